@@ -1,0 +1,48 @@
+"""Errors that chronocl raises on bad input.
+
+Every error is a `ChronoclError` and also the builtin a Python caller would
+expect (`ValueError`, `FileNotFoundError`, ...), so both ``except
+ChronoclError`` and ``except ValueError`` work. The message is one line that
+names the problem and, where there is one, the fix; the CLI prints it as is
+and exits with code 2.
+"""
+
+from __future__ import annotations
+
+
+class ChronoclError(Exception):
+    """Base class of every error chronocl raises on purpose."""
+
+    exit_code = 2
+
+
+class InvalidDataError(ChronoclError, ValueError):
+    """Input data are malformed: wrong size, non-finite values, bad shape."""
+
+
+class InvalidSelectionError(ChronoclError, ValueError):
+    """A time window, stride or step list that does not fit the series."""
+
+
+class InvalidTransferFunctionError(ChronoclError, ValueError):
+    """A transfer function that is malformed (NaN, unsorted, out of range, wrong length)."""
+
+
+class UnknownNameError(ChronoclError, ValueError):
+    """An unknown mode, order, preset, format or data set name."""
+
+
+class InvalidParameterError(ChronoclError, ValueError):
+    """Any other out-of-range or malformed parameter."""
+
+
+class InputNotFoundError(ChronoclError, FileNotFoundError):
+    """An input file, glob or store that does not exist."""
+
+
+class OutputExistsError(ChronoclError, FileExistsError):
+    """The output path exists and --overwrite was not given."""
+
+
+class StoreFormatError(ChronoclError, ValueError):
+    """A path that exists but is not a chronocl store or chronovolume."""

@@ -1,0 +1,119 @@
+"""Time-step selections: which steps of a series a chronovolume integrates.
+
+A selection is a strictly increasing tuple of step indices s_0 < ... < s_{W-1}
+inside [0, T): either a window ``[t0, t1)`` with a stride, or an explicit list.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from .errors import InvalidSelectionError
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The selected steps of a series with `n_steps` steps in all."""
+
+    steps: tuple[int, ...]
+    n_steps: int
+
+    def __post_init__(self) -> None:
+        if self.n_steps < 1:
+            raise InvalidSelectionError("the series has no time steps; ingest at least one step")
+        if not self.steps:
+            raise InvalidSelectionError(
+                "the selection is empty; choose at least one time step, e.g. --window 0:10"
+            )
+        bad = [s for s in self.steps if not 0 <= s < self.n_steps]
+        if bad:
+            raise InvalidSelectionError(
+                f"time step {bad[0]} is outside [0, {self.n_steps}); "
+                f"choose steps between 0 and {self.n_steps - 1}"
+            )
+        if any(b <= a for a, b in itertools.pairwise(self.steps)):
+            raise InvalidSelectionError(
+                f"selected steps {list(self.steps)} must be strictly increasing without repeats; "
+                "give the importance order with order=[...] instead"
+            )
+
+    @property
+    def width(self) -> int:
+        """W, the number of selected steps."""
+        return len(self.steps)
+
+    @classmethod
+    def window(cls, t0: int, t1: int, stride: int, n_steps: int) -> Selection:
+        """Steps t0, t0+stride, ... below t1."""
+        if stride < 1:
+            raise InvalidSelectionError(f"stride must be at least 1, got {stride}")
+        if not (0 <= t0 < t1 <= n_steps):
+            raise InvalidSelectionError(
+                f"window {t0}:{t1} is outside the series' steps [0, {n_steps}); "
+                f"use 0 <= t0 < t1 <= {n_steps}"
+            )
+        return cls(tuple(range(t0, t1, stride)), n_steps)
+
+    def describe(self) -> str:
+        """Short label, e.g. '0:30:3' or '2,5,9'."""
+        s = self.steps
+        if len(s) == 1:
+            return str(s[0])
+        stride = s[1] - s[0]
+        if all(b - a == stride for a, b in itertools.pairwise(s)):
+            return f"{s[0]}:{s[-1] + 1}" + (f":{stride}" if stride != 1 else "")
+        return ",".join(map(str, s))
+
+
+def parse_selection(window: object, n_steps: int) -> Selection:
+    """Build a Selection from a string ('0:30', '0:30:2', '3,7,9'), slice, tuple or list."""
+    if isinstance(window, Selection):
+        if window.n_steps != n_steps:
+            raise InvalidSelectionError(
+                f"the selection was made for {window.n_steps} steps but the series has {n_steps}"
+            )
+        return window
+    if window is None:
+        return Selection.window(0, n_steps, 1, n_steps)
+    if isinstance(window, slice):
+        start = 0 if window.start is None else window.start
+        stop = n_steps if window.stop is None else window.stop
+        step = 1 if window.step is None else window.step
+        return Selection.window(int(start), int(stop), int(step), n_steps)
+    if isinstance(window, str):
+        return _parse_string(window.strip(), n_steps)
+    if isinstance(window, Sequence):
+        try:
+            steps = tuple(int(s) for s in window)
+        except (TypeError, ValueError):
+            raise InvalidSelectionError(
+                f"selection {window!r} must hold integer time steps"
+            ) from None
+        return Selection(steps, n_steps)
+    raise InvalidSelectionError(
+        f"cannot read a time selection from {window!r}; use 't0:t1[:stride]' or a list of steps"
+    )
+
+
+def _parse_string(text: str, n_steps: int) -> Selection:
+    try:
+        if ":" in text:
+            parts = [p.strip() for p in text.split(":")]
+            if len(parts) not in (2, 3):
+                raise ValueError(text)
+            t0 = int(parts[0]) if parts[0] else 0
+            t1 = int(parts[1]) if parts[1] else n_steps
+            stride = int(parts[2]) if len(parts) == 3 and parts[2] else 1
+            steps = None
+        else:
+            steps = tuple(int(p) for p in text.split(","))
+    except ValueError:
+        raise InvalidSelectionError(
+            f"cannot read time window {text!r}; use 't0:t1[:stride]' (e.g. 0:30:3) "
+            "or a comma list of steps (e.g. 2,5,9)"
+        ) from None
+    if steps is None:
+        return Selection.window(t0, t1, stride, n_steps)
+    return Selection(steps, n_steps)
