@@ -1,0 +1,124 @@
+"""What a chronovolume is made of: mode, order, transfer functions, enhancement.
+
+`IntegrationSpec` is the frozen, validated description shared by every engine
+and stored in a chronovolume's metadata; `resolve_order` turns an order into
+the sequence of selection indices k in which steps are integrated.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .enhance import Enhance
+from .errors import InvalidParameterError, InvalidSelectionError, UnknownNameError
+from .selection import Selection
+from .tf import DataTF, TimeTF
+
+MODES = ("alpha", "first_hit", "additive", "max", "min")
+ORDERS = ("forward", "backward")
+NORMALIZE = ("time", "max")
+MODES_WITH_T_INDEX = ("first_hit", "max", "min")
+
+
+@dataclass(frozen=True)
+class IntegrationSpec:
+    """How to integrate a selection through time (DESIGN.md section 2).
+
+    `order` is ``forward``, ``backward`` or an importance permutation given as the
+    selected step numbers, most important first. `threshold` is first_hit's opacity
+    threshold; `normalize` is additive's normalisation (``time``: divide by
+    N = Σ a_t·rgb_t; ``max``: by the volume's largest channel value).
+    """
+
+    mode: str = "alpha"
+    order: str | tuple[int, ...] = "forward"
+    data_tf: DataTF = field(default_factory=DataTF)
+    time_tf: TimeTF = field(default_factory=TimeTF)
+    enhance: Enhance = field(default_factory=Enhance)
+    threshold: float = 0.0
+    normalize: str = "time"
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise UnknownNameError(f"unknown mode {self.mode!r}; choose one of {', '.join(MODES)}")
+        if isinstance(self.order, str):
+            if self.order not in ORDERS:
+                raise UnknownNameError(
+                    f"unknown order {self.order!r}; choose forward, backward or a list of steps"
+                )
+        elif isinstance(self.order, Sequence | np.ndarray):
+            try:
+                object.__setattr__(self, "order", tuple(int(s) for s in self.order))
+            except (TypeError, ValueError):
+                raise InvalidSelectionError(
+                    f"importance order {self.order!r} must be a list of step numbers"
+                ) from None
+        else:
+            raise UnknownNameError(
+                f"unknown order {self.order!r}; choose forward, backward or a list of steps"
+            )
+        if self.normalize not in NORMALIZE:
+            raise UnknownNameError(
+                f"unknown additive normalisation {self.normalize!r}; choose time or max"
+            )
+        t = float(self.threshold)
+        if not (math.isfinite(t) and 0.0 <= t < 1.0):
+            raise InvalidParameterError(
+                f"first-hit threshold is {self.threshold}; it must lie in [0, 1)"
+            )
+        object.__setattr__(self, "threshold", t)
+
+    @property
+    def has_t_index(self) -> bool:
+        return self.mode in MODES_WITH_T_INDEX
+
+    def to_dict(self) -> dict:
+        return {
+            "mode": self.mode,
+            "order": self.order if isinstance(self.order, str) else list(self.order),
+            "data_tf": self.data_tf.to_dict(),
+            "time_tf": self.time_tf.to_dict(),
+            "enhance": self.enhance.to_dict(),
+            "threshold": self.threshold,
+            "normalize": self.normalize,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> IntegrationSpec:
+        order = d.get("order", "forward")
+        return cls(
+            mode=d["mode"],
+            order=order if isinstance(order, str) else tuple(order),
+            data_tf=DataTF.from_dict(d.get("data_tf", {})),
+            time_tf=TimeTF.from_dict(d.get("time_tf", {})),
+            enhance=Enhance(**{**d.get("enhance", {}), "view": tuple(d["enhance"]["view"])})
+            if "enhance" in d
+            else Enhance(),
+            threshold=d.get("threshold", 0.0),
+            normalize=d.get("normalize", "time"),
+        )
+
+
+def resolve_order(order: str | Sequence[int], selection: Selection) -> np.ndarray:
+    """Indices k into the selection, in integration order (first = in front)."""
+    w = selection.width
+    if isinstance(order, str):
+        if order == "forward":
+            return np.arange(w)
+        if order == "backward":
+            return np.arange(w)[::-1].copy()
+        raise UnknownNameError(
+            f"unknown order {order!r}; choose forward, backward or a list of steps"
+        )
+    steps = [int(s) for s in order]
+    if sorted(steps) != list(selection.steps):
+        raise InvalidSelectionError(
+            f"importance order {steps} must be a permutation of the selected steps "
+            f"{list(selection.steps)}"
+        )
+    where = {s: k for k, s in enumerate(selection.steps)}
+    return np.array([where[s] for s in steps], dtype=np.int64)
