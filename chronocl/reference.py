@@ -1,0 +1,140 @@
+"""The numpy reference integrator: dead simple, every mode, the oracle that tests compare with.
+
+Input is the window's normalised values u (W, Z, Y, X) in [0, 1]; output is
+premultiplied RGBA (Z, Y, X, 4) and, for first_hit / max / min, the step that
+supplied each voxel (t_index, -1 where none). Each mode is one loop over the
+steps in integration order, written as in DESIGN.md section 2. Work is split in
+two: `accumulate` is per voxel (so it may run on z-slabs with a gradient halo)
+and `finalize` is the global step (additive normalisation).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import enhance as _enhance
+from .spec import IntegrationSpec
+from .tf import lut_lookup
+
+
+def normalize(v: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
+    """u = clip((v - vmin) / (vmax - vmin), 0, 1) in float32; a constant field maps to 0.
+
+    Done in float32 with a precomputed reciprocal so every engine gets the same bits.
+    """
+    if not vmax > vmin:
+        return np.zeros(np.shape(v), dtype=np.float32)
+    scale = np.float32(1.0 / (float(vmax) - float(vmin)))
+    u = (np.asarray(v, dtype=np.float32) - np.float32(vmin)) * scale
+    return np.clip(u, np.float32(0.0), np.float32(1.0))
+
+
+@dataclass
+class Partial:
+    """Per-voxel result before finalisation. For additive, rgb holds the raw sums Σ α·c."""
+
+    rgba: np.ndarray
+    t_index: np.ndarray | None
+
+
+def over(front: np.ndarray, back: np.ndarray) -> np.ndarray:
+    """Premultiplied `over`: front composited in front of back."""
+    return front + (1.0 - front[..., 3:4]) * back
+
+
+def additive_norm(spec: IntegrationSpec, positions: np.ndarray) -> np.ndarray:
+    """N = Σ_k a_t(p_k)·rgb_t(p_k), per channel (3,)."""
+    rgb_t, a_t = spec.time_tf.evaluate(positions)
+    return (a_t[:, None] * rgb_t).sum(axis=0)
+
+
+def accumulate(
+    u: np.ndarray,
+    steps: Sequence[int],
+    positions: np.ndarray,
+    order: np.ndarray,
+    spec: IntegrationSpec,
+) -> Partial:
+    """Integrate u (W, Z, Y, X) over the steps in `order` (indices into the selection)."""
+    w = u.shape[0]
+    shape = u.shape[1:]
+    lut = spec.data_tf.lut
+    rgb_t, a_t = spec.time_tf.evaluate(positions)
+
+    def step_rgba(k: int) -> tuple[np.ndarray, np.ndarray]:
+        d = lut_lookup(lut, u[k])
+        e = _enhance.factor(u[k], spec.enhance)
+        colour = d[..., :3] * rgb_t[k]
+        alpha = np.clip(d[..., 3] * a_t[k] * e, 0.0, 1.0)
+        return colour, alpha
+
+    rgba = np.zeros((*shape, 4), dtype=np.float64)
+    t_index = np.full(shape, -1, dtype=np.int32) if spec.has_t_index else None
+    assert len(steps) == w and len(order) == w
+
+    if spec.mode == "alpha":
+        for k in order:
+            c, a = step_rgba(k)
+            trans = 1.0 - rgba[..., 3]
+            rgba[..., :3] += (trans * a)[..., None] * c
+            rgba[..., 3] += trans * a
+    elif spec.mode == "first_hit":
+        for k in order:
+            c, a = step_rgba(k)
+            hit = (t_index < 0) & (a > spec.threshold)
+            rgba[hit, :3] = a[hit, None] * c[hit]
+            rgba[hit, 3] = a[hit]
+            t_index[hit] = steps[k]
+    elif spec.mode == "additive":
+        for k in order:
+            c, a = step_rgba(k)
+            rgba[..., :3] += a[..., None] * c
+            rgba[..., 3] = np.maximum(rgba[..., 3], a)
+    elif spec.mode in ("max", "min"):
+        best = np.zeros(shape, dtype=np.float32)
+        best_k = np.full(shape, -1, dtype=np.int64)
+        for k in order:
+            better = best_k < 0
+            better |= u[k] > best if spec.mode == "max" else u[k] < best
+            best = np.where(better, u[k], best)
+            best_k = np.where(better, k, best_k)
+        for k in range(w):
+            sel = best_k == k
+            if sel.any():
+                c, a = step_rgba(k)
+                rgba[sel, :3] = a[sel, None] * c[sel]
+                rgba[sel, 3] = a[sel]
+                t_index[sel] = steps[k]
+    else:  # pragma: no cover - IntegrationSpec validates the mode
+        raise AssertionError(spec.mode)
+    return Partial(rgba, t_index)
+
+
+def finalize(partial: Partial, positions: np.ndarray, spec: IntegrationSpec) -> np.ndarray:
+    """Global last step; returns premultiplied RGBA float32. Only additive does work here."""
+    rgba = partial.rgba
+    if spec.mode == "additive":
+        rgba = rgba.copy()
+        if spec.normalize == "time":
+            norm = additive_norm(spec, positions)
+        else:
+            norm = np.full(3, rgba[..., :3].max() if rgba.size else 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            scaled = np.where(norm > 0, rgba[..., :3] / np.where(norm > 0, norm, 1.0), 0.0)
+        rgba[..., :3] = np.minimum(scaled, rgba[..., 3:4])
+    return rgba.astype(np.float32)
+
+
+def integrate(
+    u: np.ndarray,
+    steps: Sequence[int],
+    positions: np.ndarray,
+    order: np.ndarray,
+    spec: IntegrationSpec,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Whole-volume integration: (premultiplied RGBA float32 (Z, Y, X, 4), t_index or None)."""
+    partial = accumulate(u, steps, positions, order, spec)
+    return finalize(partial, positions, spec), partial.t_index
