@@ -1,0 +1,1 @@
+"""Data: time series over zarr, ingest, z-slab bricks, built-in synthetic data."""

@@ -1,0 +1,373 @@
+"""TimeSeries: a time-varying volume (T, Z, Y, X) over a zarr store, read lazily through dask.
+
+Store layout (zarr v3 written, v2 read): a group whose array ``data`` is
+(T, Z, Y, X), chunked (1, zc, Y, X) so one step is one small set of chunks,
+and whose attribute ``chronocl`` holds the global value range, per-step
+min/max/mean, voxel spacing, time labels and a source description. A bare
+zarr array (v2 or v3) without those attributes opens too; its statistics are
+then computed in one dask pass.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import dask.array as da
+import numpy as np
+import zarr
+
+from ..atomic import atomic_directory
+from ..errors import InputNotFoundError, InvalidDataError, InvalidParameterError, StoreFormatError
+from ..progress import track
+from ..reference import normalize
+
+FORMAT = "chronocl.series"
+CHUNK_BYTES = 16 * 2**20
+SUPPORTED_DTYPES = ("uint8", "uint16", "int16", "float32", "float64")
+
+
+@dataclass(frozen=True)
+class SeriesStats:
+    """Statistics gathered while writing: global range and per-step min/max/mean."""
+
+    vmin: float
+    vmax: float
+    step_min: tuple[float, ...]
+    step_max: tuple[float, ...]
+    step_mean: tuple[float, ...]
+
+
+@dataclass
+class TimeSeries:
+    """A (T, Z, Y, X) series with its statistics, spacing (dz, dy, dx) and time labels."""
+
+    data: da.Array
+    stats: SeriesStats
+    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    times: tuple = ()
+    source: str = ""
+    path: Path | None = None
+    _zarr: zarr.Array | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.times:
+            self.times = tuple(range(self.n_steps))
+
+    # -- shape ---------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int, int, int]:
+        return tuple(int(n) for n in self.data.shape)  # type: ignore[return-value]
+
+    @property
+    def n_steps(self) -> int:
+        return self.shape[0]
+
+    @property
+    def volume_shape(self) -> tuple[int, int, int]:
+        """(Z, Y, X) of one step."""
+        return self.shape[1:]  # type: ignore[return-value]
+
+    @property
+    def dtype(self) -> np.dtype:
+        return self.data.dtype
+
+    @property
+    def vmin(self) -> float:
+        return self.stats.vmin
+
+    @property
+    def vmax(self) -> float:
+        return self.stats.vmax
+
+    # -- reading -------------------------------------------------------------------------
+    def read(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
+        """Raw values of the given steps and z rows: (W, z1 - z0, Y, X), in xytz order."""
+        z1 = self.shape[1] if z1 is None else z1
+        if self._zarr is not None:
+            out = np.empty((len(steps), z1 - z0, *self.shape[2:]), dtype=self.dtype)
+            for i, s in enumerate(steps):
+                out[i] = self._zarr[int(s), z0:z1]
+            return out
+        return np.asarray(self.data[list(steps), z0:z1].compute())
+
+    def normalized(
+        self,
+        steps: Sequence[int],
+        z0: int = 0,
+        z1: int | None = None,
+        value_range: tuple[float, float] | None = None,
+    ) -> np.ndarray:
+        """u = clip((v - vmin) / (vmax - vmin), 0, 1) as float32 (W, z1 - z0, Y, X)."""
+        lo, hi = value_range if value_range is not None else (self.vmin, self.vmax)
+        return normalize(self.read(steps, z0, z1), lo, hi)
+
+    # -- construction --------------------------------------------------------------------
+    @classmethod
+    def from_array(
+        cls,
+        array: object,
+        spacing: Sequence[float] = (1.0, 1.0, 1.0),
+        times: Sequence | None = None,
+        source: str = "array",
+    ) -> TimeSeries:
+        """Wrap an in-memory (numpy) or lazy (dask) array (T, Z, Y, X); statistics are computed."""
+        arr = array if isinstance(array, da.Array) else da.from_array(np.asarray(array))
+        _check_shape(arr.shape, "array")
+        _check_dtype(arr.dtype)
+        finite = da.isfinite(arr).all() if arr.dtype.kind == "f" else da.from_array(True)
+        smin, smax, smean, ok = da.compute(
+            arr.min(axis=(1, 2, 3)), arr.max(axis=(1, 2, 3)), arr.mean(axis=(1, 2, 3)), finite
+        )
+        if not ok:
+            bad = int(np.argmax(~np.isfinite(smin + smax)))
+            raise InvalidDataError(
+                f"time step {bad} of {source} holds NaN or infinite values; "
+                "replace them first (e.g. numpy.nan_to_num) so the value range is defined"
+            )
+        stats = _stats_from_steps(smin, smax, smean)
+        return cls(
+            data=arr,
+            stats=stats,
+            spacing=parse_spacing(spacing),
+            times=_parse_times(times, arr.shape[0]),
+            source=source,
+        )
+
+    def save(self, path: str | os.PathLike, overwrite: bool = False, progress: bool = False):
+        """Write this series as a chronocl store; returns the opened store."""
+        steps = (np.asarray(self.data[t].compute()) for t in range(self.n_steps))
+        return write_series(
+            path,
+            steps,
+            n_steps=self.n_steps,
+            volume_shape=self.volume_shape,
+            dtype=self.dtype,
+            spacing=self.spacing,
+            times=self.times,
+            source=self.source,
+            overwrite=overwrite,
+            progress=progress,
+        )
+
+    def describe(self) -> dict:
+        """A summary for `chronocl info` and the demo."""
+        t, z, y, x = self.shape
+        d = {
+            "path": str(self.path) if self.path else None,
+            "source": self.source,
+            "shape (T, Z, Y, X)": [t, z, y, x],
+            "dtype": str(self.dtype),
+            "value range": [self.vmin, self.vmax],
+            "steps": t,
+            "time labels": f"{self.times[0]} .. {self.times[-1]}",
+            "spacing (x, y, z)": [self.spacing[2], self.spacing[1], self.spacing[0]],
+            "chunks": list(self.data.chunksize),
+            "size in memory": _human(t * z * y * x * self.dtype.itemsize),
+        }
+        if self.path is not None:
+            d["size on disk"] = _human(_disk_usage(self.path))
+        return d
+
+
+def open_series(path: str | os.PathLike) -> TimeSeries:
+    """Open a chronocl store (zarr v3 or v2), or a bare (T, Z, Y, X) zarr array."""
+    p = Path(path)
+    if not p.exists():
+        raise InputNotFoundError(
+            f"store {str(p)!r} does not exist; create one with 'chronocl ingest' or "
+            "'chronocl generate'"
+        )
+    try:
+        node = zarr.open(store=str(p), mode="r")
+    except Exception as exc:  # zarr raises several kinds for a non-store folder
+        raise StoreFormatError(
+            f"{str(p)!r} is not a zarr store ({type(exc).__name__}); "
+            "ingest your data with 'chronocl ingest'"
+        ) from None
+    if isinstance(node, zarr.Group):
+        if "data" not in node:
+            raise StoreFormatError(
+                f"zarr group {str(p)!r} has no array 'data'; "
+                "it is not a chronocl series (is it a chronovolume?)"
+            )
+        arr = node["data"]
+        attrs = dict(node.attrs).get("chronocl", {})
+    else:
+        arr = node
+        attrs = dict(node.attrs).get("chronocl", {})
+    _check_shape(arr.shape, str(p))
+    _check_dtype(arr.dtype)
+    lazy = da.from_zarr(arr)
+    if attrs.get("format") == FORMAT:
+        stats = SeriesStats(
+            vmin=float(attrs["vmin"]),
+            vmax=float(attrs["vmax"]),
+            step_min=tuple(attrs["step_min"]),
+            step_max=tuple(attrs["step_max"]),
+            step_mean=tuple(attrs["step_mean"]),
+        )
+        sp = attrs.get("spacing", {})
+        spacing = (sp.get("z", 1.0), sp.get("y", 1.0), sp.get("x", 1.0))
+        return TimeSeries(
+            data=lazy,
+            stats=stats,
+            spacing=parse_spacing(spacing),
+            times=tuple(attrs.get("times", ())),
+            source=attrs.get("source", str(p)),
+            path=p,
+            _zarr=arr,
+        )
+    series = TimeSeries.from_array(lazy, source=str(p))
+    series.path, series._zarr = p, arr
+    return series
+
+
+def write_series(
+    path: str | os.PathLike,
+    steps: Iterable[np.ndarray],
+    *,
+    n_steps: int,
+    volume_shape: Sequence[int],
+    dtype: object,
+    spacing: Sequence[float] = (1.0, 1.0, 1.0),
+    times: Sequence | None = None,
+    source: str = "",
+    overwrite: bool = False,
+    progress: bool = False,
+    nan_fill: float | None = None,
+    labels: Sequence[str] | None = None,
+) -> TimeSeries:
+    """Write steps (each (Z, Y, X)) to a new store atomically, gathering statistics on the way.
+
+    Non-finite values are rejected unless `nan_fill` is given, which replaces them.
+    `labels` name each step's origin (e.g. its file) in error messages.
+    """
+    dt = np.dtype(dtype)
+    _check_dtype(dt)
+    shape = (int(n_steps), *(int(n) for n in volume_shape))
+    _check_shape(shape, source or str(path))
+    spacing = parse_spacing(spacing)
+    times = _parse_times(times, n_steps)
+    z, y, x = shape[1:]
+    zc = max(1, min(z, CHUNK_BYTES // max(1, y * x * dt.itemsize)))
+    smin, smax, smean = [], [], []
+    with atomic_directory(path, overwrite) as tmp:
+        group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
+        arr = group.create_array("data", shape=shape, chunks=(1, zc, y, x), dtype=dt)
+        count = 0
+        for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
+            where = labels[t] if labels else f"time step {t}"
+            step = np.asarray(step)
+            if t >= n_steps:
+                raise InvalidDataError(f"got more than the {n_steps} steps announced")
+            if step.shape != shape[1:]:
+                raise InvalidDataError(
+                    f"{where} has shape {step.shape}, expected {shape[1:]} (Z, Y, X)"
+                )
+            if dt.kind == "f":
+                bad = ~np.isfinite(step)
+                n_bad = int(bad.sum())
+                if n_bad:
+                    if nan_fill is None:
+                        raise InvalidDataError(
+                            f"{where} has {n_bad} NaN/infinite values; pass --nan-fill VALUE "
+                            "(nan_fill=...) to replace them"
+                        )
+                    step = np.where(bad, dt.type(nan_fill), step)
+            step = step.astype(dt, copy=False)
+            arr[t] = step
+            smin.append(float(step.min()))
+            smax.append(float(step.max()))
+            smean.append(float(step.mean(dtype=np.float64)))
+            count += 1
+        if count != n_steps:
+            raise InvalidDataError(f"got {count} time steps, expected {n_steps}")
+        stats = _stats_from_steps(smin, smax, smean)
+        group.attrs["chronocl"] = {
+            "format": FORMAT,
+            "version": 1,
+            "vmin": stats.vmin,
+            "vmax": stats.vmax,
+            "step_min": list(stats.step_min),
+            "step_max": list(stats.step_max),
+            "step_mean": list(stats.step_mean),
+            "spacing": {"x": spacing[2], "y": spacing[1], "z": spacing[0]},
+            "times": list(times),
+            "source": source,
+        }
+    return open_series(path)
+
+
+def parse_spacing(spacing: Sequence[float]) -> tuple[float, float, float]:
+    """Validate a voxel spacing (dz, dy, dx): three finite numbers > 0."""
+    try:
+        sp = tuple(float(s) for s in spacing)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"spacing {spacing!r} must be three numbers") from None
+    if len(sp) != 3 or not all(math.isfinite(s) and s > 0 for s in sp):
+        raise InvalidParameterError(
+            f"spacing {list(sp)} must be three finite numbers > 0 (one per axis)"
+        )
+    return sp  # type: ignore[return-value]
+
+
+def _parse_times(times: Sequence | None, n_steps: int) -> tuple:
+    if times is None or len(times) == 0:
+        return tuple(range(n_steps))
+    if len(times) != n_steps:
+        raise InvalidParameterError(
+            f"got {len(times)} time labels for {n_steps} steps; give one label per step"
+        )
+    out = []
+    for t in times:
+        if isinstance(t, np.generic):
+            t = t.item()
+        if isinstance(t, float) and not math.isfinite(t):
+            raise InvalidParameterError(f"time label {t} is not finite")
+        out.append(t if isinstance(t, int | float | str) else str(t))
+    return tuple(out)
+
+
+def _check_shape(shape: Sequence[int], what: str) -> None:
+    if len(shape) != 4:
+        raise InvalidDataError(
+            f"{what} has {len(shape)} dimensions {tuple(shape)}; a series is 4D (T, Z, Y, X)"
+        )
+    if shape[0] == 0:
+        raise InvalidDataError(f"{what} has zero time steps; a series needs at least one")
+    if min(shape[1:]) == 0:
+        raise InvalidDataError(f"{what} has an empty volume {tuple(shape[1:])} (Z, Y, X)")
+
+
+def _check_dtype(dtype: np.dtype) -> None:
+    if np.dtype(dtype).name not in SUPPORTED_DTYPES:
+        raise InvalidDataError(
+            f"data type {np.dtype(dtype).name} is not supported; "
+            f"use one of {', '.join(SUPPORTED_DTYPES)}"
+        )
+
+
+def _stats_from_steps(smin, smax, smean) -> SeriesStats:
+    return SeriesStats(
+        vmin=float(np.min(smin)),
+        vmax=float(np.max(smax)),
+        step_min=tuple(float(v) for v in smin),
+        step_max=tuple(float(v) for v in smax),
+        step_mean=tuple(float(v) for v in smean),
+    )
+
+
+def _disk_usage(path: Path) -> int:
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+
+
+def _human(n: float) -> str:
+    for unit in ("B", "KB", "MB", "GB", "TB"):
+        if n < 1024 or unit == "TB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n} B"
