@@ -1,0 +1,41 @@
+"""chronocl: chronovolumes of time-varying volume data (Woodring & Shen 2003) on OpenCL.
+
+A window of time steps is integrated along time, through a temporal transfer
+function, into one RGBA volume that can be raycast from any view.
+
+    import chronocl
+    series = chronocl.open("vortex.zarr")
+    cv = chronocl.integrate(series, "0:30:10", mode="alpha", time_tf="rgb")
+    cv.save("vortex-alpha.zarr")
+"""
+
+from .chronovolume import Chronovolume
+from .data.series import TimeSeries, open_series
+from .enhance import Enhance
+from .errors import ChronoclError
+from .integrate import integrate, make_spec
+from .selection import Selection
+from .spec import IntegrationSpec
+from .tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF
+
+open = open_series
+
+__version__ = "0.1.0"
+__all__ = [
+    "ChronoclError",
+    "Chronovolume",
+    "DataTF",
+    "Enhance",
+    "IntegrationSpec",
+    "Selection",
+    "TFSetting",
+    "TimeAlpha",
+    "TimeColor",
+    "TimeSeries",
+    "TimeTF",
+    "__version__",
+    "integrate",
+    "make_spec",
+    "open",
+    "open_series",
+]

@@ -1,0 +1,78 @@
+"""Chronovolume: the integrated RGBA volume, its t_index and the metadata that made it.
+
+Saved as a zarr v3 group: array ``rgba`` (Z, Y, X, 4) premultiplied float32,
+array ``t_index`` (Z, Y, X) int32 for first_hit / max / min (-1 where no step
+contributed), and attribute ``chronocl`` with the metadata (dataset,
+selection, integration spec, spacing, value range).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import zarr
+
+from .atomic import atomic_directory
+from .errors import InputNotFoundError, StoreFormatError
+from .spec import IntegrationSpec
+
+FORMAT = "chronocl.chronovolume"
+
+
+@dataclass
+class Chronovolume:
+    """Premultiplied RGBA (Z, Y, X, 4), optional t_index (Z, Y, X) and metadata."""
+
+    rgba: np.ndarray
+    t_index: np.ndarray | None = None
+    metadata: dict = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.rgba.shape[:3]  # type: ignore[return-value]
+
+    @property
+    def spec(self) -> IntegrationSpec:
+        return IntegrationSpec.from_dict(self.metadata["spec"])
+
+    @property
+    def steps(self) -> tuple[int, ...]:
+        return tuple(self.metadata["selection"]["steps"])
+
+    @property
+    def spacing(self) -> tuple[float, float, float]:
+        sp = self.metadata.get("spacing", {"x": 1.0, "y": 1.0, "z": 1.0})
+        return (sp["z"], sp["y"], sp["x"])
+
+    def save(self, path: str | os.PathLike, overwrite: bool = False) -> Path:
+        """Write to a zarr store atomically."""
+        z, y, x, _ = self.rgba.shape
+        zc = max(1, min(z, (8 * 2**20) // max(1, y * x * 16)))
+        with atomic_directory(path, overwrite) as tmp:
+            group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
+            group.create_array("rgba", data=self.rgba.astype(np.float32), chunks=(zc, y, x, 4))
+            if self.t_index is not None:
+                group.create_array("t_index", data=self.t_index.astype(np.int32), chunks=(zc, y, x))
+            group.attrs["chronocl"] = {"format": FORMAT, "version": 1, **self.metadata}
+        return Path(path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Chronovolume:
+        p = Path(path)
+        if not p.exists():
+            raise InputNotFoundError(f"chronovolume {str(p)!r} does not exist")
+        try:
+            group = zarr.open_group(store=str(p), mode="r")
+        except Exception:
+            raise StoreFormatError(f"{str(p)!r} is not a zarr group; not a chronovolume") from None
+        attrs = dict(dict(group.attrs).get("chronocl", {}))
+        if attrs.pop("format", None) != FORMAT or "rgba" not in group:
+            raise StoreFormatError(
+                f"{str(p)!r} is not a chronovolume (is it a series? integrate it first)"
+            )
+        attrs.pop("version", None)
+        t_index = np.asarray(group["t_index"][...]) if "t_index" in group else None
+        return cls(rgba=np.asarray(group["rgba"][...]), t_index=t_index, metadata=attrs)

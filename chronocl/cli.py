@@ -1,0 +1,266 @@
+"""The `chronocl` command line: a thin layer over the public API.
+
+Errors that chronocl raises on bad input print one line on stderr and exit
+with code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from .errors import ChronoclError, InvalidParameterError
+
+err = Console(stderr=True)
+out = Console()
+
+app = typer.Typer(
+    name="chronocl",
+    help="""Chronovolumes: integrate a window of time steps of a time-varying volume into one
+RGBA volume through a temporal transfer function (Woodring & Shen 2003).
+
+Examples:
+
+  chronocl generate vortex vortex.zarr --shape 64x64x64 --steps 30
+
+  chronocl ingest 'jet/jet_*.raw' -o jet.zarr --dims 128 128 128 --dtype float32
+
+  chronocl info vortex.zarr
+
+  chronocl integrate vortex.zarr alpha.zarr --mode alpha --window 0:30:10
+""",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+
+def _parse_shape(text: str) -> tuple[int, int, int]:
+    try:
+        parts = tuple(int(p) for p in text.lower().split("x"))
+    except ValueError:
+        parts = ()
+    if len(parts) != 3 or min(parts) < 1:
+        raise InvalidParameterError(
+            f"shape {text!r} must be NXxNYxNZ with positive sizes, e.g. 64x64x64"
+        )
+    return parts  # type: ignore[return-value]
+
+
+@app.command()
+def generate(
+    name: Annotated[str, typer.Argument(help="Data set: vortex or jet.")],
+    out_path: Annotated[Path, typer.Argument(metavar="OUT.zarr", help="Store to write.")],
+    shape: Annotated[str, typer.Option(help="Volume size NXxNYxNZ.")] = "64x64x64",
+    steps: Annotated[int, typer.Option(help="Number of time steps.")] = 30,
+    seed: Annotated[int, typer.Option(help="Seed of the smooth random variations.")] = 0,
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+) -> None:
+    """Write a built-in synthetic time-varying data set.
+
+    Example: chronocl generate jet jet.zarr --shape 96x64x64 --steps 20
+    """
+    from .data import synthetic
+    from .data.series import write_series
+
+    nx, ny, nz = _parse_shape(shape)
+    if name not in synthetic.DATASETS:
+        synthetic.step(name, 0, 1, (1, 1, 1))  # raises the unknown-name error
+    t0 = time.perf_counter()
+    series = write_series(
+        out_path,
+        synthetic.steps(name, steps, (nz, ny, nx), seed),
+        n_steps=steps,
+        volume_shape=(nz, ny, nx),
+        dtype="float32",
+        source=f"chronocl generate {name} --shape {nx}x{ny}x{nz} --steps {steps} --seed {seed}",
+        overwrite=overwrite,
+        progress=True,
+    )
+    err.print(f"wrote {out_path} in {time.perf_counter() - t0:.1f} s")
+    _print_summary(series.describe())
+
+
+@app.command()
+def ingest(
+    inputs: Annotated[
+        list[str],
+        typer.Argument(help="Raw files or globs (one file per step), or one .npy (T, Z, Y, X)."),
+    ],
+    out_path: Annotated[
+        Path, typer.Option("--out", "-o", metavar="OUT.zarr", help="Store to write.")
+    ],
+    dims: Annotated[
+        tuple[int, int, int] | None,
+        typer.Option(metavar="NX NY NZ", help="Raw: volume size, x fastest."),
+    ] = None,
+    dtype: Annotated[
+        str, typer.Option(help="Raw: float32, uint8, uint16, int16, float64.")
+    ] = "float32",
+    endian: Annotated[str, typer.Option(help="Raw: little or big.")] = "little",
+    spacing: Annotated[
+        tuple[float, float, float], typer.Option(metavar="DX DY DZ", help="Voxel spacing.")
+    ] = (1.0, 1.0, 1.0),
+    nan_fill: Annotated[
+        float | None, typer.Option(help="Replace NaN/Inf with this value (default: reject them).")
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+) -> None:
+    """Convert time steps into a chronocl store (zarr v3), with statistics.
+
+    Files are sorted naturally (step2 before step10). The store appears only when complete.
+
+    Examples:
+
+      chronocl ingest 'vortex/*.raw' -o vortex.zarr --dims 128 128 128
+
+      chronocl ingest a.raw b.raw -o ab.zarr --dims 64 64 32 --dtype uint16 --endian big
+
+      chronocl ingest series.npy -o series.zarr --spacing 1 1 2.5
+    """
+    from .data.ingest import ingest as run_ingest
+
+    t0 = time.perf_counter()
+    series = run_ingest(
+        inputs,
+        out_path,
+        dims=dims,
+        dtype=dtype,
+        endian=endian,
+        spacing=(spacing[2], spacing[1], spacing[0]),
+        nan_fill=nan_fill,
+        overwrite=overwrite,
+        progress=True,
+    )
+    err.print(f"wrote {out_path} in {time.perf_counter() - t0:.1f} s")
+    _print_summary(series.describe())
+
+
+@app.command()
+def info(
+    store: Annotated[Path, typer.Argument(help="A chronocl series or chronovolume store.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Show shape, dtype, value range, steps, chunking and size on disk.
+
+    Example: chronocl info vortex.zarr --json
+    """
+    from .chronovolume import Chronovolume
+    from .data.series import open_series
+    from .errors import StoreFormatError
+
+    try:
+        summary = open_series(store).describe()
+    except StoreFormatError:
+        cv = Chronovolume.load(store)
+        summary = {"chronovolume": str(store), "shape (Z, Y, X)": list(cv.shape), **cv.metadata}
+    if as_json:
+        out.print_json(json.dumps(summary, default=str))
+    else:
+        _print_summary(summary)
+
+
+@app.command()
+def integrate(
+    store: Annotated[Path, typer.Argument(help="Series store.")],
+    out_path: Annotated[Path, typer.Argument(metavar="OUT.zarr", help="Chronovolume to write.")],
+    mode: Annotated[str, typer.Option(help="alpha, first_hit, additive, max or min.")] = "alpha",
+    window: Annotated[
+        str | None, typer.Option(help="t0:t1[:stride] or a list 2,5,9 (default: all).")
+    ] = None,
+    order: Annotated[
+        str, typer.Option(help="forward, backward, or importance steps 9,2,5.")
+    ] = "forward",
+    tf: Annotated[
+        Path | None, typer.Option(help="Transfer-function JSON (data_tf, time_tf).")
+    ] = None,
+    time_tf: Annotated[
+        str | None,
+        typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
+    ] = None,
+    enhance: Annotated[str, typer.Option(help="none, edge or silhouette.")] = "none",
+    threshold: Annotated[float, typer.Option(help="first_hit opacity threshold.")] = 0.0,
+    normalize: Annotated[str, typer.Option(help="additive normalisation: time or max.")] = "time",
+    engine: Annotated[str, typer.Option(help="Integration engine.")] = "numpy",
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+) -> None:
+    """Integrate a window of time steps into a chronovolume store.
+
+    Examples:
+
+      chronocl integrate vortex.zarr a.zarr --mode alpha --window 0:30:10
+
+      chronocl integrate jet.zarr m.zarr --mode max --window 0:10 --order backward
+    """
+    from .atomic import check_output
+    from .data.series import open_series
+    from .integrate import integrate as run
+
+    check_output(out_path, overwrite)
+    order_arg: str | list[int] = order
+    if order not in ("forward", "backward"):
+        try:
+            order_arg = [int(s) for s in order.split(",")]
+        except ValueError:
+            order_arg = order  # let the spec name the problem
+    series = open_series(store)
+    t0 = time.perf_counter()
+    cv = run(
+        series,
+        window,
+        mode,
+        tf=tf,
+        time_tf=time_tf,
+        order=order_arg,
+        enhance=enhance,
+        threshold=threshold,
+        normalize=normalize,
+        engine=engine,
+        progress=True,
+    )
+    cv.save(out_path, overwrite=overwrite)
+    err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {time.perf_counter() - t0:.2f} s")
+
+
+@app.command()
+def demo(
+    out_dir: Annotated[Path, typer.Option("--out", help="Folder for the demo outputs.")] = Path(
+        "demo-out"
+    ),
+) -> None:
+    """Generate the built-in data sets, integrate every mode, and print summaries.
+
+    Example: chronocl demo --out demo-out
+    """
+    from .demo import run_demo
+
+    run_demo(out_dir)
+
+
+def _print_summary(summary: dict) -> None:
+    width = max(len(k) for k in summary)
+    for key, value in summary.items():
+        out.print(f"{key:<{width}}  {value}", highlight=False, soft_wrap=True)
+
+
+def main() -> None:
+    """Console entry point: run the app, turning chronocl errors into one line and exit 2.
+
+    Usage errors (missing or malformed options) are typer's own: usage, one line, exit 2.
+    """
+    try:
+        app()
+    except ChronoclError as exc:
+        err.print(f"chronocl: error: {exc}", highlight=False, markup=False, soft_wrap=True)
+        sys.exit(exc.exit_code)
+
+
+if __name__ == "__main__":
+    main()
