@@ -1,0 +1,97 @@
+"""Hypothesis strategies: random windows, transfer functions and integration specs."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import strategies as st
+
+from chronocl.enhance import Enhance
+from chronocl.selection import Selection
+from chronocl.spec import IntegrationSpec
+from chronocl.tf import DataTF, TimeAlpha, TimeColor, TimeTF
+
+shapes = st.tuples(st.integers(1, 7), st.integers(1, 6), st.integers(1, 6))
+
+
+@st.composite
+def data_tfs(draw) -> DataTF:
+    n = draw(st.integers(2, 5))
+    us = sorted(set(draw(st.lists(st.floats(0, 1), min_size=n, max_size=n))))
+    if len(us) < 2:
+        us = [0.0, 1.0]
+    unit = st.floats(0, 1)
+    points = [(u, draw(unit), draw(unit), draw(unit), draw(unit)) for u in us]
+    return DataTF(points=points, size=draw(st.sampled_from([256, 300, 1024])))
+
+
+@st.composite
+def time_tfs(draw, positions=None) -> TimeTF:
+    color = draw(
+        st.sampled_from(
+            [
+                TimeColor("rgb"),
+                TimeColor("warm-cool"),
+                TimeColor("luminance", focus=draw(st.floats(0, 1)), falloff=0.7),
+                TimeColor("white"),
+            ]
+        )
+    )
+    alpha = draw(
+        st.sampled_from(
+            [
+                TimeAlpha("constant", value=draw(st.floats(0.05, 1))),
+                TimeAlpha("hat", center=draw(st.floats(0, 1)), width=0.8, floor=0.1),
+                TimeAlpha("inverted-hat", center=draw(st.floats(0, 1)), width=0.6, floor=0.2),
+            ]
+        )
+    )
+    pos = positions or draw(st.sampled_from(["relative", "absolute"]))
+    return TimeTF(color=color, alpha=alpha, positions=pos)
+
+
+enhancements = st.one_of(
+    st.just(Enhance()),
+    st.builds(Enhance, st.just("edge"), st.floats(0, 1), st.floats(0, 8), st.floats(0.5, 2)),
+    st.builds(
+        Enhance,
+        st.just("silhouette"),
+        st.floats(0, 1),
+        st.floats(0, 1),
+        st.floats(0.5, 2),
+        st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(0.1, 1)),
+    ),
+)
+
+
+@st.composite
+def windows(draw, max_w: int = 9):
+    """(u (W, Z, Y, X) float32, Selection) with W random and steps spread over T."""
+    shape = draw(shapes)
+    w = draw(st.integers(1, max_w))
+    n_steps = draw(st.integers(w, w + 6))
+    steps = sorted(draw(st.permutations(range(n_steps)))[:w])
+    seed = draw(st.integers(0, 2**31))
+    rng = np.random.default_rng(seed)
+    u = rng.random((w, *shape), dtype=np.float32)
+    # Coarse levels make exact ties, so thresholds and argmax tie-breaking are exercised.
+    if draw(st.booleans()):
+        u = (np.round(u * 4) / 4).astype(np.float32)
+    return u, Selection(tuple(steps), n_steps)
+
+
+@st.composite
+def specs(draw, mode=None, selection: Selection | None = None, positions=None) -> IntegrationSpec:
+    mode = mode or draw(st.sampled_from(["alpha", "first_hit", "additive", "max", "min"]))
+    if selection is not None and draw(st.booleans()):
+        order = tuple(draw(st.permutations(selection.steps)))
+    else:
+        order = draw(st.sampled_from(["forward", "backward"]))
+    return IntegrationSpec(
+        mode=mode,
+        order=order,
+        data_tf=draw(data_tfs()),
+        time_tf=draw(time_tfs(positions)),
+        enhance=draw(enhancements),
+        threshold=draw(st.sampled_from([0.0, 0.1, 0.5])),
+        normalize=draw(st.sampled_from(["time", "max"])),
+    )

@@ -1,0 +1,125 @@
+"""The command line: help with examples, the commands end to end, one-line errors with exit 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import chronocl
+
+
+def cli(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "chronocl", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=120,
+    )
+
+
+def assert_one_line_error(result: subprocess.CompletedProcess, needle: str) -> None:
+    assert result.returncode == 2, result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("chronocl: error:") and needle in lines[0], lines[0]
+    assert "Traceback" not in result.stderr
+
+
+def test_help_has_examples():
+    result = cli("--help")
+    assert result.returncode == 0 and "Examples" in result.stdout
+    for command in ("generate", "ingest", "info", "integrate"):
+        sub = cli(command, "--help")
+        assert sub.returncode == 0 and "chronocl " + command in sub.stdout
+
+
+def test_generate_info_integrate(tmp_path):
+    store = tmp_path / "v.zarr"
+    result = cli("generate", "vortex", store, "--shape", "12x10x8", "--steps", "6")
+    assert result.returncode == 0, result.stderr
+    series = chronocl.open(store)
+    assert series.shape == (6, 8, 10, 12)
+    info = cli("info", store, "--json")
+    assert info.returncode == 0
+    assert json.loads(info.stdout)["shape (T, Z, Y, X)"] == [6, 8, 10, 12]
+    out = tmp_path / "cv.zarr"
+    result = cli("integrate", store, out, "--mode", "max", "--window", "0:6:2", "--order", "4,0,2")
+    assert result.returncode == 0, result.stderr
+    cv = chronocl.Chronovolume.load(out)
+    expected = chronocl.integrate(series, "0:6:2", "max", order=(4, 0, 2))
+    np.testing.assert_array_equal(cv.rgba, expected.rgba)
+    np.testing.assert_array_equal(cv.t_index, expected.t_index)
+    assert cli("info", out).returncode == 0
+
+
+def test_ingest_command(tmp_path):
+    data = np.arange(2 * 60, dtype=np.uint8).reshape(2, 5, 4, 3)
+    for t in range(2):
+        data[t].tofile(tmp_path / f"s{t}.raw")
+    result = cli(
+        "ingest",
+        tmp_path / "s*.raw",
+        "-o",
+        tmp_path / "s.zarr",
+        "--dims",
+        3,
+        4,
+        5,
+        "--dtype",
+        "uint8",
+        "--spacing",
+        1,
+        1,
+        2,
+    )
+    assert result.returncode == 0, result.stderr
+    series = chronocl.open(tmp_path / "s.zarr")
+    np.testing.assert_array_equal(series.read([0, 1]), data)
+    assert series.spacing == (2, 1, 1)
+
+
+@pytest.fixture(scope="module")
+def small_store(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "s.zarr"
+    chronocl.TimeSeries.from_array(np.random.default_rng(0).random((5, 3, 4, 5))).save(path)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["integrate", "{s}", "{tmp}/o.zarr", "--window", "0:9"], "outside the series"),
+        (["integrate", "{s}", "{tmp}/o.zarr", "--window", "0:5:0"], "stride must be at least 1"),
+        (["integrate", "{s}", "{tmp}/o.zarr", "--mode", "sum"], "unknown mode 'sum'"),
+        (["integrate", "{s}", "{tmp}/o.zarr", "--order", "sideways"], "unknown order"),
+        (["integrate", "{s}", "{tmp}/o.zarr", "--time-tf", "rainbow"], "unknown time TF preset"),
+        (["integrate", "{s}", "{tmp}/o.zarr", "--tf", "{tmp}/bad.json"], "sorted"),
+        (["integrate", "{s}", "{s}"], "already exists; pass --overwrite"),
+        (["integrate", "{tmp}/none.zarr", "{tmp}/o.zarr"], "does not exist"),
+        (["generate", "tornado", "{tmp}/o.zarr"], "tornado"),
+        (["generate", "jet", "{tmp}/o.zarr", "--shape", "8x8"], "NXxNYxNZ"),
+        (
+            ["ingest", "{tmp}/*.nothing", "-o", "{tmp}/o.zarr", "--dims", "2", "2", "2"],
+            "no files match",
+        ),
+        (["ingest", "{tmp}/bad.json", "-o", "{tmp}/o.zarr", "--dims", "2", "2", "2"], "needs 32"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(tmp_path, small_store, args, needle):
+    (tmp_path / "bad.json").write_text(
+        '{"data_tf": {"points": [[0.5, 1, 1, 1, 0], [0.2, 1, 1, 1, 1]]}}'
+    )
+    argv = [a.format(s=small_store, tmp=tmp_path) for a in args]
+    assert_one_line_error(cli(*argv), needle)
+    assert not (tmp_path / "o.zarr").exists()
+    assert not [p for p in tmp_path.iterdir() if ".partial-" in p.name]
+
+
+def test_usage_errors_exit_2():
+    result = cli("integrate")
+    assert result.returncode == 2 and "Traceback" not in result.stderr

@@ -1,0 +1,179 @@
+"""Ingest: raw steps and .npy -> store -> same values, statistics, and every bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import chronocl
+from chronocl.data.ingest import ingest, ingest_npy, ingest_raw
+from chronocl.errors import (
+    ChronoclError,
+    InputNotFoundError,
+    InvalidDataError,
+    InvalidParameterError,
+    OutputExistsError,
+    UnknownNameError,
+)
+
+SHAPE = (5, 4, 3)  # (Z, Y, X): dims NX NY NZ = 3 4 5
+
+
+def write_raw(folder, series: np.ndarray, dtype: str, endian: str = "<", names=None) -> list:
+    files = []
+    for t, step in enumerate(series):
+        name = names[t] if names else f"step{t}.raw"
+        path = folder / name
+        step.astype(np.dtype(dtype).newbyteorder(endian)).tofile(path)
+        files.append(path)
+    return files
+
+
+def no_partial(folder) -> bool:
+    return not [p for p in folder.iterdir() if ".partial-" in p.name]
+
+
+@pytest.mark.parametrize(
+    ("dtype", "endian"),
+    [
+        ("float32", "<"),
+        ("float32", ">"),
+        ("uint8", "<"),
+        ("uint16", ">"),
+        ("int16", "<"),
+        ("float64", ">"),
+    ],
+)
+def test_raw_round_trip(tmp_path, dtype, endian):
+    rng = np.random.default_rng(1)
+    data = (rng.random((4, *SHAPE)) * 200).astype(dtype)
+    write_raw(tmp_path, data, dtype, endian)
+    series = ingest_raw(
+        [str(tmp_path / "step*.raw")],
+        tmp_path / "s.zarr",
+        dims=(3, 4, 5),
+        dtype=dtype,
+        endian="little" if endian == "<" else "big",
+        spacing=(2.5, 1.0, 0.5),
+    )
+    reopened = chronocl.open(tmp_path / "s.zarr")
+    for s in (series, reopened):
+        assert s.shape == (4, *SHAPE)
+        assert s.dtype == np.dtype(dtype)
+        np.testing.assert_array_equal(s.read(range(4)), data)
+        assert s.vmin == data.min() and s.vmax == data.max()
+        np.testing.assert_allclose(s.stats.step_min, data.min(axis=(1, 2, 3)))
+        np.testing.assert_allclose(s.stats.step_max, data.max(axis=(1, 2, 3)))
+        np.testing.assert_allclose(s.stats.step_mean, data.astype(np.float64).mean(axis=(1, 2, 3)))
+        assert s.spacing == (2.5, 1.0, 0.5)
+        assert s.data.chunksize[0] == 1  # one time step per chunk
+
+
+def test_files_are_sorted_naturally(tmp_path):
+    data = np.arange(11 * 60, dtype=np.float32).reshape(11, *SHAPE)
+    names = [f"v{t}.raw" for t in range(11)]  # v10 must come after v9, not after v1
+    files = write_raw(tmp_path, data, "float32", names=names)
+    series = ingest_raw([str(f) for f in reversed(files)], tmp_path / "s.zarr", dims=(3, 4, 5))
+    np.testing.assert_array_equal(series.read(range(11)), data)
+
+
+def test_npy_round_trip_and_big_endian(tmp_path):
+    data = np.random.default_rng(2).random((3, *SHAPE)).astype(">f4")
+    np.save(tmp_path / "a.npy", data)
+    series = ingest([str(tmp_path / "a.npy")], tmp_path / "s.zarr", times=[0.0, 0.5, 1.0])
+    np.testing.assert_array_equal(series.read([0, 1, 2]), data.astype("<f4"))
+    assert series.times == (0.0, 0.5, 1.0)
+
+
+def test_wrong_file_size(tmp_path):
+    write_raw(tmp_path, np.zeros((2, *SHAPE)), "float32")
+    with pytest.raises(InvalidDataError, match="has 240 bytes but --dims 3 4 6"):
+        ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 6))
+    with pytest.raises(InvalidDataError, match="--dtype float64 needs 480"):
+        ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5), dtype="float64")
+    assert not (tmp_path / "s.zarr").exists() and no_partial(tmp_path)
+
+
+def test_mixed_sizes(tmp_path):
+    write_raw(tmp_path, np.zeros((2, *SHAPE)), "float32")
+    (tmp_path / "step2.raw").write_bytes(b"\0" * 236)
+    with pytest.raises(InvalidDataError, match="differ in size"):
+        ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5))
+
+
+def test_missing_files_and_empty_glob(tmp_path):
+    with pytest.raises(InputNotFoundError, match="no files match"):
+        ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5))
+    with pytest.raises(InputNotFoundError, match="does not exist"):
+        ingest_raw([str(tmp_path / "gone.raw")], tmp_path / "s.zarr", dims=(3, 4, 5))
+    with pytest.raises(InputNotFoundError, match="no input files"):
+        ingest_raw([], tmp_path / "s.zarr", dims=(3, 4, 5))
+    with pytest.raises(InputNotFoundError) as info:
+        ingest_npy(tmp_path / "gone.npy", tmp_path / "s.zarr")
+    assert isinstance(info.value, FileNotFoundError)
+
+
+def test_zero_steps_and_bad_shapes(tmp_path):
+    np.save(tmp_path / "empty.npy", np.zeros((0, *SHAPE), dtype=np.float32))
+    with pytest.raises(InvalidDataError, match="zero time steps"):
+        ingest_npy(tmp_path / "empty.npy", tmp_path / "s.zarr")
+    np.save(tmp_path / "three.npy", np.zeros(SHAPE, dtype=np.float32))
+    with pytest.raises(InvalidDataError, match="must be 4D"):
+        ingest_npy(tmp_path / "three.npy", tmp_path / "s.zarr")
+    with pytest.raises(InvalidDataError, match="zero time steps"):
+        chronocl.TimeSeries.from_array(np.zeros((0, *SHAPE)))
+
+
+def test_non_finite_values_rejected_or_filled(tmp_path):
+    data = np.ones((3, *SHAPE), dtype=np.float32)
+    data[1, 2, 1, 0] = np.nan
+    data[2, 0, 0, 0] = np.inf
+    write_raw(tmp_path, data, "float32")
+    with pytest.raises(InvalidDataError, match=r"step1.raw \(step 1\) has 1 NaN/infinite"):
+        ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5))
+    assert not (tmp_path / "s.zarr").exists() and no_partial(tmp_path)
+    series = ingest_raw(
+        [str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5), nan_fill=0.0
+    )
+    assert series.read([1])[0, 2, 1, 0] == 0.0 and series.read([2])[0, 0, 0, 0] == 0.0
+    assert series.vmin == 0.0 and series.vmax == 1.0
+    with pytest.raises(InvalidDataError, match="NaN or infinite"):
+        chronocl.TimeSeries.from_array(data)
+
+
+def test_existing_output_needs_overwrite(tmp_path):
+    write_raw(tmp_path, np.zeros((1, *SHAPE)), "float32")
+    ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5))
+    with pytest.raises(OutputExistsError, match="--overwrite") as info:
+        ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5))
+    assert isinstance(info.value, FileExistsError)
+    write_raw(tmp_path, np.full((1, *SHAPE), 7.0), "float32")
+    series = ingest_raw(
+        [str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5), overwrite=True
+    )
+    assert series.vmax == 7.0 and no_partial(tmp_path)
+
+
+def test_failed_overwrite_keeps_the_old_store(tmp_path):
+    write_raw(tmp_path, np.full((2, *SHAPE), 3.0), "float32")
+    ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5))
+    bad = np.full((2, *SHAPE), np.nan, dtype=np.float32)
+    write_raw(tmp_path, bad, "float32")
+    with pytest.raises(InvalidDataError):
+        ingest_raw([str(tmp_path / "*.raw")], tmp_path / "s.zarr", dims=(3, 4, 5), overwrite=True)
+    assert chronocl.open(tmp_path / "s.zarr").vmax == 3.0 and no_partial(tmp_path)
+
+
+def test_bad_options(tmp_path):
+    write_raw(tmp_path, np.zeros((1, *SHAPE)), "float32")
+    files = [str(tmp_path / "step0.raw")]
+    with pytest.raises(UnknownNameError, match="complex64"):
+        ingest_raw(files, tmp_path / "s.zarr", dims=(3, 4, 5), dtype="complex64")
+    with pytest.raises(UnknownNameError, match="middle"):
+        ingest_raw(files, tmp_path / "s.zarr", dims=(3, 4, 5), endian="middle")
+    with pytest.raises(InvalidParameterError, match="needs --dims"):
+        ingest(files, tmp_path / "s.zarr")
+    with pytest.raises(InvalidParameterError, match="three positive sizes"):
+        ingest_raw(files, tmp_path / "s.zarr", dims=(3, 0, 5))
+    with pytest.raises(ChronoclError, match="spacing"):
+        ingest_raw(files, tmp_path / "s.zarr", dims=(3, 4, 5), spacing=(1, -1, 1))

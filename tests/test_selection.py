@@ -1,0 +1,68 @@
+"""Time selections: windows with stride, explicit lists, orders, and their errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from chronocl.errors import InvalidSelectionError, UnknownNameError
+from chronocl.selection import Selection, parse_selection
+from chronocl.spec import IntegrationSpec, resolve_order
+
+
+@pytest.mark.parametrize(
+    ("text", "steps"),
+    [
+        ("0:10:3", (0, 3, 6, 9)),
+        ("2:5", (2, 3, 4)),
+        (":3", (0, 1, 2)),
+        ("7:", (7, 8, 9)),
+        ("1,4,8", (1, 4, 8)),
+        ("5", (5,)),
+    ],
+)
+def test_parse_strings(text, steps):
+    sel = parse_selection(text, 10)
+    assert sel.steps == steps
+    assert parse_selection(sel.describe(), 10) == sel
+
+
+def test_other_forms():
+    assert parse_selection(slice(1, 7, 2), 10).steps == (1, 3, 5)
+    assert parse_selection([0, 9], 10).steps == (0, 9)
+    assert parse_selection(None, 4).steps == (0, 1, 2, 3)
+
+
+@pytest.mark.parametrize(
+    ("window", "needle"),
+    [
+        ("0:11", "outside the series"),
+        ("-1:3", "outside"),
+        ("5:5", "outside"),
+        ("0:5:0", "stride must be at least 1"),
+        ("3,3", "strictly increasing"),
+        ("4,2", "strictly increasing"),
+        ("12", "outside [0, 10)"),
+        ("a:b", "cannot read"),
+        ("1:2:3:4", "cannot read"),
+        ([], "empty"),
+    ],
+)
+def test_bad_windows(window, needle):
+    with pytest.raises(InvalidSelectionError) as info:
+        parse_selection(window, 10)
+    assert needle in str(info.value)
+    assert isinstance(info.value, ValueError)
+
+
+def test_orders():
+    sel = Selection((2, 5, 9), 10)
+    np.testing.assert_array_equal(resolve_order("forward", sel), [0, 1, 2])
+    np.testing.assert_array_equal(resolve_order("backward", sel), [2, 1, 0])
+    np.testing.assert_array_equal(resolve_order((9, 2, 5), sel), [2, 0, 1])
+    with pytest.raises(InvalidSelectionError, match="permutation"):
+        resolve_order((9, 2), sel)
+    with pytest.raises(UnknownNameError, match="sideways"):
+        IntegrationSpec(order="sideways")
+    with pytest.raises(UnknownNameError, match="unknown mode 'sum'"):
+        IntegrationSpec(mode="sum")

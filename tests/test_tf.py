@@ -1,0 +1,117 @@
+"""Transfer functions: presets, LUT, JSON round trip and validation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from chronocl.errors import (
+    ChronoclError,
+    InputNotFoundError,
+    InvalidTransferFunctionError,
+    UnknownNameError,
+)
+from chronocl.tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF, lut_lookup
+
+
+def test_rgb_ramp_is_blue_green_red():
+    rgb = TimeColor("rgb").evaluate(np.array([0.0, 0.25, 0.5, 1.0]))
+    np.testing.assert_allclose(rgb, [[0, 0, 1], [0, 0.5, 0.5], [0, 1, 0], [1, 0, 0]])
+
+
+def test_luminance_is_white_at_focus_fading_to_black():
+    lum = TimeColor("luminance", focus=0.5, falloff=0.5).evaluate(np.array([0.0, 0.25, 0.5, 1.0]))
+    np.testing.assert_allclose(lum[:, 0], [0, 0.5, 1, 0])
+    np.testing.assert_allclose(lum[:, 0], lum[:, 2])
+
+
+def test_warm_cool_goes_from_cool_to_warm():
+    rgb = TimeColor("warm-cool").evaluate(np.array([0.0, 1.0]))
+    assert rgb[0, 2] > rgb[0, 0] and rgb[1, 0] > rgb[1, 2]
+
+
+def test_hat_and_inverted_hat():
+    p = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+    hat = TimeAlpha("hat", center=0.5, width=1.0, floor=0.0).evaluate(p)
+    np.testing.assert_allclose(hat, [0, 0.5, 1, 0.5, 0])
+    inv = TimeAlpha("inverted-hat", center=0.5, width=1.0, floor=0.2).evaluate(p)
+    np.testing.assert_allclose(inv, [1, 0.6, 0.2, 0.6, 1])
+    np.testing.assert_allclose(TimeAlpha("constant", value=0.3).evaluate(p), 0.3)
+
+
+def test_positions_relative_and_absolute():
+    tf_rel, tf_abs = TimeTF(), TimeTF(positions="absolute")
+    np.testing.assert_allclose(tf_rel.positions_of([3, 5, 9], 11), [0, 0.5, 1])
+    np.testing.assert_allclose(tf_abs.positions_of([3, 5, 9], 11), [0.3, 0.5, 0.9])
+    np.testing.assert_allclose(tf_rel.positions_of([4], 11), [0])
+    np.testing.assert_allclose(tf_abs.positions_of([0], 1), [0])
+
+
+def test_lut_interpolates_linearly_between_entries():
+    tf = DataTF(points=[(0, 0, 0, 0, 0), (1, 1, 1, 1, 1)], size=256)
+    lut = tf.lut
+    assert lut.shape == (256, 4) and lut.dtype == np.float32
+    u = np.array([0.0, 0.3, 0.77, 1.0])
+    np.testing.assert_allclose(lut_lookup(lut, u)[:, 3], u, atol=1e-6)
+    step = DataTF(points=[(0, 0, 0, 0, 0), (0.5, 0, 0, 0, 0), (0.6, 1, 0, 0, 1), (1, 1, 0, 0, 1)])
+    assert lut_lookup(step.lut, np.array([0.4]))[0, 3] == 0
+    assert lut_lookup(step.lut, np.array([0.7]))[0, 3] == pytest.approx(1)
+
+
+def test_json_round_trip(tmp_path):
+    setting = TFSetting(
+        data_tf=DataTF(points=[(0, 1, 0, 0, 0), (0.4, 0, 1, 0, 0.3), (1, 0, 0, 1, 1)], size=512),
+        time_tf=TimeTF(
+            color=TimeColor("luminance", focus=0.3, falloff=0.5),
+            alpha=TimeAlpha("hat", center=0.7, width=0.4, floor=0.1),
+            positions="absolute",
+        ),
+    )
+    path = tmp_path / "tf.json"
+    setting.save(path)
+    assert TFSetting.load(path) == setting
+    custom = TFSetting(
+        time_tf=TimeTF(color=TimeColor("points", points=[(0, 1, 0, 0), (1, 0, 1, 0)]))
+    )
+    custom.save(path)
+    assert TFSetting.load(path) == custom
+
+
+@pytest.mark.parametrize(
+    ("content", "needle"),
+    [
+        ("{not json", "not valid JSON"),
+        ('{"data_tf": {"points": [[0, 1, 1, 1, NaN], [1, 1, 1, 1, 1]]}}', "NaN"),
+        ('{"data_tf": {"points": [[0.5, 1, 1, 1, 0], [0.2, 1, 1, 1, 1]]}}', "sorted"),
+        ('{"data_tf": {"points": [[0, 1, 1, 1, 0], [1, 1, 1, 1.5, 1]]}}', "outside [0, 1]"),
+        ('{"data_tf": {"points": [[0, 1, 1, 0], [1, 1, 1, 1, 1]]}}', "expected 5"),
+        ('{"data_tf": {"points": []}}', "non-empty"),
+        ('{"data_tf": {"size": 16}}', "256 to 65536"),
+        ('{"time_tf": {"alpha": {"shape": "hat", "width": 0}}}', "width"),
+        ('{"time_tf": {"color": {"preset": "rainbow"}}}', "rainbow"),
+        ('{"time_tf": {"colour": {}}}', "unknown key 'colour'"),
+        ("[1, 2]", "JSON object"),
+    ],
+)
+def test_bad_tf_json_gives_one_clear_line(tmp_path, content, needle):
+    path = tmp_path / "bad.json"
+    path.write_text(content)
+    with pytest.raises(ChronoclError) as info:
+        TFSetting.load(path)
+    assert needle in str(info.value)
+    assert "\n" not in str(info.value)
+    assert isinstance(info.value, ValueError)
+
+
+def test_missing_tf_file(tmp_path):
+    with pytest.raises(InputNotFoundError):
+        TFSetting.load(tmp_path / "nope.json")
+
+
+def test_unknown_presets():
+    with pytest.raises(UnknownNameError, match="rainbow"):
+        TimeTF.preset("rainbow")
+    with pytest.raises(UnknownNameError):
+        TimeTF(positions="sideways")
+    with pytest.raises(InvalidTransferFunctionError, match="min < max"):
+        DataTF(value_range=(2.0, 1.0))
