@@ -46,3 +46,11 @@ class OutputExistsError(ChronoclError, FileExistsError):
 
 class StoreFormatError(ChronoclError, ValueError):
     """A path that exists but is not a chronocl store or chronovolume."""
+
+
+class EngineUnavailableError(ChronoclError, RuntimeError):
+    """No OpenCL platform or device is available (or the named one does not exist)."""
+
+
+class KernelBuildError(ChronoclError, RuntimeError):
+    """An OpenCL program failed to build; the message carries options, device and log."""

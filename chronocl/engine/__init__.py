@@ -1,0 +1,56 @@
+"""Integration engines: ``numpy`` (the reference) and ``opencl`` (PoCL on CPUs, any GPU driver).
+
+An engine integrates one xytz brick (rows, W, Y, X) into that slab's part of
+the chronovolume; `chronocl.integrate` streams the bricks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import reference
+from ..errors import UnknownNameError
+from ..reference import Partial
+from ..spec import IntegrationSpec
+
+ENGINES = ("opencl", "numpy")
+
+
+class NumpyEngine:
+    """The reference integrator behind the engine interface."""
+
+    name = "numpy"
+    max_brick_bytes = 64 * 2**20
+
+    def accumulate(
+        self,
+        brick: np.ndarray,
+        crop: slice,
+        steps,
+        positions: np.ndarray,
+        order: np.ndarray,
+        spec: IntegrationSpec,
+        value_range: tuple[float, float],
+    ) -> tuple[Partial, bool]:
+        u = reference.normalize(np.moveaxis(brick, 1, 0), *value_range)
+        partial = reference.accumulate(u, steps, positions, order, spec)
+        t_index = None if partial.t_index is None else partial.t_index[crop]
+        return Partial(partial.rgba[crop], t_index), False
+
+
+_engines: dict[tuple[str, str | None], object] = {}
+
+
+def get_engine(name: str = "opencl", device: str | None = None):
+    """A cached engine by name (the OpenCL one per device)."""
+    if name not in ENGINES:
+        raise UnknownNameError(f"unknown engine {name!r}; choose one of {', '.join(ENGINES)}")
+    key = (name, device)
+    if key not in _engines:
+        if name == "numpy":
+            _engines[key] = NumpyEngine()
+        else:
+            from .opencl import OpenCLEngine
+
+            _engines[key] = OpenCLEngine(device)
+    return _engines[key]

@@ -1,0 +1,150 @@
+"""OpenCL device selection and one cached context + queue per device.
+
+`CHRONOCL_DEVICE` picks a device by index ("0:1" = platform 0, device 1) or by a
+case-insensitive substring of "platform: device"; `PYOPENCL_CTX` is honoured
+the way pyopencl does. Default: the first GPU if there is one, else the first
+CPU device. Contexts are cached per process and never shared across a fork:
+anything multi-process must use the spawn start method (PoCL hangs in a forked
+child once a context exists in the parent).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from dataclasses import dataclass
+from functools import cache
+
+from ..errors import EngineUnavailableError
+
+NO_PLATFORM = (
+    "no OpenCL platform found; install one with 'pip install pyopencl[pocl]' (PoCL on the CPU) "
+    "or 'apt-get install pocl-opencl-icd', or use --engine numpy"
+)
+
+
+def _cl():
+    try:
+        import pyopencl as cl
+    except ImportError:
+        raise EngineUnavailableError(
+            "pyopencl is not installed; 'pip install pyopencl[pocl]', or use --engine numpy"
+        ) from None
+    return cl
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    index: str  # "platform:device"
+    platform: str
+    name: str
+    kind: str  # "GPU", "CPU", ...
+    version: str
+    driver: str
+    compute_units: int
+    global_mem: int
+    max_alloc: int
+
+    @property
+    def label(self) -> str:
+        return f"{self.platform}: {self.name}"
+
+
+def _all_devices() -> list[tuple[DeviceInfo, object]]:
+    cl = _cl()
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        platforms = []
+    found = []
+    for pi, platform in enumerate(platforms):
+        try:
+            devices = platform.get_devices()
+        except cl.Error:
+            continue
+        for di, dev in enumerate(devices):
+            info = DeviceInfo(
+                index=f"{pi}:{di}",
+                platform=platform.name.strip(),
+                name=dev.name.strip(),
+                kind=_kind(cl, dev.type),
+                version=dev.version.strip(),
+                driver=dev.driver_version.strip(),
+                compute_units=dev.max_compute_units,
+                global_mem=dev.global_mem_size,
+                max_alloc=dev.max_mem_alloc_size,
+            )
+            found.append((info, dev))
+    return found
+
+
+def _kind(cl, bits: int) -> str:
+    for name in ("GPU", "CPU", "ACCELERATOR"):
+        if bits & getattr(cl.device_type, name):
+            return name
+    return "OTHER"
+
+
+def list_devices() -> list[DeviceInfo]:
+    """Every OpenCL device of every platform (empty when there is no platform)."""
+    return [info for info, _ in _all_devices()]
+
+
+def _pick(spec: str | None) -> tuple[DeviceInfo, object]:
+    devices = _all_devices()
+    if not devices:
+        raise EngineUnavailableError(NO_PLATFORM)
+    if not spec:
+        spec = os.environ.get("CHRONOCL_DEVICE") or os.environ.get("PYOPENCL_CTX") or ""
+    spec = spec.strip()
+    if spec:
+        parts = spec.split(":")
+        if parts[0].isdigit() and all(p.isdigit() for p in parts[1:] if p) and len(parts) <= 2:
+            wanted = f"{int(parts[0])}:{int(parts[1]) if len(parts) > 1 and parts[1] else 0}"
+            for info, dev in devices:
+                if info.index == wanted:
+                    return info, dev
+        else:
+            for info, dev in devices:
+                if spec.lower() in info.label.lower():
+                    return info, dev
+        known = "; ".join(f"{i.index} {i.label}" for i, _ in devices)
+        raise EngineUnavailableError(
+            f"no OpenCL device matches {spec!r}; available: {known} (see 'chronocl devices')"
+        )
+    for kind in ("GPU", "CPU"):
+        for info, dev in devices:
+            if kind in info.kind:
+                return info, dev
+    return devices[0]
+
+
+@dataclass
+class DeviceContext:
+    """A device with its context and in-order queue."""
+
+    info: DeviceInfo
+    device: object
+    context: object
+    queue: object
+    lock: threading.Lock
+
+    @property
+    def is_cpu(self) -> bool:
+        return "CPU" in self.info.kind
+
+
+@cache
+def _context_for(index: str) -> DeviceContext:
+    cl = _cl()
+    for info, dev in _all_devices():
+        if info.index == index:
+            ctx = cl.Context([dev])
+            return DeviceContext(info, dev, ctx, cl.CommandQueue(ctx), threading.Lock())
+    raise EngineUnavailableError(f"OpenCL device {index} disappeared")  # pragma: no cover
+
+
+def get_context(device: str | None = None) -> DeviceContext:
+    """The cached context of the selected device (see module docstring)."""
+    info, _ = _pick(device)
+    return _context_for(info.index)
