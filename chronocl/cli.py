@@ -34,6 +34,8 @@ Examples:
   chronocl info vortex.zarr
 
   chronocl integrate vortex.zarr alpha.zarr --mode alpha --window 0:30:10
+
+  chronocl devices
 """,
     no_args_is_help=True,
     add_completion=False,
@@ -188,7 +190,13 @@ def integrate(
     enhance: Annotated[str, typer.Option(help="none, edge or silhouette.")] = "none",
     threshold: Annotated[float, typer.Option(help="first_hit opacity threshold.")] = 0.0,
     normalize: Annotated[str, typer.Option(help="additive normalisation: time or max.")] = "time",
-    engine: Annotated[str, typer.Option(help="Integration engine.")] = "numpy",
+    engine: Annotated[
+        str, typer.Option(help="opencl (default) or numpy (the reference).")
+    ] = "opencl",
+    device: Annotated[
+        str | None,
+        typer.Option(help="OpenCL device: index 0:1 or a name part (see 'chronocl devices')."),
+    ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
 ) -> None:
     """Integrate a window of time steps into a chronovolume store.
@@ -223,10 +231,35 @@ def integrate(
         threshold=threshold,
         normalize=normalize,
         engine=engine,
+        device=device,
         progress=True,
     )
     cv.save(out_path, overwrite=overwrite)
     err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {time.perf_counter() - t0:.2f} s")
+
+
+@app.command()
+def devices() -> None:
+    """List the OpenCL platforms and devices, marking the default one.
+
+    Select one with --device 0:1 (platform:device), a part of its name, or CHRONOCL_DEVICE.
+
+    Example: chronocl devices
+    """
+    from .engine.device import NO_PLATFORM, _pick, list_devices
+
+    found = list_devices()
+    if not found:
+        err.print(f"chronocl: {NO_PLATFORM}", highlight=False, markup=False)
+        return
+    default = _pick(None)[0].index
+    for d in found:
+        mark = "*" if d.index == default else " "
+        out.print(
+            f"{mark} {d.index}  {d.kind:<4} {d.label}  ({d.version}; driver {d.driver}; "
+            f"{d.compute_units} compute units, {d.global_mem / 2**30:.1f} GiB)",
+            highlight=False,
+        )
 
 
 @app.command()

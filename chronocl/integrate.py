@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -17,15 +18,13 @@ from . import reference
 from .chronovolume import Chronovolume
 from .data.bricks import slabs
 from .data.series import TimeSeries
+from .engine import get_engine
 from .enhance import Enhance
-from .errors import InvalidParameterError, UnknownNameError
+from .errors import InvalidParameterError
 from .progress import track
 from .selection import Selection, parse_selection
 from .spec import IntegrationSpec, resolve_order
 from .tf import DataTF, TFSetting, TimeTF
-
-ENGINES = ("numpy",)
-SLAB_BYTES = 64 * 2**20
 
 
 def make_spec(
@@ -62,7 +61,8 @@ def integrate(
     mode: str = "alpha",
     *,
     spec: IntegrationSpec | None = None,
-    engine: str = "numpy",
+    engine: str | object = "opencl",
+    device: str | None = None,
     slab: int | None = None,
     progress: bool = False,
     **spec_args: object,
@@ -72,35 +72,55 @@ def integrate(
     `window` is 't0:t1[:stride]', a list of steps, a slice or a Selection (default:
     every step). Either pass a ready `spec`, or the arguments of `make_spec`
     (tf=, data_tf=, time_tf=, order=, enhance=, threshold=, normalize=).
-    `slab` sets the z rows integrated at once (default: as many as fit 64 MB).
+    `engine` is ``opencl`` (default; `device` picks one, see `chronocl devices`),
+    ``numpy`` (the reference) or an engine object. `slab` sets the z rows per brick
+    (default: as many as fit the engine's brick size).
     """
-    if engine not in ENGINES:
-        raise UnknownNameError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
     if spec is None:
         spec = make_spec(mode, **spec_args)  # type: ignore[arg-type]
     elif spec_args:
         raise InvalidParameterError("pass either spec= or the integration arguments, not both")
     selection = parse_selection(window, series.n_steps)
     order = resolve_order(spec.order, selection)
+    eng = get_engine(engine, device) if isinstance(engine, str) else engine
     positions = spec.time_tf.positions_of(selection.steps, series.n_steps)
     value_range = spec.data_tf.value_range or (series.vmin, series.vmax)
 
     nz, ny, nx = series.volume_shape
-    if slab is None:
-        slab = max(1, SLAB_BYTES // max(1, selection.width * ny * nx * 4))
     halo = 1 if spec.enhance.needs_gradient else 0
+    row_bytes = selection.width * ny * nx * series.dtype.itemsize
+    fit = eng.max_brick_bytes // max(1, row_bytes) - 2 * halo
+    if fit < 1:
+        most = max(1, eng.max_brick_bytes // ((1 + 2 * halo) * ny * nx * series.dtype.itemsize))
+        raise InvalidParameterError(
+            f"one z-row of a {selection.width}-step window needs "
+            f"{(1 + 2 * halo) * row_bytes / 2**20:.0f} MB but the engine holds at most "
+            f"{eng.max_brick_bytes / 2**20:.0f} MB per brick; use a window of at most {most} steps"
+        )
+    slab = fit if slab is None else min(slab, fit)
     parts = slabs(nz, slab, halo)
 
-    rgba = np.zeros((nz, ny, nx, 4), dtype=np.float64)
-    t_index = np.full((nz, ny, nx), -1, dtype=np.int32) if spec.has_t_index else None
-    for s in track(parts, len(parts), "integrating slabs", progress and len(parts) > 1):
-        u = series.normalized(selection.steps, s.r0, s.r1, value_range)
-        partial = reference.accumulate(u, selection.steps, positions, order, spec)
-        rgba[s.z0 : s.z1] = partial.rgba[s.crop]
-        if t_index is not None:
-            t_index[s.z0 : s.z1] = partial.t_index[s.crop]
-    out = reference.finalize(reference.Partial(rgba, t_index), positions, spec)
-    return Chronovolume(out, t_index, _metadata(series, selection, spec, value_range, engine))
+    rgba = np.empty((nz, ny, nx, 4), dtype=np.float32)
+    t_index = np.empty((nz, ny, nx), dtype=np.int32) if spec.has_t_index else None
+    final = True
+    # Double buffering: the next brick is read while the engine integrates this one.
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="chronocl-read") as reader:
+        pending = reader.submit(series.read_brick, selection.steps, parts[0].r0, parts[0].r1)
+        for i, s in enumerate(track(parts, len(parts), "integrating bricks", progress)):
+            brick = pending.result()
+            if i + 1 < len(parts):
+                nxt = parts[i + 1]
+                pending = reader.submit(series.read_brick, selection.steps, nxt.r0, nxt.r1)
+            partial, final = eng.accumulate(
+                brick, s.crop, selection.steps, positions, order, spec, value_range
+            )
+            rgba[s.z0 : s.z1] = partial.rgba
+            if t_index is not None:
+                t_index[s.z0 : s.z1] = partial.t_index
+    if not final:
+        rgba = reference.finalize(reference.Partial(rgba, t_index), positions, spec)
+    name = getattr(eng, "name", type(eng).__name__)
+    return Chronovolume(rgba, t_index, _metadata(series, selection, spec, value_range, name))
 
 
 def _metadata(

@@ -94,6 +94,17 @@ class TimeSeries:
             return out
         return np.asarray(self.data[list(steps), z0:z1].compute())
 
+    def read_brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
+        """Raw values of z rows [z0, z1) of the given steps as an xytz brick (z1 - z0, W, Y, X)."""
+        z1 = self.shape[1] if z1 is None else z1
+        out = np.empty((z1 - z0, len(steps), *self.shape[2:]), dtype=self.dtype)
+        for i, s in enumerate(steps):
+            if self._zarr is not None:
+                out[:, i] = self._zarr[int(s), z0:z1]
+            else:
+                out[:, i] = self.data[int(s), z0:z1].compute()
+        return out
+
     def normalized(
         self,
         steps: Sequence[int],

@@ -1,0 +1,195 @@
+"""The OpenCL engine on PoCL equals the numpy reference; every fast path equals the general path."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import chronocl
+from chronocl.engine.device import list_devices
+from chronocl.engine.opencl import OpenCLEngine
+from chronocl.errors import EngineUnavailableError, KernelBuildError
+from chronocl.spec import IntegrationSpec
+
+from .strategies import specs, windows
+
+
+def series_of(u: np.ndarray, sel, dtype=np.float32) -> chronocl.TimeSeries:
+    raw = np.zeros((sel.n_steps, *u.shape[1:]), dtype=np.float32)
+    raw[list(sel.steps)] = u
+    raw[0].flat[0], raw[-1].flat[-1] = 0.0, 1.0
+    if np.dtype(dtype) == np.uint8:
+        raw = np.round(raw * 255).astype(np.uint8)
+    return chronocl.TimeSeries.from_array(raw.astype(dtype))
+
+
+def assert_same(a: chronocl.Chronovolume, b: chronocl.Chronovolume, atol: float = 1e-5) -> None:
+    np.testing.assert_allclose(a.rgba, b.rgba, atol=atol, rtol=0)
+    if a.t_index is None:
+        assert b.t_index is None
+    else:
+        np.testing.assert_array_equal(a.t_index, b.t_index)
+
+
+@given(st.data())
+def test_opencl_equals_reference(data):
+    """Invariant 4 (and 3 on the device): any mode x order x enhancement, odd shapes, any bricks."""
+    u, sel = data.draw(windows(max_w=40))
+    spec = data.draw(specs(selection=sel))
+    dtype = data.draw(st.sampled_from([np.float32, np.float64, np.uint8, np.uint16, np.int16]))
+    series = series_of(u, sel, dtype)
+    slab = data.draw(st.integers(1, u.shape[1] + 1))
+    ref = chronocl.integrate(series, sel, spec=spec, engine="numpy")
+    ocl = chronocl.integrate(series, sel, spec=spec, engine="opencl", slab=slab)
+    assert_same(ref, ocl)
+
+
+@given(st.data())
+def test_fast_paths_equal_the_general_path(data):
+    """Early exit, direct uint8 LUT indexing and host-pointer buffers against the general path."""
+    u, sel = data.draw(windows(max_w=16))
+    spec = data.draw(specs(selection=sel))
+    series = series_of(u, sel, np.uint8)
+    general = OpenCLEngine(host_ptr=False, early_exit=False, quantized=False)
+    fast = OpenCLEngine(host_ptr=True, early_exit=True, quantized=True)
+    base = chronocl.integrate(series, sel, spec=spec, engine=general)
+    assert_same(base, chronocl.integrate(series, sel, spec=spec, engine=fast))
+    for flag in ("host_ptr", "early_exit", "quantized"):
+        options = {"host_ptr": False, "early_exit": False, "quantized": False, flag: True}
+        one = chronocl.integrate(series, sel, spec=spec, engine=OpenCLEngine(**options))
+        assert_same(base, one)
+
+
+def test_early_exit_on_opaque_front_and_window_of_40():
+    rng = np.random.default_rng(3)
+    data = rng.random((40, 5, 7, 13)).astype(np.float32)
+    data[0] = 1.0  # the first step is opaque everywhere: the rest is skipped
+    series = chronocl.TimeSeries.from_array(data)
+    spec = IntegrationSpec(
+        mode="alpha", data_tf=chronocl.DataTF(points=[(0, 1, 1, 1, 0), (1, 1, 1, 1, 1)])
+    )
+    ref = chronocl.integrate(series, "0:40", spec=spec, engine="numpy")
+    ocl = chronocl.integrate(series, "0:40", spec=spec)
+    assert_same(ref, ocl)
+    np.testing.assert_allclose(ocl.rgba[..., 3], 1.0)
+
+
+def test_window_larger_than_a_brick_is_split():
+    """A device that holds only a few rows gets more bricks, not a failure."""
+    data = np.random.default_rng(4).random((12, 9, 6, 5)).astype(np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    small = OpenCLEngine(max_brick_bytes=4 * 12 * 6 * 5 * 4)  # four z-rows of the window
+    calls = []
+    accumulate = small.accumulate
+    small.accumulate = lambda brick, *a: calls.append(brick.shape) or accumulate(brick, *a)
+    ref = chronocl.integrate(series, "0:12", "alpha", engine="numpy", enhance="edge")
+    assert_same(ref, chronocl.integrate(series, "0:12", "alpha", engine=small, enhance="edge"))
+    assert len(calls) == 5  # 2 output rows + 2 halo rows per brick over 9 rows
+    assert all(shape[0] <= 4 for shape in calls)
+
+
+def test_window_that_cannot_fit_one_row_names_the_limit():
+    series = chronocl.TimeSeries.from_array(np.zeros((12, 3, 6, 5), dtype=np.float32))
+    tiny = OpenCLEngine(max_brick_bytes=3 * 6 * 5 * 4)
+    with pytest.raises(chronocl.ChronoclError, match="window of at most 1 steps"):
+        chronocl.integrate(series, "0:12", "alpha", engine=tiny, enhance="edge")
+
+
+def test_unknown_device_names_the_available_ones():
+    with pytest.raises(EngineUnavailableError, match="no OpenCL device matches 'quantum'") as info:
+        chronocl.integrate(chronocl.TimeSeries.from_array(np.zeros((1, 1, 1, 1))), device="quantum")
+    assert list_devices()[0].name in str(info.value)
+    assert isinstance(info.value, RuntimeError)
+
+
+def test_build_error_shows_options_device_and_log():
+    from chronocl.engine.device import get_context
+    from chronocl.engine.program import build
+
+    dc = get_context()
+    with pytest.raises(KernelBuildError) as info:
+        build(dc, "broken.cl", {"LUT_N": 256}, text="__kernel void f() { this is not C; }")
+    message = str(info.value)
+    assert "broken.cl" in message and "-DLUT_N=256" in message
+    assert dc.info.name in message and "error" in message.lower()
+
+
+def test_no_platform_gives_install_hint(tmp_path):
+    env = {**os.environ, "OCL_ICD_VENDORS": str(tmp_path / "none"), "CHRONOCL_DEVICE": ""}
+    store = tmp_path / "s.zarr"
+    chronocl.TimeSeries.from_array(np.zeros((2, 2, 2, 2))).save(store)
+    result = subprocess.run(
+        [sys.executable, "-m", "chronocl", "integrate", str(store), str(tmp_path / "o.zarr")],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert result.returncode == 2
+    assert "pyopencl[pocl]" in result.stderr and "pocl-opencl-icd" in result.stderr
+    assert "--engine numpy" in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "o.zarr").exists()
+
+
+def test_kernels_load_from_an_installed_wheel(tmp_path):
+    """A non-editable install must carry kernels/ (a missing force-include is silent)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(tmp_path / "dist"),
+            root,
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    wheel = next((tmp_path / "dist").glob("chronocl-*.whl"))
+    site = tmp_path / "site"
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "-q",
+            "--no-deps",
+            "--target",
+            str(site),
+            str(wheel),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    code = (
+        "import numpy as np, chronocl; from chronocl.engine.program import kernel_dir; "
+        "print(chronocl.__file__); print(kernel_dir()); "
+        "s = chronocl.TimeSeries.from_array(np.random.default_rng(0).random((3, 2, 3, 4))); "
+        "print(chronocl.integrate(s, mode='max').t_index.max())"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(site)},
+    )
+    assert out.returncode == 0, out.stderr
+    module_file, kernels, t_max = out.stdout.split()
+    assert module_file.startswith(str(site)) and kernels.startswith(str(site))
+    assert int(t_max) in (0, 1, 2)
