@@ -111,12 +111,11 @@ def integrate(
             if i + 1 < len(parts):
                 nxt = parts[i + 1]
                 pending = reader.submit(series.read_brick, selection.steps, nxt.r0, nxt.r1)
-            partial, final = eng.accumulate(
-                brick, s.crop, selection.steps, positions, order, spec, value_range
+            # z is the outermost axis, so a slab of the output is a contiguous view.
+            out = (rgba[s.z0 : s.z1], None if t_index is None else t_index[s.z0 : s.z1])
+            _, final = eng.accumulate(
+                brick, s.crop, selection.steps, positions, order, spec, value_range, out
             )
-            rgba[s.z0 : s.z1] = partial.rgba
-            if t_index is not None:
-                t_index[s.z0 : s.z1] = partial.t_index
     if not final:
         rgba = reference.finalize(reference.Partial(rgba, t_index), positions, spec)
     name = getattr(eng, "name", type(eng).__name__)

@@ -31,11 +31,18 @@ class NumpyEngine:
         order: np.ndarray,
         spec: IntegrationSpec,
         value_range: tuple[float, float],
+        out: tuple[np.ndarray, np.ndarray | None] | None = None,
     ) -> tuple[Partial, bool]:
         u = reference.normalize(np.moveaxis(brick, 1, 0), *value_range)
         partial = reference.accumulate(u, steps, positions, order, spec)
+        rgba = partial.rgba[crop]
         t_index = None if partial.t_index is None else partial.t_index[crop]
-        return Partial(partial.rgba[crop], t_index), False
+        if out is not None:
+            out[0][...] = rgba
+            if t_index is not None:
+                out[1][...] = t_index
+            rgba, t_index = out[0], (out[1] if t_index is not None else None)
+        return Partial(rgba, t_index), False
 
 
 _engines: dict[tuple[str, str | None], object] = {}

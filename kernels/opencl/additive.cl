@@ -4,18 +4,28 @@
 __kernel void integrate_additive(KERNEL_ARGS, const float4 norm, __global float4 *out)
 {
     VOXEL_PROLOGUE
-    float3 c = (float3)(0.0f);
-    float a = 0.0f;
+    floatv cr = 0.0f, cg = 0.0f, cb = 0.0f, ca = 0.0f;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        const float4 s = step_rgba(data, lut, k, x, y, zb, nx, ny, w, vmin, scale);
-        const float ak = ALPHA_OF(s, k);
-        c += ak * s.xyz;
-        a = fmax(a, ak);
+        LutPos p;
+        int live;
+        LOCATE(RAW(k), p, live)
+#ifdef SKIP_EMPTY
+        if (!live) continue; /* adds 0 to the sums and cannot raise the maximum */
+#endif
+        const float4 t = tc[k];
+        floatv r, g, b;
+        STEP_COLOR(lut, p, t, r, g, b)
+        const floatv ak = STEP_ALPHA(lut, p, t, k);
+        cr += ak * r;
+        cg += ak * g;
+        cb += ak * b;
+        ca = fmax(ca, ak);
     }
 #ifdef NORM_TIME
-    c = select((float3)(0.0f), c / norm.xyz, norm.xyz > 0.0f);
-    c = fmin(c, (float3)(a));
+    cr = norm.x > 0.0f ? fmin(cr / norm.x, ca) : (floatv)(0.0f);
+    cg = norm.y > 0.0f ? fmin(cg / norm.y, ca) : (floatv)(0.0f);
+    cb = norm.z > 0.0f ? fmin(cb / norm.z, ca) : (floatv)(0.0f);
 #endif
-    out[o] = (float4)(c, a);
+    STORE_RGBA(o, cr, cg, cb, ca);
 }

@@ -3,19 +3,28 @@
 __kernel void integrate_alpha(KERNEL_ARGS, __global float4 *out)
 {
     VOXEL_PROLOGUE
-    float3 c = (float3)(0.0f);
-    float a = 0.0f;
+    floatv cr = 0.0f, cg = 0.0f, cb = 0.0f, ca = 0.0f;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        const float4 s = step_rgba(data, lut, k, x, y, zb, nx, ny, w, vmin, scale);
-        const float ak = ALPHA_OF(s, k);
-        const float t = (1.0f - a) * ak;
-        c += t * s.xyz;
-        a += t;
+        LutPos p;
+        int live;
+        LOCATE(RAW(k), p, live)
+#ifdef SKIP_EMPTY
+        if (!live) continue;
+#endif
+        const float4 t = tc[k];
+        floatv r, g, b;
+        STEP_COLOR(lut, p, t, r, g, b)
+        const floatv ak = STEP_ALPHA(lut, p, t, k);
+        const floatv tk = (1.0f - ca) * ak;
+        cr += tk * r;
+        cg += tk * g;
+        cb += tk * b;
+        ca += tk;
 #ifdef EARLY_EXIT
-        /* What the remaining steps could add is at most the transmittance 1 - a. */
-        if (1.0f - a < 1e-6f) break;
+        /* What the remaining steps could add is at most the transmittance 1 - A. */
+        if (ALL(1.0f - ca < 1e-6f)) break;
 #endif
     }
-    out[o] = (float4)(c, a);
+    STORE_RGBA(o, cr, cg, cb, ca);
 }

@@ -1,48 +1,141 @@
 /* Shared helpers of the chronocl integration kernels.
  *
- * Build options set by the host (chronocl/engine/program.py):
- *   DATA_T     element type of the brick: float, uchar, ushort or short
- *   QUANT      defined for uchar data: the per-step LUT is indexed by the raw value
- *   LUT_N      entries per step in the LUT (256 when QUANT)
- *   ENHANCE    0 none, 1 edge, 2 silhouette
- *   EARLY_EXIT defined to stop compositing once the transmittance is below 1e-6
+ * Build options set by the host (chronocl/engine/opencl.py):
+ *   VEC         voxels per work-item along x: 16 (vectorised) or 1 (x tail, enhancement)
+ *   DATA_T      element type of the brick: float, uchar, ushort or short
+ *   DATA_V      DATA_T with VEC lanes (e.g. uchar16)
+ *   QUANT       uchar data index the data LUT directly (lut holds TF(u(v)) for v = 0..255)
+ *   RAW_ORDER   max/min compare raw values: u(v) is strictly increasing on the data type
+ *   LUT_N       entries per channel of the data LUT
+ *   CONST_COLOR the data colour is the same everywhere: skip the colour lookups
+ *   ENHANCE     0 none, 1 edge, 2 silhouette (VEC must be 1)
+ *   EARLY_EXIT  alpha: stop once every lane's transmittance is below 1e-6
+ *   SKIP_EMPTY  skip steps whose lanes all map to zero data opacity (exact: they add nothing)
  *
- * The brick is in xytz order: (nzb, w, ny, nx), x fastest. The output covers brick
- * rows [zcrop, zcrop + nz_out): rows outside are the gradient halo.
- * Arithmetic mirrors chronocl/reference.py so results agree to float32 rounding.
+ * The brick is in xytz order: (nzb, w, ny, nx), x fastest. A work-item integrates VEC
+ * consecutive voxels starting at x0 + VEC * get_global_id(0); the output covers brick rows
+ * [zcrop, zcrop + nz_out), the rest being the gradient halo. The data LUT is planar
+ * (r[LUT_N], g[LUT_N], b[LUT_N], a[LUT_N]) and shared by all steps; tc[k] = (rgb_t, a_t) of
+ * step k. Arithmetic follows chronocl/reference.py so results agree to float32 rounding.
  */
 
-#define VOX(zb, k, y, x) data[(((size_t)(zb) * w + (k)) * ny + (y)) * nx + (x)]
+#pragma OPENCL FP_CONTRACT OFF
+
+#define VOX_INDEX(zb, k, y, x) ((((size_t)(zb) * w + (k)) * ny + (y)) * nx + (x))
 #define OUT_INDEX(z, y, x) (((size_t)(z) * ny + (y)) * nx + (x))
 
-/* u = clip((v - vmin) * scale, 0, 1), in float32 exactly as the reference. */
-inline float normalize_value(DATA_T v, float vmin, float scale)
-{
-    float u = ((float)v - vmin) * scale;
-    return fmin(fmax(u, 0.0f), 1.0f);
-}
-
-/* Per-step LUT (rgb_d * rgb_t, a_d * a_t) evaluated at u with linear interpolation. */
-inline float4 lut_lerp(__global const float4 *lut, float u)
-{
-    float x = u * (float)(LUT_N - 1);
-    int i0 = min((int)x, LUT_N - 2);
-    float f = x - (float)i0;
-    float4 a = lut[i0];
-    float4 b = lut[i0 + 1];
-    return a * (1.0f - f) + b * f;
-}
-
-/* RGBA before enhancement of step k at brick voxel (x, y, zb). */
-inline float4 step_rgba(__global const DATA_T *data, __global const float4 *lut, int k,
-                        int x, int y, int zb, int nx, int ny, int w, float vmin, float scale)
-{
-#ifdef QUANT
-    return lut[k * LUT_N + (int)VOX(zb, k, y, x)];
+#if VEC == 16
+typedef float16 floatv;
+typedef int16 intv;
+#define VLOAD(p) vload16(0, (p))
+#define TO_FLOAT(v) convert_float16(v)
+#define TO_INT(v) convert_int16(v)
+#define ANY(c) any(c)
+#define ALL(c) all(c)
+#define WIDEN_MASK(m) (convert_int16(m) != 0) /* a narrow lane mask as int lanes (-1 / 0) */
+#define SELECT(a, b, c) select((a), (b), (c))
+#define STORE_INT(v, p) vstore16((v), 0, (p))
+#define GATHER_INT(l, i)                                                                 \
+    (int16)((l)[(i).s0], (l)[(i).s1], (l)[(i).s2], (l)[(i).s3], (l)[(i).s4],            \
+            (l)[(i).s5], (l)[(i).s6], (l)[(i).s7], (l)[(i).s8], (l)[(i).s9],            \
+            (l)[(i).sa], (l)[(i).sb], (l)[(i).sc], (l)[(i).sd], (l)[(i).se], (l)[(i).sf])
+#define GATHER(l, i)                                                                     \
+    (float16)((l)[(i).s0], (l)[(i).s1], (l)[(i).s2], (l)[(i).s3], (l)[(i).s4],          \
+              (l)[(i).s5], (l)[(i).s6], (l)[(i).s7], (l)[(i).s8], (l)[(i).s9],          \
+              (l)[(i).sa], (l)[(i).sb], (l)[(i).sc], (l)[(i).sd], (l)[(i).se], (l)[(i).sf])
+/* Interleave lane j of four planar vectors into out[o + n] (RGBA of voxel x + n). */
+#define ST1(o, j, n, R_, G_, B_, A_) \
+    out[(o) + n] = (float4)((R_).s##j, (G_).s##j, (B_).s##j, (A_).s##j)
+#define STORE_RGBA(o, R_, G_, B_, A_)                                                    \
+    do {                                                                                  \
+        ST1(o, 0, 0, R_, G_, B_, A_); ST1(o, 1, 1, R_, G_, B_, A_);                       \
+        ST1(o, 2, 2, R_, G_, B_, A_); ST1(o, 3, 3, R_, G_, B_, A_);                       \
+        ST1(o, 4, 4, R_, G_, B_, A_); ST1(o, 5, 5, R_, G_, B_, A_);                       \
+        ST1(o, 6, 6, R_, G_, B_, A_); ST1(o, 7, 7, R_, G_, B_, A_);                       \
+        ST1(o, 8, 8, R_, G_, B_, A_); ST1(o, 9, 9, R_, G_, B_, A_);                       \
+        ST1(o, a, 10, R_, G_, B_, A_); ST1(o, b, 11, R_, G_, B_, A_);                     \
+        ST1(o, c, 12, R_, G_, B_, A_); ST1(o, d, 13, R_, G_, B_, A_);                     \
+        ST1(o, e, 14, R_, G_, B_, A_); ST1(o, f, 15, R_, G_, B_, A_);                     \
+    } while (0)
+#elif VEC == 1
+typedef float floatv;
+typedef int intv;
+#define VLOAD(p) (*(p))
+#define TO_FLOAT(v) convert_float(v)
+#define TO_INT(v) convert_int(v)
+#define ANY(c) (c)
+#define ALL(c) (c)
+#define WIDEN_MASK(m) (m)
+#define SELECT(a, b, c) ((c) ? (b) : (a))
+#define STORE_INT(v, p) (*(p) = (v))
+#define GATHER(l, i) ((l)[(i)])
+#define GATHER_INT(l, i) ((l)[(i)])
+#define STORE_RGBA(o, r, g, b, a) (out[(o)] = (float4)((r), (g), (b), (a)))
 #else
-    return lut_lerp(lut + k * LUT_N, normalize_value(VOX(zb, k, y, x), vmin, scale));
+#error "VEC must be 16 or 1"
 #endif
+
+#if ENHANCE && VEC != 1
+#error "gradient enhancement is computed one voxel per work-item (VEC=1)"
+#endif
+
+/* u = clip((v - vmin) * scale, 0, 1), in float32 exactly as the reference. */
+#define NORMALIZE(v) clamp((TO_FLOAT(v) - vmin) * scale, 0.0f, 1.0f)
+
+/* Data TF of a step's values: position in the LUT, then interpolated channels. */
+typedef struct {
+    intv i0;   /* left LUT entry (QUANT: the raw value) */
+    floatv f;  /* weight of the right entry (QUANT: unused) */
+} LutPos;
+
+inline LutPos lut_pos_of(const floatv u)
+{
+    LutPos p;
+    const floatv x = u * (float)(LUT_N - 1);
+    p.i0 = min(TO_INT(x), LUT_N - 2);
+    p.f = x - TO_FLOAT(p.i0);
+    return p;
 }
+
+#ifdef QUANT
+#define LUT_CHANNEL(lut, c, p) GATHER((lut) + (c) * LUT_N, (p).i0)
+#else
+#define LUT_CHANNEL(lut, c, p)                                           \
+    (GATHER((lut) + (c) * LUT_N, (p).i0) * (1.0f - (p).f) +              \
+     GATHER((lut) + (c) * LUT_N, (p).i0 + 1) * (p).f)
+#endif
+
+/* The LUT position of step k's raw values `raw`, and whether any lane can be non-empty:
+ * below `cut` (a LUT position, or for QUANT a raw value) the data opacity is exactly 0. */
+#ifdef QUANT
+#define LOCATE(raw, p, live)                                  \
+    {                                                         \
+        const DATA_V raw_ = (raw);                            \
+        live = ANY(raw_ >= (DATA_V)((DATA_T)cut));            \
+        (p).i0 = TO_INT(raw_);                                \
+        (p).f = (floatv)(0.0f);                               \
+    }
+#else
+#define LOCATE(raw, p, live)                                  \
+    {                                                         \
+        const floatv u_ = NORMALIZE(raw);                     \
+        (p) = lut_pos_of(u_);                                 \
+        live = ANY(u_ * (float)(LUT_N - 1) >= cut);           \
+    }
+#endif
+
+#ifdef CONST_COLOR
+/* Colour is data colour (constant, folded into tc on the host) times time colour. */
+#define STEP_COLOR(lut, p, t, r, g, b) \
+    r = (floatv)((t).x);               \
+    g = (floatv)((t).y);               \
+    b = (floatv)((t).z);
+#else
+#define STEP_COLOR(lut, p, t, r, g, b)      \
+    r = LUT_CHANNEL(lut, 0, p) * (t).x;     \
+    g = LUT_CHANNEL(lut, 1, p) * (t).y;     \
+    b = LUT_CHANNEL(lut, 2, p) * (t).z;
+#endif
 
 #if ENHANCE
 /* One-sided difference at the borders, central inside, zero on an axis of length 1:
@@ -55,43 +148,46 @@ inline float axis_gradient(float lo, float mid, float hi, int i, int n)
     return (hi - lo) * 0.5f;
 }
 
-/* Enhancement factor e of step k at brick voxel (x, y, zb); params = (k0, k1, k2, -). */
-inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, int zb,
-                            int nx, int ny, int nzb, int w, float vmin, float scale,
-                            float4 params, float4 view)
+/* Enhancement factor e of step k at brick voxel (x, y, zb); enh = (k0, k1, k2, -). */
+inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, int zb, int nx,
+                            int ny, int nzb, int w, float vmin, float scale, float4 enh,
+                            float4 view)
 {
-#define U(zz, yy, xx) normalize_value(VOX(zz, k, yy, xx), vmin, scale)
-    float mid = U(zb, y, x);
-    float gx = axis_gradient(U(zb, y, max(x - 1, 0)), mid, U(zb, y, min(x + 1, nx - 1)), x, nx);
-    float gy = axis_gradient(U(zb, max(y - 1, 0), x), mid, U(zb, min(y + 1, ny - 1), x), y, ny);
-    float gz = axis_gradient(U(max(zb - 1, 0), y, x), mid, U(min(zb + 1, nzb - 1), y, x), zb, nzb);
+#define U(zz, yy, xx) NORMALIZE(data[VOX_INDEX(zz, k, yy, xx)])
+    const float mid = U(zb, y, x);
+    const float gx = axis_gradient(U(zb, y, max(x - 1, 0)), mid, U(zb, y, min(x + 1, nx - 1)), x, nx);
+    const float gy = axis_gradient(U(zb, max(y - 1, 0), x), mid, U(zb, min(y + 1, ny - 1), x), y, ny);
+    const float gz = axis_gradient(U(max(zb - 1, 0), y, x), mid, U(min(zb + 1, nzb - 1), y, x), zb, nzb);
 #undef U
-    float mag = sqrt(gx * gx + gy * gy + gz * gz);
+    const float mag = sqrt(gx * gx + gy * gy + gz * gz);
 #if ENHANCE == 1
-    return params.x + params.y * pow(mag, params.z);
+    return enh.x + enh.y * pow(mag, enh.z);
 #else
-    if (mag == 0.0f) return params.x;
-    float c = fabs(gx * view.x + gy * view.y + gz * view.z) / mag;
-    return params.x + params.y * pow(clamp(1.0f - c, 0.0f, 1.0f), params.z);
+    if (mag == 0.0f) return enh.x;
+    const float c = fabs(gx * view.x + gy * view.y + gz * view.z) / mag;
+    return enh.x + enh.y * pow(clamp(1.0f - c, 0.0f, 1.0f), enh.z);
 #endif
 }
-#define ALPHA_OF(rgba, k) clamp((rgba).w * enhance_factor(data, k, x, y, zb, nx, ny, nzb, w, \
-                                 vmin, scale, enh, view), 0.0f, 1.0f)
+#define STEP_ALPHA(lut, p, t, k) \
+    clamp(LUT_CHANNEL(lut, 3, p) * (t).w * \
+          enhance_factor(data, k, x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view), 0.0f, 1.0f)
 #else
-#define ALPHA_OF(rgba, k) clamp((rgba).w, 0.0f, 1.0f)
+#define STEP_ALPHA(lut, p, t, k) clamp(LUT_CHANNEL(lut, 3, p) * (t).w, 0.0f, 1.0f)
 #endif
 
 /* The arguments every integration kernel takes, in this order. */
-#define KERNEL_ARGS                                                                     \
-    __global const DATA_T *data, __global const float4 *lut, __global const int *order, \
-    __global const int *steps, const int nx, const int ny, const int nzb, const int w,  \
-    const int zcrop, const float vmin, const float scale, const float4 enh,              \
-    const float4 view
+#define KERNEL_ARGS                                                                        \
+    __global const DATA_T *data, __global const float *lut, __global const float4 *tc,     \
+    __global const int *order, __global const int *steps, const int x0, const int nx,      \
+    const int ny, const int nzb, const int w, const int zcrop, const float vmin,           \
+    const float scale, const float cut, const float4 enh, const float4 view
 
-#define VOXEL_PROLOGUE                           \
-    const int x = get_global_id(0);              \
-    const int y = get_global_id(1);              \
-    const int z = get_global_id(2);              \
-    if (x >= nx || y >= ny) return;              \
-    const int zb = z + zcrop;                    \
+#define VOXEL_PROLOGUE                                  \
+    const int x = x0 + VEC * (int)get_global_id(0);     \
+    const int y = get_global_id(1);                     \
+    const int z = get_global_id(2);                     \
+    if (x >= nx || y >= ny) return;                     \
+    const int zb = z + zcrop;                           \
     const size_t o = OUT_INDEX(z, y, x);
+
+#define RAW(k) VLOAD(data + VOX_INDEX(zb, (k), y, x))

@@ -1,23 +1,56 @@
 /* max / min: the step holding the extreme normalised value (ties: first in the order) supplies
- * the voxel, coloured by its TF: (a * c, a), t_index = s_k*. IS_MIN selects min. */
+ * the voxel, coloured by its TF at that value and that step's time position: (a * c, a),
+ * t_index = s_k*. IS_MIN selects min. Built without QUANT: the LUT is interpolated at u.
+ * RAW_ORDER compares raw values (the host checked that u(v) is strictly increasing). */
+#ifdef IS_MIN
+#define IS_BETTER <
+#else
+#define IS_BETTER >
+#endif
+
 __kernel void integrate_extreme(KERNEL_ARGS, __global float4 *out, __global int *t_index)
 {
     VOXEL_PROLOGUE
-    int best_k = order[0];
-    float best = normalize_value(VOX(zb, best_k, y, x), vmin, scale);
+    const int first = order[0];
+    intv best_k = first;
+#ifdef RAW_ORDER
+    DATA_V best_raw = RAW(first);
     for (int i = 1; i < w; ++i) {
         const int k = order[i];
-        const float u = normalize_value(VOX(zb, k, y, x), vmin, scale);
-#ifdef IS_MIN
-        const int better = u < best;
-#else
-        const int better = u > best;
-#endif
-        best = better ? u : best;
-        best_k = better ? k : best_k;
+        const DATA_V v = RAW(k);
+        /* the lane mask has the data type's width: widen it for the int lanes of best_k */
+        best_k = SELECT(best_k, (intv)(k), WIDEN_MASK(v IS_BETTER best_raw));
+        best_raw = SELECT(best_raw, v, v IS_BETTER best_raw);
     }
-    const float4 s = step_rgba(data, lut, best_k, x, y, zb, nx, ny, w, vmin, scale);
-    const float ak = ALPHA_OF(s, best_k);
-    out[o] = (float4)(ak * s.xyz, ak);
-    t_index[o] = steps[best_k];
+    const floatv best = NORMALIZE(best_raw);
+#else
+    floatv best = NORMALIZE(RAW(first));
+    for (int i = 1; i < w; ++i) {
+        const int k = order[i];
+        const floatv u = NORMALIZE(RAW(k));
+        const intv better = u IS_BETTER best;
+        best = SELECT(best, u, better);
+        best_k = SELECT(best_k, (intv)(k), better);
+    }
+#endif
+    const LutPos p = lut_pos_of(best);
+    const __global float *tcf = (const __global float *)tc;
+    const intv k4 = best_k * 4;
+    const floatv ta = GATHER(tcf, k4 + 3);
+#ifdef CONST_COLOR
+    const floatv r = GATHER(tcf, k4), g = GATHER(tcf, k4 + 1), b = GATHER(tcf, k4 + 2);
+#else
+    const floatv r = LUT_CHANNEL(lut, 0, p) * GATHER(tcf, k4);
+    const floatv g = LUT_CHANNEL(lut, 1, p) * GATHER(tcf, k4 + 1);
+    const floatv b = LUT_CHANNEL(lut, 2, p) * GATHER(tcf, k4 + 2);
+#endif
+#if ENHANCE
+    const floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * ta *
+                            enhance_factor(data, best_k, x, y, zb, nx, ny, nzb, w, vmin, scale,
+                                           enh, view), 0.0f, 1.0f);
+#else
+    const floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * ta, 0.0f, 1.0f);
+#endif
+    STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
+    STORE_INT(GATHER_INT(steps, best_k), t_index + o);
 }

@@ -4,18 +4,28 @@ __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global f
                                   __global int *t_index)
 {
     VOXEL_PROLOGUE
-    float4 hit = (float4)(0.0f);
-    int step = -1;
+    floatv hr = 0.0f, hg = 0.0f, hb = 0.0f, ha = 0.0f;
+    intv hit = -1;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        const float4 s = step_rgba(data, lut, k, x, y, zb, nx, ny, w, vmin, scale);
-        const float ak = ALPHA_OF(s, k);
-        if (ak > threshold) {
-            hit = (float4)(ak * s.xyz, ak);
-            step = steps[k];
-            break;
-        }
+        LutPos p;
+        int live;
+        LOCATE(RAW(k), p, live)
+#ifdef SKIP_EMPTY
+        if (!live) continue; /* opacity 0 never passes a threshold >= 0 */
+#endif
+        const float4 t = tc[k];
+        floatv r, g, b;
+        STEP_COLOR(lut, p, t, r, g, b)
+        const floatv ak = STEP_ALPHA(lut, p, t, k);
+        const intv take = (hit < 0) & (ak > threshold);
+        hr = SELECT(hr, ak * r, take);
+        hg = SELECT(hg, ak * g, take);
+        hb = SELECT(hb, ak * b, take);
+        ha = SELECT(ha, ak, take);
+        hit = SELECT(hit, (intv)(steps[k]), take);
+        if (ALL(hit >= 0)) break;
     }
-    out[o] = hit;
-    t_index[o] = step;
+    STORE_RGBA(o, hr, hg, hb, ha);
+    STORE_INT(hit, t_index + o);
 }
