@@ -11,6 +11,8 @@ from chronocl.spec import IntegrationSpec
 from chronocl.tf import DataTF, TimeAlpha, TimeColor, TimeTF
 
 shapes = st.tuples(st.integers(1, 7), st.integers(1, 6), st.integers(1, 6))
+# x spans 1..40 so the OpenCL engine's 16-voxel lanes and its scalar x tail are both exercised.
+wide_shapes = st.tuples(st.integers(1, 4), st.integers(1, 3), st.integers(1, 40))
 
 
 @st.composite
@@ -20,7 +22,11 @@ def data_tfs(draw) -> DataTF:
     if len(us) < 2:
         us = [0.0, 1.0]
     unit = st.floats(0, 1)
-    points = [(u, draw(unit), draw(unit), draw(unit), draw(unit)) for u in us]
+    if draw(st.booleans()):  # constant colour: the engine's colour-by-time fast path
+        rgb = (draw(unit), draw(unit), draw(unit))
+        points = [(u, *rgb, draw(unit)) for u in us]
+    else:
+        points = [(u, draw(unit), draw(unit), draw(unit), draw(unit)) for u in us]
     return DataTF(points=points, size=draw(st.sampled_from([256, 300, 1024])))
 
 
@@ -64,9 +70,9 @@ enhancements = st.one_of(
 
 
 @st.composite
-def windows(draw, max_w: int = 9):
+def windows(draw, max_w: int = 9, wide: bool = False):
     """(u (W, Z, Y, X) float32, Selection) with W random and steps spread over T."""
-    shape = draw(shapes)
+    shape = draw(wide_shapes if wide else shapes)
     w = draw(st.integers(1, max_w))
     n_steps = draw(st.integers(w, w + 6))
     steps = sorted(draw(st.permutations(range(n_steps)))[:w])

@@ -40,7 +40,7 @@ def assert_same(a: chronocl.Chronovolume, b: chronocl.Chronovolume, atol: float 
 @given(st.data())
 def test_opencl_equals_reference(data):
     """Invariant 4 (and 3 on the device): any mode x order x enhancement, odd shapes, any bricks."""
-    u, sel = data.draw(windows(max_w=40))
+    u, sel = data.draw(windows(max_w=40, wide=data.draw(st.booleans())))
     spec = data.draw(specs(selection=sel))
     dtype = data.draw(st.sampled_from([np.float32, np.float64, np.uint8, np.uint16, np.int16]))
     series = series_of(u, sel, dtype)
@@ -52,16 +52,17 @@ def test_opencl_equals_reference(data):
 
 @given(st.data())
 def test_fast_paths_equal_the_general_path(data):
-    """Early exit, direct uint8 LUT indexing and host-pointer buffers against the general path."""
-    u, sel = data.draw(windows(max_w=16))
+    """Early exit, uint8 LUT indexing, empty skipping, host pointers against the general path."""
+    u, sel = data.draw(windows(max_w=16, wide=True))
     spec = data.draw(specs(selection=sel))
     series = series_of(u, sel, np.uint8)
-    general = OpenCLEngine(host_ptr=False, early_exit=False, quantized=False)
-    fast = OpenCLEngine(host_ptr=True, early_exit=True, quantized=True)
+    flags = ("host_ptr", "early_exit", "quantized", "skip_empty")
+    general = OpenCLEngine(**dict.fromkeys(flags, False))
+    fast = OpenCLEngine(**dict.fromkeys(flags, True))
     base = chronocl.integrate(series, sel, spec=spec, engine=general)
     assert_same(base, chronocl.integrate(series, sel, spec=spec, engine=fast))
-    for flag in ("host_ptr", "early_exit", "quantized"):
-        options = {"host_ptr": False, "early_exit": False, "quantized": False, flag: True}
+    for flag in flags:
+        options = {**dict.fromkeys(flags, False), flag: True}
         one = chronocl.integrate(series, sel, spec=spec, engine=OpenCLEngine(**options))
         assert_same(base, one)
 
