@@ -1,0 +1,56 @@
+"""Helpers shared by the benchmarks: timing, JSON lines, environment record (../shared/BENCH.md)."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable
+
+
+def emit(obj: dict) -> None:
+    print(json.dumps(obj), flush=True)
+
+
+def timeit(fn: Callable[[], object], repeats: int, warmup: int = 1) -> tuple[float, float]:
+    """(median, minimum) wall time of `fn` over `repeats` runs after `warmup` runs."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), min(times)
+
+
+def env_record(bench: str, extra: dict | None = None) -> dict:
+    import numpy as np
+
+    record = {
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "cpu_count": os.cpu_count(),
+        "machine": platform.machine(),
+        "processor": platform.processor() or platform.machine(),
+    }
+    try:
+        import pyopencl as cl
+
+        from chronocl.engine.device import get_context
+
+        dc = get_context()
+        record.update(
+            pyopencl=cl.VERSION_TEXT,
+            platform=dc.info.platform,
+            device=dc.info.name,
+            driver=dc.info.driver,
+            device_version=dc.info.version,
+        )
+    except Exception as exc:  # the env line must print even without OpenCL
+        record["opencl"] = f"unavailable: {exc}"
+    record.update(extra or {})
+    return {"bench": bench, "env": record}

@@ -1,0 +1,201 @@
+"""Integration throughput: the OpenCL engine against the numpy reference, VTK and the read roofline.
+
+Cases are the paper's Table 1 workloads (10/20/30 steps of 128^3, 512x64x64, 128x128x64) of the
+built-in vortex data, float32 and uint8, every mode, the window resident in memory as one xytz
+brick. Prints JSON lines (../shared/BENCH.md) and a summary with `roofline_fraction`,
+`speedup_vs_numpy`, `max_vs_vtk` and `u8_vs_f32`.
+
+    python bench/integrate.py --quick      # 30x128^3 only, numpy at 10 steps; under 2 minutes
+    python bench/integrate.py              # every Table 1 case
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import emit, env_record, timeit
+
+from chronocl import reference
+from chronocl.data import synthetic
+from chronocl.engine import NumpyEngine
+from chronocl.engine.opencl import OpenCLEngine
+from chronocl.engine.program import kernel
+from chronocl.integrate import make_spec
+from chronocl.selection import Selection
+from chronocl.spec import resolve_order
+
+MODES = ("alpha", "first_hit", "additive", "max", "min")
+TABLE1 = {"128^3": (128, 128, 128), "512x64x64": (512, 64, 64), "128x128x64": (128, 128, 64)}
+SPEC_ARGS = {"first_hit": {"threshold": 0.05}}
+
+
+def make_brick(shape_xyz, steps: int, dtype: str) -> np.ndarray:
+    """The vortex window as an xytz brick (Z, W, Y, X)."""
+    nx, ny, nz = shape_xyz
+    brick = np.empty((nz, steps, ny, nx), dtype=np.float32)
+    for t, vol in enumerate(synthetic.steps("vortex", steps, (nz, ny, nx))):
+        brick[:, t] = vol
+    if dtype == "uint8":
+        return np.round(brick / brick.max() * 255).astype(np.uint8)
+    return brick
+
+
+def case_name(label: str, steps: int, dtype: str) -> str:
+    return f"{label}xT{steps}-{'f32' if dtype == 'float32' else 'u8'}"
+
+
+class Runner:
+    def __init__(self, repeats: int) -> None:
+        self.repeats = repeats
+        self.ocl = OpenCLEngine()
+        self.results: dict[tuple[str, str, str], float] = {}  # (case, impl, mode) -> Gvox/s
+
+    def record(self, case, impl, mode, brick, fn, repeats=None) -> float:
+        nz, w, ny, nx = brick.shape
+        med, best = timeit(fn, repeats or self.repeats)
+        gvox = nz * ny * nx * w / med / 1e9
+        self.results[(case, impl, mode)] = gvox
+        emit(
+            {
+                "bench": "integrate",
+                "case": case,
+                "impl": impl,
+                "mode": mode,
+                "median_s": round(med, 6),
+                "min_s": round(best, 6),
+                "repeats": repeats or self.repeats,
+                "value": round(gvox, 4),
+                "unit": "Gvoxsteps/s",
+            }
+        )
+        return gvox
+
+    def integrate_fn(self, engine, brick, mode):
+        nz, w, ny, nx = brick.shape
+        sel = Selection(tuple(range(w)), w)
+        spec = make_spec(mode, **SPEC_ARGS.get(mode, {}))
+        positions = spec.time_tf.positions_of(sel.steps, w)
+        order = resolve_order(spec.order, sel)
+        vr = (0.0, 255.0) if brick.dtype == np.uint8 else (float(brick.min()), float(brick.max()))
+
+        # The output is allocated once, as an interactive session re-integrating on every
+        # transfer-function edit keeps it (chronocl.integrate writes slabs into one volume).
+        out = (np.zeros((nz, ny, nx, 4), np.float32), np.zeros((nz, ny, nx), np.int32))
+
+        def run():
+            partial, final = engine.accumulate(
+                brick, slice(0, nz), sel.steps, positions, order, spec, vr, out
+            )
+            if not final:
+                reference.finalize(partial, positions, spec)
+
+        return run
+
+    def roofline(self, case, brick) -> float:
+        import pyopencl as cl
+
+        nz, w, ny, nx = brick.shape
+        dc = self.ocl.dc
+        dtype = {"float32": "float", "uint8": "uchar"}[brick.dtype.name]
+        kern = kernel(
+            dc,
+            "read_roofline.cl",
+            "read_sum",
+            {"DATA_T": dtype, "DATA_V": dtype + "16", "LUT_N": 256, "VEC": 16},
+        )
+        out = np.empty((nz, ny, nx), dtype=np.float32)
+        mf = cl.mem_flags
+
+        def run_cl():
+            src = cl.Buffer(dc.context, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick)
+            dst = cl.Buffer(dc.context, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=out)
+            kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
+            cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // 16, ny, nz), (8, 2, 1))
+            mapped, _ = cl.enqueue_map_buffer(
+                dc.queue, dst, cl.map_flags.READ, 0, out.shape, out.dtype
+            )
+            mapped.base.release(dc.queue)
+            dc.queue.finish()
+
+        a = self.record(case, "read-opencl", "read", brick, run_cl)
+        b = self.record(case, "read-numpy-max", "read", brick, lambda: brick.max())
+        return max(a, b)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="30x128^3 only; under 2 minutes")
+    parser.add_argument("--repeats", type=int, default=7)
+    args = parser.parse_args()
+
+    emit(env_record("integrate"))
+    run = Runner(args.repeats)
+    main_case = case_name("128^3", 30, "float32")
+    cases = [("128^3", 30)] if args.quick else [(k, w) for k in TABLE1 for w in (10, 20, 30)]
+    roof: dict[str, float] = {}
+    for label, steps in cases:
+        for dtype in ("float32", "uint8"):
+            brick = make_brick(TABLE1[label], steps, dtype)
+            case = case_name(label, steps, dtype)
+            roof[case] = run.roofline(case, brick)
+            for mode in MODES:
+                run.record(case, "opencl", mode, brick, run.integrate_fn(run.ocl, brick, mode))
+
+    # numpy reference: the main case in full runs; 10 steps of 128^3 in --quick runs.
+    np_case = ("128^3", 30) if not args.quick else ("128^3", 10)
+    brick = make_brick(TABLE1[np_case[0]], np_case[1], "float32")
+    np_name = case_name(np_case[0], np_case[1], "float32")
+    speedup = {}
+    for mode in MODES:
+        if (np_name, "opencl", mode) not in run.results:
+            run.record(np_name, "opencl", mode, brick, run.integrate_fn(run.ocl, brick, mode))
+        ref = run.record(
+            np_name, "numpy", mode, brick, run.integrate_fn(NumpyEngine(), brick, mode), repeats=5
+        )
+        speedup[mode] = run.results[(np_name, "opencl", mode)] / ref
+
+    max_vs_vtk = None
+    try:
+        from vtk_peer import make_pipeline, run_max, vtk_available
+
+        if vtk_available():
+            brick = make_brick(TABLE1["128^3"], 30, "float32")
+            steps = np.ascontiguousarray(np.moveaxis(brick, 1, 0))  # VTK takes one step at a time
+            pipeline = make_pipeline(steps)
+            vtk = run.record(
+                main_case,
+                "vtk-temporal-statistics",
+                "max",
+                brick,
+                lambda: run_max(pipeline),
+                repeats=5,
+            )
+            max_vs_vtk = run.results[(main_case, "opencl", "max")] / vtk
+    except ImportError:
+        pass
+
+    u8 = case_name("128^3", 30, "uint8")
+    summary = {
+        "roofline_fraction": {
+            m: round(run.results[(main_case, "opencl", m)] / roof[main_case], 3) for m in MODES
+        },
+        "speedup_vs_numpy": {m: round(v, 1) for m, v in speedup.items()},
+        "max_vs_vtk": None if max_vs_vtk is None else round(max_vs_vtk, 2),
+        "u8_vs_f32": {
+            m: round(run.results[(u8, "opencl", m)] / run.results[(main_case, "opencl", m)], 2)
+            for m in MODES
+        },
+        "roofline_gvox_s": round(roof[main_case], 3),
+        "numpy_case": np_name,
+    }
+    emit({"bench": "integrate", "summary": summary})
+
+
+if __name__ == "__main__":
+    main()
