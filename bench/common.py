@@ -27,6 +27,23 @@ def timeit(fn: Callable[[], object], repeats: int, warmup: int = 1) -> tuple[flo
     return statistics.median(times), min(times)
 
 
+def race(fns: dict[str, Callable[[], object]], repeats: int, warmup: int = 1) -> dict:
+    """Time several contenders round-robin, so machine noise hits them alike.
+
+    Returns {name: (median, minimum)} over `repeats` runs each after `warmup` runs each.
+    """
+    for _ in range(warmup):
+        for fn in fns.values():
+            fn()
+    times: dict[str, list[float]] = {name: [] for name in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    return {name: (statistics.median(t), min(t)) for name, t in times.items()}
+
+
 def env_record(bench: str, extra: dict | None = None) -> dict:
     import numpy as np
 

@@ -19,11 +19,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import emit, env_record, timeit
+from common import emit, env_record, race
+from vtk_peer import make_pipeline, run_max, vtk_available, vtk_version
 
 from chronocl import reference
 from chronocl.data import synthetic
 from chronocl.engine import NumpyEngine
+from chronocl.engine.memory import aligned_empty
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.engine.program import kernel
 from chronocl.integrate import make_spec
@@ -38,11 +40,13 @@ SPEC_ARGS = {"first_hit": {"threshold": 0.05}}
 def make_brick(shape_xyz, steps: int, dtype: str) -> np.ndarray:
     """The vortex window as an xytz brick (Z, W, Y, X)."""
     nx, ny, nz = shape_xyz
-    brick = np.empty((nz, steps, ny, nx), dtype=np.float32)
+    brick = aligned_empty((nz, steps, ny, nx), np.float32)
     for t, vol in enumerate(synthetic.steps("vortex", steps, (nz, ny, nx))):
         brick[:, t] = vol
     if dtype == "uint8":
-        return np.round(brick / brick.max() * 255).astype(np.uint8)
+        quantised = aligned_empty(brick.shape, np.uint8)
+        quantised[...] = np.round(brick / brick.max() * 255)
+        return quantised
     return brick
 
 
@@ -56,25 +60,27 @@ class Runner:
         self.ocl = OpenCLEngine()
         self.results: dict[tuple[str, str, str], float] = {}  # (case, impl, mode) -> Gvox/s
 
-    def record(self, case, impl, mode, brick, fn, repeats=None) -> float:
+    def race(self, case: str, brick: np.ndarray, contenders: dict, repeats: int | None = None):
+        """Time contenders {(impl, mode): fn} round-robin on one brick; emit one line each."""
         nz, w, ny, nx = brick.shape
-        med, best = timeit(fn, repeats or self.repeats)
-        gvox = nz * ny * nx * w / med / 1e9
-        self.results[(case, impl, mode)] = gvox
-        emit(
-            {
-                "bench": "integrate",
-                "case": case,
-                "impl": impl,
-                "mode": mode,
-                "median_s": round(med, 6),
-                "min_s": round(best, 6),
-                "repeats": repeats or self.repeats,
-                "value": round(gvox, 4),
-                "unit": "Gvoxsteps/s",
-            }
-        )
-        return gvox
+        n = repeats or self.repeats
+        timings = race({f"{i}/{m}": fn for (i, m), fn in contenders.items()}, n)
+        for (impl, mode), (med, best) in zip(contenders, timings.values(), strict=True):
+            gvox = nz * ny * nx * w / med / 1e9
+            self.results[(case, impl, mode)] = gvox
+            emit(
+                {
+                    "bench": "integrate",
+                    "case": case,
+                    "impl": impl,
+                    "mode": mode,
+                    "median_s": round(med, 6),
+                    "min_s": round(best, 6),
+                    "repeats": n,
+                    "value": round(gvox, 4),
+                    "unit": "Gvoxsteps/s",
+                }
+            )
 
     def integrate_fn(self, engine, brick, mode):
         nz, w, ny, nx = brick.shape
@@ -83,10 +89,9 @@ class Runner:
         positions = spec.time_tf.positions_of(sel.steps, w)
         order = resolve_order(spec.order, sel)
         vr = (0.0, 255.0) if brick.dtype == np.uint8 else (float(brick.min()), float(brick.max()))
-
         # The output is allocated once, as an interactive session re-integrating on every
         # transfer-function edit keeps it (chronocl.integrate writes slabs into one volume).
-        out = (np.zeros((nz, ny, nx, 4), np.float32), np.zeros((nz, ny, nx), np.int32))
+        out = (aligned_empty((nz, ny, nx, 4), np.float32), aligned_empty((nz, ny, nx), np.int32))
 
         def run():
             partial, final = engine.accumulate(
@@ -97,18 +102,15 @@ class Runner:
 
         return run
 
-    def roofline(self, case, brick) -> float:
+    def roofline_fns(self, brick) -> dict:
+        """(a) an OpenCL kernel that reads the brick once and sums it, (b) numpy max over it."""
         import pyopencl as cl
 
         nz, w, ny, nx = brick.shape
         dc = self.ocl.dc
         dtype = {"float32": "float", "uint8": "uchar"}[brick.dtype.name]
-        kern = kernel(
-            dc,
-            "read_roofline.cl",
-            "read_sum",
-            {"DATA_T": dtype, "DATA_V": dtype + "16", "LUT_N": 256, "VEC": 16},
-        )
+        defines = {"DATA_T": dtype, "DATA_V": dtype + "16", "LUT_N": 256, "VEC": 16}
+        kern = kernel(dc, "read_roofline.cl", "read_sum", defines)
         out = np.empty((nz, ny, nx), dtype=np.float32)
         mf = cl.mem_flags
 
@@ -123,9 +125,13 @@ class Runner:
             mapped.base.release(dc.queue)
             dc.queue.finish()
 
-        a = self.record(case, "read-opencl", "read", brick, run_cl)
-        b = self.record(case, "read-numpy-max", "read", brick, lambda: brick.max())
-        return max(a, b)
+        return {("read-opencl", "read"): run_cl, ("read-numpy-max", "read"): brick.max}
+
+    def roofline(self, case: str) -> float:
+        return max(
+            self.results[(case, "read-opencl", "read")],
+            self.results[(case, "read-numpy-max", "read")],
+        )
 
 
 def main() -> None:
@@ -134,7 +140,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=7)
     args = parser.parse_args()
 
-    emit(env_record("integrate"))
+    emit(env_record("integrate", {"vtk": vtk_version()}))
     run = Runner(args.repeats)
     main_case = case_name("128^3", 30, "float32")
     cases = [("128^3", 30)] if args.quick else [(k, w) for k in TABLE1 for w in (10, 20, 30)]
@@ -143,42 +149,34 @@ def main() -> None:
         for dtype in ("float32", "uint8"):
             brick = make_brick(TABLE1[label], steps, dtype)
             case = case_name(label, steps, dtype)
-            roof[case] = run.roofline(case, brick)
+            contenders = run.roofline_fns(brick)
             for mode in MODES:
-                run.record(case, "opencl", mode, brick, run.integrate_fn(run.ocl, brick, mode))
+                contenders[("opencl", mode)] = run.integrate_fn(run.ocl, brick, mode)
+            if case == main_case and vtk_available():
+                # VTK takes one (Z, Y, X) step at a time.
+                pipeline = make_pipeline(np.ascontiguousarray(np.moveaxis(brick, 1, 0)))
+                contenders[("vtk-temporal-statistics", "max")] = lambda p=pipeline: run_max(p)
+            run.race(case, brick, contenders)
+            roof[case] = run.roofline(case)
 
-    # numpy reference: the main case in full runs; 10 steps of 128^3 in --quick runs.
-    np_case = ("128^3", 30) if not args.quick else ("128^3", 10)
-    brick = make_brick(TABLE1[np_case[0]], np_case[1], "float32")
-    np_name = case_name(np_case[0], np_case[1], "float32")
-    speedup = {}
+    # numpy reference, raced against OpenCL: the main case in full runs, 10 steps when --quick.
+    np_label, np_steps = ("128^3", 30) if not args.quick else ("128^3", 10)
+    brick = make_brick(TABLE1[np_label], np_steps, "float32")
+    np_name = case_name(np_label, np_steps, "float32") + "-vs-numpy"
+    contenders = {}
     for mode in MODES:
-        if (np_name, "opencl", mode) not in run.results:
-            run.record(np_name, "opencl", mode, brick, run.integrate_fn(run.ocl, brick, mode))
-        ref = run.record(
-            np_name, "numpy", mode, brick, run.integrate_fn(NumpyEngine(), brick, mode), repeats=5
-        )
-        speedup[mode] = run.results[(np_name, "opencl", mode)] / ref
-
-    max_vs_vtk = None
-    try:
-        from vtk_peer import make_pipeline, run_max, vtk_available
-
-        if vtk_available():
-            brick = make_brick(TABLE1["128^3"], 30, "float32")
-            steps = np.ascontiguousarray(np.moveaxis(brick, 1, 0))  # VTK takes one step at a time
-            pipeline = make_pipeline(steps)
-            vtk = run.record(
-                main_case,
-                "vtk-temporal-statistics",
-                "max",
-                brick,
-                lambda: run_max(pipeline),
-                repeats=5,
-            )
-            max_vs_vtk = run.results[(main_case, "opencl", "max")] / vtk
-    except ImportError:
-        pass
+        contenders[("opencl", mode)] = run.integrate_fn(run.ocl, brick, mode)
+        contenders[("numpy", mode)] = run.integrate_fn(NumpyEngine(), brick, mode)
+    run.race(np_name, brick, contenders, repeats=5)
+    speedup = {
+        m: run.results[(np_name, "opencl", m)] / run.results[(np_name, "numpy", m)] for m in MODES
+    }
+    vtk_key = (main_case, "vtk-temporal-statistics", "max")
+    max_vs_vtk = (
+        run.results[(main_case, "opencl", "max")] / run.results[vtk_key]
+        if vtk_key in run.results
+        else None
+    )
 
     u8 = case_name("128^3", 30, "uint8")
     summary = {
@@ -193,6 +191,7 @@ def main() -> None:
         },
         "roofline_gvox_s": round(roof[main_case], 3),
         "numpy_case": np_name,
+        "device": run.ocl.dc.info.label,
     }
     emit({"bench": "integrate", "summary": summary})
 

@@ -19,6 +19,7 @@ from .chronovolume import Chronovolume
 from .data.bricks import slabs
 from .data.series import TimeSeries
 from .engine import get_engine
+from .engine.memory import aligned_empty
 from .enhance import Enhance
 from .errors import InvalidParameterError
 from .progress import track
@@ -100,8 +101,8 @@ def integrate(
     slab = fit if slab is None else min(slab, fit)
     parts = slabs(nz, slab, halo)
 
-    rgba = np.empty((nz, ny, nx, 4), dtype=np.float32)
-    t_index = np.empty((nz, ny, nx), dtype=np.int32) if spec.has_t_index else None
+    rgba = aligned_empty((nz, ny, nx, 4), np.float32)
+    t_index = aligned_empty((nz, ny, nx), np.int32) if spec.has_t_index else None
     final = True
     # Double buffering: the next brick is read while the engine integrates this one.
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="chronocl-read") as reader:

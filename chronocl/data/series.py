@@ -21,6 +21,7 @@ import numpy as np
 import zarr
 
 from ..atomic import atomic_directory
+from ..engine.memory import aligned_empty
 from ..errors import InputNotFoundError, InvalidDataError, InvalidParameterError, StoreFormatError
 from ..progress import track
 from ..reference import normalize
@@ -97,7 +98,7 @@ class TimeSeries:
     def read_brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
         """Raw values of z rows [z0, z1) of the given steps as an xytz brick (z1 - z0, W, Y, X)."""
         z1 = self.shape[1] if z1 is None else z1
-        out = np.empty((z1 - z0, len(steps), *self.shape[2:]), dtype=self.dtype)
+        out = aligned_empty((z1 - z0, len(steps), *self.shape[2:]), self.dtype)
         for i, s in enumerate(steps):
             if self._zarr is not None:
                 out[:, i] = self._zarr[int(s), z0:z1]

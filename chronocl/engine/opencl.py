@@ -18,6 +18,7 @@ from ..reference import Partial
 from ..spec import IntegrationSpec
 from ..tf import lut_lookup
 from .device import DeviceContext, get_context
+from .memory import aligned_empty, is_aligned
 from .program import kernel
 
 DEVICE_TYPES = {"uint8": "uchar", "uint16": "ushort", "int16": "short", "float32": "float"}
@@ -99,8 +100,10 @@ class OpenCLEngine:
         tc = np.concatenate([colour, a_t[:, None]], axis=1).astype(np.float32)
         nonzero = np.flatnonzero(lut[:, 3] > 0)
         first = int(nonzero[0]) if nonzero.size else len(lut)
-        # Interpolated: position x < first - 1 only mixes entries that are 0. Quantised: v < first.
-        cut = float(min(first, 255)) if quant else float(first - 1)
+        if quant:  # byte values below `first` have opacity 0
+            cut = float(min(first, 255))
+        else:  # LUT positions x < first - 1 only mix entries that are 0
+            cut = raw_cut(float(first - 1), value_range, len(lut))
         return np.ascontiguousarray(lut.T, dtype=np.float32), tc, const_color, cut
 
     def accumulate(
@@ -140,6 +143,7 @@ class OpenCLEngine:
         raw_order = (
             spec.mode in ("max", "min")
             and dt == np.uint8
+            and w <= 256  # the winning step is tracked in byte lanes
             and bool(np.all(np.diff(reference.normalize(np.arange(256), *value_range)) > 0))
         )
         defines = {
@@ -159,15 +163,22 @@ class OpenCLEngine:
         host = mf.USE_HOST_PTR if self.host_ptr else mf.COPY_HOST_PTR
         rgba, t_index = out if out is not None else (None, None)
         if rgba is None:
-            rgba = np.empty((nz_out, ny, nx, 4), dtype=np.float32)
+            rgba = aligned_empty((nz_out, ny, nx, 4), np.float32)
         if t_index is None and spec.has_t_index:
-            t_index = np.empty((nz_out, ny, nx), dtype=np.int32)
+            t_index = aligned_empty((nz_out, ny, nx), np.int32)
         _check_out(rgba, (nz_out, ny, nx, 4), np.float32)
         if spec.has_t_index:
             _check_out(t_index, (nz_out, ny, nx), np.int32)
         else:
             t_index = None
         e = spec.enhance
+        aligned = (
+            nx % VEC == 0
+            and is_aligned(brick)
+            and is_aligned(rgba)
+            and (t_index is None or is_aligned(t_index))
+        )
+        defines["ALIGNED"] = aligned
 
         def table(a: np.ndarray):
             return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
@@ -238,6 +249,51 @@ class OpenCLEngine:
         else:
             lx, ly, lz = min(64, _round_up(count, 32)), 1, 1
         return (_round_up(count, lx), _round_up(ny, ly), _round_up(nz, lz)), (lx, ly, lz)
+
+
+def raw_cut(position: float, value_range: tuple[float, float], lut_size: int) -> float:
+    """The smallest float32 raw value v whose LUT position u(v) * (N - 1) is >= `position`.
+
+    The kernels compute u(v) = clip((v - vmin) * scale, 0, 1) in float32; every step of it
+    is monotone, so a binary search over the ordered float32 values finds the exact bound.
+    """
+    lo, hi = value_range
+    vmin = np.float32(lo) if hi > lo else np.float32(0.0)
+    scale = np.float32(1.0 / (float(hi) - float(lo))) if hi > lo else np.float32(0.0)
+    n1, target = np.float32(lut_size - 1), np.float32(position)
+
+    def reaches(key: int) -> bool:
+        v = _float_of_key(key)
+        with np.errstate(over="ignore"):  # near the float32 limits: inf, clipped as on the device
+            u = np.clip((v - vmin) * scale, np.float32(0.0), np.float32(1.0))
+        return bool(u * n1 >= target)
+
+    if scale == 0:  # a constant field: u = 0 everywhere
+        return float("-inf") if np.float32(0.0) >= target else float("inf")
+    big = np.finfo(np.float32).max  # data are finite
+    low, high = _key_of_float(-big), _key_of_float(big)
+    if reaches(low):
+        return float("-inf")
+    if not reaches(high):
+        return float("inf")
+    while high - low > 1:  # invariant: not reaches(low), reaches(high)
+        mid = (low + high) // 2
+        if reaches(mid):
+            high = mid
+        else:
+            low = mid
+    return float(_float_of_key(high))
+
+
+def _key_of_float(v: np.float32) -> int:
+    """An integer key that orders float32 values as the numbers they are."""
+    bits = int(np.array(v, dtype=np.float32).view(np.int32))
+    return bits if bits >= 0 else -(bits & 0x7FFFFFFF)
+
+
+def _float_of_key(key: int) -> np.float32:
+    bits = key if key >= 0 else (-key) | -0x80000000
+    return np.array(bits, dtype=np.int32).view(np.float32)[()]
 
 
 def _check_out(a: np.ndarray, shape: tuple, dtype) -> None:

@@ -49,7 +49,7 @@ def build(dc, name: str, defines: dict[str, object], text: str | None = None):
         for key, value in sorted(defines.items())
         if value is not False and value is not None
     )
-    key = (dc.info.index, name, options, text)
+    key = (dc.info.index, str(kernel_dir()), name, options, text)
     with _lock:
         program = _programs.get(key)
         if program is None:

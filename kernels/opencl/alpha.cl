@@ -6,12 +6,12 @@ __kernel void integrate_alpha(KERNEL_ARGS, __global float4 *out)
     floatv cr = 0.0f, cg = 0.0f, cb = 0.0f, ca = 0.0f;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        LutPos p;
-        int live;
-        LOCATE(RAW(k), p, live)
+        const DATA_V raw = RAW(k);
 #ifdef SKIP_EMPTY
-        if (!live) continue;
+        if (!IS_LIVE(raw)) continue;
 #endif
+        LutPos p;
+        LOCATE(raw, p)
         const float4 t = tc[k];
         floatv r, g, b;
         STEP_COLOR(lut, p, t, r, g, b)

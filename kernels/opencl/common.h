@@ -4,6 +4,9 @@
  *   VEC         voxels per work-item along x: 16 (vectorised) or 1 (x tail, enhancement)
  *   DATA_T      element type of the brick: float, uchar, ushort or short
  *   DATA_V      DATA_T with VEC lanes (e.g. uchar16)
+ *   ALIGNED     every VEC-lane load and t_index store is aligned to its vector size
+ *               (x width a multiple of 16, buffers 64-byte aligned): use vector pointers,
+ *               which PoCL compiles to vector moves where vload16 becomes element loads
  *   QUANT       uchar data index the data LUT directly (lut holds TF(u(v)) for v = 0..255)
  *   RAW_ORDER   max/min compare raw values: u(v) is strictly increasing on the data type
  *   LUT_N       entries per channel of the data LUT
@@ -27,14 +30,41 @@
 #if VEC == 16
 typedef float16 floatv;
 typedef int16 intv;
+#ifdef ALIGNED
+#define VLOAD(p) (*(const __global DATA_V *)(p))
+#define STORE_INT(v, p) (*(__global int16 *)(p) = (v))
+#else
 #define VLOAD(p) vload16(0, (p))
+#define STORE_INT(v, p) vstore16((v), 0, (p))
+#endif
 #define TO_FLOAT(v) convert_float16(v)
 #define TO_INT(v) convert_int16(v)
-#define ANY(c) any(c)
-#define ALL(c) all(c)
-#define WIDEN_MASK(m) (convert_int16(m) != 0) /* a narrow lane mask as int lanes (-1 / 0) */
-#define SELECT(a, b, c) select((a), (b), (c))
-#define STORE_INT(v, p) vstore16((v), 0, (p))
+/* Whether any / all lanes of a comparison mask (lanes 0 or -1) are set, by OR / AND over 64-bit
+ * words: PoCL's any() / all() builtins cost as much as the rest of a skipped step. */
+inline int __attribute__((overloadable)) any_lane(int16 m)
+{
+    const ulong8 v = as_ulong8(m);
+    const ulong4 a = v.lo | v.hi;
+    const ulong2 b = a.lo | a.hi;
+    return (b.lo | b.hi) != 0;
+}
+inline int __attribute__((overloadable)) any_lane(char16 m)
+{
+    const ulong2 v = as_ulong2(m);
+    return (v.lo | v.hi) != 0;
+}
+inline int all_lanes(int16 m)
+{
+    const ulong8 v = as_ulong8(m);
+    const ulong4 a = v.lo & v.hi;
+    const ulong2 b = a.lo & a.hi;
+    return (b.lo & b.hi) == ~0UL;
+}
+#define ANY(c) any_lane(c)
+#define ALL(c) all_lanes(c)
+/* Lane-wise choice by a mask of the lanes' width: the vector ternary, which PoCL compiles to
+ * a blend where its select() builtin is several times slower. */
+#define SELECT(a, b, c) ((c) ? (b) : (a))
 #define GATHER_INT(l, i)                                                                 \
     (int16)((l)[(i).s0], (l)[(i).s1], (l)[(i).s2], (l)[(i).s3], (l)[(i).s4],            \
             (l)[(i).s5], (l)[(i).s6], (l)[(i).s7], (l)[(i).s8], (l)[(i).s9],            \
@@ -65,7 +95,6 @@ typedef int intv;
 #define TO_INT(v) convert_int(v)
 #define ANY(c) (c)
 #define ALL(c) (c)
-#define WIDEN_MASK(m) (m)
 #define SELECT(a, b, c) ((c) ? (b) : (a))
 #define STORE_INT(v, p) (*(p) = (v))
 #define GATHER(l, i) ((l)[(i)])
@@ -105,23 +134,21 @@ inline LutPos lut_pos_of(const floatv u)
      GATHER((lut) + (c) * LUT_N, (p).i0 + 1) * (p).f)
 #endif
 
-/* The LUT position of step k's raw values `raw`, and whether any lane can be non-empty:
- * below `cut` (a LUT position, or for QUANT a raw value) the data opacity is exactly 0. */
+/* Whether any lane of raw values can have non-zero data opacity. `cut` is the smallest raw
+ * value that can (found exactly on the host: u(v) is monotone in float32 arithmetic). */
 #ifdef QUANT
-#define LOCATE(raw, p, live)                                  \
-    {                                                         \
-        const DATA_V raw_ = (raw);                            \
-        live = ANY(raw_ >= (DATA_V)((DATA_T)cut));            \
-        (p).i0 = TO_INT(raw_);                                \
-        (p).f = (floatv)(0.0f);                               \
-    }
+#define IS_LIVE(raw) ANY((raw) >= (DATA_V)((DATA_T)cut))
 #else
-#define LOCATE(raw, p, live)                                  \
-    {                                                         \
-        const floatv u_ = NORMALIZE(raw);                     \
-        (p) = lut_pos_of(u_);                                 \
-        live = ANY(u_ * (float)(LUT_N - 1) >= cut);           \
-    }
+#define IS_LIVE(raw) ANY(TO_FLOAT(raw) >= cut)
+#endif
+
+/* The LUT position of raw values (QUANT: the value itself). */
+#ifdef QUANT
+#define LOCATE(raw, p)          \
+    (p).i0 = TO_INT(raw);       \
+    (p).f = (floatv)(0.0f);
+#else
+#define LOCATE(raw, p) (p) = lut_pos_of(NORMALIZE(raw));
 #endif
 
 #ifdef CONST_COLOR

@@ -13,14 +13,28 @@ __kernel void integrate_extreme(KERNEL_ARGS, __global float4 *out, __global int 
     VOXEL_PROLOGUE
     const int first = order[0];
     intv best_k = first;
-#ifdef RAW_ORDER
+#if defined(RAW_ORDER) && VEC == 16
+    /* uchar data, w <= 256: compare bytes and keep the winning step index in byte lanes too,
+     * so the loop never widens its lane masks. */
+    DATA_V best_raw = RAW(first);
+    uchar16 best_k8 = (uchar16)((uchar)first);
+    for (int i = 1; i < w; ++i) {
+        const int k = order[i];
+        const DATA_V v = RAW(k);
+        const char16 take = v IS_BETTER best_raw;
+        best_k8 = SELECT(best_k8, (uchar16)((uchar)k), take);
+        best_raw = SELECT(best_raw, v, take);
+    }
+    best_k = convert_int16(best_k8);
+    const floatv best = NORMALIZE(best_raw);
+#elif defined(RAW_ORDER)
     DATA_V best_raw = RAW(first);
     for (int i = 1; i < w; ++i) {
         const int k = order[i];
         const DATA_V v = RAW(k);
-        /* the lane mask has the data type's width: widen it for the int lanes of best_k */
-        best_k = SELECT(best_k, (intv)(k), WIDEN_MASK(v IS_BETTER best_raw));
-        best_raw = SELECT(best_raw, v, v IS_BETTER best_raw);
+        const int take = v IS_BETTER best_raw;
+        best_k = take ? k : best_k;
+        best_raw = take ? v : best_raw;
     }
     const floatv best = NORMALIZE(best_raw);
 #else

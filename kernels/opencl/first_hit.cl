@@ -8,12 +8,12 @@ __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global f
     intv hit = -1;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        LutPos p;
-        int live;
-        LOCATE(RAW(k), p, live)
+        const DATA_V raw = RAW(k);
 #ifdef SKIP_EMPTY
-        if (!live) continue; /* opacity 0 never passes a threshold >= 0 */
+        if (!IS_LIVE(raw)) continue; /* opacity 0 never passes a threshold >= 0 */
 #endif
+        LutPos p;
+        LOCATE(raw, p)
         const float4 t = tc[k];
         floatv r, g, b;
         STEP_COLOR(lut, p, t, r, g, b)
