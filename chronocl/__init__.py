@@ -14,6 +14,7 @@ from .data.series import TimeSeries, open_series
 from .enhance import Enhance
 from .errors import ChronoclError
 from .integrate import integrate, make_spec
+from .render import Camera, render, render_views
 from .selection import Selection
 from .spec import IntegrationSpec
 from .tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF
@@ -22,6 +23,7 @@ open = open_series
 
 __version__ = "0.1.0"
 __all__ = [
+    "Camera",
     "ChronoclError",
     "Chronovolume",
     "DataTF",
@@ -38,4 +40,6 @@ __all__ = [
     "make_spec",
     "open",
     "open_series",
+    "render",
+    "render_views",
 ]

@@ -35,6 +35,10 @@ Examples:
 
   chronocl integrate vortex.zarr alpha.zarr --mode alpha --window 0:30:10
 
+  chronocl render jet.zarr -o trio.png --mode alpha,additive,max --window 0:30:14
+
+  chronocl demo --out demo-out
+
   chronocl devices
 """,
     no_args_is_help=True,
@@ -236,6 +240,172 @@ def integrate(
     )
     cv.save(out_path, overwrite=overwrite)
     err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {time.perf_counter() - t0:.2f} s")
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InvalidParameterError(f"size {text!r} must be WxH, e.g. 512x512") from None
+    return w, h
+
+
+def _parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != n:
+        raise InvalidParameterError(f"{what} {text!r} must be {n} comma-separated numbers")
+    return values
+
+
+def _parse_order(order: str) -> str | list[int]:
+    if order in ("forward", "backward"):
+        return order
+    try:
+        return [int(s) for s in order.split(",")]
+    except ValueError:
+        return order  # the spec names the problem
+
+
+@app.command()
+def render(
+    store: Annotated[Path, typer.Argument(help="Series store.")],
+    out_path: Annotated[
+        Path, typer.Option("--out", "-o", metavar="OUT.png", help="Image to write.")
+    ],
+    mode: Annotated[
+        list[str], typer.Option(help="Mode(s); repeat or comma-separate for parallel views.")
+    ] = ["alpha"],  # noqa: B006
+    window: Annotated[
+        str | None, typer.Option(help="t0:t1[:stride] or a list 2,5,9 (default: all).")
+    ] = None,
+    order: Annotated[
+        str, typer.Option(help="forward, backward, or importance steps 9,2,5.")
+    ] = "forward",
+    tf: Annotated[
+        Path | None, typer.Option(help="Transfer-function JSON (data_tf, time_tf).")
+    ] = None,
+    time_tf: Annotated[
+        str | None,
+        typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
+    ] = None,
+    enhance: Annotated[
+        str, typer.Option(help="none, edge or silhouette (follows the camera).")
+    ] = "none",
+    threshold: Annotated[float, typer.Option(help="first_hit opacity threshold.")] = 0.0,
+    normalize: Annotated[str, typer.Option(help="additive normalisation: time or max.")] = "time",
+    azimuth: Annotated[float, typer.Option(help="Degrees around the vertical axis.")] = 30.0,
+    elevation: Annotated[float, typer.Option(help="Degrees above the horizon.")] = 20.0,
+    zoom: Annotated[float, typer.Option(help="Magnification (1 fits the volume).")] = 1.0,
+    projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
+    size: Annotated[str, typer.Option(help="Image (panel) size WxH, 16..8192.")] = "512x512",
+    clip: Annotated[
+        str | None,
+        typer.Option(help="Slicing plane nx,ny,nz,offset (offset -1..1; keeps the normal's side)."),
+    ] = None,
+    background: Annotated[str, typer.Option(help="Colour name or #rrggbb.")] = "black",
+    outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
+    engine: Annotated[str, typer.Option(help="opencl (default) or numpy.")] = "opencl",
+    device: Annotated[
+        str | None, typer.Option(help="OpenCL device (see 'chronocl devices').")
+    ] = None,
+    turntable: Annotated[
+        Path | None,
+        typer.Option(metavar="OUT.mp4|OUT.gif", help="Also render a full turn as a video."),
+    ] = None,
+    frames: Annotated[int, typer.Option(help="Turntable frames.")] = 36,
+    save_chronovolume: Annotated[
+        Path | None, typer.Option(metavar="OUT.zarr", help="Also save the chronovolume(s).")
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace outputs that exist.")] = False,
+) -> None:
+    """Integrate a window and render it; several modes become parallel views in one image.
+
+    Examples:
+
+      chronocl render vortex.zarr -o alpha.png --mode alpha --window 0:20:9
+
+      chronocl render jet.zarr -o trio.png --mode alpha,additive,max --window 0:30:14
+
+      chronocl render vortex.zarr -o cut.png --clip 1,0,0,0 --azimuth 60 --zoom 1.4
+
+      chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
+    """
+    from .atomic import check_output
+    from .data.series import open_series
+    from .integrate import integrate as run
+    from .render import Camera, render_views
+    from .render.turntable import turntable as make_turntable
+
+    modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
+    check_output(out_path, overwrite)
+    if turntable is not None:
+        check_output(turntable, overwrite)
+    saves = _chronovolume_paths(save_chronovolume, modes)
+    for path in saves:
+        check_output(path, overwrite)
+    camera = Camera(azimuth, elevation, zoom, projection=projection)
+    clip_plane = _parse_floats(clip, 4, "clip") if clip else None
+    panel = _parse_size(size)
+    series = open_series(store)
+
+    def chronovolumes(cam: Camera):
+        view = cam.view_direction()
+        args = dict(
+            tf=tf,
+            time_tf=time_tf,
+            order=_parse_order(order),
+            threshold=threshold,
+            normalize=normalize,
+            engine=engine,
+            device=device,
+        )
+        if enhance != "none":
+            from .enhance import Enhance
+
+            args["enhance"] = Enhance(enhance, view=view) if enhance == "silhouette" else enhance
+        return [run(series, window, m, **args) for m in modes]
+
+    t0 = time.perf_counter()
+    cvs = chronovolumes(camera)
+    t1 = time.perf_counter()
+
+    def frame(cam: Camera, cvs=cvs):
+        if enhance == "silhouette" and cam is not camera:
+            cvs = chronovolumes(cam)  # the silhouette depends on the view: re-integrate
+        return render_views(
+            cvs,
+            cam,
+            panel,
+            background=background,
+            clip=clip_plane,
+            outline=outline,
+            legend=True,
+            labels=None if len(cvs) > 1 else [],
+        )
+
+    image = frame(camera)
+    image.save(out_path, overwrite=overwrite)
+    err.print(
+        f"wrote {out_path} ({', '.join(modes)}; integrate {t1 - t0:.2f} s, "
+        f"render {time.perf_counter() - t1:.2f} s)"
+    )
+    for cv, path in zip(cvs, saves, strict=False):
+        cv.save(path, overwrite=overwrite)
+        err.print(f"wrote {path}")
+    if turntable is not None:
+        make_turntable(frame, camera, turntable, frames=frames, overwrite=overwrite, progress=True)
+        err.print(f"wrote {turntable} ({frames} frames)")
+
+
+def _chronovolume_paths(path: Path | None, modes: list[str]) -> list[Path]:
+    if path is None:
+        return []
+    if len(modes) == 1:
+        return [path]
+    return [path.with_name(f"{path.stem}-{m}{path.suffix}") for m in modes]
 
 
 @app.command()

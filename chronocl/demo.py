@@ -1,76 +1,236 @@
-"""`make demo`: generate the built-in data sets and integrate them with every mode.
+"""`make demo` / `chronocl demo`: the built-in data sets and a gallery after the paper's Figure 3.
 
-Until the renderer exists, the demo writes the series stores and one
-chronovolume per mode (the selections of the paper's Figure 3), and prints a
-summary of each with the time it took.
+Writes the vortex and jet series, one PNG per figure, `gallery.png` (all figures with their
+captions) and `index.html`, and prints where they are and how long each took.
 """
 
 from __future__ import annotations
 
+import html
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 from rich.console import Console
 from rich.table import Table
 
 from .data import synthetic
-from .data.series import write_series
+from .data.series import TimeSeries, write_series
+from .enhance import Enhance
 from .integrate import integrate
+from .render import Camera, render_views
+from .tf import DataTF
 
-# (name, data set, window, mode, extra integration arguments): after the paper's Figure 3.
-CASES = (
-    ("alpha-3-spaced", "vortex", "0:20:9", "alpha", {}),
-    ("first-hit-10", "vortex", "0:10", "first_hit", {"threshold": 0.05}),
-    ("additive-10", "vortex", "0:10", "additive", {}),
-    ("max-3-of-10", "vortex", "0:10:4", "max", {}),
-    ("silhouette-alpha-3", "vortex", "0:30:14", "alpha", {"enhance": "silhouette"}),
-    ("jet-alpha-3", "jet", "0:30:14", "alpha", {}),
-    ("jet-additive-3", "jet", "0:30:14", "additive", {}),
-    ("jet-max-3", "jet", "0:30:14", "max", {}),
+# Opacity 1 above the feature threshold: where every step is present, additive is white.
+SURFACE = DataTF(points=[(0, 1, 1, 1, 0), (0.42, 1, 1, 1, 0), (0.5, 1, 1, 1, 1), (1, 1, 1, 1, 1)])
+# Low opacity, so first hit lets one see through a step to those behind it.
+FAINT = DataTF(
+    points=[(0, 1, 1, 1, 0), (0.4, 1, 1, 1, 0), (0.55, 1, 1, 1, 0.22), (1, 1, 1, 1, 0.3)]
 )
 
 
-def run_demo(out_dir: Path, shape_xyz: tuple[int, int, int] = (64, 64, 64), n_steps: int = 30):
-    """Write the demo outputs under `out_dir` and print where they are."""
+@dataclass
+class Figure:
+    name: str
+    data: str
+    window: str
+    modes: tuple[str, ...]
+    caption: str
+    args: dict = field(default_factory=dict)
+    camera: Camera = field(default_factory=lambda: Camera(30, 25, zoom=1.5))
+
+
+FIGURES = (
+    Figure(
+        "a-alpha-3-spaced",
+        "vortex",
+        "0:20:9",
+        ("alpha",),
+        "(a) Alpha compositing over 3 spaced steps of 20: the rings move from blue (oldest) "
+        "through green to red (newest) without overlapping.",
+    ),
+    Figure(
+        "b-first-hit-10",
+        "vortex",
+        "0:10",
+        ("first_hit",),
+        "(b) First temporal hit over 10 consecutive steps with a low opacity: each voxel "
+        "shows the first step that reached it; steps stay distinct and see-through.",
+        {"data_tf": FAINT},
+    ),
+    Figure(
+        "c-additive-10",
+        "vortex",
+        "0:10",
+        ("additive",),
+        "(c) Additive colours over 10 consecutive steps, normalised: white where all steps "
+        "overlap, a single hue where one step was alone.",
+        {"data_tf": SURFACE},
+    ),
+    Figure(
+        "e-max-3-of-10",
+        "vortex",
+        "0,4,9",
+        ("max",),
+        "(e) Maximum intensity over 3 steps of 10, coloured by the step that held the "
+        "maximum: blue where the value fell, red where it rose.",
+    ),
+    Figure(
+        "f-silhouette-3-of-30",
+        "vortex",
+        "0,14,29",
+        ("alpha",),
+        "(f) Alpha compositing with view-dependent silhouette enhancement over 3 steps of "
+        "30: edges facing away from the viewer stand out.",
+        {"enhance": "silhouette"},
+    ),
+    Figure(
+        "ghi-jet-trio",
+        "jet",
+        "0,14,29",
+        ("alpha", "additive", "max"),
+        "(g, h, i) The jet over 3 steps in parallel views: alpha (the plume moved from blue "
+        "to green to red), additive (white where steps share space), maximum intensity "
+        "(where the value grew).",
+        {"data_tf": SURFACE},
+        Camera(25, 20, zoom=1.45),
+    ),
+)
+
+
+def run_demo(
+    out_dir: Path,
+    shape_xyz: tuple[int, int, int] = (96, 96, 96),
+    n_steps: int = 30,
+    size: int = 512,
+) -> list[Path]:
+    """Write the demo under `out_dir`; returns the PNG paths."""
     console = Console(stderr=True)
     out_dir.mkdir(parents=True, exist_ok=True)
     nx, ny, nz = shape_xyz
-    series = {}
+    shapes = {"vortex": (nz, ny, nx), "jet": (max(16, nz * 2 // 3), max(16, ny * 2 // 3), nx)}
+    series: dict[str, TimeSeries] = {}
+    timings = Table(title=f"chronocl demo -> {out_dir.resolve()}")
+    for col in ("output", "what", "integrate", "render"):
+        timings.add_column(col)
     for name, description in synthetic.DATASETS.items():
         t0 = time.perf_counter()
+        shape = shapes[name]
         series[name] = write_series(
             out_dir / f"{name}.zarr",
-            synthetic.steps(name, n_steps, (nz, ny, nx)),
+            synthetic.steps(name, n_steps, shape),
             n_steps=n_steps,
-            volume_shape=(nz, ny, nx),
+            volume_shape=shape,
             dtype="float32",
             source=f"chronocl built-in '{name}': {description}",
             overwrite=True,
             progress=True,
         )
-        console.print(
-            f"generated {name} ({nx}x{ny}x{nz}, {n_steps} steps) "
-            f"in {time.perf_counter() - t0:.1f} s -> {out_dir / (name + '.zarr')}"
+        timings.add_row(
+            f"{name}.zarr",
+            f"{shape[2]}x{shape[1]}x{shape[0]}, {n_steps} steps",
+            f"{time.perf_counter() - t0:.2f} s (generate)",
+            "",
         )
 
-    table = Table(title="chronovolumes (numpy reference engine)")
-    for col in ("case", "window", "mode", "covered", "mean α", "time", "file"):
-        table.add_column(col)
-    for case, data, window, mode, extra in CASES:
+    written = []
+    for fig in FIGURES:
         t0 = time.perf_counter()
-        cv = integrate(series[data], window, mode, **extra)
-        seconds = time.perf_counter() - t0
-        path = cv.save(out_dir / f"{case}.zarr", overwrite=True)
-        alpha = cv.rgba[..., 3]
-        table.add_row(
-            case,
-            window,
-            mode,
-            f"{np.mean(alpha > 0.05):.1%}",
-            f"{alpha.mean():.3f}",
-            f"{seconds:.2f} s",
-            path.name,
+        args = dict(fig.args)
+        if args.get("enhance") == "silhouette":  # the silhouette follows the camera
+            args["enhance"] = Enhance(
+                "silhouette", k0=0.05, k1=1.5, k2=1.5, view=fig.camera.view_direction()
+            )
+        cvs = [integrate(series[fig.data], fig.window, m, **args) for m in fig.modes]
+        t1 = time.perf_counter()
+        image = render_views(
+            cvs, fig.camera, (size, size), legend=True, labels=None if len(cvs) > 1 else []
         )
-    Console().print(table)
-    console.print(f"demo outputs are in {out_dir.resolve()}")
+        path = image.save(out_dir / f"{fig.name}.png")
+        written.append(path)
+        timings.add_row(
+            path.name,
+            f"{fig.data} {fig.window} {'/'.join(fig.modes)}",
+            f"{t1 - t0:.2f} s",
+            f"{time.perf_counter() - t1:.2f} s",
+        )
+    _gallery(out_dir, written)
+    _index(out_dir, written)
+    Console().print(timings)
+    console.print(f"gallery: {out_dir / 'gallery.png'}   page: {out_dir / 'index.html'}")
+    return written
+
+
+def _gallery(out_dir: Path, paths: list[Path]) -> Path:
+    """All figures on one sheet with their captions."""
+    from PIL import Image as PILImage
+    from PIL import ImageDraw
+
+    from .render.views import _font
+
+    thumbs = [PILImage.open(p).convert("RGB") for p in paths]
+    height = 360
+    thumbs = [t.resize((max(1, round(t.width * height / t.height)), height)) for t in thumbs]
+    font = _font(14)
+    rows, row, width = [], [], 0
+    for t, fig in zip(thumbs, FIGURES, strict=True):
+        if width + t.width > 1500 and row:
+            rows.append(row)
+            row, width = [], 0
+        row.append((t, fig))
+        width += t.width
+    rows.append(row)
+    line_h = 16
+    caption_h = 8 + line_h * max(
+        len(_wrap(f.caption, max(20, t.width // 8)))
+        for t, f in ((t, f) for r in rows for t, f in r)
+    )
+    sheet_w = max(sum(t.width for t, _ in r) for r in rows)
+    sheet = PILImage.new("RGB", (sheet_w, len(rows) * (height + caption_h)), (16, 16, 16))
+    draw = ImageDraw.Draw(sheet)
+    for r, items in enumerate(rows):
+        x = 0
+        for t, fig in items:
+            y = r * (height + caption_h)
+            sheet.paste(t, (x, y))
+            for i, line in enumerate(_wrap(fig.caption, max(20, t.width // 8))):
+                draw.text(
+                    (x + 6, y + height + 4 + line_h * i), line, fill=(230, 230, 230), font=font
+                )
+            x += t.width
+    path = out_dir / "gallery.png"
+    sheet.save(path)
+    return path
+
+
+def _wrap(text: str, width: int) -> list[str]:
+    lines, line = [], ""
+    for word in text.split():
+        if len(line) + len(word) + 1 > width and line:
+            lines.append(line)
+            line = word
+        else:
+            line = f"{line} {word}".strip()
+    return [*lines, line]
+
+
+def _index(out_dir: Path, paths: list[Path]) -> Path:
+    items = "\n".join(
+        f'<figure><img src="{html.escape(p.name)}" alt="{html.escape(f.name)}">'
+        f"<figcaption>{html.escape(f.caption)}</figcaption></figure>"
+        for p, f in zip(paths, FIGURES, strict=True)
+    )
+    page = f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>chronocl demo gallery</title>
+<style>
+body {{ background: #111; color: #ddd; font: 15px/1.4 system-ui, sans-serif; margin: 2em; }}
+figure {{ display: inline-block; vertical-align: top; margin: 0 1.5em 2em 0; max-width: 1100px; }}
+img {{ max-width: 100%; border: 1px solid #333; }}
+</style></head><body>
+<h1>Chronovolumes of the built-in data, after Woodring &amp; Shen (2003), Figure 3</h1>
+{items}
+</body></html>
+"""
+    path = out_dir / "index.html"
+    path.write_text(page)
+    return path

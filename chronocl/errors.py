@@ -54,3 +54,7 @@ class EngineUnavailableError(ChronoclError, RuntimeError):
 
 class KernelBuildError(ChronoclError, RuntimeError):
     """An OpenCL program failed to build; the message carries options, device and log."""
+
+
+class RendererUnavailableError(ChronoclError, RuntimeError):
+    """No OpenGL context can be made (EGL or a GL driver is missing)."""

@@ -1,0 +1,122 @@
+"""The orbit camera: azimuth and elevation around the volume's centre, zoom, field of view.
+
+World space: the volume box is centred at the origin with x right, y up, z towards the
+viewer at azimuth = elevation = 0, and its longest side has length 1 (voxel spacing honoured).
+Matrices are numpy float64, row-major; upload them transposed (GL is column-major).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InvalidParameterError, UnknownNameError
+
+PROJECTIONS = ("perspective", "orthographic")
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Orbit camera. `zoom` > 1 magnifies; `view_height` (world units) fixes an orthographic
+    view's height exactly, for pixel-exact views."""
+
+    azimuth: float = 30.0
+    elevation: float = 20.0
+    zoom: float = 1.0
+    fov: float = 30.0
+    projection: str = "perspective"
+    view_height: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("azimuth", "elevation", "zoom", "fov"):
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not math.isfinite(value):
+                raise InvalidParameterError(
+                    f"camera {name} is {value!r}; give a finite number (degrees for angles)"
+                )
+        if self.zoom <= 0:
+            raise InvalidParameterError(f"camera zoom is {self.zoom}; it must be > 0")
+        if not 1.0 <= self.fov <= 120.0:
+            raise InvalidParameterError(f"camera fov is {self.fov}; use 1 to 120 degrees")
+        if self.projection not in PROJECTIONS:
+            raise UnknownNameError(
+                f"unknown projection {self.projection!r}; choose perspective or orthographic"
+            )
+        if self.view_height is not None and not (
+            math.isfinite(self.view_height) and self.view_height > 0
+        ):
+            raise InvalidParameterError(f"view_height is {self.view_height}; it must be > 0")
+
+    def orbited(self, degrees: float) -> Camera:
+        """The same camera turned `degrees` further in azimuth (for turntables)."""
+        return Camera(
+            self.azimuth + degrees,
+            self.elevation,
+            self.zoom,
+            self.fov,
+            self.projection,
+            self.view_height,
+        )
+
+    def eye_direction(self) -> np.ndarray:
+        """Unit vector from the centre towards the eye."""
+        az, el = math.radians(self.azimuth), math.radians(self.elevation)
+        return np.array([math.cos(el) * math.sin(az), math.sin(el), math.cos(el) * math.cos(az)])
+
+    def view_direction(self) -> tuple[float, float, float]:
+        """Unit viewing direction (eye towards the centre), for silhouette enhancement."""
+        return tuple(float(c) for c in -self.eye_direction())  # type: ignore[return-value]
+
+    def matrices(self, extent: np.ndarray, aspect: float) -> tuple[np.ndarray, np.ndarray]:
+        """(view, projection) for a box of world `extent` (x, y, z) and image aspect w / h."""
+        radius = 0.5 * float(np.linalg.norm(extent))
+        half_fov = math.radians(self.fov) / 2
+        distance = radius / math.sin(half_fov) / self.zoom
+        eye = self.eye_direction() * distance
+        view = look_at(eye, np.zeros(3), _up_for(self.eye_direction()))
+        near, far = max(distance - 2 * radius, 1e-3 * distance), distance + 2 * radius
+        if self.projection == "perspective":
+            proj = perspective(2 * half_fov, aspect, near, far)
+        else:
+            height = self.view_height if self.view_height is not None else 2 * radius / self.zoom
+            proj = orthographic(height * aspect, height, near, far)
+        return view, proj
+
+
+def _up_for(eye_dir: np.ndarray) -> np.ndarray:
+    # Looking straight down or up, world y is parallel to the view: use z as "up" instead.
+    return (
+        np.array([0.0, 0.0, -1.0 if eye_dir[1] > 0 else 1.0])
+        if abs(eye_dir[1]) > 0.999
+        else (np.array([0.0, 1.0, 0.0]))
+    )
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
+    f = target - eye
+    f = f / np.linalg.norm(f)
+    s = np.cross(f, up)
+    s = s / np.linalg.norm(s)
+    u = np.cross(s, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def perspective(fovy: float, aspect: float, near: float, far: float) -> np.ndarray:
+    f = 1.0 / math.tan(fovy / 2)
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = f / aspect, f
+    m[2, 2], m[2, 3] = (far + near) / (near - far), 2 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def orthographic(width: float, height: float, near: float, far: float) -> np.ndarray:
+    m = np.eye(4)
+    m[0, 0], m[1, 1] = 2.0 / width, 2.0 / height
+    m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
+    return m

@@ -1,0 +1,58 @@
+"""The OpenGL context (headless EGL, one per process) and shader programs from `kernels/glsl/`."""
+
+from __future__ import annotations
+
+import threading
+from functools import cache
+from importlib import resources
+from pathlib import Path
+
+from ..errors import RendererUnavailableError
+
+NO_GL = (
+    "cannot create an OpenGL context through EGL ({why}); install the system packages "
+    "libegl1 and libgl1-mesa-dri (Mesa llvmpipe renders on the CPU), or a GPU driver"
+)
+
+_lock = threading.Lock()
+_context = None
+
+
+def gl_context():
+    """The process's headless moderngl context (EGL: a GPU driver where present, else llvmpipe)."""
+    global _context
+    with _lock:
+        if _context is None:
+            try:
+                import moderngl
+            except ImportError:
+                raise RendererUnavailableError(
+                    "moderngl is not installed; 'pip install moderngl'"
+                ) from None
+            try:
+                _context = moderngl.create_context(standalone=True, backend="egl", require=330)
+            except Exception as exc:  # moderngl/glcontext raise plain Exceptions
+                why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                raise RendererUnavailableError(NO_GL.format(why=why)) from None
+        return _context
+
+
+@cache
+def shader_dir() -> Path:
+    packaged = Path(str(resources.files("chronocl"))) / "kernels" / "glsl"
+    if packaged.is_dir():
+        return packaged
+    return Path(__file__).resolve().parents[2] / "kernels" / "glsl"
+
+
+def shader_source(name: str) -> str:
+    return (shader_dir() / name).read_text()
+
+
+@cache
+def program(ctx, name: str):
+    """The linked program `name` (name.vert + name.frag) on `ctx`, built once."""
+    return ctx.program(
+        vertex_shader=shader_source(f"{name}.vert"),
+        fragment_shader=shader_source(f"{name}.frag"),
+    )

@@ -1,0 +1,168 @@
+"""The moderngl raycaster: a chronovolume as a 3D texture, rays through the box, PNG-ready pixels.
+
+See kernels/glsl/raycast.frag for the compositing. A `Volume` is an uploaded chronovolume
+(RGBA16F or RGBA8 texture, trilinear or nearest) with its world-space box; `draw` renders one
+view of it into an (H, W, 3) uint8 array, top-down.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..chronovolume import Chronovolume
+from ..errors import InvalidParameterError
+from .camera import Camera
+from .gl import gl_context, program
+
+MIN_SIZE, MAX_SIZE = 16, 8192
+TEXTURE_TYPES = {"f2": np.float16, "f1": np.uint8}
+
+
+def check_size(size: tuple[int, int]) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"image size {size!r} must be two integers (W, H)") from None
+    if not (MIN_SIZE <= w <= MAX_SIZE and MIN_SIZE <= h <= MAX_SIZE):
+        raise InvalidParameterError(
+            f"image size {w}x{h} is outside {MIN_SIZE}..{MAX_SIZE} pixels per side; "
+            "choose e.g. --size 512x512"
+        )
+    return w, h
+
+
+@dataclass
+class Volume:
+    """A chronovolume on the GPU: its texture and world-space box."""
+
+    texture: object
+    extent: np.ndarray  # world size (x, y, z); the longest side is 1
+    unit: float  # world length of one voxel (the smallest side), the opacity reference
+
+    def release(self) -> None:
+        self.texture.release()
+
+
+class Raycaster:
+    """Renders uploaded chronovolumes on the process's GL context."""
+
+    def __init__(self) -> None:
+        self.ctx = gl_context()
+        self.prog = program(self.ctx, "raycast")
+        self.vao = self.ctx.vertex_array(self.prog, [])
+        self.outline_prog = program(self.ctx, "outline")
+        self._fbos: dict[tuple[int, int], object] = {}
+
+    def upload(self, cv: Chronovolume, dtype: str = "f2", nearest: bool = False) -> Volume:
+        """Upload premultiplied RGBA (Z, Y, X, 4) as a 3D texture (f2: half float, f1: 8 bit)."""
+        import moderngl
+
+        nz, ny, nx, _ = cv.rgba.shape
+        if dtype == "f1":
+            data = np.clip(np.round(cv.rgba * 255), 0, 255).astype(np.uint8)
+        else:
+            data = cv.rgba.astype(np.float16)
+        tex = self.ctx.texture3d((nx, ny, nz), 4, np.ascontiguousarray(data).tobytes(), dtype=dtype)
+        tex.filter = (
+            (moderngl.NEAREST, moderngl.NEAREST)
+            if nearest
+            else (
+                moderngl.LINEAR,
+                moderngl.LINEAR,
+            )
+        )
+        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+        dz, dy, dx = cv.spacing
+        physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
+        extent = physical / physical.max()
+        unit = float(np.min(extent / np.array([nx, ny, nz])))
+        return Volume(tex, extent, unit)
+
+    def draw(
+        self,
+        volume: Volume,
+        camera: Camera,
+        size: tuple[int, int],
+        *,
+        background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        clip: tuple[float, float, float, float] | None = None,
+        jitter: bool = True,
+        step: float = 1.0,
+        outline: bool = False,
+    ) -> np.ndarray:
+        """Render one view; returns (H, W, 3) uint8, top-down.
+
+        `step` is the sampling distance in voxels. `clip` = (nx, ny, nz, offset): keep the
+        part of the volume on the normal's side of a plane; offset -1..1 moves the plane from
+        the box's back (everything kept) to its front (nothing kept), 0 through the centre.
+        """
+        w, h = check_size(size)
+        if not (math.isfinite(step) and 0.05 <= step <= 8):
+            raise InvalidParameterError(f"step is {step} voxels; use 0.05 to 8")
+        fbo = self._fbo((w, h))
+        fbo.use()
+        fbo.clear(*background, 1.0)
+        view, proj = camera.matrices(volume.extent, w / h)
+        view_proj = proj @ view
+        half = volume.extent / 2
+        prog = self.prog
+        prog["inv_view_proj"].write(np.linalg.inv(view_proj).T.astype("f4").tobytes())
+        prog["box_min"].value = tuple(-half)
+        prog["box_max"].value = tuple(half)
+        prog["step_world"].value = step * volume.unit
+        prog["unit_world"].value = volume.unit
+        diagonal_steps = float(np.linalg.norm(volume.extent)) / (step * volume.unit)
+        prog["max_steps"].value = int(diagonal_steps) + 2
+        prog["jitter"].value = bool(jitter)
+        prog["background"].value = tuple(float(c) for c in background)
+        prog["clip_enabled"].value = clip is not None
+        prog["clip_plane"].value = clip_plane(clip, volume.extent) if clip else (0, 0, 0, 0)
+        volume.texture.use(location=0)
+        prog["volume"].value = 0
+        self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
+        self.vao.render(vertices=3)
+        if outline:
+            self._draw_outline(view_proj, half, background)
+        pixels = np.frombuffer(fbo.read(components=3, alignment=1), dtype=np.uint8)
+        return pixels.reshape(h, w, 3)[::-1].copy()
+
+    def _fbo(self, size: tuple[int, int]):
+        fbo = self._fbos.get(size)
+        if fbo is None:
+            fbo = self._fbos[size] = self.ctx.simple_framebuffer(size, components=4)
+        return fbo
+
+    def _draw_outline(self, view_proj: np.ndarray, half: np.ndarray, background) -> None:
+        corners = np.array(
+            [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype="f4"
+        ) * half.astype("f4")
+        edges = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
+        lines = np.array([corners[i] for edge in edges for i in edge], dtype="f4")
+        vbo = self.ctx.buffer(lines.tobytes())
+        vao = self.ctx.vertex_array(self.outline_prog, [(vbo, "3f", "position")])
+        self.outline_prog["view_proj"].write(view_proj.T.astype("f4").tobytes())
+        grey = 0.35 if sum(background) > 1.5 else 0.65
+        self.outline_prog["color"].value = (grey, grey, grey)
+        vao.render(mode=self.ctx.LINES)
+        vao.release()
+        vbo.release()
+
+
+def clip_plane(clip: tuple[float, float, float, float], extent: np.ndarray) -> tuple:
+    """World-space plane (n, d) keeping dot(n, p) + d >= 0, from (nx, ny, nz, offset)."""
+    try:
+        values = [float(v) for v in clip]
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"clip {clip!r} must be four numbers nx,ny,nz,offset") from None
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        raise InvalidParameterError(f"clip {clip!r} must be four finite numbers nx,ny,nz,offset")
+    n = np.array(values[:3])
+    norm = float(np.linalg.norm(n))
+    if norm == 0:
+        raise InvalidParameterError("clip plane normal is (0, 0, 0); give a direction")
+    n /= norm
+    reach = 0.5 * float(np.abs(n) @ extent)  # the box's half-width along n
+    return (*n, -values[3] * reach)

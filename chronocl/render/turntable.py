@@ -1,0 +1,50 @@
+"""Turntable videos: the camera orbits the volume, one frame per step, written by imageio."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from ..atomic import atomic_file
+from ..errors import InvalidParameterError
+from ..progress import track
+from .camera import Camera
+from .image import Image
+
+VIDEO_SUFFIXES = (".mp4", ".gif", ".webm", ".mkv")
+
+
+def turntable(
+    frame: Callable[[Camera], Image],
+    camera: Camera,
+    path: str | os.PathLike,
+    frames: int = 36,
+    fps: int = 12,
+    overwrite: bool = True,
+    progress: bool = False,
+) -> Path:
+    """Render `frames` views a full turn apart in azimuth with `frame(camera)`; write a video."""
+    import imageio.v3 as iio
+
+    target = Path(path)
+    if target.suffix.lower() not in VIDEO_SUFFIXES:
+        raise InvalidParameterError(
+            f"turntable {target.name!r}: use a video suffix ({', '.join(VIDEO_SUFFIXES)})"
+        )
+    if not 2 <= frames <= 3600:
+        raise InvalidParameterError(f"turntable frames is {frames}; use 2 to 3600")
+    images: Sequence = [
+        frame(camera.orbited(360.0 * i / frames)).array
+        for i in track(range(frames), frames, "rendering frames", progress)
+    ]
+    with atomic_file(target, overwrite=overwrite) as tmp:
+        if target.suffix.lower() == ".gif":
+            iio.imwrite(tmp, images, extension=".gif", duration=1000 / fps, loop=0)
+        else:
+            iio.imwrite(
+                tmp, images, extension=target.suffix, fps=fps, codec="libx264", macro_block_size=1
+            ) if target.suffix.lower() == ".mp4" else iio.imwrite(
+                tmp, images, extension=target.suffix, fps=fps
+            )
+    return target

@@ -1,0 +1,235 @@
+"""Render chronovolumes: one view, or parallel views of several under one camera, labelled,
+with a legend bar of the time colours (oldest .. newest, step numbers)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..chronovolume import Chronovolume
+from ..errors import InvalidParameterError
+from .camera import Camera
+from .image import Image
+from .raycaster import Raycaster, check_size
+
+_raycaster: Raycaster | None = None
+
+
+def raycaster() -> Raycaster:
+    """The process's raycaster (created on first use)."""
+    global _raycaster
+    if _raycaster is None:
+        _raycaster = Raycaster()
+    return _raycaster
+
+
+def parse_color(color: object) -> tuple[float, float, float]:
+    """'#rrggbb', a colour name Pillow knows, or three numbers in [0, 1]."""
+    if isinstance(color, str):
+        from PIL import ImageColor
+
+        try:
+            r, g, b = ImageColor.getrgb(color)[:3]
+        except ValueError:
+            raise InvalidParameterError(
+                f"unknown colour {color!r}; use #rrggbb or a name such as black"
+            ) from None
+        return r / 255, g / 255, b / 255
+    try:
+        rgb = tuple(float(c) for c in color)  # type: ignore[union-attr]
+    except TypeError:
+        rgb = ()
+    if len(rgb) != 3 or not all(math.isfinite(c) and 0 <= c <= 1 for c in rgb):
+        raise InvalidParameterError(f"colour {color!r} must be three numbers in [0, 1]")
+    return rgb  # type: ignore[return-value]
+
+
+def render(
+    chronovolume: Chronovolume,
+    camera: Camera | None = None,
+    size: tuple[int, int] = (512, 512),
+    *,
+    background: object = "black",
+    clip: tuple[float, float, float, float] | None = None,
+    jitter: bool = True,
+    step: float = 1.0,
+    outline: bool = False,
+    nearest: bool = False,
+    label: str | None = None,
+    legend: bool = False,
+) -> Image:
+    """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`)."""
+    return render_views(
+        [chronovolume],
+        camera,
+        size,
+        background=background,
+        clip=clip,
+        jitter=jitter,
+        step=step,
+        outline=outline,
+        nearest=nearest,
+        labels=[label] if label else None,
+        legend=legend,
+    )
+
+
+def render_views(
+    chronovolumes: Sequence[Chronovolume],
+    camera: Camera | None = None,
+    size: tuple[int, int] = (384, 384),
+    *,
+    background: object = "black",
+    clip: tuple[float, float, float, float] | None = None,
+    jitter: bool = True,
+    step: float = 1.0,
+    outline: bool = False,
+    nearest: bool = False,
+    labels: Sequence[str] | None = None,
+    legend: bool = True,
+    columns: int | None = None,
+) -> Image:
+    """Parallel views: each chronovolume in its own panel of `size`, all under one camera."""
+    if not chronovolumes:
+        raise InvalidParameterError("nothing to render: give at least one chronovolume")
+    camera = camera or Camera()
+    w, h = check_size(size)
+    bg = parse_color(background)
+    rc = raycaster()
+    panels = []
+    for cv in chronovolumes:
+        volume = rc.upload(cv, nearest=nearest)
+        try:
+            panels.append(
+                rc.draw(
+                    volume,
+                    camera,
+                    (w, h),
+                    background=bg,
+                    clip=clip,
+                    jitter=jitter,
+                    step=step,
+                    outline=outline,
+                )
+            )
+        finally:
+            volume.release()
+    if labels is None and len(chronovolumes) > 1:
+        labels = [describe(cv) for cv in chronovolumes]
+    if not labels and not legend:
+        return Image(panels[0]) if len(panels) == 1 else Image(_grid(panels, columns, bg))
+    return Image(_compose(panels, labels, chronovolumes if legend else None, columns, bg))
+
+
+def describe(cv: Chronovolume) -> str:
+    """Panel label: mode, order and window, e.g. 'alpha, forward, steps 0:20:9'."""
+    from ..selection import Selection
+
+    spec = cv.metadata.get("spec", {})
+    order = spec.get("order", "forward")
+    order = order if isinstance(order, str) else "importance " + ",".join(map(str, order))
+    sel = cv.metadata.get("selection", {})
+    steps = Selection(tuple(sel.get("steps", ())), sel.get("n_steps", 1)).describe()
+    extra = ""
+    enhance = spec.get("enhance", {}).get("kind", "none")
+    if enhance != "none":
+        extra = f", {enhance}"
+    return f"{spec.get('mode', '?')}, {order}, steps {steps}{extra}"
+
+
+def _grid(panels: list[np.ndarray], columns: int | None, bg) -> np.ndarray:
+    n = len(panels)
+    cols = columns or n
+    rows = math.ceil(n / cols)
+    h, w, _ = panels[0].shape
+    out = np.empty((rows * h, cols * w, 3), dtype=np.uint8)
+    out[...] = (np.array(bg) * 255).round().astype(np.uint8)
+    for i, p in enumerate(panels):
+        r, c = divmod(i, cols)
+        out[r * h : (r + 1) * h, c * w : (c + 1) * w] = p
+    return out
+
+
+def _font(size: int):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # Pillow without FreeType sizes
+        return ImageFont.load_default()
+
+
+def _compose(panels, labels, legend_of, columns, bg) -> np.ndarray:
+    from PIL import Image as PILImage
+    from PIL import ImageDraw
+
+    grid = _grid(panels, columns, bg)
+    h, w, _ = panels[0].shape
+    text_rgb = (20, 20, 20) if sum(bg) > 1.5 else (235, 235, 235)
+    font = _font(max(11, min(w, h) // 26))
+    legend_h = max(36, h // 8) if legend_of else 0
+    canvas = PILImage.new(
+        "RGB", (grid.shape[1], grid.shape[0] + legend_h), tuple(round(c * 255) for c in bg)
+    )
+    canvas.paste(PILImage.fromarray(grid), (0, 0))
+    draw = ImageDraw.Draw(canvas)
+    cols = columns or len(panels)
+    for i, text in enumerate(labels or []):
+        r, c = divmod(i, cols)
+        draw.text((c * w + 8, r * h + 6), text, fill=text_rgb, font=font)
+    if legend_of:
+        _legend(
+            draw,
+            legend_of[0],
+            (8, grid.shape[0] + 4, canvas.width - 8, legend_h - 8),
+            font,
+            text_rgb,
+        )
+    return np.asarray(canvas)
+
+
+def _legend(draw, cv: Chronovolume, box, font, text_rgb) -> None:
+    """A bar of the time colours over the selected steps, oldest on the left."""
+    from ..spec import IntegrationSpec
+
+    spec = IntegrationSpec.from_dict(cv.metadata["spec"])
+    steps = cv.steps
+    n_steps = cv.metadata["selection"]["n_steps"]
+    positions = spec.time_tf.positions_of(steps, n_steps)
+    x0, y0, width, height = box
+    bar_h = max(8, height // 2)
+    gap = 8
+    x_start = x0 + int(draw.textlength("oldest", font=font)) + gap
+    x_end = x0 + width - int(draw.textlength("newest", font=font)) - gap
+    draw.text((x0, y0 + 1), "oldest", fill=text_rgb, font=font)
+    draw.text((x_end + gap, y0 + 1), "newest", fill=text_rgb, font=font)
+    span = max(1, x_end - x_start)
+    # Colour by position within the window: blend between the steps' colours.
+    xs = np.linspace(0.0, 1.0, span)
+    p_of_x = (
+        np.interp(xs, np.linspace(0, 1, len(positions)), positions)
+        if len(steps) > 1
+        else (np.full(span, positions[0]))
+    )
+    rgb, alpha = spec.time_tf.evaluate(p_of_x)
+    shown = np.clip(rgb * np.maximum(alpha, 0.25)[:, None], 0, 1)
+    for i in range(span):
+        colour = tuple(round(c * 255) for c in shown[i])
+        draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
+    # Label the steps that fit without overlapping; the oldest and newest always.
+    positions_x = [x_start + (k / max(1, len(steps) - 1)) * (span - 1) for k in range(len(steps))]
+    min_gap = 8 * max(len(str(s)) for s in steps) + 10
+    shown_at: list[float] = []
+    for k in [0, len(steps) - 1, *range(1, len(steps) - 1)]:
+        x = positions_x[k]
+        if k < len(steps) and all(abs(x - other) >= min_gap for other in shown_at):
+            shown_at.append(x)
+            draw.line([(x, y0 + bar_h), (x, y0 + bar_h + 3)], fill=text_rgb)
+            draw.text(
+                (x - 4 * len(str(steps[k])), y0 + bar_h + 4),
+                str(steps[k]),
+                fill=text_rgb,
+                font=font,
+            )

@@ -1,0 +1,78 @@
+#version 330
+// Raycast a chronovolume: premultiplied RGBA in a 3D texture, composited front to back.
+//
+// Rays come from unprojecting the fragment at the near and far planes (orthographic or
+// perspective alike) and are clipped to the volume box and, optionally, to a slicing plane.
+// Samples are taken every `step_world` along the ray; a sample's opacity, defined for a
+// path of `unit_world` (one voxel), is corrected for the step: a' = 1 - (1 - a)^(step/unit),
+// and its premultiplied colour scaled alike. Early termination once A > 1 - 1/512 (less than
+// half an 8-bit step can still be added).
+
+uniform sampler3D volume;
+uniform mat4 inv_view_proj;   // clip space -> world
+uniform vec3 box_min;         // world-space corners of the volume box
+uniform vec3 box_max;
+uniform float step_world;     // sampling distance along the ray
+uniform float unit_world;     // the length an opacity value refers to (one voxel)
+uniform int max_steps;
+uniform bool jitter;          // offset each ray's first sample by a per-pixel random fraction
+uniform bool clip_enabled;
+uniform vec4 clip_plane;      // world-space plane n.x + d; the side where it is >= 0 is kept
+uniform vec3 background;
+
+in vec2 ndc;
+out vec4 frag_color;
+
+float hash(vec2 p)
+{
+    return fract(sin(dot(p, vec2(12.9898, 78.233))) * 43758.5453);
+}
+
+void main()
+{
+    vec4 near = inv_view_proj * vec4(ndc, -1.0, 1.0);
+    vec4 far = inv_view_proj * vec4(ndc, 1.0, 1.0);
+    vec3 origin = near.xyz / near.w;
+    vec3 dir = normalize(far.xyz / far.w - origin);
+
+    // Slab test against the box.
+    vec3 inv = 1.0 / dir;
+    vec3 t0 = (box_min - origin) * inv;
+    vec3 t1 = (box_max - origin) * inv;
+    vec3 tmin = min(t0, t1);
+    vec3 tmax = max(t0, t1);
+    float t_enter = max(max(tmin.x, tmin.y), max(tmin.z, 0.0));
+    float t_exit = min(min(tmax.x, tmax.y), tmax.z);
+
+    if (clip_enabled) {
+        float denom = dot(clip_plane.xyz, dir);
+        float side = dot(clip_plane.xyz, origin) + clip_plane.w;
+        if (abs(denom) < 1e-12) {
+            if (side < 0.0) t_exit = -1.0;
+        } else {
+            float t_plane = -side / denom;
+            if (denom > 0.0) t_enter = max(t_enter, t_plane);
+            else t_exit = min(t_exit, t_plane);
+        }
+    }
+
+    vec4 acc = vec4(0.0);
+    if (t_exit > t_enter) {
+        float offset = jitter ? hash(gl_FragCoord.xy) : 0.5;
+        float ratio = step_world / unit_world;
+        vec3 size = box_max - box_min;
+        float t = t_enter + offset * step_world;
+        for (int i = 0; i < max_steps && t < t_exit; ++i) {
+            vec3 tex = (origin + t * dir - box_min) / size;
+            vec4 s = texture(volume, tex);
+            if (s.a > 0.0) {
+                float a = 1.0 - pow(max(1.0 - s.a, 0.0), ratio);
+                acc.rgb += (1.0 - acc.a) * s.rgb * (a / s.a);
+                acc.a += (1.0 - acc.a) * a;
+                if (acc.a > 1.0 - 1.0 / 512.0) break;
+            }
+            t += step_world;
+        }
+    }
+    frag_color = vec4(acc.rgb + (1.0 - acc.a) * background, 1.0);
+}
