@@ -337,12 +337,14 @@ def render(
     from .data.series import open_series
     from .integrate import integrate as run
     from .render import Camera, render_views
+    from .render.turntable import check_video
     from .render.turntable import turntable as make_turntable
 
     modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
     check_output(out_path, overwrite)
     if turntable is not None:
         check_output(turntable, overwrite)
+        check_video(turntable, frames)
     saves = _chronovolume_paths(save_chronovolume, modes)
     for path in saves:
         check_output(path, overwrite)

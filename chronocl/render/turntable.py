@@ -15,6 +15,18 @@ from .image import Image
 VIDEO_SUFFIXES = (".mp4", ".gif", ".webm", ".mkv")
 
 
+def check_video(path: str | os.PathLike, frames: int) -> Path:
+    """Validate a turntable's output path and frame count before any work is done."""
+    target = Path(path)
+    if target.suffix.lower() not in VIDEO_SUFFIXES:
+        raise InvalidParameterError(
+            f"turntable {target.name!r}: use a video suffix ({', '.join(VIDEO_SUFFIXES)})"
+        )
+    if not 2 <= frames <= 3600:
+        raise InvalidParameterError(f"turntable frames is {frames}; use 2 to 3600")
+    return target
+
+
 def turntable(
     frame: Callable[[Camera], Image],
     camera: Camera,
@@ -27,13 +39,7 @@ def turntable(
     """Render `frames` views a full turn apart in azimuth with `frame(camera)`; write a video."""
     import imageio.v3 as iio
 
-    target = Path(path)
-    if target.suffix.lower() not in VIDEO_SUFFIXES:
-        raise InvalidParameterError(
-            f"turntable {target.name!r}: use a video suffix ({', '.join(VIDEO_SUFFIXES)})"
-        )
-    if not 2 <= frames <= 3600:
-        raise InvalidParameterError(f"turntable frames is {frames}; use 2 to 3600")
+    target = check_video(path, frames)
     images: Sequence = [
         frame(camera.orbited(360.0 * i / frames)).array
         for i in track(range(frames), frames, "rendering frames", progress)

@@ -1,0 +1,116 @@
+"""`chronocl render` and the demo gallery end to end; bad render options exit 2 with one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import chronocl
+from chronocl.demo import run_demo
+
+from .test_cli import assert_one_line_error, cli
+
+
+@pytest.fixture(scope="module")
+def vortex(tmp_path_factory):
+    path = tmp_path_factory.mktemp("render") / "v.zarr"
+    assert cli("generate", "vortex", path, "--shape", "24x24x24", "--steps", "6").returncode == 0
+    return path
+
+
+def test_parallel_views_turntable_and_saved_chronovolumes(tmp_path, vortex):
+    from PIL import Image as PILImage
+
+    result = cli(
+        "render",
+        vortex,
+        "-o",
+        tmp_path / "views.png",
+        "--mode",
+        "alpha,max",
+        "--mode",
+        "additive",
+        "--window",
+        "0:6:2",
+        "--size",
+        "64x48",
+        "--clip",
+        "0,0,-1,0.2",
+        "--outline",
+        "--background",
+        "#202020",
+        "--turntable",
+        tmp_path / "turn.gif",
+        "--frames",
+        "4",
+        "--save-chronovolume",
+        tmp_path / "cv.zarr",
+    )
+    assert result.returncode == 0, result.stderr
+    image = PILImage.open(tmp_path / "views.png")
+    assert image.width == 3 * 64 and image.height > 48  # three panels, legend below
+    pixels = np.asarray(image.convert("RGB"))[:48]
+    assert len(np.unique(pixels.reshape(-1, 3), axis=0)) > 20  # something was drawn
+    import imageio.v3 as iio
+
+    frames = iio.imread(tmp_path / "turn.gif", index=None)
+    assert frames.shape[0] == 4
+    assert not np.array_equal(frames[0], frames[1])  # the camera moved
+    for mode in ("alpha", "max", "additive"):
+        cv = chronocl.Chronovolume.load(tmp_path / f"cv-{mode}.zarr")
+        assert cv.spec.mode == mode and cv.steps == (0, 2, 4)
+
+
+def test_silhouette_follows_the_camera(tmp_path, vortex):
+    result = cli(
+        "render",
+        vortex,
+        "-o",
+        tmp_path / "s.png",
+        "--enhance",
+        "silhouette",
+        "--window",
+        "0:6:3",
+        "--size",
+        "48x48",
+        "--azimuth",
+        "90",
+        "--save-chronovolume",
+        tmp_path / "s.zarr",
+    )
+    assert result.returncode == 0, result.stderr
+    view = chronocl.Chronovolume.load(tmp_path / "s.zarr").spec.enhance.view
+    np.testing.assert_allclose(
+        view, [-np.cos(np.radians(20)), -np.sin(np.radians(20)), 0], atol=1e-9
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--size", "8x8"], "outside 16..8192"),
+        (["--size", "9000x100"], "outside 16..8192"),
+        (["--size", "big"], "WxH"),
+        (["--azimuth", "nan"], "azimuth"),
+        (["--time-tf", "rainbow"], "unknown time TF preset"),
+        (["--mode", "sum"], "unknown mode"),
+        (["--clip", "1,2"], "clip"),
+        (["--projection", "fisheye"], "fisheye"),
+        (["--background", "no-such-colour"], "unknown colour"),
+        (["--turntable", "{tmp}/t.txt"], "video suffix"),
+    ],
+)
+def test_bad_render_options(tmp_path, vortex, args, needle):
+    argv = [a.format(tmp=tmp_path) for a in args]
+    result = cli("render", vortex, "-o", tmp_path / "o.png", *argv)
+    assert_one_line_error(result, needle)
+    assert not (tmp_path / "o.png").exists()
+    assert not [p for p in tmp_path.iterdir() if ".partial-" in p.name]
+
+
+def test_demo_writes_the_gallery(tmp_path):
+    paths = run_demo(tmp_path, shape_xyz=(24, 24, 24), n_steps=30, size=64)
+    assert len(paths) == 6 and all(p.exists() for p in paths)
+    assert (tmp_path / "gallery.png").exists()
+    page = (tmp_path / "index.html").read_text()
+    assert all(p.name in page for p in paths) and "white where all steps" in page
