@@ -41,6 +41,7 @@ class Volume:
     texture: object
     extent: np.ndarray  # world size (x, y, z); the longest side is 1
     unit: float  # world length of one voxel (the smallest side), the opacity reference
+    occupied: tuple[np.ndarray, np.ndarray]  # world corners of the voxels with opacity > 0
 
     def release(self) -> None:
         self.texture.release()
@@ -78,8 +79,9 @@ class Raycaster:
         dz, dy, dx = cv.spacing
         physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
         extent = physical / physical.max()
-        unit = float(np.min(extent / np.array([nx, ny, nz])))
-        return Volume(tex, extent, unit)
+        voxel = extent / np.array([nx, ny, nz])
+        unit = float(np.min(voxel))
+        return Volume(tex, extent, unit, occupied_box(cv.rgba[..., 3], extent, voxel))
 
     def draw(
         self,
@@ -112,6 +114,8 @@ class Raycaster:
         prog["inv_view_proj"].write(np.linalg.inv(view_proj).T.astype("f4").tobytes())
         prog["box_min"].value = tuple(-half)
         prog["box_max"].value = tuple(half)
+        prog["hit_min"].value = tuple(volume.occupied[0])
+        prog["hit_max"].value = tuple(volume.occupied[1])
         prog["step_world"].value = step * volume.unit
         prog["unit_world"].value = volume.unit
         diagonal_steps = float(np.linalg.norm(volume.extent)) / (step * volume.unit)
@@ -149,6 +153,24 @@ class Raycaster:
         vao.render(mode=self.ctx.LINES)
         vao.release()
         vbo.release()
+
+
+def occupied_box(alpha: np.ndarray, extent: np.ndarray, voxel: np.ndarray):
+    """World corners of the voxels with opacity > 0, grown by one voxel (trilinear reach) and
+    kept inside the box; an empty volume gives an empty box."""
+    half = extent / 2
+    filled = alpha > 0
+    if not filled.any():
+        return half.copy(), -half.copy()  # min > max: every ray misses
+    lo, hi = [], []
+    for axis in (2, 1, 0):  # x, y, z
+        other = tuple(a for a in range(3) if a != axis)
+        idx = np.flatnonzero(filled.any(axis=other))
+        lo.append(max(idx[0] - 1, 0))
+        hi.append(min(idx[-1] + 2, filled.shape[axis]))
+    lo_w = -half + np.array(lo) * voxel
+    hi_w = -half + np.array(hi) * voxel
+    return lo_w, hi_w
 
 
 def clip_plane(clip: tuple[float, float, float, float], extent: np.ndarray) -> tuple:

@@ -10,8 +10,10 @@
 
 uniform sampler3D volume;
 uniform mat4 inv_view_proj;   // clip space -> world
-uniform vec3 box_min;         // world-space corners of the volume box
+uniform vec3 box_min;         // world-space corners of the volume box (texture mapping)
 uniform vec3 box_max;
+uniform vec3 hit_min;         // corners of the occupied part (opacity > 0, grown by a voxel):
+uniform vec3 hit_max;         // rays only march there
 uniform float step_world;     // sampling distance along the ray
 uniform float unit_world;     // the length an opacity value refers to (one voxel)
 uniform int max_steps;
@@ -35,10 +37,10 @@ void main()
     vec3 origin = near.xyz / near.w;
     vec3 dir = normalize(far.xyz / far.w - origin);
 
-    // Slab test against the box.
+    // Slab test against the occupied box.
     vec3 inv = 1.0 / dir;
-    vec3 t0 = (box_min - origin) * inv;
-    vec3 t1 = (box_max - origin) * inv;
+    vec3 t0 = (hit_min - origin) * inv;
+    vec3 t1 = (hit_max - origin) * inv;
     vec3 tmin = min(t0, t1);
     vec3 tmax = max(t0, t1);
     float t_enter = max(max(tmin.x, tmin.y), max(tmin.z, 0.0));
