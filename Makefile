@@ -7,6 +7,12 @@ STAMP := $(VENV)/.installed
 .PHONY: demo test lint format bench clean
 
 $(STAMP): pyproject.toml
+	@# Headless rendering needs EGL and Mesa (llvmpipe); install them where they are missing.
+	@if ! ldconfig -p | grep -q libEGL_mesa; then \
+		if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
+			apt-get update -qq && apt-get install -y -qq libegl1 libgl1-mesa-dri libegl-mesa0; \
+		else echo "warning: EGL/Mesa missing; install libegl1 libgl1-mesa-dri to render"; fi; \
+	fi
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[dev]'
