@@ -61,6 +61,26 @@ def test_parallel_views_turntable_and_saved_chronovolumes(tmp_path, vortex):
         assert cv.spec.mode == mode and cv.steps == (0, 2, 4)
 
 
+def test_mp4_turntable_with_odd_sizes(tmp_path, vortex):
+    import imageio.v3 as iio
+
+    result = cli(
+        "render",
+        vortex,
+        "-o",
+        tmp_path / "t.png",
+        "--size",
+        "33x31",
+        "--turntable",
+        tmp_path / "t.mp4",
+        "--frames",
+        "3",
+    )
+    assert result.returncode == 0, result.stderr
+    frames = iio.imread(tmp_path / "t.mp4", index=None)
+    assert frames.shape[0] == 3 and frames.shape[1] % 2 == 0 and frames.shape[2] % 2 == 0
+
+
 def test_silhouette_follows_the_camera(tmp_path, vortex):
     result = cli(
         "render",

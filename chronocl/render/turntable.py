@@ -6,6 +6,8 @@ import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import numpy as np
+
 from ..atomic import atomic_file
 from ..errors import InvalidParameterError
 from ..progress import track
@@ -44,13 +46,17 @@ def turntable(
         frame(camera.orbited(360.0 * i / frames)).array
         for i in track(range(frames), frames, "rendering frames", progress)
     ]
+    suffix = target.suffix.lower()
     with atomic_file(target, overwrite=overwrite) as tmp:
-        if target.suffix.lower() == ".gif":
+        if suffix == ".gif":
             iio.imwrite(tmp, images, extension=".gif", duration=1000 / fps, loop=0)
-        else:
-            iio.imwrite(
-                tmp, images, extension=target.suffix, fps=fps, codec="libx264", macro_block_size=1
-            ) if target.suffix.lower() == ".mp4" else iio.imwrite(
-                tmp, images, extension=target.suffix, fps=fps
-            )
+        else:  # H.264 and friends want even frame sizes
+            even = [_pad_even(image) for image in images]
+            options = {"codec": "libx264", "macro_block_size": 1} if suffix == ".mp4" else {}
+            iio.imwrite(tmp, even, extension=suffix, fps=fps, **options)
     return target
+
+
+def _pad_even(image: np.ndarray) -> np.ndarray:
+    h, w = image.shape[:2]
+    return np.pad(image, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
