@@ -15,18 +15,6 @@ def emit(obj: dict) -> None:
     print(json.dumps(obj), flush=True)
 
 
-def timeit(fn: Callable[[], object], repeats: int, warmup: int = 1) -> tuple[float, float]:
-    """(median, minimum) wall time of `fn` over `repeats` runs after `warmup` runs."""
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), min(times)
-
-
 def race(fns: dict[str, Callable[[], object]], repeats: int, warmup: int = 1) -> dict:
     """Time several contenders round-robin, so machine noise hits them alike.
 

@@ -17,7 +17,14 @@ import numpy as np
 
 from . import enhance as _enhance
 from .spec import IntegrationSpec
-from .tf import lut_lookup
+from .tf import lut_lerp32
+
+
+def normalization(vmin: float, vmax: float) -> tuple[np.float32, np.float32]:
+    """(vmin, scale) in float32 with u = (v - vmin) * scale; a constant field gets scale 0."""
+    if not vmax > vmin:
+        return np.float32(0.0), np.float32(0.0)
+    return np.float32(vmin), np.float32(1.0 / (float(vmax) - float(vmin)))
 
 
 def normalize(v: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
@@ -25,10 +32,8 @@ def normalize(v: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
 
     Done in float32 with a precomputed reciprocal so every engine gets the same bits.
     """
-    if not vmax > vmin:
-        return np.zeros(np.shape(v), dtype=np.float32)
-    scale = np.float32(1.0 / (float(vmax) - float(vmin)))
-    u = (np.asarray(v, dtype=np.float32) - np.float32(vmin)) * scale
+    lo, scale = normalization(vmin, vmax)
+    u = (np.asarray(v, dtype=np.float32) - lo) * scale
     return np.clip(u, np.float32(0.0), np.float32(1.0))
 
 
@@ -65,11 +70,16 @@ def accumulate(
     rgb_t, a_t = spec.time_tf.evaluate(positions)
 
     def step_rgba(k: int) -> tuple[np.ndarray, np.ndarray]:
-        d = lut_lookup(lut, u[k])
-        e = _enhance.factor(u[k], spec.enhance)
-        colour = d[..., :3] * rgb_t[k]
-        alpha = np.clip(d[..., 3] * a_t[k] * e, 0.0, 1.0)
-        return colour, alpha
+        # Opacity in float32 in the kernels' order, so thresholds decide alike everywhere.
+        d = lut_lerp32(lut, u[k])
+        e = (
+            np.float32(1.0)
+            if spec.enhance.kind == "none"
+            else (np.asarray(_enhance.factor(u[k], spec.enhance), dtype=np.float32))
+        )
+        colour = d[..., :3].astype(np.float64) * rgb_t[k]
+        alpha = np.clip(d[..., 3] * np.float32(a_t[k]) * e, np.float32(0.0), np.float32(1.0))
+        return colour, alpha.astype(np.float64)
 
     rgba = np.zeros((*shape, 4), dtype=np.float64)
     t_index = np.full(shape, -1, dtype=np.int32) if spec.has_t_index else None
@@ -125,7 +135,7 @@ def finalize(partial: Partial, positions: np.ndarray, spec: IntegrationSpec) -> 
         with np.errstate(invalid="ignore", divide="ignore"):
             scaled = np.where(norm > 0, rgba[..., :3] / np.where(norm > 0, norm, 1.0), 0.0)
         rgba[..., :3] = np.minimum(scaled, rgba[..., 3:4])
-    return rgba.astype(np.float32)
+    return rgba.astype(np.float32, copy=False)
 
 
 def integrate(

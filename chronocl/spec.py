@@ -70,7 +70,8 @@ class IntegrationSpec:
             raise InvalidParameterError(
                 f"first-hit threshold is {self.threshold}; it must lie in [0, 1)"
             )
-        object.__setattr__(self, "threshold", t)
+        # Opacities are float32 in every engine: compare against the float32 threshold.
+        object.__setattr__(self, "threshold", float(np.float32(t)))
 
     @property
     def has_t_index(self) -> bool:

@@ -150,6 +150,18 @@ def lut_lookup(lut: np.ndarray, u: np.ndarray) -> np.ndarray:
     return lut64[i0] * (1.0 - f) + lut64[i0 + 1] * f
 
 
+def lut_lerp32(lut: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The LUT at u in float32, operation for operation as the OpenCL kernels do it:
+    x = u * (N - 1); i0 = min(trunc(x), N - 2); f = x - i0; lut[i0] * (1 - f) + lut[i0 + 1] * f.
+    Decisions on opacity (first_hit's threshold) then agree exactly between engines."""
+    lut32 = np.asarray(lut, dtype=np.float32)
+    n = lut32.shape[0]
+    x = np.asarray(u, dtype=np.float32) * np.float32(n - 1)
+    i0 = np.minimum(x.astype(np.int32), n - 2)
+    f = (x - i0.astype(np.float32))[..., None]
+    return lut32[i0] * (np.float32(1.0) - f) + lut32[i0 + 1] * f
+
+
 # --------------------------------------------------------------------------- time TF
 
 

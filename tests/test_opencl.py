@@ -82,6 +82,54 @@ def test_aligned_vector_path_equals_reference(mode, dtype):
         assert_same(ref, chronocl.integrate(series, None, spec=spec, slab=2))
 
 
+@pytest.mark.parametrize("mode", ["alpha", "first_hit", "additive", "max", "min"])
+@pytest.mark.parametrize("local_size", [None, (1, 1, 2), (4, 2, 2)])
+def test_padded_launches_stay_inside_their_slab(mode, local_size):
+    """x = 150 (9 vectors + 6, padded to whole work-groups), z padded by the local size: every
+    write lands in the slab's rows, and the result equals the reference."""
+    rng = np.random.default_rng(11)
+    data = rng.random((5, 3, 3, 150), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    spec = IntegrationSpec(mode=mode)
+    engine = OpenCLEngine(local_size=local_size)
+    sel = chronocl.Selection(tuple(range(5)), 5)
+    brick = series.read_brick(sel.steps)
+    rgba = np.full((4, 3, 150, 4), 7.0, dtype=np.float32)  # row 3 is a sentinel
+    t_index = np.full((4, 3, 150), 77, dtype=np.int32)
+    positions = spec.time_tf.positions_of(sel.steps, 5)
+    order = np.arange(5)
+    engine.accumulate(
+        brick,
+        slice(0, 3),
+        sel.steps,
+        positions,
+        order,
+        spec,
+        (series.vmin, series.vmax),
+        (rgba[:3], t_index[:3]),
+    )
+    assert np.all(rgba[3] == 7.0) and np.all(t_index[3] == 77)
+    ref = chronocl.integrate(series, sel, spec=spec, engine="numpy")
+    assert_same(ref, chronocl.integrate(series, sel, spec=spec, engine=engine))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.uint8])
+def test_first_hit_threshold_on_an_opacity_plateau(dtype):
+    """Opacity exactly at the threshold is not a hit, in both engines alike."""
+    rng = np.random.default_rng(5)
+    series = series_of(
+        rng.random((4, 2, 3, 37), dtype=np.float32), chronocl.Selection(tuple(range(4)), 4), dtype
+    )
+    for level in (0.1, 0.3, 0.7):
+        spec = IntegrationSpec(
+            mode="first_hit",
+            threshold=level,
+            data_tf=chronocl.DataTF(points=[(0, 1, 1, 1, level), (1, 1, 1, 1, level)]),
+        )
+        ref = chronocl.integrate(series, None, spec=spec, engine="numpy")
+        assert_same(ref, chronocl.integrate(series, None, spec=spec))
+
+
 def test_early_exit_on_opaque_front_and_window_of_40():
     rng = np.random.default_rng(3)
     data = rng.random((40, 5, 7, 13)).astype(np.float32)

@@ -119,7 +119,7 @@ def test_z_slabs_with_halo_equal_the_whole_volume(data):
     series = TimeSeries.from_array(raw)
     u_all = series.normalized(sel.steps)
     whole, t_whole = ref(u_all, sel, spec)
-    cv = integrate(series, sel, spec=spec, slab=slab)
+    cv = integrate(series, sel, spec=spec, slab=slab, engine="numpy")
     np.testing.assert_allclose(cv.rgba, whole, atol=1e-6)
     if spec.has_t_index:
         np.testing.assert_array_equal(cv.t_index, t_whole)

@@ -86,14 +86,8 @@ class TimeSeries:
 
     # -- reading -------------------------------------------------------------------------
     def read(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
-        """Raw values of the given steps and z rows: (W, z1 - z0, Y, X), in xytz order."""
-        z1 = self.shape[1] if z1 is None else z1
-        if self._zarr is not None:
-            out = np.empty((len(steps), z1 - z0, *self.shape[2:]), dtype=self.dtype)
-            for i, s in enumerate(steps):
-                out[i] = self._zarr[int(s), z0:z1]
-            return out
-        return np.asarray(self.data[list(steps), z0:z1].compute())
+        """Raw values of the given steps and z rows: (W, z1 - z0, Y, X)."""
+        return np.moveaxis(self.read_brick(steps, z0, z1), 1, 0)
 
     def read_brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
         """Raw values of z rows [z0, z1) of the given steps as an xytz brick (z1 - z0, W, Y, X)."""

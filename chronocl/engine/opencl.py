@@ -16,7 +16,7 @@ import numpy as np
 from .. import reference
 from ..reference import Partial
 from ..spec import IntegrationSpec
-from ..tf import lut_lookup
+from ..tf import lut_lerp32
 from .device import DeviceContext, get_context
 from .memory import aligned_empty, is_aligned
 from .program import kernel
@@ -89,9 +89,9 @@ class OpenCLEngine:
         the data colour is constant (then folded into tc), and the skip cut: LUT positions
         below it (for quantised data: raw values below it) have data opacity exactly 0).
         """
-        if quant:
+        if quant:  # TF(u(v)) for every byte value, with the kernels' float32 arithmetic
             u = reference.normalize(np.arange(256, dtype=np.uint8), *value_range)
-            lut = lut_lookup(spec.data_tf.lut, u)  # TF(u(v)) for every byte value, as float64
+            lut = lut_lerp32(spec.data_tf.lut, u).astype(np.float64)
         else:
             lut = spec.data_tf.lut.astype(np.float64)
         rgb_t, a_t = spec.time_tf.evaluate(positions)
@@ -134,9 +134,7 @@ class OpenCLEngine:
         nz_out = z1 - z0
         quant = self.quantized and dt == np.uint8 and spec.mode not in ("max", "min")
         lut, tc, const_color, cut = self.luts(spec, positions, quant, value_range)
-        lo, hi = value_range
-        vmin = np.float32(lo) if hi > lo else np.float32(0.0)
-        scale = np.float32(1.0 / (float(hi) - float(lo))) if hi > lo else np.float32(0.0)
+        vmin, scale = reference.normalization(*value_range)
         file, kernel_name = KERNELS[spec.mode]
         final = spec.mode != "additive" or spec.normalize == "time"
         vec = 1 if spec.enhance.needs_gradient else VEC
@@ -195,6 +193,7 @@ class OpenCLEngine:
             np.int32(nzb),
             np.int32(w),
             np.int32(z0),
+            np.int32(nz_out),
             vmin,
             scale,
             np.float32(cut),
@@ -257,9 +256,7 @@ def raw_cut(position: float, value_range: tuple[float, float], lut_size: int) ->
     The kernels compute u(v) = clip((v - vmin) * scale, 0, 1) in float32; every step of it
     is monotone, so a binary search over the ordered float32 values finds the exact bound.
     """
-    lo, hi = value_range
-    vmin = np.float32(lo) if hi > lo else np.float32(0.0)
-    scale = np.float32(1.0 / (float(hi) - float(lo))) if hi > lo else np.float32(0.0)
+    vmin, scale = reference.normalization(*value_range)
     n1, target = np.float32(lut_size - 1), np.float32(position)
 
     def reaches(key: int) -> bool:

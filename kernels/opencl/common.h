@@ -62,9 +62,6 @@ inline int all_lanes(int16 m)
 }
 #define ANY(c) any_lane(c)
 #define ALL(c) all_lanes(c)
-/* Lane-wise choice by a mask of the lanes' width: the vector ternary, which PoCL compiles to
- * a blend where its select() builtin is several times slower. */
-#define SELECT(a, b, c) ((c) ? (b) : (a))
 #define GATHER_INT(l, i)                                                                 \
     (int16)((l)[(i).s0], (l)[(i).s1], (l)[(i).s2], (l)[(i).s3], (l)[(i).s4],            \
             (l)[(i).s5], (l)[(i).s6], (l)[(i).s7], (l)[(i).s8], (l)[(i).s9],            \
@@ -95,7 +92,6 @@ typedef int intv;
 #define TO_INT(v) convert_int(v)
 #define ANY(c) (c)
 #define ALL(c) (c)
-#define SELECT(a, b, c) ((c) ? (b) : (a))
 #define STORE_INT(v, p) (*(p) = (v))
 #define GATHER(l, i) ((l)[(i)])
 #define GATHER_INT(l, i) ((l)[(i)])
@@ -103,6 +99,10 @@ typedef int intv;
 #else
 #error "VEC must be 16 or 1"
 #endif
+
+/* Lane-wise choice by a mask of the lanes' width: the vector ternary, which PoCL compiles to
+ * a blend where its select() builtin is several times slower. */
+#define SELECT(a, b, c) ((c) ? (b) : (a))
 
 #if ENHANCE && VEC != 1
 #error "gradient enhancement is computed one voxel per work-item (VEC=1)"
@@ -206,14 +206,15 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 #define KERNEL_ARGS                                                                        \
     __global const DATA_T *data, __global const float *lut, __global const float4 *tc,     \
     __global const int *order, __global const int *steps, const int x0, const int nx,      \
-    const int ny, const int nzb, const int w, const int zcrop, const float vmin,           \
-    const float scale, const float cut, const float4 enh, const float4 view
+    const int ny, const int nzb, const int w, const int zcrop, const int nz_out,           \
+    const float vmin, const float scale, const float cut, const float4 enh, const float4 view
 
 #define VOXEL_PROLOGUE                                  \
     const int x = x0 + VEC * (int)get_global_id(0);     \
     const int y = get_global_id(1);                     \
     const int z = get_global_id(2);                     \
-    if (x >= nx || y >= ny) return;                     \
+    /* padding work-items of a rounded-up launch: a lane past the row or a row past the slab */ \
+    if (x + VEC > nx || y >= ny || z >= nz_out) return; \
     const int zb = z + zcrop;                           \
     const size_t o = OUT_INDEX(z, y, x);
 
