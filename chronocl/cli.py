@@ -48,6 +48,25 @@ Examples:
 )
 
 
+# Options shared by `integrate` and `render`.
+WindowOpt = Annotated[
+    str | None, typer.Option(help="t0:t1[:stride] or a list 2,5,9 (default: all).")
+]
+OrderOpt = Annotated[str, typer.Option(help="forward, backward, or importance steps 9,2,5.")]
+TfOpt = Annotated[Path | None, typer.Option(help="Transfer-function JSON (data_tf, time_tf).")]
+TimeTfOpt = Annotated[
+    str | None,
+    typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
+]
+ThresholdOpt = Annotated[float, typer.Option(help="first_hit opacity threshold.")]
+NormalizeOpt = Annotated[str, typer.Option(help="additive normalisation: time or max.")]
+EngineOpt = Annotated[str, typer.Option(help="opencl (default) or numpy (the reference).")]
+DeviceOpt = Annotated[
+    str | None,
+    typer.Option(help="OpenCL device: index 0:1 or a name part (see 'chronocl devices')."),
+]
+
+
 def _parse_shape(text: str) -> tuple[int, int, int]:
     try:
         parts = tuple(int(p) for p in text.lower().split("x"))
@@ -178,29 +197,15 @@ def integrate(
     store: Annotated[Path, typer.Argument(help="Series store.")],
     out_path: Annotated[Path, typer.Argument(metavar="OUT.zarr", help="Chronovolume to write.")],
     mode: Annotated[str, typer.Option(help="alpha, first_hit, additive, max or min.")] = "alpha",
-    window: Annotated[
-        str | None, typer.Option(help="t0:t1[:stride] or a list 2,5,9 (default: all).")
-    ] = None,
-    order: Annotated[
-        str, typer.Option(help="forward, backward, or importance steps 9,2,5.")
-    ] = "forward",
-    tf: Annotated[
-        Path | None, typer.Option(help="Transfer-function JSON (data_tf, time_tf).")
-    ] = None,
-    time_tf: Annotated[
-        str | None,
-        typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
-    ] = None,
+    window: WindowOpt = None,
+    order: OrderOpt = "forward",
+    tf: TfOpt = None,
+    time_tf: TimeTfOpt = None,
     enhance: Annotated[str, typer.Option(help="none, edge or silhouette.")] = "none",
-    threshold: Annotated[float, typer.Option(help="first_hit opacity threshold.")] = 0.0,
-    normalize: Annotated[str, typer.Option(help="additive normalisation: time or max.")] = "time",
-    engine: Annotated[
-        str, typer.Option(help="opencl (default) or numpy (the reference).")
-    ] = "opencl",
-    device: Annotated[
-        str | None,
-        typer.Option(help="OpenCL device: index 0:1 or a name part (see 'chronocl devices')."),
-    ] = None,
+    threshold: ThresholdOpt = 0.0,
+    normalize: NormalizeOpt = "time",
+    engine: EngineOpt = "opencl",
+    device: DeviceOpt = None,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
 ) -> None:
     """Integrate a window of time steps into a chronovolume store.
@@ -216,12 +221,6 @@ def integrate(
     from .integrate import integrate as run
 
     check_output(out_path, overwrite)
-    order_arg: str | list[int] = order
-    if order not in ("forward", "backward"):
-        try:
-            order_arg = [int(s) for s in order.split(",")]
-        except ValueError:
-            order_arg = order  # let the spec name the problem
     series = open_series(store)
     t0 = time.perf_counter()
     cv = run(
@@ -230,7 +229,7 @@ def integrate(
         mode,
         tf=tf,
         time_tf=time_tf,
-        order=order_arg,
+        order=_parse_order(order),
         enhance=enhance,
         threshold=threshold,
         normalize=normalize,
@@ -278,24 +277,15 @@ def render(
     mode: Annotated[
         list[str], typer.Option(help="Mode(s); repeat or comma-separate for parallel views.")
     ] = ["alpha"],  # noqa: B006
-    window: Annotated[
-        str | None, typer.Option(help="t0:t1[:stride] or a list 2,5,9 (default: all).")
-    ] = None,
-    order: Annotated[
-        str, typer.Option(help="forward, backward, or importance steps 9,2,5.")
-    ] = "forward",
-    tf: Annotated[
-        Path | None, typer.Option(help="Transfer-function JSON (data_tf, time_tf).")
-    ] = None,
-    time_tf: Annotated[
-        str | None,
-        typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
-    ] = None,
+    window: WindowOpt = None,
+    order: OrderOpt = "forward",
+    tf: TfOpt = None,
+    time_tf: TimeTfOpt = None,
     enhance: Annotated[
         str, typer.Option(help="none, edge or silhouette (follows the camera).")
     ] = "none",
-    threshold: Annotated[float, typer.Option(help="first_hit opacity threshold.")] = 0.0,
-    normalize: Annotated[str, typer.Option(help="additive normalisation: time or max.")] = "time",
+    threshold: ThresholdOpt = 0.0,
+    normalize: NormalizeOpt = "time",
     azimuth: Annotated[float, typer.Option(help="Degrees around the vertical axis.")] = 30.0,
     elevation: Annotated[float, typer.Option(help="Degrees above the horizon.")] = 20.0,
     zoom: Annotated[float, typer.Option(help="Magnification (1 fits the volume).")] = 1.0,
@@ -307,10 +297,8 @@ def render(
     ] = None,
     background: Annotated[str, typer.Option(help="Colour name or #rrggbb.")] = "black",
     outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
-    engine: Annotated[str, typer.Option(help="opencl (default) or numpy.")] = "opencl",
-    device: Annotated[
-        str | None, typer.Option(help="OpenCL device (see 'chronocl devices').")
-    ] = None,
+    engine: EngineOpt = "opencl",
+    device: DeviceOpt = None,
     turntable: Annotated[
         Path | None,
         typer.Option(metavar="OUT.mp4|OUT.gif", help="Also render a full turn as a video."),
