@@ -81,7 +81,8 @@ FIGURES = (
         "0,14,29",
         ("alpha",),
         "(f) Alpha compositing with view-dependent silhouette enhancement over 3 steps of "
-        "30: edges facing away from the viewer stand out.",
+        "30: surfaces seen edge-on (the outlines) stay opaque, surfaces facing the viewer "
+        "turn translucent.",
         {"enhance": "silhouette"},
     ),
     Figure(
