@@ -1,0 +1,1 @@
+"""Readers for input formats (NetCDF, TIFF, OME-Zarr) that feed `chronocl ingest`."""
