@@ -1,0 +1,210 @@
+"""Read an OME-Zarr (OME-NGFF 0.4 on zarr v2, 0.5 on zarr v3) image as a TimeSeries, in place.
+
+NGFF 0.4 keeps ``multiscales`` in the group attributes; 0.5 nests it (and
+``version``) under ``attributes["ome"]``. The image must have a time axis
+(name ``t`` or type ``time``), the spatial axes ``z``, ``y``, ``x`` and at most
+one channel axis (name ``c`` or type ``channel``), in any order. One
+resolution level (``multiscales[0].datasets[level]``) and one channel are
+picked; the level array is wrapped with ``dask.array.from_zarr`` and
+transposed to (T, Z, Y, X) without copying anything.
+
+Voxel spacing (dz, dy, dx) comes from the dataset's ``scale`` transformation
+times the multiscale's top-level ``scale`` when present; a time scale ``dt``
+other than 1 makes the time labels ``t * dt``. Translations are ignored.
+
+When the array is exactly (t, z, y, x) and chunked one time step per chunk,
+the series also keeps the zarr array for the fast step-read path. Otherwise
+reads go through dask, which works for any chunking but reads whole chunks;
+``chronocl ingest`` rewrites such an image into a chronocl store chunked one
+step per chunk.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import dask.array as da
+import zarr
+
+from ...errors import InputNotFoundError, InvalidDataError, InvalidParameterError, StoreFormatError
+from ..series import TimeSeries, parse_spacing
+
+SPATIAL = ("z", "y", "x")
+
+
+def is_omezarr(path: str | os.PathLike) -> bool:
+    """True when `path` is a zarr group whose metadata holds NGFF ``multiscales`` (0.4 or 0.5)."""
+    p = Path(path)
+    if not p.is_dir():
+        return False
+    try:
+        group = zarr.open_group(store=str(p), mode="r")
+    except Exception:  # not a zarr group (or unreadable): not an OME-Zarr image
+        return False
+    return _multiscales(dict(group.attrs)) is not None
+
+
+def open_omezarr(
+    path: str | os.PathLike, *, channel: int = 0, level: int = 0, progress: bool = False
+) -> TimeSeries:
+    """Open one channel and resolution level of an OME-Zarr image as a lazy (T, Z, Y, X) series.
+
+    Nothing is copied: the series reads the image's own chunks. Statistics
+    (global and per-step min/max/mean) are computed in one dask pass.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise InputNotFoundError(f"OME-Zarr image {str(p)!r} does not exist")
+    try:
+        group = zarr.open_group(store=str(p), mode="r")
+    except Exception:
+        raise StoreFormatError(
+            f"{str(p)!r} is not a zarr group, so not an OME-Zarr image"
+        ) from None
+    ms = _multiscales(dict(group.attrs))
+    if ms is None:
+        raise StoreFormatError(
+            f"{str(p)!r} is not an OME-Zarr image (no 'multiscales' in its group metadata)"
+        )
+    axes = _axis_names(ms.get("axes"), p)
+    roles = _roles(axes, p)
+    datasets = ms.get("datasets") or []
+    if not datasets:
+        raise StoreFormatError(f"OME-Zarr image {str(p)!r} lists no datasets in 'multiscales'")
+    if not isinstance(level, int) or not 0 <= level < len(datasets):
+        raise InvalidParameterError(
+            f"level {level} is out of range: {str(p)!r} has {len(datasets)} resolution "
+            f"level(s) (0..{len(datasets) - 1})"
+        )
+    ds = datasets[level]
+    ds_path = str(ds.get("path", ""))
+    try:
+        arr = group[ds_path]
+    except KeyError:
+        arr = None
+    if not isinstance(arr, zarr.Array):
+        raise StoreFormatError(
+            f"OME-Zarr image {str(p)!r} has no array {ds_path!r} for level {level}"
+        )
+    if arr.ndim != len(axes):
+        raise InvalidDataError(
+            f"level {level} of {str(p)!r} has {arr.ndim} dimensions but {len(axes)} axes "
+            f"({','.join(axes)})"
+        )
+    index: list[object] = [slice(None)] * arr.ndim
+    c_axis = roles.get("c")
+    if c_axis is not None:
+        n_ch = int(arr.shape[c_axis])
+        if not isinstance(channel, int) or not 0 <= channel < n_ch:
+            raise InvalidParameterError(
+                f"channel {channel} is out of range: {str(p)!r} has {n_ch} channel(s) "
+                f"(0..{n_ch - 1})"
+            )
+        index[c_axis] = channel
+    elif channel != 0:
+        raise InvalidParameterError(
+            f"channel {channel} is out of range: {str(p)!r} has no channel axis (1 channel, 0)"
+        )
+    scale = _scale(ms, ds, len(axes), p)
+    spacing = parse_spacing([scale[roles[a]] for a in SPATIAL])
+    dt = scale[roles["t"]]
+    times = None
+    if dt != 1.0:
+        times = [i * dt for i in range(int(arr.shape[roles["t"]]))]
+
+    lazy = da.from_zarr(arr)[tuple(index)]
+    kept = [i for i in range(arr.ndim) if i != c_axis]  # axes left after picking the channel
+    order = [kept.index(roles[a]) for a in ("t", *SPATIAL)]
+    lazy = lazy.transpose(order)
+    source = f"{p.name} (OME-Zarr level {level}" + (
+        f", channel {channel})" if c_axis is not None else ")"
+    )
+    if progress:
+        from dask.diagnostics import ProgressBar
+
+        with ProgressBar(out=sys.stderr):
+            series = TimeSeries.from_array(lazy, spacing=spacing, times=times, source=source)
+    else:
+        series = TimeSeries.from_array(lazy, spacing=spacing, times=times, source=source)
+    series.path = p
+    if tuple(axes) == ("t", *SPATIAL) and arr.chunks[0] == 1:
+        series._zarr = arr
+    return series
+
+
+# -- metadata ----------------------------------------------------------------------------
+
+
+def _multiscales(attrs: dict) -> dict | None:
+    """The first multiscale of NGFF 0.5 (``attrs['ome']``) or 0.4 (top-level) metadata."""
+    for where in (attrs.get("ome"), attrs):
+        if isinstance(where, dict):
+            ms = where.get("multiscales")
+            if isinstance(ms, list) and ms and isinstance(ms[0], dict):
+                return ms[0]
+    return None
+
+
+def _axis_names(axes: object, p: Path) -> list[str]:
+    """Axis names, lower-cased; a time axis of another name (type 'time') becomes 't'."""
+    if not isinstance(axes, list) or not axes:
+        raise StoreFormatError(
+            f"OME-Zarr image {str(p)!r} has no 'axes' in 'multiscales' (NGFF < 0.4 is not read)"
+        )
+    names = []
+    for a in axes:
+        if isinstance(a, str):  # NGFF 0.3 wrote bare names
+            name, kind = a, ""
+        elif isinstance(a, dict):
+            name, kind = str(a.get("name", "")), str(a.get("type", ""))
+        else:
+            raise StoreFormatError(f"OME-Zarr image {str(p)!r} has a malformed axis {a!r}")
+        name = name.lower()
+        if kind == "time" and name not in SPATIAL:
+            name = "t"
+        elif kind == "channel" and name not in SPATIAL:
+            name = "c"
+        names.append(name)
+    return names
+
+
+def _roles(axes: list[str], p: Path) -> dict[str, int]:
+    """Position of each of t, c (optional), z, y, x; a one-line error for anything else."""
+    found = ",".join(axes)
+    if "t" not in axes:
+        raise InvalidDataError(f"{str(p)!r} has axes {found}; a time series needs a t axis")
+    allowed = {"t", "c", *SPATIAL}
+    if len(set(axes)) != len(axes) or not set(axes) <= allowed or not set(SPATIAL) <= set(axes):
+        raise InvalidDataError(
+            f"{str(p)!r} has axes {found}; expected t, [c,] z, y, x (one each, c optional)"
+        )
+    return {name: i for i, name in enumerate(axes)}
+
+
+def _scale(ms: dict, ds: dict, ndim: int, p: Path) -> list[float]:
+    """Per-axis scale: the dataset's ``scale`` times the multiscale's top-level one."""
+    out = [1.0] * ndim
+    for transforms in (ds.get("coordinateTransformations"), ms.get("coordinateTransformations")):
+        for tr in transforms or []:
+            if not isinstance(tr, dict) or tr.get("type") != "scale":
+                continue
+            values = tr.get("scale")
+            if values is None and "path" in tr:
+                raise InvalidDataError(
+                    f"OME-Zarr image {str(p)!r} stores its scale in a separate array; "
+                    "only inline 'scale' values are read"
+                )
+            if not isinstance(values, list) or len(values) != ndim:
+                raise InvalidDataError(
+                    f"OME-Zarr image {str(p)!r} has a scale {values!r} that does not give "
+                    f"one number per axis ({ndim})"
+                )
+            try:
+                out = [o * float(v) for o, v in zip(out, values, strict=True)]
+            except (TypeError, ValueError):
+                raise InvalidDataError(
+                    f"OME-Zarr image {str(p)!r} has a non-numeric scale {values!r}"
+                ) from None
+    return out
