@@ -1,0 +1,157 @@
+"""Write volumes as VTK XML ImageData (.vti) files that ParaView and VTK open directly.
+
+The writer needs no VTK: a .vti is a small XML header followed by the arrays in
+"appended raw" encoding (after the ``_`` marker, each array is a UInt64 byte
+count then its little-endian bytes, x fastest). Arrays are point data on the
+grid; (Z, Y, X) arrays are scalars and (Z, Y, X, C) arrays have C components.
+Files are written to a temporary sibling and renamed when complete.
+
+Spacing and origin are given in chronocl's (z, y, x) order and written in
+VTK's (x, y, z) order.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, BinaryIO
+
+import numpy as np
+
+from .atomic import atomic_file
+from .errors import InvalidParameterError
+
+if TYPE_CHECKING:
+    from .chronovolume import Chronovolume
+
+VTK_TYPES = {
+    "int8": "Int8",
+    "uint8": "UInt8",
+    "int16": "Int16",
+    "uint16": "UInt16",
+    "int32": "Int32",
+    "uint32": "UInt32",
+    "int64": "Int64",
+    "uint64": "UInt64",
+    "float32": "Float32",
+    "float64": "Float64",
+}
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")
+_HEADER = np.dtype("<u8")
+
+
+def write_vti(
+    path: str | os.PathLike,
+    arrays: Mapping[str, np.ndarray],
+    spacing: Sequence[float] = (1.0, 1.0, 1.0),
+    origin: Sequence[float] = (0.0, 0.0, 0.0),
+    overwrite: bool = False,
+) -> Path:
+    """Write `arrays` ({name: (Z, Y, X) or (Z, Y, X, C)}) as point data of one .vti file.
+
+    `spacing` is (dz, dy, dx) and `origin` (oz, oy, ox). Returns the path written.
+    """
+    named = _check_arrays(arrays)
+    sp = _check_triple(spacing, "spacing", positive=True)
+    org = _check_triple(origin, "origin", positive=False)
+    nz, ny, nx = next(iter(named.values())).shape[:3]
+    extent = f"0 {nx - 1} 0 {ny - 1} 0 {nz - 1}"
+
+    lines = [
+        '<?xml version="1.0"?>',
+        '<VTKFile type="ImageData" version="1.0" byte_order="LittleEndian" header_type="UInt64">',
+        f'  <ImageData WholeExtent="{extent}" Origin="{_xyz(org)}" Spacing="{_xyz(sp)}">',
+        f'    <Piece Extent="{extent}">',
+        f'      <PointData Scalars="{next(iter(named))}">',
+    ]
+    offset = 0
+    for name, a in named.items():
+        comps = 1 if a.ndim == 3 else a.shape[3]
+        lines.append(
+            f'        <DataArray type="{VTK_TYPES[a.dtype.name]}" Name="{name}" '
+            f'NumberOfComponents="{comps}" format="appended" offset="{offset}"/>'
+        )
+        offset += _HEADER.itemsize + a.nbytes
+    lines += [
+        "      </PointData>",
+        "      <CellData>",
+        "      </CellData>",
+        "    </Piece>",
+        "  </ImageData>",
+        '  <AppendedData encoding="raw">',
+        "   _",
+    ]
+    header = "\n".join(lines).encode("ascii")
+
+    target = Path(path)
+    with atomic_file(target, overwrite) as tmp, open(tmp, "wb") as f:
+        f.write(header)
+        for a in named.values():
+            _write_block(f, a)
+        f.write(b"\n  </AppendedData>\n</VTKFile>\n")
+    return target
+
+
+def save_chronovolume_vti(
+    cv: Chronovolume, path: str | os.PathLike, overwrite: bool = False
+) -> Path:
+    """Write a chronovolume's ``rgba`` (premultiplied, 4 components) and ``t_index`` as a .vti."""
+    arrays: dict[str, np.ndarray] = {"rgba": np.asarray(cv.rgba, dtype=np.float32)}
+    if cv.t_index is not None:
+        arrays["t_index"] = np.asarray(cv.t_index, dtype=np.int32)
+    return write_vti(path, arrays, spacing=cv.spacing, overwrite=overwrite)
+
+
+def _check_arrays(arrays: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    if not arrays:
+        raise InvalidParameterError("a .vti needs at least one array; none were given")
+    out: dict[str, np.ndarray] = {}
+    grid: tuple[int, ...] | None = None
+    for name, value in arrays.items():
+        if not isinstance(name, str) or not _NAME.fullmatch(name):
+            raise InvalidParameterError(
+                f"array name {name!r} is not usable in a .vti; use letters, digits, '_', '.', '-'"
+            )
+        a = np.asarray(value)
+        if a.dtype.name not in VTK_TYPES:
+            raise InvalidParameterError(
+                f"array {name!r} has type {a.dtype.name}; use one of {', '.join(VTK_TYPES)}"
+            )
+        if a.ndim not in (3, 4) or min(a.shape) < 1:
+            raise InvalidParameterError(
+                f"array {name!r} has shape {a.shape}; expected non-empty (Z, Y, X) or (Z, Y, X, C)"
+            )
+        if grid is None:
+            grid = a.shape[:3]
+        elif a.shape[:3] != grid:
+            raise InvalidParameterError(
+                f"array {name!r} has grid {a.shape[:3]} but the first array has {grid} (Z, Y, X)"
+            )
+        out[name] = a
+    return out
+
+
+def _check_triple(values: Sequence[float], what: str, positive: bool) -> tuple[float, ...]:
+    try:
+        t = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"{what} {values!r} must be three numbers (z, y, x)") from None
+    ok = len(t) == 3 and all(math.isfinite(v) and (v > 0 or not positive) for v in t)
+    if not ok:
+        need = "finite numbers > 0" if positive else "finite numbers"
+        raise InvalidParameterError(f"{what} {list(t)} must be three {need} (z, y, x)")
+    return t
+
+
+def _xyz(zyx: Sequence[float]) -> str:
+    return " ".join(repr(float(v)) for v in (zyx[2], zyx[1], zyx[0]))
+
+
+def _write_block(f: BinaryIO, a: np.ndarray) -> None:
+    """One appended block: UInt64 byte count, then the little-endian C-order bytes."""
+    little = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
+    f.write(np.array([little.nbytes], dtype=_HEADER).tobytes())
+    f.write(memoryview(little.reshape(-1).view(np.uint8)))
