@@ -117,11 +117,18 @@ def generate(
 def ingest(
     inputs: Annotated[
         list[str],
-        typer.Argument(help="Raw files or globs (one file per step), or one .npy (T, Z, Y, X)."),
+        typer.Argument(
+            help="Raw files or globs (one per step), a .npy (T, Z, Y, X), a NetCDF/HDF5 file, "
+            "TIFF stacks (one per step, or one 4D TZYX), or an OME-Zarr folder."
+        ),
     ],
     out_path: Annotated[
         Path, typer.Option("--out", "-o", metavar="OUT.zarr", help="Store to write.")
     ],
+    fmt: Annotated[
+        str,
+        typer.Option("--format", help="auto (by file type), raw, npy, netcdf, tiff, omezarr."),
+    ] = "auto",
     dims: Annotated[
         tuple[int, int, int] | None,
         typer.Option(metavar="NX NY NZ", help="Raw: volume size, x fastest."),
@@ -130,9 +137,18 @@ def ingest(
         str, typer.Option(help="Raw: float32, uint8, uint16, int16, float64.")
     ] = "float32",
     endian: Annotated[str, typer.Option(help="Raw: little or big.")] = "little",
+    var: Annotated[str | None, typer.Option(help="NetCDF/HDF5: the variable.")] = None,
+    time_dim: Annotated[str | None, typer.Option(help="NetCDF/HDF5: the time dimension.")] = None,
+    dims_order: Annotated[
+        str | None,
+        typer.Option(help="NetCDF/HDF5: dimension names for t,z,y,x, e.g. time,lev,lat,lon."),
+    ] = None,
+    channel: Annotated[int, typer.Option(help="OME-Zarr: channel index.")] = 0,
+    level: Annotated[int, typer.Option(help="OME-Zarr: resolution level (0 = full).")] = 0,
     spacing: Annotated[
-        tuple[float, float, float], typer.Option(metavar="DX DY DZ", help="Voxel spacing.")
-    ] = (1.0, 1.0, 1.0),
+        tuple[float, float, float] | None,
+        typer.Option(metavar="DX DY DZ", help="Raw/npy/TIFF: voxel spacing."),
+    ] = None,
     nan_fill: Annotated[
         float | None, typer.Option(help="Replace NaN/Inf with this value (default: reject them).")
     ] = None,
@@ -149,21 +165,36 @@ def ingest(
       chronocl ingest a.raw b.raw -o ab.zarr --dims 64 64 32 --dtype uint16 --endian big
 
       chronocl ingest series.npy -o series.zarr --spacing 1 1 2.5
+
+      chronocl ingest ocean.nc -o ocean.zarr --var temp --time-dim time
+
+      chronocl ingest 'cells/t*.tif' -o cells.zarr
+
+      chronocl ingest embryo.ome.zarr -o embryo.zarr --channel 1 --level 0
     """
     from .data.ingest import ingest as run_ingest
 
+    options: dict = {"nan_fill": nan_fill, "overwrite": overwrite, "progress": True}
+    if dims is not None:
+        options["dims"] = dims
+    for key, value, default in (
+        ("dtype", dtype, "float32"),
+        ("endian", endian, "little"),
+        ("channel", channel, 0),
+        ("level", level, 0),
+    ):
+        if value != default:
+            options[key] = value
+    if var is not None:
+        options["var"] = var
+    if time_dim is not None:
+        options["time_dim"] = time_dim
+    if dims_order is not None:
+        options["dims_order"] = [d.strip() for d in dims_order.split(",")]
+    if spacing is not None:
+        options["spacing"] = (spacing[2], spacing[1], spacing[0])
     t0 = time.perf_counter()
-    series = run_ingest(
-        inputs,
-        out_path,
-        dims=dims,
-        dtype=dtype,
-        endian=endian,
-        spacing=(spacing[2], spacing[1], spacing[0]),
-        nan_fill=nan_fill,
-        overwrite=overwrite,
-        progress=True,
-    )
+    series = run_ingest(inputs, out_path, fmt, **options)
     err.print(f"wrote {out_path} in {time.perf_counter() - t0:.1f} s")
     _print_summary(series.describe())
 
@@ -195,7 +226,13 @@ def info(
 @app.command()
 def integrate(
     store: Annotated[Path, typer.Argument(help="Series store.")],
-    out_path: Annotated[Path, typer.Argument(metavar="OUT.zarr", help="Chronovolume to write.")],
+    out_path: Annotated[
+        Path,
+        typer.Argument(
+            metavar="OUT",
+            help="Chronovolume to write: .zarr, .ome.zarr (napari) or .vti (ParaView).",
+        ),
+    ],
     mode: Annotated[str, typer.Option(help="alpha, first_hit, additive, max or min.")] = "alpha",
     window: WindowOpt = None,
     order: OrderOpt = "forward",
@@ -219,8 +256,10 @@ def integrate(
     from .atomic import check_output
     from .data.series import open_series
     from .integrate import integrate as run
+    from .outputs import output_kind, save_chronovolume
 
     check_output(out_path, overwrite)
+    output_kind(out_path)
     series = open_series(store)
     t0 = time.perf_counter()
     cv = run(
@@ -237,7 +276,7 @@ def integrate(
         device=device,
         progress=True,
     )
-    cv.save(out_path, overwrite=overwrite)
+    save_chronovolume(cv, out_path, overwrite=overwrite)
     err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {time.perf_counter() - t0:.2f} s")
 
 
@@ -305,7 +344,10 @@ def render(
     ] = None,
     frames: Annotated[int, typer.Option(help="Turntable frames.")] = 36,
     save_chronovolume: Annotated[
-        Path | None, typer.Option(metavar="OUT.zarr", help="Also save the chronovolume(s).")
+        Path | None,
+        typer.Option(
+            metavar="OUT.zarr|OUT.ome.zarr|OUT.vti", help="Also save the chronovolume(s)."
+        ),
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace outputs that exist.")] = False,
 ) -> None:
@@ -324,6 +366,8 @@ def render(
     from .atomic import check_output
     from .data.series import open_series
     from .integrate import integrate as run
+    from .outputs import output_kind
+    from .outputs import save_chronovolume as save_any
     from .render import Camera, render_views
     from .render.turntable import check_video
     from .render.turntable import turntable as make_turntable
@@ -336,6 +380,7 @@ def render(
     saves = _chronovolume_paths(save_chronovolume, modes)
     for path in saves:
         check_output(path, overwrite)
+        output_kind(path)
     camera = Camera(azimuth, elevation, zoom, projection=projection)
     clip_plane = _parse_floats(clip, 4, "clip") if clip else None
     panel = _parse_size(size)
@@ -383,7 +428,7 @@ def render(
         f"render {time.perf_counter() - t1:.2f} s)"
     )
     for cv, path in zip(cvs, saves, strict=False):
-        cv.save(path, overwrite=overwrite)
+        save_any(cv, path, overwrite=overwrite)
         err.print(f"wrote {path}")
     if turntable is not None:
         make_turntable(frame, camera, turntable, frames=frames, overwrite=overwrite, progress=True)
@@ -391,11 +436,51 @@ def render(
 
 
 def _chronovolume_paths(path: Path | None, modes: list[str]) -> list[Path]:
+    """One path per mode: NAME-MODE.SUFFIX when there are several (.ome.zarr kept whole)."""
     if path is None:
         return []
     if len(modes) == 1:
         return [path]
-    return [path.with_name(f"{path.stem}-{m}{path.suffix}") for m in modes]
+    name = path.name
+    suffix = ".ome.zarr" if name.lower().endswith(".ome.zarr") else path.suffix
+    stem = name[: len(name) - len(suffix)] if suffix else name
+    return [path.with_name(f"{stem}-{m}{suffix}") for m in modes]
+
+
+@app.command()
+def export(
+    store: Annotated[Path, typer.Argument(help="Series store.")],
+    out_path: Annotated[
+        Path, typer.Option("--out", "-o", metavar="OUT", help="Folder (vti, raw) or .npy file.")
+    ],
+    fmt: Annotated[str, typer.Option("--format", help="vti, npy or raw.")] = "vti",
+    window: WindowOpt = None,
+    z: Annotated[str | None, typer.Option(help="Only rows z0:z1 of every step.")] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+) -> None:
+    """Export time steps of a series: .vti per step with a .pvd (ParaView), .npy, or raw files.
+
+    Examples:
+
+      chronocl export vortex.zarr -o vortex-vti --format vti --window 0:30:5
+
+      chronocl export vortex.zarr -o slab.npy --format npy --window 0:10 --z 40:60
+
+      chronocl export vortex.zarr -o raw-steps --format raw
+    """
+    from .data.series import open_series
+    from .export_series import export_series
+
+    paths = export_series(
+        open_series(store),
+        out_path,
+        fmt=fmt,
+        window=window,
+        z=z,
+        overwrite=overwrite,
+        progress=True,
+    )
+    err.print(f"wrote {len(paths)} file(s) under {out_path}")
 
 
 @app.command()

@@ -148,15 +148,91 @@ def ingest_npy(
     )
 
 
+FORMATS = ("auto", "raw", "npy", "netcdf", "tiff", "omezarr")
+_SUFFIXES = {
+    ".npy": "npy",
+    ".nc": "netcdf",
+    ".nc4": "netcdf",
+    ".cdf": "netcdf",
+    ".netcdf": "netcdf",
+    ".h5": "netcdf",
+    ".hdf5": "netcdf",
+    ".he5": "netcdf",
+    ".tif": "tiff",
+    ".tiff": "tiff",
+}
+# Options that only some readers take, and the formats they belong to.
+_ONLY_FOR = {
+    "dims": ("raw",),
+    "dtype": ("raw",),
+    "endian": ("raw",),
+    "var": ("netcdf",),
+    "time_dim": ("netcdf",),
+    "dims_order": ("netcdf",),
+    "channel": ("omezarr",),
+    "level": ("omezarr",),
+    "spacing": ("raw", "npy", "tiff"),  # NetCDF coordinates and OME-Zarr scales carry their own
+}
+_DEFAULTS = {"dtype": "float32", "endian": "little", "channel": 0, "level": 0}
+
+
+def detect_format(inputs: Sequence[str | os.PathLike]) -> str:
+    """The reader for these inputs, from the file type (a folder: OME-Zarr)."""
+    first = Path(str(inputs[0]))
+    if first.is_dir():
+        from .formats.omezarr import is_omezarr
+
+        if is_omezarr(first):
+            return "omezarr"
+        raise InvalidParameterError(
+            f"{first} is a folder but not an OME-Zarr image; give files, or --format"
+        )
+    name = first.name.lower()
+    if name.endswith(".ome.tif") or name.endswith(".ome.tiff"):
+        return "tiff"
+    return _SUFFIXES.get(first.suffix.lower(), "raw")
+
+
 def ingest(
-    inputs: Sequence[str | os.PathLike], out: str | os.PathLike, **options: object
+    inputs: Sequence[str | os.PathLike],
+    out: str | os.PathLike,
+    fmt: str = "auto",
+    **options: object,
 ) -> TimeSeries:
-    """Pick the reader by file type: a single .npy, else raw files (which need dims=)."""
-    if len(inputs) == 1 and str(inputs[0]).lower().endswith(".npy"):
-        for raw_only in ("dims", "dtype", "endian"):
-            if options.pop(raw_only, None) not in (None, "float32", "little"):
-                raise InvalidParameterError(f"--{raw_only} applies to raw files, not .npy")
+    """Ingest with the reader for `fmt` (``auto``: by file type; raw files need dims=)."""
+    if fmt not in FORMATS:
+        raise UnknownNameError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    if not inputs:
+        raise InputNotFoundError("no input files given; pass files or a glob such as 'v_*.raw'")
+    if fmt == "auto":
+        fmt = detect_format(inputs)
+    for key, formats in _ONLY_FOR.items():
+        value = options.pop(key, None) if fmt not in formats else options.get(key)
+        if fmt not in formats and value not in (None, _DEFAULTS.get(key)):
+            flag = "--" + key.replace("_", "-")
+            raise InvalidParameterError(f"{flag} applies to {'/'.join(formats)} input, not {fmt}")
+    single = fmt in ("npy", "netcdf", "omezarr")
+    if single and len(inputs) != 1:
+        raise InvalidParameterError(f"{fmt} input is one file; got {len(inputs)}")
+    if fmt in ("raw", "npy") and options.get("spacing") is None:
+        options["spacing"] = (1.0, 1.0, 1.0)
+    if fmt == "npy":
         return ingest_npy(inputs[0], out, **options)  # type: ignore[arg-type]
+    if fmt == "netcdf":
+        from .formats.netcdf import ingest_netcdf
+
+        return ingest_netcdf(inputs[0], out, **options)  # type: ignore[arg-type]
+    if fmt == "tiff":
+        from .formats.tiff import ingest_tiff
+
+        return ingest_tiff(inputs, out, **options)  # type: ignore[arg-type]
+    if fmt == "omezarr":
+        from .formats.omezarr import open_omezarr
+
+        channel, level = options.pop("channel", 0), options.pop("level", 0)
+        options.pop("nan_fill", None)
+        series = open_omezarr(inputs[0], channel=channel, level=level)  # type: ignore[arg-type]
+        return series.save(out, **options)  # type: ignore[arg-type]
     if options.get("dims") is None:
         raise InvalidParameterError(
             "raw input needs --dims NX NY NZ (and --dtype, --endian if not float32 little-endian)"

@@ -116,11 +116,21 @@ class TimeSeries:
     def from_array(
         cls,
         array: object,
-        spacing: Sequence[float] = (1.0, 1.0, 1.0),
+        spacing: Sequence[float] | None = None,
         times: Sequence | None = None,
         source: str = "array",
     ) -> TimeSeries:
-        """Wrap an in-memory (numpy) or lazy (dask) array (T, Z, Y, X); statistics are computed."""
+        """Wrap a numpy or dask array (T, Z, Y, X), or an xarray DataArray with a time
+        dimension (dimensions mapped by name, spacing and time labels from its coordinates);
+        no copy is made. Statistics are computed in one pass."""
+        if type(array).__module__.startswith("xarray"):
+            from .formats.netcdf import dataarray_layout
+
+            array, coord_spacing, coord_times = dataarray_layout(array)
+            spacing = coord_spacing if spacing is None else spacing
+            times = coord_times if times is None else times
+            array = array.data  # numpy (a view) or dask
+        spacing = (1.0, 1.0, 1.0) if spacing is None else spacing
         arr = array if isinstance(array, da.Array) else da.from_array(np.asarray(array))
         _check_shape(arr.shape, "array")
         _check_dtype(arr.dtype)
@@ -187,6 +197,10 @@ def open_series(path: str | os.PathLike) -> TimeSeries:
             f"store {str(p)!r} does not exist; create one with 'chronocl ingest' or "
             "'chronocl generate'"
         )
+    from .formats.omezarr import is_omezarr, open_omezarr
+
+    if is_omezarr(p):  # opened in place: channel 0, full resolution
+        return open_omezarr(p)
     try:
         node = zarr.open(store=str(p), mode="r")
     except Exception as exc:  # zarr raises several kinds for a non-store folder
