@@ -16,8 +16,9 @@ import numpy as np
 import zarr
 
 from .atomic import atomic_directory
-from .errors import InputNotFoundError, StoreFormatError
+from .errors import StoreFormatError
 from .spec import IntegrationSpec
+from .stores import open_group
 
 FORMAT = "chronocl.chronovolume"
 
@@ -62,12 +63,7 @@ class Chronovolume:
     @classmethod
     def load(cls, path: str | os.PathLike) -> Chronovolume:
         p = Path(path)
-        if not p.exists():
-            raise InputNotFoundError(f"chronovolume {str(p)!r} does not exist")
-        try:
-            group = zarr.open_group(store=str(p), mode="r")
-        except Exception:
-            raise StoreFormatError(f"{str(p)!r} is not a zarr group; not a chronovolume") from None
+        group = open_group(p, "chronovolume")
         attrs = dict(dict(group.attrs).get("chronocl", {}))
         if attrs.pop("format", None) != FORMAT or "rgba" not in group:
             raise StoreFormatError(

@@ -25,7 +25,8 @@ import zarr
 
 from .atomic import atomic_directory
 from .chronovolume import Chronovolume
-from .errors import InputNotFoundError, StoreFormatError
+from .errors import StoreFormatError
+from .stores import open_group
 
 FORMAT = "chronocl.chronovolume.omezarr"
 NGFF_VERSION = "0.4"
@@ -103,12 +104,7 @@ def save_chronovolume_omezarr(
 def load_chronovolume_omezarr(path: str | os.PathLike) -> Chronovolume:
     """Read a chronovolume written by `save_chronovolume_omezarr`."""
     p = Path(path)
-    if not p.exists():
-        raise InputNotFoundError(f"OME-Zarr chronovolume {str(p)!r} does not exist")
-    try:
-        root = zarr.open_group(store=str(p), mode="r")
-    except Exception:
-        raise StoreFormatError(f"{str(p)!r} is not a zarr group; not a chronovolume") from None
+    root = open_group(p, "OME-Zarr chronovolume")
     attrs = dict(root.attrs).get("chronocl", {})
     if not isinstance(attrs, dict) or attrs.get("format") != FORMAT or "0" not in root:
         raise StoreFormatError(f"{str(p)!r} is not a chronovolume exported as OME-Zarr by chronocl")

@@ -28,7 +28,8 @@ from pathlib import Path
 import dask.array as da
 import zarr
 
-from ...errors import InputNotFoundError, InvalidDataError, InvalidParameterError, StoreFormatError
+from ...errors import InvalidDataError, InvalidParameterError, StoreFormatError
+from ...stores import open_group
 from ..series import TimeSeries, parse_spacing
 
 SPATIAL = ("z", "y", "x")
@@ -55,14 +56,7 @@ def open_omezarr(
     (global and per-step min/max/mean) are computed in one dask pass.
     """
     p = Path(path)
-    if not p.exists():
-        raise InputNotFoundError(f"OME-Zarr image {str(p)!r} does not exist")
-    try:
-        group = zarr.open_group(store=str(p), mode="r")
-    except Exception:
-        raise StoreFormatError(
-            f"{str(p)!r} is not a zarr group, so not an OME-Zarr image"
-        ) from None
+    group = open_group(p, "OME-Zarr image")
     ms = _multiscales(dict(group.attrs))
     if ms is None:
         raise StoreFormatError(

@@ -1,0 +1,25 @@
+"""Opening existing zarr groups with errors that say what the path was expected to be."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import zarr
+
+from .errors import InputNotFoundError, StoreFormatError
+
+
+def open_group(path: str | os.PathLike, what: str) -> zarr.Group:
+    """Open the zarr group at `path` read-only; `what` names the expected thing in errors."""
+    p = Path(path)
+    if not p.exists():
+        raise InputNotFoundError(f"{what} {str(p)!r} does not exist")
+    try:
+        return zarr.open_group(store=str(p), mode="r")
+    except Exception:  # zarr raises several kinds for a folder that is not a group
+        raise StoreFormatError(f"{str(p)!r} is not a zarr group, so not {_article(what)}") from None
+
+
+def _article(what: str) -> str:
+    return ("an " if what[:1].lower() in "aeiou" else "a ") + what
