@@ -24,12 +24,12 @@ from common import emit, env_record, race
 
 import chronocl
 from chronocl.data import synthetic
+from chronocl.demo import SURFACE
 from chronocl.render import Camera
 from chronocl.render.gl import gl_context, shader_source
 from chronocl.render.views import raycaster
-from chronocl.tf import DataTF
 
-OPAQUE = DataTF(points=[(0, 1, 1, 1, 0), (0.42, 1, 1, 1, 0), (0.5, 1, 1, 1, 1), (1, 1, 1, 1, 1)])
+OPAQUE = SURFACE  # opacity 1 above the feature threshold
 HERE = Path(__file__).resolve().parent
 
 

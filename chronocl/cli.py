@@ -67,16 +67,15 @@ DeviceOpt = Annotated[
 ]
 
 
-def _parse_shape(text: str) -> tuple[int, int, int]:
+def _parse_sizes(text: str, n: int, form: str, example: str) -> tuple[int, ...]:
+    """n positive integers written AxB[xC], e.g. 64x64x64."""
     try:
         parts = tuple(int(p) for p in text.lower().split("x"))
     except ValueError:
         parts = ()
-    if len(parts) != 3 or min(parts) < 1:
-        raise InvalidParameterError(
-            f"shape {text!r} must be NXxNYxNZ with positive sizes, e.g. 64x64x64"
-        )
-    return parts  # type: ignore[return-value]
+    if len(parts) != n or min(parts) < 1:
+        raise InvalidParameterError(f"{text!r} must be {form} with positive sizes, e.g. {example}")
+    return parts
 
 
 @app.command()
@@ -95,7 +94,7 @@ def generate(
     from .data import synthetic
     from .data.series import write_series
 
-    nx, ny, nz = _parse_shape(shape)
+    nx, ny, nz = _parse_sizes(shape, 3, "NXxNYxNZ", "64x64x64")
     if name not in synthetic.DATASETS:
         synthetic.step(name, 0, 1, (1, 1, 1))  # raises the unknown-name error
     t0 = time.perf_counter()
@@ -280,14 +279,6 @@ def integrate(
     err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {time.perf_counter() - t0:.2f} s")
 
 
-def _parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise InvalidParameterError(f"size {text!r} must be WxH, e.g. 512x512") from None
-    return w, h
-
-
 def _parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(","))
@@ -371,6 +362,7 @@ def render(
     from .render import Camera, render_views
     from .render.turntable import check_video
     from .render.turntable import turntable as make_turntable
+    from .render.views import raycaster
 
     modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
     check_output(out_path, overwrite)
@@ -383,7 +375,7 @@ def render(
         output_kind(path)
     camera = Camera(azimuth, elevation, zoom, projection=projection)
     clip_plane = _parse_floats(clip, 4, "clip") if clip else None
-    panel = _parse_size(size)
+    panel = _parse_sizes(size, 2, "WxH", "512x512")
     series = open_series(store)
 
     def chronovolumes(cam: Camera):
@@ -407,9 +399,10 @@ def render(
     cvs = chronovolumes(camera)
     t1 = time.perf_counter()
 
-    def frame(cam: Camera, cvs=cvs):
+    def frame(cam: Camera, cvs=cvs, volumes=None):
         if enhance == "silhouette" and cam is not camera:
             cvs = chronovolumes(cam)  # the silhouette depends on the view: re-integrate
+            volumes = None
         return render_views(
             cvs,
             cam,
@@ -419,6 +412,7 @@ def render(
             outline=outline,
             legend=True,
             labels=None if len(cvs) > 1 else [],
+            volumes=volumes,
         )
 
     image = frame(camera)
@@ -431,7 +425,20 @@ def render(
         save_any(cv, path, overwrite=overwrite)
         err.print(f"wrote {path}")
     if turntable is not None:
-        make_turntable(frame, camera, turntable, frames=frames, overwrite=overwrite, progress=True)
+        # Without silhouettes every frame shows the same chronovolumes: upload them once.
+        volumes = [] if enhance == "silhouette" else [raycaster().upload(cv) for cv in cvs]
+        try:
+            make_turntable(
+                lambda cam: frame(cam, volumes=volumes or None),
+                camera,
+                turntable,
+                frames=frames,
+                overwrite=overwrite,
+                progress=True,
+            )
+        finally:
+            for volume in volumes:
+                volume.release()
         err.print(f"wrote {turntable} ({frames} frames)")
 
 

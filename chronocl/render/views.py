@@ -12,7 +12,7 @@ from ..chronovolume import Chronovolume
 from ..errors import InvalidParameterError
 from .camera import Camera
 from .image import Image
-from .raycaster import Raycaster, check_size
+from .raycaster import Raycaster, Volume, check_size
 
 _raycaster: Raycaster | None = None
 
@@ -90,8 +90,13 @@ def render_views(
     labels: Sequence[str] | None = None,
     legend: bool = True,
     columns: int | None = None,
+    volumes: Sequence[Volume] | None = None,
 ) -> Image:
-    """Parallel views: each chronovolume in its own panel of `size`, all under one camera."""
+    """Parallel views: each chronovolume in its own panel of `size`, all under one camera.
+
+    `volumes`, the chronovolumes already uploaded with `raycaster().upload` (and released by
+    the caller), spare the upload when one set is rendered many times, e.g. a turntable.
+    """
     if not chronovolumes:
         raise InvalidParameterError("nothing to render: give at least one chronovolume")
     camera = camera or Camera()
@@ -99,8 +104,8 @@ def render_views(
     bg = parse_color(background)
     rc = raycaster()
     panels = []
-    for cv in chronovolumes:
-        volume = rc.upload(cv, nearest=nearest)
+    for i, cv in enumerate(chronovolumes):
+        volume = volumes[i] if volumes is not None else rc.upload(cv, nearest=nearest)
         try:
             panels.append(
                 rc.draw(
@@ -115,7 +120,8 @@ def render_views(
                 )
             )
         finally:
-            volume.release()
+            if volumes is None:
+                volume.release()
     if labels is None and len(chronovolumes) > 1:
         labels = [describe(cv) for cv in chronovolumes]
     if not labels and not legend:
