@@ -7,15 +7,21 @@ function, into one RGBA volume that can be raycast from any view.
     series = chronocl.open("vortex.zarr")
     cv = chronocl.integrate(series, "0:30:10", mode="alpha", time_tf="rgb")
     cv.save("vortex-alpha.zarr")
+
+    session = chronocl.Session(series, memory="2GB", mode="max", time_tf="rgb")
+    cv = session.set_window(0, 16)
+    cv = session.slide(+1)          # incremental with absolute time positions
 """
 
 from .chronovolume import Chronovolume
 from .data.series import TimeSeries, open_series
+from .data.window import WindowManager
 from .enhance import Enhance
 from .errors import ChronoclError
 from .integrate import integrate, make_spec
 from .render import Camera, render, render_views
 from .selection import Selection
+from .session import Session
 from .spec import IntegrationSpec
 from .tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF
 
@@ -30,11 +36,13 @@ __all__ = [
     "Enhance",
     "IntegrationSpec",
     "Selection",
+    "Session",
     "TFSetting",
     "TimeAlpha",
     "TimeColor",
     "TimeSeries",
     "TimeTF",
+    "WindowManager",
     "__version__",
     "integrate",
     "make_spec",

@@ -58,3 +58,11 @@ class KernelBuildError(ChronoclError, RuntimeError):
 
 class RendererUnavailableError(ChronoclError, RuntimeError):
     """No OpenGL context can be made (EGL or a GL driver is missing)."""
+
+
+class StoreChangedError(ChronoclError, RuntimeError):
+    """A store changed underneath an open series (steps added or removed)."""
+
+
+class SupersededError(ChronoclError, RuntimeError):
+    """A data request was cancelled because a newer request replaced it."""

@@ -4,25 +4,29 @@
 enhancement), then integrates the window slab by slab in z (with a one-voxel
 halo when enhancement needs gradients) and finalises once for the whole
 volume. The engine computes each slab; ``numpy`` is the reference.
+`prepare`, `engine_rows` and `integrate_slabs` are shared with
+`chronocl.streaming`, which writes the slabs to a store instead.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import reference
 from .chronovolume import Chronovolume
-from .data.bricks import slabs
+from .data.bricks import Slab, slabs
 from .data.series import TimeSeries
 from .engine import get_engine
 from .engine.memory import aligned_empty
 from .enhance import Enhance
 from .errors import InvalidParameterError
 from .progress import track
+from .reference import Partial
 from .selection import Selection, parse_selection
 from .spec import IntegrationSpec, resolve_order
 from .tf import DataTF, TFSetting, TimeTF
@@ -56,6 +60,118 @@ def make_spec(
     )
 
 
+@dataclass(frozen=True)
+class Job:
+    """One validated integration: the series, its selection and spec, and what every slab shares."""
+
+    series: TimeSeries
+    selection: Selection
+    spec: IntegrationSpec
+    order: np.ndarray
+    positions: np.ndarray
+    value_range: tuple[float, float]
+
+    @property
+    def halo(self) -> int:
+        """z rows read on each side of a slab: 1 when enhancement needs gradients."""
+        return 1 if self.spec.enhance.needs_gradient else 0
+
+    @property
+    def row_bytes(self) -> int:
+        """Bytes of one z-row of the window's brick (W, Y, X) as stored."""
+        _, ny, nx = self.series.volume_shape
+        return self.selection.width * ny * nx * self.series.dtype.itemsize
+
+    def metadata(self, engine: str) -> dict:
+        """The chronovolume metadata of this integration."""
+        series, selection = self.series, self.selection
+        dz, dy, dx = series.spacing
+        return {
+            "dataset": series.source or (str(series.path) if series.path else ""),
+            "selection": {"steps": list(selection.steps), "n_steps": selection.n_steps},
+            "time_labels": [series.times[s] for s in selection.steps],
+            "spec": self.spec.to_dict(),
+            "spacing": {"x": dx, "y": dy, "z": dz},
+            "value_range": [float(self.value_range[0]), float(self.value_range[1])],
+            "engine": engine,
+        }
+
+
+def prepare(
+    series: TimeSeries,
+    window: object = None,
+    mode: str = "alpha",
+    spec: IntegrationSpec | None = None,
+    spec_args: dict | None = None,
+) -> Job:
+    """Validate window, spec (or the arguments of `make_spec`) and order into a Job."""
+    if spec is None:
+        spec = make_spec(mode, **(spec_args or {}))  # type: ignore[arg-type]
+    elif spec_args:
+        raise InvalidParameterError("pass either spec= or the integration arguments, not both")
+    selection = parse_selection(window, series.n_steps)
+    return Job(
+        series=series,
+        selection=selection,
+        spec=spec,
+        order=resolve_order(spec.order, selection),
+        positions=spec.time_tf.positions_of(selection.steps, series.n_steps),
+        value_range=spec.data_tf.value_range or (series.vmin, series.vmax),
+    )
+
+
+def engine_rows(eng: object, job: Job) -> int:
+    """Output z-rows per brick that fit the engine (at least 1, else a clear error)."""
+    _, ny, nx = job.series.volume_shape
+    halo = job.halo
+    fit = eng.max_brick_bytes // max(1, job.row_bytes) - 2 * halo  # type: ignore[attr-defined]
+    if fit < 1:
+        itemsize = job.series.dtype.itemsize
+        most = max(1, eng.max_brick_bytes // ((1 + 2 * halo) * ny * nx * itemsize))  # type: ignore[attr-defined]
+        raise InvalidParameterError(
+            f"one z-row of a {job.selection.width}-step window needs "
+            f"{(1 + 2 * halo) * job.row_bytes / 2**20:.0f} MB but the engine holds at most "
+            f"{eng.max_brick_bytes / 2**20:.0f} MB per brick; use a window of at most {most} steps"  # type: ignore[attr-defined]
+        )
+    return fit
+
+
+OutFor = Callable[[Slab], tuple[np.ndarray, np.ndarray | None]]
+
+
+def integrate_slabs(
+    job: Job,
+    eng: object,
+    parts: Sequence[Slab],
+    out: OutFor,
+    read: Callable[[Sequence[int], int, int], np.ndarray] | None = None,
+) -> Iterator[tuple[Slab, Partial, bool]]:
+    """Integrate `parts` one after the other; yields (slab, partial, final) per slab.
+
+    `out(slab)` gives the C-contiguous buffers the slab's result is written to. The next
+    brick is read on a background thread while the engine integrates this one (double
+    buffering), so at most two bricks are held. `read(steps, r0, r1)` reads a brick
+    (default: `TimeSeries.read_brick`); the brick it returned last is no longer in use
+    when it is called again.
+    """
+    if not parts:
+        return
+    read = read or job.series.read_brick
+    steps = job.selection.steps
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="chronocl-read") as reader:
+        pending = reader.submit(read, steps, parts[0].r0, parts[0].r1)
+        for i, s in enumerate(parts):
+            brick = pending.result()
+            if i + 1 < len(parts):
+                nxt = parts[i + 1]
+                pending = reader.submit(read, steps, nxt.r0, nxt.r1)
+            partial, final = eng.accumulate(  # type: ignore[attr-defined]
+                brick, s.crop, steps, job.positions, job.order, job.spec, job.value_range, out(s)
+            )
+            del brick
+            yield s, partial, final
+
+
 def integrate(
     series: TimeSeries,
     window: object = None,
@@ -75,68 +191,28 @@ def integrate(
     (tf=, data_tf=, time_tf=, order=, enhance=, threshold=, normalize=).
     `engine` is ``opencl`` (default; `device` picks one, see `chronocl devices`),
     ``numpy`` (the reference) or an engine object. `slab` sets the z rows per brick
-    (default: as many as fit the engine's brick size).
+    (default: as many as fit the engine's brick size). For outputs larger than memory
+    see `chronocl.streaming.integrate_to_store`.
     """
-    if spec is None:
-        spec = make_spec(mode, **spec_args)  # type: ignore[arg-type]
-    elif spec_args:
-        raise InvalidParameterError("pass either spec= or the integration arguments, not both")
-    selection = parse_selection(window, series.n_steps)
-    order = resolve_order(spec.order, selection)
+    job = prepare(series, window, mode, spec, spec_args)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
-    positions = spec.time_tf.positions_of(selection.steps, series.n_steps)
-    value_range = spec.data_tf.value_range or (series.vmin, series.vmax)
-
-    nz, ny, nx = series.volume_shape
-    halo = 1 if spec.enhance.needs_gradient else 0
-    row_bytes = selection.width * ny * nx * series.dtype.itemsize
-    fit = eng.max_brick_bytes // max(1, row_bytes) - 2 * halo
-    if fit < 1:
-        most = max(1, eng.max_brick_bytes // ((1 + 2 * halo) * ny * nx * series.dtype.itemsize))
-        raise InvalidParameterError(
-            f"one z-row of a {selection.width}-step window needs "
-            f"{(1 + 2 * halo) * row_bytes / 2**20:.0f} MB but the engine holds at most "
-            f"{eng.max_brick_bytes / 2**20:.0f} MB per brick; use a window of at most {most} steps"
-        )
+    fit = engine_rows(eng, job)
     slab = fit if slab is None else min(slab, fit)
-    parts = slabs(nz, slab, halo)
+    nz, ny, nx = series.volume_shape
+    parts = slabs(nz, slab, job.halo)
 
     rgba = aligned_empty((nz, ny, nx, 4), np.float32)
-    t_index = aligned_empty((nz, ny, nx), np.int32) if spec.has_t_index else None
+    t_index = aligned_empty((nz, ny, nx), np.int32) if job.spec.has_t_index else None
+
+    def out(s: Slab) -> tuple[np.ndarray, np.ndarray | None]:
+        # z is the outermost axis, so a slab of the output is a contiguous view.
+        return rgba[s.z0 : s.z1], None if t_index is None else t_index[s.z0 : s.z1]
+
     final = True
-    # Double buffering: the next brick is read while the engine integrates this one.
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="chronocl-read") as reader:
-        pending = reader.submit(series.read_brick, selection.steps, parts[0].r0, parts[0].r1)
-        for i, s in enumerate(track(parts, len(parts), "integrating bricks", progress)):
-            brick = pending.result()
-            if i + 1 < len(parts):
-                nxt = parts[i + 1]
-                pending = reader.submit(series.read_brick, selection.steps, nxt.r0, nxt.r1)
-            # z is the outermost axis, so a slab of the output is a contiguous view.
-            out = (rgba[s.z0 : s.z1], None if t_index is None else t_index[s.z0 : s.z1])
-            _, final = eng.accumulate(
-                brick, s.crop, selection.steps, positions, order, spec, value_range, out
-            )
+    results = integrate_slabs(job, eng, parts, out)
+    for _, _, last in track(results, len(parts), "integrating bricks", progress):
+        final = last
     if not final:
-        rgba = reference.finalize(reference.Partial(rgba, t_index), positions, spec)
+        rgba = reference.finalize(reference.Partial(rgba, t_index), job.positions, job.spec)
     name = getattr(eng, "name", type(eng).__name__)
-    return Chronovolume(rgba, t_index, _metadata(series, selection, spec, value_range, name))
-
-
-def _metadata(
-    series: TimeSeries,
-    selection: Selection,
-    spec: IntegrationSpec,
-    value_range: tuple[float, float],
-    engine: str,
-) -> dict:
-    dz, dy, dx = series.spacing
-    return {
-        "dataset": series.source or (str(series.path) if series.path else ""),
-        "selection": {"steps": list(selection.steps), "n_steps": selection.n_steps},
-        "time_labels": [series.times[s] for s in selection.steps],
-        "spec": spec.to_dict(),
-        "spacing": {"x": dx, "y": dy, "z": dz},
-        "value_range": [float(value_range[0]), float(value_range[1])],
-        "engine": engine,
-    }
+    return Chronovolume(rgba, t_index, job.metadata(name))

@@ -39,10 +39,14 @@ def normalize(v: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
 
 @dataclass
 class Partial:
-    """Per-voxel result before finalisation. For additive, rgb holds the raw sums Σ α·c."""
+    """Per-voxel result before finalisation. For additive, rgb holds the raw sums Σ α·c.
+
+    `value` is max/min's winning normalised value u, which combining two partials needs.
+    """
 
     rgba: np.ndarray
     t_index: np.ndarray | None
+    value: np.ndarray | None = None
 
 
 def over(front: np.ndarray, back: np.ndarray) -> np.ndarray:
@@ -118,23 +122,61 @@ def accumulate(
                 rgba[sel, :3] = a[sel, None] * c[sel]
                 rgba[sel, 3] = a[sel]
                 t_index[sel] = steps[k]
+        return Partial(rgba, t_index, best)
     else:  # pragma: no cover - IntegrationSpec validates the mode
         raise AssertionError(spec.mode)
     return Partial(rgba, t_index)
+
+
+def combine(front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
+    """The partial of two consecutive runs of steps, `front` integrated before `back`.
+
+    Associative for every mode, which is what sliding a window needs (DESIGN.md 3):
+    alpha is `over`; first_hit keeps the front's hit where it has one; max/min keep the
+    front's winner unless the back's value is strictly more extreme (ties go to the step
+    integrated first, as in `accumulate`); additive adds the sums and takes the larger alpha.
+    """
+    if spec.mode == "alpha":
+        return Partial(over(front.rgba, back.rgba), None)
+    if spec.mode == "additive":
+        rgba = front.rgba + back.rgba
+        rgba[..., 3] = np.maximum(front.rgba[..., 3], back.rgba[..., 3])
+        return Partial(rgba, None)
+    if spec.mode == "first_hit":
+        keep = front.t_index >= 0
+    else:
+        beats = back.value > front.value if spec.mode == "max" else back.value < front.value
+        keep = (front.t_index >= 0) & ~(beats & (back.t_index >= 0))
+    value = None if front.value is None else np.where(keep, front.value, back.value)
+    return Partial(
+        np.where(keep[..., None], front.rgba, back.rgba),
+        np.where(keep, front.t_index, back.t_index),
+        value,
+    )
 
 
 def finalize(partial: Partial, positions: np.ndarray, spec: IntegrationSpec) -> np.ndarray:
     """Global last step; returns premultiplied RGBA float32. Only additive does work here."""
     rgba = partial.rgba
     if spec.mode == "additive":
-        rgba = rgba.copy()
         if spec.normalize == "time":
             norm = additive_norm(spec, positions)
         else:
             norm = np.full(3, rgba[..., :3].max() if rgba.size else 0.0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            scaled = np.where(norm > 0, rgba[..., :3] / np.where(norm > 0, norm, 1.0), 0.0)
-        rgba[..., :3] = np.minimum(scaled, rgba[..., 3:4])
+        return finalize_sums(rgba, norm)
+    return rgba.astype(np.float32, copy=False)
+
+
+def finalize_sums(sums: np.ndarray, norm: np.ndarray) -> np.ndarray:
+    """Additive: colour sums / norm per channel (0 where norm is 0), clamped to the opacity.
+
+    Arithmetic stays in the dtypes given (float32 sums over a float32 norm divide in float32),
+    so every path that finalises the same sums gets the same bits.
+    """
+    rgba = np.array(sums, copy=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scaled = np.where(norm > 0, rgba[..., :3] / np.where(norm > 0, norm, 1.0), 0.0)
+    rgba[..., :3] = np.minimum(scaled, rgba[..., 3:4])
     return rgba.astype(np.float32, copy=False)
 
 

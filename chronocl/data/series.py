@@ -22,7 +22,13 @@ import zarr
 
 from ..atomic import atomic_directory
 from ..engine.memory import aligned_empty
-from ..errors import InputNotFoundError, InvalidDataError, InvalidParameterError, StoreFormatError
+from ..errors import (
+    InputNotFoundError,
+    InvalidDataError,
+    InvalidParameterError,
+    StoreChangedError,
+    StoreFormatError,
+)
 from ..progress import track
 from ..reference import normalize
 
@@ -53,10 +59,14 @@ class TimeSeries:
     source: str = ""
     path: Path | None = None
     _zarr: zarr.Array | None = field(default=None, repr=False)
+    _stamp: int | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.times:
             self.times = tuple(range(self.n_steps))
+        if self.path is not None and self._zarr is not None:
+            meta = _metadata_file(self.path, self._zarr)
+            self._stamp = meta.stat().st_mtime_ns if meta is not None else None
 
     # -- shape ---------------------------------------------------------------------------
     @property
@@ -99,6 +109,47 @@ class TimeSeries:
             else:
                 out[:, i] = self.data[int(s), z0:z1].compute()
         return out
+
+    @property
+    def z_chunk(self) -> int:
+        """Rows per stored chunk along z (reads in these units waste nothing)."""
+        if self._zarr is not None:
+            return int(self._zarr.chunks[1])
+        return int(self.data.chunks[1][0])
+
+    def read_rows(self, step: int, z0: int, z1: int, out: np.ndarray) -> None:
+        """Read z rows [z0, z1) of one step into `out` (z1 - z0, Y, X)."""
+        if self._zarr is not None:
+            out[...] = self._zarr[int(step), z0:z1]
+        else:
+            out[...] = self.data[int(step), z0:z1].compute()
+
+    def check_unchanged(self) -> None:
+        """Raise StoreChangedError when the store on disk no longer has this series' shape.
+
+        Cheap when nothing changed: only the array's metadata file is stat'ed.
+        """
+        if self.path is None or self._zarr is None:
+            return
+        meta = _metadata_file(self.path, self._zarr)
+        try:
+            stamp = meta.stat().st_mtime_ns if meta is not None else None
+        except OSError:
+            stamp = -1
+        if stamp == self._stamp:
+            return
+        try:
+            node = zarr.open(store=str(self.path), mode="r")
+            shape = tuple((node["data"] if isinstance(node, zarr.Group) else node).shape)
+        except Exception:
+            shape = None
+        if shape != self.shape:
+            now = "is gone" if shape is None else f"now has shape {shape}"
+            raise StoreChangedError(
+                f"store {str(self.path)!r} changed underneath: opened with shape {self.shape}, "
+                f"{now}; open it again to see the new steps"
+            )
+        self._stamp = stamp
 
     def normalized(
         self,
@@ -243,6 +294,7 @@ def open_series(path: str | os.PathLike) -> TimeSeries:
         )
     series = TimeSeries.from_array(lazy, source=str(p))
     series.path, series._zarr = p, arr
+    series.__post_init__()  # records the metadata stamp that check_unchanged compares with
     return series
 
 
@@ -260,11 +312,15 @@ def write_series(
     progress: bool = False,
     nan_fill: float | None = None,
     labels: Sequence[str] | None = None,
+    chunk_bytes: int = CHUNK_BYTES,
+    compressor: str = "zstd",
 ) -> TimeSeries:
     """Write steps (each (Z, Y, X)) to a new store atomically, gathering statistics on the way.
 
     Non-finite values are rejected unless `nan_fill` is given, which replaces them.
-    `labels` name each step's origin (e.g. its file) in error messages.
+    `labels` name each step's origin (e.g. its file) in error messages. Chunks are
+    (1, zc, Y, X) of at most `chunk_bytes` (small chunks suit small streaming budgets);
+    `compressor` is one of COMPRESSORS.
     """
     dt = np.dtype(dtype)
     _check_dtype(dt)
@@ -273,11 +329,14 @@ def write_series(
     spacing = parse_spacing(spacing)
     times = _parse_times(times, n_steps)
     z, y, x = shape[1:]
-    zc = max(1, min(z, CHUNK_BYTES // max(1, y * x * dt.itemsize)))
+    zc = max(1, min(z, int(chunk_bytes) // max(1, y * x * dt.itemsize)))
+    codecs = compressors(compressor)
     smin, smax, smean = [], [], []
     with atomic_directory(path, overwrite) as tmp:
         group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
-        arr = group.create_array("data", shape=shape, chunks=(1, zc, y, x), dtype=dt)
+        arr = group.create_array(
+            "data", shape=shape, chunks=(1, zc, y, x), dtype=dt, compressors=codecs
+        )
         count = 0
         for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
             where = labels[t] if labels else f"time step {t}"
@@ -320,6 +379,24 @@ def write_series(
             "source": source,
         }
     return open_series(path)
+
+
+COMPRESSORS = ("zstd", "blosc-lz4", "none")
+
+
+def compressors(name: str) -> object:
+    """zarr v3 compressors for a name in COMPRESSORS (zstd level 0 is zarr's default)."""
+    from zarr.codecs import BloscCodec, ZstdCodec
+
+    if name == "zstd":
+        return (ZstdCodec(level=0),)
+    if name == "blosc-lz4":
+        return (BloscCodec(cname="lz4", clevel=5, shuffle="shuffle"),)
+    if name == "none":
+        return None
+    raise InvalidParameterError(
+        f"unknown compressor {name!r}; choose one of {', '.join(COMPRESSORS)}"
+    )
 
 
 def parse_spacing(spacing: Sequence[float]) -> tuple[float, float, float]:
@@ -379,6 +456,15 @@ def _stats_from_steps(smin, smax, smean) -> SeriesStats:
         step_max=tuple(float(v) for v in smax),
         step_mean=tuple(float(v) for v in smean),
     )
+
+
+def _metadata_file(path: Path, arr: zarr.Array) -> Path | None:
+    """The file holding an array's shape in a local store (zarr v3 or v2), if there is one."""
+    folder = Path(path) / arr.path if arr.path else Path(path)
+    for name in ("zarr.json", ".zarray"):
+        if (folder / name).is_file():
+            return folder / name
+    return None
 
 
 def _disk_usage(path: Path) -> int:

@@ -44,6 +44,26 @@ class NumpyEngine:
             rgba, t_index = out[0], (out[1] if t_index is not None else None)
         return Partial(rgba, t_index), False
 
+    def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
+        """The partial of `front` then `back`; additive partials hold opacity alone."""
+        if spec.mode == "additive":
+            return Partial(np.maximum(front.rgba, back.rgba), None)
+        return reference.combine(front, back, spec)
+
+    def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:
+        """acc (Z, Y, X, 3) int64 += sign * fixed-point colour sums of one additive partial."""
+        fixed = np.trunc(np.asarray(rgba[..., :3], np.float64) * FIXED_ONE).astype(np.int64)
+        acc += fixed if sign > 0 else -fixed
+
+    def fixed_finalize(self, acc: np.ndarray, alpha: np.ndarray, norm: np.ndarray) -> np.ndarray:
+        """The finished additive RGBA from fixed-point sums, window opacity and norm (3,)."""
+        rgba = np.empty((*alpha.shape, 4), np.float64)
+        rgba[..., :3] = acc / FIXED_ONE
+        rgba[..., 3] = alpha
+        return reference.finalize_sums(rgba, norm)
+
+
+FIXED_ONE = float(2**40)  # additive colour sums in fixed point: exact add / subtract
 
 _engines: dict[tuple[str, str | None], object] = {}
 

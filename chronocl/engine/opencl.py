@@ -239,6 +239,97 @@ class OpenCLEngine:
             queue.finish()
         return Partial(rgba, t_index), final
 
+    # -- sliding windows: combining partials (kernels/opencl/combine.cl) ----------------------
+    def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
+        """The partial of `front` then `back` (see reference.combine); new arrays, inputs kept.
+
+        For additive only opacities are combined (partials hold alpha alone); colour sums
+        are kept in fixed point by `fixed_add`.
+        """
+        shape = front.rgba.shape
+        if spec.mode == "additive":
+            out = aligned_empty(shape, np.float32)
+            self._elementwise("combine_fmax", front.rgba.size, {}, [front.rgba, back.rgba], [out])
+            return Partial(out, None)
+        rgba = aligned_empty(shape, np.float32)
+        if spec.mode == "alpha":
+            self._elementwise("combine_over", t_size(shape), {}, [front.rgba, back.rgba], [rgba])
+            return Partial(rgba, None)
+        t_index = aligned_empty(shape[:-1], np.int32)
+        if spec.mode == "first_hit":
+            ins = [front.rgba, front.t_index, back.rgba, back.t_index]
+            self._elementwise("combine_first", t_size(shape), {}, ins, [rgba, t_index])
+            return Partial(rgba, t_index)
+        value = aligned_empty(shape[:-1], np.float32)
+        ins = [front.rgba, front.t_index, front.value, back.rgba, back.t_index, back.value]
+        defines = {"IS_MIN": spec.mode == "min"}
+        self._elementwise("combine_extreme", t_size(shape), defines, ins, [rgba, t_index, value])
+        return Partial(rgba, t_index, value)
+
+    def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:
+        """acc (Z, Y, X, 3) int64 += sign * fixed-point colour sums of one additive partial."""
+        self._elementwise(
+            "fixed_add", rgba.size // 4, {}, [rgba], [acc], [np.int32(sign)], inout=True
+        )
+
+    def fixed_finalize(self, acc: np.ndarray, alpha: np.ndarray, norm: np.ndarray) -> np.ndarray:
+        """The finished additive RGBA from fixed-point sums, window opacity and norm (3,)."""
+        out = aligned_empty((*alpha.shape, 4), np.float32)
+        scalars = [np.array([*norm, 0.0], dtype=np.float32)]
+        self._elementwise(
+            "fixed_finalize", alpha.size, {}, [acc, alpha], [out], scalars, scalars_first=False
+        )
+        return out
+
+    def _elementwise(
+        self,
+        function: str,
+        n: int,
+        defines: dict,
+        inputs: list[np.ndarray],
+        outputs: list[np.ndarray],
+        scalars: list = (),
+        inout: bool = False,
+        scalars_first: bool = True,
+    ) -> None:
+        """Run a one-voxel-per-work-item kernel of combine.cl over `n` voxels.
+
+        Argument order is inputs, outputs, scalars (fixed_add: the in-out array first,
+        then inputs, then scalars; fixed_finalize: inputs, scalars, outputs).
+        """
+        import pyopencl as cl
+
+        ctx, mf = self.dc.context, cl.mem_flags
+        host = mf.USE_HOST_PTR if self.host_ptr else mf.COPY_HOST_PTR
+        ins = [cl.Buffer(ctx, mf.READ_ONLY | host, hostbuf=np.ascontiguousarray(a)) for a in inputs]
+        flag = mf.READ_WRITE if inout else mf.WRITE_ONLY
+        if self.host_ptr:
+            outs = [cl.Buffer(ctx, flag | mf.USE_HOST_PTR, hostbuf=a) for a in outputs]
+        elif inout:
+            outs = [cl.Buffer(ctx, flag | mf.COPY_HOST_PTR, hostbuf=a) for a in outputs]
+        else:
+            outs = [cl.Buffer(ctx, flag, a.nbytes) for a in outputs]
+        if inout:
+            args = [*outs, *ins, *scalars]
+        elif scalars_first:
+            args = [*ins, *outs, *scalars]
+        else:
+            args = [*ins, *scalars, *outs]
+        kern = kernel(self.dc, "combine.cl", function, defines, common=False)
+        queue = self.dc.queue
+        with self.dc.lock:
+            kern.set_args(*args)
+            cl.enqueue_nd_range_kernel(queue, kern, (n,), None)
+            for a, buf in zip(outputs, outs, strict=True):
+                if self.host_ptr:
+                    mapped, _ = cl.enqueue_map_buffer(
+                        queue, buf, cl.map_flags.READ, 0, a.shape, a.dtype
+                    )
+                    mapped.base.release(queue)
+                else:
+                    cl.enqueue_copy(queue, a, buf)
+            queue.finish()
+
     def _launch_shape(self, count: int, ny: int, nz: int):
         """Global and local size for `count` work-items along x."""
         if self.local_size is not None:
@@ -248,6 +339,11 @@ class OpenCLEngine:
         else:
             lx, ly, lz = min(64, _round_up(count, 32)), 1, 1
         return (_round_up(count, lx), _round_up(ny, ly), _round_up(nz, lz)), (lx, ly, lz)
+
+
+def t_size(rgba_shape: tuple) -> int:
+    """Voxels of an RGBA array shape (..., 4)."""
+    return int(np.prod(rgba_shape[:-1]))
 
 
 def raw_cut(position: float, value_range: tuple[float, float], lut_size: int) -> float:

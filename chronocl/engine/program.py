@@ -34,10 +34,11 @@ def kernel_dir() -> Path:
     )
 
 
-def source(name: str) -> str:
-    """common.h followed by kernels/opencl/NAME."""
+def source(name: str, common: bool = True) -> str:
+    """kernels/opencl/NAME, after common.h unless `common` is false."""
     folder = kernel_dir()
-    return (folder / "common.h").read_text() + "\n" + (folder / name).read_text()
+    text = (folder / name).read_text()
+    return (folder / "common.h").read_text() + "\n" + text if common else text
 
 
 def build(dc, name: str, defines: dict[str, object], text: str | None = None):
@@ -66,7 +67,7 @@ def build(dc, name: str, defines: dict[str, object], text: str | None = None):
     return program
 
 
-def kernel(dc, name: str, function: str, defines: dict[str, object]):
+def kernel(dc, name: str, function: str, defines: dict[str, object], common: bool = True):
     """The cached kernel object `function` of kernel file `name` built with `defines`.
 
     Kernels carry their arguments, so callers set arguments and enqueue under the
@@ -74,7 +75,7 @@ def kernel(dc, name: str, function: str, defines: dict[str, object]):
     """
     import pyopencl as cl
 
-    program = build(dc, name, defines)
+    program = build(dc, name, defines, None if common else source(name, common=False))
     key = (id(program), function)
     with _lock:
         k = _kernels.get(key)

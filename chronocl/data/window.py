@@ -1,0 +1,275 @@
+"""The window manager: the time steps of interest resident in memory, under a byte budget.
+
+A `WindowManager` serves whole time steps of one `TimeSeries` as aligned
+(Z, Y, X) numpy blocks, the layout the engine takes as a one-step xytz brick
+and stacks into wider ones. A request names the steps of the current window:
+
+- steps already resident are not read again; missing ones are read on
+  background threads, chunk row by chunk row, through zarr (or dask);
+- steps that are neither requested nor prefetched stay cached (least recently
+  used first out) only while the budget allows;
+- after a request, the next steps in the scrub direction are prefetched, as far
+  as the budget allows without evicting the window;
+- a newer request supersedes older ones: loads nobody wants any more are
+  cancelled before they start, or stop at the next chunk row, and waiting on a
+  superseded request raises `SupersededError` instead of queueing behind it.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter, OrderedDict
+from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..budget import human, parse_memory
+from ..engine.memory import aligned_empty
+from ..errors import InvalidParameterError, InvalidSelectionError, SupersededError
+from .series import TimeSeries
+
+
+@dataclass
+class _Load:
+    """One step being read: its destination, future and whether it is still wanted."""
+
+    step: int
+    array: np.ndarray
+    future: Future | None = None
+    abort: threading.Event = field(default_factory=threading.Event)
+
+
+class Request:
+    """The steps of one window, loading; `result()` waits for them."""
+
+    def __init__(self, manager: WindowManager, generation: int, steps: tuple[int, ...]) -> None:
+        self.manager = manager
+        self.generation = generation
+        self.steps = steps
+
+    @property
+    def superseded(self) -> bool:
+        return self.manager.generation != self.generation
+
+    def result(self, timeout: float | None = None) -> list[np.ndarray]:
+        """The steps' arrays in request order; SupersededError if a newer request came first."""
+        return self.manager._wait(self, timeout)
+
+
+class WindowManager:
+    """Resident time steps of `series` under `memory` bytes, with prefetch and cancellation.
+
+    `prefetch` is how many steps beyond the window to read ahead in the scrub
+    direction (default: as many as the window is wide, budget permitting);
+    `threads` is the number of background readers.
+    """
+
+    def __init__(
+        self,
+        series: TimeSeries,
+        memory: str | int | None = None,
+        *,
+        prefetch: int | None = None,
+        threads: int = 2,
+    ) -> None:
+        self.series = series
+        self.budget = parse_memory(memory)
+        self.step_bytes = int(np.prod(series.volume_shape)) * series.dtype.itemsize
+        if self.budget < self.step_bytes:
+            raise InvalidParameterError(
+                f"memory budget {human(self.budget)} cannot hold one time step of "
+                f"{series.volume_shape} {series.dtype} ({human(self.step_bytes)}); "
+                f"use --memory {_round_up_mb(self.step_bytes)}MB or more"
+            )
+        self.prefetch = prefetch
+        self.generation = 0
+        self.reads: Counter[int] = Counter()  # completed reads per step (tests: never twice)
+        self.cancelled = 0  # loads dropped before they finished
+        self._cache: OrderedDict[int, np.ndarray] = OrderedDict()  # LRU order, newest last
+        self._loads: dict[int, _Load] = {}
+        self._wanted: set[int] = set()
+        self._failed: dict[int, BaseException] = {}  # read errors, raised to whoever waits
+        self._lock = threading.Condition()
+        self._pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="chronocl-window")
+        self._closed = False
+
+    # -- public --------------------------------------------------------------------------
+    @property
+    def capacity(self) -> int:
+        """How many steps fit the budget."""
+        return self.budget // self.step_bytes
+
+    @property
+    def resident_bytes(self) -> int:
+        """Bytes held in resident steps and in loads under way."""
+        with self._lock:
+            return self.step_bytes * (len(self._cache) + len(self._loads))
+
+    def resident(self) -> list[int]:
+        with self._lock:
+            return sorted(self._cache)
+
+    def request(self, steps: Sequence[int], direction: int = 0) -> Request:
+        """Start loading `steps` (and prefetching beyond them in `direction`: +1, -1 or 0).
+
+        Supersedes every earlier request. Raises InvalidParameterError when the steps
+        cannot all be resident at once under the budget.
+        """
+        steps = tuple(int(s) for s in steps)
+        n = self.series.n_steps
+        bad = [s for s in steps if not 0 <= s < n]
+        if bad:
+            raise InvalidSelectionError(f"steps {bad} are outside the series' [0, {n})")
+        self.series.check_unchanged()
+        if len(set(steps)) > self.capacity:
+            raise InvalidParameterError(
+                f"a window of {len(set(steps))} steps needs "
+                f"{human(len(set(steps)) * self.step_bytes)} resident but the memory budget is "
+                f"{human(self.budget)}; use --memory {_round_up_mb(len(steps) * self.step_bytes)}"
+                "MB or more, or a shorter window (integrate streams windows of any size)"
+            )
+        ahead = self._prefetch_steps(steps, direction)
+        with self._lock:
+            if self._closed:
+                raise InvalidParameterError("this window manager is closed; make a new one")
+            self.generation += 1
+            self._wanted = set(steps)
+            for s in steps:
+                self._failed.pop(s, None)
+            keep = self._wanted | set(ahead)
+            for step, load in list(self._loads.items()):
+                if step not in keep:
+                    self._cancel(load)
+            for s in steps:
+                if s in self._cache:
+                    self._cache.move_to_end(s)
+            for s in steps:
+                if s not in self._cache and s not in self._loads:
+                    self._make_room(protect=self._wanted)
+                    self._start(s)
+            for s in ahead:
+                if s in self._cache or s in self._loads:
+                    continue
+                if not self._make_room(protect=keep):
+                    break
+                self._start(s)
+            return Request(self, self.generation, steps)
+
+    def get(self, steps: Sequence[int], direction: int = 0) -> list[np.ndarray]:
+        """Request `steps` and wait for them (the arrays must be treated as read-only)."""
+        return self.request(steps, direction).result()
+
+    def brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
+        """Rows [z0, z1) of resident steps as an xytz brick (z1 - z0, W, Y, X)."""
+        arrays = self.get(steps)
+        z1 = self.series.volume_shape[0] if z1 is None else z1
+        out = aligned_empty((z1 - z0, len(arrays), *self.series.volume_shape[1:]), arrays[0].dtype)
+        for i, a in enumerate(arrays):
+            out[:, i] = a[z0:z1]
+        return out
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            for load in list(self._loads.values()):
+                self._cancel(load)
+            self._cache.clear()
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> WindowManager:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- internals (the lock is held where noted) ------------------------------------------
+    def _prefetch_steps(self, steps: tuple[int, ...], direction: int) -> list[int]:
+        if not direction or not steps:
+            return []
+        stride = abs(steps[-1] - steps[0]) // (len(steps) - 1) if len(steps) > 1 else 1
+        stride = max(1, stride)
+        count = len(steps) if self.prefetch is None else self.prefetch
+        edge = max(steps) if direction > 0 else min(steps)
+        ahead = [edge + direction * stride * (i + 1) for i in range(count)]
+        return [s for s in ahead if 0 <= s < self.series.n_steps]
+
+    def _make_room(self, protect: set[int]) -> bool:
+        """Evict least recently used steps outside `protect` until one more step fits (locked)."""
+        while self.step_bytes * (len(self._cache) + len(self._loads) + 1) > self.budget:
+            victim = next((s for s in self._cache if s not in protect), None)
+            if victim is not None:
+                del self._cache[victim]
+                continue
+            load = next((ld for s, ld in self._loads.items() if s not in protect), None)
+            if load is None:
+                return False
+            self._cancel(load)
+        return True
+
+    def _start(self, step: int) -> None:
+        """Reserve the step's memory and submit its read (locked)."""
+        load = _Load(step, aligned_empty(self.series.volume_shape, self.series.dtype))
+        self._loads[step] = load
+        load.future = self._pool.submit(self._read, load)
+
+    def _cancel(self, load: _Load) -> None:
+        """Drop a load nobody wants: not started -> never runs; running -> stops (locked)."""
+        load.abort.set()
+        if load.future is not None:
+            load.future.cancel()
+        self._loads.pop(load.step, None)
+        self.cancelled += 1
+        self._lock.notify_all()
+
+    def _read(self, load: _Load) -> None:
+        """Read one step chunk row by chunk row, stopping early when cancelled."""
+        nz = self.series.volume_shape[0]
+        rows = self.series.z_chunk
+        try:
+            for z0 in range(0, nz, rows):
+                if load.abort.is_set():
+                    return
+                z1 = min(nz, z0 + rows)
+                self.series.read_rows(load.step, z0, z1, load.array[z0:z1])
+        except BaseException as exc:
+            with self._lock:
+                if self._loads.get(load.step) is load:
+                    del self._loads[load.step]
+                    self._failed[load.step] = exc
+                self._lock.notify_all()
+            raise
+        with self._lock:
+            if load.abort.is_set() or self._loads.get(load.step) is not load:
+                return
+            del self._loads[load.step]
+            self._cache[load.step] = load.array
+            self.reads[load.step] += 1
+            self._lock.notify_all()
+
+    def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
+        with self._lock:
+            while True:
+                if request.superseded and not all(s in self._cache for s in request.steps):
+                    raise SupersededError(
+                        f"the request for steps {list(request.steps)} was replaced by a newer one"
+                    )
+                missing = [s for s in request.steps if s not in self._cache]
+                if not missing:
+                    for s in request.steps:
+                        self._cache.move_to_end(s)
+                    return [self._cache[s] for s in request.steps]
+                for s in missing:
+                    if s in self._failed:
+                        raise self._failed[s]
+                    if s not in self._loads:
+                        raise SupersededError(
+                            f"step {s} of the request was dropped; request the window again"
+                        )
+                if not self._lock.wait(timeout):
+                    raise TimeoutError(f"steps {missing} did not load within {timeout} s")
+
+
+def _round_up_mb(n: int) -> int:
+    return -(-n // 10**6)

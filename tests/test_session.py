@@ -1,0 +1,252 @@
+"""Sliding windows: incremental chronovolumes equal integrating the same window from scratch.
+
+DESIGN.md invariant 6, for every mode and both engines: after any random sequence of slides
+(either way, by one or more strides) and jumps, the Session's chronovolume equals
+`integrate` of the same window (1e-5; t_index exactly), windows of 1..40 steps. Also the
+double-ended sliding aggregate on its own, with a non-commutative operation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from chronocl.data.series import TimeSeries
+from chronocl.errors import InvalidParameterError, InvalidSelectionError
+from chronocl.integrate import integrate, make_spec
+from chronocl.session import Session
+from chronocl.sliding import SlidingAggregate
+from chronocl.tf import TimeTF
+
+from .strategies import specs
+
+ENGINES = ["numpy", "opencl"]
+
+
+def _series(rng: np.random.Generator, t: int, shape: tuple[int, int, int], levels: bool):
+    data = rng.random((t, *shape), dtype=np.float32)
+    if levels:  # exact ties: first_hit thresholds and max/min tie-breaking
+        data = (np.round(data * 4) / 4).astype(np.float32)
+    return TimeSeries.from_array(data)
+
+
+def _check(cv, series, selection, spec, engine) -> None:
+    ref = integrate(series, selection, spec=spec, engine=engine)
+    assert cv.steps == tuple(selection.steps)
+    np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
+    if spec.has_t_index:
+        np.testing.assert_array_equal(cv.t_index, ref.t_index)
+    else:
+        assert cv.t_index is None
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@settings(max_examples=30)
+@given(data=st.data())
+def test_slides_and_jumps_equal_scratch(engine: str, data) -> None:
+    shape = data.draw(st.tuples(st.integers(1, 4), st.integers(1, 3), st.integers(1, 40)))
+    width = data.draw(st.integers(1, 40))
+    n_steps = data.draw(st.integers(width, width + 12))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    series = _series(rng, n_steps, shape, data.draw(st.booleans()))
+    spec = data.draw(specs(positions="absolute"))
+    session = Session(series, engine=engine, spec=spec, memory="64MB")
+    t0 = data.draw(st.integers(0, n_steps - width))
+    cv = session.set_window(t0, t0 + width)
+    _check(cv, series, session.selection, spec, engine)
+    for _ in range(data.draw(st.integers(1, 10))):
+        if data.draw(st.integers(0, 4)) == 0:  # a jump anywhere
+            t0 = data.draw(st.integers(0, n_steps - width))
+            cv = session.set_window(t0, t0 + width)
+        else:
+            before = session.selection
+            k = data.draw(st.sampled_from([-3, -2, -1, 1, 2, 3]))
+            cv = session.slide(k)
+            moved = session.selection != before
+            overlap = set(before.steps) & set(session.selection.steps)
+            if moved and overlap:
+                assert session.stats["path"] == "incremental"
+        _check(cv, series, session.selection, spec, engine)
+    session.close()
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("mode", ["alpha", "first_hit", "additive", "max", "min"])
+def test_strided_windows_slide_by_strides(engine: str, mode: str) -> None:
+    rng = np.random.default_rng(7)
+    series = _series(rng, 60, (3, 5, 21), levels=True)
+    spec = make_spec(mode, time_tf=TimeTF.preset("warm-cool", positions="absolute"), threshold=0.3)
+    with Session(series, engine=engine, spec=spec) as session:
+        session.set_window("4:40:3")
+        for k in (1, 1, 2, -1, -3, 5):
+            cv = session.slide(k)
+            assert session.stats["path"] == "incremental"
+            assert np.all(np.diff(cv.steps) == 3)
+            _check(cv, series, session.selection, spec, engine)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_relative_positions_and_importance_order_reintegrate(engine: str) -> None:
+    rng = np.random.default_rng(3)
+    series = _series(rng, 20, (2, 3, 17), levels=False)
+    with Session(series, engine=engine, mode="alpha", time_tf="rgb") as session:
+        session.set_window(2, 9)
+        cv = session.slide(1)
+        assert session.stats["path"] == "reintegrate"
+        assert "relative" in session.stats["why_not_incremental"]
+        _check(cv, series, session.selection, session.spec, engine)
+        order = (5, 3, 9, 4, 8, 6, 7)
+        cv = session.set_spec(order=order)
+        _check(cv, series, session.selection, session.spec, engine)
+
+
+def test_spec_changes_and_slides_read_each_step_once() -> None:
+    rng = np.random.default_rng(5)
+    series = _series(rng, 30, (4, 4, 16), levels=False)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    with Session(series, engine="opencl", mode="max", time_tf=absolute, memory="64MB") as s:
+        s.set_window(0, 8)
+        for _ in range(10):
+            s.slide(1)
+        s.set_spec(mode="alpha")
+        for _ in range(10):
+            s.slide(-1)
+        assert s.stats["path"] == "incremental"
+        assert max(s.manager.reads.values()) == 1  # the budget holds every step touched
+
+
+def test_slide_clamps_at_both_ends() -> None:
+    series = _series(np.random.default_rng(1), 10, (2, 2, 3), levels=False)
+    with Session(series, engine="numpy", mode="additive") as s:
+        s.set_window(6, 9)
+        assert s.slide(5).steps == (7, 8, 9)
+        assert s.slide(-20).steps == (0, 1, 2)
+        with pytest.raises(InvalidSelectionError):
+            s.set_window(5, 12)
+
+
+def test_window_larger_than_budget_is_a_clear_error() -> None:
+    series = _series(np.random.default_rng(1), 12, (8, 32, 32), levels=False)  # 32 KB steps
+    with Session(series, engine="numpy", mode="max", memory="100KB") as s:
+        with pytest.raises(InvalidParameterError, match="use --memory 1MB or more"):
+            s.set_window(0, 10)
+
+
+def test_sliding_state_is_charged_to_the_budget() -> None:
+    series = _series(np.random.default_rng(2), 40, (8, 32, 32), levels=False)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    # 16 steps fit (512 KB) but not the partial volumes sliding would hold: re-integrate.
+    with Session(series, engine="numpy", mode="alpha", time_tf=absolute, memory="1MB") as s:
+        s.set_window(0, 16)
+        cv = s.slide(1)
+        assert s.stats["path"] == "reintegrate"
+        assert "budget" in s.stats["why_not_incremental"]
+        _check(cv, series, s.selection, s.spec, "numpy")
+
+
+@settings(max_examples=200)
+@given(st.integers(1, 40), st.lists(st.sampled_from(["f", "b", "grow", "shrink"]), max_size=80))
+def test_sliding_aggregate_both_ways(width: int, ops: list[str]) -> None:
+    """Concatenation is associative but not commutative: any slip in order shows."""
+    agg = SlidingAggregate(lambda s: (s,), lambda a, b: a + b)
+    window = list(range(100, 100 + width))
+    agg.reset(window)
+    most = 0
+    for op in ops:
+        if op == "f":
+            window.append(window[-1] + 1)
+            agg.push_back(window[-1])
+            assert agg.pop_front() == window.pop(0)
+        elif op == "b":
+            window.insert(0, window[0] - 1)
+            agg.push_front(window[0])
+            assert agg.pop_back() == window.pop()
+        elif op == "grow":
+            window.append(window[-1] + 1)
+            agg.push_back(window[-1])
+        elif len(window) > 1:
+            assert agg.pop_front() == window.pop(0)
+        assert agg.steps == window
+        assert agg.value() == tuple(window)
+        most = max(most, agg.held)
+    bound = 4 * math.isqrt(len(window) + len(ops)) + 8
+    assert most <= bound
+
+
+def test_sliding_aggregate_cost_does_not_grow_with_width() -> None:
+    per_slide = {}
+    for width in (8, 64):
+        agg = SlidingAggregate(lambda s: (s,), lambda a, b: a + b)
+        agg.reset(range(width))
+        agg.value()
+        leaves, combines = agg.leaves, agg.combines
+        for s in range(width, width + 640):
+            agg.push_back(s)
+            agg.pop_front()
+            agg.value()
+        per_slide[width] = ((agg.leaves - leaves) / 640, (agg.combines - combines) / 640)
+    assert per_slide[64][0] <= 4 and per_slide[64][1] <= 5
+    assert per_slide[64][0] <= 1.5 * per_slide[8][0]
+
+
+@settings(max_examples=40)
+@given(data=st.data())
+def test_combine_kernels_match_the_reference(data) -> None:
+    """combine.cl against reference.combine on random partials (ties and misses included)."""
+    from chronocl.engine import NumpyEngine, get_engine
+    from chronocl.reference import Partial
+
+    engine = get_engine("opencl")
+    shape = data.draw(st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(1, 37)))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    mode = data.draw(st.sampled_from(["alpha", "first_hit", "max", "min", "additive"]))
+    spec = make_spec(mode)
+
+    def partial() -> Partial:
+        a = rng.random((*shape, 1), dtype=np.float32)
+        rgba = np.concatenate([rng.random((*shape, 3), dtype=np.float32) * a, a], axis=-1)
+        t = rng.integers(-1 if mode == "first_hit" else 0, 9, shape).astype(np.int32)
+        v = (np.round(rng.random(shape) * 3) / 3).astype(np.float32)  # ties
+        if mode == "additive":
+            return Partial(np.ascontiguousarray(rgba[..., 3]), None)
+        return Partial(rgba, t if spec.has_t_index else None, v if mode in ("max", "min") else None)
+
+    front, back = partial(), partial()
+    got = engine.combine(front, back, spec)
+    want = NumpyEngine().combine(front, back, spec)
+    np.testing.assert_allclose(got.rgba, want.rgba, rtol=0, atol=1e-6)
+    if spec.has_t_index:
+        np.testing.assert_array_equal(got.t_index, want.t_index)
+    if mode in ("max", "min"):
+        np.testing.assert_array_equal(got.value, want.value)
+
+
+@settings(max_examples=20)
+@given(data=st.data())
+def test_fixed_point_sums_cancel_exactly(data) -> None:
+    """Adding then subtracting the same steps returns the sums to exactly zero, on both engines."""
+    from chronocl.engine import NumpyEngine, get_engine
+
+    shape = data.draw(st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(1, 37)))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    steps = [rng.random((*shape, 4), dtype=np.float32) for _ in range(data.draw(st.integers(1, 9)))]
+    alpha = rng.random(shape, dtype=np.float32)
+    norm = np.array([2.0, 0.0, 3.5])
+    results = []
+    for engine in (get_engine("opencl"), NumpyEngine()):
+        acc = np.zeros((*shape, 3), np.int64)
+        for s in steps:
+            engine.fixed_add(acc, s, +1)
+        sums = acc.copy()
+        results.append(engine.fixed_finalize(acc, alpha, norm))
+        for s in steps[::-1]:
+            engine.fixed_add(acc, s, -1)
+        assert not acc.any()
+        np.testing.assert_allclose(
+            sums / 2.0**40, sum(s[..., :3].astype(np.float64) for s in steps), atol=1e-9
+        )
+    np.testing.assert_allclose(results[0], results[1], rtol=0, atol=1e-6)

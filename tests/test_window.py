@@ -1,0 +1,159 @@
+"""The window manager: resident steps under the budget, LRU, prefetch, cancellation, changes.
+
+Concurrency is tested with a gated store (reads block until the test opens the gate)
+instead of sleeps, so every interleaving asserted here is forced, not hoped for.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import dask.array as da
+import numpy as np
+import pytest
+import zarr
+
+from chronocl.data.series import TimeSeries, open_series
+from chronocl.data.window import WindowManager
+from chronocl.errors import (
+    InvalidParameterError,
+    InvalidSelectionError,
+    StoreChangedError,
+    SupersededError,
+)
+
+
+class GatedArray:
+    """A (T, Z, Y, X) array whose reads wait for `gate` and are logged by step."""
+
+    def __init__(self, data: np.ndarray) -> None:
+        self.data = data
+        self.shape, self.dtype, self.ndim = data.shape, data.dtype, data.ndim
+        self.gate = threading.Event()
+        self.gate.set()
+        self.entered = threading.Event()  # a read is waiting at the gate
+        self.log: list[int] = []
+        self._lock = threading.Lock()
+
+    def __getitem__(self, key):
+        step = key[0].start if isinstance(key[0], slice) else int(key[0])
+        with self._lock:
+            self.log.append(int(step))
+        self.entered.set()
+        assert self.gate.wait(30), "the test never opened the gate"
+        return self.data[key]
+
+
+def gated_series(t: int = 20, shape=(4, 8, 8)) -> tuple[TimeSeries, GatedArray]:
+    data = np.arange(t * np.prod(shape), dtype=np.float32).reshape(t, *shape)
+    gated = GatedArray(data)
+    series = TimeSeries.from_array(da.from_array(gated, chunks=(1, *shape)))
+    gated.log.clear()
+    return series, gated
+
+
+def zarr_series(tmp_path, t: int = 12, shape=(6, 10, 10)) -> TimeSeries:
+    data = np.random.default_rng(0).random((t, *shape), dtype=np.float32)
+    TimeSeries.from_array(data).save(tmp_path / "s.zarr")
+    return open_series(tmp_path / "s.zarr")
+
+
+def test_steps_come_back_exact_and_are_read_once(tmp_path) -> None:
+    series = zarr_series(tmp_path)
+    truth = np.asarray(series.data)
+    with WindowManager(series, "10MB") as wm:
+        for steps in ([0, 1, 2], [1, 2, 3], [2, 3, 4], [0, 1, 2]):
+            arrays = wm.get(steps)
+            for s, a in zip(steps, arrays, strict=True):
+                np.testing.assert_array_equal(a, truth[s])
+        assert dict(wm.reads) == {0: 1, 1: 1, 2: 1, 3: 1, 4: 1}
+        brick = wm.brick([4, 2], 1, 5)
+        np.testing.assert_array_equal(brick, np.moveaxis(truth[[4, 2], 1:5], 0, 1))
+
+
+def test_budget_bounds_residency_and_evicts_least_recently_used(tmp_path) -> None:
+    series = zarr_series(tmp_path)
+    step = 6 * 10 * 10 * 4
+    with WindowManager(series, 4 * step, prefetch=0) as wm:
+        assert wm.capacity == 4
+        wm.get([0, 1, 2])
+        wm.get([3])
+        wm.get([1])  # 1 becomes the most recently used
+        wm.get([5, 6])  # evicts the two least recently used: 0 and 2
+        assert wm.resident() == [1, 3, 5, 6]
+        assert wm.resident_bytes <= wm.budget
+        wm.get([0])
+        assert wm.reads[0] == 2  # evicted, so read again
+
+
+def test_prefetch_reads_ahead_in_the_scrub_direction(tmp_path) -> None:
+    series = zarr_series(tmp_path)
+    with WindowManager(series, "10MB", prefetch=2) as wm:
+        wm.get([4, 5, 6], direction=+1)
+        wm.request([4, 5, 6, 7, 8], direction=0).result()  # waits for the prefetched steps too
+        assert wm.reads[7] == 1 and wm.reads[8] == 1
+        wm.get([2, 3, 4], direction=-1)
+        wm.request([0, 1, 2, 3, 4]).result()
+        assert all(wm.reads[s] == 1 for s in range(9))
+
+
+def test_superseded_requests_are_cancelled_not_queued() -> None:
+    series, gated = gated_series()
+    with WindowManager(series, "10MB", threads=1, prefetch=0) as wm:
+        gated.gate.clear()
+        first = wm.request([0, 1, 2, 3])
+        assert gated.entered.wait(10)  # step 0 is being read, 1..3 wait in the queue
+        second = wm.request([10, 11, 12])
+        with pytest.raises(SupersededError, match="replaced by a newer one"):
+            first.result(timeout=10)
+        gated.gate.set()
+        arrays = second.result(timeout=30)
+        assert [int(a[0, 0, 0]) for a in arrays] == [s * 256 for s in (10, 11, 12)]
+        assert sorted(set(gated.log)) == [0, 10, 11, 12]  # 1..3 were never read
+        assert wm.reads[0] == 0  # the read under way was dropped, not kept
+        assert wm.cancelled >= 4
+
+
+def test_a_request_can_wait_for_steps_another_request_started() -> None:
+    series, gated = gated_series()
+    with WindowManager(series, "10MB", threads=2, prefetch=0) as wm:
+        gated.gate.clear()
+        wm.request([5, 6])
+        later = wm.request([6, 7])  # 6 keeps loading, 5 is dropped
+        gated.gate.set()
+        assert [int(a[0, 0, 0]) for a in later.result(timeout=30)] == [6 * 256, 7 * 256]
+        assert gated.log.count(6) == 1
+
+
+def test_read_errors_reach_the_waiting_request() -> None:
+    series, gated = gated_series()
+    gated.data = None  # every read now fails inside the store
+    with WindowManager(series, "10MB", prefetch=0) as wm, pytest.raises(TypeError):
+        wm.get([3])
+
+
+def test_budget_below_one_step_names_the_minimum() -> None:
+    series, _ = gated_series(shape=(100, 100, 100))  # 4 MB per step
+    with pytest.raises(InvalidParameterError, match=r"cannot hold one time step.*--memory 4MB"):
+        WindowManager(series, "1MB")
+    with pytest.raises(InvalidParameterError, match="not a size"):
+        WindowManager(series, "lots")
+
+
+def test_window_wider_than_budget_and_steps_outside(tmp_path) -> None:
+    series = zarr_series(tmp_path)
+    with WindowManager(series, 3 * 2400) as wm:
+        with pytest.raises(InvalidParameterError, match="a window of 5 steps"):
+            wm.get(range(5))
+        with pytest.raises(InvalidSelectionError, match="outside"):
+            wm.get([11, 12])
+
+
+def test_store_modified_underneath_is_detected(tmp_path) -> None:
+    series = zarr_series(tmp_path)
+    with WindowManager(series, "10MB") as wm:
+        wm.get([0, 1])
+        arr = zarr.open_group(str(tmp_path / "s.zarr"), mode="a")["data"]
+        arr.resize((14, 6, 10, 10))  # two steps appended by a running simulation
+        with pytest.raises(StoreChangedError, match="now has shape"):
+            wm.get([1, 2])
