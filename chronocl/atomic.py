@@ -32,16 +32,20 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
     """Yield a temporary sibling directory that replaces `path` when the block succeeds."""
     target = check_output(path, overwrite)
     target.parent.mkdir(parents=True, exist_ok=True)
-    tag = uuid.uuid4().hex[:8]
-    tmp = target.parent / f".{target.name}.partial-{tag}"
+    tmp = target.parent / f".{target.name}.partial-{uuid.uuid4().hex[:8]}"
     try:
         yield tmp
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    commit_directory(tmp, target)
+
+
+def commit_directory(tmp: Path, target: Path) -> None:
+    """Move the finished directory `tmp` to `target`, replacing whatever is there."""
     if target.exists():
         # Directories cannot be replaced in one rename: move the old one aside first.
-        old = target.parent / f".{target.name}.old-{tag}"
+        old = target.parent / f".{target.name}.old-{uuid.uuid4().hex[:8]}"
         os.replace(target, old)
         os.replace(tmp, target)
         if old.is_dir():

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+import contextlib
+import time
+from collections.abc import Callable, Iterable, Iterator
 from typing import TypeVar
 
 from rich.console import Console
@@ -37,3 +39,38 @@ def track(items: Iterable[T], total: int, description: str, enabled: bool) -> It
             yield item
             speed = bar.tasks[0].speed
             bar.update(task, advance=1, rate=f"{speed:.1f}/s" if speed else "")
+
+
+@contextlib.contextmanager
+def meter(
+    total: int, description: str, enabled: bool, done: int = 0, unit: str = "slabs"
+) -> Iterator[Callable[[int], None]]:
+    """Yield `advance(nbytes)`: one call per finished item, showing items/s and MB/s of data.
+
+    `done` items were finished before (a resumed run); rates count only this run's items.
+    """
+    if not enabled:
+        yield lambda nbytes=0: None
+        return
+    columns = (
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[rate]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    start, count, moved = time.perf_counter(), 0, 0
+
+    with Progress(*columns, console=Console(stderr=True), transient=False) as bar:
+        task = bar.add_task(description, total=total, completed=done, rate="")
+
+        def advance(nbytes: int = 0) -> None:
+            nonlocal count, moved
+            count += 1
+            moved += nbytes
+            dt = max(time.perf_counter() - start, 1e-9)
+            rate = f"{count / dt:.2f} {unit}/s, {moved / dt / 1e6:.0f} MB/s"
+            bar.update(task, advance=1, rate=rate)
+
+        yield advance

@@ -1,0 +1,261 @@
+"""Streaming integration (chronocl.streaming): slabs from the store into a chronovolume store.
+
+Streamed output must be the bytes `chronocl.integrate` gives in memory, for every mode and
+any slab split; peak memory must follow the budget, not the data; an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tracemalloc
+
+import numpy as np
+import pytest
+import zarr
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import chronocl
+import chronocl.streaming as streaming
+from chronocl.data.series import write_series
+from chronocl.errors import InvalidParameterError, OutputExistsError
+from chronocl.integrate import prepare
+from chronocl.streaming import integrate_to_store, partial_path
+
+# (mode, integration arguments): every mode, enhancement across slab boundaries, both
+# additive normalisations, an importance order.
+CASES = {
+    "alpha-silhouette": ("alpha", {"enhance": "silhouette", "time_tf": "warm-cool"}),
+    "alpha-backward": ("alpha", {"order": "backward"}),
+    "first_hit": ("first_hit", {"threshold": 0.15, "order": (4, 0, 2, 6)}),
+    "additive-time": ("additive", {}),
+    "additive-max": ("additive", {"normalize": "max", "enhance": "edge"}),
+    "max": ("max", {}),
+    "min-edge": ("min", {"enhance": "edge"}),
+}
+WINDOW = "0:7:2"
+
+
+@pytest.fixture(scope="module")
+def odd_store(tmp_path_factory):
+    """7 steps of an odd 13 x 11 x 19 volume (Z, Y, X): no size divides another."""
+    rng = np.random.default_rng(7)
+    data = rng.random((7, 13, 11, 19), dtype=np.float32)
+    data[:, 4:9] *= np.linspace(0.2, 1.0, 19, dtype=np.float32)  # some structure to enhance
+    path = tmp_path_factory.mktemp("odd") / "odd.zarr"
+    return write_series(path, iter(data), n_steps=7, volume_shape=data.shape[1:], dtype="float32")
+
+
+@pytest.fixture(scope="module")
+def references(odd_store):
+    cache: dict = {}
+
+    def get(engine: str, case: str) -> chronocl.Chronovolume:
+        if (engine, case) not in cache:
+            mode, args = CASES[case]
+            cache[engine, case] = chronocl.integrate(odd_store, WINDOW, mode, engine=engine, **args)
+        return cache[engine, case]
+
+    return get
+
+
+def assert_same_bytes(path, ref: chronocl.Chronovolume) -> None:
+    cv = chronocl.Chronovolume.load(path)
+    assert cv.rgba.dtype == np.float32 and cv.rgba.tobytes() == ref.rgba.tobytes()
+    if ref.t_index is None:
+        assert cv.t_index is None
+    else:
+        assert cv.t_index.tobytes() == ref.t_index.tobytes()
+    assert cv.metadata == json.loads(json.dumps(ref.metadata))  # as stored: lists, not tuples
+    assert cv.steps == ref.steps
+
+
+@pytest.mark.parametrize("engine", ["numpy", "opencl"])
+@pytest.mark.parametrize("case", list(CASES))
+def test_streamed_equals_in_memory(tmp_path, odd_store, references, engine, case):
+    mode, args = CASES[case]
+    out = integrate_to_store(
+        odd_store, WINDOW, tmp_path / "cv.zarr", mode=mode, engine=engine, slab=3, **args
+    )
+    assert_same_bytes(out, references(engine, case))
+    assert not partial_path(out).exists()  # committed: nothing left behind
+
+
+@settings(max_examples=12)
+@given(
+    slab=st.integers(1, 13),
+    engine=st.sampled_from(["numpy", "opencl"]),
+    case=st.sampled_from(["alpha-silhouette", "additive-max", "max", "min-edge"]),
+)
+def test_any_slab_split_gives_the_same_bytes(
+    tmp_path_factory, odd_store, references, slab, engine, case
+):
+    mode, args = CASES[case]
+    out = tmp_path_factory.mktemp("split") / "cv.zarr"
+    integrate_to_store(odd_store, WINDOW, out, mode=mode, engine=engine, slab=slab, **args)
+    assert_same_bytes(out, references(engine, case))
+    group = zarr.open_group(str(out), mode="r")
+    assert group["rgba"].chunks[0] <= slab  # slabs are whole chunks
+    assert "rgba_raw" not in group
+
+
+def test_in_memory_series_streams_too(tmp_path):
+    data = np.random.default_rng(1).random((4, 9, 5, 6)).astype(np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    out = integrate_to_store(series, None, tmp_path / "a.zarr", mode="alpha", slab=2)
+    assert_same_bytes(out, chronocl.integrate(series, None, "alpha"))
+
+
+def test_peak_memory_follows_the_budget(tmp_path):
+    """~200 MB of data through a 50 MB budget: tracemalloc's peak stays within budget + 25 %."""
+    steps, shape = 50, (64, 128, 128)  # 4 MB per step, 200 MB in all
+    rng = np.random.default_rng(3)
+    series = write_series(
+        tmp_path / "big.zarr",
+        (rng.random(shape, dtype=np.float32) for _ in range(steps)),
+        n_steps=steps,
+        volume_shape=shape,
+        dtype="float32",
+        chunk_bytes=4 * 128 * 128 * 4,  # 4-row chunks: a slab decodes little beyond itself
+    )
+    budget = 50_000_000
+    assert steps * np.prod(shape) * 4 >= 4 * budget
+    job = prepare(series, None, "alpha", None, {})
+    assert not streaming.fits_in_memory(job, budget)
+    chronocl.engine.get_engine("opencl")  # the device context is not the integration's memory
+    tracemalloc.start()
+    try:
+        out = integrate_to_store(series, None, tmp_path / "cv.zarr", mode="alpha", memory=budget)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak <= 1.25 * budget, f"peak {peak / 1e6:.1f} MB for a {budget / 1e6:.0f} MB budget"
+    cv = chronocl.Chronovolume.load(out)
+    assert cv.shape == shape
+    # Spot check the first slab boundary against the in-memory integration of those rows.
+    z = streaming.plan_slabs(job, budget, "opencl").slab_rows
+    assert 2 <= z < shape[0] - 2
+    sub = chronocl.TimeSeries.from_array(series.read(range(steps), z - 2, z + 2))
+    sub.stats = series.stats  # the whole series' value range
+    ref = chronocl.integrate(sub, None, "alpha")
+    assert cv.rgba[z - 2 : z + 2].tobytes() == ref.rgba.tobytes()
+
+
+def test_budget_below_one_row_names_the_minimum(odd_store, tmp_path):
+    with pytest.raises(InvalidParameterError, match=r"use --memory \d+MB or more") as info:
+        integrate_to_store(odd_store, None, tmp_path / "cv.zarr", mode="alpha", memory="100kB")
+    need = int(str(info.value).split("--memory ")[1].split("MB")[0])
+    # The named budget works.
+    integrate_to_store(odd_store, None, tmp_path / "cv.zarr", memory=f"{need}MB")
+    assert not (tmp_path / "cv.zarr.partial-run").exists()
+
+
+def test_streamed_output_must_be_chronocl_zarr(odd_store, tmp_path):
+    for name in ("cv.vti", "cv.ome.zarr"):
+        with pytest.raises(InvalidParameterError, match=r"must be a chronocl \.zarr"):
+            integrate_to_store(odd_store, None, tmp_path / name)
+    (tmp_path / "there.zarr").mkdir()
+    with pytest.raises(OutputExistsError):
+        integrate_to_store(odd_store, None, tmp_path / "there.zarr")
+
+
+def test_interrupted_run_resumes_and_skips_finished_slabs(
+    tmp_path, odd_store, references, monkeypatch
+):
+    mode, args = CASES["additive-max"]
+    out = tmp_path / "cv.zarr"
+    written: list[int] = []
+    real = streaming.write_slab
+
+    def failing(group, job, slab, *rest):
+        if len(written) == 3:
+            raise RuntimeError("injected failure")
+        written.append(slab.z0)
+        return real(group, job, slab, *rest)
+
+    monkeypatch.setattr(streaming, "write_slab", failing)
+    with pytest.raises(RuntimeError, match="injected"):
+        integrate_to_store(odd_store, WINDOW, out, mode=mode, slab=2, **args)
+    assert not out.exists()
+    markers = sorted((partial_path(out) / streaming.RUN_DIR).glob("slab-*.json"))
+    assert len(markers) == 3
+
+    resumed: list[int] = []
+
+    def counting(group, job, slab, *rest):
+        resumed.append(slab.z0)
+        return real(group, job, slab, *rest)
+
+    monkeypatch.setattr(streaming, "write_slab", counting)
+    integrate_to_store(odd_store, WINDOW, out, mode=mode, slab=2, **args)
+    assert sorted(resumed) == [z for z in range(0, 13, 2) if z not in written]
+    assert_same_bytes(out, references("opencl", "additive-max"))
+    assert not partial_path(out).exists()
+
+
+def test_a_different_run_does_not_reuse_markers(tmp_path, odd_store, references, monkeypatch):
+    out = tmp_path / "cv.zarr"
+    real = streaming.write_slab
+    calls: list[int] = []
+
+    def failing(group, job, slab, *rest):
+        calls.append(slab.z0)
+        if len(calls) >= 4:
+            raise RuntimeError("injected failure")
+        return real(group, job, slab, *rest)
+
+    monkeypatch.setattr(streaming, "write_slab", failing)
+    with pytest.raises(RuntimeError):
+        integrate_to_store(odd_store, WINDOW, out, mode="max", slab=2)
+    calls.clear()
+    monkeypatch.setattr(streaming, "write_slab", lambda *a: calls.append(a[2].z0) or real(*a))
+    mode, args = CASES["alpha-silhouette"]
+    integrate_to_store(odd_store, WINDOW, out, mode=mode, slab=2, **args)
+    assert len(calls) == 7  # every slab integrated again: the markers were another run's
+    assert_same_bytes(out, references("opencl", "alpha-silhouette"))
+
+
+def cli(*args) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "chronocl", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def test_cli_streams_when_the_window_exceeds_memory(tmp_path, odd_store, references):
+    job = prepare(odd_store, WINDOW, "alpha", None, {})
+    small = streaming.slab_bytes(job, 4, "opencl")
+    assert not streaming.fits_in_memory(job, small)
+    out = tmp_path / "cv.zarr"
+    result = cli(
+        "integrate",
+        odd_store.path,
+        out,
+        "--mode",
+        "alpha",
+        "--window",
+        WINDOW,
+        "--enhance",
+        "silhouette",
+        "--time-tf",
+        "warm-cool",
+        "--memory",
+        str(small),
+    )
+    assert result.returncode == 0, result.stderr
+    assert "streamed" in result.stderr
+    assert_same_bytes(out, references("opencl", "alpha-silhouette"))
+
+    # Too small a budget: one line, exit 2.
+    bad = cli("integrate", odd_store.path, tmp_path / "b.zarr", "--memory", "10kB")
+    assert bad.returncode == 2, bad.stderr
+    lines = [line for line in bad.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "use --memory" in lines[0] and "Traceback" not in bad.stderr
+    # A .vti cannot stream: one line, exit 2.
+    vti = cli("integrate", odd_store.path, tmp_path / "b.vti", "--memory", str(small))
+    assert vti.returncode == 2 and "write a .zarr" in vti.stderr
+    assert len([line for line in vti.stderr.splitlines() if line.strip()]) == 1
