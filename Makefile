@@ -26,6 +26,13 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check .
 
 test: lint
+	@# The viewer's browser tests drive Debian's chromium (no Playwright browser download).
+	@if [ ! -x /usr/bin/chromium ]; then \
+		if command -v apt-get >/dev/null; then \
+			SUDO=$$([ "$$(id -u)" = 0 ] || echo sudo); \
+			$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq chromium; \
+		else echo "warning: /usr/bin/chromium missing; the browser tests will be skipped"; fi; \
+	fi
 	$(BIN)/python -m pytest -q
 
 format: $(STAMP)

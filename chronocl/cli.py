@@ -39,6 +39,8 @@ Examples:
 
   chronocl demo --out demo-out
 
+  chronocl view vortex.zarr jet.zarr
+
   chronocl devices
 """,
     no_args_is_help=True,
@@ -242,41 +244,119 @@ def integrate(
     normalize: NormalizeOpt = "time",
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
+    memory: Annotated[
+        str,
+        typer.Option(help="Memory budget; larger windows stream z-slabs into a .zarr OUT."),
+    ] = "2GB",
+    scheduler: Annotated[
+        str | None,
+        typer.Option(help="dask scheduler address (tcp://host:8786): one task per z-slab."),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(help="Start a local dask cluster of N worker processes (spawned)."),
+    ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
 ) -> None:
     """Integrate a window of time steps into a chronovolume store.
+
+    A window too large for --memory is streamed slab by slab into a .zarr OUT; with
+    --scheduler or --workers the slabs run on a dask cluster. An interrupted streamed run
+    resumes when run again with the same arguments.
 
     Examples:
 
       chronocl integrate vortex.zarr a.zarr --mode alpha --window 0:30:10
 
       chronocl integrate jet.zarr m.zarr --mode max --window 0:10 --order backward
+
+      chronocl integrate big.zarr a.zarr --memory 4GB --workers 2
     """
     from .atomic import check_output
+    from .budget import parse_memory
     from .data.series import open_series
     from .integrate import integrate as run
+    from .integrate import prepare
     from .outputs import output_kind, save_chronovolume
+    from .streaming import fits_in_memory
 
     check_output(out_path, overwrite)
-    output_kind(out_path)
+    kind = output_kind(out_path)
+    budget = parse_memory(memory)
     series = open_series(store)
-    t0 = time.perf_counter()
-    cv = run(
-        series,
-        window,
-        mode,
+    spec_args = dict(
         tf=tf,
         time_tf=time_tf,
         order=_parse_order(order),
         enhance=enhance,
         threshold=threshold,
         normalize=normalize,
-        engine=engine,
-        device=device,
-        progress=True,
     )
+    t0 = time.perf_counter()
+    job = prepare(series, window, mode, None, spec_args)
+    if scheduler or workers or not fits_in_memory(job, budget, engine):
+        if kind != ".zarr" and not (scheduler or workers):
+            raise InvalidParameterError(
+                f"this window needs more than --memory {memory} in memory; write a .zarr "
+                "OUT (streamed slab by slab) and convert it, or give a larger --memory"
+            )
+        _integrate_streaming(
+            series,
+            window,
+            out_path,
+            mode,
+            spec_args,
+            budget,
+            engine,
+            device,
+            scheduler,
+            workers,
+            overwrite,
+        )
+        err.print(f"wrote {out_path} ({mode}, streamed) in {time.perf_counter() - t0:.2f} s")
+        return
+    cv = run(series, window, mode, engine=engine, device=device, progress=True, **spec_args)
     save_chronovolume(cv, out_path, overwrite=overwrite)
     err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {time.perf_counter() - t0:.2f} s")
+
+
+def _integrate_streaming(
+    series,
+    window,
+    out_path,
+    mode,
+    spec_args,
+    budget,
+    engine,
+    device,
+    scheduler,
+    workers,
+    overwrite,
+) -> None:
+    """integrate_to_store locally, or on a dask cluster; resume notes go to stderr."""
+    import logging
+
+    from .streaming import integrate_to_store
+
+    log = logging.getLogger("chronocl")
+    if not log.handlers:
+        handler = logging.StreamHandler()
+        handler.setFormatter(logging.Formatter("chronocl: %(message)s"))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+    args = dict(mode=mode, memory=budget, engine=engine, device=device, overwrite=overwrite)
+    if not (scheduler or workers):
+        integrate_to_store(series, window, out_path, progress=True, **args, **spec_args)
+        return
+    from .distributed import connect, dashboard_link
+
+    with connect(scheduler, workers) as client:
+        link = dashboard_link(client)
+        if link:
+            err.print(f"dask dashboard: {link}", highlight=False)
+        integrate_to_store(
+            series, window, out_path, client=client, progress=True, **args, **spec_args
+        )
 
 
 def _parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
@@ -488,6 +568,53 @@ def export(
         progress=True,
     )
     err.print(f"wrote {len(paths)} file(s) under {out_path}")
+
+
+@app.command()
+def view(
+    stores: Annotated[list[Path], typer.Argument(help="Series store(s) to offer in the viewer.")],
+    host: Annotated[
+        str, typer.Option(help="Interface to listen on; other than 127.0.0.1 exposes the data.")
+    ] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port to listen on (0: a free one).")] = 0,
+    browser: Annotated[
+        bool, typer.Option("--browser/--no-browser", help="Open the page in a browser.")
+    ] = True,
+    engine: EngineOpt = "opencl",
+    device: DeviceOpt = None,
+    memory: Annotated[
+        str | None, typer.Option(help="Memory budget of each view's window (e.g. 2GB).")
+    ] = None,
+) -> None:
+    """Interactive viewer in the browser, rendered here (OpenCL + EGL) and streamed as frames.
+
+    Prints http://127.0.0.1:PORT/?token=TOKEN: the page, its assets and its socket all need
+    the token. From another machine, forward the port: ssh -L PORT:127.0.0.1:PORT host.
+
+    Examples:
+
+      chronocl view vortex.zarr jet.zarr
+
+      chronocl view vortex.zarr --port 8765 --no-browser
+    """
+    from .viewer import serve
+
+    try:
+        import starlette  # noqa: F401
+        import uvicorn  # noqa: F401
+    except ImportError as exc:
+        raise InvalidParameterError(
+            f"the viewer needs {exc.name}; pip install 'starlette' 'uvicorn[standard]'"
+        ) from None
+    serve(
+        stores,
+        host=host,
+        port=port,
+        open_browser=browser,
+        engine=engine,
+        device=device,
+        memory=memory,
+    )
 
 
 @app.command()

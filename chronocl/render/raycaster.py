@@ -50,8 +50,9 @@ class Volume:
 class Raycaster:
     """Renders uploaded chronovolumes on the process's GL context."""
 
-    def __init__(self) -> None:
-        self.ctx = gl_context()
+    def __init__(self, ctx=None) -> None:
+        """On the process's context, or on `ctx` (a context current in the calling thread)."""
+        self.ctx = gl_context() if ctx is None else ctx
         self.prog = program(self.ctx, "raycast")
         self.vao = self.ctx.vertex_array(self.prog, [])
         self.outline_prog = program(self.ctx, "outline")

@@ -1,0 +1,367 @@
+"""The viewer server without a browser: token, origin, protocol errors, frames, probe, downloads,
+and many clients scrubbing at once with flat memory."""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("websockets")
+
+from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
+
+from .viewer_helpers import Client, make_stores, start_server
+
+SCRUB_SECONDS = float(os.environ.get("CHRONOCL_VIEWER_SCRUB_S", "30"))
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    # As after other tests: the process's GL context is current in this (the main) thread.
+    from chronocl.render.views import raycaster
+
+    raycaster()
+    stores = make_stores(tmp_path_factory.mktemp("viewer"))
+    srv = start_server(stores)
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture
+def client(server):
+    c = Client(server)
+    yield c
+    c.close()
+
+
+def get(url: str, headers: dict | None = None):
+    req = urllib.request.Request(url, headers=headers or {})
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, r.read(), r.headers
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read(), exc.headers
+
+
+# --------------------------------------------------------------------------- access
+
+
+def test_page_and_assets_need_the_token(server):
+    status, body, _ = get(f"{server.base}/")
+    assert status == 403 and b"token" in body
+    assert get(f"{server.base}/static/app.js")[0] == 403
+    assert get(f"{server.base}/?token=wrong")[0] == 403
+
+    status, body, headers = get(server.url)
+    assert status == 200 and b'<canvas id="timeline"' in body
+    cookie = headers["set-cookie"]
+    assert server.token in cookie and "HttpOnly" in cookie and "SameSite=Strict" in cookie
+    assert "default-src 'none'" in headers["content-security-policy"]
+
+    name_value = cookie.split(";")[0]
+    for asset in ("app.js", "style.css"):
+        assert get(f"{server.base}/static/{asset}", {"Cookie": name_value})[0] == 200
+    assert get(f"{server.base}/static/app.js", {"X-Chronocl-Token": server.token})[0] == 200
+    bearer = {"Authorization": f"Bearer {server.token}"}
+    assert get(f"{server.base}/static/style.css", bearer)[0] == 200
+    # Only the shipped files are served: no paths, no traversal.
+    assert get(f"{server.base}/static/..%2Fserver.py", bearer)[0] == 404
+    assert get(f"{server.base}/static/server.py", bearer)[0] == 404
+
+
+def test_socket_needs_the_token_and_the_servers_origin(server):
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    with pytest.raises(InvalidStatus) as exc:
+        connect(f"ws://127.0.0.1:{server.port}/ws")
+    assert exc.value.response.status_code == 403
+    with pytest.raises(InvalidStatus):
+        connect(f"ws://127.0.0.1:{server.port}/ws?token=nope")
+    with pytest.raises(InvalidStatus):
+        connect(
+            f"ws://127.0.0.1:{server.port}/ws?token={server.token}",
+            origin="http://evil.example",
+        )
+    ok = Client(server, origin=f"http://127.0.0.1:{server.port}")
+    assert [d["name"] for d in ok.info["datasets"]] == ["vortex", "jet"]
+    ok.close()
+
+
+# --------------------------------------------------------------------------- protocol errors
+
+
+BAD_MESSAGES = [
+    ("not json", "not valid JSON"),
+    ("[1, 2]", "JSON object"),
+    ('{"type": "launch"}', "unknown message type"),
+    ('{"type": "update", "colour": "red"}', "unknown field 'colour'"),
+    ('{"type": "update", "camera": {"zoom": 1e9}}', "camera.zoom"),
+    ('{"type": "update", "camera": {"zoom": NaN}}', "NaN"),
+    ('{"type": "update", "camera": {"elevation": "high"}}', "must be a number"),
+    ('{"type": "update", "views": []}', "update.views has 0 entries"),
+    ('{"type": "update", "views": [{"mode": "sum"}]}', "mode"),
+    ('{"type": "update", "size": [10, 10]}', "size[0]"),
+    ('{"type": "update", "window": {"t0": 3, "t1": 99}}', "outside the series"),
+    ('{"type": "update", "window": {"t0": -1, "t1": 4}}', "window.t0"),
+    ('{"type": "update", "data_tf": {"points": [[0.5,1,1,1,1],[0.2,1,1,1,1]]}}', "sorted"),
+    ('{"type": "update", "data_tf": {"points": [[0,1,1,1,2]]}}', "points[0][4]"),
+    ('{"type": "update", "clip": {"normal": [0, 0, 0]}}', "direction"),
+    ('{"type": "open", "dataset": "../../etc/passwd"}', "unknown data set"),
+    ('{"type": "open", "dataset": 7}', "unknown data set"),
+    ('{"type": "probe", "view": 9, "x": 0.5, "y": 0.5}', "probe.view"),
+    ('{"type": "histogram", "range": [0.6, 0.2]}', "lo < hi"),
+    ('{"type": "save", "what": "/etc/passwd"}', "save.what"),
+]
+
+
+def test_bad_messages_get_an_error_reply_and_the_server_keeps_serving(client):
+    client.open()
+    for text, expected in BAD_MESSAGES:
+        client.send_raw(text)
+        _, reply = client.wait("error", timeout=30)
+        assert expected in reply["message"], (text, reply)
+    # With an id, the error names the request.
+    client.send_raw('{"type": "update", "id": 4242, "threshold": 5}')
+    assert client.wait("error", timeout=30)[1]["id"] == 4242
+    # Oversized and binary messages too.
+    client.send_raw(json.dumps({"type": "update", "pad": "x" * (MAX_MESSAGE_BYTES + 10)}))
+    assert "over the limit" in client.wait("error", timeout=30)[1]["message"]
+    client.send_raw(b"\x00\x01binary")
+    assert "binary" in client.wait("error", timeout=30)[1]["message"]
+    # Still serving, and nothing of the bad messages was applied.
+    rid = client.send({"type": "update", "camera": {"azimuth": 80.0}})
+    _, header, images = client.frame_for(rid)
+    assert header["id"] == rid and images[0][:2] == b"\xff\xd8"  # JPEG
+    assert [e["step"] for e in header["legend"]] == list(range(1, 11))
+
+
+def test_state_frames_and_incremental_slides(client):
+    ds, (_, header, images) = client.open(0, size=(96, 96))
+    assert ds["name"] == "vortex" and len(ds["step_mean"]) == 12
+    assert ds["state"]["window"] == {"t0": 1, "t1": 11, "stride": 1}
+    assert header["views"][0]["width"] == 96 and len(images) == 1
+    for key in ("integrate_ms", "upload_ms", "render_ms", "encode_ms", "server_ms"):
+        assert header["timings"][key] >= 0
+
+    rid = client.send({"type": "update", "views": [{"mode": "alpha"}, {"mode": "max"}]})
+    _, header, images = client.frame_for(rid)
+    assert len(images) == 2 and images[0] != images[1]
+    assert header["views"][1]["label"].startswith("max, forward, steps 1:11")
+
+    # A camera change only re-renders: no integration.
+    rid = client.send({"type": "update", "camera": {"azimuth": 100.0}})
+    _, header, moved = client.frame_for(rid)
+    assert header["timings"]["integrate_ms"] == 0 and moved[0] != images[0]
+
+    # The same state renders the same pixels (the jitter is a fixed per-pixel pattern).
+    rid = client.send({"type": "update", "camera": {"azimuth": 30.0}})
+    _, _, again = client.frame_for(rid)
+    assert again[0] == images[0]
+
+    # Sliding keeps width and stride: the session slides; the legend follows the window.
+    rid = client.send({"type": "update", "window": {"t0": 2, "t1": 12, "stride": 1}})
+    _, header, slid = client.frame_for(rid)
+    assert [e["step"] for e in header["legend"]] == list(range(2, 12))
+    assert slid[0] != images[0]
+
+    # Preview frames are smaller.
+    rid = client.send({"type": "update", "camera": {"azimuth": 50.0}, "quality": "preview"})
+    _, header, _ = client.frame_for(rid)
+    assert header["quality"] == "preview" and header["views"][0]["width"] == 48
+
+
+def test_newest_request_wins(client):
+    client.open(0, size=(128, 128))
+    last = 0
+    for k in range(30):
+        last = client.send({"type": "update", "camera": {"azimuth": 3.0 * k}})
+    frames = []
+    while True:
+        got = client.recv(60)
+        if got[0] == "frame":
+            frames.append(got[1]["id"])
+            if got[1]["id"] == last:
+                break
+    # Requests that arrived while a frame was being made were replaced, not queued.
+    assert frames[-1] == last and len(frames) < 30
+    assert frames == sorted(frames)
+
+
+def test_probe_finds_a_voxel_and_its_curve(client):
+    client.open(0, size=(128, 128))
+    rid = client.send({"type": "probe", "view": 0, "x": 0.5, "y": 0.5})
+    _, reply = client.wait("probe", rid)
+    assert len(reply["values"]) == 12 and reply["window"] == list(range(1, 11))
+    v = reply["voxel"]
+    assert all(0 <= v[a] < 32 for a in "xyz")
+    assert max(reply["values"]) > 0
+    # A corner ray misses the (empty) border.
+    rid = client.send({"type": "probe", "view": 0, "x": 0.0, "y": 0.0})
+    _, reply = client.wait("probe", rid)
+    assert reply["voxel"] is None and reply["values"] is None
+
+
+def test_histogram_switch_dataset_and_downloads(server, client):
+    client.open(0)
+    rid = client.send({"type": "histogram", "range": [0.25, 0.75]})
+    _, hist = client.wait("histogram", rid)
+    assert hist["range"] == [0.25, 0.75] and len(hist["counts"]) == 128
+
+    ds, _ = client.open("jet")
+    assert ds["name"] == "jet" and ds["shape"] == {"t": 10, "z": 24, "y": 24, "x": 32}
+
+    rid = client.send({"type": "save", "what": "image"})
+    _, dl = client.wait("download", rid)
+    assert dl["filename"].startswith("jet-") and dl["filename"].endswith(".png")
+    auth = {"X-Chronocl-Token": server.token}
+    status, body, _ = get(server.base + dl["url"], auth)
+    assert status == 200 and body[:8] == b"\x89PNG\r\n\x1a\n"
+    assert get(server.base + dl["url"])[0] == 403
+
+    rid = client.send({"type": "save", "what": "chronovolume", "view": 0})
+    _, dl = client.wait("download", rid)
+    status, body, _ = get(server.base + dl["url"], auth)
+    assert status == 200 and body[:2] == b"PK"
+    import io
+    import zipfile
+
+    names = zipfile.ZipFile(io.BytesIO(body)).namelist()
+    assert "zarr.json" in names and any(n.startswith("rgba/") for n in names)
+
+
+# --------------------------------------------------------------------------- load
+
+
+def test_many_clients_scrubbing_get_frames_and_memory_stays_flat(server):
+    """10 clients slide their windows back and forth and orbit for SCRUB_SECONDS."""
+    psutil = pytest.importorskip("psutil")
+    n_clients, duration = 10, SCRUB_SECONDS
+    proc = psutil.Process()
+    stop = threading.Event()
+    results: list[dict] = [{} for _ in range(n_clients)]
+
+    def scrub(i: int) -> None:
+        r = results[i]
+        r.update(frames=0, errors=[], failure=None)
+        try:
+            c = Client(server)
+            c.open(i % 2, size=(96, 96))
+            n = 12 if i % 2 == 0 else 10
+            t0, step = 0, 1
+            while not stop.is_set():
+                if not 0 <= t0 + step <= n - 6:
+                    step = -step
+                t0 += step
+                c.send({"type": "update", "window": {"t0": t0, "t1": t0 + 6, "stride": 1}})
+                rid = c.send({"type": "update", "camera": {"azimuth": 7.0 * t0 + i}})
+                c.frame_for(rid, errors=r["errors"])
+                r["frames"] += 1
+            c.close()
+        except Exception as exc:  # reported below
+            r["failure"] = repr(exc)
+
+    threads = [threading.Thread(target=scrub, args=(i,)) for i in range(n_clients)]
+    for t in threads:
+        t.start()
+    start = time.monotonic()
+    samples = []
+    warm = duration / 3
+    while time.monotonic() - start < duration:
+        time.sleep(0.5)
+        if time.monotonic() - start >= warm:
+            samples.append(proc.memory_info().rss)
+    stop.set()
+    for t in threads:
+        t.join(120)
+    for r in results:
+        assert r["failure"] is None, r["failure"]
+        assert r["errors"] == []
+        assert r["frames"] >= 3
+    growth = (max(samples) - samples[0]) / 2**20
+    print(f"frames per client {[r['frames'] for r in results]}, RSS growth {growth:.1f} MB")
+    assert growth < 120, f"RSS grew by {growth:.0f} MB after warm-up"
+
+
+def test_probe_ray_matches_a_known_block():
+    """The CPU march finds the front face of an opaque block on the axis view."""
+    from chronocl.chronovolume import Chronovolume
+    from chronocl.render.camera import Camera
+    from chronocl.viewer.state import probe_ray
+
+    rgba = np.zeros((20, 20, 20, 4), np.float32)
+    rgba[5:15, 8:12, 8:12] = 0.9  # z 5..14
+    cv = Chronovolume(rgba, metadata={"spacing": {"x": 1.0, "y": 1.0, "z": 1.0}})
+    cam = Camera(azimuth=0.0, elevation=0.0, projection="orthographic", zoom=1.0)
+    hit = probe_ray(cv, cam, (200, 200), 0.5, 0.5)
+    assert hit["reached"] and hit["voxel"] == (14, 10, 10)  # the face nearest the eye (+z)
+    behind = Camera(azimuth=180.0, elevation=0.0, projection="orthographic")
+    assert probe_ray(cv, behind, (200, 200), 0.5, 0.5)["voxel"] == (5, 10, 10)
+    # The slicing plane keeps z <= centre only: the hit moves to the plane.
+    cut = probe_ray(cv, cam, (200, 200), 0.5, 0.5, clip=(0, 0, -1, 0.0))
+    assert cut["voxel"][0] == 9
+    assert probe_ray(cv, cam, (200, 200), 0.02, 0.5)["voxel"] is None
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def test_cli_serves_and_prints_the_url(tmp_path_factory):
+    import re
+    import subprocess
+    import sys
+
+    store = make_stores(tmp_path_factory.mktemp("viewer-cli"))[0]
+    cmd = [sys.executable, "-m", "chronocl", "view", str(store), "--no-browser"]
+    proc = subprocess.Popen(
+        [*cmd, "--host", "0.0.0.0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        line = proc.stdout.readline()
+        m = re.search(r"http://0\.0\.0\.0:(\d+)/\?token=([\w-]+)", line)
+        assert m, line
+        port, token = m.groups()
+        status, body, _ = get(f"http://127.0.0.1:{port}/?token={token}")
+        assert status == 200 and b"chronocl viewer" in body
+        assert get(f"http://127.0.0.1:{port}/")[0] == 403
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=30)
+    assert "warning: serving on 0.0.0.0" in err
+
+    done = subprocess.run(
+        [sys.executable, "-m", "chronocl", "view", str(store) + "-missing", "--no-browser"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and "does not exist" in done.stderr
+
+
+def test_the_page_ships_in_the_wheel(tmp_path):
+    """hatch must carry static/ (HTML, JS, CSS) into the wheel, beside the modules."""
+    import subprocess
+    import sys
+    import zipfile
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    pip = [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation"]
+    subprocess.run(
+        [*pip, "-w", str(tmp_path), str(root)],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    names = zipfile.ZipFile(next(tmp_path.glob("chronocl-*.whl"))).namelist()
+    for name in ("index.html", "app.js", "style.css"):
+        assert f"chronocl/viewer/static/{name}" in names

@@ -1,0 +1,110 @@
+"""Shared pieces of the viewer tests: small stores, a server on a thread, a socket client."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from chronocl.data import synthetic
+from chronocl.data.series import TimeSeries
+from chronocl.viewer.protocol import unpack_frame
+from chronocl.viewer.server import ViewerServer
+
+BROWSER_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+]
+CHROMIUM = "/usr/bin/chromium"
+
+
+def make_stores(root: Path) -> list[Path]:
+    """A 32^3 vortex of 12 steps and a 32x24x24 jet of 10 steps, as chronocl stores."""
+    import numpy as np
+
+    out = []
+    for name, steps, shape in (("vortex", 12, (32, 32, 32)), ("jet", 10, (24, 24, 32))):
+        data = np.stack(list(synthetic.steps(name, steps, shape)))
+        path = root / f"{name}.zarr"
+        TimeSeries.from_array(data, source=name).save(path)
+        out.append(path)
+    return out
+
+
+def start_server(stores: list[Path]) -> ViewerServer:
+    server = ViewerServer(stores)
+    server.start()
+    return server
+
+
+class Client:
+    """A blocking WebSocket client that speaks the viewer protocol."""
+
+    def __init__(self, server: ViewerServer, **kwargs) -> None:
+        from websockets.sync.client import connect
+
+        self.ws = connect(f"ws://127.0.0.1:{server.port}/ws?token={server.token}", **kwargs)
+        self.next_id = 1
+        self.info = self.recv_json()
+        assert self.info["type"] == "info"
+
+    def send(self, msg: dict) -> int:
+        msg = dict(msg)
+        msg.setdefault("id", self.next_id)
+        self.next_id = max(self.next_id, msg["id"]) + 1
+        self.ws.send(json.dumps(msg))
+        return msg["id"]
+
+    def send_raw(self, data: str | bytes) -> None:
+        self.ws.send(data)
+
+    def recv(self, timeout: float = 60.0):
+        """The next message: ('frame', header, images) or (type, dict)."""
+        m = self.ws.recv(timeout=timeout)
+        if isinstance(m, bytes):
+            header, images = unpack_frame(m)
+            return "frame", header, images
+        d = json.loads(m)
+        return d["type"], d
+
+    def recv_json(self, timeout: float = 60.0) -> dict:
+        return json.loads(self.ws.recv(timeout=timeout))
+
+    def wait(self, kind: str, rid: int | None = None, timeout: float = 60.0, errors=None):
+        """Skip messages until one of `kind` (answering request `rid`, if given) arrives."""
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError(f"no {kind} for request {rid}")
+            got = self.recv(left)
+            if errors is not None and got[0] == "error":
+                errors.append(got[1])
+            if got[0] == kind and (rid is None or got[1].get("id") == rid):
+                return got
+
+    def frame_for(self, rid: int, timeout: float = 60.0, errors=None):
+        """The first frame answering request `rid` or a later one."""
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError(f"no frame for request {rid}")
+            got = self.recv(left)
+            if got[0] == "error":
+                if errors is None:
+                    raise AssertionError(f"error reply: {got[1]}")
+                errors.append(got[1])
+            if got[0] == "frame" and (got[1]["id"] or 0) >= rid:
+                return got
+
+    def open(self, dataset: int | str = 0, size=(128, 128)):
+        rid = self.send({"type": "open", "dataset": dataset})
+        _, ds = self.wait("dataset", rid)
+        rid = self.send({"type": "update", "size": list(size)})
+        return ds, self.frame_for(rid)
+
+    def close(self) -> None:
+        self.ws.close()
