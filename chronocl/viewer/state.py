@@ -34,6 +34,7 @@ import numpy as np
 
 from ..chronovolume import Chronovolume
 from ..data.series import TimeSeries
+from ..data.window import WindowManager
 from ..enhance import Enhance
 from ..errors import ChronoclError, InvalidParameterError, UnknownNameError
 from ..render.camera import Camera
@@ -468,6 +469,8 @@ class ClientWorker:
         self._closed = False
         self._slots: list[ViewSlot] = []
         self._slots_dataset = -1
+        # The views show one window of one data set: their sessions share its resident steps.
+        self._manager: WindowManager | None = None
         self._shown: ViewState | None = None  # the state of the last frame sent
         self._frame = 0
         self.thread = threading.Thread(target=self._run, name="chronocl-view", daemon=True)
@@ -551,6 +554,12 @@ class ClientWorker:
         for s in slots:
             if s.session is not None:
                 s.session.close()
+        self._close_manager()
+
+    def _close_manager(self) -> None:
+        if self._manager is not None:
+            self._manager.close()
+            self._manager = None
 
     def _chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed."""
@@ -560,7 +569,10 @@ class ClientWorker:
                 if s.session is not None:
                     s.session.close()
                     s.session, s.cv = None, None
+            self._close_manager()
             self._slots_dataset = state.dataset
+        if self._manager is None:
+            self._manager = WindowManager(series, self.memory)
         while len(self._slots) < len(state.views):
             self._slots.append(ViewSlot())
         sel = state.selection(series.n_steps)
@@ -597,7 +609,12 @@ class ClientWorker:
             if s is not None:
                 s.close()
             s = slot.session = Session(
-                series, memory=self.memory, engine=self.engine, device=self.device, spec=spec
+                series,
+                memory=self.memory,
+                engine=self.engine,
+                device=self.device,
+                spec=spec,
+                manager=self._manager,
             )
             cv = s.set_window(sel.steps[0], sel.steps[-1] + 1, _stride(sel))
         elif s.spec != spec:
