@@ -308,6 +308,7 @@ class _Slider:
 
     def _agg_leaf(self, step: int) -> Partial:
         full = self._leaf_full(step)
+        self._full.pop(step, None)  # cached only for the push that follows a fixed_add
         if self.spec.mode == "additive":  # only the opacity (a maximum) slides
             alpha = aligned_empty(full.rgba.shape[:-1], np.float32)
             alpha[...] = full.rgba[..., 3]
