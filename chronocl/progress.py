@@ -20,11 +20,8 @@ from rich.progress import (
 T = TypeVar("T")
 
 
-def track(items: Iterable[T], total: int, description: str, enabled: bool) -> Iterator[T]:
-    """Yield `items`, showing a bar with count, rate and time left when `enabled`."""
-    if not enabled:
-        yield from items
-        return
+def _bar() -> Progress:
+    """A bar on stderr with count, a `rate` field, elapsed and remaining time."""
     columns = (
         TextColumn("[bold]{task.description}"),
         BarColumn(),
@@ -33,7 +30,15 @@ def track(items: Iterable[T], total: int, description: str, enabled: bool) -> It
         TimeElapsedColumn(),
         TimeRemainingColumn(),
     )
-    with Progress(*columns, console=Console(stderr=True), transient=False) as bar:
+    return Progress(*columns, console=Console(stderr=True), transient=False)
+
+
+def track(items: Iterable[T], total: int, description: str, enabled: bool) -> Iterator[T]:
+    """Yield `items`, showing a bar with count, rate and time left when `enabled`."""
+    if not enabled:
+        yield from items
+        return
+    with _bar() as bar:
         task = bar.add_task(description, total=total, rate="")
         for item in items:
             yield item
@@ -52,17 +57,9 @@ def meter(
     if not enabled:
         yield lambda nbytes=0: None
         return
-    columns = (
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[rate]}"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-    )
     start, count, moved = time.perf_counter(), 0, 0
 
-    with Progress(*columns, console=Console(stderr=True), transient=False) as bar:
+    with _bar() as bar:
         task = bar.add_task(description, total=total, completed=done, rate="")
 
         def advance(nbytes: int = 0) -> None:

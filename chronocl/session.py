@@ -32,15 +32,13 @@ from .budget import human, parse_memory
 from .chronovolume import Chronovolume
 from .data.series import TimeSeries
 from .data.window import WindowManager
-from .engine import get_engine
+from .engine import FIXED_ONE, get_engine
 from .engine.memory import aligned_empty
 from .integrate import integrate, make_spec, prepare
 from .reference import Partial
 from .selection import Selection, parse_selection
 from .sliding import SlidingAggregate, _block
 from .spec import IntegrationSpec
-
-FIXED_ONE = float(2**40)  # the engines' fixed-point scale of additive colour sums
 
 
 class Session:
@@ -245,8 +243,9 @@ class _Slider:
                 engine.fixed_add(self.acc, self._leaf_full(s).rgba, +1)
                 self._full.pop(s, None)
         old, new = self.selection.steps, selection.steps
-        entering = [s for s in new if s not in set(old)]
-        leaving = [s for s in old if s not in set(new)]
+        old_set, new_set = set(old), set(new)
+        entering = [s for s in new if s not in old_set]
+        leaving = [s for s in old if s not in new_set]
         forward = new[0] > old[0]
         for s in entering if forward else entering[::-1]:
             if additive:

@@ -227,16 +227,7 @@ class OpenCLEngine:
                 kern.set_args(*args, *out_bufs)
                 global_size, local_size = self._launch_shape(count, ny, nz_out)
                 cl.enqueue_nd_range_kernel(queue, kern, global_size, local_size)
-            for a, buf in zip(outputs, out_bufs, strict=True):
-                if self.host_ptr:
-                    # Mapping synchronises the host array (no copy on CPU devices).
-                    mapped, _ = cl.enqueue_map_buffer(
-                        queue, buf, cl.map_flags.READ, 0, a.shape, a.dtype
-                    )
-                    mapped.base.release(queue)
-                else:
-                    cl.enqueue_copy(queue, a, buf)
-            queue.finish()
+            self._read_back(outputs, out_bufs)
         return Partial(rgba, t_index), final
 
     # -- sliding windows: combining partials (kernels/opencl/combine.cl) ----------------------
@@ -276,9 +267,7 @@ class OpenCLEngine:
         """The finished additive RGBA from fixed-point sums, window opacity and norm (3,)."""
         out = aligned_empty((*alpha.shape, 4), np.float32)
         scalars = [np.array([*norm, 0.0], dtype=np.float32)]
-        self._elementwise(
-            "fixed_finalize", alpha.size, {}, [acc, alpha], [out], scalars, scalars_first=False
-        )
+        self._elementwise("fixed_finalize", alpha.size, {}, [acc, alpha], [out], scalars)
         return out
 
     def _elementwise(
@@ -290,12 +279,10 @@ class OpenCLEngine:
         outputs: list[np.ndarray],
         scalars: list = (),
         inout: bool = False,
-        scalars_first: bool = True,
     ) -> None:
         """Run a one-voxel-per-work-item kernel of combine.cl over `n` voxels.
 
-        Argument order is inputs, outputs, scalars (fixed_add: the in-out array first,
-        then inputs, then scalars; fixed_finalize: inputs, scalars, outputs).
+        Kernel arguments are inputs, outputs, scalars; `inout` outputs are read too.
         """
         import pyopencl as cl
 
@@ -309,26 +296,27 @@ class OpenCLEngine:
             outs = [cl.Buffer(ctx, flag | mf.COPY_HOST_PTR, hostbuf=a) for a in outputs]
         else:
             outs = [cl.Buffer(ctx, flag, a.nbytes) for a in outputs]
-        if inout:
-            args = [*outs, *ins, *scalars]
-        elif scalars_first:
-            args = [*ins, *outs, *scalars]
-        else:
-            args = [*ins, *scalars, *outs]
         kern = kernel(self.dc, "combine.cl", function, defines, common=False)
-        queue = self.dc.queue
         with self.dc.lock:
-            kern.set_args(*args)
-            cl.enqueue_nd_range_kernel(queue, kern, (n,), None)
-            for a, buf in zip(outputs, outs, strict=True):
-                if self.host_ptr:
-                    mapped, _ = cl.enqueue_map_buffer(
-                        queue, buf, cl.map_flags.READ, 0, a.shape, a.dtype
-                    )
-                    mapped.base.release(queue)
-                else:
-                    cl.enqueue_copy(queue, a, buf)
-            queue.finish()
+            kern.set_args(*ins, *outs, *scalars)
+            cl.enqueue_nd_range_kernel(self.dc.queue, kern, (n,), None)
+            self._read_back(outputs, outs)
+
+    def _read_back(self, outputs: list[np.ndarray], bufs: list) -> None:
+        """Make the host arrays hold the kernels' results, then wait (the lock is held)."""
+        import pyopencl as cl
+
+        queue = self.dc.queue
+        for a, buf in zip(outputs, bufs, strict=True):
+            if self.host_ptr:
+                # Mapping synchronises the host array (no copy on CPU devices).
+                mapped, _ = cl.enqueue_map_buffer(
+                    queue, buf, cl.map_flags.READ, 0, a.shape, a.dtype
+                )
+                mapped.base.release(queue)
+            else:
+                cl.enqueue_copy(queue, a, buf)
+        queue.finish()
 
     def _launch_shape(self, count: int, ny: int, nz: int):
         """Global and local size for `count` work-items along x."""

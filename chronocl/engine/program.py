@@ -41,8 +41,11 @@ def source(name: str, common: bool = True) -> str:
     return (folder / "common.h").read_text() + "\n" + text if common else text
 
 
-def build(dc, name: str, defines: dict[str, object], text: str | None = None):
-    """The built program for kernel file `name` with -D `defines` on device context `dc`."""
+def build(dc, name: str, defines: dict[str, object], text: str | None = None, common: bool = True):
+    """The built program for kernel file `name` with -D `defines` on device context `dc`.
+
+    `text` replaces the file's source; `common` prepends common.h to the file's source.
+    """
     import pyopencl as cl
 
     options = tuple(
@@ -50,11 +53,11 @@ def build(dc, name: str, defines: dict[str, object], text: str | None = None):
         for key, value in sorted(defines.items())
         if value is not False and value is not None
     )
-    key = (dc.info.index, str(kernel_dir()), name, options, text)
+    key = (dc.info.index, str(kernel_dir()), name, options, text, common)
     with _lock:
         program = _programs.get(key)
         if program is None:
-            src = text if text is not None else source(name)
+            src = text if text is not None else source(name, common)
             try:
                 program = cl.Program(dc.context, src).build(options=list(options))
             except cl.RuntimeError as exc:
@@ -75,7 +78,7 @@ def kernel(dc, name: str, function: str, defines: dict[str, object], common: boo
     """
     import pyopencl as cl
 
-    program = build(dc, name, defines, None if common else source(name, common=False))
+    program = build(dc, name, defines, common=common)
     key = (id(program), function)
     with _lock:
         k = _kernels.get(key)

@@ -59,7 +59,7 @@ __kernel void combine_fmax(__global const float *front, __global const float *ba
 }
 
 /* acc (3 longs per voxel) += sign * fixed(a_k * c_k) of one step's raw additive partial. */
-__kernel void fixed_add(__global long *acc, __global const float4 *step, const int sign)
+__kernel void fixed_add(__global const float4 *step, __global long *acc, const int sign)
 {
     const size_t i = get_global_id(0);
     const float4 s = step[i];
@@ -74,7 +74,7 @@ __kernel void fixed_add(__global long *acc, __global const float4 *step, const i
 /* The finished additive chronovolume: sums / norm per channel (0 where norm is 0), clamped
  * to the window's largest opacity `alpha`, as reference.finalize does. */
 __kernel void fixed_finalize(__global const long *acc, __global const float *alpha,
-                             const float4 norm, __global float4 *out)
+                             __global float4 *out, const float4 norm)
 {
     const size_t i = get_global_id(0);
     const float a = alpha[i];
