@@ -44,6 +44,11 @@ class Selection:
         """W, the number of selected steps."""
         return len(self.steps)
 
+    @property
+    def stride(self) -> int:
+        """Spacing of the first two steps (1 for a single step): what a slide moves by."""
+        return self.steps[1] - self.steps[0] if len(self.steps) > 1 else 1
+
     @classmethod
     def window(cls, t0: int, t1: int, stride: int, n_steps: int) -> Selection:
         """Steps t0, t0+stride, ... below t1."""

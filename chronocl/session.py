@@ -94,7 +94,7 @@ class Session:
         """Move the window by k strides (negative: back in time), clamped at either end."""
         sel = self._require()
         steps = sel.steps
-        stride = _stride(steps)
+        stride = sel.stride
         shift = int(k) * stride
         shift = max(-steps[0], min(shift, self.series.n_steps - 1 - steps[-1]))
         return self._update(Selection(tuple(s + shift for s in steps), sel.n_steps))
@@ -338,7 +338,3 @@ class _ResidentSeries:
         for i, s in enumerate(steps):
             out[:, i] = self._arrays[int(s)][z0:z1]
         return out
-
-
-def _stride(steps: Sequence[int]) -> int:
-    return steps[1] - steps[0] if len(steps) > 1 else 1

@@ -616,14 +616,14 @@ class ClientWorker:
                 spec=spec,
                 manager=self._manager,
             )
-            cv = s.set_window(sel.steps[0], sel.steps[-1] + 1, _stride(sel))
+            cv = s.set_window(sel.steps[0], sel.steps[-1] + 1, sel.stride)
         elif s.spec != spec:
             cv = s.set_spec(spec)
         else:
             k = _slide_by(s.selection, sel)
-            cv = s.slide(k) if k else s.set_window(sel.steps[0], sel.steps[-1] + 1, _stride(sel))
+            cv = s.slide(k) if k else s.set_window(sel.steps[0], sel.steps[-1] + 1, sel.stride)
             if s.selection != sel:  # clamped differently: jump
-                cv = s.set_window(sel.steps[0], sel.steps[-1] + 1, _stride(sel))
+                cv = s.set_window(sel.steps[0], sel.steps[-1] + 1, sel.stride)
         slot.cv = cv
         stats = s.stats or {}
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
@@ -768,16 +768,12 @@ def rid_of(msg: dict) -> int | None:
     return msg.get("id")
 
 
-def _stride(sel: Selection) -> int:
-    return sel.steps[1] - sel.steps[0] if sel.width > 1 else 1
-
-
 def _slide_by(old: Selection | None, new: Selection) -> int:
     """k such that `new` is `old` moved by k strides, else 0."""
-    if old is None or old.width != new.width or _stride(old) != _stride(new):
+    if old is None or old.width != new.width or old.stride != new.stride:
         return 0
     shift = new.steps[0] - old.steps[0]
-    stride = _stride(new)
+    stride = new.stride
     if shift == 0 or shift % stride:
         return 0
     return shift // stride
