@@ -6,8 +6,11 @@ import dask.array as da
 import numpy as np
 import pytest
 import zarr
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import chronocl
+from chronocl.data.series import step_runs, write_series
 from chronocl.errors import InputNotFoundError, OutputExistsError, StoreFormatError
 
 
@@ -92,3 +95,51 @@ def test_chronovolume_round_trip(tmp_path, mode):
         chronocl.Chronovolume.load(series.save(tmp_path / "s.zarr").path)
     with pytest.raises(StoreFormatError, match="is it a chronovolume"):
         chronocl.open(tmp_path / "cv.zarr")
+
+
+@pytest.fixture(scope="module")
+def chunked_store(tmp_path_factory):
+    """9 steps of 11 x 3 x 5, stored 4 rows per chunk (the last chunk partial)."""
+    data = np.random.default_rng(5).random((9, 11, 3, 5), dtype=np.float32)
+    path = tmp_path_factory.mktemp("chunked") / "s.zarr"
+    series = write_series(
+        path,
+        iter(data),
+        n_steps=9,
+        volume_shape=data.shape[1:],
+        dtype="float32",
+        chunk_bytes=4 * 3 * 5 * 4,
+    )
+    assert series.z_chunk == 4
+    return series, data
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    steps=st.lists(st.integers(0, 8), min_size=1, max_size=12),
+    rows=st.tuples(st.integers(0, 10), st.integers(1, 11)).filter(lambda r: r[0] < r[1]),
+    most=st.integers(1, 5),
+    given_out=st.booleans(),
+)
+def test_read_brick_decodes_runs_of_steps_into_the_brick(
+    chunked_store, steps, rows, most, given_out, monkeypatch
+):
+    """Whatever the steps (repeated, descending, strided) and rows, the brick equals the
+    stored values step by step, read into a given buffer or a new one."""
+    series, data = chunked_store
+    monkeypatch.setattr("chronocl.data.series.STEPS_PER_READ", most)
+    z0, z1 = rows
+    expected = np.stack([data[s, z0:z1] for s in steps], axis=1)
+    out = np.full(expected.shape, np.nan, np.float32) if given_out else None
+    brick = series.read_brick(steps, z0, z1, out=out)
+    assert out is None or brick is out
+    np.testing.assert_array_equal(brick, expected)
+
+
+@given(steps=st.lists(st.integers(0, 30), max_size=20), most=st.integers(1, 6))
+def test_step_runs_cover_the_steps_in_order(steps, most):
+    runs = step_runs(steps, most)
+    assert [i for i0, i1, _ in runs for i in range(i0, i1)] == list(range(len(steps)))
+    for i0, i1, run in runs:
+        assert 1 <= i1 - i0 <= most
+        assert list(range(run.start, run.stop, run.step)) == list(steps[i0:i1])
