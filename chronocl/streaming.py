@@ -38,7 +38,7 @@ from .atomic import check_output, commit_directory
 from .budget import parse_memory
 from .chronovolume import FORMAT
 from .data.bricks import Slab, slabs
-from .data.series import TimeSeries, compressors
+from .data.series import STEPS_PER_READ, TimeSeries, compressors
 from .engine import get_engine
 from .engine.memory import aligned_empty
 from .errors import InvalidParameterError
@@ -82,10 +82,10 @@ def slab_bytes(job: Job, rows: int, engine: str, read_ahead: bool = True) -> int
     """Memory held while a slab of `rows` output rows is read, integrated and written.
 
     Counts the brick being integrated and the one read ahead, one step's rows as the store
-    returns them plus the stored chunks decoded for them (compressed and decoded), the
-    engine's own work arrays (float64 input goes to OpenCL as float32; the numpy reference
-    works in float64), the slab's output and the previous one being written (write-behind),
-    and zarr's encoded copies while writing.
+    returns them plus the stored chunks decoded at once for `STEPS_PER_READ` steps (compressed
+    and decoded), the engine's own work arrays (float64 input goes to OpenCL as float32; the
+    numpy reference works in float64), the slab's output and the previous one being written
+    (write-behind), and zarr's encoded copies while writing.
     """
     nz, ny, nx = job.series.volume_shape
     plane, w, item = ny * nx, job.selection.width, job.series.dtype.itemsize
@@ -94,8 +94,10 @@ def slab_bytes(job: Job, rows: int, engine: str, read_ahead: bool = True) -> int
     total = BASE_BYTES + brick * (2 if read_ahead else 1)
     zc = stored_z_chunk(job.series)
     if zc:
-        touched = min(math.ceil(read_rows / zc) + 1, math.ceil(nz / zc))
-        total += 2 * touched * zc * plane * item
+        # A slab of whole stored chunks without halo touches no chunk beyond its own rows.
+        aligned = rows % zc == 0 and job.halo == 0
+        touched = min(math.ceil(read_rows / zc) + (0 if aligned else 1), math.ceil(nz / zc))
+        total += 2 * min(w, STEPS_PER_READ) * touched * zc * plane * item
     total += read_rows * plane * item
     if engine == "numpy":
         # u (float32) and the reference's float64 RGBA, colour, gradients and temporaries
@@ -128,8 +130,8 @@ def plan_slabs(
             f"{job.selection.width}-step window of {nx}x{ny} one z-row at a time needs at "
             f"least {mb} MB; use --memory {mb}MB or more"
         )
-    high = min(nz, max_rows or nz, slab or nz)
-    low = 1
+    top = min(nz, max_rows or nz, slab or nz)
+    low, high = 1, top
     while low < high:  # largest rows with slab_bytes(rows) <= budget
         mid = (low + high + 1) // 2
         if slab_bytes(job, mid, engine, read_ahead) <= budget:
@@ -137,8 +139,13 @@ def plan_slabs(
         else:
             high = mid - 1
     zc = stored_z_chunk(job.series)
-    if zc and low >= zc and slab is None:
-        low = low // zc * zc  # whole stored chunks: each is decoded once per step, not twice
+    if zc and slab is None:
+        # Whole stored chunks, each decoded once per step rather than twice (and they need
+        # less memory than a misaligned slab of nearly the same size).
+        fit = [k * zc for k in range(1, top // zc + 1)]
+        fit = [rows for rows in fit if slab_bytes(job, rows, engine, read_ahead) <= budget]
+        if fit:
+            low = fit[-1]
     chunk = max(1, min(nz, CHUNK_BYTES // (ny * nx * 16), low))
     rows = low // chunk * chunk
     return Plan(tuple(slabs(nz, rows, job.halo)), rows, chunk, slab_bytes(job, rows, engine))
@@ -197,11 +204,19 @@ def open_run(tmp: Path, job: Job, plan: Plan, digest: str, compressor: str) -> N
     names = ["rgba_raw", "rgba"] if needs_raw(job.spec) else ["rgba"]
     for name in names:
         group.create_array(
-            name, shape=(nz, ny, nx, 4), chunks=(c, ny, nx, 4), dtype=np.float32, compressors=codecs
+            name,
+            shape=(nz, ny, nx, 4),
+            chunks=(c, ny, nx, 4),
+            dtype=np.float32,
+            compressors=codecs,
         )
     if job.spec.has_t_index:
         group.create_array(
-            "t_index", shape=(nz, ny, nx), chunks=(c, ny, nx), dtype=np.int32, compressors=codecs
+            "t_index",
+            shape=(nz, ny, nx),
+            chunks=(c, ny, nx),
+            dtype=np.int32,
+            compressors=codecs,
         )
     # Written last: a store without it was cut short while being created, and is remade.
     _write_json(run_file, {"hash": digest, "chunk_rows": c})
@@ -238,15 +253,26 @@ def _write_json(path: Path, obj: dict) -> None:
 
 
 # -- one slab ---------------------------------------------------------------------------------
+# Every chunk is written, empty or not: zarr's test for empty chunks scans each chunk again and
+# cost as much as the write itself, and an empty chunk compresses to almost nothing. This is a
+# runtime setting of an opened array, not stored with it.
+WRITE_CONFIG = {"write_empty_chunks": True}
+
+
+def output_array(group: zarr.Group, name: str) -> zarr.Array:
+    """The output array `name` of a run's store, opened for writing whole chunks."""
+    return group[name].with_config(WRITE_CONFIG)  # type: ignore[union-attr]
+
+
 def write_slab(group: zarr.Group, job: Job, slab: Slab, partial: Partial, final: bool) -> float:
     """Write one integrated slab; returns its largest colour value (for normalize="max")."""
     raw = needs_raw(job.spec)
     rgba = partial.rgba
     if not final and not raw:  # per-voxel finalisation (the numpy engine leaves it to us)
         rgba = reference.finalize(partial, job.positions, job.spec)
-    group["rgba_raw" if raw else "rgba"][slab.z0 : slab.z1] = rgba
+    output_array(group, "rgba_raw" if raw else "rgba")[slab.z0 : slab.z1] = rgba
     if partial.t_index is not None:
-        group["t_index"][slab.z0 : slab.z1] = partial.t_index
+        output_array(group, "t_index")[slab.z0 : slab.z1] = partial.t_index
     return float(rgba[..., :3].max()) if raw else 0.0
 
 
@@ -254,7 +280,8 @@ def normalize_slab(group: zarr.Group, slab: Slab, chunk_rows: int, peak: float) 
     """Second pass of additive/max: rgba = raw sums scaled by the volume maximum, per chunk."""
     for c0 in range(slab.z0, slab.z1, chunk_rows):
         c1 = min(c0 + chunk_rows, slab.z1)
-        group["rgba"][c0:c1] = scale_by_peak(np.asarray(group["rgba_raw"][c0:c1]), peak)
+        raw = np.asarray(group["rgba_raw"][c0:c1])
+        output_array(group, "rgba")[c0:c1] = scale_by_peak(raw, peak)
 
 
 def scale_by_peak(rgba: np.ndarray, peak: float) -> np.ndarray:
@@ -439,8 +466,8 @@ def _run_local(
 class BrickReader:
     """Reads bricks into two reused buffers, alternately (fresh pages cost as much as reading).
 
-    zarr decodes each step's rows straight into the brick; in-memory series fall back to
-    `TimeSeries.read_brick`.
+    zarr decodes the rows straight into the brick (`TimeSeries.read_brick`); in-memory series
+    get a fresh brick per read.
     """
 
     def __init__(
@@ -458,16 +485,9 @@ class BrickReader:
     def read(self, steps: Sequence[int], r0: int, r1: int) -> np.ndarray:
         if self.arr is None:
             return self.series.read_brick(steps, r0, r1)
-        from zarr.core.buffer import default_buffer_prototype
-
-        nd = default_buffer_prototype().nd_buffer
         brick = self.buffers[self.turn][: r1 - r0]
         self.turn = (self.turn + 1) % len(self.buffers)
-        for i, s in enumerate(steps):
-            self.arr.get_basic_selection(
-                (int(s), slice(r0, r1)), out=nd.from_numpy_array(brick[:, i])
-            )
-        return brick
+        return self.series.read_brick(steps, r0, r1, out=brick)
 
 
 def commit(tmp: Path, target: Path, job: Job, engine: str, overwrite: bool) -> None:

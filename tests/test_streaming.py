@@ -143,6 +143,25 @@ def test_peak_memory_follows_the_budget(tmp_path):
     assert cv.rgba[z - 2 : z + 2].tobytes() == ref.rgba.tobytes()
 
 
+def test_slabs_are_whole_stored_chunks_when_they_fit(tmp_path):
+    """A slab of whole stored chunks needs less memory than one row less (which touches one
+    more chunk per step); the plan finds it rather than stopping below it."""
+    data = np.random.default_rng(2).random((4, 40, 16, 16), dtype=np.float32)
+    series = write_series(
+        tmp_path / "s.zarr",
+        iter(data),
+        n_steps=4,
+        volume_shape=data.shape[1:],
+        dtype="float32",
+        chunk_bytes=8 * 16 * 16 * 4,
+    )
+    job = prepare(series, None, "alpha", None, {})
+    for rows in (8, 16, 24):
+        budget = streaming.slab_bytes(job, rows, "opencl")
+        assert streaming.slab_bytes(job, rows - 1, "opencl") > budget
+        assert streaming.plan_slabs(job, budget, "opencl").slab_rows == rows
+
+
 def test_budget_below_one_row_names_the_minimum(odd_store, tmp_path):
     with pytest.raises(InvalidParameterError, match=r"use --memory \d+MB or more") as info:
         integrate_to_store(odd_store, None, tmp_path / "cv.zarr", mode="alpha", memory="100kB")
