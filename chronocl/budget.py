@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 from dask.utils import format_bytes, parse_bytes
 
 from .errors import InvalidParameterError
@@ -27,3 +29,51 @@ def parse_memory(value: str | int | float | None, default: str = DEFAULT_MEMORY)
 def human(n: float) -> str:
     """Bytes for people: '1.50 GiB'."""
     return format_bytes(int(n))
+
+
+def _load_trim():
+    try:
+        import ctypes
+        import ctypes.util
+
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        return libc.malloc_trim
+    except (OSError, AttributeError):  # not glibc: nothing to trim
+        return None
+
+
+_malloc_trim = _load_trim()
+
+
+def resident_bytes() -> int | None:
+    """This process's resident memory (Linux), or None where it cannot be read cheaply."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+class GrowthGuard:
+    """Keeps the process's growth since creation near `allowance` bytes.
+
+    zarr decodes and encodes chunks on several threads, and glibc keeps what each thread's
+    arena freed for that thread's next allocation: tens of MB beyond what is in use, which a
+    memory budget cannot plan for. `check()` hands the freed memory back to the system
+    (malloc_trim) when the process has grown by more than the allowance. It does nothing
+    while the process stays within it, since memory handed back costs a page fault per page
+    when it is used again.
+    """
+
+    def __init__(self, allowance: int) -> None:
+        self.allowance = allowance
+        self.base = resident_bytes()
+        self.trims = 0
+
+    def check(self) -> None:
+        if _malloc_trim is None or self.base is None:
+            return
+        now = resident_bytes()
+        if now is not None and now - self.base > self.allowance:
+            _malloc_trim(0)
+            self.trims += 1

@@ -35,7 +35,7 @@ import zarr
 
 from . import reference
 from .atomic import check_output, commit_directory
-from .budget import parse_memory
+from .budget import GrowthGuard, parse_memory
 from .chronovolume import FORMAT
 from .data.bricks import Slab, slabs
 from .data.series import STEPS_PER_READ, TimeSeries, compressors
@@ -422,6 +422,7 @@ def _run_local(
     """Integrate `todo` here: read ahead on one thread, write behind on another."""
     _, ny, nx = job.series.volume_shape
     rows = plan.slab_rows
+    guard = GrowthGuard(plan.peak_bytes)  # before the buffers, which the plan counts
     buffers = [
         (
             aligned_empty((rows, ny, nx, 4), np.float32),
@@ -449,6 +450,7 @@ def _run_local(
 
         def finish(s: Slab, partial: Partial, final: bool, t0: float) -> None:
             peak = write_slab(group, job, s, partial, final)
+            guard.check()
             mark_done(tmp, "slab", s, digest, max=peak, seconds=time.perf_counter() - t0)
             advance((s.r1 - s.r0) * job.row_bytes)
 

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 import chronocl
 import chronocl.streaming as streaming
+from chronocl.budget import GrowthGuard, resident_bytes
 from chronocl.data.series import write_series
 from chronocl.errors import InvalidParameterError, OutputExistsError
 from chronocl.integrate import prepare
@@ -278,3 +279,17 @@ def test_cli_streams_when_the_window_exceeds_memory(tmp_path, odd_store, referen
     vti = cli("integrate", odd_store.path, tmp_path / "b.vti", "--memory", str(small))
     assert vti.returncode == 2 and "write a .zarr" in vti.stderr
     assert len([line for line in vti.stderr.splitlines() if line.strip()]) == 1
+
+
+@pytest.mark.skipif(resident_bytes() is None, reason="needs /proc/self/statm")
+def test_growth_guard_trims_only_past_its_allowance():
+    """The guard hands freed memory back once the process grew past its allowance, and
+    leaves the allocator alone while it stays within (memory handed back faults again)."""
+    held = np.ones(64 * 2**20, np.uint8)
+    small, large = GrowthGuard(allowance=16 * 2**20), GrowthGuard(allowance=2**40)
+    more = np.ones(32 * 2**20, np.uint8)  # the process grows by 32 MB
+    small.check()
+    large.check()
+    can_trim = chronocl.budget._malloc_trim is not None
+    assert (small.trims, large.trims) == (int(can_trim), 0)
+    del held, more
