@@ -32,6 +32,7 @@ def human(n: float) -> str:
 
 
 def _load_trim():
+    """glibc's malloc_trim, or None on other C libraries."""
     try:
         import ctypes
         import ctypes.util

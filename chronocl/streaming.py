@@ -142,8 +142,8 @@ def plan_slabs(
     if zc and slab is None:
         # Whole stored chunks, each decoded once per step rather than twice (and they need
         # less memory than a misaligned slab of nearly the same size).
-        fit = [k * zc for k in range(1, top // zc + 1)]
-        fit = [rows for rows in fit if slab_bytes(job, rows, engine, read_ahead) <= budget]
+        whole = [k * zc for k in range(1, top // zc + 1)]
+        fit = [n for n in whole if slab_bytes(job, n, engine, read_ahead) <= budget]
         if fit:
             low = fit[-1]
     chunk = max(1, min(nz, CHUNK_BYTES // (ny * nx * 16), low))
@@ -204,19 +204,11 @@ def open_run(tmp: Path, job: Job, plan: Plan, digest: str, compressor: str) -> N
     names = ["rgba_raw", "rgba"] if needs_raw(job.spec) else ["rgba"]
     for name in names:
         group.create_array(
-            name,
-            shape=(nz, ny, nx, 4),
-            chunks=(c, ny, nx, 4),
-            dtype=np.float32,
-            compressors=codecs,
+            name, shape=(nz, ny, nx, 4), chunks=(c, ny, nx, 4), dtype=np.float32, compressors=codecs
         )
     if job.spec.has_t_index:
         group.create_array(
-            "t_index",
-            shape=(nz, ny, nx),
-            chunks=(c, ny, nx),
-            dtype=np.int32,
-            compressors=codecs,
+            "t_index", shape=(nz, ny, nx), chunks=(c, ny, nx), dtype=np.int32, compressors=codecs
         )
     # Written last: a store without it was cut short while being created, and is remade.
     _write_json(run_file, {"hash": digest, "chunk_rows": c})
