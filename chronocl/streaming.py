@@ -94,9 +94,12 @@ def slab_bytes(job: Job, rows: int, engine: str, read_ahead: bool = True) -> int
     total = BASE_BYTES + brick * (2 if read_ahead else 1)
     zc = stored_z_chunk(job.series)
     if zc:
-        # A slab of whole stored chunks without halo touches no chunk beyond its own rows.
-        aligned = rows % zc == 0 and job.halo == 0
-        touched = min(math.ceil(read_rows / zc) + (0 if aligned else 1), math.ceil(nz / zc))
+        # Stored chunks a read of these rows can touch: as many as they fill when a slab of
+        # whole chunks without halo starts on a chunk, and one more where it may not.
+        if rows % zc == 0 and job.halo == 0:
+            touched = read_rows // zc
+        else:
+            touched = min(1 + math.ceil((read_rows - 1) / zc), math.ceil(nz / zc))
         total += 2 * min(w, STEPS_PER_READ) * touched * zc * plane * item
     total += read_rows * plane * item
     if engine == "numpy":
