@@ -145,14 +145,15 @@ def integrate_slabs(
     parts: Sequence[Slab],
     out: OutFor,
     read: Callable[[Sequence[int], int, int], np.ndarray] | None = None,
+    read_ahead: bool = True,
 ) -> Iterator[tuple[Slab, Partial, bool]]:
     """Integrate `parts` one after the other; yields (slab, partial, final) per slab.
 
-    `out(slab)` gives the C-contiguous buffers the slab's result is written to. The next
-    brick is read on a background thread while the engine integrates this one (double
-    buffering), so at most two bricks are held. `read(steps, r0, r1)` reads a brick
-    (default: `TimeSeries.read_brick`); the brick it returned last is no longer in use
-    when it is called again.
+    `out(slab)` gives the C-contiguous buffers the slab's result is written to. With
+    `read_ahead` the next brick is read on a background thread while the engine integrates
+    this one (double buffering), so at most two bricks are held; without, one.
+    `read(steps, r0, r1)` reads a brick (default: `TimeSeries.read_brick`); the brick it
+    returned last is no longer in use when it is called again.
     """
     if not parts:
         return
@@ -162,13 +163,15 @@ def integrate_slabs(
         pending = reader.submit(read, steps, parts[0].r0, parts[0].r1)
         for i, s in enumerate(parts):
             brick = pending.result()
-            if i + 1 < len(parts):
-                nxt = parts[i + 1]
+            nxt = parts[i + 1] if i + 1 < len(parts) else None
+            if nxt is not None and read_ahead:
                 pending = reader.submit(read, steps, nxt.r0, nxt.r1)
             partial, final = eng.accumulate(  # type: ignore[attr-defined]
                 brick, s.crop, steps, job.positions, job.order, job.spec, job.value_range, out(s)
             )
             del brick
+            if nxt is not None and not read_ahead:
+                pending = reader.submit(read, steps, nxt.r0, nxt.r1)
             yield s, partial, final
 
 

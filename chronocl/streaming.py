@@ -65,6 +65,7 @@ class Plan:
     slab_rows: int
     chunk_rows: int
     peak_bytes: int  # estimated memory held while one slab is integrated and written
+    read_ahead: bool = True  # the next brick is read while this one is integrated
 
 
 def stored_z_chunk(series: TimeSeries) -> int:
@@ -78,14 +79,17 @@ def needs_raw(spec: IntegrationSpec) -> bool:
     return spec.mode == "additive" and spec.normalize == "max"
 
 
-def slab_bytes(job: Job, rows: int, engine: str, read_ahead: bool = True) -> int:
+def slab_bytes(
+    job: Job, rows: int, engine: str, read_ahead: bool = True, write_behind: bool | None = None
+) -> int:
     """Memory held while a slab of `rows` output rows is read, integrated and written.
 
     Counts the brick being integrated and the one read ahead, one step's rows as the store
     returns them plus the stored chunks decoded at once for `STEPS_PER_READ` steps (compressed
     and decoded), the engine's own work arrays (float64 input goes to OpenCL as float32; the
     numpy reference works in float64), the slab's output and the previous one being written
-    (write-behind), and zarr's encoded copies while writing.
+    (write-behind; by default where there is read-ahead), and zarr's encoded copies while
+    writing.
     """
     nz, ny, nx = job.series.volume_shape
     plane, w, item = ny * nx, job.selection.width, job.series.dtype.itemsize
@@ -109,7 +113,8 @@ def slab_bytes(job: Job, rows: int, engine: str, read_ahead: bool = True) -> int
         total += read_rows * w * plane * 4
     out = rows * plane * (16 + (4 if job.spec.has_t_index else 0))
     # The slab integrated, the one being written behind it, and zarr's encoded copies.
-    total += (2 if read_ahead else 1) * out + 2 * out
+    behind = read_ahead if write_behind is None else write_behind
+    total += (2 if behind else 1) * out + 2 * out
     if engine == "numpy" and job.spec.mode == "additive":
         total += rows * plane * 16 * 3  # reference.finalize's copies
     return total
@@ -123,9 +128,15 @@ def plan_slabs(
     slab: int | None = None,
     read_ahead: bool = True,
 ) -> Plan:
-    """The largest slabs that fit `budget` (and the engine's `max_rows`, and `slab` if given)."""
+    """The largest slabs that fit `budget` (and the engine's `max_rows`, and `slab` if given).
+
+    Slabs of whole stored chunks come first: a chunk that two slabs share is decoded twice.
+    Where whole chunks fit only without reading the next brick ahead, the plan drops the
+    read-ahead (and keeps writing behind) rather than decode every chunk twice.
+    """
     nz, ny, nx = job.series.volume_shape
-    need = slab_bytes(job, 1, engine, read_ahead)
+    behind = read_ahead  # the local run writes behind; a task on a cluster does neither
+    need = slab_bytes(job, 1, engine, False, behind)
     if need > budget:
         mb = math.ceil(need / 1e6)
         raise InvalidParameterError(
@@ -133,25 +144,29 @@ def plan_slabs(
             f"{job.selection.width}-step window of {nx}x{ny} one z-row at a time needs at "
             f"least {mb} MB; use --memory {mb}MB or more"
         )
+    if slab_bytes(job, 1, engine, read_ahead, behind) > budget:
+        read_ahead = False  # room for one brick at a time only
     top = min(nz, max_rows or nz, slab or nz)
     low, high = 1, top
     while low < high:  # largest rows with slab_bytes(rows) <= budget
         mid = (low + high + 1) // 2
-        if slab_bytes(job, mid, engine, read_ahead) <= budget:
+        if slab_bytes(job, mid, engine, read_ahead, behind) <= budget:
             low = mid
         else:
             high = mid - 1
     zc = stored_z_chunk(job.series)
     if zc and slab is None:
-        # Whole stored chunks, each decoded once per step rather than twice (and they need
-        # less memory than a misaligned slab of nearly the same size).
+        # Whole stored chunks need less memory than a misaligned slab of nearly the same size.
         whole = [k * zc for k in range(1, top // zc + 1)]
-        fit = [n for n in whole if slab_bytes(job, n, engine, read_ahead) <= budget]
-        if fit:
-            low = fit[-1]
+        for ahead in (read_ahead, False) if read_ahead else (False,):
+            fit = [n for n in whole if slab_bytes(job, n, engine, ahead, behind) <= budget]
+            if fit:
+                low, read_ahead = fit[-1], ahead
+                break
     chunk = max(1, min(nz, CHUNK_BYTES // (ny * nx * 16), low))
     rows = low // chunk * chunk
-    return Plan(tuple(slabs(nz, rows, job.halo)), rows, chunk, slab_bytes(job, rows, engine))
+    peak = slab_bytes(job, rows, engine, read_ahead, behind)
+    return Plan(tuple(slabs(nz, rows, job.halo)), rows, chunk, peak, read_ahead)
 
 
 def fits_in_memory(job: Job, budget: int, engine: str = "opencl") -> bool:
@@ -450,8 +465,10 @@ def _run_local(
             advance((s.r1 - s.r0) * job.row_bytes)
 
         t0 = time.perf_counter()
-        reader = BrickReader(job.series, plan.slab_rows + 2 * job.halo, job.selection.width)
-        results = integrate_slabs(job, eng, todo, out, reader.read)
+        n = 2 if plan.read_ahead else 1
+        brick_rows = plan.slab_rows + 2 * job.halo
+        reader = BrickReader(job.series, brick_rows, job.selection.width, buffers=n)
+        results = integrate_slabs(job, eng, todo, out, reader.read, plan.read_ahead)
         for i, (s, partial, final) in enumerate(results):
             writes[i % 2] = writer.submit(finish, s, partial, final, t0)
             t0 = time.perf_counter()
@@ -461,21 +478,21 @@ def _run_local(
 
 
 class BrickReader:
-    """Reads bricks into two reused buffers, alternately (fresh pages cost as much as reading).
+    """Reads bricks into reused buffers, in turn (fresh pages cost as much as reading): two
+    where the next brick is read while one is integrated, or a list given.
 
     zarr decodes the rows straight into the brick (`TimeSeries.read_brick`); in-memory series
     get a fresh brick per read.
     """
 
-    def __init__(
-        self, series: TimeSeries, rows: int, width: int, buffers: list | None = None
-    ) -> None:
+    def __init__(self, series: TimeSeries, rows: int, width: int, buffers: list | int = 2) -> None:
         self.series = series
         self.arr = getattr(series, "_zarr", None)
         _, ny, nx = series.volume_shape
         shape = (min(rows, series.volume_shape[0]), width, ny, nx)
-        if buffers is None:
-            buffers = [aligned_empty(shape, series.dtype) for _ in range(2)] if self.arr else []
+        if isinstance(buffers, int):
+            n = buffers if self.arr else 0
+            buffers = [aligned_empty(shape, series.dtype) for _ in range(n)]
         self.buffers = buffers
         self.turn = 0
 

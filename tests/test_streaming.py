@@ -163,6 +163,27 @@ def test_slabs_are_whole_stored_chunks_when_they_fit(tmp_path):
         assert streaming.plan_slabs(job, budget, "opencl").slab_rows == rows
 
 
+def test_whole_chunks_without_read_ahead_rather_than_chunks_decoded_twice(tmp_path):
+    """Where a slab of whole stored chunks fits only without the read-ahead brick, the plan
+    drops the read-ahead, and the streamed output is still the in-memory bytes."""
+    data = np.random.default_rng(4).random((5, 24, 12, 16), dtype=np.float32)
+    series = write_series(
+        tmp_path / "s.zarr",
+        iter(data),
+        n_steps=5,
+        volume_shape=data.shape[1:],
+        dtype="float32",
+        chunk_bytes=8 * 12 * 16 * 4,
+    )
+    job = prepare(series, None, "max", None, {})
+    budget = streaming.slab_bytes(job, 8, "opencl", read_ahead=False, write_behind=True)
+    assert streaming.slab_bytes(job, 8, "opencl") > budget
+    plan = streaming.plan_slabs(job, budget, "opencl")
+    assert (plan.slab_rows, plan.read_ahead, plan.peak_bytes) == (8, False, budget)
+    out = integrate_to_store(series, None, tmp_path / "cv.zarr", mode="max", memory=budget)
+    assert_same_bytes(out, chronocl.integrate(series, None, "max"))
+
+
 def test_budget_below_one_row_names_the_minimum(odd_store, tmp_path):
     with pytest.raises(InvalidParameterError, match=r"use --memory \d+MB or more") as info:
         integrate_to_store(odd_store, None, tmp_path / "cv.zarr", mode="alpha", memory="100kB")
