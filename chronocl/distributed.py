@@ -30,7 +30,7 @@ from pathlib import Path
 import zarr
 
 from .data.bricks import Slab
-from .data.series import TimeSeries, open_series
+from .data.series import STEPS_PER_READ, TimeSeries, open_series
 from .engine import get_engine
 from .engine.memory import aligned_empty
 from .errors import ChronoclError, EngineUnavailableError, InvalidParameterError
@@ -151,7 +151,7 @@ def _open(store: str, shape: Sequence[int]) -> TimeSeries:
 _brick: dict[tuple, list] = {}
 
 
-def _reader(job: Job, rows: int) -> BrickReader:
+def _reader(job: Job, rows: int, per_call: int) -> BrickReader:
     """A reader whose one brick buffer stays with the worker from task to task (no fresh pages)."""
     _, ny, nx = job.series.volume_shape
     key = (job.series.dtype.str, job.selection.width, ny, nx)
@@ -159,7 +159,7 @@ def _reader(job: Job, rows: int) -> BrickReader:
     if held is None or held[0].shape[0] < rows:
         _brick.clear()  # one buffer per worker process, the size of its largest slab
         held = _brick[key] = [aligned_empty((rows, *key[1:]), job.series.dtype)]
-    return BrickReader(job.series, rows, job.selection.width, held)
+    return BrickReader(job.series, rows, job.selection.width, held, per_call)
 
 
 def slab_task(
@@ -174,7 +174,8 @@ def slab_task(
     except EngineUnavailableError as exc:
         raise EngineUnavailableError(f"worker {_worker_name()}: {exc}") from None
     s = Slab(*bounds)
-    brick = _reader(j, s.r1 - s.r0).read(j.selection.steps, s.r0, s.r1)
+    per_call = int(job.get("steps_per_read", STEPS_PER_READ))
+    brick = _reader(j, s.r1 - s.r0, per_call).read(j.selection.steps, s.r0, s.r1)
     partial, final = eng.accumulate(
         brick, s.crop, j.selection.steps, j.positions, j.order, j.spec, j.value_range
     )
@@ -255,7 +256,7 @@ def run_slab_tasks(
     progress: bool,
 ) -> list[dict]:
     """Submit one task per slab still to do and wait for all; returns their small results."""
-    args = task_args(job)
+    args = {**task_args(job), "steps_per_read": plan.steps_per_read}
     run = uuid.uuid4().hex[:8]
     futures = [
         client.submit(

@@ -163,25 +163,47 @@ def test_slabs_are_whole_stored_chunks_when_they_fit(tmp_path):
         assert streaming.plan_slabs(job, budget, "opencl").slab_rows == rows
 
 
-def test_whole_chunks_without_read_ahead_rather_than_chunks_decoded_twice(tmp_path):
-    """Where a slab of whole stored chunks fits only without the read-ahead brick, the plan
-    drops the read-ahead, and the streamed output is still the in-memory bytes."""
+@pytest.fixture(scope="module")
+def chunked_store(tmp_path_factory):
+    """5 steps of 24 x 12 x 16 stored 8 rows per chunk."""
     data = np.random.default_rng(4).random((5, 24, 12, 16), dtype=np.float32)
-    series = write_series(
-        tmp_path / "s.zarr",
+    return write_series(
+        tmp_path_factory.mktemp("chunked") / "s.zarr",
         iter(data),
         n_steps=5,
         volume_shape=data.shape[1:],
         dtype="float32",
         chunk_bytes=8 * 12 * 16 * 4,
     )
-    job = prepare(series, None, "max", None, {})
-    budget = streaming.slab_bytes(job, 8, "opencl", read_ahead=False, write_behind=True)
-    assert streaming.slab_bytes(job, 8, "opencl") > budget
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.0, 1.0))
+def test_plans_fit_and_keep_whole_chunks_while_any_option_allows(chunked_store, share):
+    job = prepare(chunked_store, None, "max", None, {})
+    least = streaming.slab_bytes(job, 1, "opencl", False, True, 1)
+    most = streaming.slab_bytes(job, 24, "opencl", True, True, 8)
+    budget = int(least + share * (most - least))
     plan = streaming.plan_slabs(job, budget, "opencl")
-    assert (plan.slab_rows, plan.read_ahead, plan.peak_bytes) == (8, False, budget)
-    out = integrate_to_store(series, None, tmp_path / "cv.zarr", mode="max", memory=budget)
-    assert_same_bytes(out, chronocl.integrate(series, None, "max"))
+    assert plan.peak_bytes <= budget
+    if streaming.slab_bytes(job, 8, "opencl", False, True, 1) <= budget:
+        assert plan.slab_rows % 8 == 0
+    # No faster option would have fitted slabs of these rows.
+    faster = streaming.READ_OPTIONS[
+        : streaming.READ_OPTIONS.index((plan.steps_per_read, plan.read_ahead))
+    ]
+    for per_read, ahead in faster:
+        assert streaming.slab_bytes(job, plan.slab_rows, "opencl", ahead, True, per_read) > budget
+
+
+def test_lean_plans_stream_the_same_bytes(chunked_store, tmp_path):
+    """Fewer steps decoded at once and no read-ahead change memory, not the result."""
+    job = prepare(chunked_store, None, "max", None, {})
+    budget = streaming.slab_bytes(job, 8, "opencl", False, True, 2)
+    plan = streaming.plan_slabs(job, budget, "opencl")
+    assert (plan.slab_rows, plan.read_ahead, plan.steps_per_read) == (8, False, 2)
+    out = integrate_to_store(chunked_store, None, tmp_path / "cv.zarr", mode="max", memory=budget)
+    assert_same_bytes(out, chronocl.integrate(chunked_store, None, "max"))
 
 
 def test_budget_below_one_row_names_the_minimum(odd_store, tmp_path):

@@ -33,10 +33,9 @@ from ..progress import track
 from ..reference import normalize
 
 FORMAT = "chronocl.series"
-# Steps read per zarr call, whose chunks zarr decodes concurrently: enough to keep the cores
-# busy while the kernels and writes take turns on them (4 streamed 1.15x faster than 2 on two
-# cores), and few chunk buffers in flight (streaming.slab_bytes counts them).
-STEPS_PER_READ = min(8, max(4, os.cpu_count() or 1))
+# Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at
+# once, zarr's async.concurrency). The streaming plan chooses fewer when the budget is tight.
+STEPS_PER_READ = 8
 CHUNK_BYTES = 16 * 2**20
 SUPPORTED_DTYPES = ("uint8", "uint16", "int16", "float32", "float64")
 
@@ -109,13 +108,14 @@ class TimeSeries:
         z0: int = 0,
         z1: int | None = None,
         out: np.ndarray | None = None,
+        per_call: int = STEPS_PER_READ,
     ) -> np.ndarray:
         """Raw values of z rows [z0, z1) of the given steps as an xytz brick (z1 - z0, W, Y, X).
 
         `out`, if given, is filled and returned (a C-contiguous array of that shape and dtype).
-        A zarr store is read up to `STEPS_PER_READ` evenly spaced steps per call, decoding
-        straight into the brick: zarr fetches and decodes the chunks of one call concurrently,
-        where one call per step would decode them one at a time.
+        A zarr store is read up to `per_call` evenly spaced steps per call, decoding straight
+        into the brick: zarr fetches and decodes the chunks of one call concurrently, where
+        one call per step would decode them one at a time.
         """
         z1 = self.shape[1] if z1 is None else z1
         if out is None:
@@ -127,7 +127,7 @@ class TimeSeries:
         from zarr.core.buffer import default_buffer_prototype
 
         wrap = default_buffer_prototype().nd_buffer.from_numpy_array
-        for i0, i1, run in step_runs(steps, STEPS_PER_READ):
+        for i0, i1, run in step_runs(steps, per_call):
             # (rows, n, Y, X) of the brick seen as (n, rows, Y, X), the store's order.
             view = out[:, i0:i1].transpose(1, 0, 2, 3)
             self._zarr.get_basic_selection((run, slice(z0, z1)), out=wrap(view))
