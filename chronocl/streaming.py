@@ -92,10 +92,10 @@ def slab_bytes(
 
     Counts the brick being integrated and the one read ahead, one step's rows as the store
     returns them plus the stored chunks decoded at once for `steps_per_read` steps (compressed
-    and decoded), the engine's own work arrays (float64 input goes to OpenCL as float32; the
-    numpy reference works in float64), the slab's output and the previous one being written
-    (write-behind; by default where there is read-ahead), and zarr's encoded copies while
-    writing.
+    and decoded; at most zarr's async.concurrency), the engine's own work arrays (float64
+    input goes to OpenCL as float32; the numpy reference works in float64), the slab's output
+    and the previous one being written (write-behind; by default where there is read-ahead),
+    and zarr's encoded copies while writing.
     """
     nz, ny, nx = job.series.volume_shape
     plane, w, item = ny * nx, job.selection.width, job.series.dtype.itemsize
@@ -110,7 +110,9 @@ def slab_bytes(
             touched = read_rows // zc
         else:
             touched = min(1 + math.ceil((read_rows - 1) / zc), math.ceil(nz / zc))
-        total += 2 * min(w, steps_per_read) * touched * zc * plane * item
+        # zarr decodes at most async.concurrency chunks of one call at once.
+        in_flight = min(min(w, steps_per_read) * touched, zarr.config.get("async.concurrency"))
+        total += 2 * in_flight * zc * plane * item
     total += read_rows * plane * item
     if engine == "numpy":
         # u (float32) and the reference's float64 RGBA, colour, gradients and temporaries
@@ -141,9 +143,12 @@ def plan_slabs(
 ) -> Plan:
     """The largest slabs that fit `budget` (and the engine's `max_rows`, and `slab` if given).
 
-    Slabs of whole stored chunks come first, since a chunk two slabs share is decoded twice;
-    then as many steps decoded at once as fit, then reading the next brick ahead (the local
-    run writes behind; a task on a cluster does neither: `read_ahead=False`).
+    From a store, slabs of whole stored chunks come first, since a chunk two slabs share is
+    decoded twice; then as many steps decoded at once as fit, then reading the next brick
+    ahead. (The local run writes behind; a task on a cluster does neither:
+    `read_ahead=False`.) With a gradient halo slabs share chunks anyway, and the plan takes
+    the most rows any option allows. Data in memory are not decoded: the most rows with
+    read-ahead, or without where that alone fits.
     """
     nz, ny, nx = job.series.volume_shape
     behind = read_ahead
@@ -162,23 +167,32 @@ def plan_slabs(
         )
     top = min(nz, max_rows or nz, slab or nz)
     zc = stored_z_chunk(job.series)
+    cap = max(1, CHUNK_BYTES // (ny * nx * 16))  # output chunk rows
     choice = None
-    if zc and slab is None:
+    if zc and job.halo == 0:
         # Whole stored chunks need less memory than a misaligned slab of nearly the same size.
         whole = [k * zc for k in range(1, top // zc + 1)]
         for option in options:
             fit = [n for n in whole if need(n, option) <= budget]
             if fit:
-                choice = fit[-1], option
+                rows = fit[-1]  # output chunks that divide it keep every slab whole chunks
+                chunk = max(d for d in range(1, min(cap, rows) + 1) if rows % d == 0)
+                choice = rows, chunk, option
                 break
-    if choice is None:  # the most rows any option allows: every row fewer decodes more
-        best = [(_most_rows(need, option, top, budget), option) for option in options]
-        choice = max(best, key=lambda b: b[0])  # the first (fastest) of equals
-    low, (per_read, ahead) = choice
-    chunk = max(1, min(nz, CHUNK_BYTES // (ny * nx * 16), low))
-    rows = low // chunk * chunk
+    if choice is None:
+        if not zc:  # nothing to decode: keep the read-ahead while one row fits with it
+            options = [o for o in options[:2] if need(1, o) <= budget][:1]
+        # The most rows any option allows (every row fewer decodes more), the fastest of equals.
+        most, option = max(((_most_rows(need, o, top, budget), o) for o in options), key=_first)
+        chunk = max(1, min(nz, cap, most))
+        choice = most // chunk * chunk, chunk, option
+    rows, chunk, (per_read, ahead) = choice
     peak = slab_bytes(job, rows, engine, ahead, behind, per_read)
     return Plan(tuple(slabs(nz, rows, job.halo)), rows, chunk, peak, ahead, per_read)
+
+
+def _first(candidate: tuple[int, tuple]) -> int:
+    return candidate[0]
 
 
 def _most_rows(need, option: tuple[int, bool], top: int, budget: int) -> int:
@@ -284,15 +298,16 @@ def _write_json(path: Path, obj: dict) -> None:
 
 
 # -- one slab ---------------------------------------------------------------------------------
-# Every chunk is written, empty or not: zarr's test for empty chunks scans each chunk again and
-# cost as much as the write itself, and an empty chunk compresses to almost nothing. This is a
-# runtime setting of an opened array, not stored with it.
-WRITE_CONFIG = {"write_empty_chunks": True}
-
-
 def output_array(group: zarr.Group, name: str) -> zarr.Array:
-    """The output array `name` of a run's store, opened for writing whole chunks."""
-    return group[name].with_config(WRITE_CONFIG)  # type: ignore[union-attr]
+    """The output array `name` of a run's store, opened for writing whole chunks.
+
+    Compressed, every chunk is written, empty or not: zarr's test for empty chunks scans each
+    chunk again and cost as much as the write itself, and an empty chunk compresses to
+    almost nothing. Uncompressed, empty chunks are left out (they would be full size). This
+    is a runtime setting of the opened array, not stored with it.
+    """
+    arr = group[name]
+    return arr.with_config({"write_empty_chunks": bool(arr.compressors)})  # type: ignore[union-attr]
 
 
 def write_slab(group: zarr.Group, job: Job, slab: Slab, partial: Partial, final: bool) -> float:

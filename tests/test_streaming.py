@@ -145,8 +145,7 @@ def test_peak_memory_follows_the_budget(tmp_path):
 
 
 def test_slabs_are_whole_stored_chunks_when_they_fit(tmp_path):
-    """A slab of whole stored chunks needs less memory than one row less (which touches one
-    more chunk per step); the plan finds it rather than stopping below it."""
+    """With the memory for a slab of whole stored chunks, the plan takes exactly that slab."""
     data = np.random.default_rng(2).random((4, 40, 16, 16), dtype=np.float32)
     series = write_series(
         tmp_path / "s.zarr",
@@ -159,7 +158,6 @@ def test_slabs_are_whole_stored_chunks_when_they_fit(tmp_path):
     job = prepare(series, None, "alpha", None, {})
     for rows in (8, 16, 24):
         budget = streaming.slab_bytes(job, rows, "opencl")
-        assert streaming.slab_bytes(job, rows - 1, "opencl") > budget
         assert streaming.plan_slabs(job, budget, "opencl").slab_rows == rows
 
 
@@ -194,6 +192,34 @@ def test_plans_fit_and_keep_whole_chunks_while_any_option_allows(chunked_store, 
     ]
     for per_read, ahead in faster:
         assert streaming.slab_bytes(job, plan.slab_rows, "opencl", ahead, True, per_read) > budget
+
+
+def test_output_chunks_divide_slabs_of_whole_stored_chunks(tmp_path):
+    """Output chunks of a 300 x 300 plane hold at most 5 rows; slabs of 12 rows (3 stored
+    chunks of 4) get output chunks that divide them, so they stay whole and within budget."""
+    data = np.random.default_rng(6).random((2, 12, 300, 300), dtype=np.float32)
+    series = write_series(
+        tmp_path / "s.zarr",
+        iter(data),
+        n_steps=2,
+        volume_shape=data.shape[1:],
+        dtype="float32",
+        chunk_bytes=4 * 300 * 300 * 4,
+    )
+    job = prepare(series, None, "alpha", None, {})
+    for budget in (streaming.slab_bytes(job, 12, "opencl"), 10**10):
+        plan = streaming.plan_slabs(job, budget, "opencl")
+        assert (plan.slab_rows, plan.chunk_rows) == (12, 4)
+        assert plan.peak_bytes <= budget
+
+
+def test_data_in_memory_keep_the_read_ahead(tmp_path):
+    """Nothing is decoded from memory, so no rows are traded for dropping the read-ahead."""
+    series = chronocl.TimeSeries.from_array(np.zeros((4, 64, 32, 32), np.float32))
+    job = prepare(series, None, "alpha", None, {})
+    budget = streaming.slab_bytes(job, 20, "opencl")
+    plan = streaming.plan_slabs(job, budget, "opencl")
+    assert plan.read_ahead and plan.slab_rows == 20
 
 
 def test_lean_plans_stream_the_same_bytes(chunked_store, tmp_path):
