@@ -63,18 +63,23 @@ class GrowthGuard:
     memory budget cannot plan for. `check()` hands the freed memory back to the system
     (malloc_trim) when the process has grown by more than the allowance. It does nothing
     while the process stays within it, since memory handed back costs a page fault per page
-    when it is used again.
+    when it is used again, nor until the process grows again by a quarter of the allowance
+    beyond what a trim could not hand back.
     """
 
     def __init__(self, allowance: int) -> None:
         self.allowance = allowance
         self.base = resident_bytes()
+        self.floor = 0  # resident bytes after the last trim
         self.trims = 0
 
     def check(self) -> None:
         if _malloc_trim is None or self.base is None:
             return
         now = resident_bytes()
-        if now is not None and now - self.base > self.allowance:
+        if now is None or now - self.base <= self.allowance:
+            return
+        if now > self.floor + self.allowance // 4:
             _malloc_trim(0)
             self.trims += 1
+            self.floor = resident_bytes() or 0

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import threading
 import time
 import uuid
 from collections.abc import Iterator, Sequence
@@ -148,17 +149,19 @@ def _open(store: str, shape: Sequence[int]) -> TimeSeries:
     return series
 
 
-_brick: dict[tuple, list] = {}
+_held = threading.local()  # a worker may run several tasks at once, one per thread
 
 
 def _reader(job: Job, rows: int, per_call: int) -> BrickReader:
-    """A reader whose one brick buffer stays with the worker from task to task (no fresh pages)."""
+    """A reader whose brick buffer stays with the worker thread from task to task (no fresh
+    pages): one buffer per thread, the size of its largest slab."""
     _, ny, nx = job.series.volume_shape
     key = (job.series.dtype.str, job.selection.width, ny, nx)
-    held = _brick.get(key)
+    brick = getattr(_held, "brick", {})
+    held = brick.get(key)
     if held is None or held[0].shape[0] < rows:
-        _brick.clear()  # one buffer per worker process, the size of its largest slab
-        held = _brick[key] = [aligned_empty((rows, *key[1:]), job.series.dtype)]
+        held = [aligned_empty((rows, *key[1:]), job.series.dtype)]
+        _held.brick = {key: held}
     return BrickReader(job.series, rows, job.selection.width, held, per_call)
 
 

@@ -152,8 +152,9 @@ def integrate_slabs(
     `out(slab)` gives the C-contiguous buffers the slab's result is written to. With
     `read_ahead` the next brick is read on a background thread while the engine integrates
     this one (double buffering), so at most two bricks are held; without, one.
-    `read(steps, r0, r1)` reads a brick (default: `TimeSeries.read_brick`); the brick it
-    returned last is no longer in use when it is called again.
+    `read(steps, r0, r1)` reads a brick (default: `TimeSeries.read_brick`); when it is
+    called, the brick it returned two calls before (one without read-ahead) is no longer in
+    use.
     """
     if not parts:
         return

@@ -122,16 +122,15 @@ def chunked_store(tmp_path_factory):
     given_out=st.booleans(),
 )
 def test_read_brick_decodes_runs_of_steps_into_the_brick(
-    chunked_store, steps, rows, most, given_out, monkeypatch
+    chunked_store, steps, rows, most, given_out
 ):
     """Whatever the steps (repeated, descending, strided) and rows, the brick equals the
     stored values step by step, read into a given buffer or a new one."""
     series, data = chunked_store
-    monkeypatch.setattr("chronocl.data.series.STEPS_PER_READ", most)
     z0, z1 = rows
     expected = np.stack([data[s, z0:z1] for s in steps], axis=1)
     out = np.full(expected.shape, np.nan, np.float32) if given_out else None
-    brick = series.read_brick(steps, z0, z1, out=out)
+    brick = series.read_brick(steps, z0, z1, out=out, per_call=most)
     assert out is None or brick is out
     np.testing.assert_array_equal(brick, expected)
 
