@@ -106,18 +106,20 @@ def _hwm() -> int | None:
     return None
 
 
-def child(store: str, out: str, budget: int, mode: str) -> None:
+def child(store: str, out: str, budget: int, mode: str, compressor: str) -> None:
     import gc
 
     import chronocl
-    from chronocl.integrate import prepare
+    from chronocl.engine import get_engine
+    from chronocl.integrate import engine_rows, prepare
     from chronocl.streaming import integrate_to_store, plan_slabs
 
     series = open_series(store)
     _, ny, nx = series.volume_shape
     warm = np.random.default_rng(0).random((2, 2, ny, nx), dtype=np.float32)
     chronocl.integrate(chronocl.TimeSeries.from_array(warm), None, mode)  # context, kernels
-    plan = plan_slabs(prepare(series, None, mode, None, {}), budget, "opencl")
+    job = prepare(series, None, mode, None, {})
+    plan = plan_slabs(job, budget, "opencl", engine_rows(get_engine("opencl"), job))
     del warm
     gc.collect()
     baseline = _rss()
@@ -132,7 +134,9 @@ def child(store: str, out: str, budget: int, mode: str) -> None:
     sampler = threading.Thread(target=sample, daemon=True)
     sampler.start()
     t0 = time.perf_counter()
-    integrate_to_store(series, None, out, mode=mode, memory=budget, overwrite=True)
+    integrate_to_store(
+        series, None, out, mode=mode, memory=budget, overwrite=True, compressor=compressor
+    )
     seconds = time.perf_counter() - t0
     stop.set()
     sampler.join()
@@ -148,6 +152,8 @@ def child(store: str, out: str, budget: int, mode: str) -> None:
                 "sampled_peak_rss": max(sampled),
                 "slabs": len(plan.slabs),
                 "slab_rows": plan.slab_rows,
+                "read_ahead": plan.read_ahead,
+                "steps_per_read": plan.steps_per_read,
                 "estimated_peak": plan.peak_bytes,
             }
         )
@@ -203,7 +209,8 @@ def stages_alone(series, out: Path, budget: int, mode: str, compressor: str) -> 
     job = prepare(series, None, mode, None, {})
     eng = get_engine("opencl")
     plan = plan_slabs(job, budget, "opencl", engine_rows(eng, job))
-    reader = BrickReader(series, plan.slab_rows + 2 * job.halo, job.selection.width)
+    rows = plan.slab_rows + 2 * job.halo
+    reader = BrickReader(series, rows, job.selection.width, 1, plan.steps_per_read)
     kernel_wall = kernel_cpu = 0.0
     for s in plan.slabs:
         brick = reader.read(job.selection.steps, s.r0, s.r1)
@@ -256,11 +263,11 @@ def main() -> None:
     parser.add_argument("--output-compressor", choices=COMPRESSORS, default="blosc-lz4")
     parser.add_argument("--chunk-mb", type=float, default=4.0, help="stored chunk size (MiB)")
     parser.add_argument("--repeats", type=int, default=None)
-    parser.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
+    parser.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        store, out, budget, mode = args.child
-        child(store, out, int(budget), mode)
+        store, out, budget, mode, compressor = args.child
+        child(store, out, int(budget), mode, compressor)
         return
 
     budget = parse_memory(args.budget)
@@ -345,7 +352,7 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
         runs["read"].append(timed(read))
         runs["integrate"].append(timed(integrate))
     alone = stages_alone(series, out, budget, args.mode, args.output_compressor)
-    fresh = [run_child(store, out, budget, args.mode) for _ in range(2)]
+    fresh = [run_child(store, out, budget, args.mode, args.output_compressor) for _ in range(2)]
 
     def med(name: str, k: int) -> float:
         return statistics.median(r[k] for r in runs[name])
@@ -363,6 +370,8 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
                 "fresh_process_s": [round(f["seconds"], 3) for f in fresh],
                 "slabs": fresh[0]["slabs"],
                 "slab_rows": fresh[0]["slab_rows"],
+                "read_ahead": fresh[0]["read_ahead"],
+                "steps_per_read": fresh[0]["steps_per_read"],
             },
         ),
     ):
