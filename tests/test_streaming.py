@@ -144,17 +144,23 @@ def test_peak_memory_follows_the_budget(tmp_path):
     assert cv.rgba[z - 2 : z + 2].tobytes() == ref.rgba.tobytes()
 
 
+def chunked_series(path, shape: tuple[int, int, int, int], chunk_rows: int):
+    """A random float32 series of `shape` (T, Z, Y, X) stored `chunk_rows` rows per chunk."""
+    data = np.random.default_rng(sum(shape)).random(shape, dtype=np.float32)
+    row = shape[2] * shape[3] * 4
+    return write_series(
+        path,
+        iter(data),
+        n_steps=shape[0],
+        volume_shape=shape[1:],
+        dtype="float32",
+        chunk_bytes=chunk_rows * row,
+    )
+
+
 def test_slabs_are_whole_stored_chunks_when_they_fit(tmp_path):
     """With the memory for a slab of whole stored chunks, the plan takes exactly that slab."""
-    data = np.random.default_rng(2).random((4, 40, 16, 16), dtype=np.float32)
-    series = write_series(
-        tmp_path / "s.zarr",
-        iter(data),
-        n_steps=4,
-        volume_shape=data.shape[1:],
-        dtype="float32",
-        chunk_bytes=8 * 16 * 16 * 4,
-    )
+    series = chunked_series(tmp_path / "s.zarr", (4, 40, 16, 16), 8)
     job = prepare(series, None, "alpha", None, {})
     for rows in (8, 16, 24):
         budget = streaming.slab_bytes(job, rows, "opencl")
@@ -164,15 +170,7 @@ def test_slabs_are_whole_stored_chunks_when_they_fit(tmp_path):
 @pytest.fixture(scope="module")
 def chunked_store(tmp_path_factory):
     """5 steps of 24 x 12 x 16 stored 8 rows per chunk."""
-    data = np.random.default_rng(4).random((5, 24, 12, 16), dtype=np.float32)
-    return write_series(
-        tmp_path_factory.mktemp("chunked") / "s.zarr",
-        iter(data),
-        n_steps=5,
-        volume_shape=data.shape[1:],
-        dtype="float32",
-        chunk_bytes=8 * 12 * 16 * 4,
-    )
+    return chunked_series(tmp_path_factory.mktemp("chunked") / "s.zarr", (5, 24, 12, 16), 8)
 
 
 @settings(max_examples=40, deadline=None)
@@ -197,15 +195,7 @@ def test_plans_fit_and_keep_whole_chunks_while_any_option_allows(chunked_store, 
 def test_output_chunks_divide_slabs_of_whole_stored_chunks(tmp_path):
     """Output chunks of a 300 x 300 plane hold at most 5 rows; slabs of 12 rows (3 stored
     chunks of 4) get output chunks that divide them, so they stay whole and within budget."""
-    data = np.random.default_rng(6).random((2, 12, 300, 300), dtype=np.float32)
-    series = write_series(
-        tmp_path / "s.zarr",
-        iter(data),
-        n_steps=2,
-        volume_shape=data.shape[1:],
-        dtype="float32",
-        chunk_bytes=4 * 300 * 300 * 4,
-    )
+    series = chunked_series(tmp_path / "s.zarr", (2, 12, 300, 300), 4)
     job = prepare(series, None, "alpha", None, {})
     for budget in (streaming.slab_bytes(job, 12, "opencl"), 10**10):
         plan = streaming.plan_slabs(job, budget, "opencl")
