@@ -71,6 +71,24 @@ class Job:
     positions: np.ndarray
     value_range: tuple[float, float]
 
+    @classmethod
+    def of(
+        cls,
+        series: TimeSeries,
+        selection: Selection,
+        spec: IntegrationSpec,
+        value_range: tuple[float, float],
+    ) -> Job:
+        """The job of `spec` over `selection`, with the order and time positions they imply."""
+        return cls(
+            series=series,
+            selection=selection,
+            spec=spec,
+            order=resolve_order(spec.order, selection),
+            positions=spec.time_tf.positions_of(selection.steps, series.n_steps),
+            value_range=value_range,
+        )
+
     @property
     def halo(self) -> int:
         """z rows read on each side of a slab: 1 when enhancement needs gradients."""
@@ -110,14 +128,7 @@ def prepare(
     elif spec_args:
         raise InvalidParameterError("pass either spec= or the integration arguments, not both")
     selection = parse_selection(window, series.n_steps)
-    return Job(
-        series=series,
-        selection=selection,
-        spec=spec,
-        order=resolve_order(spec.order, selection),
-        positions=spec.time_tf.positions_of(selection.steps, series.n_steps),
-        value_range=spec.data_tf.value_range or (series.vmin, series.vmax),
-    )
+    return Job.of(series, selection, spec, spec.data_tf.value_range or (series.vmin, series.vmax))
 
 
 def engine_rows(eng: object, job: Job) -> int:

@@ -28,6 +28,7 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from operator import itemgetter
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +47,7 @@ from .integrate import Job, engine_rows, integrate_slabs, prepare
 from .progress import meter
 from .reference import Partial
 from .selection import Selection
-from .spec import IntegrationSpec, resolve_order
+from .spec import IntegrationSpec
 
 log = logging.getLogger("chronocl")
 
@@ -183,16 +184,13 @@ def plan_slabs(
         if not zc:  # nothing to decode: keep the read-ahead while one row fits with it
             options = [o for o in options[:2] if need(1, o) <= budget][:1]
         # The most rows any option allows (every row fewer decodes more), the fastest of equals.
-        most, option = max(((_most_rows(need, o, top, budget), o) for o in options), key=_first)
+        fits = [(_most_rows(need, o, top, budget), o) for o in options]
+        most, option = max(fits, key=itemgetter(0))
         chunk = max(1, min(nz, cap, most))
         choice = most // chunk * chunk, chunk, option
     rows, chunk, (per_read, ahead) = choice
     peak = slab_bytes(job, rows, engine, ahead, behind, per_read)
     return Plan(tuple(slabs(nz, rows, job.halo)), rows, chunk, peak, ahead, per_read)
-
-
-def _first(candidate: tuple[int, tuple]) -> int:
-    return candidate[0]
 
 
 def _most_rows(need, option: tuple[int, bool], top: int, budget: int) -> int:
@@ -354,15 +352,8 @@ def job_to_dict(job: Job) -> dict:
 
 def job_from_dict(d: dict, series: TimeSeries) -> Job:
     selection = Selection(tuple(d["steps"]), int(d["n_steps"]))
-    spec = IntegrationSpec.from_dict(d["spec"])
-    return Job(
-        series=series,
-        selection=selection,
-        spec=spec,
-        order=resolve_order(spec.order, selection),
-        positions=spec.time_tf.positions_of(selection.steps, series.n_steps),
-        value_range=(float(d["value_range"][0]), float(d["value_range"][1])),
-    )
+    value_range = (float(d["value_range"][0]), float(d["value_range"][1]))
+    return Job.of(series, selection, IntegrationSpec.from_dict(d["spec"]), value_range)
 
 
 # -- the call ---------------------------------------------------------------------------------
