@@ -260,23 +260,31 @@ def run_slab_tasks(
 ) -> list[dict]:
     """Submit one task per slab still to do and wait for all; returns their small results."""
     args = {**task_args(job), "steps_per_read": plan.steps_per_read}
+    return _per_slab(
+        client,
+        "slab",
+        slab_task,
+        todo,
+        lambda b: (args, b, str(tmp), digest, engine, device),
+        len(plan.slabs),
+        "integrating slabs",
+        progress,
+    )
+
+
+def _per_slab(client, kind: str, task, todo, args_of, total: int, label: str, progress) -> list:
+    """Run task(*args_of(bounds)) for every slab in `todo`, under keys of this run; wait."""
     run = uuid.uuid4().hex[:8]
     futures = [
         client.submit(
-            slab_task,
-            args,
-            (s.z0, s.z1, s.r0, s.r1),
-            str(tmp),
-            digest,
-            engine,
-            device,
-            key=f"chronocl-slab-{s.z0}-{run}",
+            task,
+            *args_of((s.z0, s.z1, s.r0, s.r1)),
+            key=f"chronocl-{kind}-{s.z0}-{run}",
             pure=False,
         )
         for s in todo
     ]
-    total = len(plan.slabs)
-    return _gather(client, futures, total, total - len(todo), "integrating slabs", progress)
+    return _gather(client, futures, total, total - len(todo), label, progress)
 
 
 def run_normalize_tasks(
@@ -288,19 +296,13 @@ def run_normalize_tasks(
     peak: float,
     progress: bool,
 ) -> list[dict]:
-    run = uuid.uuid4().hex[:8]
-    futures = [
-        client.submit(
-            normalize_task,
-            (s.z0, s.z1, s.r0, s.r1),
-            str(tmp),
-            digest,
-            plan.chunk_rows,
-            peak,
-            key=f"chronocl-norm-{s.z0}-{run}",
-            pure=False,
-        )
-        for s in todo
-    ]
-    total = len(plan.slabs)
-    return _gather(client, futures, total, total - len(todo), "normalising", progress)
+    return _per_slab(
+        client,
+        "norm",
+        normalize_task,
+        todo,
+        lambda b: (b, str(tmp), digest, plan.chunk_rows, peak),
+        len(plan.slabs),
+        "normalising",
+        progress,
+    )
