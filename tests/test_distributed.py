@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
 import threading
 import time
 
@@ -23,6 +21,7 @@ from chronocl.data.series import write_series
 from chronocl.errors import EngineUnavailableError, InvalidParameterError
 from chronocl.streaming import RUN_DIR, integrate_to_store, partial_path
 
+from .test_cli import cli
 from .test_streaming import CASES, WINDOW, assert_same_bytes
 
 distributed = pytest.importorskip("distributed")
@@ -187,16 +186,6 @@ def test_in_memory_series_cannot_go_to_workers(tmp_path, client):
     series = chronocl.TimeSeries.from_array(np.ones((2, 3, 4, 5), dtype=np.float32))
     with pytest.raises(InvalidParameterError, match="save it first"):
         integrate_to_store(series, None, tmp_path / "cv.zarr", client=client)
-
-
-def cli(*args) -> subprocess.CompletedProcess:
-    # The timeout only guards against a hang; the connect timeout itself is CONNECT_TIMEOUT.
-    return subprocess.run(
-        [sys.executable, "-m", "chronocl", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
 
 
 def test_cli_runs_on_a_scheduler(tmp_path, client, store, local):

@@ -7,8 +7,6 @@ any slab split; peak memory must follow the budget, not the data; an interrupted
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import tracemalloc
 
 import numpy as np
@@ -24,6 +22,8 @@ from chronocl.data.series import write_series
 from chronocl.errors import InvalidParameterError, OutputExistsError
 from chronocl.integrate import prepare
 from chronocl.streaming import integrate_to_store, partial_path
+
+from .test_cli import cli
 
 # (mode, integration arguments): every mode, enhancement across slab boundaries, both
 # additive normalisations, an importance order.
@@ -294,15 +294,6 @@ def test_a_different_run_does_not_reuse_markers(tmp_path, odd_store, references,
     integrate_to_store(odd_store, WINDOW, out, mode=mode, slab=2, **args)
     assert len(calls) == 7  # every slab integrated again: the markers were another run's
     assert_same_bytes(out, references("opencl", "alpha-silhouette"))
-
-
-def cli(*args) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "chronocl", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
 
 
 def test_cli_streams_when_the_window_exceeds_memory(tmp_path, odd_store, references):
