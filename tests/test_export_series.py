@@ -18,6 +18,8 @@ from chronocl.errors import (
 )
 from chronocl.export_series import export_series, parse_slab
 
+from .test_export_vti import read_vti
+
 T, Z, Y, X = 6, 5, 4, 3  # all different, so an axis mix-up shows
 SPACING = (2.0, 1.5, 0.5)  # dz, dy, dx
 
@@ -32,16 +34,8 @@ def _series(dtype=np.float32, times=None) -> TimeSeries:
 
 
 def _read_vti(path):
-    vtk = pytest.importorskip("vtk")
-    from vtk.util.numpy_support import vtk_to_numpy
-
-    reader = vtk.vtkXMLImageDataReader()
-    reader.SetFileName(str(path))
-    reader.Update()
-    image = reader.GetOutput()
-    nx, ny, nz = image.GetDimensions()
-    values = vtk_to_numpy(image.GetPointData().GetArray("value")).reshape(nz, ny, nx)
-    return image, values
+    image, arrays = read_vti(path)
+    return image, arrays["value"]
 
 
 def _read_pvd(path):

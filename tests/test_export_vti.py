@@ -13,7 +13,8 @@ Z, Y, X = 3, 4, 5  # odd and all different, so an axis mix-up shows
 SPACING = (2.5, 1.5, 0.5)  # dz, dy, dx
 
 
-def _read(path):
+def read_vti(path):
+    """(image, {name: (Z, Y, X[, components]) array}) of a .vti file, read back with VTK."""
     vtk = pytest.importorskip("vtk")
     from vtk.util.numpy_support import vtk_to_numpy
 
@@ -21,14 +22,14 @@ def _read(path):
     reader.SetFileName(str(path))
     reader.Update()
     image = reader.GetOutput()
+    nx, ny, nz = image.GetDimensions()
     pd = image.GetPointData()
     arrays = {}
     for i in range(pd.GetNumberOfArrays()):
         a = pd.GetArray(i)
-        values = vtk_to_numpy(a)
         comps = a.GetNumberOfComponents()
-        shape = (Z, Y, X) if comps == 1 else (Z, Y, X, comps)
-        arrays[a.GetName()] = values.reshape(shape)
+        shape = (nz, ny, nx) if comps == 1 else (nz, ny, nx, comps)
+        arrays[a.GetName()] = vtk_to_numpy(a).reshape(shape)
     return image, arrays
 
 
@@ -45,7 +46,7 @@ def test_chronovolume_round_trip(tmp_path):
     cv = _chronovolume()
     out = save_chronovolume_vti(cv, tmp_path / "cv.vti")
     assert out == tmp_path / "cv.vti"
-    image, arrays = _read(out)
+    image, arrays = read_vti(out)
     assert image.GetDimensions() == (X, Y, Z)
     assert image.GetExtent() == (0, X - 1, 0, Y - 1, 0, Z - 1)
     assert image.GetSpacing() == (SPACING[2], SPACING[1], SPACING[0])
@@ -62,7 +63,7 @@ def test_chronovolume_without_t_index(tmp_path):
     pytest.importorskip("vtk")
     cv = _chronovolume()
     cv.t_index = None
-    _, arrays = _read(save_chronovolume_vti(cv, tmp_path / "cv.vti"))
+    _, arrays = read_vti(save_chronovolume_vti(cv, tmp_path / "cv.vti"))
     assert set(arrays) == {"rgba"}
 
 
@@ -72,7 +73,7 @@ def test_dtypes_and_origin(tmp_path, dtype):
     a = (np.arange(Z * Y * X) % 200).reshape(Z, Y, X).astype(dtype)
     big = a.astype(a.dtype.newbyteorder(">"))  # byte order of the input must not matter
     path = write_vti(tmp_path / "a.vti", {"a": a, "b": big}, spacing=SPACING, origin=(3, 2, 1))
-    image, arrays = _read(path)
+    image, arrays = read_vti(path)
     assert image.GetOrigin() == (1.0, 2.0, 3.0)
     for name in ("a", "b"):
         assert arrays[name].dtype == np.dtype(dtype)
@@ -83,7 +84,7 @@ def test_non_contiguous_input(tmp_path):
     pytest.importorskip("vtk")
     full = np.random.default_rng(1).random((X, Y, Z)).astype(np.float32)
     a = full.transpose(2, 1, 0)  # (Z, Y, X) view, not C-contiguous
-    _, arrays = _read(write_vti(tmp_path / "a.vti", {"v": a}))
+    _, arrays = read_vti(write_vti(tmp_path / "a.vti", {"v": a}))
     np.testing.assert_array_equal(arrays["v"], a)
 
 
