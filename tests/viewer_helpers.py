@@ -74,30 +74,39 @@ class Client:
 
     def wait(self, kind: str, rid: int | None = None, timeout: float = 60.0, errors=None):
         """Skip messages until one of `kind` (answering request `rid`, if given) arrives."""
-        deadline = time.monotonic() + timeout
-        while True:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise TimeoutError(f"no {kind} for request {rid}")
-            got = self.recv(left)
-            if errors is not None and got[0] == "error":
-                errors.append(got[1])
-            if got[0] == kind and (rid is None or got[1].get("id") == rid):
-                return got
+        return self._until(
+            lambda got: got[0] == kind and (rid is None or got[1].get("id") == rid),
+            f"no {kind} for request {rid}",
+            timeout,
+            errors,
+            errors_fail=False,
+        )
 
     def frame_for(self, rid: int, timeout: float = 60.0, errors=None):
         """The first frame answering request `rid` or a later one."""
+        return self._until(
+            lambda got: got[0] == "frame" and (got[1]["id"] or 0) >= rid,
+            f"no frame for request {rid}",
+            timeout,
+            errors,
+            errors_fail=True,
+        )
+
+    def _until(self, match, missing: str, timeout: float, errors, errors_fail: bool):
+        """The first message `match` accepts. Error replies on the way go to `errors` if it
+        is a list; else they fail the test where `errors_fail`, and are skipped otherwise."""
         deadline = time.monotonic() + timeout
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
-                raise TimeoutError(f"no frame for request {rid}")
+                raise TimeoutError(missing)
             got = self.recv(left)
             if got[0] == "error":
-                if errors is None:
+                if errors is not None:
+                    errors.append(got[1])
+                elif errors_fail:
                     raise AssertionError(f"error reply: {got[1]}")
-                errors.append(got[1])
-            if got[0] == "frame" and (got[1]["id"] or 0) >= rid:
+            if match(got):
                 return got
 
     def open(self, dataset: int | str = 0, size=(128, 128)):
