@@ -15,6 +15,13 @@ shapes = st.tuples(st.integers(1, 7), st.integers(1, 6), st.integers(1, 6))
 wide_shapes = st.tuples(st.integers(1, 4), st.integers(1, 3), st.integers(1, 40))
 
 
+# Factors of opacity (TF opacities, enhancement weights) are 0 or far above float32's smallest
+# normal numbers, even multiplied together: 1e-300 times an opacity is 0 in the float32
+# arithmetic the engines share but not in the float64 these tests check with.
+def opacity_factors(high: float = 1.0):
+    return st.one_of(st.just(0.0), st.floats(1e-12, high))
+
+
 @st.composite
 def data_tfs(draw) -> DataTF:
     n = draw(st.integers(2, 5))
@@ -22,9 +29,7 @@ def data_tfs(draw) -> DataTF:
     if len(us) < 2:
         us = [0.0, 1.0]
     unit = st.floats(0, 1)
-    # Opacities of 0 or far above float32's subnormals: 1.4e-45 times a time opacity is 0 in
-    # the float32 arithmetic the engines share but not in the float64 these tests check with.
-    opacity = st.one_of(st.just(0.0), st.floats(1e-30, 1))
+    opacity = opacity_factors()
     if draw(st.booleans()):  # constant colour: the engine's colour-by-time fast path
         rgb = (draw(unit), draw(unit), draw(unit))
         points = [(u, *rgb, draw(opacity)) for u in us]
@@ -60,12 +65,12 @@ def time_tfs(draw, positions=None) -> TimeTF:
 
 enhancements = st.one_of(
     st.just(Enhance()),
-    st.builds(Enhance, st.just("edge"), st.floats(0, 1), st.floats(0, 8), st.floats(0.5, 2)),
+    st.builds(Enhance, st.just("edge"), opacity_factors(), opacity_factors(8), st.floats(0.5, 2)),
     st.builds(
         Enhance,
         st.just("silhouette"),
-        st.floats(0, 1),
-        st.floats(0, 1),
+        opacity_factors(),
+        opacity_factors(),
         st.floats(0.5, 2),
         st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(0.1, 1)),
     ),
