@@ -318,8 +318,10 @@ def main() -> None:
         shutil.rmtree(tmp, ignore_errors=True)
     main_comp = compressors[0]
     summary = {
-        **{k: results[main_comp][k] for k in ("peak_rss_over_budget", "throughput_vs_read")},
-        "cpu_bound_throughput_vs_read": results[main_comp]["cpu_bound_throughput_vs_read"],
+        **{
+            k: results[main_comp][k]
+            for k in ("peak_rss_over_budget", "throughput_vs_read", "cpu_bound_throughput_vs_read")
+        },
         "compressor": main_comp,
         "output_compressor": args.output_compressor,
         "budget_mb": round(budget / 1e6, 1),
@@ -446,6 +448,7 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
                 "steps_per_read": fresh[0]["steps_per_read"],
             },
         ),
+        *((name, name, {"vs_read": round(read_s / med(name, 0), 3)}) for name in parts),
     ):
         emit(
             {
@@ -459,18 +462,6 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
                 "value": round(data_bytes / med(name, 0) / 1e9, 3),
                 "unit": "GB/s",
                 **extra,
-            }
-        )
-    for name in parts:
-        emit(
-            {
-                "bench": "out_of_core",
-                "case": case,
-                "impl": name,
-                "median_s": round(med(name, 0), 3),
-                "cpu_s": round(med(name, 1), 3),
-                "repeats": repeats,
-                "vs_read": round(read_s / med(name, 0), 3),
             }
         )
     work = med("read", 1) + alone["kernel_cpu_s"] + alone["write_cpu_s"]

@@ -304,14 +304,14 @@ def integrate(
             series,
             window,
             out_path,
-            mode,
-            spec_args,
-            budget,
-            engine,
-            device,
             scheduler,
             workers,
-            overwrite,
+            mode=mode,
+            memory=budget,
+            engine=engine,
+            device=device,
+            overwrite=overwrite,
+            **spec_args,
         )
         err.print(f"wrote {out_path} ({mode}, streamed) in {time.perf_counter() - t0:.2f} s")
         return
@@ -320,20 +320,8 @@ def integrate(
     err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {time.perf_counter() - t0:.2f} s")
 
 
-def _integrate_streaming(
-    series,
-    window,
-    out_path,
-    mode,
-    spec_args,
-    budget,
-    engine,
-    device,
-    scheduler,
-    workers,
-    overwrite,
-) -> None:
-    """integrate_to_store locally, or on a dask cluster; resume notes go to stderr."""
+def _integrate_streaming(series, window, out_path, scheduler, workers, **args) -> None:
+    """integrate_to_store(**args) locally, or on a dask cluster; resume notes go to stderr."""
     import logging
 
     from .streaming import integrate_to_store
@@ -344,9 +332,8 @@ def _integrate_streaming(
         handler.setFormatter(logging.Formatter("chronocl: %(message)s"))
         log.addHandler(handler)
         log.setLevel(logging.INFO)
-    args = dict(mode=mode, memory=budget, engine=engine, device=device, overwrite=overwrite)
     if not (scheduler or workers):
-        integrate_to_store(series, window, out_path, progress=True, **args, **spec_args)
+        integrate_to_store(series, window, out_path, progress=True, **args)
         return
     from .distributed import connect, dashboard_link
 
@@ -354,9 +341,7 @@ def _integrate_streaming(
         link = dashboard_link(client)
         if link:
             err.print(f"dask dashboard: {link}", highlight=False)
-        integrate_to_store(
-            series, window, out_path, client=client, progress=True, **args, **spec_args
-        )
+        integrate_to_store(series, window, out_path, client=client, progress=True, **args)
 
 
 def _parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:

@@ -72,8 +72,7 @@ class Plan:
 
 def stored_z_chunk(series: TimeSeries) -> int:
     """Rows per stored chunk along z (0 for in-memory data, which need no decoding)."""
-    arr = getattr(series, "_zarr", None)
-    return int(arr.chunks[1]) if arr is not None else 0
+    return series.z_chunk if getattr(series, "_zarr", None) is not None else 0
 
 
 def needs_raw(spec: IntegrationSpec) -> bool:
