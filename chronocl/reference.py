@@ -134,14 +134,13 @@ def combine(front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
     Associative for every mode, which is what sliding a window needs (DESIGN.md 3):
     alpha is `over`; first_hit keeps the front's hit where it has one; max/min keep the
     front's winner unless the back's value is strictly more extreme (ties go to the step
-    integrated first, as in `accumulate`); additive adds the sums and takes the larger alpha.
+    integrated first, as in `accumulate`). Additive partials hold opacity alone (the colour
+    sums are kept apart, exactly, in fixed point): the larger opacity.
     """
     if spec.mode == "alpha":
         return Partial(over(front.rgba, back.rgba), None)
     if spec.mode == "additive":
-        rgba = front.rgba + back.rgba
-        rgba[..., 3] = np.maximum(front.rgba[..., 3], back.rgba[..., 3])
-        return Partial(rgba, None)
+        return Partial(np.maximum(front.rgba, back.rgba), None)
     if spec.mode == "first_hit":
         keep = front.t_index >= 0
     else:

@@ -45,9 +45,7 @@ class NumpyEngine:
         return Partial(rgba, t_index), False
 
     def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
-        """The partial of `front` then `back`; additive partials hold opacity alone."""
-        if spec.mode == "additive":
-            return Partial(np.maximum(front.rgba, back.rgba), None)
+        """The partial of `front` then `back` (reference.combine)."""
         return reference.combine(front, back, spec)
 
     def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:
