@@ -31,10 +31,10 @@ from . import reference
 from .budget import human, parse_memory
 from .chronovolume import Chronovolume
 from .data.series import TimeSeries
-from .data.window import WindowManager
+from .data.window import WindowManager, stack_brick
 from .engine import FIXED_ONE, get_engine
 from .engine.memory import aligned_empty
-from .integrate import integrate, make_spec, prepare
+from .integrate import Job, integrate, make_spec, prepare
 from .reference import Partial
 from .selection import Selection, parse_selection
 from .sliding import SlidingAggregate, _block
@@ -209,8 +209,7 @@ class _Slider:
         self.spec = session.spec
         self.selection = selection
         self.arrays: dict[int, np.ndarray] = {}
-        series = session.series
-        self.value_range = self.spec.data_tf.value_range or (series.vmin, series.vmax)
+        self.value_range = prepare(session.series, selection, spec=self.spec).value_range
         mode = self.spec.mode
         # Leaves of additive are raw sums: finalisation happens once per window.
         self.leaf_spec = (
@@ -267,11 +266,11 @@ class _Slider:
 
     def _chronovolume(self) -> Chronovolume:
         session, spec = self.session, self.spec
+        job = Job.of(session.series, self.selection, spec, self.value_range)
         value = self.agg.value()
         if spec.mode == "additive":
             if spec.normalize == "time":
-                positions = spec.time_tf.positions_of(self.selection.steps, session.series.n_steps)
-                norm = reference.additive_norm(spec, positions)
+                norm = reference.additive_norm(spec, job.positions)
             else:
                 norm = np.full(3, float(self.acc.max()) / FIXED_ONE if self.acc.size else 0.0)
             rgba, t_index = session.engine.fixed_finalize(self.acc, value.rgba, norm), None
@@ -279,8 +278,7 @@ class _Slider:
             rgba = np.asarray(value.rgba, dtype=np.float32)
             t_index = None if value.t_index is None else np.array(value.t_index, dtype=np.int32)
         name = getattr(session.engine, "name", type(session.engine).__name__)
-        meta = prepare(session.series, self.selection, spec=spec).metadata(name)
-        return Chronovolume(rgba, t_index, meta)
+        return Chronovolume(rgba, t_index, job.metadata(name))
 
     def _leaf_full(self, step: int) -> Partial:
         """One step integrated alone: its partial chronovolume (additive: raw sums)."""
@@ -332,9 +330,4 @@ class _ResidentSeries:
         return getattr(self._series, name)
 
     def read_brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
-        z1 = self._series.volume_shape[0] if z1 is None else z1
-        first = self._arrays[int(steps[0])]
-        out = aligned_empty((z1 - z0, len(steps), *first.shape[1:]), first.dtype)
-        for i, s in enumerate(steps):
-            out[:, i] = self._arrays[int(s)][z0:z1]
-        return out
+        return stack_brick([self._arrays[int(s)] for s in steps], z0, z1)

@@ -78,7 +78,7 @@ class _Stack(Generic[P]):
         return acc
 
     def push(self, step: int) -> None:
-        below = self._at(len(self.items) - 1) if self.items else None
+        below = self.top()
         self.items.append(step)
         self.aggs[len(self.items) - 1] = self._up(below, self.owner._leaf(step))
         self._trim()

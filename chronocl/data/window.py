@@ -123,10 +123,11 @@ class WindowManager:
         if bad:
             raise InvalidSelectionError(f"steps {bad} are outside the series' [0, {n})")
         self.series.check_unchanged()
-        if len(set(steps)) > self.capacity:
+        distinct = len(set(steps))
+        if distinct > self.capacity:
             raise InvalidParameterError(
-                f"a window of {len(set(steps))} steps needs "
-                f"{human(len(set(steps)) * self.step_bytes)} resident but the memory budget is "
+                f"a window of {distinct} steps needs "
+                f"{human(distinct * self.step_bytes)} resident but the memory budget is "
                 f"{human(self.budget)}; use --memory {_round_up_mb(len(steps) * self.step_bytes)}"
                 "MB or more, or a shorter window (integrate streams windows of any size)"
             )
@@ -163,12 +164,7 @@ class WindowManager:
 
     def brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
         """Rows [z0, z1) of resident steps as an xytz brick (z1 - z0, W, Y, X)."""
-        arrays = self.get(steps)
-        z1 = self.series.volume_shape[0] if z1 is None else z1
-        out = aligned_empty((z1 - z0, len(arrays), *self.series.volume_shape[1:]), arrays[0].dtype)
-        for i, a in enumerate(arrays):
-            out[:, i] = a[z0:z1]
-        return out
+        return stack_brick(self.get(steps), z0, z1)
 
     def close(self) -> None:
         with self._lock:
@@ -251,11 +247,11 @@ class WindowManager:
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
         with self._lock:
             while True:
-                if request.superseded and not all(s in self._cache for s in request.steps):
+                missing = [s for s in request.steps if s not in self._cache]
+                if request.superseded and missing:
                     raise SupersededError(
                         f"the request for steps {list(request.steps)} was replaced by a newer one"
                     )
-                missing = [s for s in request.steps if s not in self._cache]
                 if not missing:
                     for s in request.steps:
                         self._cache.move_to_end(s)
@@ -273,3 +269,13 @@ class WindowManager:
 
 def _round_up_mb(n: int) -> int:
     return -(-n // 10**6)
+
+
+def stack_brick(arrays: Sequence[np.ndarray], z0: int = 0, z1: int | None = None) -> np.ndarray:
+    """Rows [z0, z1) of whole-volume step arrays (Z, Y, X) as an xytz brick (z1 - z0, W, Y, X)."""
+    first = arrays[0]
+    z1 = first.shape[0] if z1 is None else z1
+    out = aligned_empty((z1 - z0, len(arrays), *first.shape[1:]), first.dtype)
+    for i, a in enumerate(arrays):
+        out[:, i] = a[z0:z1]
+    return out
