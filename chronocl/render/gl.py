@@ -24,17 +24,24 @@ def gl_context():
     with _lock:
         if _context is None:
             try:
-                import moderngl
+                import moderngl  # noqa: F401  (its own message when missing)
             except ImportError:
                 raise RendererUnavailableError(
                     "moderngl is not installed; 'pip install moderngl'"
                 ) from None
-            try:
-                _context = moderngl.create_context(standalone=True, backend="egl", require=330)
-            except Exception as exc:  # moderngl/glcontext raise plain Exceptions
-                why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-                raise RendererUnavailableError(NO_GL.format(why=why)) from None
+            _context = new_egl_context()
         return _context
+
+
+def new_egl_context():
+    """A new standalone OpenGL 3.3 context on EGL, or RendererUnavailableError saying why not."""
+    try:
+        import moderngl
+
+        return moderngl.create_context(standalone=True, backend="egl", require=330)
+    except Exception as exc:  # moderngl/glcontext raise plain Exceptions
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RendererUnavailableError(NO_GL.format(why=why)) from None
 
 
 @cache

@@ -79,12 +79,11 @@ class TokenGuard:
         port = (scope.get("server") or ("", 0))[1]
         return f"chronocl_token_{port}"
 
-    def _offered(self, scope) -> tuple[list[str], bool]:
+    def _offered(self, scope, headers: dict[str, str]) -> tuple[list[str], bool]:
         """Tokens the request offers, and whether one came in the query string."""
         query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
         from_query = query.get("token", [])
         offered = list(from_query)
-        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
         if "x-chronocl-token" in headers:
             offered.append(headers["x-chronocl-token"])
         auth = headers.get("authorization", "")
@@ -109,14 +108,12 @@ class TokenGuard:
         if scope["type"] not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
-        offered, from_query = self._offered(scope)
+        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
+        offered, from_query = self._offered(scope, headers)
         if not self._valid(offered):
             await self._refuse(scope, send, "the token is missing or wrong")
             return
         if scope["type"] == "websocket":
-            headers = {
-                k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]
-            }
             origin = headers.get("origin")
             if origin is not None and urlsplit(origin).netloc != headers.get("host", ""):
                 await self._refuse(scope, send, "the page's origin is not this server")

@@ -39,6 +39,7 @@ from ..enhance import Enhance
 from ..errors import ChronoclError, InvalidParameterError, UnknownNameError
 from ..render.camera import Camera
 from ..render.raycaster import Volume, clip_plane, occupied_box
+from ..render.views import describe
 from ..selection import Selection
 from ..session import Session
 from ..spec import IntegrationSpec
@@ -80,18 +81,10 @@ def on_gl(fn: Callable, *args):
 def _on_gl(fn: Callable, args: tuple):
     global _gl_raycaster
     if _gl_raycaster is None:
-        from ..errors import RendererUnavailableError
-        from ..render.gl import NO_GL
+        from ..render.gl import new_egl_context
         from ..render.raycaster import Raycaster
 
-        try:
-            import moderngl
-
-            ctx = moderngl.create_context(standalone=True, backend="egl", require=330)
-        except Exception as exc:  # moderngl/glcontext raise plain Exceptions
-            why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise RendererUnavailableError(NO_GL.format(why=why)) from None
-        _gl_raycaster = Raycaster(ctx)
+        _gl_raycaster = Raycaster(new_egl_context())
     return fn(_gl_raycaster, *args)
 
 
@@ -293,6 +286,11 @@ class ViewSlot:
             self.volume.release()
             self.volume = None
             self.uploaded = None
+
+    def drop_session(self) -> None:
+        if self.session is not None:
+            self.session.close()
+        self.session, self.cv = None, None
 
 
 def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
@@ -552,8 +550,7 @@ class ClientWorker:
         if any(s.volume is not None for s in slots):
             on_gl(lambda rc: [s.release_gl() for s in slots])
         for s in slots:
-            if s.session is not None:
-                s.session.close()
+            s.drop_session()
         self._close_manager()
 
     def _close_manager(self) -> None:
@@ -566,9 +563,7 @@ class ClientWorker:
         series = self.datasets[state.dataset].series
         if self._slots_dataset != state.dataset:
             for s in self._slots:
-                if s.session is not None:
-                    s.session.close()
-                    s.session, s.cv = None, None
+                s.drop_session()
             self._close_manager()
             self._slots_dataset = state.dataset
         if self._manager is None:
@@ -596,9 +591,7 @@ class ClientWorker:
             incremental = incremental or inc
             cvs.append(cv)
         for slot in self._slots[len(state.views) :]:
-            if slot.session is not None:
-                slot.session.close()
-            slot.session, slot.cv = None, None
+            slot.drop_session()
         return cvs, integrate_ms, incremental
 
     def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
@@ -616,14 +609,11 @@ class ClientWorker:
                 spec=spec,
                 manager=self._manager,
             )
-            cv = s.set_window(sel.steps[0], sel.steps[-1] + 1, sel.stride)
+            cv = s.set_window(sel)
         elif s.spec != spec:
             cv = s.set_spec(spec)
         else:
-            k = _slide_by(s.selection, sel)
-            cv = s.slide(k) if k else s.set_window(sel.steps[0], sel.steps[-1] + 1, sel.stride)
-            if s.selection != sel:  # clamped differently: jump
-                cv = s.set_window(sel.steps[0], sel.steps[-1] + 1, sel.stride)
+            cv = s.set_window(sel)  # the session slides where the new window overlaps the old
         slot.cv = cv
         stats = s.stats or {}
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
@@ -674,10 +664,10 @@ class ClientWorker:
             "quality": state.quality,
             "format": "jpeg",
             "views": [
-                {"width": w, "height": h, "bytes": len(b), "label": label(cv)}
+                {"width": w, "height": h, "bytes": len(b), "label": describe(cv)}
                 for b, cv in zip(images, cvs, strict=True)
             ],
-            "legend": legend(cvs[0], state),
+            "legend": legend(cvs[0]),
             "timings": {
                 "integrate_ms": round(integrate_ms, 2),
                 "incremental": incremental,
@@ -716,7 +706,7 @@ class ClientWorker:
         assert cv is not None
         hit = probe_ray(cv, state.camera, state.size, msg["x"], msg["y"], state.clip)
         ds = self.datasets[state.dataset]
-        reply = {"type": "probe", "id": rid_of(msg), "view": view, "x": msg["x"], "y": msg["y"]}
+        reply = {"type": "probe", "id": msg.get("id"), "view": view, "x": msg["x"], "y": msg["y"]}
         reply |= {"reached": hit["reached"], "opacity": round(hit["opacity"], 4)}
         if hit["voxel"] is None:
             reply |= {"voxel": None, "values": None}
@@ -737,7 +727,7 @@ class ClientWorker:
             cvs = [s.cv for s in self._slots[: len(state.views)]]
             bg = parse_color(state.background)
             panels, *_ = on_gl(self._draw, cvs, state, state.size, bg)
-            labels = [label(cv) for cv in cvs]  # type: ignore[arg-type]
+            labels = [describe(cv) for cv in cvs]  # type: ignore[arg-type]
             image = Image(_compose(panels, labels, cvs, None, bg))
             name = f"{ds.name}-{sel}.png"
             key = self.downloads.add(image.png_bytes(), name, "image/png")
@@ -752,7 +742,7 @@ class ClientWorker:
                 zip_store(store, archive)
                 key = self.downloads.add(archive, name, "application/zip")
         self._reply(
-            {"type": "download", "id": rid_of(msg), "url": f"/download/{key}", "filename": name}
+            {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}
         )
 
 
@@ -764,21 +754,6 @@ def zip_store(store: Path, archive: Path) -> None:
                 zf.write(path, path.relative_to(store).as_posix())
 
 
-def rid_of(msg: dict) -> int | None:
-    return msg.get("id")
-
-
-def _slide_by(old: Selection | None, new: Selection) -> int:
-    """k such that `new` is `old` moved by k strides, else 0."""
-    if old is None or old.width != new.width or old.stride != new.stride:
-        return 0
-    shift = new.steps[0] - old.steps[0]
-    stride = new.stride
-    if shift == 0 or shift % stride:
-        return 0
-    return shift // stride
-
-
 def encode(pixels: np.ndarray, quality: int) -> bytes:
     from PIL import Image
 
@@ -787,13 +762,7 @@ def encode(pixels: np.ndarray, quality: int) -> bytes:
     return buf.getvalue()
 
 
-def label(cv: Chronovolume) -> str:
-    from ..render.views import describe
-
-    return describe(cv)
-
-
-def legend(cv: Chronovolume, state: ViewState) -> list[dict]:
+def legend(cv: Chronovolume) -> list[dict]:
     """Each selected step's time colour and opacity (the timeline colours its ticks by them)."""
     spec = cv.spec
     steps = cv.steps
