@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import emit, env_record
+from common import emit, env_record, race
 from out_of_core import generate
 
 from chronocl.budget import parse_memory
@@ -74,32 +74,17 @@ def main() -> None:
         with dist.local_cluster(args.workers) as cluster, Client(cluster) as client:
             startup = time.perf_counter() - t0
 
-            def local() -> float:
-                t = time.perf_counter()
+            def run(name: str, **kw: object) -> None:
+                out = tmp / f"{name}.zarr"
                 integrate_to_store(
-                    series, None, tmp / "local.zarr", mode=args.mode, memory=budget, overwrite=True
+                    series, None, out, mode=args.mode, memory=budget, overwrite=True, **kw
                 )
-                return time.perf_counter() - t
 
-            def distributed_run() -> float:
-                t = time.perf_counter()
-                integrate_to_store(
-                    series,
-                    None,
-                    tmp / "dist.zarr",
-                    mode=args.mode,
-                    memory=budget,
-                    overwrite=True,
-                    client=client,
-                )
-                return time.perf_counter() - t
+            def distributed_run() -> None:
+                run("dist", client=client)
 
-            local(), distributed_run()  # warm-up: kernels built in every process
-            times: dict[str, list[float]] = {"local": [], "distributed": []}
-            tasks = 0
-            for _ in range(repeats):
-                times["local"].append(local())
-                times["distributed"].append(distributed_run())
+            # The warm-up builds the kernels in every process.
+            times = race({"local": lambda: run("local"), "distributed": distributed_run}, repeats)
 
             # One more distributed run with the task function spied, to size what travels.
             job = prepare(series, None, args.mode, None, {})
@@ -118,11 +103,10 @@ def main() -> None:
             finally:
                 dist._gather = real_gather
             tasks = len(results)
-            for info in results:
-                call = (args_dict, (0, 1, 0, 1), str(tmp / "x"), "0" * 24, "opencl", None)
-                sizes.append(len(pickle.dumps(call)) + len(pickle.dumps(info)))
-        for impl, ts in times.items():
-            med = statistics.median(ts)
+            call = (args_dict, (0, 1, 0, 1), str(tmp / "x"), "0" * 24, "opencl", None)
+            call_bytes = len(pickle.dumps(call))
+            sizes.extend(call_bytes + len(pickle.dumps(info)) for info in results)
+        for impl, (med, least) in times.items():
             emit(
                 {
                     "bench": "distributed",
@@ -130,13 +114,13 @@ def main() -> None:
                     "impl": impl,
                     "mode": args.mode,
                     "median_s": round(med, 3),
-                    "min_s": round(min(ts), 3),
+                    "min_s": round(least, 3),
                     "repeats": repeats,
                     "value": round(data_bytes / med / 1e9, 3),
                     "unit": "GB/s",
                 }
             )
-        med_local, med_dist = (statistics.median(times[k]) for k in ("local", "distributed"))
+        med_local, med_dist = times["local"][0], times["distributed"][0]
         ratio = med_dist / med_local
         summary = {
             "distributed_over_local": round(ratio, 3),
