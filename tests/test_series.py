@@ -114,7 +114,7 @@ def chunked_store(tmp_path_factory):
     return series, data
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(
     steps=st.lists(st.integers(0, 8), min_size=1, max_size=12),
     rows=st.tuples(st.integers(0, 10), st.integers(1, 11)).filter(lambda r: r[0] < r[1]),

@@ -173,7 +173,7 @@ def chunked_store(tmp_path_factory):
     return chunked_series(tmp_path_factory.mktemp("chunked") / "s.zarr", (5, 24, 12, 16), 8)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(st.floats(0.0, 1.0))
 def test_plans_fit_and_keep_whole_chunks_while_any_option_allows(chunked_store, share):
     job = prepare(chunked_store, None, "max", None, {})
