@@ -16,6 +16,8 @@ import numpy as np
 import zarr
 
 from .atomic import atomic_directory
+from .data.integrity import checked_read
+from .data.series import compressors
 from .errors import StoreFormatError
 from .spec import IntegrationSpec
 from .stores import open_group
@@ -52,23 +54,37 @@ class Chronovolume:
         """Write to a zarr store atomically."""
         z, y, x, _ = self.rgba.shape
         zc = max(1, min(z, (8 * 2**20) // max(1, y * x * 16)))
+        keep = {"compressors": compressors("zstd"), "config": {"write_empty_chunks": True}}
         with atomic_directory(path, overwrite) as tmp:
             group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
-            group.create_array("rgba", data=self.rgba.astype(np.float32), chunks=(zc, y, x, 4))
+            group.create_array(
+                "rgba", data=self.rgba.astype(np.float32), chunks=(zc, y, x, 4), **keep
+            )
             if self.t_index is not None:
-                group.create_array("t_index", data=self.t_index.astype(np.int32), chunks=(zc, y, x))
-            group.attrs["chronocl"] = {"format": FORMAT, "version": 1, **self.metadata}
+                group.create_array(
+                    "t_index", data=self.t_index.astype(np.int32), chunks=(zc, y, x), **keep
+                )
+            group.attrs["chronocl"] = {
+                "format": FORMAT,
+                "version": 1,
+                "chunks": "complete",
+                **self.metadata,
+            }
         return Path(path)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Chronovolume:
         p = Path(path)
-        group = open_group(p, "chronovolume")
+        group = open_group(p, "chronovolume", checked=("rgba", "t_index"))
         attrs = dict(dict(group.attrs).get("chronocl", {}))
         if attrs.pop("format", None) != FORMAT or "rgba" not in group:
             raise StoreFormatError(
                 f"{str(p)!r} is not a chronovolume (is it a series? integrate it first)"
             )
         attrs.pop("version", None)
-        t_index = np.asarray(group["t_index"][...]) if "t_index" in group else None
-        return cls(rgba=np.asarray(group["rgba"][...]), t_index=t_index, metadata=attrs)
+        arrays = {}
+        for name in ("rgba", "t_index"):
+            if name in group:
+                arr = group[name]
+                arrays[name] = checked_read(p, arr, lambda a=arr: np.asarray(a[...]), ())
+        return cls(rgba=arrays["rgba"], t_index=arrays.get("t_index"), metadata=attrs)

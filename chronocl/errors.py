@@ -66,3 +66,7 @@ class StoreChangedError(ChronoclError, RuntimeError):
 
 class SupersededError(ChronoclError, RuntimeError):
     """A data request was cancelled because a newer request replaced it."""
+
+
+class StoreCorruptError(ChronoclError, ValueError):
+    """A store whose metadata disagree or whose chunks are missing or do not decode."""

@@ -38,12 +38,23 @@ def track(items: Iterable[T], total: int, description: str, enabled: bool) -> It
     if not enabled:
         yield from items
         return
-    with _bar() as bar:
+    with _bar() as bar, _erased_on_error(bar):
         task = bar.add_task(description, total=total, rate="")
         for item in items:
             yield item
             speed = bar.tasks[0].speed
             bar.update(task, advance=1, rate=f"{speed:.1f}/s" if speed else "")
+
+
+@contextlib.contextmanager
+def _erased_on_error(bar: Progress) -> Iterator[None]:
+    """Leave no bar behind when the work fails, so the error is the only line shown."""
+    try:
+        yield
+    except BaseException:
+        bar.live.transient = True
+        bar.console.quiet = True  # the bar's own console: nothing more is drawn on stop
+        raise
 
 
 @contextlib.contextmanager
@@ -59,7 +70,7 @@ def meter(
         return
     start, count, moved = time.perf_counter(), 0, 0
 
-    with _bar() as bar:
+    with _bar() as bar, _erased_on_error(bar):
         task = bar.add_task(description, total=total, completed=done, rate="")
 
         def advance(nbytes: int = 0) -> None:

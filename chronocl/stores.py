@@ -10,13 +10,25 @@ import zarr
 from .errors import InputNotFoundError, StoreFormatError
 
 
-def open_group(path: str | os.PathLike, what: str) -> zarr.Group:
-    """Open the zarr group at `path` read-only; `what` names the expected thing in errors."""
+def open_group(path: str | os.PathLike, what: str, checked: tuple[str, ...] = ()) -> zarr.Group:
+    """Open the zarr group at `path` read-only; `what` names the expected thing in errors.
+
+    Missing chunks of the `checked` arrays raise StoreCorruptError when the group's
+    attribute ``chronocl.chunks`` says that every chunk was written.
+    """
+    from .data.integrity import CheckedStore
+
     p = Path(path)
     if not p.exists():
         raise InputNotFoundError(f"{what} {str(p)!r} does not exist")
     try:
-        return zarr.open_group(store=str(p), mode="r")
+        store = CheckedStore(p, checked)
+        group = zarr.open_group(store=store, mode="r")
+        attrs = dict(group.attrs).get("chronocl")
+        store.complete = (
+            bool(checked) and isinstance(attrs, dict) and attrs.get("chunks") == "complete"
+        )
+        return group
     except Exception:  # zarr raises several kinds for a folder that is not a group
         raise StoreFormatError(f"{str(p)!r} is not a zarr group, so not {_article(what)}") from None
 

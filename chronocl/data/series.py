@@ -23,6 +23,7 @@ import zarr
 from ..atomic import atomic_directory
 from ..engine.memory import aligned_empty
 from ..errors import (
+    ChronoclError,
     InputNotFoundError,
     InvalidDataError,
     InvalidParameterError,
@@ -31,6 +32,7 @@ from ..errors import (
 )
 from ..progress import track
 from ..reference import normalize
+from .integrity import CheckedArray, CheckedStore, checked_read, damaged
 
 FORMAT = "chronocl.series"
 # Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at
@@ -130,7 +132,13 @@ class TimeSeries:
         for i0, i1, run in step_runs(steps, per_call):
             # (rows, n, Y, X) of the brick seen as (n, rows, Y, X), the store's order.
             view = out[:, i0:i1].transpose(1, 0, 2, 3)
-            self._zarr.get_basic_selection((run, slice(z0, z1)), out=wrap(view))
+            selection = (run, slice(z0, z1))
+            checked_read(
+                self.path,
+                self._zarr,
+                lambda sel=selection, v=view: self._zarr.get_basic_selection(sel, out=wrap(v)),
+                selection,
+            )
         return out
 
     @property
@@ -143,7 +151,8 @@ class TimeSeries:
     def read_rows(self, step: int, z0: int, z1: int, out: np.ndarray) -> None:
         """Read z rows [z0, z1) of one step into `out` (z1 - z0, Y, X)."""
         if self._zarr is not None:
-            out[...] = self._zarr[int(step), z0:z1]
+            sel = (int(step), slice(z0, z1))
+            out[...] = checked_read(self.path, self._zarr, lambda: self._zarr[sel], sel)
         else:
             out[...] = self.data[int(step), z0:z1].compute()
 
@@ -205,9 +214,16 @@ class TimeSeries:
             times = coord_times if times is None else times
             array = array.data  # numpy (a view) or dask
         spacing = (1.0, 1.0, 1.0) if spacing is None else spacing
-        arr = array if isinstance(array, da.Array) else da.from_array(np.asarray(array))
-        _check_shape(arr.shape, "array")
-        _check_dtype(arr.dtype)
+        if not isinstance(array, da.Array):
+            try:
+                array = np.asarray(array)
+            except (ValueError, TypeError) as exc:
+                raise InvalidDataError(
+                    f"{source} is not a rectangular array ({exc}); pass a (T, Z, Y, X) array"
+                ) from None
+        _check_shape(array.shape, "array")
+        _check_dtype(array.dtype)
+        arr = array if isinstance(array, da.Array) else da.from_array(array)
         finite = da.isfinite(arr).all() if arr.dtype.kind == "f" else da.from_array(True)
         smin, smax, smean, ok = da.compute(
             arr.min(axis=(1, 2, 3)), arr.max(axis=(1, 2, 3)), arr.mean(axis=(1, 2, 3)), finite
@@ -275,43 +291,45 @@ def open_series(path: str | os.PathLike) -> TimeSeries:
 
     if is_omezarr(p):  # opened in place: channel 0, full resolution
         return open_omezarr(p)
+    store = CheckedStore(p)
     try:
-        node = zarr.open(store=str(p), mode="r")
+        node = zarr.open(store=store, mode="r")
+        has_data = isinstance(node, zarr.Group) and "data" in node
+        arr = node["data"] if has_data else node
     except Exception as exc:  # zarr raises several kinds for a non-store folder
+        bad = _unreadable_metadata(p)
+        if bad is not None:
+            raise damaged(p, f"its metadata file {bad} cannot be read") from None
         raise StoreFormatError(
             f"{str(p)!r} is not a zarr store ({type(exc).__name__}); "
             "ingest your data with 'chronocl ingest'"
         ) from None
-    if isinstance(node, zarr.Group):
-        if "data" not in node:
-            raise StoreFormatError(
-                f"zarr group {str(p)!r} has no array 'data'; "
-                "it is not a chronocl series (is it a chronovolume?)"
-            )
-        arr = node["data"]
-        attrs = dict(node.attrs).get("chronocl", {})
-    else:
-        arr = node
-        attrs = dict(node.attrs).get("chronocl", {})
+    if isinstance(arr, zarr.Group):
+        raise StoreFormatError(
+            f"zarr group {str(p)!r} has no array 'data'; "
+            "it is not a chronocl series (is it a chronovolume?)"
+        )
+    if not has_data:
+        store.arrays = ("",)
+    attrs = dict(node.attrs).get("chronocl", {})
     _check_shape(arr.shape, str(p))
     _check_dtype(arr.dtype)
-    lazy = da.from_zarr(arr)
-    if attrs.get("format") == FORMAT:
-        stats = SeriesStats(
-            vmin=float(attrs["vmin"]),
-            vmax=float(attrs["vmax"]),
-            step_min=tuple(attrs["step_min"]),
-            step_max=tuple(attrs["step_max"]),
-            step_mean=tuple(attrs["step_mean"]),
-        )
-        sp = attrs.get("spacing", {})
-        spacing = (sp.get("z", 1.0), sp.get("y", 1.0), sp.get("x", 1.0))
+    lazy = da.from_array(CheckedArray(p, arr), chunks=arr.chunks, name=f"chronocl-{p}-{id(arr)}")
+    if isinstance(attrs, dict) and attrs.get("format") == FORMAT:
+        stats, spacing, times = _checked_attrs(p, arr, attrs)
+        if attrs.get("chunks") == "complete":
+            store.complete = True
+        else:  # written before stores kept empty chunks: a step may lack all-fill chunks
+            fill = float(arr.fill_value)
+            store.may_miss = frozenset(
+                t for t in range(arr.shape[0]) if stats.step_min[t] <= fill <= stats.step_max[t]
+            )
         return TimeSeries(
             data=lazy,
             stats=stats,
-            spacing=parse_spacing(spacing),
-            times=tuple(attrs.get("times", ())),
-            source=attrs.get("source", str(p)),
+            spacing=spacing,
+            times=times,
+            source=str(attrs.get("source", p)),
             path=p,
             _zarr=arr,
         )
@@ -319,6 +337,81 @@ def open_series(path: str | os.PathLike) -> TimeSeries:
     series.path, series._zarr = p, arr
     series.__post_init__()  # records the metadata stamp that check_unchanged compares with
     return series
+
+
+def _unreadable_metadata(path: Path) -> str | None:
+    """The first zarr metadata file under `path` that is not valid JSON, relative to it."""
+    import json
+
+    for name in ("zarr.json", ".zgroup", ".zarray", ".zattrs"):
+        for f in (path / name, path / "data" / name):
+            if not f.is_file():
+                continue
+            try:
+                json.loads(f.read_bytes())
+            except (ValueError, RecursionError):
+                return str(f.relative_to(path))
+    return None
+
+
+def _checked_attrs(path: Path, arr, attrs: dict) -> tuple[SeriesStats, tuple, tuple]:
+    """The statistics, spacing and time labels of a chronocl store, checked against its array.
+
+    Raises StoreCorruptError when they are missing, malformed or disagree with the array.
+    """
+    t = arr.shape[0]
+
+    def number(value: object, what: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise damaged(path, f"its {what} is {value!r}, not a number")
+        if not math.isfinite(value):
+            raise damaged(path, f"its {what} is {value}, not a finite number")
+        return float(value)
+
+    def numbers(key: str) -> tuple[float, ...]:
+        values = attrs.get(key)
+        if not isinstance(values, list):
+            raise damaged(path, f"its statistics lack the list {key!r}")
+        if len(values) != t:
+            raise damaged(
+                path, f"it has {t} time steps but {len(values)} entries in its {key} statistics"
+            )
+        return tuple(number(v, f"{key}[{i}]") for i, v in enumerate(values))
+
+    for key in ("vmin", "vmax"):
+        if key not in attrs:
+            raise damaged(path, f"its statistics lack {key!r}")
+    vmin, vmax = number(attrs["vmin"], "vmin"), number(attrs["vmax"], "vmax")
+    smin, smax, smean = numbers("step_min"), numbers("step_max"), numbers("step_mean")
+    if vmin > vmax:
+        raise damaged(path, f"its value range [{vmin}, {vmax}] is inverted")
+    if vmin != min(smin) or vmax != max(smax):
+        raise damaged(
+            path,
+            f"its value range [{vmin}, {vmax}] disagrees with its per-step statistics "
+            f"[{min(smin)}, {max(smax)}]",
+        )
+    for i, (lo, mean, hi) in enumerate(zip(smin, smean, smax, strict=True)):
+        if not lo <= hi or not lo - 1e-6 * abs(lo) <= mean <= hi + 1e-6 * abs(hi):
+            raise damaged(path, f"the statistics of step {i} are inconsistent")
+    chunks = tuple(arr.chunks)
+    if chunks[0] != 1 or chunks[2:] != tuple(arr.shape[2:]):
+        raise damaged(
+            path,
+            f"its chunk shape {chunks} is not one step of whole (Y, X) planes "
+            f"(1, zc, {arr.shape[2]}, {arr.shape[3]}) as chronocl writes",
+        )
+    sp = attrs.get("spacing", {})
+    try:
+        spacing = parse_spacing((sp.get("z", 1.0), sp.get("y", 1.0), sp.get("x", 1.0)))
+    except (ChronoclError, AttributeError):
+        raise damaged(path, f"its voxel spacing {sp!r} is not three numbers > 0") from None
+    times = attrs.get("times", [])
+    if not isinstance(times, list) or len(times) not in (0, t):
+        n = len(times) if isinstance(times, list) else type(times).__name__
+        raise damaged(path, f"it has {t} time steps but {n} time labels")
+    stats = SeriesStats(vmin=vmin, vmax=vmax, step_min=smin, step_max=smax, step_mean=smean)
+    return stats, spacing, tuple(times)
 
 
 def write_series(
@@ -337,28 +430,40 @@ def write_series(
     labels: Sequence[str] | None = None,
     chunk_bytes: int = CHUNK_BYTES,
     compressor: str = "zstd",
+    checksum: bool = True,
 ) -> TimeSeries:
     """Write steps (each (Z, Y, X)) to a new store atomically, gathering statistics on the way.
 
     Non-finite values are rejected unless `nan_fill` is given, which replaces them.
     `labels` name each step's origin (e.g. its file) in error messages. Chunks are
     (1, zc, Y, X) of at most `chunk_bytes` (small chunks suit small streaming budgets);
-    `compressor` is one of COMPRESSORS.
+    `compressor` is one of COMPRESSORS; `checksum` adds a crc32c per chunk.
     """
     dt = np.dtype(dtype)
     _check_dtype(dt)
+    if nan_fill is not None and not (
+        isinstance(nan_fill, int | float | np.number) and math.isfinite(nan_fill)
+    ):
+        raise InvalidParameterError(
+            f"--nan-fill {nan_fill} must be a finite number (it replaces NaN and infinite values)"
+        )
     shape = (int(n_steps), *(int(n) for n in volume_shape))
     _check_shape(shape, source or str(path))
     spacing = parse_spacing(spacing)
     times = _parse_times(times, n_steps)
     z, y, x = shape[1:]
     zc = max(1, min(z, int(chunk_bytes) // max(1, y * x * dt.itemsize)))
-    codecs = compressors(compressor)
+    codecs = compressors(compressor, checksum)
     smin, smax, smean = [], [], []
     with atomic_directory(path, overwrite) as tmp:
         group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
         arr = group.create_array(
-            "data", shape=shape, chunks=(1, zc, y, x), dtype=dt, compressors=codecs
+            "data",
+            shape=shape,
+            chunks=(1, zc, y, x),
+            dtype=dt,
+            compressors=codecs,
+            config={"write_empty_chunks": True},  # a missing chunk then always means damage
         )
         count = 0
         for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
@@ -392,6 +497,7 @@ def write_series(
         group.attrs["chronocl"] = {
             "format": FORMAT,
             "version": 1,
+            "chunks": "complete",
             "vmin": stats.vmin,
             "vmax": stats.vmax,
             "step_min": list(stats.step_min),
@@ -407,19 +513,26 @@ def write_series(
 COMPRESSORS = ("zstd", "blosc-lz4", "none")
 
 
-def compressors(name: str) -> object:
-    """zarr v3 compressors for a name in COMPRESSORS (zstd level 0 is zarr's default)."""
-    from zarr.codecs import BloscCodec, ZstdCodec
+def compressors(name: str, checksum: bool = True) -> object:
+    """zarr v3 compressors for a name in COMPRESSORS (zstd level 0 is zarr's default).
 
-    if name == "zstd":
-        return (ZstdCodec(level=0),)
-    if name == "blosc-lz4":
-        return (BloscCodec(cname="lz4", clevel=5, shuffle="shuffle"),)
-    if name == "none":
-        return None
-    raise InvalidParameterError(
-        f"unknown compressor {name!r}; choose one of {', '.join(COMPRESSORS)}"
-    )
+    With `checksum` a crc32c of every encoded chunk follows the compressor, so a chunk whose
+    bytes changed on disk fails to read (StoreCorruptError) instead of decoding to other values.
+    """
+    from zarr.codecs import BloscCodec, Crc32cCodec, ZstdCodec
+
+    if name not in COMPRESSORS:
+        raise InvalidParameterError(
+            f"unknown compressor {name!r}; choose one of {', '.join(COMPRESSORS)}"
+        )
+    chain = {
+        "zstd": [ZstdCodec(level=0)],
+        "blosc-lz4": [BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")],
+        "none": [],
+    }[name]
+    if checksum:
+        chain.append(Crc32cCodec())
+    return tuple(chain) or None
 
 
 def parse_spacing(spacing: Sequence[float]) -> tuple[float, float, float]:
