@@ -603,6 +603,21 @@ def view(
 
 
 @app.command()
+def verify(
+    store: Annotated[Path, typer.Argument(help="A chronocl series or chronovolume store.")],
+) -> None:
+    """Read a whole store back: every chunk must decode and every step match its statistics.
+
+    Exits 0 when the store is sound, 2 with one line naming the first damage otherwise.
+
+    Example: chronocl verify vortex.zarr
+    """
+    from .data.verify import verify as run_verify
+
+    _print_summary(run_verify(store, progress=True))
+
+
+@app.command()
 def devices() -> None:
     """List the OpenCL platforms and devices, marking the default one.
 
