@@ -570,11 +570,15 @@ def view(
     memory: Annotated[
         str | None, typer.Option(help="Memory budget of each view's window (e.g. 2GB).")
     ] = None,
+    max_clients: Annotated[
+        int, typer.Option(help="Most browser connections served at once (each has a thread).")
+    ] = 32,
 ) -> None:
     """Interactive viewer in the browser, rendered here (OpenCL + EGL) and streamed as frames.
 
     Prints http://127.0.0.1:PORT/?token=TOKEN: the page, its assets and its socket all need
-    the token. From another machine, forward the port: ssh -L PORT:127.0.0.1:PORT host.
+    the token, and the Host header must name this server. From another machine, forward the
+    port: ssh -L PORT:127.0.0.1:PORT host. Every option is checked before the server starts.
 
     Examples:
 
@@ -599,6 +603,7 @@ def view(
         engine=engine,
         device=device,
         memory=memory,
+        max_clients=max_clients,
     )
 
 

@@ -12,9 +12,11 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     save       {"what": "image" | "chronovolume", "view"}
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
-raise `ProtocolError` naming the field; the server answers {"type": "error", "id", "message"}
-and keeps serving. Server -> client: JSON text messages (info, dataset, histogram, probe,
-download, error) and binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON
+(numbers must be finite; data values must fit float32, ranges need lo < hi) raise
+`ProtocolError` naming the field; so do messages nested deeper than `MAX_DEPTH`, refused
+before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
+Server -> client: JSON text messages (info, dataset, histogram, probe, download, error) and
+binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON
 header, then the images' bytes back to back).
 """
 
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import struct
 from dataclasses import dataclass
 
@@ -29,6 +32,8 @@ from ..errors import InvalidParameterError
 from ..spec import MODES
 
 MAX_MESSAGE_BYTES = 64 * 1024
+MAX_DEPTH = 8  # the deepest message (update.data_tf.points[i][j]) nests 4 containers
+FLOAT32_MAX = 3.4028234663852886e38
 MAX_VIEWS = 4
 MAX_TF_POINTS = 64
 MIN_PANEL, MAX_PANEL = 64, 1024
@@ -49,7 +54,10 @@ class Num:
     def check(self, value: object, path: str) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ProtocolError(f"{path} must be a number, got {_show(value)}")
-        x = float(value)
+        try:
+            x = float(value)
+        except OverflowError:  # an int beyond any float
+            x = math.inf
         if not math.isfinite(x) or not self.lo <= x <= self.hi:
             raise ProtocolError(f"{path} is {_show(value)}; it must lie in [{self.lo}, {self.hi}]")
         return x
@@ -118,6 +126,26 @@ class List:
 
 
 @dataclass(frozen=True)
+class Range:
+    """[lo, hi]: two numbers with lo < hi whose span, and its reciprocal, are finite float32
+    (values are normalised as (v - lo) / (hi - lo) in float32)."""
+
+    item: Num
+
+    def check(self, value: object, path: str) -> list:
+        lo, hi = List(self.item, 2, 2).check(value, path)
+        span = hi - lo
+        if not span > 0:
+            raise ProtocolError(f"{path} is [{lo:g}, {hi:g}]; it must have lo < hi")
+        if span > FLOAT32_MAX or span < 1.0 / FLOAT32_MAX:
+            raise ProtocolError(
+                f"{path} spans {span:g}; hi - lo must lie in [{1.0 / FLOAT32_MAX:.3g}, "
+                f"{FLOAT32_MAX:.3g}] (float32)"
+            )
+        return [lo, hi]
+
+
+@dataclass(frozen=True)
 class Nullable:
     inner: object
 
@@ -163,7 +191,6 @@ ORDERS = ("forward", "backward")
 TIME_COLORS = ("rgb", "warm-cool", "luminance", "white")
 TIME_ALPHAS = ("constant", "hat", "inverted-hat")
 ENHANCE_KINDS = ("none", "edge", "silhouette")
-BIG = 1e300
 
 CAMERA = Obj(
     {
@@ -182,7 +209,7 @@ WINDOW = Obj(
 DATA_TF = Obj(
     {
         "points": List(List(Num(0.0, 1.0), 5, 5), 1, MAX_TF_POINTS),
-        "value_range": Nullable(List(Num(-BIG, BIG), 2, 2)),
+        "value_range": Nullable(Range(Num(-FLOAT32_MAX, FLOAT32_MAX))),
     },
     frozenset({"points"}),
 )
@@ -243,7 +270,7 @@ MESSAGES: dict[str, Obj] = {
         frozenset({"x", "y"}),
     ),
     "histogram": Obj(
-        {"type": Enum(("histogram",)), "id": ID, "range": List(Num(0.0, 1.0), 2, 2)},
+        {"type": Enum(("histogram",)), "id": ID, "range": Range(Num(0.0, 1.0))},
         frozenset({"range"}),
     ),
     "save": Obj(
@@ -262,13 +289,43 @@ def _reject_constant(name: str) -> float:
     raise ProtocolError(f"{name} is not allowed in a message; send finite numbers")
 
 
+_STRINGS = re.compile(r'"(?:[^"\\]|\\.)*"', re.S)
+_BRACKETS = re.compile(r"[\[\]{}]")
+
+
+def too_deep(text: str, limit: int = MAX_DEPTH) -> bool:
+    """Whether the JSON text nests arrays and objects deeper than `limit` (strings skipped;
+    a cheap scan before decoding, which recurses once per level)."""
+    depth = 0
+    for m in _BRACKETS.finditer(_STRINGS.sub("", text)):
+        if m.group() in "[{":
+            depth += 1
+            if depth > limit:
+                return True
+        else:
+            depth -= 1
+    return False
+
+
+def _decode(text: str) -> object:
+    """json.loads without NaN/Infinity and without deep nesting (ProtocolError, ValueError)."""
+    if too_deep(text):
+        raise ProtocolError(
+            f"message nests arrays or objects more than {MAX_DEPTH} deep; send a flat message"
+        )
+    try:
+        return json.loads(text, parse_constant=_reject_constant)
+    except RecursionError:  # the scan above should have caught it
+        raise ProtocolError("message nests too deep; send a flat message") from None
+
+
 def request_id(text: object) -> int | None:
     """The `id` of a message, if it has a usable one (for error replies to bad messages)."""
     if not isinstance(text, str) or len(text) > MAX_MESSAGE_BYTES:
         return None
     try:
-        msg = json.loads(text, parse_constant=_reject_constant)
-    except (ValueError, ProtocolError):
+        msg = _decode(text)
+    except ValueError:  # ProtocolError is one
         return None
     rid = msg.get("id") if isinstance(msg, dict) else None
     return rid if isinstance(rid, int) and not isinstance(rid, bool) and 0 <= rid <= 2**53 else None
@@ -287,7 +344,9 @@ def parse_message(text: object) -> dict:
     if len(text.encode()) > MAX_MESSAGE_BYTES:
         raise ProtocolError(f"message is over the limit of {MAX_MESSAGE_BYTES} bytes")
     try:
-        msg = json.loads(text, parse_constant=_reject_constant)
+        msg = _decode(text)
+    except ProtocolError:
+        raise
     except ValueError as exc:
         raise ProtocolError(f"message is not valid JSON ({exc})") from None
     if not isinstance(msg, dict):

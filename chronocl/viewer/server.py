@@ -2,9 +2,14 @@
 
 Starlette on uvicorn. Every request needs the server's random token: `?token=` in the URL
 (the page then gets it as a cookie), the cookie, an `X-Chronocl-Token` header or
-`Authorization: Bearer`; tokens are compared with `hmac.compare_digest`. A WebSocket whose
-`Origin` is not the host it connected to is refused. The client names data sets only by
-index or name from the list the server was started with.
+`Authorization: Bearer`; tokens are compared with `hmac.compare_digest`. The `Host` header
+must name the address the server listens on (127.0.0.1, localhost or [::1] with its port, or
+the host it was bound to; bound to 0.0.0.0 or ::, any IP address too, never another name), so a
+DNS-rebinding page cannot reach it; a WebSocket whose `Origin` is not that host is refused.
+At most `max_clients` sockets are served at once (each has a render thread); the next one is
+told so and closed. The client names data sets only by index or name from the list the
+server was started with. Errors in a message are answered and the socket stays up; nothing
+sent to a client or printed carries a traceback.
 
     server = ViewerServer(["vortex.zarr"])   # 127.0.0.1, a free port
     print(server.url)                        # http://127.0.0.1:PORT/?token=...
@@ -16,7 +21,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hmac
+import ipaddress
 import json
+import logging
 import os
 import secrets
 import socket
@@ -28,9 +35,9 @@ from importlib import resources
 from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
-from ..errors import ChronoclError, InvalidParameterError
+from ..errors import ChronoclError, InvalidParameterError, UnknownNameError
 from .protocol import MAX_MESSAGE_BYTES, MAX_VIEWS, ProtocolError, parse_message, request_id
-from .state import ClientWorker, Dataset, Downloads
+from .state import ClientWorker, Dataset, Downloads, internal_error
 
 STATIC = {
     "index.html": "text/html; charset=utf-8",
@@ -43,6 +50,26 @@ CSP = (
     "connect-src 'self'; form-action 'none'; frame-ancestors 'none'; base-uri 'none'"
 )
 SEND_TIMEOUT_S = 60.0
+MAX_CLIENTS = 32
+MAX_CLIENTS_LIMIT = 1000
+WILDCARD = ("0.0.0.0", "::", "")
+CLOSE_TRY_AGAIN = 1013  # WebSocket close code: try again later
+
+log = logging.getLogger("chronocl.viewer")
+
+
+class _DenialNotAnError(logging.Filter):
+    """uvicorn's websockets-sansio protocol logs "ASGI callable returned without completing
+    handshake." at ERROR after every handshake answered with a denial response (the
+    `websocket.http.response` extension), though the client got the response
+    (Kludex/uvicorn#3138). This app answers every handshake (accept, close or denial), so
+    that line only ever follows a refusal: it is dropped."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() != "ASGI callable returned without completing handshake."
+
+
+_DENIAL_FILTER = _DenialNotAnError()
 
 
 def static_file(name: str) -> bytes:
@@ -68,12 +95,93 @@ def open_datasets(stores: Sequence[str | os.PathLike]) -> list[Dataset]:
     return datasets
 
 
-class TokenGuard:
-    """ASGI middleware: the token on every request, the Origin on sockets, safe headers."""
+def check_options(
+    *,
+    host: object = "127.0.0.1",
+    port: object = 0,
+    engine: object = "opencl",
+    device: object = None,
+    memory: object = None,
+    max_clients: object = MAX_CLIENTS,
+    token: object = None,
+) -> None:
+    """Raise the ChronoclError naming the first bad server option (before anything starts)."""
+    from ..budget import parse_memory
+    from ..engine import ENGINES
 
-    def __init__(self, app, token: str) -> None:
+    if not isinstance(host, str) or not host.strip() or any(c.isspace() for c in host):
+        raise InvalidParameterError(f"host {host!r} is not an address; use e.g. 127.0.0.1")
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise InvalidParameterError(f"port {port!r} is outside 0..65535; use 0 for a free one")
+    if engine not in ENGINES:
+        raise UnknownNameError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    if device is not None and not isinstance(device, str):
+        raise InvalidParameterError(f"device {device!r} must be a string such as 0:1 or a name")
+    if (
+        isinstance(max_clients, bool)
+        or not isinstance(max_clients, int)
+        or not 1 <= max_clients <= MAX_CLIENTS_LIMIT
+    ):
+        raise InvalidParameterError(
+            f"max_clients (--max-clients) {max_clients!r} must be an integer in "
+            f"1..{MAX_CLIENTS_LIMIT}, e.g. {MAX_CLIENTS}"
+        )
+    if token is not None and (not isinstance(token, str) or len(token) < 8):
+        raise InvalidParameterError("token must be a string of at least 8 characters")
+    if memory is not None:
+        parse_memory(memory)  # type: ignore[arg-type]
+    if engine == "opencl" and device:
+        from ..engine.device import _pick
+
+        _pick(device)  # raises EngineUnavailableError naming the devices there are
+
+
+def host_names(host: str, port: int) -> frozenset[str]:
+    """The Host header values (lower case) that name a server bound to host:port."""
+    names = {"127.0.0.1", "localhost", "[::1]", f"[{host}]" if ":" in host else host}
+    hosts = {f"{n}:{port}" for n in names}
+    if port == 80:  # browsers leave the default port out
+        hosts |= names
+    return frozenset(h.lower() for h in hosts)
+
+
+def is_ip_host(value: str, port: int) -> bool:
+    """Whether a Host header is an IP address (not a name) with this port."""
+    if value.startswith("["):  # [v6] or [v6]:port
+        addr, _, rest = value[1:].partition("]")
+        if rest and not rest.startswith(":"):
+            return False
+        given = rest[1:]
+    elif value.count(":") <= 1:
+        addr, _, given = value.partition(":")
+    else:
+        return False  # an IPv6 address needs brackets in a Host header
+    if (given or "80") != str(port):
+        return False
+    try:
+        ipaddress.ip_address(addr)
+    except ValueError:
+        return False
+    return True
+
+
+class TokenGuard:
+    """ASGI middleware: the Host and the token on every request, the Origin on sockets,
+    safe headers. `host`/`port`: the address the server is bound to (port None: the port
+    the request came in on)."""
+
+    def __init__(self, app, token: str, host: str = "127.0.0.1", port: int | None = None) -> None:
         self.app = app
         self.token = token.encode()
+        self.host = host
+        self.port = port
+
+    def host_ok(self, scope, headers: dict[str, str]) -> bool:
+        value = headers.get("host", "").strip().lower()
+        port = self.port if self.port is not None else (scope.get("server") or ("", 0))[1]
+        if value in host_names(self.host, port):
+            return True
+        return self.host in WILDCARD and is_ip_host(value, port)
 
     def cookie_name(self, scope) -> str:
         port = (scope.get("server") or ("", 0))[1]
@@ -109,6 +217,11 @@ class TokenGuard:
             await self.app(scope, receive, send)
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
+        if not self.host_ok(scope, headers):
+            await self._refuse(
+                scope, send, "the Host header does not name this server (DNS rebinding?)"
+            )
+            return
         offered, from_query = self._offered(scope, headers)
         if not self._valid(offered):
             await self._refuse(scope, send, "the token is missing or wrong")
@@ -145,23 +258,26 @@ class TokenGuard:
         await self.app(scope, receive, send_with_headers)
 
     async def _refuse(self, scope, send, why: str) -> None:
-        if scope["type"] == "websocket":
-            # Closing before accepting makes the server answer the handshake with 403.
-            await send({"type": "websocket.close", "code": 1008, "reason": why})
-            return
         body = (
             f"403 forbidden: {why}; open the URL with ?token=... that 'chronocl view' printed\n"
         ).encode()
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 403,
-                "headers": [
-                    (b"content-type", b"text/plain; charset=utf-8"),
-                    (b"content-length", str(len(body)).encode()),
-                ],
-            }
-        )
+        start = {
+            "status": 403,
+            "headers": [
+                (b"content-type", b"text/plain; charset=utf-8"),
+                (b"content-length", str(len(body)).encode()),
+            ],
+        }
+        if scope["type"] == "websocket":
+            if "websocket.http.response" in scope.get("extensions", {}):
+                # The handshake is answered with 403 and the reason as its body.
+                await send({"type": "websocket.http.response.start", **start})
+                await send({"type": "websocket.http.response.body", "body": body})
+            else:
+                # Closing before accepting makes the server answer the handshake with 403.
+                await send({"type": "websocket.close", "code": 1008, "reason": why})
+            return
+        await send({"type": "http.response.start", **start})
         await send({"type": "http.response.body", "body": body})
 
 
@@ -173,14 +289,19 @@ def make_app(
     device: str | None = None,
     memory: str | int | None = None,
     downloads: Downloads | None = None,
+    max_clients: int = MAX_CLIENTS,
+    host: str = "127.0.0.1",
+    port: int | None = None,
 ):
-    """The ASGI application (token-guarded Starlette app)."""
+    """The ASGI application (Host- and token-guarded Starlette app). At most `max_clients`
+    sockets are served at once; `host`/`port` are where the server listens (the Host check)."""
     from starlette.applications import Starlette
     from starlette.responses import FileResponse, PlainTextResponse, Response
     from starlette.routing import Route, WebSocketRoute
     from starlette.websockets import WebSocket, WebSocketDisconnect
 
     downloads = downloads or Downloads()
+    active = 0  # sockets being served (only the event loop's thread touches it)
 
     async def index(request):
         return Response(static_file("index.html"), media_type=STATIC["index.html"])
@@ -198,7 +319,33 @@ def make_app(
         path, filename, media_type = item
         return FileResponse(path, media_type=media_type, filename=filename)
 
+    async def refuse_over_cap(websocket: WebSocket) -> None:
+        message = (
+            f"the viewer already serves {max_clients} connections, its limit; close another "
+            "tab or start 'chronocl view' with a larger --max-clients"
+        )
+        with contextlib.suppress(Exception):  # the client may be gone already
+            await websocket.accept()
+            await websocket.send_text(json.dumps({"type": "error", "id": None, "message": message}))
+            await websocket.close(CLOSE_TRY_AGAIN, "too many connections")
+
     async def socket_endpoint(websocket: WebSocket) -> None:
+        nonlocal active
+        if active >= max_clients:
+            await refuse_over_cap(websocket)
+            return
+        active += 1  # no await between the test and the count
+        try:
+            await serve_socket(websocket)
+        except WebSocketDisconnect:
+            pass
+        except Exception as exc:  # one line in the log; the server goes on
+            log.error("chronocl viewer: %s", internal_error(exc, "on a socket"))
+            log.debug("chronocl viewer: socket failed", exc_info=True)
+        finally:
+            active -= 1
+
+    async def serve_socket(websocket: WebSocket) -> None:
         await websocket.accept()
         loop = asyncio.get_running_loop()
         send_lock = asyncio.Lock()
@@ -256,8 +403,13 @@ def make_app(
                     await deliver(
                         json.dumps({"type": "error", "id": request_id(text), "message": str(exc)})
                     )
-        except WebSocketDisconnect:
-            pass
+                except Exception as exc:  # a bug: answered and logged in one line, no traceback
+                    log.error("chronocl viewer: %s", internal_error(exc, "on a message"))
+                    log.debug("chronocl viewer: message failed", exc_info=True)
+                    err = {"type": "error", "id": request_id(text)}
+                    await deliver(
+                        json.dumps(err | {"message": internal_error(exc, "on a message")})
+                    )
         finally:
             gone.set()
             worker.close()
@@ -276,7 +428,7 @@ def make_app(
         ],
         lifespan=lifespan,
     )
-    return TokenGuard(app, token)
+    return TokenGuard(app, token, host=host, port=port)
 
 
 def handle(worker: ClientWorker, msg: dict) -> dict | None:
@@ -296,7 +448,9 @@ def handle(worker: ClientWorker, msg: dict) -> dict | None:
 
 
 class ViewerServer:
-    """`chronocl view`: serve the given stores on host:port (port 0: a free one)."""
+    """`chronocl view`: serve the given stores on host:port (port 0: a free one), at most
+    `max_clients` sockets at once. Every option is checked (ChronoclError) before the stores
+    are opened or the port bound."""
 
     def __init__(
         self,
@@ -309,14 +463,23 @@ class ViewerServer:
         engine: str = "opencl",
         device: str | None = None,
         memory: str | int | None = None,
+        max_clients: int = MAX_CLIENTS,
     ) -> None:
         import uvicorn
 
+        check_options(
+            host=host,
+            port=port,
+            engine=engine,
+            device=device,
+            memory=memory,
+            max_clients=max_clients,
+            token=token,
+        )
         self.datasets = datasets if datasets is not None else open_datasets(stores or [])
         self.token = token or secrets.token_urlsafe(24)
         self.host = host
-        if not 0 <= port <= 65535:
-            raise InvalidParameterError(f"port {port} is outside 0..65535; use 0 for a free one")
+        self.max_clients = max_clients
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self.sock = socket.socket(family, socket.SOCK_STREAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -337,6 +500,9 @@ class ViewerServer:
             device=device,
             memory=memory,
             downloads=self.downloads,
+            max_clients=max_clients,
+            host=host,
+            port=self.port,
         )
         config = uvicorn.Config(
             app,
@@ -345,6 +511,7 @@ class ViewerServer:
             ws_per_message_deflate=False,
             lifespan="on",
         )
+        logging.getLogger("uvicorn.error").addFilter(_DENIAL_FILTER)  # idempotent
         self.server = uvicorn.Server(config)
         self._thread: threading.Thread | None = None
 
@@ -398,9 +565,23 @@ def serve(
     engine: str = "opencl",
     device: str | None = None,
     memory: str | int | None = None,
+    max_clients: int = MAX_CLIENTS,
 ) -> None:
-    """Run the viewer: print the URL (with its token), open the browser, serve until Ctrl-C."""
-    server = ViewerServer(stores, host=host, port=port, engine=engine, device=device, memory=memory)
+    """Run the viewer: print the URL (with its token), open the browser, serve until Ctrl-C.
+
+    Every argument is checked first; a bad one raises the ChronoclError naming it and the fix.
+    """
+    if not isinstance(open_browser, bool):
+        raise InvalidParameterError(f"open_browser {open_browser!r} must be true or false")
+    server = ViewerServer(
+        stores,
+        host=host,
+        port=port,
+        engine=engine,
+        device=device,
+        memory=memory,
+        max_clients=max_clients,
+    )
     warning = server.warn_if_exposed()
     if warning:
         print(warning, file=sys.stderr, flush=True)

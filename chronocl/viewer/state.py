@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import logging
 import shutil
 import tempfile
 import threading
@@ -46,6 +47,7 @@ from ..spec import IntegrationSpec
 from ..tf import DataTF, TimeAlpha, TimeColor, TimeTF
 from .protocol import pack_frame
 
+log = logging.getLogger("chronocl.viewer")
 INTEGRATE_LOCK = threading.Lock()
 _gl_executor: ThreadPoolExecutor | None = None
 _gl_raycaster = None
@@ -64,6 +66,26 @@ DEFAULT_POINTS = (
     (0.55, 1.0, 1.0, 1.0, 0.35),
     (1.0, 1.0, 1.0, 1.0, 0.9),
 )
+
+
+def internal_error(exc: BaseException, where: str) -> str:
+    """One line for an unexpected error, for the client and the log: the exception's type,
+    never its text (which may hold paths) nor a traceback."""
+    return (
+        f"internal error ({type(exc).__name__}) {where}; the server keeps serving "
+        "(please report it)"
+    )
+
+
+def error_text(exc: BaseException, where: str) -> str:
+    """What a client is told of an error: a ChronoclError's own line, else `internal_error`
+    (then logged in one line, the traceback at debug level only)."""
+    if isinstance(exc, ChronoclError):
+        return str(exc)
+    text = internal_error(exc, where)
+    log.error("chronocl viewer: %s", text)
+    log.debug("chronocl viewer: %s", where, exc_info=exc)
+    return text
 
 
 # --------------------------------------------------------------------------- GL thread
@@ -519,26 +541,34 @@ class ClientWorker:
     # -- the thread ----------------------------------------------------------------------
     def _run(self) -> None:
         try:
-            while True:
-                with self._cond:
-                    while not self._closed and self._pending is None and not self._tasks:
-                        self._cond.wait()
-                    if self._closed:
-                        return
-                    pending, self._pending = self._pending, None
-                    task = None if pending is not None else self._tasks.popleft()
-                try:
-                    if pending is not None:
-                        self._render(*pending)
-                    else:
-                        self._do_task(*task)  # type: ignore[misc]
-                except Exception as exc:  # reported to the client; the worker keeps serving
-                    rid = pending[1] if pending is not None else task[1].get("id")  # type: ignore[index]
-                    text = str(exc) if isinstance(exc, ChronoclError) else f"internal: {exc!r}"
-                    if not self._reply({"type": "error", "id": rid, "message": text}):
-                        return
+            self._loop()
+        except Exception as exc:  # nothing of the thread's end may print a traceback
+            error_text(exc, "in a client's render thread")
         finally:
-            self._release()
+            try:
+                self._release()
+            except Exception as exc:
+                error_text(exc, "releasing a client's views")
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while not self._closed and self._pending is None and not self._tasks:
+                    self._cond.wait()
+                if self._closed:
+                    return
+                pending, self._pending = self._pending, None
+                task = None if pending is not None else self._tasks.popleft()
+            try:
+                if pending is not None:
+                    self._render(*pending)
+                else:
+                    self._do_task(*task)  # type: ignore[misc]
+            except Exception as exc:  # reported to the client; the worker keeps serving
+                rid = pending[1] if pending is not None else task[1].get("id")  # type: ignore[index]
+                text = error_text(exc, "making the frame" if pending else f"on {task[0]}")  # type: ignore[index]
+                if not self._reply({"type": "error", "id": rid, "message": text}):
+                    return
 
     def _reply(self, obj: dict) -> bool:
         import json
