@@ -117,3 +117,56 @@ class Client:
 
     def close(self) -> None:
         self.ws.close()
+
+
+class CliServer:
+    """`chronocl view STORES --no-browser ARGS` in a subprocess, its stderr kept in a file
+    (so a test can assert that nothing the clients did printed a traceback there)."""
+
+    def __init__(self, stores: list[Path], log: Path, *args: str, timeout: float = 120.0) -> None:
+        import re
+        import subprocess
+        import sys
+
+        self.log = log
+        self._err = open(log, "w")  # closed in stop()
+        cmd = [sys.executable, "-m", "chronocl", "view", *map(str, stores), "--no-browser", *args]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._err, text=True)
+        line = self._first_line(timeout)
+        m = re.search(r"http://127\.0\.0\.1:(\d+)/\?token=([\w-]+)", line)
+        if not m:
+            self.stop()
+            raise RuntimeError(f"'chronocl view' printed {line!r}; stderr: {self.stderr()}")
+        self.port, self.token = int(m.group(1)), m.group(2)
+        self.base = f"http://127.0.0.1:{self.port}"
+        self.url = f"{self.base}/?token={self.token}"
+
+    def _first_line(self, timeout: float) -> str:
+        import threading
+
+        got: list[str] = []
+        reader = threading.Thread(target=lambda: got.append(self.proc.stdout.readline()))
+        reader.daemon = True
+        reader.start()
+        reader.join(timeout)
+        return got[0] if got else ""
+
+    def stderr(self, start: int = 0) -> str:
+        if not self._err.closed:
+            self._err.flush()
+        return self.log.read_text(errors="replace")[start:]
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(30)
+            except Exception:
+                self.proc.kill()
+                self.proc.wait(30)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+        self._err.close()

@@ -321,11 +321,11 @@ def _decode(text: str) -> object:
 
 def request_id(text: object) -> int | None:
     """The `id` of a message, if it has a usable one (for error replies to bad messages)."""
-    if not isinstance(text, str) or len(text) > MAX_MESSAGE_BYTES:
+    if not isinstance(text, str) or len(text) > MAX_MESSAGE_BYTES or too_deep(text):
         return None
-    try:
-        msg = _decode(text)
-    except ValueError:  # ProtocolError is one
+    try:  # NaN and Infinity elsewhere in the message do not hide its id
+        msg = json.loads(text, parse_constant=lambda name: None)
+    except (ValueError, RecursionError):
         return None
     rid = msg.get("id") if isinstance(msg, dict) else None
     return rid if isinstance(rid, int) and not isinstance(rid, bool) and 0 <= rid <= 2**53 else None
