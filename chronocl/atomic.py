@@ -18,6 +18,9 @@ from .errors import OutputExistsError
 
 def check_output(path: str | os.PathLike, overwrite: bool) -> Path:
     """Return `path` as a Path; raise if it exists and `overwrite` is false."""
+    from .paths import check_writable
+
+    check_writable(path)  # its folder must take new files: probed before any work
     target = Path(path)
     if target.exists() and not overwrite:
         raise OutputExistsError(

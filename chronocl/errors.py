@@ -70,3 +70,11 @@ class SupersededError(ChronoclError, RuntimeError):
 
 class StoreCorruptError(ChronoclError, ValueError):
     """A store whose metadata disagree or whose chunks are missing or do not decode."""
+
+
+class OutputNotWritableError(ChronoclError, PermissionError):
+    """The output's folder cannot be written (permissions, read-only, a file used as a folder)."""
+
+
+class OutputIsInputError(ChronoclError, ValueError):
+    """The output is an input, lies inside one, or holds one: writing it would destroy input."""

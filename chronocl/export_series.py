@@ -48,6 +48,9 @@ def export_series(
     Returns the paths written: for vti the .pvd first, for raw the .json first, then the
     per-step files in step order; for npy the one file.
     """
+    from .paths import check_apart
+
+    check_apart(out, [series.path])  # never onto, into or around the input
     kind = str(fmt).lower().lstrip(".")
     if kind not in FORMATS:
         raise UnknownNameError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")

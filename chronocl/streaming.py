@@ -383,6 +383,9 @@ def integrate_to_store(
     or none. A run that fails leaves its finished slabs behind; running it again with the
     same parameters resumes. Returns the path written; `Chronovolume.load` reads it.
     """
+    from .paths import check_apart
+
+    check_apart(out_path, [series.path])  # never onto, into or around the input
     target = check_output(out_path, overwrite)
     name = str(target).lower().rstrip("/")
     if not name.endswith(".zarr") or name.endswith(".ome.zarr"):

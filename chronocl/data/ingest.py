@@ -200,6 +200,9 @@ def ingest(
     **options: object,
 ) -> TimeSeries:
     """Ingest with the reader for `fmt` (``auto``: by file type; raw files need dims=)."""
+    from ..paths import check_apart
+
+    check_apart(out, inputs)  # never onto, into or around an input
     if fmt not in FORMATS:
         raise UnknownNameError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
     if not inputs:
