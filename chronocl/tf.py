@@ -15,7 +15,6 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -24,6 +23,7 @@ from .errors import InputNotFoundError, InvalidTransferFunctionError, UnknownNam
 TIME_COLORS = ("rgb", "warm-cool", "luminance", "white", "points")
 TIME_ALPHAS = ("constant", "hat", "inverted-hat", "points")
 TIME_POSITIONS = ("relative", "absolute")
+MAX_JSON_BYTES = 16 * 2**20  # a transfer-function file larger than this is not one
 
 # Colours of the presets at p = 0, 0.5, 1 (oldest, middle, newest), interpolated linearly.
 _PRESET_STOPS = {
@@ -37,13 +37,44 @@ def _bad(msg: str) -> InvalidTransferFunctionError:
     return InvalidTransferFunctionError(msg)
 
 
-def _finite_unit(value: object, what: str) -> float:
+_JSON_TYPES = {str: "the string", list: "the list", tuple: "the list", dict: "the object"}
+
+
+def _show(value: object, most: int = 60) -> str:
+    """A value for a one-line message: its repr, shortened."""
     try:
-        x = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise _bad(f"{what} must be a number, got {value!r}") from None
+        text = repr(value).replace("\n", " ")
+    except RecursionError:
+        return "(nested too deeply to show)"
+    return text if len(text) <= most else text[: most - 3] + "..."
+
+
+def _got(value: object) -> str:
+    """What a JSON value is, for 'must be ..., got <this>'."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return f"the number {_show(value)}"
+    return f"{_JSON_TYPES.get(type(value), type(value).__name__)} {_show(value)}"
+
+
+def _number(value: object, what: str) -> float:
+    """A finite number (int or float, not a string or true/false) as float."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise _bad(f"{what} must be a number, got {_got(value)}")
+    try:
+        x = float(value)
+    except OverflowError:  # an int beyond float
+        x = math.inf
     if not math.isfinite(x):
-        raise _bad(f"{what} is {x}; every transfer-function value must be a finite number")
+        raise _bad(f"{what} is {_show(value)}; every transfer-function value must be finite")
+    return x
+
+
+def _finite_unit(value: object, what: str) -> float:
+    x = _number(value, what)
     if not 0.0 <= x <= 1.0:
         raise _bad(f"{what} is {x}, outside [0, 1]; transfer-function values lie in [0, 1]")
     return x
@@ -59,9 +90,10 @@ def _parse_points(points: object, n: int, what: str, names: str) -> tuple[tuple[
     for i, pt in enumerate(points):
         if isinstance(pt, np.ndarray):
             pt = pt.tolist()
-        if not isinstance(pt, Sequence) or isinstance(pt, str) or len(pt) != n:
-            got = len(pt) if isinstance(pt, Sequence) and not isinstance(pt, str) else pt
-            raise _bad(f"{what} point {i} has {got!r} entries, expected {n} ({names})")
+        if not isinstance(pt, Sequence) or isinstance(pt, str):
+            raise _bad(f"{what} point {i} must be a list of {n} numbers ({names}), got {_got(pt)}")
+        if len(pt) != n:
+            raise _bad(f"{what} point {i} has {len(pt)} entries, expected {n} ({names})")
         out.append(tuple(_finite_unit(v, f"{what} point {i} entry {j}") for j, v in enumerate(pt)))
     for i in range(1, len(out)):
         if out[i][0] <= out[i - 1][0]:
@@ -106,17 +138,12 @@ class DataTF:
             self, "points", _parse_points(self.points, 5, "data_tf", "u, r, g, b, a")
         )
         if isinstance(self.size, bool) or not isinstance(self.size, int | np.integer):
-            raise _bad(f"data_tf size must be an integer, got {self.size!r}")
+            raise _bad(f"data_tf size must be an integer, got {_got(self.size)}")
         if not 256 <= self.size <= 65536:
             raise _bad(f"data_tf size is {self.size}; use a LUT of 256 to 65536 entries")
         object.__setattr__(self, "size", int(self.size))
         if self.value_range is not None:
-            vr = self.value_range
-            if len(vr) != 2 or not all(math.isfinite(float(v)) for v in vr):
-                raise _bad(f"data_tf value_range {vr!r} must be two finite numbers [min, max]")
-            if float(vr[1]) <= float(vr[0]):
-                raise _bad(f"data_tf value_range {list(vr)} must have min < max")
-            object.__setattr__(self, "value_range", (float(vr[0]), float(vr[1])))
+            object.__setattr__(self, "value_range", _value_range(self.value_range))
 
     @property
     def lut(self) -> np.ndarray:
@@ -138,6 +165,29 @@ class DataTF:
             size=d.get("size", 256),
             value_range=d.get("value_range"),
         )
+
+
+def _value_range(vr: object) -> tuple[float, float]:
+    """[min, max]: two finite numbers within float32 (the engines' precision), min < max."""
+    if isinstance(vr, np.ndarray):
+        vr = vr.tolist()
+    if not isinstance(vr, list | tuple) or len(vr) != 2:
+        raise _bad(
+            f"data_tf value_range must be a list of two numbers [min, max], got {_got(vr)}; "
+            "e.g. [0, 1]"
+        )
+    lo, hi = (_number(v, "data_tf value_range") for v in vr)
+    big = float(np.finfo(np.float32).max)
+    if max(abs(lo), abs(hi)) > big:
+        raise _bad(
+            f"data_tf value_range {[lo, hi]} lies outside float32 (|v| <= {big:.3g}); "
+            "give the data's range"
+        )
+    if not np.float32(lo) < np.float32(hi) or not math.isfinite(float(np.float32(hi) - lo)):
+        raise _bad(
+            f"data_tf value_range {[lo, hi]} must have min < max (distinct in float32); e.g. [0, 1]"
+        )
+    return lo, hi
 
 
 def lut_lookup(lut: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -182,12 +232,11 @@ class TimeColor:
     def __post_init__(self) -> None:
         if self.preset not in TIME_COLORS:
             raise UnknownNameError(
-                f"unknown time colour preset {self.preset!r}; "
+                f"unknown time colour preset {_show(self.preset)}; "
                 f"choose one of {', '.join(TIME_COLORS)}"
             )
         _finite_unit(self.focus, "time colour focus")
-        f = float(self.falloff)
-        if not (math.isfinite(f) and f > 0):
+        if _number(self.falloff, "time colour falloff") <= 0:
             raise _bad(f"time colour falloff is {self.falloff}; it must be a number > 0")
         if self.preset == "points":
             object.__setattr__(
@@ -230,12 +279,13 @@ class TimeAlpha:
     def __post_init__(self) -> None:
         if self.shape not in TIME_ALPHAS:
             raise UnknownNameError(
-                f"unknown time alpha shape {self.shape!r}; choose one of {', '.join(TIME_ALPHAS)}"
+                f"unknown time alpha shape {_show(self.shape)}; "
+                f"choose one of {', '.join(TIME_ALPHAS)}"
             )
         for name in ("value", "center", "floor"):
             _finite_unit(getattr(self, name), f"time alpha {name}")
-        w = float(self.width)
-        if not (math.isfinite(w) and 0 < w <= 2):
+        w = _number(self.width, "time alpha width")
+        if not 0 < w <= 2:
             raise _bad(f"time alpha width is {self.width}; it must lie in (0, 2]")
         if self.shape == "points":
             object.__setattr__(self, "points", _parse_points(self.points, 2, "time alpha", "p, a"))
@@ -275,7 +325,7 @@ class TimeTF:
     def __post_init__(self) -> None:
         if self.positions not in TIME_POSITIONS:
             raise UnknownNameError(
-                f"unknown time positions {self.positions!r}; choose relative or absolute"
+                f"unknown time positions {_show(self.positions)}; choose relative or absolute"
             )
 
     @classmethod
@@ -358,17 +408,34 @@ class TFSetting:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> TFSetting:
-        p = Path(path)
-        if not p.is_file():
-            raise InputNotFoundError(f"transfer-function file {str(p)!r} does not exist")
+        from .paths import check_input
+
+        p = check_input(path, "transfer-function file", want="file", hint="check the --tf path")
+        if p.stat().st_size > MAX_JSON_BYTES:
+            raise _bad(
+                f"{p.name} has {p.stat().st_size} bytes; a transfer-function file is small "
+                f"JSON (at most {MAX_JSON_BYTES // 2**20} MiB); check --tf"
+            )
         try:
-            d = json.loads(p.read_text(), parse_constant=_reject_constant)
+            d = json.loads(p.read_text(encoding="utf-8"), parse_constant=_reject_constant)
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise _bad(f"{p.name} is not valid JSON ({exc}); fix the file") from None
+        except RecursionError:
+            raise _bad(
+                f"{p.name} nests lists or objects too deeply to read; a transfer function "
+                "needs three levels at most"
+            ) from None
+        except OSError as exc:
+            raise InputNotFoundError(
+                f"transfer-function file {str(p)!r} cannot be read ({exc.strerror or exc}); "
+                "check its permissions"
+            ) from None
         try:
             return cls.from_dict(d)
         except InvalidTransferFunctionError as exc:
             raise _bad(f"{p.name}: {exc}") from None
+        except RecursionError:
+            raise _bad(f"{p.name} nests lists too deeply; fix the file") from None
 
 
 def _reject_constant(name: str) -> float:
@@ -377,7 +444,7 @@ def _reject_constant(name: str) -> float:
 
 def _check_keys(d: object, what: str, allowed: set[str]) -> None:
     if not isinstance(d, dict):
-        raise _bad(f"{what} must be a JSON object, got {type(d).__name__}")
+        raise _bad(f"{what} must be a JSON object {{...}}, got {_got(d)}")
     unknown = sorted(set(d) - allowed)
     if unknown:
         raise _bad(f"{what} has unknown key {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}")

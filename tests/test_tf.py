@@ -91,6 +91,22 @@ def test_json_round_trip(tmp_path):
         ('{"time_tf": {"color": {"preset": "rainbow"}}}', "rainbow"),
         ('{"time_tf": {"colour": {}}}', "unknown key 'colour'"),
         ("[1, 2]", "JSON object"),
+        ('{"data_tf": {"value_range": "01"}}', "value_range must be a list of two numbers"),
+        ('{"data_tf": {"value_range": 5}}', "value_range must be a list of two numbers"),
+        ('{"data_tf": {"value_range": [0, 1, 2]}}', "value_range must be a list of two numbers"),
+        ('{"data_tf": {"value_range": ["0", 1]}}', "must be a number, got the string"),
+        ('{"data_tf": {"value_range": [0, 1e300]}}', "outside float32"),
+        ('{"data_tf": {"value_range": [1, 1]}}', "min < max"),
+        ('{"time_tf": {"alpha": {"shape": "hat", "width": "0.5"}}}', "width must be a number"),
+        ('{"time_tf": {"color": {"preset": "luminance", "falloff": null}}}', "got null"),
+        ('{"time_tf": {"color": {"preset": "luminance", "falloff": 0}}}', "falloff is 0"),
+        ('{"time_tf": {"alpha": {"value": true}}}', "got true"),
+        ('{"data_tf": {"points": [[0, 1, 1, 1, "0"], [1, 1, 1, 1, 1]]}}', "got the string '0'"),
+        ('{"data_tf": {"points": [5, [1, 1, 1, 1, 1]]}}', "must be a list of 5 numbers"),
+        ('{"data_tf": {"size": 256.0}}', "size must be an integer"),
+        ('{"data_tf": null}', "data_tf must be a JSON object"),
+        ("[" * 100_000 + "]" * 100_000, "too deeply"),
+        ('{"data_tf": {"points": ' + "[" * 990 + "]" * 990 + "}}", "bad.json"),  # either message
     ],
 )
 def test_bad_tf_json_gives_one_clear_line(tmp_path, content, needle):
@@ -115,3 +131,25 @@ def test_unknown_presets():
         TimeTF(positions="sideways")
     with pytest.raises(InvalidTransferFunctionError, match="min < max"):
         DataTF(value_range=(2.0, 1.0))
+
+
+def test_tf_path_that_is_not_a_file_says_what_it_is(tmp_path):
+    from chronocl.errors import InvalidParameterError
+
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    with pytest.raises(InputNotFoundError, match="symlink loop"):
+        TFSetting.load(tmp_path / "a")
+    (tmp_path / "gone").symlink_to(tmp_path / "nothing.json")
+    with pytest.raises(InputNotFoundError, match="broken symlink"):
+        TFSetting.load(tmp_path / "gone")
+    with pytest.raises(InvalidParameterError, match="is a folder, not a file"):
+        TFSetting.load(tmp_path)
+    with pytest.raises(InvalidParameterError, match="not a regular file"):
+        TFSetting.load("/dev/null")
+
+
+def test_value_range_accepts_numpy_numbers_and_rejects_strings():
+    assert DataTF(value_range=(np.float32(-1), np.int64(3))).value_range == (-1.0, 3.0)
+    with pytest.raises(InvalidTransferFunctionError, match="got the string"):
+        TimeAlpha("hat", width="0.5")  # type: ignore[arg-type]
