@@ -9,6 +9,7 @@ from dask.utils import format_bytes, parse_bytes
 from .errors import InvalidParameterError
 
 DEFAULT_MEMORY = "2GB"
+MAX_MEMORY = 2**50  # 1 PiB: a larger budget is a typo, not a machine
 
 
 def parse_memory(value: str | int | float | None, default: str = DEFAULT_MEMORY) -> int:
@@ -16,13 +17,22 @@ def parse_memory(value: str | int | float | None, default: str = DEFAULT_MEMORY)
     if value is None:
         value = default
     try:
+        if isinstance(value, bool):
+            raise TypeError(value)
         n = int(value) if isinstance(value, int | float) else int(parse_bytes(str(value)))
+    except OverflowError:  # 1e999 or inf: infinitely many bytes
+        n = MAX_MEMORY + 1
     except (ValueError, TypeError):
         raise InvalidParameterError(
             f"memory budget {value!r} is not a size; write it like 512MB, 2GB or 1.5GiB"
         ) from None
     if n <= 0:
         raise InvalidParameterError(f"memory budget {value!r} must be positive, e.g. 2GB")
+    if n > MAX_MEMORY:
+        raise InvalidParameterError(
+            f"memory budget {value!r} is more than {human(MAX_MEMORY)}, far beyond any "
+            "machine's memory; give the memory you want chronocl to use, e.g. 2GB"
+        )
     return n
 
 
