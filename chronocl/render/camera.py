@@ -15,6 +15,7 @@ import numpy as np
 from ..errors import InvalidParameterError, UnknownNameError
 
 PROJECTIONS = ("perspective", "orthographic")
+MIN_ZOOM, MAX_ZOOM = 0.01, 100.0  # beyond, the volume is a dot or the view is inside one voxel
 
 
 @dataclass(frozen=True)
@@ -36,8 +37,11 @@ class Camera:
                 raise InvalidParameterError(
                     f"camera {name} is {value!r}; give a finite number (degrees for angles)"
                 )
-        if self.zoom <= 0:
-            raise InvalidParameterError(f"camera zoom is {self.zoom}; it must be > 0")
+        if not MIN_ZOOM <= self.zoom <= MAX_ZOOM:
+            raise InvalidParameterError(
+                f"camera zoom is {self.zoom:g}; use {MIN_ZOOM:g} to {MAX_ZOOM:g} "
+                "(1 fits the volume, > 1 magnifies)"
+            )
         if not 1.0 <= self.fov <= 120.0:
             raise InvalidParameterError(f"camera fov is {self.fov}; use 1 to 120 degrees")
         if self.projection not in PROJECTIONS:

@@ -174,18 +174,36 @@ def occupied_box(alpha: np.ndarray, extent: np.ndarray, voxel: np.ndarray):
     return lo_w, hi_w
 
 
+def check_clip(clip: object) -> tuple[float, float, float, float]:
+    """A clip plane (nx, ny, nz, offset): four finite numbers, a normal that is not zero, and
+    the offset in -1..1 (beyond, the plane misses the box: all kept or nothing drawn)."""
+    try:
+        values = [float(v) for v in clip]  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise InvalidParameterError(
+            f"clip {clip!r} must be four numbers nx,ny,nz,offset, e.g. --clip 1,0,0,0"
+        ) from None
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        raise InvalidParameterError(
+            f"clip {clip!r} must be four finite numbers nx,ny,nz,offset, e.g. --clip 1,0,0,0"
+        )
+    n = np.array(values[:3])
+    if not float(np.linalg.norm(n)) > 1e-12:
+        raise InvalidParameterError(
+            "clip plane normal is (0, 0, 0); give a direction, e.g. --clip 1,0,0,0"
+        )
+    if not -1.0 <= values[3] <= 1.0:
+        raise InvalidParameterError(
+            f"clip offset is {values[3]:g}; use -1 (keep everything) to 1 (keep nothing), "
+            "0 cuts through the centre"
+        )
+    return values[0], values[1], values[2], values[3]
+
+
 def clip_plane(clip: tuple[float, float, float, float], extent: np.ndarray) -> tuple:
     """World-space plane (n, d) keeping dot(n, p) + d >= 0, from (nx, ny, nz, offset)."""
-    try:
-        values = [float(v) for v in clip]
-    except (TypeError, ValueError):
-        raise InvalidParameterError(f"clip {clip!r} must be four numbers nx,ny,nz,offset") from None
-    if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        raise InvalidParameterError(f"clip {clip!r} must be four finite numbers nx,ny,nz,offset")
+    values = check_clip(clip)
     n = np.array(values[:3])
-    norm = float(np.linalg.norm(n))
-    if norm == 0:
-        raise InvalidParameterError("clip plane normal is (0, 0, 0); give a direction")
-    n /= norm
+    n /= float(np.linalg.norm(n))
     reach = 0.5 * float(np.abs(n) @ extent)  # the box's half-width along n
     return (*n, -values[3] * reach)

@@ -12,7 +12,7 @@ from ..chronovolume import Chronovolume
 from ..errors import InvalidParameterError
 from .camera import Camera
 from .image import Image
-from .raycaster import Raycaster, Volume, check_size
+from .raycaster import Raycaster, Volume, check_clip, check_size
 
 _raycaster: Raycaster | None = None
 
@@ -102,6 +102,7 @@ def render_views(
     camera = camera or Camera()
     w, h = check_size(size)
     bg = parse_color(background)
+    clip = None if clip is None else check_clip(clip)
     rc = raycaster()
     panels = []
     for i, cv in enumerate(chronovolumes):
