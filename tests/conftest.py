@@ -1,10 +1,24 @@
-"""Shared fixtures and hypothesis settings."""
+"""Shared fixtures and hypothesis settings; a cold private kernel cache for every session."""
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 
-from hypothesis import HealthCheck, settings
+# Tests must not depend on what earlier runs left in the user's caches: every session gets
+# empty ones, set before pyopencl is imported so subprocesses (the CLI tests) inherit them.
+# pyopencl's compiler cache and pytools' PersistentDict live under XDG_CACHE_HOME (through
+# platformdirs; pyopencl has no variable of its own), PoCL's kernel cache in POCL_CACHE_DIR.
+_CACHE = tempfile.mkdtemp(prefix="chronocl-test-cache-")
+os.environ["XDG_CACHE_HOME"] = os.path.join(_CACHE, "xdg")
+os.environ["POCL_CACHE_DIR"] = os.path.join(_CACHE, "pocl")
+os.makedirs(os.environ["XDG_CACHE_HOME"])
+os.makedirs(os.environ["POCL_CACHE_DIR"])
+atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)
+
+from hypothesis import HealthCheck, settings  # noqa: E402
 
 settings.register_profile(
     "default",

@@ -1,0 +1,268 @@
+"""Kernel builds are silent: every kernel file builds without a warning with the options the
+engine uses, on a cold cache, and a CLI run prints nothing of the compiler's.
+
+The options are those of OpenCLEngine.accumulate / _elementwise and bench/integrate.py.
+Options a file never mentions cannot change its preprocessed source, so they are held
+fixed; of the rest, a set of combinations holding every pair of values (all-pairs) is
+built. CHRONOCL_KERNEL_MATRIX=full builds every combination instead (about 3,600 builds,
+a quarter of an hour on PoCL).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import re
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import chronocl
+from chronocl.engine import opencl, program
+from chronocl.engine.opencl import DEVICE_TYPES, KERNELS, OpenCLEngine
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+INTEGRATION_KEYS = {
+    "DATA_T",
+    "DATA_V",
+    "VEC",
+    "RAW_ORDER",
+    "QUANT",
+    "LUT_N",
+    "CONST_COLOR",
+    "ENHANCE",
+    "EARLY_EXIT",
+    "SKIP_EMPTY",
+    "IS_MIN",
+    "NORM_TIME",
+    "ALIGNED",
+}
+BOOLS = (False, True)
+
+
+def integration_combinations(mode: str):
+    """Every define combination OpenCLEngine.accumulate can pass for `mode`."""
+    extreme = mode in ("max", "min")
+    data = []  # (DATA_T, QUANT, RAW_ORDER): quantised and raw-order paths are uint8 only
+    for t in DEVICE_TYPES.values():
+        data.append((t, False, False))
+        if t == "uchar":
+            data.append((t, False, True) if extreme else (t, True, False))
+    lanes = ((0, 16), (0, 1), (1, 1), (2, 1))  # (ENHANCE, VEC): enhancement is VEC=1 only
+    norm = BOOLS if mode == "additive" else (False,)
+    for (t, quant, raw), (
+        enh,
+        vec,
+    ), const, early, skip, aligned, norm_time, lut_n in itertools.product(
+        data, lanes, BOOLS, BOOLS, BOOLS, BOOLS, norm, (256, 65536)
+    ):
+        if quant and lut_n != 256:  # the quantised LUT has one entry per byte value
+            continue
+        yield {
+            "DATA_T": t,
+            "DATA_V": t + (str(vec) if vec > 1 else ""),
+            "VEC": vec,
+            "RAW_ORDER": raw,
+            "QUANT": quant,
+            "LUT_N": lut_n,
+            "CONST_COLOR": const,
+            "ENHANCE": enh,
+            "EARLY_EXIT": early,
+            "SKIP_EMPTY": skip,
+            "IS_MIN": mode == "min",
+            "NORM_TIME": norm_time,
+            "ALIGNED": aligned,
+        }
+
+
+def all_pairs(combinations: list[dict]) -> list[dict]:
+    """A subset of `combinations` holding every pair of (key, value)s that any of them holds."""
+
+    def pairs(c):
+        return set(itertools.combinations(sorted(c.items(), key=str), 2))
+
+    todo = set().union(*(pairs(c) for c in combinations))
+    chosen = []
+    while todo:
+        best = max(combinations, key=lambda c: len(pairs(c) & todo))
+        chosen.append(best)
+        todo -= pairs(best)
+    return chosen
+
+
+def builds(full: bool) -> list[tuple[str, list[str], bool]]:
+    """(kernel file, options, common) of every build the test makes."""
+    out = []
+    files = {}
+    for mode, (file, _) in KERNELS.items():
+        files.setdefault(file, []).extend(integration_combinations(mode))
+    files["read_roofline.cl"] = [
+        {"DATA_T": t, "DATA_V": t + "16", "LUT_N": 256, "VEC": 16} for t in ("uchar", "float")
+    ]
+    for file, combinations in files.items():
+        text = program.source(file)
+        used = {k for k in combinations[0] if re.search(rf"\b{k}\b", text)}
+        reduced = []  # options the file never names are held at their first value
+        for c in combinations:
+            r = {k: (v if k in used else combinations[0][k]) for k, v in c.items()}
+            if r not in reduced:
+                reduced.append(r)
+        if not full:
+            reduced = all_pairs(reduced)
+        out += [(file, list(program.build_options(c)), True) for c in reduced]
+    out += [("combine.cl", list(program.build_options(d)), False) for d in ({}, {"IS_MIN": True})]
+    return out
+
+
+# Said by NVIDIA's driver (550 and later) about every kernel, whatever its source.
+DRIVER_NOISE = (
+    r"\(\): Warning: Function \w+ is a kernel, so overriding noinline attribute\. "
+    r"The function may be inlined when called\."
+)
+
+BUILD_ALL = r"""
+import json, re, sys, warnings
+import pyopencl as cl
+from chronocl.engine.device import get_context
+from chronocl.engine.program import source
+
+NOISE = sys.argv[1]
+dc = get_context()
+said = []
+for file, options, common in json.load(sys.stdin):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        prg = cl.Program(dc.context, source(file, common)).build(options=options)
+    log = "\n".join(
+        (prg.get_build_info(d, cl.program_build_info.LOG) or "").strip() for d in prg.devices
+    )
+    log = "\n".join(
+        line for line in log.splitlines() if line.strip() and not re.fullmatch(NOISE, line.strip())
+    )
+    caught = [w for w in caught if log or not issubclass(w.category, cl.CompilerWarning)]
+    if caught or log:
+        said.append([file, " ".join(options), log, [str(w.message) for w in caught]])
+print(json.dumps({"device": dc.info.label, "said": said}))
+"""
+
+
+def cold_env(tmp_path) -> dict:
+    """The environment of a process with empty pyopencl and PoCL caches."""
+    env = {k: v for k, v in os.environ.items() if k != "CHRONOCL_VERBOSE"}
+    env.update(
+        XDG_CACHE_HOME=str(tmp_path / "xdg"),
+        POCL_CACHE_DIR=str(tmp_path / "pocl"),
+        PYOPENCL_NO_CACHE="1",
+        PYOPENCL_COMPILER_OUTPUT="1",
+    )
+    return env
+
+
+def test_the_builds_cover_the_engines_options(monkeypatch):
+    """The options the engine passes are the ones enumerated above (a new one must be added)."""
+    seen = []
+    real = opencl.kernel
+
+    def recording(dc, name, function, defines, common=True):
+        seen.append((name, dict(defines)))
+        return real(dc, name, function, defines, common=common)
+
+    monkeypatch.setattr(opencl, "kernel", recording)
+    series = chronocl.TimeSeries.from_array(np.random.default_rng(0).random((3, 2, 3, 20)))
+    for mode in KERNELS:
+        chronocl.integrate(series, mode=mode, engine=OpenCLEngine())
+    assert {n for n, _ in seen} == {f for f, _ in KERNELS.values()}
+    for name, defines in seen:
+        assert set(defines) == INTEGRATION_KEYS, name
+        modes = [m for m, (f, _) in KERNELS.items() if f == name]
+        assert any(defines in integration_combinations(m) for m in modes), (name, defines)
+
+
+def test_every_kernel_builds_without_warnings_on_a_cold_cache(tmp_path):
+    full = os.environ.get("CHRONOCL_KERNEL_MATRIX") == "full"
+    todo = builds(full)
+    assert len({f for f, _, _ in todo}) == len(os.listdir(program.kernel_dir())) - 1  # common.h
+    result = subprocess.run(
+        [sys.executable, "-c", BUILD_ALL, DRIVER_NOISE],
+        input=json.dumps(todo),
+        capture_output=True,
+        text=True,
+        env=cold_env(tmp_path),
+        cwd=tmp_path,
+        timeout=3600 if full else 900,
+    )
+    assert result.returncode == 0, result.stderr[-4000:]
+    said = json.loads(result.stdout)["said"]
+    assert not said, f"{len(said)} of {len(todo)} builds warned; the first: {said[0]}"
+    assert result.stderr == ""  # clang writes "N warnings generated." straight to fd 2
+
+
+def test_a_cli_run_on_a_cold_cache_prints_only_its_own_line(tmp_path):
+    store = tmp_path / "s.zarr"
+    raw = np.random.default_rng(1).random((4, 3, 5, 21)).astype(np.float32)
+    chronocl.TimeSeries.from_array(raw).save(store)
+    out = tmp_path / "o.zarr"
+    result = subprocess.run(
+        [sys.executable, "-m", "chronocl", "integrate", str(store), str(out)],
+        capture_output=True,
+        text=True,
+        env={**cold_env(tmp_path), "COLUMNS": "500"},  # no wrapped lines
+        cwd=tmp_path,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stderr.splitlines()
+    # the CLI's own lines: its progress bar and one "wrote OUT (alpha, ...) in T s"
+    assert [line for line in lines if "━" not in line] == [lines[-1]], result.stderr
+    assert lines[-1].startswith(f"wrote {out} ("), result.stderr
+
+
+WARNS = '#warning "chronocl test: {}"\n__kernel void f(__global int *x) {{ x[0] = 1; }}\n'
+
+
+def test_build_logs_are_captured_unless_verbose(monkeypatch, capsys, tmp_path):
+    from chronocl.engine.device import get_context
+
+    monkeypatch.delenv("CHRONOCL_VERBOSE", raising=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        program.build(get_context(), "quiet.cl", {"LUT_N": 7}, text=WARNS.format("quiet"))
+    assert caught == []
+    assert capsys.readouterr().err == ""  # clang's "1 warning generated." goes to fd 2
+
+    # In a fresh process: PoCL 3.0 repeats the first warned build's log in later ones.
+    code = (
+        "import sys; from chronocl.engine.device import get_context; "
+        "from chronocl.engine.program import build; "
+        f"build(get_context(), 'loud.cl', {{'LUT_N': 7}}, text={WARNS.format('loud')!r})"
+    )
+    env = {**cold_env(tmp_path), "CHRONOCL_VERBOSE": "1"}
+    result = subprocess.run(
+        [sys.executable, "-W", "error", "-c", code],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "chronocl: building loud.cl on " in result.stderr, result.stderr
+    assert "-DLUT_N=7" in result.stderr and "chronocl test: loud" in result.stderr
+
+
+@pytest.mark.parametrize("verbose", ["", "1"])
+def test_build_failure_still_names_options_device_and_log(monkeypatch, verbose):
+    from chronocl.engine.device import get_context
+    from chronocl.errors import KernelBuildError
+
+    monkeypatch.setenv("CHRONOCL_VERBOSE", verbose)
+    dc = get_context()
+    bad = f"__kernel void f() {{ not C {verbose}; }}"
+    with pytest.raises(KernelBuildError) as info:
+        program.build(dc, "bad.cl", {"VEC": 16}, text=bad)
+    message = str(info.value)
+    assert "bad.cl" in message and "-DVEC=16" in message and dc.info.label in message
+    assert "error" in message.lower()
