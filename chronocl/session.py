@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import weakref
 from collections.abc import Sequence
 
 import numpy as np
@@ -215,7 +216,12 @@ class _Slider:
         self.leaf_spec = (
             dataclasses.replace(self.spec, normalize="max") if mode == "additive" else self.spec
         )
-        self.agg: SlidingAggregate[Partial] = SlidingAggregate(self._agg_leaf, self._op)
+        # Callbacks through a weak proxy, so the slider and its aggregate form no cycle and a
+        # dropped slider frees its partial volumes at once (no garbage collection needed).
+        me = weakref.proxy(self)
+        self.agg: SlidingAggregate[Partial] = SlidingAggregate(
+            lambda step: me._agg_leaf(step), lambda a, b: me._op(a, b)
+        )
         self.agg.reset(selection.steps)
         self.acc: np.ndarray | None = None  # additive: fixed-point colour sums (Z, Y, X, 3)
         self._full: dict[int, Partial] = {}

@@ -26,6 +26,7 @@ leaves and combines, independent of W.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Sequence
 from typing import Generic, TypeVar
 
@@ -36,7 +37,9 @@ class _Stack(Generic[P]):
     """Steps from the middle of the window (bottom) to one end (top), with level aggregates."""
 
     def __init__(self, owner: SlidingAggregate[P], outer_is_later: bool) -> None:
-        self.owner = owner
+        # A weak link: a cycle would keep every dropped aggregate's partial volumes alive
+        # until the next full garbage collection, which Python seldom runs.
+        self.owner = weakref.proxy(owner)
         self.outer_is_later = outer_is_later
         self.items: list[int] = []
         self.aggs: dict[int, P] = {}
