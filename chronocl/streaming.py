@@ -10,10 +10,18 @@ no two slabs ever write the same chunk, and the same slab tasks run on a dask cl
 The output is built in a hidden sibling ``.NAME.partial-run`` and renamed into place when every
 slab is written. Each finished slab leaves a marker in ``.chronocl-run/`` holding a hash of the
 run's parameters; a re-run after a crash skips the slabs whose markers carry its own hash and
-starts afresh when they do not. Additive with ``normalize="max"`` needs the volume's maximum:
-the raw sums go to a temporary array ``rgba_raw``, every slab marker records its maximum, and a
-second pass over the output chunks writes ``rgba`` normalised (bit for bit as
-`reference.finalize` does for the whole volume).
+starts afresh when they do not. The running process holds a lock (``.chronocl-run/lock``):
+a second run of the same output is refused while it lives, and once it is dead (killed) the
+partial is resumed by the next streamed run or removed by the next write of NAME by any other
+path (`chronocl.atomic.remove_stale`). A run that fails before any slab is finished, or on
+bad input (a ChronoclError), removes its partial: nothing to resume. The commit moves the
+partial to a name of its own process first, so that from then on any failure or kill leaves
+nothing that outlives the next write.
+
+Additive with ``normalize="max"`` needs the volume's maximum: the raw sums go to a temporary
+array ``rgba_raw``, every slab marker records its maximum, and a second pass over the output
+chunks writes ``rgba`` normalised (bit for bit as `reference.finalize` does for the whole
+volume).
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ import logging
 import math
 import os
 import shutil
+import sys
 import time
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -34,15 +43,15 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from . import reference
-from .atomic import check_output, commit_directory
+from . import atomic, reference
+from .atomic import RUN_DIR, RUN_LOCK, check_output, lock_run, remove_path
 from .budget import GrowthGuard, parse_memory
 from .chronovolume import FORMAT
 from .data.bricks import Slab, slabs
 from .data.series import STEPS_PER_READ, TimeSeries, compressors
 from .engine import get_engine
 from .engine.memory import aligned_empty
-from .errors import InvalidParameterError
+from .errors import ChronoclError, InvalidParameterError, OutputExistsError
 from .integrate import Job, engine_rows, integrate_slabs, prepare
 from .progress import meter
 from .reference import Partial
@@ -51,7 +60,11 @@ from .spec import IntegrationSpec
 
 log = logging.getLogger("chronocl")
 
-RUN_DIR = ".chronocl-run"
+
+class OutputBusyError(ChronoclError, FileExistsError):
+    """Another live process is writing the same streamed output."""
+
+
 RUN_VERSION = 1
 CHUNK_BYTES = 8 * 2**20  # output chunk size, as Chronovolume.save
 BASE_BYTES = 2 * 2**20  # tables, small buffers and bookkeeping of one slab
@@ -235,33 +248,102 @@ def partial_path(target: Path) -> Path:
     return target.parent / f".{target.name}.partial-run"
 
 
-def open_run(tmp: Path, job: Job, plan: Plan, digest: str, compressor: str) -> None:
-    """Create the run's store at `tmp`, or keep it when it belongs to the same run."""
-    run_file = tmp / RUN_DIR / "run.json"
-    if tmp.exists():
+def target_of(tmp: Path) -> Path:
+    """The output whose run builds at `tmp` (the inverse of `partial_path`)."""
+    return tmp.parent / tmp.name[1 : -len(".partial-run")]
+
+
+def open_run(tmp: Path, job: Job, plan: Plan, digest: str, compressor: str) -> int:
+    """Lock the run's store at `tmp` and keep it when it belongs to the same run (resume), or
+    make it afresh; returns the lock's file descriptor (closing it releases the run).
+
+    Raises OutputBusyError while another live process holds the run. A fresh store is built
+    under a name of this process and renamed to `tmp` complete with its lock, so `tmp` never
+    exists without one.
+    """
+    for _ in range(3):
         try:
-            same = json.loads(run_file.read_text())["hash"] == digest
-        except (OSError, ValueError, KeyError):
-            same = False
-        if same:
-            return
-        log.info("discarding %s: it was made by a run with other parameters", tmp)
-        shutil.rmtree(tmp)
+            fd = lock_run(tmp)
+        except BlockingIOError:
+            raise OutputBusyError(
+                f"another chronocl process is writing {str(target_of(tmp))!r} "
+                f"(its partial {tmp.name} is locked); wait for it to finish, or write "
+                "another output"
+            ) from None
+        if fd is not None and _run_hash(tmp) == digest:
+            return fd
+        if fd is not None or os.path.lexists(tmp):
+            log.info("discarding %s: it was made by a run with other parameters", tmp)
+            _discard(tmp, fd)
+        fd = _create_run(tmp, job, plan, digest, compressor)
+        if fd is not None:
+            return fd
+    raise OutputBusyError(  # pragma: no cover - three runs racing for one output
+        f"other chronocl processes keep making {tmp.name}; run one at a time"
+    )
+
+
+def _run_hash(tmp: Path) -> str | None:
+    try:
+        return json.loads((tmp / RUN_DIR / "run.json").read_text())["hash"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _discard(tmp: Path, fd: int | None) -> None:
+    """Remove the run at `tmp` (locked by `fd`, or made before locks)."""
+    gone = atomic.partial_path(target_of(tmp))
+    try:
+        os.replace(tmp, gone)
+    except FileNotFoundError:
+        return
+    finally:
+        if fd is not None:
+            os.close(fd)
+    remove_path(gone)
+
+
+def _create_run(tmp: Path, job: Job, plan: Plan, digest: str, compressor: str) -> int | None:
+    """Build an empty run store with its lock taken, and move it to `tmp`; its lock fd, or
+    None when another process made `tmp` meanwhile."""
     nz, ny, nx = job.series.volume_shape
     c = plan.chunk_rows
     codecs = compressors(compressor)
-    group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
-    names = ["rgba_raw", "rgba"] if needs_raw(job.spec) else ["rgba"]
-    for name in names:
-        group.create_array(
-            name, shape=(nz, ny, nx, 4), chunks=(c, ny, nx, 4), dtype=np.float32, compressors=codecs
-        )
-    if job.spec.has_t_index:
-        group.create_array(
-            "t_index", shape=(nz, ny, nx), chunks=(c, ny, nx), dtype=np.int32, compressors=codecs
-        )
-    # Written last: a store without it was cut short while being created, and is remade.
-    _write_json(run_file, {"hash": digest, "chunk_rows": c})
+    build = atomic.partial_path(target_of(tmp))  # this process's: no one else removes it
+    fd = None
+    try:
+        group = zarr.open_group(store=str(build), mode="w", zarr_format=3)
+        names = ["rgba_raw", "rgba"] if needs_raw(job.spec) else ["rgba"]
+        for name in names:
+            group.create_array(
+                name,
+                shape=(nz, ny, nx, 4),
+                chunks=(c, ny, nx, 4),
+                dtype=np.float32,
+                compressors=codecs,
+            )
+        if job.spec.has_t_index:
+            group.create_array(
+                "t_index",
+                shape=(nz, ny, nx),
+                chunks=(c, ny, nx),
+                dtype=np.int32,
+                compressors=codecs,
+            )
+        (build / RUN_DIR).mkdir()
+        (build / RUN_DIR / RUN_LOCK).write_text(str(os.getpid()))
+        fd = lock_run(build)  # a fresh file in a folder only this process knows: free
+        _write_json(build / RUN_DIR / "run.json", {"hash": digest, "chunk_rows": c})
+        if not atomic.rename_new(build, tmp):
+            os.close(fd)
+            remove_path(build)
+            return None
+    except BaseException:
+        if fd is not None:
+            os.close(fd)
+        remove_path(build)
+        raise
+    return fd
 
 
 def _marker(tmp: Path, kind: str, z0: int, z1: int) -> Path:
@@ -380,8 +462,9 @@ def integrate_to_store(
     dask.distributed Client that runs one task per slab on its workers (see
     `chronocl.distributed`). `compressor` compresses the output chunks: blosc-lz4 (default;
     as small as zstd here and about twice as fast to write), zstd (as `Chronovolume.save`)
-    or none. A run that fails leaves its finished slabs behind; running it again with the
-    same parameters resumes. Returns the path written; `Chronovolume.load` reads it.
+    or none. A run interrupted or failed (other than on bad input) leaves its finished slabs
+    behind; running it again with the same parameters resumes. Returns the path written;
+    `Chronovolume.load` reads it.
     """
     from .paths import check_apart
 
@@ -410,11 +493,58 @@ def integrate_to_store(
     digest = run_hash(job, engine, plan.chunk_rows, compressor)
     tmp = partial_path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
-    open_run(tmp, job, plan, digest, compressor)
+    lock = open_run(tmp, job, plan, digest, compressor)
+    try:
+        _run(
+            job,
+            plan,
+            tmp,
+            digest,
+            engine,
+            device,
+            client,
+            progress,
+            eng if client is None else None,
+        )
+        commit(tmp, target, job, engine, overwrite)
+    except BaseException as exc:
+        _drop_unless_resumable(tmp, digest, exc)
+        raise
+    finally:
+        os.close(lock)
+    return target
+
+
+def _drop_unless_resumable(tmp: Path, digest: str, exc: BaseException) -> None:
+    """After a failure: keep the run at `tmp` only if a re-run can resume it.
+
+    Kept: finished slabs after an interruption, an I/O or engine failure, lost workers, or
+    an output that appeared meanwhile (a re-run with --overwrite resumes). Removed: a run
+    with no finished slab, and one that chronocl itself stopped because the input or the
+    parameters are wrong (any other ChronoclError: a damaged or changed store, bad values),
+    which the same re-run would meet again.
+    """
+    dist = sys.modules.get("chronocl.distributed")
+    lost = dist is not None and isinstance(exc, dist.SlabTaskError)  # "a re-run resumes"
+    resumable = not isinstance(exc, ChronoclError) or lost or isinstance(exc, OutputExistsError)
+    try:
+        if not resumable or not done_slabs(tmp, "slab", digest):
+            remove_path(tmp)
+    except OSError as err:  # pragma: no cover - the failure itself is what is reported
+        log.warning("could not check %s for finished slabs: %s", tmp, err)
+
+
+def _run(job, plan, tmp, digest, engine, device, client, progress, eng) -> None:
+    """Integrate the slabs not yet done (and normalise them for additive/max) into `tmp`."""
     done = done_slabs(tmp, "slab", digest)
     todo = [s for s in plan.slabs if (s.z0, s.z1) not in done]
     if done:
-        log.info("resuming %s: %d of %d slabs already written", target, len(done), len(plan.slabs))
+        log.info(
+            "resuming %s: %d of %d slabs already written",
+            target_of(tmp),
+            len(done),
+            len(plan.slabs),
+        )
 
     if client is not None:
         from .distributed import run_slab_tasks
@@ -439,8 +569,6 @@ def integrate_to_store(
                     normalize_slab(group, s, plan.chunk_rows, peak)
                     mark_done(tmp, "norm", s, digest)
                     advance((s.z1 - s.z0) * _plane_bytes(job))
-    commit(tmp, target, job, engine, overwrite)
-    return target
 
 
 def _plane_bytes(job: Job) -> int:
@@ -542,11 +670,22 @@ class BrickReader:
 
 
 def commit(tmp: Path, target: Path, job: Job, engine: str, overwrite: bool) -> None:
-    """Finish the store (metadata, drop the raw sums and markers) and move it into place."""
+    """Finish the store (metadata, drop the raw sums and markers) and move it into place.
+
+    The finished run is first moved to a name of this process (it can no longer resume), so
+    whatever fails or kills the rest leaves nothing that outlives the next write of `target`;
+    a failure removes it.
+    """
     group = zarr.open_group(store=str(tmp), mode="r+")
     if "rgba_raw" in group:
         del group["rgba_raw"]
     group.attrs["chronocl"] = {"format": FORMAT, "version": 1, **job.metadata(engine)}
     check_output(target, overwrite)
-    shutil.rmtree(tmp / RUN_DIR)
-    commit_directory(tmp, target)
+    final = atomic.partial_path(target)
+    os.replace(tmp, final)
+    try:
+        shutil.rmtree(final / RUN_DIR)
+        atomic.replace(final, target)
+    except BaseException:
+        remove_path(final)
+        raise
