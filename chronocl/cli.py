@@ -6,7 +6,9 @@ with code 2, never a traceback.
 
 from __future__ import annotations
 
+import errno
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -50,6 +52,29 @@ Examples:
 )
 
 
+@app.callback()
+def _global_options(
+    verbose: Annotated[
+        bool,
+        typer.Option("--verbose", help="Print details such as the OpenCL compiler's build log."),
+    ] = False,
+) -> None:
+    """Options before the command, e.g. chronocl --verbose render ..."""
+    if verbose:
+        os.environ["CHRONOCL_VERBOSE"] = "1"
+
+
+STORE_HINT = "create one with 'chronocl ingest' or 'chronocl generate'"
+
+
+def _check_engine(engine: str) -> None:
+    from .engine import ENGINES
+    from .errors import UnknownNameError
+
+    if engine not in ENGINES:
+        raise UnknownNameError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+
+
 # Options shared by `integrate` and `render`.
 WindowOpt = Annotated[
     str | None, typer.Option(help="t0:t1[:stride] or a list 2,5,9 (default: all).")
@@ -80,6 +105,11 @@ def _parse_sizes(text: str, n: int, form: str, example: str) -> tuple[int, ...]:
     return parts
 
 
+MAX_GENERATED_STEPS = 100_000
+MAX_GENERATED_SIDE = 4096
+MAX_GENERATED_VOXELS = 2**30  # 4 GiB of float32 per step, computed in memory
+
+
 @app.command()
 def generate(
     name: Annotated[str, typer.Argument(help="Data set: vortex or jet.")],
@@ -95,10 +125,22 @@ def generate(
     """
     from .data import synthetic
     from .data.series import write_series
+    from .paths import check_target
 
     nx, ny, nz = _parse_sizes(shape, 3, "NXxNYxNZ", "64x64x64")
     if name not in synthetic.DATASETS:
         synthetic.step(name, 0, 1, (1, 1, 1))  # raises the unknown-name error
+    if not 1 <= steps <= MAX_GENERATED_STEPS:
+        raise InvalidParameterError(
+            f"--steps is {steps}; generate 1 to {MAX_GENERATED_STEPS} steps"
+        )
+    if max(nx, ny, nz) > MAX_GENERATED_SIDE or nx * ny * nz > MAX_GENERATED_VOXELS:
+        raise InvalidParameterError(
+            f"--shape {nx}x{ny}x{nz} is too large to generate; use at most "
+            f"{MAX_GENERATED_SIDE} per side and {MAX_GENERATED_VOXELS // 2**20} Mi voxels, "
+            "e.g. --shape 256x256x256"
+        )
+    check_target(out_path, overwrite)
     t0 = time.perf_counter()
     series = write_series(
         out_path,
@@ -174,7 +216,12 @@ def ingest(
       chronocl ingest embryo.ome.zarr -o embryo.zarr --channel 1 --level 0
     """
     from .data.ingest import ingest as run_ingest
+    from .paths import check_input, check_target
 
+    for item in inputs:
+        if not set("*?[") & set(item):
+            check_input(item, "input", hint="check the path, or quote a glob such as 'v_*.raw'")
+    check_target(out_path, overwrite, inputs)
     options: dict = {"nan_fill": nan_fill, "overwrite": overwrite, "progress": True}
     if dims is not None:
         options["dims"] = dims
@@ -212,7 +259,9 @@ def info(
     from .chronovolume import Chronovolume
     from .data.series import open_series
     from .errors import StoreFormatError
+    from .paths import check_input
 
+    check_input(store, "store", hint=STORE_HINT)
     try:
         summary = open_series(store).describe()
     except StoreFormatError:
@@ -272,20 +321,29 @@ def integrate(
 
       chronocl integrate big.zarr a.zarr --memory 4GB --workers 2
     """
-    from .atomic import check_output
     from .budget import parse_memory
     from .data.series import open_series
     from .integrate import integrate as run
     from .integrate import prepare
     from .outputs import output_kind, save_chronovolume
+    from .paths import check_input, check_target
     from .streaming import fits_in_memory
+    from .tf import TFSetting
 
-    check_output(out_path, overwrite)
+    # Everything is checked before any work: no kernel built, no brick read, nothing written.
     kind = output_kind(out_path)
     budget = parse_memory(memory)
+    _check_engine(engine)
+    if workers is not None and workers < 1:
+        raise InvalidParameterError(f"--workers is {workers}; start at least 1 worker")
+    if scheduler is not None:
+        _check_scheduler(scheduler, workers)
+    check_input(store, "store", hint=STORE_HINT)
+    setting = TFSetting.load(tf) if tf is not None else None
+    check_target(out_path, overwrite, [store, tf])
     series = open_series(store)
     spec_args = dict(
-        tf=tf,
+        tf=setting,
         time_tf=time_tf,
         order=_parse_order(order),
         enhance=enhance,
@@ -318,6 +376,24 @@ def integrate(
     cv = run(series, window, mode, engine=engine, device=device, progress=True, **spec_args)
     save_chronovolume(cv, out_path, overwrite=overwrite)
     err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {time.perf_counter() - t0:.2f} s")
+
+
+def _check_scheduler(address: str, workers: int | None) -> None:
+    """A dask scheduler address: [scheme://]host:port."""
+    from urllib.parse import urlsplit
+
+    if workers is not None:
+        raise InvalidParameterError("give either --scheduler ADDRESS or --workers N, not both")
+    try:
+        parts = urlsplit(address if "://" in address else f"tcp://{address}")
+        ok = bool(parts.hostname) and parts.port is not None and parts.port > 0
+    except ValueError:  # a port that is not a number or out of range
+        ok = False
+    if not ok:
+        raise InvalidParameterError(
+            f"--scheduler {address!r} is not a scheduler address; write it like "
+            "tcp://host:8786 (host and port)"
+        )
 
 
 def _integrate_streaming(series, window, out_path, scheduler, workers, **args) -> None:
@@ -419,34 +495,62 @@ def render(
 
       chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
     """
-    from .atomic import check_output
     from .data.series import open_series
+    from .enhance import Enhance
     from .integrate import integrate as run
+    from .integrate import prepare
     from .outputs import output_kind
     from .outputs import save_chronovolume as save_any
+    from .paths import check_distinct, check_input, check_target
     from .render import Camera, render_views
+    from .render.raycaster import check_clip, check_size
     from .render.turntable import check_video
     from .render.turntable import turntable as make_turntable
-    from .render.views import raycaster
+    from .render.views import parse_color, raycaster
+    from .tf import TFSetting
 
+    # Every option is checked before any work: no kernel built, no brick read, nothing written.
     modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
-    check_output(out_path, overwrite)
+    if not modes:
+        raise InvalidParameterError("--mode names no mode; give e.g. --mode alpha,max")
+    if len(set(modes)) < len(modes):
+        twice = next(m for m in modes if modes.count(m) > 1)
+        raise InvalidParameterError(f"--mode {twice} is given twice; name each mode once")
+    _check_engine(engine)
+    camera = Camera(azimuth, elevation, zoom, projection=projection)
+    panel = check_size(_parse_sizes(size, 2, "WxH", "512x512"))
+    parse_color(background)
+    clip_plane = check_clip(_parse_floats(clip, 4, "clip")) if clip else None
     if turntable is not None:
-        check_output(turntable, overwrite)
         check_video(turntable, frames)
+    elif not 2 <= frames <= 3600:
+        raise InvalidParameterError(f"turntable frames is {frames}; use 2 to 3600")
+    Enhance(enhance)  # an unknown kind fails here
     saves = _chronovolume_paths(save_chronovolume, modes)
     for path in saves:
-        check_output(path, overwrite)
         output_kind(path)
-    camera = Camera(azimuth, elevation, zoom, projection=projection)
-    clip_plane = _parse_floats(clip, 4, "clip") if clip else None
-    panel = _parse_sizes(size, 2, "WxH", "512x512")
+    check_input(store, "store", hint=STORE_HINT)
+    setting = TFSetting.load(tf) if tf is not None else None
+    outputs = [out_path, *([turntable] if turntable is not None else []), *saves]
+    check_distinct(outputs)
+    for path in outputs:
+        check_target(path, overwrite, [store, tf])
     series = open_series(store)
+    spec_args = dict(
+        tf=setting,
+        time_tf=time_tf,
+        order=_parse_order(order),
+        enhance=enhance,
+        threshold=threshold,
+        normalize=normalize,
+    )
+    for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
+        prepare(series, window, m, None, spec_args)
 
     def chronovolumes(cam: Camera):
         view = cam.view_direction()
         args = dict(
-            tf=tf,
+            tf=setting,
             time_tf=time_tf,
             order=_parse_order(order),
             threshold=threshold,
@@ -455,8 +559,6 @@ def render(
             device=device,
         )
         if enhance != "none":
-            from .enhance import Enhance
-
             args["enhance"] = Enhance(enhance, view=view) if enhance == "silhouette" else enhance
         return [run(series, window, m, **args) for m in modes]
 
@@ -542,7 +644,10 @@ def export(
     """
     from .data.series import open_series
     from .export_series import export_series
+    from .paths import check_apart, check_input
 
+    check_input(store, "store", hint=STORE_HINT)
+    check_apart(out_path, [store])
     paths = export_series(
         open_series(store),
         out_path,
@@ -618,7 +723,9 @@ def verify(
     Example: chronocl verify vortex.zarr
     """
     from .data.verify import verify as run_verify
+    from .paths import check_input
 
+    check_input(store, "store", hint=STORE_HINT)
     _print_summary(run_verify(store, progress=True))
 
 
@@ -671,12 +778,39 @@ def main() -> None:
     """Console entry point: run the app, turning chronocl errors into one line and exit 2.
 
     Usage errors (missing or malformed options) are typer's own: usage, one line, exit 2.
+    An OSError that escaped the checks made before the work (a folder made read-only
+    meanwhile, a full disk) is one line naming the path, exit 2.
     """
     try:
         app()
     except ChronoclError as exc:
-        err.print(f"chronocl: error: {exc}", highlight=False, markup=False, soft_wrap=True)
-        sys.exit(exc.exit_code)
+        _fail(str(exc), exc.exit_code)
+    except OSError as exc:
+        _fail(_os_error_line(exc), 2)
+
+
+def _fail(message: str, code: int) -> None:
+    line = " ".join(message.splitlines())  # one line, whatever the message held
+    err.print(f"chronocl: error: {line}", highlight=False, markup=False, soft_wrap=True)
+    sys.exit(code)
+
+
+def _os_error_line(exc: OSError) -> str:
+    """'<reason>: <path>; <fix>' for an OSError."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    path = exc.filename if exc.filename is not None else ""
+    where = f" {os.fspath(path)!r}" if path != "" else ""
+    if exc.errno == errno.ENOSPC:
+        fix = "free some disk space or write the output elsewhere"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        fix = "choose a location you can write, or fix its permissions"
+    elif exc.errno == errno.ENOTDIR:
+        fix = "a part of the path is a file, not a folder; fix the path"
+    elif exc.errno == errno.ENOENT:
+        fix = "check that the path exists"
+    else:
+        fix = "check the path"
+    return f"{reason}:{where}; {fix}"
 
 
 if __name__ == "__main__":

@@ -36,7 +36,8 @@ class Selection:
         if any(b <= a for a, b in itertools.pairwise(self.steps)):
             raise InvalidSelectionError(
                 f"selected steps {list(self.steps)} must be strictly increasing without repeats; "
-                "give the importance order with order=[...] instead"
+                "list each step once, in increasing order (an importance order goes in "
+                "--order / order=[...])"
             )
 
     @property

@@ -99,7 +99,8 @@ def small_store(tmp_path_factory):
         (["integrate", "{s}", "{tmp}/o.zarr", "--order", "sideways"], "unknown order"),
         (["integrate", "{s}", "{tmp}/o.zarr", "--time-tf", "rainbow"], "unknown time TF preset"),
         (["integrate", "{s}", "{tmp}/o.zarr", "--tf", "{tmp}/bad.json"], "sorted"),
-        (["integrate", "{s}", "{s}"], "already exists; pass --overwrite"),
+        (["integrate", "{s}", "{s}"], "is the input"),
+        (["integrate", "{s}", "{tmp}/bad.json"], "cannot tell the chronovolume format"),
         (["integrate", "{tmp}/none.zarr", "{tmp}/o.zarr"], "does not exist"),
         (["generate", "tornado", "{tmp}/o.zarr"], "tornado"),
         (["generate", "jet", "{tmp}/o.zarr", "--shape", "8x8"], "NXxNYxNZ"),
@@ -123,3 +124,36 @@ def test_bad_input_is_one_line_exit_2(tmp_path, small_store, args, needle):
 def test_usage_errors_exit_2():
     result = cli("integrate")
     assert result.returncode == 2 and "Traceback" not in result.stderr
+
+
+def test_verbose_flag_sets_the_environment(monkeypatch, small_store, capsys):
+    import os
+
+    from chronocl.cli import main
+
+    monkeypatch.delenv("CHRONOCL_VERBOSE", raising=False)
+    monkeypatch.setattr(sys, "argv", ["chronocl", "--verbose", "info", str(small_store)])
+    with pytest.raises(SystemExit) as info:
+        main()
+    assert info.value.code == 0
+    assert os.environ.get("CHRONOCL_VERBOSE") == "1"
+    assert "shape" in capsys.readouterr().out
+
+
+def test_an_os_error_past_the_checks_is_one_line(monkeypatch, small_store, tmp_path, capsys):
+    """A folder that stops taking files after the checks (simulated by skipping them)."""
+    import chronocl.paths
+    from chronocl.cli import main
+
+    monkeypatch.setattr(chronocl.paths, "check_writable", lambda path: None)
+    (tmp_path / "f").write_text("a file, not a folder")
+    out = tmp_path / "f" / "o.zarr"
+    argv = ["chronocl", "integrate", str(small_store), str(out), "--engine", "numpy"]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as info:
+        main()
+    assert info.value.code == 2
+    stderr = capsys.readouterr().err  # the finished progress bar, then the error
+    errors = [line for line in stderr.splitlines() if line.startswith("chronocl: error: ")]
+    assert len(errors) == 1 and stderr.rstrip().endswith(errors[0]), stderr
+    assert str(tmp_path / "f") in errors[0] and "Traceback" not in stderr

@@ -118,6 +118,15 @@ def test_silhouette_follows_the_camera(tmp_path, vortex):
         (["--projection", "fisheye"], "fisheye"),
         (["--background", "no-such-colour"], "unknown colour"),
         (["--turntable", "{tmp}/t.txt"], "video suffix"),
+        (["--clip", "1,0,0,5"], "clip offset is 5"),
+        (["--clip", "0,0,0,0"], "normal is (0, 0, 0)"),
+        (["--zoom", "0"], "camera zoom"),
+        (["--frames", "1", "--turntable", "{tmp}/t.gif"], "use 2 to 3600"),
+        (["--engine", "cuda"], "unknown engine"),
+        (["--enhance", "glow"], "unknown enhancement"),
+        (["--normalize", "sum"], "unknown additive normalisation"),
+        (["--window", "0:99"], "outside the series"),
+        (["--save-chronovolume", "{tmp}/cv.png"], "cannot tell the chronovolume format"),
     ],
 )
 def test_bad_render_options(tmp_path, vortex, args, needle):
