@@ -87,6 +87,8 @@ def _expand(item: PathLike) -> list[str]:
 def check_apart(output: PathLike, inputs: Iterable[PathLike | None] = ()) -> None:
     """Raise OutputIsInputError if `output` is, lies inside, or holds one of `inputs` (globs
     expanded; None skipped), or holds the working folder. Symlinks are resolved first."""
+    if isinstance(inputs, str | os.PathLike):  # one path, not a sequence of characters
+        inputs = [inputs]
     out = _real(output)
     shown = os.fspath(output)
     for item in inputs:
