@@ -171,17 +171,15 @@ def is_ip_host(value: str, port: int) -> bool:
 class HeapKeeper:
     """Keeps a long-running viewer's memory near what its clients use.
 
-    A session drops its sliding state (partial chronovolumes, MBs each) as reference cycles
-    (`session._Slider` and `sliding.SlidingAggregate` point at each other) whenever a spec
-    changes, and only a full garbage collection frees them; Python runs one rarely. And
-    glibc keeps what each render thread's arena freed. Under 20 clients scrubbing and
-    editing the server grew by about 100 MB a second without bound (bench/viewer_soak.py).
-    `check()` (once a second, off the event loop) collects and hands freed memory back
-    (malloc_trim) once the process has grown by `allowance` over the least it used since the
-    last clean-up; a clean-up stops every thread for tens of ms, so a quiet viewer seldom
-    needs one. While the server runs, the objects it started with (modules, data sets) are
-    frozen out of the collections (`gc.freeze`): a collection then takes about 30 ms instead
-    of 170 under that load.
+    Under 20 clients scrubbing and editing, a server leaves garbage that only a full
+    collection frees (dask's task graphs of reads hold reference cycles; Python runs full
+    collections rarely once many objects are long-lived), and glibc keeps what each render
+    thread's arena freed. `check()` (once a second, off the event loop) collects and hands
+    freed memory back (malloc_trim) once the process has grown by `allowance` over the least
+    it used since the last clean-up; a clean-up stops every thread for tens of ms, so a quiet
+    viewer seldom needs one. While the server runs, the objects it started with (modules,
+    data sets) are frozen out of the collections (`gc.freeze`), which makes each collection
+    several times cheaper under that load.
     """
 
     def __init__(self, allowance: int = HEAP_ALLOWANCE) -> None:
