@@ -82,6 +82,7 @@ class Chronovolume:
                 f"{str(p)!r} is not a chronovolume (is it a series? integrate it first)"
             )
         attrs.pop("version", None)
+        attrs.pop("chunks", None)  # how it was stored, not what made it
         arrays = {}
         for name in ("rgba", "t_index"):
             if name in group:

@@ -380,13 +380,13 @@ def _write_json(path: Path, obj: dict) -> None:
 def output_array(group: zarr.Group, name: str) -> zarr.Array:
     """The output array `name` of a run's store, opened for writing whole chunks.
 
-    Compressed, every chunk is written, empty or not: zarr's test for empty chunks scans each
-    chunk again and cost as much as the write itself, and an empty chunk compresses to
-    almost nothing. Uncompressed, empty chunks are left out (they would be full size). This
-    is a runtime setting of the opened array, not stored with it.
+    Every chunk is written, empty or not, so that a missing chunk always means damage (the
+    store says ``chunks: complete``); zarr's test for empty chunks would also scan each chunk
+    again, costing as much as the write itself. This is a runtime setting of the opened array,
+    not stored with it.
     """
     arr = group[name]
-    return arr.with_config({"write_empty_chunks": bool(arr.compressors)})  # type: ignore[union-attr]
+    return arr.with_config({"write_empty_chunks": True})  # type: ignore[union-attr]
 
 
 def write_slab(group: zarr.Group, job: Job, slab: Slab, partial: Partial, final: bool) -> float:
@@ -679,7 +679,12 @@ def commit(tmp: Path, target: Path, job: Job, engine: str, overwrite: bool) -> N
     group = zarr.open_group(store=str(tmp), mode="r+")
     if "rgba_raw" in group:
         del group["rgba_raw"]
-    group.attrs["chronocl"] = {"format": FORMAT, "version": 1, **job.metadata(engine)}
+    group.attrs["chronocl"] = {
+        "format": FORMAT,
+        "version": 1,
+        "chunks": "complete",
+        **job.metadata(engine),
+    }
     check_output(target, overwrite)
     final = atomic.partial_path(target)
     os.replace(tmp, final)
