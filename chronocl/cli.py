@@ -328,7 +328,6 @@ def integrate(
     from .outputs import output_kind, save_chronovolume
     from .paths import check_input, check_target
     from .streaming import fits_in_memory
-    from .tf import TFSetting
 
     # Everything is checked before any work: no kernel built, no brick read, nothing written.
     kind = output_kind(out_path)
@@ -339,17 +338,9 @@ def integrate(
     if scheduler is not None:
         _check_scheduler(scheduler, workers)
     check_input(store, "store", hint=STORE_HINT)
-    setting = TFSetting.load(tf) if tf is not None else None
+    spec_args = _spec_args(tf, time_tf, order, enhance, threshold, normalize)
     check_target(out_path, overwrite, [store, tf])
     series = open_series(store)
-    spec_args = dict(
-        tf=setting,
-        time_tf=time_tf,
-        order=_parse_order(order),
-        enhance=enhance,
-        threshold=threshold,
-        normalize=normalize,
-    )
     t0 = time.perf_counter()
     job = prepare(series, window, mode, None, spec_args)
     if scheduler or workers or not fits_in_memory(job, budget, engine):
@@ -430,6 +421,20 @@ def _parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
     return values
 
 
+def _spec_args(tf, time_tf, order, enhance, threshold, normalize) -> dict:
+    """The integration options that integrate and render share, with the TF file loaded."""
+    from .tf import TFSetting
+
+    return dict(
+        tf=TFSetting.load(tf) if tf is not None else None,
+        time_tf=time_tf,
+        order=_parse_order(order),
+        enhance=enhance,
+        threshold=threshold,
+        normalize=normalize,
+    )
+
+
 def _parse_order(order: str) -> str | list[int]:
     if order in ("forward", "backward"):
         return order
@@ -507,7 +512,6 @@ def render(
     from .render.turntable import check_video
     from .render.turntable import turntable as make_turntable
     from .render.views import parse_color, raycaster
-    from .tf import TFSetting
 
     # Every option is checked before any work: no kernel built, no brick read, nothing written.
     modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
@@ -530,36 +534,20 @@ def render(
     for path in saves:
         output_kind(path)
     check_input(store, "store", hint=STORE_HINT)
-    setting = TFSetting.load(tf) if tf is not None else None
+    spec_args = _spec_args(tf, time_tf, order, enhance, threshold, normalize)
     outputs = [out_path, *([turntable] if turntable is not None else []), *saves]
     check_distinct(outputs)
     for path in outputs:
         check_target(path, overwrite, [store, tf])
     series = open_series(store)
-    spec_args = dict(
-        tf=setting,
-        time_tf=time_tf,
-        order=_parse_order(order),
-        enhance=enhance,
-        threshold=threshold,
-        normalize=normalize,
-    )
     for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
         prepare(series, window, m, None, spec_args)
 
     def chronovolumes(cam: Camera):
         view = cam.view_direction()
-        args = dict(
-            tf=setting,
-            time_tf=time_tf,
-            order=_parse_order(order),
-            threshold=threshold,
-            normalize=normalize,
-            engine=engine,
-            device=device,
-        )
-        if enhance != "none":
-            args["enhance"] = Enhance(enhance, view=view) if enhance == "silhouette" else enhance
+        args = dict(spec_args, engine=engine, device=device)
+        if enhance == "silhouette":
+            args["enhance"] = Enhance(enhance, view=view)
         return [run(series, window, m, **args) for m in modes]
 
     t0 = time.perf_counter()
