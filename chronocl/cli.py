@@ -35,6 +35,8 @@ Examples:
 
   chronocl info vortex.zarr
 
+  chronocl verify vortex.zarr
+
   chronocl integrate vortex.zarr alpha.zarr --mode alpha --window 0:30:10
 
   chronocl render jet.zarr -o trio.png --mode alpha,additive,max --window 0:30:14
