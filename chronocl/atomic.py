@@ -124,6 +124,23 @@ def _flock(fd: int) -> None:
     fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
 
 
+def discard_run(path: Path, target: Path, fd: int | None) -> bool:
+    """Remove the streamed run folder `path` of `target`, locked by `fd` (None: made before
+    locks). It is first moved aside under its lock, so no run resumes it meanwhile; the lock
+    is released either way. False when it could not be moved (gone, or not ours to move).
+    """
+    gone = partial_path(target)
+    try:
+        os.replace(path, gone)
+    except OSError:
+        return False
+    finally:
+        if fd is not None:
+            os.close(fd)
+    remove_path(gone)
+    return True
+
+
 def remove_path(path: Path) -> None:
     """Remove a file or folder tree; what is already gone is no error."""
     try:
@@ -161,15 +178,8 @@ def remove_stale(target: Path) -> list[Path]:
                 fd = lock_run(path)
             except OSError:  # held: a live run (or a lock we cannot take: leave it)
                 continue
-            try:  # moved aside under its lock, so no run resumes it meanwhile
-                gone = partial_path(target)
-                os.replace(path, gone)
-            except OSError:
+            if not discard_run(path, target, fd):
                 continue
-            finally:
-                if fd is not None:
-                    os.close(fd)
-            remove_path(gone)
         else:
             remove_path(path)  # a name without a pid: from a writer before pids
         removed.append(path)

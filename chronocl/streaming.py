@@ -292,15 +292,7 @@ def _run_hash(tmp: Path) -> str | None:
 
 def _discard(tmp: Path, fd: int | None) -> None:
     """Remove the run at `tmp` (locked by `fd`, or made before locks)."""
-    gone = atomic.partial_path(target_of(tmp))
-    try:
-        os.replace(tmp, gone)
-    except FileNotFoundError:
-        return
-    finally:
-        if fd is not None:
-            os.close(fd)
-    remove_path(gone)
+    atomic.discard_run(tmp, target_of(tmp), fd)
 
 
 def _create_run(tmp: Path, job: Job, plan: Plan, digest: str, compressor: str) -> int | None:
