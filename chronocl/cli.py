@@ -218,10 +218,10 @@ def ingest(
       chronocl ingest embryo.ome.zarr -o embryo.zarr --channel 1 --level 0
     """
     from .data.ingest import ingest as run_ingest
-    from .paths import check_input, check_target
+    from .paths import GLOB_CHARS, check_input, check_target
 
     for item in inputs:
-        if not set("*?[") & set(item):
+        if not GLOB_CHARS & set(item):
             check_input(item, "input", hint="check the path, or quote a glob such as 'v_*.raw'")
     check_target(out_path, overwrite, inputs)
     options: dict = {"nan_fill": nan_fill, "overwrite": overwrite, "progress": True}
@@ -634,11 +634,10 @@ def export(
     """
     from .data.series import open_series
     from .export_series import export_series
-    from .paths import check_apart, check_input
+    from .paths import check_input
 
     check_input(store, "store", hint=STORE_HINT)
-    check_apart(out_path, [store])
-    paths = export_series(
+    paths = export_series(  # which refuses an output onto, into or around the store
         open_series(store),
         out_path,
         fmt=fmt,

@@ -34,7 +34,12 @@ from .data.bricks import Slab
 from .data.series import STEPS_PER_READ, TimeSeries, open_series
 from .engine import get_engine
 from .engine.memory import aligned_empty
-from .errors import ChronoclError, EngineUnavailableError, InvalidParameterError
+from .errors import (
+    ChronoclError,
+    EngineUnavailableError,
+    InvalidParameterError,
+    SlabTaskError,
+)
 from .integrate import Job
 from .progress import meter
 from .streaming import (
@@ -52,10 +57,6 @@ CONNECT_TIMEOUT = 5.0  # seconds before an unreachable scheduler is reported
 
 class SchedulerUnreachableError(ChronoclError, ConnectionError):
     """The dask scheduler address cannot be reached (or is not an address)."""
-
-
-class SlabTaskError(ChronoclError, RuntimeError):
-    """A slab task was lost again and again (its workers died); a re-run resumes."""
 
 
 # -- connecting -------------------------------------------------------------------------------

@@ -78,3 +78,11 @@ class OutputNotWritableError(ChronoclError, PermissionError):
 
 class OutputIsInputError(ChronoclError, ValueError):
     """The output is an input, lies inside one, or holds one: writing it would destroy input."""
+
+
+class OutputBusyError(ChronoclError, FileExistsError):
+    """Another live process is writing the same streamed output."""
+
+
+class SlabTaskError(ChronoclError, RuntimeError):
+    """A slab task was lost again and again (its workers died); a re-run resumes."""

@@ -31,7 +31,7 @@ from .errors import (
     OutputNotWritableError,
 )
 
-_GLOB_CHARS = set("*?[")
+GLOB_CHARS = set("*?[")  # a path holding one is a pattern
 PathLike = str | os.PathLike
 
 
@@ -79,7 +79,7 @@ def _real(path: PathLike) -> Path:
 def _expand(item: PathLike) -> list[str]:
     """A path, or the files a glob matches (the pattern itself when it matches nothing)."""
     text = os.fspath(item)
-    if _GLOB_CHARS & set(text):
+    if GLOB_CHARS & set(text):
         return sorted(glob.glob(text)) or [text]
     return [text]
 

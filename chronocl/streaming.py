@@ -32,7 +32,6 @@ import logging
 import math
 import os
 import shutil
-import sys
 import time
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -51,7 +50,13 @@ from .data.bricks import Slab, slabs
 from .data.series import STEPS_PER_READ, TimeSeries, compressors
 from .engine import get_engine
 from .engine.memory import aligned_empty
-from .errors import ChronoclError, InvalidParameterError, OutputExistsError
+from .errors import (
+    ChronoclError,
+    InvalidParameterError,
+    OutputBusyError,
+    OutputExistsError,
+    SlabTaskError,
+)
 from .integrate import Job, engine_rows, integrate_slabs, prepare
 from .progress import meter
 from .reference import Partial
@@ -59,10 +64,6 @@ from .selection import Selection
 from .spec import IntegrationSpec
 
 log = logging.getLogger("chronocl")
-
-
-class OutputBusyError(ChronoclError, FileExistsError):
-    """Another live process is writing the same streamed output."""
 
 
 RUN_VERSION = 1
@@ -516,9 +517,8 @@ def _drop_unless_resumable(tmp: Path, digest: str, exc: BaseException) -> None:
     parameters are wrong (any other ChronoclError: a damaged or changed store, bad values),
     which the same re-run would meet again.
     """
-    dist = sys.modules.get("chronocl.distributed")
-    lost = dist is not None and isinstance(exc, dist.SlabTaskError)  # "a re-run resumes"
-    resumable = not isinstance(exc, ChronoclError) or lost or isinstance(exc, OutputExistsError)
+    kept = (SlabTaskError, OutputExistsError)  # lost workers; an output that appeared
+    resumable = not isinstance(exc, ChronoclError) or isinstance(exc, kept)
     try:
         if not resumable or not done_slabs(tmp, "slab", digest):
             remove_path(tmp)

@@ -39,7 +39,7 @@ import chronocl.streaming as streaming
 from chronocl import atomic
 from chronocl.data.ingest import ingest_raw
 from chronocl.data.series import write_series
-from chronocl.errors import InvalidDataError, OutputExistsError
+from chronocl.errors import InvalidDataError, OutputBusyError, OutputExistsError
 from chronocl.export_series import export_series
 from chronocl.integrate import prepare
 from chronocl.streaming import integrate_to_store, partial_path
@@ -366,7 +366,7 @@ def test_a_locked_streamed_run_is_neither_removed_nor_run_twice(tmp_path, monkey
     fd = atomic.lock_run(run)  # as a live process running it would
     assert fd is not None
     try:
-        with pytest.raises(streaming.OutputBusyError, match="another chronocl process"):
+        with pytest.raises(OutputBusyError, match="another chronocl process"):
             integrate_to_store(series, None, out, mode="max", slab=2, engine="numpy")
         ref.save(out)  # a commit of the same output by another path
         assert run.exists()  # a live run's partial stays

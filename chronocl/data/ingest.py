@@ -18,10 +18,10 @@ import numpy as np
 from natsort import natsorted
 
 from ..errors import InputNotFoundError, InvalidDataError, InvalidParameterError, UnknownNameError
+from ..paths import GLOB_CHARS
 from .series import SUPPORTED_DTYPES, TimeSeries, write_series
 
 ENDIANS = ("little", "big")
-_GLOB_CHARS = set("*?[")
 
 
 def expand_inputs(inputs: Sequence[str | os.PathLike]) -> list[Path]:
@@ -31,7 +31,7 @@ def expand_inputs(inputs: Sequence[str | os.PathLike]) -> list[Path]:
     files: list[str] = []
     for item in inputs:
         text = str(item)
-        if _GLOB_CHARS & set(text):
+        if GLOB_CHARS & set(text):
             matched = glob.glob(text)
             if not matched:
                 raise InputNotFoundError(f"no files match {text!r}; check the pattern and folder")
