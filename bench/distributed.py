@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import emit, env_record, race
 from out_of_core import generate
 
-from chronocl.budget import parse_memory
+from chronocl.core.budget import parse_memory
 
 # This file is named like the dask package: keep its folder off the path (and off the path
 # that spawned workers inherit) from here on.
@@ -52,10 +52,10 @@ def main() -> None:
     repeats = args.repeats or (2 if args.quick else 5)
     budget = parse_memory(args.memory)
 
-    import chronocl.distributed as dist
+    import chronocl.integration.distributed as dist
     from chronocl.engine import get_engine
-    from chronocl.integrate import prepare
-    from chronocl.streaming import integrate_to_store
+    from chronocl.integration.inmemory import prepare
+    from chronocl.integration.streaming import integrate_to_store
 
     emit(env_record("distributed", {"workers": args.workers, "budget": budget}))
     tmp = Path(tempfile.mkdtemp(prefix="chronocl-dist-"))

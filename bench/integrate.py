@@ -23,15 +23,15 @@ from common import emit, env_record, race
 from vtk_peer import make_pipeline, run_max, vtk_available, vtk_version
 
 from chronocl import reference
+from chronocl.core.memory import aligned_empty
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF
 from chronocl.data import synthetic
 from chronocl.engine import NumpyEngine
-from chronocl.engine.memory import aligned_empty
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.engine.program import kernel
-from chronocl.integrate import make_spec
-from chronocl.selection import Selection
-from chronocl.spec import resolve_order
-from chronocl.tf import DataTF
+from chronocl.integration.inmemory import make_spec
+from chronocl.modes.spec import resolve_order
 
 MODES = ("alpha", "first_hit", "additive", "max", "min")
 TABLE1 = {"128^3": (128, 128, 128), "512x64x64": (512, 64, 64), "128x128x64": (128, 128, 64)}

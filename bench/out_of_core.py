@@ -2,8 +2,9 @@
 
 Generates a smooth time-varying float32 series in a temporary folder (deleted afterwards) and,
 in this process, alternately reads it with plain zarr and integrates it with
-`chronocl.streaming.integrate_to_store` under `--budget` (after a warm-up of each, with the
-store written back to disk and hot in the page cache). Then it times the integration's own
+`chronocl.integration.streaming.integrate_to_store` under `--budget` (after a warm-up of
+each, with the store written back to disk and hot in the page cache). Then it times the
+integration's own
 work alone (kernels on bricks in memory, writing the output) and runs the integration twice
 in a fresh child process that records its RSS. Prints JSON lines (../shared/BENCH.md) and a
 summary with
@@ -50,7 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import emit, env_record
 
-from chronocl.budget import parse_memory
+from chronocl.core.budget import parse_memory
 from chronocl.data.series import COMPRESSORS, open_series, write_series
 
 
@@ -115,8 +116,8 @@ def child(store: str, out: str, budget: int, mode: str, compressor: str) -> None
 
     import chronocl
     from chronocl.engine import get_engine
-    from chronocl.integrate import engine_rows, prepare
-    from chronocl.streaming import integrate_to_store, plan_slabs
+    from chronocl.integration.inmemory import engine_rows, prepare
+    from chronocl.integration.streaming import integrate_to_store, plan_slabs
 
     series = open_series(store)
     _, ny, nx = series.volume_shape
@@ -228,8 +229,8 @@ def stages_alone(series, out: Path, budget: int, mode: str, compressor: str) -> 
     and writing the output it produced (same chunks and codec) into a new store."""
     from chronocl.data.series import compressors
     from chronocl.engine import get_engine
-    from chronocl.integrate import engine_rows, prepare
-    from chronocl.streaming import BrickReader, plan_slabs
+    from chronocl.integration.inmemory import engine_rows, prepare
+    from chronocl.integration.streaming import BrickReader, plan_slabs
 
     job = prepare(series, None, mode, None, {})
     eng = get_engine("opencl")
@@ -352,7 +353,7 @@ def pipeline_parts(integrate) -> dict:
     part costs: reading the bricks alone, then reading and integrating without writing."""
     from unittest import mock
 
-    import chronocl.streaming as streaming
+    import chronocl.integration.streaming as streaming
     from chronocl.engine import get_engine
     from chronocl.reference import Partial
 
@@ -379,7 +380,7 @@ def pipeline_parts(integrate) -> dict:
 
 
 def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Path) -> dict:
-    from chronocl.streaming import integrate_to_store
+    from chronocl.integration.streaming import integrate_to_store
 
     store = tmp / f"series-{comp}.zarr"
     out = tmp / "cv.zarr"

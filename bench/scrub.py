@@ -30,10 +30,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import emit, env_record
 
+from chronocl.core.tf import DataTF, TimeTF
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
-from chronocl.session import Session
-from chronocl.tf import DataTF, TimeTF
+from chronocl.integration.session import Session
 
 MODES = ("alpha", "first_hit", "additive", "max", "min")
 # Opacity everywhere: no voxel is empty, so no step can be skipped.

@@ -96,10 +96,10 @@ def summarise(op: str, totals: list[float], headers: list[dict], case: str) -> d
 def direct_baseline(series: TimeSeries, points: list, repeats: int) -> list[float]:
     """The same edit's work without the server: integrate, upload, draw, encode."""
     import chronocl
+    from chronocl.core.tf import DataTF
     from chronocl.render import Camera
     from chronocl.render.gl import gl_context
     from chronocl.render.views import raycaster
-    from chronocl.tf import DataTF
     from chronocl.viewer.state import encode
 
     times = []

@@ -13,17 +13,17 @@ function, into one RGBA volume that can be raycast from any view.
     cv = session.slide(+1)          # incremental with absolute time positions
 """
 
-from .chronovolume import Chronovolume
-from .data.series import TimeSeries, open_series
-from .data.window import WindowManager
-from .enhance import Enhance
-from .errors import ChronoclError
-from .integrate import integrate, make_spec
-from .render import Camera, render, render_views
-from .selection import Selection
-from .session import Session
-from .spec import IntegrationSpec
-from .tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF
+from chronocl.core.enhance import Enhance
+from chronocl.core.errors import ChronoclError
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries, open_series
+from chronocl.data.window import WindowManager
+from chronocl.integration.inmemory import integrate, make_spec
+from chronocl.integration.session import Session
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.render import Camera, render, render_views
 
 open = open_series
 

@@ -1,5 +1,5 @@
 """`python -m chronocl` runs the command line."""
 
-from .cli import main
+from chronocl.cli import main
 
 main()

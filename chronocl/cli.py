@@ -17,7 +17,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from .errors import ChronoclError, InvalidParameterError
+from chronocl.core.errors import ChronoclError, InvalidParameterError
 
 err = Console(stderr=True)
 out = Console()
@@ -70,8 +70,8 @@ STORE_HINT = "create one with 'chronocl ingest' or 'chronocl generate'"
 
 
 def _check_engine(engine: str) -> None:
-    from .engine import ENGINES
-    from .errors import UnknownNameError
+    from chronocl.core.errors import UnknownNameError
+    from chronocl.engine import ENGINES
 
     if engine not in ENGINES:
         raise UnknownNameError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
@@ -125,9 +125,9 @@ def generate(
 
     Example: chronocl generate jet jet.zarr --shape 96x64x64 --steps 20
     """
-    from .data import synthetic
-    from .data.series import write_series
-    from .paths import check_target
+    from chronocl.core.paths import check_target
+    from chronocl.data import synthetic
+    from chronocl.data.series import write_series
 
     nx, ny, nz = _parse_sizes(shape, 3, "NXxNYxNZ", "64x64x64")
     if name not in synthetic.DATASETS:
@@ -217,8 +217,8 @@ def ingest(
 
       chronocl ingest embryo.ome.zarr -o embryo.zarr --channel 1 --level 0
     """
-    from .data.ingest import ingest as run_ingest
-    from .paths import GLOB_CHARS, check_input, check_target
+    from chronocl.core.paths import GLOB_CHARS, check_input, check_target
+    from chronocl.data.ingest import ingest as run_ingest
 
     for item in inputs:
         if not GLOB_CHARS & set(item):
@@ -258,10 +258,10 @@ def info(
 
     Example: chronocl info vortex.zarr --json
     """
-    from .chronovolume import Chronovolume
-    from .data.series import open_series
-    from .errors import StoreFormatError
-    from .paths import check_input
+    from chronocl.core.errors import StoreFormatError
+    from chronocl.core.paths import check_input
+    from chronocl.data.chronovolume import Chronovolume
+    from chronocl.data.series import open_series
 
     check_input(store, "store", hint=STORE_HINT)
     try:
@@ -323,13 +323,13 @@ def integrate(
 
       chronocl integrate big.zarr a.zarr --memory 4GB --workers 2
     """
-    from .budget import parse_memory
-    from .data.series import open_series
-    from .integrate import integrate as run
-    from .integrate import prepare
-    from .outputs import output_kind, save_chronovolume
-    from .paths import check_input, check_target
-    from .streaming import fits_in_memory
+    from chronocl.core.budget import parse_memory
+    from chronocl.core.paths import check_input, check_target
+    from chronocl.data.formats.outputs import output_kind, save_chronovolume
+    from chronocl.data.series import open_series
+    from chronocl.integration.inmemory import integrate as run
+    from chronocl.integration.inmemory import prepare
+    from chronocl.integration.streaming import fits_in_memory
 
     # Everything is checked before any work: no kernel built, no brick read, nothing written.
     kind = output_kind(out_path)
@@ -393,7 +393,7 @@ def _integrate_streaming(series, window, out_path, scheduler, workers, **args) -
     """integrate_to_store(**args) locally, or on a dask cluster; resume notes go to stderr."""
     import logging
 
-    from .streaming import integrate_to_store
+    from chronocl.integration.streaming import integrate_to_store
 
     log = logging.getLogger("chronocl")
     if not log.handlers:
@@ -404,7 +404,7 @@ def _integrate_streaming(series, window, out_path, scheduler, workers, **args) -
     if not (scheduler or workers):
         integrate_to_store(series, window, out_path, progress=True, **args)
         return
-    from .distributed import connect, dashboard_link
+    from chronocl.integration.distributed import connect, dashboard_link
 
     with connect(scheduler, workers) as client:
         link = dashboard_link(client)
@@ -425,7 +425,7 @@ def _parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
 
 def _spec_args(tf, time_tf, order, enhance, threshold, normalize) -> dict:
     """The integration options that integrate and render share, with the TF file loaded."""
-    from .tf import TFSetting
+    from chronocl.core.tf import TFSetting
 
     return dict(
         tf=TFSetting.load(tf) if tf is not None else None,
@@ -502,18 +502,18 @@ def render(
 
       chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
     """
-    from .data.series import open_series
-    from .enhance import Enhance
-    from .integrate import integrate as run
-    from .integrate import prepare
-    from .outputs import output_kind
-    from .outputs import save_chronovolume as save_any
-    from .paths import check_distinct, check_input, check_target
-    from .render import Camera, render_views
-    from .render.raycaster import check_clip, check_size
-    from .render.turntable import check_video
-    from .render.turntable import turntable as make_turntable
-    from .render.views import parse_color, raycaster
+    from chronocl.core.enhance import Enhance
+    from chronocl.core.paths import check_distinct, check_input, check_target
+    from chronocl.data.formats.outputs import output_kind
+    from chronocl.data.formats.outputs import save_chronovolume as save_any
+    from chronocl.data.series import open_series
+    from chronocl.integration.inmemory import integrate as run
+    from chronocl.integration.inmemory import prepare
+    from chronocl.render import Camera, render_views
+    from chronocl.render.raycaster import check_clip, check_size
+    from chronocl.render.turntable import check_video
+    from chronocl.render.turntable import turntable as make_turntable
+    from chronocl.render.views import parse_color, raycaster
 
     # Every option is checked before any work: no kernel built, no brick read, nothing written.
     modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
@@ -632,9 +632,9 @@ def export(
 
       chronocl export vortex.zarr -o raw-steps --format raw
     """
-    from .data.series import open_series
-    from .export_series import export_series
-    from .paths import check_input
+    from chronocl.core.paths import check_input
+    from chronocl.data.formats.export import export_series
+    from chronocl.data.series import open_series
 
     check_input(store, "store", hint=STORE_HINT)
     paths = export_series(  # which refuses an output onto, into or around the store
@@ -680,7 +680,7 @@ def view(
 
       chronocl view vortex.zarr --port 8765 --no-browser
     """
-    from .viewer import serve
+    from chronocl.viewer import serve
 
     try:
         import starlette  # noqa: F401
@@ -711,8 +711,8 @@ def verify(
 
     Example: chronocl verify vortex.zarr
     """
-    from .data.verify import verify as run_verify
-    from .paths import check_input
+    from chronocl.core.paths import check_input
+    from chronocl.data.verify import verify as run_verify
 
     check_input(store, "store", hint=STORE_HINT)
     _print_summary(run_verify(store, progress=True))
@@ -726,7 +726,7 @@ def devices() -> None:
 
     Example: chronocl devices
     """
-    from .engine.device import NO_PLATFORM, _pick, list_devices
+    from chronocl.engine.device import NO_PLATFORM, _pick, list_devices
 
     found = list_devices()
     if not found:
@@ -752,7 +752,7 @@ def demo(
 
     Example: chronocl demo --out demo-out
     """
-    from .demo import run_demo
+    from chronocl.demo import run_demo
 
     run_demo(out_dir)
 

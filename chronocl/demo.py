@@ -14,12 +14,12 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from .data import synthetic
-from .data.series import TimeSeries, write_series
-from .enhance import Enhance
-from .integrate import integrate
-from .render import Camera, render_views
-from .tf import DataTF
+from chronocl.core.enhance import Enhance
+from chronocl.core.tf import DataTF
+from chronocl.data import synthetic
+from chronocl.data.series import TimeSeries, write_series
+from chronocl.integration.inmemory import integrate
+from chronocl.render import Camera, render_views
 
 # Opacity 1 above the feature threshold: where every step is present, additive is white.
 SURFACE = DataTF(points=[(0, 1, 1, 1, 0), (0.42, 1, 1, 1, 0), (0.5, 1, 1, 1, 1), (1, 1, 1, 1, 1)])
@@ -167,7 +167,7 @@ def _gallery(out_dir: Path, paths: list[Path]) -> Path:
     from PIL import Image as PILImage
     from PIL import ImageDraw
 
-    from .render.views import _font
+    from chronocl.render.views import _font
 
     thumbs = [PILImage.open(p).convert("RGB") for p in paths]
     height = 360

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import enhance as _enhance
-from .spec import IntegrationSpec
-from .tf import lut_lerp32
+from chronocl.core import enhance as _enhance
+from chronocl.core.tf import lut_lerp32
+from chronocl.modes.spec import IntegrationSpec
 
 
 def normalization(vmin: float, vmax: float) -> tuple[np.float32, np.float32]:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import strategies as st
 
-from chronocl.enhance import Enhance
-from chronocl.selection import Selection
-from chronocl.spec import IntegrationSpec
-from chronocl.tf import DataTF, TimeAlpha, TimeColor, TimeTF
+from chronocl.core.enhance import Enhance
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF, TimeAlpha, TimeColor, TimeTF
+from chronocl.modes.spec import IntegrationSpec
 
 shapes = st.tuples(st.integers(1, 7), st.integers(1, 6), st.integers(1, 6))
 # x spans 1..40 so the OpenCL engine's 16-voxel lanes and its scalar x tail are both exercised.

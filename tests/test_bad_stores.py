@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 
 import chronocl
-from chronocl.data import synthetic
-from chronocl.data.series import write_series
-from chronocl.errors import (
+from chronocl.core.errors import (
     ChronoclError,
     InvalidDataError,
     InvalidParameterError,
     InvalidSelectionError,
     StoreCorruptError,
 )
+from chronocl.data import synthetic
+from chronocl.data.series import write_series
 
 from .bad_input import assert_rejected, digest
 

@@ -142,10 +142,10 @@ def test_verbose_flag_sets_the_environment(monkeypatch, small_store, capsys):
 
 def test_an_os_error_past_the_checks_is_one_line(monkeypatch, small_store, tmp_path, capsys):
     """A folder that stops taking files after the checks (simulated by skipping them)."""
-    import chronocl.paths
+    import chronocl.core.paths
     from chronocl.cli import main
 
-    monkeypatch.setattr(chronocl.paths, "check_writable", lambda path: None)
+    monkeypatch.setattr(chronocl.core.paths, "check_writable", lambda path: None)
     (tmp_path / "f").write_text("a file, not a folder")
     out = tmp_path / "f" / "o.zarr"
     argv = ["chronocl", "integrate", str(small_store), str(out), "--engine", "numpy"]

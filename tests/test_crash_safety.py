@@ -35,14 +35,14 @@ import numpy as np
 import pytest
 
 import chronocl
-import chronocl.streaming as streaming
-from chronocl import atomic
+import chronocl.integration.streaming as streaming
+from chronocl.core import atomic
+from chronocl.core.errors import InvalidDataError, OutputBusyError, OutputExistsError
+from chronocl.data.formats.export import export_series
 from chronocl.data.ingest import ingest_raw
 from chronocl.data.series import write_series
-from chronocl.errors import InvalidDataError, OutputBusyError, OutputExistsError
-from chronocl.export_series import export_series
-from chronocl.integrate import prepare
-from chronocl.streaming import integrate_to_store, partial_path
+from chronocl.integration.inmemory import prepare
+from chronocl.integration.streaming import integrate_to_store, partial_path
 
 # The real command line, with every chunk written (zarr) and every step exported paused for
 # CRASH_TEST_DELAY seconds, so that a poll sees the partial between two writes.
@@ -51,7 +51,7 @@ import os, sys, time
 delay = float(os.environ.get("CRASH_TEST_DELAY") or 0)
 if delay:
     import zarr.storage
-    import chronocl.export_series as es
+    import chronocl.data.formats.export as es
     _set, _read = zarr.storage.LocalStore.set, es._read_step
     async def slow_set(self, key, value, *args, **kwargs):
         await _set(self, key, value, *args, **kwargs)

@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import chronocl
-import chronocl.distributed as dist
+import chronocl.integration.distributed as dist
+from chronocl.core.errors import EngineUnavailableError, InvalidParameterError
 from chronocl.data.series import write_series
-from chronocl.errors import EngineUnavailableError, InvalidParameterError
-from chronocl.streaming import RUN_DIR, integrate_to_store, partial_path
+from chronocl.integration.streaming import RUN_DIR, integrate_to_store, partial_path
 
 from .test_cli import cli
 from .test_streaming import CASES, WINDOW, assert_same_bytes
@@ -153,7 +153,7 @@ def test_failed_run_resumes_skipping_finished_slabs(tmp_path, client, store, loc
 def test_local_and_distributed_runs_share_the_resume_markers(tmp_path, client, store, local):
     """A local run cut short is finished on the cluster (same parameters, same bytes)."""
     out = tmp_path / "cv.zarr"
-    import chronocl.streaming as streaming
+    import chronocl.integration.streaming as streaming
 
     real, calls = streaming.write_slab, []
 

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from chronocl import TimeSeries
-from chronocl.data.ingest import ingest_raw
-from chronocl.errors import (
+from chronocl.core.errors import (
     InvalidParameterError,
     InvalidSelectionError,
     OutputExistsError,
     UnknownNameError,
 )
-from chronocl.export_series import export_series, parse_slab
+from chronocl.data.formats.export import export_series, parse_slab
+from chronocl.data.ingest import ingest_raw
 
 from .test_export_vti import read_vti
 

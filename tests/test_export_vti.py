@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from chronocl import Chronovolume
-from chronocl.errors import InvalidParameterError, OutputExistsError
-from chronocl.export_vti import save_chronovolume_vti, write_vti
+from chronocl.core.errors import InvalidParameterError, OutputExistsError
+from chronocl.data.formats.vti import save_chronovolume_vti, write_vti
 
 Z, Y, X = 3, 4, 5  # odd and all different, so an axis mix-up shows
 SPACING = (2.5, 1.5, 0.5)  # dz, dy, dx

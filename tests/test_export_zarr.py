@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import zarr
 
-from chronocl.chronovolume import Chronovolume
-from chronocl.errors import OutputExistsError, StoreFormatError
-from chronocl.export_zarr import load_chronovolume_omezarr, save_chronovolume_omezarr
+from chronocl.core.errors import OutputExistsError, StoreFormatError
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.formats.omezarr_write import load_chronovolume_omezarr, save_chronovolume_omezarr
 
 META = {
     "dataset": "rand",

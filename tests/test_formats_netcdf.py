@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import chronocl
+from chronocl.core.errors import ChronoclError, InputNotFoundError, InvalidDataError
 from chronocl.data.formats.netcdf import ingest_netcdf
-from chronocl.errors import ChronoclError, InputNotFoundError, InvalidDataError
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("h5netcdf")

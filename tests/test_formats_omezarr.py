@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import zarr
 
+from chronocl.core.errors import ChronoclError, InputNotFoundError, StoreFormatError
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
-from chronocl.errors import ChronoclError, InputNotFoundError, StoreFormatError
 
 AXES = {
     "t": {"name": "t", "type": "time", "unit": "second"},

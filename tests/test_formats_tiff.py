@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import chronocl
+from chronocl.core.errors import ChronoclError, InputNotFoundError, InvalidDataError
 from chronocl.data.formats.tiff import ingest_tiff
-from chronocl.errors import ChronoclError, InputNotFoundError, InvalidDataError
 
 tifffile = pytest.importorskip("tifffile")
 

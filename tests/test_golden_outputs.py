@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 from chronocl import Session, integrate
+from chronocl.core.enhance import Enhance
+from chronocl.core.tf import TimeAlpha, TimeColor, TimeTF
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
 from chronocl.demo import FIGURES
-from chronocl.enhance import Enhance
-from chronocl.tf import TimeAlpha, TimeColor, TimeTF
 
 GOLDEN = Path(__file__).parent / "golden" / "chronovolumes.json"
 WRITE = os.environ.get("CHRONOCL_WRITE_GOLDEN") == "1"

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 import chronocl
-from chronocl.data.ingest import ingest, ingest_npy, ingest_raw
-from chronocl.errors import (
+from chronocl.core.errors import (
     ChronoclError,
     InputNotFoundError,
     InvalidDataError,
@@ -15,6 +14,7 @@ from chronocl.errors import (
     OutputExistsError,
     UnknownNameError,
 )
+from chronocl.data.ingest import ingest, ingest_npy, ingest_raw
 
 SHAPE = (5, 4, 3)  # (Z, Y, X): dims NX NY NZ = 3 4 5
 

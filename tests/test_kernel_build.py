@@ -255,8 +255,8 @@ def test_build_logs_are_captured_unless_verbose(monkeypatch, capsys, tmp_path):
 
 @pytest.mark.parametrize("verbose", ["", "1"])
 def test_build_failure_still_names_options_device_and_log(monkeypatch, verbose):
+    from chronocl.core.errors import KernelBuildError
     from chronocl.engine.device import get_context
-    from chronocl.errors import KernelBuildError
 
     monkeypatch.setenv("CHRONOCL_VERBOSE", verbose)
     dc = get_context()

@@ -12,10 +12,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import chronocl
+from chronocl.core.errors import EngineUnavailableError, KernelBuildError
 from chronocl.engine.device import list_devices
 from chronocl.engine.opencl import OpenCLEngine
-from chronocl.errors import EngineUnavailableError, KernelBuildError
-from chronocl.spec import IntegrationSpec
+from chronocl.modes.spec import IntegrationSpec
 
 from .strategies import specs, windows
 

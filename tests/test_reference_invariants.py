@@ -7,12 +7,12 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from chronocl import reference
+from chronocl.core.enhance import factor
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF, TimeAlpha, TimeTF, lut_lookup
 from chronocl.data.series import TimeSeries
-from chronocl.enhance import factor
-from chronocl.integrate import integrate
-from chronocl.selection import Selection
-from chronocl.spec import IntegrationSpec, resolve_order
-from chronocl.tf import DataTF, TimeAlpha, TimeTF, lut_lookup
+from chronocl.integration.inmemory import integrate
+from chronocl.modes.spec import IntegrationSpec, resolve_order
 
 from .strategies import specs, windows
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from chronocl import reference
-from chronocl.enhance import Enhance
-from chronocl.selection import Selection
-from chronocl.spec import IntegrationSpec, resolve_order
-from chronocl.tf import DataTF, TimeTF
+from chronocl.core.enhance import Enhance
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF, TimeTF
+from chronocl.modes.spec import IntegrationSpec, resolve_order
 
 # a_d(u) = u, data colour white; time colour rgb (blue, green, red), time alpha 1.
 LINEAR = DataTF(points=[(0, 1, 1, 1, 0), (1, 1, 1, 1, 1)])
@@ -103,7 +103,7 @@ def test_max_min(mode, order, expected, step, tie_step):
 
 def test_edge_and_silhouette_factors():
     u = np.array([0.0, 0.5, 1.0], dtype=np.float32).reshape(1, 1, 3)  # |g| = 0.5 along x
-    from chronocl.enhance import factor
+    from chronocl.core.enhance import factor
 
     np.testing.assert_allclose(factor(u, Enhance("edge", 0.1, 2.0, 2.0)), 0.1 + 2.0 * 0.25)
     along = factor(u, Enhance("silhouette", 0.2, 1.0, 1.0, view=(1, 0, 0)))

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import chronocl
-from chronocl.errors import ChronoclError, InvalidParameterError, UnknownNameError
+from chronocl.core.errors import ChronoclError, InvalidParameterError, UnknownNameError
 from chronocl.render import Camera, render
 from chronocl.render.raycaster import Raycaster
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from chronocl.errors import InvalidSelectionError, UnknownNameError
-from chronocl.selection import Selection, parse_selection
-from chronocl.spec import IntegrationSpec, resolve_order
+from chronocl.core.errors import InvalidSelectionError, UnknownNameError
+from chronocl.core.selection import Selection, parse_selection
+from chronocl.modes.spec import IntegrationSpec, resolve_order
 
 
 @pytest.mark.parametrize(

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import chronocl
+from chronocl.core.errors import InputNotFoundError, OutputExistsError, StoreFormatError
 from chronocl.data.series import step_runs, write_series
-from chronocl.errors import InputNotFoundError, OutputExistsError, StoreFormatError
 
 
 def test_from_array_numpy_and_dask_are_lazy_and_equal(tmp_path):

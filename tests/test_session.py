@@ -15,12 +15,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from chronocl.core.errors import InvalidParameterError, InvalidSelectionError
+from chronocl.core.tf import TimeTF
 from chronocl.data.series import TimeSeries
-from chronocl.errors import InvalidParameterError, InvalidSelectionError
-from chronocl.integrate import integrate, make_spec
-from chronocl.session import Session
-from chronocl.sliding import SlidingAggregate
-from chronocl.tf import TimeTF
+from chronocl.integration.inmemory import integrate, make_spec
+from chronocl.integration.session import Session
+from chronocl.integration.sliding import SlidingAggregate
 
 from .strategies import specs
 

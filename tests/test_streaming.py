@@ -1,4 +1,5 @@
-"""Streaming integration (chronocl.streaming): slabs from the store into a chronovolume store.
+"""Streaming integration (chronocl.integration.streaming): slabs from the store into a
+chronovolume store.
 
 Streamed output must be the bytes `chronocl.integrate` gives in memory, for every mode and
 any slab split; peak memory must follow the budget, not the data; an interrupted run resumes.
@@ -16,12 +17,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import chronocl
-import chronocl.streaming as streaming
-from chronocl.budget import GrowthGuard, resident_bytes
+import chronocl.integration.streaming as streaming
+from chronocl.core.budget import GrowthGuard, resident_bytes
+from chronocl.core.errors import InvalidParameterError, OutputExistsError
 from chronocl.data.series import write_series
-from chronocl.errors import InvalidParameterError, OutputExistsError
-from chronocl.integrate import prepare
-from chronocl.streaming import integrate_to_store, partial_path
+from chronocl.integration.inmemory import prepare
+from chronocl.integration.streaming import integrate_to_store, partial_path
 
 from .test_cli import cli
 
@@ -340,6 +341,6 @@ def test_growth_guard_trims_only_past_its_allowance():
     more = np.ones(32 * 2**20, np.uint8)  # the process grows by 32 MB
     small.check()
     large.check()
-    can_trim = chronocl.budget._malloc_trim is not None
+    can_trim = chronocl.core.budget._malloc_trim is not None
     assert (small.trims, large.trims) == (int(can_trim), 0)
     del held, more

@@ -7,8 +7,8 @@ import itertools
 import numpy as np
 import pytest
 
+from chronocl.core.errors import ChronoclError, InvalidParameterError, UnknownNameError
 from chronocl.data.synthetic import DATASETS, step, steps
-from chronocl.errors import ChronoclError, InvalidParameterError, UnknownNameError
 
 NAMES = sorted(DATASETS)
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from chronocl.errors import (
+from chronocl.core.errors import (
     ChronoclError,
     InputNotFoundError,
     InvalidTransferFunctionError,
     UnknownNameError,
 )
-from chronocl.tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF, lut_lookup
+from chronocl.core.tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF, lut_lookup
 
 
 def test_rgb_ramp_is_blue_green_red():
@@ -134,7 +134,7 @@ def test_unknown_presets():
 
 
 def test_tf_path_that_is_not_a_file_says_what_it_is(tmp_path):
-    from chronocl.errors import InvalidParameterError
+    from chronocl.core.errors import InvalidParameterError
 
     (tmp_path / "a").symlink_to(tmp_path / "b")
     (tmp_path / "b").symlink_to(tmp_path / "a")

@@ -28,7 +28,7 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
 import chronocl
-from chronocl.errors import ChronoclError
+from chronocl.core.errors import ChronoclError
 from chronocl.viewer.protocol import FLOAT32_MAX, MAX_DEPTH, MESSAGES
 from chronocl.viewer.server import ViewerServer, host_names, is_ip_host, serve
 

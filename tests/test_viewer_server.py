@@ -293,7 +293,7 @@ def test_many_clients_scrubbing_get_frames_and_memory_stays_flat(server):
 
 def test_probe_ray_matches_a_known_block():
     """The CPU march finds the front face of an opaque block on the axis view."""
-    from chronocl.chronovolume import Chronovolume
+    from chronocl.data.chronovolume import Chronovolume
     from chronocl.render.camera import Camera
     from chronocl.viewer.state import probe_ray
 

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 import zarr
 
-from chronocl.data.series import TimeSeries, open_series
-from chronocl.data.window import WindowManager
-from chronocl.errors import (
+from chronocl.core.errors import (
     InvalidParameterError,
     InvalidSelectionError,
     StoreChangedError,
     SupersededError,
 )
+from chronocl.data.series import TimeSeries, open_series
+from chronocl.data.window import WindowManager
 
 
 class GatedArray:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import InvalidParameterError
+from chronocl.core.errors import InvalidParameterError
 
 
 @dataclass(frozen=True)

@@ -17,9 +17,14 @@ from pathlib import Path
 import numpy as np
 from natsort import natsorted
 
-from ..errors import InputNotFoundError, InvalidDataError, InvalidParameterError, UnknownNameError
-from ..paths import GLOB_CHARS
-from .series import SUPPORTED_DTYPES, TimeSeries, write_series
+from chronocl.core.errors import (
+    InputNotFoundError,
+    InvalidDataError,
+    InvalidParameterError,
+    UnknownNameError,
+)
+from chronocl.core.paths import GLOB_CHARS
+from chronocl.data.series import SUPPORTED_DTYPES, TimeSeries, write_series
 
 ENDIANS = ("little", "big")
 
@@ -180,7 +185,7 @@ def detect_format(inputs: Sequence[str | os.PathLike]) -> str:
     """The reader for these inputs, from the file type (a folder: OME-Zarr)."""
     first = Path(str(inputs[0]))
     if first.is_dir():
-        from .formats.omezarr import is_omezarr
+        from chronocl.data.formats.omezarr import is_omezarr
 
         if is_omezarr(first):
             return "omezarr"
@@ -200,7 +205,7 @@ def ingest(
     **options: object,
 ) -> TimeSeries:
     """Ingest with the reader for `fmt` (``auto``: by file type; raw files need dims=)."""
-    from ..paths import check_apart
+    from chronocl.core.paths import check_apart
 
     check_apart(out, inputs)  # never onto, into or around an input
     if fmt not in FORMATS:
@@ -222,15 +227,15 @@ def ingest(
     if fmt == "npy":
         return ingest_npy(inputs[0], out, **options)  # type: ignore[arg-type]
     if fmt == "netcdf":
-        from .formats.netcdf import ingest_netcdf
+        from chronocl.data.formats.netcdf import ingest_netcdf
 
         return ingest_netcdf(inputs[0], out, **options)  # type: ignore[arg-type]
     if fmt == "tiff":
-        from .formats.tiff import ingest_tiff
+        from chronocl.data.formats.tiff import ingest_tiff
 
         return ingest_tiff(inputs, out, **options)  # type: ignore[arg-type]
     if fmt == "omezarr":
-        from .formats.omezarr import open_omezarr
+        from chronocl.data.formats.omezarr import open_omezarr
 
         channel, level = options.pop("channel", 0), options.pop("level", 0)
         options.pop("nan_fill", None)

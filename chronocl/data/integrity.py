@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from zarr.storage import LocalStore
 
-from ..errors import ChronoclError, StoreCorruptError
+from chronocl.core.errors import ChronoclError, StoreCorruptError
 
 _METADATA_NAMES = {"zarr.json", ".zarray", ".zattrs", ".zgroup", ".zmetadata"}
 FIX = "restore it from a copy or ingest the data again ('chronocl verify STORE' checks a store)"

@@ -20,9 +20,8 @@ import dask.array as da
 import numpy as np
 import zarr
 
-from ..atomic import atomic_directory
-from ..engine.memory import aligned_empty
-from ..errors import (
+from chronocl.core.atomic import atomic_directory
+from chronocl.core.errors import (
     ChronoclError,
     InputNotFoundError,
     InvalidDataError,
@@ -30,9 +29,10 @@ from ..errors import (
     StoreChangedError,
     StoreFormatError,
 )
-from ..progress import track
-from ..reference import normalize
-from .integrity import CheckedArray, CheckedStore, checked_read, damaged
+from chronocl.core.memory import aligned_empty
+from chronocl.core.progress import track
+from chronocl.data.integrity import CheckedArray, CheckedStore, checked_read, damaged
+from chronocl.reference import normalize
 
 FORMAT = "chronocl.series"
 # Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at
@@ -207,7 +207,7 @@ class TimeSeries:
         dimension (dimensions mapped by name, spacing and time labels from its coordinates);
         no copy is made. Statistics are computed in one pass."""
         if type(array).__module__.startswith("xarray"):
-            from .formats.netcdf import dataarray_layout
+            from chronocl.data.formats.netcdf import dataarray_layout
 
             array, coord_spacing, coord_times = dataarray_layout(array)
             spacing = coord_spacing if spacing is None else spacing
@@ -287,7 +287,7 @@ def open_series(path: str | os.PathLike) -> TimeSeries:
             f"store {str(p)!r} does not exist; create one with 'chronocl ingest' or "
             "'chronocl generate'"
         )
-    from .formats.omezarr import is_omezarr, open_omezarr
+    from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
 
     if is_omezarr(p):  # opened in place: channel 0, full resolution
         return open_omezarr(p)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InvalidParameterError, UnknownNameError
+from chronocl.core.errors import InvalidParameterError, UnknownNameError
 
 DATASETS: dict[str, str] = {
     "vortex": "vortex rings and a twisting tube that move, tilt, spin, grow and merge",

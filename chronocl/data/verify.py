@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import StoreFormatError
-from ..progress import track
-from .integrity import damaged
-from .series import TimeSeries, open_series
+from chronocl.core.errors import StoreFormatError
+from chronocl.core.progress import track
+from chronocl.data.integrity import damaged
+from chronocl.data.series import TimeSeries, open_series
 
 
 def verify(path: str | os.PathLike, progress: bool = False) -> dict:
@@ -25,7 +25,7 @@ def verify(path: str | os.PathLike, progress: bool = False) -> dict:
     try:
         series = open_series(path)
     except StoreFormatError:
-        from ..chronovolume import Chronovolume
+        from chronocl.data.chronovolume import Chronovolume
 
         cv = Chronovolume.load(path)  # reads and checks every chunk
         return {"chronovolume": str(path), "shape (Z, Y, X)": list(cv.shape), "status": "ok"}

@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..budget import human, parse_memory
-from ..engine.memory import aligned_empty
-from ..errors import InvalidParameterError, InvalidSelectionError, SupersededError
-from .series import TimeSeries
+from chronocl.core.budget import human, parse_memory
+from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, SupersededError
+from chronocl.core.memory import aligned_empty
+from chronocl.data.series import TimeSeries
 
 
 @dataclass

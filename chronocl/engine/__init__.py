@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import reference
-from ..errors import UnknownNameError
-from ..reference import Partial
-from ..spec import IntegrationSpec
+from chronocl import reference
+from chronocl.core.errors import UnknownNameError
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.reference import Partial
 
 ENGINES = ("opencl", "numpy")
 
@@ -75,7 +75,7 @@ def get_engine(name: str = "opencl", device: str | None = None):
         if name == "numpy":
             _engines[key] = NumpyEngine()
         else:
-            from .opencl import OpenCLEngine
+            from chronocl.engine.opencl import OpenCLEngine
 
             _engines[key] = OpenCLEngine(device)
     return _engines[key]

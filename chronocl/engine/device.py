@@ -15,7 +15,7 @@ import threading
 from dataclasses import dataclass
 from functools import cache
 
-from ..errors import EngineUnavailableError
+from chronocl.core.errors import EngineUnavailableError
 
 NO_PLATFORM = (
     "no OpenCL platform found; install one with 'pip install pyopencl[pocl]' (PoCL on the CPU) "

@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import reference
-from ..reference import Partial
-from ..spec import IntegrationSpec
-from ..tf import lut_lerp32
-from .device import DeviceContext, get_context
-from .memory import aligned_empty, is_aligned
-from .program import kernel
+from chronocl import reference
+from chronocl.core.memory import aligned_empty, is_aligned
+from chronocl.core.tf import lut_lerp32
+from chronocl.engine.device import DeviceContext, get_context
+from chronocl.engine.program import kernel
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.reference import Partial
 
 DEVICE_TYPES = {"uint8": "uchar", "uint16": "ushort", "int16": "short", "float32": "float"}
 KERNELS = {

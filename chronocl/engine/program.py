@@ -21,7 +21,7 @@ from functools import cache
 from importlib import resources
 from pathlib import Path
 
-from ..errors import KernelBuildError
+from chronocl.core.errors import KernelBuildError
 
 _lock = threading.Lock()
 _programs: dict[tuple, object] = {}

@@ -4,8 +4,8 @@ image = chronocl.render(chronovolume, camera=Camera(azimuth=30), size=(512, 512)
 image.save("view.png")     # in Jupyter, `image` displays inline
 """
 
-from .camera import Camera
-from .image import Image
-from .views import render, render_views
+from chronocl.render.camera import Camera
+from chronocl.render.image import Image
+from chronocl.render.views import render, render_views
 
 __all__ = ["Camera", "Image", "render", "render_views"]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InvalidParameterError, UnknownNameError
+from chronocl.core.errors import InvalidParameterError, UnknownNameError
 
 PROJECTIONS = ("perspective", "orthographic")
 MIN_ZOOM, MAX_ZOOM = 0.01, 100.0  # beyond, the volume is a dot or the view is inside one voxel

@@ -7,7 +7,7 @@ from functools import cache
 from importlib import resources
 from pathlib import Path
 
-from ..errors import RendererUnavailableError
+from chronocl.core.errors import RendererUnavailableError
 
 NO_GL = (
     "cannot create an OpenGL context through EGL ({why}); install the system packages "

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_file
+from chronocl.core.atomic import atomic_file
 
 
 @dataclass

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..chronovolume import Chronovolume
-from ..errors import InvalidParameterError
-from .camera import Camera
-from .gl import gl_context, program
+from chronocl.core.errors import InvalidParameterError
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.render.camera import Camera
+from chronocl.render.gl import gl_context, program
 
 MIN_SIZE, MAX_SIZE = 16, 8192
 TEXTURE_TYPES = {"f2": np.float16, "f1": np.uint8}

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_file
-from ..errors import InvalidParameterError
-from ..progress import track
-from .camera import Camera
-from .image import Image
+from chronocl.core.atomic import atomic_file
+from chronocl.core.errors import InvalidParameterError
+from chronocl.core.progress import track
+from chronocl.render.camera import Camera
+from chronocl.render.image import Image
 
 VIDEO_SUFFIXES = (".mp4", ".gif", ".webm", ".mkv")
 

@@ -8,11 +8,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..chronovolume import Chronovolume
-from ..errors import InvalidParameterError
-from .camera import Camera
-from .image import Image
-from .raycaster import Raycaster, Volume, check_clip, check_size
+from chronocl.core.errors import InvalidParameterError
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.render.camera import Camera
+from chronocl.render.image import Image
+from chronocl.render.raycaster import Raycaster, Volume, check_clip, check_size
 
 _raycaster: Raycaster | None = None
 
@@ -132,7 +132,7 @@ def render_views(
 
 def describe(cv: Chronovolume) -> str:
     """Panel label: mode, order and window, e.g. 'alpha, forward, steps 0:20:9'."""
-    from ..selection import Selection
+    from chronocl.core.selection import Selection
 
     spec = cv.metadata.get("spec", {})
     order = spec.get("order", "forward")
@@ -199,7 +199,7 @@ def _compose(panels, labels, legend_of, columns, bg) -> np.ndarray:
 
 def _legend(draw, cv: Chronovolume, box, font, text_rgb) -> None:
     """A bar of the time colours over the selected steps, oldest on the left."""
-    from ..spec import IntegrationSpec
+    from chronocl.modes.spec import IntegrationSpec
 
     spec = IntegrationSpec.from_dict(cv.metadata["spec"])
     steps = cv.steps

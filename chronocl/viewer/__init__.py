@@ -7,6 +7,6 @@ back. See `server` (HTTP, token, sockets), `protocol` (message schemas) and `sta
 per-client render worker).
 """
 
-from .server import ViewerServer, make_app, serve
+from chronocl.viewer.server import ViewerServer, make_app, serve
 
 __all__ = ["ViewerServer", "make_app", "serve"]

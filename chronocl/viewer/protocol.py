@@ -28,8 +28,8 @@ import re
 import struct
 from dataclasses import dataclass
 
-from ..errors import InvalidParameterError
-from ..spec import MODES
+from chronocl.core.errors import InvalidParameterError
+from chronocl.modes.spec import MODES
 
 MAX_MESSAGE_BYTES = 64 * 1024
 MAX_DEPTH = 8  # the deepest message (update.data_tf.points[i][j]) nests 4 containers

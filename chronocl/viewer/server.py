@@ -36,9 +36,15 @@ from importlib import resources
 from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
-from ..errors import ChronoclError, InvalidParameterError, UnknownNameError
-from .protocol import MAX_MESSAGE_BYTES, MAX_VIEWS, ProtocolError, parse_message, request_id
-from .state import ClientWorker, Dataset, Downloads, internal_error
+from chronocl.core.errors import ChronoclError, InvalidParameterError, UnknownNameError
+from chronocl.viewer.protocol import (
+    MAX_MESSAGE_BYTES,
+    MAX_VIEWS,
+    ProtocolError,
+    parse_message,
+    request_id,
+)
+from chronocl.viewer.state import ClientWorker, Dataset, Downloads, internal_error
 
 STATIC = {
     "index.html": "text/html; charset=utf-8",
@@ -81,7 +87,7 @@ def static_file(name: str) -> bytes:
 
 def open_datasets(stores: Sequence[str | os.PathLike]) -> list[Dataset]:
     """Open each store; names are the stores' stems, made unique with a suffix."""
-    from ..data.series import open_series
+    from chronocl.data.series import open_series
 
     if not stores:
         raise InvalidParameterError("no store given; name at least one series store to view")
@@ -109,8 +115,8 @@ def check_options(
     token: object = None,
 ) -> None:
     """Raise the ChronoclError naming the first bad server option (before anything starts)."""
-    from ..budget import parse_memory
-    from ..engine import ENGINES
+    from chronocl.core.budget import parse_memory
+    from chronocl.engine import ENGINES
 
     if not isinstance(host, str) or not host.strip() or any(c.isspace() for c in host):
         raise InvalidParameterError(f"host {host!r} is not an address; use e.g. 127.0.0.1")
@@ -134,7 +140,7 @@ def check_options(
     if memory is not None:
         parse_memory(memory)  # type: ignore[arg-type]
     if engine == "opencl" and device:
-        from ..engine.device import _pick
+        from chronocl.engine.device import _pick
 
         _pick(device)  # raises EngineUnavailableError naming the devices there are
 
@@ -183,7 +189,7 @@ class HeapKeeper:
     """
 
     def __init__(self, allowance: int = HEAP_ALLOWANCE) -> None:
-        from ..budget import resident_bytes
+        from chronocl.core.budget import resident_bytes
 
         self.allowance = allowance
         self.floor = resident_bytes()
@@ -201,7 +207,7 @@ class HeapKeeper:
     def check(self) -> None:
         import time
 
-        from ..budget import _malloc_trim, resident_bytes
+        from chronocl.core.budget import _malloc_trim, resident_bytes
 
         now = resident_bytes()
         if now is None or self.floor is None:

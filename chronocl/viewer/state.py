@@ -33,19 +33,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ..chronovolume import Chronovolume
-from ..data.series import TimeSeries
-from ..data.window import WindowManager
-from ..enhance import Enhance
-from ..errors import ChronoclError, InvalidParameterError, UnknownNameError
-from ..render.camera import Camera
-from ..render.raycaster import Volume, clip_plane, occupied_box
-from ..render.views import describe
-from ..selection import Selection
-from ..session import Session
-from ..spec import IntegrationSpec
-from ..tf import DataTF, TimeAlpha, TimeColor, TimeTF
-from .protocol import pack_frame
+from chronocl.core.enhance import Enhance
+from chronocl.core.errors import ChronoclError, InvalidParameterError, UnknownNameError
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF, TimeAlpha, TimeColor, TimeTF
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.data.window import WindowManager
+from chronocl.integration.session import Session
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.render.camera import Camera
+from chronocl.render.raycaster import Volume, clip_plane, occupied_box
+from chronocl.render.views import describe
+from chronocl.viewer.protocol import pack_frame
 
 log = logging.getLogger("chronocl.viewer")
 INTEGRATE_LOCK = threading.Lock()
@@ -103,8 +103,8 @@ def on_gl(fn: Callable, *args):
 def _on_gl(fn: Callable, args: tuple):
     global _gl_raycaster
     if _gl_raycaster is None:
-        from ..render.gl import new_egl_context
-        from ..render.raycaster import Raycaster
+        from chronocl.render.gl import new_egl_context
+        from chronocl.render.raycaster import Raycaster
 
         _gl_raycaster = Raycaster(new_egl_context())
     return fn(_gl_raycaster, *args)
@@ -672,7 +672,7 @@ class ClientWorker:
         return panels, t_up, t_draw, time.perf_counter()
 
     def _render(self, state: ViewState, rid: int | None) -> None:
-        from ..render.views import parse_color
+        from chronocl.render.views import parse_color
 
         t_start = time.perf_counter()
         cvs, integrate_ms, incremental = self._chronovolumes(state)
@@ -747,8 +747,8 @@ class ClientWorker:
         self._reply(reply)
 
     def _save(self, msg: dict) -> None:
-        from ..render.image import Image
-        from ..render.views import _compose, parse_color
+        from chronocl.render.image import Image
+        from chronocl.render.views import _compose, parse_color
 
         state, view = self._shown_view(msg)
         ds = self.datasets[state.dataset]

@@ -18,9 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import check_output
-from ...errors import ChronoclError, InputNotFoundError, InvalidDataError, InvalidParameterError
-from ..series import SUPPORTED_DTYPES, TimeSeries, write_series
+from chronocl.core.atomic import check_output
+from chronocl.core.errors import (
+    ChronoclError,
+    InputNotFoundError,
+    InvalidDataError,
+    InvalidParameterError,
+)
+from chronocl.data.series import SUPPORTED_DTYPES, TimeSeries, write_series
 
 HDF5_SUFFIXES = (".nc", ".nc4", ".h5", ".hdf5", ".he5", ".hdf")
 TIME_NAMES = ("time", "t")

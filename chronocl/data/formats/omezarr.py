@@ -28,9 +28,9 @@ from pathlib import Path
 import dask.array as da
 import zarr
 
-from ...errors import InvalidDataError, InvalidParameterError, StoreFormatError
-from ...stores import open_group
-from ..series import TimeSeries, parse_spacing
+from chronocl.core.errors import InvalidDataError, InvalidParameterError, StoreFormatError
+from chronocl.data.series import TimeSeries, parse_spacing
+from chronocl.data.stores import open_group
 
 SPATIAL = ("z", "y", "x")
 

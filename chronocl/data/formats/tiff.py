@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import check_output
-from ...errors import ChronoclError, InvalidDataError
-from ..ingest import expand_inputs
-from ..series import SUPPORTED_DTYPES, TimeSeries, parse_spacing, write_series
+from chronocl.core.atomic import check_output
+from chronocl.core.errors import ChronoclError, InvalidDataError
+from chronocl.data.ingest import expand_inputs
+from chronocl.data.series import SUPPORTED_DTYPES, TimeSeries, parse_spacing, write_series
 
 # Words in tifffile's log warnings that mean the file structure is damaged; tifffile logs
 # them and carries on with fewer pages (or a wrong series) instead of raising.

@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .enhance import Enhance
-from .errors import InvalidParameterError, InvalidSelectionError, UnknownNameError
-from .selection import Selection
-from .tf import DataTF, TimeTF
+from chronocl.core.enhance import Enhance
+from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, UnknownNameError
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF, TimeTF
 
 MODES = ("alpha", "first_hit", "additive", "max", "min")
 ORDERS = ("forward", "backward")

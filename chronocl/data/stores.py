@@ -7,7 +7,7 @@ from pathlib import Path
 
 import zarr
 
-from .errors import InputNotFoundError, StoreFormatError
+from chronocl.core.errors import InputNotFoundError, StoreFormatError
 
 
 def open_group(path: str | os.PathLike, what: str, checked: tuple[str, ...] = ()) -> zarr.Group:
@@ -16,7 +16,7 @@ def open_group(path: str | os.PathLike, what: str, checked: tuple[str, ...] = ()
     Missing chunks of the `checked` arrays raise StoreCorruptError when the group's
     attribute ``chronocl.chunks`` says that every chunk was written.
     """
-    from .data.integrity import CheckedStore
+    from chronocl.data.integrity import CheckedStore
 
     p = Path(path)
     if not p.exists():

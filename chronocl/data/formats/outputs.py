@@ -10,8 +10,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .chronovolume import Chronovolume
-from .errors import InvalidParameterError
+from chronocl.core.errors import InvalidParameterError
+from chronocl.data.chronovolume import Chronovolume
 
 KINDS = {".ome.zarr": "OME-Zarr (napari)", ".zarr": "chronocl zarr", ".vti": "VTK (ParaView)"}
 
@@ -32,11 +32,11 @@ def save_chronovolume(cv: Chronovolume, path: str | os.PathLike, overwrite: bool
     """Save `cv` in the format its suffix names, atomically."""
     kind = output_kind(path)
     if kind == ".vti":
-        from .export_vti import save_chronovolume_vti
+        from chronocl.data.formats.vti import save_chronovolume_vti
 
         return save_chronovolume_vti(cv, path, overwrite=overwrite)
     if kind == ".ome.zarr":
-        from .export_zarr import save_chronovolume_omezarr
+        from chronocl.data.formats.omezarr_write import save_chronovolume_omezarr
 
         return save_chronovolume_omezarr(cv, path, overwrite=overwrite)
     return cv.save(path, overwrite=overwrite)

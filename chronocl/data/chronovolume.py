@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from .atomic import atomic_directory
-from .data.integrity import checked_read
-from .data.series import compressors
-from .errors import StoreFormatError
-from .spec import IntegrationSpec
-from .stores import open_group
+from chronocl.core.atomic import atomic_directory
+from chronocl.core.errors import StoreFormatError
+from chronocl.data.integrity import checked_read
+from chronocl.data.series import compressors
+from chronocl.data.stores import open_group
+from chronocl.modes.spec import IntegrationSpec
 
 FORMAT = "chronocl.chronovolume"
 

@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from .atomic import atomic_directory
-from .chronovolume import Chronovolume
-from .errors import StoreFormatError
-from .stores import open_group
+from chronocl.core.atomic import atomic_directory
+from chronocl.core.errors import StoreFormatError
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.stores import open_group
 
 FORMAT = "chronocl.chronovolume.omezarr"
 NGFF_VERSION = "0.4"

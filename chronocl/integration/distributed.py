@@ -1,7 +1,8 @@
 """Integration on a dask.distributed cluster: one task per z-slab of the output.
 
-`chronocl.streaming.integrate_to_store(..., client=client)` plans the slabs and submits one
-`slab_task` per slab. A task gets only paths, the spec as a dict and its slab bounds; on its
+`chronocl.integration.streaming.integrate_to_store(..., client=client)` plans the slabs and
+submits one `slab_task` per slab. A task gets only paths, the spec as a dict and its slab bounds;
+on its
 worker it opens the series (a shared file system or object store), integrates with that
 worker's engine (`get_engine` keeps one OpenCL context per worker process), writes its slab of
 the output store directly (slabs are whole output chunks, so no two tasks write one chunk),
@@ -30,19 +31,19 @@ from pathlib import Path
 
 import zarr
 
-from .data.bricks import Slab
-from .data.series import STEPS_PER_READ, TimeSeries, open_series
-from .engine import get_engine
-from .engine.memory import aligned_empty
-from .errors import (
+from chronocl.core.errors import (
     ChronoclError,
     EngineUnavailableError,
     InvalidParameterError,
     SlabTaskError,
 )
-from .integrate import Job
-from .progress import meter
-from .streaming import (
+from chronocl.core.memory import aligned_empty
+from chronocl.core.progress import meter
+from chronocl.data.bricks import Slab
+from chronocl.data.series import STEPS_PER_READ, TimeSeries, open_series
+from chronocl.engine import get_engine
+from chronocl.integration.inmemory import Job
+from chronocl.integration.streaming import (
     BrickReader,
     Plan,
     job_from_dict,

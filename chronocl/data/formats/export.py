@@ -22,12 +22,12 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .atomic import atomic_directory, atomic_file, check_output
-from .data.series import TimeSeries
-from .errors import InvalidParameterError, UnknownNameError
-from .export_vti import write_vti
-from .progress import track
-from .selection import parse_selection
+from chronocl.core.atomic import atomic_directory, atomic_file, check_output
+from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.core.progress import track
+from chronocl.core.selection import parse_selection
+from chronocl.data.formats.vti import write_vti
+from chronocl.data.series import TimeSeries
 
 FORMATS = ("vti", "npy", "raw")
 VTI_ARRAY = "value"
@@ -48,7 +48,7 @@ def export_series(
     Returns the paths written: for vti the .pvd first, for raw the .json first, then the
     per-step files in step order; for npy the one file.
     """
-    from .paths import check_apart
+    from chronocl.core.paths import check_apart
 
     check_apart(out, [series.path])  # never onto, into or around the input
     kind = str(fmt).lower().lstrip(".")

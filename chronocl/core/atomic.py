@@ -9,8 +9,9 @@ NAME, and no partial of it stays behind:
 - A write killed outright (kill -9, power loss) cannot clean up. The next write of the same
   NAME that commits, by whichever path, removes the partials that such dead writers left:
   those whose pid is no longer a live process, the older names without a pid, and the
-  streamed run's ``.NAME.partial-run`` folder (`chronocl.streaming`) unless a live run holds
-  its lock. A partial of a live concurrent writer is never touched. (Liveness is that of the
+  streamed run's ``.NAME.partial-run`` folder (`chronocl.integration.streaming`) unless a
+  live run holds its lock. A partial of a live concurrent writer is never touched. (Liveness is
+  that of the
   pid on this machine: writers of one output on several hosts are not told apart.)
 - Replacing an existing NAME (overwrite) exchanges the two in one step where the system can
   (Linux renameat2), so NAME is always either the complete old output or the complete new
@@ -31,7 +32,7 @@ import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
-from .errors import OutputExistsError
+from chronocl.core.errors import OutputExistsError
 
 log = logging.getLogger("chronocl")
 
@@ -41,7 +42,7 @@ RUN_LOCK = "lock"  # RUN_DIR/RUN_LOCK: flock-ed by the live process that owns th
 
 def check_output(path: str | os.PathLike, overwrite: bool) -> Path:
     """Return `path` as a Path; raise if it exists and `overwrite` is false."""
-    from .paths import check_writable
+    from chronocl.core.paths import check_writable
 
     check_writable(path)  # its folder must take new files: probed before any work
     target = Path(path)

@@ -28,18 +28,18 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import reference
-from .budget import human, parse_memory
-from .chronovolume import Chronovolume
-from .data.series import TimeSeries
-from .data.window import WindowManager, stack_brick
-from .engine import FIXED_ONE, get_engine
-from .engine.memory import aligned_empty
-from .integrate import Job, integrate, make_spec, prepare
-from .reference import Partial
-from .selection import Selection, parse_selection
-from .sliding import SlidingAggregate, _block
-from .spec import IntegrationSpec
+from chronocl import reference
+from chronocl.core.budget import human, parse_memory
+from chronocl.core.memory import aligned_empty
+from chronocl.core.selection import Selection, parse_selection
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.data.window import WindowManager, stack_brick
+from chronocl.engine import FIXED_ONE, get_engine
+from chronocl.integration.inmemory import Job, integrate, make_spec, prepare
+from chronocl.integration.sliding import SlidingAggregate, _block
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.reference import Partial
 
 
 class Session:

@@ -6,7 +6,7 @@ import os
 
 from dask.utils import format_bytes, parse_bytes
 
-from .errors import InvalidParameterError
+from chronocl.core.errors import InvalidParameterError
 
 DEFAULT_MEMORY = "2GB"
 MAX_MEMORY = 2**50  # 1 PiB: a larger budget is a typo, not a machine

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InputNotFoundError, InvalidTransferFunctionError, UnknownNameError
+from chronocl.core.errors import InputNotFoundError, InvalidTransferFunctionError, UnknownNameError
 
 TIME_COLORS = ("rgb", "warm-cool", "luminance", "white", "points")
 TIME_ALPHAS = ("constant", "hat", "inverted-hat", "points")
@@ -401,14 +401,14 @@ class TFSetting:
         )
 
     def save(self, path: str | os.PathLike) -> None:
-        from .atomic import atomic_file
+        from chronocl.core.atomic import atomic_file
 
         with atomic_file(path, overwrite=True) as tmp:
             tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n")
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> TFSetting:
-        from .paths import check_input
+        from chronocl.core.paths import check_input
 
         p = check_input(path, "transfer-function file", want="file", hint="check the --tf path")
         if p.stat().st_size > MAX_JSON_BYTES:

@@ -24,7 +24,7 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
-from .errors import (
+from chronocl.core.errors import (
     InputNotFoundError,
     InvalidParameterError,
     OutputIsInputError,
@@ -169,7 +169,7 @@ def check_input(path: PathLike, what: str, *, want: str | None = None, hint: str
 def check_target(path: PathLike, overwrite: bool, inputs: Iterable[PathLike | None] = ()) -> Path:
     """Every check of an output before the work: apart from `inputs` (and the working
     folder), not existing unless `overwrite`, and in a folder that can be written."""
-    from .atomic import check_output
+    from chronocl.core.atomic import check_output
 
     check_apart(path, inputs)
     return check_output(path, overwrite)  # which also probes the folder (check_writable)

@@ -21,11 +21,11 @@ from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
-from .atomic import atomic_file
-from .errors import InvalidParameterError
+from chronocl.core.atomic import atomic_file
+from chronocl.core.errors import InvalidParameterError
 
 if TYPE_CHECKING:
-    from .chronovolume import Chronovolume
+    from chronocl.data.chronovolume import Chronovolume
 
 VTK_TYPES = {
     "int8": "Int8",

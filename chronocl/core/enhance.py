@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidParameterError, UnknownNameError
+from chronocl.core.errors import InvalidParameterError, UnknownNameError
 
 ENHANCE_KINDS = ("none", "edge", "silhouette")
 _DEFAULTS = {"none": (1.0, 0.0, 1.0), "edge": (0.2, 6.0, 1.0), "silhouette": (0.15, 1.0, 1.0)}

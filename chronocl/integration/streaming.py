@@ -5,7 +5,7 @@ integrates them with the engine and writes each slab of the output zarr (the lay
 `Chronovolume.save`: ``rgba``, ``t_index``, attribute ``chronocl``) before reading further, so
 memory is set by the budget (`--memory`), not by the data. Slabs are whole output chunks, so
 no two slabs ever write the same chunk, and the same slab tasks run on a dask cluster
-(`chronocl.distributed`).
+(`chronocl.integration.distributed`).
 
 The output is built in a hidden sibling ``.NAME.partial-run`` and renamed into place when every
 slab is written. Each finished slab leaves a marker in ``.chronocl-run/`` holding a hash of the
@@ -13,7 +13,7 @@ run's parameters; a re-run after a crash skips the slabs whose markers carry its
 starts afresh when they do not. The running process holds a lock (``.chronocl-run/lock``):
 a second run of the same output is refused while it lives, and once it is dead (killed) the
 partial is resumed by the next streamed run or removed by the next write of NAME by any other
-path (`chronocl.atomic.remove_stale`). A run that fails before any slab is finished, or on
+path (`chronocl.core.atomic.remove_stale`). A run that fails before any slab is finished, or on
 bad input (a ChronoclError), removes its partial: nothing to resume. The commit moves the
 partial to a name of its own process first, so that from then on any failure or kill leaves
 nothing that outlives the next write.
@@ -42,26 +42,27 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from . import atomic, reference
-from .atomic import RUN_DIR, RUN_LOCK, check_output, lock_run, remove_path
-from .budget import GrowthGuard, parse_memory
-from .chronovolume import FORMAT
-from .data.bricks import Slab, slabs
-from .data.series import STEPS_PER_READ, TimeSeries, compressors
-from .engine import get_engine
-from .engine.memory import aligned_empty
-from .errors import (
+from chronocl import reference
+from chronocl.core import atomic
+from chronocl.core.atomic import RUN_DIR, RUN_LOCK, check_output, lock_run, remove_path
+from chronocl.core.budget import GrowthGuard, parse_memory
+from chronocl.core.errors import (
     ChronoclError,
     InvalidParameterError,
     OutputBusyError,
     OutputExistsError,
     SlabTaskError,
 )
-from .integrate import Job, engine_rows, integrate_slabs, prepare
-from .progress import meter
-from .reference import Partial
-from .selection import Selection
-from .spec import IntegrationSpec
+from chronocl.core.memory import aligned_empty
+from chronocl.core.progress import meter
+from chronocl.core.selection import Selection
+from chronocl.data.bricks import Slab, slabs
+from chronocl.data.chronovolume import FORMAT
+from chronocl.data.series import STEPS_PER_READ, TimeSeries, compressors
+from chronocl.engine import get_engine
+from chronocl.integration.inmemory import Job, engine_rows, integrate_slabs, prepare
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.reference import Partial
 
 log = logging.getLogger("chronocl")
 
@@ -453,13 +454,14 @@ def integrate_to_store(
     `memory`, the budget ('2GB', '512MiB', bytes; default 2GB) that sets the slab size
     (per worker with a client), `slab`, at most this many rows per slab, and `client`, a
     dask.distributed Client that runs one task per slab on its workers (see
-    `chronocl.distributed`). `compressor` compresses the output chunks: blosc-lz4 (default;
-    as small as zstd here and about twice as fast to write), zstd (as `Chronovolume.save`)
+    `chronocl.integration.distributed`). `compressor` compresses the output chunks:
+    blosc-lz4 (default; as small as zstd here and about twice as fast to write), zstd (as
+    `Chronovolume.save`)
     or none. A run interrupted or failed (other than on bad input) leaves its finished slabs
     behind; running it again with the same parameters resumes. Returns the path written;
     `Chronovolume.load` reads it.
     """
-    from .paths import check_apart
+    from chronocl.core.paths import check_apart
 
     check_apart(out_path, [series.path])  # never onto, into or around the input
     target = check_output(out_path, overwrite)
@@ -478,7 +480,7 @@ def integrate_to_store(
         eng = get_engine(engine, device)
         plan = plan_slabs(job, budget, engine, engine_rows(eng, job), slab)
     else:
-        from .distributed import slab_rows_for
+        from chronocl.integration.distributed import slab_rows_for
 
         rows = slab_rows_for(client, job.series.volume_shape[0])
         plan = plan_slabs(job, budget, engine, rows, slab, read_ahead=False)
@@ -539,7 +541,7 @@ def _run(job, plan, tmp, digest, engine, device, client, progress, eng) -> None:
         )
 
     if client is not None:
-        from .distributed import run_slab_tasks
+        from chronocl.integration.distributed import run_slab_tasks
 
         run_slab_tasks(client, job, plan, tmp, digest, todo, engine, device, progress)
     else:
@@ -551,7 +553,7 @@ def _run(job, plan, tmp, digest, engine, device, client, progress, eng) -> None:
         finished = done_slabs(tmp, "norm", digest)
         rest = [s for s in plan.slabs if (s.z0, s.z1) not in finished]
         if client is not None:
-            from .distributed import run_normalize_tasks
+            from chronocl.integration.distributed import run_normalize_tasks
 
             run_normalize_tasks(client, plan, tmp, digest, rest, peak, progress)
         else:

@@ -10,7 +10,7 @@ import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from .errors import InvalidSelectionError
+from chronocl.core.errors import InvalidSelectionError
 
 
 @dataclass(frozen=True)

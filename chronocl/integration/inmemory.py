@@ -5,7 +5,7 @@ enhancement), then integrates the window slab by slab in z (with a one-voxel
 halo when enhancement needs gradients) and finalises once for the whole
 volume. The engine computes each slab; ``numpy`` is the reference.
 `prepare`, `engine_rows` and `integrate_slabs` are shared with
-`chronocl.streaming`, which writes the slabs to a store instead.
+`chronocl.integration.streaming`, which writes the slabs to a store instead.
 """
 
 from __future__ import annotations
@@ -17,19 +17,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import reference
-from .chronovolume import Chronovolume
-from .data.bricks import Slab, slabs
-from .data.series import TimeSeries
-from .engine import get_engine
-from .engine.memory import aligned_empty
-from .enhance import Enhance
-from .errors import InvalidParameterError
-from .progress import track
-from .reference import Partial
-from .selection import Selection, parse_selection
-from .spec import IntegrationSpec, resolve_order
-from .tf import DataTF, TFSetting, TimeTF
+from chronocl import reference
+from chronocl.core.enhance import Enhance
+from chronocl.core.errors import InvalidParameterError
+from chronocl.core.memory import aligned_empty
+from chronocl.core.progress import track
+from chronocl.core.selection import Selection, parse_selection
+from chronocl.core.tf import DataTF, TFSetting, TimeTF
+from chronocl.data.bricks import Slab, slabs
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.engine import get_engine
+from chronocl.modes.spec import IntegrationSpec, resolve_order
+from chronocl.reference import Partial
 
 
 def make_spec(
@@ -207,7 +207,7 @@ def integrate(
     `engine` is ``opencl`` (default; `device` picks one, see `chronocl devices`),
     ``numpy`` (the reference) or an engine object. `slab` sets the z rows per brick
     (default: as many as fit the engine's brick size). For outputs larger than memory
-    see `chronocl.streaming.integrate_to_store`.
+    see `chronocl.integration.streaming.integrate_to_store`.
     """
     job = prepare(series, window, mode, spec, spec_args)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine

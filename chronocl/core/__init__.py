@@ -1,0 +1,1 @@
+"""Core: errors, selections, transfer functions, enhancement, budgets, safe writes, progress."""
