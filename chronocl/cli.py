@@ -726,13 +726,13 @@ def devices() -> None:
 
     Example: chronocl devices
     """
-    from chronocl.engine.device import NO_PLATFORM, _pick, list_devices
+    from chronocl.engine.device import NO_PLATFORM, list_devices, pick_device
 
     found = list_devices()
     if not found:
         err.print(f"chronocl: {NO_PLATFORM}", highlight=False, markup=False)
         return
-    default = _pick(None)[0].index
+    default = pick_device(None)[0].index
     for d in found:
         mark = "*" if d.index == default else " "
         out.print(

@@ -167,12 +167,12 @@ def _gallery(out_dir: Path, paths: list[Path]) -> Path:
     from PIL import Image as PILImage
     from PIL import ImageDraw
 
-    from chronocl.render.views import _font
+    from chronocl.render.views import label_font
 
     thumbs = [PILImage.open(p).convert("RGB") for p in paths]
     height = 360
     thumbs = [t.resize((max(1, round(t.width * height / t.height)), height)) for t in thumbs]
-    font = _font(14)
+    font = label_font(14)
     rows, row, width = [], [], 0
     for t, fig in zip(thumbs, FIGURES, strict=True):
         if width + t.width > 1500 and row:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from chronocl import reference
+from chronocl.core import values
 from chronocl.core.enhance import Enhance
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeTF
@@ -131,5 +132,5 @@ def test_enhancement_scales_alpha_and_clamps():
 
 def test_normalize_values():
     v = np.array([-1.0, 0.0, 5.0, 10.0, 11.0])
-    np.testing.assert_allclose(reference.normalize(v, 0.0, 10.0), [0, 0, 0.5, 1, 1])
-    np.testing.assert_array_equal(reference.normalize(v, 3.0, 3.0), 0)
+    np.testing.assert_allclose(values.normalize(v, 0.0, 10.0), [0, 0, 0.5, 1, 1])
+    np.testing.assert_array_equal(values.normalize(v, 3.0, 3.0), 0)

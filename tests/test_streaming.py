@@ -341,6 +341,6 @@ def test_growth_guard_trims_only_past_its_allowance():
     more = np.ones(32 * 2**20, np.uint8)  # the process grows by 32 MB
     small.check()
     large.check()
-    can_trim = chronocl.core.budget._malloc_trim is not None
+    can_trim = chronocl.core.budget.malloc_trim is not None
     assert (small.trims, large.trims) == (int(can_trim), 0)
     del held, more

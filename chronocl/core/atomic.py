@@ -33,25 +33,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from chronocl.core.errors import OutputExistsError
+from chronocl.core.paths import check_output
 
 log = logging.getLogger("chronocl")
 
 RUN_DIR = ".chronocl-run"  # bookkeeping of a streamed run, inside its .NAME.partial-run
 RUN_LOCK = "lock"  # RUN_DIR/RUN_LOCK: flock-ed by the live process that owns the run
-
-
-def check_output(path: str | os.PathLike, overwrite: bool) -> Path:
-    """Return `path` as a Path; raise if it exists and `overwrite` is false."""
-    from chronocl.core.paths import check_writable
-
-    check_writable(path)  # its folder must take new files: probed before any work
-    target = Path(path)
-    if target.exists() and not overwrite:
-        raise OutputExistsError(
-            f"output {str(target)!r} already exists; "
-            "pass --overwrite (overwrite=True) to replace it"
-        )
-    return target
 
 
 # -- names of the hidden siblings -------------------------------------------------------------

@@ -53,7 +53,7 @@ def _load_trim():
         return None
 
 
-_malloc_trim = _load_trim()
+malloc_trim = _load_trim()
 
 
 def resident_bytes() -> int | None:
@@ -84,12 +84,12 @@ class GrowthGuard:
         self.trims = 0
 
     def check(self) -> None:
-        if _malloc_trim is None or self.base is None:
+        if malloc_trim is None or self.base is None:
             return
         now = resident_bytes()
         if now is None or now - self.base <= self.allowance:
             return
         if now > self.floor + self.allowance // 4:
-            _malloc_trim(0)
+            malloc_trim(0)
             self.trims += 1
             self.floor = resident_bytes() or 0

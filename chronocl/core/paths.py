@@ -27,6 +27,7 @@ from pathlib import Path
 from chronocl.core.errors import (
     InputNotFoundError,
     InvalidParameterError,
+    OutputExistsError,
     OutputIsInputError,
     OutputNotWritableError,
 )
@@ -166,11 +167,21 @@ def check_input(path: PathLike, what: str, *, want: str | None = None, hint: str
     return p
 
 
+def check_output(path: str | os.PathLike, overwrite: bool) -> Path:
+    """Return `path` as a Path; raise if it exists and `overwrite` is false."""
+    check_writable(path)  # its folder must take new files: probed before any work
+    target = Path(path)
+    if target.exists() and not overwrite:
+        raise OutputExistsError(
+            f"output {str(target)!r} already exists; "
+            "pass --overwrite (overwrite=True) to replace it"
+        )
+    return target
+
+
 def check_target(path: PathLike, overwrite: bool, inputs: Iterable[PathLike | None] = ()) -> Path:
     """Every check of an output before the work: apart from `inputs` (and the working
     folder), not existing unless `overwrite`, and in a folder that can be written."""
-    from chronocl.core.atomic import check_output
-
     check_apart(path, inputs)
     return check_output(path, overwrite)  # which also probes the folder (check_writable)
 

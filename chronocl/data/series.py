@@ -31,8 +31,8 @@ from chronocl.core.errors import (
 )
 from chronocl.core.memory import aligned_empty
 from chronocl.core.progress import track
+from chronocl.core.values import normalize
 from chronocl.data.integrity import CheckedArray, CheckedStore, checked_read, damaged
-from chronocl.reference import normalize
 
 FORMAT = "chronocl.series"
 # Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from chronocl import reference
+from chronocl.core import values
 from chronocl.core.errors import UnknownNameError
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.reference import Partial
@@ -33,7 +34,7 @@ class NumpyEngine:
         value_range: tuple[float, float],
         out: tuple[np.ndarray, np.ndarray | None] | None = None,
     ) -> tuple[Partial, bool]:
-        u = reference.normalize(np.moveaxis(brick, 1, 0), *value_range)
+        u = values.normalize(np.moveaxis(brick, 1, 0), *value_range)
         partial = reference.accumulate(u, steps, positions, order, spec)
         rgba = partial.rgba[crop]
         t_index = None if partial.t_index is None else partial.t_index[crop]

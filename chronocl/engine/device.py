@@ -90,7 +90,7 @@ def list_devices() -> list[DeviceInfo]:
     return [info for info, _ in _all_devices()]
 
 
-def _pick(spec: str | None) -> tuple[DeviceInfo, object]:
+def pick_device(spec: str | None) -> tuple[DeviceInfo, object]:
     devices = _all_devices()
     if not devices:
         raise EngineUnavailableError(NO_PLATFORM)
@@ -146,5 +146,5 @@ def _context_for(index: str) -> DeviceContext:
 
 def get_context(device: str | None = None) -> DeviceContext:
     """The cached context of the selected device (see module docstring)."""
-    info, _ = _pick(device)
+    info, _ = pick_device(device)
     return _context_for(info.index)

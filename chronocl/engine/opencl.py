@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from chronocl import reference
+from chronocl.core import values
 from chronocl.core.memory import aligned_empty, is_aligned
 from chronocl.core.tf import lut_lerp32
 from chronocl.engine.device import DeviceContext, get_context
@@ -90,7 +91,7 @@ class OpenCLEngine:
         below it (for quantised data: raw values below it) have data opacity exactly 0).
         """
         if quant:  # TF(u(v)) for every byte value, with the kernels' float32 arithmetic
-            u = reference.normalize(np.arange(256, dtype=np.uint8), *value_range)
+            u = values.normalize(np.arange(256, dtype=np.uint8), *value_range)
             lut = lut_lerp32(spec.data_tf.lut, u).astype(np.float64)
         else:
             lut = spec.data_tf.lut.astype(np.float64)
@@ -134,7 +135,7 @@ class OpenCLEngine:
         nz_out = z1 - z0
         quant = self.quantized and dt == np.uint8 and spec.mode not in ("max", "min")
         lut, tc, const_color, cut = self.luts(spec, positions, quant, value_range)
-        vmin, scale = reference.normalization(*value_range)
+        vmin, scale = values.normalization(*value_range)
         file, kernel_name = KERNELS[spec.mode]
         final = spec.mode != "additive" or spec.normalize == "time"
         vec = 1 if spec.enhance.needs_gradient else VEC
@@ -142,7 +143,7 @@ class OpenCLEngine:
             spec.mode in ("max", "min")
             and dt == np.uint8
             and w <= 256  # the winning step is tracked in byte lanes
-            and bool(np.all(np.diff(reference.normalize(np.arange(256), *value_range)) > 0))
+            and bool(np.all(np.diff(values.normalize(np.arange(256), *value_range)) > 0))
         )
         defines = {
             "DATA_T": DEVICE_TYPES[dt.name],
@@ -340,7 +341,7 @@ def raw_cut(position: float, value_range: tuple[float, float], lut_size: int) ->
     The kernels compute u(v) = clip((v - vmin) * scale, 0, 1) in float32; every step of it
     is monotone, so a binary search over the ordered float32 values finds the exact bound.
     """
-    vmin, scale = reference.normalization(*value_range)
+    vmin, scale = values.normalization(*value_range)
     n1, target = np.float32(lut_size - 1), np.float32(position)
 
     def reaches(key: int) -> bool:

@@ -29,6 +29,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from chronocl import reference
+from chronocl.core import values
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection, parse_selection
@@ -37,7 +38,7 @@ from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager, stack_brick
 from chronocl.engine import FIXED_ONE, get_engine
 from chronocl.integration.inmemory import Job, integrate, make_spec, prepare
-from chronocl.integration.sliding import SlidingAggregate, _block
+from chronocl.integration.sliding import SlidingAggregate, block_size
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.reference import Partial
 
@@ -191,7 +192,7 @@ class Session:
         voxels = int(np.prod(self.series.volume_shape))
         per = {"alpha": 16, "first_hit": 20, "max": 24, "min": 24, "additive": 4}[self.spec.mode]
         extra = 24 * voxels if self.spec.mode == "additive" else 0  # fixed-point sums
-        return (4 * _block(selection.width) + 4) * per * voxels + extra
+        return (4 * block_size(selection.width) + 4) * per * voxels + extra
 
     def _reintegrate(self, selection: Selection) -> Chronovolume:
         return integrate(
@@ -304,7 +305,7 @@ class _Slider:
             self.value_range,
         )
         if self.spec.mode in ("max", "min"):
-            partial.value = reference.normalize(array, *self.value_range)
+            partial.value = values.normalize(array, *self.value_range)
         if self.spec.mode == "additive":
             self._full[step] = partial
         return partial

@@ -113,7 +113,7 @@ class SlidingAggregate(Generic[P]):
         The oldest `front_share` steps (default: half, rounded up) go to the front stack.
         """
         steps = list(steps)
-        self.block = _block(len(steps))
+        self.block = block_size(len(steps))
         half = (len(steps) + 1) // 2 if front_share is None else front_share
         self._front.rebuild(steps[:half][::-1])
         self._back.rebuild(steps[half:])
@@ -172,6 +172,6 @@ class SlidingAggregate(Generic[P]):
         return self.op(a, b)
 
 
-def _block(n: int) -> int:
+def block_size(n: int) -> int:
     """ceil(sqrt(n)), at least 1."""
     return max(1, math.isqrt(max(0, n - 1)) + 1)

@@ -44,7 +44,7 @@ import zarr
 
 from chronocl import reference
 from chronocl.core import atomic
-from chronocl.core.atomic import RUN_DIR, RUN_LOCK, check_output, lock_run, remove_path
+from chronocl.core.atomic import RUN_DIR, RUN_LOCK, lock_run, remove_path
 from chronocl.core.budget import GrowthGuard, parse_memory
 from chronocl.core.errors import (
     ChronoclError,
@@ -54,6 +54,7 @@ from chronocl.core.errors import (
     SlabTaskError,
 )
 from chronocl.core.memory import aligned_empty
+from chronocl.core.paths import check_output
 from chronocl.core.progress import meter
 from chronocl.core.selection import Selection
 from chronocl.data.bricks import Slab, slabs

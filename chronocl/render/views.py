@@ -127,7 +127,7 @@ def render_views(
         labels = [describe(cv) for cv in chronovolumes]
     if not labels and not legend:
         return Image(panels[0]) if len(panels) == 1 else Image(_grid(panels, columns, bg))
-    return Image(_compose(panels, labels, chronovolumes if legend else None, columns, bg))
+    return Image(compose_panels(panels, labels, chronovolumes if legend else None, columns, bg))
 
 
 def describe(cv: Chronovolume) -> str:
@@ -159,7 +159,7 @@ def _grid(panels: list[np.ndarray], columns: int | None, bg) -> np.ndarray:
     return out
 
 
-def _font(size: int):
+def label_font(size: int):
     from PIL import ImageFont
 
     try:
@@ -168,14 +168,14 @@ def _font(size: int):
         return ImageFont.load_default()
 
 
-def _compose(panels, labels, legend_of, columns, bg) -> np.ndarray:
+def compose_panels(panels, labels, legend_of, columns, bg) -> np.ndarray:
     from PIL import Image as PILImage
     from PIL import ImageDraw
 
     grid = _grid(panels, columns, bg)
     h, w, _ = panels[0].shape
     text_rgb = (20, 20, 20) if sum(bg) > 1.5 else (235, 235, 235)
-    font = _font(max(11, min(w, h) // 26))
+    font = label_font(max(11, min(w, h) // 26))
     legend_h = max(36, h // 8) if legend_of else 0
     canvas = PILImage.new(
         "RGB", (grid.shape[1], grid.shape[0] + legend_h), tuple(round(c * 255) for c in bg)

@@ -140,9 +140,9 @@ def check_options(
     if memory is not None:
         parse_memory(memory)  # type: ignore[arg-type]
     if engine == "opencl" and device:
-        from chronocl.engine.device import _pick
+        from chronocl.engine.device import pick_device
 
-        _pick(device)  # raises EngineUnavailableError naming the devices there are
+        pick_device(device)  # raises EngineUnavailableError naming the devices there are
 
 
 def host_names(host: str, port: int) -> frozenset[str]:
@@ -207,7 +207,7 @@ class HeapKeeper:
     def check(self) -> None:
         import time
 
-        from chronocl.core.budget import _malloc_trim, resident_bytes
+        from chronocl.core.budget import malloc_trim, resident_bytes
 
         now = resident_bytes()
         if now is None or self.floor is None:
@@ -229,8 +229,8 @@ class HeapKeeper:
         finally:
             gc.callbacks.remove(timer)
         t1 = time.perf_counter()
-        if _malloc_trim is not None:
-            _malloc_trim(0)
+        if malloc_trim is not None:
+            malloc_trim(0)
         self.floor = resident_bytes()
         self.cleanups += 1
         self.trim_s += time.perf_counter() - t1

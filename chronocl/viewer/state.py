@@ -748,7 +748,7 @@ class ClientWorker:
 
     def _save(self, msg: dict) -> None:
         from chronocl.render.image import Image
-        from chronocl.render.views import _compose, parse_color
+        from chronocl.render.views import compose_panels, parse_color
 
         state, view = self._shown_view(msg)
         ds = self.datasets[state.dataset]
@@ -758,7 +758,7 @@ class ClientWorker:
             bg = parse_color(state.background)
             panels, *_ = on_gl(self._draw, cvs, state, state.size, bg)
             labels = [describe(cv) for cv in cvs]  # type: ignore[arg-type]
-            image = Image(_compose(panels, labels, cvs, None, bg))
+            image = Image(compose_panels(panels, labels, cvs, None, bg))
             name = f"{ds.name}-{sel}.png"
             key = self.downloads.add(image.png_bytes(), name, "image/png")
         else:

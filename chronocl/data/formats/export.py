@@ -22,8 +22,9 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from chronocl.core.atomic import atomic_directory, atomic_file, check_output
+from chronocl.core.atomic import atomic_directory, atomic_file
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.core.paths import check_output
 from chronocl.core.progress import track
 from chronocl.core.selection import parse_selection
 from chronocl.data.formats.vti import write_vti

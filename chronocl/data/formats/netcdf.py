@@ -18,13 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from chronocl.core.atomic import check_output
 from chronocl.core.errors import (
     ChronoclError,
     InputNotFoundError,
     InvalidDataError,
     InvalidParameterError,
 )
+from chronocl.core.paths import check_output
 from chronocl.data.series import SUPPORTED_DTYPES, TimeSeries, write_series
 
 HDF5_SUFFIXES = (".nc", ".nc4", ".h5", ".hdf5", ".he5", ".hdf")

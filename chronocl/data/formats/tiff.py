@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from chronocl.core.atomic import check_output
 from chronocl.core.errors import ChronoclError, InvalidDataError
+from chronocl.core.paths import check_output
 from chronocl.data.ingest import expand_inputs
 from chronocl.data.series import SUPPORTED_DTYPES, TimeSeries, parse_spacing, write_series
 
