@@ -13,20 +13,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from chronocl import modes
 from chronocl.core.enhance import Enhance
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, UnknownNameError
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeTF
+from chronocl.modes import Mode
 
-MODES = ("alpha", "first_hit", "additive", "max", "min")
 ORDERS = ("forward", "backward")
 NORMALIZE = ("time", "max")
-MODES_WITH_T_INDEX = ("first_hit", "max", "min")
 
 
 @dataclass(frozen=True)
 class IntegrationSpec:
-    """How to integrate a selection through time (DESIGN.md section 2).
+    """How to integrate a selection through time (docs/semantics.md).
 
     `order` is ``forward``, ``backward`` or an importance permutation given as the
     selected step numbers, most important first. `threshold` is first_hit's opacity
@@ -43,8 +43,7 @@ class IntegrationSpec:
     normalize: str = "time"
 
     def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise UnknownNameError(f"unknown mode {self.mode!r}; choose one of {', '.join(MODES)}")
+        modes.get(self.mode)  # an unknown name raises, naming the choices
         if isinstance(self.order, str):
             if self.order not in ORDERS:
                 raise UnknownNameError(
@@ -74,8 +73,18 @@ class IntegrationSpec:
         object.__setattr__(self, "threshold", float(np.float32(t)))
 
     @property
+    def integration(self) -> Mode:
+        """The registered mode that integrates this spec."""
+        return modes.get(self.mode)
+
+    @property
     def has_t_index(self) -> bool:
-        return self.mode in MODES_WITH_T_INDEX
+        return self.integration.has_t_index
+
+    @property
+    def finalize_is_global(self) -> bool:
+        """Whether finishing needs the whole volume (additive normalised by its maximum)."""
+        return self.integration.finalize_is_global(self)
 
     def to_dict(self) -> dict:
         return {

@@ -28,8 +28,8 @@ import re
 import struct
 from dataclasses import dataclass
 
+from chronocl import modes
 from chronocl.core.errors import InvalidParameterError
-from chronocl.modes.spec import MODES
 
 MAX_MESSAGE_BYTES = 64 * 1024
 MAX_DEPTH = 8  # the deepest message (update.data_tf.points[i][j]) nests 4 containers
@@ -201,7 +201,7 @@ CAMERA = Obj(
         "projection": Enum(("perspective", "orthographic")),
     }
 )
-VIEW = Obj({"mode": Enum(MODES), "order": Enum(ORDERS)}, frozenset({"mode"}))
+VIEW = Obj({"mode": Enum(modes.names()), "order": Enum(ORDERS)}, frozenset({"mode"}))
 WINDOW = Obj(
     {"t0": Int(0, 10**7), "t1": Int(1, 10**7), "stride": Int(1, 10**7)},
     frozenset({"t0", "t1"}),

@@ -1,0 +1,75 @@
+"""What a mode is: the interface every integration mode implements, and the partial result.
+
+A mode owns everything about one way of integrating a window through time (see
+docs/semantics.md): its numpy reference (`accumulate` over the steps in order, `combine` of
+two consecutive runs, `finalize`), how a sliding window keeps its state (by aggregation of
+partials, or by adding and subtracting steps exactly: ``invert``), the partial volume's size
+per voxel, and its OpenCL kernel file ``kernels/opencl/<kernel>.cl`` (integrate and combine
+kernels together). The registry in `chronocl.modes` lists the modes; nothing else names one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from chronocl.modes.spec import IntegrationSpec
+
+# One step's colour and opacity: step k -> (colour (..., 3) float64, opacity (...) float64).
+StepRGBA = Callable[[int], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass
+class Partial:
+    """Per-voxel result before finalisation.
+
+    `rgba` is premultiplied RGBA (a mode that finalises globally keeps its raw sums there),
+    `t_index` the selected step that supplied the voxel (-1: none) for modes that have one,
+    and `value` what `combine` needs beyond the colour (max/min: the winning value u).
+    """
+
+    rgba: np.ndarray
+    t_index: np.ndarray | None
+    value: np.ndarray | None = None
+
+
+class Mode:
+    """One integration mode. Subclasses set the class attributes and the reference methods."""
+
+    name: ClassVar[str]
+    summary: ClassVar[str]  # one line for the CLI help, the viewer and the docs
+    kernel: ClassVar[str]  # stem of its file in kernels/opencl/
+    kernel_function: ClassVar[str]  # the integrate kernel in that file
+    has_t_index: ClassVar[bool] = False
+    slides: ClassVar[str] = "aggregate"  # "aggregate" partials, or "invert" (add/subtract)
+    state_bytes: ClassVar[int] = 16  # bytes per voxel of one partial volume while sliding
+
+    # -- the numpy reference -------------------------------------------------------------
+    def accumulate(
+        self,
+        u: np.ndarray,
+        steps: Sequence[int],
+        order: np.ndarray,
+        step_rgba: StepRGBA,
+        spec: IntegrationSpec,
+    ) -> Partial:
+        """Integrate u (W, Z, Y, X) over the steps in `order` (indices into the selection)."""
+        raise NotImplementedError
+
+    def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
+        """The partial of two consecutive runs of steps, `front` integrated first."""
+        raise NotImplementedError
+
+    def finalize(
+        self, partial: Partial, positions: np.ndarray, spec: IntegrationSpec
+    ) -> np.ndarray:
+        """The finished premultiplied RGBA float32 of a whole window."""
+        return partial.rgba.astype(np.float32, copy=False)
+
+    def finalize_is_global(self, spec: IntegrationSpec) -> bool:
+        """Whether finishing needs the whole volume (e.g. a normalisation by its maximum)."""
+        return False

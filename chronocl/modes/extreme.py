@@ -1,0 +1,67 @@
+"""max / min: the step holding the extreme value u supplies the voxel, coloured by its TF there.
+
+(a c, a) at that value and that step's time position; t_index = s_k*. Ties go to the step
+integrated first. Slides by aggregation: the back's winner replaces the front's only when
+strictly more extreme.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chronocl.modes.base import Mode, Partial
+
+
+class Extreme(Mode):
+    kernel = "extreme"
+    kernel_function = "integrate_extreme"
+    has_t_index = True
+    state_bytes = 24
+    is_min = False
+
+    def better(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Where value a beats value b (strictly)."""
+        return a < b if self.is_min else a > b
+
+    def accumulate(self, u, steps, order, step_rgba, spec):
+        shape = u.shape[1:]
+        rgba = np.zeros((*shape, 4), dtype=np.float64)
+        t_index = np.full(shape, -1, dtype=np.int32)
+        best = np.zeros(shape, dtype=np.float32)
+        best_k = np.full(shape, -1, dtype=np.int64)
+        for k in order:
+            better = (best_k < 0) | self.better(u[k], best)
+            best = np.where(better, u[k], best)
+            best_k = np.where(better, k, best_k)
+        for k in range(u.shape[0]):
+            sel = best_k == k
+            if sel.any():
+                c, a = step_rgba(k)
+                rgba[sel, :3] = a[sel, None] * c[sel]
+                rgba[sel, 3] = a[sel]
+                t_index[sel] = steps[k]
+        return Partial(rgba, t_index, best)
+
+    def combine(self, front, back, spec):
+        beats = self.better(back.value, front.value)
+        keep = (front.t_index >= 0) & ~(beats & (back.t_index >= 0))
+        return Partial(
+            np.where(keep[..., None], front.rgba, back.rgba),
+            np.where(keep, front.t_index, back.t_index),
+            np.where(keep, front.value, back.value),
+        )
+
+
+class Max(Extreme):
+    name = "max"
+    summary = "maximum intensity through time, coloured by the step that held it"
+
+
+class Min(Extreme):
+    name = "min"
+    summary = "minimum intensity through time, coloured by the step that held it"
+    is_min = True
+
+
+MAX = Max()
+MIN = Min()
