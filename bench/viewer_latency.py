@@ -32,9 +32,9 @@ from common import emit, env_record
 
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
+from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.protocol import unpack_frame
 from chronocl.viewer.server import ViewerServer
-from chronocl.viewer.state import Dataset
 
 BENCH = "viewer_latency"
 SPLIT = ("integrate_ms", "upload_ms", "render_ms", "encode_ms", "server_ms")
@@ -96,11 +96,12 @@ def summarise(op: str, totals: list[float], headers: list[dict], case: str) -> d
 def direct_baseline(series: TimeSeries, points: list, repeats: int) -> list[float]:
     """The same edit's work without the server: integrate, upload, draw, encode."""
     import chronocl
+    from chronocl import modes
     from chronocl.core.tf import DataTF
     from chronocl.render import Camera
     from chronocl.render.gl import gl_context
     from chronocl.render.views import raycaster
-    from chronocl.viewer.state import encode
+    from chronocl.viewer.frames import encode
 
     times = []
     cam = Camera(azimuth=30.0, elevation=20.0, zoom=1.2)
@@ -111,8 +112,8 @@ def direct_baseline(series: TimeSeries, points: list, repeats: int) -> list[floa
             pts[2][4] = 0.3 + 0.02 * (k % 10)
             t0 = time.perf_counter()
             cv = chronocl.integrate(
-                series, "0:10", "alpha", data_tf=DataTF(points=pts), time_tf="rgb"
-            )
+                series, "0:10", modes.names()[0], data_tf=DataTF(points=pts), time_tf="rgb"
+            )  # the viewer's default view: the first registered mode
             vol = rc.upload(cv)
             pixels = rc.draw(vol, cam, (512, 512))
             encode(pixels, 88)
@@ -150,7 +151,7 @@ def main() -> None:
                 "time_tf": {"color": "rgb", "positions": "absolute"},
             }
         )
-        from chronocl.viewer.state import DEFAULT_POINTS
+        from chronocl.viewer.view_state import DEFAULT_POINTS
 
         points = [list(p) for p in DEFAULT_POINTS]
 

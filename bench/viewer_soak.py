@@ -59,8 +59,8 @@ def serve_child(side: int, steps: int) -> None:
 
     from chronocl.data import synthetic
     from chronocl.data.series import TimeSeries
+    from chronocl.viewer.datasets import Dataset
     from chronocl.viewer.server import ViewerServer
-    from chronocl.viewer.state import Dataset
 
     datasets = []
     for name in ("vortex", "jet"):

@@ -29,8 +29,9 @@ from websockets.sync.client import connect
 
 import chronocl
 from chronocl.core.errors import ChronoclError
+from chronocl.viewer.guard import host_names, is_ip_host
 from chronocl.viewer.protocol import FLOAT32_MAX, MAX_DEPTH, MESSAGES
-from chronocl.viewer.server import ViewerServer, host_names, is_ip_host, serve
+from chronocl.viewer.server import ViewerServer, serve
 
 from .viewer_helpers import Client, CliServer, make_stores
 

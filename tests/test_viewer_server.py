@@ -16,6 +16,7 @@ import pytest
 pytest.importorskip("starlette")
 pytest.importorskip("websockets")
 
+from chronocl import modes
 from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
 
 from .viewer_helpers import Client, make_stores, start_server
@@ -94,6 +95,24 @@ def test_socket_needs_the_token_and_the_servers_origin(server):
     ok = Client(server, origin=f"http://127.0.0.1:{server.port}")
     assert [d["name"] for d in ok.info["datasets"]] == ["vortex", "jet"]
     ok.close()
+
+
+def test_info_lists_exactly_the_registered_modes(client):
+    listed = client.info["modes"]
+    assert [m["name"] for m in listed] == list(modes.names())
+    for m in listed:
+        mode = modes.get(m["name"])
+        assert m["summary"] == mode.summary and m["has_t_index"] == mode.has_t_index
+    assert client.info["orders"] and client.info["limits"]["max_views"] >= 1
+
+
+@pytest.mark.parametrize("mode", modes.names())
+def test_every_registered_mode_renders(client, mode):
+    client.open(0)
+    rid = client.send({"type": "update", "views": [{"mode": mode}]})
+    _, header, images = client.frame_for(rid)
+    assert header["views"][0]["label"].startswith(mode)
+    assert images[0][:2] == b"\xff\xd8"  # a JPEG
 
 
 # --------------------------------------------------------------------------- protocol errors
@@ -295,7 +314,7 @@ def test_probe_ray_matches_a_known_block():
     """The CPU march finds the front face of an opaque block on the axis view."""
     from chronocl.data.chronovolume import Chronovolume
     from chronocl.render.camera import Camera
-    from chronocl.viewer.state import probe_ray
+    from chronocl.viewer.probe import probe_ray
 
     rgba = np.zeros((20, 20, 20, 4), np.float32)
     rgba[5:15, 8:12, 8:12] = 0.9  # z 5..14

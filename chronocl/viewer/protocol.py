@@ -17,180 +17,59 @@ Every field is checked against its schema: unknown fields, wrong types and out-o
 before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
 Server -> client: JSON text messages (info, dataset, histogram, probe, download, error) and
 binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON
-header, then the images' bytes back to back).
+header, then the images' bytes back to back). `info`, sent first on every socket, lists the
+data sets and `choices()`: the registered modes and every other menu, default and bound the
+page offers, so the page copies nothing from here. The schema primitives are in `schema`.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import re
 import struct
-from dataclasses import dataclass
 
 from chronocl import modes
-from chronocl.core.errors import InvalidParameterError
+from chronocl.core import tf
+from chronocl.core.enhance import ENHANCE_KINDS, Enhance
+from chronocl.viewer.schema import (
+    FLOAT32_MAX,
+    Bool,
+    Enum,
+    Int,
+    List,
+    Name,
+    Nullable,
+    Num,
+    Obj,
+    ProtocolError,
+    Range,
+    show,
+)
 
 MAX_MESSAGE_BYTES = 64 * 1024
 MAX_DEPTH = 8  # the deepest message (update.data_tf.points[i][j]) nests 4 containers
-FLOAT32_MAX = 3.4028234663852886e38
 MAX_VIEWS = 4
 MAX_TF_POINTS = 64
 MIN_PANEL, MAX_PANEL = 64, 1024
 
 
-class ProtocolError(InvalidParameterError):
-    """A viewer message that is malformed, oversized, or has unknown or out-of-range fields."""
-
-
-# --------------------------------------------------------------------------- schema primitives
-
-
-@dataclass(frozen=True)
-class Num:
-    lo: float
-    hi: float
-
-    def check(self, value: object, path: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ProtocolError(f"{path} must be a number, got {_show(value)}")
-        try:
-            x = float(value)
-        except OverflowError:  # an int beyond any float
-            x = math.inf
-        if not math.isfinite(x) or not self.lo <= x <= self.hi:
-            raise ProtocolError(f"{path} is {_show(value)}; it must lie in [{self.lo}, {self.hi}]")
-        return x
-
-
-@dataclass(frozen=True)
-class Int:
-    lo: int
-    hi: int
-
-    def check(self, value: object, path: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ProtocolError(f"{path} must be an integer, got {_show(value)}")
-        if not self.lo <= value <= self.hi:
-            raise ProtocolError(f"{path} is {value}; it must lie in [{self.lo}, {self.hi}]")
-        return value
-
-
-@dataclass(frozen=True)
-class Enum:
-    values: tuple[str, ...]
-
-    def check(self, value: object, path: str) -> str:
-        if not isinstance(value, str) or value not in self.values:
-            raise ProtocolError(f"{path} is {_show(value)}; choose one of {', '.join(self.values)}")
-        return value
-
-
-@dataclass(frozen=True)
-class Bool:
-    def check(self, value: object, path: str) -> bool:
-        if not isinstance(value, bool):
-            raise ProtocolError(f"{path} must be true or false, got {_show(value)}")
-        return value
-
-
-@dataclass(frozen=True)
-class Name:
-    """A data set named by its index in the server's list or by its name (never a path)."""
-
-    def check(self, value: object, path: str) -> int | str:
-        if isinstance(value, int) and not isinstance(value, bool):
-            return Int(0, 1000).check(value, path)
-        if isinstance(value, str) and 0 < len(value) <= 200:
-            return value
-        raise ProtocolError(f"{path} must be a data set index or name, got {_show(value)}")
-
-
-@dataclass(frozen=True)
-class List:
-    item: object
-    min_len: int
-    max_len: int
-
-    def check(self, value: object, path: str) -> list:
-        if not isinstance(value, list):
-            raise ProtocolError(f"{path} must be a list, got {_show(value)}")
-        if not self.min_len <= len(value) <= self.max_len:
-            n = (
-                str(self.min_len)
-                if self.min_len == self.max_len
-                else f"{self.min_len} to {self.max_len}"
-            )
-            raise ProtocolError(f"{path} has {len(value)} entries; give {n}")
-        return [self.item.check(v, f"{path}[{i}]") for i, v in enumerate(value)]  # type: ignore[attr-defined]
-
-
-@dataclass(frozen=True)
-class Range:
-    """[lo, hi]: two numbers with lo < hi whose span, and its reciprocal, are finite float32
-    (values are normalised as (v - lo) / (hi - lo) in float32)."""
-
-    item: Num
-
-    def check(self, value: object, path: str) -> list:
-        lo, hi = List(self.item, 2, 2).check(value, path)
-        span = hi - lo
-        if not span > 0:
-            raise ProtocolError(f"{path} is [{lo:g}, {hi:g}]; it must have lo < hi")
-        if span > FLOAT32_MAX or span < 1.0 / FLOAT32_MAX:
-            raise ProtocolError(
-                f"{path} spans {span:g}; hi - lo must lie in [{1.0 / FLOAT32_MAX:.3g}, "
-                f"{FLOAT32_MAX:.3g}] (float32)"
-            )
-        return [lo, hi]
-
-
-@dataclass(frozen=True)
-class Nullable:
-    inner: object
-
-    def check(self, value: object, path: str) -> object:
-        return None if value is None else self.inner.check(value, path)  # type: ignore[attr-defined]
-
-
-@dataclass(frozen=True)
-class Obj:
-    fields: dict
-    required: frozenset = frozenset()
-
-    def check(self, value: object, path: str) -> dict:
-        if not isinstance(value, dict):
-            raise ProtocolError(f"{path} must be an object, got {_show(value)}")
-        unknown = sorted(set(value) - set(self.fields))
-        if unknown:
-            raise ProtocolError(
-                f"{path} has unknown field {unknown[0]!r}; allowed: {', '.join(self.fields)}"
-            )
-        missing = sorted(self.required - set(value))
-        if missing:
-            raise ProtocolError(f"{path} is missing the field {missing[0]!r}")
-        return {k: self.fields[k].check(v, f"{path}.{k}") for k, v in value.items()}
-
-
-def _show(value: object) -> str:
-    text = json.dumps(value) if _jsonable(value) else repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _jsonable(value: object) -> bool:
-    try:
-        json.dumps(value)
-    except (TypeError, ValueError):
-        return False
-    return True
-
-
 # --------------------------------------------------------------------------- messages
 
 ORDERS = ("forward", "backward")
-TIME_COLORS = ("rgb", "warm-cool", "luminance", "white")
-TIME_ALPHAS = ("constant", "hat", "inverted-hat")
-ENHANCE_KINDS = ("none", "edge", "silhouette")
+PROJECTIONS = ("perspective", "orthographic")
+BACKGROUNDS = ("black", "white")
+# The time-TF presets the page offers (a TF of explicit points is not edited there).
+TIME_COLORS = tuple(c for c in tf.TIME_COLORS if c != "points")
+TIME_ALPHAS = tuple(a for a in tf.TIME_ALPHAS if a != "points")
+# What the page's menus say for a choice, where its name alone says too little.
+LABELS = {
+    "rgb": "rgb (old blue → new red)",
+    "inverted-hat": "inverted hat",
+    "relative": "relative (window spans the ramp)",
+    "absolute": "absolute (a step keeps its colour)",
+    "edge": "edge (gradient)",
+    "silhouette": "silhouette (view)",
+}
 
 CAMERA = Obj(
     {
@@ -198,7 +77,7 @@ CAMERA = Obj(
         "elevation": Num(-89.9, 89.9),
         "zoom": Num(0.1, 20.0),
         "fov": Num(5.0, 90.0),
-        "projection": Enum(("perspective", "orthographic")),
+        "projection": Enum(PROJECTIONS),
     }
 )
 VIEW = Obj({"mode": Enum(modes.names()), "order": Enum(ORDERS)}, frozenset({"mode"}))
@@ -223,7 +102,7 @@ TIME_TF = Obj(
         "center": Num(0.0, 1.0),
         "width": Num(0.01, 2.0),
         "floor": Num(0.0, 1.0),
-        "positions": Enum(("relative", "absolute")),
+        "positions": Enum(tf.TIME_POSITIONS),
     }
 )
 ENHANCE = Obj(
@@ -234,9 +113,10 @@ ENHANCE = Obj(
         "k2": Num(0.0, 10.0),
     }
 )
-CLIP = Nullable(
-    Obj({"normal": List(Num(-1.0, 1.0), 3, 3), "offset": Num(-1.0, 1.0)}, frozenset({"normal"}))
+CLIP_PLANE = Obj(
+    {"normal": List(Num(-1.0, 1.0), 3, 3), "offset": Num(-1.0, 1.0)}, frozenset({"normal"})
 )
+THRESHOLD = Num(0.0, 0.99)
 ID = Int(0, 2**53)
 
 MESSAGES: dict[str, Obj] = {
@@ -251,11 +131,11 @@ MESSAGES: dict[str, Obj] = {
             "data_tf": DATA_TF,
             "time_tf": TIME_TF,
             "enhance": ENHANCE,
-            "threshold": Num(0.0, 0.99),
-            "clip": CLIP,
+            "threshold": THRESHOLD,
+            "clip": Nullable(CLIP_PLANE),
             "size": List(Int(MIN_PANEL, MAX_PANEL), 2, 2),
             "quality": Enum(("preview", "full")),
-            "background": Enum(("black", "white")),
+            "background": Enum(BACKGROUNDS),
             "outline": Bool(),
         }
     ),
@@ -283,6 +163,53 @@ MESSAGES: dict[str, Obj] = {
         frozenset({"what"}),
     ),
 }
+
+
+def _menu(names: tuple[str, ...]) -> list[dict]:
+    return [{"name": n, "label": LABELS.get(n, n)} for n in names]
+
+
+def _ranges(obj: Obj) -> dict:
+    return {k: [f.lo, f.hi] for k, f in obj.fields.items() if isinstance(f, Num)}
+
+
+def choices() -> dict:
+    """What the page may choose from and the bounds it must keep, for the `info` message.
+
+    The modes are the registry's (name, one-line summary, whether the mode records the step
+    that supplied a voxel), in its order; nothing in the page names a mode. Enhancement kinds
+    come with their default parameters; `ranges` are the bounds the schemas above enforce.
+    """
+    return {
+        "modes": [
+            {"name": n, "summary": modes.get(n).summary, "has_t_index": modes.get(n).has_t_index}
+            for n in modes.names()
+        ],
+        "orders": list(ORDERS),
+        "projections": list(PROJECTIONS),
+        "backgrounds": list(BACKGROUNDS),
+        "time_colors": _menu(TIME_COLORS),
+        "time_alphas": _menu(TIME_ALPHAS),
+        "positions": _menu(tf.TIME_POSITIONS),
+        "enhance": [
+            item | {"k": [e.k0, e.k1, e.k2]}
+            for item, e in zip(_menu(ENHANCE_KINDS), map(Enhance, ENHANCE_KINDS), strict=True)
+        ],
+        "ranges": {
+            "camera": _ranges(CAMERA),
+            "time_tf": _ranges(TIME_TF),
+            "enhance": _ranges(ENHANCE),
+            "clip": _ranges(CLIP_PLANE),
+            "threshold": [THRESHOLD.lo, THRESHOLD.hi],
+        },
+        "limits": {
+            "max_views": MAX_VIEWS,
+            "max_message_bytes": MAX_MESSAGE_BYTES,
+            "max_tf_points": MAX_TF_POINTS,
+            "min_panel": MIN_PANEL,
+            "max_panel": MAX_PANEL,
+        },
+    }
 
 
 def _reject_constant(name: str) -> float:
@@ -354,7 +281,7 @@ def parse_message(text: object) -> dict:
     kind = msg.get("type")
     if not isinstance(kind, str) or kind not in MESSAGES:
         raise ProtocolError(
-            f"unknown message type {_show(kind)}; choose one of {', '.join(MESSAGES)}"
+            f"unknown message type {show(kind)}; choose one of {', '.join(MESSAGES)}"
         )
     return MESSAGES[kind].check(msg, kind)
 

@@ -1,0 +1,35 @@
+"""The viewer's one GL thread, which owns its EGL context and raycaster.
+
+A context can be current in only one thread, and the process's own context may already be
+current in another, so all of the viewer's GL work (uploads, draws, releases) is handed to
+this thread by `on_gl`.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+_gl_executor: ThreadPoolExecutor | None = None
+_gl_raycaster = None
+_gl_guard = threading.Lock()
+
+
+def on_gl(fn: Callable, *args):
+    """fn(raycaster, *args) on the viewer's GL thread; returns its result (or raises)."""
+    global _gl_executor
+    with _gl_guard:
+        if _gl_executor is None:
+            _gl_executor = ThreadPoolExecutor(1, thread_name_prefix="chronocl-viewer-gl")
+    return _gl_executor.submit(_on_gl, fn, args).result()
+
+
+def _on_gl(fn: Callable, args: tuple):
+    global _gl_raycaster
+    if _gl_raycaster is None:
+        from chronocl.render.gl import new_egl_context
+        from chronocl.render.raycaster import Raycaster
+
+        _gl_raycaster = Raycaster(new_egl_context())
+    return fn(_gl_raycaster, *args)

@@ -1,0 +1,107 @@
+"""The probe: which voxel a click on a panel meets, and the reply that plots v(t) there.
+
+The ray through the clicked pixel is marched on the CPU over the shown chronovolume's
+opacity, with the raycaster's camera, box, clip plane and compositing, to the voxel where the
+accumulated opacity passes `PROBE_THRESHOLD`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.render.camera import Camera
+from chronocl.render.raycaster import clip_plane
+from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.slots import geometry
+from chronocl.viewer.view_state import ViewState
+
+PROBE_THRESHOLD = 0.5
+
+
+def probe_ray(
+    cv: Chronovolume,
+    camera: Camera,
+    size: tuple[int, int],
+    x: float,
+    y: float,
+    clip: tuple[float, float, float, float] | None = None,
+    threshold: float = PROBE_THRESHOLD,
+) -> dict:
+    """March the ray through pixel (x, y) (fractions of the panel, top-left origin) over the
+    chronovolume's opacity on the CPU, with the raycaster's camera, box and compositing.
+
+    Returns {"voxel": (z, y, x) or None, "opacity": accumulated opacity there,
+    "reached": whether the accumulated opacity passed `threshold`}. When it never does, the
+    voxel of the largest opacity increment is returned (None if the ray sees nothing).
+    """
+    extent, voxel = geometry(cv)
+    w, h = size
+    view, proj = camera.matrices(extent, w / h)
+    inv = np.linalg.inv(proj @ view)
+    ndc = np.array([2.0 * x - 1.0, 1.0 - 2.0 * y])
+    near = inv @ np.array([ndc[0], ndc[1], -1.0, 1.0])
+    far = inv @ np.array([ndc[0], ndc[1], 1.0, 1.0])
+    origin = near[:3] / near[3]
+    direction = far[:3] / far[3] - origin
+    direction /= np.linalg.norm(direction)
+    half = extent / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = (-half - origin) / direction
+        t1 = (half - origin) / direction
+    t_enter = max(float(np.nanmax(np.minimum(t0, t1))), 0.0)
+    t_exit = float(np.nanmin(np.maximum(t0, t1)))
+    if clip is not None:
+        *n, d = clip_plane(clip, extent)
+        denom = float(np.dot(n, direction))
+        side = float(np.dot(n, origin)) + d
+        if abs(denom) < 1e-12:
+            if side < 0:
+                t_exit = -1.0
+        else:
+            t_plane = -side / denom
+            if denom > 0:
+                t_enter = max(t_enter, t_plane)
+            else:
+                t_exit = min(t_exit, t_plane)
+    none = {"voxel": None, "opacity": 0.0, "reached": False}
+    if not t_exit > t_enter:
+        return none
+    step = float(np.min(voxel)) / 2
+    t = t_enter + (np.arange(int((t_exit - t_enter) / step) + 1) + 0.5) * step
+    t = t[t < t_exit]
+    if t.size == 0:
+        return none
+    points = origin + t[:, None] * direction
+    n_xyz = np.array(cv.shape[::-1])
+    idx = np.clip(np.floor((points + half) / extent * n_xyz).astype(int), 0, n_xyz - 1)
+    a = cv.rgba[idx[:, 2], idx[:, 1], idx[:, 0], 3].astype(np.float64)
+    a = 1.0 - np.power(np.clip(1.0 - a, 0.0, 1.0), 0.5)  # half-voxel steps
+    transmitted = np.cumprod(1.0 - a)
+    acc = 1.0 - transmitted
+    passed = np.flatnonzero(acc >= threshold)
+    if passed.size:
+        k, reached = int(passed[0]), True
+    else:
+        gained = a * np.concatenate([[1.0], transmitted[:-1]])
+        if not (gained > 0).any():
+            return none
+        k, reached = int(np.argmax(gained)), False
+    ix, iy, iz = (int(v) for v in idx[k])
+    return {"voxel": (iz, iy, ix), "opacity": float(acc[k]), "reached": reached}
+
+
+def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Dataset) -> dict:
+    """The `probe` reply to `msg` for the shown `view` of `state`: the voxel met, v(t) there
+    over every step, and the window's steps."""
+    hit = probe_ray(cv, state.camera, state.size, msg["x"], msg["y"], state.clip)
+    reply = {"type": "probe", "id": msg.get("id"), "view": view, "x": msg["x"], "y": msg["y"]}
+    reply |= {"reached": hit["reached"], "opacity": round(hit["opacity"], 4)}
+    reply["threshold"] = PROBE_THRESHOLD
+    if hit["voxel"] is None:
+        reply |= {"voxel": None, "values": None}
+    else:
+        z, y, x = hit["voxel"]
+        reply |= {"voxel": {"z": z, "y": y, "x": x}, "values": ds.curve(z, y, x)}
+    reply["window"] = list(state.selection(ds.series.n_steps).steps)
+    return reply

@@ -1,0 +1,79 @@
+"""Save actions: the shown views as one labelled PNG, or one view's chronovolume as a zipped
+zarr store, each kept in `Downloads` under a random key for the page to fetch."""
+
+from __future__ import annotations
+
+import secrets
+import shutil
+import tempfile
+import threading
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.render.image import Image
+from chronocl.render.views import compose_panels, describe
+
+
+class Downloads:
+    """Files prepared for download (a saved image or chronovolume), by random key."""
+
+    MAX = 16
+
+    def __init__(self) -> None:
+        self.dir = Path(tempfile.mkdtemp(prefix="chronocl-viewer-"))
+        self._items: dict[str, tuple[Path, str, str]] = {}
+        self._lock = threading.Lock()
+
+    def add(self, data: bytes | Path, filename: str, media_type: str) -> str:
+        key = secrets.token_urlsafe(16)
+        path = self.dir / key
+        if isinstance(data, Path):
+            data.replace(path)
+        else:
+            path.write_bytes(data)
+        with self._lock:
+            self._items[key] = (path, filename, media_type)
+            while len(self._items) > self.MAX:
+                old = next(iter(self._items))
+                self._items.pop(old)[0].unlink(missing_ok=True)
+        return key
+
+    def get(self, key: str) -> tuple[Path, str, str] | None:
+        with self._lock:
+            return self._items.get(key)
+
+    def close(self) -> None:
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def zip_store(store: Path, archive: Path) -> None:
+    """A zarr directory store as a zip whose root is the store's root (zarr's ZipStore reads it)."""
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_STORED) as zf:
+        for path in sorted(store.rglob("*")):
+            if path.is_file():
+                zf.write(path, path.relative_to(store).as_posix())
+
+
+def save_image(
+    downloads: Downloads,
+    panels: list[np.ndarray],
+    cvs: list[Chronovolume],
+    background: tuple,
+    name: str,
+) -> str:
+    """The panels side by side, each labelled with its chronovolume, as a PNG download."""
+    labels = [describe(cv) for cv in cvs]
+    image = Image(compose_panels(panels, labels, cvs, None, background))
+    return downloads.add(image.png_bytes(), name, "image/png")
+
+
+def save_chronovolume(downloads: Downloads, cv: Chronovolume, name: str) -> str:
+    """The chronovolume as a zipped zarr store download."""
+    with tempfile.TemporaryDirectory(dir=downloads.dir) as tmp:
+        store = cv.save(Path(tmp) / "chronovolume.zarr")
+        archive = Path(tmp) / "chronovolume.zip"
+        zip_store(store, archive)
+        return downloads.add(archive, name, "application/zip")

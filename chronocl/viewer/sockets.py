@@ -1,0 +1,114 @@
+"""One client's WebSocket: the `info` message first, then the protocol loop.
+
+Each message is validated (`protocol.parse_message`) and handed to the client's
+`ClientWorker`; an immediate reply (`dataset`) is sent at once, frames and task replies come
+from the worker's thread through `send_from_thread`. Errors in a message are answered and
+the socket stays up; nothing sent to a client carries a traceback.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+
+from chronocl.core.errors import ChronoclError
+from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.errors import internal_error, log
+from chronocl.viewer.protocol import ProtocolError, choices, parse_message, request_id
+from chronocl.viewer.saving import Downloads
+from chronocl.viewer.worker import ClientWorker
+
+SEND_TIMEOUT_S = 60.0
+
+
+def info_message(datasets: list[Dataset]) -> dict:
+    """The first message on every socket: the data sets and everything the page may choose
+    from (modes from the registry, orders, presets, defaults, bounds)."""
+    return {
+        "type": "info",
+        "datasets": [
+            {"index": i, "name": d.name, "shape": list(d.series.shape)}
+            for i, d in enumerate(datasets)
+        ],
+        **choices(),
+    }
+
+
+def handle(worker: ClientWorker, msg: dict) -> dict | None:
+    """Apply one validated message; returns an immediate reply, if any."""
+    kind = msg["type"]
+    if kind == "open":
+        return {
+            "type": "dataset",
+            "id": msg.get("id"),
+            **worker.open(msg["dataset"], msg.get("id")),
+        }
+    if kind == "update":
+        worker.update(msg)
+        return None
+    worker.task(kind, msg)
+    return None
+
+
+async def serve_socket(
+    websocket,
+    datasets: list[Dataset],
+    downloads: Downloads,
+    *,
+    engine: str = "opencl",
+    device: str | None = None,
+    memory: str | int | None = None,
+) -> None:
+    """Serve one accepted-to-be Starlette WebSocket until the client goes."""
+    await websocket.accept()
+    loop = asyncio.get_running_loop()
+    send_lock = asyncio.Lock()
+    gone = threading.Event()
+
+    async def deliver(data: str | bytes) -> None:
+        async with send_lock:
+            if isinstance(data, bytes):
+                await websocket.send_bytes(data)
+            else:
+                await websocket.send_text(data)
+
+    def send_from_thread(data: str | bytes) -> bool:
+        if gone.is_set():
+            return False
+        try:
+            asyncio.run_coroutine_threadsafe(deliver(data), loop).result(SEND_TIMEOUT_S)
+        except Exception:  # closed socket, cancelled, timed out: the client is gone
+            gone.set()
+            return False
+        return True
+
+    worker = ClientWorker(
+        datasets, send_from_thread, downloads, engine=engine, device=device, memory=memory
+    )
+    try:
+        await deliver(json.dumps(info_message(datasets)))
+        while True:
+            message = await websocket.receive()
+            if message["type"] == "websocket.disconnect":
+                break
+            text = message.get("text")
+            try:
+                if text is None:
+                    raise ProtocolError("binary messages are not accepted; send JSON text")
+                msg = parse_message(text)
+                reply = handle(worker, msg)
+                if reply is not None:
+                    await deliver(json.dumps(reply))
+            except ChronoclError as exc:
+                await deliver(
+                    json.dumps({"type": "error", "id": request_id(text), "message": str(exc)})
+                )
+            except Exception as exc:  # a bug: answered and logged in one line, no traceback
+                log.error("chronocl viewer: %s", internal_error(exc, "on a message"))
+                log.debug("chronocl viewer: message failed", exc_info=True)
+                err = {"type": "error", "id": request_id(text)}
+                await deliver(json.dumps(err | {"message": internal_error(exc, "on a message")}))
+    finally:
+        gone.set()
+        worker.close()

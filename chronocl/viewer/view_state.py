@@ -1,0 +1,183 @@
+"""A client's desired view state: one immutable snapshot of everything a frame depends on
+(data set, camera, views, window, transfer functions, enhancement, clip plane, size, ...),
+how a validated update message is merged into it, and how it is described back to the page."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from chronocl import modes
+from chronocl.core.enhance import Enhance
+from chronocl.core.errors import InvalidParameterError
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF, TimeAlpha, TimeColor, TimeTF
+from chronocl.data.series import TimeSeries
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.render.camera import Camera
+from chronocl.viewer.protocol import ORDERS
+
+# The viewer's default data TF: translucent shells rising with the value, white (colour by time).
+DEFAULT_POINTS = (
+    (0.0, 1.0, 1.0, 1.0, 0.0),
+    (0.2, 1.0, 1.0, 1.0, 0.0),
+    (0.55, 1.0, 1.0, 1.0, 0.35),
+    (1.0, 1.0, 1.0, 1.0, 0.9),
+)
+
+
+@dataclass(frozen=True)
+class ViewState:
+    """Everything a frame depends on (one immutable snapshot per request)."""
+
+    dataset: int = 0
+    camera: Camera = field(default_factory=lambda: Camera(azimuth=30.0, elevation=20.0, zoom=1.2))
+    # One view of the first registered mode.
+    views: tuple[tuple[str, str], ...] = field(
+        default_factory=lambda: ((modes.names()[0], ORDERS[0]),)
+    )
+    window: tuple[int, int, int] = (0, 1, 1)
+    data_tf: DataTF = field(default_factory=lambda: DataTF(points=DEFAULT_POINTS))
+    time_tf: dict = field(
+        default_factory=lambda: {
+            "color": "rgb",
+            "alpha": "constant",
+            "value": 1.0,
+            "center": 0.5,
+            "width": 0.6,
+            "floor": 0.1,
+            "focus": 1.0,
+            "falloff": 1.0,
+            "positions": "relative",
+        }
+    )
+    enhance: dict = field(
+        default_factory=lambda: {"kind": "none", "k0": None, "k1": None, "k2": None}
+    )
+    threshold: float = 0.05
+    clip: tuple[float, float, float, float] | None = None
+    size: tuple[int, int] = (512, 512)
+    quality: str = "full"
+    background: str = "black"
+    outline: bool = False
+
+    def selection(self, n_steps: int) -> Selection:
+        t0, t1, stride = self.window
+        return Selection.window(t0, t1, stride, n_steps)
+
+    def time_tf_object(self) -> TimeTF:
+        t = self.time_tf
+        color = (
+            TimeColor("luminance", focus=t["focus"], falloff=t["falloff"])
+            if t["color"] == "luminance"
+            else TimeColor(t["color"])
+        )
+        if t["alpha"] == "constant":
+            alpha = TimeAlpha("constant", value=t["value"])
+        else:
+            alpha = TimeAlpha(
+                t["alpha"], value=t["value"], center=t["center"], width=t["width"], floor=t["floor"]
+            )
+        return TimeTF(color=color, alpha=alpha, positions=t["positions"])
+
+    def spec(self, view: int, *, view_dir: tuple[float, float, float] | None = None):
+        mode, order = self.views[view]
+        e = self.enhance
+        kwargs = {k: e[k] for k in ("k0", "k1", "k2") if e.get(k) is not None}
+        if e["kind"] == "silhouette":
+            kwargs["view"] = view_dir or self.camera.view_direction()
+        return IntegrationSpec(
+            mode=mode,
+            order=order,
+            data_tf=self.data_tf,
+            time_tf=self.time_tf_object(),
+            enhance=Enhance(e["kind"], **kwargs),
+            threshold=self.threshold,
+        )
+
+
+def default_state(dataset: int, series: TimeSeries) -> ViewState:
+    n = series.n_steps
+    width = min(n, 10)
+    t0 = (n - width) // 2
+    return ViewState(dataset=dataset, window=(t0, t0 + width, 1))
+
+
+def merge(state: ViewState, msg: dict, n_steps: int) -> ViewState:
+    """`state` with the fields of a validated update message applied; raises ChronoclError
+    (nothing applied) when the combination does not fit the data set."""
+    changes: dict = {}
+    if "camera" in msg:
+        cam = dataclasses.asdict(state.camera) | msg["camera"]
+        changes["camera"] = Camera(**cam)
+    if "views" in msg:
+        changes["views"] = tuple((v["mode"], v.get("order", ORDERS[0])) for v in msg["views"])
+    if "window" in msg:
+        w = msg["window"]
+        window = (w["t0"], w["t1"], w.get("stride", 1))
+        Selection.window(*window, n_steps)  # validates
+        changes["window"] = window
+    if "data_tf" in msg:
+        d = msg["data_tf"]
+        vr = d.get("value_range")
+        changes["data_tf"] = DataTF(points=d["points"], value_range=tuple(vr) if vr else None)
+    if "time_tf" in msg:
+        changes["time_tf"] = state.time_tf | msg["time_tf"]
+    if "enhance" in msg:
+        e = msg["enhance"]
+        kind = e.get("kind", state.enhance["kind"])
+        base = state.enhance if kind == state.enhance["kind"] else {"k0": None, "k1": None}
+        changes["enhance"] = {"k0": None, "k1": None, "k2": None} | base | e | {"kind": kind}
+    if "threshold" in msg:
+        changes["threshold"] = msg["threshold"]
+    if "clip" in msg:
+        c = msg["clip"]
+        if c is not None:
+            n = c["normal"]
+            if not any(abs(v) > 1e-6 for v in n):
+                raise InvalidParameterError("clip.normal is (0, 0, 0); give a direction")
+            c = (n[0], n[1], n[2], c.get("offset", 0.0))
+        changes["clip"] = c
+    for key in ("quality", "background", "outline"):
+        if key in msg:
+            changes[key] = msg[key]
+    if "size" in msg:
+        changes["size"] = tuple(msg["size"])
+    new = dataclasses.replace(state, **changes)
+    new.time_tf_object()  # validates
+    if "enhance" in msg:
+        new.spec(0)  # validates the enhancement parameters
+    return new
+
+
+def describe_state(state: ViewState) -> dict:
+    """The state in the protocol's terms (the page starts from it)."""
+    cam = state.camera
+    e = state.enhance
+    spec = state.spec(0)
+    return {
+        "camera": {
+            "azimuth": cam.azimuth,
+            "elevation": cam.elevation,
+            "zoom": cam.zoom,
+            "fov": cam.fov,
+            "projection": cam.projection,
+        },
+        "views": [{"mode": m, "order": o} for m, o in state.views],
+        "window": dict(zip(("t0", "t1", "stride"), state.window, strict=True)),
+        "data_tf": {"points": [list(p) for p in state.data_tf.points]},
+        "time_tf": dict(state.time_tf),
+        "enhance": {
+            "kind": e["kind"],
+            "k0": spec.enhance.k0,
+            "k1": spec.enhance.k1,
+            "k2": spec.enhance.k2,
+        },
+        "threshold": state.threshold,
+        "clip": None
+        if state.clip is None
+        else {"normal": list(state.clip[:3]), "offset": state.clip[3]},
+        "size": list(state.size),
+        "background": state.background,
+        "outline": state.outline,
+    }

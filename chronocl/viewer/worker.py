@@ -1,0 +1,331 @@
+"""Per-client render worker.
+
+Each WebSocket client owns a `ClientWorker`: the client's desired state (`ViewState`) and one
+thread that makes frames from it. Updates are merged into the desired state at once
+(validated there, so a bad one is answered with an error and changes nothing) and leave one
+"latest pending request" slot filled; the worker always renders the newest state, so input
+that arrives while a frame is being made replaces older pending input instead of queueing
+behind it. Each view keeps a `Session` (the moving window: a slide of the window goes through
+`Session.slide`, which updates incrementally) and its uploaded texture, so a camera change
+only re-renders and a window or TF change only re-integrates what changed. Histogram, probe
+and save requests wait in a short queue behind the newest frame.
+
+OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared); GL
+work runs on the viewer's GL thread (`gl_thread.on_gl`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+
+from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.window import WindowManager
+from chronocl.integration.session import Session
+from chronocl.render.views import describe, parse_color
+from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.errors import error_text
+from chronocl.viewer.frames import JPEG_QUALITY, PREVIEW_SCALE, encode, legend
+from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.probe import probe_reply
+from chronocl.viewer.protocol import pack_frame
+from chronocl.viewer.saving import Downloads, save_chronovolume, save_image
+from chronocl.viewer.slots import ViewSlot, upload
+from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
+
+INTEGRATE_LOCK = threading.Lock()
+MAX_TASKS = 8
+
+
+class ClientWorker:
+    """The render thread of one client. `send(data)` delivers a text (str) or binary (bytes)
+    message to the client and returns False once the client is gone."""
+
+    def __init__(
+        self,
+        datasets: list[Dataset],
+        send: Callable[[str | bytes], bool],
+        downloads: Downloads,
+        *,
+        engine: str = "opencl",
+        device: str | None = None,
+        memory: str | int | None = None,
+    ) -> None:
+        self.datasets = datasets
+        self.send = send
+        self.downloads = downloads
+        self.engine, self.device, self.memory = engine, device, memory
+        self.state = default_state(0, datasets[0].series)
+        self._cond = threading.Condition()
+        self._pending: tuple[ViewState, int | None] | None = None
+        self._tasks: deque[tuple[str, dict]] = deque()
+        self._closed = False
+        self._slots: list[ViewSlot] = []
+        self._slots_dataset = -1
+        # The views show one window of one data set: their sessions share its resident steps.
+        self._manager: WindowManager | None = None
+        self._shown: ViewState | None = None  # the state of the last frame sent
+        self._frame = 0
+        self.thread = threading.Thread(target=self._run, name="chronocl-view", daemon=True)
+        self.thread.start()
+
+    # -- called from the server's event loop ----------------------------------------------
+    def find_dataset(self, ref: int | str) -> int:
+        if isinstance(ref, int):
+            if ref < len(self.datasets):
+                return ref
+        else:
+            for i, d in enumerate(self.datasets):
+                if d.name == ref:
+                    return i
+        names = ", ".join(f"{i}: {d.name}" for i, d in enumerate(self.datasets))
+        raise UnknownNameError(f"unknown data set {ref!r}; choose one of {names}")
+
+    def open(self, ref: int | str, rid: int | None) -> dict:
+        i = self.find_dataset(ref)
+        with self._cond:
+            self.state = default_state(i, self.datasets[i].series)
+            self._pending = (self.state, rid)
+            self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
+            self._cond.notify()
+        return self.datasets[i].info(i) | {"state": describe_state(self.state)}
+
+    def update(self, msg: dict) -> None:
+        with self._cond:
+            n = self.datasets[self.state.dataset].series.n_steps
+            self.state = merge(self.state, msg, n)
+            self._pending = (self.state, msg.get("id"))
+            self._cond.notify()
+
+    def task(self, kind: str, msg: dict) -> None:
+        with self._cond:
+            if len(self._tasks) >= MAX_TASKS:
+                raise InvalidParameterError(
+                    f"{MAX_TASKS} requests are already waiting; wait for their replies"
+                )
+            self._tasks.append((kind, msg))
+            self._cond.notify()
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify()
+
+    # -- the thread ----------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as exc:  # nothing of the thread's end may print a traceback
+            error_text(exc, "in a client's render thread")
+        finally:
+            try:
+                self._release()
+            except Exception as exc:
+                error_text(exc, "releasing a client's views")
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while not self._closed and self._pending is None and not self._tasks:
+                    self._cond.wait()
+                if self._closed:
+                    return
+                pending, self._pending = self._pending, None
+                task = None if pending is not None else self._tasks.popleft()
+            try:
+                if pending is not None:
+                    self._render(*pending)
+                else:
+                    self._do_task(*task)  # type: ignore[misc]
+            except Exception as exc:  # reported to the client; the worker keeps serving
+                rid = pending[1] if pending is not None else task[1].get("id")  # type: ignore[index]
+                text = error_text(exc, "making the frame" if pending else f"on {task[0]}")  # type: ignore[index]
+                if not self._reply({"type": "error", "id": rid, "message": text}):
+                    return
+
+    def _reply(self, obj: dict) -> bool:
+        return self.send(json.dumps(obj))
+
+    def _release(self) -> None:
+        slots, self._slots = self._slots, []
+        if any(s.volume is not None for s in slots):
+            on_gl(lambda rc: [s.release_gl() for s in slots])
+        for s in slots:
+            s.drop_session()
+        self._close_manager()
+
+    def _close_manager(self) -> None:
+        if self._manager is not None:
+            self._manager.close()
+            self._manager = None
+
+    def _chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
+        """The views' chronovolumes for `state`, integrating only where something changed."""
+        series = self.datasets[state.dataset].series
+        if self._slots_dataset != state.dataset:
+            for s in self._slots:
+                s.drop_session()
+            self._close_manager()
+            self._slots_dataset = state.dataset
+        if self._manager is None:
+            self._manager = WindowManager(series, self.memory)
+        while len(self._slots) < len(state.views):
+            self._slots.append(ViewSlot())
+        sel = state.selection(series.n_steps)
+        integrate_ms, incremental = 0.0, False
+        cvs = []
+        for i in range(len(state.views)):
+            slot = self._slots[i]
+            spec = state.spec(i)
+            if (
+                state.quality == "preview"
+                and spec.enhance.kind == "silhouette"
+                and slot.session is not None
+                and slot.cv is not None
+            ):
+                # Silhouettes follow the camera; while dragging keep the last ones.
+                old = slot.session.spec
+                spec = dataclasses.replace(spec, enhance=old.enhance)
+            with INTEGRATE_LOCK:
+                cv, ms, inc = self._integrate(slot, series, spec, sel)
+            integrate_ms += ms
+            incremental = incremental or inc
+            cvs.append(cv)
+        for slot in self._slots[len(state.views) :]:
+            slot.drop_session()
+        return cvs, integrate_ms, incremental
+
+    def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
+        s = slot.session
+        if s is not None and slot.cv is not None and s.spec == spec and s.selection == sel:
+            return slot.cv, 0.0, False
+        if s is None or (s.spec != spec and s.selection != sel):
+            if s is not None:
+                s.close()
+            s = slot.session = Session(
+                series,
+                memory=self.memory,
+                engine=self.engine,
+                device=self.device,
+                spec=spec,
+                manager=self._manager,
+            )
+            cv = s.set_window(sel)
+        elif s.spec != spec:
+            cv = s.set_spec(spec)
+        else:
+            cv = s.set_window(sel)  # the session slides where the new window overlaps the old
+        slot.cv = cv
+        stats = s.stats or {}
+        return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
+
+    def _draw(self, rc, cvs, state: ViewState, size, bg) -> tuple[list, float, float, float]:
+        """Upload what changed and draw every view (on the GL thread)."""
+        t_up = time.perf_counter()
+        for slot, cv in zip(self._slots, cvs, strict=False):
+            if slot.uploaded is not cv:
+                upload(rc, slot, cv)
+        t_draw = time.perf_counter()
+        panels = [
+            rc.draw(
+                slot.volume,
+                state.camera,
+                size,
+                background=bg,
+                clip=state.clip,
+                step=1.0,
+                outline=state.outline,
+            )
+            for slot in self._slots[: len(cvs)]
+        ]
+        for slot in self._slots[len(cvs) :]:
+            slot.release_gl()
+        return panels, t_up, t_draw, time.perf_counter()
+
+    def _render(self, state: ViewState, rid: int | None) -> None:
+        t_start = time.perf_counter()
+        cvs, integrate_ms, incremental = self._chronovolumes(state)
+        preview = state.quality == "preview"
+        w, h = state.size
+        if preview:
+            w, h = max(32, int(w * PREVIEW_SCALE)), max(32, int(h * PREVIEW_SCALE))
+        bg = parse_color(state.background)
+        t0 = time.perf_counter()
+        panels, t_up, t_draw, t_done = on_gl(self._draw, cvs, state, (w, h), bg)
+        images = [encode(p, JPEG_QUALITY[state.quality]) for p in panels]
+        t_enc = time.perf_counter()
+        self._frame += 1
+        self._shown = state
+        header = {
+            "type": "frame",
+            "id": rid,
+            "seq": self._frame,
+            "quality": state.quality,
+            "format": "jpeg",
+            "views": [
+                {"width": w, "height": h, "bytes": len(b), "label": describe(cv)}
+                for b, cv in zip(images, cvs, strict=True)
+            ],
+            "legend": legend(cvs[0]),
+            "timings": {
+                "integrate_ms": round(integrate_ms, 2),
+                "incremental": incremental,
+                "upload_ms": round(1e3 * (t_draw - t_up), 2),
+                "render_ms": round(1e3 * (t_done - t_draw), 2),
+                "gl_wait_ms": round(1e3 * (t_up - t0), 2),
+                "encode_ms": round(1e3 * (t_enc - t_done), 2),
+                "server_ms": round(1e3 * (t_enc - t_start), 2),
+            },
+            "sent_at": time.time(),
+        }
+        self.send(pack_frame(header, images))
+
+    # -- tasks ---------------------------------------------------------------------------
+    def _do_task(self, kind: str, msg: dict) -> None:
+        rid = msg.get("id")
+        ds = self.datasets[self.state.dataset]
+        if kind == "histogram":
+            lo, hi = msg["range"]
+            self._reply({"type": "histogram", "id": rid, **ds.histogram(lo, hi)})
+        elif kind == "probe":
+            self._probe(msg)
+        elif kind == "save":
+            self._save(msg)
+
+    def _shown_view(self, msg: dict) -> tuple[ViewState, int]:
+        state = self._shown
+        view = msg.get("view", 0)
+        if state is None or view >= len(state.views) or view >= len(self._slots):
+            raise InvalidParameterError(f"view {view} is not shown; choose a view on the page")
+        return state, view
+
+    def _probe(self, msg: dict) -> None:
+        state, view = self._shown_view(msg)
+        cv = self._slots[view].cv
+        assert cv is not None
+        self._reply(probe_reply(msg, view, state, cv, self.datasets[state.dataset]))
+
+    def _save(self, msg: dict) -> None:
+        state, view = self._shown_view(msg)
+        ds = self.datasets[state.dataset]
+        sel = state.selection(ds.series.n_steps).describe().replace(":", "-")
+        if msg["what"] == "image":
+            cvs = [s.cv for s in self._slots[: len(state.views)]]
+            bg = parse_color(state.background)
+            panels, *_ = on_gl(self._draw, cvs, state, state.size, bg)
+            name = f"{ds.name}-{sel}.png"
+            key = save_image(self.downloads, panels, cvs, bg, name)  # type: ignore[arg-type]
+        else:
+            cv = self._slots[view].cv
+            assert cv is not None
+            mode = state.views[view][0]
+            name = f"{ds.name}-{mode}-{sel}.zarr.zip"
+            key = save_chronovolume(self.downloads, cv, name)
+        self._reply(
+            {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}
+        )
