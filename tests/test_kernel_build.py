@@ -22,8 +22,9 @@ import numpy as np
 import pytest
 
 import chronocl
+from chronocl import modes
 from chronocl.engine import opencl, program
-from chronocl.engine.opencl import DEVICE_TYPES, KERNELS, OpenCLEngine
+from chronocl.engine.opencl import DEVICE_TYPES, OpenCLEngine
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 INTEGRATION_KEYS = {
@@ -39,28 +40,31 @@ INTEGRATION_KEYS = {
     "SKIP_EMPTY",
     "IS_MIN",
     "NORM_TIME",
+    "RAW_PARTIAL",
     "ALIGNED",
 }
 BOOLS = (False, True)
 
 
-def integration_combinations(mode: str):
-    """Every define combination OpenCLEngine.accumulate can pass for `mode`."""
-    extreme = mode in ("max", "min")
+def integration_combinations(name: str):
+    """Every define combination OpenCLEngine.accumulate can pass for mode `name`."""
+    mode = modes.get(name)
+    extreme = getattr(mode, "raw_order", False)
     data = []  # (DATA_T, QUANT, RAW_ORDER): quantised and raw-order paths are uint8 only
     for t in DEVICE_TYPES.values():
         data.append((t, False, False))
         if t == "uchar":
             data.append((t, False, True) if extreme else (t, True, False))
     lanes = ((0, 16), (0, 1), (1, 1), (2, 1))  # (ENHANCE, VEC): enhancement is VEC=1 only
-    norm = BOOLS if mode == "additive" else (False,)
+    norm = BOOLS if name == "additive" else (False,)
+    partial = BOOLS if mode.slides == "invert" else (False,)
     for (t, quant, raw), (
         enh,
         vec,
-    ), const, early, skip, aligned, norm_time, lut_n in itertools.product(
-        data, lanes, BOOLS, BOOLS, BOOLS, BOOLS, norm, (256, 65536)
+    ), const, early, skip, aligned, norm_time, raw_partial, lut_n in itertools.product(
+        data, lanes, BOOLS, BOOLS, BOOLS, BOOLS, norm, partial, (256, 65536)
     ):
-        if quant and lut_n != 256:  # the quantised LUT has one entry per byte value
+        if quant and (lut_n != 256 or mode.lut_by_value):  # one LUT entry per byte value
             continue
         yield {
             "DATA_T": t,
@@ -73,8 +77,9 @@ def integration_combinations(mode: str):
             "ENHANCE": enh,
             "EARLY_EXIT": early,
             "SKIP_EMPTY": skip,
-            "IS_MIN": mode == "min",
+            "IS_MIN": name == "min",
             "NORM_TIME": norm_time,
+            "RAW_PARTIAL": raw_partial,
             "ALIGNED": aligned,
         }
 
@@ -98,8 +103,9 @@ def builds(full: bool) -> list[tuple[str, list[str], bool]]:
     """(kernel file, options, common) of every build the test makes."""
     out = []
     files = {}
-    for mode, (file, _) in KERNELS.items():
-        files.setdefault(file, []).extend(integration_combinations(mode))
+    for name in modes.names():
+        file = f"{modes.get(name).kernel}.cl"
+        files.setdefault(file, []).extend(integration_combinations(name))
     files["read_roofline.cl"] = [
         {"DATA_T": t, "DATA_V": t + "16", "LUT_N": 256, "VEC": 16} for t in ("uchar", "float")
     ]
@@ -114,7 +120,20 @@ def builds(full: bool) -> list[tuple[str, list[str], bool]]:
         if not full:
             reduced = all_pairs(reduced)
         out += [(file, list(program.build_options(c)), True) for c in reduced]
-    out += [("combine.cl", list(program.build_options(d)), False) for d in ({}, {"IS_MIN": True})]
+    sliding = [  # each mode's combine / finish kernels, and the fixed-point sums
+        (f, {"SLIDING": True, **d})
+        for f, d in [
+            ("alpha.cl", {}),
+            ("first_hit.cl", {}),
+            ("extreme.cl", {}),
+            ("extreme.cl", {"IS_MIN": True}),
+            ("additive.cl", {}),
+            ("mean.cl", {}),
+            ("count.cl", {"LUT_N": 256}),
+            *(("sums.cl", {"CHANNELS": c}) for c in (1, 3, 4)),
+        ]
+    ]
+    out += [(f, list(program.build_options(d)), True) for f, d in sliding]
     return out
 
 
@@ -173,13 +192,13 @@ def test_the_builds_cover_the_engines_options(monkeypatch):
 
     monkeypatch.setattr(opencl, "kernel", recording)
     series = chronocl.TimeSeries.from_array(np.random.default_rng(0).random((3, 2, 3, 20)))
-    for mode in KERNELS:
+    for mode in modes.names():
         chronocl.integrate(series, mode=mode, engine=OpenCLEngine())
-    assert {n for n, _ in seen} == {f for f, _ in KERNELS.values()}
+    assert {n for n, _ in seen} == {f"{modes.get(m).kernel}.cl" for m in modes.names()}
     for name, defines in seen:
         assert set(defines) == INTEGRATION_KEYS, name
-        modes = [m for m, (f, _) in KERNELS.items() if f == name]
-        assert any(defines in integration_combinations(m) for m in modes), (name, defines)
+        names = [m for m in modes.names() if f"{modes.get(m).kernel}.cl" == name]
+        assert any(defines in integration_combinations(m) for m in names), (name, defines)
 
 
 def test_every_kernel_builds_without_warnings_on_a_cold_cache(tmp_path):

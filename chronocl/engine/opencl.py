@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from chronocl import reference
 from chronocl.core import values
 from chronocl.core.memory import aligned_empty, is_aligned
 from chronocl.core.tf import lut_lerp32
@@ -23,13 +22,6 @@ from chronocl.modes.spec import IntegrationSpec
 from chronocl.reference import Partial
 
 DEVICE_TYPES = {"uint8": "uchar", "uint16": "ushort", "int16": "short", "float32": "float"}
-KERNELS = {
-    "alpha": ("alpha.cl", "integrate_alpha"),
-    "first_hit": ("first_hit.cl", "integrate_first_hit"),
-    "additive": ("additive.cl", "integrate_additive"),
-    "max": ("extreme.cl", "integrate_extreme"),
-    "min": ("extreme.cl", "integrate_extreme"),
-}
 ENHANCE_CODES = {"none": 0, "edge": 1, "silhouette": 2}
 VEC = 16  # voxels per work-item along x in the vectorised kernels
 
@@ -117,14 +109,15 @@ class OpenCLEngine:
         spec: IntegrationSpec,
         value_range: tuple[float, float],
         out: tuple[np.ndarray, np.ndarray | None] | None = None,
+        raw: bool = False,
     ) -> tuple[Partial, bool]:
         """Integrate brick rows `crop` of an xytz brick (rows, W, Y, X).
 
         `out` = (rgba, t_index) receives the result when given (C-contiguous, float32
         (rows, Y, X, 4) and int32 (rows, Y, X)): a caller that integrates again and again,
         or slab by slab into one volume, avoids allocating and copying.
-        Returns the partial result and whether it is final (additive normalised by the
-        time TF is finished on the device; normalisation by the volume maximum is global).
+        Returns the partial result and whether it is final: a mode whose finish is global
+        (additive normalised by the volume maximum) or a `raw` call is finished elsewhere.
         """
         import pyopencl as cl
 
@@ -133,14 +126,16 @@ class OpenCLEngine:
         nzb, w, ny, nx = brick.shape
         z0, z1 = crop.start, crop.stop
         nz_out = z1 - z0
-        quant = self.quantized and dt == np.uint8 and spec.mode not in ("max", "min")
+        mode = spec.integration
+        quant = self.quantized and dt == np.uint8 and not mode.lut_by_value
         lut, tc, const_color, cut = self.luts(spec, positions, quant, value_range)
         vmin, scale = values.normalization(*value_range)
-        file, kernel_name = KERNELS[spec.mode]
-        final = spec.mode != "additive" or spec.normalize == "time"
+        file, kernel_name = f"{mode.kernel}.cl", mode.kernel_function
+        final = not raw and not mode.finalize_is_global(spec)
+        mode_defines, mode_args = mode.kernel_options(spec, positions, raw)
         vec = 1 if spec.enhance.needs_gradient else VEC
         raw_order = (
-            spec.mode in ("max", "min")
+            getattr(mode, "raw_order", False)
             and dt == np.uint8
             and w <= 256  # the winning step is tracked in byte lanes
             and bool(np.all(np.diff(values.normalize(np.arange(256), *value_range)) > 0))
@@ -154,8 +149,8 @@ class OpenCLEngine:
             "ENHANCE": ENHANCE_CODES[spec.enhance.kind],
             "EARLY_EXIT": self.early_exit,
             "SKIP_EMPTY": self.skip_empty,
-            "IS_MIN": spec.mode == "min",
-            "NORM_TIME": spec.mode == "additive" and spec.normalize == "time",
+            "RAW_PARTIAL": raw,
+            **mode_defines,
         }
 
         ctx, mf = self.dc.context, cl.mem_flags
@@ -201,11 +196,7 @@ class OpenCLEngine:
             np.array([e.k0, e.k1, e.k2, 0.0], dtype=np.float32),
             np.array([*e.view, 0.0], dtype=np.float32),
         ]
-        if spec.mode == "first_hit":
-            args.append(np.float32(spec.threshold))
-        if spec.mode == "additive":
-            norm = reference.additive_norm(spec, positions)
-            args.append(np.array([*norm, 0.0], dtype=np.float32))
+        args += mode_args
         outputs = [rgba] + ([t_index] if t_index is not None else [])
         if self.host_ptr:
             out_bufs = [cl.Buffer(ctx, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=a) for a in outputs]
@@ -231,48 +222,58 @@ class OpenCLEngine:
             self._read_back(outputs, out_bufs)
         return Partial(rgba, t_index), final
 
-    # -- sliding windows: combining partials (kernels/opencl/combine.cl) ----------------------
+    # -- sliding windows: each mode's combine / finish kernels, built with SLIDING ------------
     def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
-        """The partial of `front` then `back` (see reference.combine); new arrays, inputs kept.
-
-        For additive only opacities are combined (partials hold alpha alone); colour sums
-        are kept in fixed point by `fixed_add`.
-        """
+        """The partial of `front` then `back` (see the mode's `combine`); new arrays."""
+        mode = spec.integration
+        file, kernel, defines = mode.combine_kernel(spec)
         shape = front.rgba.shape
-        if spec.mode == "additive":
+        if mode.slides == "invert":  # the aggregated opacity alone
             out = aligned_empty(shape, np.float32)
-            self._elementwise("combine_fmax", front.rgba.size, {}, [front.rgba, back.rgba], [out])
+            self._elementwise(
+                mode.kernel, kernel, front.rgba.size, defines, [front.rgba, back.rgba], [out]
+            )
             return Partial(out, None)
         rgba = aligned_empty(shape, np.float32)
-        if spec.mode == "alpha":
-            self._elementwise("combine_over", t_size(shape), {}, [front.rgba, back.rgba], [rgba])
-            return Partial(rgba, None)
-        t_index = aligned_empty(shape[:-1], np.int32)
-        if spec.mode == "first_hit":
-            ins = [front.rgba, front.t_index, back.rgba, back.t_index]
-            self._elementwise("combine_first", t_size(shape), {}, ins, [rgba, t_index])
-            return Partial(rgba, t_index)
-        value = aligned_empty(shape[:-1], np.float32)
-        ins = [front.rgba, front.t_index, front.value, back.rgba, back.t_index, back.value]
-        defines = {"IS_MIN": spec.mode == "min"}
-        self._elementwise("combine_extreme", t_size(shape), defines, ins, [rgba, t_index, value])
+        t_index = aligned_empty(shape[:-1], np.int32) if mode.has_t_index else None
+        value = aligned_empty(shape[:-1], np.float32) if front.value is not None else None
+        ins = [a for p in (front, back) for a in (p.rgba, p.t_index, p.value) if a is not None]
+        outs = [a for a in (rgba, t_index, value) if a is not None]
+        self._elementwise(file, kernel, t_size(shape), defines, ins, outs)
         return Partial(rgba, t_index, value)
 
     def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:
-        """acc (Z, Y, X, 3) int64 += sign * fixed-point colour sums of one additive partial."""
+        """acc (Z, Y, X, C) int64 += sign * fixed-point first C channels of a raw partial."""
+        defines = {"CHANNELS": acc.shape[-1]}
         self._elementwise(
-            "fixed_add", rgba.size // 4, {}, [rgba], [acc], [np.int32(sign)], inout=True
+            "sums",
+            "fixed_add",
+            rgba.size // 4,
+            defines,
+            [rgba],
+            [acc],
+            [np.int32(sign)],
+            inout=True,
         )
 
-    def fixed_finalize(self, acc: np.ndarray, alpha: np.ndarray, norm: np.ndarray) -> np.ndarray:
-        """The finished additive RGBA from fixed-point sums, window opacity and norm (3,)."""
-        out = aligned_empty((*alpha.shape, 4), np.float32)
-        scalars = [np.array([*norm, 0.0], dtype=np.float32)]
-        self._elementwise("fixed_finalize", alpha.size, {}, [acc, alpha], [out], scalars)
+    def finish_sums(
+        self,
+        acc: np.ndarray,
+        alpha: np.ndarray | None,
+        positions: np.ndarray,
+        spec: IntegrationSpec,
+    ) -> np.ndarray:
+        """The finished RGBA of a window kept as fixed-point sums (see Mode.finish_sums)."""
+        mode = spec.integration
+        kernel, defines, extra, scalars = mode.finish_kernel(acc, positions, spec)
+        out = aligned_empty((*acc.shape[:-1], 4), np.float32)
+        ins = [acc, *([alpha] if alpha is not None else []), *extra]
+        self._elementwise(mode.kernel, kernel, t_size(out.shape), defines, ins, [out], scalars)
         return out
 
     def _elementwise(
         self,
+        file: str,
         function: str,
         n: int,
         defines: dict,
@@ -281,7 +282,7 @@ class OpenCLEngine:
         scalars: list = (),
         inout: bool = False,
     ) -> None:
-        """Run a one-voxel-per-work-item kernel of combine.cl over `n` voxels.
+        """Run a one-voxel-per-work-item kernel of kernels/opencl/FILE.cl over `n` voxels.
 
         Kernel arguments are inputs, outputs, scalars; `inout` outputs are read too.
         """
@@ -297,7 +298,7 @@ class OpenCLEngine:
             outs = [cl.Buffer(ctx, flag | mf.COPY_HOST_PTR, hostbuf=a) for a in outputs]
         else:
             outs = [cl.Buffer(ctx, flag, a.nbytes) for a in outputs]
-        kern = kernel(self.dc, "combine.cl", function, defines, common=False)
+        kern = kernel(self.dc, f"{file}.cl", function, {**defines, "SLIDING": True})
         with self.dc.lock:
             kern.set_args(*ins, *outs, *scalars)
             cl.enqueue_nd_range_kernel(self.dc.queue, kern, (n,), None)

@@ -3,14 +3,15 @@
 A `Session` is what a viewer or notebook scrubs through time with. Its steps
 come from a `WindowManager` (resident under the memory budget, prefetched in
 the scrub direction, no step read twice while resident). How a new window is
-integrated depends on the time positions (DESIGN.md section 3):
+integrated depends on the time positions (docs/semantics.md, sliding windows):
 
 - ``absolute`` positions with forward or backward order: a step's colour does
   not depend on the window, so the window's state is updated instead of
-  recomputed. Additive keeps its colour sums in fixed point and adds the
-  entering and subtracts the leaving steps exactly (its opacity, a maximum,
-  slides like the others); alpha, first_hit, max and min slide through a
-  `SlidingAggregate` of partial chronovolumes, combined on the engine.
+  recomputed. Each mode says how (`chronocl.modes`): modes that slide by
+  inversion keep sums in fixed point and add the entering and subtract the
+  leaving steps exactly (a part they aggregate, like additive's opacity, slides
+  like the others); the rest slide through a `SlidingAggregate` of partial
+  chronovolumes, combined on the engine.
 - ``relative`` positions, importance orders, jumps to a window that does not
   overlap the last one, and spec changes: the window is re-integrated, from
   resident data only.
@@ -28,15 +29,15 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from chronocl import reference
 from chronocl.core import values
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection, parse_selection
+from chronocl.data.bricks import stack_brick
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
-from chronocl.data.window import WindowManager, stack_brick
-from chronocl.engine import FIXED_ONE, get_engine
+from chronocl.data.window import WindowManager
+from chronocl.engine import get_engine
 from chronocl.integration.inmemory import Job, integrate, make_spec, prepare
 from chronocl.integration.sliding import SlidingAggregate, block_size
 from chronocl.modes.spec import IntegrationSpec
@@ -188,11 +189,11 @@ class Session:
         return None
 
     def _state_bytes(self, selection: Selection) -> int:
-        """Budget for the partial volumes sliding holds: 2 stacks of ~2 sqrt(W), plus work."""
+        """Budget for the state sliding holds: 2 stacks of ~2 sqrt(W) partials, work, sums."""
         voxels = int(np.prod(self.series.volume_shape))
-        per = {"alpha": 16, "first_hit": 20, "max": 24, "min": 24, "additive": 4}[self.spec.mode]
-        extra = 24 * voxels if self.spec.mode == "additive" else 0  # fixed-point sums
-        return (4 * block_size(selection.width) + 4) * per * voxels + extra
+        mode = self.spec.integration
+        partials = (4 * block_size(selection.width) + 4) * mode.state_bytes * voxels
+        return partials + 8 * mode.sum_channels * voxels
 
     def _reintegrate(self, selection: Selection) -> Chronovolume:
         return integrate(
@@ -204,32 +205,39 @@ class Session:
 
 
 class _Slider:
-    """The incremental state of one window under one spec (absolute positions)."""
+    """The incremental state of one window under one spec (absolute positions).
+
+    A leaf is one step integrated alone, or for a mode whose leaves span several steps
+    (change: a pair), the steps ending at it; the sliding items are the steps that end a
+    leaf. Modes that slide by inversion add and subtract their leaves' raw sums; the rest
+    (and an inverting mode's aggregated opacity) slide through a `SlidingAggregate`.
+    """
 
     def __init__(self, session: Session, selection: Selection) -> None:
         self.session = session
         self.spec = session.spec
+        self.mode = self.spec.integration
         self.selection = selection
         self.arrays: dict[int, np.ndarray] = {}
         self.value_range = prepare(session.series, selection, spec=self.spec).value_range
-        mode = self.spec.mode
-        # Leaves of additive are raw sums: finalisation happens once per window.
-        self.leaf_spec = (
-            dataclasses.replace(self.spec, normalize="max") if mode == "additive" else self.spec
-        )
+        self.inverts = self.mode.slides == "invert"
         # Callbacks through a weak proxy, so the slider and its aggregate form no cycle and a
         # dropped slider frees its partial volumes at once (no garbage collection needed).
         me = weakref.proxy(self)
-        self.agg: SlidingAggregate[Partial] = SlidingAggregate(
-            lambda step: me._agg_leaf(step), lambda a, b: me._op(a, b)
-        )
-        self.agg.reset(selection.steps)
-        self.acc: np.ndarray | None = None  # additive: fixed-point colour sums (Z, Y, X, 3)
+        self.agg: SlidingAggregate[Partial] | None = None
+        if not self.inverts or self.mode.state_bytes:
+            self.agg = SlidingAggregate(lambda s: me._agg_leaf(s), lambda a, b: me._op(a, b))
+            self.agg.reset(self._items(selection))
+        self.acc: np.ndarray | None = None  # inverting modes: fixed-point sums (Z, Y, X, C)
         self._full: dict[int, Partial] = {}
+        self._before: dict[int, tuple[int, ...]] = {}  # leaf -> the earlier steps it spans
 
     @property
     def held(self) -> int:
-        return self.agg.held
+        return 0 if self.agg is None else self.agg.held
+
+    def _items(self, selection: Selection) -> tuple[int, ...]:
+        return selection.steps[self.mode.leaf_span - 1 :]
 
     def can_move_to(self, selection: Selection) -> bool:
         old, new = self.selection.steps, selection.steps
@@ -242,45 +250,51 @@ class _Slider:
     def move_to(self, selection: Selection, arrays: dict[int, np.ndarray]) -> Chronovolume:
         engine = self.session.engine
         self.arrays = arrays
-        additive = self.spec.mode == "additive"
-        if additive and self.acc is None:
-            self.acc = np.zeros((*self.session.series.volume_shape, 3), np.int64)
-            for s in self.selection.steps:
+        old_items = self._items(self.selection)
+        # Leaves spanning several steps find their earlier steps in the window they are in.
+        self._before = {**self._before_of(self.selection), **self._before_of(selection)}
+        if self.inverts and self.acc is None:
+            shape = (*self.session.series.volume_shape, self.mode.sum_channels)
+            self.acc = np.zeros(shape, np.int64)
+            for s in old_items:
                 engine.fixed_add(self.acc, self._leaf_full(s).rgba, +1)
                 self._full.pop(s, None)
-        old, new = self.selection.steps, selection.steps
+        old, new = old_items, self._items(selection)
         old_set, new_set = set(old), set(new)
         entering = [s for s in new if s not in old_set]
         leaving = [s for s in old if s not in new_set]
-        forward = new[0] > old[0]
+        forward = selection.steps[0] > self.selection.steps[0]
         for s in entering if forward else entering[::-1]:
-            if additive:
+            if self.inverts:
                 engine.fixed_add(self.acc, self._leaf_full(s).rgba, +1)
-            if forward:
-                self.agg.push_back(s)
-            else:
-                self.agg.push_front(s)
+            if self.agg is not None:
+                self.agg.push_back(s) if forward else self.agg.push_front(s)
         for s in leaving if forward else leaving[::-1]:
-            if additive:
+            if self.inverts:
                 engine.fixed_add(self.acc, self._leaf_full(s).rgba, -1)
-            if forward:
-                self.agg.pop_front()
-            else:
-                self.agg.pop_back()
+            if self.agg is not None:
+                self.agg.pop_front() if forward else self.agg.pop_back()
         self._full.clear()
         self.selection = selection
         return self._chronovolume()
 
+    def _before_of(self, selection: Selection) -> dict[int, tuple[int, ...]]:
+        span, steps = self.mode.leaf_span, selection.steps
+        return {steps[i]: steps[i - span + 1 : i] for i in range(span - 1, len(steps))}
+
     def _chronovolume(self) -> Chronovolume:
         session, spec = self.session, self.spec
         job = Job.of(session.series, self.selection, spec, self.value_range)
-        value = self.agg.value()
-        if spec.mode == "additive":
-            if spec.normalize == "time":
-                norm = reference.additive_norm(spec, job.positions)
-            else:
-                norm = np.full(3, float(self.acc.max()) / FIXED_ONE if self.acc.size else 0.0)
-            rgba, t_index = session.engine.fixed_finalize(self.acc, value.rgba, norm), None
+        shape = session.series.volume_shape
+        value = None
+        if self.agg is not None and self.agg.steps:
+            value = self.agg.value()
+        if self.inverts:
+            alpha = None if value is None else value.rgba
+            rgba, t_index = session.engine.finish_sums(self.acc, alpha, job.positions, spec), None
+        elif value is None:  # no leaf in the window (change over one step): nothing changed
+            rgba = np.zeros((*shape, 4), np.float32)
+            t_index = np.full(shape, -1, np.int32) if spec.has_t_index else None
         else:
             rgba = np.asarray(value.rgba, dtype=np.float32)
             t_index = None if value.t_index is None else np.array(value.t_index, dtype=np.int32)
@@ -288,32 +302,36 @@ class _Slider:
         return Chronovolume(rgba, t_index, job.metadata(name))
 
     def _leaf_full(self, step: int) -> Partial:
-        """One step integrated alone: its partial chronovolume (additive: raw sums)."""
+        """The leaf ending at `step` integrated alone: its partial (inverting modes: raw)."""
         if step in self._full:
             return self._full[step]
         series = self.session.series
-        array = self.arrays[step]
-        brick = array[:, None]  # one step is a (Z, 1, Y, X) xytz brick without a copy
-        positions = self.spec.time_tf.positions_of([step], series.n_steps)
+        steps = (*self._before.get(step, ()), step) if self.mode.leaf_span > 1 else (step,)
+        arrays = [self.arrays[s] for s in steps]
+        # One step is a (Z, 1, Y, X) xytz brick without a copy.
+        brick = arrays[0][:, None] if len(arrays) == 1 else np.stack(arrays, axis=1)
+        positions = self.spec.time_tf.positions_of(list(steps), series.n_steps)
         partial, _ = self.session.engine.accumulate(
             brick,
-            slice(0, array.shape[0]),
-            (step,),
+            slice(0, arrays[0].shape[0]),
+            steps,
             positions,
-            np.zeros(1, np.int64),
-            self.leaf_spec,
+            np.arange(len(steps)),
+            self.spec,
             self.value_range,
+            raw=self.inverts,
         )
-        if self.spec.mode in ("max", "min"):
-            partial.value = values.normalize(array, *self.value_range)
-        if self.spec.mode == "additive":
+        if self.mode.compares_values:
+            u = np.stack([values.normalize(a, *self.value_range) for a in arrays])
+            partial.value = self.mode.leaf_value(u)
+        if self.inverts:
             self._full[step] = partial
         return partial
 
     def _agg_leaf(self, step: int) -> Partial:
         full = self._leaf_full(step)
         self._full.pop(step, None)  # cached only for the push that follows a fixed_add
-        if self.spec.mode == "additive":  # only the opacity (a maximum) slides
+        if self.inverts:  # only the aggregated opacity slides here
             alpha = aligned_empty(full.rgba.shape[:-1], np.float32)
             alpha[...] = full.rgba[..., 3]
             return Partial(alpha, None)

@@ -9,7 +9,7 @@ is one module here, one kernel file in kernels/opencl/ and a line in `_MODES` be
 from __future__ import annotations
 
 from chronocl.core.errors import UnknownNameError
-from chronocl.modes import additive, alpha, extreme, first_hit
+from chronocl.modes import additive, alpha, change, count, extreme, first_hit, mean
 from chronocl.modes.base import Mode, Partial
 
 _MODES: tuple[Mode, ...] = (
@@ -18,6 +18,9 @@ _MODES: tuple[Mode, ...] = (
     additive.MODE,
     extreme.MAX,
     extreme.MIN,
+    mean.MODE,
+    change.MODE,
+    count.MODE,
 )
 REGISTRY: dict[str, Mode] = {m.name: m for m in _MODES}
 

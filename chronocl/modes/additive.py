@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from chronocl.modes.base import Mode, Partial
+from chronocl.modes.base import FIXED_ONE, Mode, Partial
 
 
 def additive_norm(spec, positions: np.ndarray) -> np.ndarray:
@@ -38,8 +38,8 @@ class Additive(Mode):
     kernel = "additive"
     kernel_function = "integrate_additive"
     slides = "invert"
-    state_bytes = 4  # the opacity; the fixed-point colour sums are one volume beside it
-    sums_bytes = 24
+    state_bytes = 4  # the opacity slides by aggregation (a maximum)
+    sum_channels = 3  # the colour sums, in fixed point
 
     def accumulate(self, u, steps, order, step_rgba, spec):
         rgba = np.zeros((*u.shape[1:], 4), dtype=np.float64)
@@ -64,11 +64,30 @@ class Additive(Mode):
     def finalize_is_global(self, spec):
         return spec.normalize == "max"
 
-    def norm(self, spec, positions: np.ndarray, sums_max: float) -> np.ndarray:
-        """The per-channel divisor given the largest colour sum of the volume."""
+    def norm(self, spec, positions: np.ndarray, sums: np.ndarray) -> np.ndarray:
+        """The per-channel divisor: the time TF's N, or the largest colour sum in `sums`."""
         if spec.normalize == "time":
             return additive_norm(spec, positions)
-        return np.full(3, sums_max)
+        return np.full(3, float(sums.max()) if sums.size else 0.0)
+
+    def finish_sums(self, sums, alpha, positions, spec):
+        rgba = np.empty((*alpha.shape, 4), np.float64)
+        rgba[..., :3] = sums
+        rgba[..., 3] = alpha
+        return finalize_sums(rgba, self.norm(spec, positions, sums))
+
+    def combine_kernel(self, spec):
+        return "additive", "combine_fmax", {}
+
+    def finish_kernel(self, acc, positions, spec):
+        sums_max = np.array([float(acc.max()) / FIXED_ONE if acc.size else 0.0])
+        norm = self.norm(spec, positions, sums_max)
+        return "finish_additive", {}, [], [np.array([*norm, 0.0], dtype=np.float32)]
+
+    def kernel_options(self, spec, positions, raw):
+        norm = additive_norm(spec, positions)
+        final = spec.normalize == "time" and not raw
+        return {"NORM_TIME": final}, [np.array([*norm, 0.0], dtype=np.float32)]
 
 
 MODE = Additive()

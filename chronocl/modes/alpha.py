@@ -35,5 +35,8 @@ class Alpha(Mode):
     def combine(self, front, back, spec):
         return Partial(over(front.rgba, back.rgba), None)
 
+    def combine_kernel(self, spec):
+        return "alpha", "combine_over", {}
+
 
 MODE = Alpha()

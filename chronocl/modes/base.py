@@ -19,8 +19,11 @@ import numpy as np
 if TYPE_CHECKING:
     from chronocl.modes.spec import IntegrationSpec
 
-# One step's colour and opacity: step k -> (colour (..., 3) float64, opacity (...) float64).
-StepRGBA = Callable[[int], tuple[np.ndarray, np.ndarray]]
+FIXED_ONE = float(2**40)  # sums of inverting modes in fixed point: exact add and subtract
+
+# One step's colour and opacity: (step k, values (default: u of step k)) -> (colour (..., 3)
+# float64, opacity (...) float64), the data TF taken at the values, the time TF at step k.
+StepRGBA = Callable[..., tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass
@@ -46,7 +49,11 @@ class Mode:
     kernel_function: ClassVar[str]  # the integrate kernel in that file
     has_t_index: ClassVar[bool] = False
     slides: ClassVar[str] = "aggregate"  # "aggregate" partials, or "invert" (add/subtract)
-    state_bytes: ClassVar[int] = 16  # bytes per voxel of one partial volume while sliding
+    state_bytes: ClassVar[int] = 16  # bytes per voxel of one aggregated partial volume
+    sum_channels: ClassVar[int] = 0  # "invert": leading RGBA channels kept as fixed-point sums
+    leaf_span: ClassVar[int] = 1  # consecutive steps one sliding leaf integrates (ending at it)
+    compares_values: ClassVar[bool] = False  # combine needs `leaf_value` in Partial.value
+    lut_by_value: ClassVar[bool] = False  # looks the data TF up at a derived value, not v itself
 
     # -- the numpy reference -------------------------------------------------------------
     def accumulate(
@@ -73,3 +80,39 @@ class Mode:
     def finalize_is_global(self, spec: IntegrationSpec) -> bool:
         """Whether finishing needs the whole volume (e.g. a normalisation by its maximum)."""
         return False
+
+    # -- sliding windows --------------------------------------------------------------------
+    def leaf_value(self, u: np.ndarray) -> np.ndarray | None:
+        """What `combine` compares, from the u of a leaf's steps (leaf_span, Z, Y, X)."""
+        return None
+
+    def finish_sums(
+        self,
+        sums: np.ndarray,
+        alpha: np.ndarray | None,
+        positions: np.ndarray,
+        spec: IntegrationSpec,
+    ) -> np.ndarray:
+        """ "invert" modes: the finished RGBA float32 from the window's sums (Z, Y, X, C)."""
+        raise NotImplementedError
+
+    # -- the OpenCL kernel ------------------------------------------------------------------
+    def kernel_options(
+        self, spec: IntegrationSpec, positions: np.ndarray, raw: bool
+    ) -> tuple[dict, list]:
+        """Build defines and the extra scalar arguments of this mode's integrate kernel."""
+        return {}, []
+
+    def combine_kernel(self, spec: IntegrationSpec) -> tuple[str, str, dict]:
+        """(kernel file stem, kernel, defines) of the kernel doing `combine` (built SLIDING)."""
+        raise NotImplementedError
+
+    def finish_kernel(
+        self, acc: np.ndarray, positions: np.ndarray, spec: IntegrationSpec
+    ) -> tuple[str, dict, list]:
+        """ "invert" modes: the kernel doing `finish_sums`, its defines and scalar arguments.
+
+        Its arguments: acc (C longs per voxel), the aggregated opacity if the mode has one,
+        the output RGBA, then the scalars.
+        """
+        raise NotImplementedError

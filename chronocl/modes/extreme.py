@@ -17,7 +17,10 @@ class Extreme(Mode):
     kernel_function = "integrate_extreme"
     has_t_index = True
     state_bytes = 24
+    compares_values = True
+    lut_by_value = True  # built without QUANT: the LUT is interpolated at the winning u
     is_min = False
+    raw_order = True  # raw values may be compared where u(v) is strictly increasing
 
     def better(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Where value a beats value b (strictly)."""
@@ -41,6 +44,15 @@ class Extreme(Mode):
                 rgba[sel, 3] = a[sel]
                 t_index[sel] = steps[k]
         return Partial(rgba, t_index, best)
+
+    def leaf_value(self, u):
+        return u[-1]
+
+    def kernel_options(self, spec, positions, raw):
+        return {"IS_MIN": self.is_min}, []
+
+    def combine_kernel(self, spec):
+        return "extreme", "combine_extreme", {"IS_MIN": self.is_min}
 
     def combine(self, front, back, spec):
         beats = self.better(back.value, front.value)

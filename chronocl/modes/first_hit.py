@@ -31,6 +31,12 @@ class FirstHit(Mode):
             t_index[hit] = steps[k]
         return Partial(rgba, t_index)
 
+    def combine_kernel(self, spec):
+        return "first_hit", "combine_first", {}
+
+    def kernel_options(self, spec, positions, raw):
+        return {}, [np.float32(spec.threshold)]
+
     def combine(self, front, back, spec):
         keep = front.t_index >= 0
         return Partial(

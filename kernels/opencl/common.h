@@ -1,6 +1,6 @@
 /* Shared helpers of the chronocl integration kernels.
  *
- * Build options set by the host (chronocl/engine/opencl.py):
+ * Build options set by the host (chronocl/engine/opencl.py and each mode's kernel_options):
  *   VEC         voxels per work-item along x: 16 (vectorised) or 1 (x tail, enhancement)
  *   DATA_T      element type of the brick: float, uchar, ushort or short
  *   DATA_V      DATA_T with VEC lanes (e.g. uchar16)
@@ -35,6 +35,13 @@
 #endif
 #endif
 
+/* Sums of windows that slide by inversion, in fixed point: adding a step and later subtracting
+ * the very same contribution cancels exactly, so a window never drifts. */
+#define FIXED_ONE 1099511627776.0f /* 2^40 */
+
+/* SLIDING builds hold only a mode's combine / finish kernels: one voxel per work-item, none of
+ * the integrate kernels' build options. */
+#ifndef SLIDING
 #define VOX_INDEX(zb, k, y, x) ((((size_t)(zb) * w + (k)) * ny + (y)) * nx + (x))
 #define OUT_INDEX(z, y, x) (((size_t)(z) * ny + (y)) * nx + (x))
 
@@ -230,3 +237,5 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
     const size_t o = OUT_INDEX(z, y, x);
 
 #define RAW(k) VLOAD(data + VOX_INDEX(zb, (k), y, x))
+
+#endif /* SLIDING */

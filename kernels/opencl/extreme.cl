@@ -2,6 +2,7 @@
  * the voxel, coloured by its TF at that value and that step's time position: (a * c, a),
  * t_index = s_k*. IS_MIN selects min. Built without QUANT: the LUT is interpolated at u.
  * RAW_ORDER compares raw values (the host checked that u(v) is strictly increasing). */
+#ifndef SLIDING
 #ifdef IS_MIN
 #define IS_BETTER <
 #else
@@ -68,3 +69,26 @@ __kernel void integrate_extreme(KERNEL_ARGS, __global float4 *out, __global int 
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
     STORE_INT(GATHER_INT(steps, best_k), t_index + o);
 }
+#else
+/* Combining the partials of two consecutive runs of steps, `front` integrated first
+ * (chronocl/modes/extreme.py `combine` is the oracle). One voxel per work-item. */
+
+/* Ties keep the front: the step integrated first wins, as in integrate_extreme. */
+__kernel void combine_extreme(__global const float4 *front, __global const int *front_t,
+                              __global const float *front_v, __global const float4 *back,
+                              __global const int *back_t, __global const float *back_v,
+                              __global float4 *out, __global int *out_t, __global float *out_v)
+{
+    const size_t i = get_global_id(0);
+    const float a = front_v[i], b = back_v[i];
+#ifdef IS_MIN
+    const int beats = b < a;
+#else
+    const int beats = b > a;
+#endif
+    const int keep = front_t[i] >= 0 && !(beats && back_t[i] >= 0);
+    out[i] = keep ? front[i] : back[i];
+    out_t[i] = keep ? front_t[i] : back_t[i];
+    out_v[i] = keep ? a : b;
+}
+#endif

@@ -1,5 +1,6 @@
 /* first_hit: the first step in the order whose opacity exceeds the threshold supplies the
  * voxel: (a_k * c_k, a_k) and t_index = s_k; none: (0, 0, 0, 0) and -1. */
+#ifndef SLIDING
 __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global float4 *out,
                                   __global int *t_index)
 {
@@ -29,3 +30,17 @@ __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global f
     STORE_RGBA(o, hr, hg, hb, ha);
     STORE_INT(hit, t_index + o);
 }
+#else
+/* Combining the partials of two consecutive runs of steps, `front` integrated first
+ * (chronocl/modes/first_hit.py `combine` is the oracle). One voxel per work-item. */
+
+__kernel void combine_first(__global const float4 *front, __global const int *front_t,
+                            __global const float4 *back, __global const int *back_t,
+                            __global float4 *out, __global int *out_t)
+{
+    const size_t i = get_global_id(0);
+    const int keep = front_t[i] >= 0;
+    out[i] = keep ? front[i] : back[i];
+    out_t[i] = keep ? front_t[i] : back_t[i];
+}
+#endif

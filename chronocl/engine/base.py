@@ -1,0 +1,64 @@
+"""The contract every integration engine keeps (the numpy reference and OpenCL alike).
+
+An engine integrates one xytz brick (rows, W, Y, X) into that slab's part of a chronovolume,
+combines the partials of adjacent runs of steps (for windows that slide by aggregation), and
+keeps the fixed-point sums of windows that slide by inversion (docs/semantics.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol
+
+import numpy as np
+
+from chronocl.modes.base import FIXED_ONE, Partial
+from chronocl.modes.spec import IntegrationSpec
+
+__all__ = ["FIXED_ONE", "Engine"]
+
+
+class Engine(Protocol):
+    name: str
+
+    @property
+    def max_brick_bytes(self) -> int:
+        """Largest brick one call may be given."""
+        ...
+
+    def accumulate(
+        self,
+        brick: np.ndarray,
+        crop: slice,
+        steps: Sequence[int],
+        positions: np.ndarray,
+        order: np.ndarray,
+        spec: IntegrationSpec,
+        value_range: tuple[float, float],
+        out: tuple[np.ndarray, np.ndarray | None] | None = None,
+        raw: bool = False,
+    ) -> tuple[Partial, bool]:
+        """Integrate brick rows `crop`; returns the partial and whether it is finished.
+
+        `raw` asks for the mode's raw partial (what is summed or combined before finishing).
+        """
+        ...
+
+    def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
+        """The partial of `front` then `back` (new arrays; the inputs are kept)."""
+        ...
+
+    def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:
+        """acc (Z, Y, X, C) int64 += sign * fixed(first C channels of a raw partial)."""
+        ...
+
+    def finish_sums(
+        self,
+        acc: np.ndarray,
+        alpha: np.ndarray | None,
+        positions: np.ndarray,
+        spec: IntegrationSpec,
+    ) -> np.ndarray:
+        """The finished RGBA float32 of a window kept as fixed-point sums (and, for modes
+        that aggregate their opacity, that opacity)."""
+        ...

@@ -1,0 +1,58 @@
+"""The numpy engine: the reference integrator (chronocl.reference) behind the engine contract."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chronocl import reference
+from chronocl.core import values
+from chronocl.engine.base import FIXED_ONE
+from chronocl.modes.base import Partial
+from chronocl.modes.spec import IntegrationSpec
+
+
+class NumpyEngine:
+    """Slow and plain: the oracle every fast path is tested against."""
+
+    name = "numpy"
+    max_brick_bytes = 64 * 2**20
+
+    def accumulate(
+        self,
+        brick: np.ndarray,
+        crop: slice,
+        steps,
+        positions: np.ndarray,
+        order: np.ndarray,
+        spec: IntegrationSpec,
+        value_range: tuple[float, float],
+        out: tuple[np.ndarray, np.ndarray | None] | None = None,
+        raw: bool = False,
+    ) -> tuple[Partial, bool]:
+        u = values.normalize(np.moveaxis(brick, 1, 0), *value_range)
+        partial = reference.accumulate(u, steps, positions, order, spec)
+        rgba = partial.rgba[crop]
+        t_index = None if partial.t_index is None else partial.t_index[crop]
+        if out is not None:
+            out[0][...] = rgba
+            if t_index is not None:
+                out[1][...] = t_index
+            rgba, t_index = out[0], (out[1] if t_index is not None else None)
+        return Partial(rgba, t_index), False
+
+    def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
+        return reference.combine(front, back, spec)
+
+    def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:
+        c = acc.shape[-1]
+        fixed = np.trunc(np.asarray(rgba[..., :c], np.float64) * FIXED_ONE).astype(np.int64)
+        acc += fixed if sign > 0 else -fixed
+
+    def finish_sums(
+        self,
+        acc: np.ndarray,
+        alpha: np.ndarray | None,
+        positions: np.ndarray,
+        spec: IntegrationSpec,
+    ) -> np.ndarray:
+        return spec.integration.finish_sums(acc / FIXED_ONE, alpha, positions, spec)

@@ -1,0 +1,61 @@
+"""change: where and when a place changed most between consecutive selected steps.
+
+δ_k = |u(s_k) - u(s_{k-1})| for consecutive selected steps (k >= 1, in time order); the
+largest δ supplies the voxel, coloured by the data TF at δ and the time TF of s_k (the step
+where it happened), t_index = s_k; ties go to the step integrated first. One step: nothing
+changed (transparent, t_index -1). Slides by aggregation over pairs of steps: a pair is a
+leaf, combined like max.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chronocl.modes.base import Mode, Partial
+from chronocl.modes.extreme import MAX
+
+
+class Change(Mode):
+    name = "change"
+    summary = "largest change between consecutive steps, coloured by when it happened"
+    kernel = "change"
+    kernel_function = "integrate_change"
+    has_t_index = True
+    state_bytes = 24
+    leaf_span = 2
+    compares_values = True
+    lut_by_value = True  # the data TF is looked up at δ
+
+    def accumulate(self, u, steps, order, step_rgba, spec):
+        shape = u.shape[1:]
+        rgba = np.zeros((*shape, 4), dtype=np.float64)
+        t_index = np.full(shape, -1, dtype=np.int32)
+        best = np.zeros(shape, dtype=np.float32)
+        best_k = np.full(shape, -1, dtype=np.int64)
+        for k in order:
+            if k == 0:
+                continue
+            d = np.abs(u[k] - u[k - 1])
+            better = (best_k < 0) | (d > best)
+            best = np.where(better, d, best)
+            best_k = np.where(better, k, best_k)
+        for k in range(1, u.shape[0]):
+            sel = best_k == k
+            if sel.any():
+                c, a = step_rgba(k, best)
+                rgba[sel, :3] = a[sel, None] * c[sel]
+                rgba[sel, 3] = a[sel]
+                t_index[sel] = steps[k]
+        return Partial(rgba, t_index, best)
+
+    def leaf_value(self, u):
+        return np.abs(u[-1] - u[-2])
+
+    def combine(self, front, back, spec):
+        return MAX.combine(front, back, spec)
+
+    def combine_kernel(self, spec):
+        return "extreme", "combine_extreme", {}
+
+
+MODE = Change()

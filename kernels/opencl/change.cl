@@ -1,0 +1,42 @@
+/* change: the largest |u(s_k) - u(s_{k-1})| between consecutive selected steps (k >= 1 in the
+ * brick's time order, visited in integration order; ties: first in the order) supplies the
+ * voxel, coloured by the data TF at that change and the time TF of s_k: (a * c, a),
+ * t_index = s_k. One step: (0, 0, 0, 0) and -1. Built without QUANT: the LUT is interpolated at
+ * the change. Sliding windows combine pairs of steps with extreme.cl's combine_extreme. */
+__kernel void integrate_change(KERNEL_ARGS, __global float4 *out, __global int *t_index)
+{
+    VOXEL_PROLOGUE
+    intv best_k = -1;
+    floatv best = 0.0f;
+    for (int i = 0; i < w; ++i) {
+        const int k = order[i];
+        if (k == 0) continue;
+        const floatv d = fabs(NORMALIZE(RAW(k)) - NORMALIZE(RAW(k - 1)));
+        const intv better = (best_k < 0) | (d > best);
+        best = SELECT(best, d, better);
+        best_k = SELECT(best_k, (intv)(k), better);
+    }
+    const intv none = best_k < 0;
+    const intv kk = max(best_k, 0);
+    const LutPos p = lut_pos_of(best);
+    const __global float *tcf = (const __global float *)tc;
+    const intv k4 = kk * 4;
+    const floatv ta = GATHER(tcf, k4 + 3);
+#ifdef CONST_COLOR
+    const floatv r = GATHER(tcf, k4), g = GATHER(tcf, k4 + 1), b = GATHER(tcf, k4 + 2);
+#else
+    const floatv r = LUT_CHANNEL(lut, 0, p) * GATHER(tcf, k4);
+    const floatv g = LUT_CHANNEL(lut, 1, p) * GATHER(tcf, k4 + 1);
+    const floatv b = LUT_CHANNEL(lut, 2, p) * GATHER(tcf, k4 + 2);
+#endif
+#if ENHANCE
+    floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * ta *
+                      enhance_factor(data, kk, x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view),
+                      0.0f, 1.0f);
+#else
+    floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * ta, 0.0f, 1.0f);
+#endif
+    ak = SELECT(ak, (floatv)(0.0f), none);
+    STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
+    STORE_INT(SELECT(GATHER_INT(steps, kk), (intv)(-1), none), t_index + o);
+}

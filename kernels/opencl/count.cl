@@ -1,0 +1,45 @@
+/* count (occupancy): n = the number of steps whose opacity exceeds the threshold; the voxel is
+ * the data TF at f = n / W, premultiplied. RAW_PARTIAL writes (n, 0, 0, 0) for sliding windows. */
+#ifndef SLIDING
+__kernel void integrate_count(KERNEL_ARGS, const float threshold, __global float4 *out)
+{
+    VOXEL_PROLOGUE
+    floatv n = 0.0f;
+    for (int i = 0; i < w; ++i) {
+        const int k = order[i];
+        const DATA_V raw = RAW(k);
+#ifdef SKIP_EMPTY
+        if (!IS_LIVE(raw)) continue; /* opacity 0 never passes a threshold >= 0 */
+#endif
+        LutPos p;
+        LOCATE(raw, p)
+        const float4 t = tc[k];
+        const floatv ak = STEP_ALPHA(lut, p, t, k);
+        n = SELECT(n, n + 1.0f, ak > threshold);
+    }
+#ifdef RAW_PARTIAL
+    STORE_RGBA(o, n, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));
+#else
+    const LutPos q = lut_pos_of(n / (float)w);
+    const floatv a = LUT_CHANNEL(lut, 3, q);
+    STORE_RGBA(o, LUT_CHANNEL(lut, 0, q) * a, LUT_CHANNEL(lut, 1, q) * a,
+               LUT_CHANNEL(lut, 2, q) * a, a);
+#endif
+}
+#else
+/* The window's occupancy from its fixed-point counts (1 long per voxel) through the planar
+ * data LUT (LUT_N entries per channel), as reference: f = n / W, premultiplied TF(f). */
+__kernel void finish_count(__global const long *acc, __global const float *lut,
+                           __global float4 *out, const float w)
+{
+    const size_t i = get_global_id(0);
+    const float f = (convert_float(acc[i]) / FIXED_ONE) / w;
+    const float x = f * (float)(LUT_N - 1);
+    const int i0 = min(convert_int(x), LUT_N - 2);
+    const float t = x - convert_float(i0);
+#define CH(c) (lut[(c) * LUT_N + i0] * (1.0f - t) + lut[(c) * LUT_N + i0 + 1] * t)
+    const float a = CH(3);
+    out[i] = (float4)(CH(0) * a, CH(1) * a, CH(2) * a, a);
+#undef CH
+}
+#endif
