@@ -1,18 +1,30 @@
-"""Turntable videos: the camera orbits the volume, one frame per step, written by imageio."""
+"""Turntable videos: the camera orbits the volume, one frame per step, written by imageio.
+
+`ModeViews` draws one window of a series integrated in several modes as parallel views (what
+`chronocl render` writes) and turns them into a turntable. A silhouette enhancement depends on
+the view, so its chronovolumes are integrated again for every frame's camera; any other set is
+uploaded once and drawn from every angle.
+"""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from chronocl.core.atomic import atomic_file
+from chronocl.core.enhance import Enhance
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.progress import track
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.integration.inmemory import integrate
 from chronocl.render.camera import Camera
 from chronocl.render.image import Image
+from chronocl.render.views import raycaster, render_views
 
 VIDEO_SUFFIXES = (".mp4", ".gif", ".webm", ".mkv")
 
@@ -55,6 +67,92 @@ def turntable(
             options = {"codec": "libx264", "macro_block_size": 1} if suffix == ".mp4" else {}
             iio.imwrite(tmp, even, extension=suffix, fps=fps, **options)
     return target
+
+
+@dataclass(frozen=True)
+class ModeViews:
+    """One window of `series` integrated in each of `modes` and drawn as parallel views of
+    `size`, with a legend (and a label per panel when there are several).
+
+    `spec_args` are the arguments of `chronocl.make_spec` shared by every mode; `draw_args`
+    those of `render_views` (background, clip, outline).
+    """
+
+    series: TimeSeries
+    window: object
+    modes: Sequence[str]
+    size: tuple[int, int] = (512, 512)
+    engine: str = "opencl"
+    device: str | None = None
+    spec_args: Mapping[str, object] = field(default_factory=dict)
+    draw_args: Mapping[str, object] = field(default_factory=dict)
+
+    @property
+    def follows_camera(self) -> bool:
+        """Whether the chronovolumes depend on the view (a silhouette enhancement)."""
+        enhance = self.spec_args.get("enhance")
+        kind = enhance.kind if isinstance(enhance, Enhance) else enhance
+        return kind == "silhouette"
+
+    def integrate(self, camera: Camera) -> list[Chronovolume]:
+        """The chronovolumes of every mode, a silhouette taken along `camera`'s view."""
+        args = dict(self.spec_args, engine=self.engine, device=self.device)
+        if self.follows_camera:
+            enhance = args["enhance"]
+            view = camera.view_direction()
+            args["enhance"] = (
+                replace(enhance, view=view)
+                if isinstance(enhance, Enhance)
+                else Enhance(str(enhance), view=view)
+            )
+        return [integrate(self.series, self.window, m, **args) for m in self.modes]
+
+    def draw(self, chronovolumes: Sequence[Chronovolume], camera: Camera, volumes=None) -> Image:
+        """The parallel views of `chronovolumes` (`volumes`: them uploaded, if they are)."""
+        return render_views(
+            chronovolumes,
+            camera,
+            self.size,
+            legend=True,
+            labels=None if len(chronovolumes) > 1 else [],
+            volumes=volumes,
+            **self.draw_args,  # type: ignore[arg-type]
+        )
+
+    def turntable(
+        self,
+        chronovolumes: Sequence[Chronovolume],
+        camera: Camera,
+        path: str | os.PathLike,
+        frames: int = 36,
+        overwrite: bool = True,
+        progress: bool = False,
+    ) -> Path:
+        """A full turn from `camera` as a video: `chronovolumes` (as `integrate(camera)` made
+        them) uploaded once and drawn from every angle, or integrated again for every frame's
+        view when they follow the camera."""
+        if self.follows_camera:
+            return turntable(
+                lambda cam: self.draw(self.integrate(cam), cam),
+                camera,
+                path,
+                frames=frames,
+                overwrite=overwrite,
+                progress=progress,
+            )
+        volumes = [raycaster().upload(cv) for cv in chronovolumes]
+        try:
+            return turntable(
+                lambda cam: self.draw(chronovolumes, cam, volumes),
+                camera,
+                path,
+                frames=frames,
+                overwrite=overwrite,
+                progress=progress,
+            )
+        finally:
+            for volume in volumes:
+                volume.release()
 
 
 def _pad_even(image: np.ndarray) -> np.ndarray:

@@ -1,0 +1,36 @@
+"""`chronocl info`: the summary of a series or chronovolume store, as text or JSON."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from chronocl.cli.options import STORE_HINT, out, print_summary
+
+
+def info(
+    store: Annotated[Path, typer.Argument(help="A chronocl series or chronovolume store.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Show shape, dtype, value range, steps, chunking and size on disk.
+
+    Example: chronocl info vortex.zarr --json
+    """
+    from chronocl.core.errors import StoreFormatError
+    from chronocl.core.paths import check_input
+    from chronocl.data.chronovolume import Chronovolume
+    from chronocl.data.series import open_series
+
+    check_input(store, "store", hint=STORE_HINT)
+    try:
+        summary = open_series(store).describe()
+    except StoreFormatError:
+        cv = Chronovolume.load(store)
+        summary = {"chronovolume": str(store), "shape (Z, Y, X)": list(cv.shape), **cv.metadata}
+    if as_json:
+        out.print_json(json.dumps(summary, default=str))
+    else:
+        print_summary(summary)

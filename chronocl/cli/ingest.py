@@ -1,0 +1,101 @@
+"""`chronocl ingest`: convert raw, npy, NetCDF/HDF5, TIFF or OME-Zarr time steps into a store."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from chronocl.cli.options import err, print_summary
+
+
+def ingest(
+    inputs: Annotated[
+        list[str],
+        typer.Argument(
+            help="Raw files or globs (one per step), a .npy (T, Z, Y, X), a NetCDF/HDF5 file, "
+            "TIFF stacks (one per step, or one 4D TZYX), or an OME-Zarr folder."
+        ),
+    ],
+    out_path: Annotated[
+        Path, typer.Option("--out", "-o", metavar="OUT.zarr", help="Store to write.")
+    ],
+    fmt: Annotated[
+        str,
+        typer.Option("--format", help="auto (by file type), raw, npy, netcdf, tiff, omezarr."),
+    ] = "auto",
+    dims: Annotated[
+        tuple[int, int, int] | None,
+        typer.Option(metavar="NX NY NZ", help="Raw: volume size, x fastest."),
+    ] = None,
+    dtype: Annotated[
+        str, typer.Option(help="Raw: float32, uint8, uint16, int16, float64.")
+    ] = "float32",
+    endian: Annotated[str, typer.Option(help="Raw: little or big.")] = "little",
+    var: Annotated[str | None, typer.Option(help="NetCDF/HDF5: the variable.")] = None,
+    time_dim: Annotated[str | None, typer.Option(help="NetCDF/HDF5: the time dimension.")] = None,
+    dims_order: Annotated[
+        str | None,
+        typer.Option(help="NetCDF/HDF5: dimension names for t,z,y,x, e.g. time,lev,lat,lon."),
+    ] = None,
+    channel: Annotated[int, typer.Option(help="OME-Zarr: channel index.")] = 0,
+    level: Annotated[int, typer.Option(help="OME-Zarr: resolution level (0 = full).")] = 0,
+    spacing: Annotated[
+        tuple[float, float, float] | None,
+        typer.Option(metavar="DX DY DZ", help="Raw/npy/TIFF: voxel spacing."),
+    ] = None,
+    nan_fill: Annotated[
+        float | None, typer.Option(help="Replace NaN/Inf with this value (default: reject them).")
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+) -> None:
+    """Convert time steps into a chronocl store (zarr v3), with statistics.
+
+    Files are sorted naturally (step2 before step10). The store appears only when complete.
+
+    Examples:
+
+      chronocl ingest 'vortex/*.raw' -o vortex.zarr --dims 128 128 128
+
+      chronocl ingest a.raw b.raw -o ab.zarr --dims 64 64 32 --dtype uint16 --endian big
+
+      chronocl ingest series.npy -o series.zarr --spacing 1 1 2.5
+
+      chronocl ingest ocean.nc -o ocean.zarr --var temp --time-dim time
+
+      chronocl ingest 'cells/t*.tif' -o cells.zarr
+
+      chronocl ingest embryo.ome.zarr -o embryo.zarr --channel 1 --level 0
+    """
+    from chronocl.core.paths import GLOB_CHARS, check_input, check_target
+    from chronocl.data.ingest import ingest as run_ingest
+
+    for item in inputs:
+        if not GLOB_CHARS & set(item):
+            check_input(item, "input", hint="check the path, or quote a glob such as 'v_*.raw'")
+    check_target(out_path, overwrite, inputs)
+    options: dict = {"nan_fill": nan_fill, "overwrite": overwrite, "progress": True}
+    if dims is not None:
+        options["dims"] = dims
+    for key, value, default in (
+        ("dtype", dtype, "float32"),
+        ("endian", endian, "little"),
+        ("channel", channel, 0),
+        ("level", level, 0),
+    ):
+        if value != default:
+            options[key] = value
+    if var is not None:
+        options["var"] = var
+    if time_dim is not None:
+        options["time_dim"] = time_dim
+    if dims_order is not None:
+        options["dims_order"] = [d.strip() for d in dims_order.split(",")]
+    if spacing is not None:
+        options["spacing"] = (spacing[2], spacing[1], spacing[0])
+    t0 = time.perf_counter()
+    series = run_ingest(inputs, out_path, fmt, **options)
+    err.print(f"wrote {out_path} in {time.perf_counter() - t0:.1f} s")
+    print_summary(series.describe())

@@ -1,0 +1,117 @@
+"""What the commands share: the consoles, the options of integrate and render, the parsers of
+option values, and the listing of the registered modes for the help."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from chronocl import modes
+from chronocl.core.errors import InvalidParameterError
+
+err = Console(stderr=True)
+out = Console()
+
+STORE_HINT = "create one with 'chronocl ingest' or 'chronocl generate'"
+
+# Options shared by `integrate` and `render`.
+WindowOpt = Annotated[
+    str | None, typer.Option(help="t0:t1[:stride] or a list 2,5,9 (default: all).")
+]
+OrderOpt = Annotated[str, typer.Option(help="forward, backward, or importance steps 9,2,5.")]
+TfOpt = Annotated[Path | None, typer.Option(help="Transfer-function JSON (data_tf, time_tf).")]
+TimeTfOpt = Annotated[
+    str | None,
+    typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
+]
+ThresholdOpt = Annotated[float, typer.Option(help="first_hit opacity threshold.")]
+NormalizeOpt = Annotated[str, typer.Option(help="additive normalisation: time or max.")]
+EngineOpt = Annotated[str, typer.Option(help="opencl (default) or numpy (the reference).")]
+DeviceOpt = Annotated[
+    str | None,
+    typer.Option(help="OpenCL device: index 0:1 or a name part (see 'chronocl devices')."),
+]
+
+
+def mode_choices() -> str:
+    """The registered modes' names as a choice: 'alpha, first_hit, ... or min'."""
+    names = modes.names()
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+
+
+def modes_help(width: int = 76) -> str:
+    """A help section listing every registered mode with its one-line summary."""
+    names = modes.names()
+    indent = max(len(n) for n in names) + 4
+    lines = []
+    for name in names:
+        summary = textwrap.wrap(modes.get(name).summary, width - indent) or [""]
+        lines.append(f"  {name:<{indent - 2}}{summary[0]}")
+        lines += [" " * indent + rest for rest in summary[1:]]
+    return "Modes:\n\n\b\n" + "\n".join(lines)
+
+
+def check_engine(engine: str) -> None:
+    """An engine name chronocl has (opencl or numpy)."""
+    from chronocl.core.errors import UnknownNameError
+    from chronocl.engine import ENGINES
+
+    if engine not in ENGINES:
+        raise UnknownNameError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+
+
+def parse_sizes(text: str, n: int, form: str, example: str) -> tuple[int, ...]:
+    """n positive integers written AxB[xC], e.g. 64x64x64."""
+    try:
+        parts = tuple(int(p) for p in text.lower().split("x"))
+    except ValueError:
+        parts = ()
+    if len(parts) != n or min(parts) < 1:
+        raise InvalidParameterError(f"{text!r} must be {form} with positive sizes, e.g. {example}")
+    return parts
+
+
+def parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
+    """n numbers written a,b,c."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != n:
+        raise InvalidParameterError(f"{what} {text!r} must be {n} comma-separated numbers")
+    return values
+
+
+def spec_args(tf, time_tf, order, enhance, threshold, normalize) -> dict:
+    """The integration options that integrate and render share, with the TF file loaded."""
+    from chronocl.core.tf import TFSetting
+
+    return dict(
+        tf=TFSetting.load(tf) if tf is not None else None,
+        time_tf=time_tf,
+        order=parse_order(order),
+        enhance=enhance,
+        threshold=threshold,
+        normalize=normalize,
+    )
+
+
+def parse_order(order: str) -> str | list[int]:
+    """forward, backward, or importance steps 9,2,5 as a list."""
+    if order in ("forward", "backward"):
+        return order
+    try:
+        return [int(s) for s in order.split(",")]
+    except ValueError:
+        return order  # the spec names the problem
+
+
+def print_summary(summary: dict) -> None:
+    """key  value lines on stdout, the keys aligned."""
+    width = max(len(k) for k in summary)
+    for key, value in summary.items():
+        out.print(f"{key:<{width}}  {value}", highlight=False, soft_wrap=True)

@@ -1,0 +1,166 @@
+"""`chronocl render`: integrate a window in one or more modes and draw them as parallel views
+in a PNG, optionally with a turntable video and the chronovolumes saved."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from chronocl.cli.options import (
+    STORE_HINT,
+    DeviceOpt,
+    EngineOpt,
+    NormalizeOpt,
+    OrderOpt,
+    TfOpt,
+    ThresholdOpt,
+    TimeTfOpt,
+    WindowOpt,
+    check_engine,
+    err,
+    mode_choices,
+    parse_floats,
+    parse_sizes,
+    spec_args,
+)
+from chronocl.core.errors import InvalidParameterError
+
+
+def render(
+    store: Annotated[Path, typer.Argument(help="Series store.")],
+    out_path: Annotated[
+        Path, typer.Option("--out", "-o", metavar="OUT.png", help="Image to write.")
+    ],
+    mode: Annotated[
+        list[str],
+        typer.Option(
+            help=f"Mode(s) of {mode_choices()}; repeat or comma-separate for parallel views."
+        ),
+    ] = ["alpha"],  # noqa: B006
+    window: WindowOpt = None,
+    order: OrderOpt = "forward",
+    tf: TfOpt = None,
+    time_tf: TimeTfOpt = None,
+    enhance: Annotated[
+        str, typer.Option(help="none, edge or silhouette (follows the camera).")
+    ] = "none",
+    threshold: ThresholdOpt = 0.0,
+    normalize: NormalizeOpt = "time",
+    azimuth: Annotated[float, typer.Option(help="Degrees around the vertical axis.")] = 30.0,
+    elevation: Annotated[float, typer.Option(help="Degrees above the horizon.")] = 20.0,
+    zoom: Annotated[float, typer.Option(help="Magnification (1 fits the volume).")] = 1.0,
+    projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
+    size: Annotated[str, typer.Option(help="Image (panel) size WxH, 16..8192.")] = "512x512",
+    clip: Annotated[
+        str | None,
+        typer.Option(help="Slicing plane nx,ny,nz,offset (offset -1..1; keeps the normal's side)."),
+    ] = None,
+    background: Annotated[str, typer.Option(help="Colour name or #rrggbb.")] = "black",
+    outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
+    engine: EngineOpt = "opencl",
+    device: DeviceOpt = None,
+    turntable: Annotated[
+        Path | None,
+        typer.Option(metavar="OUT.mp4|OUT.gif", help="Also render a full turn as a video."),
+    ] = None,
+    frames: Annotated[int, typer.Option(help="Turntable frames.")] = 36,
+    save_chronovolume: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="OUT.zarr|OUT.ome.zarr|OUT.vti", help="Also save the chronovolume(s)."
+        ),
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace outputs that exist.")] = False,
+) -> None:
+    """Integrate a window and render it; several modes become parallel views in one image.
+
+    Examples:
+
+      chronocl render vortex.zarr -o alpha.png --mode alpha --window 0:20:9
+
+      chronocl render jet.zarr -o trio.png --mode alpha,additive,max --window 0:30:14
+
+      chronocl render vortex.zarr -o cut.png --clip 1,0,0,0 --azimuth 60 --zoom 1.4
+
+      chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
+    """
+    from chronocl.core.enhance import Enhance
+    from chronocl.core.paths import check_distinct, check_input, check_target
+    from chronocl.data.formats.outputs import output_kind
+    from chronocl.data.formats.outputs import save_chronovolume as save_any
+    from chronocl.data.series import open_series
+    from chronocl.integration.inmemory import prepare
+    from chronocl.render import Camera
+    from chronocl.render.raycaster import check_clip, check_size
+    from chronocl.render.turntable import ModeViews, check_video
+    from chronocl.render.views import parse_color
+
+    # Every option is checked before any work: no kernel built, no brick read, nothing written.
+    modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
+    if not modes:
+        raise InvalidParameterError("--mode names no mode; give e.g. --mode alpha,max")
+    if len(set(modes)) < len(modes):
+        twice = next(m for m in modes if modes.count(m) > 1)
+        raise InvalidParameterError(f"--mode {twice} is given twice; name each mode once")
+    check_engine(engine)
+    camera = Camera(azimuth, elevation, zoom, projection=projection)
+    panel = check_size(parse_sizes(size, 2, "WxH", "512x512"))
+    parse_color(background)
+    clip_plane = check_clip(parse_floats(clip, 4, "clip")) if clip else None
+    if turntable is not None:
+        check_video(turntable, frames)
+    elif not 2 <= frames <= 3600:
+        raise InvalidParameterError(f"turntable frames is {frames}; use 2 to 3600")
+    Enhance(enhance)  # an unknown kind fails here
+    saves = chronovolume_paths(save_chronovolume, modes)
+    for path in saves:
+        output_kind(path)
+    check_input(store, "store", hint=STORE_HINT)
+    args = spec_args(tf, time_tf, order, enhance, threshold, normalize)
+    outputs = [out_path, *([turntable] if turntable is not None else []), *saves]
+    check_distinct(outputs)
+    for path in outputs:
+        check_target(path, overwrite, [store, tf])
+    series = open_series(store)
+    for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
+        prepare(series, window, m, None, args)
+    views = ModeViews(
+        series,
+        window,
+        modes,
+        panel,
+        engine=engine,
+        device=device,
+        spec_args=args,
+        draw_args=dict(background=background, clip=clip_plane, outline=outline),
+    )
+
+    t0 = time.perf_counter()
+    cvs = views.integrate(camera)
+    t1 = time.perf_counter()
+    views.draw(cvs, camera).save(out_path, overwrite=overwrite)
+    err.print(
+        f"wrote {out_path} ({', '.join(modes)}; integrate {t1 - t0:.2f} s, "
+        f"render {time.perf_counter() - t1:.2f} s)"
+    )
+    for cv, path in zip(cvs, saves, strict=False):
+        save_any(cv, path, overwrite=overwrite)
+        err.print(f"wrote {path}")
+    if turntable is not None:
+        views.turntable(cvs, camera, turntable, frames, overwrite=overwrite, progress=True)
+        err.print(f"wrote {turntable} ({frames} frames)")
+
+
+def chronovolume_paths(path: Path | None, modes: list[str]) -> list[Path]:
+    """One path per mode: NAME-MODE.SUFFIX when there are several (.ome.zarr kept whole)."""
+    if path is None:
+        return []
+    if len(modes) == 1:
+        return [path]
+    name = path.name
+    suffix = ".ome.zarr" if name.lower().endswith(".ome.zarr") else path.suffix
+    stem = name[: len(name) - len(suffix)] if suffix else name
+    return [path.with_name(f"{stem}-{m}{suffix}") for m in modes]

@@ -1,0 +1,62 @@
+"""`chronocl view`: serve the interactive browser viewer of one or more series stores."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from chronocl.cli.options import DeviceOpt, EngineOpt
+from chronocl.core.errors import InvalidParameterError
+
+
+def view(
+    stores: Annotated[list[Path], typer.Argument(help="Series store(s) to offer in the viewer.")],
+    host: Annotated[
+        str, typer.Option(help="Interface to listen on; other than 127.0.0.1 exposes the data.")
+    ] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port to listen on (0: a free one).")] = 0,
+    browser: Annotated[
+        bool, typer.Option("--browser/--no-browser", help="Open the page in a browser.")
+    ] = True,
+    engine: EngineOpt = "opencl",
+    device: DeviceOpt = None,
+    memory: Annotated[
+        str | None, typer.Option(help="Memory budget of each view's window (e.g. 2GB).")
+    ] = None,
+    max_clients: Annotated[
+        int, typer.Option(help="Most browser connections served at once (each has a thread).")
+    ] = 32,
+) -> None:
+    """Interactive viewer in the browser, rendered here (OpenCL + EGL) and streamed as frames.
+
+    Prints http://127.0.0.1:PORT/?token=TOKEN: the page, its assets and its socket all need
+    the token, and the Host header must name this server. From another machine, forward the
+    port: ssh -L PORT:127.0.0.1:PORT host. Every option is checked before the server starts.
+
+    Examples:
+
+      chronocl view vortex.zarr jet.zarr
+
+      chronocl view vortex.zarr --port 8765 --no-browser
+    """
+    from chronocl.viewer import serve
+
+    try:
+        import starlette  # noqa: F401
+        import uvicorn  # noqa: F401
+    except ImportError as exc:
+        raise InvalidParameterError(
+            f"the viewer needs {exc.name}; pip install 'starlette' 'uvicorn[standard]'"
+        ) from None
+    serve(
+        stores,
+        host=host,
+        port=port,
+        open_browser=browser,
+        engine=engine,
+        device=device,
+        memory=memory,
+        max_clients=max_clients,
+    )
