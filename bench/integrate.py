@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import emit, env_record, race
 from vtk_peer import make_pipeline, run_max, vtk_available, vtk_version
 
-from chronocl import reference
+from chronocl import modes, reference
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF
@@ -33,7 +33,7 @@ from chronocl.engine.program import kernel
 from chronocl.integration.inmemory import make_spec
 from chronocl.modes.spec import resolve_order
 
-MODES = ("alpha", "first_hit", "additive", "max", "min")
+MODES = modes.names()
 TABLE1 = {"128^3": (128, 128, 128), "512x64x64": (512, 64, 64), "128x128x64": (128, 128, 64)}
 SPEC_ARGS = {"first_hit": {"threshold": 0.05}}
 # A coloured data TF with opacity everywhere: no voxel is empty, nothing can be skipped.

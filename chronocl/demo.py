@@ -28,6 +28,17 @@ FAINT = DataTF(
     points=[(0, 1, 1, 1, 0), (0.4, 1, 1, 1, 0), (0.55, 1, 1, 1, 0.22), (1, 1, 1, 1, 0.3)]
 )
 
+# change and count look the data TF up at a change or a fraction in [0, 1], not at a value.
+CHANGE = DataTF(points=[(0, 1, 1, 1, 0), (0.08, 1, 1, 1, 0), (0.3, 1, 1, 1, 0.6), (1, 1, 1, 1, 1)])
+OCCUPANCY = DataTF(
+    points=[
+        (0, 0.27, 0.0, 0.33, 0),
+        (0.02, 0.27, 0.0, 0.33, 0.08),
+        (0.5, 0.13, 0.57, 0.55, 0.25),
+        (1, 0.99, 0.91, 0.14, 0.6),
+    ]
+)
+
 
 @dataclass
 class Figure:
@@ -95,6 +106,33 @@ FIGURES = (
         "(where the value grew).",
         {"data_tf": SURFACE},
         Camera(25, 20, zoom=1.45),
+    ),
+    Figure(
+        "j-mean-10",
+        "vortex",
+        "0:10",
+        ("mean",),
+        "(j) Mean over 10 consecutive steps: the time-averaged colour and opacity; places the "
+        "rings crossed briefly are faint, where they lingered dense.",
+        {"data_tf": SURFACE},
+    ),
+    Figure(
+        "k-change-10",
+        "vortex",
+        "0:10",
+        ("change",),
+        "(k) Change over 10 steps: the largest jump between consecutive steps, coloured by "
+        "when it happened (blue early, red late): where and when each place changed most.",
+        {"data_tf": CHANGE},
+    ),
+    Figure(
+        "l-count-30",
+        "vortex",
+        "0:30",
+        ("count",),
+        "(l) Occupancy over 30 steps: the fraction of steps in which a voxel was opaque, "
+        "through a colour ramp (purple once, yellow always): the rings' swept volume.",
+        {"data_tf": OCCUPANCY, "threshold": 0.5},
     ),
 )
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import strategies as st
 
+from chronocl import modes
 from chronocl.core.enhance import Enhance
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeAlpha, TimeColor, TimeTF
@@ -95,7 +96,7 @@ def windows(draw, max_w: int = 9, wide: bool = False):
 
 @st.composite
 def specs(draw, mode=None, selection: Selection | None = None, positions=None) -> IntegrationSpec:
-    mode = mode or draw(st.sampled_from(["alpha", "first_hit", "additive", "max", "min"]))
+    mode = mode or draw(st.sampled_from(modes.names()))
     if selection is not None and draw(st.booleans()):
         order = tuple(draw(st.permutations(selection.steps)))
     else:

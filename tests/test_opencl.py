@@ -12,6 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import chronocl
+from chronocl import modes
 from chronocl.core.errors import EngineUnavailableError, KernelBuildError
 from chronocl.engine.device import list_devices
 from chronocl.engine.opencl import OpenCLEngine
@@ -68,7 +69,7 @@ def test_fast_paths_equal_the_general_path(data):
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.uint8, np.uint16, np.int16])
-@pytest.mark.parametrize("mode", ["alpha", "first_hit", "additive", "max", "min"])
+@pytest.mark.parametrize("mode", modes.names())
 def test_aligned_vector_path_equals_reference(mode, dtype):
     """x a multiple of 16 with 64-byte aligned buffers: the kernels use vector pointers."""
     rng = np.random.default_rng(7)
@@ -82,7 +83,7 @@ def test_aligned_vector_path_equals_reference(mode, dtype):
         assert_same(ref, chronocl.integrate(series, None, spec=spec, slab=2))
 
 
-@pytest.mark.parametrize("mode", ["alpha", "first_hit", "additive", "max", "min"])
+@pytest.mark.parametrize("mode", modes.names())
 @pytest.mark.parametrize("local_size", [None, (1, 1, 2), (4, 2, 2)])
 def test_padded_launches_stay_inside_their_slab(mode, local_size):
     """x = 150 (9 vectors + 6, padded to whole work-groups), z padded by the local size: every

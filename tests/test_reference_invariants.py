@@ -1,12 +1,13 @@
-"""Property tests of DESIGN.md invariants 1, 2, 3 and 5 for the numpy reference."""
+"""Property tests of the invariants of docs/semantics.md (1, 2, 3 and 5) for the numpy reference."""
 
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given
+import pytest
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from chronocl import reference
+from chronocl import modes, reference
 from chronocl.core.enhance import factor
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeAlpha, TimeTF, lut_lookup
@@ -22,11 +23,14 @@ def ref(u, sel: Selection, spec: IntegrationSpec):
     return reference.integrate(u, sel.steps, pos, resolve_order(spec.order, sel), spec)
 
 
-@given(st.data())
-def test_single_step_is_the_transfer_function(data):
-    """Invariant 1: W = 1 gives TF(u, p) premultiplied (additive: colour / N)."""
+@pytest.mark.parametrize("mode", modes.names())
+@settings(max_examples=40)
+@given(data=st.data())
+def test_single_step_is_the_transfer_function(mode, data):
+    """Invariant 1: W = 1 gives TF(u, p) premultiplied (additive: colour / N; count: the data
+    TF at 0 or 1; change: nothing, no step changed)."""
     u, sel = data.draw(windows(max_w=1))
-    spec = data.draw(specs(selection=sel))
+    spec = data.draw(specs(mode=mode, selection=sel))
     rgba, t_index = ref(u, sel, spec)
 
     p = spec.time_tf.positions_of(sel.steps, sel.n_steps)
@@ -48,6 +52,15 @@ def test_single_step_is_the_transfer_function(data):
         np.testing.assert_array_equal(t_index, np.where(hit, sel.steps[0], -1))
     elif spec.mode in ("max", "min"):
         np.testing.assert_array_equal(t_index, sel.steps[0])
+    elif spec.mode == "count":
+        f = (alpha > spec.threshold).astype(np.float64)
+        d = lut_lookup(spec.data_tf.lut, f)
+        expected = np.concatenate([d[..., :3] * d[..., 3:], d[..., 3:]], axis=-1)
+    elif spec.mode == "change":
+        expected = np.zeros_like(expected)
+        np.testing.assert_array_equal(t_index, -1)
+    else:
+        assert spec.mode in ("alpha", "additive", "mean"), f"add the W = 1 case of {spec.mode}"
     np.testing.assert_allclose(rgba, expected, atol=1e-6)
 
 

@@ -1,4 +1,4 @@
-"""Known answers: hand-computed voxels for each mode and order (DESIGN.md section 2)."""
+"""Known answers: hand-computed voxels for each mode and order (docs/semantics.md)."""
 
 from __future__ import annotations
 

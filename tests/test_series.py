@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import chronocl
+from chronocl import modes
 from chronocl.core.errors import InputNotFoundError, OutputExistsError, StoreFormatError
 from chronocl.data.series import step_runs, write_series
 
@@ -73,7 +74,7 @@ def test_open_errors(tmp_path):
         chronocl.open(tmp_path / "3d.zarr")
 
 
-@pytest.mark.parametrize("mode", ["alpha", "first_hit", "additive", "max", "min"])
+@pytest.mark.parametrize("mode", modes.names())
 def test_chronovolume_round_trip(tmp_path, mode):
     data = np.random.default_rng(1).random((6, 3, 4, 5)).astype(np.float32)
     series = chronocl.TimeSeries.from_array(data, spacing=(2, 1, 1), source="rand")
@@ -84,7 +85,7 @@ def test_chronovolume_round_trip(tmp_path, mode):
     back = chronocl.Chronovolume.load(tmp_path / "cv.zarr")
     np.testing.assert_array_equal(back.rgba, cv.rgba)
     assert back.rgba.dtype == np.float32 and back.shape == (3, 4, 5)
-    if mode in ("first_hit", "max", "min"):
+    if modes.get(mode).has_t_index:
         np.testing.assert_array_equal(back.t_index, cv.t_index)
         assert set(np.unique(back.t_index)) <= {-1, 1, 3, 5}
     else:

@@ -1,6 +1,6 @@
 """Sliding windows: incremental chronovolumes equal integrating the same window from scratch.
 
-DESIGN.md invariant 6, for every mode and both engines: after any random sequence of slides
+Invariant 6 of docs/semantics.md, for every registered mode and both engines: after any random sequence of slides
 (either way, by one or more strides) and jumps, the Session's chronovolume equals
 `integrate` of the same window (1e-5; t_index exactly), windows of 1..40 steps. Also the
 double-ended sliding aggregate on its own, with a non-commutative operation.
@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from chronocl import modes
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError
 from chronocl.core.tf import TimeTF
 from chronocl.data.series import TimeSeries
@@ -44,16 +45,19 @@ def _check(cv, series, selection, spec, engine) -> None:
         assert cv.t_index is None
 
 
+@pytest.mark.parametrize("mode", modes.names())
 @pytest.mark.parametrize("engine", ENGINES)
-@settings(max_examples=30)
+@settings(max_examples=8)
 @given(data=st.data())
-def test_slides_and_jumps_equal_scratch(engine: str, data) -> None:
+def test_slides_and_jumps_equal_scratch(engine: str, mode: str, data) -> None:
+    """Every registered mode: any walk of slides and jumps, W in 1..40, equals integrating
+    each window from scratch."""
     shape = data.draw(st.tuples(st.integers(1, 4), st.integers(1, 3), st.integers(1, 40)))
     width = data.draw(st.integers(1, 40))
     n_steps = data.draw(st.integers(width, width + 12))
     rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
     series = _series(rng, n_steps, shape, data.draw(st.booleans()))
-    spec = data.draw(specs(positions="absolute"))
+    spec = data.draw(specs(mode=mode, positions="absolute"))
     session = Session(series, engine=engine, spec=spec, memory="64MB")
     t0 = data.draw(st.integers(0, n_steps - width))
     cv = session.set_window(t0, t0 + width)
@@ -75,7 +79,7 @@ def test_slides_and_jumps_equal_scratch(engine: str, data) -> None:
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-@pytest.mark.parametrize("mode", ["alpha", "first_hit", "additive", "max", "min"])
+@pytest.mark.parametrize("mode", modes.names())
 def test_strided_windows_slide_by_strides(engine: str, mode: str) -> None:
     rng = np.random.default_rng(7)
     series = _series(rng, 60, (3, 5, 21), levels=True)
@@ -196,24 +200,29 @@ def test_sliding_aggregate_cost_does_not_grow_with_width() -> None:
 @settings(max_examples=40)
 @given(data=st.data())
 def test_combine_kernels_match_the_reference(data) -> None:
-    """combine.cl against reference.combine on random partials (ties and misses included)."""
+    """Each mode's combine kernel against its reference combine on random partials (ties and
+    misses included); modes that slide by inversion combine their aggregated opacity."""
     from chronocl.engine import NumpyEngine, get_engine
     from chronocl.reference import Partial
 
     engine = get_engine("opencl")
     shape = data.draw(st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(1, 37)))
     rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
-    mode = data.draw(st.sampled_from(["alpha", "first_hit", "max", "min", "additive"]))
+    names = [
+        m for m in modes.names() if modes.get(m).slides == "aggregate" or modes.get(m).state_bytes
+    ]
+    mode = data.draw(st.sampled_from(names))
     spec = make_spec(mode)
+    kind = modes.get(mode)
 
     def partial() -> Partial:
         a = rng.random((*shape, 1), dtype=np.float32)
         rgba = np.concatenate([rng.random((*shape, 3), dtype=np.float32) * a, a], axis=-1)
-        t = rng.integers(-1 if mode == "first_hit" else 0, 9, shape).astype(np.int32)
+        t = rng.integers(-1, 9, shape).astype(np.int32)
         v = (np.round(rng.random(shape) * 3) / 3).astype(np.float32)  # ties
-        if mode == "additive":
+        if kind.slides == "invert":
             return Partial(np.ascontiguousarray(rgba[..., 3]), None)
-        return Partial(rgba, t if spec.has_t_index else None, v if mode in ("max", "min") else None)
+        return Partial(rgba, t if kind.has_t_index else None, v if kind.compares_values else None)
 
     front, back = partial(), partial()
     got = engine.combine(front, back, spec)
@@ -221,32 +230,37 @@ def test_combine_kernels_match_the_reference(data) -> None:
     np.testing.assert_allclose(got.rgba, want.rgba, rtol=0, atol=1e-6)
     if spec.has_t_index:
         np.testing.assert_array_equal(got.t_index, want.t_index)
-    if mode in ("max", "min"):
+    if kind.compares_values:
         np.testing.assert_array_equal(got.value, want.value)
 
 
-@settings(max_examples=20)
+@pytest.mark.parametrize("mode", [m for m in modes.names() if modes.get(m).slides == "invert"])
+@settings(max_examples=15)
 @given(data=st.data())
-def test_fixed_point_sums_cancel_exactly(data) -> None:
-    """Adding then subtracting the same steps returns the sums to exactly zero, on both engines."""
+def test_fixed_point_sums_cancel_exactly(mode, data) -> None:
+    """Adding then subtracting the same steps returns the sums to exactly zero, and both
+    engines finish the same sums alike (each inverting mode)."""
     from chronocl.engine import NumpyEngine, get_engine
 
+    kind = modes.get(mode)
+    spec = make_spec(mode, normalize=data.draw(st.sampled_from(["time", "max"])))
     shape = data.draw(st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(1, 37)))
     rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
     steps = [rng.random((*shape, 4), dtype=np.float32) for _ in range(data.draw(st.integers(1, 9)))]
-    alpha = rng.random(shape, dtype=np.float32)
-    norm = np.array([2.0, 0.0, 3.5])
+    alpha = rng.random(shape, dtype=np.float32) if kind.state_bytes else None
+    positions = np.linspace(0, 1, len(steps))
+    c = kind.sum_channels
     results = []
     for engine in (get_engine("opencl"), NumpyEngine()):
-        acc = np.zeros((*shape, 3), np.int64)
+        acc = np.zeros((*shape, c), np.int64)
         for s in steps:
             engine.fixed_add(acc, s, +1)
         sums = acc.copy()
-        results.append(engine.fixed_finalize(acc, alpha, norm))
+        results.append(engine.finish_sums(acc, alpha, positions, spec))
         for s in steps[::-1]:
             engine.fixed_add(acc, s, -1)
         assert not acc.any()
         np.testing.assert_allclose(
-            sums / 2.0**40, sum(s[..., :3].astype(np.float64) for s in steps), atol=1e-9
+            sums / 2.0**40, sum(s[..., :c].astype(np.float64) for s in steps), atol=1e-9
         )
     np.testing.assert_allclose(results[0], results[1], rtol=0, atol=1e-6)

@@ -2,7 +2,7 @@
 
 A voxel's value u in [0, 1] at step k with time position p_k gets
 colour c_k = rgb_d(u) * rgb_t(p_k) and opacity α_k = a_d(u) * a_t(p_k) * e_k
-(DESIGN.md section 2). The data TF is piecewise linear over control points and
+(docs/semantics.md). The data TF is piecewise linear over control points and
 is sampled into a LUT that is evaluated with linear interpolation between
 entries; the engines all use that LUT, so they agree to rounding. A complete
 setting (`TFSetting`) saves to and loads from JSON, validated at the edge.

@@ -1,7 +1,7 @@
 """Sliding-window aggregation of an associative operation that has no inverse.
 
 Alpha compositing, first hit and max/min combine partial chronovolumes
-associatively but cannot take a step back out (DESIGN.md section 3). A
+associatively but cannot take a step back out (docs/semantics.md, sliding windows). A
 `SlidingAggregate` holds the steps of a window in time order and their
 aggregate under `op(earlier, later)`, and lets the window move either way:
 steps enter and leave at both ends (scrubbing forward and backward).
