@@ -10,6 +10,8 @@ import pytest
 pytest.importorskip("starlette")
 playwright_api = pytest.importorskip("playwright.sync_api")
 
+from chronocl import modes  # noqa: E402
+
 from .viewer_helpers import BROWSER_ARGS, CHROMIUM, make_stores, start_server  # noqa: E402
 
 pytestmark = pytest.mark.skipif(
@@ -75,6 +77,11 @@ def test_page_loads_with_the_token_and_shows_a_frame(page):
     assert size >= 64
     assert "token" not in page.url  # dropped from the address bar; the cookie keeps access
     assert "integrate" in page.inner_text("#status")
+    # The mode menu is the server's registry, with each mode's summary as its tooltip.
+    menu = page.eval_on_selector_all(
+        ".view select.mode option", "os => os.map(o => [o.value, o.title])"
+    )
+    assert menu == [[n, modes.get(n).summary] for n in modes.names()]
 
 
 def test_without_the_token_the_page_and_the_socket_are_refused(browser, server):
@@ -161,7 +168,8 @@ def test_parallel_views_screenshot(page, tmp_path):
     frame = settle(page, frame)
     assert frame["views"] == 3
     labels = page.locator(".view-label").all_inner_texts()
-    assert [t.split(",")[0] for t in labels] == ["alpha", "additive", "max"]
+    # New views take the first registered modes not shown yet.
+    assert [t.split(",")[0] for t in labels] == list(modes.names()[:3])
     shot = tmp_path / "viewer.png"
     page.screenshot(path=str(shot))
     assert shot.stat().st_size > 10_000

@@ -68,7 +68,7 @@ def test_page_and_assets_need_the_token(server):
     assert "default-src 'none'" in headers["content-security-policy"]
 
     name_value = cookie.split(";")[0]
-    for asset in ("app.js", "style.css"):
+    for asset in ("app.js", "connection.js", "style.css"):
         assert get(f"{server.base}/static/{asset}", {"Cookie": name_value})[0] == 200
     assert get(f"{server.base}/static/app.js", {"X-Chronocl-Token": server.token})[0] == 200
     bearer = {"Authorization": f"Bearer {server.token}"}
@@ -382,5 +382,7 @@ def test_the_page_ships_in_the_wheel(tmp_path):
         timeout=300,
     )
     names = zipfile.ZipFile(next(tmp_path.glob("chronocl-*.whl"))).namelist()
-    for name in ("index.html", "app.js", "style.css"):
+    static = sorted(p.name for p in (root / "chronocl" / "viewer" / "static").iterdir())
+    assert {"index.html", "app.js", "style.css"} <= set(static)
+    for name in static:  # the page's ES modules among them
         assert f"chronocl/viewer/static/{name}" in names

@@ -13,10 +13,9 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import clip_plane
 from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.protocol import PROBE_THRESHOLD
 from chronocl.viewer.slots import geometry
 from chronocl.viewer.view_state import ViewState
-
-PROBE_THRESHOLD = 0.5
 
 
 def probe_ray(

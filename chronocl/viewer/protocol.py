@@ -51,6 +51,7 @@ MAX_DEPTH = 8  # the deepest message (update.data_tf.points[i][j]) nests 4 conta
 MAX_VIEWS = 4
 MAX_TF_POINTS = 64
 MIN_PANEL, MAX_PANEL = 64, 1024
+PROBE_THRESHOLD = 0.5  # the probe finds the voxel where a ray's opacity passes this
 
 
 # --------------------------------------------------------------------------- messages
@@ -189,7 +190,10 @@ def choices() -> dict:
         "projections": list(PROJECTIONS),
         "backgrounds": list(BACKGROUNDS),
         "time_colors": _menu(TIME_COLORS),
-        "time_alphas": _menu(TIME_ALPHAS),
+        "time_alphas": [  # with the parameters each shape reads
+            item | {"params": [k for k in tf.TimeAlpha(item["name"]).to_dict() if k != "shape"]}
+            for item in _menu(TIME_ALPHAS)
+        ],
         "positions": _menu(tf.TIME_POSITIONS),
         "enhance": [
             item | {"k": [e.k0, e.k1, e.k2]}
@@ -208,6 +212,7 @@ def choices() -> dict:
             "max_tf_points": MAX_TF_POINTS,
             "min_panel": MIN_PANEL,
             "max_panel": MAX_PANEL,
+            "probe_threshold": PROBE_THRESHOLD,
         },
     }
 

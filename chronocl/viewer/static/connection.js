@@ -1,0 +1,55 @@
+// The WebSocket to the server. The server renders the newest state only, so the page may send
+// freely; it still coalesces input to one update message per animation frame.
+
+import { S, setStatus, viewer } from './state.js';
+
+const params = new URLSearchParams(location.search);
+const token = params.get('token') || '';
+if (token) history.replaceState(null, '', location.pathname); // the cookie keeps us in
+
+let ws = null;
+let nextId = 1;
+export const sentAt = new Map(); // request id -> when it was sent (for round trips)
+
+// Opens the socket; text messages go to onText(parsed JSON), binary frames to onFrame.
+export function connect({ onText, onFrame }) {
+  const proto = location.protocol === 'https:' ? 'wss:' : 'ws:';
+  const q = token ? `?token=${encodeURIComponent(token)}` : '';
+  ws = new WebSocket(`${proto}//${location.host}/ws${q}`);
+  ws.binaryType = 'arraybuffer';
+  ws.onmessage = (e) => (typeof e.data === 'string' ? onText(JSON.parse(e.data)) : onFrame(e.data));
+  ws.onclose = () => setStatus('disconnected: reload the page (is the server still running?)', true);
+}
+
+export function send(msg) {
+  if (!ws || ws.readyState !== WebSocket.OPEN) return 0;
+  msg.id = nextId++;
+  sentAt.set(msg.id, performance.now());
+  if (sentAt.size > 200) sentAt.delete(sentAt.keys().next().value);
+  ws.send(JSON.stringify(msg));
+  return msg.id;
+}
+
+// Updates are merged into S.state at once and sent once per animation frame.
+let pending = null;
+let pendingQuality = 'full';
+export function update(fields, quality = 'full') {
+  pending = Object.assign(pending || {}, fields);
+  pendingQuality = quality;
+  Object.assign(S.state, fields);
+  requestAnimationFrame(flush);
+}
+
+function flush() {
+  if (!pending) return;
+  const msg = Object.assign({ type: 'update', quality: pendingQuality }, pending);
+  pending = null;
+  viewer.sent = send(msg);
+}
+
+// A full-quality frame once input has paused for `ms`.
+let settleTimer = 0;
+export function settleLater(ms = 250) {
+  clearTimeout(settleTimer);
+  settleTimer = setTimeout(() => update({}, 'full'), ms);
+}

@@ -1,0 +1,135 @@
+// The header bar and side panel controls: number of views, projection, background, time TF,
+// enhancement, threshold, slicing plane, save. Their menus, defaults and bounds come from the
+// server's `info` message (`fillControls`), so nothing here copies a list from the server.
+
+import { send, update } from './connection.js';
+import { $, S } from './state.js';
+import { syncPointColor } from './tf_editor.js';
+import { fillSelect, layoutViews } from './views.js';
+
+const TIME_PARAMS = ['center', 'width', 'floor']; // the sliders t-center, t-width, t-floor
+
+function setRange(id, [lo, hi]) {
+  $(id).min = lo;
+  $(id).max = hi;
+}
+
+// The menus and input bounds, from the server's choices.
+export function fillControls(c) {
+  fillSelect($('nviews'), Array.from({ length: c.limits.max_views }, (_, k) => k + 1));
+  fillSelect($('projection'), c.projections);
+  fillSelect($('background'), c.backgrounds);
+  fillSelect($('time-color'), c.time_colors);
+  fillSelect($('time-alpha'), c.time_alphas);
+  fillSelect($('positions'), c.positions);
+  fillSelect($('enhance'), c.enhance);
+  for (const p of TIME_PARAMS) setRange(`t-${p}`, c.ranges.time_tf[p]);
+  for (const k of ['k0', 'k1', 'k2']) setRange(k, c.ranges.enhance[k]);
+  setRange('threshold', c.ranges.threshold);
+  setRange('clip-offset', c.ranges.clip.offset);
+  $('probe-text').textContent =
+    `click a pixel: v(t) at the voxel where the ray's opacity passes ${c.limits.probe_threshold}`;
+}
+
+export function syncControls() {
+  const st = S.state;
+  $('nviews').value = st.views.length;
+  $('projection').value = st.camera.projection;
+  $('background').value = st.background;
+  $('outline').checked = st.outline;
+  $('time-color').value = st.time_tf.color;
+  $('time-alpha').value = st.time_tf.alpha;
+  for (const p of TIME_PARAMS) $(`t-${p}`).value = st.time_tf[p];
+  $('positions').value = st.time_tf.positions;
+  $('enhance').value = st.enhance.kind;
+  $('k0').value = st.enhance.k0;
+  $('k1').value = st.enhance.k1;
+  $('k2').value = st.enhance.k2;
+  $('threshold').value = st.threshold;
+  $('clip-on').checked = !!st.clip;
+  $('stride').value = st.window.stride;
+  syncTimeControls();
+  syncPointColor();
+}
+
+// Only the sliders the chosen opacity shape reads are enabled.
+function syncTimeControls() {
+  const shape = S.choices.time_alphas.find((a) => a.name === S.state.time_tf.alpha);
+  const used = new Set(shape ? shape.params : []);
+  for (const p of TIME_PARAMS) $(`t-${p}`).disabled = !used.has(p);
+}
+
+// A new view shows the first registered mode not shown yet.
+function newView(views) {
+  const used = new Set(views.map((v) => v.mode));
+  const modes = S.choices.modes.map((m) => m.name);
+  return { mode: modes.find((m) => !used.has(m)) || modes[0], order: S.choices.orders[0] };
+}
+
+const within = (v, [lo, hi]) => Number.isFinite(v) && v >= lo && v <= hi;
+
+export function bindControls() {
+  $('dataset').addEventListener('change', () => send({ type: 'open', dataset: Number($('dataset').value) }));
+  $('nviews').addEventListener('change', () => {
+    const n = Number($('nviews').value);
+    const views = S.state.views.slice(0, n).map((v) => ({ ...v }));
+    while (views.length < n) views.push(newView(views));
+    S.state.views = views;
+    S.selectedView = Math.min(S.selectedView, n - 1);
+    const size = layoutViews();
+    update({ views, size });
+  });
+  $('projection').addEventListener('change', () =>
+    update({ camera: { ...S.state.camera, projection: $('projection').value } }));
+  $('background').addEventListener('change', () => update({ background: $('background').value }));
+  $('outline').addEventListener('change', () => update({ outline: $('outline').checked }));
+
+  const timeTF = (quality) => {
+    const t = {
+      color: $('time-color').value,
+      alpha: $('time-alpha').value,
+      positions: $('positions').value,
+    };
+    for (const p of TIME_PARAMS) t[p] = Number($(`t-${p}`).value);
+    update({ time_tf: Object.assign({}, S.state.time_tf, t) }, quality);
+    syncTimeControls();
+  };
+  for (const id of ['time-color', 'time-alpha', 'positions']) $(id).addEventListener('change', () => timeTF('full'));
+  for (const p of TIME_PARAMS) {
+    $(`t-${p}`).addEventListener('input', () => timeTF('preview'));
+    $(`t-${p}`).addEventListener('change', () => timeTF('full'));
+  }
+
+  $('enhance').addEventListener('change', () => {
+    const kind = $('enhance').value;
+    const [k0, k1, k2] = S.choices.enhance.find((e) => e.name === kind).k;
+    $('k0').value = k0;
+    $('k1').value = k1;
+    $('k2').value = k2;
+    update({ enhance: { kind, k0, k1, k2 } });
+  });
+  for (const id of ['k0', 'k1', 'k2']) {
+    $(id).addEventListener('change', () => {
+      const v = Number($(id).value);
+      if (within(v, S.choices.ranges.enhance[id])) update({ enhance: { [id]: v } });
+    });
+  }
+  $('threshold').addEventListener('change', () => {
+    const v = Number($('threshold').value);
+    if (within(v, S.choices.ranges.threshold)) update({ threshold: v });
+  });
+
+  const clip = (quality) => {
+    if (!$('clip-on').checked) return update({ clip: null }, quality);
+    const normal = $('clip-axis').value.split(',').map(Number);
+    update({ clip: { normal, offset: Number($('clip-offset').value) } }, quality);
+  };
+  $('clip-on').addEventListener('change', () => clip('full'));
+  $('clip-axis').addEventListener('change', () => clip('full'));
+  $('clip-offset').addEventListener('input', () => $('clip-on').checked && clip('preview'));
+  $('clip-offset').addEventListener('change', () => $('clip-on').checked && clip('full'));
+
+  $('save-image').addEventListener('click', () => send({ type: 'save', what: 'image' }));
+  $('save-cv').addEventListener('click', () =>
+    send({ type: 'save', what: 'chronovolume', view: S.selectedView }));
+}

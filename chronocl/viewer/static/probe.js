@@ -1,0 +1,60 @@
+// The probe plot: v(t) over every step at the voxel a click on a view met, the window's
+// steps marked on it.
+
+import { $, S, canvasSize, fmt, viewer } from './state.js';
+
+export function onProbe(msg) {
+  viewer.probe = msg;
+  drawProbe();
+  const txt = $('probe-text');
+  if (!msg.voxel) {
+    txt.textContent = 'this ray meets no opaque voxel; click on a feature';
+    return;
+  }
+  const v = msg.voxel;
+  const how = msg.reached ? `opacity passes ${msg.threshold}` : `strongest sample (opacity ${msg.opacity})`;
+  txt.textContent = `voxel x=${v.x} y=${v.y} z=${v.z} (${how}) · view ${msg.view + 1}`;
+}
+
+export function drawProbe() {
+  const c = $('probe');
+  const [ctx, w, h] = canvasSize(c);
+  ctx.clearRect(0, 0, w, h);
+  const msg = viewer.probe;
+  if (!S.info || !msg || !msg.values) return;
+  const T = msg.values.length;
+  const p = { l: 40, r: 6, t: 8, b: 16 };
+  const vmin = S.info.vmin;
+  const vmax = S.info.vmax > vmin ? S.info.vmax : vmin + 1;
+  const X = (s) => p.l + (T > 1 ? s / (T - 1) : 0.5) * (w - p.l - p.r);
+  const Y = (v) => h - p.b - ((v - vmin) / (vmax - vmin)) * (h - p.t - p.b);
+  const win = msg.window;
+  ctx.fillStyle = 'rgba(240,160,48,0.16)';
+  ctx.fillRect(X(win[0]) - 2, p.t, X(win[win.length - 1]) - X(win[0]) + 4, h - p.t - p.b);
+  ctx.strokeStyle = '#343941';
+  ctx.lineWidth = 1;
+  ctx.strokeRect(p.l, p.t, w - p.l - p.r, h - p.t - p.b);
+  ctx.beginPath();
+  msg.values.forEach((v, s) => (s === 0 ? ctx.moveTo(X(s), Y(v)) : ctx.lineTo(X(s), Y(v))));
+  ctx.strokeStyle = '#7fb8ff';
+  ctx.lineWidth = 1.6;
+  ctx.stroke();
+  ctx.fillStyle = '#f0a030';
+  for (const s of win) {
+    ctx.beginPath();
+    ctx.arc(X(s), Y(msg.values[s]), 2.6, 0, 2 * Math.PI);
+    ctx.fill();
+  }
+  ctx.fillStyle = '#8b949e';
+  ctx.font = '10px system-ui, sans-serif';
+  ctx.textAlign = 'right';
+  ctx.textBaseline = 'middle';
+  ctx.fillText(String(fmt(vmax)), p.l - 3, p.t + 3);
+  ctx.fillText(String(fmt(vmin)), p.l - 3, h - p.b - 2);
+  ctx.textBaseline = 'bottom';
+  ctx.textAlign = 'left';
+  ctx.fillText('t = 0', p.l, h);
+  ctx.textAlign = 'right';
+  ctx.fillText(String(T - 1), w - p.r, h);
+  c.dataset.drawn = String(Number(c.dataset.drawn || 0) + 1);
+}

@@ -1,0 +1,49 @@
+// What the page shows and the small helpers every part of it uses.
+// `viewer` (window.viewer) is also read by the tests and the benchmarks.
+
+export const $ = (id) => document.getElementById(id);
+
+export const S = {
+  choices: null, // the server's `info` message: modes, orders, presets, defaults, bounds
+  info: null, // the data set: shape, stats
+  state: null, // protocol state (camera, views, window, data_tf, time_tf, ...)
+  histogram: null,
+  zoom: [0, 1], // data TF editor's visible range of u
+  selectedPoint: 1,
+  selectedView: 0,
+  legend: [],
+  playing: false,
+};
+
+export const viewer = (window.viewer = {
+  frames: 0, full: 0, sent: 0, last: null, errors: [], probe: null, downloads: [], S,
+});
+
+// A canvas sized to its box in device pixels; returns its context (in CSS pixels) and size.
+export function canvasSize(c) {
+  const r = c.getBoundingClientRect();
+  const dpr = window.devicePixelRatio || 1;
+  const w = Math.max(1, Math.round(r.width * dpr));
+  const h = Math.max(1, Math.round(r.height * dpr));
+  if (c.width !== w || c.height !== h) {
+    c.width = w;
+    c.height = h;
+  }
+  const ctx = c.getContext('2d');
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  return [ctx, r.width, r.height];
+}
+
+export const fmt = (v) =>
+  Math.abs(v) >= 1e4 || (Math.abs(v) < 1e-3 && v !== 0) ? v.toExponential(2) : +v.toPrecision(4);
+
+export const clamp = (v, [lo, hi]) => Math.max(lo, Math.min(hi, v));
+
+let statusTimer = 0;
+export function setStatus(text, bad = false) {
+  const el = $('status');
+  if (!bad && el.classList.contains('error') && Date.now() < statusTimer) return;
+  el.textContent = text;
+  el.classList.toggle('error', bad);
+  if (bad) statusTimer = Date.now() + 4000;
+}

@@ -1,0 +1,199 @@
+// The data transfer function editor: a log histogram of the data under the opacity curve and
+// its colour strip; drag points, click to add, double-click to remove, wheel to zoom in u.
+
+import { send, update } from './connection.js';
+import { $, S, canvasSize, fmt, viewer } from './state.js';
+
+const tf = { drag: null };
+const pad = { l: 6, r: 6, t: 8, b: 18 };
+function tfGeom() {
+  const [ctx, w, h] = canvasSize($('tf'));
+  const [lo, hi] = S.zoom;
+  const X = (u) => pad.l + ((u - lo) / (hi - lo)) * (w - pad.l - pad.r);
+  const U = (x) => lo + ((x - pad.l) / (w - pad.l - pad.r)) * (hi - lo);
+  const Y = (a) => h - pad.b - a * (h - pad.t - pad.b);
+  const A = (y) => (h - pad.b - y) / (h - pad.t - pad.b);
+  return { ctx, w, h, X, U, Y, A };
+}
+const rgbCss = (p, a = 1) => `rgba(${Math.round(p[1] * 255)},${Math.round(p[2] * 255)},${Math.round(p[3] * 255)},${a})`;
+const dataValue = (u) => S.info.vmin + u * (S.info.vmax - S.info.vmin);
+
+export function drawTF() {
+  if (!S.state) return;
+  const { ctx, w, h, X, Y } = tfGeom();
+  const pts = S.state.data_tf.points;
+  ctx.clearRect(0, 0, w, h);
+  const hist = S.histogram;
+  if (hist && hist.range[0] === S.zoom[0] && hist.range[1] === S.zoom[1]) {
+    const n = hist.counts.length;
+    const top = Math.log1p(Math.max(...hist.counts, 1));
+    ctx.fillStyle = 'rgba(120,160,210,0.45)';
+    const bw = (w - pad.l - pad.r) / n;
+    hist.counts.forEach((c, i) => {
+      const bh = (Math.log1p(c) / top) * (h - pad.t - pad.b);
+      ctx.fillRect(pad.l + i * bw, h - pad.b - bh, Math.max(1, bw - 0.5), bh);
+    });
+  }
+  // Colour strip under the curve: the TF's colour with its opacity.
+  const grad = ctx.createLinearGradient(X(pts[0][0]), 0, X(pts[pts.length - 1][0]), 0);
+  const span = pts[pts.length - 1][0] - pts[0][0] || 1;
+  for (const p of pts) grad.addColorStop((p[0] - pts[0][0]) / span, rgbCss(p, 0.25 + 0.75 * p[4]));
+  ctx.fillStyle = grad;
+  ctx.fillRect(pad.l, h - pad.b + 2, w - pad.l - pad.r, 5);
+  // Opacity curve and points.
+  ctx.beginPath();
+  ctx.moveTo(X(S.zoom[0]), Y(pts[0][4]));
+  for (const p of pts) ctx.lineTo(X(p[0]), Y(p[4]));
+  ctx.lineTo(X(S.zoom[1]), Y(pts[pts.length - 1][4]));
+  ctx.strokeStyle = '#f0a030';
+  ctx.lineWidth = 1.5;
+  ctx.stroke();
+  pts.forEach((p, i) => {
+    ctx.beginPath();
+    ctx.arc(X(p[0]), Y(p[4]), i === S.selectedPoint ? 6 : 4.5, 0, 2 * Math.PI);
+    ctx.fillStyle = rgbCss(p);
+    ctx.fill();
+    ctx.lineWidth = i === S.selectedPoint ? 2.5 : 1.2;
+    ctx.strokeStyle = i === S.selectedPoint ? '#f0a030' : '#222';
+    ctx.stroke();
+  });
+  ctx.fillStyle = '#8b949e';
+  ctx.font = '10px system-ui, sans-serif';
+  ctx.textBaseline = 'bottom';
+  if (S.info) {
+    ctx.textAlign = 'left';
+    ctx.fillText(String(fmt(dataValue(S.zoom[0]))), pad.l, h);
+    ctx.textAlign = 'right';
+    ctx.fillText(String(fmt(dataValue(S.zoom[1]))), w - pad.r, h);
+    ctx.textAlign = 'left';
+    $('zoom-lo').value = fmt(dataValue(S.zoom[0]));
+    $('zoom-hi').value = fmt(dataValue(S.zoom[1]));
+  }
+}
+
+function sendTF(quality) {
+  update({ data_tf: { points: S.state.data_tf.points.map((p) => p.slice()) } }, quality);
+  drawTF();
+}
+
+export function syncPointColor() {
+  const p = S.state.data_tf.points[S.selectedPoint];
+  if (!p) return;
+  const hex = (v) => Math.round(v * 255).toString(16).padStart(2, '0');
+  $('point-color').value = `#${hex(p[1])}${hex(p[2])}${hex(p[3])}`;
+}
+
+export function bindTF() {
+  const c = $('tf');
+  const at = (e) => {
+    const r = c.getBoundingClientRect();
+    return [e.clientX - r.left, e.clientY - r.top];
+  };
+  const clamp01 = (v) => Math.max(0, Math.min(1, v));
+  c.addEventListener('pointerdown', (e) => {
+    if (!S.state || e.button !== 0) return;
+    const g = tfGeom();
+    const [x, y] = at(e);
+    const pts = S.state.data_tf.points;
+    let best = -1;
+    let bestD = 9;
+    pts.forEach((p, i) => {
+      const d = Math.hypot(g.X(p[0]) - x, g.Y(p[4]) - y);
+      if (d < bestD) [best, bestD] = [i, d];
+    });
+    if (best < 0) {
+      // A new point on the curve's colour at that value.
+      const u = clamp01(g.U(x));
+      if (pts.some((p) => Math.abs(p[0] - u) < 1e-4) || pts.length >= S.choices.limits.max_tf_points) return;
+      let k = pts.findIndex((p) => p[0] > u);
+      if (k < 0) k = pts.length;
+      const a = pts[Math.max(0, k - 1)];
+      const b = pts[Math.min(pts.length - 1, k)];
+      const f = b[0] === a[0] ? 0 : (u - a[0]) / (b[0] - a[0]);
+      const rgb = [1, 2, 3].map((j) => a[j] + f * (b[j] - a[j]));
+      pts.splice(k, 0, [u, ...rgb, clamp01(g.A(y))]);
+      best = k;
+    }
+    S.selectedPoint = best;
+    syncPointColor();
+    c.setPointerCapture(e.pointerId);
+    tf.drag = { i: best };
+    sendTF('preview');
+  });
+  c.addEventListener('pointermove', (e) => {
+    if (!tf.drag) return;
+    const g = tfGeom();
+    const [x, y] = at(e);
+    const pts = S.state.data_tf.points;
+    const i = tf.drag.i;
+    const lo = i > 0 ? pts[i - 1][0] + 1e-4 : 0;
+    const hi = i < pts.length - 1 ? pts[i + 1][0] - 1e-4 : 1;
+    pts[i][0] = Math.max(lo, Math.min(hi, clamp01(g.U(x))));
+    pts[i][4] = clamp01(g.A(y));
+    sendTF('preview');
+  });
+  const end = () => {
+    if (!tf.drag) return;
+    tf.drag = null;
+    sendTF('full');
+  };
+  c.addEventListener('pointerup', end);
+  c.addEventListener('pointercancel', end);
+  const remove = () => {
+    const pts = S.state.data_tf.points;
+    if (pts.length <= 2) return;
+    pts.splice(S.selectedPoint, 1);
+    S.selectedPoint = Math.min(S.selectedPoint, pts.length - 1);
+    syncPointColor();
+    sendTF('full');
+  };
+  c.addEventListener('dblclick', remove);
+  $('tf-delete').addEventListener('click', remove);
+  $('point-color').addEventListener('input', () => {
+    const p = S.state.data_tf.points[S.selectedPoint];
+    const hex = $('point-color').value;
+    [1, 2, 3].forEach((j, k) => (p[j] = parseInt(hex.slice(1 + 2 * k, 3 + 2 * k), 16) / 255));
+    sendTF('full');
+  });
+  c.addEventListener(
+    'wheel',
+    (e) => {
+      e.preventDefault();
+      const g = tfGeom();
+      const u = g.U(at(e)[0]);
+      const f = Math.exp(e.deltaY * 0.002);
+      const [lo, hi] = S.zoom;
+      let nlo = u - (u - lo) * f;
+      let nhi = u + (hi - u) * f;
+      if (nhi - nlo < 1e-3) return;
+      setZoom(Math.max(0, nlo), Math.min(1, nhi));
+    },
+    { passive: false },
+  );
+  $('tf-reset-zoom').addEventListener('click', () => setZoom(0, 1));
+  const fromInputs = () => {
+    const span = S.info.vmax - S.info.vmin || 1;
+    const lo = (parseFloat($('zoom-lo').value) - S.info.vmin) / span;
+    const hi = (parseFloat($('zoom-hi').value) - S.info.vmin) / span;
+    if (Number.isFinite(lo) && Number.isFinite(hi) && hi - lo > 1e-4) setZoom(Math.max(0, lo), Math.min(1, hi));
+    else drawTF();
+  };
+  $('zoom-lo').addEventListener('change', fromInputs);
+  $('zoom-hi').addEventListener('change', fromInputs);
+}
+
+let histTimer = 0;
+function setZoom(lo, hi) {
+  S.zoom = [lo, hi];
+  drawTF();
+  clearTimeout(histTimer);
+  histTimer = setTimeout(() => send({ type: 'histogram', range: [lo, hi] }), 120);
+}
+
+// Page coordinates of a TF point's handle, for scripted use (the browser tests).
+viewer.tfPointAt = (i) => {
+  const g = tfGeom();
+  const r = $('tf').getBoundingClientRect();
+  const p = S.state.data_tf.points[i];
+  return { x: r.left + g.X(p[0]), y: r.top + g.Y(p[4]) };
+};

@@ -1,0 +1,166 @@
+// The timeline under the views: per-step sparklines of the data, the window brush (drag to
+// select, move or resize it), stride, play, and the arrow keys that slide the window.
+
+import { update } from './connection.js';
+import { $, S, canvasSize, viewer } from './state.js';
+
+const tl = { drag: null };
+
+export function drawTimeline() {
+  if (!S.info) return;
+  const [ctx, w, h] = canvasSize($('timeline'));
+  const T = S.info.shape.t;
+  const cell = w / T;
+  const { t0, t1, stride } = S.state.window;
+  ctx.clearRect(0, 0, w, h);
+  const top = 14;
+  const bottom = h - 14;
+  const ph = bottom - top;
+  const range = S.info.vmax - S.info.vmin || 1;
+  const meanMax = Math.max(...S.info.step_mean.map((v) => v - S.info.vmin), 1e-12);
+  // The window.
+  ctx.fillStyle = 'rgba(240,160,48,0.16)';
+  ctx.fillRect(t0 * cell, 0, (t1 - t0) * cell, h);
+  // Sparklines: mean (filled, own scale) and max (line, over the value range).
+  ctx.beginPath();
+  ctx.moveTo(0, bottom);
+  S.info.step_mean.forEach((v, s) => ctx.lineTo((s + 0.5) * cell, bottom - ((v - S.info.vmin) / meanMax) * ph));
+  ctx.lineTo(w, bottom);
+  ctx.closePath();
+  ctx.fillStyle = 'rgba(120,160,210,0.35)';
+  ctx.fill();
+  ctx.beginPath();
+  S.info.step_max.forEach((v, s) => {
+    const y = bottom - ((v - S.info.vmin) / range) * ph;
+    if (s === 0) ctx.moveTo((s + 0.5) * cell, y);
+    else ctx.lineTo((s + 0.5) * cell, y);
+  });
+  ctx.strokeStyle = 'rgba(230,230,230,0.8)';
+  ctx.lineWidth = 1.2;
+  ctx.stroke();
+  // Selected steps, coloured by their time colour.
+  const colours = new Map(S.legend.map((l) => [l.step, l]));
+  for (let s = t0; s < t1; s += stride) {
+    const l = colours.get(s);
+    ctx.fillStyle = l ? `rgb(${l.rgb.map((c) => Math.round(c * 255)).join(',')})` : '#f0a030';
+    ctx.fillRect(s * cell + cell * 0.15, bottom + 2, Math.max(2, cell * 0.7), 5);
+  }
+  // Brush edges.
+  ctx.strokeStyle = '#f0a030';
+  ctx.lineWidth = 2;
+  ctx.strokeRect(t0 * cell + 1, 1, (t1 - t0) * cell - 2, h - 2);
+  // Axis labels.
+  ctx.fillStyle = '#8b949e';
+  ctx.font = '10px system-ui, sans-serif';
+  ctx.textBaseline = 'bottom';
+  ctx.fillText('0', 3, h - 1);
+  ctx.textAlign = 'right';
+  ctx.fillText(String(T - 1), w - 3, h - 1);
+  ctx.textAlign = 'left';
+  ctx.textBaseline = 'top';
+  ctx.fillText('max ─  mean ▆', 3, 2);
+  $('window-text').textContent = `steps ${t0}:${t1}${stride > 1 ? ':' + stride : ''} (${Math.ceil((t1 - t0) / stride)} of ${T})`;
+}
+
+function setWindow(t0, t1, stride, quality = 'full') {
+  const T = S.info.shape.t;
+  t0 = Math.max(0, Math.min(T - 1, t0));
+  t1 = Math.max(t0 + 1, Math.min(T, t1));
+  const w = S.state.window;
+  if (w.t0 === t0 && w.t1 === t1 && w.stride === stride) return false;
+  update({ window: { t0, t1, stride } }, quality);
+  drawTimeline();
+  return true;
+}
+
+function slide(k) {
+  const { t0, t1, stride } = S.state.window;
+  const T = S.info.shape.t;
+  let shift = k * stride;
+  shift = Math.max(-t0, Math.min(shift, T - t1));
+  if (!shift) return false;
+  return setWindow(t0 + shift, t1 + shift, stride);
+}
+
+export function bindTimeline() {
+  const c = $('timeline');
+  const stepAt = (e) => {
+    const r = c.getBoundingClientRect();
+    return ((e.clientX - r.left) / r.width) * S.info.shape.t;
+  };
+  c.addEventListener('pointerdown', (e) => {
+    if (!S.info) return;
+    c.setPointerCapture(e.pointerId);
+    const x = stepAt(e);
+    const { t0, t1 } = S.state.window;
+    const edge = (0.25 * S.info.shape.t * 8) / c.getBoundingClientRect().width; // 8 px in steps
+    let kind = 'new';
+    if (Math.abs(x - t0) < Math.max(edge, 0.25)) kind = 'left';
+    else if (Math.abs(x - t1) < Math.max(edge, 0.25)) kind = 'right';
+    else if (x > t0 && x < t1) kind = 'move';
+    tl.drag = { kind, x0: x, t0, t1, anchor: Math.floor(x) };
+  });
+  c.addEventListener('pointermove', (e) => {
+    if (!tl.drag) return;
+    const x = stepAt(e);
+    const d = tl.drag;
+    const stride = S.state.window.stride;
+    if (d.kind === 'move') {
+      const T = S.info.shape.t;
+      let shift = Math.round(x - d.x0);
+      shift = Math.max(-d.t0, Math.min(shift, T - d.t1));
+      setWindow(d.t0 + shift, d.t1 + shift, stride, 'preview');
+    } else if (d.kind === 'left') {
+      setWindow(Math.min(Math.round(x), d.t1 - 1), d.t1, stride, 'preview');
+    } else if (d.kind === 'right') {
+      setWindow(d.t0, Math.max(Math.round(x), d.t0 + 1), stride, 'preview');
+    } else {
+      const a = d.anchor;
+      const b = Math.floor(x);
+      setWindow(Math.min(a, b), Math.max(a, b) + 1, stride, 'preview');
+    }
+  });
+  const end = () => {
+    if (!tl.drag) return;
+    tl.drag = null;
+    update({}, 'full');
+  };
+  c.addEventListener('pointerup', end);
+  c.addEventListener('pointercancel', end);
+  $('stride').addEventListener('change', () => {
+    const s = Math.max(1, Math.min(S.info.shape.t, parseInt($('stride').value, 10) || 1));
+    $('stride').value = s;
+    setWindow(S.state.window.t0, S.state.window.t1, s);
+  });
+  $('play').addEventListener('click', () => setPlaying(!S.playing));
+  document.addEventListener('keydown', (e) => {
+    if (!S.info || e.target.closest('input, select, textarea')) return;
+    if (e.key === 'ArrowRight') slide(1);
+    else if (e.key === 'ArrowLeft') slide(-1);
+    else if (e.key === ' ') setPlaying(!S.playing);
+    else return;
+    e.preventDefault();
+  });
+}
+
+let playTimer = 0;
+function setPlaying(on) {
+  S.playing = on;
+  $('play').textContent = on ? '❚❚' : '▶';
+  clearInterval(playTimer);
+  if (!on) return;
+  playTimer = setInterval(() => {
+    // Wait for the frame of the last request before sliding again.
+    if (viewer.last && viewer.last.id < viewer.sent) return;
+    if (!slide(1)) {
+      const { t0, t1, stride } = S.state.window;
+      setWindow(0, t1 - t0, stride);
+    }
+  }, 90);
+}
+
+// Page coordinates of a step on the timeline, for scripted use (the browser tests).
+viewer.timelineAt = (step) => {
+  const r = $('timeline').getBoundingClientRect();
+  return { x: r.left + ((step + 0.5) / S.info.shape.t) * r.width, y: r.top + r.height / 2 };
+};

@@ -1,0 +1,204 @@
+// The view panels: their grid, each panel's mode menu and order button, orbit and zoom by
+// pointer, the probe click, and the frames the server sends into them.
+
+import { send, sentAt, settleLater, update } from './connection.js';
+import { $, S, clamp, setStatus, viewer } from './state.js';
+import { drawTimeline } from './timeline.js';
+
+const PREFERRED_PANEL = 768; // largest panel side the layout asks for (the server allows more)
+export const panels = [];
+
+// One option per item: a name, or {name, label, summary}.
+export function fillSelect(el, items) {
+  el.replaceChildren(
+    ...items.map((item) => {
+      const o = document.createElement('option');
+      const it = typeof item === 'object' ? item : { name: String(item) };
+      o.value = it.name;
+      o.textContent = it.label || it.name;
+      if (it.summary) o.title = it.summary;
+      return o;
+    }),
+  );
+}
+
+export function layoutViews() {
+  const n = S.state.views.length;
+  const box = $('views');
+  const { min_panel: minPanel, max_panel: maxPanel } = S.choices.limits;
+  while (panels.length > n) panels.pop().el.remove();
+  while (panels.length < n) panels.push(makePanel(panels.length));
+  panels.forEach((p, i) => {
+    p.mode.value = S.state.views[i].mode;
+    p.mode.title = S.choices.modes.find((m) => m.name === p.mode.value)?.summary || '';
+    p.order.textContent = S.state.views[i].order || S.choices.orders[0];
+    p.el.classList.toggle('selected', i === S.selectedView && n > 1);
+  });
+  // The grid (columns x rows) that gives the largest square panels.
+  const gap = 6;
+  let cols = 1;
+  let side = 0;
+  for (let c = n; c >= 1; c--) {
+    const r = Math.ceil(n / c);
+    const w = (box.clientWidth - 12 - gap * (c - 1)) / c;
+    const h = (box.clientHeight - 12 - gap * (r - 1)) / r;
+    const s = Math.floor(Math.min(w, h, PREFERRED_PANEL, maxPanel) / 8) * 8;
+    if (s > side * 1.1) [cols, side] = [c, s]; // more rows only for clearly larger panels
+  }
+  side = Math.max(minPanel, side);
+  box.style.gridTemplateColumns = `repeat(${cols}, ${side}px)`;
+  for (const p of panels) {
+    p.el.style.width = `${side}px`;
+    p.el.style.height = `${side}px`;
+  }
+  return [side, side];
+}
+
+function makePanel(i) {
+  const el = document.createElement('div');
+  el.className = 'view';
+  el.dataset.i = i;
+  el.innerHTML =
+    '<img alt="view" draggable="false"><div class="view-head">' +
+    '<select class="mode" title="Integration mode"></select>' +
+    '<button class="order" title="Integration order (which steps are in front)"></button>' +
+    '</div><div class="view-label"></div><div class="probe-mark"></div>';
+  $('views').appendChild(el);
+  const p = {
+    el,
+    img: el.querySelector('img'),
+    mode: el.querySelector('.mode'),
+    order: el.querySelector('.order'),
+    label: el.querySelector('.view-label'),
+    mark: el.querySelector('.probe-mark'),
+  };
+  fillSelect(p.mode, S.choices.modes);
+  p.mode.addEventListener('change', () => {
+    const views = S.state.views.map((v) => ({ ...v }));
+    views[i].mode = p.mode.value;
+    p.mode.title = S.choices.modes.find((m) => m.name === p.mode.value)?.summary || '';
+    update({ views });
+  });
+  p.order.addEventListener('click', () => {
+    const orders = S.choices.orders;
+    const views = S.state.views.map((v) => ({ ...v }));
+    const k = orders.indexOf(views[i].order || orders[0]);
+    views[i].order = orders[(k + 1) % orders.length];
+    p.order.textContent = views[i].order;
+    update({ views });
+  });
+  bindOrbit(p, i);
+  return p;
+}
+
+function bindOrbit(p, i) {
+  const ranges = () => S.choices.ranges.camera;
+  let start = null;
+  p.img.addEventListener('pointerdown', (e) => {
+    if (!S.state) return;
+    p.img.setPointerCapture(e.pointerId);
+    start = { x: e.clientX, y: e.clientY, cam: { ...S.state.camera }, moved: false };
+  });
+  p.img.addEventListener('pointermove', (e) => {
+    if (!start) return;
+    const dx = e.clientX - start.x;
+    const dy = e.clientY - start.y;
+    if (!start.moved && Math.hypot(dx, dy) < 3) return;
+    start.moved = true;
+    const cam = { ...S.state.camera };
+    cam.azimuth = start.cam.azimuth - dx * 0.5;
+    cam.elevation = clamp(start.cam.elevation + dy * 0.5, ranges().elevation);
+    update({ camera: cam }, 'preview');
+  });
+  const end = (e) => {
+    if (!start) return;
+    const wasDrag = start.moved;
+    start = null;
+    if (wasDrag) update({ camera: { ...S.state.camera } }, 'full');
+    else if (e.type === 'pointerup') probeAt(p, i, e);
+  };
+  p.img.addEventListener('pointerup', end);
+  p.img.addEventListener('pointercancel', end);
+  p.img.addEventListener(
+    'wheel',
+    (e) => {
+      e.preventDefault();
+      const cam = { ...S.state.camera };
+      cam.zoom = clamp(cam.zoom * Math.exp(-e.deltaY * 0.0015), ranges().zoom);
+      update({ camera: cam }, 'preview');
+      settleLater();
+    },
+    { passive: false },
+  );
+}
+
+function probeAt(p, i, e) {
+  const r = p.img.getBoundingClientRect();
+  const x = clamp((e.clientX - r.left) / r.width, [0, 1]);
+  const y = clamp((e.clientY - r.top) / r.height, [0, 1]);
+  S.selectedView = i;
+  panels.forEach((q, j) => q.el.classList.toggle('selected', j === i && panels.length > 1));
+  for (const q of panels) q.mark.style.display = 'none';
+  p.mark.style.left = `${x * 100}%`;
+  p.mark.style.top = `${y * 100}%`;
+  p.mark.style.display = 'block';
+  send({ type: 'probe', view: i, x, y });
+}
+
+// ------------------------------------------------------------------ frames
+function fnv(bytes, h) {
+  for (let k = 0; k < bytes.length; k++) {
+    h ^= bytes[k];
+    h = Math.imul(h, 16777619) >>> 0;
+  }
+  return h;
+}
+
+// A binary frame: header length (uint32, big-endian), JSON header, the panels' JPEGs.
+export function onFrame(buf) {
+  const n = new DataView(buf).getUint32(0);
+  const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, n)));
+  let at = 4 + n;
+  let digest = 2166136261;
+  header.views.forEach((v, i) => {
+    const bytes = new Uint8Array(buf, at, v.bytes);
+    at += v.bytes;
+    digest = fnv(bytes, digest);
+    const p = panels[i];
+    if (!p) return;
+    const url = URL.createObjectURL(new Blob([bytes], { type: 'image/jpeg' }));
+    const old = p.img.dataset.url;
+    p.img.src = url;
+    p.img.dataset.url = url;
+    if (old) URL.revokeObjectURL(old);
+    p.label.textContent = v.label;
+  });
+  S.legend = header.legend || [];
+  const now = performance.now();
+  const t0 = sentAt.get(header.id);
+  viewer.frames += 1;
+  if (header.quality === 'full') viewer.full += 1;
+  viewer.last = {
+    id: header.id, seq: header.seq, quality: header.quality, digest, views: header.views.length,
+    timings: header.timings, roundTripMs: t0 === undefined ? null : now - t0,
+  };
+  document.body.dataset.frames = viewer.frames;
+  showTimings(header);
+  drawTimeline();
+}
+
+function showTimings(h) {
+  const t = h.timings;
+  const v = h.views[0];
+  const kb = h.views.reduce((s, x) => s + x.bytes, 0) / 1024;
+  const rt = viewer.last.roundTripMs;
+  const parts = [
+    `integrate ${t.integrate_ms.toFixed(1)} ms${t.incremental ? ' (incremental)' : ''}`,
+    `upload ${t.upload_ms.toFixed(1)} ms`,
+    `render ${t.render_ms.toFixed(1)} ms`,
+    `encode ${t.encode_ms.toFixed(1)} ms`,
+    `${h.views.length}× ${v.width}×${v.height} ${h.format} ${kb.toFixed(0)} KB (${h.quality})`,
+  ];
+  if (rt !== null) parts.push(`round trip ${rt.toFixed(0)} ms`);
+  setStatus(parts.join(' · '));
+}
