@@ -1,8 +1,9 @@
 """The window manager: the time steps of interest resident in memory, under a byte budget.
 
 A `WindowManager` serves whole time steps of one `TimeSeries` as aligned
-(Z, Y, X) numpy blocks, the layout the engine takes as a one-step xytz brick
-and stacks into wider ones. A request names the steps of the current window:
+(Z, Y, X) numpy blocks, the layout the engine takes as a one-step xytz brick;
+`brick` stacks them into wider ones through `chronocl.data.bricks.ResidentBricks`.
+A request names the steps of the current window:
 
 - steps already resident are not read again; missing ones are read on
   background threads, chunk row by chunk row, through zarr (or dask);
@@ -28,6 +29,7 @@ import numpy as np
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, SupersededError
 from chronocl.core.memory import aligned_empty
+from chronocl.data.bricks import ResidentBricks
 from chronocl.data.series import TimeSeries
 
 
@@ -164,7 +166,8 @@ class WindowManager:
 
     def brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
         """Rows [z0, z1) of resident steps as an xytz brick (z1 - z0, W, Y, X)."""
-        return stack_brick(self.get(steps), z0, z1)
+        arrays = dict(zip(steps, self.get(steps), strict=True))
+        return ResidentBricks(arrays).read(steps, z0, z1)
 
     def close(self) -> None:
         with self._lock:
@@ -269,13 +272,3 @@ class WindowManager:
 
 def _round_up_mb(n: int) -> int:
     return -(-n // 10**6)
-
-
-def stack_brick(arrays: Sequence[np.ndarray], z0: int = 0, z1: int | None = None) -> np.ndarray:
-    """Rows [z0, z1) of whole-volume step arrays (Z, Y, X) as an xytz brick (z1 - z0, W, Y, X)."""
-    first = arrays[0]
-    z1 = first.shape[0] if z1 is None else z1
-    out = aligned_empty((z1 - z0, len(arrays), *first.shape[1:]), first.dtype)
-    for i, a in enumerate(arrays):
-        out[:, i] = a[z0:z1]
-    return out

@@ -3,9 +3,11 @@
 `integrate` validates everything at the edge (selection, mode, order, TFs,
 enhancement), then integrates the window slab by slab in z (with a one-voxel
 halo when enhancement needs gradients) and finalises once for the whole
-volume. The engine computes each slab; ``numpy`` is the reference.
-`prepare`, `engine_rows` and `integrate_slabs` are shared with
-`chronocl.integration.streaming`, which writes the slabs to a store instead.
+volume. The engine computes each slab; ``numpy`` is the reference. Bricks come
+from a `chronocl.data.bricks.BrickSource`: the series by default, or steps
+already in memory (`integrate_bricks`). `prepare`, `engine_rows`, `integrate_brick`
+and `integrate_slabs` are shared with the out-of-core run
+(`chronocl.integration.streaming`), which writes the slabs to a store instead.
 """
 
 from __future__ import annotations
@@ -24,10 +26,11 @@ from chronocl.core.memory import aligned_empty
 from chronocl.core.progress import track
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.core.tf import DataTF, TFSetting, TimeTF
-from chronocl.data.bricks import Slab, slabs
+from chronocl.data.bricks import BrickSource, SeriesBricks, Slab, slabs
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import get_engine
+from chronocl.engine.base import Engine
 from chronocl.modes.spec import IntegrationSpec, resolve_order
 from chronocl.reference import Partial
 
@@ -131,59 +134,66 @@ def prepare(
     return Job.of(series, selection, spec, spec.data_tf.value_range or (series.vmin, series.vmax))
 
 
-def engine_rows(eng: object, job: Job) -> int:
+def engine_rows(eng: Engine, job: Job) -> int:
     """Output z-rows per brick that fit the engine (at least 1, else a clear error)."""
     _, ny, nx = job.series.volume_shape
     halo = job.halo
-    fit = eng.max_brick_bytes // max(1, job.row_bytes) - 2 * halo  # type: ignore[attr-defined]
+    fit = eng.max_brick_bytes // max(1, job.row_bytes) - 2 * halo
     if fit < 1:
         itemsize = job.series.dtype.itemsize
-        most = max(1, eng.max_brick_bytes // ((1 + 2 * halo) * ny * nx * itemsize))  # type: ignore[attr-defined]
+        most = max(1, eng.max_brick_bytes // ((1 + 2 * halo) * ny * nx * itemsize))
         raise InvalidParameterError(
             f"one z-row of a {job.selection.width}-step window needs "
             f"{(1 + 2 * halo) * job.row_bytes / 2**20:.0f} MB but the engine holds at most "
-            f"{eng.max_brick_bytes / 2**20:.0f} MB per brick; use a window of at most {most} steps"  # type: ignore[attr-defined]
+            f"{eng.max_brick_bytes / 2**20:.0f} MB per brick; use a window of at most {most} steps"
         )
     return fit
 
 
-OutFor = Callable[[Slab], tuple[np.ndarray, np.ndarray | None]]
+Out = tuple[np.ndarray, np.ndarray | None]
+OutFor = Callable[[Slab], Out]
+Integrate = Callable[[Slab, np.ndarray, Out | None], tuple[Partial, bool]]
+
+
+def integrate_brick(
+    job: Job, eng: Engine, slab: Slab, brick: np.ndarray, out: Out | None = None
+) -> tuple[Partial, bool]:
+    """Integrate the brick of `slab` (rows r0..r1 of the window); returns the slab's partial
+    (into `out` if given) and whether the engine finished it."""
+    steps = job.selection.steps
+    return eng.accumulate(
+        brick, slab.crop, steps, job.positions, job.order, job.spec, job.value_range, out
+    )
 
 
 def integrate_slabs(
-    job: Job,
-    eng: object,
     parts: Sequence[Slab],
+    steps: Sequence[int],
+    bricks: BrickSource,
+    integrate: Integrate,
     out: OutFor,
-    read: Callable[[Sequence[int], int, int], np.ndarray] | None = None,
     read_ahead: bool = True,
 ) -> Iterator[tuple[Slab, Partial, bool]]:
     """Integrate `parts` one after the other; yields (slab, partial, final) per slab.
 
-    `out(slab)` gives the C-contiguous buffers the slab's result is written to. With
-    `read_ahead` the next brick is read on a background thread while the engine integrates
-    this one (double buffering), so at most two bricks are held; without, one.
-    `read(steps, r0, r1)` reads a brick (default: `TimeSeries.read_brick`); when it is
-    called, the brick it returned two calls before (one without read-ahead) is no longer in
-    use.
+    `integrate(slab, brick, out)` integrates one brick (`integrate_brick` with a job and an
+    engine), `out(slab)` gives the C-contiguous buffers the slab's result is written to.
+    With `read_ahead` the next brick is read from `bricks` on a background thread while this
+    one is integrated (double buffering), so at most two bricks are held; without, one.
     """
     if not parts:
         return
-    read = read or job.series.read_brick
-    steps = job.selection.steps
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="chronocl-read") as reader:
-        pending = reader.submit(read, steps, parts[0].r0, parts[0].r1)
+        pending = reader.submit(bricks.read, steps, parts[0].r0, parts[0].r1)
         for i, s in enumerate(parts):
             brick = pending.result()
             nxt = parts[i + 1] if i + 1 < len(parts) else None
             if nxt is not None and read_ahead:
-                pending = reader.submit(read, steps, nxt.r0, nxt.r1)
-            partial, final = eng.accumulate(  # type: ignore[attr-defined]
-                brick, s.crop, steps, job.positions, job.order, job.spec, job.value_range, out(s)
-            )
+                pending = reader.submit(bricks.read, steps, nxt.r0, nxt.r1)
+            partial, final = integrate(s, brick, out(s))
             del brick
             if nxt is not None and not read_ahead:
-                pending = reader.submit(read, steps, nxt.r0, nxt.r1)
+                pending = reader.submit(bricks.read, steps, nxt.r0, nxt.r1)
             yield s, partial, final
 
 
@@ -193,7 +203,7 @@ def integrate(
     mode: str = "alpha",
     *,
     spec: IntegrationSpec | None = None,
-    engine: str | object = "opencl",
+    engine: str | Engine = "opencl",
     device: str | None = None,
     slab: int | None = None,
     progress: bool = False,
@@ -211,23 +221,38 @@ def integrate(
     """
     job = prepare(series, window, mode, spec, spec_args)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
+    return integrate_bricks(job, eng, SeriesBricks(series), slab, progress)
+
+
+def integrate_bricks(
+    job: Job,
+    eng: Engine,
+    bricks: BrickSource,
+    slab: int | None = None,
+    progress: bool = False,
+) -> Chronovolume:
+    """Integrate a prepared `job` with bricks from `bricks` (e.g. steps already resident:
+    `chronocl.data.bricks.ResidentBricks`) into a Chronovolume, as `integrate` does."""
     fit = engine_rows(eng, job)
     slab = fit if slab is None else min(slab, fit)
-    nz, ny, nx = series.volume_shape
+    nz, ny, nx = job.series.volume_shape
     parts = slabs(nz, slab, job.halo)
 
     rgba = aligned_empty((nz, ny, nx, 4), np.float32)
     t_index = aligned_empty((nz, ny, nx), np.int32) if job.spec.has_t_index else None
 
-    def out(s: Slab) -> tuple[np.ndarray, np.ndarray | None]:
+    def out(s: Slab) -> Out:
         # z is the outermost axis, so a slab of the output is a contiguous view.
         return rgba[s.z0 : s.z1], None if t_index is None else t_index[s.z0 : s.z1]
 
+    def integrate_one(s: Slab, brick: np.ndarray, buffers: Out | None) -> tuple[Partial, bool]:
+        return integrate_brick(job, eng, s, brick, buffers)
+
     final = True
-    results = integrate_slabs(job, eng, parts, out)
+    results = integrate_slabs(parts, job.selection.steps, bricks, integrate_one, out)
     for _, _, last in track(results, len(parts), "integrating bricks", progress):
         final = last
     if not final:
-        rgba = reference.finalize(reference.Partial(rgba, t_index), job.positions, job.spec)
+        rgba = reference.finalize(Partial(rgba, t_index), job.positions, job.spec)
     name = getattr(eng, "name", type(eng).__name__)
     return Chronovolume(rgba, t_index, job.metadata(name))
