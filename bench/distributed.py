@@ -55,7 +55,7 @@ def main() -> None:
     import chronocl.integration.distributed as dist
     from chronocl.engine import get_engine
     from chronocl.integration.inmemory import prepare
-    from chronocl.integration.streaming import integrate_to_store
+    from chronocl.integration.streaming import SlabTask, integrate_to_store
 
     emit(env_record("distributed", {"workers": args.workers, "budget": budget}))
     tmp = Path(tempfile.mkdtemp(prefix="chronocl-dist-"))
@@ -88,23 +88,22 @@ def main() -> None:
 
             # One more distributed run with the task function spied, to size what travels.
             job = prepare(series, None, args.mode, None, {})
-            args_dict = dist.task_args(job)
+            remote = SlabTask(job, tmp / "x", "0" * 24).remote()
             results: list[dict] = []
-            real_gather = dist._gather
+            real_run_slabs = dist.DaskExecutor.run_slabs
 
-            def spy_gather(client, futures, total, done, label, progress):
-                out = real_gather(client, futures, total, done, label, progress)
+            def spy(self, task, plan, todo, total):
+                out = real_run_slabs(self, task, plan, todo, total)
                 results.extend(out)
                 return out
 
-            dist._gather = spy_gather
+            dist.DaskExecutor.run_slabs = spy
             try:
                 distributed_run()
             finally:
-                dist._gather = real_gather
+                dist.DaskExecutor.run_slabs = real_run_slabs
             tasks = len(results)
-            call = (args_dict, (0, 1, 0, 1), str(tmp / "x"), "0" * 24, "opencl", None)
-            call_bytes = len(pickle.dumps(call))
+            call_bytes = len(pickle.dumps((remote, (0, 1, 0, 1))))
             sizes.extend(call_bytes + len(pickle.dumps(info)) for info in results)
         for impl, (med, least) in times.items():
             emit(

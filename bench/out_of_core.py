@@ -117,7 +117,8 @@ def child(store: str, out: str, budget: int, mode: str, compressor: str) -> None
     import chronocl
     from chronocl.engine import get_engine
     from chronocl.integration.inmemory import engine_rows, prepare
-    from chronocl.integration.streaming import integrate_to_store, plan_slabs
+    from chronocl.integration.plan import plan_slabs
+    from chronocl.integration.streaming import integrate_to_store
 
     series = open_series(store)
     _, ny, nx = series.volume_shape
@@ -227,24 +228,21 @@ def first_touch(nbytes: int = 2**28) -> dict:
 def stages_alone(series, out: Path, budget: int, mode: str, compressor: str) -> dict:
     """CPU seconds of the integration's work done alone: kernels on bricks already in memory,
     and writing the output it produced (same chunks and codec) into a new store."""
+    from chronocl.data.bricks import SeriesBricks
     from chronocl.data.series import compressors
     from chronocl.engine import get_engine
-    from chronocl.integration.inmemory import engine_rows, prepare
-    from chronocl.integration.streaming import BrickReader, plan_slabs
+    from chronocl.integration.inmemory import engine_rows, integrate_brick, prepare
+    from chronocl.integration.plan import plan_slabs
 
     job = prepare(series, None, mode, None, {})
     eng = get_engine("opencl")
     plan = plan_slabs(job, budget, "opencl", engine_rows(eng, job))
     rows = plan.slab_rows + 2 * job.halo
-    reader = BrickReader(series, rows, job.selection.width, 1, plan.steps_per_read)
+    bricks = SeriesBricks.buffered(series, rows, job.selection.width, 1, plan.steps_per_read)
     kernel_wall = kernel_cpu = 0.0
     for s in plan.slabs:
-        brick = reader.read(job.selection.steps, s.r0, s.r1)
-        w, c = timed(
-            lambda b=brick, s=s: eng.accumulate(
-                b, s.crop, job.selection.steps, job.positions, job.order, job.spec, job.value_range
-            )
-        )
+        brick = bricks.read(job.selection.steps, s.r0, s.r1)
+        w, c = timed(lambda b=brick, s=s: integrate_brick(job, eng, s, b))
         kernel_wall, kernel_cpu = kernel_wall + w, kernel_cpu + c
     src = zarr.open_group(str(out), mode="r")
     dst = zarr.open_group(str(out.with_name("write-alone.zarr")), mode="w", zarr_format=3)
@@ -359,11 +357,11 @@ def pipeline_parts(integrate) -> dict:
 
     engine_class = type(get_engine("opencl"))
 
-    def no_kernel(self, brick, crop, steps, positions, order, spec, value_range, out):
+    def no_kernel(self, brick, crop, steps, positions, order, spec, value_range, out, raw=False):
         return Partial(*out), True
 
-    def no_write(*args) -> float:
-        return 0.0
+    def no_write(*args) -> None:
+        return None
 
     def reads_only() -> None:
         with (

@@ -17,6 +17,7 @@ import pytest
 
 import chronocl
 import chronocl.integration.distributed as dist
+import chronocl.integration.streaming as streaming
 from chronocl.core.errors import EngineUnavailableError, InvalidParameterError
 from chronocl.data.series import write_series
 from chronocl.integration.streaming import RUN_DIR, integrate_to_store, partial_path
@@ -58,8 +59,8 @@ def local(store):
 
 # Functions run on the workers with client.run (imported there from this module).
 def _patch_write_slab(delay: float = 0.0, fail_z0: int | None = None) -> None:
-    real = getattr(dist, "_real_write_slab", dist.write_slab)
-    dist._real_write_slab = real
+    real = getattr(streaming, "_real_write_slab", streaming.write_slab)
+    streaming._real_write_slab = real
 
     def patched(group, job, slab, *rest):
         time.sleep(delay)
@@ -67,12 +68,12 @@ def _patch_write_slab(delay: float = 0.0, fail_z0: int | None = None) -> None:
             raise RuntimeError(f"injected failure in slab {slab.z0}")
         return real(group, job, slab, *rest)
 
-    dist.write_slab = patched
+    streaming.write_slab = patched
 
 
 def _restore_write_slab() -> None:
-    if hasattr(dist, "_real_write_slab"):
-        dist.write_slab = dist._real_write_slab
+    if hasattr(streaming, "_real_write_slab"):
+        streaming.write_slab = streaming._real_write_slab
 
 
 def test_workers_are_spawned_processes(client):
@@ -137,13 +138,13 @@ def test_failed_run_resumes_skipping_finished_slabs(tmp_path, client, store, loc
     assert done and len(done) < 13
 
     submitted: list = []
-    real = dist.run_slab_tasks
+    real = dist.DaskExecutor.run_slabs
 
-    def spy(client, job, plan, tmp, digest, todo, *rest):
+    def spy(self, task, plan, todo, total):
         submitted.extend(todo)
-        return real(client, job, plan, tmp, digest, todo, *rest)
+        return real(self, task, plan, todo, total)
 
-    monkeypatch.setattr(dist, "run_slab_tasks", spy)
+    monkeypatch.setattr(dist.DaskExecutor, "run_slabs", spy)
     integrate_to_store(store, WINDOW, out, mode=mode, slab=1, client=client, **args)
     names = {f"slab-{s.z0:07d}-{s.z1:07d}.json" for s in submitted}
     assert names and names.isdisjoint(done) and len(names) + len(done) == 13
@@ -153,8 +154,6 @@ def test_failed_run_resumes_skipping_finished_slabs(tmp_path, client, store, loc
 def test_local_and_distributed_runs_share_the_resume_markers(tmp_path, client, store, local):
     """A local run cut short is finished on the cluster (same parameters, same bytes)."""
     out = tmp_path / "cv.zarr"
-    import chronocl.integration.streaming as streaming
-
     real, calls = streaming.write_slab, []
 
     def failing(group, job, slab, *rest):

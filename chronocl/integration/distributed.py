@@ -1,14 +1,14 @@
-"""Integration on a dask.distributed cluster: one task per z-slab of the output.
+"""The dask executor: an out-of-core run's slab tasks on a dask.distributed cluster.
 
 `chronocl.integration.streaming.integrate_to_store(..., client=client)` plans the slabs and
-submits one `slab_task` per slab. A task gets only paths, the spec as a dict and its slab bounds;
-on its
-worker it opens the series (a shared file system or object store), integrates with that
-worker's engine (`get_engine` keeps one OpenCL context per worker process), writes its slab of
-the output store directly (slabs are whole output chunks, so no two tasks write one chunk),
-leaves a completion marker and returns a small dict. The scheduler therefore moves kilobytes
-per task, never voxels. A task lost with its worker is re-run elsewhere; rewriting a slab
-writes the same bytes.
+`DaskExecutor` submits one task per slab: the same slab task the local executor runs
+(`streaming.SlabTask`), in the small form it travels in (`SlabTask.remote`): paths, the spec
+as a dict and the slab's bounds. On its worker it opens the series (a shared file system or
+object store), integrates with that worker's engine (`get_engine` keeps one OpenCL context
+per worker process), writes its slab of the output store directly (slabs are whole output
+chunks, so no two tasks write one chunk), leaves a completion marker and returns a small
+dict. The scheduler therefore moves kilobytes per task, never voxels. A task lost with its
+worker is re-run elsewhere; rewriting a slab writes the same bytes.
 
 Workers must be started with the spawn method: PoCL hangs in a forked child once the parent
 holds an OpenCL context. `local_cluster` sets dask's
@@ -23,13 +23,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import threading
-import time
 import uuid
-from collections.abc import Iterator, Sequence
-from pathlib import Path
-
-import zarr
+from collections.abc import Callable, Iterator, Sequence
 
 from chronocl.core.errors import (
     ChronoclError,
@@ -37,21 +32,14 @@ from chronocl.core.errors import (
     InvalidParameterError,
     SlabTaskError,
 )
-from chronocl.core.memory import aligned_empty
 from chronocl.core.progress import meter
 from chronocl.data.bricks import Slab
-from chronocl.data.series import STEPS_PER_READ, TimeSeries, open_series
+from chronocl.data.series import TimeSeries, open_series
 from chronocl.engine import get_engine
+from chronocl.engine.base import Engine
 from chronocl.integration.inmemory import Job
-from chronocl.integration.streaming import (
-    BrickReader,
-    Plan,
-    job_from_dict,
-    job_to_dict,
-    mark_done,
-    normalize_slab,
-    write_slab,
-)
+from chronocl.integration.local import Bounds, SlabWork
+from chronocl.integration.plan import Plan
 
 CONNECT_TIMEOUT = 5.0  # seconds before an unreachable scheduler is reported
 
@@ -122,17 +110,18 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
         yield client
 
 
-def dashboard_link(client: object) -> str | None:
+def dashboard_link(client) -> str | None:
     """The dashboard's address when the scheduler serves one (it needs bokeh)."""
     try:
-        services = client.scheduler_info().get("services", {})  # type: ignore[attr-defined]
-        return client.dashboard_link if "dashboard" in services else None  # type: ignore[attr-defined]
+        services = client.scheduler_info().get("services", {})
+        return client.dashboard_link if "dashboard" in services else None
     except Exception:  # the link is a courtesy; never fail a run over it
         return None
 
 
 # -- on the workers ---------------------------------------------------------------------------
-def _worker_name() -> str:
+def worker_name() -> str:
+    """The address of the dask worker running this code ("local" outside any)."""
     try:
         from distributed import get_worker
 
@@ -141,71 +130,23 @@ def _worker_name() -> str:
         return "local"
 
 
-def _open(store: str, shape: Sequence[int]) -> TimeSeries:
+def open_on_worker(store: str, shape: Sequence[int]) -> TimeSeries:
+    """The series at `store` as this worker sees it, checked to have the client's `shape`."""
     series = open_series(store)
     if list(series.shape) != list(shape):
         raise InvalidParameterError(
-            f"store {store!r} on worker {_worker_name()} has shape {series.shape}, the client "
+            f"store {store!r} on worker {worker_name()} has shape {series.shape}, the client "
             f"saw {tuple(shape)}; give every worker the same data (a shared file system)"
         )
     return series
 
 
-_held = threading.local()  # a worker may run several tasks at once, one per thread
-
-
-def _reader(job: Job, rows: int, per_call: int) -> BrickReader:
-    """A reader whose brick buffer stays with the worker thread from task to task (no fresh
-    pages): one buffer per thread, the size of its largest slab."""
-    _, ny, nx = job.series.volume_shape
-    key = (job.series.dtype.str, job.selection.width, ny, nx)
-    brick = getattr(_held, "brick", {})
-    held = brick.get(key)
-    if held is None or held[0].shape[0] < rows:
-        held = [aligned_empty((rows, *key[1:]), job.series.dtype)]
-        _held.brick = {key: held}
-    return BrickReader(job.series, rows, job.selection.width, held, per_call)
-
-
-def slab_task(
-    job: dict, bounds: tuple[int, int, int, int], out: str, digest: str, engine: str, device
-) -> dict:
-    """Integrate and write one slab; returns {"slab", "max", "seconds", "bytes", "worker"}."""
-    t0 = time.perf_counter()
-    series = _open(job["store"], job["shape"])
-    j = job_from_dict(job, series)
+def engine_on_worker(name: str, device: str | None) -> Engine:
+    """This worker's engine; EngineUnavailableError naming the worker when it has none."""
     try:
-        eng = get_engine(engine, device)
+        return get_engine(name, device)
     except EngineUnavailableError as exc:
-        raise EngineUnavailableError(f"worker {_worker_name()}: {exc}") from None
-    s = Slab(*bounds)
-    per_call = int(job.get("steps_per_read", STEPS_PER_READ))
-    brick = _reader(j, s.r1 - s.r0, per_call).read(j.selection.steps, s.r0, s.r1)
-    partial, final = eng.accumulate(
-        brick, s.crop, j.selection.steps, j.positions, j.order, j.spec, j.value_range
-    )
-    del brick
-    peak = write_slab(zarr.open_group(store=out, mode="r+"), j, s, partial, final)
-    seconds = time.perf_counter() - t0
-    mark_done(Path(out), "slab", s, digest, max=peak, seconds=seconds)
-    return {
-        "slab": s.z0,
-        "max": peak,
-        "seconds": seconds,
-        "bytes": (s.r1 - s.r0) * j.row_bytes,
-        "worker": _worker_name(),
-    }
-
-
-def normalize_task(
-    bounds: tuple[int, int, int, int], out: str, digest: str, chunk_rows: int, peak: float
-) -> dict:
-    """The second pass of additive/max for one slab."""
-    t0 = time.perf_counter()
-    s = Slab(*bounds)
-    normalize_slab(zarr.open_group(store=out, mode="r+"), s, chunk_rows, peak)
-    mark_done(Path(out), "norm", s, digest)
-    return {"slab": s.z0, "seconds": time.perf_counter() - t0}
+        raise EngineUnavailableError(f"worker {worker_name()}: {exc}") from None
 
 
 # -- on the client ----------------------------------------------------------------------------
@@ -221,12 +162,37 @@ def slab_rows_for(client, nz: int) -> int:
     return max(1, -(-nz // (threads * TASKS_PER_THREAD)))
 
 
-def task_args(job: Job) -> dict:
-    """What every slab task gets besides its bounds: paths and the spec, a few kilobytes."""
-    return {**job_to_dict(job), "shape": list(job.series.shape)}
+class DaskExecutor:
+    """Runs slab tasks on the workers of `client`: one submitted task per slab."""
+
+    read_ahead = False  # a task reads its one brick and writes it: nothing to overlap
+
+    def __init__(self, client, progress: bool = False) -> None:
+        self.client = client
+        self.progress = progress
+
+    def max_rows(self, job: Job) -> int:
+        """At most this many rows per slab, so that every worker thread gets several."""
+        return slab_rows_for(self.client, job.series.volume_shape[0])
+
+    def run_slabs(self, task: SlabWork, plan: Plan, todo: Sequence[Slab], total: int) -> list:
+        """Submit the slab task for each slab of `todo` (of `total`); their small results."""
+        return self.run(task.remote(), todo, total, "integrating slabs")
+
+    def run(
+        self, task: Callable[[Bounds], dict], todo: Sequence[Slab], total: int, label: str
+    ) -> list[dict]:
+        """Submit task(bounds) for every slab in `todo`, under keys of this run, and wait."""
+        run, name = uuid.uuid4().hex[:8], type(task).__name__.lower()
+        futures = [
+            self.client.submit(task, s.bounds, key=f"chronocl-{name}-{s.z0}-{run}", pure=False)
+            for s in todo
+        ]
+        return gather(self.client, futures, total, total - len(todo), label, self.progress)
 
 
-def _gather(client, futures: list, total: int, done: int, label: str, progress: bool) -> list:
+def gather(client, futures: list, total: int, done: int, label: str, progress: bool) -> list:
+    """The results of `futures` as they finish (a progress bar); cancels the rest on failure."""
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
 
@@ -247,64 +213,3 @@ def _gather(client, futures: list, total: int, done: int, label: str, progress: 
         client.cancel(futures)
         raise
     return results
-
-
-def run_slab_tasks(
-    client,
-    job: Job,
-    plan: Plan,
-    tmp: Path,
-    digest: str,
-    todo: Sequence[Slab],
-    engine: str,
-    device: str | None,
-    progress: bool,
-) -> list[dict]:
-    """Submit one task per slab still to do and wait for all; returns their small results."""
-    args = {**task_args(job), "steps_per_read": plan.steps_per_read}
-    return _per_slab(
-        client,
-        "slab",
-        slab_task,
-        todo,
-        lambda b: (args, b, str(tmp), digest, engine, device),
-        len(plan.slabs),
-        "integrating slabs",
-        progress,
-    )
-
-
-def _per_slab(client, kind: str, task, todo, args_of, total: int, label: str, progress) -> list:
-    """Run task(*args_of(bounds)) for every slab in `todo`, under keys of this run; wait."""
-    run = uuid.uuid4().hex[:8]
-    futures = [
-        client.submit(
-            task,
-            *args_of((s.z0, s.z1, s.r0, s.r1)),
-            key=f"chronocl-{kind}-{s.z0}-{run}",
-            pure=False,
-        )
-        for s in todo
-    ]
-    return _gather(client, futures, total, total - len(todo), label, progress)
-
-
-def run_normalize_tasks(
-    client,
-    plan: Plan,
-    tmp: Path,
-    digest: str,
-    todo: Sequence[Slab],
-    peak: float,
-    progress: bool,
-) -> list[dict]:
-    return _per_slab(
-        client,
-        "norm",
-        normalize_task,
-        todo,
-        lambda b: (b, str(tmp), digest, plan.chunk_rows, peak),
-        len(plan.slabs),
-        "normalising",
-        progress,
-    )
