@@ -1,7 +1,8 @@
 """Scrubbing: the time to slide a window by one step, W = 8, 16, 32, 64, on 128^3 data.
 
 With absolute time positions a `Session` updates the window incrementally (fixed-point sums
-for additive, a sliding aggregate of partial chronovolumes for the other modes), so a slide
+for modes that slide by inversion, a sliding aggregate of partial chronovolumes for the
+others; every registered mode is timed), so a slide
 should cost the same at any W; with relative positions every slide re-integrates the window
 from resident steps, which grows with W. Each case warms up with W slides (the first slide
 after a jump builds the sliding state from all W steps), then times `--slides` slides one by
@@ -30,15 +31,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import emit, env_record
 
+from chronocl import modes
 from chronocl.core.tf import DataTF, TimeTF
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
 from chronocl.integration.session import Session
 
-MODES = ("alpha", "first_hit", "additive", "max", "min")
+MODES = modes.names()
 # Opacity everywhere: no voxel is empty, so no step can be skipped.
 DENSE_TF = DataTF(points=[(0, 0, 0, 1, 0.02), (0.5, 0, 1, 0, 0.1), (1, 1, 0, 0, 0.5)])
-SPEC_ARGS = {"first_hit": {"threshold": 0.05}}
+THRESHOLD = 0.05  # the opacity threshold, for the modes that have one
 
 
 def make_series(n_steps: int, n: int) -> TimeSeries:
@@ -101,7 +103,7 @@ def main() -> None:
                     mode=mode,
                     data_tf=DENSE_TF,
                     time_tf=time_tf,
-                    **SPEC_ARGS.get(mode, {}),
+                    threshold=THRESHOLD,
                 )
                 for w in widths
             }
