@@ -39,7 +39,7 @@ import chronocl.integration.streaming as streaming
 from chronocl.core import atomic
 from chronocl.core.errors import InvalidDataError, OutputBusyError, OutputExistsError
 from chronocl.data.formats.export import export_series
-from chronocl.data.ingest import ingest_raw
+from chronocl.data.formats.raw import ingest_raw
 from chronocl.data.series import write_series
 from chronocl.integration.inmemory import prepare
 from chronocl.integration.streaming import integrate_to_store, partial_path

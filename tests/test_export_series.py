@@ -16,7 +16,7 @@ from chronocl.core.errors import (
     UnknownNameError,
 )
 from chronocl.data.formats.export import export_series, parse_slab
-from chronocl.data.ingest import ingest_raw
+from chronocl.data.formats.raw import ingest_raw
 
 from .test_export_vti import read_vti
 

@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 import zarr
 
-from chronocl.core.errors import ChronoclError, InputNotFoundError, StoreFormatError
+from chronocl.core.errors import (
+    ChronoclError,
+    InputNotFoundError,
+    StoreChangedError,
+    StoreFormatError,
+)
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
 
 AXES = {
@@ -97,6 +102,17 @@ def test_ngff05_opens_in_place_with_fast_reads_and_statistics(tmp_path):
     np.testing.assert_allclose(s.stats.step_max, data.max(axis=(1, 2, 3)))
     np.testing.assert_allclose(s.stats.step_mean, data.mean(axis=(1, 2, 3)))
     assert s.spacing == (3.0, 2.0, 1.5) and s.times == (0, 1, 2, 3)
+
+
+def test_an_image_read_in_place_is_unchanged_until_its_level_changes(tmp_path):
+    data = np.zeros((4, 3, 5, 6), np.float32)
+    path = tmp_path / "v05.zarr"
+    _write(path, [data], "tzyx", [[1, 1, 1, 1]], 3, chunks=(1, 3, 5, 6))
+    s = open_omezarr(path)
+    s.check_unchanged()  # the level array "0" is what it was: no StoreChangedError
+    zarr.open_array(store=str(path / "0"), mode="r+").resize((5, 3, 5, 6))
+    with pytest.raises(StoreChangedError, match=r"now has shape \(5, 3, 5, 6\)"):
+        s.check_unchanged()
 
 
 def test_time_chunks_larger_than_one_and_other_axis_order_read_through_dask(tmp_path):

@@ -14,7 +14,9 @@ from chronocl.core.errors import (
     OutputExistsError,
     UnknownNameError,
 )
-from chronocl.data.ingest import ingest, ingest_npy, ingest_raw
+from chronocl.data.formats.npy import ingest_npy
+from chronocl.data.formats.raw import ingest_raw
+from chronocl.data.ingest import ingest
 
 SHAPE = (5, 4, 3)  # (Z, Y, X): dims NX NY NZ = 3 4 5
 

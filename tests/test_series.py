@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 import chronocl
 from chronocl import modes
 from chronocl.core.errors import InputNotFoundError, OutputExistsError, StoreFormatError
-from chronocl.data.series import step_runs, write_series
+from chronocl.data.series import write_series
+from chronocl.data.timeseries import step_runs
 
 
 def test_from_array_numpy_and_dask_are_lazy_and_equal(tmp_path):

@@ -18,8 +18,8 @@ import zarr
 from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import StoreFormatError
 from chronocl.data.integrity import checked_read
-from chronocl.data.series import compressors
 from chronocl.data.stores import open_group
+from chronocl.data.writer import compressors
 from chronocl.modes.spec import IntegrationSpec
 
 FORMAT = "chronocl.chronovolume"

@@ -1,4 +1,4 @@
-"""Where a chronovolume can be saved, chosen by the path's suffix.
+"""Where a chronovolume can be saved, chosen by the path's suffix among the registry's outputs.
 
 ``.zarr``: chronocl's own store (reloads with `Chronovolume.load`); ``.ome.zarr``: OME-Zarr
 (NGFF 0.4) image with RGBA channels and the t_index, which napari opens; ``.vti``: VTK XML image
@@ -12,31 +12,26 @@ from pathlib import Path
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
-
-KINDS = {".ome.zarr": "OME-Zarr (napari)", ".zarr": "chronocl zarr", ".vti": "VTK (ParaView)"}
+from chronocl.data.formats.contract import Output
+from chronocl.data.formats.registry import OUTPUTS, output_for
 
 
 def output_kind(path: str | os.PathLike) -> str:
     """The suffix that decides the format; raises for anything else (call before the work)."""
-    name = str(path).lower().rstrip("/")
-    for suffix in KINDS:
-        if name.endswith(suffix):
-            return suffix
-    raise InvalidParameterError(
-        f"cannot tell the chronovolume format of {str(path)!r}; end it in .zarr (chronocl), "
-        ".ome.zarr (napari) or .vti (ParaView)"
-    )
+    return _output(path).suffix
 
 
 def save_chronovolume(cv: Chronovolume, path: str | os.PathLike, overwrite: bool = False) -> Path:
     """Save `cv` in the format its suffix names, atomically."""
-    kind = output_kind(path)
-    if kind == ".vti":
-        from chronocl.data.formats.vti import save_chronovolume_vti
+    return _output(path).save(cv, path, overwrite=overwrite)
 
-        return save_chronovolume_vti(cv, path, overwrite=overwrite)
-    if kind == ".ome.zarr":
-        from chronocl.data.formats.omezarr_write import save_chronovolume_omezarr
 
-        return save_chronovolume_omezarr(cv, path, overwrite=overwrite)
-    return cv.save(path, overwrite=overwrite)
+def _output(path: str | os.PathLike) -> Output:
+    output = output_for(path)
+    if output is None:
+        named = [f"{o.suffix} ({o.opens_in})" for o in OUTPUTS]
+        raise InvalidParameterError(
+            f"cannot tell the chronovolume format of {str(path)!r}; end it in "
+            f"{', '.join(named[:-1])} or {named[-1]}"
+        )
+    return output

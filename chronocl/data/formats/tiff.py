@@ -25,8 +25,11 @@ import numpy as np
 
 from chronocl.core.errors import ChronoclError, InvalidDataError
 from chronocl.core.paths import check_output
-from chronocl.data.ingest import expand_inputs
-from chronocl.data.series import SUPPORTED_DTYPES, TimeSeries, parse_spacing, write_series
+from chronocl.data.formats.contract import Reader, has_suffix
+from chronocl.data.inputs import expand_inputs
+from chronocl.data.metadata import SUPPORTED_DTYPES, parse_spacing
+from chronocl.data.series import write_series
+from chronocl.data.timeseries import TimeSeries
 
 # Words in tifffile's log warnings that mean the file structure is damaged; tifffile logs
 # them and carries on with fewer pages (or a wrong series) instead of raising.
@@ -265,3 +268,11 @@ def _positive(value) -> float:
     except (TypeError, ValueError):
         return 1.0
     return v if np.isfinite(v) and v > 0 else 1.0
+
+
+READER = Reader(
+    "tiff",
+    ingest_tiff,
+    options={"spacing": None},
+    recognises=has_suffix(".tif", ".tiff"),  # .ome.tif(f) too
+)

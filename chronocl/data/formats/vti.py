@@ -1,4 +1,5 @@
-"""Write volumes as VTK XML ImageData (.vti) files that ParaView and VTK open directly.
+"""VTK XML ImageData (.vti) files, which ParaView and VTK open directly: volumes, chronovolumes
+and series steps (one .vti per step and a .pvd collection that opens them as one time series).
 
 The writer needs no VTK: a .vti is a small XML header followed by the arrays in
 "appended raw" encoding (after the ``_`` marker, each array is a UInt64 byte
@@ -8,6 +9,9 @@ Files are written to a temporary sibling and renamed when complete.
 
 Spacing and origin are given in chronocl's (z, y, x) order and written in
 VTK's (x, y, z) order.
+
+An export of steps writes a folder OUT holding ``<stem>_t{step:05d}.vti`` per step, each with
+the point array ``value``, and ``<stem>.pvd``; a z slab's files carry the slab's origin.
 """
 
 from __future__ import annotations
@@ -18,14 +22,18 @@ import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from chronocl.core.atomic import atomic_file
+from chronocl.core.atomic import atomic_directory, atomic_file
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.progress import track
+from chronocl.data.formats.contract import Exporter, Output, StepExport
 
 if TYPE_CHECKING:
     from chronocl.data.chronovolume import Chronovolume
+    from chronocl.data.timeseries import TimeSeries
 
 VTK_TYPES = {
     "int8": "Int8",
@@ -39,6 +47,7 @@ VTK_TYPES = {
     "float32": "Float32",
     "float64": "Float64",
 }
+VTI_ARRAY = "value"  # the point array of each exported step
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")
 _HEADER = np.dtype("<u8")
 
@@ -105,6 +114,47 @@ def save_chronovolume_vti(
     return write_vti(path, arrays, spacing=cv.spacing, overwrite=overwrite)
 
 
+def export_vti(job: StepExport) -> list[Path]:
+    """Write each step as a .vti and the .pvd collection of them; the .pvd comes first."""
+    series, target, steps = job.series, job.target, job.steps
+    dz = series.spacing[0]
+    names = [job.step_name(s, ".vti") for s in steps]
+    with atomic_directory(target, job.overwrite) as tmp:
+        tmp.mkdir(parents=True)
+        for s, name in zip(
+            track(steps, len(steps), "exporting .vti", job.progress), names, strict=True
+        ):
+            write_vti(
+                tmp / name,
+                {VTI_ARRAY: job.read(s)},
+                spacing=series.spacing,
+                origin=(job.z0 * dz, 0.0, 0.0),
+            )
+        entries = "\n".join(
+            f'    <DataSet timestep="{_time_value(series, s)}" group="" part="0" '
+            f"file={quoteattr(name)}/>"
+            for s, name in zip(steps, names, strict=True)
+        )
+        pvd = (
+            '<?xml version="1.0"?>\n'
+            '<VTKFile type="Collection" version="1.0" byte_order="LittleEndian">\n'
+            "  <Collection>\n"
+            f"{entries}\n"
+            "  </Collection>\n"
+            "</VTKFile>\n"
+        )
+        (tmp / f"{job.stem}.pvd").write_text(pvd, encoding="utf-8")
+    return [target / f"{job.stem}.pvd", *(target / n for n in names)]
+
+
+def _time_value(series: TimeSeries, step: int) -> str:
+    """The step's time label when it is a number, else the step index."""
+    label = series.times[step] if step < len(series.times) else step
+    if isinstance(label, bool) or not isinstance(label, int | float):
+        return str(step)
+    return repr(label)
+
+
 def _check_arrays(arrays: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     if not arrays:
         raise InvalidParameterError("a .vti needs at least one array; none were given")
@@ -155,3 +205,7 @@ def _write_block(f: BinaryIO, a: np.ndarray) -> None:
     little = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
     f.write(np.array([little.nbytes], dtype=_HEADER).tobytes())
     f.write(memoryview(little.reshape(-1).view(np.uint8)))
+
+
+OUTPUT = Output(".vti", "ParaView", save_chronovolume_vti)
+EXPORTER = Exporter("vti", export_vti)

@@ -1,0 +1,146 @@
+"""Headerless raw volumes: ingest one file per time step, export steps as raw files.
+
+Raw files are x fastest then y then z, as the classic vortex and jet data sets are shipped.
+Files come as globs or a list and are sorted naturally (step2 before step10); every size is
+checked before the first byte is written. An export writes a folder OUT of
+``<stem>_t{step:05d}.raw`` files (little-endian) and ``<stem>.json`` with dims, dtype,
+endianness and spacing, so ``chronocl ingest 'OUT/<stem>_t*.raw' --dims NX NY NZ ...`` reads
+them back.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from chronocl.core.atomic import atomic_directory
+from chronocl.core.errors import InvalidDataError, InvalidParameterError, UnknownNameError
+from chronocl.core.progress import track
+from chronocl.data.formats.contract import Exporter, Reader, StepExport
+from chronocl.data.inputs import expand_inputs
+from chronocl.data.metadata import SUPPORTED_DTYPES
+from chronocl.data.series import write_series
+from chronocl.data.timeseries import TimeSeries
+
+ENDIANS = ("little", "big")
+
+
+def ingest_raw(
+    inputs: Sequence[str | os.PathLike],
+    out: str | os.PathLike,
+    dims: Sequence[int] | None = None,
+    dtype: str = "float32",
+    endian: str = "little",
+    spacing: Sequence[float] | None = None,
+    times: Sequence | None = None,
+    nan_fill: float | None = None,
+    overwrite: bool = False,
+    progress: bool = False,
+) -> TimeSeries:
+    """One raw file per time step; `dims` is (NX, NY, NZ), `spacing` is (dz, dy, dx)."""
+    if dims is None:
+        raise InvalidParameterError(
+            "raw input needs --dims NX NY NZ (and --dtype, --endian if not float32 little-endian)"
+        )
+    if dtype not in SUPPORTED_DTYPES:
+        raise UnknownNameError(
+            f"unknown dtype {dtype!r}; choose one of {', '.join(SUPPORTED_DTYPES)}"
+        )
+    if endian not in ENDIANS:
+        raise UnknownNameError(f"unknown endianness {endian!r}; choose little or big")
+    if len(dims) != 3 or any(int(n) < 1 for n in dims):
+        raise InvalidParameterError(
+            f"dims {list(dims)} must be three positive sizes NX NY NZ (e.g. --dims 128 128 128)"
+        )
+    nx, ny, nz = (int(n) for n in dims)
+    files = expand_inputs(inputs)
+    file_dtype = np.dtype(dtype).newbyteorder("<" if endian == "little" else ">")
+    expected = nx * ny * nz * file_dtype.itemsize
+    sizes = {f: f.stat().st_size for f in files}
+    distinct = sorted(set(sizes.values()))
+    if len(distinct) > 1:
+        a = next(f for f in files if sizes[f] == distinct[0])
+        b = next(f for f in files if sizes[f] == distinct[-1])
+        raise InvalidDataError(
+            f"input files differ in size ({a.name}: {sizes[a]} bytes, {b.name}: {sizes[b]} "
+            "bytes); every time step must have the same dims"
+        )
+    if distinct[0] != expected:
+        raise InvalidDataError(
+            f"{files[0].name} has {distinct[0]} bytes but --dims {nx} {ny} {nz} --dtype {dtype} "
+            f"needs {expected}; check --dims and --dtype"
+        )
+
+    def steps() -> Iterator[np.ndarray]:
+        for f in files:
+            raw = np.fromfile(f, dtype=file_dtype, count=nx * ny * nz)
+            yield raw.reshape(nz, ny, nx).astype(np.dtype(dtype), copy=False)
+
+    return write_series(
+        out,
+        steps(),
+        n_steps=len(files),
+        volume_shape=(nz, ny, nx),
+        dtype=dtype,
+        spacing=(1.0, 1.0, 1.0) if spacing is None else spacing,
+        times=times,
+        source=f"raw: {files[0].parent}/{files[0].name} .. {files[-1].name} ({len(files)} files)",
+        overwrite=overwrite,
+        progress=progress,
+        nan_fill=nan_fill,
+        labels=[f"{f.name} (step {t})" for t, f in enumerate(files)],
+    )
+
+
+def export_raw(job: StepExport) -> list[Path]:
+    """Write each step as a raw file and the .json that says how to read them back."""
+    series, target, steps = job.series, job.target, job.steps
+    names = [job.step_name(s, ".raw") for s in steps]
+    little = series.dtype.newbyteorder("<")
+    _, _, ny, nx = series.shape
+    dz, dy, dx = series.spacing
+    dims = [nx, ny, job.z1 - job.z0]
+    sidecar = {
+        "format": "chronocl.raw",
+        "version": 1,
+        "dims": dims,
+        "dims_order": "x y z (x fastest)",
+        "dtype": series.dtype.name,
+        "endian": "little",
+        "spacing": {"x": dx, "y": dy, "z": dz},
+        "origin": {"x": 0.0, "y": 0.0, "z": job.z0 * dz},
+        "z_slab": [job.z0, job.z1],
+        "steps": list(steps),
+        "times": [series.times[s] for s in steps],
+        "files": names,
+        "ingest": (
+            f"chronocl ingest '{job.stem}_t*.raw' -o {job.stem}.zarr --dims {nx} {ny} "
+            f"{job.z1 - job.z0} --dtype {series.dtype.name} --endian little "
+            f"--spacing {dx!r} {dy!r} {dz!r}"
+        ),
+    }
+    with atomic_directory(target, job.overwrite) as tmp:
+        tmp.mkdir(parents=True)
+        for s, name in zip(
+            track(steps, len(steps), "exporting .raw", job.progress), names, strict=True
+        ):
+            data = np.ascontiguousarray(job.read(s), dtype=little)
+            with open(tmp / name, "wb") as f:
+                f.write(memoryview(data.reshape(-1).view(np.uint8)))
+        (tmp / f"{job.stem}.json").write_text(
+            json.dumps(sidecar, indent=2) + "\n", encoding="utf-8"
+        )
+    return [target / f"{job.stem}.json", *(target / n for n in names)]
+
+
+READER = Reader(
+    "raw",
+    ingest_raw,
+    options={"dims": None, "dtype": "float32", "endian": "little", "spacing": None, "times": None},
+    recognises=None,  # headerless: any file that no other reader recognises
+)
+EXPORTER = Exporter("raw", export_raw)

@@ -1,0 +1,147 @@
+"""Writing time steps into a new chronocl store, atomically, gathering statistics on the way.
+
+Store layout (zarr v3): a group whose array ``data`` is (T, Z, Y, X), chunked (1, zc, Y, X) so
+one step is one small set of chunks, and whose attribute ``chronocl`` holds the global value
+range, per-step min/max/mean, voxel spacing, time labels and a source description. Every chunk
+is written, empty ones included, so a missing chunk always means damage.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+import zarr
+from zarr.codecs import BloscCodec, Crc32cCodec, ZstdCodec
+
+from chronocl.core.atomic import atomic_directory
+from chronocl.core.errors import InvalidDataError, InvalidParameterError
+from chronocl.core.progress import track
+from chronocl.data.metadata import (
+    FORMAT,
+    check_dtype,
+    check_shape,
+    parse_spacing,
+    parse_times,
+    stats_from_steps,
+)
+
+CHUNK_BYTES = 16 * 2**20
+COMPRESSORS = ("zstd", "blosc-lz4", "none")
+
+
+def compressors(name: str, checksum: bool = True) -> object:
+    """zarr v3 compressors for a name in COMPRESSORS (zstd level 0 is zarr's default).
+
+    With `checksum` a crc32c of every encoded chunk follows the compressor, so a chunk whose
+    bytes changed on disk fails to read (StoreCorruptError) instead of decoding to other values.
+    """
+    if name not in COMPRESSORS:
+        raise InvalidParameterError(
+            f"unknown compressor {name!r}; choose one of {', '.join(COMPRESSORS)}"
+        )
+    chain = {
+        "zstd": [ZstdCodec(level=0)],
+        "blosc-lz4": [BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")],
+        "none": [],
+    }[name]
+    if checksum:
+        chain.append(Crc32cCodec())
+    return tuple(chain) or None
+
+
+def write_store(
+    path: str | os.PathLike,
+    steps: Iterable[np.ndarray],
+    *,
+    n_steps: int,
+    volume_shape: Sequence[int],
+    dtype: object,
+    spacing: Sequence[float] = (1.0, 1.0, 1.0),
+    times: Sequence | None = None,
+    source: str = "",
+    overwrite: bool = False,
+    progress: bool = False,
+    nan_fill: float | None = None,
+    labels: Sequence[str] | None = None,
+    chunk_bytes: int = CHUNK_BYTES,
+    compressor: str = "zstd",
+    checksum: bool = True,
+) -> None:
+    """Write steps (each (Z, Y, X)) to a new store at `path` atomically.
+
+    Non-finite values are rejected unless `nan_fill` is given, which replaces them.
+    `labels` name each step's origin (e.g. its file) in error messages. Chunks are
+    (1, zc, Y, X) of at most `chunk_bytes` (small chunks suit small streaming budgets);
+    `compressor` is one of COMPRESSORS; `checksum` adds a crc32c per chunk.
+    """
+    dt = np.dtype(dtype)
+    check_dtype(dt)
+    if nan_fill is not None and not (
+        isinstance(nan_fill, int | float | np.number) and math.isfinite(nan_fill)
+    ):
+        raise InvalidParameterError(
+            f"--nan-fill {nan_fill} must be a finite number (it replaces NaN and infinite values)"
+        )
+    shape = (int(n_steps), *(int(n) for n in volume_shape))
+    check_shape(shape, source or str(path))
+    spacing = parse_spacing(spacing)
+    times = parse_times(times, n_steps)
+    z, y, x = shape[1:]
+    zc = max(1, min(z, int(chunk_bytes) // max(1, y * x * dt.itemsize)))
+    codecs = compressors(compressor, checksum)
+    smin, smax, smean = [], [], []
+    with atomic_directory(path, overwrite) as tmp:
+        group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
+        arr = group.create_array(
+            "data",
+            shape=shape,
+            chunks=(1, zc, y, x),
+            dtype=dt,
+            compressors=codecs,
+            config={"write_empty_chunks": True},  # a missing chunk then always means damage
+        )
+        count = 0
+        for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
+            where = labels[t] if labels else f"time step {t}"
+            step = np.asarray(step)
+            if t >= n_steps:
+                raise InvalidDataError(f"got more than the {n_steps} steps announced")
+            if step.shape != shape[1:]:
+                raise InvalidDataError(
+                    f"{where} has shape {step.shape}, expected {shape[1:]} (Z, Y, X)"
+                )
+            if dt.kind == "f":
+                bad = ~np.isfinite(step)
+                n_bad = int(bad.sum())
+                if n_bad:
+                    if nan_fill is None:
+                        raise InvalidDataError(
+                            f"{where} has {n_bad} NaN/infinite values; pass --nan-fill VALUE "
+                            "(nan_fill=...) to replace them"
+                        )
+                    step = np.where(bad, dt.type(nan_fill), step)
+            step = step.astype(dt, copy=False)
+            arr[t] = step
+            smin.append(float(step.min()))
+            smax.append(float(step.max()))
+            smean.append(float(step.mean(dtype=np.float64)))
+            count += 1
+        if count != n_steps:
+            raise InvalidDataError(f"got {count} time steps, expected {n_steps}")
+        stats = stats_from_steps(smin, smax, smean)
+        group.attrs["chronocl"] = {
+            "format": FORMAT,
+            "version": 1,
+            "chunks": "complete",
+            "vmin": stats.vmin,
+            "vmax": stats.vmax,
+            "step_min": list(stats.step_min),
+            "step_max": list(stats.step_max),
+            "step_mean": list(stats.step_mean),
+            "spacing": {"x": spacing[2], "y": spacing[1], "z": spacing[0]},
+            "times": list(times),
+            "source": source,
+        }
