@@ -1,6 +1,7 @@
 """The package reads top-down: no import cycles, no upward imports, no private names borrowed.
 
-Every import in every module counts, including those inside functions. Layers, lowest first
+Every import in every module counts, including those inside functions (those under
+`if TYPE_CHECKING:`, for annotations only, never run). Layers, lowest first
 (docs/architecture.md): core <- modes <- data <- engine <- integration <- render <- viewer
 <- the command line (cli, demo, the package's face).
 """
@@ -49,7 +50,18 @@ def _imports(module: str) -> list[tuple[str, str | None, int]]:
     path = MODULES[module]
     is_pkg = path.name == "__init__.py"
     found = []
-    for node in ast.walk(ast.parse(path.read_text())):
+    tree = ast.parse(path.read_text())
+    # Imports under `if TYPE_CHECKING:` are for annotations only and never run.
+    typing_only = {
+        id(n)
+        for block in ast.walk(tree)
+        if isinstance(block, ast.If) and ast.unparse(block.test).endswith("TYPE_CHECKING")
+        for stmt in block.body
+        for n in ast.walk(stmt)
+    }
+    for node in ast.walk(tree):
+        if id(node) in typing_only:
+            continue
         if isinstance(node, ast.Import):
             found += [(a.name, None, node.lineno) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
