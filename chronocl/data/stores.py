@@ -8,6 +8,7 @@ from pathlib import Path
 import zarr
 
 from chronocl.core.errors import InputNotFoundError, StoreFormatError
+from chronocl.data.integrity import CheckedStore
 
 
 def open_group(path: str | os.PathLike, what: str, checked: tuple[str, ...] = ()) -> zarr.Group:
@@ -16,8 +17,6 @@ def open_group(path: str | os.PathLike, what: str, checked: tuple[str, ...] = ()
     Missing chunks of the `checked` arrays raise StoreCorruptError when the group's
     attribute ``chronocl.chunks`` says that every chunk was written.
     """
-    from chronocl.data.integrity import CheckedStore
-
     p = Path(path)
     if not p.exists():
         raise InputNotFoundError(f"{what} {str(p)!r} does not exist")

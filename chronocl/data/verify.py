@@ -16,6 +16,7 @@ import numpy as np
 
 from chronocl.core.errors import StoreFormatError
 from chronocl.core.progress import track
+from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.integrity import damaged
 from chronocl.data.series import TimeSeries, open_series
 
@@ -25,8 +26,6 @@ def verify(path: str | os.PathLike, progress: bool = False) -> dict:
     try:
         series = open_series(path)
     except StoreFormatError:
-        from chronocl.data.chronovolume import Chronovolume
-
         cv = Chronovolume.load(path)  # reads and checks every chunk
         return {"chronovolume": str(path), "shape (Z, Y, X)": list(cv.shape), "status": "ok"}
     _check_steps(series, progress)

@@ -1,1 +1,1 @@
-"""Readers for input formats (NetCDF, TIFF, OME-Zarr) that feed `chronocl ingest`."""
+"""The file formats chronocl reads and writes, one module each, listed in `registry`."""
