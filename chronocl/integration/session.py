@@ -33,12 +33,12 @@ from chronocl.core import values
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection, parse_selection
-from chronocl.data.bricks import stack_brick
+from chronocl.data.bricks import ResidentBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.engine import get_engine
-from chronocl.integration.inmemory import Job, integrate, make_spec, prepare
+from chronocl.integration.inmemory import Job, integrate_bricks, make_spec, prepare
 from chronocl.integration.sliding import SlidingAggregate, block_size
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.reference import Partial
@@ -196,12 +196,8 @@ class Session:
         return partials + 8 * mode.sum_channels * voxels
 
     def _reintegrate(self, selection: Selection) -> Chronovolume:
-        return integrate(
-            _ResidentSeries(self.series, self._arrays),
-            selection,
-            spec=self.spec,
-            engine=self.engine,
-        )
+        job = prepare(self.series, selection, spec=self.spec)
+        return integrate_bricks(job, self.engine, ResidentBricks(self._arrays))
 
 
 class _Slider:
@@ -342,17 +338,3 @@ class _Slider:
         if spec.order == "backward":
             return engine.combine(later, earlier, spec)
         return engine.combine(earlier, later, spec)
-
-
-class _ResidentSeries:
-    """A TimeSeries whose bricks come from resident step arrays (re-integration reads nothing)."""
-
-    def __init__(self, series: TimeSeries, arrays: dict[int, np.ndarray]) -> None:
-        self._series = series
-        self._arrays = arrays
-
-    def __getattr__(self, name: str):
-        return getattr(self._series, name)
-
-    def read_brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
-        return stack_brick([self._arrays[int(s)] for s in steps], z0, z1)
