@@ -11,6 +11,7 @@ from typing import Annotated
 
 import typer
 
+from chronocl import modes
 from chronocl.cli.options import (
     STORE_HINT,
     DeviceOpt,
@@ -37,7 +38,7 @@ def integrate(
             help="Chronovolume to write: .zarr, .ome.zarr (napari) or .vti (ParaView).",
         ),
     ],
-    mode: Annotated[str, typer.Option(help=f"{mode_choices()}.")] = "alpha",
+    mode: Annotated[str, typer.Option(help=f"{mode_choices()}.")] = modes.DEFAULT,
     window: WindowOpt = None,
     order: OrderOpt = "forward",
     tf: TfOpt = None,

@@ -9,6 +9,7 @@ from typing import Annotated
 
 import typer
 
+from chronocl import modes
 from chronocl.cli.options import (
     STORE_HINT,
     DeviceOpt,
@@ -39,7 +40,7 @@ def render(
         typer.Option(
             help=f"Mode(s) of {mode_choices()}; repeat or comma-separate for parallel views."
         ),
-    ] = ["alpha"],  # noqa: B006
+    ] = [modes.DEFAULT],  # noqa: B006
     window: WindowOpt = None,
     order: OrderOpt = "forward",
     tf: TfOpt = None,

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
+from chronocl import modes
 from chronocl.core.budget import DEFAULT_MEMORY, parse_memory
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.data.chronovolume import Chronovolume
@@ -24,7 +25,8 @@ from chronocl.data.formats.outputs import output_kind, save_chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import ENGINES
 from chronocl.integration.inmemory import Job, integrate, prepare
-from chronocl.integration.streaming import fits_in_memory, integrate_to_store
+from chronocl.integration.plan import fits_in_memory
+from chronocl.integration.streaming import integrate_to_store
 from chronocl.modes.spec import IntegrationSpec
 
 IN_MEMORY, STREAMED, DASK = "in memory", "streamed", "dask"
@@ -137,7 +139,7 @@ def plan_run(
     window: object = None,
     out_path: str | os.PathLike = "chronovolume.zarr",
     *,
-    mode: str = "alpha",
+    mode: str = modes.DEFAULT,
     spec: IntegrationSpec | None = None,
     memory: str | int | None = None,
     engine: str = "opencl",

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from chronocl import reference
+from chronocl import modes, reference
 from chronocl.core.enhance import Enhance
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.memory import aligned_empty
@@ -36,7 +36,7 @@ from chronocl.reference import Partial
 
 
 def make_spec(
-    mode: str = "alpha",
+    mode: str = modes.DEFAULT,
     *,
     tf: TFSetting | str | os.PathLike | None = None,
     data_tf: DataTF | None = None,
@@ -121,7 +121,7 @@ class Job:
 def prepare(
     series: TimeSeries,
     window: object = None,
-    mode: str = "alpha",
+    mode: str = modes.DEFAULT,
     spec: IntegrationSpec | None = None,
     spec_args: dict | None = None,
 ) -> Job:
@@ -200,7 +200,7 @@ def integrate_slabs(
 def integrate(
     series: TimeSeries,
     window: object = None,
-    mode: str = "alpha",
+    mode: str = modes.DEFAULT,
     *,
     spec: IntegrationSpec | None = None,
     engine: str | Engine = "opencl",

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from chronocl import reference
+from chronocl import modes, reference
 from chronocl.core.atomic import RUN_DIR
 from chronocl.core.budget import parse_memory
 from chronocl.core.errors import InvalidParameterError
@@ -229,7 +229,7 @@ def integrate_to_store(
         )
     if engine not in ("opencl", "numpy"):
         raise InvalidParameterError(f"unknown engine {engine!r}; choose opencl or numpy")
-    mode = str(spec_args.pop("mode", "alpha"))
+    mode = str(spec_args.pop("mode", modes.DEFAULT))
     job = prepare(series, window, mode, spec, spec_args)
     budget = parse_memory(memory)
     if client is None:

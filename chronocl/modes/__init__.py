@@ -23,8 +23,9 @@ _MODES: tuple[Mode, ...] = (
     count.MODE,
 )
 REGISTRY: dict[str, Mode] = {m.name: m for m in _MODES}
+DEFAULT = alpha.MODE.name  # the mode used when none is named
 
-__all__ = ["REGISTRY", "Mode", "Partial", "get", "names"]
+__all__ = ["DEFAULT", "REGISTRY", "Mode", "Partial", "get", "names"]
 
 
 def names() -> tuple[str, ...]:

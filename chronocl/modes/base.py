@@ -78,7 +78,12 @@ class Mode:
         return partial.rgba.astype(np.float32, copy=False)
 
     def finalize_is_global(self, spec: IntegrationSpec) -> bool:
-        """Whether finishing needs the whole volume (e.g. a normalisation by its maximum)."""
+        """Whether finishing needs the whole volume (e.g. a normalisation by its maximum).
+
+        Such a mode may depend on the rest of the volume only through the per-channel maxima
+        of its raw partial: out-of-core runs record those per slab and finish each chunk
+        with them (`chronocl.integration.runstore.FinishTask`).
+        """
         return False
 
     # -- sliding windows --------------------------------------------------------------------

@@ -34,7 +34,7 @@ class IntegrationSpec:
     N = Σ a_t·rgb_t; ``max``: by the volume's largest channel value).
     """
 
-    mode: str = "alpha"
+    mode: str = modes.DEFAULT
     order: str | tuple[int, ...] = "forward"
     data_tf: DataTF = field(default_factory=DataTF)
     time_tf: TimeTF = field(default_factory=TimeTF)
