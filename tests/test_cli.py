@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import chronocl
+from chronocl import modes
 
 
 def cli(*args: str, cwd=None) -> subprocess.CompletedProcess:
@@ -157,3 +158,49 @@ def test_an_os_error_past_the_checks_is_one_line(monkeypatch, small_store, tmp_p
     errors = [line for line in stderr.splitlines() if line.startswith("chronocl: error: ")]
     assert len(errors) == 1 and stderr.rstrip().endswith(errors[0]), stderr
     assert str(tmp_path / "f") in errors[0] and "Traceback" not in stderr
+
+
+def test_the_mode_lists_come_from_the_registry():
+    from typer.testing import CliRunner
+
+    from chronocl.cli import app
+
+    names = modes.names()
+    helps = {}
+    for command in ("integrate", "render"):
+        result = CliRunner().invoke(app, [command, "--help"])
+        assert result.exit_code == 0, result.output
+        helps[command] = " ".join(result.output.split()).replace("- ", "-")
+        assert f"{', '.join(names[:-1])} or {names[-1]}" in helps[command]
+    for name in names:  # the integrate help's Modes section: each name with its summary
+        assert f"{name} {' '.join(modes.get(name).summary.split())}" in helps["integrate"]
+    assert "Examples:" in helps["integrate"]
+
+
+@pytest.mark.parametrize("mode", modes.names())
+def test_every_registered_mode_integrates(monkeypatch, small_store, tmp_path, mode):
+    from chronocl.cli import main
+
+    out = tmp_path / f"{mode}.zarr"
+    argv = ["chronocl", "integrate", str(small_store), str(out), "--mode", mode]
+    monkeypatch.setattr(sys, "argv", [*argv, "--window", "0:5:2", "--engine", "numpy"])
+    with pytest.raises(SystemExit) as info:
+        main()
+    assert info.value.code in (0, None)
+    cv = chronocl.Chronovolume.load(out)
+    expected = chronocl.integrate(chronocl.open(small_store), "0:5:2", mode, engine="numpy")
+    np.testing.assert_array_equal(cv.rgba, expected.rgba)
+
+
+def test_plan_run_picks_where_the_integration_runs(small_store, tmp_path):
+    from chronocl.core.errors import InvalidParameterError
+    from chronocl.integration.auto import DASK, IN_MEMORY, STREAMED, plan_run
+
+    series = chronocl.open(small_store)
+    assert plan_run(series, None, tmp_path / "a.vti").where == IN_MEMORY
+    tight = plan_run(series, None, tmp_path / "a.zarr", memory=1000)
+    assert tight.where == STREAMED and tight.streamed
+    with pytest.raises(InvalidParameterError, match="needs more than --memory 1000"):
+        plan_run(series, None, tmp_path / "a.vti", memory=1000)
+    assert plan_run(series, None, tmp_path / "a.zarr", workers=2).where == DASK
+    assert not list(tmp_path.iterdir())  # planning writes nothing

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import chronocl
-from chronocl.demo import run_demo
+from chronocl.demo import FIGURES, run_demo
 
 from .test_cli import assert_one_line_error, cli
 
@@ -139,7 +139,7 @@ def test_bad_render_options(tmp_path, vortex, args, needle):
 
 def test_demo_writes_the_gallery(tmp_path):
     paths = run_demo(tmp_path, shape_xyz=(24, 24, 24), n_steps=30, size=64)
-    assert len(paths) == 6 and all(p.exists() for p in paths)
+    assert len(paths) == len(FIGURES) and all(p.exists() for p in paths)
     assert (tmp_path / "gallery.png").exists()
     page = (tmp_path / "index.html").read_text()
     assert all(p.name in page for p in paths) and "white where all steps" in page
