@@ -41,6 +41,7 @@ INTEGRATION_KEYS = {
     "IS_MIN",
     "NORM_TIME",
     "RAW_PARTIAL",
+    "TIME_ORDER",
     "ALIGNED",
 }
 BOOLS = (False, True)
@@ -58,11 +59,12 @@ def integration_combinations(name: str):
     lanes = ((0, 16), (0, 1), (1, 1), (2, 1))  # (ENHANCE, VEC): enhancement is VEC=1 only
     norm = BOOLS if name == "additive" else (False,)
     partial = BOOLS if mode.slides == "invert" else (False,)
+    time_order = (0, 1, 2) if name == "change" else (False,)
     for (t, quant, raw), (
         enh,
         vec,
-    ), const, early, skip, aligned, norm_time, raw_partial, lut_n in itertools.product(
-        data, lanes, BOOLS, BOOLS, BOOLS, BOOLS, norm, partial, (256, 65536)
+    ), const, early, skip, aligned, norm_time, raw_partial, order, lut_n in itertools.product(
+        data, lanes, BOOLS, BOOLS, BOOLS, BOOLS, norm, partial, time_order, (256, 65536)
     ):
         if quant and (lut_n != 256 or mode.lut_by_value):  # one LUT entry per byte value
             continue
@@ -80,6 +82,7 @@ def integration_combinations(name: str):
             "IS_MIN": name == "min",
             "NORM_TIME": norm_time,
             "RAW_PARTIAL": raw_partial,
+            "TIME_ORDER": order,
             "ALIGNED": aligned,
         }
 

@@ -54,6 +54,9 @@ class Change(Mode):
     def combine(self, front, back, spec):
         return MAX.combine(front, back, spec)
 
+    def kernel_options(self, spec, positions, raw):
+        return {"TIME_ORDER": {"forward": 1, "backward": 2}.get(spec.order, 0)}, []
+
     def combine_kernel(self, spec):
         return "extreme", "combine_extreme", {}
 
