@@ -32,10 +32,10 @@ FAINT = DataTF(
 CHANGE = DataTF(points=[(0, 1, 1, 1, 0), (0.08, 1, 1, 1, 0), (0.3, 1, 1, 1, 0.6), (1, 1, 1, 1, 1)])
 OCCUPANCY = DataTF(
     points=[
-        (0, 0.27, 0.0, 0.33, 0),
-        (0.02, 0.27, 0.0, 0.33, 0.08),
-        (0.5, 0.13, 0.57, 0.55, 0.25),
-        (1, 0.99, 0.91, 0.14, 0.6),
+        (0, 0.55, 0.25, 0.85, 0),
+        (0.02, 0.55, 0.25, 0.85, 0.3),
+        (0.25, 0.1, 0.75, 0.7, 0.55),
+        (1, 1.0, 0.9, 0.1, 0.9),
     ]
 )
 
@@ -131,7 +131,8 @@ FIGURES = (
         "0:30",
         ("count",),
         "(l) Occupancy over 30 steps: the fraction of steps in which a voxel was opaque, "
-        "through a colour ramp (purple once, yellow always): the rings' swept volume.",
+        "through a colour ramp (purple once, teal a quarter of the time, yellow always): the "
+        "volume the rings swept.",
         {"data_tf": OCCUPANCY, "threshold": 0.5},
     ),
 )

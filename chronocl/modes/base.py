@@ -53,7 +53,8 @@ class Mode:
     sum_channels: ClassVar[int] = 0  # "invert": leading RGBA channels kept as fixed-point sums
     leaf_span: ClassVar[int] = 1  # consecutive steps one sliding leaf integrates (ending at it)
     compares_values: ClassVar[bool] = False  # combine needs `leaf_value` in Partial.value
-    lut_by_value: ClassVar[bool] = False  # looks the data TF up at a derived value, not v itself
+    lut_by_value: ClassVar[bool] = False  # looks the data TF up at a derived value, not v
+    legend: ClassVar[str] = "time"  # what colour tells: "time", or "fraction" of the steps
 
     # -- the numpy reference -------------------------------------------------------------
     def accumulate(

@@ -22,6 +22,7 @@ class Count(Mode):
     state_bytes = 0
     sum_channels = 1
     lut_by_value = True  # the data TF is looked up at the fraction f
+    legend = "fraction"
 
     def accumulate(self, u, steps, order, step_rgba, spec):
         rgba = np.zeros((*u.shape[1:], 4), dtype=np.float64)

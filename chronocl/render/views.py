@@ -9,6 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.tf import lut_lookup
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
 from chronocl.render.image import Image
@@ -202,6 +203,9 @@ def _legend(draw, cv: Chronovolume, box, font, text_rgb) -> None:
     from chronocl.modes.spec import IntegrationSpec
 
     spec = IntegrationSpec.from_dict(cv.metadata["spec"])
+    if spec.integration.legend == "fraction":
+        _fraction_legend(draw, spec, box, font, text_rgb)
+        return
     steps = cv.steps
     n_steps = cv.metadata["selection"]["n_steps"]
     positions = spec.time_tf.positions_of(steps, n_steps)
@@ -240,3 +244,26 @@ def _legend(draw, cv: Chronovolume, box, font, text_rgb) -> None:
                 fill=text_rgb,
                 font=font,
             )
+
+
+def _fraction_legend(draw, spec, box, font, text_rgb) -> None:
+    """A bar of the data TF over the fraction of steps, for modes that show one (count)."""
+    x0, y0, width, height = box
+    bar_h = max(8, height // 2)
+    gap = 8
+    left, right = "no step", "every step"
+    x_start = x0 + int(draw.textlength(left, font=font)) + gap
+    x_end = x0 + width - int(draw.textlength(right, font=font)) - gap
+    draw.text((x0, y0 + 1), left, fill=text_rgb, font=font)
+    draw.text((x_end + gap, y0 + 1), right, fill=text_rgb, font=font)
+    span = max(1, x_end - x_start)
+    rgba = lut_lookup(spec.data_tf.lut, np.linspace(0.0, 1.0, span))
+    shown = np.clip(rgba[:, :3] * np.maximum(rgba[:, 3], 0.25)[:, None], 0, 1)
+    for i in range(span):
+        colour = tuple(round(c * 255) for c in shown[i])
+        draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
+    for f in (0.0, 0.25, 0.5, 0.75, 1.0):
+        x = x_start + f * (span - 1)
+        label = f"{round(100 * f)}%"
+        draw.line([(x, y0 + bar_h), (x, y0 + bar_h + 3)], fill=text_rgb)
+        draw.text((x - 4 * len(label), y0 + bar_h + 4), label, fill=text_rgb, font=font)
