@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from chronocl.modes.base import Mode, Partial
-from chronocl.modes.extreme import MAX
+from chronocl.modes.base import Mode
+from chronocl.modes.extreme import MAX, winners
 
 
 class Change(Mode):
@@ -27,11 +27,8 @@ class Change(Mode):
     lut_by_value = True  # the data TF is looked up at δ
 
     def accumulate(self, u, steps, order, step_rgba, spec):
-        shape = u.shape[1:]
-        rgba = np.zeros((*shape, 4), dtype=np.float64)
-        t_index = np.full(shape, -1, dtype=np.int32)
-        best = np.zeros(shape, dtype=np.float32)
-        best_k = np.full(shape, -1, dtype=np.int64)
+        best = np.zeros(u.shape[1:], dtype=np.float32)
+        best_k = np.full(u.shape[1:], -1, dtype=np.int64)
         for k in order:
             if k == 0:
                 continue
@@ -39,14 +36,7 @@ class Change(Mode):
             better = (best_k < 0) | (d > best)
             best = np.where(better, d, best)
             best_k = np.where(better, k, best_k)
-        for k in range(1, u.shape[0]):
-            sel = best_k == k
-            if sel.any():
-                c, a = step_rgba(k, best)
-                rgba[sel, :3] = a[sel, None] * c[sel]
-                rgba[sel, 3] = a[sel]
-                t_index[sel] = steps[k]
-        return Partial(rgba, t_index, best)
+        return winners(best, best_k, steps, step_rgba)
 
     def leaf_value(self, u):
         return np.abs(u[-1] - u[-2])

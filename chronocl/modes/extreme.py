@@ -12,6 +12,20 @@ import numpy as np
 from chronocl.modes.base import Mode, Partial
 
 
+def winners(best: np.ndarray, best_k: np.ndarray, steps, step_rgba) -> Partial:
+    """Each voxel coloured by the step that won it (best_k, -1: none) at its value `best`:
+    the data TF at that value, that step's time TF and enhancement, premultiplied."""
+    rgba = np.zeros((*best.shape, 4), dtype=np.float64)
+    t_index = np.full(best.shape, -1, dtype=np.int32)
+    for k in np.unique(best_k[best_k >= 0]):
+        sel = best_k == k
+        c, a = step_rgba(int(k), best)
+        rgba[sel, :3] = a[sel, None] * c[sel]
+        rgba[sel, 3] = a[sel]
+        t_index[sel] = steps[k]
+    return Partial(rgba, t_index, best)
+
+
 class Extreme(Mode):
     kernel = "extreme"
     kernel_function = "integrate_extreme"
@@ -27,23 +41,13 @@ class Extreme(Mode):
         return a < b if self.is_min else a > b
 
     def accumulate(self, u, steps, order, step_rgba, spec):
-        shape = u.shape[1:]
-        rgba = np.zeros((*shape, 4), dtype=np.float64)
-        t_index = np.full(shape, -1, dtype=np.int32)
-        best = np.zeros(shape, dtype=np.float32)
-        best_k = np.full(shape, -1, dtype=np.int64)
+        best = np.zeros(u.shape[1:], dtype=np.float32)
+        best_k = np.full(u.shape[1:], -1, dtype=np.int64)
         for k in order:
             better = (best_k < 0) | self.better(u[k], best)
             best = np.where(better, u[k], best)
             best_k = np.where(better, k, best_k)
-        for k in range(u.shape[0]):
-            sel = best_k == k
-            if sel.any():
-                c, a = step_rgba(k)
-                rgba[sel, :3] = a[sel, None] * c[sel]
-                rgba[sel, 3] = a[sel]
-                t_index[sel] = steps[k]
-        return Partial(rgba, t_index, best)
+        return winners(best, best_k, steps, step_rgba)
 
     def leaf_value(self, u):
         return u[-1]

@@ -39,24 +39,7 @@ __kernel void integrate_change(KERNEL_ARGS, __global float4 *out, __global int *
 #endif
     const intv none = best_k < 0;
     const intv kk = max(best_k, 0);
-    const LutPos p = lut_pos_of(best);
-    const __global float *tcf = (const __global float *)tc;
-    const intv k4 = kk * 4;
-    const floatv ta = GATHER(tcf, k4 + 3);
-#ifdef CONST_COLOR
-    const floatv r = GATHER(tcf, k4), g = GATHER(tcf, k4 + 1), b = GATHER(tcf, k4 + 2);
-#else
-    const floatv r = LUT_CHANNEL(lut, 0, p) * GATHER(tcf, k4);
-    const floatv g = LUT_CHANNEL(lut, 1, p) * GATHER(tcf, k4 + 1);
-    const floatv b = LUT_CHANNEL(lut, 2, p) * GATHER(tcf, k4 + 2);
-#endif
-#if ENHANCE
-    floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * ta *
-                      enhance_factor(data, kk, x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view),
-                      0.0f, 1.0f);
-#else
-    floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * ta, 0.0f, 1.0f);
-#endif
+    WINNER_RGBA(best, kk, r, g, b, ak)
     ak = SELECT(ak, (floatv)(0.0f), none);
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
     STORE_INT(SELECT(GATHER_INT(steps, kk), (intv)(-1), none), t_index + o);

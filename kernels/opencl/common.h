@@ -238,4 +238,46 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 
 #define RAW(k) VLOAD(data + VOX_INDEX(zb, (k), y, x))
 
+/* Step k's colour r, g, b and opacity ak, inside a loop over the steps. With SKIP_EMPTY a step
+ * whose lanes all map to zero data opacity is skipped (`continue`): every mode using this
+ * gets nothing from such a step (over adds 0, no hit, sums add 0, a count does not grow). */
+#ifdef SKIP_EMPTY
+#define SKIP_IF_EMPTY(raw) if (!IS_LIVE(raw)) continue;
+#else
+#define SKIP_IF_EMPTY(raw)
+#endif
+#define STEP_RGBA(k, r, g, b, ak)       \
+    const DATA_V raw = RAW(k);          \
+    SKIP_IF_EMPTY(raw)                  \
+    LutPos p;                           \
+    LOCATE(raw, p)                      \
+    const float4 t = tc[k];             \
+    floatv r, g, b;                     \
+    STEP_COLOR(lut, p, t, r, g, b)      \
+    const floatv ak = STEP_ALPHA(lut, p, t, k);
+
+/* The colour r, g, b and opacity ak of the step that won (max, min, change): the data TF at
+ * `value`, the time TF of selection index `win` (lanes), and that step's enhancement. */
+#ifdef CONST_COLOR
+#define WINNER_COLOR(p, k4, r, g, b) \
+    const floatv r = GATHER(tcf, k4), g = GATHER(tcf, (k4) + 1), b = GATHER(tcf, (k4) + 2);
+#else
+#define WINNER_COLOR(p, k4, r, g, b)                          \
+    const floatv r = LUT_CHANNEL(lut, 0, p) * GATHER(tcf, k4); \
+    const floatv g = LUT_CHANNEL(lut, 1, p) * GATHER(tcf, (k4) + 1); \
+    const floatv b = LUT_CHANNEL(lut, 2, p) * GATHER(tcf, (k4) + 2);
+#endif
+#if ENHANCE
+#define WINNER_ENHANCE(win) \
+    *enhance_factor(data, (win), x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view)
+#else
+#define WINNER_ENHANCE(win)
+#endif
+#define WINNER_RGBA(value, win, r, g, b, ak)                            \
+    const LutPos p = lut_pos_of(value);                                 \
+    const __global float *tcf = (const __global float *)tc;             \
+    const intv k4 = (win) * 4;                                          \
+    WINNER_COLOR(p, k4, r, g, b)                                        \
+    floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * GATHER(tcf, k4 + 3) WINNER_ENHANCE(win), 0.0f, 1.0f);
+
 #endif /* SLIDING */

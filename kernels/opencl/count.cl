@@ -7,14 +7,7 @@ __kernel void integrate_count(KERNEL_ARGS, const float threshold, __global float
     floatv n = 0.0f;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        const DATA_V raw = RAW(k);
-#ifdef SKIP_EMPTY
-        if (!IS_LIVE(raw)) continue; /* opacity 0 never passes a threshold >= 0 */
-#endif
-        LutPos p;
-        LOCATE(raw, p)
-        const float4 t = tc[k];
-        const floatv ak = STEP_ALPHA(lut, p, t, k);
+        STEP_RGBA(k, r, g, b, ak)
         n = SELECT(n, n + 1.0f, ak > threshold);
     }
 #ifdef RAW_PARTIAL

@@ -48,24 +48,7 @@ __kernel void integrate_extreme(KERNEL_ARGS, __global float4 *out, __global int 
         best_k = SELECT(best_k, (intv)(k), better);
     }
 #endif
-    const LutPos p = lut_pos_of(best);
-    const __global float *tcf = (const __global float *)tc;
-    const intv k4 = best_k * 4;
-    const floatv ta = GATHER(tcf, k4 + 3);
-#ifdef CONST_COLOR
-    const floatv r = GATHER(tcf, k4), g = GATHER(tcf, k4 + 1), b = GATHER(tcf, k4 + 2);
-#else
-    const floatv r = LUT_CHANNEL(lut, 0, p) * GATHER(tcf, k4);
-    const floatv g = LUT_CHANNEL(lut, 1, p) * GATHER(tcf, k4 + 1);
-    const floatv b = LUT_CHANNEL(lut, 2, p) * GATHER(tcf, k4 + 2);
-#endif
-#if ENHANCE
-    const floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * ta *
-                            enhance_factor(data, best_k, x, y, zb, nx, ny, nzb, w, vmin, scale,
-                                           enh, view), 0.0f, 1.0f);
-#else
-    const floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * ta, 0.0f, 1.0f);
-#endif
+    WINNER_RGBA(best, best_k, r, g, b, ak)
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
     STORE_INT(GATHER_INT(steps, best_k), t_index + o);
 }

@@ -9,16 +9,7 @@ __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global f
     intv hit = -1;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        const DATA_V raw = RAW(k);
-#ifdef SKIP_EMPTY
-        if (!IS_LIVE(raw)) continue; /* opacity 0 never passes a threshold >= 0 */
-#endif
-        LutPos p;
-        LOCATE(raw, p)
-        const float4 t = tc[k];
-        floatv r, g, b;
-        STEP_COLOR(lut, p, t, r, g, b)
-        const floatv ak = STEP_ALPHA(lut, p, t, k);
+        STEP_RGBA(k, r, g, b, ak)
         const intv take = (hit < 0) & (ak > threshold);
         hr = SELECT(hr, ak * r, take);
         hg = SELECT(hg, ak * g, take);

@@ -7,16 +7,7 @@ __kernel void integrate_mean(KERNEL_ARGS, __global float4 *out)
     floatv cr = 0.0f, cg = 0.0f, cb = 0.0f, ca = 0.0f;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        const DATA_V raw = RAW(k);
-#ifdef SKIP_EMPTY
-        if (!IS_LIVE(raw)) continue; /* adds 0 to every sum */
-#endif
-        LutPos p;
-        LOCATE(raw, p)
-        const float4 t = tc[k];
-        floatv r, g, b;
-        STEP_COLOR(lut, p, t, r, g, b)
-        const floatv ak = STEP_ALPHA(lut, p, t, k);
+        STEP_RGBA(k, r, g, b, ak)
         cr += ak * r;
         cg += ak * g;
         cb += ak * b;
