@@ -25,6 +25,7 @@ import chronocl
 from chronocl import modes
 from chronocl.engine import opencl, program
 from chronocl.engine.opencl import DEVICE_TYPES, OpenCLEngine
+from chronocl.modes.spec import IntegrationSpec
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 INTEGRATION_KEYS = {
@@ -123,18 +124,19 @@ def builds(full: bool) -> list[tuple[str, list[str], bool]]:
         if not full:
             reduced = all_pairs(reduced)
         out += [(file, list(program.build_options(c)), True) for c in reduced]
-    sliding = [  # each mode's combine / finish kernels, and the fixed-point sums
-        (f, {"SLIDING": True, **d})
-        for f, d in [
-            ("alpha.cl", {}),
-            ("first_hit.cl", {}),
-            ("extreme.cl", {}),
-            ("extreme.cl", {"IS_MIN": True}),
-            ("additive.cl", {}),
-            ("mean.cl", {}),
-            ("count.cl", {"LUT_N": 256}),
-            *(("sums.cl", {"CHANNELS": c}) for c in (1, 3, 4)),
-        ]
+    sliding = []  # each mode's combine / finish kernels, and the fixed-point sums
+    for name in modes.names():
+        mode, spec = modes.get(name), IntegrationSpec(mode=name)
+        if mode.state_bytes:  # partials it combines
+            file, _, defines = mode.combine_kernel(spec)
+            sliding.append((f"{file}.cl", defines))
+        if mode.slides == "invert":
+            acc = np.zeros((1, 1, 1, mode.sum_channels), np.int64)
+            _, defines, _, _ = mode.finish_kernel(acc, np.linspace(0, 1, 3), spec)
+            sliding.append((f"{mode.kernel}.cl", defines))
+            sliding.append(("sums.cl", {"CHANNELS": mode.sum_channels}))
+    sliding = [
+        (f, {"SLIDING": True, **d}) for i, (f, d) in enumerate(sliding) if (f, d) not in sliding[:i]
     ]
     out += [(f, list(program.build_options(d)), True) for f, d in sliding]
     return out
