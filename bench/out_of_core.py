@@ -52,7 +52,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import emit, env_record
 
 from chronocl.core.budget import parse_memory
-from chronocl.data.series import COMPRESSORS, open_series, write_series
+from chronocl.data.series import open_series, write_series
+from chronocl.data.writer import COMPRESSORS
 
 
 def field(t: int, n: int, steps: int) -> np.ndarray:
@@ -229,7 +230,7 @@ def stages_alone(series, out: Path, budget: int, mode: str, compressor: str) -> 
     """CPU seconds of the integration's work done alone: kernels on bricks already in memory,
     and writing the output it produced (same chunks and codec) into a new store."""
     from chronocl.data.bricks import SeriesBricks
-    from chronocl.data.series import compressors
+    from chronocl.data.writer import compressors
     from chronocl.engine import get_engine
     from chronocl.integration.inmemory import engine_rows, integrate_brick, prepare
     from chronocl.integration.plan import plan_slabs

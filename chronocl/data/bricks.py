@@ -20,7 +20,7 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.memory import aligned_empty
-from chronocl.data.series import STEPS_PER_READ, TimeSeries
+from chronocl.data.timeseries import STEPS_PER_READ, TimeSeries
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,8 @@
 
 `open_series` opens whatever a path holds: an OME-Zarr image in place, else a chronocl store
 or a bare (T, Z, Y, X) zarr array. `write_series` writes time steps into a new chronocl store
-and opens it. The rest is defined where it belongs and offered here as one place to import
-from: the type (`chronocl.data.timeseries`), the store's codecs (`chronocl.data.writer`).
+and opens it. The `TimeSeries` type itself lives in `chronocl.data.timeseries` and is handed
+on from here with the functions that make one.
 """
 
 from __future__ import annotations
@@ -15,17 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
-from chronocl.data.timeseries import STEPS_PER_READ, TimeSeries, open_store
-from chronocl.data.writer import COMPRESSORS, compressors, write_store
+from chronocl.data.timeseries import TimeSeries, open_store
+from chronocl.data.writer import write_store
 
-__all__ = [
-    "COMPRESSORS",
-    "STEPS_PER_READ",
-    "TimeSeries",
-    "compressors",
-    "open_series",
-    "write_series",
-]
+__all__ = ["TimeSeries", "open_series", "write_series"]
 
 
 def open_series(path: str | os.PathLike) -> TimeSeries:

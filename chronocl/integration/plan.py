@@ -19,7 +19,7 @@ import zarr
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.data.bricks import Slab, slabs, stored_z_chunk
-from chronocl.data.series import STEPS_PER_READ
+from chronocl.data.timeseries import STEPS_PER_READ
 from chronocl.integration.inmemory import Job
 
 CHUNK_BYTES = 8 * 2**20  # output chunk size, as Chronovolume.save

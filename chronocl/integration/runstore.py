@@ -38,7 +38,7 @@ from chronocl.core.errors import ChronoclError, OutputBusyError, OutputExistsErr
 from chronocl.core.paths import check_output
 from chronocl.data.bricks import Slab
 from chronocl.data.chronovolume import FORMAT
-from chronocl.data.series import compressors
+from chronocl.data.writer import compressors
 from chronocl.integration.inmemory import Job
 from chronocl.integration.plan import Plan
 from chronocl.modes.spec import IntegrationSpec

@@ -34,7 +34,9 @@ from chronocl.core.errors import InvalidParameterError
 from chronocl.core.paths import check_apart, check_output
 from chronocl.core.selection import Selection
 from chronocl.data.bricks import BrickSource, SeriesBricks, Slab
-from chronocl.data.series import STEPS_PER_READ, TimeSeries, compressors
+from chronocl.data.series import TimeSeries
+from chronocl.data.timeseries import STEPS_PER_READ
+from chronocl.data.writer import compressors
 from chronocl.engine import get_engine
 from chronocl.integration import distributed
 from chronocl.integration.distributed import DaskExecutor
