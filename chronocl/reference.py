@@ -19,7 +19,7 @@ from chronocl.core import enhance as _enhance
 from chronocl.core.tf import lut_lerp32
 from chronocl.modes.additive import additive_norm, finalize_sums
 from chronocl.modes.alpha import over
-from chronocl.modes.base import Partial
+from chronocl.modes.base import Partial, Values
 from chronocl.modes.spec import IntegrationSpec
 
 __all__ = [
@@ -40,8 +40,13 @@ def accumulate(
     positions: np.ndarray,
     order: np.ndarray,
     spec: IntegrationSpec,
+    values: Values | None = None,
 ) -> Partial:
-    """Integrate u (W, Z, Y, X) over the steps in `order` (indices into the selection)."""
+    """Integrate u (W, Z, Y, X) over the steps in `order` (indices into the selection).
+
+    `values` are the raw values u came from, for modes that compare them (`reads_values`);
+    without them u stands for the values, with the range (0, 1).
+    """
     assert len(steps) == u.shape[0] and len(order) == u.shape[0]
     lut = spec.data_tf.lut
     rgb_t, a_t = spec.time_tf.evaluate(positions)
@@ -58,7 +63,11 @@ def accumulate(
         alpha = np.clip(d[..., 3] * np.float32(a_t[k]) * e, np.float32(0.0), np.float32(1.0))
         return colour, alpha.astype(np.float64)
 
-    return spec.integration.accumulate(u, steps, order, step_rgba, spec)
+    mode = spec.integration
+    if mode.reads_values:
+        given = values if values is not None else Values(u)
+        return mode.accumulate(u, steps, order, step_rgba, spec, values=given)
+    return mode.accumulate(u, steps, order, step_rgba, spec)
 
 
 def combine(front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
@@ -80,7 +89,8 @@ def integrate(
     positions: np.ndarray,
     order: np.ndarray,
     spec: IntegrationSpec,
+    values: Values | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Whole-volume integration: (premultiplied RGBA float32 (Z, Y, X, 4), t_index or None)."""
-    partial = accumulate(u, steps, positions, order, spec)
+    partial = accumulate(u, steps, positions, order, spec, values)
     return finalize(partial, positions, spec), partial.t_index

@@ -25,6 +25,7 @@ import chronocl
 from chronocl import modes
 from chronocl.engine import opencl, program
 from chronocl.engine.opencl import DEVICE_TYPES, OpenCLEngine
+from chronocl.modes.base import KernelInput
 from chronocl.modes.spec import IntegrationSpec
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -33,6 +34,7 @@ INTEGRATION_KEYS = {
     "DATA_V",
     "VEC",
     "RAW_ORDER",
+    "CHANGE_BYTES",
     "QUANT",
     "LUT_N",
     "CONST_COLOR",
@@ -48,15 +50,29 @@ INTEGRATION_KEYS = {
 BOOLS = (False, True)
 
 
+def byte_lane_define(mode) -> str | None:
+    """The define a mode sets for byte data compared in byte lanes (None: it has none)."""
+    spec = IntegrationSpec(mode=mode.name, order="forward")
+    on, _ = mode.kernel_options(
+        spec, np.zeros(2), False, KernelInput(np.dtype(np.uint8), 2, (0, 255))
+    )
+    off, _ = mode.kernel_options(
+        spec, np.zeros(2), False, KernelInput(np.dtype(np.float32), 2, (0, 255))
+    )
+    keys = [k for k in on if on[k] is True and off.get(k) is False]
+    assert len(keys) <= 1, keys
+    return keys[0] if keys else None
+
+
 def integration_combinations(name: str):
     """Every define combination OpenCLEngine.accumulate can pass for mode `name`."""
     mode = modes.get(name)
-    extreme = getattr(mode, "raw_order", False)
-    data = []  # (DATA_T, QUANT, RAW_ORDER): quantised and raw-order paths are uint8 only
+    byte_path = byte_lane_define(mode)
+    data = []  # (DATA_T, QUANT, byte lanes): quantised and byte-lane paths are uint8 only
     for t in DEVICE_TYPES.values():
         data.append((t, False, False))
         if t == "uchar":
-            data.append((t, False, True) if extreme else (t, True, False))
+            data.append((t, False, True) if byte_path else (t, True, False))
     lanes = ((0, 16), (0, 1), (1, 1), (2, 1))  # (ENHANCE, VEC): enhancement is VEC=1 only
     norm = BOOLS if name == "additive" else (False,)
     partial = BOOLS if mode.slides == "invert" else (False,)
@@ -73,7 +89,9 @@ def integration_combinations(name: str):
             "DATA_T": t,
             "DATA_V": t + (str(vec) if vec > 1 else ""),
             "VEC": vec,
-            "RAW_ORDER": raw,
+            "RAW_ORDER": False,
+            "CHANGE_BYTES": False,
+            **({byte_path: raw} if byte_path else {}),
             "QUANT": quant,
             "LUT_N": lut_n,
             "CONST_COLOR": const,

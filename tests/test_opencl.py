@@ -258,3 +258,20 @@ def test_kernels_load_from_an_installed_wheel(tmp_path):
     module_file, kernels, t_max = out.stdout.split()
     assert module_file.startswith(str(site)) and kernels.startswith(str(site))
     assert int(t_max) in (0, 1, 2)
+
+
+@given(st.data())
+def test_change_in_byte_lanes_equals_reference(data):
+    """change on bytes clipped to whole-number bounds is compared in byte lanes; other bounds
+    take the float path. Few distinct values, so equal changes (ties) are everywhere."""
+    w = data.draw(st.integers(1, 40))
+    nx = data.draw(st.sampled_from([16, 33, 48]))
+    seed = data.draw(st.integers(0, 2**16))
+    raw = np.random.default_rng(seed).integers(0, 6, (w, 2, 3, nx)).astype(np.uint8) * 50
+    series = chronocl.TimeSeries.from_array(raw)
+    bounds = data.draw(st.sampled_from([(0, 255), (50, 200), (10.5, 200.25), (-3, 300)]))
+    order = data.draw(st.sampled_from(["forward", "backward", tuple(range(w))[::-1]]))
+    tf = chronocl.DataTF(points=[(0, 1, 1, 1, 0), (1, 1, 1, 1, 1)], value_range=bounds)
+    spec = IntegrationSpec(mode="change", order=order, data_tf=tf)
+    ref = chronocl.integrate(series, None, spec=spec, engine="numpy")
+    assert_same(ref, chronocl.integrate(series, None, spec=spec, slab=2))

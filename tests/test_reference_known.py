@@ -134,3 +134,24 @@ def test_normalize_values():
     v = np.array([-1.0, 0.0, 5.0, 10.0, 11.0])
     np.testing.assert_allclose(values.normalize(v, 0.0, 10.0), [0, 0, 0.5, 1, 1])
     np.testing.assert_array_equal(values.normalize(v, 3.0, 3.0), 0)
+
+
+@pytest.mark.parametrize("engine", ["numpy", "opencl"])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+@pytest.mark.parametrize(("order", "step"), [("forward", 1), ("backward", 3), ((2, 0, 1, 3), 2)])
+def test_change_ties_equal_changes_exactly(engine, dtype, order, step):
+    """Equal changes of the stored values tie whatever rounding u would have: steps 0, 7, 14,
+    21 change by 7 each time, so the first in the order wins; δ = 7 / 255."""
+    import chronocl
+
+    raw = np.zeros((4, 1, 1, 37), dtype=np.float32)
+    raw[:, 0, 0, :] = np.array([0, 7, 14, 21], dtype=np.float32)[:, None]
+    raw[0, 0, 0, 1], raw[1, 0, 0, 1] = 255, 255  # the range is 0..255; voxel 1 changes once
+    series = chronocl.TimeSeries.from_array(raw.astype(dtype))
+    spec = IntegrationSpec(mode="change", order=order, data_tf=LINEAR)
+    cv = chronocl.integrate(series, spec=spec, engine=engine)
+    t = cv.t_index[0, 0]
+    assert t[0] == step and np.all(t[2:] == step)
+    assert t[1] == 2  # 255 -> 14 is the largest change there
+    # a_d(δ) = δ: the opacity of the winner is the change in u
+    np.testing.assert_allclose(cv.rgba[0, 0, 0, 3], 7 / 255, rtol=1e-6)

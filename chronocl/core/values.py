@@ -20,3 +20,19 @@ def normalize(v: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
     lo, scale = normalization(vmin, vmax)
     u = (np.asarray(v, dtype=np.float32) - lo) * scale
     return np.clip(u, np.float32(0.0), np.float32(1.0))
+
+
+def clip_bounds(vmin: float, vmax: float) -> tuple[np.float32, np.float32]:
+    """(lo, hi) in float32 of the normalisation range; a constant field gets hi = lo."""
+    lo = np.float32(vmin)
+    return lo, (np.float32(vmax) if vmax > vmin else lo)
+
+
+def clip(v: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
+    """The values clipped to the normalisation range, in float32: u = (clip(v) - vmin) * scale.
+
+    Differences of clipped values are exact where the values are integers, so modes that
+    compare changes (``change``) compare them here and scale only the winner.
+    """
+    lo, hi = clip_bounds(vmin, vmax)
+    return np.clip(np.asarray(v, dtype=np.float32), lo, hi)

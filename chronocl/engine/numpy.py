@@ -7,7 +7,7 @@ import numpy as np
 from chronocl import reference
 from chronocl.core import values
 from chronocl.engine.base import FIXED_ONE
-from chronocl.modes.base import Partial
+from chronocl.modes.base import Partial, Values
 from chronocl.modes.spec import IntegrationSpec
 
 
@@ -29,8 +29,10 @@ class NumpyEngine:
         out: tuple[np.ndarray, np.ndarray | None] | None = None,
         raw: bool = False,
     ) -> tuple[Partial, bool]:
-        u = values.normalize(np.moveaxis(brick, 1, 0), *value_range)
-        partial = reference.accumulate(u, steps, positions, order, spec)
+        window = np.moveaxis(brick, 1, 0)
+        u = values.normalize(window, *value_range)
+        raw_values = Values(window, value_range)
+        partial = reference.accumulate(u, steps, positions, order, spec, raw_values)
         rgba = partial.rgba[crop]
         t_index = None if partial.t_index is None else partial.t_index[crop]
         if out is not None:

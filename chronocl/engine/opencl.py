@@ -18,6 +18,7 @@ from chronocl.core.memory import aligned_empty, is_aligned
 from chronocl.core.tf import lut_lerp32
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.program import kernel
+from chronocl.modes.base import KernelInput
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.reference import Partial
 
@@ -132,17 +133,11 @@ class OpenCLEngine:
         vmin, scale = values.normalization(*value_range)
         file, kernel_name = f"{mode.kernel}.cl", mode.kernel_function
         final = not raw and not mode.finalize_is_global(spec)
-        mode_defines, mode_args = mode.kernel_options(spec, positions, raw)
+        given = KernelInput(dt, w, value_range)
+        mode_defines, mode_args = mode.kernel_options(spec, positions, raw, given)
         vec = 1 if spec.enhance.needs_gradient else VEC
-        raw_order = (
-            getattr(mode, "raw_order", False)
-            and dt == np.uint8
-            and w <= 256  # the winning step is tracked in byte lanes
-            and bool(np.all(np.diff(values.normalize(np.arange(256), *value_range)) > 0))
-        )
         defines = {
             "DATA_T": DEVICE_TYPES[dt.name],
-            "RAW_ORDER": raw_order,
             "QUANT": quant,
             "LUT_N": lut.shape[1],
             "CONST_COLOR": const_color,

@@ -29,7 +29,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from chronocl.core import values
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection, parse_selection
@@ -40,6 +39,7 @@ from chronocl.data.window import WindowManager
 from chronocl.engine import get_engine
 from chronocl.integration.inmemory import Job, integrate_bricks, make_spec, prepare
 from chronocl.integration.sliding import SlidingAggregate, block_size
+from chronocl.modes.base import Values
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.reference import Partial
 
@@ -318,8 +318,7 @@ class _Slider:
             raw=self.inverts,
         )
         if self.mode.compares_values:
-            u = np.stack([values.normalize(a, *self.value_range) for a in arrays])
-            partial.value = self.mode.leaf_value(u)
+            partial.value = self.mode.leaf_value(Values(np.stack(arrays), self.value_range))
         if self.inverts:
             self._full[step] = partial
         return partial

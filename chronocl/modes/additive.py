@@ -84,7 +84,7 @@ class Additive(Mode):
         norm = self.norm(spec, positions, sums_max)
         return "finish_additive", {}, [], [np.array([*norm, 0.0], dtype=np.float32)]
 
-    def kernel_options(self, spec, positions, raw):
+    def kernel_options(self, spec, positions, raw, given):
         norm = additive_norm(spec, positions)
         final = spec.normalize == "time" and not raw
         return {"NORM_TIME": final}, [np.array([*norm, 0.0], dtype=np.float32)]

@@ -26,6 +26,27 @@ FIXED_ONE = float(2**40)  # sums of inverting modes in fixed point: exact add an
 StepRGBA = Callable[..., tuple[np.ndarray, np.ndarray]]
 
 
+@dataclass(frozen=True)
+class Values:
+    """The raw values of a window (W, Z, Y, X) and the range that normalises them to u.
+
+    Tests may integrate u directly; then the values are u and the range is (0, 1).
+    """
+
+    raw: np.ndarray
+    value_range: tuple[float, float] = (0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class KernelInput:
+    """What a mode's kernel options may depend on beyond the spec: the device data type,
+    the number of steps in the brick and the normalisation range."""
+
+    dtype: np.dtype
+    n_steps: int
+    value_range: tuple[float, float]
+
+
 @dataclass
 class Partial:
     """Per-voxel result before finalisation.
@@ -55,6 +76,7 @@ class Mode:
     compares_values: ClassVar[bool] = False  # combine needs `leaf_value` in Partial.value
     lut_by_value: ClassVar[bool] = False  # looks the data TF up at a derived value, not v
     legend: ClassVar[str] = "time"  # what colour tells: "time", or "fraction" of the steps
+    reads_values: ClassVar[bool] = False  # `accumulate` also takes `values=` (Values)
 
     # -- the numpy reference -------------------------------------------------------------
     def accumulate(
@@ -65,7 +87,10 @@ class Mode:
         step_rgba: StepRGBA,
         spec: IntegrationSpec,
     ) -> Partial:
-        """Integrate u (W, Z, Y, X) over the steps in `order` (indices into the selection)."""
+        """Integrate u (W, Z, Y, X) over the steps in `order` (indices into the selection).
+
+        A mode with `reads_values` is also given ``values=`` (`Values`): the raw window.
+        """
         raise NotImplementedError
 
     def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
@@ -88,8 +113,8 @@ class Mode:
         return False
 
     # -- sliding windows --------------------------------------------------------------------
-    def leaf_value(self, u: np.ndarray) -> np.ndarray | None:
-        """What `combine` compares, from the u of a leaf's steps (leaf_span, Z, Y, X)."""
+    def leaf_value(self, values: Values) -> np.ndarray | None:
+        """What `combine` compares, from the raw values of a leaf's steps (leaf_span, Z, Y, X)."""
         return None
 
     def finish_sums(
@@ -104,7 +129,7 @@ class Mode:
 
     # -- the OpenCL kernel ------------------------------------------------------------------
     def kernel_options(
-        self, spec: IntegrationSpec, positions: np.ndarray, raw: bool
+        self, spec: IntegrationSpec, positions: np.ndarray, raw: bool, given: KernelInput
     ) -> tuple[dict, list]:
         """Build defines and the extra scalar arguments of this mode's integrate kernel."""
         return {}, []

@@ -40,7 +40,7 @@ class Count(Mode):
         d = lut_lerp32(spec.data_tf.lut, f).astype(np.float32)
         return np.concatenate([d[..., :3] * d[..., 3:4], d[..., 3:4]], axis=-1)
 
-    def kernel_options(self, spec, positions, raw):
+    def kernel_options(self, spec, positions, raw, given):
         return {}, [np.float32(spec.threshold)]
 
     def finish_kernel(self, acc, positions, spec):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from chronocl.core import values as _values
 from chronocl.modes.base import Mode, Partial
 
 
@@ -34,7 +35,6 @@ class Extreme(Mode):
     compares_values = True
     lut_by_value = True  # built without QUANT: the LUT is interpolated at the winning u
     is_min = False
-    raw_order = True  # raw values may be compared where u(v) is strictly increasing
 
     def better(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Where value a beats value b (strictly)."""
@@ -49,11 +49,17 @@ class Extreme(Mode):
             best_k = np.where(better, k, best_k)
         return winners(best, best_k, steps, step_rgba)
 
-    def leaf_value(self, u):
-        return u[-1]
+    def leaf_value(self, values):
+        return _values.normalize(values.raw[-1], *values.value_range)
 
-    def kernel_options(self, spec, positions, raw):
-        return {"IS_MIN": self.is_min}, []
+    def kernel_options(self, spec, positions, raw, given):
+        # Raw values may be compared where u(v) is strictly increasing on the bytes; the
+        # winning step is then tracked in byte lanes.
+        u = _values.normalize(np.arange(256), *given.value_range)
+        raw_order = (
+            given.dtype == np.uint8 and given.n_steps <= 256 and bool(np.all(np.diff(u) > 0))
+        )
+        return {"IS_MIN": self.is_min, "RAW_ORDER": raw_order}, []
 
     def combine_kernel(self, spec):
         return "extreme", "combine_extreme", {"IS_MIN": self.is_min}

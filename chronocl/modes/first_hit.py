@@ -34,7 +34,7 @@ class FirstHit(Mode):
     def combine_kernel(self, spec):
         return "first_hit", "combine_first", {}
 
-    def kernel_options(self, spec, positions, raw):
+    def kernel_options(self, spec, positions, raw, given):
         return {}, [np.float32(spec.threshold)]
 
     def combine(self, front, back, spec):

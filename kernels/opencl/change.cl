@@ -1,46 +1,77 @@
-/* change: the largest |u(s_k) - u(s_{k-1})| between consecutive selected steps (k >= 1 in the
- * brick's time order, visited in integration order; ties: first in the order) supplies the
- * voxel, coloured by the data TF at that change and the time TF of s_k: (a * c, a),
- * t_index = s_k. One step: (0, 0, 0, 0) and -1. Built without QUANT: the LUT is interpolated at
- * the change. TIME_ORDER: 1 forward, 2 backward, 0 any order (through `order`). Sliding
- * windows combine pairs of steps with extreme.cl's combine_extreme. */
-__kernel void integrate_change(KERNEL_ARGS, __global float4 *out, __global int *t_index)
+/* change: the largest change between consecutive selected steps (k >= 1 in the brick's time
+ * order, visited in integration order; ties: first in the order) supplies the voxel, coloured
+ * by the data TF at δ and the time TF of s_k: (a * c, a), t_index = s_k. One step:
+ * (0, 0, 0, 0) and -1. Changes are compared as d = |clip(v_k) - clip(v_{k-1})| on the values
+ * clipped to [lo, hi]; the winner's δ = min(d * scale, 1) (chronocl/modes/change.py). Built
+ * without QUANT: the LUT is interpolated at δ. TIME_ORDER: 1 forward, 2 backward, 0 any order
+ * (through `order`). CHANGE_BYTES: uchar data whose clipped values are whole numbers,
+ * compared in byte lanes.
+ * Sliding windows combine pairs of steps with extreme.cl's combine_extreme. */
+#define CLIPPED(v) clamp(TO_FLOAT(v), lo, hi)
+
+/* forward order: a strictly larger change takes the lead; backward: an equal one too, so the
+ * latest of equal changes (first in its order) wins. */
+#if TIME_ORDER == 1
+#define TAKES >
+#else
+#define TAKES >=
+#endif
+
+__kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
+                               __global float4 *out, __global int *t_index)
 {
     VOXEL_PROLOGUE
-    intv best_k = -1;
-    floatv best = 0.0f;
-#if TIME_ORDER
-    /* forward (1) or backward (2) order: walk the steps in time, each value normalised once;
-     * backward takes ties too, so the latest of equal changes (first in its order) wins. */
-    best = -1.0f; /* below any change, so step 1 always takes the lead */
-    floatv prev = NORMALIZE(RAW(0));
-    for (int k = 1; k < w; ++k) {
-        const floatv u = NORMALIZE(RAW(k));
-        const floatv d = fabs(u - prev);
-        prev = u;
-#if TIME_ORDER == 1
-        const intv better = d > best;
-#else
-        const intv better = d >= best;
-#endif
-        best = SELECT(best, d, better);
-        best_k = SELECT(best_k, (intv)(k), better);
+    if (w < 2) { /* one step: nothing changed */
+        STORE_RGBA(o, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));
+        STORE_INT((intv)(-1), t_index + o);
+        return;
     }
-    best = fmax(best, 0.0f); /* one step: no change (the lanes are cleared below) */
+#if defined(CHANGE_BYTES) && VEC == 16
+    /* Walk the steps in time; clipped values, differences and the winning step stay in byte
+     * lanes (the host checked that lo and hi clip bytes to whole numbers). */
+    const uchar16 lo8 = (uchar16)((uchar)clamp(lo, 0.0f, 255.0f));
+    const uchar16 hi8 = (uchar16)((uchar)clamp(hi, 0.0f, 255.0f));
+#define CLIPPED8(v) clamp((v), lo8, hi8)
+    DATA_V prev = CLIPPED8(RAW(1));
+    const uchar16 first = CLIPPED8(RAW(0));
+    uchar16 best_d = max(prev, first) - min(prev, first);
+    uchar16 best_k8 = (uchar16)(1);
+    for (int k = 2; k < w; ++k) {
+        const DATA_V v = CLIPPED8(RAW(k));
+        const uchar16 d = max(v, prev) - min(v, prev);
+        prev = v;
+        const char16 take = d TAKES best_d;
+        best_d = SELECT(best_d, d, take);
+        best_k8 = SELECT(best_k8, (uchar16)((uchar)k), take);
+    }
+    const floatv best = convert_float16(best_d);
+    const intv kk = convert_int16(best_k8);
+#elif TIME_ORDER
+    floatv prev = CLIPPED(RAW(1));
+    floatv best = fabs(prev - CLIPPED(RAW(0)));
+    intv kk = (intv)(1);
+    for (int k = 2; k < w; ++k) {
+        const floatv c = CLIPPED(RAW(k));
+        const floatv d = fabs(c - prev);
+        prev = c;
+        const intv take = d TAKES best;
+        best = SELECT(best, d, take);
+        kk = SELECT(kk, (intv)(k), take);
+    }
 #else
+    floatv best = 0.0f;
+    intv kk = -1;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
         if (k == 0) continue;
-        const floatv d = fabs(NORMALIZE(RAW(k)) - NORMALIZE(RAW(k - 1)));
-        const intv better = (best_k < 0) | (d > best);
-        best = SELECT(best, d, better);
-        best_k = SELECT(best_k, (intv)(k), better);
+        const floatv d = fabs(CLIPPED(RAW(k)) - CLIPPED(RAW(k - 1)));
+        const intv take = (kk < 0) | (d > best);
+        best = SELECT(best, d, take);
+        kk = SELECT(kk, (intv)(k), take);
     }
 #endif
-    const intv none = best_k < 0;
-    const intv kk = max(best_k, 0);
-    WINNER_RGBA(best, kk, r, g, b, ak)
-    ak = SELECT(ak, (floatv)(0.0f), none);
+    const floatv delta = fmin(best * scale, 1.0f);
+    WINNER_RGBA(delta, kk, r, g, b, ak)
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
-    STORE_INT(SELECT(GATHER_INT(steps, kk), (intv)(-1), none), t_index + o);
+    STORE_INT(GATHER_INT(steps, kk), t_index + o);
 }
