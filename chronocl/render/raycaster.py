@@ -16,9 +16,10 @@ from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
 from chronocl.render.gl import gl_context, program
+from chronocl.render.upload import FORMATS, convert, occupancy
 
 MIN_SIZE, MAX_SIZE = 16, 8192
-TEXTURE_TYPES = {"f2": np.float16, "f1": np.uint8}
+TEXTURE_TYPES = FORMATS
 
 
 def check_size(size: tuple[int, int]) -> tuple[int, int]:
@@ -59,15 +60,16 @@ class Raycaster:
         self._fbos: dict[tuple[int, int], object] = {}
 
     def upload(self, cv: Chronovolume, dtype: str = "f2", nearest: bool = False) -> Volume:
-        """Upload premultiplied RGBA (Z, Y, X, 4) as a 3D texture (f2: half float, f1: 8 bit)."""
+        """Upload premultiplied RGBA (Z, Y, X, 4) as a new 3D texture (f4: float32, f2: half
+        float, f1: 8 bit), converted by `chronocl.render.upload.convert` (the viewer's
+        helper; the viewer keeps its textures and rewrites them in place, see
+        chronocl/viewer/slots.py). Half float stays the default for renders and turntables:
+        their golden images and pixel-exact tests are recorded with it."""
         import moderngl
 
         nz, ny, nx, _ = cv.rgba.shape
-        if dtype == "f1":
-            data = np.clip(np.round(cv.rgba * 255), 0, 255).astype(np.uint8)
-        else:
-            data = cv.rgba.astype(np.float16)
-        tex = self.ctx.texture3d((nx, ny, nz), 4, np.ascontiguousarray(data).tobytes(), dtype=dtype)
+        data, occ = convert(cv.rgba, dtype)
+        tex = self.ctx.texture3d((nx, ny, nz), 4, data, dtype=dtype)
         tex.filter = (
             (moderngl.NEAREST, moderngl.NEAREST)
             if nearest
@@ -82,7 +84,7 @@ class Raycaster:
         extent = physical / physical.max()
         voxel = extent / np.array([nx, ny, nz])
         unit = float(np.min(voxel))
-        return Volume(tex, extent, unit, occupied_box(cv.rgba[..., 3], extent, voxel))
+        return Volume(tex, extent, unit, occ.corners(extent, voxel))
 
     def draw(
         self,
@@ -159,19 +161,7 @@ class Raycaster:
 def occupied_box(alpha: np.ndarray, extent: np.ndarray, voxel: np.ndarray):
     """World corners of the voxels with opacity > 0, grown by one voxel (trilinear reach) and
     kept inside the box; an empty volume gives an empty box."""
-    half = extent / 2
-    filled = alpha > 0
-    if not filled.any():
-        return half.copy(), -half.copy()  # min > max: every ray misses
-    lo, hi = [], []
-    for axis in (2, 1, 0):  # x, y, z
-        other = tuple(a for a in range(3) if a != axis)
-        idx = np.flatnonzero(filled.any(axis=other))
-        lo.append(max(idx[0] - 1, 0))
-        hi.append(min(idx[-1] + 2, filled.shape[axis]))
-    lo_w = -half + np.array(lo) * voxel
-    hi_w = -half + np.array(hi) * voxel
-    return lo_w, hi_w
+    return occupancy(alpha).corners(extent, voxel)
 
 
 def check_clip(clip: object) -> tuple[float, float, float, float]:

@@ -1,0 +1,161 @@
+"""Display textures: a chronovolume's premultiplied RGBA made ready for a 3D texture, fast.
+
+Formats: "f4" float32 (no conversion), "f2" half float, "f1" RGBA8 unorm (round(v * 255),
+clipped to 0..255). `convert` works in z-slab tasks on a small thread pool (numpy's casts and
+ufuncs release the GIL), one cache-sized block at a time, straight into a staging buffer the
+caller keeps and passes back next frame (no allocation per frame). The same pass finds the
+slices, rows and columns with opacity > 0, from which the raycaster's occupied box comes, so the
+volume is read once. Which format the viewer sends at which size, and why: docs/display.md.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from functools import cache
+from itertools import pairwise
+
+import numpy as np
+
+from chronocl.core.errors import InvalidParameterError
+
+FORMATS: dict[str, type] = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
+BLOCK_VALUES = 2**16  # floats per block (256 KB): a block and its scratch stay in L2
+SERIAL_VOXELS = 2**15
+LITTLE_ENDIAN = sys.byteorder == "little"  # below this, one task on the calling thread
+COMPACT_VOXELS = 2**21  # above this (128^3), the viewer sends RGBA8: docs/display.md
+_scratch = threading.local()
+
+
+def display_format(voxels: int) -> str:
+    """The viewer's texture format for a volume of `voxels`: float32 up to `COMPACT_VOXELS`
+    (nothing to convert, and llvmpipe draws it as fast), RGBA8 above (docs/display.md)."""
+    return "f4" if voxels <= COMPACT_VOXELS else "f1"
+
+
+@dataclass
+class Occupancy:
+    """Which slices (z), rows (y) and columns (x) hold a voxel with opacity > 0."""
+
+    z: np.ndarray
+    y: np.ndarray
+    x: np.ndarray
+
+    def corners(self, extent: np.ndarray, voxel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World corners of the occupied voxels grown by one voxel (trilinear reach), kept
+        inside the box; an empty volume gives an empty box (min > max: every ray misses)."""
+        half = extent / 2
+        if not self.z.any():
+            return half.copy(), -half.copy()
+        lo, hi = [], []
+        for filled in (self.x, self.y, self.z):
+            idx = np.flatnonzero(filled)
+            lo.append(max(int(idx[0]) - 1, 0))
+            hi.append(min(int(idx[-1]) + 2, filled.size))
+        return -half + np.array(lo) * voxel, -half + np.array(hi) * voxel
+
+
+def occupancy(alpha: np.ndarray) -> Occupancy:
+    """The occupancy of an opacity volume (Z, Y, X), serially (small volumes, tests)."""
+    filled = alpha > 0
+    return Occupancy(filled.any(axis=(1, 2)), filled.any(axis=(0, 2)), filled.any(axis=(0, 1)))
+
+
+def staging_for(shape: tuple[int, ...], fmt: str, staging: np.ndarray | None) -> np.ndarray:
+    """`staging` when it has this shape and format's type, else a new C-contiguous buffer."""
+    dtype = np.dtype(FORMATS[fmt])
+    if (
+        staging is not None
+        and staging.shape == tuple(shape)
+        and staging.dtype == dtype
+        and staging.flags.c_contiguous
+    ):
+        return staging
+    return np.empty(shape, dtype=dtype)
+
+
+def convert(
+    rgba: np.ndarray, fmt: str, staging: np.ndarray | None = None
+) -> tuple[np.ndarray, Occupancy]:
+    """Premultiplied RGBA (Z, Y, X, 4) as texture data of format `fmt`, and its occupancy.
+
+    The data is written into `staging` when it fits (see `staging_for`; keep the returned
+    array and pass it back next time). For "f4" a C-contiguous float32 input is returned
+    as it is (nothing to convert; only the occupancy is computed).
+    """
+    if fmt not in FORMATS:
+        raise InvalidParameterError(f"texture format {fmt!r}; use one of {', '.join(FORMATS)}")
+    if rgba.ndim != 4 or rgba.shape[3] != 4:
+        raise InvalidParameterError(f"RGBA volume of shape {rgba.shape}; expected (Z, Y, X, 4)")
+    nz, ny, nx, _ = rgba.shape
+    as_is = fmt == "f4" and rgba.dtype == np.float32 and rgba.flags.c_contiguous
+    out = rgba if as_is else staging_for(rgba.shape, fmt, staging)
+    z = np.zeros(nz, dtype=bool)
+    y = np.zeros(ny, dtype=bool)
+    x = np.zeros(nx, dtype=bool)
+    if nz * ny * nx <= SERIAL_VOXELS or nz == 1:
+        parts = [_convert_slab(rgba, out, fmt, 0, nz, as_is)]
+    else:
+        workers = _workers()
+        cuts = np.linspace(0, nz, min(nz, 2 * workers) + 1).astype(int)
+        jobs = [
+            _pool().submit(_convert_slab, rgba, out, fmt, a, b, as_is)
+            for a, b in pairwise(cuts.tolist())
+            if b > a
+        ]
+        parts = [job.result() for job in jobs]
+    for z0, part_z, part_y, part_x in parts:
+        z[z0 : z0 + part_z.size] = part_z
+        y |= part_y
+        x |= part_x
+    return out, Occupancy(z, y, x)
+
+
+def _convert_slab(rgba, out, fmt: str, z0: int, z1: int, as_is: bool):
+    """Convert slices z0..z1 block by block; returns (z0, their z, y, x occupancy)."""
+    _, ny, nx, _ = rgba.shape
+    rows = max(1, BLOCK_VALUES // (4 * nx))
+    occ_z = np.zeros(z1 - z0, dtype=bool)
+    occ_y = np.zeros(ny, dtype=bool)
+    occ_x = np.zeros(nx, dtype=bool)
+    scratch = None
+    if fmt == "f1":
+        scratch = getattr(_scratch, "block", None)
+        if scratch is None or scratch.size < rows * nx * 4:
+            scratch = _scratch.block = np.empty(rows * nx * 4, dtype=np.float32)
+    for k in range(z0, z1):
+        for r0 in range(0, ny, rows):
+            src = rgba[k, r0 : r0 + rows]
+            dst = out[k, r0 : r0 + rows]
+            if scratch is not None:
+                block = scratch[: src.size].reshape(src.shape)
+                np.multiply(src, 255, out=block)
+                np.rint(block, out=block)
+                np.clip(block, 0, 255, out=block)
+                np.copyto(dst, block, casting="unsafe")
+                if LITTLE_ENDIAN:  # RGBA8 as one uint32: opacity > 0 when it is > 2^24 - 1
+                    filled = dst.view(np.uint32)[..., 0] > 0xFFFFFF
+                else:
+                    filled = dst[..., 3] > 0
+            else:
+                if not as_is:
+                    np.copyto(dst, src, casting="same_kind")
+                filled = src[..., 3] > 0
+            in_rows = filled.any(axis=1)
+            if in_rows.any():
+                occ_z[k - z0] = True
+                occ_y[r0 : r0 + rows] |= in_rows
+                occ_x |= filled.any(axis=0)
+    return z0, occ_z, occ_y, occ_x
+
+
+def _workers() -> int:
+    return max(1, min(8, os.cpu_count() or 1))
+
+
+@cache
+def _pool() -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(max_workers=_workers(), thread_name_prefix="chronocl-upload")
