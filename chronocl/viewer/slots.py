@@ -9,9 +9,8 @@ import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.session import Session
-from chronocl.render.raycaster import Volume, occupied_box
-
-FLOAT_TEXTURE_VOXELS = 2**23  # 128 MB of float32 RGBA
+from chronocl.render.raycaster import Volume
+from chronocl.render.upload import convert, display_format
 
 
 @dataclass
@@ -22,12 +21,14 @@ class ViewSlot:
     cv: Chronovolume | None = None
     volume: Volume | None = None
     uploaded: Chronovolume | None = None
+    staging: np.ndarray | None = None  # the texture data's host buffer, reused frame to frame
 
     def release_gl(self) -> None:
         if self.volume is not None:
             self.volume.release()
             self.volume = None
             self.uploaded = None
+        self.staging = None
 
     def drop_session(self) -> None:
         if self.session is not None:
@@ -37,30 +38,34 @@ class ViewSlot:
 
 def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
     """The chronovolume as a 3D texture, rewriting the slot's texture in place when its shape
-    and type are unchanged (allocating a new 3D texture costs more than the write).
+    and format are unchanged (allocating a new 3D texture costs more than the write); a new
+    shape or format allocates a new one.
 
-    Volumes up to `FLOAT_TEXTURE_VOXELS` go up as float32: no conversion on the host, and
-    llvmpipe samples them about twice as fast as half floats; larger ones as half floats.
+    The format follows `display_format` (docs/display.md, measured by bench/upload.py): small
+    volumes go up as float32 (no conversion; the write and the draw cost about what RGBA8's
+    do), larger ones as RGBA8 (a quarter of the bytes; the conversion runs on a thread pool
+    into the slot's staging buffer, reused frame to frame, and finds the occupied box in the
+    same pass). The whole texture is written each time: a changed-region check would read
+    as many bytes as the conversion does to save a write that costs less.
     """
     import moderngl
 
     nz, ny, nx, _ = cv.rgba.shape
-    if nz * ny * nx <= FLOAT_TEXTURE_VOXELS:
-        dtype, data = "f4", np.ascontiguousarray(cv.rgba, dtype=np.float32)
-    else:
-        dtype, data = "f2", cv.rgba.astype(np.float16)
+    fmt = display_format(nz * ny * nx)
+    data, occ = convert(cv.rgba, fmt, slot.staging)
     vol = slot.volume
-    if vol is not None and vol.texture.size == (nx, ny, nz) and vol.texture.dtype == dtype:
+    if vol is not None and vol.texture.size == (nx, ny, nz) and vol.texture.dtype == fmt:
         vol.texture.write(data)
     else:
         slot.release_gl()
-        tex = rc.ctx.texture3d((nx, ny, nz), 4, data, dtype=dtype)
+        tex = rc.ctx.texture3d((nx, ny, nz), 4, data, dtype=fmt)
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         tex.repeat_x = tex.repeat_y = tex.repeat_z = False
         vol = Volume(tex, np.zeros(3), 0.0, (np.zeros(3), np.zeros(3)))
+    slot.staging = None if data is cv.rgba else data
     extent, voxel = geometry(cv)
     vol.extent, vol.unit = extent, float(np.min(voxel))
-    vol.occupied = occupied_box(cv.rgba[..., 3], extent, voxel)
+    vol.occupied = occ.corners(extent, voxel)
     slot.volume, slot.uploaded = vol, cv
     return vol
 
