@@ -1,24 +1,33 @@
-"""Viewer latency: from a client's edit to the new frame in its hands, over a real socket.
+"""Viewer latency at 128^3, 256^3 and 512^3: from a client's edit to the frame in its hands.
 
-A viewer server runs on a thread of this process, serving the built-in vortex at 128^3
-(20 steps, made on the fly); a WebSocket client sets a 10-step window and a 512^2 view, then
-times (a) data-TF edits (an opacity control point moved: re-integrate + upload + render +
-encode + transfer) and (b) scrub steps (the window slid by one step: `Session.slide`). The
-server's own timings come with each frame, so the median split is reported too; "transfer"
-is what remains of the round trip (socket, framing, queueing). The baseline, measured in the
-same run, is the same work called directly in-process (integrate + upload + draw + JPEG),
-without server or socket.
+For each size the built-in vortex is generated on the fly into a chronocl store with its
+coarse levels (float32, 20 steps; 512^3: uint8, 12 steps, about 1.7 GB on disk) and served
+by a viewer server on a thread of this process; a WebSocket client sets a 10-step window and
+a 512^2 view, then times
+
+- data-TF edits (an opacity control point moved): to the first frame (a coarse level when
+  full resolution would miss the viewer's latency target) and to the full-resolution frame
+  that follows once input stops;
+- scrub steps (the window slid by one step, one after the other as a drag sends them): to
+  the first frame, and whether the session updated incrementally.
+
+The server's own timings come with each frame (the median split is reported). The baseline,
+measured in the same run at 128^3, is the same edit done directly in-process at full
+resolution (integrate + upload + draw + JPEG), without server or socket.
 
     python bench/viewer_latency.py --quick
+    python bench/viewer_latency.py --quick --sizes 128,256
 
-Summary keys: `tf_edit_to_frame_ms`, `scrub_step_to_frame_ms` (medians), their splits,
-`direct_tf_edit_ms` (the baseline) and `tf_edit_vs_direct` (ratio).
+Summary keys (per size): `first_frame_ms` (TF edit -> first frame), `full_res_ms` (TF edit
+-> full-resolution frame), `scrub_first_frame_ms`, `scrub_incremental` ("k/n"),
+`first_frame_level`, `split_ms`; `direct_tf_edit_ms` at 128^3 and the targets.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import statistics
 import sys
 import time
@@ -37,6 +46,7 @@ from chronocl.viewer.protocol import unpack_frame
 from chronocl.viewer.server import ViewerServer
 
 BENCH = "viewer_latency"
+TARGETS = {"first_frame_ms": 200, "first_frame_ms_128": 150, "full_res_ms_256": 1500}
 SPLIT = ("integrate_ms", "upload_ms", "render_ms", "encode_ms", "server_ms")
 
 
@@ -50,14 +60,28 @@ class Client:
             max_size=2**26,
         )
         self.rid = 0
+        self.t0 = 0.0
+        self.kind = ""
         json.loads(self.ws.recv())  # info
 
     def request(self, msg: dict) -> tuple[float, dict]:
-        """Send `msg`; returns (ms until its frame arrived, the frame header)."""
+        """Send `msg`; returns (ms until its first frame arrived, the frame header)."""
         self.rid += 1
         msg = {**msg, "id": self.rid}
-        t0 = time.perf_counter()
+        self.t0 = time.perf_counter()
+        self.kind = msg["type"]
         self.ws.send(json.dumps(msg))
+        return self.frame()
+
+    def full_resolution(self) -> tuple[float, dict]:
+        """Wait for the last request's full-resolution frame: (ms since it was sent, header)."""
+        while True:
+            ms, header = self.frame()
+            if header.get("level", 0) == 0:
+                return ms, header
+
+    def frame(self) -> tuple[float, dict]:
+        t0 = self.t0
         while True:
             m = self.ws.recv(timeout=120)
             if isinstance(m, bytes):
@@ -68,7 +92,7 @@ class Client:
                 d = json.loads(m)
                 if d["type"] == "error":
                     raise RuntimeError(d["message"])
-                if d["type"] == "dataset" and msg["type"] == "open":
+                if d["type"] == "dataset" and self.kind == "open":
                     continue
 
 
@@ -87,6 +111,7 @@ def summarise(op: str, totals: list[float], headers: list[dict], case: str) -> d
         "repeats": len(totals),
         "split_ms": split,
         "incremental": sum(bool(h["timings"].get("incremental")) for h in headers),
+        "levels": sorted({h.get("level", 0) for h in headers}),
         "frame_bytes": int(statistics.median(h["views"][0]["bytes"] for h in headers)),
     }
     emit(record)
@@ -123,22 +148,37 @@ def direct_baseline(series: TimeSeries, points: list, repeats: int) -> list[floa
     return times
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="fewer repeats (under 2 minutes)")
-    ap.add_argument("--size", type=int, default=128, help="volume side (default 128)")
-    ap.add_argument("--edits", type=int, default=None, help="TF edits to time (default 40/20)")
-    args = ap.parse_args()
-    edits = args.edits or (20 if args.quick else 40)
-    scrubs = 20 if args.quick else 40
-    n = args.size
-    case = f"{n}^3xW10-512^2"
+def make_store(root: Path, n: int) -> tuple[Path, str]:
+    """The vortex at n^3 as a chronocl store with levels (512^3 and up: uint8, 12 steps)."""
+    from chronocl.data.writer import write_store
 
-    data = np.stack(list(synthetic.steps("vortex", 20, (n, n, n))))
-    series = TimeSeries.from_array(data, source="vortex")
-    emit(env_record(BENCH, {"case": case, "steps": 20, "window": 10, "image": [512, 512]}))
+    big = n >= 512
+    steps, dtype = (12, np.uint8) if big else (20, np.float32)
 
-    server = ViewerServer(datasets=[Dataset("vortex", series)])
+    def generate():
+        for step in synthetic.steps("vortex", steps, (n, n, n)):
+            yield np.round(np.clip(step, 0, 1) * 255).astype(np.uint8) if big else step
+
+    path = root / f"vortex-{n}.zarr"
+    write_store(
+        path,
+        generate(),
+        n_steps=steps,
+        volume_shape=(n, n, n),
+        dtype=dtype,
+        source=f"vortex {n}^3",
+        progress=True,
+    )
+    return path, f"{n}^3x{steps}-{np.dtype(dtype).name}-W10-512^2"
+
+
+def measure(path: Path, case: str, edits: int, scrubs: int) -> dict:
+    """TF edits and scrub steps against a server on the store at `path`."""
+    from chronocl.data.series import open_series
+    from chronocl.viewer.view_state import DEFAULT_POINTS
+
+    series = open_series(path)
+    server = ViewerServer(datasets=[Dataset("vortex", series)], memory="12GB")
     server.start()
     try:
         client = Client(server)
@@ -151,77 +191,84 @@ def main() -> None:
                 "time_tf": {"color": "rgb", "positions": "absolute"},
             }
         )
-        from chronocl.viewer.view_state import DEFAULT_POINTS
-
+        client.full_resolution()
         points = [list(p) for p in DEFAULT_POINTS]
 
-        def tf_edit(k: int, quality: str = "full"):
+        def tf_edit(k: int) -> tuple[tuple[float, dict], tuple[float, dict]]:
             pts = [list(p) for p in points]
             pts[2][4] = 0.3 + 0.02 * (k % 10)  # a drag of one control point
-            return client.request(
-                {"type": "update", "data_tf": {"points": pts}, "quality": quality}
-            )
+            first = client.request({"type": "update", "data_tf": {"points": pts}})
+            full = first if first[1].get("level", 0) == 0 else client.full_resolution()
+            return first, full
 
-        for k in range(3):  # warm-up: kernels built, textures allocated
+        for k in range(2):  # warm-up: kernels built, textures allocated, the levels measured
             tf_edit(k)
-        totals, headers = [], []
-        for k in range(edits):
-            t, h = tf_edit(k + 1)
-            totals.append(t)
-            headers.append(h)
-        tf = summarise("tf_edit", totals, headers, case)
-
-        totals, headers = [], []
-        for k in range(edits // 2):
-            t, h = tf_edit(k + 1, "preview")
-            totals.append(t)
-            headers.append(h)
-        preview = summarise("tf_drag_preview", totals, headers, case)
+        edits_done = [tf_edit(k + 1) for k in range(edits)]
+        first = summarise(
+            "tf_edit_first_frame", *zip(*[e[0] for e in edits_done], strict=True), case
+        )
+        full = summarise(
+            "tf_edit_full_resolution", *zip(*[e[1] for e in edits_done], strict=True), case
+        )
 
         totals, headers = [], []
         t0, step = 0, 1
+        n = series.n_steps
         for _ in range(scrubs):
-            if not 0 <= t0 + step <= 10:
+            if not 0 <= t0 + step <= n - 10:
                 step = -step
             t0 += step
             window = {"t0": t0, "t1": t0 + 10, "stride": 1}
-            t, h = client.request({"type": "update", "window": window, "quality": "full"})
+            t, h = client.request({"type": "update", "window": window})
             totals.append(t)
             headers.append(h)
         scrub = summarise("scrub_step", totals, headers, case)
         client.ws.close()
     finally:
         server.stop()
+    return {"first": first, "full": full, "scrub": scrub}
 
-    direct = direct_baseline(series, points, max(5, edits // 4))
-    direct_ms = statistics.median(direct)
-    emit(
-        {
-            "bench": BENCH,
-            "case": case,
-            "impl": "direct",
-            "op": "tf_edit",
-            "median_ms": round(direct_ms, 2),
-            "min_ms": round(min(direct), 2),
-            "repeats": len(direct),
-        }
-    )
-    emit(
-        {
-            "bench": BENCH,
-            "summary": {
-                "tf_edit_to_frame_ms": tf["median_ms"],
-                "tf_edit_split_ms": tf["split_ms"],
-                "scrub_step_to_frame_ms": scrub["median_ms"],
-                "scrub_step_split_ms": scrub["split_ms"],
-                "scrub_incremental_frames": f"{scrub['incremental']}/{scrub['repeats']}",
-                "tf_drag_preview_to_frame_ms": preview["median_ms"],
-                "direct_tf_edit_ms": round(direct_ms, 2),
-                "tf_edit_vs_direct": round(tf["median_ms"] / direct_ms, 2),
-                "target_tf_edit_ms": 150,
-            },
-        }
-    )
+
+def main() -> None:
+    import tempfile
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer repeats")
+    ap.add_argument("--sizes", default="128,256,512", help="volume sides (default 128,256,512)")
+    ap.add_argument("--edits", type=int, default=None, help="TF edits per size (default 10/20)")
+    ap.add_argument("--keep", type=Path, default=None, help="folder to keep the stores in")
+    args = ap.parse_args()
+    edits = args.edits or (10 if args.quick else 20)
+    scrubs = 20 if args.quick else 40
+    sizes = [int(v) for v in args.sizes.split(",")]
+    emit(env_record(BENCH, {"sizes": sizes, "window": 10, "image": [512, 512]}))
+
+    summary: dict = {k: {} for k in ("first_frame_ms", "full_res_ms", "scrub_first_frame_ms")}
+    summary |= {"scrub_incremental": {}, "first_frame_level": {}, "split_ms": {}}
+    with tempfile.TemporaryDirectory(prefix="chronocl-latency-", dir=args.keep) as tmp:
+        for n in sizes:
+            path, case = make_store(Path(tmp), n)
+            r = measure(path, case, edits, scrubs)
+            key = str(n)
+            summary["first_frame_ms"][key] = r["first"]["median_ms"]
+            summary["full_res_ms"][key] = r["full"]["median_ms"]
+            summary["scrub_first_frame_ms"][key] = r["scrub"]["median_ms"]
+            summary["scrub_incremental"][key] = f"{r['scrub']['incremental']}/{scrubs}"
+            summary["first_frame_level"][key] = r["first"]["levels"]
+            summary["split_ms"][key] = {
+                "first": r["first"]["split_ms"],
+                "full": r["full"]["split_ms"],
+                "scrub": r["scrub"]["split_ms"],
+            }
+            if n == 128:
+                from chronocl.data.series import open_series
+                from chronocl.viewer.view_state import DEFAULT_POINTS
+
+                points = [list(p) for p in DEFAULT_POINTS]
+                direct = direct_baseline(open_series(path), points, max(5, edits // 2))
+                summary["direct_tf_edit_ms_128"] = round(statistics.median(direct), 2)
+            shutil.rmtree(path)
+    emit({"bench": BENCH, "summary": {**summary, "targets": TARGETS}})
 
 
 if __name__ == "__main__":

@@ -115,6 +115,7 @@ class Job:
             "spacing": {"x": dx, "y": dy, "z": dz},
             "value_range": [float(self.value_range[0]), float(self.value_range[1])],
             "engine": engine,
+            "level": series.level_index,
         }
 
 
@@ -207,6 +208,7 @@ def integrate(
     device: str | None = None,
     slab: int | None = None,
     progress: bool = False,
+    level: int = 0,
     **spec_args: object,
 ) -> Chronovolume:
     """Integrate the selected steps of `series` into a Chronovolume.
@@ -217,11 +219,15 @@ def integrate(
     `engine` is ``opencl`` (default; `device` picks one, see `chronocl devices`),
     ``numpy`` (the reference) or an engine object. `slab` sets the z rows per brick
     (default: as many as fit the engine's brick size). For outputs larger than memory
-    see `chronocl.integration.streaming.integrate_to_store`.
+    see `chronocl.integration.streaming.integrate_to_store`. `level` integrates a coarse
+    level of the series (0: full resolution; docs/levels.md), pooled as the mode asks; the
+    chronovolume keeps the physical extent, so it renders in the same place.
     """
     job = prepare(series, window, mode, spec, spec_args)
+    if level != 0:
+        job = prepare(series.level(level, job.spec.integration.pool), job.selection, spec=job.spec)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
-    return integrate_bricks(job, eng, SeriesBricks(series), slab, progress)
+    return integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
 
 
 def integrate_bricks(

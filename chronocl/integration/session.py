@@ -30,6 +30,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from chronocl.core.budget import human, parse_memory
+from chronocl.core.errors import InvalidParameterError
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.data.bricks import ResidentBricks
@@ -38,6 +39,7 @@ from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.engine import get_engine
 from chronocl.integration.inmemory import Job, integrate_bricks, make_spec, prepare
+from chronocl.integration.levels import AutoLevels, check_level
 from chronocl.integration.sliding import SlidingAggregate, block_size
 from chronocl.modes.base import Values
 from chronocl.modes.spec import IntegrationSpec
@@ -69,20 +71,34 @@ class Session:
         spec: IntegrationSpec | None = None,
         prefetch: int | None = None,
         manager: WindowManager | None = None,
+        level: int | str = 0,
+        target_ms: float = 150.0,
+        managers: dict | None = None,
         **spec_args: object,
     ) -> None:
-        self.series = series
+        self.base = series
         self.spec = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
         self.engine = get_engine(engine, device) if isinstance(engine, str) else engine
         self.budget = parse_memory(memory)
-        # Sessions that show one window in several views can share one manager's resident steps.
-        self._owns_manager = manager is None
-        self.manager = manager or WindowManager(series, self.budget, prefetch=prefetch)
         self.selection: Selection | None = None
         self.stats: dict = {}
         self._arrays: dict[int, np.ndarray] = {}
         self._slider: _Slider | None = None
         self._cv: Chronovolume | None = None
+        self._prefetch = prefetch
+        self._managers = managers
+        # level="auto": child sessions at fixed levels, chosen per frame for the target.
+        self._auto: AutoLevels | None = None
+        if level == "auto":
+            self.level = 0
+            self._auto = AutoLevels(self, target_ms)
+            self.series, self.manager, self._owns_manager = series, None, False
+            return
+        self.level = check_level(series, level)
+        self.series = series.level(self.level, self.spec.integration.pool)
+        # Sessions that show one window in several views can share one manager's resident steps.
+        self._owns_manager = manager is None
+        self.manager = manager or WindowManager(self.series, self.budget, prefetch=prefetch)
 
     # -- public --------------------------------------------------------------------------
     def set_window(
@@ -90,8 +106,7 @@ class Session:
     ) -> Chronovolume:
         """Jump to the window [t0, t1) with a stride (or a '0:16:2' string, list or Selection)."""
         window = t0 if t1 is None else slice(int(t0), int(t1), int(stride))
-        selection = parse_selection(window, self.series.n_steps)
-        return self._update(selection)
+        return self.show(parse_selection(window, self.series.n_steps))
 
     def slide(self, k: int = 1) -> Chronovolume:
         """Move the window by k strides (negative: back in time), clamped at either end."""
@@ -100,28 +115,72 @@ class Session:
         stride = sel.stride
         shift = int(k) * stride
         shift = max(-steps[0], min(shift, self.series.n_steps - 1 - steps[-1]))
-        return self._update(Selection(tuple(s + shift for s in steps), sel.n_steps))
+        return self.show(Selection(tuple(s + shift for s in steps), sel.n_steps))
 
     def set_spec(self, spec: IntegrationSpec | None = None, **changes: object) -> Chronovolume:
         """Change the integration: a whole spec, or fields of the current one (mode="max")."""
         new = spec if spec is not None else dataclasses.replace(self.spec, **changes)
-        if new != self.spec:
-            self.spec = new
+        return self.show(self._require(), new)
+
+    def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume:
+        """The chronovolume of `selection` under `spec` (default: the current one): a window
+        and a spec change at once, integrated once."""
+        spec = self.spec if spec is None else spec
+        if self._auto is not None:
+            self.spec, self.selection = spec, selection
+            return self._auto.show(selection, spec)
+        if spec != self.spec:
+            if self.level and spec.integration.pool != self.spec.integration.pool:
+                self._repool(spec.integration.pool)
+            self.spec = spec
             self._slider = None
             self._cv = None
-        return self.current()
+        return self._update(selection)
 
     def current(self) -> Chronovolume:
         """The chronovolume of the current window and spec."""
+        if self._auto is not None:
+            return self._auto.current()
         if self._cv is None:
             return self._update(self._require())
         return self._cv
 
+    def refine(self) -> Chronovolume | None:
+        """level="auto": the full-resolution chronovolume of what was last shown coarse (None
+        when the last one was full resolution already, or the level is fixed)."""
+        return None if self._auto is None else self._auto.refine()
+
+    def record_display(self, ms: float) -> None:
+        """The display's upload + render time of the last chronovolume returned: level="auto"
+        learns from it which level meets the target next time."""
+        if self._auto is not None:
+            self._auto.record_display(ms)
+
+    @property
+    def shown_level(self) -> int:
+        """The level of the last chronovolume returned (0: full resolution)."""
+        return self.level if self._auto is None else self._auto.shown
+
     def close(self) -> None:
+        if self._auto is not None:
+            self._auto.close()
         if self._owns_manager:
             self.manager.close()
         self._arrays = {}
         self._slider = None
+
+    def _repool(self, pool: str) -> None:
+        """A coarse session whose new mode pools levels differently reads the other level."""
+        if not self._owns_manager:
+            raise InvalidParameterError(
+                f"mode {self.spec.mode!r} pools coarse levels differently; give this session "
+                "its own window manager, or use level='auto'"
+            )
+        self.manager.close()
+        self.series = self.base.level(self.level, pool)
+        self.manager = WindowManager(self.series, self.budget, prefetch=self._prefetch)
+        self._arrays = {}
+        self.selection = None
 
     def __enter__(self) -> Session:
         return self
@@ -165,6 +224,7 @@ class Session:
                 self._slider = None
         self._cv = cv
         self.stats = {
+            "level": self.level,
             "integrate_ms": 1e3 * (time.perf_counter() - t),
             "path": path,
             "incremental": path == "incremental",

@@ -77,6 +77,9 @@ class Mode:
     lut_by_value: ClassVar[bool] = False  # looks the data TF up at a derived value, not v
     legend: ClassVar[str] = "time"  # what colour tells: "time", or "fraction" of the steps
     reads_values: ClassVar[bool] = False  # `accumulate` also takes `values=` (Values)
+    # The coarse levels a mode integrates (docs/levels.md): "mean" for modes that show the
+    # whole field; max/min take levels pooled alike, so a thin peak or trough survives.
+    pool: ClassVar[str] = "mean"
 
     # -- the numpy reference -------------------------------------------------------------
     def accumulate(

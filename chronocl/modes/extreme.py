@@ -77,12 +77,14 @@ class Extreme(Mode):
 class Max(Extreme):
     name = "max"
     summary = "maximum intensity through time, coloured by the step that held it"
+    pool = "max"
 
 
 class Min(Extreme):
     name = "min"
     summary = "minimum intensity through time, coloured by the step that held it"
     is_min = True
+    pool = "min"
 
 
 MAX = Max()

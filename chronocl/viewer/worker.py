@@ -40,6 +40,8 @@ from chronocl.viewer.view_state import ViewState, default_state, describe_state,
 
 INTEGRATE_LOCK = threading.Lock()
 MAX_TASKS = 8
+TARGET_MS = 150.0  # a coarse level is drawn first when full resolution would take longer
+REFINE_AFTER_S = 0.25  # idle time after a coarse frame before the full-resolution one
 
 
 class ClientWorker:
@@ -67,8 +69,11 @@ class ClientWorker:
         self._closed = False
         self._slots: list[ViewSlot] = []
         self._slots_dataset = -1
-        # The views show one window of one data set: their sessions share its resident steps.
-        self._manager: WindowManager | None = None
+        # The views show one window of one data set: their sessions share its resident steps,
+        # one window manager per level and pooling.
+        self._managers: dict[tuple[int, str], WindowManager] = {}
+        self._refine_at: float | None = None  # when the coarse frame shown is to be refined
+        self._last_rid: int | None = None
         self._shown: ViewState | None = None  # the state of the last frame sent
         self._frame = 0
         self.thread = threading.Thread(target=self._run, name="chronocl-view", daemon=True)
@@ -132,19 +137,27 @@ class ClientWorker:
         while True:
             with self._cond:
                 while not self._closed and self._pending is None and not self._tasks:
-                    self._cond.wait()
+                    wait = None if self._refine_at is None else self._refine_at - time.monotonic()
+                    if wait is not None and wait <= 0:
+                        break
+                    self._cond.wait(wait)
                 if self._closed:
                     return
                 pending, self._pending = self._pending, None
-                task = None if pending is not None else self._tasks.popleft()
+                task = None if pending is not None or not self._tasks else self._tasks.popleft()
             try:
                 if pending is not None:
                     self._render(*pending)
+                elif task is not None:
+                    self._do_task(*task)
                 else:
-                    self._do_task(*task)  # type: ignore[misc]
+                    self._refine()
             except Exception as exc:  # reported to the client; the worker keeps serving
-                rid = pending[1] if pending is not None else task[1].get("id")  # type: ignore[index]
-                text = error_text(exc, "making the frame" if pending else f"on {task[0]}")  # type: ignore[index]
+                rid = pending[1] if pending is not None else task[1].get("id") if task else None
+                what = (
+                    f"on {task[0]}" if task is not None and pending is None else "making the frame"
+                )
+                text = error_text(exc, what)
                 if not self._reply({"type": "error", "id": rid, "message": text}):
                     return
 
@@ -160,9 +173,9 @@ class ClientWorker:
         self._close_manager()
 
     def _close_manager(self) -> None:
-        if self._manager is not None:
-            self._manager.close()
-            self._manager = None
+        managers, self._managers = self._managers, {}
+        for m in managers.values():
+            m.close()
 
     def _chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed."""
@@ -172,8 +185,6 @@ class ClientWorker:
                 s.drop_session()
             self._close_manager()
             self._slots_dataset = state.dataset
-        if self._manager is None:
-            self._manager = WindowManager(series, self.memory)
         while len(self._slots) < len(state.views):
             self._slots.append(ViewSlot())
         sel = state.selection(series.n_steps)
@@ -213,13 +224,13 @@ class ClientWorker:
                 engine=self.engine,
                 device=self.device,
                 spec=spec,
-                manager=self._manager,
+                level="auto",
+                target_ms=TARGET_MS,
+                managers=self._managers,
             )
             cv = s.set_window(sel)
-        elif s.spec != spec:
-            cv = s.set_spec(spec)
-        else:
-            cv = s.set_window(sel)  # the session slides where the new window overlaps the old
+        else:  # the session slides where the new window overlaps the old
+            cv = s.show(sel, spec)
         slot.cv = cv
         stats = s.stats or {}
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
@@ -250,6 +261,31 @@ class ClientWorker:
     def _render(self, state: ViewState, rid: int | None) -> None:
         t_start = time.perf_counter()
         cvs, integrate_ms, incremental = self._chronovolumes(state)
+        self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
+
+    def _refine(self) -> None:
+        """The coarse frame shown, at full resolution; given up as soon as new input comes."""
+        self._refine_at = None
+        state = self._shown
+        if state is None:
+            return
+        t_start = time.perf_counter()
+        integrate_ms = 0.0
+        for slot in self._slots[: len(state.views)]:
+            with self._cond:
+                if self._pending is not None:
+                    return  # newer input: the frame for it comes instead
+            if slot.session is None:
+                return
+            with INTEGRATE_LOCK:
+                cv = slot.session.refine()
+            if cv is not None:
+                slot.cv = cv
+                integrate_ms += float(slot.session.stats.get("integrate_ms", 0.0))
+        cvs = [slot.cv for slot in self._slots[: len(state.views)]]
+        self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start)
+
+    def _send_frame(self, state, rid, cvs, integrate_ms, incremental, t_start) -> None:
         preview = state.quality == "preview"
         w, h = state.size
         if preview:
@@ -260,7 +296,14 @@ class ClientWorker:
         images = [encode(p, JPEG_QUALITY[state.quality]) for p in panels]
         t_enc = time.perf_counter()
         self._frame += 1
-        self._shown = state
+        self._shown, self._last_rid = state, rid
+        sessions = [slot.session for slot in self._slots[: len(cvs)] if slot.session is not None]
+        display_ms = 1e3 * (t_done - t_up) / max(1, len(cvs))
+        for session in sessions:
+            session.record_display(display_ms)
+        level = max((session.shown_level for session in sessions), default=0)
+        refining = level > 0
+        self._refine_at = time.monotonic() + REFINE_AFTER_S if refining else None
         header = {
             "type": "frame",
             "id": rid,
@@ -272,6 +315,10 @@ class ClientWorker:
                 for b, cv in zip(images, cvs, strict=True)
             ],
             "legend": legend(cvs[0]),
+            "level": level,
+            "levels": self.datasets[state.dataset].series.n_levels,
+            "level_shape": list(cvs[0].shape),
+            "refining": refining,
             "timings": {
                 "integrate_ms": round(integrate_ms, 2),
                 "incremental": incremental,
@@ -304,14 +351,26 @@ class ClientWorker:
             raise InvalidParameterError(f"view {view} is not shown; choose a view on the page")
         return state, view
 
+    def _full_resolution(self, views: range) -> None:
+        """Bring the shown views to full resolution (probes and saves never use a coarse one)."""
+        for i in views:
+            slot = self._slots[i]
+            if slot.session is not None and slot.session.shown_level > 0:
+                with INTEGRATE_LOCK:
+                    cv = slot.session.refine()
+                if cv is not None:
+                    slot.cv = cv
+
     def _probe(self, msg: dict) -> None:
         state, view = self._shown_view(msg)
+        self._full_resolution(range(view, view + 1))
         cv = self._slots[view].cv
         assert cv is not None
         self._reply(probe_reply(msg, view, state, cv, self.datasets[state.dataset]))
 
     def _save(self, msg: dict) -> None:
         state, view = self._shown_view(msg)
+        self._full_resolution(range(len(state.views)))
         ds = self.datasets[state.dataset]
         sel = state.selection(ds.series.n_steps).describe().replace(":", "-")
         if msg["what"] == "image":

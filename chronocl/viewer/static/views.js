@@ -181,8 +181,11 @@ export function onFrame(buf) {
   viewer.last = {
     id: header.id, seq: header.seq, quality: header.quality, digest, views: header.views.length,
     timings: header.timings, roundTripMs: t0 === undefined ? null : now - t0,
+    level: header.level || 0, refining: !!header.refining,
   };
   document.body.dataset.frames = viewer.frames;
+  document.body.dataset.level = header.level || 0;
+  document.body.dataset.refining = header.refining ? 'yes' : 'no';
   showTimings(header);
   drawTimeline();
 }
@@ -192,7 +195,10 @@ function showTimings(h) {
   const v = h.views[0];
   const kb = h.views.reduce((s, x) => s + x.bytes, 0) / 1024;
   const rt = viewer.last.roundTripMs;
+  const shape = (h.level_shape || []).slice().reverse().join('×');
+  const level = h.level ? `level ${h.level} (${shape}) · refining…` : `full resolution (${shape})`;
   const parts = [
+    level,
     `integrate ${t.integrate_ms.toFixed(1)} ms${t.incremental ? ' (incremental)' : ''}`,
     `upload ${t.upload_ms.toFixed(1)} ms`,
     `render ${t.render_ms.toFixed(1)} ms`,

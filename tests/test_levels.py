@@ -1,0 +1,147 @@
+"""Integrating coarse levels: `integrate(level=)`, fixed-level sessions and level="auto"
+(a coarse frame first, refined to exactly the full-resolution chronovolume)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import chronocl
+from chronocl import modes
+from chronocl.core.errors import ChronoclError, InvalidParameterError
+from chronocl.core.tf import TimeTF
+from chronocl.data import synthetic
+from chronocl.integration.levels import LatencyModel
+from chronocl.integration.session import Session
+
+# Odd sizes: the longest axis 130 gives levels 1 (65) and 2 (33).
+SHAPE = (20, 18, 130)
+
+
+@pytest.fixture(scope="module")
+def series() -> chronocl.TimeSeries:
+    data = np.stack(list(synthetic.steps("vortex", 8, SHAPE)))
+    return chronocl.TimeSeries.from_array(data, spacing=(2.0, 1.0, 0.5), source="vortex")
+
+
+def extent(cv) -> np.ndarray:
+    return np.array(cv.shape) * np.array(cv.spacing)
+
+
+@pytest.mark.parametrize("mode", modes.names())
+def test_integrate_a_level_keeps_the_extent_and_pools_as_the_mode_asks(series, mode):
+    assert series.n_levels == 3
+    full = chronocl.integrate(series, "0:6", mode)
+    for level in (1, 2):
+        cv = chronocl.integrate(series, "0:6", mode, level=level)
+        coarse = series.level(level, modes.get(mode).pool)
+        assert cv.shape == coarse.volume_shape
+        np.testing.assert_allclose(extent(cv), extent(full))
+        assert cv.metadata["level"] == level
+        direct = chronocl.integrate(coarse, "0:6", mode)
+        np.testing.assert_array_equal(cv.rgba, direct.rgba)
+    assert full.metadata["level"] == 0
+
+
+@pytest.mark.parametrize("mode", modes.names())
+def test_auto_draws_coarse_first_and_refines_to_exactly_level_0(series, mode):
+    with Session(series, mode=mode, time_tf="rgb", level="auto", memory="1GB") as s:
+        first = s.set_window(0, 5)
+        assert s.shown_level == 2 and s.stats["level"] == 2 and s.stats["refining"]
+        assert first.shape == series.level(2).volume_shape
+        full = s.refine()
+        assert s.shown_level == 0 and not s.stats["refining"]
+        ref = chronocl.integrate(series, "0:5", mode, time_tf="rgb")
+        np.testing.assert_array_equal(full.rgba, ref.rgba)
+        if ref.t_index is not None:
+            np.testing.assert_array_equal(full.t_index, ref.t_index)
+        assert s.refine() is None  # already at full resolution
+
+
+def test_auto_scrubs_incrementally_at_the_level_it_picked(series):
+    rgb = TimeTF.preset("rgb", positions="absolute")  # colours that do not move with the window
+    with Session(series, mode="max", time_tf=rgb, level="auto", target_ms=1e-3) as s:
+        s.set_window(0, 4)
+        cvs = [s.slide(+1) for _ in range(3)]
+        assert s.stats["incremental"] and s.stats["level"] == 2
+        ref = chronocl.integrate(series, "3:7", "max", time_tf=rgb, level=2)
+        np.testing.assert_array_equal(cvs[-1].rgba, ref.rgba)
+
+
+def test_auto_picks_finer_levels_once_they_are_predicted_to_fit(series):
+    with Session(series, mode="alpha", level="auto", target_ms=1e6) as s:
+        s.set_window(0, 4)
+        assert s.shown_level == 2  # nothing measured yet: the coarsest
+        s.set_spec(mode="additive")
+        assert s.shown_level == 0  # everything fits a generous target
+        assert "within the target" in s.stats["why_level"]
+
+
+def test_fixed_level_session_follows_the_modes_pooling(series):
+    with Session(series, mode="alpha", level=1) as s:
+        a = s.set_window(0, 4)
+        m = s.set_spec(mode="max")
+        assert a.shape == m.shape == series.level(1).volume_shape
+        ref = chronocl.integrate(series, "0:4", "max", level=1)
+        np.testing.assert_array_equal(m.rgba, ref.rgba)
+
+
+def test_latency_model_picks_the_finest_level_within_target():
+    model = LatencyModel([8000, 1000, 125], target_ms=100)
+    assert model.pick(10)[0] == 2
+    model.record_integrate(2, ms=1.0, steps=10)  # 1 ms per 1250 voxel-steps
+    model.record_display(2, ms=5.0)
+    assert model.predict(1, 10) == pytest.approx(8.0 + 40.0)
+    assert model.pick(10)[0] == 1  # level 0: 64 + 320 ms > 100
+    model.record_integrate(1, ms=100.0, steps=10)  # slower than predicted: back off
+    assert model.pick(10)[0] == 2
+
+
+@pytest.mark.parametrize(
+    ("level", "text"),
+    [(3, "level 3 is out of range: vortex has levels 0..2"), ("fine", "must be an integer")],
+)
+def test_bad_levels_say_what_is_allowed(series, level, text):
+    with pytest.raises(InvalidParameterError, match=text) as err:
+        Session(series, level=level)
+    assert "\n" not in str(err.value) and isinstance(err.value, ChronoclError)
+    with pytest.raises(ChronoclError):
+        chronocl.integrate(series, "0:4", level=level)
+
+
+def test_bad_target_and_a_series_without_levels():
+    with pytest.raises(InvalidParameterError, match="target_ms"):
+        LatencyModel([1], target_ms=0)
+    small = chronocl.TimeSeries.from_array(np.zeros((3, 8, 8, 8), np.float32))
+    assert small.n_levels == 1
+    with pytest.raises(InvalidParameterError, match="only level 0"):
+        Session(small, level=1)
+    with Session(small, level="auto") as s:  # nothing coarser: full resolution at once
+        s.set_window(0, 2)
+        assert s.shown_level == 0 and s.refine() is None
+
+
+def test_viewer_sends_a_coarse_frame_then_full_resolution(tmp_path):
+    """A store with levels: the first frame of a request is coarse and says so, the next one
+    (after a short idle) answers the same request at full resolution; a probe never uses
+    the coarse level."""
+    from .viewer_helpers import Client, start_server
+
+    data = np.stack(list(synthetic.steps("vortex", 6, (40, 36, 96))))
+    path = tmp_path / "vortex.zarr"
+    chronocl.TimeSeries.from_array(data, source="vortex").save(path)
+    assert chronocl.open(path).n_levels == 2
+    server = start_server([path])
+    try:
+        client = Client(server)
+        rid = client.send({"type": "open", "dataset": 0})
+        client.wait("dataset", rid)
+        rid = client.send({"type": "update", "size": [96, 96], "window": {"t0": 0, "t1": 4}})
+        _, first, _ = client.frame_for(rid)
+        assert first["level"] == 1 and first["refining"] and first["level_shape"] == [20, 18, 48]
+        _, full, _ = client.frame_for(rid)
+        assert full["id"] == rid and full["level"] == 0 and not full["refining"]
+        assert full["level_shape"] == [40, 36, 96]
+        client.close()
+    finally:
+        server.stop()
