@@ -145,3 +145,24 @@ def test_viewer_sends_a_coarse_frame_then_full_resolution(tmp_path):
         client.close()
     finally:
         server.stop()
+
+
+def test_cli_integrates_and_renders_a_level_and_refuses_a_missing_one(tmp_path, series):
+    from .test_cli import assert_one_line_error, cli
+
+    store = tmp_path / "v.zarr"
+    series.save(store)
+    out = tmp_path / "coarse.zarr"
+    assert cli("integrate", str(store), str(out), "--mode", "max", "--level", "2").returncode == 0
+    cv = chronocl.Chronovolume.load(out)
+    assert cv.metadata["level"] == 2 and cv.shape == series.level(2).volume_shape
+    png = tmp_path / "coarse.png"
+    r = cli("render", str(store), "-o", str(png), "--level", "1", "--size", "64x64")
+    assert r.returncode == 0 and png.exists()
+    bad = cli("integrate", str(store), str(tmp_path / "x.zarr"), "--level", "3")
+    assert_one_line_error(bad, "level 3 is out of range")
+    assert not (tmp_path / "x.zarr").exists()
+    small = tmp_path / "small.zarr"
+    chronocl.TimeSeries.from_array(np.zeros((3, 8, 8, 8), np.float32)).save(small)
+    r = cli("render", str(small), "-o", str(tmp_path / "s.png"), "--level", "1")
+    assert_one_line_error(r, "chronocl pyramid")

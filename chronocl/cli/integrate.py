@@ -16,6 +16,7 @@ from chronocl.cli.options import (
     STORE_HINT,
     DeviceOpt,
     EngineOpt,
+    LevelOpt,
     NormalizeOpt,
     OrderOpt,
     TfOpt,
@@ -48,6 +49,7 @@ def integrate(
     normalize: NormalizeOpt = "time",
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
+    level: LevelOpt = 0,
     memory: Annotated[
         str,
         typer.Option(help="Memory budget; larger windows stream z-slabs into a .zarr OUT."),
@@ -75,10 +77,13 @@ def integrate(
       chronocl integrate jet.zarr m.zarr --mode max --window 0:10 --order backward
 
       chronocl integrate big.zarr a.zarr --memory 4GB --workers 2
+
+      chronocl integrate big.zarr quick.zarr --mode max --level 2
     """
     from chronocl.core.paths import check_input, check_target
     from chronocl.data.series import open_series
     from chronocl.integration.auto import check_run_options, plan_run
+    from chronocl.integration.levels import check_level
 
     # Everything is checked before any work: no kernel built, no brick read, nothing written.
     check_run_options(out_path, memory, engine, scheduler, workers)
@@ -86,6 +91,7 @@ def integrate(
     args = spec_args(tf, time_tf, order, enhance, threshold, normalize)
     check_target(out_path, overwrite, [store, tf])
     series = open_series(store)
+    check_level(series, level)
     t0 = time.perf_counter()
     run = plan_run(
         series,
@@ -97,6 +103,7 @@ def integrate(
         device=device,
         scheduler=scheduler,
         workers=workers,
+        level=level,
         **args,
     )
     if run.streamed:

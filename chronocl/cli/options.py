@@ -35,6 +35,10 @@ DeviceOpt = Annotated[
     str | None,
     typer.Option(help="OpenCL device: index 0:1 or a name part (see 'chronocl devices')."),
 ]
+LevelOpt = Annotated[
+    int,
+    typer.Option(help="Coarse level to integrate (0: full resolution; see 'chronocl pyramid')."),
+]
 
 
 def mode_choices() -> str:

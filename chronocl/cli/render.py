@@ -14,6 +14,7 @@ from chronocl.cli.options import (
     STORE_HINT,
     DeviceOpt,
     EngineOpt,
+    LevelOpt,
     NormalizeOpt,
     OrderOpt,
     TfOpt,
@@ -63,6 +64,7 @@ def render(
     outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
+    level: LevelOpt = 0,
     turntable: Annotated[
         Path | None,
         typer.Option(metavar="OUT.mp4|OUT.gif", help="Also render a full turn as a video."),
@@ -94,6 +96,7 @@ def render(
     from chronocl.data.formats.outputs import save_chronovolume as save_any
     from chronocl.data.series import open_series
     from chronocl.integration.inmemory import prepare
+    from chronocl.integration.levels import check_level
     from chronocl.render import Camera
     from chronocl.render.raycaster import check_clip, check_size
     from chronocl.render.turntable import ModeViews, check_video
@@ -126,6 +129,7 @@ def render(
     for path in outputs:
         check_target(path, overwrite, [store, tf])
     series = open_series(store)
+    check_level(series, level)
     for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
         prepare(series, window, m, None, args)
     views = ModeViews(
@@ -137,6 +141,7 @@ def render(
         device=device,
         spec_args=args,
         draw_args=dict(background=background, clip=clip_plane, outline=outline),
+        level=level,
     )
 
     t0 = time.perf_counter()

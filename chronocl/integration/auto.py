@@ -24,7 +24,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.formats.outputs import output_kind, save_chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import ENGINES
-from chronocl.integration.inmemory import Job, integrate, prepare
+from chronocl.integration.inmemory import Job, at_level, integrate, prepare
 from chronocl.integration.plan import fits_in_memory
 from chronocl.integration.streaming import integrate_to_store
 from chronocl.modes.spec import IntegrationSpec
@@ -147,6 +147,7 @@ def plan_run(
     client: object = None,
     scheduler: str | None = None,
     workers: int | None = None,
+    level: int = 0,
     **spec_args: object,
 ) -> Run:
     """Validate the integration of `window` of `series` into `out_path` and choose where it runs.
@@ -156,9 +157,10 @@ def plan_run(
     `scheduler` (an address) or `workers` (a local cluster of that many processes) to run the
     slabs on dask. Nothing is read or written yet. A window that does not fit the budget needs
     a .zarr output (streamed) or a cluster; any other output raises InvalidParameterError.
+    `level` integrates a coarse level of the series (docs/levels.md).
     """
     budget = check_run_options(out_path, memory, engine, scheduler, workers)
-    job = prepare(series, window, mode, spec, spec_args)
+    job = at_level(prepare(series, window, mode, spec, spec_args), level)
     distributed = client is not None or bool(scheduler or workers)
     if distributed:
         where = DASK

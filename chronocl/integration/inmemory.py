@@ -31,6 +31,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
+from chronocl.integration.levels import check_level
 from chronocl.modes.spec import IntegrationSpec, resolve_order
 from chronocl.reference import Partial
 
@@ -135,6 +136,14 @@ def prepare(
     return Job.of(series, selection, spec, spec.data_tf.value_range or (series.vmin, series.vmax))
 
 
+def at_level(job: Job, level: int) -> Job:
+    """The job on a coarse level of its series (0: the job itself), pooled as its mode asks."""
+    if level == 0:
+        return job
+    coarse = job.series.level(check_level(job.series, level), job.spec.integration.pool)
+    return prepare(coarse, job.selection, spec=job.spec)
+
+
 def engine_rows(eng: Engine, job: Job) -> int:
     """Output z-rows per brick that fit the engine (at least 1, else a clear error)."""
     _, ny, nx = job.series.volume_shape
@@ -223,9 +232,7 @@ def integrate(
     level of the series (0: full resolution; docs/levels.md), pooled as the mode asks; the
     chronovolume keeps the physical extent, so it renders in the same place.
     """
-    job = prepare(series, window, mode, spec, spec_args)
-    if level != 0:
-        job = prepare(series.level(level, job.spec.integration.pool), job.selection, spec=job.spec)
+    job = at_level(prepare(series, window, mode, spec, spec_args), level)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
     return integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
 

@@ -86,6 +86,7 @@ class ModeViews:
     device: str | None = None
     spec_args: Mapping[str, object] = field(default_factory=dict)
     draw_args: Mapping[str, object] = field(default_factory=dict)
+    level: int = 0  # a coarse level of the series (docs/levels.md)
 
     @property
     def follows_camera(self) -> bool:
@@ -105,7 +106,9 @@ class ModeViews:
                 if isinstance(enhance, Enhance)
                 else Enhance(str(enhance), view=view)
             )
-        return [integrate(self.series, self.window, m, **args) for m in self.modes]
+        return [
+            integrate(self.series, self.window, m, level=self.level, **args) for m in self.modes
+        ]
 
     def draw(self, chronovolumes: Sequence[Chronovolume], camera: Camera, volumes=None) -> Image:
         """The parallel views of `chronovolumes` (`volumes`: them uploaded, if they are)."""
