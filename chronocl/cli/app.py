@@ -22,6 +22,7 @@ from chronocl.cli import (
     info,
     ingest,
     integrate,
+    pyramid,
     render,
     verify,
     view,
@@ -43,6 +44,8 @@ Examples:
   chronocl info vortex.zarr
 
   chronocl verify vortex.zarr
+
+  chronocl pyramid vortex.zarr
 
   chronocl integrate vortex.zarr alpha.zarr --mode alpha --window 0:30:10
 
@@ -81,6 +84,7 @@ app.command()(render.render)
 app.command()(export.export)
 app.command()(view.view)
 app.command()(verify.verify)
+app.command()(pyramid.pyramid)
 app.command()(devices.devices)
 app.command()(demo.demo)
 

@@ -66,7 +66,10 @@ class CheckedStore(LocalStore):
         """Raise StoreCorruptError if a noted missing chunk lies in the chunk index ranges."""
         for coords, key in list(self.missing.items()):
             if all(c in dim for c, dim in zip(coords, touched, strict=False)):
-                where = f" ({_where(coords)})" if self.arrays in (("data",), ("",)) else ""
+                by_step = self.arrays in (("data",), ("",)) or all(
+                    a.startswith("levels/") for a in self.arrays
+                )  # series and their coarse levels are chunked one step per chunk
+                where = f" ({_where(coords)})" if by_step else ""
                 raise damaged(self.root, f"chunk {key}{where} is missing")
 
     def _chunk_coords(self, key: str) -> tuple[int, ...] | None:

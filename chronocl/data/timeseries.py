@@ -9,6 +9,7 @@ into the caller's buffer, and through `chronocl.data.integrity` so damage is nev
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -40,6 +41,7 @@ from chronocl.data.metadata import (
     stats_from_steps,
     unreadable_metadata,
 )
+from chronocl.data.pyramid import check_pool, count_levels, describe_levels, level_parts
 from chronocl.data.writer import write_store
 
 # Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at
@@ -49,7 +51,10 @@ STEPS_PER_READ = 8
 
 @dataclass
 class TimeSeries:
-    """A (T, Z, Y, X) series with its statistics, spacing (dz, dy, dx) and time labels."""
+    """A (T, Z, Y, X) series with its statistics, spacing (dz, dy, dx) and time labels.
+
+    `level_index` is 0 for the series itself, n for its coarse level n (`level(n)`).
+    """
 
     data: da.Array
     stats: SeriesStats
@@ -59,6 +64,9 @@ class TimeSeries:
     path: Path | None = None
     _zarr: zarr.Array | None = field(default=None, repr=False)
     _stamp: int | None = field(default=None, repr=False)
+    level_index: int = 0
+    _root: TimeSeries | None = field(default=None, repr=False)
+    _levels: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
         if not self.times:
@@ -102,6 +110,28 @@ class TimeSeries:
     @property
     def vmax(self) -> float:
         return self.stats.vmax
+
+    # -- coarse levels (chronocl.data.pyramid) -------------------------------------------------
+    @property
+    def n_levels(self) -> int:
+        """1 + the coarse levels: stored ones, or (in memory) those `level_shapes` gives."""
+        return count_levels(self._root or self)
+
+    def level(self, n: int, pool: str = "mean") -> TimeSeries:
+        """Coarse level `n` pooled by `pool` (mean, max, min); level 0 is the series itself.
+
+        Its stats keep level 0's vmin/vmax (one TF maps a value alike at every level) with the
+        level's own per-step statistics; its spacing keeps level 0's physical extent.
+        """
+        root = self._root or self
+        check_pool(pool)
+        if n == 0 and not isinstance(n, bool):
+            return root
+        if (n, pool) not in root._levels:
+            root._levels[n, pool] = dataclasses.replace(
+                root, **level_parts(root, n, pool), level_index=int(n), _root=root, _levels={}
+            )
+        return root._levels[n, pool]
 
     # -- reading -------------------------------------------------------------------------
     def read(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
@@ -275,7 +305,10 @@ class TimeSeries:
             "spacing (x, y, z)": [self.spacing[2], self.spacing[1], self.spacing[0]],
             "chunks": list(self.data.chunksize),
             "size in memory": _human(t * z * y * x * self.dtype.itemsize),
+            "levels": describe_levels(self.volume_shape, self.n_levels),
         }
+        if self.level_index:
+            d["level"] = self.level_index
         if self.path is not None:
             d["size on disk"] = _human(_disk_usage(self.path))
         return d

@@ -3,7 +3,8 @@
 Opening a store already checks its metadata; this also reads every chunk (missing and
 undecodable chunks raise StoreCorruptError) and recomputes each step's minimum, maximum and mean
 against the statistics stored at ingest, which catches values changed on disk in stores
-without chunk checksums.
+without chunk checksums. The coarse levels, when the store has them, are checked the same way
+against their own statistics.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from chronocl.core.errors import StoreFormatError
 from chronocl.core.progress import track
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.integrity import damaged
+from chronocl.data.pyramid import POOLS
 from chronocl.data.series import TimeSeries, open_series
 
 
@@ -29,18 +31,25 @@ def verify(path: str | os.PathLike, progress: bool = False) -> dict:
         cv = Chronovolume.load(path)  # reads and checks every chunk
         return {"chronovolume": str(path), "shape (Z, Y, X)": list(cv.shape), "status": "ok"}
     _check_steps(series, progress)
-    return {"series": str(path), "steps checked": series.n_steps, "status": "ok"}
+    summary = {"series": str(path), "steps checked": series.n_steps}
+    if series.n_levels > 1:
+        for n in range(1, series.n_levels):
+            for pool in POOLS:
+                _check_steps(series.level(n, pool), progress, f"verifying level {n} {pool}")
+        summary["levels checked"] = f"1..{series.n_levels - 1} ({', '.join(POOLS)})"
+    return {**summary, "status": "ok"}
 
 
-def _check_steps(series: TimeSeries, progress: bool) -> None:
+def _check_steps(series: TimeSeries, progress: bool, what: str = "verifying steps") -> None:
     stats, path = series.stats, Path(series.path or "array")
-    for t in track(range(series.n_steps), series.n_steps, "verifying steps", progress):
+    level = f"level {series.level_index} " if series.level_index else ""
+    for t in track(range(series.n_steps), series.n_steps, what, progress):
         step = series.read([t])[0]
         got = (float(step.min()), float(step.max()), float(step.mean(dtype=np.float64)))
         want = (stats.step_min[t], stats.step_max[t], stats.step_mean[t])
         if got[:2] != want[:2] or not math.isclose(got[2], want[2], rel_tol=1e-9, abs_tol=1e-12):
             raise damaged(
                 path,
-                f"step {t} holds values in [{got[0]}, {got[1]}] (mean {got[2]}) but its "
+                f"{level}step {t} holds values in [{got[0]}, {got[1]}] (mean {got[2]}) but its "
                 f"statistics say [{want[0]}, {want[1]}] (mean {want[2]})",
             )

@@ -3,7 +3,9 @@
 Store layout (zarr v3): a group whose array ``data`` is (T, Z, Y, X), chunked (1, zc, Y, X) so
 one step is one small set of chunks, and whose attribute ``chronocl`` holds the global value
 range, per-step min/max/mean, voxel spacing, time labels and a source description. Every chunk
-is written, empty ones included, so a missing chunk always means damage.
+is written, empty ones included, so a missing chunk always means damage. With `levels` (the
+default) the coarse levels (`chronocl.data.pyramid`, docs/levels.md) are written in the same
+pass, each step pooled as it is written.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 import zarr
@@ -27,6 +30,7 @@ from chronocl.data.metadata import (
     parse_times,
     stats_from_steps,
 )
+from chronocl.data.pyramid import LEVELS, LevelWriter, level_shapes
 
 CHUNK_BYTES = 16 * 2**20
 COMPRESSORS = ("zstd", "blosc-lz4", "none")
@@ -69,13 +73,15 @@ def write_store(
     chunk_bytes: int = CHUNK_BYTES,
     compressor: str = "zstd",
     checksum: bool = True,
+    levels: bool = True,
 ) -> None:
     """Write steps (each (Z, Y, X)) to a new store at `path` atomically.
 
     Non-finite values are rejected unless `nan_fill` is given, which replaces them.
     `labels` name each step's origin (e.g. its file) in error messages. Chunks are
     (1, zc, Y, X) of at most `chunk_bytes` (small chunks suit small streaming budgets);
-    `compressor` is one of COMPRESSORS; `checksum` adds a crc32c per chunk.
+    `compressor` is one of COMPRESSORS; `checksum` adds a crc32c per chunk. `levels` adds
+    the coarse levels (group ``levels``) in the same pass when the volume has any.
     """
     dt = np.dtype(dtype)
     check_dtype(dt)
@@ -103,34 +109,36 @@ def write_store(
             compressors=codecs,
             config={"write_empty_chunks": True},  # a missing chunk then always means damage
         )
+        pyramid = None
+        if levels and level_shapes(shape[1:]):
+            pyramid = LevelWriter(
+                group.create_group(LEVELS), shape, dt, codecs, chunk_bytes=chunk_bytes
+            )
         count = 0
-        for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
-            where = labels[t] if labels else f"time step {t}"
-            step = np.asarray(step)
-            if t >= n_steps:
-                raise InvalidDataError(f"got more than the {n_steps} steps announced")
-            if step.shape != shape[1:]:
-                raise InvalidDataError(
-                    f"{where} has shape {step.shape}, expected {shape[1:]} (Z, Y, X)"
-                )
-            if dt.kind == "f":
-                bad = ~np.isfinite(step)
-                n_bad = int(bad.sum())
-                if n_bad:
-                    if nan_fill is None:
-                        raise InvalidDataError(
-                            f"{where} has {n_bad} NaN/infinite values; pass --nan-fill VALUE "
-                            "(nan_fill=...) to replace them"
-                        )
-                    step = np.where(bad, dt.type(nan_fill), step)
-            step = step.astype(dt, copy=False)
-            arr[t] = step
-            smin.append(float(step.min()))
-            smax.append(float(step.max()))
-            smean.append(float(step.mean(dtype=np.float64)))
-            count += 1
+        # The levels of a step are pooled and written on a thread while the step itself is.
+        pool = ThreadPoolExecutor(1, thread_name_prefix="chronocl-levels") if pyramid else None
+        try:
+            for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
+                step = _checked_step(step, t, shape, dt, nan_fill, labels, n_steps)
+                levels_done = pool.submit(pyramid.add, t, step) if pool else None
+                try:
+                    arr[t] = step
+                    smin.append(float(step.min()))
+                    smax.append(float(step.max()))
+                    smean.append(float(step.mean(dtype=np.float64)))
+                finally:  # the caller may reuse the step's buffer once it has the next
+                    if levels_done is not None:
+                        wait([levels_done])
+                if levels_done is not None:
+                    levels_done.result()
+                count += 1
+        finally:
+            if pool is not None:
+                pool.shutdown()
         if count != n_steps:
             raise InvalidDataError(f"got {count} time steps, expected {n_steps}")
+        if pyramid is not None:
+            pyramid.finish()
         stats = stats_from_steps(smin, smax, smean)
         group.attrs["chronocl"] = {
             "format": FORMAT,
@@ -145,3 +153,25 @@ def write_store(
             "times": list(times),
             "source": source,
         }
+
+
+def _checked_step(step, t, shape, dt, nan_fill, labels, n_steps) -> np.ndarray:
+    """Step `t` as a C-contiguous array of the store's dtype, its non-finite values replaced
+    by `nan_fill` (else rejected)."""
+    where = labels[t] if labels else f"time step {t}"
+    step = np.asarray(step)
+    if t >= n_steps:
+        raise InvalidDataError(f"got more than the {n_steps} steps announced")
+    if step.shape != shape[1:]:
+        raise InvalidDataError(f"{where} has shape {step.shape}, expected {shape[1:]} (Z, Y, X)")
+    if dt.kind == "f":
+        bad = ~np.isfinite(step)
+        n_bad = int(bad.sum())
+        if n_bad:
+            if nan_fill is None:
+                raise InvalidDataError(
+                    f"{where} has {n_bad} NaN/infinite values; pass --nan-fill VALUE "
+                    "(nan_fill=...) to replace them"
+                )
+            step = np.where(bad, dt.type(nan_fill), step)
+    return np.ascontiguousarray(step.astype(dt, copy=False))

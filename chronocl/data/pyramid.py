@@ -1,0 +1,450 @@
+"""Coarse levels (a pyramid) of a chronocl store, so a session can draw a coarse level first.
+
+Layout: the store's group gains a child group ``levels`` holding ``levels/<n>/<pool>`` for
+n = 1..L and pool in POOLS, each (T, z, y, x) of the data's dtype, chunked one step per chunk
+along t like ``data``, every chunk written, with the data's compressor/checksum chain. The
+``levels`` group's attribute ``chronocl`` (format "chronocl.levels") holds the level-0 shape
+the levels were built from and, per level, its shape, its factor (level-0 shape / level shape
+per axis) and per pool the per-step min/max/mean.
+
+Rule: level n is ceil(shape_{n-1} / 2) per axis; levels are added while the previous level's
+largest axis is > COARSEST. Each level pools 2x2x2 blocks of the previous level of the same
+pool (partial blocks at odd edges use the voxels present): "mean" in float64 (integer data
+rounded half to even and cast back), "max" and "min" exact. See docs/levels.md.
+
+`add_levels` adds levels to an existing store without touching ``data`` or the root's
+attributes: it builds them at a hidden sibling ``.levels.partial-<pid>-<hex>`` inside the store
+and renames that to ``levels`` when complete (chronocl.core.atomic).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import dask.array as da
+import numpy as np
+import zarr
+from zarr.codecs import BloscCodec, Crc32cCodec
+
+from chronocl.core.atomic import partial_path, remove_path, remove_stale, replace
+from chronocl.core.errors import (
+    InputNotFoundError,
+    InvalidDataError,
+    InvalidParameterError,
+    StoreFormatError,
+)
+from chronocl.core.progress import track
+from chronocl.data.integrity import CheckedArray, CheckedStore, checked_read, damaged
+from chronocl.data.metadata import FORMAT, SeriesStats, checked_attrs, stats_from_steps
+
+POOLS = ("mean", "max", "min")
+LEVELS = "levels"
+LEVELS_FORMAT = "chronocl.levels"
+SLAB_BYTES = 2 * 2**20  # level-0 bytes pooled at once (through every level) while in cache
+LEVEL_CODEC = BloscCodec(cname="lz4", clevel=1, shuffle="noshuffle")  # ~3x faster than zstd
+COARSEST = 64  # levels are added while the previous level's largest axis is larger
+
+
+def level_shapes(volume_shape: Sequence[int]) -> list[tuple[int, int, int]]:
+    """The (Z, Y, X) shapes of levels 1..L of a volume of `volume_shape` (level 0)."""
+    shape = tuple(int(n) for n in volume_shape)
+    shapes = []
+    while max(shape) > COARSEST:
+        shape = tuple(-(-n // 2) for n in shape)
+        shapes.append(shape)
+    return shapes  # type: ignore[return-value]
+
+
+def level_compressors(data_compressors: object) -> tuple:
+    """The codecs of the levels: a fast lz4, then a crc32c when the data's chain has one."""
+    checked = any(isinstance(c, Crc32cCodec) for c in data_compressors or ())
+    return (LEVEL_CODEC, Crc32cCodec()) if checked else (LEVEL_CODEC,)
+
+
+def check_pool(pool: str) -> None:
+    if pool not in POOLS:
+        raise InvalidParameterError(f"unknown pool {pool!r}; choose one of {', '.join(POOLS)}")
+
+
+def downsample(step: np.ndarray, pool: str) -> np.ndarray:
+    """One (Z, Y, X) step pooled over 2x2x2 blocks: (ceil(Z/2), ceil(Y/2), ceil(X/2)).
+
+    Partial blocks at odd edges pool the voxels present. "mean" is the float64 mean (integer
+    dtypes rounded half to even, as np.rint, and cast back); "max" and "min" are exact.
+    """
+    check_pool(pool)
+    a = np.asarray(step)
+    if a.ndim != 3:
+        raise InvalidDataError(f"a step to downsample is (Z, Y, X); got shape {a.shape}")
+    if pool != "mean":
+        for axis in range(3):
+            a = _pool_axis(a, axis, np.maximum if pool == "max" else np.minimum, a.dtype)
+        return a
+    # Sums of 2x2x2 blocks, a lone edge voxel counted twice along its axis (so every block
+    # sums 8 values whose mean is that of the voxels present), in an exact accumulator.
+    acc = _ACCUMULATORS.get(a.dtype.name, np.float64)
+    dtype = a.dtype
+    for axis in range(3):
+        a = _pool_axis(a, axis, np.add, acc)
+    if dtype.kind == "f":
+        a *= 0.125
+        return a.astype(dtype, copy=False)
+    q = a >> 3  # the integer mean rounded half to even, exactly as np.rint(a / 8)
+    q &= 1
+    a += 3
+    a += q
+    a >>= 3
+    return a.astype(dtype, copy=False)
+
+
+# Exact sums of 8 values: uint8 in uint16, 16-bit integers in int32, floats in float64.
+_ACCUMULATORS = {"uint8": np.uint16, "uint16": np.int32, "int16": np.int32}
+
+
+def _pool_axis(a: np.ndarray, axis: int, op, acc) -> np.ndarray:
+    """Combine pairs along one axis with `op` into dtype `acc`; a lone last element pairs with
+    itself (an axis of length 1 too)."""
+    n = a.shape[axis]
+
+    def at(s: slice) -> tuple[slice, ...]:
+        return (slice(None),) * axis + (s,)
+
+    h = n // 2
+    shape = list(a.shape)
+    shape[axis] = n - h
+    out = np.empty(shape, acc)
+    op(a[at(slice(0, 2 * h, 2))], a[at(slice(1, 2 * h, 2))], out=out[at(slice(0, h))], dtype=acc)
+    if n % 2:
+        last = a[at(slice(n - 1, n))]
+        op(last, last, out=out[at(slice(h, n - h))], dtype=acc)
+    return out
+
+
+# -- writing ----------------------------------------------------------------------------------
+class LevelWriter:
+    """Writes levels 1..L of a series into a zarr group while the caller streams the steps.
+
+    `add(t, step)` pools one level-0 step into every level and pool and writes them; `finish()`
+    checks that every step came and writes the group's ``chronocl`` attribute.
+    """
+
+    def __init__(
+        self,
+        group: zarr.Group,
+        shape: Sequence[int],
+        dtype: object,
+        compressors: object,
+        chunk_bytes: int,
+    ) -> None:
+        self.group, self.shape, self.dtype = group, tuple(int(n) for n in shape), np.dtype(dtype)
+        self.shapes = level_shapes(self.shape[1:])
+        self.arrays = {}
+        for n, (z, y, x) in enumerate(self.shapes, 1):
+            sub = group.require_group(str(n))
+            zc = max(1, min(z, int(chunk_bytes) // max(1, y * x * self.dtype.itemsize)))
+            for pool in POOLS:
+                self.arrays[n, pool] = sub.create_array(
+                    pool,
+                    shape=(self.shape[0], z, y, x),
+                    chunks=(1, zc, y, x),
+                    dtype=self.dtype,
+                    compressors=level_compressors(compressors),
+                    config={"write_empty_chunks": True},  # a missing chunk means damage
+                )
+        self.stats = {key: ([], [], []) for key in self.arrays}
+        self.done = 0
+
+    def add(self, t: int, step: np.ndarray) -> None:
+        """Pool step `t` (Z, Y, X) into every level and pool and write them.
+
+        The step is pooled in z-slabs of about SLAB_BYTES (a multiple of 2^L planes, so every
+        level's slab starts on an even plane), which stay in the CPU's cache through all levels.
+        """
+        depth = len(self.shapes)
+        plane = max(1, step[0].nbytes)
+        planes = max(1, SLAB_BYTES // plane >> depth) << depth
+        out = {
+            (n, pool): np.empty(self.shapes[n - 1], self.dtype)
+            for n in range(1, depth + 1)
+            for pool in POOLS
+        }
+        for z0 in range(0, step.shape[0], planes):
+            for pool in POOLS:
+                a = step[z0 : z0 + planes]
+                for n in range(1, depth + 1):
+                    a = downsample(a, pool)
+                    out[n, pool][z0 >> n : (z0 >> n) + a.shape[0]] = a
+        for key, a in out.items():
+            self.arrays[key][t] = a
+            smin, smax, smean = self.stats[key]
+            smin.append(float(a.min()))
+            smax.append(float(a.max()))
+            smean.append(float(a.mean(dtype=np.float64)))
+        self.done += 1
+
+    def finish(self) -> None:
+        if self.done != self.shape[0]:
+            raise InvalidDataError(f"levels got {self.done} time steps, expected {self.shape[0]}")
+        levels = []
+        for n, lshape in enumerate(self.shapes, 1):
+            stats = {}
+            for pool in POOLS:
+                smin, smax, smean = self.stats[n, pool]
+                stats[pool] = {"step_min": smin, "step_max": smax, "step_mean": smean}
+            factor = [a / b for a, b in zip(self.shape[1:], lshape, strict=True)]
+            levels.append({"shape": [self.shape[0], *lshape], "factor": factor, "stats": stats})
+        self.group.attrs["chronocl"] = {
+            "format": LEVELS_FORMAT,
+            "version": 1,
+            "chunks": "complete",
+            "shape": list(self.shape),
+            "pools": list(POOLS),
+            "levels": levels,
+        }
+
+
+def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = False) -> dict:
+    """Add coarse levels to the chronocl store at `path`; returns a summary.
+
+    ``data`` and the root's attributes are only read. The levels are built at a hidden
+    sibling inside the store and renamed to ``levels`` when complete, so a killed build leaves
+    no ``levels`` (its partial is removed by the next build). Existing levels are kept unless
+    `force`, which builds new ones and swaps them in.
+    """
+    p = Path(path)
+    arr = _open_data(p)
+    shape = tuple(int(n) for n in arr.shape)
+    summary = {"store": str(p)}
+    target = p / LEVELS
+    remove_stale(target)  # partials of builds that were killed
+    if not level_shapes(shape[1:]):
+        return {
+            **summary,
+            "levels": describe_levels(shape[1:], 1),
+            "status": f"nothing to add: levels are made while the largest axis is > {COARSEST}",
+        }
+    if target.exists() and not force:
+        read_levels(p, shape)  # damaged levels are reported, not kept silently
+        return {
+            **summary,
+            "levels": describe_levels(shape[1:], 1 + len(level_shapes(shape[1:]))),
+            "status": "levels already present (pass --force to rebuild them)",
+        }
+    zc = int(arr.chunks[1])
+    chunk_bytes = zc * shape[2] * shape[3] * arr.dtype.itemsize
+    tmp = partial_path(target)
+    try:
+        group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
+        writer = LevelWriter(group, shape, arr.dtype, arr.compressors, chunk_bytes)
+        for t in track(range(shape[0]), shape[0], "building levels", progress):
+            sel = (t,)
+            writer.add(t, checked_read(p, arr, lambda s=sel: arr[s], sel))
+        writer.finish()
+        replace(tmp, target)  # an exchange when levels exist (force)
+    except BaseException:
+        remove_path(tmp)
+        raise
+    return {
+        **summary,
+        "levels": describe_levels(shape[1:], 1 + len(writer.shapes)),
+        "status": "rebuilt" if force else "added",
+    }
+
+
+def _open_data(p: Path) -> zarr.Array:
+    """The checked ``data`` array of the chronocl store at `p` (zarr v3), read-only."""
+    if not p.exists():
+        raise InputNotFoundError(
+            f"store {str(p)!r} does not exist; create one with 'chronocl ingest' or "
+            "'chronocl generate'"
+        )
+    store = CheckedStore(p)
+    try:
+        node = zarr.open_group(store=store, mode="r")
+        arr = node["data"]
+        attrs = dict(node.attrs).get("chronocl")
+    except Exception:
+        raise StoreFormatError(
+            f"{str(p)!r} is not a chronocl store; ingest your data with 'chronocl ingest'"
+        ) from None
+    if not isinstance(attrs, dict) or attrs.get("format") != FORMAT:
+        raise StoreFormatError(
+            f"{str(p)!r} is not a chronocl store (no chronocl statistics); "
+            "ingest it with 'chronocl ingest'"
+        )
+    if node.metadata.zarr_format != 3:
+        raise StoreFormatError(
+            f"{str(p)!r} is a zarr v2 store; levels are added to zarr v3 stores: "
+            "ingest it again with 'chronocl ingest'"
+        )
+    checked_attrs(p, arr, attrs)
+    store.complete = attrs.get("chunks") == "complete"
+    return arr
+
+
+# -- reading ----------------------------------------------------------------------------------
+def describe_levels(volume_shape: Sequence[int], n_levels: int) -> str:
+    """'0..2 (256³, 128³, 64³)' for a series with n_levels levels (level 0 included)."""
+    shapes = [tuple(volume_shape), *level_shapes(volume_shape)][:n_levels]
+    text = ", ".join(f"{s[0]}³" if len(set(s)) == 1 else "×".join(map(str, s)) for s in shapes)
+    return f"{'0' if n_levels == 1 else f'0..{n_levels - 1}'} ({text})"
+
+
+def read_levels(path: Path, shape: Sequence[int]) -> list[dict] | None:
+    """The checked ``levels`` attribute of the store at `path` whose data has `shape`.
+
+    None when the store has no levels; StoreCorruptError when they are damaged or were built
+    from another shape. Each level: {"shape", "factor", "stats": {pool: SeriesStats}} with the
+    level's own vmin/vmax.
+    """
+    folder = Path(path) / LEVELS
+    if not folder.exists():
+        return None
+    fix = f"rebuild them with 'chronocl pyramid {path} --force'"
+
+    def bad(what: str) -> Exception:
+        return damaged(path, f"{what} ({fix})")
+
+    try:
+        doc = json.loads((folder / "zarr.json").read_bytes())
+    except FileNotFoundError:
+        raise bad("its levels group has no metadata (levels/zarr.json is missing)") from None
+    except (OSError, ValueError, RecursionError):
+        raise bad("its levels metadata levels/zarr.json cannot be read") from None
+    attrs = doc.get("attributes", {}).get("chronocl") if isinstance(doc, dict) else None
+    if not isinstance(attrs, dict) or attrs.get("format") != LEVELS_FORMAT:
+        raise bad("its levels group lacks the chronocl.levels attribute")
+    if attrs.get("version") != 1 or attrs.get("chunks") != "complete":
+        raise bad(f"its levels attribute has version {attrs.get('version')!r}, not 1")
+    shape = [int(n) for n in shape]
+    if attrs.get("shape") != shape:
+        raise bad(f"its levels were built from shape {attrs.get('shape')}, its data is {shape}")
+    want = level_shapes(shape[1:])
+    levels = attrs.get("levels")
+    if not isinstance(levels, list) or len(levels) != len(want):
+        raise bad(f"its levels attribute does not list the {len(want)} levels of {shape[1:]}")
+    out = []
+    for n, (level, lshape) in enumerate(zip(levels, want, strict=True), 1):
+        if not isinstance(level, dict) or level.get("shape") != [shape[0], *lshape]:
+            raise bad(f"level {n} is not listed with shape {[shape[0], *lshape]}")
+        factor = tuple(a / b for a, b in zip(shape[1:], lshape, strict=True))
+        if level.get("factor") != list(factor):
+            raise bad(f"level {n} is listed with factor {level.get('factor')}, not {factor}")
+        stats = level.get("stats")
+        if not isinstance(stats, dict):
+            raise bad(f"level {n} lacks its statistics")
+        out.append(
+            {
+                "shape": lshape,
+                "factor": factor,
+                "stats": {pool: _pool_stats(stats.get(pool), shape[0], bad) for pool in POOLS},
+            }
+        )
+    return out
+
+
+def _pool_stats(stats: object, t: int, bad) -> SeriesStats:
+    lists = [stats.get(k) if isinstance(stats, dict) else None for k in ("step_min", "step_max")]
+    lists.append(stats.get("step_mean") if isinstance(stats, dict) else None)
+    for values in lists:
+        if not (
+            isinstance(values, list)
+            and len(values) == t
+            and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in values
+            )
+        ):
+            raise bad(f"its levels statistics are not {t} finite numbers per step")
+    return stats_from_steps(*lists)
+
+
+def open_level_array(path: Path, n: int, pool: str, shape: Sequence[int], dtype) -> zarr.Array:
+    """The checked array ``levels/<n>/<pool>`` of the store at `path` (a missing or undecodable
+    chunk raises StoreCorruptError on read)."""
+    name = f"{LEVELS}/{n}/{pool}"
+    store = CheckedStore(path, (name,))
+    store.complete = True
+    try:
+        arr = zarr.open_array(store=store, path=name, mode="r")
+    except Exception:
+        raise damaged(path, f"its level array {name} cannot be opened") from None
+    if tuple(arr.shape) != tuple(shape) or arr.dtype != dtype or arr.chunks[0] != 1:
+        raise damaged(
+            path,
+            f"its level array {name} has shape {tuple(arr.shape)} and dtype {arr.dtype}, "
+            f"expected {tuple(shape)} and {dtype}",
+        )
+    return arr
+
+
+def lazy_level(data: da.Array, n: int, pool: str) -> da.Array:
+    """Level n of a (T, Z, Y, X) dask array, pooled lazily step by step (same as stored)."""
+    a = data.rechunk((1, -1, -1, -1))
+    for lshape in level_shapes(data.shape[1:])[:n]:
+        a = a.map_blocks(_pool_block, pool, chunks=(1, *lshape), dtype=a.dtype)
+    return a
+
+
+def _pool_block(block: np.ndarray, pool: str) -> np.ndarray:
+    return np.stack([downsample(step, pool) for step in block])
+
+
+def lazy_stats(a: da.Array, vmin: float, vmax: float) -> SeriesStats:
+    """Per-step min/max/mean of a lazy level, with level 0's vmin/vmax."""
+    smin, smax, smean = da.compute(
+        a.min(axis=(1, 2, 3)), a.max(axis=(1, 2, 3)), a.mean(axis=(1, 2, 3), dtype=np.float64)
+    )
+    return keep_range(stats_from_steps(smin, smax, smean), vmin, vmax)
+
+
+def keep_range(stats: SeriesStats, vmin: float, vmax: float) -> SeriesStats:
+    """`stats` with the global range [vmin, vmax] of level 0, so one TF maps alike at every
+    level."""
+    return SeriesStats(vmin, vmax, stats.step_min, stats.step_max, stats.step_mean)
+
+
+# -- the series' hooks (duck-typed: TimeSeries lives above this module) -------------------------
+def count_levels(series) -> int:
+    """1 + the coarse levels a series has: its store's, or those level_shapes gives in memory."""
+    if series.path is None:
+        return 1 + len(level_shapes(series.volume_shape))
+    levels = read_levels(series.path, series.shape)
+    return 1 if levels is None else 1 + len(levels)
+
+
+def level_parts(series, n: int, pool: str) -> dict:
+    """The fields of level `n` (> 0) of `series` (level 0): data, stats, spacing, _zarr."""
+    check_pool(pool)
+    if isinstance(n, bool) or not isinstance(n, int | np.integer):
+        raise InvalidParameterError(f"level {n!r} is not a whole number; give 0, 1, ...")
+    n = int(n)
+    shapes = level_shapes(series.volume_shape)
+    name = series.path.name if series.path is not None else series.source or "the series"
+    levels = None if series.path is None else read_levels(series.path, series.shape)
+    top = len(shapes) if series.path is None or levels is not None else 0
+    if not 1 <= n <= len(shapes):
+        have = f"levels 0..{top}" if top else "only level 0"
+        raise InvalidParameterError(f"level {n} is out of range: {name} has {have}")
+    factor = tuple(a / b for a, b in zip(series.volume_shape, shapes[n - 1], strict=True))
+    spacing = tuple(s * f for s, f in zip(series.spacing, factor, strict=True))
+    if series.path is None:
+        data = lazy_level(series.data, n, pool)
+        stats = lazy_stats(data, series.vmin, series.vmax)
+        return {"data": data, "stats": stats, "spacing": spacing, "_zarr": None}
+    if levels is None:
+        raise StoreFormatError(
+            f"{name} has no coarse levels; add them with 'chronocl pyramid {series.path}'"
+        )
+    stats = keep_range(levels[n - 1]["stats"][pool], series.vmin, series.vmax)
+    arr = open_level_array(series.path, n, pool, (series.n_steps, *shapes[n - 1]), series.dtype)
+    data = da.from_array(
+        CheckedArray(series.path, arr),
+        chunks=arr.chunks,
+        name=f"chronocl-{series.path}-{LEVELS}-{n}-{pool}-{id(arr)}",
+    )
+    return {"data": data, "stats": stats, "spacing": spacing, "_zarr": arr}
