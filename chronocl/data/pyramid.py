@@ -2,7 +2,7 @@
 
 Layout: the store's group gains a child group ``levels`` holding ``levels/<n>/<pool>`` for
 n = 1..L and pool in POOLS, each (T, z, y, x) of the data's dtype, chunked one step per chunk
-along t like ``data``, every chunk written, with the data's compressor/checksum chain. The
+along t like ``data``, every chunk written, compressed with a fast lz4 and the data's crc32c. The
 ``levels`` group's attribute ``chronocl`` (format "chronocl.levels") holds the level-0 shape
 the levels were built from and, per level, its shape, its factor (level-0 shape / level shape
 per axis) and per pool the per-step min/max/mean.
