@@ -19,6 +19,7 @@ and renames that to ``levels`` when complete (chronocl.core.atomic).
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 import os
@@ -70,53 +71,58 @@ def check_pool(pool: str) -> None:
         raise InvalidParameterError(f"unknown pool {pool!r}; choose one of {', '.join(POOLS)}")
 
 
-def downsample(step: np.ndarray, pool: str) -> np.ndarray:
+def downsample(step: np.ndarray, pool: str, out: np.ndarray | None = None) -> np.ndarray:
     """One (Z, Y, X) step pooled over 2x2x2 blocks: (ceil(Z/2), ceil(Y/2), ceil(X/2)).
 
     Partial blocks at odd edges pool the voxels present. "mean" is the float64 mean (integer
-    dtypes rounded half to even, as np.rint, and cast back); "max" and "min" are exact.
+    dtypes rounded half to even, as np.rint, and cast back); "max" and "min" are exact. `out`,
+    if given, receives the result (an array of that shape and the step's dtype).
     """
     check_pool(pool)
     a = np.asarray(step)
     if a.ndim != 3:
         raise InvalidDataError(f"a step to downsample is (Z, Y, X); got shape {a.shape}")
+    dtype = a.dtype
     if pool != "mean":
+        op = np.maximum if pool == "max" else np.minimum
         for axis in range(3):
-            a = _pool_axis(a, axis, np.maximum if pool == "max" else np.minimum, a.dtype)
+            a = _pool_axis(a, axis, op, dtype, out if axis == 2 else None)
         return a
     # Sums of 2x2x2 blocks, a lone edge voxel counted twice along its axis (so every block
     # sums 8 values whose mean is that of the voxels present), in an exact accumulator.
-    acc = _ACCUMULATORS.get(a.dtype.name, np.float64)
-    dtype = a.dtype
+    acc = _ACCUMULATORS.get(dtype.name, np.float64)
     for axis in range(3):
         a = _pool_axis(a, axis, np.add, acc)
+    out = np.empty(a.shape, dtype) if out is None else out
     if dtype.kind == "f":
-        a *= 0.125
-        return a.astype(dtype, copy=False)
+        np.multiply(a, 0.125, out=out, casting="same_kind")
+        return out
     q = a >> 3  # the integer mean rounded half to even, exactly as np.rint(a / 8)
     q &= 1
     a += 3
     a += q
     a >>= 3
-    return a.astype(dtype, copy=False)
+    np.copyto(out, a, casting="unsafe")
+    return out
 
 
 # Exact sums of 8 values: uint8 in uint16, 16-bit integers in int32, floats in float64.
 _ACCUMULATORS = {"uint8": np.uint16, "uint16": np.int32, "int16": np.int32}
 
 
-def _pool_axis(a: np.ndarray, axis: int, op, acc) -> np.ndarray:
-    """Combine pairs along one axis with `op` into dtype `acc`; a lone last element pairs with
-    itself (an axis of length 1 too)."""
+def _pool_axis(a: np.ndarray, axis: int, op, acc, out: np.ndarray | None = None) -> np.ndarray:
+    """Combine pairs along one axis with `op` into dtype `acc` (into `out` if given); a lone
+    last element pairs with itself (an axis of length 1 too)."""
     n = a.shape[axis]
 
     def at(s: slice) -> tuple[slice, ...]:
         return (slice(None),) * axis + (s,)
 
     h = n // 2
-    shape = list(a.shape)
-    shape[axis] = n - h
-    out = np.empty(shape, acc)
+    if out is None:
+        shape = list(a.shape)
+        shape[axis] = n - h
+        out = np.empty(shape, acc)
     op(a[at(slice(0, 2 * h, 2))], a[at(slice(1, 2 * h, 2))], out=out[at(slice(0, h))], dtype=acc)
     if n % 2:
         last = a[at(slice(n - 1, n))]
@@ -172,18 +178,24 @@ class LevelWriter:
             for n in range(1, depth + 1)
             for pool in POOLS
         }
+        parts = {key: ([], [], []) for key in out}
         for z0 in range(0, step.shape[0], planes):
             for pool in POOLS:
                 a = step[z0 : z0 + planes]
                 for n in range(1, depth + 1):
-                    a = downsample(a, pool)
-                    out[n, pool][z0 >> n : (z0 >> n) + a.shape[0]] = a
+                    z = z0 >> n
+                    a = downsample(a, pool, out[n, pool][z : z + (a.shape[0] + 1) // 2])
+                    lo, hi, total = parts[n, pool]  # statistics while the slab is in cache
+                    lo.append(a.min())
+                    hi.append(a.max())
+                    total.append(a.sum(dtype=np.float64))
+        _write_together([(self.arrays[key], t, a) for key, a in out.items()])
         for key, a in out.items():
-            self.arrays[key][t] = a
+            lo, hi, total = parts[key]
             smin, smax, smean = self.stats[key]
-            smin.append(float(a.min()))
-            smax.append(float(a.max()))
-            smean.append(float(a.mean(dtype=np.float64)))
+            smin.append(float(min(lo)))
+            smax.append(float(max(hi)))
+            smean.append(float(math.fsum(total) / a.size))
         self.done += 1
 
     def finish(self) -> None:
@@ -205,6 +217,24 @@ class LevelWriter:
             "pools": list(POOLS),
             "levels": levels,
         }
+
+
+def _write_together(writes: list[tuple[zarr.Array, int, np.ndarray]]) -> None:
+    """Write step t of several arrays in one batch: zarr encodes and stores their chunks
+    concurrently (one call per array costs a round trip through zarr's event loop each)."""
+    try:
+        from zarr.core.sync import sync
+
+        pending = [(arr._async_array, t, a) for arr, t, a in writes]
+    except (ImportError, AttributeError):  # another zarr: one call per array
+        for arr, t, a in writes:
+            arr[t] = a
+        return
+
+    async def batch() -> None:
+        await asyncio.gather(*(arr.setitem((t,), a) for arr, t, a in pending))
+
+    sync(batch())
 
 
 def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = False) -> dict:
