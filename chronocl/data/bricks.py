@@ -131,13 +131,32 @@ def brick_shape(series: TimeSeries, rows: int, width: int) -> tuple[int, int, in
 
 
 class ResidentBricks:
-    """Bricks stacked from whole steps held in memory: {step: (Z, Y, X) array}."""
+    """Bricks stacked from whole steps held in memory: {step: (Z, Y, X) array}.
 
-    def __init__(self, arrays: Mapping[int, np.ndarray]) -> None:
+    With `keep` the last brick is kept and served again for the same steps and rows: an
+    interactive session re-integrating one window under a new transfer function then stacks
+    nothing (at 256^3 the stacking copy costs more than the kernel).
+    """
+
+    def __init__(self, arrays: Mapping[int, np.ndarray], keep: bool = False) -> None:
         self.arrays = arrays
+        self.keep = keep
+        self._kept: tuple[tuple, np.ndarray] | None = None
 
     def read(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
-        return stack_brick([self.arrays[int(s)] for s in steps], z0, z1)
+        key = (tuple(int(s) for s in steps), z0, z1)
+        if self._kept is not None:
+            if self._kept[0] == key and self.keep:
+                return self._kept[1]
+            self._kept = None  # freed before the next brick is stacked
+        brick = stack_brick([self.arrays[s] for s in key[0]], z0, z1)
+        if self.keep:
+            self._kept = (key, brick)
+        return brick
+
+    def forget(self) -> None:
+        """Drop the kept brick (its steps are no longer resident)."""
+        self._kept = None
 
 
 def stack_brick(arrays: Sequence[np.ndarray], z0: int = 0, z1: int | None = None) -> np.ndarray:

@@ -24,26 +24,23 @@ from __future__ import annotations
 
 import dataclasses
 import time
-import weakref
 from collections.abc import Sequence
 
 import numpy as np
 
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError
-from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.data.bricks import ResidentBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.engine import get_engine
-from chronocl.integration.inmemory import Job, integrate_bricks, make_spec, prepare
+from chronocl.integration.inmemory import integrate_bricks, make_spec, prepare
 from chronocl.integration.levels import AutoLevels, check_level
-from chronocl.integration.sliding import SlidingAggregate, block_size
-from chronocl.modes.base import Values
+from chronocl.integration.slider import Slider
+from chronocl.integration.sliding import block_size
 from chronocl.modes.spec import IntegrationSpec
-from chronocl.reference import Partial
 
 
 class Session:
@@ -83,7 +80,8 @@ class Session:
         self.selection: Selection | None = None
         self.stats: dict = {}
         self._arrays: dict[int, np.ndarray] = {}
-        self._slider: _Slider | None = None
+        self._bricks = ResidentBricks(self._arrays)
+        self._slider: Slider | None = None
         self._cv: Chronovolume | None = None
         self._prefetch = prefetch
         self._managers = managers
@@ -167,6 +165,7 @@ class Session:
         if self._owns_manager:
             self.manager.close()
         self._arrays = {}
+        self._bricks.forget()
         self._slider = None
 
     def _repool(self, pool: str) -> None:
@@ -180,6 +179,7 @@ class Session:
         self.series = self.base.level(self.level, pool)
         self.manager = WindowManager(self.series, self.budget, prefetch=self._prefetch)
         self._arrays = {}
+        self._bricks.forget()
         self.selection = None
 
     def __enter__(self) -> Session:
@@ -201,8 +201,10 @@ class Session:
             return self._cv
         direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
         reason = self._incremental_blocker(selection)
+        keep = self._keeps_brick(selection)
         if self._owns_manager:
-            self.manager.budget = self.budget - (0 if reason else self._state_bytes(selection))
+            state = 0 if reason else self._state_bytes(selection)
+            self.manager.budget = self.budget - state - keep * self._window_bytes(selection)
         arrays = dict(
             zip(selection.steps, self.manager.get(selection.steps, direction), strict=True)
         )
@@ -219,7 +221,7 @@ class Session:
             if reason is None:
                 # Jumps and spec changes integrate directly (one pass over the window);
                 # the sliding state is rebuilt lazily on the next slide.
-                self._slider = _Slider(self, selection)
+                self._slider = Slider(self, selection)
             else:
                 self._slider = None
         self._cv = cv
@@ -257,143 +259,15 @@ class Session:
 
     def _reintegrate(self, selection: Selection) -> Chronovolume:
         job = prepare(self.series, selection, spec=self.spec)
-        return integrate_bricks(job, self.engine, ResidentBricks(self._arrays))
+        self._bricks.arrays = self._arrays
+        self._bricks.keep = self._keeps_brick(selection)
+        return integrate_bricks(job, self.engine, self._bricks)
 
+    def _window_bytes(self, selection: Selection) -> int:
+        return selection.width * self.manager.step_bytes
 
-class _Slider:
-    """The incremental state of one window under one spec (absolute positions).
-
-    A leaf is one step integrated alone, or for a mode whose leaves span several steps
-    (change: a pair), the steps ending at it; the sliding items are the steps that end a
-    leaf. Modes that slide by inversion add and subtract their leaves' raw sums; the rest
-    (and an inverting mode's aggregated opacity) slide through a `SlidingAggregate`.
-    """
-
-    def __init__(self, session: Session, selection: Selection) -> None:
-        self.session = session
-        self.spec = session.spec
-        self.mode = self.spec.integration
-        self.selection = selection
-        self.arrays: dict[int, np.ndarray] = {}
-        self.value_range = prepare(session.series, selection, spec=self.spec).value_range
-        self.inverts = self.mode.slides == "invert"
-        # Callbacks through a weak proxy, so the slider and its aggregate form no cycle and a
-        # dropped slider frees its partial volumes at once (no garbage collection needed).
-        me = weakref.proxy(self)
-        self.agg: SlidingAggregate[Partial] | None = None
-        if not self.inverts or self.mode.state_bytes:
-            self.agg = SlidingAggregate(lambda s: me._agg_leaf(s), lambda a, b: me._op(a, b))
-            self.agg.reset(self._items(selection))
-        self.acc: np.ndarray | None = None  # inverting modes: fixed-point sums (Z, Y, X, C)
-        self._full: dict[int, Partial] = {}
-        self._before: dict[int, tuple[int, ...]] = {}  # leaf -> the earlier steps it spans
-
-    @property
-    def held(self) -> int:
-        return 0 if self.agg is None else self.agg.held
-
-    def _items(self, selection: Selection) -> tuple[int, ...]:
-        return selection.steps[self.mode.leaf_span - 1 :]
-
-    def can_move_to(self, selection: Selection) -> bool:
-        old, new = self.selection.steps, selection.steps
-        if len(new) != len(old) or self.spec != self.session.spec:
-            return False
-        shift = new[0] - old[0]
-        # A slide keeps the steps' spacing and overlaps the old window.
-        return tuple(s + shift for s in old) == new and bool(set(old) & set(new))
-
-    def move_to(self, selection: Selection, arrays: dict[int, np.ndarray]) -> Chronovolume:
-        engine = self.session.engine
-        self.arrays = arrays
-        old_items = self._items(self.selection)
-        # Leaves spanning several steps find their earlier steps in the window they are in.
-        self._before = {**self._before_of(self.selection), **self._before_of(selection)}
-        if self.inverts and self.acc is None:
-            shape = (*self.session.series.volume_shape, self.mode.sum_channels)
-            self.acc = np.zeros(shape, np.int64)
-            for s in old_items:
-                engine.fixed_add(self.acc, self._leaf_full(s).rgba, +1)
-                self._full.pop(s, None)
-        old, new = old_items, self._items(selection)
-        old_set, new_set = set(old), set(new)
-        entering = [s for s in new if s not in old_set]
-        leaving = [s for s in old if s not in new_set]
-        forward = selection.steps[0] > self.selection.steps[0]
-        for s in entering if forward else entering[::-1]:
-            if self.inverts:
-                engine.fixed_add(self.acc, self._leaf_full(s).rgba, +1)
-            if self.agg is not None:
-                self.agg.push_back(s) if forward else self.agg.push_front(s)
-        for s in leaving if forward else leaving[::-1]:
-            if self.inverts:
-                engine.fixed_add(self.acc, self._leaf_full(s).rgba, -1)
-            if self.agg is not None:
-                self.agg.pop_front() if forward else self.agg.pop_back()
-        self._full.clear()
-        self.selection = selection
-        return self._chronovolume()
-
-    def _before_of(self, selection: Selection) -> dict[int, tuple[int, ...]]:
-        span, steps = self.mode.leaf_span, selection.steps
-        return {steps[i]: steps[i - span + 1 : i] for i in range(span - 1, len(steps))}
-
-    def _chronovolume(self) -> Chronovolume:
-        session, spec = self.session, self.spec
-        job = Job.of(session.series, self.selection, spec, self.value_range)
-        shape = session.series.volume_shape
-        value = None
-        if self.agg is not None and self.agg.steps:
-            value = self.agg.value()
-        if self.inverts:
-            alpha = None if value is None else value.rgba
-            rgba, t_index = session.engine.finish_sums(self.acc, alpha, job.positions, spec), None
-        elif value is None:  # no leaf in the window (change over one step): nothing changed
-            rgba = np.zeros((*shape, 4), np.float32)
-            t_index = np.full(shape, -1, np.int32) if spec.has_t_index else None
-        else:
-            rgba = np.asarray(value.rgba, dtype=np.float32)
-            t_index = None if value.t_index is None else np.array(value.t_index, dtype=np.int32)
-        name = getattr(session.engine, "name", type(session.engine).__name__)
-        return Chronovolume(rgba, t_index, job.metadata(name))
-
-    def _leaf_full(self, step: int) -> Partial:
-        """The leaf ending at `step` integrated alone: its partial (inverting modes: raw)."""
-        if step in self._full:
-            return self._full[step]
-        series = self.session.series
-        steps = (*self._before.get(step, ()), step) if self.mode.leaf_span > 1 else (step,)
-        arrays = [self.arrays[s] for s in steps]
-        # One step is a (Z, 1, Y, X) xytz brick without a copy.
-        brick = arrays[0][:, None] if len(arrays) == 1 else np.stack(arrays, axis=1)
-        positions = self.spec.time_tf.positions_of(list(steps), series.n_steps)
-        partial, _ = self.session.engine.accumulate(
-            brick,
-            slice(0, arrays[0].shape[0]),
-            steps,
-            positions,
-            np.arange(len(steps)),
-            self.spec,
-            self.value_range,
-            raw=self.inverts,
-        )
-        if self.mode.compares_values:
-            partial.value = self.mode.leaf_value(Values(np.stack(arrays), self.value_range))
-        if self.inverts:
-            self._full[step] = partial
-        return partial
-
-    def _agg_leaf(self, step: int) -> Partial:
-        full = self._leaf_full(step)
-        self._full.pop(step, None)  # cached only for the push that follows a fixed_add
-        if self.inverts:  # only the aggregated opacity slides here
-            alpha = aligned_empty(full.rgba.shape[:-1], np.float32)
-            alpha[...] = full.rgba[..., 3]
-            return Partial(alpha, None)
-        return full
-
-    def _op(self, earlier: Partial, later: Partial) -> Partial:
-        engine, spec = self.session.engine, self.spec
-        if spec.order == "backward":
-            return engine.combine(later, earlier, spec)
-        return engine.combine(earlier, later, spec)
+    def _keeps_brick(self, selection: Selection) -> bool:
+        """Whether the window's stacked brick is kept for the next spec change: when it fits
+        the budget beside the window's steps and the sliding state."""
+        need = 2 * self._window_bytes(selection) + self._state_bytes(selection)
+        return need <= self.budget
