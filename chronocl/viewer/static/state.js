@@ -17,6 +17,7 @@ export const S = {
 
 export const viewer = (window.viewer = {
   frames: 0, full: 0, sent: 0, last: null, errors: [], probe: null, downloads: [], S,
+  levels: [],  // the level of each frame received, latest last (at most 50)
 });
 
 // A canvas sized to its box in device pixels; returns its context (in CSS pixels) and size.

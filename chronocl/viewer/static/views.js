@@ -184,6 +184,8 @@ export function onFrame(buf) {
     level: header.level || 0, refining: !!header.refining,
   };
   document.body.dataset.frames = viewer.frames;
+  viewer.levels.push(header.level || 0);
+  if (viewer.levels.length > 50) viewer.levels.shift();
   document.body.dataset.level = header.level || 0;
   document.body.dataset.refining = header.refining ? 'yes' : 'no';
   showTimings(header);
