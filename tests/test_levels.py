@@ -166,3 +166,14 @@ def test_cli_integrates_and_renders_a_level_and_refuses_a_missing_one(tmp_path, 
     chronocl.TimeSeries.from_array(np.zeros((3, 8, 8, 8), np.float32)).save(small)
     r = cli("render", str(small), "-o", str(tmp_path / "s.png"), "--level", "1")
     assert_one_line_error(r, "chronocl pyramid")
+
+
+def test_a_window_over_the_budget_is_streamed_by_slabs(series):
+    """Full resolution of a window larger than the budget: z-slabs read from the series, the
+    same chronovolume, and stats that say why it was not incremental."""
+    step = int(np.prod(SHAPE)) * 4
+    with Session(series, mode="additive", level="auto", memory=3 * step) as s:
+        s.set_window(0, 5)
+        full = s.refine()
+        assert s.stats["path"] == "streamed" and "budget" in s.stats["why_not_incremental"]
+        np.testing.assert_array_equal(full.rgba, chronocl.integrate(series, "0:5", "additive").rgba)

@@ -31,7 +31,7 @@ import numpy as np
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.selection import Selection, parse_selection
-from chronocl.data.bricks import ResidentBricks
+from chronocl.data.bricks import ResidentBricks, SeriesBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
@@ -199,6 +199,8 @@ class Session:
         old = self.selection
         if old is not None and selection == old and self._cv is not None:
             return self._cv
+        if self._window_bytes(selection) > self.budget:
+            return self._stream(selection, t)
         direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
         reason = self._incremental_blocker(selection)
         keep = self._keeps_brick(selection)
@@ -225,18 +227,34 @@ class Session:
             else:
                 self._slider = None
         self._cv = cv
+        self._record(t, path, reason)
+        return cv
+
+    def _stream(self, selection: Selection, t: float) -> Chronovolume:
+        """A window larger than the budget: integrated z-slab by z-slab from the store, each
+        slab's brick a quarter of the budget at most (nothing resident, no sliding)."""
+        job = prepare(self.series, selection, spec=self.spec)
+        rows = max(1, self.budget // (4 * max(1, job.row_bytes)))
+        self._arrays, self._slider, self.selection = {}, None, selection
+        self._bricks.forget()
+        self._cv = integrate_bricks(job, self.engine, SeriesBricks(self.series), slab=rows)
+        need = human(self._window_bytes(selection))
+        why = f"the window needs {need} > budget {human(self.budget)}: streamed by z-slabs"
+        self._record(t, "streamed", why)
+        return self._cv
+
+    def _record(self, t: float, path: str, reason: str | None) -> None:
         self.stats = {
             "level": self.level,
             "integrate_ms": 1e3 * (time.perf_counter() - t),
             "path": path,
             "incremental": path == "incremental",
             "why_not_incremental": reason,
-            "steps": list(selection.steps),
+            "steps": list(self.selection.steps),
             "resident_steps": len(self.manager.resident()),
             "reads": sum(self.manager.reads.values()),
             "held_partials": 0 if self._slider is None else self._slider.held,
         }
-        return cv
 
     def _incremental_blocker(self, selection: Selection) -> str | None:
         """Why this window cannot slide incrementally (None: it can)."""
