@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import zarr
 
+import chronocl
 from chronocl.core.errors import (
     ChronoclError,
     InputNotFoundError,
@@ -165,3 +166,26 @@ def test_errors_are_one_line_chronocl_value_errors(tmp_path):
         open_omezarr(tmp_path / "folder")
     with pytest.raises(InputNotFoundError, match="does not exist"):
         open_omezarr(tmp_path / "missing")
+
+
+def test_an_images_own_levels_are_used_in_place_as_mean_levels(tmp_path):
+    """Level 1 of the image (shape of chronocl's rule) is read as is for the "mean" pool, not
+    pooled again; max/min and levels the image lacks are pooled on the fly; nothing is written."""
+    from chronocl.data.pyramid import downsample
+
+    rng = np.random.default_rng(3)
+    full = rng.random((3, 1, 80, 6, 10), dtype=np.float32)  # t, c, z, y, x: longest axis 80
+    own = np.full((3, 1, 40, 3, 5), 0.25, np.float32)  # not a pooling of `full`: must be read
+    path = tmp_path / "img.ome.zarr"
+    _write(path, [full, own], "tczyx", [[1, 1, 1, 1, 1], [1, 1, 2, 2, 2]], 3)
+    before = _files(path)
+    series = chronocl.open(path)
+    assert series.n_levels == 2
+    mean = series.level(1)
+    np.testing.assert_array_equal(mean.read(range(3)), own[:, 0])
+    assert mean.vmin == series.vmin and mean.spacing == (2.0, 2.0, 2.0)
+    top = series.level(1, "max")
+    np.testing.assert_array_equal(top.read([1])[0], downsample(full[1, 0], "max"))
+    cv = chronocl.integrate(series, "0:3", "alpha", level=1)
+    assert cv.shape == (40, 3, 5)
+    assert _files(path) == before

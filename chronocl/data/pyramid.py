@@ -441,7 +441,7 @@ def keep_range(stats: SeriesStats, vmin: float, vmax: float) -> SeriesStats:
 # -- the series' hooks (duck-typed: TimeSeries lives above this module) -------------------------
 def count_levels(series) -> int:
     """1 + the coarse levels a series has: its store's, or those level_shapes gives in memory."""
-    if series.path is None:
+    if series.path is None or series._lazy_levels:
         return 1 + len(level_shapes(series.volume_shape))
     levels = read_levels(series.path, series.shape)
     return 1 if levels is None else 1 + len(levels)
@@ -455,14 +455,15 @@ def level_parts(series, n: int, pool: str) -> dict:
     n = int(n)
     shapes = level_shapes(series.volume_shape)
     name = series.path.name if series.path is not None else series.source or "the series"
-    levels = None if series.path is None else read_levels(series.path, series.shape)
-    top = len(shapes) if series.path is None or levels is not None else 0
+    lazy = series.path is None or series._lazy_levels
+    levels = None if lazy else read_levels(series.path, series.shape)
+    top = len(shapes) if lazy or levels is not None else 0
     if not 1 <= n <= len(shapes):
         have = f"levels 0..{top}" if top else "only level 0"
         raise InvalidParameterError(f"level {n} is out of range: {name} has {have}")
     factor = tuple(a / b for a, b in zip(series.volume_shape, shapes[n - 1], strict=True))
     spacing = tuple(s * f for s, f in zip(series.spacing, factor, strict=True))
-    if series.path is None:
+    if lazy:
         data = lazy_level(series.data, n, pool)
         stats = lazy_stats(data, series.vmin, series.vmax)
         return {"data": data, "stats": stats, "spacing": spacing, "_zarr": None}

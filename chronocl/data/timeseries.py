@@ -67,6 +67,9 @@ class TimeSeries:
     level_index: int = 0
     _root: TimeSeries | None = field(default=None, repr=False)
     _levels: dict = field(default_factory=dict, repr=False)
+    # Coarse levels pooled on the fly (in-memory series, OME-Zarr images read in place) rather
+    # than read from a chronocl store's `levels`.
+    _lazy_levels: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:
         if not self.times:

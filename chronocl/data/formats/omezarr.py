@@ -36,6 +36,7 @@ file back.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 from pathlib import Path
@@ -50,6 +51,7 @@ from chronocl.core.errors import InvalidDataError, InvalidParameterError, StoreF
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.formats.contract import Output, Reader
 from chronocl.data.metadata import parse_spacing
+from chronocl.data.pyramid import lazy_stats, level_shapes
 from chronocl.data.stores import open_group
 from chronocl.data.timeseries import TimeSeries
 
@@ -146,7 +148,39 @@ def open_omezarr(
     else:
         series = TimeSeries.from_array(lazy, spacing=spacing, times=times, source=source)
     fast = tuple(axes) == ("t", *SPATIAL) and arr.chunks[0] == 1
-    return series.stored_in(p, arr if fast else None)
+    series = series.stored_in(p, arr if fast else None)
+    series._lazy_levels = True
+    if level == 0:
+        _adopt_levels(series, group, datasets, index, order)
+    return series
+
+
+def _adopt_levels(series: TimeSeries, group, datasets: list, index: list, order: list) -> None:
+    """Use the image's own resolution levels, read in place, as the series' "mean" levels
+    where their shapes are those of chronocl's rule (docs/levels.md); the other levels and
+    pools are pooled on the fly."""
+    shapes = level_shapes(series.volume_shape)
+    for ds in datasets[1:]:
+        arr = group.get(str(ds.get("path", "")))
+        if not isinstance(arr, zarr.Array) or arr.dtype != series.dtype:
+            continue
+        data = da.from_zarr(arr)[tuple(index)].transpose(order)
+        if data.shape[0] != series.n_steps or tuple(data.shape[1:]) not in shapes:
+            continue
+        n = shapes.index(tuple(data.shape[1:])) + 1
+        extent = [s * a for s, a in zip(series.spacing, series.volume_shape, strict=True)]
+        spacing = tuple(e / b for e, b in zip(extent, data.shape[1:], strict=True))
+        stats = lazy_stats(data, series.vmin, series.vmax)
+        series._levels[n, "mean"] = dataclasses.replace(
+            series,
+            data=data,
+            stats=stats,
+            spacing=spacing,
+            _zarr=None,
+            level_index=n,
+            _root=series,
+            _levels={},
+        )
 
 
 def ingest_omezarr(
