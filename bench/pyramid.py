@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import emit, env_record, race
 
 from chronocl.data import synthetic
-from chronocl.data.pyramid import add_levels
+from chronocl.data.level_writer import add_levels
 from chronocl.data.series import write_series
 
 

@@ -20,7 +20,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from chronocl.core.errors import InvalidParameterError, StoreCorruptError, StoreFormatError
-from chronocl.data.pyramid import POOLS, add_levels, downsample, level_shapes
+from chronocl.data.level_writer import add_levels
+from chronocl.data.pyramid import POOLS, downsample, level_shapes
 from chronocl.data.series import open_series, write_series
 from chronocl.data.timeseries import TimeSeries
 from chronocl.data.verify import verify

@@ -33,7 +33,7 @@ def pyramid(
     import time
 
     from chronocl.core.paths import check_input
-    from chronocl.data.pyramid import add_levels
+    from chronocl.data.level_writer import add_levels
 
     check_input(store, "store", hint=STORE_HINT)
     t0 = time.perf_counter()

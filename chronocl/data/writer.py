@@ -22,6 +22,7 @@ from zarr.codecs import BloscCodec, Crc32cCodec, ZstdCodec
 from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import InvalidDataError, InvalidParameterError
 from chronocl.core.progress import track
+from chronocl.data.level_writer import LevelWriter
 from chronocl.data.metadata import (
     FORMAT,
     check_dtype,
@@ -30,7 +31,7 @@ from chronocl.data.metadata import (
     parse_times,
     stats_from_steps,
 )
-from chronocl.data.pyramid import LEVELS, LevelWriter, level_shapes
+from chronocl.data.pyramid import LEVELS, level_shapes
 
 CHUNK_BYTES = 16 * 2**20
 COMPRESSORS = ("zstd", "blosc-lz4", "none")

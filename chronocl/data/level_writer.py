@@ -1,0 +1,228 @@
+"""Writing the coarse levels of a chronocl store (the rule and reading: `chronocl.data.pyramid`).
+
+`LevelWriter` pools each step into every level and pool while `write_store` writes the step
+itself. `add_levels` adds levels to an existing store without touching ``data`` or the root's
+attributes: it builds them at a hidden sibling ``.levels.partial-<pid>-<hex>`` inside the store
+and renames that to ``levels`` when complete (chronocl.core.atomic).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import zarr
+from zarr.codecs import Crc32cCodec
+
+from chronocl.core.atomic import partial_path, remove_path, remove_stale, replace
+from chronocl.core.errors import InputNotFoundError, InvalidDataError, StoreFormatError
+from chronocl.core.progress import track
+from chronocl.data.integrity import CheckedStore, checked_read
+from chronocl.data.metadata import FORMAT, checked_attrs
+from chronocl.data.pyramid import (
+    COARSEST,
+    LEVEL_CODEC,
+    LEVELS,
+    LEVELS_FORMAT,
+    POOLS,
+    SLAB_BYTES,
+    describe_levels,
+    downsample,
+    level_shapes,
+    read_levels,
+)
+
+
+def level_compressors(data_compressors: object) -> tuple:
+    """The codecs of the levels: a fast lz4, then a crc32c when the data's chain has one."""
+    checked = any(isinstance(c, Crc32cCodec) for c in data_compressors or ())
+    return (LEVEL_CODEC, Crc32cCodec()) if checked else (LEVEL_CODEC,)
+
+
+class LevelWriter:
+    """Writes levels 1..L of a series into a zarr group while the caller streams the steps.
+
+    `add(t, step)` pools one level-0 step into every level and pool and writes them; `finish()`
+    checks that every step came and writes the group's ``chronocl`` attribute.
+    """
+
+    def __init__(
+        self,
+        group: zarr.Group,
+        shape: Sequence[int],
+        dtype: object,
+        compressors: object,
+        chunk_bytes: int,
+    ) -> None:
+        self.group, self.shape, self.dtype = group, tuple(int(n) for n in shape), np.dtype(dtype)
+        self.shapes = level_shapes(self.shape[1:])
+        self.arrays = {}
+        for n, (z, y, x) in enumerate(self.shapes, 1):
+            sub = group.require_group(str(n))
+            zc = max(1, min(z, int(chunk_bytes) // max(1, y * x * self.dtype.itemsize)))
+            for pool in POOLS:
+                self.arrays[n, pool] = sub.create_array(
+                    pool,
+                    shape=(self.shape[0], z, y, x),
+                    chunks=(1, zc, y, x),
+                    dtype=self.dtype,
+                    compressors=level_compressors(compressors),
+                    config={"write_empty_chunks": True},  # a missing chunk means damage
+                )
+        self.stats = {key: ([], [], []) for key in self.arrays}
+        self.done = 0
+
+    def add(self, t: int, step: np.ndarray) -> None:
+        """Pool step `t` (Z, Y, X) into every level and pool and write them.
+
+        The step is pooled in z-slabs of about SLAB_BYTES (a multiple of 2^L planes, so every
+        level's slab starts on an even plane), which stay in the CPU's cache through all levels.
+        """
+        depth = len(self.shapes)
+        plane = max(1, step[0].nbytes)
+        planes = max(1, SLAB_BYTES // plane >> depth) << depth
+        out = {
+            (n, pool): np.empty(self.shapes[n - 1], self.dtype)
+            for n in range(1, depth + 1)
+            for pool in POOLS
+        }
+        parts = {key: ([], [], []) for key in out}
+        for z0 in range(0, step.shape[0], planes):
+            for pool in POOLS:
+                a = step[z0 : z0 + planes]
+                for n in range(1, depth + 1):
+                    z = z0 >> n
+                    a = downsample(a, pool, out[n, pool][z : z + (a.shape[0] + 1) // 2])
+                    lo, hi, total = parts[n, pool]  # statistics while the slab is in cache
+                    lo.append(a.min())
+                    hi.append(a.max())
+                    total.append(a.sum(dtype=np.float64))
+        _write_together([(self.arrays[key], t, a) for key, a in out.items()])
+        for key, a in out.items():
+            lo, hi, total = parts[key]
+            smin, smax, smean = self.stats[key]
+            smin.append(float(min(lo)))
+            smax.append(float(max(hi)))
+            smean.append(float(math.fsum(total) / a.size))
+        self.done += 1
+
+    def finish(self) -> None:
+        if self.done != self.shape[0]:
+            raise InvalidDataError(f"levels got {self.done} time steps, expected {self.shape[0]}")
+        levels = []
+        for n, lshape in enumerate(self.shapes, 1):
+            stats = {}
+            for pool in POOLS:
+                smin, smax, smean = self.stats[n, pool]
+                stats[pool] = {"step_min": smin, "step_max": smax, "step_mean": smean}
+            factor = [a / b for a, b in zip(self.shape[1:], lshape, strict=True)]
+            levels.append({"shape": [self.shape[0], *lshape], "factor": factor, "stats": stats})
+        self.group.attrs["chronocl"] = {
+            "format": LEVELS_FORMAT,
+            "version": 1,
+            "chunks": "complete",
+            "shape": list(self.shape),
+            "pools": list(POOLS),
+            "levels": levels,
+        }
+
+
+def _write_together(writes: list[tuple[zarr.Array, int, np.ndarray]]) -> None:
+    """Write step t of several arrays in one batch: zarr encodes and stores their chunks
+    concurrently (one call per array costs a round trip through zarr's event loop each)."""
+    try:
+        from zarr.core.sync import sync
+
+        pending = [(arr._async_array, t, a) for arr, t, a in writes]
+    except (ImportError, AttributeError):  # another zarr: one call per array
+        for arr, t, a in writes:
+            arr[t] = a
+        return
+
+    async def batch() -> None:
+        await asyncio.gather(*(arr.setitem((t,), a) for arr, t, a in pending))
+
+    sync(batch())
+
+
+def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = False) -> dict:
+    """Add coarse levels to the chronocl store at `path`; returns a summary.
+
+    ``data`` and the root's attributes are only read. The levels are built at a hidden
+    sibling inside the store and renamed to ``levels`` when complete, so a killed build leaves
+    no ``levels`` (its partial is removed by the next build). Existing levels are kept unless
+    `force`, which builds new ones and swaps them in.
+    """
+    p = Path(path)
+    arr = _open_data(p)
+    shape = tuple(int(n) for n in arr.shape)
+    summary = {"store": str(p)}
+    target = p / LEVELS
+    remove_stale(target)  # partials of builds that were killed
+    if not level_shapes(shape[1:]):
+        return {
+            **summary,
+            "levels": describe_levels(shape[1:], 1),
+            "status": f"nothing to add: levels are made while the largest axis is > {COARSEST}",
+        }
+    if target.exists() and not force:
+        read_levels(p, shape)  # damaged levels are reported, not kept silently
+        return {
+            **summary,
+            "levels": describe_levels(shape[1:], 1 + len(level_shapes(shape[1:]))),
+            "status": "levels already present (pass --force to rebuild them)",
+        }
+    zc = int(arr.chunks[1])
+    chunk_bytes = zc * shape[2] * shape[3] * arr.dtype.itemsize
+    tmp = partial_path(target)
+    try:
+        group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
+        writer = LevelWriter(group, shape, arr.dtype, arr.compressors, chunk_bytes)
+        for t in track(range(shape[0]), shape[0], "building levels", progress):
+            sel = (t,)
+            writer.add(t, checked_read(p, arr, lambda s=sel: arr[s], sel))
+        writer.finish()
+        replace(tmp, target)  # an exchange when levels exist (force)
+    except BaseException:
+        remove_path(tmp)
+        raise
+    return {
+        **summary,
+        "levels": describe_levels(shape[1:], 1 + len(writer.shapes)),
+        "status": "rebuilt" if force else "added",
+    }
+
+
+def _open_data(p: Path) -> zarr.Array:
+    """The checked ``data`` array of the chronocl store at `p` (zarr v3), read-only."""
+    if not p.exists():
+        raise InputNotFoundError(
+            f"store {str(p)!r} does not exist; create one with 'chronocl ingest' or "
+            "'chronocl generate'"
+        )
+    store = CheckedStore(p)
+    try:
+        node = zarr.open_group(store=store, mode="r")
+        arr = node["data"]
+        attrs = dict(node.attrs).get("chronocl")
+    except Exception:
+        raise StoreFormatError(
+            f"{str(p)!r} is not a chronocl store; ingest your data with 'chronocl ingest'"
+        ) from None
+    if not isinstance(attrs, dict) or attrs.get("format") != FORMAT:
+        raise StoreFormatError(
+            f"{str(p)!r} is not a chronocl store (no chronocl statistics); "
+            "ingest it with 'chronocl ingest'"
+        )
+    if node.metadata.zarr_format != 3:
+        raise StoreFormatError(
+            f"{str(p)!r} is a zarr v2 store; levels are added to zarr v3 stores: "
+            "ingest it again with 'chronocl ingest'"
+        )
+    checked_attrs(p, arr, attrs)
+    store.complete = attrs.get("chunks") == "complete"
+    return arr
