@@ -114,7 +114,7 @@ def run(args, cwd: Path) -> str:
 def count(predicate) -> int:
     try:
         return predicate()
-    except (OSError, ValueError):  # renamed, or not there (or its header) yet
+    except (OSError, ValueError, EOFError):  # renamed, or not there (or its header) yet
         return 0
 
 
