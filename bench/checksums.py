@@ -11,7 +11,6 @@ ratios `ingest_checksum_over_plain` and `integrate_checksum_over_plain` per comp
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import sys
 import tempfile
@@ -20,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import emit, env_record, race
+from common import emit, env_record, race, volume_args
 
 import chronocl
 from chronocl.data import synthetic
@@ -29,15 +28,8 @@ from chronocl.engine import get_engine
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="128^3 and 3 repeats")
-    parser.add_argument("--size", type=int, default=None, help="edge of the cubic volume")
-    parser.add_argument("--steps", type=int, default=8)
-    parser.add_argument("--repeats", type=int, default=None)
-    args = parser.parse_args()
-    n = args.size or (128 if args.quick else 256)
-    repeats = args.repeats or (3 if args.quick else 5)
-    shape = (n, n, n)
+    args, shape, repeats = volume_args(__doc__)
+    n = shape[0]
     emit(env_record("checksums", {"shape": list(shape), "steps": args.steps}))
     steps = [
         np.ascontiguousarray(s, np.float32) for s in synthetic.steps("vortex", args.steps, shape, 0)

@@ -59,3 +59,18 @@ def env_record(bench: str, extra: dict | None = None) -> dict:
         record["opencl"] = f"unavailable: {exc}"
     record.update(extra or {})
     return {"bench": bench, "env": record}
+
+
+def volume_args(doc: str):
+    """Parse the options of a benchmark over a cube of generated steps: --quick (128^3, 3
+    repeats; else 256^3, 5), --size, --steps, --repeats. Returns (args, shape, repeats)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="128^3 and 3 repeats")
+    parser.add_argument("--size", type=int, default=None, help="edge of the cubic volume")
+    parser.add_argument("--steps", type=int, default=8)
+    parser.add_argument("--repeats", type=int, default=None)
+    args = parser.parse_args()
+    n = args.size or (128 if args.quick else 256)
+    return args, (n, n, n), args.repeats or (3 if args.quick else 5)

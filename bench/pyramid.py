@@ -12,7 +12,6 @@ summary whose `levels_overhead` is the largest (with levels / without) - 1 over 
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import sys
 import tempfile
@@ -22,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import emit, env_record, race
+from common import emit, env_record, race, volume_args
 
 from chronocl.data import synthetic
 from chronocl.data.level_writer import add_levels
@@ -30,15 +29,8 @@ from chronocl.data.series import write_series
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="128^3 and 3 repeats")
-    parser.add_argument("--size", type=int, default=None, help="edge of the cubic volume")
-    parser.add_argument("--steps", type=int, default=8)
-    parser.add_argument("--repeats", type=int, default=None)
-    args = parser.parse_args()
-    n = args.size or (128 if args.quick else 256)
-    repeats = args.repeats or (3 if args.quick else 5)
-    shape = (n, n, n)
+    args, shape, repeats = volume_args(__doc__)
+    n = shape[0]
     emit(env_record("pyramid", {"shape": list(shape), "steps": args.steps}))
     floats = [
         np.ascontiguousarray(s, np.float32) for s in synthetic.steps("vortex", args.steps, shape, 0)

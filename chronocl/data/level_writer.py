@@ -19,7 +19,7 @@ import zarr
 from zarr.codecs import Crc32cCodec
 
 from chronocl.core.atomic import partial_path, remove_path, remove_stale, replace
-from chronocl.core.errors import InputNotFoundError, InvalidDataError, StoreFormatError
+from chronocl.core.errors import InvalidDataError, StoreFormatError
 from chronocl.core.progress import track
 from chronocl.data.integrity import CheckedStore, checked_read
 from chronocl.data.metadata import FORMAT, checked_attrs
@@ -35,6 +35,7 @@ from chronocl.data.pyramid import (
     level_shapes,
     read_levels,
 )
+from chronocl.data.stores import require_store
 
 
 def level_compressors(data_compressors: object) -> tuple:
@@ -199,11 +200,7 @@ def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = Fa
 
 def _open_data(p: Path) -> zarr.Array:
     """The checked ``data`` array of the chronocl store at `p` (zarr v3), read-only."""
-    if not p.exists():
-        raise InputNotFoundError(
-            f"store {str(p)!r} does not exist; create one with 'chronocl ingest' or "
-            "'chronocl generate'"
-        )
+    require_store(p)
     store = CheckedStore(p)
     try:
         node = zarr.open_group(store=store, mode="r")

@@ -11,6 +11,15 @@ from chronocl.core.errors import InputNotFoundError, StoreFormatError
 from chronocl.data.integrity import CheckedStore
 
 
+def require_store(p: Path) -> None:
+    """A store path that does not exist is one clear line saying how to make one."""
+    if not p.exists():
+        raise InputNotFoundError(
+            f"store {str(p)!r} does not exist; create one with 'chronocl ingest' or "
+            "'chronocl generate'"
+        )
+
+
 def open_group(path: str | os.PathLike, what: str, checked: tuple[str, ...] = ()) -> zarr.Group:
     """Open the zarr group at `path` read-only; `what` names the expected thing in errors.
 

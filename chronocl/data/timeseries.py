@@ -21,7 +21,6 @@ import zarr
 from zarr.core.buffer import default_buffer_prototype
 
 from chronocl.core.errors import (
-    InputNotFoundError,
     InvalidDataError,
     StoreChangedError,
     StoreFormatError,
@@ -42,6 +41,7 @@ from chronocl.data.metadata import (
     unreadable_metadata,
 )
 from chronocl.data.pyramid import check_pool, count_levels, describe_levels, level_parts
+from chronocl.data.stores import require_store
 from chronocl.data.writer import write_store
 
 # Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at
@@ -320,11 +320,7 @@ class TimeSeries:
 def open_store(path: str | os.PathLike) -> TimeSeries:
     """Open a chronocl store (zarr v3 or v2), or a bare (T, Z, Y, X) zarr array."""
     p = Path(path)
-    if not p.exists():
-        raise InputNotFoundError(
-            f"store {str(p)!r} does not exist; create one with 'chronocl ingest' or "
-            "'chronocl generate'"
-        )
+    require_store(p)
     store = CheckedStore(p)
     try:
         node = zarr.open(store=store, mode="r")
