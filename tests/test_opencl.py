@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import chronocl
@@ -51,6 +51,7 @@ def test_opencl_equals_reference(data):
     assert_same(ref, ocl)
 
 
+@settings(max_examples=40)  # six integrations per example
 @given(st.data())
 def test_fast_paths_equal_the_general_path(data):
     """Early exit, uint8 LUT indexing, empty skipping, host pointers against the general path."""
@@ -260,6 +261,7 @@ def test_kernels_load_from_an_installed_wheel(tmp_path):
     assert int(t_max) in (0, 1, 2)
 
 
+@settings(max_examples=25)
 @given(st.data())
 def test_change_in_byte_lanes_equals_reference(data):
     """change on bytes clipped to whole-number bounds is compared in byte lanes; other bounds
