@@ -92,6 +92,14 @@ class LevelWriter:
             for pool in POOLS
         }
         parts = {key: ([], [], []) for key in out}
+        # Exact integer sums of integer levels (no float conversion); float levels in float64.
+        acc = (
+            np.uint64
+            if self.dtype.kind == "u"
+            else np.int64
+            if self.dtype.kind == "i"
+            else np.float64
+        )
         for z0 in range(0, step.shape[0], planes):
             for pool in POOLS:
                 a = step[z0 : z0 + planes]
@@ -101,14 +109,14 @@ class LevelWriter:
                     lo, hi, total = parts[n, pool]  # statistics while the slab is in cache
                     lo.append(a.min())
                     hi.append(a.max())
-                    total.append(a.sum(dtype=np.float64))
+                    total.append(a.sum(dtype=acc))
         _write_together([(self.arrays[key], t, a) for key, a in out.items()])
         for key, a in out.items():
             lo, hi, total = parts[key]
             smin, smax, smean = self.stats[key]
             smin.append(float(min(lo)))
             smax.append(float(max(hi)))
-            smean.append(float(math.fsum(total) / a.size))
+            smean.append(float(math.fsum(float(v) for v in total) / a.size))
         self.done += 1
 
     def finish(self) -> None:
