@@ -14,6 +14,7 @@ import time
 from typing import TYPE_CHECKING
 
 from chronocl.core.errors import InvalidParameterError
+from chronocl.data.pyramid import level_shapes
 from chronocl.data.window import WindowManager
 
 if TYPE_CHECKING:
@@ -102,7 +103,8 @@ class AutoLevels:
     def __init__(self, owner: Session, target_ms: float) -> None:
         self.owner = owner
         series = owner.base
-        shapes = [series.level(n).volume_shape for n in range(series.n_levels)]
+        # The shapes by the rule: building the level series here would pool lazy levels.
+        shapes = [series.volume_shape, *level_shapes(series.volume_shape)][: series.n_levels]
         self.model = LatencyModel([int(z) * int(y) * int(x) for z, y, x in shapes], target_ms)
         self.sessions: dict[tuple[int, str], Session] = {}
         self.shown = len(shapes) - 1

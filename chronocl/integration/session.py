@@ -203,7 +203,7 @@ class Session:
             return self._stream(selection, t)
         direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
         reason = self._incremental_blocker(selection)
-        keep = self._keeps_brick(selection)
+        keep = self._bricks.keep = self._keeps_brick(selection)
         if self._owns_manager:
             state = 0 if reason else self._state_bytes(selection)
             self.manager.budget = self.budget - state - keep * self._window_bytes(selection)
@@ -277,8 +277,7 @@ class Session:
 
     def _reintegrate(self, selection: Selection) -> Chronovolume:
         job = prepare(self.series, selection, spec=self.spec)
-        self._bricks.arrays = self._arrays
-        self._bricks.keep = self._keeps_brick(selection)
+        self._bricks.arrays = self._arrays  # its `keep` was decided in _update
         return integrate_bricks(job, self.engine, self._bricks)
 
     def _window_bytes(self, selection: Selection) -> int:

@@ -277,11 +277,7 @@ class ClientWorker:
                     return  # newer input: the frame for it comes instead
             if slot.session is None:
                 return
-            with INTEGRATE_LOCK:
-                cv = slot.session.refine()
-            if cv is not None:
-                slot.cv = cv
-                integrate_ms += float(slot.session.stats.get("integrate_ms", 0.0))
+            integrate_ms += self._refine_slot(slot)
         cvs = [slot.cv for slot in self._slots[: len(state.views)]]
         self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start)
 
@@ -302,6 +298,7 @@ class ClientWorker:
         for session in sessions:
             session.record_display(display_ms)
         level = max((session.shown_level for session in sessions), default=0)
+        levels = max((session.stats.get("levels", 1) for session in sessions), default=1)
         refining = level > 0
         self._refine_at = time.monotonic() + REFINE_AFTER_S if refining else None
         header = {
@@ -316,7 +313,7 @@ class ClientWorker:
             ],
             "legend": legend(cvs[0]),
             "level": level,
-            "levels": self.datasets[state.dataset].series.n_levels,
+            "levels": levels,  # from the sessions: no store metadata read per frame
             "level_shape": list(cvs[0].shape),
             "refining": refining,
             "timings": {
@@ -354,12 +351,18 @@ class ClientWorker:
     def _full_resolution(self, views: range) -> None:
         """Bring the shown views to full resolution (probes and saves never use a coarse one)."""
         for i in views:
-            slot = self._slots[i]
-            if slot.session is not None and slot.session.shown_level > 0:
-                with INTEGRATE_LOCK:
-                    cv = slot.session.refine()
-                if cv is not None:
-                    slot.cv = cv
+            if self._slots[i].session is not None:
+                self._refine_slot(self._slots[i])
+
+    @staticmethod
+    def _refine_slot(slot: ViewSlot) -> float:
+        """The slot's chronovolume at full resolution if it was coarse; the ms it took."""
+        with INTEGRATE_LOCK:
+            cv = slot.session.refine()  # type: ignore[union-attr]
+        if cv is None:
+            return 0.0
+        slot.cv = cv
+        return float(slot.session.stats.get("integrate_ms", 0.0))  # type: ignore[union-attr]
 
     def _probe(self, msg: dict) -> None:
         state, view = self._shown_view(msg)
