@@ -19,7 +19,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from chronocl.core.errors import InvalidParameterError, StoreCorruptError, StoreFormatError
+from chronocl.core.errors import (
+    InvalidDataError,
+    InvalidParameterError,
+    StoreCorruptError,
+    StoreFormatError,
+)
 from chronocl.data.level_writer import add_levels
 from chronocl.data.pyramid import POOLS, downsample, level_shapes
 from chronocl.data.series import open_series, write_series
@@ -139,6 +144,100 @@ def test_every_stored_level_pools_the_previous_one(tmp_path, dtype):
             for t in range(SHAPE[0]):
                 assert_pooled(level[t], previous[t], pool)
             previous = level
+
+
+# -- writing level chunks ---------------------------------------------------------------------
+def _chunk_files(root: Path) -> dict:
+    return {
+        str(f.relative_to(root)): hashlib.sha256(f.read_bytes()).hexdigest()
+        for f in sorted(root.rglob("*"))
+        if f.is_file() and f.name != "zarr.json"
+    }
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("compressor", ["zstd", "none"])
+@pytest.mark.parametrize("checksum", [True, False])
+def test_level_chunks_written_directly_are_zarrs_own(tmp_path, dtype, compressor, checksum):
+    """The direct writer's chunk files are byte for byte those zarr writes (edge chunks padded
+    to full size included), and read back through zarr unchanged."""
+    import zarr
+
+    from chronocl.data.level_writer import (
+        _direct_writable,
+        _write_step_chunks,
+        _write_together,
+        level_compressors,
+    )
+    from chronocl.data.writer import compressors
+
+    data = values((2, 11, 6, 5), dtype, 4)
+    arrays = []
+    for name in ("zarr", "direct"):
+        group = zarr.open_group(store=str(tmp_path / name), mode="w", zarr_format=3)
+        arrays.append(
+            group.create_array(
+                "a",
+                shape=data.shape,
+                chunks=(1, 4, 6, 5),  # 11 planes: the last chunk is an edge chunk
+                dtype=data.dtype,
+                compressors=level_compressors(compressors(compressor, checksum)),
+                config={"write_empty_chunks": True},
+            )
+        )
+    assert _direct_writable(arrays[1])
+    for t in range(data.shape[0]):
+        _write_together([(arrays[0], t, data[t])])
+        _write_step_chunks(arrays[1], t, data[t])
+    assert _chunk_files(tmp_path / "zarr") == _chunk_files(tmp_path / "direct")
+    reread = zarr.open_array(store=str(tmp_path / "direct"), path="a", mode="r")[:]
+    np.testing.assert_array_equal(reread, data)
+
+
+def test_levels_in_a_store_zarr_writes_itself():
+    """Arrays outside a local directory (here zarr's memory store) get their levels through
+    zarr, with the same values."""
+    import zarr
+
+    from chronocl.data.level_writer import LevelWriter
+
+    data = values((2, 130, 9, 70), "float32", 5)
+    group = zarr.open_group(store=zarr.storage.MemoryStore(), mode="w", zarr_format=3)
+    writer = LevelWriter(group, data.shape, data.dtype, None, chunk_bytes=2**20)
+    assert not writer.direct
+    for t in range(data.shape[0]):
+        writer.add(t, data[t])
+    writer.finish()
+    for pool in POOLS:
+        got = np.asarray(group["1"][pool][:])
+        for t in range(data.shape[0]):
+            assert_pooled(got[t], data[t], pool)
+    with pytest.raises(InvalidDataError, match="expected 2"):
+        writer.pool(5, data[0])
+
+
+def test_a_reused_step_buffer_gives_each_steps_levels(tmp_path):
+    """A reader that fills one buffer per step: the levels of a step are pooled before the
+    buffer is handed back, while their chunks are written beside the next step."""
+    data = values(SHAPE, "uint8", 6)
+    buffer = np.empty(SHAPE[1:], data.dtype)
+
+    def reused():
+        for step in data:
+            buffer[...] = step
+            yield buffer
+
+    series = write_series(
+        tmp_path / "r.zarr",
+        reused(),
+        n_steps=SHAPE[0],
+        volume_shape=SHAPE[1:],
+        dtype=data.dtype,
+    )
+    for pool in POOLS:
+        level = series.level(1, pool).read(range(SHAPE[0]))
+        for t in range(SHAPE[0]):
+            assert_pooled(level[t], data[t], pool)
 
 
 # -- stored, added and in-memory levels agree ------------------------------------------------

@@ -1,9 +1,10 @@
 """Writing the coarse levels of a chronocl store (the rule and reading: `chronocl.data.pyramid`).
 
 `LevelWriter` pools each step into every level and pool while `write_store` writes the step
-itself. `add_levels` adds levels to an existing store without touching ``data`` or the root's
-attributes: it builds them at a hidden sibling ``.levels.partial-<pid>-<hex>`` inside the store
-and renames that to ``levels`` when complete (chronocl.core.atomic).
+itself, and writes the levels' chunks while the next step is written. `add_levels` adds levels
+to an existing store without touching ``data`` or the root's attributes: it builds them at a
+hidden sibling ``.levels.partial-<pid>-<hex>`` inside the store and renames that to ``levels``
+when complete (chronocl.core.atomic).
 """
 
 from __future__ import annotations
@@ -14,9 +15,13 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+import google_crc32c
 import numpy as np
 import zarr
-from zarr.codecs import Crc32cCodec
+from numcodecs import Blosc
+from zarr.codecs import BloscCodec, BytesCodec, Crc32cCodec
+from zarr.codecs.bytes import Endian
+from zarr.storage import LocalStore
 
 from chronocl.core.atomic import partial_path, remove_path, remove_stale, replace
 from chronocl.core.errors import InvalidDataError, StoreFormatError
@@ -76,13 +81,21 @@ class LevelWriter:
                 )
         self.stats = {key: ([], [], []) for key in self.arrays}
         self.done = 0
+        self.direct = all(_direct_writable(a) for a in self.arrays.values())
 
     def add(self, t: int, step: np.ndarray) -> None:
-        """Pool step `t` (Z, Y, X) into every level and pool and write them.
+        """Pool step `t` (Z, Y, X) into every level and pool and write them."""
+        self.write(t, self.pool(t, step))
 
-        The step is pooled in z-slabs of about SLAB_BYTES (a multiple of 2^L planes, so every
-        level's slab starts on an even plane), which stay in the CPU's cache through all levels.
+    def pool(self, t: int, step: np.ndarray) -> dict:
+        """Step `t` (Z, Y, X) pooled into every level and pool, its statistics recorded.
+
+        Steps come in order. The step is pooled in z-slabs of about SLAB_BYTES (a multiple of
+        2^L planes, so every level's slab starts on an even plane), which stay in the CPU's
+        cache through all levels. Only this reads `step`; `write` needs just the result.
         """
+        if t != self.done:
+            raise InvalidDataError(f"levels got time step {t}, expected {self.done}")
         depth = len(self.shapes)
         plane = max(1, step[0].nbytes)
         planes = max(1, SLAB_BYTES // plane >> depth) << depth
@@ -110,7 +123,6 @@ class LevelWriter:
                     lo.append(a.min())
                     hi.append(a.max())
                     total.append(a.sum(dtype=acc))
-        _write_together([(self.arrays[key], t, a) for key, a in out.items()])
         for key, a in out.items():
             lo, hi, total = parts[key]
             smin, smax, smean = self.stats[key]
@@ -118,6 +130,15 @@ class LevelWriter:
             smax.append(float(max(hi)))
             smean.append(float(math.fsum(float(v) for v in total) / a.size))
         self.done += 1
+        return out
+
+    def write(self, t: int, out: dict) -> None:
+        """Write step `t`'s levels (what `pool` returned) into their arrays."""
+        if self.direct:
+            for key, a in out.items():
+                _write_step_chunks(self.arrays[key], t, a)
+        else:
+            _write_together([(self.arrays[key], t, a) for key, a in out.items()])
 
     def finish(self) -> None:
         if self.done != self.shape[0]:
@@ -138,6 +159,64 @@ class LevelWriter:
             "pools": list(POOLS),
             "levels": levels,
         }
+
+
+def _direct_writable(arr: zarr.Array) -> bool:
+    """Whether `_write_step_chunks` can write `arr`'s chunks: a zarr v3 array in a local
+    directory whose codecs are bytes (little-endian), then optionally blosc, then optionally
+    crc32c — the chains `level_compressors` makes."""
+    meta = arr.metadata
+    if not isinstance(arr.store, LocalStore) or getattr(meta, "zarr_format", None) != 3:
+        return False
+    codecs = list(meta.codecs)
+    if not codecs or not isinstance(codecs[0], BytesCodec):
+        return False
+    if codecs[0].endian not in (None, Endian.little):
+        return False
+    rest = codecs[1:]
+    if rest and isinstance(rest[0], BloscCodec):
+        rest = rest[1:]
+    if rest and isinstance(rest[0], Crc32cCodec):
+        rest = rest[1:]
+    return not rest
+
+
+def _write_step_chunks(arr: zarr.Array, t: int, a: np.ndarray) -> None:
+    """Write step `t` of `arr` (chunks (1, zc, Y, X)) as encoded chunk files, as zarr would.
+
+    The levels' chunks are small and many; zarr's asynchronous pipeline costs several times
+    the encoding itself per chunk, and it shares its one event loop with the data being written
+    beside the levels. The encoding is zarr v3's, done by the same libraries (numcodecs' blosc,
+    google-crc32c), and tests read every chunk back through zarr. Edge chunks are padded with
+    the fill value, as zarr v3 stores them.
+    """
+    meta = arr.metadata
+    zc = int(arr.chunks[1])
+    blosc = next((c for c in meta.codecs if isinstance(c, BloscCodec)), None)
+    crc = any(isinstance(c, Crc32cCodec) for c in meta.codecs)
+    if blosc is not None:
+        codec = Blosc(
+            cname=blosc.cname.name,
+            clevel=blosc.clevel,
+            shuffle={"noshuffle": 0, "shuffle": 1, "bitshuffle": 2}[blosc.shuffle.name],
+            blocksize=blosc.blocksize,
+        )  # typesize: the itemsize of the typed array it encodes
+    little = a.dtype.newbyteorder("<")
+    root = Path(str(arr.store.root)) / arr.path
+    for i, z0 in enumerate(range(0, a.shape[0], zc)):
+        part = a[z0 : z0 + zc]
+        if part.shape[0] < zc:  # zarr v3 keeps edge chunks at full size
+            full = np.full((zc, *a.shape[1:]), meta.fill_value, little)
+            full[: part.shape[0]] = part
+            part = full
+        raw = np.ascontiguousarray(part, little)
+        data = codec.encode(raw) if blosc is not None else raw.tobytes()
+        file = root / meta.chunk_key_encoding.encode_chunk_key((t, i, 0, 0))
+        file.parent.mkdir(parents=True, exist_ok=True)
+        with open(file, "wb") as f:
+            f.write(data)
+            if crc:
+                f.write(google_crc32c.value(data).to_bytes(4, "little"))
 
 
 def _write_together(writes: list[tuple[zarr.Array, int, np.ndarray]]) -> None:

@@ -116,26 +116,37 @@ def write_store(
                 group.create_group(LEVELS), shape, dt, codecs, chunk_bytes=chunk_bytes
             )
         count = 0
-        # The levels of a step are pooled and written on a thread while the step itself is.
-        pool = ThreadPoolExecutor(1, thread_name_prefix="chronocl-levels") if pyramid else None
+        # A step's levels are pooled on one thread while the step itself is written, and their
+        # chunks are written on another while the next step is: the step's buffer is free once
+        # it is written and pooled (the caller may reuse it), the levels' chunks are not.
+        pools = ThreadPoolExecutor(1, thread_name_prefix="chronocl-levels") if pyramid else None
+        writes = (
+            ThreadPoolExecutor(1, thread_name_prefix="chronocl-level-writes") if pyramid else None
+        )
+        written = None  # the previous step's level write, at most one in flight
         try:
             for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
                 step = _checked_step(step, t, shape, dt, nan_fill, labels, n_steps)
-                levels_done = pool.submit(pyramid.add, t, step) if pool else None
+                pooled = pools.submit(pyramid.pool, t, step) if pools else None
                 try:
                     arr[t] = step
                     smin.append(float(step.min()))
                     smax.append(float(step.max()))
                     smean.append(float(step.mean(dtype=np.float64)))
                 finally:  # the caller may reuse the step's buffer once it has the next
-                    if levels_done is not None:
-                        wait([levels_done])
-                if levels_done is not None:
-                    levels_done.result()
+                    if pooled is not None:
+                        wait([pooled])
+                if pooled is not None:
+                    if written is not None:
+                        written.result()
+                    written = writes.submit(pyramid.write, t, pooled.result())
                 count += 1
+            if written is not None:
+                written.result()
         finally:
-            if pool is not None:
-                pool.shutdown()
+            for executor in (pools, writes):
+                if executor is not None:
+                    executor.shutdown()
         if count != n_steps:
             raise InvalidDataError(f"got {count} time steps, expected {n_steps}")
         if pyramid is not None:
