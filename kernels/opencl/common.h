@@ -3,7 +3,8 @@
  * Build options set by the host (chronocl/engine/opencl.py and each mode's kernel_options):
  *   VEC         voxels per work-item along x: 16 (vectorised) or 1 (x tail, enhancement)
  *   DATA_T      element type of the brick: float, uchar, ushort or short
- *   DATA_V      DATA_T with VEC lanes (e.g. uchar16)
+ *   DATA_V      DATA_T with VEC lanes (e.g. uchar16; float lanes for half)
+ *   HALF_DATA   DATA_T is half: loads convert with vload_half (see LOAD1)
  *   ALIGNED     every VEC-lane load and t_index store is aligned to its vector size
  *               (x width a multiple of 16, buffers 64-byte aligned): use vector pointers,
  *               which PoCL compiles to vector moves where vload16 becomes element loads
@@ -118,6 +119,20 @@ typedef int intv;
 #error "VEC must be 16 or 1"
 #endif
 
+/* HALF_DATA: the brick travels as float16 (DATA_T half, DATA_V float lanes), converted as it is
+ * loaded; LOAD1 loads one value of any brick type. */
+#ifdef HALF_DATA
+#undef VLOAD
+#if VEC == 16
+#define VLOAD(p) vload_half16(0, (p))
+#else
+#define VLOAD(p) vload_half(0, (p))
+#endif
+#define LOAD1(p) vload_half(0, (p))
+#else
+#define LOAD1(p) (*(p))
+#endif
+
 /* Lane-wise choice by a mask of the lanes' width: the vector ternary, which PoCL compiles to
  * a blend where its select() builtin is several times slower. */
 #define SELECT(a, b, c) ((c) ? (b) : (a))
@@ -198,7 +213,7 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
                             int ny, int nzb, int w, float vmin, float scale, float4 enh,
                             float4 view)
 {
-#define U(zz, yy, xx) NORMALIZE(data[VOX_INDEX(zz, k, yy, xx)])
+#define U(zz, yy, xx) NORMALIZE(LOAD1(data + VOX_INDEX(zz, k, yy, xx)))
     const float mid = U(zb, y, x);
     const float gx = axis_gradient(U(zb, y, max(x - 1, 0)), mid, U(zb, y, min(x + 1, nx - 1)), x, nx);
     const float gy = axis_gradient(U(zb, max(y - 1, 0), x), mid, U(zb, min(y + 1, ny - 1), x), y, ny);
