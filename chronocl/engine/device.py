@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 
 from chronocl.core.errors import EngineUnavailableError
@@ -121,17 +121,28 @@ def pick_device(spec: str | None) -> tuple[DeviceInfo, object]:
 
 @dataclass
 class DeviceContext:
-    """A device with its context and in-order queue."""
+    """A device with its context and in-order queue (and, made when first asked for, the
+    queues and buffers of overlapped brick transfers: `streams`)."""
 
     info: DeviceInfo
     device: object
     context: object
     queue: object
     lock: threading.Lock
+    _streams: object = field(default=None, repr=False)
 
     @property
     def is_cpu(self) -> bool:
         return "CPU" in self.info.kind
+
+    def streams(self):
+        """The upload, compute and read-back queues with their reused buffers
+        (`chronocl.engine.transfer.Streams`); use them holding `lock`."""
+        if self._streams is None:
+            from chronocl.engine.transfer import make_streams
+
+            self._streams = make_streams(self.context, self.device)
+        return self._streams
 
 
 @cache

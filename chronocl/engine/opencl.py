@@ -6,7 +6,9 @@ lookup per voxel-step (quantised uint8 data index their LUT directly); when the
 data colour is constant (the default: colour by time) only opacity is looked up,
 and steps whose 16 voxels all map to zero opacity are skipped (exactly). Bricks are in xytz order
 (rows, W, Y, X). On CPU devices buffers wrap the host arrays
-(CL_MEM_USE_HOST_PTR) instead of copying; on GPUs data are copied.
+(CL_MEM_USE_HOST_PTR) instead of copying; on GPUs (or with host_ptr=False) bricks are copied in
+chunks, the upload of one overlapping the kernel of the one before, in the device format asked
+for (`chronocl.engine.transfer`).
 """
 
 from __future__ import annotations
@@ -18,18 +20,37 @@ from chronocl.core.memory import aligned_empty, is_aligned
 from chronocl.core.tf import lut_lerp32
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.program import kernel
+from chronocl.engine.transfer import (
+    Chunk,
+    TransferStats,
+    check_format_name,
+    chunks_of,
+    resolve_format,
+    run_chunks,
+    stored_dtype,
+)
 from chronocl.modes.base import KernelInput
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.reference import Partial
 
 DEVICE_TYPES = {"uint8": "uchar", "uint16": "ushort", "int16": "short", "float32": "float"}
+# float16 bricks (device format float16): DATA_T half, loaded with vload_half into float lanes.
+HALF_DEFINES = {"DATA_T": "half", "HALF_DATA": True}
 ENHANCE_CODES = {"none": 0, "edge": 1, "silhouette": 2}
 VEC = 16  # voxels per work-item along x in the vectorised kernels
+# Positions in KERNEL_ARGS (kernels/opencl/common.h) of the arguments set per launch.
+_ARG_DATA, _ARG_X0, _ARG_NZB, _ARG_ZCROP, _ARG_NZ_OUT = 0, 5, 8, 10, 11
 
 
 def device_dtype(dtype: np.dtype) -> np.dtype:
     """The dtype a brick is given to the device in (float64 goes as float32, like the reference)."""
-    return np.dtype(np.float32) if np.dtype(dtype) == np.float64 else np.dtype(dtype)
+    return stored_dtype(dtype)
+
+
+def lane_type(dt: np.dtype, lanes: int) -> str:
+    """The kernels' DATA_V: the device type with `lanes` lanes (float lanes for float16 data)."""
+    base = "float" if dt == np.float16 else DEVICE_TYPES[dt.name]
+    return base + (str(lanes) if lanes > 1 else "")
 
 
 class OpenCLEngine:
@@ -41,6 +62,11 @@ class OpenCLEngine:
     `host_ptr`, `early_exit`, `quantized` and `skip_empty` switch the fast paths
     (default: host pointers on CPU devices, the rest on); tests check each against
     the general path.
+
+    Without host pointers bricks are copied: `device_format` (auto, native, uint8, uint16,
+    float16; `chronocl.engine.transfer`) is what they travel in, `overlap` uploads the next
+    chunk of about `chunk_bytes` (None: automatic, 0: the whole brick) while the kernel of
+    this one runs, and `last_transfer` holds the timings of the last brick.
     """
 
     name = "opencl"
@@ -55,6 +81,9 @@ class OpenCLEngine:
         skip_empty: bool = True,
         local_size: tuple[int, int, int] | None = None,
         max_brick_bytes: int | None = None,
+        device_format: str = "auto",
+        overlap: bool = True,
+        chunk_bytes: int | None = None,
     ) -> None:
         self.dc: DeviceContext = get_context(device)
         self.host_ptr = self.dc.is_cpu if host_ptr is None else host_ptr
@@ -63,6 +92,24 @@ class OpenCLEngine:
         self.skip_empty = skip_empty
         self.local_size = local_size
         self._max_brick = max_brick_bytes
+        self.device_format = check_format_name(device_format)
+        self.overlap = overlap
+        self.chunk_bytes = chunk_bytes
+        self.last_transfer: TransferStats | None = None
+
+    def with_options(self, **options) -> OpenCLEngine:
+        """A copy of this engine (same device) with some options changed, e.g. device_format."""
+        import copy
+
+        if "device_format" in options:
+            check_format_name(options["device_format"])
+        other = copy.copy(self)
+        for key, value in options.items():
+            if not hasattr(self, key):
+                raise TypeError(f"OpenCLEngine has no option {key!r}")
+            setattr(other, key, value)
+        other.last_transfer = None
+        return other
 
     @property
     def max_brick_bytes(self) -> int:
@@ -122,8 +169,13 @@ class OpenCLEngine:
         """
         import pyopencl as cl
 
-        dt = device_dtype(brick.dtype)
-        brick = np.ascontiguousarray(brick, dtype=dt)
+        fmt = resolve_format(self.device_format, brick.dtype, value_range)
+        value_range = fmt.device_range  # quantised data: (0, 255) or (0, 65535)
+        dt = fmt.dtype
+        if self.host_ptr:
+            brick = np.ascontiguousarray(brick, dtype=fmt.source)
+            if fmt.converts:
+                brick = fmt.encode(brick, aligned_empty(brick.shape, dt))
         nzb, w, ny, nx = brick.shape
         z0, z1 = crop.start, crop.stop
         nz_out = z1 - z0
@@ -137,7 +189,7 @@ class OpenCLEngine:
         mode_defines, mode_args = mode.kernel_options(spec, positions, raw, given)
         vec = 1 if spec.enhance.needs_gradient else VEC
         defines = {
-            "DATA_T": DEVICE_TYPES[dt.name],
+            "DATA_T": DEVICE_TYPES.get(dt.name),
             "QUANT": quant,
             "LUT_N": lut.shape[1],
             "CONST_COLOR": const_color,
@@ -147,9 +199,10 @@ class OpenCLEngine:
             "RAW_PARTIAL": raw,
             **mode_defines,
         }
+        if dt == np.float16:
+            defines.update(HALF_DEFINES)
 
         ctx, mf = self.dc.context, cl.mem_flags
-        host = mf.USE_HOST_PTR if self.host_ptr else mf.COPY_HOST_PTR
         rgba, t_index = out if out is not None else (None, None)
         if rgba is None:
             rgba = aligned_empty((nz_out, ny, nx, 4), np.float32)
@@ -161,19 +214,22 @@ class OpenCLEngine:
         else:
             t_index = None
         e = spec.enhance
-        aligned = (
-            nx % VEC == 0
-            and is_aligned(brick)
-            and is_aligned(rgba)
-            and (t_index is None or is_aligned(t_index))
-        )
+        if self.host_ptr:
+            aligned = (
+                nx % VEC == 0
+                and is_aligned(brick)
+                and is_aligned(rgba)
+                and (t_index is None or is_aligned(t_index))
+            )
+        else:  # device buffers: aligned to the device's base address alignment (bits)
+            aligned = nx % VEC == 0 and self.dc.device.mem_base_addr_align >= 512
         defines["ALIGNED"] = aligned
 
         def table(a: np.ndarray):
             return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
 
         args = [
-            cl.Buffer(ctx, mf.READ_ONLY | host, hostbuf=brick),
+            None,  # the brick (or a chunk of it), per launch
             table(lut),
             table(tc),
             table(np.asarray(order, np.int32)),
@@ -193,28 +249,56 @@ class OpenCLEngine:
         ]
         args += mode_args
         outputs = [rgba] + ([t_index] if t_index is not None else [])
-        if self.host_ptr:
-            out_bufs = [cl.Buffer(ctx, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=a) for a in outputs]
-        else:
-            out_bufs = [cl.Buffer(ctx, mf.WRITE_ONLY, a.nbytes) for a in outputs]
 
         # Whole vectors of `vec` voxels along x, then the remaining columns one by one.
         n_vec = nx // vec
         launches = [(vec, 0, n_vec)] if n_vec else []
         if n_vec * vec < nx:
             launches.append((1, n_vec * vec, nx - n_vec * vec))
-        queue = self.dc.queue
-        with self.dc.lock:
-            for lanes, x0, count in launches:
-                lane_type = DEVICE_TYPES[dt.name] + (str(lanes) if lanes > 1 else "")
-                kern = kernel(
-                    self.dc, file, kernel_name, {**defines, "VEC": lanes, "DATA_V": lane_type}
-                )
-                args[5] = np.int32(x0)
+        built = [
+            (
+                kernel(
+                    self.dc, file, kernel_name, {**defines, "VEC": n, "DATA_V": lane_type(dt, n)}
+                ),
+                x0,
+                count,
+            )
+            for n, x0, count in launches
+        ]
+
+        def launch(queue, data, c: Chunk, out_bufs: list, wait_for: list | None = None) -> list:
+            """Enqueue the kernels of brick rows c.r0..c.r1 (output rows c.a..c.b)."""
+            args[_ARG_DATA] = data
+            args[_ARG_NZB] = np.int32(c.rows)
+            args[_ARG_ZCROP] = np.int32(c.zcrop)
+            args[_ARG_NZ_OUT] = np.int32(c.b - c.a)
+            events = []
+            for kern, x0, count in built:
+                args[_ARG_X0] = np.int32(x0)
                 kern.set_args(*args, *out_bufs)
-                global_size, local_size = self._launch_shape(count, ny, nz_out)
-                cl.enqueue_nd_range_kernel(queue, kern, global_size, local_size)
-            self._read_back(outputs, out_bufs)
+                global_size, local_size = self._launch_shape(count, ny, c.b - c.a)
+                events.append(
+                    cl.enqueue_nd_range_kernel(
+                        queue, kern, global_size, local_size, wait_for=wait_for or None
+                    )
+                )
+            return events
+
+        with self.dc.lock:
+            if self.host_ptr:
+                data = cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick)
+                flags = mf.WRITE_ONLY | mf.USE_HOST_PTR
+                out_bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in outputs]
+                launch(self.dc.queue, data, Chunk(z0, z1, 0, nzb), out_bufs)
+                self._read_back(outputs, out_bufs)
+                self.last_transfer = None
+            else:
+                row_bytes = w * ny * nx * dt.itemsize
+                halo = 1 if spec.enhance.needs_gradient else 0
+                chunks = chunks_of(nzb, crop, halo, row_bytes, self.chunk_bytes)
+                self.last_transfer = run_chunks(
+                    self.dc.streams(), ctx, fmt, brick, chunks, z0, outputs, launch, self.overlap
+                )
         return Partial(rgba, t_index), final
 
     # -- sliding windows: each mode's combine / finish kernels, built with SLIDING ------------
