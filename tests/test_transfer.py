@@ -282,3 +282,57 @@ def test_half_builds_are_silent_on_a_cold_cache(tmp_path):
     assert result.returncode == 0, result.stderr[-4000:]
     said = json.loads(result.stdout)["said"]
     assert not said, f"{len(said)} of {len(todo)} builds warned; the first: {said[0]}"
+
+
+@pytest.fixture(scope="module")
+def stores(tmp_path_factory):
+    """A float32 and a uint8 store, small."""
+    folder = tmp_path_factory.mktemp("stores")
+    rng = np.random.default_rng(4)
+    f32 = rng.random((4, 3, 5, 21)).astype(np.float32)
+    chronocl.TimeSeries.from_array(f32).save(folder / "f.zarr")
+    chronocl.TimeSeries.from_array((f32 * 255).astype(np.uint8)).save(folder / "b.zarr")
+    return folder
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["integrate", "f.zarr", "o.zarr", "--device-format", "int8"], "unknown device format"),
+        (["integrate", "b.zarr", "o.zarr", "--device-format", "uint16"], "not fewer than the 1"),
+        (
+            ["integrate", "f.zarr", "o.zarr", "--engine", "numpy", "--device-format", "uint8"],
+            "applies to the opencl engine",
+        ),
+        (
+            ["integrate", "f.zarr", "o.zarr", "--memory", "1KB", "--device-format", "uint8"],
+            "applies to windows integrated in memory",
+        ),
+        (["render", "b.zarr", "-o", "o.png", "--device-format", "float16"], "use auto"),
+        (["render", "f.zarr", "-o", "o.png", "--device-format", "half"], "choose one of auto"),
+    ],
+)
+def test_cli_refuses_nonsense_device_formats(stores, tmp_path, args, needle):
+    import shutil
+
+    from .test_cli import assert_one_line_error, cli
+
+    for name in ("f.zarr", "b.zarr"):
+        shutil.copytree(stores / name, tmp_path / name)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert_one_line_error(cli(*args, cwd=tmp_path), needle)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written
+
+
+def test_cli_device_format_gives_the_api_result(stores, tmp_path):
+    from .test_cli import cli
+
+    out = tmp_path / "o.zarr"
+    args = ["integrate", stores / "f.zarr", out, "--mode", "max", "--device-format", "uint8"]
+    result = cli(*args)
+    assert result.returncode == 0, result.stderr
+    series = chronocl.open_series(stores / "f.zarr")
+    api = chronocl.integrate(series, mode="max", device_format="uint8")
+    got = chronocl.Chronovolume.load(out)
+    np.testing.assert_array_equal(got.rgba, api.rgba)
+    np.testing.assert_array_equal(got.t_index, api.t_index)

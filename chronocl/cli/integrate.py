@@ -14,6 +14,7 @@ import typer
 from chronocl import modes
 from chronocl.cli.options import (
     STORE_HINT,
+    DeviceFormatOpt,
     DeviceOpt,
     EngineOpt,
     LevelOpt,
@@ -49,6 +50,7 @@ def integrate(
     normalize: NormalizeOpt = "time",
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
+    device_format: DeviceFormatOpt = "auto",
     level: LevelOpt = 0,
     memory: Annotated[
         str,
@@ -82,11 +84,13 @@ def integrate(
     """
     from chronocl.core.paths import check_input, check_target
     from chronocl.data.series import open_series
+    from chronocl.engine.transfer import check_format_name
     from chronocl.integration.auto import check_run_options, plan_run
     from chronocl.integration.levels import check_level
 
     # Everything is checked before any work: no kernel built, no brick read, nothing written.
     check_run_options(out_path, memory, engine, scheduler, workers)
+    check_format_name(device_format)
     check_input(store, "store", hint=STORE_HINT)
     args = spec_args(tf, time_tf, order, enhance, threshold, normalize)
     check_target(out_path, overwrite, [store, tf])
@@ -104,6 +108,7 @@ def integrate(
         scheduler=scheduler,
         workers=workers,
         level=level,
+        device_format=device_format,
         **args,
     )
     if run.streamed:

@@ -35,6 +35,13 @@ DeviceOpt = Annotated[
     str | None,
     typer.Option(help="OpenCL device: index 0:1 or a name part (see 'chronocl devices')."),
 ]
+DeviceFormatOpt = Annotated[
+    str,
+    typer.Option(
+        help="What bricks travel to the device in: auto (as stored), native (float32), float16, "
+        "or uint8/uint16 quantised over the value range (lossy; docs/engine.md)."
+    ),
+]
 LevelOpt = Annotated[
     int,
     typer.Option(help="Coarse level to integrate (0: full resolution; see 'chronocl pyramid')."),

@@ -12,6 +12,7 @@ import typer
 from chronocl import modes
 from chronocl.cli.options import (
     STORE_HINT,
+    DeviceFormatOpt,
     DeviceOpt,
     EngineOpt,
     LevelOpt,
@@ -64,6 +65,7 @@ def render(
     outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
+    device_format: DeviceFormatOpt = "auto",
     level: LevelOpt = 0,
     turntable: Annotated[
         Path | None,
@@ -95,7 +97,8 @@ def render(
     from chronocl.data.formats.outputs import output_kind
     from chronocl.data.formats.outputs import save_chronovolume as save_any
     from chronocl.data.series import open_series
-    from chronocl.integration.inmemory import prepare
+    from chronocl.engine.transfer import check_device_format, check_format_name
+    from chronocl.integration.inmemory import at_level, prepare
     from chronocl.integration.levels import check_level
     from chronocl.render import Camera
     from chronocl.render.raycaster import check_clip, check_size
@@ -110,6 +113,7 @@ def render(
         twice = next(m for m in modes if modes.count(m) > 1)
         raise InvalidParameterError(f"--mode {twice} is given twice; name each mode once")
     check_engine(engine)
+    check_format_name(device_format)
     camera = Camera(azimuth, elevation, zoom, projection=projection)
     panel = check_size(parse_sizes(size, 2, "WxH", "512x512"))
     parse_color(background)
@@ -131,7 +135,10 @@ def render(
     series = open_series(store)
     check_level(series, level)
     for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
-        prepare(series, window, m, None, args)
+        job = prepare(series, window, m, None, args)
+    if device_format != "auto":  # over the level's value range, which it quantises
+        job = at_level(job, level)
+        check_device_format(device_format, engine, job.series.dtype, job.value_range)
     views = ModeViews(
         series,
         window,
@@ -142,6 +149,7 @@ def render(
         spec_args=args,
         draw_args=dict(background=background, clip=clip_plane, outline=outline),
         level=level,
+        device_format=device_format,
     )
 
     t0 = time.perf_counter()

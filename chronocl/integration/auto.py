@@ -24,6 +24,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.formats.outputs import output_kind, save_chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import ENGINES
+from chronocl.engine.transfer import check_device_format
 from chronocl.integration.inmemory import Job, at_level, integrate, prepare
 from chronocl.integration.plan import fits_in_memory
 from chronocl.integration.streaming import integrate_to_store
@@ -82,6 +83,7 @@ class Run:
     client: object = None
     scheduler: str | None = None
     workers: int | None = None
+    device_format: str = "auto"
 
     @property
     def streamed(self) -> bool:
@@ -108,6 +110,7 @@ class Run:
                 engine=self.engine,
                 device=self.device,
                 progress=progress,
+                device_format=self.device_format,
             )
             save_chronovolume(cv, self.out_path, overwrite=overwrite)
             return cv
@@ -148,6 +151,7 @@ def plan_run(
     scheduler: str | None = None,
     workers: int | None = None,
     level: int = 0,
+    device_format: str = "auto",
     **spec_args: object,
 ) -> Run:
     """Validate the integration of `window` of `series` into `out_path` and choose where it runs.
@@ -157,7 +161,8 @@ def plan_run(
     `scheduler` (an address) or `workers` (a local cluster of that many processes) to run the
     slabs on dask. Nothing is read or written yet. A window that does not fit the budget needs
     a .zarr output (streamed) or a cluster; any other output raises InvalidParameterError.
-    `level` integrates a coarse level of the series (docs/levels.md).
+    `level` integrates a coarse level of the series (docs/levels.md). `device_format` is what
+    bricks travel to the device in (`chronocl.engine.transfer`; in-memory runs only for now).
     """
     budget = check_run_options(out_path, memory, engine, scheduler, workers)
     job = at_level(prepare(series, window, mode, spec, spec_args), level)
@@ -173,4 +178,21 @@ def plan_run(
             f"this window needs more than --memory {memory or DEFAULT_MEMORY} in memory; "
             "write a .zarr OUT (streamed slab by slab) and convert it, or give a larger --memory"
         )
-    return Run(job, Path(out_path), where, budget, engine, device, client, scheduler, workers)
+    check_device_format(device_format, engine, job.series.dtype, job.value_range)
+    if device_format != "auto" and where != IN_MEMORY:
+        raise InvalidParameterError(
+            f"--device-format {device_format} applies to windows integrated in memory; this one "
+            "is streamed slab by slab (use --device-format auto or a larger --memory)"
+        )
+    return Run(
+        job,
+        Path(out_path),
+        where,
+        budget,
+        engine,
+        device,
+        client,
+        scheduler,
+        workers,
+        device_format,
+    )

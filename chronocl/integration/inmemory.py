@@ -31,6 +31,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
+from chronocl.engine.transfer import with_device_format
 from chronocl.integration.levels import check_level
 from chronocl.modes.spec import IntegrationSpec, resolve_order
 from chronocl.reference import Partial
@@ -218,6 +219,7 @@ def integrate(
     slab: int | None = None,
     progress: bool = False,
     level: int = 0,
+    device_format: str = "auto",
     **spec_args: object,
 ) -> Chronovolume:
     """Integrate the selected steps of `series` into a Chronovolume.
@@ -231,9 +233,12 @@ def integrate(
     see `chronocl.integration.streaming.integrate_to_store`. `level` integrates a coarse
     level of the series (0: full resolution; docs/levels.md), pooled as the mode asks; the
     chronovolume keeps the physical extent, so it renders in the same place.
+    `device_format` is what bricks travel to the device in: auto (as stored), native (float32),
+    float16, or uint8 / uint16 quantised over the value range (docs/engine.md).
     """
     job = at_level(prepare(series, window, mode, spec, spec_args), level)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
+    eng = with_device_format(eng, device_format, job.series.dtype, job.value_range)
     return integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
 
 

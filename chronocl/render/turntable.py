@@ -87,6 +87,7 @@ class ModeViews:
     spec_args: Mapping[str, object] = field(default_factory=dict)
     draw_args: Mapping[str, object] = field(default_factory=dict)
     level: int = 0  # a coarse level of the series (docs/levels.md)
+    device_format: str = "auto"  # what bricks travel to the device in (engine.transfer)
 
     @property
     def follows_camera(self) -> bool:
@@ -97,7 +98,9 @@ class ModeViews:
 
     def integrate(self, camera: Camera) -> list[Chronovolume]:
         """The chronovolumes of every mode, a silhouette taken along `camera`'s view."""
-        args = dict(self.spec_args, engine=self.engine, device=self.device)
+        args = dict(
+            self.spec_args, engine=self.engine, device=self.device, device_format=self.device_format
+        )
         if self.follows_camera:
             enhance = args["enhance"]
             view = camera.view_direction()
