@@ -2,7 +2,8 @@
 
 The ray through the clicked pixel is marched on the CPU over the shown chronovolume's
 opacity, with the raycaster's camera, box, clip plane and compositing, to the voxel where the
-accumulated opacity passes `PROBE_THRESHOLD`.
+accumulated opacity passes `PROBE_THRESHOLD`. `project` puts that voxel back on screen for
+each later frame, so the page's marker follows it through orbits and projection changes.
 """
 
 from __future__ import annotations
@@ -90,10 +91,36 @@ def probe_ray(
     return {"voxel": (iz, iy, ix), "opacity": float(acc[k]), "reached": reached}
 
 
+def project(
+    cv: Chronovolume, camera: Camera, size: tuple[int, int], where: tuple[float, float, float]
+) -> tuple[float, float] | None:
+    """Where the point at `where` (x, y, z as fractions of the box) lands on a panel of `size`
+    with `camera`: (x, y) fractions, top-left origin; None if behind the camera or off-panel."""
+    extent, _ = geometry(cv)
+    w, h = size
+    view, proj = camera.matrices(extent, w / h)
+    world = (np.asarray(where, dtype=np.float64) - 0.5) * extent
+    clip = proj @ view @ np.append(world, 1.0)
+    if clip[3] <= 1e-9:
+        return None
+    x, y = (clip[0] / clip[3] + 1) / 2, (1 - clip[1] / clip[3]) / 2
+    if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
+        return None
+    return round(float(x), 5), round(float(y), 5)
+
+
+def box_fractions(cv: Chronovolume, voxel: tuple[int, int, int]) -> tuple[float, float, float]:
+    """The centre of voxel (z, y, x) of `cv` as x, y, z fractions of its box."""
+    nz, ny, nx = cv.shape
+    z, y, x = voxel
+    return (x + 0.5) / nx, (y + 0.5) / ny, (z + 0.5) / nz
+
+
 def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Dataset) -> dict:
     """The `probe` reply to `msg` for the shown `view` of `state`: the voxel met, v(t) there
     over every step, and the window's steps."""
-    hit = probe_ray(cv, state.camera, state.size, msg["x"], msg["y"], state.clip)
+    camera = state.panel_camera()
+    hit = probe_ray(cv, camera, state.size, msg["x"], msg["y"], state.clip)
     reply = {"type": "probe", "id": msg.get("id"), "view": view, "x": msg["x"], "y": msg["y"]}
     reply |= {"reached": hit["reached"], "opacity": round(hit["opacity"], 4)}
     reply["threshold"] = PROBE_THRESHOLD
@@ -102,5 +129,6 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     else:
         z, y, x = hit["voxel"]
         reply |= {"voxel": {"z": z, "y": y, "x": x}, "values": ds.curve(z, y, x)}
+        reply["mark"] = project(cv, camera, state.size, box_fractions(cv, hit["voxel"]))
     reply["window"] = list(state.selection(ds.series.n_steps).steps)
     return reply

@@ -65,6 +65,15 @@ class ViewState:
         t0, t1, stride = self.window
         return Selection.window(t0, t1, stride, n_steps)
 
+    def panel_camera(self) -> Camera:
+        """The camera as the panels are drawn: on a panel taller than wide the camera's field
+        of view spans the panel's width instead of its height (zoom scaled by w / h), so the
+        box fits across a tall panel as it fits down a wide one."""
+        w, h = self.size
+        if w >= h:
+            return self.camera
+        return dataclasses.replace(self.camera, zoom=self.camera.zoom * w / h)
+
     def time_tf_object(self) -> TimeTF:
         t = self.time_tf
         color = (

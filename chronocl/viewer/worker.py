@@ -23,6 +23,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 
+from chronocl import modes
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
@@ -30,9 +31,17 @@ from chronocl.integration.session import Session
 from chronocl.render.views import describe, parse_color
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import error_text
-from chronocl.viewer.frames import JPEG_QUALITY, PREVIEW_SCALE, encode, legend
+from chronocl.viewer.frames import (
+    JPEG_QUALITY,
+    PREVIEW_SCALE,
+    empty_note,
+    encode,
+    legend,
+    render_size,
+    visible_fraction,
+)
 from chronocl.viewer.gl_thread import on_gl
-from chronocl.viewer.probe import probe_reply
+from chronocl.viewer.probe import box_fractions, probe_reply, project
 from chronocl.viewer.protocol import pack_frame
 from chronocl.viewer.saving import Downloads, save_chronovolume, save_image
 from chronocl.viewer.slots import ViewSlot, upload
@@ -75,6 +84,8 @@ class ClientWorker:
         self._refine_at: float | None = None  # when the coarse frame shown is to be refined
         self._last_rid: int | None = None
         self._shown: ViewState | None = None  # the state of the last frame sent
+        # The last probed voxel (view, x/y/z fractions of the box): each frame says where it is.
+        self._probed: tuple[int, tuple[float, float, float]] | None = None
         self._frame = 0
         self.thread = threading.Thread(target=self._run, name="chronocl-view", daemon=True)
         self.thread.start()
@@ -95,6 +106,7 @@ class ClientWorker:
         i = self.find_dataset(ref)
         with self._cond:
             self.state = default_state(i, self.datasets[i].series)
+            self._probed = None
             self._pending = (self.state, rid)
             self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
             self._cond.notify()
@@ -245,7 +257,7 @@ class ClientWorker:
         panels = [
             rc.draw(
                 slot.volume,
-                state.camera,
+                state.panel_camera(),
                 size,
                 background=bg,
                 clip=state.clip,
@@ -283,9 +295,7 @@ class ClientWorker:
 
     def _send_frame(self, state, rid, cvs, integrate_ms, incremental, t_start) -> None:
         preview = state.quality == "preview"
-        w, h = state.size
-        if preview:
-            w, h = max(32, int(w * PREVIEW_SCALE)), max(32, int(h * PREVIEW_SCALE))
+        w, h = render_size(state.size, len(cvs), PREVIEW_SCALE if preview else 1.0)
         bg = parse_color(state.background)
         t0 = time.perf_counter()
         panels, t_up, t_draw, t_done = on_gl(self._draw, cvs, state, (w, h), bg)
@@ -308,9 +318,16 @@ class ClientWorker:
             "quality": state.quality,
             "format": "jpeg",
             "views": [
-                {"width": w, "height": h, "bytes": len(b), "label": describe(cv)}
-                for b, cv in zip(images, cvs, strict=True)
+                {
+                    "width": w,
+                    "height": h,
+                    "bytes": len(b),
+                    "label": describe(cv),
+                    "note": empty_note(mode, modes.get(mode).summary, visible_fraction(pixels, bg)),
+                }
+                for b, cv, pixels, (mode, _) in zip(images, cvs, panels, state.views, strict=True)
             ],
+            "probe": self._probe_mark(state, cvs),
             "legend": legend(cvs[0]),
             "level": level,
             "levels": levels,  # from the sessions: no store metadata read per frame
@@ -328,6 +345,14 @@ class ClientWorker:
             "sent_at": time.time(),
         }
         self.send(pack_frame(header, images))
+
+    def _probe_mark(self, state: ViewState, cvs: list[Chronovolume]) -> dict | None:
+        """Where the probed voxel is on its panel in this frame (None: no probe, or off-panel)."""
+        if self._probed is None or self._probed[0] >= len(cvs):
+            return None
+        view, where = self._probed
+        at = project(cvs[view], state.panel_camera(), state.size, where)
+        return None if at is None else {"view": view, "x": at[0], "y": at[1]}
 
     # -- tasks ---------------------------------------------------------------------------
     def _do_task(self, kind: str, msg: dict) -> None:
@@ -369,7 +394,14 @@ class ClientWorker:
         self._full_resolution(range(view, view + 1))
         cv = self._slots[view].cv
         assert cv is not None
-        self._reply(probe_reply(msg, view, state, cv, self.datasets[state.dataset]))
+        reply = probe_reply(msg, view, state, cv, self.datasets[state.dataset])
+        voxel = reply["voxel"]
+        self._probed = (
+            None
+            if voxel is None
+            else (view, box_fractions(cv, (voxel["z"], voxel["y"], voxel["x"])))
+        )
+        self._reply(reply)
 
     def _save(self, msg: dict) -> None:
         state, view = self._shown_view(msg)

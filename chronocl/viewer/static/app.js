@@ -9,13 +9,13 @@
 //   probe.js       the v(t) plot of a probed voxel
 //   controls.js    the other controls, filled from the server's choices
 
-import { connect, send, update } from './connection.js';
+import { connect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, syncControls } from './controls.js';
-import { drawProbe, onProbe } from './probe.js';
+import { clearProbe, drawProbe, onProbe } from './probe.js';
 import { $, S, setStatus, viewer } from './state.js';
 import { bindTF, drawTF } from './tf_editor.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
-import { fillSelect, layoutViews, onFrame } from './views.js';
+import { fillSelect, layoutViews, onFrame, showMark } from './views.js';
 
 // The first message: the data sets, and the modes, menus, defaults and bounds to offer.
 function onInfo(msg) {
@@ -39,7 +39,8 @@ function onDataset(msg) {
   update({ size, views: S.state.views }, 'full');
   drawTimeline();
   drawTF();
-  drawProbe();
+  clearProbe(); // the old voxel's curve does not belong on the new series' axis
+  showMark(null);
 }
 
 function onDownload(msg) {
@@ -67,11 +68,13 @@ function onText(msg) {
       break;
     case 'probe':
       onProbe(msg);
+      showMark(msg.values && msg.mark ? { view: msg.view, x: msg.mark[0], y: msg.mark[1] } : null);
       break;
     case 'download':
       onDownload(msg);
       break;
     case 'error':
+      if (msg.id !== null && msg.id >= viewer.sent) frameArrived(); // no frame will come
       viewer.errors.push(msg);
       setStatus(`error: ${msg.message}`, true);
       break;
@@ -80,17 +83,27 @@ function onText(msg) {
   }
 }
 
+// The panels follow the view area (window size, side panel shown or not) and the device
+// pixel ratio (browser zoom fires 'resize'); the render size follows the panels.
 let resizeTimer = 0;
-window.addEventListener('resize', () => {
+function relayout() {
   clearTimeout(resizeTimer);
   resizeTimer = setTimeout(() => {
     if (!S.state) return;
     const size = layoutViews();
-    if (size[0] !== S.state.size[0]) update({ size });
+    if (size[0] !== S.state.size[0] || size[1] !== S.state.size[1]) update({ size });
     drawTimeline();
     drawTF();
     drawProbe();
   }, 150);
+}
+window.addEventListener('resize', relayout);
+new ResizeObserver(relayout).observe($('views'));
+
+$('side-toggle').addEventListener('click', () => {
+  const hidden = document.body.classList.toggle('side-hidden');
+  $('side-toggle').textContent = hidden ? 'panel ◂' : 'panel ▸';
+  $('side-toggle').setAttribute('aria-expanded', String(!hidden));
 });
 
 bindTimeline();

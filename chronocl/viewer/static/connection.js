@@ -1,7 +1,13 @@
 // The WebSocket to the server. The server renders the newest state only, so the page may send
-// freely; it still coalesces input to one update message per animation frame.
+// freely; it still coalesces input to one update message per animation frame. While a frame
+// is awaited for longer than BUSY_AFTER_MS (a mode's first use compiles its kernels, a few
+// seconds) the #busy indicator says so, with the time waited.
 
-import { S, setStatus, viewer } from './state.js';
+import { $, S, setStatus, viewer } from './state.js';
+
+const BUSY_AFTER_MS = 400;
+let waitingSince = null; // when the oldest update not yet answered by a frame was sent
+let busyTimer = 0;
 
 const params = new URLSearchParams(location.search);
 const token = params.get('token') || '';
@@ -18,7 +24,10 @@ export function connect({ onText, onFrame }) {
   ws = new WebSocket(`${proto}//${location.host}/ws${q}`);
   ws.binaryType = 'arraybuffer';
   ws.onmessage = (e) => (typeof e.data === 'string' ? onText(JSON.parse(e.data)) : onFrame(e.data));
-  ws.onclose = () => setStatus('disconnected: reload the page (is the server still running?)', true);
+  ws.onclose = () => {
+    frameArrived(); // nothing more will come
+    setStatus('disconnected: reload the page (is the server still running?)', true);
+  };
 }
 
 export function send(msg) {
@@ -45,6 +54,27 @@ function flush() {
   const msg = Object.assign({ type: 'update', quality: pendingQuality }, pending);
   pending = null;
   viewer.sent = send(msg);
+  if (viewer.sent && waitingSince === null) {
+    waitingSince = performance.now();
+    clearInterval(busyTimer);
+    busyTimer = setInterval(showBusy, 100);
+  }
+}
+
+function showBusy() {
+  const el = $('busy');
+  const waited = waitingSince === null ? 0 : performance.now() - waitingSince;
+  el.hidden = waited < BUSY_AFTER_MS;
+  if (!el.hidden) {
+    el.textContent = `working… ${(waited / 1000).toFixed(1)} s (a mode's first use compiles its kernels: a few seconds)`;
+  }
+}
+
+// A frame (or an error) answering the newest update arrived.
+export function frameArrived() {
+  waitingSince = null;
+  clearInterval(busyTimer);
+  $('busy').hidden = true;
 }
 
 // A full-quality frame once input has paused for `ms`.

@@ -1,7 +1,15 @@
 // The probe plot: v(t) over every step at the voxel a click on a view met, the window's
-// steps marked on it.
+// steps marked on it. The window drawn is the page's current one (it follows play and the
+// brush); switching data sets clears the plot.
 
 import { $, S, canvasSize, fmt, viewer } from './state.js';
+
+export function clearProbe() {
+  viewer.probe = null;
+  drawProbe();
+  $('probe-text').textContent =
+    `click a pixel: v(t) at the voxel where the ray's opacity passes ${S.choices.limits.probe_threshold}`;
+}
 
 export function onProbe(msg) {
   viewer.probe = msg;
@@ -28,7 +36,10 @@ export function drawProbe() {
   const vmax = S.info.vmax > vmin ? S.info.vmax : vmin + 1;
   const X = (s) => p.l + (T > 1 ? s / (T - 1) : 0.5) * (w - p.l - p.r);
   const Y = (v) => h - p.b - ((v - vmin) / (vmax - vmin)) * (h - p.t - p.b);
-  const win = msg.window;
+  const { t0, t1, stride } = S.state.window;
+  const win = [];
+  for (let s = t0; s < Math.min(t1, T); s += stride) win.push(s);
+  if (!win.length) return;
   ctx.fillStyle = 'rgba(240,160,48,0.16)';
   ctx.fillRect(X(win[0]) - 2, p.t, X(win[win.length - 1]) - X(win[0]) + 4, h - p.t - p.b);
   ctx.strokeStyle = '#343941';

@@ -40,15 +40,23 @@ export function drawTF() {
   for (const p of pts) grad.addColorStop((p[0] - pts[0][0]) / span, rgbCss(p, 0.25 + 0.75 * p[4]));
   ctx.fillStyle = grad;
   ctx.fillRect(pad.l, h - pad.b + 2, w - pad.l - pad.r, 5);
-  // Opacity curve and points.
+  // Opacity curve, clipped to the plot (zoomed in, its segments reach far past the edges),
+  // and the points within the visible range.
+  ctx.save();
   ctx.beginPath();
-  ctx.moveTo(X(S.zoom[0]), Y(pts[0][4]));
+  ctx.rect(pad.l, 0, w - pad.l - pad.r, h - pad.b + 1);
+  ctx.clip();
+  ctx.beginPath();
+  ctx.moveTo(X(Math.min(S.zoom[0], pts[0][0])), Y(pts[0][4]));
   for (const p of pts) ctx.lineTo(X(p[0]), Y(p[4]));
-  ctx.lineTo(X(S.zoom[1]), Y(pts[pts.length - 1][4]));
+  ctx.lineTo(X(Math.max(S.zoom[1], pts[pts.length - 1][0])), Y(pts[pts.length - 1][4]));
   ctx.strokeStyle = '#f0a030';
   ctx.lineWidth = 1.5;
   ctx.stroke();
+  ctx.restore();
+  const zspan = S.zoom[1] - S.zoom[0];
   pts.forEach((p, i) => {
+    if (p[0] < S.zoom[0] - 1e-3 * zspan || p[0] > S.zoom[1] + 1e-3 * zspan) return;
     ctx.beginPath();
     ctx.arc(X(p[0]), Y(p[4]), i === S.selectedPoint ? 6 : 4.5, 0, 2 * Math.PI);
     ctx.fillStyle = rgbCss(p);

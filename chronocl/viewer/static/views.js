@@ -1,11 +1,12 @@
 // The view panels: their grid, each panel's mode menu and order button, orbit and zoom by
-// pointer, the probe click, and the frames the server sends into them.
+// pointer, the probe click and its marker, and the frames the server sends into them.
 
-import { send, sentAt, settleLater, update } from './connection.js';
+import { frameArrived, send, sentAt, settleLater, update } from './connection.js';
+import { drawProbe } from './probe.js';
 import { $, S, clamp, setStatus, viewer } from './state.js';
 import { drawTimeline } from './timeline.js';
 
-const PREFERRED_PANEL = 768; // largest panel side the layout asks for (the server allows more)
+const GAP = 6; // between panels and around them (the #views padding), CSS px
 export const panels = [];
 
 // One option per item: a name, or {name, label, summary}.
@@ -34,24 +35,29 @@ export function layoutViews() {
     p.order.textContent = S.state.views[i].order || S.choices.orders[0];
     p.el.classList.toggle('selected', i === S.selectedView && n > 1);
   });
-  // The grid (columns x rows) that gives the largest square panels.
-  const gap = 6;
-  let cols = 1;
-  let side = 0;
-  for (let c = n; c >= 1; c--) {
+  // Panels fill the view area in a grid (columns x rows): the squarest grid with room for n
+  // (2x2 for four views) unless another gives cells with a clearly (25 %) longer short side,
+  // as a row of two on a wide area or a column of two on a tall one.
+  const W = box.clientWidth - 2 * GAP;
+  const H = box.clientHeight - 2 * GAP;
+  const cell = (c) => {
     const r = Math.ceil(n / c);
-    const w = (box.clientWidth - 12 - gap * (c - 1)) / c;
-    const h = (box.clientHeight - 12 - gap * (r - 1)) / r;
-    const s = Math.floor(Math.min(w, h, PREFERRED_PANEL, maxPanel) / 8) * 8;
-    if (s > side * 1.1) [cols, side] = [c, s]; // more rows only for clearly larger panels
+    return { c, r, w: (W - GAP * (c - 1)) / c, h: (H - GAP * (r - 1)) / r };
+  };
+  let best = cell(Math.ceil(Math.sqrt(n)));
+  for (let c = 1; c <= n; c++) {
+    const g = cell(c);
+    if (Math.min(g.w, g.h) > 1.25 * Math.min(best.w, best.h)) best = g;
   }
-  side = Math.max(minPanel, side);
-  box.style.gridTemplateColumns = `repeat(${cols}, ${side}px)`;
-  for (const p of panels) {
-    p.el.style.width = `${side}px`;
-    p.el.style.height = `${side}px`;
-  }
-  return [side, side];
+  box.style.gridTemplateColumns = `repeat(${best.c}, minmax(0, 1fr))`;
+  box.style.gridTemplateRows = `repeat(${best.r}, minmax(0, 1fr))`;
+  // Render size: the cell in device pixels, the longest side within the server's limit (the
+  // server draws fewer pixels still when the views together exceed its budget).
+  const dpr = window.devicePixelRatio || 1;
+  const w = Math.max(1, best.w - 2) * dpr; // less the panel's border
+  const h = Math.max(1, best.h - 2) * dpr;
+  const fit = Math.min(1, maxPanel / Math.max(w, h));
+  return [Math.max(minPanel, Math.round(w * fit)), Math.max(minPanel, Math.round(h * fit))];
 }
 
 function makePanel(i) {
@@ -62,7 +68,8 @@ function makePanel(i) {
     '<img alt="view" draggable="false"><div class="view-head">' +
     '<select class="mode" title="Integration mode"></select>' +
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
-    '</div><div class="view-label"></div><div class="probe-mark"></div>';
+    '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
+    '<div class="probe-mark"></div>';
   $('views').appendChild(el);
   const p = {
     el,
@@ -70,6 +77,7 @@ function makePanel(i) {
     mode: el.querySelector('.mode'),
     order: el.querySelector('.order'),
     label: el.querySelector('.view-label'),
+    note: el.querySelector('.view-note'),
     mark: el.querySelector('.probe-mark'),
   };
   fillSelect(p.mode, S.choices.modes);
@@ -138,11 +146,20 @@ function probeAt(p, i, e) {
   const y = clamp((e.clientY - r.top) / r.height, [0, 1]);
   S.selectedView = i;
   panels.forEach((q, j) => q.el.classList.toggle('selected', j === i && panels.length > 1));
-  for (const q of panels) q.mark.style.display = 'none';
-  p.mark.style.left = `${x * 100}%`;
-  p.mark.style.top = `${y * 100}%`;
-  p.mark.style.display = 'block';
+  showMark({ view: i, x, y });
   send({ type: 'probe', view: i, x, y });
+}
+
+// The probe marker at {view, x, y} (fractions of the panel), or none.
+export function showMark(at) {
+  panels.forEach((q, j) => {
+    const on = !!at && at.view === j;
+    q.mark.style.display = on ? 'block' : 'none';
+    if (on) {
+      q.mark.style.left = `${at.x * 100}%`;
+      q.mark.style.top = `${at.y * 100}%`;
+    }
+  });
 }
 
 // ------------------------------------------------------------------ frames
@@ -172,7 +189,11 @@ export function onFrame(buf) {
     p.img.dataset.url = url;
     if (old) URL.revokeObjectURL(old);
     p.label.textContent = v.label;
+    p.note.textContent = v.note || '';
+    p.note.hidden = !v.note;
   });
+  // Where the probed voxel is in this frame (it moves with the camera; none before a probe).
+  if (viewer.probe && viewer.probe.values) showMark(header.probe || null);
   S.legend = header.legend || [];
   const now = performance.now();
   const t0 = sentAt.get(header.id);
@@ -188,8 +209,10 @@ export function onFrame(buf) {
   if (viewer.levels.length > 50) viewer.levels.shift();
   document.body.dataset.level = header.level || 0;
   document.body.dataset.refining = header.refining ? 'yes' : 'no';
+  if (header.id === null || header.id >= viewer.sent) frameArrived();
   showTimings(header);
   drawTimeline();
+  drawProbe();
 }
 
 function showTimings(h) {
