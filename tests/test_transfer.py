@@ -336,3 +336,37 @@ def test_cli_device_format_gives_the_api_result(stores, tmp_path):
     got = chronocl.Chronovolume.load(out)
     np.testing.assert_array_equal(got.rgba, api.rgba)
     np.testing.assert_array_equal(got.t_index, api.t_index)
+
+
+def test_bench_transfer_reports_null_on_cpu_and_figures_when_forced():
+    import importlib.util
+    import json
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "bench" / "transfer.py"
+    sys.path.insert(0, str(path.parent))
+    try:
+        spec = importlib.util.spec_from_file_location("chronocl_bench_transfer", path)
+        bench = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(bench)
+    finally:
+        sys.path.remove(str(path.parent))
+    assert bench.transfer_overlap() is None  # PoCL: a CPU device
+    figures = bench.run(None, 16, 4, "max", 1, force=True)
+    json.dumps(figures)
+    assert figures["transfer_overlap"] is None and figures["is_cpu"]
+    up = {name: f["bytes_up"] for name, f in figures["formats"].items()}
+    assert up["auto"] == 16**3 * 4 * 4 and up["float16"] == up["uint16"] == 2 * up["uint8"]
+    auto = figures["formats"]["auto"]["overlapped"]
+    assert auto["kernel_s"] > 0 and auto["upload_s"] > 0 and auto["wall_s"] > 0
+
+
+@pytest.mark.parametrize("name", ["float16", "uint8", "uint16", "native"])
+def test_conversions_split_over_threads_equal_one_pass(name):
+    v = np.random.default_rng(3).normal(0, 3e4, transfer.PARALLEL_MIN * 2 + 7).astype(np.float32)
+    fmt = resolve_format(name, np.float32, (-1e4, 2e4))
+    split = fmt.encode(v)
+    np.testing.assert_array_equal(split, fmt._encode(v, np.empty(v.shape, fmt.dtype)))
+    if name == "float16":
+        assert np.isfinite(split).all()  # saturated, not inf
