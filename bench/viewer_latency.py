@@ -17,6 +17,10 @@ resolution (integrate + upload + draw + JPEG), without server or socket.
 
     python bench/viewer_latency.py --quick
     python bench/viewer_latency.py --quick --sizes 128,256
+    python bench/viewer_latency.py --quick --sizes 128 --image 1024x733   # a panel's size
+
+`--image` is the panel size the client asks for (default 512x512); the server draws it within
+its pixel budget (chronocl/viewer/frames.py::render_size), as it does for the page.
 
 Summary keys (per size): `first_frame_ms` (TF edit -> first frame), `full_res_ms` (TF edit
 -> full-resolution frame), `scrub_first_frame_ms`, `scrub_incremental` ("k/n"),
@@ -169,10 +173,12 @@ def make_store(root: Path, n: int) -> tuple[Path, str]:
         source=f"vortex {n}^3",
         progress=True,
     )
-    return path, f"{n}^3x{steps}-{np.dtype(dtype).name}-W10-512^2"
+    return path, f"{n}^3x{steps}-{np.dtype(dtype).name}-W10"
 
 
-def measure(path: Path, case: str, edits: int, scrubs: int) -> dict:
+def measure(
+    path: Path, case: str, edits: int, scrubs: int, image: tuple[int, int] = (512, 512)
+) -> dict:
     """TF edits and scrub steps against a server on the store at `path`."""
     from chronocl.data.series import open_series
     from chronocl.viewer.view_state import DEFAULT_POINTS
@@ -186,7 +192,7 @@ def measure(path: Path, case: str, edits: int, scrubs: int) -> dict:
         client.request(
             {
                 "type": "update",
-                "size": [512, 512],
+                "size": list(image),
                 "window": {"t0": 0, "t1": 10, "stride": 1},
                 "time_tf": {"color": "rgb", "positions": "absolute"},
             }
@@ -237,18 +243,23 @@ def main() -> None:
     ap.add_argument("--sizes", default="128,256,512", help="volume sides (default 128,256,512)")
     ap.add_argument("--edits", type=int, default=None, help="TF edits per size (default 10/20)")
     ap.add_argument("--keep", type=Path, default=None, help="folder to keep the stores in")
+    ap.add_argument("--image", default="512x512", help="panel size WxH (default 512x512)")
     args = ap.parse_args()
+    image = tuple(int(v) for v in args.image.lower().split("x"))
+    if len(image) != 2:
+        ap.error(f"--image {args.image!r}: give WxH, e.g. 512x512")
+    label = f"{image[0]}^2" if image[0] == image[1] else f"{image[0]}x{image[1]}"
     edits = args.edits or (10 if args.quick else 20)
     scrubs = 20 if args.quick else 40
     sizes = [int(v) for v in args.sizes.split(",")]
-    emit(env_record(BENCH, {"sizes": sizes, "window": 10, "image": [512, 512]}))
+    emit(env_record(BENCH, {"sizes": sizes, "window": 10, "image": list(image)}))
 
     summary: dict = {k: {} for k in ("first_frame_ms", "full_res_ms", "scrub_first_frame_ms")}
     summary |= {"scrub_incremental": {}, "first_frame_level": {}, "split_ms": {}}
     with tempfile.TemporaryDirectory(prefix="chronocl-latency-", dir=args.keep) as tmp:
         for n in sizes:
             path, case = make_store(Path(tmp), n)
-            r = measure(path, case, edits, scrubs)
+            r = measure(path, f"{case}-{label}", edits, scrubs, image)
             key = str(n)
             summary["first_frame_ms"][key] = r["first"]["median_ms"]
             summary["full_res_ms"][key] = r["full"]["median_ms"]
