@@ -400,35 +400,38 @@ def run_chunks(
     downloads: list[list] = []
     host_s = 0.0
     t0 = time.perf_counter()
-    for j, c in enumerate(chunks):
-        k = j % slots
-        if j >= slots:
-            uploads[j - slots].wait()  # the staging buffer's last upload has left it
-        t = time.perf_counter()
-        n = c.rows * row_in
-        stage = staging[k][:n].view(fmt.dtype).reshape((c.rows, *brick.shape[1:]))
-        fmt.encode(brick[c.r0 : c.r1], stage)
-        host_s += time.perf_counter() - t
-        # An upload into a device buffer waits for the kernels that last read it.
-        after = kernels[j - slots] if j >= slots else []
-        ev = cl.enqueue_copy(up, dev_in[k], staging[k][:n], is_blocking=False, wait_for=after)
-        uploads.append(ev)
-        _note(log, "upload", j, k, ev, after)
-        # A kernel waits for its upload and for the read-back of the outputs it overwrites.
-        after = [ev] + (downloads[j - slots] if j >= slots else [])
-        evs = launch(comp, dev_in[k], c, dev_out[k], after)
-        kernels.append(evs)
-        _note(log, "kernel", j, k, evs, after)
-        reads = []
-        for o, buf in zip(outputs, dev_out[k], strict=True):
-            dst = o[c.a - crop_start : c.b - crop_start]
-            reads.append(cl.enqueue_copy(down, dst, buf, is_blocking=False, wait_for=evs))
-        downloads.append(reads)
-        _note(log, "download", j, k, reads, evs)
-        for q in {id(x): x for x in (up, comp, down)}.values():
-            q.flush()
-    for q in {id(x): x for x in (up, comp, down)}.values():
-        q.finish()
+    queues = list({id(x): x for x in (up, comp, down)}.values())
+    try:
+        for j, c in enumerate(chunks):
+            k = j % slots
+            if j >= slots:
+                uploads[j - slots].wait()  # the staging buffer's last upload has left it
+            t = time.perf_counter()
+            n = c.rows * row_in
+            stage = staging[k][:n].view(fmt.dtype).reshape((c.rows, *brick.shape[1:]))
+            fmt.encode(brick[c.r0 : c.r1], stage)
+            host_s += time.perf_counter() - t
+            # An upload into a device buffer waits for the kernels that last read it.
+            after = kernels[j - slots] if j >= slots else []
+            ev = cl.enqueue_copy(up, dev_in[k], staging[k][:n], is_blocking=False, wait_for=after)
+            uploads.append(ev)
+            _note(log, "upload", j, k, ev, after)
+            # A kernel waits for its upload and for the read-back of the outputs it overwrites.
+            after = [ev] + (downloads[j - slots] if j >= slots else [])
+            evs = launch(comp, dev_in[k], c, dev_out[k], after)
+            kernels.append(evs)
+            _note(log, "kernel", j, k, evs, after)
+            reads = []
+            for o, buf in zip(outputs, dev_out[k], strict=True):
+                dst = o[c.a - crop_start : c.b - crop_start]
+                reads.append(cl.enqueue_copy(down, dst, buf, is_blocking=False, wait_for=evs))
+            downloads.append(reads)
+            _note(log, "download", j, k, reads, evs)
+            for q in queues:
+                q.flush()
+    finally:  # nothing may still use the reused buffers, even after an error
+        for q in queues:
+            q.finish()
     wall = time.perf_counter() - t0
     stats = TransferStats(
         chunks=len(chunks),
