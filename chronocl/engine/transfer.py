@@ -106,12 +106,13 @@ class DeviceFormat:
     def encode(self, src: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """`src` as the device receives it (into `out`, same shape, when given).
 
-        Large conversions are split over threads (numpy releases the GIL): converting on the
-        host runs at 2-15 ns per value on one core, slower than PCIe moves the bytes saved.
+        Large bricks are split over threads (numpy releases the GIL): converting on the host
+        runs at 2-15 ns per value on one core, slower than PCIe moves the bytes saved, and one
+        core's copy into the staging buffer is slower than a PCIe 4/5 link too.
         """
         if out is None:
             out = np.empty(src.shape, self.dtype)
-        parts = _workers() if self.converts and src.size >= PARALLEL_MIN else 1
+        parts = _workers() if src.size >= PARALLEL_MIN else 1
         if parts > 1 and src.flags.c_contiguous and out.flags.c_contiguous:
             flat_src, flat_out = src.reshape(-1), out.reshape(-1)
             bounds = np.linspace(0, src.size, parts + 1).astype(int)
