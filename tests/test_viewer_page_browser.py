@@ -3,6 +3,8 @@ chosen, the probe plot and marker follow the window, the camera and the data set
 fill the view area (2x2 for four views) at 1400x900 and 1024x640 and follow the device pixel
 ratio, the side panel folds away, the TF curve stays inside its plot when zoomed, labels are
 readable on white, a nearly empty view says why, and a slow frame shows a busy indicator.
+Over the socket: a frame answering input is drawn within the draw budget and redrawn at the
+panel's size once input stops.
 
 Screenshots go to $CHRONOCL_SCREENSHOTS (else the test's temporary folder).
 """
@@ -17,9 +19,10 @@ import pytest
 pytest.importorskip("starlette")
 playwright_api = pytest.importorskip("playwright.sync_api")
 
+from chronocl.viewer import frames  # noqa: E402
 from chronocl.viewer import worker as worker_module  # noqa: E402
 
-from .viewer_helpers import BROWSER_ARGS, CHROMIUM, make_stores, start_server  # noqa: E402
+from .viewer_helpers import BROWSER_ARGS, CHROMIUM, Client, make_stores, start_server  # noqa: E402
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
@@ -75,6 +78,10 @@ class Page:
         seq = 0 if before is None else before["seq"]
         self.page.wait_for_function(SETTLED, arg=[seq], timeout=60_000)
         return self.last()
+
+    def sharp(self) -> None:
+        """Wait until the frame shown is the final one (full level and size)."""
+        self.page.wait_for_function("() => document.body.dataset.refining === 'no'", timeout=60_000)
 
     def close(self) -> None:
         assert self.problems == []
@@ -250,6 +257,7 @@ def test_panels_fill_the_view_area_at_1_2_and_4_views(open_page, tmp_path, width
             assert img["w"] >= q["w"] - 4 and img["h"] >= q["h"] - 4
         w, h = b["size"]
         assert abs(w / h - b["panels"][0]["w"] / b["panels"][0]["h"]) < 0.05
+        p.sharp()
         p.page.screenshot(path=os.path.join(shots, f"viewer-{width}x{height}-{n}views.png"))
 
 
@@ -276,6 +284,7 @@ def test_side_panel_folds_and_render_follows_device_pixels(open_page, tmp_path):
     assert folded["area"]["w"] > b["area"]["w"] + 250
     check_fills(folded, 4)
     assert folded["size"][0] > w  # wider panels, wider renders
+    p.sharp()
     p.page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-1024x640-folded-dpr2.png"))
     p.page.click("#side-toggle")
     p.page.wait_for_timeout(300)
@@ -377,3 +386,35 @@ def test_a_slow_frame_shows_a_busy_indicator(open_page, monkeypatch, tmp_path):
     p.page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-busy.png"))
     p.settle(before)
     assert not busy.is_visible()
+
+
+# -------------------------------------------------------------------- draw budget
+def test_render_size_keeps_the_aspect_within_the_budget():
+    assert frames.render_size((512, 512), 1) == (512, 512)
+    w, h = frames.render_size((1024, 733), 4)
+    assert 4 * w * h <= frames.PIXEL_BUDGET and abs(w / h - 1024 / 733) < 0.01
+    assert frames.render_size((1024, 733), 1, 0.5) == (512, 366)
+    budget = frames.DrawBudget(target_ms=80, floor=100, cap=10_000)
+    assert budget.pixels() == 10_000  # nothing measured yet
+    budget.record(80.0, 4000)  # 0.02 ms a pixel: 4000 pixels in 80 ms
+    assert budget.pixels() == 4000
+    budget.record(1e6, 4000)  # very slow: the floor
+    assert budget.pixels() == 100
+
+
+def test_a_frame_over_the_draw_budget_is_reduced_then_redrawn_in_full(server, monkeypatch):
+    monkeypatch.setattr(worker_module, "DrawBudget", lambda: frames.DrawBudget(target_ms=1.0))
+    client = Client(server)
+    try:
+        # The open's frame (512^2, nothing measured yet: drawn in full) measured the draws.
+        _, (_, fast, _) = client.open(0, size=(1024, 733))
+        full = frames.render_size((1024, 733), 1)
+        w, h = fast["views"][0]["width"], fast["views"][0]["height"]
+        assert fast["reduced"] and fast["refining"]
+        assert w * h <= frames.MIN_PIXELS * 1.01 and abs(w / h - 1024 / 733) < 0.02
+        rid = fast["id"]
+        _, final, _ = client.frame_for(rid)  # after a short idle, the same state in full
+        assert final["seq"] > fast["seq"] and not final["reduced"] and not final["refining"]
+        assert (final["views"][0]["width"], final["views"][0]["height"]) == full
+    finally:
+        client.close()

@@ -1,7 +1,8 @@
 """What a frame is made of besides the draws: the size the panels are drawn at (the page's
-panel size in device pixels, within a pixel budget), JPEG encoding of the panels, the preview
-scale and qualities, the legend of the window's time colours that the page's timeline shows,
-and the note a panel gets when almost nothing in it is visible."""
+panel size in device pixels, within a pixel budget that follows the latency target), JPEG
+encoding of the panels, the preview scale and qualities, the legend of the window's time
+colours that the page's timeline shows, and the note a panel gets when almost nothing in it
+is visible."""
 
 from __future__ import annotations
 
@@ -13,19 +14,48 @@ from chronocl.data.chronovolume import Chronovolume
 
 PREVIEW_SCALE = 0.5
 JPEG_QUALITY = {"preview": 70, "full": 88}
-# Drawing time grows with the pixels drawn (llvmpipe: ~140 ms for a 128^3 volume at 512^2,
-# docs/display.md), so a frame draws at most as many pixels, over all its views, as the
-# largest single panel the page asked for before its panels filled the view area (768^2).
-# Larger panels show the frame scaled up; saved PNGs are drawn at the panel's full size.
+# Drawing time grows with the pixels drawn (llvmpipe: ~80-140 ms for a 128^3 volume at 512^2,
+# docs/display.md). A frame answering input draws as many pixels, over all its views, as
+# `DrawBudget` predicts to take DRAW_TARGET_MS; once input stops the frame is redrawn with up
+# to PIXEL_BUDGET pixels (the largest single panel the page asked for before its panels
+# filled the view area, 768^2). The browser scales a frame up to its panels; saved PNGs are
+# drawn at the panels' full size.
 PIXEL_BUDGET = 768 * 768
+DRAW_TARGET_MS = 80.0  # about a 512^2 draw of 128^3 on llvmpipe, 2 cores
+MIN_PIXELS = 256 * 256  # never fewer, however slow the draws (a floor on sharpness)
 EMPTY_BELOW = 0.01  # a panel with less than this fraction of visible pixels gets a note
 
 
-def render_size(size: tuple[int, int], n_views: int, scale: float = 1.0) -> tuple[int, int]:
+class DrawBudget:
+    """How many pixels a frame may draw to meet `target_ms`, learnt from the frames drawn
+    (milliseconds per pixel, a running estimate). Before the first draw: `cap`."""
+
+    def __init__(
+        self, target_ms: float = DRAW_TARGET_MS, floor: int = MIN_PIXELS, cap: int = PIXEL_BUDGET
+    ) -> None:
+        self.target_ms, self.floor, self.cap = target_ms, floor, cap
+        self.ms_per_pixel: float | None = None
+
+    def record(self, ms: float, pixels: int) -> None:
+        if pixels < 16 * 16 or not ms > 0:
+            return
+        rate = ms / pixels
+        old = self.ms_per_pixel
+        self.ms_per_pixel = rate if old is None else 0.5 * old + 0.5 * rate
+
+    def pixels(self) -> int:
+        if self.ms_per_pixel is None:
+            return self.cap
+        return int(min(self.cap, max(self.floor, self.target_ms / self.ms_per_pixel)))
+
+
+def render_size(
+    size: tuple[int, int], n_views: int, scale: float = 1.0, budget: int = PIXEL_BUDGET
+) -> tuple[int, int]:
     """The size each of `n_views` panels of `size` (w, h) is drawn at: `scale` of it, shrunk
-    (same aspect) so that all views together stay within `PIXEL_BUDGET`, at least 32 px."""
+    (same aspect) so that all views together stay within `budget` pixels, at least 32 px."""
     w, h = size[0] * scale, size[1] * scale
-    fit = min(1.0, (PIXEL_BUDGET / max(1.0, w * h * n_views)) ** 0.5)
+    fit = min(1.0, (budget / max(1.0, w * h * n_views)) ** 0.5)
     return max(32, int(w * fit)), max(32, int(h * fit))
 
 

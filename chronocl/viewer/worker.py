@@ -33,7 +33,9 @@ from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import error_text
 from chronocl.viewer.frames import (
     JPEG_QUALITY,
+    PIXEL_BUDGET,
     PREVIEW_SCALE,
+    DrawBudget,
     empty_note,
     encode,
     legend,
@@ -82,6 +84,7 @@ class ClientWorker:
         # one window manager per level and pooling.
         self._managers: dict[tuple[int, str], WindowManager] = {}
         self._refine_at: float | None = None  # when the coarse frame shown is to be refined
+        self._draw_budget = DrawBudget()  # pixels a frame answering input may draw
         self._last_rid: int | None = None
         self._shown: ViewState | None = None  # the state of the last frame sent
         # The last probed voxel (view, x/y/z fractions of the box): each frame says where it is.
@@ -276,7 +279,8 @@ class ClientWorker:
         self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
 
     def _refine(self) -> None:
-        """The coarse frame shown, at full resolution; given up as soon as new input comes."""
+        """The coarse or reduced frame shown, at full resolution and size; given up as soon as
+        new input comes."""
         self._refine_at = None
         state = self._shown
         if state is None:
@@ -291,11 +295,21 @@ class ClientWorker:
                 return
             integrate_ms += self._refine_slot(slot)
         cvs = [slot.cv for slot in self._slots[: len(state.views)]]
-        self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start)
+        self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
 
-    def _send_frame(self, state, rid, cvs, integrate_ms, incremental, t_start) -> None:
+    def _send_frame(
+        self, state, rid, cvs, integrate_ms, incremental, t_start, final: bool = False
+    ) -> None:
+        """Draw, encode and send the frame. A frame answering input draws what the draw budget
+        allows in DRAW_TARGET_MS; if that is less than the panels' size (within PIXEL_BUDGET),
+        the frame is redrawn in full once input stops (`final`), as coarse levels are."""
         preview = state.quality == "preview"
-        w, h = render_size(state.size, len(cvs), PREVIEW_SCALE if preview else 1.0)
+        scale = PREVIEW_SCALE if preview else 1.0
+        full_w, full_h = render_size(state.size, len(cvs), scale, PIXEL_BUDGET)
+        w, h = full_w, full_h
+        if not final:
+            w, h = render_size(state.size, len(cvs), scale, self._draw_budget.pixels())
+        reduced = not preview and w * h < 0.9 * full_w * full_h
         bg = parse_color(state.background)
         t0 = time.perf_counter()
         panels, t_up, t_draw, t_done = on_gl(self._draw, cvs, state, (w, h), bg)
@@ -304,12 +318,13 @@ class ClientWorker:
         self._frame += 1
         self._shown, self._last_rid = state, rid
         sessions = [slot.session for slot in self._slots[: len(cvs)] if slot.session is not None]
+        self._draw_budget.record(1e3 * (t_done - t_draw), w * h * len(cvs))
         display_ms = 1e3 * (t_done - t_up) / max(1, len(cvs))
         for session in sessions:
             session.record_display(display_ms)
         level = max((session.shown_level for session in sessions), default=0)
         levels = max((session.stats.get("levels", 1) for session in sessions), default=1)
-        refining = level > 0
+        refining = level > 0 or reduced
         self._refine_at = time.monotonic() + REFINE_AFTER_S if refining else None
         header = {
             "type": "frame",
@@ -333,6 +348,7 @@ class ClientWorker:
             "levels": levels,  # from the sessions: no store metadata read per frame
             "level_shape": list(cvs[0].shape),
             "refining": refining,
+            "reduced": reduced,  # drawn smaller than the panels for the latency target
             "timings": {
                 "integrate_ms": round(integrate_ms, 2),
                 "incremental": incremental,

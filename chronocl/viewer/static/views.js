@@ -228,7 +228,7 @@ function showTimings(h) {
     `upload ${t.upload_ms.toFixed(1)} ms`,
     `render ${t.render_ms.toFixed(1)} ms`,
     `encode ${t.encode_ms.toFixed(1)} ms`,
-    `${h.views.length}× ${v.width}×${v.height} ${h.format} ${kb.toFixed(0)} KB (${h.quality})`,
+    `${h.views.length}× ${v.width}×${v.height}${h.reduced ? ' (reduced for speed, sharpening…)' : ''} ${h.format} ${kb.toFixed(0)} KB (${h.quality})`,
   ];
   if (rt !== null) parts.push(`round trip ${rt.toFixed(0)} ms`);
   setStatus(parts.join(' · '));
