@@ -304,10 +304,6 @@ def stores(tmp_path_factory):
             ["integrate", "f.zarr", "o.zarr", "--engine", "numpy", "--device-format", "uint8"],
             "applies to the opencl engine",
         ),
-        (
-            ["integrate", "f.zarr", "o.zarr", "--memory", "1KB", "--device-format", "uint8"],
-            "applies to windows integrated in memory",
-        ),
         (["render", "b.zarr", "-o", "o.png", "--device-format", "float16"], "use auto"),
         (["render", "f.zarr", "-o", "o.png", "--device-format", "half"], "choose one of auto"),
     ],
@@ -383,3 +379,20 @@ def test_conversions_split_over_threads_equal_one_pass(name):
     np.testing.assert_array_equal(split, fmt._encode(v, np.empty(v.shape, fmt.dtype)))
     if name == "float16":
         assert np.isfinite(split).all()  # saturated, not inf
+
+
+@pytest.mark.parametrize("mode", ["max", "additive"])
+def test_streamed_runs_send_the_same_device_format(stores, tmp_path, mode):
+    """Slab by slab into a store (and a resume key of its own): the in-memory result."""
+    from chronocl.integration.streaming import integrate_to_store
+
+    series = chronocl.open_series(stores / "f.zarr")
+    out = tmp_path / "s.zarr"
+    integrate_to_store(series, None, out, mode=mode, slab=1, device_format="uint16")
+    got = chronocl.Chronovolume.load(out)
+    api = chronocl.integrate(series, mode=mode, device_format="uint16")
+    np.testing.assert_allclose(got.rgba, api.rgba, atol=1e-6, rtol=0)
+    if api.t_index is not None:
+        np.testing.assert_array_equal(got.t_index, api.t_index)
+    with pytest.raises(InvalidParameterError, match="applies to the opencl engine"):
+        integrate_to_store(series, None, tmp_path / "n.zarr", engine="numpy", device_format="uint8")

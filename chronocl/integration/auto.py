@@ -121,6 +121,7 @@ class Run:
             device=self.device,
             overwrite=overwrite,
             progress=progress,
+            device_format=self.device_format,
         )
         if self.where == STREAMED:
             integrate_to_store(job.series, job.selection, self.out_path, **args)
@@ -162,7 +163,7 @@ def plan_run(
     slabs on dask. Nothing is read or written yet. A window that does not fit the budget needs
     a .zarr output (streamed) or a cluster; any other output raises InvalidParameterError.
     `level` integrates a coarse level of the series (docs/levels.md). `device_format` is what
-    bricks travel to the device in (`chronocl.engine.transfer`; in-memory runs only for now).
+    bricks travel to the device in (`chronocl.engine.transfer`).
     """
     budget = check_run_options(out_path, memory, engine, scheduler, workers)
     job = at_level(prepare(series, window, mode, spec, spec_args), level)
@@ -179,11 +180,6 @@ def plan_run(
             "write a .zarr OUT (streamed slab by slab) and convert it, or give a larger --memory"
         )
     check_device_format(device_format, engine, job.series.dtype, job.value_range)
-    if device_format != "auto" and where != IN_MEMORY:
-        raise InvalidParameterError(
-            f"--device-format {device_format} applies to windows integrated in memory; this one "
-            "is streamed slab by slab (use --device-format auto or a larger --memory)"
-        )
     return Run(
         job,
         Path(out_path),

@@ -38,6 +38,7 @@ from chronocl.data.series import TimeSeries
 from chronocl.data.timeseries import STEPS_PER_READ
 from chronocl.data.writer import compressors
 from chronocl.engine import get_engine
+from chronocl.engine.transfer import check_device_format, with_device_format
 from chronocl.integration import distributed
 from chronocl.integration.distributed import DaskExecutor
 from chronocl.integration.inmemory import Job, Out, integrate_brick, prepare
@@ -105,6 +106,7 @@ class SlabTask:
     engine: str = "opencl"
     device: str | None = None
     steps_per_read: int = STEPS_PER_READ
+    device_format: str = "auto"  # what bricks travel to the device in (engine.transfer)
 
     @cached_property
     def group(self) -> zarr.Group:
@@ -113,7 +115,9 @@ class SlabTask:
     def integrate(self, slab: Slab, brick: np.ndarray, out: Out | None = None):
         """The slab's partial and whether it is final (into `out` if given)."""
         eng = get_engine(self.engine, self.device)
-        return integrate_brick(self.job, eng, slab, brick, out)
+        job = self.job
+        eng = with_device_format(eng, self.device_format, job.series.dtype, job.value_range)
+        return integrate_brick(job, eng, slab, brick, out)
 
     def write(self, slab: Slab, partial: Partial, final: bool, started: float) -> dict:
         """Write the slab and its marker; {"slab", "seconds", "bytes" read[, "maxima"]}."""
@@ -141,6 +145,7 @@ class SlabTask:
             self.engine,
             self.device,
             self.steps_per_read,
+            self.device_format,
         )
 
 
@@ -155,12 +160,20 @@ class RemoteSlabTask:
     engine: str
     device: str | None
     steps_per_read: int
+    device_format: str = "auto"
 
     def __call__(self, bounds: Bounds) -> dict:
         series = distributed.open_on_worker(self.job["store"], self.job["shape"])
         job = job_from_dict(self.job, series)
         distributed.engine_on_worker(self.engine, self.device)
-        task = SlabTask(job, Path(self.store), self.digest, self.engine, self.device)
+        task = SlabTask(
+            job,
+            Path(self.store),
+            self.digest,
+            self.engine,
+            self.device,
+            device_format=self.device_format,
+        )
         slab = Slab(*bounds)
         width = job.selection.width
         # The brick buffer stays with the worker's thread from task to task (no fresh pages).
@@ -206,6 +219,7 @@ def integrate_to_store(
     progress: bool = False,
     client: object = None,
     compressor: str = "blosc-lz4",
+    device_format: str = "auto",
     **spec_args: object,
 ) -> Path:
     """Integrate the window of `series` slab by slab into the chronovolume store `out_path`.
@@ -217,7 +231,8 @@ def integrate_to_store(
     `chronocl.integration.distributed`). `compressor` compresses the output chunks:
     blosc-lz4 (default; as small as zstd here and about twice as fast to write), zstd (as
     `Chronovolume.save`)
-    or none. A run interrupted or failed (other than on bad input) leaves its finished slabs
+    or none. `device_format` is what bricks travel to the device in (`chronocl.integrate`).
+    A run interrupted or failed (other than on bad input) leaves its finished slabs
     behind; running it again with the same parameters resumes. Returns the path written;
     `Chronovolume.load` reads it.
     """
@@ -233,6 +248,7 @@ def integrate_to_store(
         raise InvalidParameterError(f"unknown engine {engine!r}; choose opencl or numpy")
     mode = str(spec_args.pop("mode", modes.DEFAULT))
     job = prepare(series, window, mode, spec, spec_args)
+    check_device_format(device_format, engine, job.series.dtype, job.value_range)
     budget = parse_memory(memory)
     if client is None:
         executor: LocalExecutor | DaskExecutor = LocalExecutor(get_engine(engine, device), progress)
@@ -241,12 +257,14 @@ def integrate_to_store(
     rows = executor.max_rows(job)
     plan = plan_slabs(job, budget, engine, rows, slab, read_ahead=executor.read_ahead)
     compressors(compressor)  # an unknown name fails before any work
-    digest = run_hash(job, engine, plan.chunk_rows, compressor)
+    # A device format other than auto changes the bytes, so it is part of the run's identity.
+    label = engine if device_format == "auto" else f"{engine}:{device_format}"
+    digest = run_hash(job, label, plan.chunk_rows, compressor)
     tmp = partial_path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     lock = open_run(tmp, job, plan, digest, compressor)
     try:
-        task = SlabTask(job, tmp, digest, engine, device, plan.steps_per_read)
+        task = SlabTask(job, tmp, digest, engine, device, plan.steps_per_read, device_format)
         run(task, plan, executor)
         commit(tmp, target, job, engine, overwrite)
     except BaseException as exc:
