@@ -227,7 +227,7 @@ class TransferStats:
     @property
     def overlap(self) -> float | None:
         """wall / max(kernel, transfer): 1.0 when the copies hide entirely behind the kernels
-        (or the reverse), up to 2.0 when nothing overlaps."""
+        (or the reverse), 2.0 when nothing overlaps, more when the device waited for the host."""
         t, k, w = self.transfer_s, self.kernel_s, self.wall_s
         if t is None or k is None or w is None or max(k, t) <= 0:
             return None
