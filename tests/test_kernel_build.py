@@ -4,8 +4,9 @@ engine uses, on a cold cache, and a CLI run prints nothing of the compiler's.
 The options are those of OpenCLEngine.accumulate / _elementwise and bench/integrate.py.
 Options a file never mentions cannot change its preprocessed source, so they are held
 fixed; of the rest, a set of combinations holding every pair of values (all-pairs) is
-built. CHRONOCL_KERNEL_MATRIX=full builds every combination instead (about 3,600 builds,
-a quarter of an hour on PoCL).
+built, in the test process with pyopencl's CompilerWarning an error.
+CHRONOCL_KERNEL_MATRIX=full builds every combination instead, in a fresh process (several
+thousand builds, most of an hour on PoCL).
 """
 
 from __future__ import annotations
@@ -33,11 +34,13 @@ INTEGRATION_KEYS = {
     "DATA_T",
     "DATA_V",
     "VEC",
-    "RAW_ORDER",
+    "KEY_RAW",
+    "IDX_T",
     "CHANGE_BYTES",
     "QUANT",
     "LUT_N",
     "CONST_COLOR",
+    "COLOR_SEGS",
     "ENHANCE",
     "EARLY_EXIT",
     "SKIP_EMPTY",
@@ -68,33 +71,39 @@ def integration_combinations(name: str):
     """Every define combination OpenCLEngine.accumulate can pass for mode `name`."""
     mode = modes.get(name)
     byte_path = byte_lane_define(mode)
-    data = []  # (DATA_T, QUANT, byte lanes): quantised and byte-lane paths are uint8 only
-    for t in DEVICE_TYPES.values():
+    data = []  # (DATA_T, QUANT, raw lanes): quantised paths are uint8 only; max/min compare
+    for t in DEVICE_TYPES.values():  # raw values in the lanes of every integer type
         data.append((t, False, False))
         if t == "uchar":
             data.append((t, False, True) if byte_path else (t, True, False))
+        elif t != "float" and byte_path == "KEY_RAW":
+            data.append((t, False, True))
     lanes = ((0, 16), (0, 1), (1, 1), (2, 1))  # (ENHANCE, VEC): enhancement is VEC=1 only
     norm = BOOLS if name == "additive" else (False,)
     partial = BOOLS if mode.slides == "invert" else (False,)
     time_order = (0, 1, 2) if name == "change" else (False,)
-    for (t, quant, raw), (
-        enh,
-        vec,
-    ), const, early, skip, aligned, norm_time, raw_partial, order, lut_n in itertools.product(
-        data, lanes, BOOLS, BOOLS, BOOLS, BOOLS, norm, partial, time_order, (256, 65536)
+    colour = ((True, 0), (False, 0), (False, 1), (False, 3), (False, 8))  # (CONST, SEGS)
+    for combo in itertools.product(
+        data, lanes, colour, BOOLS, BOOLS, BOOLS, norm, partial, time_order, (256, 65536)
     ):
+        (t, quant, raw), (enh, vec), (const, segs), early, skip, aligned = combo[:6]
+        norm_time, raw_partial, order, lut_n = combo[6:]
         if quant and (lut_n != 256 or mode.lut_by_value):  # one LUT entry per byte value
             continue
         yield {
             "DATA_T": t,
             "DATA_V": t + (str(vec) if vec > 1 else ""),
             "VEC": vec,
-            "RAW_ORDER": False,
+            "KEY_RAW": False,
             "CHANGE_BYTES": False,
             **({byte_path: raw} if byte_path else {}),
+            "IDX_T": ("uchar" if t == "uchar" else "ushort")
+            if raw and byte_path == "KEY_RAW"
+            else False,
             "QUANT": quant,
             "LUT_N": lut_n,
             "CONST_COLOR": const,
+            "COLOR_SEGS": segs,
             "ENHANCE": enh,
             "EARLY_EXIT": early,
             "SKIP_EMPTY": skip,
@@ -226,7 +235,12 @@ def test_the_builds_cover_the_engines_options(monkeypatch):
 
 
 def test_every_kernel_builds_without_warnings_on_a_cold_cache(tmp_path):
+    """In a fresh process with empty caches. The all-pairs builds run in this process below
+    (test_every_kernel_variant_builds_without_a_compiler_warning); here only the full matrix,
+    on request, to keep the suite short."""
     full = os.environ.get("CHRONOCL_KERNEL_MATRIX") == "full"
+    if not full:
+        pytest.skip("CHRONOCL_KERNEL_MATRIX=full builds every combination in a fresh process")
     todo = builds(full)
     assert len({f for f, _, _ in todo}) == len(os.listdir(program.kernel_dir())) - 1  # common.h
     result = subprocess.run(
@@ -242,6 +256,34 @@ def test_every_kernel_builds_without_warnings_on_a_cold_cache(tmp_path):
     said = json.loads(result.stdout)["said"]
     assert not said, f"{len(said)} of {len(todo)} builds warned; the first: {said[0]}"
     assert result.stderr == ""  # clang writes "N warnings generated." straight to fd 2
+
+
+@pytest.mark.filterwarnings("error::pyopencl.CompilerWarning")
+def test_every_kernel_variant_builds_without_a_compiler_warning(monkeypatch, capfd):
+    """The same builds in this process, with pyopencl's CompilerWarning an error. Cold: the
+    builds bypass chronocl's program cache (program.build, which also keeps the compiler's
+    warnings back), pyopencl's binary cache is off and a fresh comment makes each source new
+    to PoCL's own cache, so every variant really compiles."""
+    import uuid
+
+    import pyopencl as cl
+
+    from chronocl.engine.device import get_context
+
+    monkeypatch.setattr(cl, "_PYOPENCL_NO_CACHE", True)
+    dc = get_context()
+    nonce = f"/* cold build {uuid.uuid4()} */\n"
+    todo = builds(full=False)
+    assert len({f for f, _, _ in todo}) == len(os.listdir(program.kernel_dir())) - 1  # common.h
+    for file, options, common in todo:
+        prg = cl.Program(dc.context, nonce + program.source(file, common)).build(options=options)
+        log = "\n".join(
+            (prg.get_build_info(d, cl.program_build_info.LOG) or "").strip() for d in prg.devices
+        )
+        noise = [line for line in log.splitlines() if line.strip()]
+        noise = [line for line in noise if not re.fullmatch(DRIVER_NOISE, line.strip())]
+        assert not noise, (file, options, log)
+    assert "warning" not in capfd.readouterr().err  # clang's "N warnings generated."
 
 
 def test_a_cli_run_on_a_cold_cache_prints_only_its_own_line(tmp_path):

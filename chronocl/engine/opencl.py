@@ -3,7 +3,8 @@
 Transfer-function work is done once on the host: one data LUT shared by all
 steps and a (colour, alpha) factor per step, so a kernel does one interpolated
 lookup per voxel-step (quantised uint8 data index their LUT directly); when the
-data colour is constant (the default: colour by time) only opacity is looked up,
+data colour is constant (the default: colour by time) only opacity is looked up, when it
+is a few straight pieces (`colour_segments`) they are evaluated instead of looked up,
 and steps whose 16 voxels all map to zero opacity are skipped (exactly). Bricks are in xytz order
 (rows, W, Y, X). On CPU devices buffers wrap the host arrays
 (CL_MEM_USE_HOST_PTR) instead of copying; on GPUs (or with host_ptr=False) bricks are copied in
@@ -127,8 +128,9 @@ class OpenCLEngine:
         """The device tables of one integration.
 
         Returns (data LUT planar (4, N) float32, per-step tc (W, 4) = (rgb_t, a_t), whether
-        the data colour is constant (then folded into tc), and the skip cut: LUT positions
-        below it (for quantised data: raw values below it) have data opacity exactly 0).
+        the data colour is constant (then folded into tc), the skip cut: LUT positions
+        below it (for quantised data: raw values below it) have data opacity exactly 0), and
+        the data colour as a few straight pieces (`colour_segments`) or None.
         """
         if quant:  # TF(u(v)) for every byte value, with the kernels' float32 arithmetic
             u = values.normalize(np.arange(256, dtype=np.uint8), *value_range)
@@ -137,6 +139,7 @@ class OpenCLEngine:
             lut = spec.data_tf.lut.astype(np.float64)
         rgb_t, a_t = spec.time_tf.evaluate(positions)
         const_color = bool(np.all(lut[:, :3] == lut[:1, :3]))
+        segments = None if const_color else colour_segments(lut[:, :3].astype(np.float32))
         colour = rgb_t * lut[0, :3] if const_color else rgb_t
         tc = np.concatenate([colour, a_t[:, None]], axis=1).astype(np.float32)
         nonzero = np.flatnonzero(lut[:, 3] > 0)
@@ -145,7 +148,8 @@ class OpenCLEngine:
             cut = float(min(first, 255))
         else:  # LUT positions x < first - 1 only mix entries that are 0
             cut = raw_cut(float(first - 1), value_range, len(lut))
-        return np.ascontiguousarray(lut.T, dtype=np.float32), tc, const_color, cut
+        planar = np.ascontiguousarray(lut.T, dtype=np.float32)
+        return planar, tc, const_color, cut, segments
 
     def accumulate(
         self,
@@ -181,7 +185,7 @@ class OpenCLEngine:
         nz_out = z1 - z0
         mode = spec.integration
         quant = self.quantized and dt == np.uint8 and not mode.lut_by_value
-        lut, tc, const_color, cut = self.luts(spec, positions, quant, value_range)
+        lut, tc, const_color, cut, segments = self.luts(spec, positions, quant, value_range)
         vmin, scale = values.normalization(*value_range)
         file, kernel_name = f"{mode.kernel}.cl", mode.kernel_function
         final = not raw and not mode.finalize_is_global(spec)
@@ -193,6 +197,7 @@ class OpenCLEngine:
             "QUANT": quant,
             "LUT_N": lut.shape[1],
             "CONST_COLOR": const_color,
+            "COLOR_SEGS": 0 if segments is None else len(segments[0]),
             "ENHANCE": ENHANCE_CODES[spec.enhance.kind],
             "EARLY_EXIT": self.early_exit,
             "SKIP_EMPTY": self.skip_empty,
@@ -230,7 +235,7 @@ class OpenCLEngine:
 
         args = [
             None,  # the brick (or a chunk of it), per launch
-            table(lut),
+            table(lut if segments is None else np.concatenate([lut.ravel(), segments.ravel()])),
             table(tc),
             table(np.asarray(order, np.int32)),
             table(np.asarray(steps, np.int32)),
@@ -408,6 +413,36 @@ class OpenCLEngine:
         else:
             lx, ly, lz = min(64, _round_up(count, 32)), 1, 1
         return (_round_up(count, lx), _round_up(ny, ly), _round_up(nz, lz)), (lx, ly, lz)
+
+
+MAX_SEGMENTS = 8  # straight pieces of the data colour evaluated without lookups
+SEGMENT_TOLERANCE = 2e-7  # how far a LUT entry may lie from its piece (float32 rounding)
+
+
+def colour_segments(rgb: np.ndarray) -> np.ndarray | None:
+    """The data colour of LUT `rgb` (N, 3) as at most MAX_SEGMENTS straight pieces, or None.
+
+    Returns (7, S) float32: each piece's first LUT position x0, then its colour there (3) and
+    its slope per position (3); a piece runs to the next one's x0. Every entry lies within
+    SEGMENT_TOLERANCE of its piece, so the kernels' c0 + slope * (x - x0) equals the LUT's
+    interpolation to float32 rounding (docs/engine.md). A piece breaks where the second
+    difference of some channel is not zero.
+    """
+    n = len(rgb)
+    v64 = rgb.astype(np.float64)
+    bend = np.abs(v64[:-2] - 2 * v64[1:-1] + v64[2:]).max(axis=1) > SEGMENT_TOLERANCE
+    starts = np.concatenate([[0], np.flatnonzero(bend) + 1])
+    if len(starts) > MAX_SEGMENTS:
+        return None
+    ends = np.concatenate([starts[1:], [n - 1]])
+    table = np.zeros((7, len(starts)), dtype=np.float64)
+    for j, (a, b) in enumerate(zip(starts, ends, strict=True)):
+        slope = (v64[b] - v64[a]) / (b - a)
+        line = v64[a] + slope * np.arange(b - a + 1)[:, None]
+        if np.abs(line - v64[a : b + 1]).max() > SEGMENT_TOLERANCE:
+            return None
+        table[0, j], table[1:4, j], table[4:7, j] = a, v64[a], slope
+    return table.astype(np.float32)
 
 
 def t_size(rgba_shape: tuple) -> int:

@@ -7,6 +7,8 @@ strictly more extreme.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from chronocl.core import values as _values
@@ -25,6 +27,29 @@ def winners(best: np.ndarray, best_k: np.ndarray, steps, step_rgba) -> Partial:
         rgba[sel, 3] = a[sel]
         t_index[sel] = steps[k]
     return Partial(rgba, t_index, best)
+
+
+@functools.lru_cache(maxsize=64)
+def _integer_zones(dtype: str, value_range: tuple[float, float]) -> tuple[float, float] | None:
+    info = np.iinfo(dtype)
+    v = np.arange(info.min, info.max + 1)
+    u = _values.normalize(v, *value_range)
+    zero, one = u <= 0, u >= 1
+    zlo = float(v[zero].max()) if zero.any() else float(info.min) - 1
+    zhi = float(v[one].min()) if one.any() else float(info.max) + 1
+    middle = u[(v > zlo) & (v < zhi)]
+    return (zlo, zhi) if bool(np.all(np.diff(middle) > 0)) else None
+
+
+def raw_key_zones(dtype, value_range, n_steps: int) -> tuple[float, float] | None:
+    """(zlo, zhi) when max/min may compare the raw values of integer data: u = 0 at or below
+    zlo, u = 1 at or above zhi and u strictly increasing on the values between (so raw order is
+    u's order there, ties included), and the steps fit the data's lanes (uchar: 256, 16-bit:
+    65536). None otherwise: float data, or a range whose rounding merges integer values."""
+    dtype = np.dtype(dtype)
+    if dtype not in (np.uint8, np.uint16, np.int16) or n_steps > 2 ** (8 * dtype.itemsize):
+        return None
+    return _integer_zones(dtype.name, (float(value_range[0]), float(value_range[1])))
 
 
 class Extreme(Mode):
@@ -53,13 +78,14 @@ class Extreme(Mode):
         return _values.normalize(values.raw[-1], *values.value_range)
 
     def kernel_options(self, spec, positions, raw, given):
-        # Raw values may be compared where u(v) is strictly increasing on the bytes; the
-        # winning step is then tracked in byte lanes.
-        u = _values.normalize(np.arange(256), *given.value_range)
-        raw_order = (
-            given.dtype == np.uint8 and given.n_steps <= 256 and bool(np.all(np.diff(u) > 0))
-        )
-        return {"IS_MIN": self.is_min, "RAW_ORDER": raw_order}, []
+        # The kernel compares raw values where u orders them as it does (see raw_key_zones),
+        # else t = (v - vmin) * scale unclamped; the zones beyond zlo and zhi tie in u.
+        zones = raw_key_zones(given.dtype, given.value_range, given.n_steps)
+        defines = {"IS_MIN": self.is_min, "KEY_RAW": zones is not None}
+        if zones is not None:
+            defines["IDX_T"] = "uchar" if given.dtype == np.uint8 else "ushort"
+        zlo, zhi = zones if zones is not None else (0.0, 1.0)
+        return defines, [np.float32(zlo), np.float32(zhi)]
 
     def combine_kernel(self, spec):
         return "extreme", "combine_extreme", {"IS_MIN": self.is_min}

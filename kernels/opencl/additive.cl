@@ -12,12 +12,12 @@ __kernel void integrate_additive(KERNEL_ARGS, const float4 norm, __global float4
         cr += ak * r;
         cg += ak * g;
         cb += ak * b;
-        ca = fmax(ca, ak);
+        ca = VMAX(ca, ak);
     }
 #ifdef NORM_TIME
-    cr = norm.x > 0.0f ? fmin(cr / norm.x, ca) : (floatv)(0.0f);
-    cg = norm.y > 0.0f ? fmin(cg / norm.y, ca) : (floatv)(0.0f);
-    cb = norm.z > 0.0f ? fmin(cb / norm.z, ca) : (floatv)(0.0f);
+    cr = norm.x > 0.0f ? VMIN(cr / norm.x, ca) : (floatv)(0.0f);
+    cg = norm.y > 0.0f ? VMIN(cg / norm.y, ca) : (floatv)(0.0f);
+    cb = norm.z > 0.0f ? VMIN(cb / norm.z, ca) : (floatv)(0.0f);
 #endif
     STORE_RGBA(o, cr, cg, cb, ca);
 }

@@ -7,7 +7,7 @@
  * (through `order`). CHANGE_BYTES: uchar data whose clipped values are whole numbers,
  * compared in byte lanes.
  * Sliding windows combine pairs of steps with extreme.cl's combine_extreme. */
-#define CLIPPED(v) clamp(TO_FLOAT(v), lo, hi)
+#define CLIPPED(v) VCLAMP(TO_FLOAT(v), lo, hi)
 
 /* forward order: a strictly larger change takes the lead; backward: an equal one too, so the
  * latest of equal changes (first in its order) wins. */
@@ -29,16 +29,16 @@ __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
 #if defined(CHANGE_BYTES) && VEC == 16
     /* Walk the steps in time; clipped values, differences and the winning step stay in byte
      * lanes (the host checked that lo and hi clip bytes to whole numbers). */
-    const uchar16 lo8 = (uchar16)((uchar)clamp(lo, 0.0f, 255.0f));
-    const uchar16 hi8 = (uchar16)((uchar)clamp(hi, 0.0f, 255.0f));
-#define CLIPPED8(v) clamp((v), lo8, hi8)
+    const uchar16 lo8 = (uchar16)((uchar)VCLAMP(lo, 0.0f, 255.0f));
+    const uchar16 hi8 = (uchar16)((uchar)VCLAMP(hi, 0.0f, 255.0f));
+#define CLIPPED8(v) VCLAMP((v), lo8, hi8)
     DATA_V prev = CLIPPED8(RAW(1));
     const uchar16 first = CLIPPED8(RAW(0));
-    uchar16 best_d = max(prev, first) - min(prev, first);
+    uchar16 best_d = VMAX(prev, first) - VMIN(prev, first);
     uchar16 best_k8 = (uchar16)(1);
     for (int k = 2; k < w; ++k) {
         const DATA_V v = CLIPPED8(RAW(k));
-        const uchar16 d = max(v, prev) - min(v, prev);
+        const uchar16 d = VMAX(v, prev) - VMIN(v, prev);
         prev = v;
         const char16 take = d TAKES best_d;
         best_d = SELECT(best_d, d, take);
@@ -48,11 +48,11 @@ __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
     const intv kk = convert_int16(best_k8);
 #elif TIME_ORDER
     floatv prev = CLIPPED(RAW(1));
-    floatv best = fabs(prev - CLIPPED(RAW(0)));
+    floatv best = VABS(prev - CLIPPED(RAW(0)));
     intv kk = (intv)(1);
     for (int k = 2; k < w; ++k) {
         const floatv c = CLIPPED(RAW(k));
-        const floatv d = fabs(c - prev);
+        const floatv d = VABS(c - prev);
         prev = c;
         const intv take = d TAKES best;
         best = SELECT(best, d, take);
@@ -64,13 +64,13 @@ __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
         if (k == 0) continue;
-        const floatv d = fabs(CLIPPED(RAW(k)) - CLIPPED(RAW(k - 1)));
+        const floatv d = VABS(CLIPPED(RAW(k)) - CLIPPED(RAW(k - 1)));
         const intv take = (kk < 0) | (d > best);
         best = SELECT(best, d, take);
         kk = SELECT(kk, (intv)(k), take);
     }
 #endif
-    const floatv delta = fmin(best * scale, 1.0f);
+    const floatv delta = VMIN(best * scale, 1.0f);
     WINNER_RGBA(delta, kk, r, g, b, ak)
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
     STORE_INT(GATHER_INT(steps, kk), t_index + o);

@@ -9,9 +9,10 @@
  *               (x width a multiple of 16, buffers 64-byte aligned): use vector pointers,
  *               which PoCL compiles to vector moves where vload16 becomes element loads
  *   QUANT       uchar data index the data LUT directly (lut holds TF(u(v)) for v = 0..255)
- *   RAW_ORDER   max/min compare raw values: u(v) is strictly increasing on the data type
+ *   KEY_RAW     max/min compare raw values (extreme.cl), the winning step in IDX_T lanes
  *   LUT_N       entries per channel of the data LUT
  *   CONST_COLOR the data colour is the same everywhere: skip the colour lookups
+ *   COLOR_SEGS  the data colour is this many (1..8) straight pieces: evaluate them, no lookups
  *   ENHANCE     0 none, 1 edge, 2 silhouette (VEC must be 1)
  *   EARLY_EXIT  alpha: stop once every lane's transmittance is below 1e-6
  *   SKIP_EMPTY  skip steps whose lanes all map to zero data opacity (exact: they add nothing)
@@ -58,6 +59,7 @@ typedef int16 intv;
 #endif
 #define TO_FLOAT(v) convert_float16(v)
 #define TO_INT(v) convert_int16(v)
+#define VABS(v) as_float16(as_int16(v) & 0x7FFFFFFF)
 /* Whether any / all lanes of a comparison mask (lanes 0 or -1) are set, by OR / AND over 64-bit
  * words: PoCL's any() / all() builtins cost as much as the rest of a skipped step. */
 inline int __attribute__((overloadable)) any_lane(int16 m)
@@ -109,6 +111,7 @@ typedef int intv;
 #define VLOAD(p) (*(p))
 #define TO_FLOAT(v) convert_float(v)
 #define TO_INT(v) convert_int(v)
+#define VABS(v) as_float(as_int(v) & 0x7FFFFFFF)
 #define ANY(c) (c)
 #define ALL(c) (c)
 #define STORE_INT(v, p) (*(p) = (v))
@@ -137,25 +140,35 @@ typedef int intv;
  * a blend where its select() builtin is several times slower. */
 #define SELECT(a, b, c) ((c) ? (b) : (a))
 
+/* Lane-wise minimum, maximum, clamp and |x| by comparisons and blends. PoCL 3.0 calls its
+ * 16-lane min, max, clamp, fmin, fmax and fabs out of line, through memory: a dense step spent
+ * most of its time in those calls. Spelled with the variable operand first, x > c ? x : c, so
+ * LLVM emits one maxps / minps per 8 lanes. On finite values they give the builtins' results
+ * (a zero's sign aside, which no result can show: it only meets the LUT as position 0). */
+#define VMIN(a, b) ((a) < (b) ? (a) : (b))
+#define VMAX(a, b) ((a) > (b) ? (a) : (b))
+#define VCLAMP(x, lo, hi) VMIN(VMAX((x), (lo)), (hi))
+
 #if ENHANCE && VEC != 1
 #error "gradient enhancement is computed one voxel per work-item (VEC=1)"
 #endif
 
 /* u = clip((v - vmin) * scale, 0, 1), in float32 exactly as the reference. */
-#define NORMALIZE(v) clamp((TO_FLOAT(v) - vmin) * scale, 0.0f, 1.0f)
+#define NORMALIZE(v) VCLAMP((TO_FLOAT(v) - vmin) * scale, 0.0f, 1.0f)
 
 /* Data TF of a step's values: position in the LUT, then interpolated channels. */
 typedef struct {
     intv i0;   /* left LUT entry (QUANT: the raw value) */
     floatv f;  /* weight of the right entry (QUANT: unused) */
+    floatv x;  /* the position itself, u * (LUT_N - 1) (QUANT: unused) */
 } LutPos;
 
 inline LutPos lut_pos_of(const floatv u)
 {
     LutPos p;
-    const floatv x = u * (float)(LUT_N - 1);
-    p.i0 = min(TO_INT(x), LUT_N - 2);
-    p.f = x - TO_FLOAT(p.i0);
+    p.x = u * (float)(LUT_N - 1);
+    p.i0 = VMIN(TO_INT(p.x), LUT_N - 2);
+    p.f = p.x - TO_FLOAT(p.i0);
     return p;
 }
 
@@ -179,7 +192,8 @@ inline LutPos lut_pos_of(const floatv u)
 #ifdef QUANT
 #define LOCATE(raw, p)          \
     (p).i0 = TO_INT(raw);       \
-    (p).f = (floatv)(0.0f);
+    (p).f = (floatv)(0.0f);     \
+    (p).x = TO_FLOAT(raw);
 #else
 #define LOCATE(raw, p) (p) = lut_pos_of(NORMALIZE(raw));
 #endif
@@ -190,6 +204,36 @@ inline LutPos lut_pos_of(const floatv u)
     r = (floatv)((t).x);               \
     g = (floatv)((t).y);               \
     b = (floatv)((t).z);
+#elif COLOR_SEGS
+/* The data colour is COLOR_SEGS straight pieces of the LUT (found on the host, equal to the
+ * LUT's interpolation to float32 rounding): each lane picks its piece by comparisons and
+ * evaluates c0 + slope * (x - x0), where looking the colour up would take six gathers. The
+ * table follows the LUT in its buffer: x0[S], then c0 and slope per channel ([3][S] each). */
+#define SEG_X(j) seg[(j)]
+#define SEG_C(c, j) seg[COLOR_SEGS * (1 + (c)) + (j)]
+#define SEG_S(c, j) seg[COLOR_SEGS * (4 + (c)) + (j)]
+#define SEG_IN(j) ((p).x >= SEG_X(j))
+#define SEG_PICK(j)                                         \
+    if ((j) < COLOR_SEGS) {                                 \
+        x0 = SELECT(x0, (floatv)(SEG_X(j)), SEG_IN(j));     \
+        c0r = SELECT(c0r, (floatv)(SEG_C(0, j)), SEG_IN(j)); \
+        c0g = SELECT(c0g, (floatv)(SEG_C(1, j)), SEG_IN(j)); \
+        c0b = SELECT(c0b, (floatv)(SEG_C(2, j)), SEG_IN(j)); \
+        sr = SELECT(sr, (floatv)(SEG_S(0, j)), SEG_IN(j));   \
+        sg = SELECT(sg, (floatv)(SEG_S(1, j)), SEG_IN(j));   \
+        sb = SELECT(sb, (floatv)(SEG_S(2, j)), SEG_IN(j));   \
+    }
+#define STEP_COLOR(lut, p, t, r, g, b)                                                   \
+    {                                                                                    \
+        const __global float *seg = (lut) + 4 * LUT_N;                                   \
+        floatv x0 = SEG_X(0), c0r = SEG_C(0, 0), c0g = SEG_C(1, 0), c0b = SEG_C(2, 0);   \
+        floatv sr = SEG_S(0, 0), sg = SEG_S(1, 0), sb = SEG_S(2, 0);                     \
+        SEG_PICK(1) SEG_PICK(2) SEG_PICK(3) SEG_PICK(4) SEG_PICK(5) SEG_PICK(6) SEG_PICK(7) \
+        const floatv dx = (p).x - x0;                                                    \
+        r = (c0r + sr * dx) * (t).x;                                                     \
+        g = (c0g + sg * dx) * (t).y;                                                     \
+        b = (c0b + sb * dx) * (t).z;                                                     \
+    }
 #else
 #define STEP_COLOR(lut, p, t, r, g, b)      \
     r = LUT_CHANNEL(lut, 0, p) * (t).x;     \
@@ -225,14 +269,14 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 #else
     if (mag == 0.0f) return enh.x;
     const float c = fabs(gx * view.x + gy * view.y + gz * view.z) / mag;
-    return enh.x + enh.y * pow(clamp(1.0f - c, 0.0f, 1.0f), enh.z);
+    return enh.x + enh.y * pow(VCLAMP(1.0f - c, 0.0f, 1.0f), enh.z);
 #endif
 }
 #define STEP_ALPHA(lut, p, t, k) \
-    clamp(LUT_CHANNEL(lut, 3, p) * (t).w * \
+    VCLAMP(LUT_CHANNEL(lut, 3, p) * (t).w * \
           enhance_factor(data, k, x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view), 0.0f, 1.0f)
 #else
-#define STEP_ALPHA(lut, p, t, k) clamp(LUT_CHANNEL(lut, 3, p) * (t).w, 0.0f, 1.0f)
+#define STEP_ALPHA(lut, p, t, k) VCLAMP(LUT_CHANNEL(lut, 3, p) * (t).w, 0.0f, 1.0f)
 #endif
 
 /* The arguments every integration kernel takes, in this order. */
@@ -293,6 +337,6 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
     const __global float *tcf = (const __global float *)tc;             \
     const intv k4 = (win) * 4;                                          \
     WINNER_COLOR(p, k4, r, g, b)                                        \
-    floatv ak = clamp(LUT_CHANNEL(lut, 3, p) * GATHER(tcf, k4 + 3) WINNER_ENHANCE(win), 0.0f, 1.0f);
+    floatv ak = VCLAMP(LUT_CHANNEL(lut, 3, p) * GATHER(tcf, k4 + 3) WINNER_ENHANCE(win), 0.0f, 1.0f);
 
 #endif /* SLIDING */

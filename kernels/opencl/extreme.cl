@@ -1,56 +1,85 @@
 /* max / min: the step holding the extreme normalised value (ties: first in the order) supplies
  * the voxel, coloured by its TF at that value and that step's time position: (a * c, a),
  * t_index = s_k*. IS_MIN selects min. Built without QUANT: the LUT is interpolated at u.
- * RAW_ORDER compares raw values (the host checked that u(v) is strictly increasing). */
+ *
+ * The loop compares a key instead of u = clamp(t, 0, 1), t = (v - vmin) * scale:
+ *   KEY_RAW   the raw values, in the data's lanes (the host checked that u is strictly
+ *             increasing on the values strictly between zlo and zhi, 0 at or below zlo and 1 at
+ *             or above zhi), the winning step in lanes as narrow (IDX_T: uchar or ushort);
+ *   otherwise t unclamped (zlo = 0, zhi = 1), the winning step in int lanes.
+ * Both order the steps as u does, ties included, where the winner's key lies strictly between
+ * zlo and zhi. Beyond, u is 0 or 1 and ties: on the side the comparison runs from (max: u = 0,
+ * min: u = 1) every step ties, so the first in the order wins; on the side it runs to (max:
+ * u = 1, min: u = 0) the first step in the order that lies there wins, found by a second pass
+ * over the steps where some lane needs it. */
 #ifndef SLIDING
 #ifdef IS_MIN
 #define IS_BETTER <
+#define BEHIND(kf) ((kf) >= zhi)
+#define AHEAD(kf) ((kf) <= zlo)
 #else
 #define IS_BETTER >
+#define BEHIND(kf) ((kf) <= zlo)
+#define AHEAD(kf) ((kf) >= zhi)
 #endif
 
-__kernel void integrate_extreme(KERNEL_ARGS, __global float4 *out, __global int *t_index)
+#define CAT_(a, b) a##b
+#define CAT(a, b) CAT_(a, b)
+#ifdef KEY_RAW
+#define KEY(raw) (raw)
+#define KEY_FLOAT(key) TO_FLOAT(key)
+#if VEC == 16
+typedef DATA_V keyv;
+typedef CAT(IDX_T, 16) idxv;
+#define IDX(k) ((idxv)((IDX_T)(k)))
+#else
+typedef DATA_T keyv;
+typedef int idxv;
+#define IDX(k) (k)
+#endif
+#else
+#define KEY(raw) ((TO_FLOAT(raw) - vmin) * scale)
+#define KEY_FLOAT(key) (key)
+typedef floatv keyv;
+typedef intv idxv;
+#define IDX(k) ((idxv)(k))
+#endif
+
+__kernel void integrate_extreme(KERNEL_ARGS, const float zlo, const float zhi,
+                                __global float4 *out, __global int *t_index)
 {
     VOXEL_PROLOGUE
     const int first = order[0];
-    intv best_k = first;
-#if defined(RAW_ORDER) && VEC == 16
-    /* uchar data, w <= 256: compare bytes and keep the winning step index in byte lanes too,
-     * so the loop never widens its lane masks. */
-    DATA_V best_raw = RAW(first);
-    uchar16 best_k8 = (uchar16)((uchar)first);
+    keyv best = KEY(RAW(first));
+    idxv best_k = IDX(first);
     for (int i = 1; i < w; ++i) {
         const int k = order[i];
-        const DATA_V v = RAW(k);
-        const char16 take = v IS_BETTER best_raw;
-        best_k8 = SELECT(best_k8, (uchar16)((uchar)k), take);
-        best_raw = SELECT(best_raw, v, take);
+        const keyv v = KEY(RAW(k));
+        /* the mask's lanes are as wide as the key's (no named type: it follows DATA_T) */
+        best_k = SELECT(best_k, IDX(k), v IS_BETTER best);
+        best = SELECT(best, v, v IS_BETTER best);
     }
-    best_k = convert_int16(best_k8);
-    const floatv best = NORMALIZE(best_raw);
-#elif defined(RAW_ORDER)
-    DATA_V best_raw = RAW(first);
-    for (int i = 1; i < w; ++i) {
-        const int k = order[i];
-        const DATA_V v = RAW(k);
-        const int take = v IS_BETTER best_raw;
-        best_k = take ? k : best_k;
-        best_raw = take ? v : best_raw;
+    const floatv kf = KEY_FLOAT(best);
+    intv win = SELECT(TO_INT(best_k), (intv)(first), BEHIND(kf));
+    const intv ahead = AHEAD(kf);
+    if (ANY(ahead)) {
+        intv todo = ahead;
+        for (int i = 0; i < w; ++i) {
+            const int k = order[i];
+            const intv hit = todo & AHEAD(KEY_FLOAT(KEY(RAW(k))));
+            win = SELECT(win, (intv)(k), hit);
+            todo &= ~hit;
+            if (!ANY(todo)) break;
+        }
     }
-    const floatv best = NORMALIZE(best_raw);
+#ifdef KEY_RAW
+    const floatv u = NORMALIZE(best);
 #else
-    floatv best = NORMALIZE(RAW(first));
-    for (int i = 1; i < w; ++i) {
-        const int k = order[i];
-        const floatv u = NORMALIZE(RAW(k));
-        const intv better = u IS_BETTER best;
-        best = SELECT(best, u, better);
-        best_k = SELECT(best_k, (intv)(k), better);
-    }
+    const floatv u = VCLAMP(best, 0.0f, 1.0f);
 #endif
-    WINNER_RGBA(best, best_k, r, g, b, ak)
+    WINNER_RGBA(u, win, r, g, b, ak)
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
-    STORE_INT(GATHER_INT(steps, best_k), t_index + o);
+    STORE_INT(GATHER_INT(steps, win), t_index + o);
 }
 #else
 /* Combining the partials of two consecutive runs of steps, `front` integrated first

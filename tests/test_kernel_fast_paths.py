@@ -1,0 +1,158 @@
+"""The kernels' comparison and colour fast paths equal the general path and the numpy reference.
+
+- max / min compare keys instead of u: raw values of integer data in the data's lanes, the
+  winning step in lanes as narrow (`extreme.raw_key_zones`), else t = (v - vmin) * scale
+  unclamped; values beyond the range tie in u and are settled after the loop.
+- A coloured data TF made of a few straight pieces is evaluated piece by piece instead of
+  looked up (`opencl.colour_segments`).
+
+Each is checked against the numpy reference (1e-5, t_index exactly) and against the engine
+with the fast path switched off, on every stored dtype, odd shapes and window lengths, value
+ranges that clip, ties, every order and brick splits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import chronocl
+from chronocl import modes
+from chronocl.core.tf import DataTF, lut_lerp32
+from chronocl.engine import opencl
+from chronocl.modes import extreme
+from chronocl.modes.spec import IntegrationSpec
+
+from .strategies import time_tfs
+
+DTYPES = ["uint8", "uint16", "int16", "float32"]
+
+
+def assert_same(a, b, atol: float = 1e-5) -> None:
+    np.testing.assert_allclose(a.rgba, b.rgba, atol=atol, rtol=0)
+    if a.t_index is None:
+        assert b.t_index is None
+    else:
+        np.testing.assert_array_equal(a.t_index, b.t_index)
+
+
+def raw_values(data, dtype: str, shape: tuple) -> np.ndarray:
+    """Random values of `dtype`, often from a few levels (ties), sometimes beyond any range."""
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    if data.draw(st.booleans()):  # few levels: exact ties everywhere
+        v = rng.integers(0, 5, shape) * 20 - 10
+    else:
+        v = rng.integers(-40, 300, shape)
+    if dtype == "float32":
+        return (v + rng.choice([0.0, 1e-5, 0.5], shape)).astype(np.float32)
+    info = np.iinfo(dtype)
+    return np.clip(v, info.min, info.max).astype(dtype)
+
+
+@settings(max_examples=30)
+@given(st.data())
+def test_max_min_keys_equal_reference_and_general_path(data):
+    dtype = data.draw(st.sampled_from(DTYPES))
+    w = data.draw(st.integers(1, 37))
+    shape = (w, data.draw(st.integers(1, 4)), data.draw(st.integers(1, 3)))
+    shape += (data.draw(st.sampled_from([1, 16, 21, 32, 47])),)
+    raw = raw_values(data, dtype, shape)
+    # None: the data's own range; the others clip values on one side or both, or (for
+    # 16-bit data) merge neighbouring integers by rounding, which rules raw keys out.
+    value_range = data.draw(st.sampled_from([None, (0, 100), (20.5, 60), (-5, 400), (-1e9, 1e9)]))
+    order = data.draw(
+        st.one_of(st.sampled_from(["forward", "backward"]), st.permutations(range(w)))
+    )
+    order = order if isinstance(order, str) else tuple(order)
+    tf = DataTF(points=[(0, 0, 0.2, 1, 0.1), (0.4, 1, 0.5, 0, 0.6), (1, 1, 1, 1, 1)])
+    tf = DataTF(points=tf.points, value_range=value_range)
+    spec = IntegrationSpec(
+        mode=data.draw(st.sampled_from(["max", "min"])),
+        order=order,
+        data_tf=tf,
+        time_tf=data.draw(time_tfs()),
+    )
+    series = chronocl.TimeSeries.from_array(raw)
+    slab = data.draw(st.integers(1, shape[1] + 1))
+    ref = chronocl.integrate(series, None, spec=spec, engine="numpy")
+    fast = chronocl.integrate(series, None, spec=spec, engine="opencl", slab=slab)
+    assert_same(ref, fast)
+    with pytest.MonkeyPatch.context() as mp:  # every dtype compares t = (v - vmin) * scale
+        mp.setattr(extreme, "raw_key_zones", lambda *a: None)
+        general = chronocl.integrate(series, None, spec=spec, engine="opencl", slab=slab)
+    assert_same(general, fast, atol=0)
+
+
+def test_raw_keys_where_u_orders_integers():
+    zones = extreme.raw_key_zones
+    assert zones(np.uint8, (0, 255), 30) == (0.0, 255.0)
+    assert zones(np.uint8, (10, 40), 256) == (10.0, 40.0)
+    assert zones(np.uint8, (0, 255), 257) is None  # steps beyond byte lanes
+    assert zones(np.uint16, (-5, 70000), 300) == (-1.0, 65536.0)  # no value reaches 0 or 1
+    assert zones(np.int16, (-100, 100), 5) == (-100.0, 100.0)
+    assert zones(np.int16, (-1e9, 1e9), 5) is None  # rounding merges neighbours
+    assert zones(np.float32, (0, 1), 5) is None
+
+
+def coloured_tfs():
+    """Coloured data TFs of 2-5 control points (at most 8 straight pieces, often fewer)."""
+
+    @st.composite
+    def build(draw):
+        n = draw(st.integers(2, 5))
+        us = sorted({*draw(st.lists(st.floats(0, 1), min_size=n, max_size=n)), 0.0, 1.0})
+        unit = st.floats(0, 1)
+        opacity = st.one_of(st.just(0.0), st.floats(1e-3, 1))
+        points = [(u, draw(unit), draw(unit), draw(unit), draw(opacity)) for u in us]
+        return DataTF(points=points, size=draw(st.sampled_from([256, 300, 1024])))
+
+    return build()
+
+
+@settings(max_examples=30)
+@given(st.data())
+def test_colour_pieces_equal_reference_and_lookups(data):
+    dtype = data.draw(st.sampled_from(DTYPES))
+    w = data.draw(st.integers(1, 23))
+    shape = (
+        w,
+        data.draw(st.integers(1, 3)),
+        data.draw(st.integers(1, 3)),
+        data.draw(st.sampled_from([3, 16, 37])),
+    )
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    raw = rng.random(shape) * 250
+    if dtype != "float32":
+        raw = np.round(raw)
+    series = chronocl.TimeSeries.from_array(raw.astype(dtype))
+    spec = IntegrationSpec(
+        mode=data.draw(st.sampled_from(modes.names())),
+        order=data.draw(st.sampled_from(["forward", "backward"])),
+        data_tf=data.draw(coloured_tfs()),
+        time_tf=data.draw(time_tfs()),
+        threshold=data.draw(st.sampled_from([0.0, 0.1, 0.5])),
+        normalize=data.draw(st.sampled_from(["time", "max"])),
+    )
+    slab = data.draw(st.integers(1, shape[1] + 1))
+    ref = chronocl.integrate(series, None, spec=spec, engine="numpy")
+    fast = chronocl.integrate(series, None, spec=spec, engine="opencl", slab=slab)
+    assert_same(ref, fast)
+    with pytest.MonkeyPatch.context() as mp:  # colour looked up in the LUT
+        mp.setattr(opencl, "colour_segments", lambda rgb: None)
+        looked_up = chronocl.integrate(series, None, spec=spec, engine="opencl", slab=slab)
+    assert_same(looked_up, fast, atol=2e-6)
+
+
+def test_colour_pieces_follow_the_lut():
+    tf = DataTF(points=[(0, 0, 0, 1, 0.02), (0.5, 0, 1, 0, 0.1), (1, 1, 0, 0, 0.5)])
+    table = opencl.colour_segments(tf.lut[:, :3])
+    assert table is not None and table.shape == (7, 3)  # 0.5 falls between entries 127, 128
+    x = np.linspace(0, 255, 100_003, dtype=np.float32)
+    piece = np.searchsorted(table[0], x, side="right") - 1
+    got = table[1:4, piece] + table[4:7, piece] * (x - table[0, piece])
+    want = lut_lerp32(tf.lut, x / np.float32(255))[:, :3]
+    np.testing.assert_allclose(got.T, want, atol=1e-6, rtol=0)
+    many = DataTF(points=[(i / 11, i % 2, 0, 1 - i % 2, 1) for i in range(12)])
+    assert opencl.colour_segments(many.lut[:, :3]) is None  # more pieces than the kernels take
