@@ -20,7 +20,7 @@ pytestmark = pytest.mark.skipif(
 
 NEW_FULL_FRAME = """([seq]) => {
   const v = window.viewer, l = v && v.last;
-  return !!l && l.seq > seq && l.quality === 'full' && l.id >= v.sent;
+  return !!l && l.seq > seq && l.quality === 'full' && l.id >= v.sent && !l.refining;
 }"""
 
 
@@ -58,7 +58,8 @@ def last(page) -> dict:
 
 
 def settle(page, before: dict) -> dict:
-    """Wait for the full-quality frame answering the newest request; returns viewer.last."""
+    """Wait for the final frame (full quality, level and size) answering the newest request;
+    returns viewer.last."""
     page.wait_for_function(NEW_FULL_FRAME, arg=[before["seq"]], timeout=60_000)
     return last(page)
 

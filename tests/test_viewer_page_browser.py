@@ -30,7 +30,7 @@ pytestmark = pytest.mark.skipif(
 
 SETTLED = """([seq]) => {
   const v = window.viewer, l = v && v.last;
-  return !!l && l.seq > seq && l.quality === 'full' && l.id >= v.sent;
+  return !!l && l.seq > seq && l.quality === 'full' && l.id >= v.sent && !l.refining;
 }"""
 
 
@@ -74,14 +74,11 @@ class Page:
         return self.eval("() => window.viewer.last")
 
     def settle(self, before: dict | None = None) -> dict:
-        """Wait for the full frame answering the newest request (and a little for layout)."""
+        """Wait for the final frame (full quality, level and size) answering the newest
+        request; returns viewer.last."""
         seq = 0 if before is None else before["seq"]
         self.page.wait_for_function(SETTLED, arg=[seq], timeout=60_000)
         return self.last()
-
-    def sharp(self) -> None:
-        """Wait until the frame shown is the final one (full level and size)."""
-        self.page.wait_for_function("() => document.body.dataset.refining === 'no'", timeout=60_000)
 
     def close(self) -> None:
         assert self.problems == []
@@ -257,7 +254,6 @@ def test_panels_fill_the_view_area_at_1_2_and_4_views(open_page, tmp_path, width
             assert img["w"] >= q["w"] - 4 and img["h"] >= q["h"] - 4
         w, h = b["size"]
         assert abs(w / h - b["panels"][0]["w"] / b["panels"][0]["h"]) < 0.05
-        p.sharp()
         p.page.screenshot(path=os.path.join(shots, f"viewer-{width}x{height}-{n}views.png"))
 
 
@@ -284,7 +280,6 @@ def test_side_panel_folds_and_render_follows_device_pixels(open_page, tmp_path):
     assert folded["area"]["w"] > b["area"]["w"] + 250
     check_fills(folded, 4)
     assert folded["size"][0] > w  # wider panels, wider renders
-    p.sharp()
     p.page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-1024x640-folded-dpr2.png"))
     p.page.click("#side-toggle")
     p.page.wait_for_timeout(300)
@@ -406,13 +401,13 @@ def test_a_frame_over_the_draw_budget_is_reduced_then_redrawn_in_full(server, mo
     monkeypatch.setattr(worker_module, "DrawBudget", lambda: frames.DrawBudget(target_ms=1.0))
     client = Client(server)
     try:
-        # The open's frame (512^2, nothing measured yet: drawn in full) measured the draws.
-        _, (_, fast, _) = client.open(0, size=(1024, 733))
+        client.open(0, size=(1024, 733))  # a frame drawn: the draw budget has a measurement
+        rid = client.send({"type": "update", "threshold": 0.1})
+        _, fast, _ = client.frame_for(rid)
         full = frames.render_size((1024, 733), 1)
         w, h = fast["views"][0]["width"], fast["views"][0]["height"]
         assert fast["reduced"] and fast["refining"]
         assert w * h <= frames.MIN_PIXELS * 1.01 and abs(w / h - 1024 / 733) < 0.02
-        rid = fast["id"]
         _, final, _ = client.frame_for(rid)  # after a short idle, the same state in full
         assert final["seq"] > fast["seq"] and not final["reduced"] and not final["refining"]
         assert (final["views"][0]["width"], final["views"][0]["height"]) == full

@@ -318,8 +318,11 @@ class ClientWorker:
         self._frame += 1
         self._shown, self._last_rid = state, rid
         sessions = [slot.session for slot in self._slots[: len(cvs)] if slot.session is not None]
+        # The level model predicts frames answering input: a final frame's larger draw counts
+        # as the share of it such a frame would draw.
+        share = min(1.0, self._draw_budget.pixels() / max(1, w * h * len(cvs)))
         self._draw_budget.record(1e3 * (t_done - t_draw), w * h * len(cvs))
-        display_ms = 1e3 * (t_done - t_up) / max(1, len(cvs))
+        display_ms = 1e3 * ((t_draw - t_up) + share * (t_done - t_draw)) / max(1, len(cvs))
         for session in sessions:
             session.record_display(display_ms)
         level = max((session.shown_level for session in sessions), default=0)
