@@ -117,6 +117,8 @@ def summarise(op: str, totals: list[float], headers: list[dict], case: str) -> d
         "incremental": sum(bool(h["timings"].get("incremental")) for h in headers),
         "levels": sorted({h.get("level", 0) for h in headers}),
         "frame_bytes": int(statistics.median(h["views"][0]["bytes"] for h in headers)),
+        # the image size drawn (the server draws less than asked for when over its draw budget)
+        "drawn": sorted({f"{h['views'][0]['width']}x{h['views'][0]['height']}" for h in headers}),
     }
     emit(record)
     return record
@@ -266,6 +268,9 @@ def main() -> None:
             summary["scrub_first_frame_ms"][key] = r["scrub"]["median_ms"]
             summary["scrub_incremental"][key] = f"{r['scrub']['incremental']}/{scrubs}"
             summary["first_frame_level"][key] = r["first"]["levels"]
+            summary.setdefault("drawn", {})[key] = {
+                k: r[k]["drawn"] for k in ("first", "full", "scrub")
+            }
             summary["split_ms"][key] = {
                 "first": r["first"]["split_ms"],
                 "full": r["full"]["split_ms"],
