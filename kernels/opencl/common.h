@@ -332,11 +332,29 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 #else
 #define WINNER_ENHANCE(win)
 #endif
-#define WINNER_RGBA(value, win, r, g, b, ak)                            \
-    const LutPos p = lut_pos_of(value);                                 \
+#define WINNER_RGBA_AT(p, win, r, g, b, ak)                             \
     const __global float *tcf = (const __global float *)tc;             \
     const intv k4 = (win) * 4;                                          \
     WINNER_COLOR(p, k4, r, g, b)                                        \
     floatv ak = VCLAMP(LUT_CHANNEL(lut, 3, p) * GATHER(tcf, k4 + 3) WINNER_ENHANCE(win), 0.0f, 1.0f);
+#define WINNER_RGBA(value, win, r, g, b, ak) \
+    const LutPos p = lut_pos_of(value);      \
+    WINNER_RGBA_AT(p, win, r, g, b, ak)
+
+/* The LUT position of a step again, from the `x` LOCATE gave it (QUANT: the raw value), so
+ * that a step's opacity and colour come out in the same bits as in the loop. */
+inline LutPos lut_pos_again(const floatv x)
+{
+    LutPos p;
+    p.x = x;
+#ifdef QUANT
+    p.i0 = TO_INT(x);
+    p.f = (floatv)(0.0f);
+#else
+    p.i0 = VMIN(TO_INT(x), LUT_N - 2);
+    p.f = x - TO_FLOAT(p.i0);
+#endif
+    return p;
+}
 
 #endif /* SLIDING */

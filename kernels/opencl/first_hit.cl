@@ -5,21 +5,26 @@ __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global f
                                   __global int *t_index)
 {
     VOXEL_PROLOGUE
-    floatv hr = 0.0f, hg = 0.0f, hb = 0.0f, ha = 0.0f;
-    intv hit = -1;
+    /* The loop needs only each step's opacity (its colour goes unused and is not computed):
+     * it keeps the hit's LUT position and step, and the hit is coloured once, after it. */
+    floatv hx = 0.0f;
+    intv hk = -1;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
         STEP_RGBA(k, r, g, b, ak)
-        const intv take = (hit < 0) & (ak > threshold);
-        hr = SELECT(hr, ak * r, take);
-        hg = SELECT(hg, ak * g, take);
-        hb = SELECT(hb, ak * b, take);
-        ha = SELECT(ha, ak, take);
-        hit = SELECT(hit, (intv)(steps[k]), take);
-        if (ALL(hit >= 0)) break;
+        const intv take = (hk < 0) & (ak > threshold);
+        hx = SELECT(hx, p.x, take);
+        hk = SELECT(hk, (intv)(k), take);
+        if (ALL(hk >= 0)) break;
     }
-    STORE_RGBA(o, hr, hg, hb, ha);
-    STORE_INT(hit, t_index + o);
+    const intv none = hk < 0;
+    const intv win = VMAX(hk, 0);
+    const LutPos q = lut_pos_again(hx);
+    WINNER_RGBA_AT(q, win, r, g, b, ak)
+    const floatv zero = 0.0f;
+    STORE_RGBA(o, SELECT(ak * r, zero, none), SELECT(ak * g, zero, none),
+               SELECT(ak * b, zero, none), SELECT(ak, zero, none));
+    STORE_INT(SELECT(GATHER_INT(steps, win), (intv)(-1), none), t_index + o);
 }
 #else
 /* Combining the partials of two consecutive runs of steps, `front` integrated first
