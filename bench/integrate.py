@@ -4,7 +4,8 @@ Cases are the paper's Table 1 workloads (10/20/30 steps of 128^3, 512x64x64, 128
 built-in vortex data, float32 and uint8, every mode, the window resident in memory as one xytz
 brick. Prints JSON lines (../shared/BENCH.md) and a summary with `roofline_fraction`,
 `dense_tf_roofline_fraction` (every mode with a coloured data TF that has opacity everywhere,
-so no step can be skipped), `speedup_vs_numpy`, `max_vs_vtk` and `u8_vs_f32`.
+so no step can be skipped), `speedup_vs_numpy`, `max_vs_vtk`, `u8_vs_f32` and `transfer_overlap`
+(bench/transfer.py; null on CPU devices).
 
     python bench/integrate.py --quick      # 30x128^3 only, numpy on 10x128x128x64; < 2 minutes
     python bench/integrate.py              # every Table 1 case
@@ -21,6 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import emit, env_record, race
+from transfer import transfer_overlap
 from vtk_peer import make_pipeline, run_max, vtk_available, vtk_version
 
 from chronocl import modes, reference
@@ -209,6 +211,9 @@ def main() -> None:
             m: round(run.results[(main_case, "opencl-dense-tf", m)] / roof[main_case], 3)
             for m in MODES
         },
+        # wall / max(kernel, transfer) of the overlapped copy path; null on CPU devices,
+        # which integrate host memory in place
+        "transfer_overlap": transfer_overlap(),
         "numpy_case": np_name,
         "device": run.ocl.dc.info.label,
     }
