@@ -226,17 +226,17 @@ def test_nonsense_formats_are_refused(name, dtype, value_range, error, match):
 def test_formats_that_send_the_data_as_stored():
     assert resolve_format("auto", np.float64, (0, 1)).dtype == np.float32
     assert not resolve_format("uint8", np.uint8, (0, 255)).converts
-    assert resolve_format("native", np.uint8, (0, 255)).dtype == np.float32
+    assert resolve_format("float32", np.uint8, (0, 255)).dtype == np.float32
     assert resolve_format("uint8", np.int16, (-3, 7)).quant_max == 255
     assert resolve_format("float16", np.float32, (0, 1)).max_error < 1e-3
 
 
 def test_api_refusals_come_before_any_work():
     series = chronocl.TimeSeries.from_array(np.zeros((2, 2, 2, 2), dtype=np.uint8))
-    with pytest.raises(UnknownNameError, match="choose one of auto, native"):
+    with pytest.raises(UnknownNameError, match="choose one of auto, float32"):
         chronocl.integrate(series, device_format="half")
     with pytest.raises(InvalidParameterError, match="applies to the opencl engine"):
-        chronocl.integrate(series, engine="numpy", device_format="native")
+        chronocl.integrate(series, engine="numpy", device_format="float32")
     with pytest.raises(InvalidParameterError, match="not fewer than the 1"):
         chronocl.integrate(series, device_format="uint16")
     with pytest.raises(UnknownNameError):
@@ -371,7 +371,7 @@ def test_bench_transfer_reports_null_on_cpu_and_figures_when_forced():
     assert auto["kernel_s"] > 0 and auto["upload_s"] > 0 and auto["wall_s"] > 0
 
 
-@pytest.mark.parametrize("name", ["float16", "uint8", "uint16", "native", "auto"])
+@pytest.mark.parametrize("name", ["float16", "uint8", "uint16", "float32", "auto"])
 def test_conversions_split_over_threads_equal_one_pass(name):
     v = np.random.default_rng(3).normal(0, 3e4, transfer.PARALLEL_MIN * 2 + 7).astype(np.float32)
     fmt = resolve_format(name, np.float32, (-1e4, 2e4))

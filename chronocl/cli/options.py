@@ -38,7 +38,7 @@ DeviceOpt = Annotated[
 DeviceFormatOpt = Annotated[
     str,
     typer.Option(
-        help="What bricks travel to the device in: auto (as stored), native (float32), float16, "
+        help="What bricks travel to the device in: auto (as stored), float32, float16, "
         "or uint8/uint16 quantised over the value range (lossy; docs/engine.md)."
     ),
 ]

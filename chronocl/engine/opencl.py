@@ -64,7 +64,7 @@ class OpenCLEngine:
     (default: host pointers on CPU devices, the rest on); tests check each against
     the general path.
 
-    Without host pointers bricks are copied: `device_format` (auto, native, uint8, uint16,
+    Without host pointers bricks are copied: `device_format` (auto, float32, uint8, uint16,
     float16; `chronocl.engine.transfer`) is what they travel in, `overlap` uploads the next
     chunk of about `chunk_bytes` (None: automatic, 0: the whole brick) while the kernel of
     this one runs, and `last_transfer` holds the timings of the last brick.

@@ -4,10 +4,10 @@ On a GPU the PCIe transfer of a brick, not the kernel, bounds an integration. Tw
 it (docs/engine.md, "Transfers and device formats"):
 
 * **Device formats** (`DeviceFormat`, `resolve_format`): a brick may travel narrower than it is
-  stored. ``auto`` sends the stored type (float64 as float32), ``native`` float32, ``float16``
-  halves float32 traffic, ``uint8`` / ``uint16`` quantise the values over the normalising
-  value range. The kernels see quantised data as integers whose value range is (0, 255) or
-  (0, 65535), so every mode works on them unchanged.
+  stored. ``auto`` sends the stored type (float64 as float32), ``float32`` float32 (integers
+  widened, a baseline), ``float16`` halves float32 traffic, ``uint8`` / ``uint16`` quantise
+  the values over the normalising value range. The kernels see quantised data as integers
+  whose value range is (0, 255) or (0, 65535), so every mode works on them unchanged.
 * **Overlap** (`run_chunks`): a brick is cut into chunks of output rows (with their gradient
   halo); chunk i+1 is encoded into a pinned host staging buffer (``CL_MEM_ALLOC_HOST_PTR``,
   mapped) and uploaded on one queue while the kernel of chunk i runs on a second and the result
@@ -32,7 +32,7 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 
-FORMATS = ("auto", "native", "uint8", "uint16", "float16")
+FORMATS = ("auto", "float32", "uint8", "uint16", "float16")
 QUANT_MAX = {"uint8": 255, "uint16": 65535}
 HALF_MAX = 65504.0  # the largest finite float16
 HALF_EPS = 2.0**-11  # float16 rounding: relative error of a normal value
@@ -171,7 +171,7 @@ def resolve_format(name: str, dtype: np.dtype, value_range: tuple[float, float])
     lo, hi = float(value_range[0]), float(value_range[1])
     if name == "auto":
         return DeviceFormat(name, src, src, (lo, hi))
-    if name == "native":
+    if name == "float32":  # integer data widened: a baseline to compare the compact formats with
         return DeviceFormat(name, src, np.dtype(np.float32), (lo, hi))
     target = np.dtype(name)
     if target == src:

@@ -233,7 +233,7 @@ def integrate(
     see `chronocl.integration.streaming.integrate_to_store`. `level` integrates a coarse
     level of the series (0: full resolution; docs/levels.md), pooled as the mode asks; the
     chronovolume keeps the physical extent, so it renders in the same place.
-    `device_format` is what bricks travel to the device in: auto (as stored), native (float32),
+    `device_format` is what bricks travel to the device in: auto (as stored), float32,
     float16, or uint8 / uint16 quantised over the value range (docs/engine.md).
     """
     job = at_level(prepare(series, window, mode, spec, spec_args), level)
