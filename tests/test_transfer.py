@@ -163,6 +163,7 @@ def test_compact_formats_equal_the_reference_on_equally_converted_data(data):
     )
     got = chronocl.integrate(series, sel, spec=spec, engine=engine, device_format=name)
     assert_close(ref, got)
+    assert got.metadata.get("device_format", "auto") == name  # a lossy result says so
 
 
 @pytest.mark.parametrize("mode", modes.names())

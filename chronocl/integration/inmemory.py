@@ -273,4 +273,8 @@ def integrate_bricks(
     if not final:
         rgba = reference.finalize(Partial(rgba, t_index), job.positions, job.spec)
     name = getattr(eng, "name", type(eng).__name__)
-    return Chronovolume(rgba, t_index, job.metadata(name))
+    meta = job.metadata(name)
+    fmt = getattr(eng, "device_format", "auto")
+    if fmt != "auto":  # a lossy format changes the result: say so where the result is kept
+        meta["device_format"] = fmt
+    return Chronovolume(rgba, t_index, meta)
