@@ -22,6 +22,7 @@ from chronocl.cli import (
     info,
     ingest,
     integrate,
+    probe,
     pyramid,
     render,
     verify,
@@ -82,6 +83,7 @@ app.command()(info.info)
 app.command(help=integrate.help_text())(integrate.integrate)
 app.command()(render.render)
 app.command()(export.export)
+app.command()(probe.probe)
 app.command()(view.view)
 app.command()(verify.verify)
 app.command()(pyramid.pyramid)

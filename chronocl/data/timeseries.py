@@ -191,6 +191,33 @@ class TimeSeries:
         else:
             out[...] = self.data[int(step), z0:z1].compute()
 
+    def read_region(self, steps: slice, z: slice, y: slice, x: slice) -> np.ndarray:
+        """Raw values of a run of steps over one (z, y, x) sub-block: (steps, z, y, x).
+
+        A zarr store is read for that block alone: zarr decodes only the chunks it touches,
+        through the damage checks (a damaged chunk raises StoreCorruptError).
+        """
+        sel = (steps, z, y, x)
+        if self._zarr is None:
+            return np.asarray(self.data[sel].compute())
+        return checked_read(self.path, self._zarr, lambda: self._zarr.get_basic_selection(sel), sel)
+
+    def probe(
+        self,
+        x: int | None = None,
+        y: int | None = None,
+        z: int | None = None,
+        *,
+        region: object = None,
+        progress: bool = False,
+    ):
+        """v(t) at voxel (x, y, z), or the mean, min and max per step over the box `region`
+        ('x0:x1,y0:y1,z0:z1' or three slices), with the time labels: a TimeCurve
+        (`chronocl.data.probe`)."""
+        from chronocl.data.probe import probe
+
+        return probe(self, x, y, z, region=region, progress=progress)
+
     def check_unchanged(self) -> None:
         """Raise StoreChangedError when the store on disk no longer has this series' shape.
 

@@ -1,0 +1,462 @@
+"""Probes outside the viewer: v(t) at one voxel, or the mean, min and max over a box, per step.
+
+`probe(series, x, y, z)` and `probe(series, region=...)` read only the voxel's or the box's
+sub-block of each step (`TimeSeries.read_region`: zarr decodes the chunks that block touches,
+never a whole step where the chunking splits it, and through the store's damage checks, so a
+damaged chunk is `StoreCorruptError`, never zeros), a run of steps per read, with a progress
+bar once the work takes more than a second. They return a `TimeCurve`: the values per step
+with the steps and the series' time labels. `TimeCurve.to_csv` writes ``step,time,value`` (a
+box: ``step,time,mean,min,max``); `TimeCurve.plot` draws it with matplotlib (no display)
+against the time labels, an integration window shaded. Both write atomically.
+
+Coordinates are voxel indices x, y, z: x indexes the fastest axis of the store's (T, Z, Y, X).
+A box is three half-open ranges ``x0:x1,y0:y1,z0:z1`` as Python slices, an omitted bound
+meaning the volume's edge (``:,:,10:12`` is two whole z planes).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import math
+import os
+import time
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from chronocl.core.atomic import atomic_file
+from chronocl.core.errors import InvalidParameterError
+from chronocl.core.progress import meter
+from chronocl.core.selection import Selection, parse_selection
+
+if TYPE_CHECKING:
+    from chronocl.data.timeseries import TimeSeries
+
+AXES = ("x", "y", "z")
+SUFFIXES = (".csv", ".png")
+READ_BYTES = 64 << 20  # a run of steps read at once holds at most this much of the block
+MAX_STEPS_PER_READ = 64  # zarr decodes the chunks of one read concurrently
+BAR_AFTER_S = 1.0  # the progress bar appears once the probe has taken this long
+
+Box = tuple[tuple[int, int], tuple[int, int], tuple[int, int]]  # (x0, x1), (y0, y1), (z0, z1)
+
+
+@dataclass(frozen=True, eq=False)
+class TimeCurve:
+    """Values over time at a voxel (`point`) or over a box (`box`), one per step.
+
+    `values` is the voxel's value, or the box's mean, at each of `steps`, whose time labels are
+    `times`; a box also has the `min` and `max` over the box per step. Values are float64.
+    """
+
+    steps: np.ndarray
+    times: tuple
+    values: np.ndarray
+    min: np.ndarray | None = None
+    max: np.ndarray | None = None
+    point: tuple[int, int, int] | None = None
+    box: Box | None = None
+    source: str = ""
+
+    @property
+    def is_box(self) -> bool:
+        return self.box is not None
+
+    @property
+    def mean(self) -> np.ndarray | None:
+        """The mean over the box per step (None for a voxel)."""
+        return self.values if self.is_box else None
+
+    def __len__(self) -> int:
+        return len(self.steps)
+
+    def describe(self) -> str:
+        """'voxel x=3, y=4, z=5' or 'box x 0:4, y 0:4, z 2:3 (32 voxels)'."""
+        if self.box is None:
+            x, y, z = self.point  # type: ignore[misc]
+            return f"voxel x={x}, y={y}, z={z}"
+        ranges = ", ".join(f"{a} {lo}:{hi}" for a, (lo, hi) in zip(AXES, self.box, strict=True))
+        n = math.prod(hi - lo for lo, hi in self.box)
+        return f"box {ranges} ({n} voxel{'s' if n != 1 else ''})"
+
+    def window_steps(self, window: object) -> tuple[int, ...]:
+        """The steps of `window` (a Selection, 't0:t1[:stride]', a list; None: none)."""
+        if window is None:
+            return ()
+        return parse_selection(window, len(self.steps)).steps
+
+    def csv_text(self, window: object = None) -> str:
+        """The CSV: step,time,value (a box: step,time,mean,min,max), one row per step; with a
+        `window`, a last column in_window (1 for the window's steps, else 0)."""
+        chosen = set(self.window_steps(window))
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        header = ["step", "time", *(["mean", "min", "max"] if self.is_box else ["value"])]
+        writer.writerow(header + (["in_window"] if window is not None else []))
+        for i, step in enumerate(self.steps):
+            row = [int(step), self.times[i], repr(float(self.values[i]))]
+            if self.is_box:
+                row += [repr(float(self.min[i])), repr(float(self.max[i]))]  # type: ignore[index]
+            if window is not None:
+                row.append(int(int(step) in chosen))
+            writer.writerow(row)
+        return buf.getvalue()
+
+    def to_csv(
+        self, path: str | os.PathLike, window: object = None, overwrite: bool = False
+    ) -> Path:
+        """Write `csv_text` to `path` atomically; returns the path."""
+        check_suffix(path, (".csv",))
+        text = self.csv_text(window)
+        with atomic_file(path, overwrite) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+        return Path(path)
+
+    def figure(self, window: object = None, title: str | None = None):
+        """A matplotlib Figure of the curve against the time labels (see `plot`)."""
+        return figure(self, window, title)
+
+    def plot(
+        self,
+        path: str | os.PathLike,
+        window: object = None,
+        title: str | None = None,
+        overwrite: bool = False,
+    ) -> Path:
+        """Draw the curve to a PNG at `path`, atomically; returns the path (see `plot_curve`)."""
+        return plot_curve(self, path, window, title, overwrite)
+
+
+# -- what is probed ----------------------------------------------------------------------------
+def parse_point(text: str, what: str = "point") -> tuple[int, int, int]:
+    """'x,y,z' as three whole voxel indices."""
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        point = tuple(int(p) for p in parts)
+    except ValueError:
+        point = ()
+    if len(point) != 3:
+        raise InvalidParameterError(
+            f"{what} {text!r} must be three whole voxel indices x,y,z, e.g. 10,20,5"
+        )
+    return point  # type: ignore[return-value]
+
+
+def parse_box(text: str, what: str = "box") -> tuple[tuple[int | None, int | None], ...]:
+    """'x0:x1,y0:y1,z0:z1' as three (lo, hi) pairs, None where a bound is omitted."""
+    bad = InvalidParameterError(
+        f"{what} {text!r} must be three ranges x0:x1,y0:y1,z0:z1 of whole voxel indices "
+        "(end excluded; an omitted bound is the volume's edge), e.g. 10:20,0:16,5:6"
+    )
+    parts = [p.strip() for p in str(text).split(",")]
+    if len(parts) != 3:
+        raise bad
+    ranges = []
+    for part in parts:
+        bounds = part.split(":")
+        if len(bounds) != 2:
+            raise bad
+        try:
+            ranges.append(tuple(int(b) if b.strip() else None for b in bounds))
+        except ValueError:
+            raise bad from None
+    return tuple(ranges)  # type: ignore[return-value]
+
+
+def check_point(
+    point: Sequence[object], volume_shape: Sequence[int], what: str = "probe point"
+) -> tuple[int, int, int]:
+    """Whole voxel indices (x, y, z) inside a volume of `volume_shape` (Z, Y, X)."""
+    nz, ny, nx = volume_shape
+    sizes = (nx, ny, nz)
+    out = []
+    for axis, v, n in zip(AXES, point, sizes, strict=True):
+        if v is None:
+            raise InvalidParameterError(
+                f"{what} lacks {axis}; give all of x, y, z (voxel indices) or a region"
+            )
+        i = _whole(v, f"{what} {axis}={v!r}")
+        if not 0 <= i < n:
+            raise InvalidParameterError(
+                f"{what} {axis}={i} is outside the volume's {n} voxels along {axis} "
+                f"(x, y, z sizes {nx}, {ny}, {nz}); choose 0 <= {axis} <= {n - 1}"
+            )
+        out.append(i)
+    return tuple(out)  # type: ignore[return-value]
+
+
+def check_box(region: object, volume_shape: Sequence[int], what: str = "region") -> Box:
+    """A box as (lo, hi) per axis x, y, z inside a volume of `volume_shape` (Z, Y, X).
+
+    `region` is 'x0:x1,y0:y1,z0:z1' or three items, each a slice, a (lo, hi) pair (either may
+    be None: the edge) or one index (that plane alone).
+    """
+    nz, ny, nx = volume_shape
+    sizes = (nx, ny, nz)
+    if isinstance(region, str):
+        region = parse_box(region, what)
+    if not isinstance(region, Sequence) or len(region) != 3:
+        raise InvalidParameterError(
+            f"{what} {region!r} must give x, y and z ranges, e.g. 'x0:x1,y0:y1,z0:z1' or "
+            "(slice(10, 20), slice(0, 16), 5)"
+        )
+    box = []
+    for axis, item, n in zip(AXES, region, sizes, strict=True):
+        lo, hi = _bounds(axis, item, what)
+        lo = 0 if lo is None else lo
+        hi = n if hi is None else hi
+        if not 0 <= lo < hi <= n:
+            raise InvalidParameterError(
+                f"{what} {axis} range {lo}:{hi} does not fit the volume's {n} voxels along "
+                f"{axis} (x, y, z sizes {nx}, {ny}, {nz}); use 0 <= {axis}0 < {axis}1 <= {n}"
+            )
+        box.append((lo, hi))
+    return tuple(box)  # type: ignore[return-value]
+
+
+def _bounds(axis: str, item: object, what: str) -> tuple[int | None, int | None]:
+    if isinstance(item, slice):
+        if item.step not in (None, 1):
+            raise InvalidParameterError(
+                f"{what} {axis} slice {item} has a step; a box takes every voxel, drop the step"
+            )
+        lo, hi = item.start, item.stop
+    elif isinstance(item, Sequence) and not isinstance(item, str) and len(item) == 2:
+        lo, hi = item
+    elif isinstance(item, int | np.integer) and not isinstance(item, bool):
+        lo, hi = int(item), int(item) + 1
+    else:
+        raise InvalidParameterError(
+            f"{what} {axis} range {item!r} must be a slice, a (lo, hi) pair or one index"
+        )
+    return (
+        None if lo is None else _whole(lo, f"{what} {axis} bound {lo!r}"),
+        None if hi is None else _whole(hi, f"{what} {axis} bound {hi!r}"),
+    )
+
+
+def _whole(v: object, what: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, int | np.integer):
+        raise InvalidParameterError(f"{what} is not a voxel index; give a whole number")
+    return int(v)
+
+
+# -- probing -----------------------------------------------------------------------------------
+def probe(
+    series: TimeSeries,
+    x: int | None = None,
+    y: int | None = None,
+    z: int | None = None,
+    *,
+    region: object = None,
+    progress: bool = False,
+) -> TimeCurve:
+    """v(t) at voxel (x, y, z), or the mean, min and max over the box `region`, at every step.
+
+    Every argument is checked before anything is read. Each read covers a run of steps of the
+    voxel's or the box's sub-block only; `progress` shows a bar once it takes over a second.
+    """
+    point, box = None, None
+    if region is None:
+        point = check_point((x, y, z), series.volume_shape)
+        (x0, x1), (y0, y1), (z0, z1) = ((v, v + 1) for v in point)
+    else:
+        if (x, y, z) != (None, None, None):
+            raise InvalidParameterError(
+                "give a point (x, y, z) or a region, not both; "
+                "probe(x, y, z) or probe(region='x0:x1,y0:y1,z0:z1')"
+            )
+        box = check_box(region, series.volume_shape)
+        (x0, x1), (y0, y1), (z0, z1) = box
+    n_steps = series.n_steps
+    block = (z1 - z0) * (y1 - y0) * (x1 - x0)
+    nbytes = block * series.dtype.itemsize
+    per_read = max(1, min(MAX_STEPS_PER_READ, READ_BYTES // max(1, nbytes)))
+    values = np.empty(n_steps, np.float64)
+    lows = np.empty(n_steps, np.float64) if box else None
+    highs = np.empty(n_steps, np.float64) if box else None
+    where = (slice(z0, z1), slice(y0, y1), slice(x0, x1))
+    with _steps_meter(n_steps, progress) as advance:
+        for t0 in range(0, n_steps, per_read):
+            t1 = min(n_steps, t0 + per_read)
+            flat = series.read_region(slice(t0, t1), *where).reshape(t1 - t0, block)
+            if box is None:
+                values[t0:t1] = flat[:, 0]
+            else:
+                values[t0:t1] = flat.mean(axis=1, dtype=np.float64)
+                lows[t0:t1] = flat.min(axis=1)  # type: ignore[index]
+                highs[t0:t1] = flat.max(axis=1)  # type: ignore[index]
+            advance(t1 - t0, (t1 - t0) * nbytes)
+    return TimeCurve(
+        steps=np.arange(n_steps),
+        times=tuple(series.times),
+        values=values,
+        min=lows,
+        max=highs,
+        point=point,
+        box=box,
+        source=str(series.path) if series.path is not None else series.source,
+    )
+
+
+@contextlib.contextmanager
+def _steps_meter(total: int, enabled: bool) -> Iterator[Callable[[int, int], None]]:
+    """Yield advance(steps, nbytes); a bar is shown once the work has taken BAR_AFTER_S."""
+    start = time.perf_counter()
+    done = 0
+    tick: Callable[[int], None] | None = None
+    with contextlib.ExitStack() as stack:
+
+        def advance(n: int, nbytes: int) -> None:
+            nonlocal done, tick
+            done += n
+            if tick is not None:
+                for _ in range(n):
+                    tick(nbytes // max(n, 1))
+            elif enabled and done < total and time.perf_counter() - start > BAR_AFTER_S:
+                tick = stack.enter_context(meter(total, "probe", True, done=done, unit="steps"))
+
+        yield advance
+
+
+# -- writing -----------------------------------------------------------------------------------
+def check_suffix(path: str | os.PathLike, allowed: Sequence[str] = SUFFIXES) -> str:
+    """The suffix of `path` ('.csv' or '.png'), lower case; raise for any other."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in allowed:
+        names = " or ".join(allowed)
+        raise InvalidParameterError(
+            f"output {os.fspath(path)!r} must end in {names}; e.g. curve{allowed[0]}"
+        )
+    return suffix
+
+
+def write_curve(
+    curve: TimeCurve,
+    path: str | os.PathLike,
+    window: object = None,
+    title: str | None = None,
+    overwrite: bool = False,
+) -> Path:
+    """Write `curve` as CSV or PNG, as the suffix of `path` says."""
+    if check_suffix(path) == ".csv":
+        return curve.to_csv(path, window, overwrite)
+    return plot_curve(curve, path, window, title, overwrite)
+
+
+def plot_curve(
+    curve: TimeCurve,
+    path: str | os.PathLike,
+    window: object = None,
+    title: str | None = None,
+    overwrite: bool = False,
+) -> Path:
+    """Draw `curve` to a PNG at `path` atomically (matplotlib's Agg canvas, no display)."""
+    check_suffix(path, (".png",))
+    fig = figure(curve, window, title)
+    with atomic_file(path, overwrite) as tmp:
+        fig.savefig(tmp, format="png")
+    return Path(path)
+
+
+def figure(curve: TimeCurve, window: object = None, title: str | None = None):
+    """The curve against its time labels: a voxel's values as a line; a box's mean as a line
+    over its min-max band; the window's span shaded and its steps marked."""
+    from matplotlib.figure import Figure  # no pyplot: no display, no global state
+
+    chosen = curve.window_steps(window)
+    x, xlabel, names = time_axis(curve.times, curve.steps)
+    fig = Figure(figsize=(8, 4.5), dpi=100, layout="constrained")
+    ax = fig.add_subplot()
+    if chosen:
+        text = window if isinstance(window, str) else Selection(chosen, len(x)).describe()
+        label = f"window {text}"
+        if len(x) == 1:
+            ax.axvline(x[0], color="C1", alpha=0.5, linewidth=3, label=label)
+        else:  # from half a step before the window's first step to half one after its last
+            mids = x[:-1] + (x[1:] - x[:-1]) / 2
+            lo = mids[chosen[0] - 1] if chosen[0] > 0 else x[0]
+            hi = mids[chosen[-1]] if chosen[-1] < len(x) - 1 else x[-1]
+            ax.axvspan(lo, hi, color="C1", alpha=0.15, linewidth=0, label=label, zorder=0)
+    marker = "o" if len(curve) <= 60 else None
+    if curve.is_box:
+        ax.fill_between(
+            x, curve.min, curve.max, color="C0", alpha=0.25, linewidth=0, label="min to max"
+        )
+        ax.plot(x, curve.values, color="C0", marker=marker, markersize=3, label="mean")
+    else:
+        ax.plot(x, curve.values, color="C0", marker=marker, markersize=3, label="value")
+    if chosen:
+        idx = np.asarray(chosen)
+        ax.plot(x[idx], curve.values[idx], "o", color="C1", markersize=4, label="window steps")
+    if names is not None:
+        _label_ticks(ax, names)
+    elif np.issubdtype(x.dtype, np.datetime64):
+        from matplotlib.dates import AutoDateLocator, ConciseDateFormatter
+
+        locator = AutoDateLocator()
+        ax.xaxis.set_major_locator(locator)
+        ax.xaxis.set_major_formatter(ConciseDateFormatter(locator))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("mean, min and max over the box" if curve.is_box else "value")
+    where = f" of {Path(curve.source).name}" if curve.source else ""
+    ax.set_title(title if title is not None else f"{curve.describe()}{where}")
+    ax.grid(alpha=0.3)
+    ax.margins(x=0.02)
+    ax.legend(loc="best", fontsize="small")
+    return fig
+
+
+def time_axis(times: Sequence, steps: np.ndarray) -> tuple[np.ndarray, str, list[str] | None]:
+    """(x positions, axis label, tick names) for plotting against the time labels.
+
+    Increasing numbers are their own positions; increasing ISO dates (strings such as
+    '2024-01-01T06:00') are datetime64 positions; any other labels sit at their steps, the
+    ticks named by them. Labels that are the step numbers give an axis named 'step'.
+    """
+    labels = list(times)
+    steps = np.asarray(steps)
+    if labels == [int(s) for s in steps]:
+        return steps.astype(np.float64), "step", None
+    if all(isinstance(t, int | float) and not isinstance(t, bool) for t in labels):
+        x = np.asarray(labels, np.float64)
+        if np.all(np.diff(x) > 0):
+            return x, "time", None
+    elif all(isinstance(t, str) for t in labels):
+        dates = _dates(labels)
+        if dates is not None and np.all(np.diff(dates) > np.timedelta64(0)):
+            return dates, "time", None
+    return steps.astype(np.float64), "time", [str(t) for t in labels]
+
+
+def _dates(labels: list[str]) -> np.ndarray | None:
+    """The labels as datetime64 when every one is an ISO date (YYYY-MM...), else None."""
+    if not all(len(t) >= 7 and t[4:5] == "-" and t[:4].isdigit() for t in labels):
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # numpy warns on time zones: keep them as names
+            dates = np.array(labels, dtype="datetime64[ns]")
+    except (ValueError, TypeError, Warning):
+        return None
+    return None if np.isnat(dates).any() else dates
+
+
+def _label_ticks(ax, names: list[str]) -> None:
+    """Ticks at whole steps, named by the steps' time labels."""
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+    def name(v: float, _pos: int) -> str:
+        i = round(v)
+        return names[i] if abs(v - i) < 1e-6 and 0 <= i < len(names) else ""
+
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=8, integer=True))
+    ax.xaxis.set_major_formatter(FuncFormatter(name))
+    if max(len(n) for n in names) > 6:
+        ax.tick_params(axis="x", labelrotation=30)
