@@ -4,20 +4,28 @@
 //   state.js       what the page shows (S, window.viewer) and small helpers
 //   connection.js  the socket: send, coalesced updates
 //   views.js       the view panels, orbit/zoom/probe input, incoming frames
-//   timeline.js    the window brush, play, arrow keys
+//   timeline.js    the window brush, play (speed, loop/bounce)
+//   orientation.js the axes triads, camera reset, standard views
+//   keys.js        the keyboard shortcuts (one table) and the `?` list
 //   tf_editor.js   the data transfer function editor
 //   probe.js       the v(t) plot of a probed voxel
 //   controls.js    the other controls, filled from the server's choices
 
 import { connect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, syncControls } from './controls.js';
+import { bindKeys } from './keys.js';
+import { bindOrientation, drawTriads } from './orientation.js';
 import { clearProbe, drawProbe, onProbe } from './probe.js';
 import { $, S, setStatus, viewer } from './state.js';
 import { bindTF, drawTF } from './tf_editor.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
 import { fillSelect, layoutViews, onFrame, showMark } from './views.js';
 
-// The first message: the data sets, and the modes, menus, defaults and bounds to offer.
+// After a reconnect: the state the page had, sent back once the data set is open again.
+let restore = null;
+
+// The first message on every socket: the data sets, and the modes, menus, defaults and bounds
+// to offer. On a socket opened again (the server restarted) the page reopens its data set.
 function onInfo(msg) {
   S.choices = msg;
   fillControls(msg);
@@ -25,7 +33,9 @@ function onInfo(msg) {
     $('dataset'),
     msg.datasets.map((d) => ({ name: d.index, label: `${d.name} (${d.shape.join('×')})` })),
   );
-  send({ type: 'open', dataset: 0 });
+  const again = S.info && S.state && msg.datasets.some((d) => d.index === S.info.index);
+  restore = again ? { state: S.state, zoom: S.zoom, point: S.selectedPoint, camera: S.initialCamera } : null;
+  send({ type: 'open', dataset: again ? S.info.index : 0 });
 }
 
 function onDataset(msg) {
@@ -33,10 +43,21 @@ function onDataset(msg) {
   S.state = msg.state;
   S.zoom = [0, 1];
   S.selectedPoint = Math.min(1, S.state.data_tf.points.length - 1);
+  S.initialCamera = { ...msg.state.camera };
+  if (restore) {
+    // Every field the server describes, as the page had it before the socket closed.
+    for (const k of Object.keys(msg.state)) if (k in restore.state) S.state[k] = restore.state[k];
+    S.zoom = restore.zoom;
+    S.selectedPoint = Math.min(restore.point, S.state.data_tf.points.length - 1);
+    if (restore.camera) S.initialCamera = restore.camera;
+  }
+  const restored = restore ? { ...S.state } : null;
+  restore = null;
   $('dataset').value = msg.index;
   syncControls();
   const size = layoutViews();
-  update({ size, views: S.state.views }, 'full');
+  update(Object.assign(restored || {}, { size, views: S.state.views }), 'full');
+  drawTriads();
   drawTimeline();
   drawTF();
   clearProbe(); // the old voxel's curve does not belong on the new series' axis
@@ -109,4 +130,6 @@ $('side-toggle').addEventListener('click', () => {
 bindTimeline();
 bindTF();
 bindControls();
+bindOrientation();
+bindKeys();
 connect({ onText, onFrame });

@@ -1,5 +1,6 @@
-// The WebSocket to the server. The server renders the newest state only, so the page may send
-// freely; it still coalesces input to one update message per animation frame. While a frame
+// The WebSocket to the server, opened again after it closes (backoff, status shown). The server
+// renders the newest state only, so the page may send freely; it still coalesces input to one
+// update message per animation frame. While a frame
 // is awaited for longer than BUSY_AFTER_MS (a mode's first use compiles its kernels, a few
 // seconds) the #busy indicator says so, with the time waited.
 
@@ -17,18 +18,47 @@ let ws = null;
 let nextId = 1;
 export const sentAt = new Map(); // request id -> when it was sent (for round trips)
 
-// Opens the socket; text messages go to onText(parsed JSON), binary frames to onFrame.
-export function connect({ onText, onFrame }) {
+// Opens the socket; text messages go to onText(parsed JSON), binary frames to onFrame. When it
+// closes (the server stopped or restarted, the network dropped) it is opened again after a
+// growing pause (RETRY_MS, then its last value over and over), the wait shown in the status
+// line; the page then sends its state back (app.js), so the view returns as it was.
+const RETRY_MS = [500, 1000, 2000, 4000, 8000];
+let handlers = null;
+let attempt = 0;
+let retryTimer = 0;
+
+export function connect(h) {
+  handlers = h;
+  open();
+}
+
+function open() {
   const proto = location.protocol === 'https:' ? 'wss:' : 'ws:';
   const q = token ? `?token=${encodeURIComponent(token)}` : '';
   ws = new WebSocket(`${proto}//${location.host}/ws${q}`);
   ws.binaryType = 'arraybuffer';
-  ws.onmessage = (e) => (typeof e.data === 'string' ? onText(JSON.parse(e.data)) : onFrame(e.data));
+  ws.onopen = () => {
+    attempt = 0;
+    viewer.connects += 1;
+    document.body.dataset.connection = 'open';
+    if (viewer.connects > 1) setStatus('reconnected: restoring the view…');
+  };
+  ws.onmessage = (e) =>
+    typeof e.data === 'string' ? handlers.onText(JSON.parse(e.data)) : handlers.onFrame(e.data);
   ws.onclose = () => {
-    frameArrived(); // nothing more will come
-    setStatus('disconnected: reload the page (is the server still running?)', true);
+    frameArrived(); // nothing more will come on this socket
+    viewer.sent = 0; // request ids start again on the next socket's frames
+    const wait = RETRY_MS[Math.min(attempt, RETRY_MS.length - 1)];
+    attempt += 1;
+    const hint = attempt > RETRY_MS.length ? ' (restarted with another token? open the URL it printed)' : '';
+    setStatus(`disconnected: server unreachable; reconnecting in ${(wait / 1000).toFixed(1)} s (attempt ${attempt})${hint}`, true);
+    document.body.dataset.connection = 'retrying';
+    clearTimeout(retryTimer);
+    retryTimer = setTimeout(open, wait);
   };
 }
+
+export const connected = () => !!ws && ws.readyState === WebSocket.OPEN;
 
 export function send(msg) {
   if (!ws || ws.readyState !== WebSocket.OPEN) return 0;

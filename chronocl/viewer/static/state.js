@@ -13,11 +13,14 @@ export const S = {
   selectedView: 0,
   legend: [],
   playing: false,
+  initialCamera: null, // the data set's opening camera (camera reset returns to it)
 };
 
 export const viewer = (window.viewer = {
   frames: 0, full: 0, sent: 0, last: null, errors: [], probe: null, downloads: [], S,
   levels: [],  // the level of each frame received, latest last (at most 50)
+  playLog: [],  // {at, t0} for each slide play made, latest last (at most 200)
+  connects: 0,  // sockets opened (1 + reconnects)
 });
 
 // A canvas sized to its box in device pixels; returns its context (in CSS pixels) and size.

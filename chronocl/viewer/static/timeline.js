@@ -1,5 +1,6 @@
 // The timeline under the views: per-step sparklines of the data, the window brush (drag to
-// select, move or resize it), stride, play, and the arrow keys that slide the window.
+// select, move or resize it), stride, and play (speed in slides a second, loop or bounce).
+// Its keys (arrows, space, +, -, b) are in keys.js's table.
 
 import { update } from './connection.js';
 import { $, S, canvasSize, viewer } from './state.js';
@@ -73,7 +74,7 @@ function setWindow(t0, t1, stride, quality = 'full') {
   return true;
 }
 
-function slide(k) {
+export function slide(k) {
   const { t0, t1, stride } = S.state.window;
   const T = S.info.shape.t;
   let shift = k * stride;
@@ -133,30 +134,71 @@ export function bindTimeline() {
     setWindow(S.state.window.t0, S.state.window.t1, s);
   });
   $('play').addEventListener('click', () => setPlaying(!S.playing));
-  document.addEventListener('keydown', (e) => {
-    if (!S.info || e.target.closest('input, select, textarea')) return;
-    if (e.key === 'ArrowRight') slide(1);
-    else if (e.key === 'ArrowLeft') slide(-1);
-    else if (e.key === ' ') setPlaying(!S.playing);
-    else return;
-    e.preventDefault();
-  });
+  $('play-mode').addEventListener('change', () => setPlayMode($('play-mode').value));
+  $('play-speed').addEventListener('change', () => setPlaySpeed(Number($('play-speed').value)));
 }
 
+// ------------------------------------------------------------------ play
+// Play slides the window by one stride at `play.speed` slides a second (fewer when frames take
+// longer: it waits for the frame of each slide before the next). At the end of the series
+// 'loop' starts again from the beginning; 'bounce' turns back (and again at the start).
+export const play = { speed: 10, mode: 'loop', dir: 1, last: 0 };
+export const SPEED_RANGE = [0.5, 60];
 let playTimer = 0;
-function setPlaying(on) {
+
+export function setPlaying(on) {
   S.playing = on;
   $('play').textContent = on ? '❚❚' : '▶';
-  clearInterval(playTimer);
-  if (!on) return;
-  playTimer = setInterval(() => {
-    // Wait for the frame of the last request before sliding again.
-    if (viewer.last && viewer.last.id < viewer.sent) return;
-    if (!slide(1)) {
+  clearTimeout(playTimer);
+  if (on) {
+    play.last = 0;
+    tick();
+  }
+}
+
+export function togglePlaying() {
+  setPlaying(!S.playing);
+}
+
+export function setPlayMode(mode) {
+  play.mode = mode === 'bounce' ? 'bounce' : 'loop';
+  if (play.mode === 'loop') play.dir = 1;
+  $('play-mode').value = play.mode;
+}
+
+export function setPlaySpeed(v) {
+  const [lo, hi] = SPEED_RANGE;
+  play.speed = Number.isFinite(v) ? Math.max(lo, Math.min(hi, v)) : play.speed;
+  $('play-speed').value = play.speed;
+}
+
+// Faster or slower by a factor (the + and - keys).
+export function scalePlaySpeed(f) {
+  setPlaySpeed(+(play.speed * f).toPrecision(2));
+}
+
+function tick() {
+  if (!S.playing || !S.info) return;
+  const now = performance.now();
+  const due = play.last + 1000 / play.speed;
+  // Wait for the frame of the last slide, and for the slide's time to come.
+  if ((viewer.last && viewer.last.id < viewer.sent) || now < due) {
+    playTimer = setTimeout(tick, Math.max(5, Math.min(50, due - now)));
+    return;
+  }
+  play.last = now;
+  if (!slide(play.dir)) {
+    if (play.mode === 'bounce') {
+      play.dir = -play.dir;
+      slide(play.dir);
+    } else {
       const { t0, t1, stride } = S.state.window;
       setWindow(0, t1 - t0, stride);
     }
-  }, 90);
+  }
+  viewer.playLog.push({ at: now, t0: S.state.window.t0 });
+  if (viewer.playLog.length > 200) viewer.playLog.shift();
+  playTimer = setTimeout(tick, 1000 / play.speed);
 }
 
 // Page coordinates of a step on the timeline, for scripted use (the browser tests).

@@ -2,6 +2,7 @@
 // pointer, the probe click and its marker, and the frames the server sends into them.
 
 import { frameArrived, send, sentAt, settleLater, update } from './connection.js';
+import { drawTriads } from './orientation.js';
 import { drawProbe } from './probe.js';
 import { $, S, clamp, setStatus, viewer } from './state.js';
 import { drawTimeline } from './timeline.js';
@@ -69,7 +70,7 @@ function makePanel(i) {
     '<select class="mode" title="Integration mode"></select>' +
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
     '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
-    '<div class="probe-mark"></div>';
+    '<div class="probe-mark"></div><canvas class="triad"></canvas>';
   $('views').appendChild(el);
   const p = {
     el,
@@ -79,6 +80,7 @@ function makePanel(i) {
     label: el.querySelector('.view-label'),
     note: el.querySelector('.view-note'),
     mark: el.querySelector('.probe-mark'),
+    triad: el.querySelector('.triad'),
   };
   fillSelect(p.mode, S.choices.modes);
   p.mode.addEventListener('change', () => {
@@ -117,6 +119,7 @@ function bindOrbit(p, i) {
     cam.azimuth = start.cam.azimuth - dx * 0.5;
     cam.elevation = clamp(start.cam.elevation + dy * 0.5, ranges().elevation);
     update({ camera: cam }, 'preview');
+    drawTriads();
   });
   const end = (e) => {
     if (!start) return;
@@ -211,6 +214,7 @@ export function onFrame(buf) {
   document.body.dataset.refining = header.refining ? 'yes' : 'no';
   if (header.id === null || header.id >= viewer.sent) frameArrived();
   showTimings(header);
+  drawTriads();
   drawTimeline();
   drawProbe();
 }

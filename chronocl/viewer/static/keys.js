@@ -1,0 +1,71 @@
+// The keyboard shortcuts: one table, SHORTCUTS, that both binds the keys (the page's only
+// keydown handler) and fills the list `?` opens, so the list cannot miss a key the page binds.
+// Keys are ignored while typing in a field and when Ctrl, Alt or Meta is held.
+
+import { resetCamera, standardView, toggleTriad } from './orientation.js';
+import { $, S, viewer } from './state.js';
+import { play, scalePlaySpeed, setPlayMode, slide, togglePlaying } from './timeline.js';
+
+// keys: KeyboardEvent.key values; label: how the list shows them.
+export const SHORTCUTS = [
+  { keys: [' '], label: 'Space', does: 'play / pause', run: togglePlaying },
+  { keys: ['ArrowRight'], label: '→', does: 'slide the window one stride later', run: () => slide(1) },
+  { keys: ['ArrowLeft'], label: '←', does: 'slide the window one stride earlier', run: () => slide(-1) },
+  { keys: ['+', '='], label: '+', does: 'play faster (×1.5 steps/s)', run: () => scalePlaySpeed(1.5) },
+  { keys: ['-', '_'], label: '−', does: 'play slower (÷1.5 steps/s)', run: () => scalePlaySpeed(1 / 1.5) },
+  {
+    keys: ['b'],
+    label: 'B',
+    does: 'play mode: loop ↔ bounce',
+    run: () => setPlayMode(play.mode === 'loop' ? 'bounce' : 'loop'),
+  },
+  { keys: ['r'], label: 'R', does: 'reset the camera', run: resetCamera },
+  { keys: ['x'], label: 'X', does: 'look along +X', run: () => standardView('+x') },
+  { keys: ['X'], label: 'Shift+X', does: 'look along −X', run: () => standardView('-x') },
+  { keys: ['y'], label: 'Y', does: 'look along +Y (from below)', run: () => standardView('+y') },
+  { keys: ['Y'], label: 'Shift+Y', does: 'look along −Y (from above)', run: () => standardView('-y') },
+  { keys: ['z'], label: 'Z', does: 'look along +Z (from behind)', run: () => standardView('+z') },
+  { keys: ['Z'], label: 'Shift+Z', does: 'look along −Z (the front view)', run: () => standardView('-z') },
+  { keys: ['a'], label: 'A', does: 'show / hide the axes triads', run: toggleTriad },
+  { keys: ['?'], label: '?', does: 'show / hide this list', run: () => showHelp($('help').hidden) },
+  { keys: ['Escape'], label: 'Esc', does: 'close this list', run: () => showHelp(false), always: true },
+];
+
+viewer.shortcuts = SHORTCUTS.map((s) => ({ keys: s.keys, label: s.label, does: s.does }));
+
+export function showHelp(on) {
+  $('help').hidden = !on;
+  $('help-toggle').setAttribute('aria-expanded', String(on));
+}
+
+function fillHelp() {
+  const rows = SHORTCUTS.map((s) => {
+    const tr = document.createElement('tr');
+    const k = document.createElement('td');
+    const kbd = document.createElement('kbd');
+    kbd.textContent = s.label;
+    k.appendChild(kbd);
+    const d = document.createElement('td');
+    d.textContent = s.does;
+    tr.append(k, d);
+    tr.dataset.keys = s.keys.join(' ');
+    return tr;
+  });
+  $('help-keys').replaceChildren(...rows);
+}
+
+export function bindKeys() {
+  fillHelp();
+  const byKey = new Map();
+  for (const s of SHORTCUTS) for (const k of s.keys) byKey.set(k, s);
+  document.addEventListener('keydown', (e) => {
+    if (e.ctrlKey || e.altKey || e.metaKey) return;
+    if (e.target.closest && e.target.closest('input, select, textarea')) return;
+    const s = byKey.get(e.key);
+    if (!s || (!S.info && !s.always && s.keys[0] !== '?')) return;
+    s.run();
+    e.preventDefault();
+  });
+  $('help-toggle').addEventListener('click', () => showHelp($('help').hidden));
+  $('help-close').addEventListener('click', () => showHelp(false));
+}

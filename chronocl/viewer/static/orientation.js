@@ -1,0 +1,142 @@
+// Orientation: the axes triad drawn in a corner of every view (it turns with the camera),
+// camera reset (the data set's opening camera) and the six standard views, named as in
+// ParaView: "+X" looks along +X (the eye on the -X side), and so on.
+//
+// The triad is computed here from the camera's azimuth and elevation with the same basis the
+// server renders with (chronocl/render/camera.py: eye_direction, _up_for, look_at), so it
+// shows the world axes of the frame being drawn: x right, y up, z towards the viewer at
+// azimuth = elevation = 0.
+
+import { update } from './connection.js';
+import { $, S } from './state.js';
+import { panels } from './views.js';
+
+const POLE = 89.9; // the protocol's elevation limit
+
+// Camera angles of each standard view (view direction = -eye direction).
+export const STANDARD_VIEWS = {
+  '+x': { azimuth: -90, elevation: 0, label: '+X', title: 'look along +X (from the −X side)' },
+  '-x': { azimuth: 90, elevation: 0, label: '−X', title: 'look along −X (from the +X side)' },
+  '+y': { azimuth: 0, elevation: -POLE, label: '+Y', title: 'look along +Y (from below)' },
+  '-y': { azimuth: 0, elevation: POLE, label: '−Y', title: 'look along −Y (from above)' },
+  '+z': { azimuth: 180, elevation: 0, label: '+Z', title: 'look along +Z (from behind)' },
+  '-z': { azimuth: 0, elevation: 0, label: '−Z', title: 'look along −Z (from the front)' },
+};
+
+export const triad = { shown: true };
+
+function setCamera(fields) {
+  if (!S.state) return;
+  update({ camera: { ...S.state.camera, ...fields } }, 'full');
+  drawTriads();
+}
+
+// The opening camera of the data set (projection kept).
+export function resetCamera() {
+  if (!S.initialCamera) return;
+  const { azimuth, elevation, zoom, fov } = S.initialCamera;
+  setCamera({ azimuth, elevation, zoom, fov });
+}
+
+// A standard view at the opening zoom, so the same key always gives the same frame.
+export function standardView(name) {
+  const v = STANDARD_VIEWS[name];
+  if (!v || !S.initialCamera) return;
+  setCamera({ azimuth: v.azimuth, elevation: v.elevation, zoom: S.initialCamera.zoom });
+}
+
+export function toggleTriad() {
+  triad.shown = !triad.shown;
+  $('triad-on').checked = triad.shown;
+  drawTriads();
+}
+
+// Screen right (s), screen up (u) and towards-the-eye (e) vectors for the camera.
+function basis(cam) {
+  const az = (cam.azimuth * Math.PI) / 180;
+  const el = (cam.elevation * Math.PI) / 180;
+  const e = [Math.cos(el) * Math.sin(az), Math.sin(el), Math.cos(el) * Math.cos(az)];
+  const up = Math.abs(e[1]) > 0.999 ? [0, 0, e[1] > 0 ? -1 : 1] : [0, 1, 0];
+  const f = e.map((c) => -c);
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  let s = cross(f, up);
+  const n = Math.hypot(...s);
+  s = s.map((c) => c / n);
+  return { s, u: cross(s, f), e };
+}
+
+const AXES = [
+  { name: 'x', colour: '#ff5a5a' },
+  { name: 'y', colour: '#5ad65a' },
+  { name: 'z', colour: '#5a9bff' },
+];
+
+function drawTriad(canvas, cam) {
+  const dpr = window.devicePixelRatio || 1;
+  const size = canvas.clientWidth || 64;
+  if (canvas.width !== Math.round(size * dpr)) {
+    canvas.width = Math.round(size * dpr);
+    canvas.height = Math.round(size * dpr);
+  }
+  const ctx = canvas.getContext('2d');
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  ctx.clearRect(0, 0, size, size);
+  canvas.hidden = !triad.shown;
+  if (!triad.shown) return;
+  const { s, u, e } = basis(cam);
+  const c = size / 2;
+  const r = size * 0.34;
+  // Farthest axis first, so the nearer ones are drawn over it.
+  const order = AXES.map((a, i) => ({ ...a, x: s[i], y: u[i], z: e[i] })).sort((a, b) => a.z - b.z);
+  ctx.lineCap = 'round';
+  ctx.font = `bold ${Math.round(size * 0.19)}px system-ui, sans-serif`;
+  ctx.textAlign = 'center';
+  ctx.textBaseline = 'middle';
+  for (const a of order) {
+    const x = c + a.x * r;
+    const y = c - a.y * r;
+    ctx.globalAlpha = a.z < -0.2 ? 0.55 : 1; // pointing away from the viewer
+    ctx.strokeStyle = 'rgba(0,0,0,0.7)';
+    ctx.lineWidth = 4.5;
+    ctx.beginPath();
+    ctx.moveTo(c, c);
+    ctx.lineTo(x, y);
+    ctx.stroke();
+    ctx.strokeStyle = a.colour;
+    ctx.lineWidth = 2.5;
+    ctx.stroke();
+    const lx = c + a.x * (r + size * 0.12);
+    const ly = c - a.y * (r + size * 0.12);
+    ctx.lineWidth = 3;
+    ctx.strokeStyle = 'rgba(0,0,0,0.75)';
+    ctx.strokeText(a.name, lx, ly);
+    ctx.fillStyle = a.colour;
+    ctx.fillText(a.name, lx, ly);
+  }
+  ctx.globalAlpha = 1;
+  canvas.dataset.camera = `${cam.azimuth},${cam.elevation}`;
+}
+
+// Every view's triad, for the page's current camera.
+export function drawTriads() {
+  if (!S.state) return;
+  for (const p of panels) if (p.triad) drawTriad(p.triad, S.state.camera);
+}
+
+export function bindOrientation() {
+  $('reset-camera').addEventListener('click', resetCamera);
+  const box = $('std-views');
+  for (const [name, v] of Object.entries(STANDARD_VIEWS)) {
+    const b = document.createElement('button');
+    b.className = 'mini';
+    b.dataset.view = name;
+    b.textContent = v.label;
+    b.title = `${v.title} [${name.startsWith('-') ? `Shift+${name[1].toUpperCase()}` : name[1]}]`;
+    b.addEventListener('click', () => standardView(name));
+    box.appendChild(b);
+  }
+  $('triad-on').addEventListener('change', () => {
+    triad.shown = $('triad-on').checked;
+    drawTriads();
+  });
+}

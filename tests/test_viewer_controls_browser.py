@@ -1,0 +1,244 @@
+"""The viewer page's orientation and time controls in Chromium: the axes triad follows the
+camera, a standard view changes the frame and gives the same frame when pressed again, camera
+reset returns the opening frame; play at a set speed (steps/s) and in bounce mode; `?` lists
+every key the page binds and Escape closes the list; after the server restarts on the same
+port the page reconnects by itself and shows the view it had.
+
+Screenshots go to $CHRONOCL_SCREENSHOTS (else the test's temporary folder).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import statistics
+
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("playwright.sync_api")
+
+from chronocl.viewer.server import ViewerServer
+
+from .test_viewer_page_browser import Page, browser, server, shots_dir  # noqa: F401
+from .viewer_helpers import CHROMIUM
+
+pytestmark = pytest.mark.skipif(
+    not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
+)
+
+TRIAD = """() => [...document.querySelectorAll('.view .triad')].map(c => {
+  // Coloured pixels of each axis (red x, green y, blue z) in the triad's canvas.
+  const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+  const n = [0, 0, 0];
+  for (let k = 0; k < px.length; k += 4) {
+    if (px[k + 3] < 200) continue;
+    const [r, g, b] = [px[k], px[k + 1], px[k + 2]];
+    if (r > 200 && g < 120 && b < 120) n[0]++;
+    else if (g > 180 && r < 120 && b < 120) n[1]++;
+    else if (b > 200 && r < 120) n[2]++;
+  }
+  return {visible: !c.hidden && c.offsetWidth > 0, camera: c.dataset.camera, n};
+})"""
+
+
+def press(p: Page, key: str) -> dict:
+    before = p.last()
+    p.page.keyboard.press(key)
+    return p.settle(before)
+
+
+def test_standard_views_reset_and_the_axes_triad(browser, server, tmp_path):  # noqa: F811
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        opening = p.last()["digest"]
+        cam0 = p.eval("() => window.viewer.S.state.camera")
+        triad = p.eval(TRIAD)
+        assert triad[0]["visible"] and all(n > 20 for n in triad[0]["n"])
+
+        # +X: the frame changes; the same view again gives the same frame.
+        after_x = press(p, "x")
+        assert after_x["digest"] != opening
+        cam = p.eval("() => window.viewer.S.state.camera")
+        assert (cam["azimuth"], cam["elevation"]) == (-90, 0)
+        # Looking along +X, the x axis points away: its arm is foreshortened to (nearly) a dot.
+        along_x = p.eval(TRIAD)[0]
+        assert along_x["camera"] == "-90,0"
+        assert along_x["n"][0] < triad[0]["n"][0] / 2
+        # The buttons do what the keys do; back to +X gives +X's frame.
+        page.click('#std-views button[data-view="-y"]')
+        top = p.settle(after_x)
+        assert top["digest"] not in (opening, after_x["digest"])
+        page.click('#std-views button[data-view="+x"]')
+        again = p.settle(top)
+        assert again["digest"] == after_x["digest"]
+        press(p, "Shift+Z")  # then orbit and zoom away, and reset
+        box = page.locator(".view img").first.bounding_box()
+        c = {"x": box["x"] + box["width"] / 2, "y": box["y"] + box["height"] / 2}
+        before = p.last()
+        page.mouse.move(c["x"], c["y"])
+        page.mouse.down()
+        page.mouse.move(c["x"] + 120, c["y"] + 50, steps=6)
+        page.mouse.up()
+        page.mouse.wheel(0, -300)
+        p.settle(before)
+        page.wait_for_timeout(400)  # the wheel's settle timer
+        moved = p.settle({"seq": 0})
+        assert moved["digest"] != opening
+        reset = press(p, "r")
+        assert reset["digest"] == opening
+        assert p.eval("() => window.viewer.S.state.camera") == cam0
+
+        # The triad can be hidden (A) and shown again.
+        page.keyboard.press("a")
+        assert not p.eval(TRIAD)[0]["visible"]
+        page.keyboard.press("a")
+        assert p.eval(TRIAD)[0]["visible"]
+        # Every view has its triad, turned as the camera is.
+        before = p.last()
+        page.select_option("#nviews", "4")
+        p.settle(before)
+        press(p, "y")
+        triads = p.eval(TRIAD)
+        assert len(triads) == 4 and all(t["visible"] and t["camera"] == "0,-89.9" for t in triads)
+        assert all(t["n"] == triads[0]["n"] for t in triads)
+        press(p, "r")
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-triad-1400x900.png"))
+    finally:
+        p.close()
+
+
+def test_play_speed_and_bounce(browser, server):  # noqa: F811
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        T = p.eval("() => window.viewer.S.info.shape.t")
+        # A 4-step window, so play runs over several slides before turning.
+        before = p.last()
+        p.eval(
+            """() => { const v = window.viewer; v.S.state.window = {t0: 0, t1: 4, stride: 1}; }"""
+        )
+        page.keyboard.press("ArrowRight")  # sends the window (1, 5)
+        p.settle(before)
+        page.select_option("#play-mode", "bounce")
+
+        def run(speed: float, seconds: float) -> list[dict]:
+            page.fill("#play-speed", str(speed))
+            page.dispatch_event("#play-speed", "change")
+            p.eval("() => { window.viewer.playLog.length = 0; }")
+            page.click("#play")
+            page.wait_for_timeout(seconds * 1000)
+            page.click("#play")
+            return p.eval("() => window.viewer.playLog")
+
+        slow = run(2, 2.6)
+        fast = run(8, 2.6)
+
+        def gap(log: list[dict]) -> float:
+            return statistics.median(b["at"] - a["at"] for a, b in itertools.pairwise(log))
+
+        assert len(slow) >= 4 and len(fast) >= 8
+        assert 450 <= gap(slow) <= 700, gap(slow)
+        assert gap(fast) < 0.6 * gap(slow), (gap(fast), gap(slow))
+
+        # Bounce: the window turns back at the end of the series (and at its start), never
+        # jumping from one end to the other as loop does.
+        t0s = [e["t0"] for e in slow + fast]
+        last = T - 4
+        assert last in t0s and 0 in t0s
+        assert all(abs(a - b) == 1 for a, b in itertools.pairwise(t0s) if a != b)
+        k = t0s.index(last)
+        assert t0s[k + 1] == last - 1
+
+        # Loop: from the last window play starts again at 0.
+        page.select_option("#play-mode", "loop")
+        p.eval("() => { window.viewer.playLog.length = 0; }")
+        page.click("#play")
+        page.wait_for_function(
+            f"() => window.viewer.playLog.some((e, i, l) => i > 0 && l[i-1].t0 === {last}"
+            " && e.t0 === 0)",
+            timeout=20_000,
+        )
+        page.click("#play")
+    finally:
+        p.close()
+
+
+def test_question_mark_lists_every_shortcut_and_escape_closes_it(browser, server, tmp_path):  # noqa: F811
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        help_ = page.locator("#help")
+        assert not help_.is_visible()
+        page.keyboard.press("?")
+        assert help_.is_visible()
+        table = p.eval("() => window.viewer.shortcuts")
+        rows = p.eval(
+            """() => [...document.querySelectorAll('#help-keys tr')].map(
+                 tr => [tr.dataset.keys, tr.cells[0].innerText, tr.cells[1].innerText])"""
+        )
+        assert [r[0] for r in rows] == [" ".join(s["keys"]) for s in table]
+        assert [(r[1], r[2]) for r in rows] == [(s["label"], s["does"]) for s in table]
+        bound = {k for s in table for k in s["keys"]}
+        # Every key the page reacts to is in the table (the ones the tests above press too).
+        assert {
+            " ",
+            "ArrowLeft",
+            "ArrowRight",
+            "r",
+            "x",
+            "X",
+            "y",
+            "Y",
+            "z",
+            "Z",
+            "a",
+            "b",
+        } <= bound
+        assert {"+", "-", "?", "Escape"} <= bound
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-shortcuts-1400x900.png"))
+        page.keyboard.press("Escape")
+        assert not help_.is_visible()
+        page.click("#help-toggle")  # the header's ? button opens it too
+        assert help_.is_visible()
+        page.keyboard.press("?")
+        assert not help_.is_visible()
+    finally:
+        p.close()
+
+
+def test_page_reconnects_after_a_server_restart(browser, tmp_path):  # noqa: F811
+    from .viewer_helpers import make_stores
+
+    stores = make_stores(tmp_path)
+    first = ViewerServer(stores)
+    first.start()
+    second = None
+    p = Page(browser, first, 1400, 900)
+    try:
+        page = p.page
+        page.evaluate("() => { window.notReloaded = true; }")
+        before = press(p, "x")  # a view other than the opening one, to be restored
+        first.stop()
+        page.wait_for_function(
+            "() => document.body.dataset.connection === 'retrying'", timeout=20_000
+        )
+        assert "reconnecting" in page.inner_text("#status")
+        second = ViewerServer(stores, port=first.port, token=first.token)
+        second.start()
+        page.wait_for_function(
+            "([n]) => window.viewer.connects === 2 && window.viewer.frames > n",
+            arg=[p.eval("() => window.viewer.frames")],
+            timeout=30_000,
+        )
+        after = p.settle({"seq": 0})
+        assert page.evaluate("() => window.notReloaded") is True
+        cam = p.eval("() => window.viewer.S.state.camera")
+        assert (cam["azimuth"], cam["elevation"]) == (-90, 0)
+        assert after["digest"] == before["digest"]  # the same view as before the restart
+        p.problems.clear()  # the refused reconnects are logged by the browser, not errors
+    finally:
+        p.close()
+        if second is not None:
+            second.stop()
