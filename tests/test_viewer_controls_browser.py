@@ -242,3 +242,26 @@ def test_page_reconnects_after_a_server_restart(browser, tmp_path):  # noqa: F81
         p.close()
         if second is not None:
             second.stop()
+
+
+def test_the_token_can_come_from_the_environment(monkeypatch, tmp_path):
+    """`chronocl view` restarted with the same $CHRONOCL_VIEWER_TOKEN and --port is a server
+    an open page reconnects to (a random token would refuse it)."""
+    from chronocl.core.errors import InvalidParameterError
+    from chronocl.viewer.server import TOKEN_ENV
+
+    monkeypatch.setenv(TOKEN_ENV, "kept-across-restarts")
+    srv = ViewerServer(datasets=[])
+    try:
+        assert srv.token == "kept-across-restarts" and srv.url.endswith("=kept-across-restarts")
+    finally:
+        srv.sock.close()
+        srv.downloads.close()
+    given = ViewerServer(datasets=[], token="given-wins-here")
+    given.sock.close()
+    given.downloads.close()
+    assert given.token == "given-wins-here"
+    for bad in ("short", "has space in it", "amp&ersand&token"):
+        monkeypatch.setenv(TOKEN_ENV, bad)
+        with pytest.raises(InvalidParameterError, match=TOKEN_ENV):
+            ViewerServer(datasets=[])

@@ -10,12 +10,16 @@ starts; a bad one raises the ChronoclError naming it.
     server = ViewerServer(["vortex.zarr"])   # 127.0.0.1, a free port
     print(server.url)                        # http://127.0.0.1:PORT/?token=...
     server.run()                             # or start() / stop() on a thread
+
+The token is random unless given, or set in $CHRONOCL_VIEWER_TOKEN: a server restarted on the
+same port with the same token is one an open page reconnects to by itself.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import re
 import secrets
 import socket
 import sys
@@ -30,6 +34,7 @@ from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
 from chronocl.viewer.saving import Downloads
 
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
+TOKEN_ENV = "CHRONOCL_VIEWER_TOKEN"
 MAX_CLIENTS_LIMIT = 1000
 
 
@@ -107,6 +112,13 @@ class ViewerServer:
     ) -> None:
         import uvicorn
 
+        if token is None and os.environ.get(TOKEN_ENV):
+            token = os.environ[TOKEN_ENV]
+            if not re.fullmatch(r"[A-Za-z0-9_-]{8,}", token):
+                raise InvalidParameterError(
+                    f"${TOKEN_ENV} must be at least 8 letters, digits, '_' or '-' "
+                    "(it goes into the URL); unset it for a random token"
+                )
         check_options(
             host=host,
             port=port,
