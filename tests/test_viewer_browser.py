@@ -12,16 +12,11 @@ playwright_api = pytest.importorskip("playwright.sync_api")
 
 from chronocl import modes  # noqa: E402
 
-from .viewer_helpers import BROWSER_ARGS, CHROMIUM, make_stores, start_server  # noqa: E402
+from .viewer_helpers import CHROMIUM, SETTLED_FRAME, launch_browser, make_stores, start_server  # noqa: E402
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
 )
-
-NEW_FULL_FRAME = """([seq]) => {
-  const v = window.viewer, l = v && v.last;
-  return !!l && l.seq > seq && l.quality === 'full' && l.id >= v.sent && !l.refining;
-}"""
 
 
 @pytest.fixture(scope="module")
@@ -33,10 +28,7 @@ def server(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def browser():
-    with playwright_api.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=BROWSER_ARGS)
-        yield b
-        b.close()
+    yield from launch_browser()
 
 
 @pytest.fixture
@@ -60,7 +52,7 @@ def last(page) -> dict:
 def settle(page, before: dict) -> dict:
     """Wait for the final frame (full quality, level and size) answering the newest request;
     returns viewer.last."""
-    page.wait_for_function(NEW_FULL_FRAME, arg=[before["seq"]], timeout=60_000)
+    page.wait_for_function(SETTLED_FRAME, arg=[before["seq"]], timeout=60_000)
     return last(page)
 
 

@@ -22,16 +22,18 @@ playwright_api = pytest.importorskip("playwright.sync_api")
 from chronocl.viewer import frames  # noqa: E402
 from chronocl.viewer import worker as worker_module  # noqa: E402
 
-from .viewer_helpers import BROWSER_ARGS, CHROMIUM, Client, make_stores, start_server  # noqa: E402
+from .viewer_helpers import (  # noqa: E402
+    CHROMIUM,
+    SETTLED_FRAME,
+    Client,
+    launch_browser,
+    make_stores,
+    start_server,
+)
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
 )
-
-SETTLED = """([seq]) => {
-  const v = window.viewer, l = v && v.last;
-  return !!l && l.seq > seq && l.quality === 'full' && l.id >= v.sent && !l.refining;
-}"""
 
 
 @pytest.fixture(scope="module")
@@ -43,10 +45,7 @@ def server(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def browser():
-    with playwright_api.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=BROWSER_ARGS)
-        yield b
-        b.close()
+    yield from launch_browser()
 
 
 class Page:
@@ -77,7 +76,7 @@ class Page:
         """Wait for the final frame (full quality, level and size) answering the newest
         request; returns viewer.last."""
         seq = 0 if before is None else before["seq"]
-        self.page.wait_for_function(SETTLED, arg=[seq], timeout=60_000)
+        self.page.wait_for_function(SETTLED_FRAME, arg=[seq], timeout=60_000)
         return self.last()
 
     def close(self) -> None:

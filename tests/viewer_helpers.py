@@ -19,6 +19,23 @@ BROWSER_ARGS = [
 ]
 CHROMIUM = "/usr/bin/chromium"
 
+# A page function: true once the frame after `seq` is the full-quality answer to the newest
+# request, not a coarse or refining one.
+SETTLED_FRAME = """([seq]) => {
+  const v = window.viewer, l = v && v.last;
+  return !!l && l.seq > seq && l.quality === 'full' && l.id >= v.sent && !l.refining;
+}"""
+
+
+def launch_browser():
+    """Headless Chromium for a module's tests (a generator for a module-scoped fixture)."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=BROWSER_ARGS)
+        yield b
+        b.close()
+
 
 def make_stores(root: Path) -> list[Path]:
     """A 32^3 vortex of 12 steps and a 32x24x24 jet of 10 steps, as chronocl stores."""
