@@ -51,7 +51,7 @@ def test_opencl_equals_reference(data):
     assert_same(ref, ocl)
 
 
-@settings(max_examples=40)  # six integrations per example
+@settings(max_examples=30)  # six integrations per example
 @given(st.data())
 def test_fast_paths_equal_the_general_path(data):
     """Early exit, uint8 LUT indexing, empty skipping, host pointers against the general path."""

@@ -52,7 +52,7 @@ def row_bytes(series: chronocl.TimeSeries, width: int, dtype=None) -> int:
     return width * ny * nx * dt.itemsize
 
 
-@settings(max_examples=25)  # four integrations per example
+@settings(max_examples=20)  # four integrations per example
 @given(st.data())
 def test_overlapped_chunks_equal_serial_and_host_paths(data):
     """Any mode, odd shapes, any slabs and chunks of 1-3 rows: the same bits on every path."""
@@ -137,7 +137,7 @@ def quantized_spec(spec: IntegrationSpec, value_range) -> IntegrationSpec:
     )
 
 
-@settings(max_examples=30)
+@settings(max_examples=20)
 @given(st.data())
 def test_compact_formats_equal_the_reference_on_equally_converted_data(data):
     """uint8/uint16 quantised over the value range and float16: the engine's result is the
