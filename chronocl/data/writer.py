@@ -123,7 +123,8 @@ def write_store(
         writes = (
             ThreadPoolExecutor(1, thread_name_prefix="chronocl-level-writes") if pyramid else None
         )
-        written = None  # the previous step's level write, at most one in flight
+        # the previous step's level write, at most one in flight; first the arrays' creation
+        written = writes.submit(pyramid.create) if pyramid else None
         try:
             for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
                 step = _checked_step(step, t, shape, dt, nan_fill, labels, n_steps)
