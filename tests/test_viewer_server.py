@@ -17,6 +17,7 @@ pytest.importorskip("starlette")
 pytest.importorskip("websockets")
 
 from chronocl import modes
+from chronocl.data import synthetic
 from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
 
 from .viewer_helpers import Client, make_stores, start_server
@@ -223,10 +224,26 @@ def test_probe_finds_a_voxel_and_its_curve(client):
     v = reply["voxel"]
     assert all(0 <= v[a] < 32 for a in "xyz")
     assert max(reply["values"]) > 0
-    # A corner ray misses the (empty) border.
-    rid = client.send({"type": "probe", "view": 0, "x": 0.0, "y": 0.0})
+    assert reply["box"] is None and reply["min"] is None
+    assert reply["csv"].splitlines()[0] == "step,time,value,in_window"
+    # A shift-drag: the box between the voxels the two corners' rays meet, and its mean, min
+    # and max per step, equal to numpy's over the series.
+    rid = client.send({"type": "probe", "view": 0, "x": 0.42, "y": 0.45, "x2": 0.58, "y2": 0.56})
     _, reply = client.wait("probe", rid)
-    assert reply["voxel"] is None and reply["values"] is None
+    b = reply["box"]
+    assert reply["voxel"] is None and all(b[a][1] > b[a][0] for a in "xyz")
+    assert (b["x"][1] - b["x"][0]) * (b["y"][1] - b["y"][0]) > 1
+    data = np.stack(list(synthetic.steps("vortex", 12, (32, 32, 32))))
+    block = data[:, slice(*b["z"]), slice(*b["y"]), slice(*b["x"])].reshape(12, -1)
+    np.testing.assert_allclose(reply["values"], block.mean(axis=1, dtype=np.float64), rtol=1e-12)
+    np.testing.assert_array_equal(reply["min"], block.min(axis=1))
+    np.testing.assert_array_equal(reply["max"], block.max(axis=1))
+    assert reply["csv"].splitlines()[0] == "step,time,mean,min,max,in_window"
+    # A corner ray misses the (empty) border; so does a box with a corner there.
+    for corners in ({"x": 0.0, "y": 0.0}, {"x": 0.5, "y": 0.5, "x2": 0.0, "y2": 0.0}):
+        rid = client.send({"type": "probe", "view": 0, **corners})
+        _, reply = client.wait("probe", rid)
+        assert reply["voxel"] is None and reply["box"] is None and reply["values"] is None
 
 
 def test_histogram_switch_dataset_and_downloads(server, client):

@@ -1,5 +1,5 @@
 """The data sets a viewer serves: each series named for the client, with its statistics, a
-cached sample for histograms, and v(t) at a voxel for the probe."""
+cached sample for histograms, and v(t) at a voxel or over a box for the probe."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
+from chronocl.data.probe import TimeCurve, probe
 from chronocl.data.series import TimeSeries, open_series
 
 HIST_BINS = 128
@@ -65,10 +66,13 @@ class Dataset:
         counts, _ = np.histogram(self.sample(), bins=HIST_BINS, range=(lo, hi))
         return {"range": [lo, hi], "counts": counts.astype(int).tolist()}
 
-    def curve(self, z: int, y: int, x: int) -> list[float]:
-        """v(t) at one voxel over every step of the series."""
-        values = np.asarray(self.series.data[:, z, y, x].compute(), dtype=np.float64)
-        return [float(v) for v in values]
+    def curve(self, voxel: tuple[int, int, int] | None = None, box: object = None) -> TimeCurve:
+        """v(t) at `voxel` (z, y, x), or the mean/min/max over `box` ((x0, x1), (y0, y1),
+        (z0, z1)), over every step of the series: `chronocl.data.probe.probe`'s curve."""
+        if box is not None:
+            return probe(self.series, region=box)
+        z, y, x = voxel  # type: ignore[misc]
+        return probe(self.series, x, y, z)
 
 
 def open_datasets(stores: Sequence[str | os.PathLike]) -> list[Dataset]:

@@ -7,7 +7,8 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     update     camera, views, window, data_tf, time_tf,  any subset; the server merges it
                enhance, threshold, clip, size, quality,  into the client's state and renders
                background, outline                       the newest state only
-    probe      {"view", "x", "y"}                       x, y in [0, 1] of the panel, top-left 0
+    probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
+                                                         x2, y2: a box between two rays' voxels
     histogram  {"range": [lo, hi]}                       normalised values u, for TF zoom
     save       {"what": "image" | "chronovolume", "view"}
 
@@ -147,6 +148,8 @@ MESSAGES: dict[str, Obj] = {
             "view": Int(0, MAX_VIEWS - 1),
             "x": Num(0.0, 1.0),
             "y": Num(0.0, 1.0),
+            "x2": Num(0.0, 1.0),
+            "y2": Num(0.0, 1.0),
         },
         frozenset({"x", "y"}),
     ),

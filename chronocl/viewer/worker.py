@@ -43,7 +43,7 @@ from chronocl.viewer.frames import (
     visible_fraction,
 )
 from chronocl.viewer.gl_thread import on_gl
-from chronocl.viewer.probe import box_fractions, probe_reply, project
+from chronocl.viewer.probe import probe_reply, project
 from chronocl.viewer.protocol import pack_frame
 from chronocl.viewer.saving import Downloads, save_chronovolume, save_image
 from chronocl.viewer.slots import ViewSlot, upload
@@ -414,12 +414,8 @@ class ClientWorker:
         cv = self._slots[view].cv
         assert cv is not None
         reply = probe_reply(msg, view, state, cv, self.datasets[state.dataset])
-        voxel = reply["voxel"]
-        self._probed = (
-            None
-            if voxel is None
-            else (view, box_fractions(cv, (voxel["z"], voxel["y"], voxel["x"])))
-        )
+        where = reply.pop("where", None)
+        self._probed = None if where is None else (view, where)
         self._reply(reply)
 
     def _save(self, msg: dict) -> None:

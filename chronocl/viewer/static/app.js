@@ -15,7 +15,7 @@ import { connect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, syncControls } from './controls.js';
 import { bindKeys } from './keys.js';
 import { bindOrientation, drawTriads } from './orientation.js';
-import { clearProbe, drawProbe, onProbe } from './probe.js';
+import { clearProbe, drawProbe, exportProbe, onProbe } from './probe.js';
 import { $, S, setStatus, viewer } from './state.js';
 import { bindTF, drawTF } from './tf_editor.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
@@ -121,6 +121,7 @@ function relayout() {
 window.addEventListener('resize', relayout);
 new ResizeObserver(relayout).observe($('views'));
 
+$('probe-csv').addEventListener('click', exportProbe);
 $('side-toggle').addEventListener('click', () => {
   const hidden = document.body.classList.toggle('side-hidden');
   $('side-toggle').textContent = hidden ? 'panel ◂' : 'panel ▸';

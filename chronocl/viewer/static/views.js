@@ -70,7 +70,7 @@ function makePanel(i) {
     '<select class="mode" title="Integration mode"></select>' +
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
     '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
-    '<div class="probe-mark"></div><canvas class="triad"></canvas>';
+    '<div class="probe-mark"></div><div class="probe-band"></div><canvas class="triad"></canvas>';
   $('views').appendChild(el);
   const p = {
     el,
@@ -80,6 +80,7 @@ function makePanel(i) {
     label: el.querySelector('.view-label'),
     note: el.querySelector('.view-note'),
     mark: el.querySelector('.probe-mark'),
+    band: el.querySelector('.probe-band'),
     triad: el.querySelector('.triad'),
   };
   fillSelect(p.mode, S.choices.modes);
@@ -107,7 +108,7 @@ function bindOrbit(p, i) {
   p.img.addEventListener('pointerdown', (e) => {
     if (!S.state) return;
     p.img.setPointerCapture(e.pointerId);
-    start = { x: e.clientX, y: e.clientY, cam: { ...S.state.camera }, moved: false };
+    start = { x: e.clientX, y: e.clientY, cam: { ...S.state.camera }, moved: false, box: e.shiftKey };
   });
   p.img.addEventListener('pointermove', (e) => {
     if (!start) return;
@@ -115,6 +116,10 @@ function bindOrbit(p, i) {
     const dy = e.clientY - start.y;
     if (!start.moved && Math.hypot(dx, dy) < 3) return;
     start.moved = true;
+    if (start.box) {
+      showBand(p, start, e);
+      return;
+    }
     const cam = { ...S.state.camera };
     cam.azimuth = start.cam.azimuth - dx * 0.5;
     cam.elevation = clamp(start.cam.elevation + dy * 0.5, ranges().elevation);
@@ -123,9 +128,12 @@ function bindOrbit(p, i) {
   });
   const end = (e) => {
     if (!start) return;
-    const wasDrag = start.moved;
+    const { moved, box } = start;
+    const from = start;
     start = null;
-    if (wasDrag) update({ camera: { ...S.state.camera } }, 'full');
+    p.band.style.display = 'none';
+    if (box && moved && e.type === 'pointerup') probeAt(p, i, e, from);
+    else if (moved) update({ camera: { ...S.state.camera } }, 'full');
     else if (e.type === 'pointerup') probeAt(p, i, e);
   };
   p.img.addEventListener('pointerup', end);
@@ -143,14 +151,36 @@ function bindOrbit(p, i) {
   );
 }
 
-function probeAt(p, i, e) {
+// A click probes the voxel its ray meets; a shift-drag from `from` probes the box between the
+// voxels the rays of its two corners meet.
+function probeAt(p, i, e, from) {
   const r = p.img.getBoundingClientRect();
-  const x = clamp((e.clientX - r.left) / r.width, [0, 1]);
-  const y = clamp((e.clientY - r.top) / r.height, [0, 1]);
+  const at = (cx, cy) => [
+    clamp((cx - r.left) / r.width, [0, 1]),
+    clamp((cy - r.top) / r.height, [0, 1]),
+  ];
+  const [x, y] = at(e.clientX, e.clientY);
   S.selectedView = i;
   panels.forEach((q, j) => q.el.classList.toggle('selected', j === i && panels.length > 1));
+  if (from) {
+    const [x2, y2] = at(from.x, from.y);
+    showMark({ view: i, x: (x + x2) / 2, y: (y + y2) / 2 });
+    send({ type: 'probe', view: i, x, y, x2, y2 });
+    return;
+  }
   showMark({ view: i, x, y });
   send({ type: 'probe', view: i, x, y });
+}
+
+// The rubber band of a shift-drag, from the drag's start to the pointer.
+function showBand(p, from, e) {
+  const r = p.el.getBoundingClientRect();
+  const b = p.band.style;
+  b.display = 'block';
+  b.left = `${Math.min(from.x, e.clientX) - r.left}px`;
+  b.top = `${Math.min(from.y, e.clientY) - r.top}px`;
+  b.width = `${Math.abs(e.clientX - from.x)}px`;
+  b.height = `${Math.abs(e.clientY - from.y)}px`;
 }
 
 // The probe marker at {view, x, y} (fractions of the panel), or none.
