@@ -251,6 +251,19 @@ def test_histogram_switch_dataset_and_downloads(server, client):
     rid = client.send({"type": "histogram", "range": [0.25, 0.75]})
     _, hist = client.wait("histogram", rid)
     assert hist["range"] == [0.25, 0.75] and len(hist["counts"]) == 128
+    # The window 1:11 has 10 steps; every other one on its grid is counted, all its voxels
+    # (32^3 is under the per-step sample size).
+    assert hist["window"] == [1, 11, 1] and hist["steps"] == [2, 4, 6, 8, 10]
+    series = server.datasets[0].series
+    want = sum(
+        np.histogram(series.normalized([t], 0, 32)[0], bins=128, range=(0.25, 0.75))[0]
+        for t in hist["steps"]
+    )
+    assert hist["counts"] == want.tolist()
+    # A frame of another window brings the histogram of that window by itself.
+    client.send({"type": "update", "window": {"t0": 3, "t1": 6, "stride": 1}})
+    _, msg = client.wait("histogram")
+    assert msg["steps"] == [3, 4, 5] and msg["range"] == [0.25, 0.75] and msg["id"] is None
 
     ds, _ = client.open("jet")
     assert ds["name"] == "jet" and ds["shape"] == {"t": 10, "z": 24, "y": 24, "x": 32}

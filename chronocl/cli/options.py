@@ -4,6 +4,7 @@ option values, and the listing of the registered modes for the help."""
 from __future__ import annotations
 
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -24,6 +25,13 @@ WindowOpt = Annotated[
 ]
 OrderOpt = Annotated[str, typer.Option(help="forward, backward, or importance steps 9,2,5.")]
 TfOpt = Annotated[Path | None, typer.Option(help="Transfer-function JSON (data_tf, time_tf).")]
+ColormapOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="Colour the data TF with a colour map (viridis, magma, inferno, cividis, grey, "
+        "coolwarm, RdBu_r, turbo or any matplotlib name); its opacity curve is kept."
+    ),
+]
 TimeTfOpt = Annotated[
     str | None,
     typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
@@ -97,12 +105,17 @@ def parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
     return values
 
 
-def spec_args(tf, time_tf, order, enhance, threshold, normalize) -> dict:
-    """The integration options that integrate and render share, with the TF file loaded."""
+def spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap=None) -> dict:
+    """The integration options that integrate and render share, with the TF file loaded and
+    coloured by `colormap` if one is given."""
     from chronocl.core.tf import TFSetting
 
+    setting = TFSetting.load(tf) if tf is not None else None
+    if colormap is not None:
+        setting = setting or TFSetting()
+        setting = replace(setting, data_tf=setting.data_tf.with_colormap(colormap))
     return dict(
-        tf=TFSetting.load(tf) if tf is not None else None,
+        tf=setting,
         time_tf=time_tf,
         order=parse_order(order),
         enhance=enhance,

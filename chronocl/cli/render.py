@@ -12,6 +12,7 @@ import typer
 from chronocl import modes
 from chronocl.cli.options import (
     STORE_HINT,
+    ColormapOpt,
     DeviceFormatOpt,
     DeviceOpt,
     EngineOpt,
@@ -47,6 +48,7 @@ def render(
     order: OrderOpt = "forward",
     tf: TfOpt = None,
     time_tf: TimeTfOpt = None,
+    colormap: ColormapOpt = None,
     enhance: Annotated[
         str, typer.Option(help="none, edge or silhouette (follows the camera).")
     ] = "none",
@@ -90,6 +92,8 @@ def render(
 
       chronocl render vortex.zarr -o cut.png --clip 1,0,0,0 --azimuth 60 --zoom 1.4
 
+      chronocl render vortex.zarr -o v.png --mode max --time-tf luminance --colormap viridis
+
       chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
     """
     from chronocl.core.enhance import Enhance
@@ -127,7 +131,7 @@ def render(
     for path in saves:
         output_kind(path)
     check_input(store, "store", hint=STORE_HINT)
-    args = spec_args(tf, time_tf, order, enhance, threshold, normalize)
+    args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap)
     outputs = [out_path, *([turntable] if turntable is not None else []), *saves]
     check_distinct(outputs)
     for path in outputs:

@@ -31,6 +31,8 @@ import struct
 
 from chronocl import modes
 from chronocl.core import tf
+from chronocl.core.colormaps import PRESETS as COLORMAP_PRESETS
+from chronocl.core.colormaps import colormap_stops
 from chronocl.core.enhance import ENHANCE_KINDS, Enhance
 from chronocl.viewer.schema import (
     FLOAT32_MAX,
@@ -198,6 +200,7 @@ def choices() -> dict:
             for item in _menu(TIME_ALPHAS)
         ],
         "positions": _menu(tf.TIME_POSITIONS),
+        "colormaps": {name: colormap_stops(name) for name in COLORMAP_PRESETS},
         "enhance": [
             item | {"k": [e.k0, e.k1, e.k2]}
             for item, e in zip(_menu(ENHANCE_KINDS), map(Enhance, ENHANCE_KINDS), strict=True)

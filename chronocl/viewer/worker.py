@@ -89,6 +89,10 @@ class ClientWorker:
         self._shown: ViewState | None = None  # the state of the last frame sent
         # The last probed voxel (view, x/y/z fractions of the box): each frame says where it is.
         self._probed: tuple[int, tuple[float, float, float]] | None = None
+        # The histogram's value range and the (data set, window) it was last sent for: a frame
+        # of another window queues a new one.
+        self._hist_range = [0.0, 1.0]
+        self._hist_window: tuple | None = None
         self._frame = 0
         self.thread = threading.Thread(target=self._run, name="chronocl-view", daemon=True)
         self.thread.start()
@@ -277,6 +281,11 @@ class ClientWorker:
         t_start = time.perf_counter()
         cvs, integrate_ms, incremental = self._chronovolumes(state)
         self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
+        window = (state.dataset, *state.window)
+        if state.quality == "full" and window != self._hist_window:
+            with self._cond:  # after the frames waiting, and only one
+                if not any(kind == "histogram" for kind, _ in self._tasks):
+                    self._tasks.append(("histogram", {"id": None, "range": self._hist_range}))
 
     def _refine(self) -> None:
         """The coarse or reduced frame shown, at full resolution and size; given up as soon as
@@ -378,8 +387,12 @@ class ClientWorker:
         rid = msg.get("id")
         ds = self.datasets[self.state.dataset]
         if kind == "histogram":
-            lo, hi = msg["range"]
-            self._reply({"type": "histogram", "id": rid, **ds.histogram(lo, hi)})
+            lo, hi = self._hist_range = list(msg["range"])
+            state = self.state
+            steps = state.selection(ds.series.n_steps).steps
+            self._hist_window = (state.dataset, *state.window)
+            hist = ds.histogram(lo, hi, steps, state.window[2])
+            self._reply({"type": "histogram", "id": rid, **hist, "window": list(state.window)})
         elif kind == "probe":
             self._probe(msg)
         elif kind == "save":

@@ -17,7 +17,7 @@ import { bindKeys } from './keys.js';
 import { bindOrientation, drawTriads } from './orientation.js';
 import { clearProbe, drawProbe, exportProbe, onProbe } from './probe.js';
 import { $, S, setStatus, viewer } from './state.js';
-import { bindTF, drawTF } from './tf_editor.js';
+import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
 import { fillSelect, layoutViews, onFrame, showMark } from './views.js';
 
@@ -28,6 +28,7 @@ let restore = null;
 // to offer. On a socket opened again (the server restarted) the page reopens its data set.
 function onInfo(msg) {
   S.choices = msg;
+  fillColormaps();
   fillControls(msg);
   fillSelect(
     $('dataset'),
@@ -85,6 +86,7 @@ function onText(msg) {
       break;
     case 'histogram':
       S.histogram = msg;
+      noteHistogram();
       drawTF();
       break;
     case 'probe':
