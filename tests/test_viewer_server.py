@@ -287,6 +287,41 @@ def test_histogram_switch_dataset_and_downloads(server, client):
     assert "zarr.json" in names and any(n.startswith("rgba/") for n in names)
 
 
+def test_movies_orbit_and_play_through(server, client):
+    """An orbit of N frames turns the camera; a play-through slides the window over the series,
+    one frame per position; both arrive as downloads after a progress message per frame."""
+    import imageio.v3 as iio
+
+    client.open(0, size=(96, 96))
+    auth = {"X-Chronocl-Token": server.token}
+
+    def movie(**options) -> tuple[np.ndarray, list[dict]]:
+        rid = client.send({"type": "save", "what": "movie", **options})
+        progress = []
+        while True:
+            got = client.recv(120)
+            if got[0] == "progress":
+                progress.append(got[1])
+            elif got[0] == "download" and got[1]["id"] == rid:
+                break
+        status, body, _ = get(server.base + got[1]["url"], auth)
+        assert status == 200
+        return iio.imread(body, index=None, extension="." + options["format"]), progress
+
+    frames, progress = movie(movie="orbit", format="gif", frames=3, fps=5)
+    assert frames.shape[0] == 3 and [p["done"] for p in progress] == [1, 2, 3]
+    assert not np.array_equal(frames[0], frames[1])  # the camera turned
+    frames, progress = movie(movie="play", format="mp4", fps=5)
+    # The window 1:11 of 12 steps keeps its length: it starts at 0, 1 and 2.
+    assert frames.shape[0] == 3 == progress[-1]["total"]
+    assert np.abs(frames[0].astype(int) - frames[2]).mean() > 0.5  # the window moved
+    rid = client.send({"type": "update", "window": {"t0": 0, "t1": 12, "stride": 1}})
+    client.frame_for(rid)
+    rid = client.send({"type": "save", "what": "movie", "movie": "play", "format": "gif"})
+    _, err = client.wait("error", rid)
+    assert "cannot slide" in err["message"]
+
+
 # --------------------------------------------------------------------------- load
 
 

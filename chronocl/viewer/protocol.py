@@ -9,16 +9,17 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
                background, outline                       the newest state only
     probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
                                                          x2, y2: a box between two rays' voxels
-    histogram  {"range": [lo, hi]}                       normalised values u, for TF zoom
+    histogram  {"range": [lo, hi]}                       normalised values u in the window
     save       {"what": "image" | "chronovolume", "view"}
+               {"what": "movie", "movie": orbit | play,   a video download, a `progress`
+                "format": mp4 | gif, "frames", "fps"}     message after every frame
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
 (numbers must be finite; data values must fit float32, ranges need lo < hi) raise
 `ProtocolError` naming the field; so do messages nested deeper than `MAX_DEPTH`, refused
 before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
-Server -> client: JSON text messages (info, dataset, histogram, probe, download, error) and
-binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON
-header, then the images' bytes back to back). `info`, sent first on every socket, lists the
+Server -> client: JSON text messages (info, dataset, histogram, probe, progress, download, error)
+and binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON header, then the images' bytes back to back). `info`, sent first on every socket, lists the
 data sets and `choices()`: the registered modes and every other menu, default and bound the
 page offers, so the page copies nothing from here. The schema primitives are in `schema`.
 """
@@ -54,6 +55,9 @@ MAX_DEPTH = 8  # the deepest message (update.data_tf.points[i][j]) nests 4 conta
 MAX_VIEWS = 4
 MAX_TF_POINTS = 64
 MIN_PANEL, MAX_PANEL = 64, 1024
+MOVIES = ("orbit", "play")  # a turn of the camera, or the window slid over the series
+MOVIE_FORMATS = {"mp4": "video/mp4", "gif": "image/gif"}
+MAX_MOVIE_FRAMES = 600
 PROBE_THRESHOLD = 0.5  # the probe finds the voxel where a ray's opacity passes this
 
 
@@ -163,8 +167,12 @@ MESSAGES: dict[str, Obj] = {
         {
             "type": Enum(("save",)),
             "id": ID,
-            "what": Enum(("image", "chronovolume")),
+            "what": Enum(("image", "chronovolume", "movie")),
             "view": Int(0, MAX_VIEWS - 1),
+            "movie": Enum(MOVIES),
+            "format": Enum(tuple(MOVIE_FORMATS)),
+            "frames": Int(2, 360),
+            "fps": Int(1, 60),
         },
         frozenset({"what"}),
     ),

@@ -43,9 +43,10 @@ from chronocl.viewer.frames import (
     visible_fraction,
 )
 from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.movie import movie_states, render_movie
 from chronocl.viewer.probe import probe_reply, project
-from chronocl.viewer.protocol import pack_frame
-from chronocl.viewer.saving import Downloads, save_chronovolume, save_image
+from chronocl.viewer.protocol import MOVIE_FORMATS, pack_frame
+from chronocl.viewer.saving import Downloads, compose_image, save_chronovolume, save_image
 from chronocl.viewer.slots import ViewSlot, upload
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
@@ -436,6 +437,9 @@ class ClientWorker:
         self._full_resolution(range(len(state.views)))
         ds = self.datasets[state.dataset]
         sel = state.selection(ds.series.n_steps).describe().replace(":", "-")
+        if msg["what"] == "movie":
+            self._movie(msg, state, ds, sel)
+            return
         if msg["what"] == "image":
             cvs = [s.cv for s in self._slots[: len(state.views)]]
             bg = parse_color(state.background)
@@ -451,3 +455,33 @@ class ClientWorker:
         self._reply(
             {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}
         )
+
+    def _movie(self, msg: dict, state: ViewState, ds: Dataset, sel: str) -> None:
+        """An orbit or a play-through of the shown views as a video download, with a
+        `progress` message after every frame; the views are then as shown again."""
+        kind, fmt, rid = msg.get("movie", "orbit"), msg.get("format", "mp4"), msg.get("id")
+        states = movie_states(state, kind, msg.get("frames", 36), ds.series.n_steps)
+        bg = parse_color(state.background)
+
+        def frame(shown: ViewState):
+            self._chronovolumes(shown)
+            self._full_resolution(range(len(shown.views)))
+            cvs = [s.cv for s in self._slots[: len(shown.views)]]
+            panels, *_ = on_gl(self._draw, cvs, shown, shown.size, bg)
+            return compose_image(panels, cvs, bg)  # type: ignore[arg-type]
+
+        def progress(done: int, total: int) -> None:
+            self._reply(
+                {"type": "progress", "id": rid, "what": "movie", "done": done, "total": total}
+            )
+
+        try:
+            path = render_movie(
+                states, frame, fmt, msg.get("fps", 12), self.downloads.dir, progress
+            )
+        finally:
+            self._chronovolumes(state)
+            self._full_resolution(range(len(state.views)))
+        name = f"{ds.name}-{'orbit-' + sel if kind == 'orbit' else 'play-through'}.{fmt}"
+        key = self.downloads.add(path, name, MOVIE_FORMATS[fmt])
+        self._reply({"type": "download", "id": rid, "url": f"/download/{key}", "filename": name})

@@ -12,7 +12,7 @@
 //   controls.js    the other controls, filled from the server's choices
 
 import { connect, frameArrived, send, update } from './connection.js';
-import { bindControls, fillControls, syncControls } from './controls.js';
+import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
 import { bindKeys } from './keys.js';
 import { bindOrientation, drawTriads } from './orientation.js';
 import { clearProbe, drawProbe, exportProbe, onProbe } from './probe.js';
@@ -93,10 +93,14 @@ function onText(msg) {
       onProbe(msg);
       showMark(msg.values && msg.mark ? { view: msg.view, x: msg.mark[0], y: msg.mark[1] } : null);
       break;
+    case 'progress':
+      movieProgress(msg);
+      break;
     case 'download':
       onDownload(msg);
       break;
     case 'error':
+      movieProgress(null);
       if (msg.id !== null && msg.id >= viewer.sent) frameArrived(); // no frame will come
       viewer.errors.push(msg);
       setStatus(`error: ${msg.message}`, true);

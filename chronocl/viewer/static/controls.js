@@ -132,4 +132,23 @@ export function bindControls() {
   $('save-image').addEventListener('click', () => send({ type: 'save', what: 'image' }));
   $('save-cv').addEventListener('click', () =>
     send({ type: 'save', what: 'chronovolume', view: S.selectedView }));
+  $('save-movie').addEventListener('click', () => {
+    const int = (id, lo, hi) => Math.max(lo, Math.min(hi, Math.round(Number($(id).value)) || lo));
+    $('save-movie').disabled = true;
+    $('movie-progress').textContent = 'rendering…';
+    send({
+      type: 'save',
+      what: 'movie',
+      movie: $('movie-kind').value,
+      format: $('movie-format').value,
+      frames: int('movie-frames', 2, 360),
+      fps: int('movie-fps', 1, 60),
+    });
+  });
+}
+
+// A movie's frames as they are rendered; its download ends it (app.js), as does an error.
+export function movieProgress(msg) {
+  $('movie-progress').textContent = msg ? `frame ${msg.done} of ${msg.total}` : '';
+  if (!msg || msg.done >= msg.total) $('save-movie').disabled = false;
 }
