@@ -330,3 +330,37 @@ def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, ser
         assert text.startswith("value ") and "opacity" in text and "sampled voxels" in text
     finally:
         p.close()
+
+
+OUTLINE = "() => document.querySelector('.clip-outline polygon').getAttribute('points') || ''"
+
+
+def test_clip_plane_outline_and_turning_it_by_dragging(browser, server, tmp_path):  # noqa: F811
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        page.click("summary:has-text('Slicing plane')")
+        before = p.last()
+        page.check("#clip-on")
+        p.settle(before)
+        square = p.eval(OUTLINE)
+        assert len(square.split()) == 4  # the plane x = 0 cuts the box in a rectangle
+        # With "drag turns the plane" a drag turns the normal, not the camera.
+        page.check("#clip-drag")
+        camera = p.eval("() => window.viewer.S.state.camera")
+        box = page.locator(".view img").first.bounding_box()
+        cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        before = p.last()
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        page.mouse.move(cx + 50, cy + 30, steps=5)
+        page.mouse.up()
+        after = p.settle(before)
+        normal = p.eval("() => window.viewer.S.state.clip.normal")
+        assert p.eval("() => window.viewer.S.state.camera") == camera
+        assert abs(normal[0]) < 0.99 and abs(sum(c * c for c in normal) - 1) < 1e-6
+        assert page.input_value("#clip-axis") == "custom"
+        assert after["digest"] != before["digest"] and p.eval(OUTLINE) != square
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "clip-turned.png"))
+    finally:
+        p.close()

@@ -451,3 +451,35 @@ def test_the_page_ships_in_the_wheel(tmp_path):
     assert {"index.html", "app.js", "style.css"} <= set(static)
     for name in static:  # the page's ES modules among them
         assert f"chronocl/viewer/static/{name}" in names
+
+
+def test_clip_plane_polygon_and_outline():
+    """The plane's cut through the box: a square across an axis, a hexagon through the centre
+    along a diagonal, a triangle near a corner; its corners on the plane, in the box, in order;
+    the outline on a panel is that polygon projected (None without a plane)."""
+    from chronocl.data.chronovolume import Chronovolume
+    from chronocl.render.camera import Camera
+    from chronocl.render.raycaster import clip_plane
+    from chronocl.viewer.clip_outline import clip_outline, plane_polygon
+
+    extent = np.array([1.0, 0.5, 0.75])
+    for clip, corners in (((1, 0, 0, 0.2), 4), ((1, 1, 1, 0), 6), ((1, 1, 1, -0.9), 3)):
+        poly = plane_polygon(clip, extent)
+        assert len(poly) == corners
+        *n, d = clip_plane(clip, extent)
+        np.testing.assert_allclose(poly @ np.array(n) + d, 0, atol=1e-9)
+        assert (np.abs(poly) <= extent / 2 + 1e-9).all()
+        edges = np.roll(poly, -1, axis=0) - poly
+        turns = np.cross(edges, np.roll(edges, -1, axis=0)) @ np.array(n)
+        assert (turns > 0).all() or (turns < 0).all()  # convex, corners in order
+    assert len(plane_polygon((1, 0, 0, 1.0), extent)) == 4  # the box's face
+    cv = Chronovolume(
+        rgba=np.zeros((6, 4, 8, 4), np.float32), metadata={"spacing": {"x": 1, "y": 1, "z": 1.5}}
+    )
+    camera = Camera(azimuth=0.0, elevation=0.0, zoom=1.0, projection="orthographic")
+    assert clip_outline(cv, camera, (100, 100), None) is None
+    square = np.array(clip_outline(cv, camera, (100, 100), (0, 0, 1, 0)))
+    # Seen along z, the cut across z is the box's x-y face: a rectangle centred on the panel.
+    assert square.shape == (4, 2)
+    np.testing.assert_allclose(square.mean(axis=0), [0.5, 0.5], atol=1e-6)
+    assert len(np.unique(square[:, 0].round(6))) == len(np.unique(square[:, 1].round(6))) == 2

@@ -29,6 +29,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.session import Session
 from chronocl.render.views import describe, parse_color
+from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import error_text
 from chronocl.viewer.frames import (
@@ -356,6 +357,7 @@ class ClientWorker:
                 for b, cv, pixels, (mode, _) in zip(images, cvs, panels, state.views, strict=True)
             ],
             "probe": self._probe_mark(state, cvs),
+            "clip_outline": clip_outline(cvs[0], state.panel_camera(), state.size, state.clip),
             "legend": legend(cvs[0]),
             "level": level,
             "levels": levels,  # from the sessions: no store metadata read per frame

@@ -2,7 +2,7 @@
 // pointer, the probe click and its marker, and the frames the server sends into them.
 
 import { frameArrived, send, sentAt, settleLater, update } from './connection.js';
-import { drawTriads } from './orientation.js';
+import { drawTriads, turnedNormal } from './orientation.js';
 import { drawProbe } from './probe.js';
 import { $, S, clamp, setStatus, viewer } from './state.js';
 import { drawTimeline } from './timeline.js';
@@ -70,6 +70,7 @@ function makePanel(i) {
     '<select class="mode" title="Integration mode"></select>' +
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
     '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
+    '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon/></svg>' +
     '<div class="probe-mark"></div><div class="probe-band"></div><canvas class="triad"></canvas>';
   $('views').appendChild(el);
   const p = {
@@ -81,6 +82,7 @@ function makePanel(i) {
     note: el.querySelector('.view-note'),
     mark: el.querySelector('.probe-mark'),
     band: el.querySelector('.probe-band'),
+    outline: el.querySelector('.clip-outline polygon'),
     triad: el.querySelector('.triad'),
   };
   fillSelect(p.mode, S.choices.modes);
@@ -109,6 +111,7 @@ function bindOrbit(p, i) {
     if (!S.state) return;
     p.img.setPointerCapture(e.pointerId);
     start = { x: e.clientX, y: e.clientY, cam: { ...S.state.camera }, moved: false, box: e.shiftKey };
+    if (S.state.clip && $('clip-drag').checked && !e.shiftKey) start.clip = { ...S.state.clip };
   });
   p.img.addEventListener('pointermove', (e) => {
     if (!start) return;
@@ -118,6 +121,11 @@ function bindOrbit(p, i) {
     start.moved = true;
     if (start.box) {
       showBand(p, start, e);
+      return;
+    }
+    if (start.clip) {
+      const normal = turnedNormal(start.clip.normal, S.state.camera, dx, dy);
+      update({ clip: { normal, offset: start.clip.offset } }, 'preview');
       return;
     }
     const cam = { ...S.state.camera };
@@ -133,6 +141,10 @@ function bindOrbit(p, i) {
     start = null;
     p.band.style.display = 'none';
     if (box && moved && e.type === 'pointerup') probeAt(p, i, e, from);
+    else if (moved && from.clip) {
+      $('clip-axis').value = 'custom';
+      update({ clip: { ...S.state.clip } }, 'full');
+    }
     else if (moved) update({ camera: { ...S.state.camera } }, 'full');
     else if (e.type === 'pointerup') probeAt(p, i, e);
   };
@@ -227,6 +239,9 @@ export function onFrame(buf) {
   });
   // Where the probed voxel is in this frame (it moves with the camera; none before a probe).
   if (viewer.probe && viewer.probe.values) showMark(header.probe || null);
+  // The clip plane's cut through the box, the same on every panel (one camera, one box).
+  const cut = (header.clip_outline || []).map(([x, y]) => `${x},${y}`).join(' ');
+  for (const p of panels) p.outline.setAttribute('points', cut);
   S.legend = header.legend || [];
   const now = performance.now();
   const t0 = sentAt.get(header.id);
