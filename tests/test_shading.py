@@ -165,3 +165,21 @@ def test_bad_shading_names_the_problem(make, needle):
     with pytest.raises(ChronoclError, match=__import__("re").escape(needle)) as info:
         make()
     assert isinstance(info.value, InvalidParameterError) and "\n" not in str(info.value)
+
+
+def test_viewer_state_takes_shading_fields_and_refuses_bad_ones():
+    from chronocl.viewer.protocol import MESSAGES, ProtocolError, choices
+    from chronocl.viewer.view_state import ViewState, describe_state, merge
+
+    state = ViewState()
+    assert describe_state(state)["shading"] == Shading(enabled=False).to_dict()
+    msg = MESSAGES["update"].check({"type": "update", "shading": {"enabled": True}}, "update")
+    lit = merge(state, msg, n_steps=4)
+    assert lit.shading == Shading()
+    dimmer = merge(lit, {"shading": {"ambient": 0.1}}, n_steps=4)  # the rest as they were
+    assert dimmer.shading == Shading(ambient=0.1)
+    assert choices()["ranges"]["shading"]["specular"] == [0.0, 2.0]
+    with pytest.raises(ProtocolError, match=r"update\.shading\.diffuse is 3; it must lie in"):
+        MESSAGES["update"].check({"type": "update", "shading": {"diffuse": 3}}, "update")
+    with pytest.raises(ProtocolError, match="unknown field 'glow'"):
+        MESSAGES["update"].check({"type": "update", "shading": {"glow": 1}}, "update")
