@@ -39,7 +39,7 @@ def test_lighting_toggle_and_strengths(browser, server, tmp_path):  # noqa: F811
         shading = p.eval("() => window.viewer.S.state.shading")
         assert shading["enabled"] is True and page.is_enabled("#shading-diffuse")
         page.locator("#views").screenshot(path=os.path.join(shots_dir(tmp_path), "lit.png"))
-        page.locator("#side").screenshot(
+        page.locator("#lighting").screenshot(
             path=os.path.join(shots_dir(tmp_path), "lighting-panel.png")
         )
 
