@@ -26,7 +26,7 @@ SLIDE = """([id, value]) => {
 
 
 def test_lighting_toggle_and_strengths(browser, server, tmp_path):  # noqa: F811
-    p = Page(browser, server, 1200, 800)
+    p = Page(browser, server, 1024, 640)
     try:
         page = p.page
         opening = p.last()
