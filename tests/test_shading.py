@@ -60,16 +60,35 @@ def unshaded_views(cv, **shading) -> dict[str, np.ndarray]:
     }
 
 
+def renderer() -> str:
+    from chronocl.render.gl import gl_context
+
+    info = gl_context().info
+    return f"{info['GL_RENDERER']} | {info['GL_VERSION']}"
+
+
 @pytest.mark.parametrize(
     "shading", [{}, {"shading": False}, {"shading": Shading(enabled=False, ambient=1.0)}]
 )
 def test_shading_off_is_bit_identical_to_the_unshaded_renderer(vortex, shading, tmp_path):
+    """Exact on the renderer the goldens were recorded on (before shading existed; the
+    renderer named in unshaded_vortex_renderer.txt), within test_render's golden tolerance on
+    another; `CHRONOCL_UPDATE_GOLDEN=1` records them again after a deliberate change."""
     from PIL import Image as PILImage
 
-    for name, got in unshaded_views(vortex, **shading).items():
+    recorded_on = GOLDEN / "unshaded_vortex_renderer.txt"
+    views = unshaded_views(vortex, **shading)
+    if os.environ.get("CHRONOCL_UPDATE_GOLDEN") and not shading:
+        for name, got in views.items():
+            PILImage.fromarray(got).save(GOLDEN / f"{name}.png")
+        recorded_on.write_text(renderer() + "\n")
+    exact = recorded_on.read_text().strip() == renderer()
+    for name, got in views.items():
         expected = np.asarray(PILImage.open(GOLDEN / f"{name}.png").convert("RGB"))
-        if not np.array_equal(got, expected):
-            fail_with_diff(got, expected, name, tmp_path, f"unshaded render differs from {name}")
+        diff = np.abs(got.astype(int) - expected.astype(int))
+        if diff.max() > (0 if exact else 8) or (diff > 3).mean() > 0.01:
+            why = "bit-identical" if exact else "within 8/255"
+            fail_with_diff(got, expected, name, tmp_path, f"unshaded {name} is not {why}")
 
 
 def ball(n: int = 32, spacing_z: float = 1.0) -> chronocl.Chronovolume:
@@ -183,3 +202,16 @@ def test_viewer_state_takes_shading_fields_and_refuses_bad_ones():
         MESSAGES["update"].check({"type": "update", "shading": {"diffuse": 3}}, "update")
     with pytest.raises(ProtocolError, match="unknown field 'glow'"):
         MESSAGES["update"].check({"type": "update", "shading": {"glow": 1}}, "update")
+
+
+def test_the_unlit_program_is_built_from_the_shader_file_as_it_is():
+    from chronocl.render.gl import shader_source, with_defines
+    from chronocl.render.views import raycaster
+
+    source = shader_source("raycast.frag")
+    assert with_defines(source, ()) is source  # off: today's source, untouched
+    lit = with_defines(source, ("SHADING",)).splitlines()
+    assert lit[0] == "#version 330" and lit[1] == "#define SHADING 1"
+    prog, _ = raycaster().lit()
+    for name in ("texel", "grad_scale", "ambient", "diffuse", "specular", "shininess"):
+        assert name in prog and name not in raycaster().prog, name
