@@ -2,7 +2,8 @@
 
 See kernels/glsl/raycast.frag for the compositing. A `Volume` is an uploaded chronovolume
 (RGBA16F or RGBA8 texture, trilinear or nearest) with its world-space box; `draw` renders one
-view of it into an (H, W, 3) uint8 array, top-down.
+view of it into an (H, W, 3) uint8 array, top-down; with `shading` (chronocl/render/shading.py)
+it runs the lit build of the shader, without it the unlit one, unchanged.
 """
 
 from __future__ import annotations
