@@ -55,6 +55,23 @@ LevelOpt = Annotated[
     typer.Option(help="Coarse level to integrate (0: full resolution; see 'chronocl pyramid')."),
 ]
 
+# Lighting of rendered views (chronocl/render/shading.py).
+ShadingOpt = Annotated[
+    bool,
+    typer.Option(
+        help="Light the volume from the camera by its opacity gradient (Blinn-Phong): "
+        "depth and shape for single-colour regions. Off: flat colour."
+    ),
+]
+ShadingParamsOpt = Annotated[
+    str | None,
+    typer.Option(
+        metavar="A,D,S[,SHININESS]",
+        help="Shading strengths ambient,diffuse,specular (0..2) and optionally the "
+        "shininess (1..256); implies --shading. Default 0.3,0.7,0.3,24.",
+    ),
+]
+
 
 def mode_choices() -> str:
     """The registered modes' names as a choice: 'alpha, first_hit, ... or min'."""
@@ -132,6 +149,15 @@ def parse_order(order: str) -> str | list[int]:
         return [int(s) for s in order.split(",")]
     except ValueError:
         return order  # the spec names the problem
+
+
+def parse_shading(shading: bool, params: str | None):
+    """The Shading of --shading and --shading-params (which implies --shading)."""
+    from chronocl.render.shading import OFF, Shading
+
+    if params is not None:
+        return Shading.parse(params)
+    return Shading() if shading else OFF
 
 
 def print_summary(summary: dict) -> None:

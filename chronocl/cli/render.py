@@ -19,6 +19,8 @@ from chronocl.cli.options import (
     LevelOpt,
     NormalizeOpt,
     OrderOpt,
+    ShadingOpt,
+    ShadingParamsOpt,
     TfOpt,
     ThresholdOpt,
     TimeTfOpt,
@@ -27,6 +29,7 @@ from chronocl.cli.options import (
     err,
     mode_choices,
     parse_floats,
+    parse_shading,
     parse_sizes,
     spec_args,
 )
@@ -65,6 +68,8 @@ def render(
     ] = None,
     background: Annotated[str, typer.Option(help="Colour name or #rrggbb.")] = "black",
     outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
+    shading: ShadingOpt = False,
+    shading_params: ShadingParamsOpt = None,
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
     device_format: DeviceFormatOpt = "auto",
@@ -95,6 +100,10 @@ def render(
       chronocl render vortex.zarr -o v.png --mode max --time-tf luminance --colormap viridis
 
       chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
+
+      chronocl render jet.zarr -o lit.png --mode alpha --window 0,14,29 --shading
+
+      chronocl render jet.zarr -o lit.png --shading-params 0.2,0.8,0.5,40 --turntable lit.gif
     """
     from chronocl.core.enhance import Enhance
     from chronocl.core.paths import check_distinct, check_input, check_target
@@ -122,6 +131,7 @@ def render(
     panel = check_size(parse_sizes(size, 2, "WxH", "512x512"))
     parse_color(background)
     clip_plane = check_clip(parse_floats(clip, 4, "clip")) if clip else None
+    lighting = parse_shading(shading, shading_params)
     if turntable is not None:
         check_video(turntable, frames)
     elif not 2 <= frames <= 3600:
@@ -151,7 +161,7 @@ def render(
         engine=engine,
         device=device,
         spec_args=args,
-        draw_args=dict(background=background, clip=clip_plane, outline=outline),
+        draw_args=dict(background=background, clip=clip_plane, outline=outline, shading=lighting),
         level=level,
         device_format=device_format,
     )

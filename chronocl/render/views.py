@@ -14,6 +14,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
 from chronocl.render.image import Image
 from chronocl.render.raycaster import Raycaster, Volume, check_clip, check_size
+from chronocl.render.shading import Shading, as_shading
 
 _raycaster: Raycaster | None = None
 
@@ -60,8 +61,12 @@ def render(
     nearest: bool = False,
     label: str | None = None,
     legend: bool = False,
+    shading: Shading | bool | None = None,
 ) -> Image:
-    """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`)."""
+    """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`).
+
+    `shading=True` (or a `Shading`) lights it from the camera by its opacity gradient; off by
+    default (flat colour)."""
     return render_views(
         [chronovolume],
         camera,
@@ -74,6 +79,7 @@ def render(
         nearest=nearest,
         labels=[label] if label else None,
         legend=legend,
+        shading=shading,
     )
 
 
@@ -92,11 +98,13 @@ def render_views(
     legend: bool = True,
     columns: int | None = None,
     volumes: Sequence[Volume] | None = None,
+    shading: Shading | bool | None = None,
 ) -> Image:
     """Parallel views: each chronovolume in its own panel of `size`, all under one camera.
 
     `volumes`, the chronovolumes already uploaded with `raycaster().upload` (and released by
     the caller), spare the upload when one set is rendered many times, e.g. a turntable.
+    `shading`: as in `render`.
     """
     if not chronovolumes:
         raise InvalidParameterError("nothing to render: give at least one chronovolume")
@@ -104,6 +112,7 @@ def render_views(
     w, h = check_size(size)
     bg = parse_color(background)
     clip = None if clip is None else check_clip(clip)
+    lighting = as_shading(shading)
     rc = raycaster()
     panels = []
     for i, cv in enumerate(chronovolumes):
@@ -119,6 +128,7 @@ def render_views(
                     jitter=jitter,
                     step=step,
                     outline=outline,
+                    shading=lighting,
                 )
             )
         finally:

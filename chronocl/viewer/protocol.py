@@ -6,7 +6,7 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     open       {"dataset": index or name}               switch data set (defaults reset)
     update     camera, views, window, data_tf, time_tf,  any subset; the server merges it
                enhance, threshold, clip, size, quality,  into the client's state and renders
-               background, outline                       the newest state only
+               background, outline, shading              the newest state only
     probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
                                                          x2, y2: a box between two rays' voxels
     histogram  {"range": [lo, hi]}                       normalised values u in the window
@@ -36,6 +36,7 @@ from chronocl.core import tf
 from chronocl.core.colormaps import PRESETS as COLORMAP_PRESETS
 from chronocl.core.colormaps import colormap_stops
 from chronocl.core.enhance import ENHANCE_KINDS, Enhance
+from chronocl.render.shading import MAX_COEFFICIENT, MAX_SHININESS, MIN_SHININESS
 from chronocl.viewer.schema import (
     FLOAT32_MAX,
     Bool,
@@ -125,6 +126,16 @@ ENHANCE = Obj(
 CLIP_PLANE = Obj(
     {"normal": List(Num(-1.0, 1.0), 3, 3), "offset": Num(-1.0, 1.0)}, frozenset({"normal"})
 )
+# Lighting (chronocl/render/shading.py): the Shading's fields, the same bounds.
+SHADING = Obj(
+    {
+        "enabled": Bool(),
+        "ambient": Num(0.0, MAX_COEFFICIENT),
+        "diffuse": Num(0.0, MAX_COEFFICIENT),
+        "specular": Num(0.0, MAX_COEFFICIENT),
+        "shininess": Num(MIN_SHININESS, MAX_SHININESS),
+    }
+)
 THRESHOLD = Num(0.0, 0.99)
 ID = Int(0, 2**53)
 
@@ -146,6 +157,7 @@ MESSAGES: dict[str, Obj] = {
             "quality": Enum(("preview", "full")),
             "background": Enum(BACKGROUNDS),
             "outline": Bool(),
+            "shading": SHADING,
         }
     ),
     "probe": Obj(
@@ -219,6 +231,7 @@ def choices() -> dict:
             "time_tf": _ranges(TIME_TF),
             "enhance": _ranges(ENHANCE),
             "clip": _ranges(CLIP_PLANE),
+            "shading": _ranges(SHADING),
             "threshold": [THRESHOLD.lo, THRESHOLD.hi],
         },
         "limits": {

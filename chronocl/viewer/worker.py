@@ -272,6 +272,7 @@ class ClientWorker:
                 clip=state.clip,
                 step=1.0,
                 outline=state.outline,
+                shading=state.shading,
             )
             for slot in self._slots[: len(cvs)]
         ]

@@ -10,12 +10,14 @@
 //   tf_editor.js   the data transfer function editor
 //   probe.js       the v(t) plot of a probed voxel
 //   controls.js    the other controls, filled from the server's choices
+//   shading.js     the lighting toggle and strengths
 
 import { connect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
 import { bindKeys } from './keys.js';
 import { bindOrientation, drawTriads } from './orientation.js';
 import { clearProbe, drawProbe, exportProbe, onProbe } from './probe.js';
+import { bindShading, syncShading } from './shading.js';
 import { $, S, setStatus, viewer } from './state.js';
 import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
@@ -56,6 +58,7 @@ function onDataset(msg) {
   restore = null;
   $('dataset').value = msg.index;
   syncControls();
+  syncShading();
   const size = layoutViews();
   update(Object.assign(restored || {}, { size, views: S.state.views }), 'full');
   drawTriads();
@@ -137,6 +140,7 @@ $('side-toggle').addEventListener('click', () => {
 bindTimeline();
 bindTF();
 bindControls();
+bindShading();
 bindOrientation();
 bindKeys();
 connect({ onText, onFrame });
