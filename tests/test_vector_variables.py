@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import chronocl
-from chronocl.core.errors import UnknownNameError
+from chronocl.core.errors import StoreCorruptError, UnknownNameError
 from chronocl.data.ingest import ingest
+from chronocl.data.verify import verify
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("h5netcdf")
@@ -124,6 +125,10 @@ def test_variables_in_one_store(tmp_path, monkeypatch, capsys):
     assert chronocl.open(store, variable="u").path == u.path
     with pytest.raises(UnknownNameError, match="holds w, u"):
         first.variable("v")
+    assert verify(store)["variables checked"] == "w, u"  # every variable read back
+    next(p for p in (store / "variables" / "u" / "data" / "c").rglob("*") if p.is_file()).unlink()
+    with pytest.raises(StoreCorruptError, match="variables/u"):
+        verify(store)
     one = ingest([src], tmp_path / "v.zarr", var="v")  # one variable: as before, named
     assert one.variables == ("v",) and one.variable("v") is one and "variables" not in one.meta
 

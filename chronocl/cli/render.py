@@ -180,7 +180,8 @@ def render(
             f"{n}: {describe(cv)}"
             for n, cv in zip([n for n in names for _ in modes], cvs, strict=True)
         ]
-        image = render_views(cvs, camera, panel, labels=captions, **views.draw_args)
+        rows = {"columns": len(modes)} if len(modes) > 1 else {}  # a row per variable
+        image = render_views(cvs, camera, panel, labels=captions, **rows, **views.draw_args)
     t1 = time.perf_counter()
     (views.draw(cvs, camera) if image is None else image).save(out_path, overwrite=overwrite)
     err.print(

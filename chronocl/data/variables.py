@@ -40,8 +40,9 @@ def split_names(value: str | Sequence[str], flag: str, counts: Sequence[int] = (
     return names
 
 
-def magnitude_steps(parts: Sequence[Steps], names: Sequence[str]) -> Steps:
-    """The steps of the magnitude of the components `parts` (named `names`), float32.
+def magnitude_steps(parts: Sequence[Steps], names: Sequence[str], where: str = "") -> Steps:
+    """The steps of the magnitude of the components `parts` (named `names`, found in `where`),
+    float32.
 
     Every component must have the same number of steps, volume shape and spacing; that is
     checked here, before anything is read.
@@ -74,7 +75,7 @@ def magnitude_steps(parts: Sequence[Steps], names: Sequence[str]) -> Steps:
         volume_shape=tuple(first.volume_shape),
         dtype=np.dtype(np.float32),
         spacing=first.spacing,
-        source=f"magnitude of {', '.join(names)} ({first.source})",
+        source=f"magnitude of {', '.join(names)}" + (f" in {where}" if where else ""),
         times=first.times,
         labels=first.labels,
         attrs={**first.attrs, "variable": None, "quantity": "magnitude", "components": names},

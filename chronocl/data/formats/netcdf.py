@@ -26,6 +26,7 @@ from chronocl.core.errors import (
 from chronocl.core.paths import check_output
 from chronocl.data.formats.contract import Reader, Steps, has_suffix
 from chronocl.data.labelled import (
+    RESAMPLE,
     axis_grid,
     map_dims,
     resample_step,
@@ -71,6 +72,8 @@ def ingest_netcdf(
     ]
     if len(given) > 1:
         raise InvalidParameterError(f"{' and '.join(given)} exclude each other; give one")
+    if resample is not None and resample not in RESAMPLE:
+        raise InvalidParameterError(f"unknown resample {resample!r}; choose uniform")
     check_output(out, overwrite)
     common = dict(overwrite=overwrite, progress=progress, nan_fill=nan_fill)
     ds = _open(p)
@@ -82,7 +85,7 @@ def ingest_netcdf(
         if magnitude:
             names = split_names(magnitude, "--magnitude", (2, 3))
             parts = [steps(_pick_variable(ds, n, p.name)) for n in names]
-            return write_steps(out, magnitude_steps(parts, names), **common)
+            return write_steps(out, magnitude_steps(parts, names, f"netcdf: {p}"), **common)
         if variables:
             names = split_names(variables, "--variables")
             parts = [(n, steps(_pick_variable(ds, n, p.name))) for n in names]
