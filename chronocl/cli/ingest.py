@@ -21,7 +21,7 @@ def ingest(
             metavar="INPUTS",
             help="Raw files or globs (one per step), a .npy (T, Z, Y, X), a NetCDF/HDF5 file, "
             "TIFF stacks (one per step, or one 4D TZYX), or an OME-Zarr folder; none with "
-            "--magnitude U,V,W naming raw/npy/TIFF inputs."
+            "--magnitude U,V,W naming raw/npy/TIFF inputs.",
         ),
     ] = None,
     fmt: Annotated[
