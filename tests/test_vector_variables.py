@@ -123,8 +123,10 @@ def test_variables_in_one_store(tmp_path, monkeypatch, capsys):
     assert u.n_levels == 2 and u.level(1).shape == (T, 2, 3, 36)
     assert u.variables == ("w", "u") and u.variable("w").path == store
     assert chronocl.open(store, variable="u").path == u.path
-    with pytest.raises(UnknownNameError, match="holds w, u"):
+    with pytest.raises(UnknownNameError, match=r"uvw\.zarr.* has no variable .v.; it holds w, u"):
         first.variable("v")
+    with pytest.raises(UnknownNameError, match=r"uvw\.zarr'"):  # named by the store, not by u
+        u.variable("v")
     assert verify(store)["variables checked"] == "w, u"  # every variable read back
     next(p for p in (store / "variables" / "u" / "data" / "c").rglob("*") if p.is_file()).unlink()
     with pytest.raises(StoreCorruptError, match="variables/u"):

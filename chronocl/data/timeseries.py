@@ -127,14 +127,16 @@ class TimeSeries:
 
     def variable(self, name: str) -> TimeSeries:
         """The series of variable `name` of this series' store (`variables` lists them)."""
-        names = self.variables
+        names, own = self.variables, self.meta.get("variable")
+        root = self.path
+        if root is not None and own is not None and own != names[0]:
+            root = root.parent.parent  # this is VARIABLES/<own> inside the store
         if name not in names:
+            where = f"store {str(root)!r}" if root is not None else self.source
             found = ", ".join(names) if names else "one unnamed variable"
-            raise UnknownNameError(f"{self.source} has no variable {name!r}; it holds {found}")
-        if name == self.meta.get("variable") or self.path is None:
+            raise UnknownNameError(f"{where} has no variable {name!r}; it holds {found}")
+        if name == own or root is None:
             return self
-        first = self.meta.get("variable") == names[0]
-        root = self.path if first else self.path.parent.parent
         return open_store(root if name == names[0] else root / VARIABLES / name)
 
     # -- coarse levels (chronocl.data.pyramid) -------------------------------------------------
