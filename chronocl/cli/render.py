@@ -4,6 +4,7 @@ in a PNG, optionally with a turntable video and the chronovolumes saved."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -86,6 +87,12 @@ def render(
         ),
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace outputs that exist.")] = False,
+    variables: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="A,B", help="Variables of the store side by side: a panel each (per mode)."
+        ),
+    ] = None,
 ) -> None:
     """Integrate a window and render it; several modes become parallel views in one image.
 
@@ -104,6 +111,8 @@ def render(
       chronocl render jet.zarr -o lit.png --mode alpha --window 0,14,29 --shading
 
       chronocl render jet.zarr -o lit.png --shading-params 0.2,0.8,0.5,40 --turntable lit.gif
+
+      chronocl render ocean.zarr -o both.png --variables temp,salt --mode max
     """
     from chronocl.core.enhance import Enhance
     from chronocl.core.paths import check_distinct, check_input, check_target
@@ -116,7 +125,7 @@ def render(
     from chronocl.render import Camera
     from chronocl.render.raycaster import check_clip, check_size
     from chronocl.render.turntable import ModeViews, check_video
-    from chronocl.render.views import parse_color
+    from chronocl.render.views import describe, parse_color, render_views
 
     # Every option is checked before any work: no kernel built, no brick read, nothing written.
     modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
@@ -147,14 +156,25 @@ def render(
     for path in outputs:
         check_target(path, overwrite, [store, tf])
     series = open_series(store)
-    check_level(series, level)
-    for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
-        job = prepare(series, window, m, None, args)
+    names = [n.strip() for item in variables or [] for n in item.split(",") if n.strip()]
+    if names and (turntable is not None or saves):
+        raise InvalidParameterError(
+            "--variables draws one image; leave out --turntable and --save-chronovolume"
+        )
+    if not names and len(series.variables) > 1:
+        err.print(
+            f"note: {store} holds {', '.join(series.variables)}; drawing {series.variables[0]}"
+        )
+    picked = [series.variable(n) for n in names] or [series]
+    for one in picked:
+        check_level(one, level)
+        for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
+            job = prepare(one, window, m, None, args)
     if device_format != "auto":  # over the level's value range, which it quantises
         job = at_level(job, level)
         check_device_format(device_format, engine, job.series.dtype, job.value_range)
     views = ModeViews(
-        series,
+        picked[0],
         window,
         modes,
         panel,
@@ -167,9 +187,17 @@ def render(
     )
 
     t0 = time.perf_counter()
-    cvs = views.integrate(camera)
+    cvs = [cv for one in picked for cv in replace(views, series=one).integrate(camera)]
+    image = None
+    if names:  # one panel per variable and mode, one camera, each captioned with its variable
+        captions = [
+            f"{n}: {describe(cv)}"
+            for n, cv in zip([n for n in names for _ in modes], cvs, strict=True)
+        ]
+        rows = {"columns": len(modes)} if len(modes) > 1 else {}  # a row per variable
+        image = render_views(cvs, camera, panel, labels=captions, **rows, **views.draw_args)
     t1 = time.perf_counter()
-    views.draw(cvs, camera).save(out_path, overwrite=overwrite)
+    (views.draw(cvs, camera) if image is None else image).save(out_path, overwrite=overwrite)
     err.print(
         f"wrote {out_path} ({', '.join(modes)}; integrate {t1 - t0:.2f} s, "
         f"render {time.perf_counter() - t1:.2f} s)"
