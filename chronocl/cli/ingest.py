@@ -41,8 +41,9 @@ def ingest(
         list[str] | None,
         typer.Option(
             metavar="A,B",
-            help="NetCDF/HDF5: several variables, each a series of one store "
-            "(open one with chronocl.open(store).variable(name)); comma-separate or repeat.",
+            help="NetCDF/HDF5: several variables, OME-Zarr: several channels (by label, or "
+            "'all'), each a series of one store (open one with "
+            "chronocl.open(store).variable(name)); comma-separate or repeat.",
         ),
     ] = None,
     magnitude: Annotated[
@@ -100,6 +101,8 @@ def ingest(
       chronocl ingest 'cells/t*.tif' -o cells.zarr
 
       chronocl ingest embryo.ome.zarr -o embryo.zarr --channel 1 --level 0
+
+      chronocl ingest embryo.ome.zarr -o embryo.zarr --variables all
     """
     from chronocl.core.paths import GLOB_CHARS, check_input, check_target
     from chronocl.data.ingest import ingest as run_ingest

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -74,6 +74,9 @@ class TimeSeries:
     # What a store records beside the data (`writer.EXTRA_KEYS`): the variable's name and the
     # store's variables, a derived quantity and its components, resampling notes.
     meta: dict = field(default_factory=dict, repr=False)
+    # Opens another variable of the same source by name where it is not a chronocl store's
+    # (an OME-Zarr image's channels, read in place).
+    _variable: Callable[[str], TimeSeries] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.times:
@@ -135,7 +138,11 @@ class TimeSeries:
             where = f"store {str(root)!r}" if root is not None else self.source
             found = ", ".join(names) if names else "one unnamed variable"
             raise UnknownNameError(f"{where} has no variable {name!r}; it holds {found}")
-        if name == own or root is None:
+        if name == own:
+            return self
+        if self._variable is not None:
+            return self._variable(name)
+        if root is None:
             return self
         return open_store(root if name == names[0] else root / VARIABLES / name)
 
