@@ -6,7 +6,8 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     open       {"dataset": index or name}               switch data set (defaults reset)
     update     camera, views, window, data_tf, time_tf,  any subset; the server merges it
                enhance, threshold, clip, size, quality,  into the client's state and renders
-               background, outline                       the newest state only
+               background, outline, refocus              the newest state only (refocus:
+                                                         frame the visible region again)
     probe      {"view", "x", "y"}                       x, y in [0, 1] of the panel, top-left 0
     histogram  {"range": [lo, hi]}                       normalised values u, for TF zoom
     save       {"what": "image" | "chronovolume", "view"}
@@ -138,6 +139,7 @@ MESSAGES: dict[str, Obj] = {
             "quality": Enum(("preview", "full")),
             "background": Enum(BACKGROUNDS),
             "outline": Bool(),
+            "refocus": Bool(),  # frame the visible region again (the camera reset)
         }
     ),
     "probe": Obj(
