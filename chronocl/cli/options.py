@@ -45,7 +45,7 @@ DeviceFormatOpt = Annotated[
 TimeLabelsOpt = Annotated[
     str,
     typer.Option(
-        help="What the legend and captions call a step: labels (the store's time labels, "
+        help="What legends, captions and plots call a step: labels (the store's time labels, "
         "where it has them) or steps (step numbers)."
     ),
 ]
