@@ -50,6 +50,13 @@ DeviceFormatOpt = Annotated[
         "or uint8/uint16 quantised over the value range (lossy; docs/engine.md)."
     ),
 ]
+TimeLabelsOpt = Annotated[
+    str,
+    typer.Option(
+        help="What legends, captions and plots call a step: labels (the store's time labels, "
+        "where it has them) or steps (step numbers)."
+    ),
+]
 LevelOpt = Annotated[
     int,
     typer.Option(help="Coarse level to integrate (0: full resolution; see 'chronocl pyramid')."),

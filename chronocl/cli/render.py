@@ -24,6 +24,7 @@ from chronocl.cli.options import (
     ShadingParamsOpt,
     TfOpt,
     ThresholdOpt,
+    TimeLabelsOpt,
     TimeTfOpt,
     WindowOpt,
     check_engine,
@@ -60,7 +61,14 @@ def render(
     normalize: NormalizeOpt = "time",
     azimuth: Annotated[float, typer.Option(help="Degrees around the vertical axis.")] = 30.0,
     elevation: Annotated[float, typer.Option(help="Degrees above the horizon.")] = 20.0,
-    zoom: Annotated[float, typer.Option(help="Magnification (1 fits the volume).")] = 1.0,
+    zoom: Annotated[float, typer.Option(help="Magnification (1 fits what --frame frames).")] = 1.0,
+    frame: Annotated[
+        str,
+        typer.Option(
+            help="What the camera frames: visible (the non-transparent region) or box "
+            "(the whole volume)."
+        ),
+    ] = "visible",
     projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
     size: Annotated[str, typer.Option(help="Image (panel) size WxH, 16..8192.")] = "512x512",
     clip: Annotated[
@@ -71,6 +79,7 @@ def render(
     outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
     shading: ShadingOpt = False,
     shading_params: ShadingParamsOpt = None,
+    time_labels: TimeLabelsOpt = "labels",
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
     device_format: DeviceFormatOpt = "auto",
@@ -113,9 +122,14 @@ def render(
       chronocl render jet.zarr -o lit.png --shading-params 0.2,0.8,0.5,40 --turntable lit.gif
 
       chronocl render ocean.zarr -o both.png --variables temp,salt --mode max
+
+      chronocl render plume.zarr -o whole.png --frame box --zoom 1.2
+
+      chronocl render era5.zarr -o t.png --window 0:24:6 --time-labels steps
     """
     from chronocl.core.enhance import Enhance
     from chronocl.core.paths import check_distinct, check_input, check_target
+    from chronocl.core.time_labels import check_prefer
     from chronocl.data.formats.outputs import output_kind
     from chronocl.data.formats.outputs import save_chronovolume as save_any
     from chronocl.data.series import open_series
@@ -136,7 +150,8 @@ def render(
         raise InvalidParameterError(f"--mode {twice} is given twice; name each mode once")
     check_engine(engine)
     check_format_name(device_format)
-    camera = Camera(azimuth, elevation, zoom, projection=projection)
+    camera = Camera(azimuth, elevation, zoom, projection=projection, frame=frame)
+    check_prefer(time_labels)
     panel = check_size(parse_sizes(size, 2, "WxH", "512x512"))
     parse_color(background)
     clip_plane = check_clip(parse_floats(clip, 4, "clip")) if clip else None
@@ -181,7 +196,13 @@ def render(
         engine=engine,
         device=device,
         spec_args=args,
-        draw_args=dict(background=background, clip=clip_plane, outline=outline, shading=lighting),
+        draw_args=dict(
+            background=background,
+            clip=clip_plane,
+            outline=outline,
+            shading=lighting,
+            time_labels=time_labels,
+        ),
         level=level,
         device_format=device_format,
     )

@@ -20,6 +20,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate
 from chronocl.render.camera import Camera
+from chronocl.render.framing import framed
 from chronocl.render.image import Image
 from chronocl.render.video import check_video_path, write_video
 from chronocl.render.views import raycaster, render_views
@@ -57,7 +58,7 @@ class ModeViews:
     `size`, with a legend (and a label per panel when there are several).
 
     `spec_args` are the arguments of `chronocl.make_spec` shared by every mode; `draw_args`
-    those of `render_views` (background, clip, outline).
+    those of `render_views` (background, clip, outline, time_labels).
     """
 
     series: TimeSeries
@@ -118,7 +119,8 @@ class ModeViews:
     ) -> Path:
         """A full turn from `camera` as a video: `chronovolumes` (as `integrate(camera)` made
         them) uploaded once and drawn from every angle, or integrated again for every frame's
-        view when they follow the camera."""
+        view when they follow the camera. Every frame frames what `camera` frames for them."""
+        camera = framed(camera, chronovolumes)  # once: re-integrated frames keep one focus
         if self.follows_camera:
             return turntable(
                 lambda cam: self.draw(self.integrate(cam), cam),

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.time_labels import display_labels, has_labels
 from chronocl.data.probe import TimeCurve, probe
 from chronocl.data.series import TimeSeries, open_series
 
@@ -46,6 +47,7 @@ class Dataset:
         s = self.series
         st = s.stats
         t, z, y, x = s.shape
+        steps = list(range(t))
         return {
             "index": index,
             "name": self.name,
@@ -57,6 +59,8 @@ class Dataset:
             "step_max": [float(v) for v in st.step_max],
             "step_mean": [float(v) for v in st.step_mean],
             "times": [str(v) for v in s.times],
+            # What the timeline writes for each step; None: the store has no time labels.
+            "time_labels": display_labels(steps, s.times) if has_labels(steps, s.times) else None,
         }
 
     def step_sample(self, step: int) -> np.ndarray:

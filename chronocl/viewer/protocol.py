@@ -6,7 +6,8 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     open       {"dataset": index or name}               switch data set (defaults reset)
     update     camera, views, window, data_tf, time_tf,  any subset; the server merges it
                enhance, threshold, clip, size, quality,  into the client's state and renders
-               background, outline, shading              the newest state only
+               background, outline, shading, refocus     the newest state only (refocus:
+                                                         frame the visible region again)
     probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
                                                          x2, y2: a box between two rays' voxels
     histogram  {"range": [lo, hi]}                       normalised values u in the window
@@ -158,6 +159,7 @@ MESSAGES: dict[str, Obj] = {
             "background": Enum(BACKGROUNDS),
             "outline": Bool(),
             "shading": SHADING,
+            "refocus": Bool(),  # frame the visible region again (the camera reset)
         }
     ),
     "probe": Obj(

@@ -8,7 +8,9 @@ that arrives while a frame is being made replaces older pending input instead of
 behind it. Each view keeps a `Session` (the moving window: a slide of the window goes through
 `Session.slide`, which updates incrementally) and its uploaded texture, so a camera change
 only re-renders and a window or TF change only re-integrates what changed. Histogram, probe
-and save requests wait in a short queue behind the newest frame.
+and save requests wait in a short queue behind the newest frame. The camera frames the visible
+region found at a data set's first frame and again at each camera reset (`refocus`), and keeps
+that framing while the window moves.
 
 OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared); GL
 work runs on the viewer's GL thread (`gl_thread.on_gl`).
@@ -28,6 +30,7 @@ from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.session import Session
+from chronocl.render.framing import framed
 from chronocl.render.views import describe, parse_color
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset
@@ -96,6 +99,10 @@ class ClientWorker:
         self._hist_range = [0.0, 1.0]
         self._hist_window: tuple | None = None
         self._frame = 0
+        # The visible region framed: (generation, world box or None); a new data set or a
+        # camera reset starts a new generation, found again from that frame's chronovolumes.
+        self._focus_gen = 0
+        self._focus: tuple[int, tuple | None] | None = None
         self.thread = threading.Thread(target=self._run, name="chronocl-view", daemon=True)
         self.thread.start()
 
@@ -116,6 +123,7 @@ class ClientWorker:
         with self._cond:
             self.state = default_state(i, self.datasets[i].series)
             self._probed = None
+            self._focus_gen += 1
             self._pending = (self.state, rid)
             self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
             self._cond.notify()
@@ -125,6 +133,8 @@ class ClientWorker:
         with self._cond:
             n = self.datasets[self.state.dataset].series.n_steps
             self.state = merge(self.state, msg, n)
+            if msg.get("refocus"):
+                self._focus_gen += 1
             self._pending = (self.state, msg.get("id"))
             self._cond.notify()
 
@@ -315,6 +325,7 @@ class ClientWorker:
         """Draw, encode and send the frame. A frame answering input draws what the draw budget
         allows in DRAW_TARGET_MS; if that is less than the panels' size (within PIXEL_BUDGET),
         the frame is redrawn in full once input stops (`final`), as coarse levels are."""
+        state = self._framed(state, cvs)
         preview = state.quality == "preview"
         scale = PREVIEW_SCALE if preview else 1.0
         full_w, full_h = render_size(state.size, len(cvs), scale, PIXEL_BUDGET)
@@ -377,6 +388,17 @@ class ClientWorker:
             "sent_at": time.time(),
         }
         self.send(pack_frame(header, images))
+
+    def _framed(self, state: ViewState, cvs: list[Chronovolume]) -> ViewState:
+        """`state` with its camera framing this generation's visible region."""
+        with self._cond:
+            gen, known = self._focus_gen, self._focus
+        if known is None or known[0] != gen:
+            known = (gen, framed(dataclasses.replace(state.camera, focus=None), cvs).focus)
+            with self._cond:
+                if self._focus_gen == gen:
+                    self._focus = known
+        return dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=known[1]))
 
     def _probe_mark(self, state: ViewState, cvs: list[Chronovolume]) -> dict | None:
         """Where the probed voxel is on its panel in this frame (None: no probe, or off-panel)."""

@@ -31,11 +31,13 @@ function setCamera(fields) {
   drawTriads();
 }
 
-// The opening camera of the data set (projection kept).
+// The opening camera of the data set (projection kept), framing what is visible now.
 export function resetCamera() {
   if (!S.initialCamera) return;
   const { azimuth, elevation, zoom, fov } = S.initialCamera;
-  setCamera({ azimuth, elevation, zoom, fov });
+  update({ camera: { ...S.state.camera, azimuth, elevation, zoom, fov }, refocus: true }, 'full');
+  delete S.state.refocus; // a request, not part of the view
+  drawTriads();
 }
 
 // A standard view at the opening zoom, so the same key always gives the same frame.

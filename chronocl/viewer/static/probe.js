@@ -102,8 +102,9 @@ export function drawProbe() {
   ctx.fillText(String(fmt(vmin)), p.l - 3, h - p.b - 2);
   ctx.textBaseline = 'bottom';
   ctx.textAlign = 'left';
-  ctx.fillText('t = 0', p.l, h);
+  const labels = S.info.time_labels;
+  ctx.fillText(labels ? labels[0] : 't = 0', p.l, h);
   ctx.textAlign = 'right';
-  ctx.fillText(String(T - 1), w - p.r, h);
+  ctx.fillText(labels ? labels[T - 1] : String(T - 1), w - p.r, h);
   c.dataset.drawn = String(Number(c.dataset.drawn || 0) + 1);
 }
