@@ -44,11 +44,11 @@ def unshaded_views(cv, **shading) -> dict[str, np.ndarray]:
     orthographic panels, nearest, clipped, on white."""
     return {
         "unshaded_vortex_a": render(
-            cv, Camera(30, 20, zoom=1.3), (96, 96), outline=True, **shading
+            cv, Camera(30, 20, zoom=1.3, frame="box"), (96, 96), outline=True, **shading
         ).array,
         "unshaded_vortex_b": render_views(
             [cv, cv],
-            Camera(200, -15, projection="orthographic"),
+            Camera(200, -15, projection="orthographic", frame="box"),
             (64, 64),
             clip=(1, 0.5, 0, 0.2),
             nearest=True,

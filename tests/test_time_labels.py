@@ -13,7 +13,7 @@ import chronocl
 from chronocl import render, render_views
 from chronocl.core.errors import UnknownNameError
 from chronocl.core.time_labels import compact, display_labels, span_text
-from chronocl.data.probe import time_axis
+from chronocl.data.probe_plot import time_axis
 from chronocl.render.views import describe
 
 TIMES = [f"2024-01-01T{h:02d}:00:00.000000000" for h in range(0, 24, 3)]  # NetCDF-style

@@ -22,7 +22,6 @@ import io
 import math
 import os
 import time
-import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,8 +32,8 @@ import numpy as np
 from chronocl.core.atomic import atomic_file
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.progress import meter
-from chronocl.core.selection import Selection, parse_selection
-from chronocl.core.time_labels import check_prefer, display_labels, has_labels
+from chronocl.core.selection import parse_selection
+from chronocl.data.probe_plot import figure
 
 if TYPE_CHECKING:
     from chronocl.data.timeseries import TimeSeries
@@ -368,104 +367,3 @@ def plot_curve(
     with atomic_file(path, overwrite) as tmp:
         fig.savefig(tmp, format="png")
     return Path(path)
-
-
-def figure(curve: TimeCurve, window: object = None, title: str | None = None, time_labels="labels"):
-    """The curve against its time labels (`time_labels="steps"`: the step numbers): a voxel's
-    values as a line; a box's mean as a line over its min-max band; the window's span shaded
-    and its steps marked."""
-    from matplotlib.figure import Figure  # no pyplot: no display, no global state
-
-    chosen = curve.window_steps(window)
-    x, xlabel, names = time_axis(curve.times, curve.steps, time_labels)
-    fig = Figure(figsize=(8, 4.5), dpi=100, layout="constrained")
-    ax = fig.add_subplot()
-    if chosen:
-        text = window if isinstance(window, str) else Selection(chosen, len(x)).describe()
-        label = f"window {text}"
-        if len(x) == 1:
-            ax.axvline(x[0], color="C1", alpha=0.5, linewidth=3, label=label)
-        else:  # from half a step before the window's first step to half one after its last
-            mids = x[:-1] + (x[1:] - x[:-1]) / 2
-            lo = mids[chosen[0] - 1] if chosen[0] > 0 else x[0]
-            hi = mids[chosen[-1]] if chosen[-1] < len(x) - 1 else x[-1]
-            ax.axvspan(lo, hi, color="C1", alpha=0.15, linewidth=0, label=label, zorder=0)
-    marker = "o" if len(curve) <= 60 else None
-    if curve.is_box:
-        ax.fill_between(
-            x, curve.min, curve.max, color="C0", alpha=0.25, linewidth=0, label="min to max"
-        )
-        ax.plot(x, curve.values, color="C0", marker=marker, markersize=3, label="mean")
-    else:
-        ax.plot(x, curve.values, color="C0", marker=marker, markersize=3, label="value")
-    if chosen:
-        idx = np.asarray(chosen)
-        ax.plot(x[idx], curve.values[idx], "o", color="C1", markersize=4, label="window steps")
-    if names is not None:
-        _label_ticks(ax, names)
-    elif np.issubdtype(x.dtype, np.datetime64):
-        from matplotlib.dates import AutoDateLocator, ConciseDateFormatter
-
-        locator = AutoDateLocator()
-        ax.xaxis.set_major_locator(locator)
-        ax.xaxis.set_major_formatter(ConciseDateFormatter(locator))
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("mean, min and max over the box" if curve.is_box else "value")
-    where = f" of {Path(curve.source).name}" if curve.source else ""
-    ax.set_title(title if title is not None else f"{curve.describe()}{where}")
-    ax.grid(alpha=0.3)
-    ax.margins(x=0.02)
-    ax.legend(loc="best", fontsize="small")
-    return fig
-
-
-def time_axis(
-    times: Sequence, steps: np.ndarray, prefer: str = "labels"
-) -> tuple[np.ndarray, str, list[str] | None]:
-    """(x positions, axis label, tick names) for plotting against the time labels.
-
-    Increasing numbers are their own positions; increasing ISO dates (strings such as
-    '2024-01-01T06:00') are datetime64 positions; any other labels sit at their steps, the
-    ticks named by their display labels. Labels that are the step numbers, or `prefer`
-    "steps", give an axis named 'step'.
-    """
-    labels = list(times)
-    steps = np.asarray(steps)
-    if check_prefer(prefer) == "steps" or not has_labels([int(s) for s in steps], labels):
-        return steps.astype(np.float64), "step", None
-    if all(isinstance(t, int | float) and not isinstance(t, bool) for t in labels):
-        x = np.asarray(labels, np.float64)
-        if np.all(np.diff(x) > 0):
-            return x, "time", None
-    elif all(isinstance(t, str) for t in labels):
-        dates = _dates(labels)
-        if dates is not None and np.all(np.diff(dates) > np.timedelta64(0)):
-            return dates, "time", None
-    return steps.astype(np.float64), "time", display_labels(list(steps), labels)
-
-
-def _dates(labels: list[str]) -> np.ndarray | None:
-    """The labels as datetime64 when every one is an ISO date (YYYY-MM...), else None."""
-    if not all(len(t) >= 7 and t[4:5] == "-" and t[:4].isdigit() for t in labels):
-        return None
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")  # numpy warns on time zones: keep them as names
-            dates = np.array(labels, dtype="datetime64[ns]")
-    except (ValueError, TypeError, Warning):
-        return None
-    return None if np.isnat(dates).any() else dates
-
-
-def _label_ticks(ax, names: list[str]) -> None:
-    """Ticks at whole steps, named by the steps' time labels."""
-    from matplotlib.ticker import FuncFormatter, MaxNLocator
-
-    def name(v: float, _pos: int) -> str:
-        i = round(v)
-        return names[i] if abs(v - i) < 1e-6 and 0 <= i < len(names) else ""
-
-    ax.xaxis.set_major_locator(MaxNLocator(nbins=8, integer=True))
-    ax.xaxis.set_major_formatter(FuncFormatter(name))
-    if max(len(n) for n in names) > 6:
-        ax.tick_params(axis="x", labelrotation=30)
