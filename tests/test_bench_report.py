@@ -81,7 +81,7 @@ def test_report_json_schema(report):
     s = data["summary"]
     assert s["strong_speedup"][device]["1"] == 1.0 and s["strong_speedup"][device]["2"] > 0
     assert s["weak_efficiency"][device]["1"] == 1.0 and s["weak_efficiency"][device]["2"] > 0
-    assert "strong speed-up" in stdout  # the summary printed
+    assert "strong speed-up" in stdout and "weak efficiency" in stdout  # the summary
 
 
 def test_plots_are_drawn_and_shown(report):
@@ -151,3 +151,28 @@ def test_bad_input_is_one_line(case, store, tmp_path):
     assert left == (["report"] if case == "output not a report" else [])
     if case == "output not a report":
         assert [p.name for p in out.iterdir()] == ["mine.txt"]
+
+
+def test_a_scheduler_cluster(tmp_path):
+    """--scheduler: the cluster's workers run the cells, the roofline is measured on one of
+    them, and asking for more workers than it has is one line before any work."""
+    from distributed import LocalCluster
+
+    from chronocl.core.errors import InvalidParameterError
+    from chronocl.integration.scaling_run import run_report
+
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    ) as cluster:
+        address = cluster.scheduler_address
+        out = tmp_path / "report"
+        with pytest.raises(InvalidParameterError, match="has 1 workers"):
+            run_report(out, size_xyz=(16, 16, 8), windows=(2,), workers=(1, 2), scheduler=address)
+        assert list(tmp_path.iterdir()) == []
+        report = run_report(out, size_xyz=(16, 16, 8), windows=(2,), repeats=1, scheduler=address)
+    assert report["cluster"]["kind"] == "scheduler" and report["cluster"]["address"] == address
+    assert report["parameters"]["workers"] == [1]  # the default: the cluster's workers
+    assert report["roofline"]["where"].startswith("worker ")  # not this process
+    assert [c["study"] for c in report["cells"]] == ["strong", "weak"]
+    assert all(c["gvox_steps_s"] > 0 for c in report["cells"])
+    assert json.loads((out / "report.json").read_text())["cells"] == report["cells"]

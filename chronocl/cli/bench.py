@@ -89,10 +89,11 @@ def bench(
     )
     err.print(f"wrote {out_path}/index.html and report.json", highlight=False)
     summary = report["summary"]
-    print_summary(
-        {
-            "strong speed-up": summary["strong_speedup"],
-            "weak efficiency": summary["weak_efficiency"],
-            "best roofline fraction": summary["best_roofline_fraction"],
-        }
-    )
+    lines = {}
+    for device in report["parameters"]["devices"]:
+        strong = summary["strong_speedup"][device]
+        weak = summary["weak_efficiency"][device]
+        lines[f"{device} strong speed-up"] = ", ".join(f"{n}: {s:.2f}×" for n, s in strong.items())
+        lines[f"{device} weak efficiency"] = ", ".join(f"{n}: {e:.2f}" for n, e in weak.items())
+        lines[f"{device} best / roofline"] = f"{summary['best_roofline_fraction'][device]:.3f}"
+    print_summary(lines)

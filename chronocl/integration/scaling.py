@@ -159,6 +159,7 @@ def roofline_at(store: str, window: int, devices: Sequence[str], repeats: int) -
     """Read rates where this runs: the window read from `store` (decoded, GB/s) and the
     in-memory read roofline on each device (`chronocl.engine.roofline`)."""
     series = open_series(store)
+    where = distributed.worker_name()
     nz, ny, nx = series.volume_shape
     steps = list(range(window))
     rows = max(1, min(nz, ROOFLINE_BYTES // (window * ny * nx * series.dtype.itemsize)))
@@ -166,7 +167,7 @@ def roofline_at(store: str, window: int, devices: Sequence[str], repeats: int) -
     brick = series.read_brick(steps, 0, rows)
     store_s = statistics.median(times)
     return {
-        "where": distributed.worker_name(),
+        "where": "bench process" if where == "local" else f"worker {where}",
         "window": window,
         "shape_zyx": [rows, ny, nx],
         "bytes": int(brick.nbytes),
@@ -206,6 +207,9 @@ def time_cell(
 
     series, window = cell.series, cell.window
     chosen = list(addresses[: cell.workers])
+    nz, ny, nx = series.volume_shape
+    voxel_steps = nz * ny * nx * window
+    nbytes = voxel_steps * series.dtype.itemsize
 
     def once() -> float:
         out = scratch / f"out-{uuid.uuid4().hex[:8]}.zarr"
@@ -216,15 +220,12 @@ def time_cell(
             )
         took = time.perf_counter() - t0
         remove_path(out)
-        tick()
+        tick(nbytes)
         return took
 
     once()  # builds the kernels on the workers, warms the file cache
     times = [once() for _ in range(repeats)]
-    nz, ny, nx = series.volume_shape
     median = statistics.median(times)
-    voxel_steps = nz * ny * nx * window
-    nbytes = voxel_steps * series.dtype.itemsize
     return {
         "study": cell.study,
         "device": cell.device,
@@ -304,9 +305,9 @@ def measure(
     repeats: int,
     scratch: Path,
     local: bool,
-    advance: Callable[[], None],
+    advance: Callable[[int], None],
 ) -> tuple[list[dict], dict]:
-    """(cells, roofline) of the whole matrix; `advance()` after every run."""
+    """(cells, roofline) of the whole matrix; `advance(window bytes)` after every run."""
     cells = plan_cells(full, weak, windows, workers, devices)
     done: dict[tuple, dict] = {}
     results = []

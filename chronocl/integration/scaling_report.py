@@ -104,7 +104,7 @@ def summary(report: dict) -> dict:
 def _figure():
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(7.5, 4.8), dpi=100, layout="constrained")
+    fig = Figure(figsize=(7.5, 5), dpi=100, layout="constrained")
     return fig, fig.add_subplot()
 
 
@@ -162,7 +162,8 @@ def throughput_figure(report: dict):
     nx, ny, nz = p["size_xyz"]
     ax.set_title(f"Integration throughput, {nx}×{ny}×{nz}, mode {p['mode']}")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(loc="best", fontsize="small")
+    # below the axes: the rooflines run along the top, where a legend inside would hide them
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize="small")
     return fig
 
 
@@ -224,6 +225,7 @@ def weak_figure(report: dict):
     )
     ax.set_ylabel(f"efficiency t({workers[0]}) / t(n)")
     ax.set_ylim(0, max(1.2, ax.get_ylim()[1] * 1.1))  # room for the size labels
+    ax.margins(x=0.12)
     ax.set_title("Weak scaling: volume grows with the workers")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize="small")
@@ -253,8 +255,8 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
 def page(report: dict) -> str:
     """index.html: parameters, machine, figures, rooflines and every cell."""
     p, m, roof = report["parameters"], report["machine"], report["roofline"]
-    info = [(k, v) for k, v in p.items()] + [(k, v) for k, v in m.items()]
-    info.append(("cluster", report["cluster"]))
+    info = [(k, v if isinstance(v, str) else json.dumps(v)) for k, v in (*p.items(), *m.items())]
+    info.append(("cluster", json.dumps(report["cluster"])))
     devices = [(d["index"], d["name"], d["kind"], d["platform"]) for d in report["devices"]]
     roofs = [
         (
@@ -282,7 +284,7 @@ def page(report: dict) -> str:
     ]
     figures = "".join(f'<p><img src="{name}" alt="{name}"></p>' for name in FIGURES)
     store = (
-        f"<p>Store read (decoded, one process, {html.escape(str(roof['where']))}): "
+        f"<p>Store read (decoded, one process: {html.escape(str(roof['where']))}): "
         f"{roof['store_read_gb_s']:.2f} GB/s = {roof['store_read_gvox_steps_s']:.3f} "
         "G voxel-steps/s.</p>"
     )
