@@ -114,6 +114,12 @@ def test_an_earlier_report_may_be_replaced(report, tmp_path):
         check_report_target(tmp_path / "other")
 
 
+def test_help_has_an_example():
+    code, stdout, _ = run_main("bench", "--help")
+    assert code == 0
+    assert "chronocl bench --synthetic 128" in stdout and "--scheduler" in stdout
+
+
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
     path = tmp_path_factory.mktemp("bench-store") / "s.zarr"

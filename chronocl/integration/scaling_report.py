@@ -80,7 +80,8 @@ def efficiencies(rows: Sequence[dict]) -> dict[int, float]:
 
 def summary(report: dict) -> dict:
     """Speed-ups (largest window) and efficiencies per device, and the best fraction of the
-    memory read roofline any cell reached."""
+    memory read roofline any cell reached (in voxel-steps/s: the roofline reads stores of
+    other types than float32 and uint8 as float32)."""
     cells, p = report["cells"], report["parameters"]
     wmax = p["windows"][-1]
     roof = report["roofline"]["devices"]
@@ -94,7 +95,10 @@ def summary(report: dict) -> dict:
             for d in p["devices"]
         },
         "best_roofline_fraction": {
-            d: round(max(c["gb_s"] for c in cells if c["device"] == d) / roof[d]["gb_s"], 4)
+            d: round(
+                max(c["gvox_steps_s"] for c in cells if c["device"] == d) / roof[d]["gvox_steps_s"],
+                4,
+            )
             for d in p["devices"]
         },
     }
@@ -292,6 +296,7 @@ def page(report: dict) -> str:
 <html lang="en"><head><meta charset="utf-8"><title>chronocl scalability report</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:70em}}table{{border-collapse:collapse;
 margin:1em 0}}td,th{{border:1px solid #ccc;padding:2px 8px;text-align:right}}
+td:first-child,th:first-child{{text-align:left}}
 img{{max-width:100%}}</style></head><body>
 <h1>chronocl scalability report</h1>
 <p>Schema {html.escape(report["schema"])}, written {html.escape(report["created"])}.
