@@ -6,7 +6,8 @@ processes, one thread each, each with its share of the cores) or the cluster at 
 address. A cell of n workers restricts its tasks to the first n of them (`dask.annotate`),
 so a worker is the same unit of resources in every cell. A cell is one `integrate_to_store`
 of the window 0:W, store to store as a real run (read, integrate, write; one task per
-z-slab), timed as the median of `repeats` runs after one warm-up.
+z-slab), timed as the median of `repeats` runs after one warm-up (and, before the first
+cell, one untimed run per device on all workers, which build their kernels at once).
 
 Strong scaling: the whole volume, every window, every worker count. Weak scaling: the
 largest window over the first n·u z-rows with n workers (u = Z // the largest worker
@@ -123,7 +124,9 @@ def check_mode(mode: str) -> None:
 
 
 # -- data -------------------------------------------------------------------------------------
-def make_synthetic(folder: Path, size_xyz: Sequence[int], steps: int) -> TimeSeries:
+def make_synthetic(
+    folder: Path, size_xyz: Sequence[int], steps: int, progress: bool = False
+) -> TimeSeries:
     """`steps` steps of the vortex data set at `size_xyz`, written to folder/synthetic.zarr."""
     nx, ny, nz = size_xyz
     return write_series(
@@ -133,6 +136,7 @@ def make_synthetic(folder: Path, size_xyz: Sequence[int], steps: int) -> TimeSer
         volume_shape=(nz, ny, nx),
         dtype="float32",
         source=f"synthetic vortex {nx}x{ny}x{nz}, {steps} steps",
+        progress=progress,
         levels=False,
     )
 
@@ -202,7 +206,8 @@ def plan_cells(
 def time_cell(
     client, cell: Cell, addresses: Sequence[str], mode: str, repeats: int, scratch: Path, tick
 ) -> dict:
-    """Time `cell` on the first `cell.workers` workers: one warm-up, then `repeats` runs."""
+    """Time `cell` on the first `cell.workers` workers: one warm-up, then `repeats` runs
+    (none: the warm-up alone, and an empty result)."""
     import dask
 
     series, window = cell.series, cell.window
@@ -225,6 +230,8 @@ def time_cell(
 
     once()  # builds the kernels on the workers, warms the file cache
     times = [once() for _ in range(repeats)]
+    if not times:  # a warm-up alone
+        return {}
     median = statistics.median(times)
     return {
         "study": cell.study,
@@ -308,6 +315,9 @@ def measure(
     advance: Callable[[int], None],
 ) -> tuple[list[dict], dict]:
     """(cells, roofline) of the whole matrix; `advance(window bytes)` after every run."""
+    for device in devices:  # every worker imports and builds its kernels at once, untimed
+        warm_up = Cell("warm-up", device, len(addresses), windows[0], full)
+        time_cell(client, warm_up, addresses, mode, 0, scratch, lambda nbytes: None)
     cells = plan_cells(full, weak, windows, workers, devices)
     done: dict[tuple, dict] = {}
     results = []

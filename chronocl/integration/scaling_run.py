@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -37,6 +37,29 @@ from chronocl.integration.scaling import (
 from chronocl.integration.scaling_report import SCHEMA, check_report_target, write_report
 
 STORE_HINT = "create one with 'chronocl ingest' or 'chronocl generate', or use --synthetic SIZE"
+MAX_SYNTHETIC_VOXELS = 2**30  # a step is computed in memory (as 'chronocl generate')
+
+
+@dataclass(frozen=True)
+class Request:
+    """A checked report request: the data, the matrix and how to run it."""
+
+    series: TimeSeries | None  # the user's store, or None: synthetic at size_xyz
+    size_xyz: tuple[int, int, int]
+    n_steps: int
+    windows: tuple[int, ...]
+    workers: tuple[int, ...] | None  # None: as many as the scheduler's cluster has
+    devices: str | None
+    infos: tuple | None  # the devices resolved here (a local cluster), else on a worker
+    scheduler: str | None
+    repeats: int
+    mode: str
+    progress: bool
+
+    @property
+    def volume_zyx(self) -> tuple[int, int, int]:
+        nx, ny, nz = self.size_xyz
+        return nz, ny, nx
 
 
 def run_report(
@@ -59,12 +82,12 @@ def run_report(
     cores (or the scheduler's workers); `devices` is None (the chosen device), 'all' or a
     comma list of indices or name parts.
     """
-    windows = tuple(sorted(set(windows)))
     check_mode(mode)
     if (store is None) == (size_xyz is None):
         raise InvalidParameterError("give a STORE or --synthetic SIZE (one of the two)")
     if repeats < 1:
         raise InvalidParameterError(f"--repeats is {repeats}; time each cell at least once")
+    windows = tuple(sorted(set(windows)))
     if not windows or windows[0] < 1:
         raise InvalidParameterError("--windows must be whole numbers of at least 1, e.g. 8,16")
     if workers is not None:
@@ -74,78 +97,73 @@ def run_report(
     series: TimeSeries | None = None
     if store is not None:
         series = open_series(check_input(store, "store", hint=STORE_HINT))
-        volume, n_steps = series.volume_shape, series.n_steps
+        nz, ny, nx = series.volume_shape
+        size, n_steps = (nx, ny, nz), series.n_steps
     else:
-        nx, ny, nz = size_xyz  # type: ignore[misc]
-        volume, n_steps = (nz, ny, nx), windows[-1]
+        size, n_steps = _check_size(size_xyz), windows[-1]
     check_apart(out, [store])
-    replace = check_report_target(out)
+    replace_earlier = check_report_target(out)
     check_writable(out)
-    infos = None if scheduler else resolve_devices(devices)
     if workers is None and not scheduler:
         workers = default_workers(os.cpu_count() or 1)
+    request = Request(
+        series=series,
+        size_xyz=size,
+        n_steps=n_steps,
+        windows=windows,
+        workers=workers,
+        devices=devices,
+        infos=None if scheduler else tuple(resolve_devices(devices)),
+        scheduler=scheduler,
+        repeats=repeats,
+        mode=mode,
+        progress=progress,
+    )
     if workers is not None:
-        check_matrix(volume, n_steps, windows, workers)
+        check_matrix(request.volume_zyx, n_steps, windows, workers)
 
-    with atomic_directory(out, overwrite=replace) as tmp:
+    with atomic_directory(out, overwrite=replace_earlier) as tmp:
         tmp.mkdir()
         scratch = tmp / "scratch"
         scratch.mkdir()
         try:
-            report = _measure(
-                scratch,
-                series,
-                size_xyz,
-                volume,
-                n_steps,
-                windows,
-                workers,
-                devices,
-                infos,
-                scheduler,
-                repeats,
-                mode,
-                progress,
-            )
+            report = _measure(request, scratch)
         finally:
             remove_path(scratch)
         report = write_report(tmp, report)
     return report
 
 
-def _measure(
-    scratch: Path,
-    series,
-    size_xyz,
-    volume,
-    n_steps,
-    windows,
-    workers,
-    devices,
-    infos,
-    scheduler,
-    repeats,
-    mode,
-    progress,
-) -> dict:
+def _check_size(size_xyz: Sequence[int]) -> tuple[int, int, int]:
+    size = tuple(int(n) for n in size_xyz)
+    if len(size) != 3 or min(size) < 1 or size[0] * size[1] * size[2] > MAX_SYNTHETIC_VOXELS:
+        raise InvalidParameterError(
+            f"synthetic size {size_xyz} must be three sides of at least 1 and at most "
+            f"{MAX_SYNTHETIC_VOXELS // 2**20} Mi voxels, e.g. --synthetic 256"
+        )
+    return size  # type: ignore[return-value]
+
+
+def _measure(req: Request, scratch: Path) -> dict:
     """Start (or reach) the cluster, prepare the data, measure; the report's dict."""
-    most = workers[-1] if workers else 1
-    with cluster(scheduler, most) as (client, addresses):
-        if workers is None:  # a scheduler's cluster: as many as it has
-            workers = default_workers(len(addresses))
-            check_matrix(volume, n_steps, windows, workers)
-        if infos is None:  # the devices of the workers' machines
-            infos = client.submit(
-                resolve_devices, devices, workers=[addresses[0]], pure=False
-            ).result()
+    most = req.workers[-1] if req.workers else 1
+    windows, volume = req.windows, req.volume_zyx
+    with cluster(req.scheduler, most) as (client, addresses):
+        if req.workers is None:  # a scheduler's cluster: as many workers as it has
+            req = replace(req, workers=default_workers(len(addresses)))
+            check_matrix(volume, req.n_steps, windows, req.workers)
+        if req.infos is None:  # the devices of the workers' machines
+            found = client.submit(resolve_devices, req.devices, workers=[addresses[0]], pure=False)
+            req = replace(req, infos=tuple(found.result()))
+        workers, infos = req.workers, req.infos
         unit = volume[0] // workers[-1]
-        full = series or make_synthetic(scratch, size_xyz, windows[-1])
+        full = req.series or make_synthetic(scratch, req.size_xyz, windows[-1], req.progress)
         weak = {
             n: crop_rows(full, n * unit, windows[-1], scratch / f"weak-{n}.zarr") for n in workers
         }
         indices = [d.index for d in infos]
-        total = runs_needed(volume[0], unit, windows, workers, indices, repeats)
-        with meter(total, "measuring", progress, unit="runs") as advance:
+        total = runs_needed(volume[0], unit, windows, workers, indices, req.repeats)
+        with meter(total, "measuring", req.progress, unit="runs") as advance:
             cells, roofline = measure(
                 client,
                 addresses,
@@ -154,37 +172,36 @@ def _measure(
                 windows,
                 workers,
                 indices,
-                mode=mode,
-                repeats=repeats,
+                mode=req.mode,
+                repeats=req.repeats,
                 scratch=scratch,
-                local=not scheduler,
+                local=not req.scheduler,
                 advance=advance,
             )
-        address = client.scheduler.address if client.scheduler else scheduler
-    nz, ny, nx = volume
+        address = client.scheduler.address if client.scheduler else req.scheduler
     return {
         "schema": SCHEMA,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "machine": machine(),
         "cluster": {
-            "kind": "scheduler" if scheduler else "local",
+            "kind": "scheduler" if req.scheduler else "local",
             "address": address,
             "workers": len(addresses),
-            "threads_per_worker": 1 if not scheduler else None,
+            "threads_per_worker": None if req.scheduler else 1,
         },
         "devices": [asdict(d) for d in infos],
         "parameters": {
-            "input": str(series.path) if series is not None else "synthetic vortex",
-            "size_xyz": [nx, ny, nz],
+            "input": str(req.series.path) if req.series is not None else "synthetic vortex",
+            "size_xyz": list(req.size_xyz),
             "dtype": str(full.dtype),
             "itemsize": full.dtype.itemsize,
-            "n_steps": n_steps,
+            "n_steps": req.n_steps,
             "windows": list(windows),
             "workers": list(workers),
             "devices": indices,
-            "repeats": repeats,
+            "repeats": req.repeats,
             "warmup": 1,
-            "mode": mode,
+            "mode": req.mode,
             "weak_rows_per_worker": unit,
         },
         "cells": cells,
