@@ -95,5 +95,7 @@ def bench(
         weak = summary["weak_efficiency"][device]
         lines[f"{device} strong speed-up"] = ", ".join(f"{n}: {s:.2f}×" for n, s in strong.items())
         lines[f"{device} weak efficiency"] = ", ".join(f"{n}: {e:.2f}" for n, e in weak.items())
-        lines[f"{device} best / roofline"] = f"{summary['best_roofline_fraction'][device]:.3f}"
+        lines[f"{device} best / roofline"] = (
+            f"{100 * summary['best_roofline_fraction'][device]:.2g} %"
+        )
     print_summary(lines)

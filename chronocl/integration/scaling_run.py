@@ -96,7 +96,8 @@ def run_report(
             raise InvalidParameterError("--workers must be at least 1, e.g. --workers 1,2,4")
     series: TimeSeries | None = None
     if store is not None:
-        series = open_series(check_input(store, "store", hint=STORE_HINT))
+        # absolute: a remote cluster's workers open it from their own working folders
+        series = open_series(check_input(store, "store", hint=STORE_HINT).absolute())
         nz, ny, nx = series.volume_shape
         size, n_steps = (nx, ny, nz), series.n_steps
     else:
@@ -124,7 +125,7 @@ def run_report(
 
     with atomic_directory(out, overwrite=replace_earlier) as tmp:
         tmp.mkdir()
-        scratch = tmp / "scratch"
+        scratch = (tmp / "scratch").absolute()
         scratch.mkdir()
         try:
             report = _measure(request, scratch)
