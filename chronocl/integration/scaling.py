@@ -7,7 +7,8 @@ address. A cell of n workers restricts its tasks to the first n of them (`dask.a
 so a worker is the same unit of resources in every cell. A cell is one `integrate_to_store`
 of the window 0:W, store to store as a real run (read, integrate, write; one task per
 z-slab), timed as the median of `repeats` runs after one warm-up (and, before the first
-cell, one untimed run per device on all workers, which build their kernels at once).
+cell, one untimed run per device on the workers of the largest count, which build their
+kernels at once).
 
 Strong scaling: the whole volume, every window, every worker count. Weak scaling: the
 largest window over the first n·u z-rows with n workers (u = Z // the largest worker
@@ -315,9 +316,9 @@ def measure(
     advance: Callable[[int], None],
 ) -> tuple[list[dict], dict]:
     """(cells, roofline) of the whole matrix; `advance(window bytes)` after every run."""
-    for device in devices:  # every worker imports and builds its kernels at once, untimed
-        warm_up = Cell("warm-up", device, len(addresses), windows[0], full)
-        time_cell(client, warm_up, addresses, mode, 0, scratch, lambda nbytes: None)
+    for device in devices:  # the workers import and build their kernels at once, untimed
+        warm_up = Cell("warm-up", device, workers[-1], windows[0], full)
+        time_cell(client, warm_up, addresses, mode, 0, scratch, advance)
     cells = plan_cells(full, weak, windows, workers, devices)
     done: dict[tuple, dict] = {}
     results = []
@@ -337,4 +338,4 @@ def measure(
 def runs_needed(volume_z: int, unit: int, windows, workers, devices, repeats: int) -> int:
     """How many timed and warm-up runs `measure` makes (for the progress bar)."""
     weak = sum(1 for n in workers if n * unit != volume_z)
-    return len(devices) * (len(windows) * len(workers) + weak) * (repeats + 1)
+    return len(devices) * ((len(windows) * len(workers) + weak) * (repeats + 1) + 1)
