@@ -5,31 +5,13 @@ from __future__ import annotations
 import json
 import os
 import platform
-import statistics
 import sys
-import time
-from collections.abc import Callable
+
+from chronocl.core.timing import race  # noqa: F401  (the benchmarks import it from here)
 
 
 def emit(obj: dict) -> None:
     print(json.dumps(obj), flush=True)
-
-
-def race(fns: dict[str, Callable[[], object]], repeats: int, warmup: int = 1) -> dict:
-    """Time several contenders round-robin, so machine noise hits them alike.
-
-    Returns {name: (median, minimum)} over `repeats` runs each after `warmup` runs each.
-    """
-    for _ in range(warmup):
-        for fn in fns.values():
-            fn()
-    times: dict[str, list[float]] = {name: [] for name in fns}
-    for _ in range(repeats):
-        for name, fn in fns.items():
-            t0 = time.perf_counter()
-            fn()
-            times[name].append(time.perf_counter() - t0)
-    return {name: (statistics.median(t), min(t)) for name, t in times.items()}
 
 
 def env_record(bench: str, extra: dict | None = None) -> dict:

@@ -32,7 +32,7 @@ from chronocl.core.tf import DataTF
 from chronocl.data import synthetic
 from chronocl.engine import NumpyEngine
 from chronocl.engine.opencl import OpenCLEngine
-from chronocl.engine.program import kernel
+from chronocl.engine.roofline import read_fns
 from chronocl.integration.inmemory import make_spec
 from chronocl.modes.spec import resolve_order
 
@@ -110,28 +110,8 @@ class Runner:
 
     def roofline_fns(self, brick) -> dict:
         """(a) an OpenCL kernel that reads the brick once and sums it, (b) numpy max over it."""
-        import pyopencl as cl
-
-        nz, w, ny, nx = brick.shape
-        dc = self.ocl.dc
-        dtype = {"float32": "float", "uint8": "uchar"}[brick.dtype.name]
-        defines = {"DATA_T": dtype, "DATA_V": dtype + "16", "LUT_N": 256, "VEC": 16}
-        kern = kernel(dc, "read_roofline.cl", "read_sum", defines)
-        out = np.empty((nz, ny, nx), dtype=np.float32)
-        mf = cl.mem_flags
-
-        def run_cl():
-            src = cl.Buffer(dc.context, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick)
-            dst = cl.Buffer(dc.context, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=out)
-            kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
-            cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // 16, ny, nz), (8, 2, 1))
-            mapped, _ = cl.enqueue_map_buffer(
-                dc.queue, dst, cl.map_flags.READ, 0, out.shape, out.dtype
-            )
-            mapped.base.release(dc.queue)
-            dc.queue.finish()
-
-        return {("read-opencl", "read"): run_cl, ("read-numpy-max", "read"): brick.max}
+        fns = read_fns(self.ocl.dc, brick)
+        return {(name, "read"): fn for name, fn in fns.items()}
 
     def roofline(self, case: str) -> float:
         return max(

@@ -15,6 +15,7 @@ from typing import Annotated
 import typer
 
 from chronocl.cli import (
+    bench,
     demo,
     devices,
     export,
@@ -88,6 +89,7 @@ app.command()(view.view)
 app.command()(verify.verify)
 app.command()(pyramid.pyramid)
 app.command()(devices.devices)
+app.command()(bench.bench)
 app.command()(demo.demo)
 
 
