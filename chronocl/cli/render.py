@@ -33,10 +33,22 @@ from chronocl.core.errors import InvalidParameterError
 
 
 def render(
-    store: Annotated[Path, typer.Argument(help="Series store.")],
+    ctx: typer.Context,
+    store: Annotated[
+        Path | None, typer.Argument(help="Series store (with --state: the session's).")
+    ] = None,
     out_path: Annotated[
-        Path, typer.Option("--out", "-o", metavar="OUT.png", help="Image to write.")
-    ],
+        Path | None,
+        typer.Option("--out", "-o", metavar="OUT.png", help="Image to write (required)."),
+    ] = None,
+    state: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="SESSION.json",
+            help="A session saved in the viewer: render what it showed (-o default: "
+            "SESSION.png); options given here override it.",
+        ),
+    ] = None,
     mode: Annotated[
         list[str],
         typer.Option(
@@ -91,7 +103,16 @@ def render(
       chronocl render vortex.zarr -o cut.png --clip 1,0,0,0 --azimuth 60 --zoom 1.4
 
       chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
+
+      chronocl render --state vortex-session.json -o figure.png --size 1024x1024
     """
+    if state is not None:
+        from chronocl.cli.render_state import given, render_state
+
+        return render_state(state, given(ctx, locals()))
+    if store is None or out_path is None:
+        missing = "STORE" if store is None else "--out/-o"
+        raise InvalidParameterError(f"{missing} is missing; e.g. chronocl render v.zarr -o v.png")
     from chronocl.core.enhance import Enhance
     from chronocl.core.paths import check_distinct, check_input, check_target
     from chronocl.data.formats.outputs import output_kind

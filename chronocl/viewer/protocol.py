@@ -9,7 +9,9 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
                background, outline                       the newest state only
     probe      {"view", "x", "y"}                       x, y in [0, 1] of the panel, top-left 0
     histogram  {"range": [lo, hi]}                       normalised values u, for TF zoom
-    save       {"what": "image" | "chronovolume", "view"}
+    save       {"what": "image" | "chronovolume"         a download; "session": the state as a
+               | "session", "view"}                     session file (`session_file`)
+    load       {"session": a session file's object}     apply a saved session as one step
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
 (numbers must be finite; data values must fit float32, ranges need lo < hi) raise
@@ -43,6 +45,9 @@ from chronocl.viewer.schema import (
     Obj,
     ProtocolError,
     Range,
+    Settings,
+    Text,
+    Version,
     show,
 )
 
@@ -119,6 +124,36 @@ CLIP_PLANE = Obj(
 )
 THRESHOLD = Num(0.0, 0.99)
 ID = Int(0, 2**53)
+SIZE = List(Int(MIN_PANEL, MAX_PANEL), 2, 2)
+
+# A saved session (the viewer's Save session, the URL fragment, `chronocl render --state`):
+# the state fields of an update message plus the data set and the format's version. Camera
+# and enhancement are shared by the views, as in the viewer. `shading` is a slot for the
+# lighting settings (null or a flat object; kept, not yet applied).
+SESSION_VERSION = 1
+SESSION_KEY = "chronocl_session"
+SESSION = Obj(
+    {
+        SESSION_KEY: Version(SESSION_VERSION, "session files of"),
+        "dataset": Obj(
+            {"name": Text(200), "path": Text(4096), "shape": List(Int(1, 2**31), 4, 4)},
+            frozenset({"name"}),
+        ),
+        "window": WINDOW,
+        "views": List(VIEW, 1, MAX_VIEWS),
+        "camera": CAMERA,
+        "data_tf": DATA_TF,
+        "time_tf": TIME_TF,
+        "enhance": ENHANCE,
+        "threshold": THRESHOLD,
+        "clip": Nullable(CLIP_PLANE),
+        "size": SIZE,
+        "background": Enum(BACKGROUNDS),
+        "outline": Bool(),
+        "shading": Nullable(Settings()),
+    },
+    frozenset({SESSION_KEY, "dataset", "window", "views", "camera", "data_tf", "time_tf"}),
+)
 
 MESSAGES: dict[str, Obj] = {
     "open": Obj({"type": Enum(("open",)), "id": ID, "dataset": Name()}, frozenset({"dataset"})),
@@ -134,7 +169,7 @@ MESSAGES: dict[str, Obj] = {
             "enhance": ENHANCE,
             "threshold": THRESHOLD,
             "clip": Nullable(CLIP_PLANE),
-            "size": List(Int(MIN_PANEL, MAX_PANEL), 2, 2),
+            "size": SIZE,
             "quality": Enum(("preview", "full")),
             "background": Enum(BACKGROUNDS),
             "outline": Bool(),
@@ -158,11 +193,12 @@ MESSAGES: dict[str, Obj] = {
         {
             "type": Enum(("save",)),
             "id": ID,
-            "what": Enum(("image", "chronovolume")),
+            "what": Enum(("image", "chronovolume", "session")),
             "view": Int(0, MAX_VIEWS - 1),
         },
         frozenset({"what"}),
     ),
+    "load": Obj({"type": Enum(("load",)), "id": ID, "session": SESSION}, frozenset({"session"})),
 }
 
 
@@ -239,7 +275,7 @@ def too_deep(text: str, limit: int = MAX_DEPTH) -> bool:
     return False
 
 
-def _decode(text: str) -> object:
+def decode_json(text: str) -> object:
     """json.loads without NaN/Infinity and without deep nesting (ProtocolError, ValueError)."""
     if too_deep(text):
         raise ProtocolError(
@@ -276,7 +312,7 @@ def parse_message(text: object) -> dict:
     if len(text.encode()) > MAX_MESSAGE_BYTES:
         raise ProtocolError(f"message is over the limit of {MAX_MESSAGE_BYTES} bytes")
     try:
-        msg = _decode(text)
+        msg = decode_json(text)
     except ProtocolError:
         raise
     except ValueError as exc:

@@ -24,12 +24,12 @@ from collections import deque
 from collections.abc import Callable
 
 from chronocl import modes
-from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.session import Session
 from chronocl.render.views import describe, parse_color
-from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.errors import error_text
 from chronocl.viewer.frames import (
     JPEG_QUALITY,
@@ -46,6 +46,7 @@ from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.probe import box_fractions, probe_reply, project
 from chronocl.viewer.protocol import pack_frame
 from chronocl.viewer.saving import Downloads, save_chronovolume, save_image
+from chronocl.viewer.session_file import loaded_state, save_session
 from chronocl.viewer.slots import ViewSlot, upload
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
@@ -94,26 +95,34 @@ class ClientWorker:
         self.thread.start()
 
     # -- called from the server's event loop ----------------------------------------------
-    def find_dataset(self, ref: int | str) -> int:
-        if isinstance(ref, int):
-            if ref < len(self.datasets):
-                return ref
-        else:
-            for i, d in enumerate(self.datasets):
-                if d.name == ref:
-                    return i
-        names = ", ".join(f"{i}: {d.name}" for i, d in enumerate(self.datasets))
-        raise UnknownNameError(f"unknown data set {ref!r}; choose one of {names}")
-
     def open(self, ref: int | str, rid: int | None) -> dict:
-        i = self.find_dataset(ref)
+        i = find_dataset(self.datasets, ref)
         with self._cond:
             self.state = default_state(i, self.datasets[i].series)
             self._probed = None
             self._pending = (self.state, rid)
             self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
             self._cond.notify()
-        return self.datasets[i].info(i) | {"state": describe_state(self.state)}
+        return self._opened(i)
+
+    def _opened(self, i: int) -> dict:
+        """The `dataset` reply: the data set, the state, and the data set's opening camera."""
+        opening = describe_state(default_state(i, self.datasets[i].series))["camera"]
+        return self.datasets[i].info(i) | {
+            "state": describe_state(self.state),
+            "opening_camera": opening,
+        }
+
+    def load(self, session: dict, rid: int | None) -> dict:
+        """Apply a validated saved session as one step (nothing applied when it does not
+        fit); the reply is `open`'s."""
+        with self._cond:
+            i, self.state = loaded_state(self.datasets, self.state, session)
+            self._probed = None
+            self._pending = (self.state, rid)
+            self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
+            self._cond.notify()
+        return self._opened(i)
 
     def update(self, msg: dict) -> None:
         with self._cond:
@@ -377,7 +386,12 @@ class ClientWorker:
     def _do_task(self, kind: str, msg: dict) -> None:
         rid = msg.get("id")
         ds = self.datasets[self.state.dataset]
-        if kind == "histogram":
+        if kind == "save" and msg["what"] == "session":
+            key, name = save_session(self.downloads, self.state, ds)
+            self._reply(
+                {"type": "download", "id": rid, "url": f"/download/{key}", "filename": name}
+            )
+        elif kind == "histogram":
             lo, hi = msg["range"]
             self._reply({"type": "histogram", "id": rid, **ds.histogram(lo, hi)})
         elif kind == "probe":
