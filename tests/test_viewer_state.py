@@ -22,10 +22,19 @@ from chronocl.viewer.session_file import (
 )
 from chronocl.viewer.view_state import default_state, describe_state, merge
 
-from .test_cli import cli
 from .viewer_helpers import Client, make_stores, start_server
 
 pytest.importorskip("starlette")
+
+
+@pytest.fixture(autouse=True)
+def full_size_frames(monkeypatch):
+    """Frames drawn at the panels' full size (never a little smaller for the latency target,
+    as a slow moment on a busy machine would make them): frames compared are the same size."""
+    from chronocl.viewer import frames, worker
+
+    monkeypatch.setattr(worker, "DrawBudget", lambda: frames.DrawBudget(target_ms=1e9))
+
 
 EDITS = {
     "camera": {"azimuth": 75.0, "elevation": -15.0, "zoom": 1.5, "projection": "orthographic"},
@@ -163,8 +172,13 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
 
     path = tmp_path / "vortex-session.json"
     path.write_bytes(body)
-    result = cli("render", "--state", path)
-    assert result.returncode == 0, result.stderr
+    # The command line in this process (its kernels are built already).
+    from typer.testing import CliRunner
+
+    from chronocl.cli.app import app
+
+    result = CliRunner().invoke(app, ["render", "--state", str(path)])
+    assert result.exit_code == 0, result.output
     from PIL import Image
 
     figure = np.asarray(Image.open(tmp_path / "vortex-session.png").convert("RGB"))
@@ -178,7 +192,8 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
 
     # Options on the command line override the session; bad sessions are refused in one line
     # (in this process: the command line's exit 2 for them is `main`'s, tested elsewhere).
-    render_state(path, {"out_path": tmp_path / "big.png", "size": "96x64", "mode": ["max"]})
+    args = ["render", "--state", str(path), "-o", str(tmp_path / "big.png"), "--size", "96x64"]
+    assert CliRunner().invoke(app, [*args, "--mode", "max"]).exit_code == 0
     assert Image.open(tmp_path / "big.png").size[0] == 96
     (tmp_path / "old.json").write_text(json.dumps(session | {"chronocl_session": 0}))
     with pytest.raises(SessionFileError, match=r"old\.json: session\.chronocl_session is 0"):

@@ -9,6 +9,7 @@
 //   keys.js        the keyboard shortcuts (one table) and the `?` list
 //   tf_editor.js   the data transfer function editor
 //   probe.js       the v(t) plot of a probed voxel
+//   session.js     undo / redo, the URL fragment (#state=), Save / Load session
 //   controls.js    the other controls, filled from the server's choices
 
 import { connect, frameArrived, send, update } from './connection.js';
@@ -16,6 +17,7 @@ import { bindControls, fillControls, syncControls } from './controls.js';
 import { bindKeys } from './keys.js';
 import { bindOrientation, drawTriads } from './orientation.js';
 import { clearProbe, drawProbe, onProbe } from './probe.js';
+import { bindSession, fragmentSession, loadSession, resetHistory } from './session.js';
 import { $, S, setStatus, viewer } from './state.js';
 import { bindTF, drawTF } from './tf_editor.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
@@ -23,6 +25,8 @@ import { fillSelect, layoutViews, onFrame, showMark } from './views.js';
 
 // After a reconnect: the state the page had, sent back once the data set is open again.
 let restore = null;
+// The id of the load of the session the URL carried (#state=), until the server answers it.
+let urlLoad = null;
 
 // The first message on every socket: the data sets, and the modes, menus, defaults and bounds
 // to offer. On a socket opened again (the server restarted) the page reopens its data set.
@@ -35,15 +39,19 @@ function onInfo(msg) {
   );
   const again = S.info && S.state && msg.datasets.some((d) => d.index === S.info.index);
   restore = again ? { state: S.state, zoom: S.zoom, point: S.selectedPoint, camera: S.initialCamera } : null;
-  send({ type: 'open', dataset: again ? S.info.index : 0 });
+  const fromUrl = S.info ? null : fragmentSession();
+  if (fromUrl) urlLoad = loadSession(fromUrl);
+  else send({ type: 'open', dataset: again ? S.info.index : 0 });
 }
 
 function onDataset(msg) {
+  if (!S.info || S.info.index !== msg.index) resetHistory();
+  urlLoad = null;
   S.info = msg;
   S.state = msg.state;
   S.zoom = [0, 1];
   S.selectedPoint = Math.min(1, S.state.data_tf.points.length - 1);
-  S.initialCamera = { ...msg.state.camera };
+  S.initialCamera = { ...(msg.opening_camera || msg.state.camera) };
   if (restore) {
     // Every field the server describes, as the page had it before the socket closed.
     for (const k of Object.keys(msg.state)) if (k in restore.state) S.state[k] = restore.state[k];
@@ -98,6 +106,10 @@ function onText(msg) {
       if (msg.id !== null && msg.id >= viewer.sent) frameArrived(); // no frame will come
       viewer.errors.push(msg);
       setStatus(`error: ${msg.message}`, true);
+      if (urlLoad !== null && msg.id === urlLoad) {
+        urlLoad = null; // the URL's session does not fit: the default view instead
+        send({ type: 'open', dataset: 0 });
+      }
       break;
     default:
       break;
@@ -132,4 +144,5 @@ bindTF();
 bindControls();
 bindOrientation();
 bindKeys();
+bindSession();
 connect({ onText, onFrame });
