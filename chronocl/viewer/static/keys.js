@@ -35,6 +35,8 @@ export const SHORTCUTS = [
   { keys: ['Escape'], label: 'Esc', does: 'close this list', run: () => showHelp(false), always: true },
 ];
 
+const TEXT_FIELDS = 'textarea, input:not([type=checkbox]):not([type=range]):not([type=file])';
+
 viewer.shortcuts = SHORTCUTS.map((s) => ({ keys: s.keys, ctrl: !!s.ctrl, label: s.label, does: s.does }));
 
 export function showHelp(on) {
@@ -65,8 +67,11 @@ export function bindKeys() {
   for (const s of SHORTCUTS) for (const k of s.keys) (s.ctrl ? byCtrlKey : byKey).set(k, s);
   document.addEventListener('keydown', (e) => {
     if (e.altKey) return;
-    if (e.target.closest && e.target.closest('input, select, textarea')) return;
-    const s = (e.ctrlKey || e.metaKey ? byCtrlKey : byKey).get(e.key);
+    const ctrl = e.ctrlKey || e.metaKey;
+    // Menus and checkboxes have no undo of their own: Ctrl+Z there is the page's.
+    const field = ctrl ? TEXT_FIELDS : 'input, select, textarea';
+    if (e.target.closest && e.target.closest(field)) return;
+    const s = (ctrl ? byCtrlKey : byKey).get(e.key);
     if (!s || (!S.info && !s.always && s.keys[0] !== '?')) return;
     s.run();
     e.preventDefault();
