@@ -104,7 +104,9 @@ def read_session(path: str | os.PathLike) -> dict:
 
 
 def write_session(session: dict) -> bytes:
-    return (json.dumps(session, indent=1) + "\n").encode()
+    """The session as JSON text, one top-level field a line."""
+    lines = [f"  {json.dumps(k)}: {json.dumps(v)}" for k, v in session.items()]
+    return ("{\n" + ",\n".join(lines) + "\n}\n").encode()
 
 
 def apply_session(state: ViewState, session: dict, n_steps: int) -> ViewState:
