@@ -1,6 +1,7 @@
 """Keeping the viewer's state, in Chromium: a session saved, the page opened afresh, the
 session loaded, and the frame the one before; the URL's #state= restoring it too; undo after a
-TF edit bringing back the frame before it, redo the edited one (Ctrl+Z, Ctrl+Shift+Z).
+TF edit bringing back the frame before it, redo the edited one (Ctrl+Z, Ctrl+Shift+Z); the
+time legend drawn in each view, in the frame's time colours, and hidden with L.
 
 Screenshots go to $CHRONOCL_SCREENSHOTS (else the test's temporary folder).
 """
@@ -153,5 +154,35 @@ def test_undo_and_redo_a_tf_edit(browser, server, tmp_path):  # noqa: F811
         keys = page.inner_text("#help-keys")
         assert "Ctrl+Z" in keys and "Ctrl+Shift+Z, Ctrl+Y" in keys
         page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-undo-keys.png"))
+    finally:
+        p.close()
+
+
+# The legend canvas's pixel at step k's colour cell, and whether the canvas shows.
+LEGEND_CELL = """([k]) => {
+  const c = document.querySelector('#views .view canvas.legend');
+  const at = window.viewer.legendCell(k), dpr = window.devicePixelRatio || 1;
+  const px = c.getContext('2d').getImageData(Math.round(at.x * dpr), Math.round(at.y * dpr), 1, 1);
+  return {rgb: Array.from(px.data.slice(0, 3)), hidden: c.hidden, steps: c.dataset.steps};
+}"""
+
+
+def test_time_legend_in_each_view(browser, server, tmp_path):  # noqa: F811
+    p = Page(browser, server, 900, 640)
+    try:
+        legend = p.eval("() => window.viewer.S.legend")
+        assert len(legend) == 10  # the opening window's steps
+        for k in (0, len(legend) - 1):  # the oldest and newest step's time colour
+            got = p.eval(LEGEND_CELL, [k])
+            assert not got["hidden"]
+            assert got["steps"] == ",".join(str(item["step"]) for item in legend)
+            want = [round(255 * c) for c in legend[k]["rgb"]]
+            assert max(abs(a - b) for a, b in zip(got["rgb"], want, strict=True)) <= 3
+        p.page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-time-legend.png"))
+        p.page.keyboard.press("l")
+        assert p.eval(LEGEND_CELL, [0])["hidden"]
+        assert not p.page.is_checked("#legend-on")
+        p.page.click("#legend-on")
+        assert not p.eval(LEGEND_CELL, [0])["hidden"]
     finally:
         p.close()

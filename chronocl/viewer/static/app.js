@@ -9,12 +9,14 @@
 //   keys.js        the keyboard shortcuts (one table) and the `?` list
 //   tf_editor.js   the data transfer function editor
 //   probe.js       the v(t) plot of a probed voxel
+//   legend.js      the time legend drawn in each view
 //   session.js     undo / redo, the URL fragment (#state=), Save / Load session
 //   controls.js    the other controls, filled from the server's choices
 
 import { connect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, syncControls } from './controls.js';
 import { bindKeys } from './keys.js';
+import { bindLegend, drawLegends } from './legend.js';
 import { bindOrientation, drawTriads } from './orientation.js';
 import { clearProbe, drawProbe, onProbe } from './probe.js';
 import { bindSession, fragmentSession, loadSession, resetHistory } from './session.js';
@@ -128,6 +130,7 @@ function relayout() {
     drawTimeline();
     drawTF();
     drawProbe();
+    drawLegends();
   }, 150);
 }
 window.addEventListener('resize', relayout);
@@ -145,4 +148,5 @@ bindControls();
 bindOrientation();
 bindKeys();
 bindSession();
+bindLegend();
 connect({ onText, onFrame });

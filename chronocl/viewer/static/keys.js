@@ -3,6 +3,7 @@
 // Keys are ignored while typing in a field (where Ctrl+Z is the field's own undo) and when
 // Alt is held; entries marked `ctrl` need Ctrl (or Meta), the others act without it.
 
+import { toggleLegend } from './legend.js';
 import { resetCamera, standardView, toggleTriad } from './orientation.js';
 import { redo, undo } from './session.js';
 import { $, S, viewer } from './state.js';
@@ -29,6 +30,7 @@ export const SHORTCUTS = [
   { keys: ['z'], label: 'Z', does: 'look along +Z (from behind)', run: () => standardView('+z') },
   { keys: ['Z'], label: 'Shift+Z', does: 'look along −Z (the front view)', run: () => standardView('-z') },
   { keys: ['a'], label: 'A', does: 'show / hide the axes triads', run: toggleTriad },
+  { keys: ['l'], label: 'L', does: 'show / hide the time legends', run: () => toggleLegend() },
   { keys: ['z'], ctrl: true, label: 'Ctrl+Z', does: 'undo the last edit', run: undo },
   { keys: ['Z', 'y'], ctrl: true, label: 'Ctrl+Shift+Z, Ctrl+Y', does: 'redo the edit undone', run: redo },
   { keys: ['?'], label: '?', does: 'show / hide this list', run: () => showHelp($('help').hidden) },

@@ -2,6 +2,7 @@
 // pointer, the probe click and its marker, and the frames the server sends into them.
 
 import { frameArrived, send, sentAt, settleLater, update } from './connection.js';
+import { drawLegends } from './legend.js';
 import { drawTriads } from './orientation.js';
 import { drawProbe } from './probe.js';
 import { $, S, clamp, setStatus, viewer } from './state.js';
@@ -70,7 +71,7 @@ function makePanel(i) {
     '<select class="mode" title="Integration mode"></select>' +
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
     '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
-    '<div class="probe-mark"></div><canvas class="triad"></canvas>';
+    '<div class="probe-mark"></div><canvas class="legend"></canvas><canvas class="triad"></canvas>';
   $('views').appendChild(el);
   const p = {
     el,
@@ -198,6 +199,7 @@ export function onFrame(buf) {
   // Where the probed voxel is in this frame (it moves with the camera; none before a probe).
   if (viewer.probe && viewer.probe.values) showMark(header.probe || null);
   S.legend = header.legend || [];
+  drawLegends();
   const now = performance.now();
   const t0 = sentAt.get(header.id);
   viewer.frames += 1;
