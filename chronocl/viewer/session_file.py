@@ -29,7 +29,7 @@ import json
 import os
 from pathlib import Path
 
-from chronocl.core.errors import InputNotFoundError, InvalidParameterError
+from chronocl.core.errors import InputNotFoundError, InvalidParameterError, InvalidSelectionError
 from chronocl.data.series import TimeSeries
 from chronocl.render.image import Image
 from chronocl.render.views import compose_panels, describe, parse_color, raycaster
@@ -115,11 +115,7 @@ def apply_session(state: ViewState, session: dict, n_steps: int) -> ViewState:
     fields = {k: session[k] for k in STATE_FIELDS if k in session}
     try:
         return merge(state, fields, n_steps)
-    except ProtocolError:
-        raise
-    except InvalidParameterError as exc:
-        raise SessionFileError(f"the session does not fit its data set: {exc}") from None
-    except ValueError as exc:  # a window beyond the series, a bad TF
+    except InvalidSelectionError as exc:  # a window beyond the series' steps
         raise SessionFileError(f"the session does not fit its data set: {exc}") from None
 
 
