@@ -48,7 +48,7 @@ class Figure:
     modes: tuple[str, ...]
     caption: str
     args: dict = field(default_factory=dict)
-    camera: Camera = field(default_factory=lambda: Camera(30, 25, zoom=1.5))
+    camera: Camera = field(default_factory=lambda: Camera(30, 25, zoom=1.15))
 
 
 FIGURES = (
@@ -105,7 +105,7 @@ FIGURES = (
         "to green to red), additive (white where steps share space), maximum intensity "
         "(where the value grew).",
         {"data_tf": SURFACE},
-        Camera(25, 20, zoom=1.45),
+        Camera(25, 20, zoom=1.15),
     ),
     Figure(
         "j-mean-10",

@@ -25,7 +25,7 @@ def dataset(data: np.ndarray, **extra) -> xr.Dataset:
     coords = {
         "time": TIMES,
         "z": np.arange(Z) * 2.5,
-        "y": np.array([0.0, 1.0, 3.0, 4.0]),  # non-uniform -> spacing 1.0
+        "y": np.array([0.0, 1.0, 2.0, 3.0]),  # uniform; non-uniform ones: tests/test_nonuniform.py
         "x": np.arange(X) * 0.5 + 10,
     }
     return xr.Dataset({"temp": (("time", "z", "y", "x"), data), **extra}, coords=coords)

@@ -87,6 +87,40 @@ def test_ngff04_channel_level_and_scale(tmp_path):
     assert low.shape == (3, 2, 3, 4) and low.spacing == (4.0, 0.5, 0.5)
 
 
+def test_channels_are_variables_in_place_and_in_an_ingested_store(tmp_path, monkeypatch, capsys):
+    """An image's channels are its series' variables (named by their omero labels); ingest
+    --variables writes chosen channels, or all, as the variables of one store."""
+    from chronocl.data.series import open_series
+
+    from .test_vector_variables import one_line_error, run_cli
+
+    rng = np.random.default_rng(1)
+    full = rng.random((3, 3, 4, 6, 8)).astype(np.float32)  # t, c, z, y, x
+    path = tmp_path / "cells.ome.zarr"
+    group = _write(path, [full], "tczyx", [[1, 1, 1, 1, 1]], 2, chunks=(1, 1, 4, 6, 8))
+    group.attrs["omero"] = {"channels": [{"label": "DAPI"}, {"label": "GFP 488"}, {}]}
+    s = open_omezarr(path)
+    assert s.variables == ("DAPI", "GFP_488", "c2")
+    np.testing.assert_array_equal(s.variable("GFP_488").data.compute(), full[:, 1])
+    with pytest.raises(ValueError, match="no variable 'RFP'"):
+        s.variable("RFP")
+
+    def ingest(out, names):
+        return run_cli(
+            monkeypatch, capsys, "ingest", path, "-o", tmp_path / out, "--variables", names
+        )
+
+    assert ingest("cells.zarr", "c2,DAPI")[0] == 0
+    stored = open_series(tmp_path / "cells.zarr")
+    assert stored.variables == ("c2", "DAPI")
+    np.testing.assert_array_equal(stored.data.compute(), full[:, 2])
+    np.testing.assert_array_equal(stored.variable("DAPI").data.compute(), full[:, 0])
+    one_line_error(*ingest("x.zarr", "RFP"), "its channels: DAPI, GFP_488, c2")
+    assert not (tmp_path / "x.zarr").exists()
+    assert ingest("all.zarr", "all")[0] == 0
+    assert open_series(tmp_path / "all.zarr").variables == s.variables
+
+
 def test_ngff05_opens_in_place_with_fast_reads_and_statistics(tmp_path):
     data = np.arange(4 * 3 * 5 * 6, dtype=np.uint16).reshape(4, 3, 5, 6)
     path = tmp_path / "v05.zarr"

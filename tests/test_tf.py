@@ -153,3 +153,27 @@ def test_value_range_accepts_numpy_numbers_and_rejects_strings():
     assert DataTF(value_range=(np.float32(-1), np.int64(3))).value_range == (-1.0, 3.0)
     with pytest.raises(InvalidTransferFunctionError, match="got the string"):
         TimeAlpha("hat", width="0.5")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", ["viridis", "grey", "coolwarm"])
+def test_a_colour_map_recolours_and_keeps_the_opacity_curve(name):
+    from matplotlib import colormaps
+
+    from chronocl.core.colormaps import STOPS, colormap_stops
+    from chronocl.core.tf_input import interp_points
+
+    before = DataTF()
+    after = before.with_colormap(name)
+    u = np.linspace(0.0, 1.0, 2001)
+    np.testing.assert_array_equal(
+        interp_points(after.points, u)[:, 3], interp_points(before.points, u)[:, 3]
+    )
+    stops = np.linspace(0.0, 1.0, STOPS)
+    want = colormaps[{"grey": "gray"}.get(name, name)](stops)[:, :3]
+    np.testing.assert_allclose(interp_points(after.points, stops)[:, :3], want, atol=1e-6)
+    assert [s[0] for s in colormap_stops(name)] == pytest.approx(list(stops))
+
+
+def test_unknown_colour_map_is_one_line():
+    with pytest.raises(InvalidTransferFunctionError, match="unknown colour map 'nope'; use one of"):
+        DataTF().with_colormap("nope")

@@ -4,6 +4,7 @@ orbit, mode, window brush and TF edits; the probe plots; without the token nothi
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import pytest
 
@@ -153,6 +154,23 @@ def test_probe_plot_appears(page):
     probe = page.evaluate("() => window.viewer.probe")
     assert probe["voxel"] is not None and len(probe["values"]) == 12
     assert "voxel x=" in page.inner_text("#probe-text")
+    # A shift-drag across the middle probes a box: mean with its min-max band, exported as CSV.
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.keyboard.down("Shift")
+    page.mouse.move(cx - 0.08 * box["width"], cy - 0.06 * box["height"])
+    page.mouse.down()
+    page.mouse.move(cx + 0.08 * box["width"], cy + 0.06 * box["height"], steps=6)
+    page.mouse.up()
+    page.keyboard.up("Shift")
+    page.wait_for_function("() => window.viewer.probe && window.viewer.probe.box", timeout=60_000)
+    probe = page.evaluate("() => window.viewer.probe")
+    assert len(probe["min"]) == len(probe["max"]) == 12
+    assert page.inner_text("#probe-text").startswith("box x ")
+    with page.expect_download() as got:
+        page.click("#probe-csv")
+    assert got.value.suggested_filename.startswith("vortex-probe-x")
+    lines = Path(got.value.path()).read_text().splitlines()
+    assert lines[0] == "step,time,mean,min,max,in_window" and len(lines) == 13
 
 
 def test_parallel_views_screenshot(page, tmp_path):

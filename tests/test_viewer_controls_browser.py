@@ -265,3 +265,102 @@ def test_the_token_can_come_from_the_environment(monkeypatch, tmp_path):
         monkeypatch.setenv(TOKEN_ENV, bad)
         with pytest.raises(InvalidParameterError, match=TOKEN_ENV):
             ViewerServer(datasets=[])
+
+
+HIST_BARS = """() => { // histogram-coloured pixels in the TF canvas: bars drawn log or linear
+  const c = document.getElementById('tf');
+  const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+  let n = 0;
+  for (let k = 0; k < px.length; k += 4) if (px[k + 3] > 60 && px[k + 2] > px[k] + 40) n++;
+  return n;
+}"""
+
+
+def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, server, tmp_path):  # noqa: F811
+    from chronocl.core.tf import DataTF
+
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        hist = "() => window.viewer.S.histogram && window.viewer.S.histogram.steps"
+        page.wait_for_function(hist, timeout=60_000)
+        # The histogram counts the window's steps, and follows the window when it moves.
+        before = p.last()
+        p.eval("() => { window.viewer.S.state.window = {t0: 0, t1: 4, stride: 1}; }")
+        page.keyboard.press("ArrowRight")  # sends the window (1, 5)
+        p.settle(before)
+        page.wait_for_function(f"() => ({hist})().join() === '1,2,3,4'", timeout=60_000)
+        assert "4 steps of the window (1…4)" in page.inner_text("#hist-note")
+        logged = p.eval(HIST_BARS)
+        page.uncheck("#hist-log")
+        assert 0 < p.eval(HIST_BARS) < logged  # linear counts: the rare values' bars shrink
+        # A colour map recolours the points as DataTF.with_colormap does, opacity kept.
+        points = p.eval("() => window.viewer.S.state.data_tf.points")
+        before = p.last()
+        page.select_option("#tf-colormap", "viridis")
+        after = p.settle(before)
+        got = p.eval("() => window.viewer.S.state.data_tf.points")
+        want = DataTF(points=[tuple(q) for q in points]).with_colormap("viridis").points
+        assert len(got) == len(want)
+        for g, w in zip(got, want, strict=True):
+            assert g == pytest.approx(list(w), abs=1e-9)
+        assert after["digest"] != before["digest"]
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "tf-viridis.png"))
+        # The selected point's value and opacity typed in.
+        at = p.eval(
+            "() => window.viewer.tfPointAt(window.viewer.S.state.data_tf.points.length - 1)"
+        )
+        page.mouse.click(at["x"], at["y"])
+        info = p.eval("() => window.viewer.S.info")
+        before = p.last()
+        page.fill("#point-alpha", "0.25")
+        page.dispatch_event("#point-alpha", "change")
+        p.settle(before)
+        last = p.eval("() => window.viewer.S.state.data_tf.points.at(-1)")
+        assert last[4] == 0.25 and last[0] == 1.0
+        mid = info["vmin"] + 0.999 * (info["vmax"] - info["vmin"])
+        page.fill("#point-value", str(mid))
+        page.dispatch_event("#point-value", "change")
+        last = p.eval("() => window.viewer.S.state.data_tf.points.at(-1)")
+        assert last[0] == pytest.approx(0.999, abs=1e-9)
+        # The readout under the pointer: value, opacity and the histogram's count there.
+        box = page.locator("#tf").bounding_box()
+        page.mouse.move(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.5)
+        text = page.inner_text("#tf-hover")
+        assert text.startswith("value ") and "opacity" in text and "sampled voxels" in text
+    finally:
+        p.close()
+
+
+OUTLINE = "() => document.querySelector('.clip-outline polygon').getAttribute('points') || ''"
+
+
+def test_clip_plane_outline_and_turning_it_by_dragging(browser, server, tmp_path):  # noqa: F811
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        page.click("summary:has-text('Slicing plane')")
+        before = p.last()
+        page.check("#clip-on")
+        p.settle(before)
+        square = p.eval(OUTLINE)
+        assert len(square.split()) == 4  # the plane x = 0 cuts the box in a rectangle
+        # With "drag turns the plane" a drag turns the normal, not the camera.
+        page.check("#clip-drag")
+        camera = p.eval("() => window.viewer.S.state.camera")
+        box = page.locator(".view img").first.bounding_box()
+        cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        before = p.last()
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        page.mouse.move(cx + 50, cy + 30, steps=5)
+        page.mouse.up()
+        after = p.settle(before)
+        normal = p.eval("() => window.viewer.S.state.clip.normal")
+        assert p.eval("() => window.viewer.S.state.camera") == camera
+        assert abs(normal[0]) < 0.99 and abs(sum(c * c for c in normal) - 1) < 1e-6
+        assert page.input_value("#clip-axis") == "custom"
+        assert after["digest"] != before["digest"] and p.eval(OUTLINE) != square
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "clip-turned.png"))
+    finally:
+        p.close()

@@ -17,6 +17,7 @@ pytest.importorskip("starlette")
 pytest.importorskip("websockets")
 
 from chronocl import modes
+from chronocl.data import synthetic
 from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
 
 from .viewer_helpers import Client, make_stores, start_server
@@ -223,10 +224,26 @@ def test_probe_finds_a_voxel_and_its_curve(client):
     v = reply["voxel"]
     assert all(0 <= v[a] < 32 for a in "xyz")
     assert max(reply["values"]) > 0
-    # A corner ray misses the (empty) border.
-    rid = client.send({"type": "probe", "view": 0, "x": 0.0, "y": 0.0})
+    assert reply["box"] is None and reply["min"] is None
+    assert reply["csv"].splitlines()[0] == "step,time,value,in_window"
+    # A shift-drag: the box between the voxels the two corners' rays meet, and its mean, min
+    # and max per step, equal to numpy's over the series.
+    rid = client.send({"type": "probe", "view": 0, "x": 0.42, "y": 0.45, "x2": 0.58, "y2": 0.56})
     _, reply = client.wait("probe", rid)
-    assert reply["voxel"] is None and reply["values"] is None
+    b = reply["box"]
+    assert reply["voxel"] is None and all(b[a][1] > b[a][0] for a in "xyz")
+    assert (b["x"][1] - b["x"][0]) * (b["y"][1] - b["y"][0]) > 1
+    data = np.stack(list(synthetic.steps("vortex", 12, (32, 32, 32))))
+    block = data[:, slice(*b["z"]), slice(*b["y"]), slice(*b["x"])].reshape(12, -1)
+    np.testing.assert_allclose(reply["values"], block.mean(axis=1, dtype=np.float64), rtol=1e-12)
+    np.testing.assert_array_equal(reply["min"], block.min(axis=1))
+    np.testing.assert_array_equal(reply["max"], block.max(axis=1))
+    assert reply["csv"].splitlines()[0] == "step,time,mean,min,max,in_window"
+    # A corner ray misses the (empty) border; so does a box with a corner there.
+    for corners in ({"x": 0.0, "y": 0.0}, {"x": 0.5, "y": 0.5, "x2": 0.0, "y2": 0.0}):
+        rid = client.send({"type": "probe", "view": 0, **corners})
+        _, reply = client.wait("probe", rid)
+        assert reply["voxel"] is None and reply["box"] is None and reply["values"] is None
 
 
 def test_histogram_switch_dataset_and_downloads(server, client):
@@ -234,6 +251,19 @@ def test_histogram_switch_dataset_and_downloads(server, client):
     rid = client.send({"type": "histogram", "range": [0.25, 0.75]})
     _, hist = client.wait("histogram", rid)
     assert hist["range"] == [0.25, 0.75] and len(hist["counts"]) == 128
+    # The window 1:11 has 10 steps; every other one on its grid is counted, all its voxels
+    # (32^3 is under the per-step sample size).
+    assert hist["window"] == [1, 11, 1] and hist["steps"] == [2, 4, 6, 8, 10]
+    series = server.datasets[0].series
+    want = sum(
+        np.histogram(series.normalized([t], 0, 32)[0], bins=128, range=(0.25, 0.75))[0]
+        for t in hist["steps"]
+    )
+    assert hist["counts"] == want.tolist()
+    # A frame of another window brings the histogram of that window by itself.
+    client.send({"type": "update", "window": {"t0": 3, "t1": 6, "stride": 1}})
+    _, msg = client.wait("histogram")
+    assert msg["steps"] == [3, 4, 5] and msg["range"] == [0.25, 0.75] and msg["id"] is None
 
     ds, _ = client.open("jet")
     assert ds["name"] == "jet" and ds["shape"] == {"t": 10, "z": 24, "y": 24, "x": 32}
@@ -255,6 +285,41 @@ def test_histogram_switch_dataset_and_downloads(server, client):
 
     names = zipfile.ZipFile(io.BytesIO(body)).namelist()
     assert "zarr.json" in names and any(n.startswith("rgba/") for n in names)
+
+
+def test_movies_orbit_and_play_through(server, client):
+    """An orbit of N frames turns the camera; a play-through slides the window over the series,
+    one frame per position; both arrive as downloads after a progress message per frame."""
+    import imageio.v3 as iio
+
+    client.open(0, size=(96, 96))
+    auth = {"X-Chronocl-Token": server.token}
+
+    def movie(**options) -> tuple[np.ndarray, list[dict]]:
+        rid = client.send({"type": "save", "what": "movie", **options})
+        progress = []
+        while True:
+            got = client.recv(120)
+            if got[0] == "progress":
+                progress.append(got[1])
+            elif got[0] == "download" and got[1]["id"] == rid:
+                break
+        status, body, _ = get(server.base + got[1]["url"], auth)
+        assert status == 200
+        return iio.imread(body, index=None, extension="." + options["format"]), progress
+
+    frames, progress = movie(movie="orbit", format="gif", frames=3, fps=5)
+    assert frames.shape[0] == 3 and [p["done"] for p in progress] == [1, 2, 3]
+    assert not np.array_equal(frames[0], frames[1])  # the camera turned
+    frames, progress = movie(movie="play", format="mp4", fps=5)
+    # The window 1:11 of 12 steps keeps its length: it starts at 0, 1 and 2.
+    assert frames.shape[0] == 3 == progress[-1]["total"]
+    assert np.abs(frames[0].astype(int) - frames[2]).mean() > 0.5  # the window moved
+    rid = client.send({"type": "update", "window": {"t0": 0, "t1": 12, "stride": 1}})
+    client.frame_for(rid)
+    rid = client.send({"type": "save", "what": "movie", "movie": "play", "format": "gif"})
+    _, err = client.wait("error", rid)
+    assert "cannot slide" in err["message"]
 
 
 # --------------------------------------------------------------------------- load
@@ -386,3 +451,35 @@ def test_the_page_ships_in_the_wheel(tmp_path):
     assert {"index.html", "app.js", "style.css"} <= set(static)
     for name in static:  # the page's ES modules among them
         assert f"chronocl/viewer/static/{name}" in names
+
+
+def test_clip_plane_polygon_and_outline():
+    """The plane's cut through the box: a square across an axis, a hexagon through the centre
+    along a diagonal, a triangle near a corner; its corners on the plane, in the box, in order;
+    the outline on a panel is that polygon projected (None without a plane)."""
+    from chronocl.data.chronovolume import Chronovolume
+    from chronocl.render.camera import Camera
+    from chronocl.render.raycaster import clip_plane
+    from chronocl.viewer.clip_outline import clip_outline, plane_polygon
+
+    extent = np.array([1.0, 0.5, 0.75])
+    for clip, corners in (((1, 0, 0, 0.2), 4), ((1, 1, 1, 0), 6), ((1, 1, 1, -0.9), 3)):
+        poly = plane_polygon(clip, extent)
+        assert len(poly) == corners
+        *n, d = clip_plane(clip, extent)
+        np.testing.assert_allclose(poly @ np.array(n) + d, 0, atol=1e-9)
+        assert (np.abs(poly) <= extent / 2 + 1e-9).all()
+        edges = np.roll(poly, -1, axis=0) - poly
+        turns = np.cross(edges, np.roll(edges, -1, axis=0)) @ np.array(n)
+        assert (turns > 0).all() or (turns < 0).all()  # convex, corners in order
+    assert len(plane_polygon((1, 0, 0, 1.0), extent)) == 4  # the box's face
+    cv = Chronovolume(
+        rgba=np.zeros((6, 4, 8, 4), np.float32), metadata={"spacing": {"x": 1, "y": 1, "z": 1.5}}
+    )
+    camera = Camera(azimuth=0.0, elevation=0.0, zoom=1.0, projection="orthographic")
+    assert clip_outline(cv, camera, (100, 100), None) is None
+    square = np.array(clip_outline(cv, camera, (100, 100), (0, 0, 1, 0)))
+    # Seen along z, the cut across z is the box's x-y face: a rectangle centred on the panel.
+    assert square.shape == (4, 2)
+    np.testing.assert_allclose(square.mean(axis=0), [0.5, 0.5], atol=1e-6)
+    assert len(np.unique(square[:, 0].round(6))) == len(np.unique(square[:, 1].round(6))) == 2

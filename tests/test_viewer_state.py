@@ -48,6 +48,7 @@ EDITS = {
     "size": [160, 128],
     "background": "white",
     "outline": True,
+    "shading": {"enabled": True, "ambient": 0.3},
 }
 
 
@@ -64,22 +65,23 @@ def edited(stores):
 
 def test_session_round_trip(stores, edited):
     series, state = edited
-    session = session_of(state, "vortex", series, str(stores[0]))
-    assert session["chronocl_session"] == 1 and session["shading"] is None
+    focus = [-0.3, -0.4, -0.25, 0.3, 0.2, 0.5]
+    session = session_of(state, "vortex", series, str(stores[0]), focus)
+    assert session["chronocl_session"] == 1 and session["shading"]["enabled"] is True
     text = json.dumps(session)
     again = check_session(json.loads(text))
     back = session_state(again, series)
     assert describe_state(back) == describe_state(state)
     assert [back.spec(i) for i in range(2)] == [state.spec(i) for i in range(2)]
+    assert back.camera.focus == tuple(focus) and back.shading == state.shading
     # Every field the viewer describes is kept, and a session with only the required fields
     # takes the viewer's defaults for the rest.
     required = {k: session[k] for k in ("chronocl_session", "dataset", "window", "views")}
     required |= {k: session[k] for k in ("camera", "data_tf", "time_tf")}
     partial = session_state(check_session(required), series)
-    assert partial.camera == state.camera and partial.size == default_state(0, series).size
-    # The shading slot takes a flat object of settings for the lighting to come.
-    shaded = check_session(session | {"shading": {"kind": "phong", "light": [1, 1, 0]}})
-    assert shaded["shading"] == {"kind": "phong", "light": [1.0, 1.0, 0.0]}
+    assert partial.camera.azimuth == state.camera.azimuth and partial.camera.focus is None
+    assert partial.size == default_state(0, series).size
+    assert partial.shading == default_state(0, series).shading
 
 
 @pytest.mark.parametrize(
@@ -92,7 +94,8 @@ def test_session_round_trip(stores, edited):
         (lambda s: s | {"views": []}, "session.views has 0 entries"),
         (lambda s: s | {"colour": "red"}, "unknown field 'colour'"),
         (lambda s: {k: v for k, v in s.items() if k != "window"}, "missing the field 'window'"),
-        (lambda s: s | {"shading": {"a": {"b": 1}}}, "session.shading.a must be a number"),
+        (lambda s: s | {"shading": {"glow": 1}}, "session.shading has unknown field 'glow'"),
+        (lambda s: s | {"focus": [0, 0, 0, 1, 1]}, "session.focus has 5 entries"),
     ],
 )
 def test_bad_sessions_are_refused_in_one_line(edited, change, needle):
@@ -149,6 +152,7 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
         session = json.loads(body)
         assert session["dataset"]["path"] == str(stores[0].resolve())
         assert session["window"] == EDITS["window"] and session["size"] == EDITS["size"]
+        assert len(session["focus"]) == 6  # the box the views framed
         client.close()
 
         fresh = Client(server)

@@ -12,16 +12,18 @@ from chronocl.cli.options import err, print_summary
 
 
 def ingest(
-    inputs: Annotated[
-        list[str],
-        typer.Argument(
-            help="Raw files or globs (one per step), a .npy (T, Z, Y, X), a NetCDF/HDF5 file, "
-            "TIFF stacks (one per step, or one 4D TZYX), or an OME-Zarr folder."
-        ),
-    ],
     out_path: Annotated[
         Path, typer.Option("--out", "-o", metavar="OUT.zarr", help="Store to write.")
     ],
+    inputs: Annotated[
+        list[str] | None,
+        typer.Argument(
+            metavar="INPUTS",
+            help="Raw files or globs (one per step), a .npy (T, Z, Y, X), a NetCDF/HDF5 file, "
+            "TIFF stacks (one per step, or one 4D TZYX), or an OME-Zarr folder; none with "
+            "--magnitude U,V,W naming raw/npy/TIFF inputs.",
+        ),
+    ] = None,
     fmt: Annotated[
         str,
         typer.Option("--format", help="auto (by file type), raw, npy, netcdf, tiff, omezarr."),
@@ -35,6 +37,31 @@ def ingest(
     ] = "float32",
     endian: Annotated[str, typer.Option(help="Raw: little or big.")] = "little",
     var: Annotated[str | None, typer.Option(help="NetCDF/HDF5: the variable.")] = None,
+    variables: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="A,B",
+            help="NetCDF/HDF5: several variables, OME-Zarr: several channels (by label, or "
+            "'all'), each a series of one store (open one with "
+            "chronocl.open(store).variable(name)); comma-separate or repeat.",
+        ),
+    ] = None,
+    magnitude: Annotated[
+        str | None,
+        typer.Option(
+            metavar="U,V,W",
+            help="Store the magnitude sqrt(u²+v²+w²) (float32) of two or three components: "
+            "NetCDF/HDF5 variables, or, with no other inputs, raw/npy/TIFF inputs (globs).",
+        ),
+    ] = None,
+    resample: Annotated[
+        str | None,
+        typer.Option(
+            metavar="uniform",
+            help="NetCDF/HDF5: interpolate a non-uniformly spaced z/y/x coordinate linearly "
+            "onto uniform spacing (without it such a file is refused).",
+        ),
+    ] = None,
     time_dim: Annotated[str | None, typer.Option(help="NetCDF/HDF5: the time dimension.")] = None,
     dims_order: Annotated[
         str | None,
@@ -65,17 +92,27 @@ def ingest(
 
       chronocl ingest ocean.nc -o ocean.zarr --var temp --time-dim time
 
+      chronocl ingest flow.nc -o speed.zarr --magnitude u,v,w
+
+      chronocl ingest -o speed.zarr --magnitude 'u/*.raw,v/*.raw,w/*.raw' --dims 64 64 64
+
+      chronocl ingest ocean.nc -o ocean.zarr --variables temp,salt --resample uniform
+
       chronocl ingest 'cells/t*.tif' -o cells.zarr
 
       chronocl ingest embryo.ome.zarr -o embryo.zarr --channel 1 --level 0
+
+      chronocl ingest embryo.ome.zarr -o embryo.zarr --variables all
     """
     from chronocl.core.paths import GLOB_CHARS, check_input, check_target
     from chronocl.data.ingest import ingest as run_ingest
 
-    for item in inputs:
+    inputs = inputs or []
+    named = magnitude.split(",") if magnitude and not inputs else []
+    for item in [*inputs, *(n.strip() for n in named)]:
         if not GLOB_CHARS & set(item):
             check_input(item, "input", hint="check the path, or quote a glob such as 'v_*.raw'")
-    check_target(out_path, overwrite, inputs)
+    check_target(out_path, overwrite, [*inputs, *named])
     options: dict = {"nan_fill": nan_fill, "overwrite": overwrite, "progress": True}
     if dims is not None:
         options["dims"] = dims
@@ -89,6 +126,12 @@ def ingest(
             options[key] = value
     if var is not None:
         options["var"] = var
+    if variables:
+        options["variables"] = [n for item in variables for n in item.split(",")]
+    if magnitude is not None:
+        options["magnitude"] = magnitude
+    if resample is not None:
+        options["resample"] = resample
     if time_dim is not None:
         options["time_dim"] = time_dim
     if dims_order is not None:
@@ -97,5 +140,9 @@ def ingest(
         options["spacing"] = (spacing[2], spacing[1], spacing[0])
     t0 = time.perf_counter()
     series = run_ingest(inputs, out_path, fmt, **options)
+    for note in series.meta.get("resampled", []):
+        err.print(f"note: {note}")
     err.print(f"wrote {out_path} in {time.perf_counter() - t0:.1f} s")
+    if len(series.variables) > 1:
+        err.print(f"variables: {', '.join(series.variables)}")
     print_summary(series.describe())

@@ -14,6 +14,7 @@ import typer
 from chronocl import modes
 from chronocl.cli.options import (
     STORE_HINT,
+    ColormapOpt,
     DeviceFormatOpt,
     DeviceOpt,
     EngineOpt,
@@ -45,6 +46,7 @@ def integrate(
     order: OrderOpt = "forward",
     tf: TfOpt = None,
     time_tf: TimeTfOpt = None,
+    colormap: ColormapOpt = None,
     enhance: Annotated[str, typer.Option(help="none, edge or silhouette.")] = "none",
     threshold: ThresholdOpt = 0.0,
     normalize: NormalizeOpt = "time",
@@ -92,7 +94,7 @@ def integrate(
     check_run_options(out_path, memory, engine, scheduler, workers)
     check_format_name(device_format)
     check_input(store, "store", hint=STORE_HINT)
-    args = spec_args(tf, time_tf, order, enhance, threshold, normalize)
+    args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap)
     check_target(out_path, overwrite, [store, tf])
     series = open_series(store)
     check_level(series, level)

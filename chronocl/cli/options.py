@@ -4,6 +4,7 @@ option values, and the listing of the registered modes for the help."""
 from __future__ import annotations
 
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -24,6 +25,13 @@ WindowOpt = Annotated[
 ]
 OrderOpt = Annotated[str, typer.Option(help="forward, backward, or importance steps 9,2,5.")]
 TfOpt = Annotated[Path | None, typer.Option(help="Transfer-function JSON (data_tf, time_tf).")]
+ColormapOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="Colour the data TF with a colour map (viridis, magma, inferno, cividis, grey, "
+        "coolwarm, RdBu_r, turbo or any matplotlib name); its opacity curve is kept."
+    ),
+]
 TimeTfOpt = Annotated[
     str | None,
     typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
@@ -42,9 +50,33 @@ DeviceFormatOpt = Annotated[
         "or uint8/uint16 quantised over the value range (lossy; docs/engine.md)."
     ),
 ]
+TimeLabelsOpt = Annotated[
+    str,
+    typer.Option(
+        help="What legends, captions and plots call a step: labels (the store's time labels, "
+        "where it has them) or steps (step numbers)."
+    ),
+]
 LevelOpt = Annotated[
     int,
     typer.Option(help="Coarse level to integrate (0: full resolution; see 'chronocl pyramid')."),
+]
+
+# Lighting of rendered views (chronocl/render/shading.py).
+ShadingOpt = Annotated[
+    bool,
+    typer.Option(
+        help="Light the volume from the camera by its opacity gradient (Blinn-Phong): "
+        "depth and shape for single-colour regions. Off: flat colour."
+    ),
+]
+ShadingParamsOpt = Annotated[
+    str | None,
+    typer.Option(
+        metavar="A,D,S[,SHININESS]",
+        help="Shading strengths ambient,diffuse,specular (0..2) and optionally the "
+        "shininess (1..256); implies --shading. Default 0.3,0.7,0.3,24.",
+    ),
 ]
 
 
@@ -97,12 +129,17 @@ def parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
     return values
 
 
-def spec_args(tf, time_tf, order, enhance, threshold, normalize) -> dict:
-    """The integration options that integrate and render share, with the TF file loaded."""
+def spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap=None) -> dict:
+    """The integration options that integrate and render share, with the TF file loaded and
+    coloured by `colormap` if one is given."""
     from chronocl.core.tf import TFSetting
 
+    setting = TFSetting.load(tf) if tf is not None else None
+    if colormap is not None:
+        setting = setting or TFSetting()
+        setting = replace(setting, data_tf=setting.data_tf.with_colormap(colormap))
     return dict(
-        tf=TFSetting.load(tf) if tf is not None else None,
+        tf=setting,
         time_tf=time_tf,
         order=parse_order(order),
         enhance=enhance,
@@ -119,6 +156,15 @@ def parse_order(order: str) -> str | list[int]:
         return [int(s) for s in order.split(",")]
     except ValueError:
         return order  # the spec names the problem
+
+
+def parse_shading(shading: bool, params: str | None):
+    """The Shading of --shading and --shading-params (which implies --shading)."""
+    from chronocl.render.shading import OFF, Shading
+
+    if params is not None:
+        return Shading.parse(params)
+    return Shading() if shading else OFF
 
 
 def print_summary(summary: dict) -> None:

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from chronocl.cli.options import STORE_HINT, err
+from chronocl.cli.options import STORE_HINT, TimeLabelsOpt, err
 from chronocl.core.errors import InvalidParameterError
 
 
@@ -43,6 +43,7 @@ def probe(
         str | None, typer.Option(help="Plot title (default: what was probed).")
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    time_labels: TimeLabelsOpt = "labels",
 ) -> None:
     """Values over time at a voxel (--at) or over a box (--box: mean, min, max), with time labels.
 
@@ -55,8 +56,10 @@ def probe(
       chronocl probe vortex.zarr --at 32,32,32
       chronocl probe vortex.zarr --at 32,32,32 -o curve.csv
       chronocl probe vortex.zarr --box 24:40,24:40,28:36 -o box.png --window 0:30:10
+      chronocl probe era5.zarr --at 10,20,3 -o steps.png --time-labels steps
     """
     from chronocl.core.paths import check_input, check_target
+    from chronocl.core.time_labels import check_prefer
     from chronocl.data.probe import check_box, check_point, check_suffix, parse_box, parse_point
     from chronocl.data.series import open_series
 
@@ -65,6 +68,7 @@ def probe(
         raise InvalidParameterError(
             "give --at X,Y,Z (one voxel) or --box X0:X1,Y0:Y1,Z0:Z1 (a box), one of them"
         )
+    check_prefer(time_labels)
     point = parse_point(at, "--at") if at is not None else None
     ranges = parse_box(box, "--box") if box is not None else None
     if out_path is not None:
@@ -91,7 +95,7 @@ def probe(
         return
     from chronocl.data.probe import write_curve
 
-    write_curve(curve, out_path, window, title, overwrite)
+    write_curve(curve, out_path, window, title, overwrite, time_labels)
     err.print(
         f"wrote {out_path} ({curve.describe()}, {len(curve)} steps)",
         highlight=False,

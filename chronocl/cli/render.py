@@ -4,6 +4,7 @@ in a PNG, optionally with a turntable video and the chronovolumes saved."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -12,20 +13,25 @@ import typer
 from chronocl import modes
 from chronocl.cli.options import (
     STORE_HINT,
+    ColormapOpt,
     DeviceFormatOpt,
     DeviceOpt,
     EngineOpt,
     LevelOpt,
     NormalizeOpt,
     OrderOpt,
+    ShadingOpt,
+    ShadingParamsOpt,
     TfOpt,
     ThresholdOpt,
+    TimeLabelsOpt,
     TimeTfOpt,
     WindowOpt,
     check_engine,
     err,
     mode_choices,
     parse_floats,
+    parse_shading,
     parse_sizes,
     spec_args,
 )
@@ -59,6 +65,7 @@ def render(
     order: OrderOpt = "forward",
     tf: TfOpt = None,
     time_tf: TimeTfOpt = None,
+    colormap: ColormapOpt = None,
     enhance: Annotated[
         str, typer.Option(help="none, edge or silhouette (follows the camera).")
     ] = "none",
@@ -66,7 +73,14 @@ def render(
     normalize: NormalizeOpt = "time",
     azimuth: Annotated[float, typer.Option(help="Degrees around the vertical axis.")] = 30.0,
     elevation: Annotated[float, typer.Option(help="Degrees above the horizon.")] = 20.0,
-    zoom: Annotated[float, typer.Option(help="Magnification (1 fits the volume).")] = 1.0,
+    zoom: Annotated[float, typer.Option(help="Magnification (1 fits what --frame frames).")] = 1.0,
+    frame: Annotated[
+        str,
+        typer.Option(
+            help="What the camera frames: visible (the non-transparent region) or box "
+            "(the whole volume)."
+        ),
+    ] = "visible",
     projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
     size: Annotated[str, typer.Option(help="Image (panel) size WxH, 16..8192.")] = "512x512",
     clip: Annotated[
@@ -75,6 +89,9 @@ def render(
     ] = None,
     background: Annotated[str, typer.Option(help="Colour name or #rrggbb.")] = "black",
     outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
+    shading: ShadingOpt = False,
+    shading_params: ShadingParamsOpt = None,
+    time_labels: TimeLabelsOpt = "labels",
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
     device_format: DeviceFormatOpt = "auto",
@@ -91,6 +108,12 @@ def render(
         ),
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace outputs that exist.")] = False,
+    variables: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="A,B", help="Variables of the store side by side: a panel each (per mode)."
+        ),
+    ] = None,
 ) -> None:
     """Integrate a window and render it; several modes become parallel views in one image.
 
@@ -102,7 +125,19 @@ def render(
 
       chronocl render vortex.zarr -o cut.png --clip 1,0,0,0 --azimuth 60 --zoom 1.4
 
+      chronocl render vortex.zarr -o v.png --mode max --time-tf luminance --colormap viridis
+
       chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
+
+      chronocl render jet.zarr -o lit.png --mode alpha --window 0,14,29 --shading
+
+      chronocl render jet.zarr -o lit.png --shading-params 0.2,0.8,0.5,40 --turntable lit.gif
+
+      chronocl render ocean.zarr -o both.png --variables temp,salt --mode max
+
+      chronocl render plume.zarr -o whole.png --frame box --zoom 1.2
+
+      chronocl render era5.zarr -o t.png --window 0:24:6 --time-labels steps
 
       chronocl render --state vortex-session.json -o figure.png --size 1024x1024
     """
@@ -115,6 +150,7 @@ def render(
         raise InvalidParameterError(f"{missing} is missing; e.g. chronocl render v.zarr -o v.png")
     from chronocl.core.enhance import Enhance
     from chronocl.core.paths import check_distinct, check_input, check_target
+    from chronocl.core.time_labels import check_prefer
     from chronocl.data.formats.outputs import output_kind
     from chronocl.data.formats.outputs import save_chronovolume as save_any
     from chronocl.data.series import open_series
@@ -124,7 +160,7 @@ def render(
     from chronocl.render import Camera
     from chronocl.render.raycaster import check_clip, check_size
     from chronocl.render.turntable import ModeViews, check_video
-    from chronocl.render.views import parse_color
+    from chronocl.render.views import describe, parse_color, render_views
 
     # Every option is checked before any work: no kernel built, no brick read, nothing written.
     modes = [m.strip() for item in mode for m in item.split(",") if m.strip()]
@@ -135,10 +171,12 @@ def render(
         raise InvalidParameterError(f"--mode {twice} is given twice; name each mode once")
     check_engine(engine)
     check_format_name(device_format)
-    camera = Camera(azimuth, elevation, zoom, projection=projection)
+    camera = Camera(azimuth, elevation, zoom, projection=projection, frame=frame)
+    check_prefer(time_labels)
     panel = check_size(parse_sizes(size, 2, "WxH", "512x512"))
     parse_color(background)
     clip_plane = check_clip(parse_floats(clip, 4, "clip")) if clip else None
+    lighting = parse_shading(shading, shading_params)
     if turntable is not None:
         check_video(turntable, frames)
     elif not 2 <= frames <= 3600:
@@ -148,35 +186,60 @@ def render(
     for path in saves:
         output_kind(path)
     check_input(store, "store", hint=STORE_HINT)
-    args = spec_args(tf, time_tf, order, enhance, threshold, normalize)
+    args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap)
     outputs = [out_path, *([turntable] if turntable is not None else []), *saves]
     check_distinct(outputs)
     for path in outputs:
         check_target(path, overwrite, [store, tf])
     series = open_series(store)
-    check_level(series, level)
-    for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
-        job = prepare(series, window, m, None, args)
+    names = [n.strip() for item in variables or [] for n in item.split(",") if n.strip()]
+    if names and (turntable is not None or saves):
+        raise InvalidParameterError(
+            "--variables draws one image; leave out --turntable and --save-chronovolume"
+        )
+    if not names and len(series.variables) > 1:
+        err.print(
+            f"note: {store} holds {', '.join(series.variables)}; drawing {series.variables[0]}"
+        )
+    picked = [series.variable(n) for n in names] or [series]
+    for one in picked:
+        check_level(one, level)
+        for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
+            job = prepare(one, window, m, None, args)
     if device_format != "auto":  # over the level's value range, which it quantises
         job = at_level(job, level)
         check_device_format(device_format, engine, job.series.dtype, job.value_range)
     views = ModeViews(
-        series,
+        picked[0],
         window,
         modes,
         panel,
         engine=engine,
         device=device,
         spec_args=args,
-        draw_args=dict(background=background, clip=clip_plane, outline=outline),
+        draw_args=dict(
+            background=background,
+            clip=clip_plane,
+            outline=outline,
+            shading=lighting,
+            time_labels=time_labels,
+        ),
         level=level,
         device_format=device_format,
     )
 
     t0 = time.perf_counter()
-    cvs = views.integrate(camera)
+    cvs = [cv for one in picked for cv in replace(views, series=one).integrate(camera)]
+    image = None
+    if names:  # one panel per variable and mode, one camera, each captioned with its variable
+        captions = [
+            f"{n}: {describe(cv)}"
+            for n, cv in zip([n for n in names for _ in modes], cvs, strict=True)
+        ]
+        rows = {"columns": len(modes)} if len(modes) > 1 else {}  # a row per variable
+        image = render_views(cvs, camera, panel, labels=captions, **rows, **views.draw_args)
     t1 = time.perf_counter()
-    views.draw(cvs, camera).save(out_path, overwrite=overwrite)
+    (views.draw(cvs, camera) if image is None else image).save(out_path, overwrite=overwrite)
     err.print(
         f"wrote {out_path} ({', '.join(modes)}; integrate {t1 - t0:.2f} s, "
         f"render {time.perf_counter() - t1:.2f} s)"

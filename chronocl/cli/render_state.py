@@ -8,11 +8,18 @@ import dataclasses
 import time
 from pathlib import Path
 
-from chronocl.cli.options import err, parse_floats, parse_order, parse_sizes
+from chronocl.cli.options import err, parse_floats, parse_order, parse_shading, parse_sizes
 from chronocl.core.errors import InvalidParameterError
 
 # Options that do not apply to a session's render (its integration and draw are the viewer's).
-NOT_WITH_STATE = ("turntable", "save_chronovolume", "level", "device_format", "frames")
+NOT_WITH_STATE = (
+    "turntable",
+    "save_chronovolume",
+    "level",
+    "device_format",
+    "frames",
+    "variables",
+)
 
 
 def given(ctx, params: dict) -> dict:
@@ -30,6 +37,7 @@ def render_state(state_path: Path, options: dict) -> None:
     """Render the session in `state_path`; `options` are those given on the command line."""
     from chronocl.core.paths import check_target
     from chronocl.core.tf import TFSetting, TimeTF
+    from chronocl.core.time_labels import check_prefer
     from chronocl.data.series import open_series
     from chronocl.render.raycaster import check_clip, check_size
     from chronocl.render.views import parse_color
@@ -60,11 +68,21 @@ def render_state(state_path: Path, options: dict) -> None:
     if "background" in options:
         parse_color(options["background"])
         replace["background"] = options["background"]
+    if "shading" in options or "shading_params" in options:
+        lit = parse_shading(options.get("shading", False), options.get("shading_params"))
+        replace["shading"] = lit
+    if "frame" in options:
+        replace["camera"] = dataclasses.replace(state.camera, frame=options["frame"])
     state = dataclasses.replace(state, **replace)
+    time_labels = options.get("time_labels", "labels")
+    check_prefer(time_labels)
     setting = TFSetting.load(options["tf"]) if "tf" in options else None
     time_tf = TimeTF.preset(options["time_tf"]) if "time_tf" in options else None
+    data_tf = setting.data_tf if setting else None
+    if "colormap" in options:
+        data_tf = (data_tf or state.data_tf).with_colormap(options["colormap"])
     spec = {
-        "data_tf": setting.data_tf if setting else None,
+        "data_tf": data_tf,
         "time_tf": time_tf or (setting.time_tf if setting else None),
         "normalize": options.get("normalize"),
     }
@@ -74,7 +92,7 @@ def render_state(state_path: Path, options: dict) -> None:
         series,
         engine=options.get("engine", "opencl"),
         device=options.get("device"),
-        shading=session.get("shading"),
+        time_labels=time_labels,
         **{k: v for k, v in spec.items() if v is not None},
     )
     image.save(out, overwrite=overwrite)

@@ -14,10 +14,11 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from chronocl.core.colormaps import apply_colormap
 from chronocl.core.errors import InputNotFoundError, InvalidTransferFunctionError
 from chronocl.core.tf_input import (
     bad,
@@ -92,6 +93,11 @@ class DataTF:
     def lut(self) -> np.ndarray:
         """RGBA float32 (size, 4), entry i at u = i / (size - 1)."""
         return interp_points(self.points, np.linspace(0.0, 1.0, self.size)).astype(np.float32)
+
+    def with_colormap(self, name: str) -> DataTF:
+        """This TF coloured by matplotlib's map `name` (e.g. "viridis", "magma", "grey",
+        "coolwarm"), its opacity curve unchanged (`chronocl.core.colormaps`)."""
+        return replace(self, points=apply_colormap(self.points, name))
 
     def to_dict(self) -> dict:
         d: dict = {"points": [list(p) for p in self.points], "size": self.size}

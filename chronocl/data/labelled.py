@@ -5,13 +5,17 @@ of a Dataset). The time dimension is found by name (``time``, ``t``), by a CF ``
 attribute or by a datetime coordinate; the other three dimensions are mapped to (z, y, x) by
 name or kept in their order. Plain HDF5 data sets without dimension names (h5netcdf calls them
 ``phony_dim_N``) are taken as (T, Z, Y, X) in order. Spacing comes from uniform numeric
-coordinates, time labels from the time coordinate.
+coordinates; a non-uniform one is refused, or resampled linearly to uniform spacing on request
+(``--resample uniform``). Time labels come from the time coordinate.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
+from dataclasses import dataclass
 
+import dask.array as da
 import numpy as np
 
 from chronocl.core.errors import InvalidDataError, InvalidParameterError
@@ -131,19 +135,91 @@ def _role(ds, dim: str) -> str | None:
     return None
 
 
-def coordinate_spacing(ds, dim: str) -> float:
-    """The coordinate step of `dim` when its values are numeric and uniform, else 1.0."""
+RESAMPLE = ("uniform",)
+# Relative spread of a coordinate's steps up to which the coordinate counts as uniform.
+UNIFORM_TOLERANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class AxisGrid:
+    """How one spatial axis maps to the store: its spacing and, for a non-uniform coordinate
+    resampled to uniform spacing, the source index `lo` and `weight` of each output sample
+    (value = a[lo] + weight * (a[lo + 1] - a[lo]))."""
+
+    dim: str
+    spacing: float = 1.0
+    lo: np.ndarray | None = None
+    weight: np.ndarray | None = None
+    note: str = ""
+
+
+def axis_grid(ds, dim: str, resample: str | None = None) -> AxisGrid:
+    """The grid of dimension `dim`: the step of a uniform numeric coordinate (1.0 without one).
+
+    A non-uniform coordinate (steps differing by more than UNIFORM_TOLERANCE of their mean) is
+    refused unless `resample` is ``"uniform"``, which interpolates it linearly onto as many
+    uniformly spaced samples over the same range.
+    """
+    if resample is not None and resample not in RESAMPLE:
+        raise InvalidParameterError(f"unknown resample {resample!r}; choose uniform")
     if dim not in ds.coords or ds[dim].ndim != 1 or ds[dim].size < 2:
-        return 1.0
+        return AxisGrid(dim)
     values = ds[dim].values
     if values.dtype.kind not in "iuf":
-        return 1.0
-    steps = np.abs(np.diff(values.astype(np.float64)))
-    if not np.all(np.isfinite(steps)) or steps.min() <= 0:
-        return 1.0
-    if steps.max() - steps.min() > 1e-6 * steps.max():
-        return 1.0
-    return float(steps.mean())
+        return AxisGrid(dim)
+    values = values.astype(np.float64)
+    steps = np.diff(values)
+    if not np.all(np.isfinite(values)) or not (np.all(steps > 0) or np.all(steps < 0)):
+        raise InvalidDataError(
+            f"coordinate {dim} is not strictly increasing or decreasing finite numbers; "
+            "sort or fix it before ingesting"
+        )
+    steps = np.abs(steps)
+    mean = float(abs(values[-1] - values[0]) / (values.size - 1))
+    if steps.max() - steps.min() <= UNIFORM_TOLERANCE * mean:
+        return AxisGrid(dim, mean)
+    spread = f"steps {steps.min():g} to {steps.max():g}"
+    if resample is None:
+        raise InvalidDataError(
+            f"coordinate {dim} is not uniformly spaced ({spread}); pass --resample uniform "
+            "(resample='uniform') to interpolate it onto uniform spacing"
+        )
+    target = np.linspace(values[0], values[-1], values.size)
+    order = np.argsort(values)
+    index = np.interp(target, values[order], np.arange(values.size, dtype=np.float64)[order])
+    lo = np.minimum(np.floor(index).astype(np.intp), values.size - 2)
+    note = f"{dim}: non-uniform coordinate ({spread}) resampled linearly to spacing {mean:g}"
+    return AxisGrid(dim, mean, lo, (index - lo).astype(np.float32), note)
+
+
+def resample_step(step: np.ndarray, grids: Sequence[AxisGrid], first_axis: int = 0) -> np.ndarray:
+    """`step` with each resampled grid applied along its axis (grids[i] to axis first_axis + i);
+    float32 (float64 stays float64) where any axis is resampled, else `step` itself."""
+    for i, grid in enumerate(grids):
+        if grid.lo is None:
+            continue
+        axis = first_axis + i
+        if step.dtype != np.float64:
+            step = step.astype(np.float32, copy=False)
+        shape = [1] * step.ndim
+        shape[axis] = -1
+        a = np.take(step, grid.lo, axis=axis)
+        b = np.take(step, grid.lo + 1, axis=axis)
+        step = a + (b - a) * grid.weight.reshape(shape).astype(step.dtype)
+    return step
+
+
+def resampled_dtype(dtype: np.dtype, grids: Sequence[AxisGrid]) -> np.dtype:
+    """The dtype of steps after `resample_step` with `grids`."""
+    if any(g.lo is not None for g in grids) and np.dtype(dtype) != np.float64:
+        return np.dtype(np.float32)
+    return np.dtype(dtype)
+
+
+def coordinate_spacing(ds, dim: str) -> float:
+    """The coordinate step of `dim` (1.0 without a numeric coordinate); a non-uniform one is
+    refused (`axis_grid`)."""
+    return axis_grid(ds, dim).spacing
 
 
 def time_labels(ds, tdim: str) -> list | None:
@@ -161,14 +237,25 @@ def time_labels(ds, tdim: str) -> list | None:
 
 
 def dataarray_layout(
-    array, time_dim: str | None = None, dims_order: str | Sequence[str] | None = None
-) -> tuple[object, tuple[float, float, float], list | None]:
-    """An xarray DataArray with a time dimension as (T, Z, Y, X): (the transposed DataArray, a
-    view where the data allow, its spacing (dz, dy, dx) from uniform coordinates, time labels)."""
+    array,
+    time_dim: str | None = None,
+    dims_order: str | Sequence[str] | None = None,
+    resample: str | None = None,
+) -> tuple[object, tuple[float, float, float], list | None, list[str]]:
+    """An xarray DataArray with a time dimension as (T, Z, Y, X): (its data, a view where the
+    data allow, resampled lazily when `resample` is ``"uniform"`` and a coordinate is not
+    uniform; its spacing (dz, dy, dx) from the coordinates; time labels; resampling notes)."""
     name = str(array.name) if array.name is not None else "data"
     ds = array.to_dataset(name=name)
     tdim, zyx, squeeze = map_dims(ds, array, name, time_dim, dims_order)
     view = array.isel(dict.fromkeys(squeeze, 0)) if squeeze else array
     view = view.transpose(tdim, *zyx)
-    spacing = tuple(coordinate_spacing(ds, d) for d in zyx)
-    return view, spacing, time_labels(ds, tdim)  # type: ignore[return-value]
+    grids = [axis_grid(ds, d, resample) for d in zyx]
+    data = view.data
+    if any(g.lo is not None for g in grids):
+        lazy = da.asarray(data).rechunk({1: -1, 2: -1, 3: -1})
+        apply = functools.partial(resample_step, grids=grids, first_axis=1)
+        data = lazy.map_blocks(apply, dtype=resampled_dtype(lazy.dtype, grids))
+    spacing = tuple(g.spacing for g in grids)
+    notes = [g.note for g in grids if g.note]
+    return data, spacing, time_labels(ds, tdim), notes  # type: ignore[return-value]

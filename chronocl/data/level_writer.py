@@ -53,7 +53,9 @@ class LevelWriter:
     """Writes levels 1..L of a series into a zarr group while the caller streams the steps.
 
     `add(t, step)` pools one level-0 step into every level and pool and writes them; `finish()`
-    checks that every step came and writes the group's ``chronocl`` attribute.
+    checks that every step came and writes the group's ``chronocl`` attribute. The level
+    arrays are created by `create()`, or by the first write: creating six arrays through zarr
+    costs tens of milliseconds, which `write_store` spends on its writer thread.
     """
 
     def __init__(
@@ -66,22 +68,43 @@ class LevelWriter:
     ) -> None:
         self.group, self.shape, self.dtype = group, tuple(int(n) for n in shape), np.dtype(dtype)
         self.shapes = level_shapes(self.shape[1:])
-        self.arrays = {}
+        self.compressors, self.chunk_bytes = level_compressors(compressors), int(chunk_bytes)
+        self._arrays: dict | None = None
+        self.stats = {
+            (n, pool): ([], [], []) for n in range(1, len(self.shapes) + 1) for pool in POOLS
+        }
+        self.done = 0
+
+    def create(self) -> None:
+        """Create the level arrays in the group (once)."""
+        if self._arrays is not None:
+            return
+        arrays = {}
         for n, (z, y, x) in enumerate(self.shapes, 1):
-            sub = group.require_group(str(n))
-            zc = max(1, min(z, int(chunk_bytes) // max(1, y * x * self.dtype.itemsize)))
+            sub = self.group.require_group(str(n))
+            zc = max(1, min(z, self.chunk_bytes // max(1, y * x * self.dtype.itemsize)))
             for pool in POOLS:
-                self.arrays[n, pool] = sub.create_array(
+                arrays[n, pool] = sub.create_array(
                     pool,
                     shape=(self.shape[0], z, y, x),
                     chunks=(1, zc, y, x),
                     dtype=self.dtype,
-                    compressors=level_compressors(compressors),
+                    compressors=self.compressors,
                     config={"write_empty_chunks": True},  # a missing chunk means damage
                 )
-        self.stats = {key: ([], [], []) for key in self.arrays}
-        self.done = 0
-        self.direct = all(_direct_writable(a) for a in self.arrays.values())
+        self._direct = all(_direct_writable(a) for a in arrays.values())
+        self._arrays = arrays
+
+    @property
+    def arrays(self) -> dict:
+        self.create()
+        return self._arrays
+
+    @property
+    def direct(self) -> bool:
+        """Whether the chunks are written as files by `_write_step_chunks` (else by zarr)."""
+        self.create()
+        return self._direct
 
     def add(self, t: int, step: np.ndarray) -> None:
         """Pool step `t` (Z, Y, X) into every level and pool and write them."""
@@ -141,6 +164,7 @@ class LevelWriter:
             _write_together([(self.arrays[key], t, a) for key, a in out.items()])
 
     def finish(self) -> None:
+        self.create()
         if self.done != self.shape[0]:
             raise InvalidDataError(f"levels got {self.done} time steps, expected {self.shape[0]}")
         levels = []

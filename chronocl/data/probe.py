@@ -34,6 +34,7 @@ from chronocl.core.atomic import atomic_file
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.progress import meter
 from chronocl.core.selection import Selection, parse_selection
+from chronocl.core.time_labels import check_prefer, display_labels, has_labels
 
 if TYPE_CHECKING:
     from chronocl.data.timeseries import TimeSeries
@@ -118,9 +119,9 @@ class TimeCurve:
             tmp.write_text(text, encoding="utf-8")
         return Path(path)
 
-    def figure(self, window: object = None, title: str | None = None):
+    def figure(self, window: object = None, title: str | None = None, time_labels="labels"):
         """A matplotlib Figure of the curve against the time labels (see `plot`)."""
-        return figure(self, window, title)
+        return figure(self, window, title, time_labels)
 
     def plot(
         self,
@@ -128,9 +129,11 @@ class TimeCurve:
         window: object = None,
         title: str | None = None,
         overwrite: bool = False,
+        time_labels: str = "labels",
     ) -> Path:
-        """Draw the curve to a PNG at `path`, atomically; returns the path (see `plot_curve`)."""
-        return plot_curve(self, path, window, title, overwrite)
+        """Draw the curve to a PNG at `path`, atomically; returns the path (see `plot_curve`);
+        `time_labels="steps"` plots against the step numbers instead of the time labels."""
+        return plot_curve(self, path, window, title, overwrite, time_labels)
 
 
 # -- what is probed ----------------------------------------------------------------------------
@@ -343,11 +346,12 @@ def write_curve(
     window: object = None,
     title: str | None = None,
     overwrite: bool = False,
+    time_labels: str = "labels",
 ) -> Path:
     """Write `curve` as CSV or PNG, as the suffix of `path` says."""
     if check_suffix(path) == ".csv":
         return curve.to_csv(path, window, overwrite)
-    return plot_curve(curve, path, window, title, overwrite)
+    return plot_curve(curve, path, window, title, overwrite, time_labels)
 
 
 def plot_curve(
@@ -356,22 +360,24 @@ def plot_curve(
     window: object = None,
     title: str | None = None,
     overwrite: bool = False,
+    time_labels: str = "labels",
 ) -> Path:
     """Draw `curve` to a PNG at `path` atomically (matplotlib's Agg canvas, no display)."""
     check_suffix(path, (".png",))
-    fig = figure(curve, window, title)
+    fig = figure(curve, window, title, time_labels)
     with atomic_file(path, overwrite) as tmp:
         fig.savefig(tmp, format="png")
     return Path(path)
 
 
-def figure(curve: TimeCurve, window: object = None, title: str | None = None):
-    """The curve against its time labels: a voxel's values as a line; a box's mean as a line
-    over its min-max band; the window's span shaded and its steps marked."""
+def figure(curve: TimeCurve, window: object = None, title: str | None = None, time_labels="labels"):
+    """The curve against its time labels (`time_labels="steps"`: the step numbers): a voxel's
+    values as a line; a box's mean as a line over its min-max band; the window's span shaded
+    and its steps marked."""
     from matplotlib.figure import Figure  # no pyplot: no display, no global state
 
     chosen = curve.window_steps(window)
-    x, xlabel, names = time_axis(curve.times, curve.steps)
+    x, xlabel, names = time_axis(curve.times, curve.steps, time_labels)
     fig = Figure(figsize=(8, 4.5), dpi=100, layout="constrained")
     ax = fig.add_subplot()
     if chosen:
@@ -413,16 +419,19 @@ def figure(curve: TimeCurve, window: object = None, title: str | None = None):
     return fig
 
 
-def time_axis(times: Sequence, steps: np.ndarray) -> tuple[np.ndarray, str, list[str] | None]:
+def time_axis(
+    times: Sequence, steps: np.ndarray, prefer: str = "labels"
+) -> tuple[np.ndarray, str, list[str] | None]:
     """(x positions, axis label, tick names) for plotting against the time labels.
 
     Increasing numbers are their own positions; increasing ISO dates (strings such as
     '2024-01-01T06:00') are datetime64 positions; any other labels sit at their steps, the
-    ticks named by them. Labels that are the step numbers give an axis named 'step'.
+    ticks named by their display labels. Labels that are the step numbers, or `prefer`
+    "steps", give an axis named 'step'.
     """
     labels = list(times)
     steps = np.asarray(steps)
-    if labels == [int(s) for s in steps]:
+    if check_prefer(prefer) == "steps" or not has_labels([int(s) for s in steps], labels):
         return steps.astype(np.float64), "step", None
     if all(isinstance(t, int | float) and not isinstance(t, bool) for t in labels):
         x = np.asarray(labels, np.float64)
@@ -432,7 +441,7 @@ def time_axis(times: Sequence, steps: np.ndarray) -> tuple[np.ndarray, str, list
         dates = _dates(labels)
         if dates is not None and np.all(np.diff(dates) > np.timedelta64(0)):
             return dates, "time", None
-    return steps.astype(np.float64), "time", [str(t) for t in labels]
+    return steps.astype(np.float64), "time", display_labels(list(steps), labels)
 
 
 def _dates(labels: list[str]) -> np.ndarray | None:

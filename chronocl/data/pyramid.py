@@ -70,6 +70,8 @@ def downsample(step: np.ndarray, pool: str, out: np.ndarray | None = None) -> np
     if a.ndim != 3:
         raise InvalidDataError(f"a step to downsample is (Z, Y, X); got shape {a.shape}")
     dtype = a.dtype
+    if dtype == np.uint8 and a.flags.c_contiguous and not any(n % 2 for n in a.shape):
+        return _pool_uint8(a, pool, out)
     if pool != "mean":
         op = np.maximum if pool == "max" else np.minimum
         for axis in range(3):
@@ -90,6 +92,38 @@ def downsample(step: np.ndarray, pool: str, out: np.ndarray | None = None) -> np
     a += q
     a >>= 3
     np.copyto(out, a, casting="unsafe")
+    return out
+
+
+def _pool_uint8(a: np.ndarray, pool: str, out: np.ndarray | None) -> np.ndarray:
+    """`downsample` of a C-contiguous uint8 step with even sides: the same values, faster.
+
+    Read as uint16, a row holds its x pairs, one voxel per byte (which byte is which does not
+    matter to a sum, a max or a min), so the x pass is a mask, a shift and one operation
+    instead of a strided pass over bytes. The mean takes it first, so that every sum is
+    formed in uint16 without a cast; max and min take it last, on a quarter of the data.
+    """
+    byte, shift = np.uint16(0xFF), np.uint16(8)
+    if pool == "mean":
+        w = a.view(np.uint16)
+        s = w[0::2] & byte
+        s += w[1::2] & byte
+        s += w[0::2] >> shift
+        s += w[1::2] >> shift
+        s = s[:, 0::2] + s[:, 1::2]
+        q = s >> np.uint16(3)  # rounded half to even, as in `downsample`
+        q &= np.uint16(1)
+        s += np.uint16(3)
+        s += q
+        s >>= np.uint16(3)
+    else:
+        op = np.maximum if pool == "max" else np.minimum
+        zy = op(a[0::2], a[1::2])
+        zy = op(zy[:, 0::2], zy[:, 1::2]).view(np.uint16)
+        s = op(zy & byte, zy >> shift)
+    if out is None:
+        return s.astype(np.uint8)
+    np.copyto(out, s, casting="unsafe")
     return out
 
 

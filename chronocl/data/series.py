@@ -14,20 +14,24 @@ from pathlib import Path
 
 import numpy as np
 
+from chronocl.data.formats.contract import Steps
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
 from chronocl.data.timeseries import TimeSeries, open_store
 from chronocl.data.writer import write_store
 
-__all__ = ["TimeSeries", "open_series", "write_series"]
+__all__ = ["TimeSeries", "open_series", "write_series", "write_steps"]
 
 
-def open_series(path: str | os.PathLike) -> TimeSeries:
+def open_series(path: str | os.PathLike, variable: str | None = None) -> TimeSeries:
     """Open a chronocl store (zarr v3 or v2), a bare (T, Z, Y, X) zarr array or an OME-Zarr
-    image (in place: channel 0, full resolution)."""
+    image (in place: channel 0, full resolution).
+
+    A store of several variables opens at its first; `variable` names another
+    (`TimeSeries.variables` lists them, `TimeSeries.variable(name)` switches).
+    """
     p = Path(path)
-    if is_omezarr(p):
-        return open_omezarr(p)
-    return open_store(p)
+    series = open_omezarr(p) if is_omezarr(p) else open_store(p)
+    return series if variable is None else series.variable(variable)
 
 
 def write_series(
@@ -40,3 +44,22 @@ def write_series(
     """
     write_store(path, steps, **options)  # type: ignore[arg-type]
     return open_store(path)
+
+
+def write_steps(
+    path: str | os.PathLike,
+    steps: Steps,
+    *,
+    overwrite: bool = False,
+    progress: bool = False,
+    nan_fill: float | None = None,
+) -> TimeSeries:
+    """Write a reader's `steps` to a new store atomically and open it."""
+    return write_series(
+        path,
+        steps.read(),
+        **steps.written(),
+        overwrite=overwrite,
+        progress=progress,
+        nan_fill=nan_fill,
+    )

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,6 +24,7 @@ from chronocl.core.errors import (
     InvalidDataError,
     StoreChangedError,
     StoreFormatError,
+    UnknownNameError,
 )
 from chronocl.core.memory import aligned_empty
 from chronocl.core.values import normalize
@@ -42,7 +43,7 @@ from chronocl.data.metadata import (
 )
 from chronocl.data.pyramid import check_pool, count_levels, describe_levels, level_parts
 from chronocl.data.stores import require_store
-from chronocl.data.writer import write_store
+from chronocl.data.writer import EXTRA_KEYS, VARIABLES, write_store
 
 # Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at
 # once, zarr's async.concurrency). The streaming plan chooses fewer when the budget is tight.
@@ -70,6 +71,12 @@ class TimeSeries:
     # Coarse levels pooled on the fly (in-memory series, OME-Zarr images read in place) rather
     # than read from a chronocl store's `levels`.
     _lazy_levels: bool = field(default=False, repr=False)
+    # What a store records beside the data (`writer.EXTRA_KEYS`): the variable's name and the
+    # store's variables, a derived quantity and its components, resampling notes.
+    meta: dict = field(default_factory=dict, repr=False)
+    # Opens another variable of the same source by name where it is not a chronocl store's
+    # (an OME-Zarr image's channels, read in place).
+    _variable: Callable[[str], TimeSeries] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.times:
@@ -113,6 +120,31 @@ class TimeSeries:
     @property
     def vmax(self) -> float:
         return self.stats.vmax
+
+    # -- variables (docs/variables.md) -------------------------------------------------------
+    @property
+    def variables(self) -> tuple[str, ...]:
+        """The variables of the store this series was opened from (first: the store's own)."""
+        names = self.meta.get("variables") or [self.meta.get("variable")]
+        return tuple(str(n) for n in names if n)
+
+    def variable(self, name: str) -> TimeSeries:
+        """The series of variable `name` of this series' store (`variables` lists them)."""
+        names, own = self.variables, self.meta.get("variable")
+        root = self.path
+        if root is not None and own is not None and own != names[0]:
+            root = root.parent.parent  # this is VARIABLES/<own> inside the store
+        if name not in names:
+            where = f"store {str(root)!r}" if root is not None else self.source
+            found = ", ".join(names) if names else "one unnamed variable"
+            raise UnknownNameError(f"{where} has no variable {name!r}; it holds {found}")
+        if name == own:
+            return self
+        if self._variable is not None:
+            return self._variable(name)
+        if root is None:
+            return self
+        return open_store(root if name == names[0] else root / VARIABLES / name)
 
     # -- coarse levels (chronocl.data.pyramid) -------------------------------------------------
     @property
@@ -265,15 +297,22 @@ class TimeSeries:
         spacing: Sequence[float] | None = None,
         times: Sequence | None = None,
         source: str = "array",
+        resample: str | None = None,
     ) -> TimeSeries:
         """Wrap a numpy or dask array (T, Z, Y, X), or an xarray DataArray with a time
         dimension (dimensions mapped by name, spacing and time labels from its coordinates);
-        no copy is made. Statistics are computed in one pass."""
+        no copy is made. Statistics are computed in one pass.
+
+        A DataArray coordinate that is not uniformly spaced is refused, or with
+        ``resample="uniform"`` interpolated lazily onto uniform spacing (noted in `meta`).
+        """
+        meta: dict = {}
         if type(array).__module__.startswith("xarray"):
-            array, coord_spacing, coord_times = dataarray_layout(array)
+            array, coord_spacing, coord_times, notes = dataarray_layout(array, resample=resample)
             spacing = coord_spacing if spacing is None else spacing
             times = coord_times if times is None else times
-            array = array.data  # numpy (a view) or dask
+            if notes:
+                meta["resampled"] = notes
         spacing = (1.0, 1.0, 1.0) if spacing is None else spacing
         if not isinstance(array, da.Array):
             try:
@@ -302,6 +341,7 @@ class TimeSeries:
             spacing=parse_spacing(spacing),
             times=parse_times(times, arr.shape[0]),
             source=source,
+            meta=meta,
         )
 
     def save(self, path: str | os.PathLike, overwrite: bool = False, progress: bool = False):
@@ -318,6 +358,7 @@ class TimeSeries:
             source=self.source,
             overwrite=overwrite,
             progress=progress,
+            attrs={k: v for k, v in self.meta.items() if k in ("quantity", "components")},
         )
         return open_store(path)
 
@@ -339,6 +380,14 @@ class TimeSeries:
         }
         if self.level_index:
             d["level"] = self.level_index
+        for key in ("variable", "quantity", "components", "resampled"):
+            if key in self.meta:
+                d[key] = self.meta[key]
+        if len(self.variables) > 1:
+            d["variables"] = (
+                f"{', '.join(self.variables)} (this is {self.meta.get('variable')}; "
+                "choose with --variables or .variable(name))"
+            )
         if self.path is not None:
             d["size on disk"] = _human(_disk_usage(self.path))
         return d
@@ -389,6 +438,7 @@ def open_store(path: str | os.PathLike) -> TimeSeries:
             source=str(attrs.get("source", p)),
             path=p,
             _zarr=arr,
+            meta={k: attrs[k] for k in EXTRA_KEYS if k in attrs},
         )
     return TimeSeries.from_array(lazy, source=str(p)).stored_in(p, arr)
 

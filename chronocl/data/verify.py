@@ -1,10 +1,10 @@
 """`chronocl verify`: read a whole store back and check it, as a file-system check would.
 
-Opening a store already checks its metadata; this also reads every chunk (missing and
-undecodable chunks raise StoreCorruptError) and recomputes each step's minimum, maximum and mean
-against the statistics stored at ingest, which catches values changed on disk in stores
-without chunk checksums. The coarse levels, when the store has them, are checked the same way
-against their own statistics.
+Opening a store already checks its metadata; this also reads every chunk of every variable
+(missing and undecodable chunks raise StoreCorruptError) and recomputes each step's minimum,
+maximum and mean against the statistics stored at ingest, which catches values changed on disk
+in stores without chunk checksums. The coarse levels, when the store has them, are checked the
+same way against their own statistics.
 """
 
 from __future__ import annotations
@@ -30,12 +30,16 @@ def verify(path: str | os.PathLike, progress: bool = False) -> dict:
     except StoreFormatError:
         cv = Chronovolume.load(path)  # reads and checks every chunk
         return {"chronovolume": str(path), "shape (Z, Y, X)": list(cv.shape), "status": "ok"}
-    _check_steps(series, progress)
     summary = {"series": str(path), "steps checked": series.n_steps}
-    if series.n_levels > 1:
-        for n in range(1, series.n_levels):
+    for name in [None, *series.variables[1:]]:  # every variable of a multi-variable store
+        one = series if name is None else series.variable(name)
+        _check_steps(one, progress)
+        for n in range(1, one.n_levels):
             for pool in POOLS:
-                _check_steps(series.level(n, pool), progress, f"verifying level {n} {pool}")
+                _check_steps(one.level(n, pool), progress, f"verifying level {n} {pool}")
+    if len(series.variables) > 1:
+        summary["variables checked"] = ", ".join(series.variables)
+    if series.n_levels > 1:
         summary["levels checked"] = f"1..{series.n_levels - 1} ({', '.join(POOLS)})"
     return {**summary, "status": "ok"}
 

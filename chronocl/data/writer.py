@@ -34,6 +34,12 @@ from chronocl.data.metadata import (
 from chronocl.data.pyramid import LEVELS, level_shapes
 
 CHUNK_BYTES = 16 * 2**20
+# Optional attributes a store may record beside its statistics (`write_store(attrs=...)`):
+# `variable` (its name) and `variables` (all of a multi-variable store, whose others sit in
+# VARIABLES/<name>/ as stores of their own), `quantity` ("magnitude") and its `components`,
+# `resampled` (notes on coordinates resampled to uniform spacing).
+EXTRA_KEYS = ("variable", "variables", "quantity", "components", "resampled")
+VARIABLES = "variables"
 COMPRESSORS = ("zstd", "blosc-lz4", "none")
 
 
@@ -75,6 +81,7 @@ def write_store(
     compressor: str = "zstd",
     checksum: bool = True,
     levels: bool = True,
+    attrs: dict | None = None,
 ) -> None:
     """Write steps (each (Z, Y, X)) to a new store at `path` atomically.
 
@@ -82,10 +89,17 @@ def write_store(
     `labels` name each step's origin (e.g. its file) in error messages. Chunks are
     (1, zc, Y, X) of at most `chunk_bytes` (small chunks suit small streaming budgets);
     `compressor` is one of COMPRESSORS; `checksum` adds a crc32c per chunk. `levels` adds
-    the coarse levels (group ``levels``) in the same pass when the volume has any.
+    the coarse levels (group ``levels``) in the same pass when the volume has any. `attrs`
+    adds the EXTRA_KEYS it has to the store's metadata.
     """
     dt = np.dtype(dtype)
     check_dtype(dt)
+    extra = {k: v for k, v in (attrs or {}).items() if v}
+    if set(extra) - set(EXTRA_KEYS):
+        raise InvalidParameterError(
+            f"unknown store attributes {sorted(set(extra) - set(EXTRA_KEYS))}; "
+            f"choose from {', '.join(EXTRA_KEYS)}"
+        )
     if nan_fill is not None and not (
         isinstance(nan_fill, int | float | np.number) and math.isfinite(nan_fill)
     ):
@@ -123,7 +137,8 @@ def write_store(
         writes = (
             ThreadPoolExecutor(1, thread_name_prefix="chronocl-level-writes") if pyramid else None
         )
-        written = None  # the previous step's level write, at most one in flight
+        # the previous step's level write, at most one in flight; first the arrays' creation
+        written = writes.submit(pyramid.create) if pyramid else None
         try:
             for t, step in enumerate(track(steps, n_steps, "writing steps", progress)):
                 step = _checked_step(step, t, shape, dt, nan_fill, labels, n_steps)
@@ -164,6 +179,7 @@ def write_store(
             "spacing": {"x": spacing[2], "y": spacing[1], "z": spacing[0]},
             "times": list(times),
             "source": source,
+            **extra,
         }
 
 

@@ -111,6 +111,8 @@ class Job:
         dz, dy, dx = series.spacing
         return {
             "dataset": series.source or (str(series.path) if series.path else ""),
+            # Where to read the series again (a silhouette re-integrated for another view).
+            "store": str(series.path.resolve()) if series.path is not None else None,
             "selection": {"steps": list(selection.steps), "n_steps": selection.n_steps},
             "time_labels": [series.times[s] for s in selection.steps],
             "spec": self.spec.to_dict(),

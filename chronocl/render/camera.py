@@ -1,27 +1,35 @@
-"""The orbit camera: azimuth and elevation around the volume's centre, zoom, field of view.
+"""The orbit camera: azimuth and elevation around what it frames, zoom, field of view.
 
 World space: the volume box is centred at the origin with x right, y up, z towards the
 viewer at azimuth = elevation = 0, and its longest side has length 1 (voxel spacing honoured).
+The camera frames the whole box, or (`frame="visible"`, the default) a `focus` box: the part of
+the volume that is not transparent, which `chronocl.render.framing` finds and fills in before
+drawing. It orbits about the centre of what it frames; zoom 1 fits that box's bounding sphere.
 Matrices are numpy float64, row-major; upload them transposed (GL is column-major).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 
 PROJECTIONS = ("perspective", "orthographic")
+FRAMES = ("visible", "box")  # what zoom 1 fits: the non-transparent region, or the whole box
 MIN_ZOOM, MAX_ZOOM = 0.01, 100.0  # beyond, the volume is a dot or the view is inside one voxel
 
 
 @dataclass(frozen=True)
 class Camera:
     """Orbit camera. `zoom` > 1 magnifies; `view_height` (world units) fixes an orthographic
-    view's height exactly, for pixel-exact views."""
+    view's height exactly, for pixel-exact views.
+
+    `frame="visible"` frames `focus`, a world box (x0, y0, z0, x1, y1, z1), when it is set
+    (`render` sets it to the visible region of what it draws); `frame="box"` always frames
+    the whole volume box."""
 
     azimuth: float = 30.0
     elevation: float = 20.0
@@ -29,6 +37,8 @@ class Camera:
     fov: float = 30.0
     projection: str = "perspective"
     view_height: float | None = None
+    frame: str = "visible"
+    focus: tuple[float, float, float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         for name in ("azimuth", "elevation", "zoom", "fov"):
@@ -52,17 +62,23 @@ class Camera:
             math.isfinite(self.view_height) and self.view_height > 0
         ):
             raise InvalidParameterError(f"view_height is {self.view_height}; it must be > 0")
+        if self.frame not in FRAMES:
+            raise UnknownNameError(
+                f"unknown frame {self.frame!r}; choose visible (the non-transparent region) "
+                "or box (the whole volume)"
+            )
+        if self.focus is not None:
+            box = np.asarray(self.focus, dtype=np.float64)
+            if box.shape != (6,) or not np.isfinite(box).all() or not (box[3:] > box[:3]).all():
+                raise InvalidParameterError(
+                    f"camera focus {self.focus!r} must be a world box x0,y0,z0,x1,y1,z1 "
+                    "with x0 < x1, y0 < y1, z0 < z1"
+                )
+            object.__setattr__(self, "focus", tuple(float(v) for v in box))
 
     def orbited(self, degrees: float) -> Camera:
         """The same camera turned `degrees` further in azimuth (for turntables)."""
-        return Camera(
-            self.azimuth + degrees,
-            self.elevation,
-            self.zoom,
-            self.fov,
-            self.projection,
-            self.view_height,
-        )
+        return replace(self, azimuth=self.azimuth + degrees)
 
     def eye_direction(self) -> np.ndarray:
         """Unit vector from the centre towards the eye."""
@@ -73,14 +89,25 @@ class Camera:
         """Unit viewing direction (eye towards the centre), for silhouette enhancement."""
         return tuple(float(c) for c in -self.eye_direction())  # type: ignore[return-value]
 
+    def target(self, extent: np.ndarray) -> tuple[np.ndarray, float]:
+        """(centre, radius) of what the camera frames in a box of world `extent`."""
+        if self.frame == "visible" and self.focus is not None:
+            lo, hi = np.array(self.focus[:3]), np.array(self.focus[3:])
+            return (lo + hi) / 2, 0.5 * float(np.linalg.norm(hi - lo))
+        return np.zeros(3), 0.5 * float(np.linalg.norm(extent))
+
     def matrices(self, extent: np.ndarray, aspect: float) -> tuple[np.ndarray, np.ndarray]:
         """(view, projection) for a box of world `extent` (x, y, z) and image aspect w / h."""
-        radius = 0.5 * float(np.linalg.norm(extent))
+        centre, radius = self.target(extent)
+        box_radius = 0.5 * float(np.linalg.norm(extent))
         half_fov = math.radians(self.fov) / 2
         distance = radius / math.sin(half_fov) / self.zoom
-        eye = self.eye_direction() * distance
-        view = look_at(eye, np.zeros(3), _up_for(self.eye_direction()))
-        near, far = max(distance - 2 * radius, 1e-3 * distance), distance + 2 * radius
+        eye = centre + self.eye_direction() * distance
+        view = look_at(eye, centre, _up_for(self.eye_direction()))
+        # The whole box lies within box_radius of the origin: near and far keep all of it.
+        off = float(np.linalg.norm(centre))
+        near = max(distance - off - 2 * box_radius, 1e-3 * distance)
+        far = distance + off + 2 * box_radius
         if self.projection == "perspective":
             proj = perspective(2 * half_fov, aspect, near, far)
         else:

@@ -56,10 +56,20 @@ def shader_source(name: str) -> str:
     return (shader_dir() / name).read_text()
 
 
+def with_defines(source: str, defines: tuple[str, ...]) -> str:
+    """`source` with `#define NAME 1` for each of `defines` after its #version line (GLSL
+    wants that first); no defines give the source unchanged."""
+    if not defines:
+        return source
+    version, _, rest = source.partition("\n")
+    return "\n".join([version, *(f"#define {d} 1" for d in defines), rest])
+
+
 @cache
-def program(ctx, name: str):
-    """The linked program `name` (name.vert + name.frag) on `ctx`, built once."""
+def program(ctx, name: str, defines: tuple[str, ...] = ()):
+    """The linked program `name` (name.vert + name.frag) on `ctx` with `defines` switched on in
+    the fragment shader (e.g. ("SHADING",)), built once per set of defines."""
     return ctx.program(
         vertex_shader=shader_source(f"{name}.vert"),
-        fragment_shader=shader_source(f"{name}.frag"),
+        fragment_shader=with_defines(shader_source(f"{name}.frag"), defines),
     )

@@ -2,7 +2,8 @@
 
 See kernels/glsl/raycast.frag for the compositing. A `Volume` is an uploaded chronovolume
 (RGBA16F or RGBA8 texture, trilinear or nearest) with its world-space box; `draw` renders one
-view of it into an (H, W, 3) uint8 array, top-down.
+view of it into an (H, W, 3) uint8 array, top-down; with `shading` (chronocl/render/shading.py)
+it runs the lit build of the shader, without it the unlit one, unchanged.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
 from chronocl.render.gl import gl_context, program
+from chronocl.render.shading import OFF, Shading
 from chronocl.render.upload import FORMATS, convert, occupancy
 
 MIN_SIZE, MAX_SIZE = 16, 8192
@@ -56,6 +58,7 @@ class Raycaster:
         self.ctx = gl_context() if ctx is None else ctx
         self.prog = program(self.ctx, "raycast")
         self.vao = self.ctx.vertex_array(self.prog, [])
+        self._lit: tuple | None = None  # the lit program and its vertex array, on first use
         self.outline_prog = program(self.ctx, "outline")
         self._fbos: dict[tuple[int, int], object] = {}
 
@@ -97,12 +100,14 @@ class Raycaster:
         jitter: bool = True,
         step: float = 1.0,
         outline: bool = False,
+        shading: Shading = OFF,
     ) -> np.ndarray:
         """Render one view; returns (H, W, 3) uint8, top-down.
 
         `step` is the sampling distance in voxels. `clip` = (nx, ny, nz, offset): keep the
         part of the volume on the normal's side of a plane; offset -1..1 moves the plane from
         the box's back (everything kept) to its front (nothing kept), 0 through the centre.
+        `shading` lights the samples (chronocl/render/shading.py); off, the unlit shader runs.
         """
         w, h = check_size(size)
         if not (math.isfinite(step) and 0.05 <= step <= 8):
@@ -113,7 +118,7 @@ class Raycaster:
         view, proj = camera.matrices(volume.extent, w / h)
         view_proj = proj @ view
         half = volume.extent / 2
-        prog = self.prog
+        prog, vao = self.lit() if shading.enabled else (self.prog, self.vao)
         prog["inv_view_proj"].write(np.linalg.inv(view_proj).T.astype("f4").tobytes())
         prog["box_min"].value = tuple(-half)
         prog["box_max"].value = tuple(half)
@@ -127,14 +132,23 @@ class Raycaster:
         prog["background"].value = tuple(float(c) for c in background)
         prog["clip_enabled"].value = clip is not None
         prog["clip_plane"].value = clip_plane(clip, volume.extent) if clip else (0, 0, 0, 0)
+        if shading.enabled:
+            set_shading(prog, shading, volume)
         volume.texture.use(location=0)
         prog["volume"].value = 0
         self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
-        self.vao.render(vertices=3)
+        vao.render(vertices=3)
         if outline:
             self._draw_outline(view_proj, half, background)
         pixels = np.frombuffer(fbo.read(components=3, alignment=1), dtype=np.uint8)
         return pixels.reshape(h, w, 3)[::-1].copy()
+
+    def lit(self) -> tuple:
+        """The shading program (raycast.frag with SHADING) and its vertex array."""
+        if self._lit is None:
+            prog = program(self.ctx, "raycast", ("SHADING",))
+            self._lit = (prog, self.ctx.vertex_array(prog, []))
+        return self._lit
 
     def _fbo(self, size: tuple[int, int]):
         fbo = self._fbos.get(size)
@@ -156,6 +170,17 @@ class Raycaster:
         vao.render(mode=self.ctx.LINES)
         vao.release()
         vbo.release()
+
+
+def set_shading(prog, shading: Shading, volume: Volume) -> None:
+    """The lit shader's uniforms: a voxel in texture space, and the scale that turns opacity
+    differences two voxels apart into the change per `unit_world` (spacing honoured)."""
+    dims = np.array(volume.texture.size, dtype=np.float64)  # voxels along x, y, z
+    voxel = volume.extent / dims
+    prog["texel"].value = tuple(1.0 / dims)
+    prog["grad_scale"].value = tuple(volume.unit / (2.0 * voxel))
+    for name in ("ambient", "diffuse", "specular", "shininess"):
+        prog[name].value = float(getattr(shading, name))
 
 
 def occupied_box(alpha: np.ndarray, extent: np.ndarray, voxel: np.ndarray):

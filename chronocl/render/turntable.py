@@ -13,9 +13,6 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
-
-from chronocl.core.atomic import atomic_file
 from chronocl.core.enhance import Enhance
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.progress import track
@@ -23,19 +20,15 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate
 from chronocl.render.camera import Camera
+from chronocl.render.framing import framed
 from chronocl.render.image import Image
+from chronocl.render.video import check_video_path, write_video
 from chronocl.render.views import raycaster, render_views
-
-VIDEO_SUFFIXES = (".mp4", ".gif", ".webm", ".mkv")
 
 
 def check_video(path: str | os.PathLike, frames: int) -> Path:
     """Validate a turntable's output path and frame count before any work is done."""
-    target = Path(path)
-    if target.suffix.lower() not in VIDEO_SUFFIXES:
-        raise InvalidParameterError(
-            f"turntable {target.name!r}: use a video suffix ({', '.join(VIDEO_SUFFIXES)})"
-        )
+    target = check_video_path(path, "turntable")
     if not 2 <= frames <= 3600:
         raise InvalidParameterError(f"turntable frames is {frames}; use 2 to 3600")
     return target
@@ -51,22 +44,12 @@ def turntable(
     progress: bool = False,
 ) -> Path:
     """Render `frames` views a full turn apart in azimuth with `frame(camera)`; write a video."""
-    import imageio.v3 as iio
-
     target = check_video(path, frames)
     images: Sequence = [
         frame(camera.orbited(360.0 * i / frames)).array
         for i in track(range(frames), frames, "rendering frames", progress)
     ]
-    suffix = target.suffix.lower()
-    with atomic_file(target, overwrite=overwrite) as tmp:
-        if suffix == ".gif":
-            iio.imwrite(tmp, images, extension=".gif", duration=1000 / fps, loop=0)
-        else:  # H.264 and friends want even frame sizes
-            even = [_pad_even(image) for image in images]
-            options = {"codec": "libx264", "macro_block_size": 1} if suffix == ".mp4" else {}
-            iio.imwrite(tmp, even, extension=suffix, fps=fps, **options)
-    return target
+    return write_video(images, target, fps, overwrite)
 
 
 @dataclass(frozen=True)
@@ -75,7 +58,7 @@ class ModeViews:
     `size`, with a legend (and a label per panel when there are several).
 
     `spec_args` are the arguments of `chronocl.make_spec` shared by every mode; `draw_args`
-    those of `render_views` (background, clip, outline).
+    those of `render_views` (background, clip, outline, time_labels).
     """
 
     series: TimeSeries
@@ -136,7 +119,8 @@ class ModeViews:
     ) -> Path:
         """A full turn from `camera` as a video: `chronovolumes` (as `integrate(camera)` made
         them) uploaded once and drawn from every angle, or integrated again for every frame's
-        view when they follow the camera."""
+        view when they follow the camera. Every frame frames what `camera` frames for them."""
+        camera = framed(camera, chronovolumes)  # once: re-integrated frames keep one focus
         if self.follows_camera:
             return turntable(
                 lambda cam: self.draw(self.integrate(cam), cam),
@@ -159,8 +143,3 @@ class ModeViews:
         finally:
             for volume in volumes:
                 volume.release()
-
-
-def _pad_even(image: np.ndarray) -> np.ndarray:
-    h, w = image.shape[:2]
-    return np.pad(image, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")

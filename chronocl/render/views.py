@@ -1,5 +1,9 @@
 """Render chronovolumes: one view, or parallel views of several under one camera, labelled,
-with a legend bar of the time colours (oldest .. newest, step numbers)."""
+with a legend bar of the time colours (oldest .. newest, the steps' time labels or numbers).
+
+The camera frames what is visible (`chronocl.render.framing`) unless it frames the box, and a
+silhouette taken along another view is integrated again for the camera where the chronovolume's
+store can be reached (`chronocl.render.follow`)."""
 
 from __future__ import annotations
 
@@ -10,10 +14,14 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.tf import lut_lookup
+from chronocl.core.time_labels import check_prefer, compact, display_labels, span_text
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
+from chronocl.render.follow import following
+from chronocl.render.framing import framed
 from chronocl.render.image import Image
 from chronocl.render.raycaster import Raycaster, Volume, check_clip, check_size
+from chronocl.render.shading import Shading, as_shading
 
 _raycaster: Raycaster | None = None
 
@@ -60,8 +68,16 @@ def render(
     nearest: bool = False,
     label: str | None = None,
     legend: bool = False,
+    shading: Shading | bool | None = None,
+    time_labels: str = "labels",
 ) -> Image:
-    """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`)."""
+    """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`).
+
+    The camera frames the visible region (`Camera(frame="box")`: the whole box); `time_labels`
+    "labels" writes the store's time labels in the legend where it has them, "steps" the step
+    numbers. A silhouette taken along another view is integrated again along the camera's
+    where the store it came from can be opened, else a warning says so. `shading=True` (or a
+    `Shading`) lights it from the camera by its opacity gradient; off by default (flat colour)."""
     return render_views(
         [chronovolume],
         camera,
@@ -74,6 +90,8 @@ def render(
         nearest=nearest,
         labels=[label] if label else None,
         legend=legend,
+        shading=shading,
+        time_labels=time_labels,
     )
 
 
@@ -92,18 +110,26 @@ def render_views(
     legend: bool = True,
     columns: int | None = None,
     volumes: Sequence[Volume] | None = None,
+    shading: Shading | bool | None = None,
+    time_labels: str = "labels",
 ) -> Image:
     """Parallel views: each chronovolume in its own panel of `size`, all under one camera.
 
     `volumes`, the chronovolumes already uploaded with `raycaster().upload` (and released by
     the caller), spare the upload when one set is rendered many times, e.g. a turntable.
+    `shading`: as in `render`.
     """
     if not chronovolumes:
         raise InvalidParameterError("nothing to render: give at least one chronovolume")
     camera = camera or Camera()
+    check_prefer(time_labels)
+    if volumes is None:  # uploaded volumes are drawn as they are
+        chronovolumes = following(chronovolumes, camera)
+    camera = framed(camera, chronovolumes)
     w, h = check_size(size)
     bg = parse_color(background)
     clip = None if clip is None else check_clip(clip)
+    lighting = as_shading(shading)
     rc = raycaster()
     panels = []
     for i, cv in enumerate(chronovolumes):
@@ -119,32 +145,43 @@ def render_views(
                     jitter=jitter,
                     step=step,
                     outline=outline,
+                    shading=lighting,
                 )
             )
         finally:
             if volumes is None:
                 volume.release()
     if labels is None and len(chronovolumes) > 1:
-        labels = [describe(cv) for cv in chronovolumes]
+        labels = [describe(cv, time_labels) for cv in chronovolumes]
     if not labels and not legend:
         return Image(panels[0]) if len(panels) == 1 else Image(_grid(panels, columns, bg))
-    return Image(compose_panels(panels, labels, chronovolumes if legend else None, columns, bg))
+    legend_of = chronovolumes if legend else None
+    return Image(compose_panels(panels, labels, legend_of, columns, bg, time_labels))
 
 
-def describe(cv: Chronovolume) -> str:
-    """Panel label: mode, order and window, e.g. 'alpha, forward, steps 0:20:9'."""
+def step_texts(cv: Chronovolume, prefer: str = "labels") -> list[str]:
+    """The display labels of the chronovolume's steps (`chronocl.core.time_labels`)."""
+    return display_labels(cv.steps, cv.metadata.get("time_labels"), prefer)
+
+
+def describe(cv: Chronovolume, time_labels: str = "labels") -> str:
+    """Panel label: mode, order and window, e.g. 'alpha, forward, steps 0:20:9', or with
+    time labels 'alpha, forward, 2024-01-01 06:00 .. 18:00 (3 steps)'."""
     from chronocl.core.selection import Selection
 
     spec = cv.metadata.get("spec", {})
     order = spec.get("order", "forward")
     order = order if isinstance(order, str) else "importance " + ",".join(map(str, order))
     sel = cv.metadata.get("selection", {})
-    steps = Selection(tuple(sel.get("steps", ())), sel.get("n_steps", 1)).describe()
+    steps = "steps " + Selection(tuple(sel.get("steps", ())), sel.get("n_steps", 1)).describe()
+    texts = step_texts(cv, time_labels)
+    if texts != [str(s) for s in cv.steps]:
+        steps = f"{span_text(texts)} ({len(texts)} step{'s' if len(texts) > 1 else ''})"
     extra = ""
     enhance = spec.get("enhance", {}).get("kind", "none")
     if enhance != "none":
         extra = f", {enhance}"
-    return f"{spec.get('mode', '?')}, {order}, steps {steps}{extra}"
+    return f"{spec.get('mode', '?')}, {order}, {steps}{extra}"
 
 
 def _grid(panels: list[np.ndarray], columns: int | None, bg) -> np.ndarray:
@@ -169,7 +206,7 @@ def label_font(size: int):
         return ImageFont.load_default()
 
 
-def compose_panels(panels, labels, legend_of, columns, bg) -> np.ndarray:
+def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels") -> np.ndarray:
     from PIL import Image as PILImage
     from PIL import ImageDraw
 
@@ -194,11 +231,12 @@ def compose_panels(panels, labels, legend_of, columns, bg) -> np.ndarray:
             (8, grid.shape[0] + 4, canvas.width - 8, legend_h - 8),
             font,
             text_rgb,
+            time_labels,
         )
     return np.asarray(canvas)
 
 
-def _legend(draw, cv: Chronovolume, box, font, text_rgb) -> None:
+def _legend(draw, cv: Chronovolume, box, font, text_rgb, time_labels="labels") -> None:
     """A bar of the time colours over the selected steps, oldest on the left."""
     from chronocl.modes.spec import IntegrationSpec
 
@@ -230,20 +268,16 @@ def _legend(draw, cv: Chronovolume, box, font, text_rgb) -> None:
         colour = tuple(round(c * 255) for c in shown[i])
         draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
     # Label the steps that fit without overlapping; the oldest and newest always.
+    texts = compact(step_texts(cv, time_labels))
     positions_x = [x_start + (k / max(1, len(steps) - 1)) * (span - 1) for k in range(len(steps))]
-    min_gap = 8 * max(len(str(s)) for s in steps) + 10
-    shown_at: list[float] = []
+    shown: list[tuple[float, float]] = []  # the labels' extents, 10 px apart at least
     for k in [0, len(steps) - 1, *range(1, len(steps) - 1)]:
-        x = positions_x[k]
-        if k < len(steps) and all(abs(x - other) >= min_gap for other in shown_at):
-            shown_at.append(x)
+        x, w = positions_x[k], draw.textlength(texts[k], font=font)
+        left = min(max(x - w / 2, x0), x0 + width - w)  # centred on its tick, inside the bar
+        if all(left + w + 10 <= a or left >= b + 10 for a, b in shown):
+            shown.append((left, left + w))
             draw.line([(x, y0 + bar_h), (x, y0 + bar_h + 3)], fill=text_rgb)
-            draw.text(
-                (x - 4 * len(str(steps[k])), y0 + bar_h + 4),
-                str(steps[k]),
-                fill=text_rgb,
-                font=font,
-            )
+            draw.text((left, y0 + bar_h + 4), texts[k], fill=text_rgb, font=font)
 
 
 def _fraction_legend(draw, spec, box, font, text_rgb) -> None:

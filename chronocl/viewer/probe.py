@@ -109,26 +109,55 @@ def project(
     return round(float(x), 5), round(float(y), 5)
 
 
-def box_fractions(cv: Chronovolume, voxel: tuple[int, int, int]) -> tuple[float, float, float]:
-    """The centre of voxel (z, y, x) of `cv` as x, y, z fractions of its box."""
+def box_fractions(
+    cv: Chronovolume, voxel: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """The centre of voxel (z, y, x) of `cv` (a fractional index: between voxels) as x, y, z
+    fractions of its box."""
     nz, ny, nx = cv.shape
     z, y, x = voxel
     return (x + 0.5) / nx, (y + 0.5) / ny, (z + 0.5) / nz
 
 
 def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Dataset) -> dict:
-    """The `probe` reply to `msg` for the shown `view` of `state`: the voxel met, v(t) there
-    over every step, and the window's steps."""
+    """The `probe` reply to `msg` for the shown `view` of `state`: the voxel met and v(t) there
+    over every step, or with a second corner (x2, y2) the box spanned by the voxels the two
+    rays meet and its mean, min and max per step; the window's steps, and the curve as CSV.
+
+    The box is the smallest one holding both voxels, so a drag across a feature's face probes
+    a slab one voxel deep where both rays stop at the same depth.
+    """
     camera = state.panel_camera()
-    hit = probe_ray(cv, camera, state.size, msg["x"], msg["y"], state.clip)
+    corners = [(msg["x"], msg["y"])]
+    if "x2" in msg and "y2" in msg:
+        corners.append((msg["x2"], msg["y2"]))
+    hits = [probe_ray(cv, camera, state.size, x, y, state.clip) for x, y in corners]
     reply = {"type": "probe", "id": msg.get("id"), "view": view, "x": msg["x"], "y": msg["y"]}
-    reply |= {"reached": hit["reached"], "opacity": round(hit["opacity"], 4)}
+    if len(corners) == 2:
+        reply |= {"x2": msg["x2"], "y2": msg["y2"]}
+    reply |= {"reached": all(h["reached"] for h in hits)}
+    reply["opacity"] = round(min(h["opacity"] for h in hits), 4)
     reply["threshold"] = PROBE_THRESHOLD
-    if hit["voxel"] is None:
-        reply |= {"voxel": None, "values": None}
+    window = list(state.selection(ds.series.n_steps).steps)
+    reply["window"] = window
+    empty = {"voxel": None, "box": None, "values": None, "min": None, "max": None, "csv": None}
+    if any(h["voxel"] is None for h in hits):
+        return reply | empty
+    voxels = np.array([h["voxel"] for h in hits])  # (z, y, x) per corner
+    lo, hi = voxels.min(axis=0), voxels.max(axis=0) + 1
+    if len(hits) == 1:
+        z, y, x = hits[0]["voxel"]
+        curve = ds.curve((z, y, x))
+        reply |= {"voxel": {"z": z, "y": y, "x": x}, "box": None}
     else:
-        z, y, x = hit["voxel"]
-        reply |= {"voxel": {"z": z, "y": y, "x": x}, "values": ds.curve(z, y, x)}
-        reply["mark"] = project(cv, camera, state.size, box_fractions(cv, hit["voxel"]))
-    reply["window"] = list(state.selection(ds.series.n_steps).steps)
+        box = tuple((int(lo[a]), int(hi[a])) for a in (2, 1, 0))  # x, y, z ranges
+        curve = ds.curve(box=box)
+        reply |= {"voxel": None, "box": {a: list(r) for a, r in zip("xyz", box, strict=True)}}
+    centre = tuple(float(v) for v in (lo + hi - 1) / 2)
+    reply["values"] = [float(v) for v in curve.values]
+    reply["min"] = None if curve.min is None else [float(v) for v in curve.min]
+    reply["max"] = None if curve.max is None else [float(v) for v in curve.max]
+    reply["csv"] = curve.csv_text(window)
+    reply["mark"] = project(cv, camera, state.size, box_fractions(cv, centre))
+    reply["where"] = box_fractions(cv, centre)
     return reply

@@ -6,22 +6,27 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     open       {"dataset": index or name}               switch data set (defaults reset)
     update     camera, views, window, data_tf, time_tf,  any subset; the server merges it
                enhance, threshold, clip, size, quality,  into the client's state and renders
-               background, outline                       the newest state only
-    probe      {"view", "x", "y"}                       x, y in [0, 1] of the panel, top-left 0
-    histogram  {"range": [lo, hi]}                       normalised values u, for TF zoom
-    save       {"what": "image" | "chronovolume"         a download; "session": the state as a
-               | "session", "view"}                     session file (`session_file`)
+               background, outline, shading, refocus,    the newest state only (refocus:
+               focus                                     frame the visible region again;
+                                                         focus: frame this world box)
+    probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
+                                                         x2, y2: a box between two rays' voxels
+    histogram  {"range": [lo, hi]}                       normalised values u in the window
+    save       {"what": "image" | "chronovolume", "view"}
+               {"what": "movie", "movie": orbit | play,   a video download, a `progress`
+                "format": mp4 | gif, "frames", "fps"}     message after every frame
+               {"what": "session"}                       the state as a session file
     load       {"session": a session file's object}     apply a saved session as one step
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
 (numbers must be finite; data values must fit float32, ranges need lo < hi) raise
 `ProtocolError` naming the field; so do messages nested deeper than `MAX_DEPTH`, refused
 before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
-Server -> client: JSON text messages (info, dataset, histogram, probe, download, error) and
-binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON
-header, then the images' bytes back to back). `info`, sent first on every socket, lists the
-data sets and `choices()`: the registered modes and every other menu, default and bound the
-page offers, so the page copies nothing from here. The schema primitives are in `schema`.
+Server -> client: JSON text messages (info, dataset, histogram, probe, progress, download, error)
+and binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON header, then the
+images' bytes back to back). `info`, sent first on every socket, lists the data sets and
+`choices()`: the registered modes and every other menu, default and bound the page offers, so
+the page copies nothing from here. The schema primitives are in `schema`.
 """
 
 from __future__ import annotations
@@ -32,7 +37,10 @@ import struct
 
 from chronocl import modes
 from chronocl.core import tf
+from chronocl.core.colormaps import PRESETS as COLORMAP_PRESETS
+from chronocl.core.colormaps import colormap_stops
 from chronocl.core.enhance import ENHANCE_KINDS, Enhance
+from chronocl.render.shading import MAX_COEFFICIENT, MAX_SHININESS, MIN_SHININESS
 from chronocl.viewer.schema import (
     FLOAT32_MAX,
     Bool,
@@ -45,7 +53,6 @@ from chronocl.viewer.schema import (
     Obj,
     ProtocolError,
     Range,
-    Settings,
     Text,
     Version,
     show,
@@ -56,6 +63,9 @@ MAX_DEPTH = 8  # the deepest message (update.data_tf.points[i][j]) nests 4 conta
 MAX_VIEWS = 4
 MAX_TF_POINTS = 64
 MIN_PANEL, MAX_PANEL = 64, 1024
+MOVIES = ("orbit", "play")  # a turn of the camera, or the window slid over the series
+MOVIE_FORMATS = {"mp4": "video/mp4", "gif": "image/gif"}
+MAX_MOVIE_FRAMES = 600
 PROBE_THRESHOLD = 0.5  # the probe finds the voxel where a ray's opacity passes this
 
 
@@ -122,14 +132,26 @@ ENHANCE = Obj(
 CLIP_PLANE = Obj(
     {"normal": List(Num(-1.0, 1.0), 3, 3), "offset": Num(-1.0, 1.0)}, frozenset({"normal"})
 )
+# Lighting (chronocl/render/shading.py): the Shading's fields, the same bounds.
+SHADING = Obj(
+    {
+        "enabled": Bool(),
+        "ambient": Num(0.0, MAX_COEFFICIENT),
+        "diffuse": Num(0.0, MAX_COEFFICIENT),
+        "specular": Num(0.0, MAX_COEFFICIENT),
+        "shininess": Num(MIN_SHININESS, MAX_SHININESS),
+    }
+)
 THRESHOLD = Num(0.0, 0.99)
+# The world box (x0, y0, z0, x1, y1, z1) the camera frames (render/framing.py; the box's
+# longest side is 1, centred on the origin).
+FOCUS = List(Num(-1.0, 1.0), 6, 6)
 ID = Int(0, 2**53)
 SIZE = List(Int(MIN_PANEL, MAX_PANEL), 2, 2)
 
 # A saved session (the viewer's Save session, the URL fragment, `chronocl render --state`):
-# the state fields of an update message plus the data set and the format's version. Camera
-# and enhancement are shared by the views, as in the viewer. `shading` is a slot for the
-# lighting settings (null or a flat object; kept, not yet applied).
+# the state fields of an update message plus the data set and the format's version. Camera,
+# enhancement and lighting are shared by the views, as in the viewer.
 SESSION_VERSION = 1
 SESSION_KEY = "chronocl_session"
 SESSION = Obj(
@@ -150,7 +172,8 @@ SESSION = Obj(
         "size": SIZE,
         "background": Enum(BACKGROUNDS),
         "outline": Bool(),
-        "shading": Nullable(Settings()),
+        "shading": Nullable(SHADING),
+        "focus": Nullable(FOCUS),
     },
     frozenset({SESSION_KEY, "dataset", "window", "views", "camera", "data_tf", "time_tf"}),
 )
@@ -173,6 +196,9 @@ MESSAGES: dict[str, Obj] = {
             "quality": Enum(("preview", "full")),
             "background": Enum(BACKGROUNDS),
             "outline": Bool(),
+            "shading": SHADING,
+            "refocus": Bool(),  # frame the visible region again (the camera reset)
+            "focus": FOCUS,  # frame this world box (a saved session's, an undone state's)
         }
     ),
     "probe": Obj(
@@ -182,6 +208,8 @@ MESSAGES: dict[str, Obj] = {
             "view": Int(0, MAX_VIEWS - 1),
             "x": Num(0.0, 1.0),
             "y": Num(0.0, 1.0),
+            "x2": Num(0.0, 1.0),
+            "y2": Num(0.0, 1.0),
         },
         frozenset({"x", "y"}),
     ),
@@ -193,8 +221,12 @@ MESSAGES: dict[str, Obj] = {
         {
             "type": Enum(("save",)),
             "id": ID,
-            "what": Enum(("image", "chronovolume", "session")),
+            "what": Enum(("image", "chronovolume", "movie", "session")),
             "view": Int(0, MAX_VIEWS - 1),
+            "movie": Enum(MOVIES),
+            "format": Enum(tuple(MOVIE_FORMATS)),
+            "frames": Int(2, 360),
+            "fps": Int(1, 60),
         },
         frozenset({"what"}),
     ),
@@ -231,6 +263,7 @@ def choices() -> dict:
             for item in _menu(TIME_ALPHAS)
         ],
         "positions": _menu(tf.TIME_POSITIONS),
+        "colormaps": {name: colormap_stops(name) for name in COLORMAP_PRESETS},
         "enhance": [
             item | {"k": [e.k0, e.k1, e.k2]}
             for item, e in zip(_menu(ENHANCE_KINDS), map(Enhance, ENHANCE_KINDS), strict=True)
@@ -240,6 +273,7 @@ def choices() -> dict:
             "time_tf": _ranges(TIME_TF),
             "enhance": _ranges(ENHANCE),
             "clip": _ranges(CLIP_PLANE),
+            "shading": _ranges(SHADING),
             "threshold": [THRESHOLD.lo, THRESHOLD.hi],
         },
         "limits": {

@@ -57,6 +57,11 @@ def zip_store(store: Path, archive: Path) -> None:
                 zf.write(path, path.relative_to(store).as_posix())
 
 
+def compose_image(panels: list[np.ndarray], cvs: list[Chronovolume], background: tuple):
+    """The panels side by side, each labelled with its chronovolume, with the legend."""
+    return compose_panels(panels, [describe(cv) for cv in cvs], cvs, None, background)
+
+
 def save_image(
     downloads: Downloads,
     panels: list[np.ndarray],
@@ -64,9 +69,8 @@ def save_image(
     background: tuple,
     name: str,
 ) -> str:
-    """The panels side by side, each labelled with its chronovolume, as a PNG download."""
-    labels = [describe(cv) for cv in cvs]
-    image = Image(compose_panels(panels, labels, cvs, None, background))
+    """`compose_image` as a PNG download."""
+    image = Image(compose_image(panels, cvs, background))
     return downloads.add(image.png_bytes(), name, "image/png")
 
 

@@ -109,32 +109,6 @@ class Version:
 
 
 @dataclass(frozen=True)
-class Settings:
-    """A flat object of named settings (numbers, booleans, short texts, up to 4 numbers),
-    checked no further: a slot that a later feature fills (e.g. shading)."""
-
-    max_fields: int = 16
-
-    def check(self, value: object, path: str) -> dict:
-        if not isinstance(value, dict) or len(value) > self.max_fields:
-            raise ProtocolError(f"{path} must be an object of at most {self.max_fields} fields")
-        one = (Num(-FLOAT32_MAX, FLOAT32_MAX), Bool(), Text(64), List(Num(-1e6, 1e6), 1, 4))
-        out = {}
-        for k, v in value.items():
-            if not isinstance(k, str) or not 0 < len(k) <= 40:
-                raise ProtocolError(f"{path} has a field name that is not 1 to 40 characters")
-            kind = (
-                one[1]
-                if isinstance(v, bool)
-                else one[2]
-                if isinstance(v, str)
-                else (one[3] if isinstance(v, list) else one[0])
-            )
-            out[k] = kind.check(v, f"{path}.{k}")
-        return out
-
-
-@dataclass(frozen=True)
 class List:
     item: object
     min_len: int

@@ -15,11 +15,13 @@ draws it. Its fields are the state fields of the protocol's update message (chec
      "data_tf": {"points": [[0, 1, 1, 1, 0], [1, 1, 1, 1, 0.9]]},
      "time_tf": {"color": "rgb", "alpha": "hat", "center": 0.5, "width": 0.6, ...},
      "enhance": {"kind": "none"}, "threshold": 0.05, "clip": null,
-     "size": [512, 512], "background": "black", "outline": false, "shading": null}
+     "size": [512, 512], "background": "black", "outline": false,
+     "shading": {"enabled": false, ...}, "focus": [-0.3, -0.4, -0.5, 0.3, 0.4, 0.5]}
 
-Camera and enhancement are shared by the views (the viewer draws its views under one
-camera). `shading` is a slot for lighting settings: null or a flat object, kept as it is and
-handed to `render_session` (`shading=`) so that wiring it into the draw is one line.
+Camera, enhancement and lighting are shared by the views (the viewer draws its views under
+one camera). `focus` is the world box the camera framed (the viewer frames the visible region
+of a data set's first frame, or of the frame after a camera reset, and keeps it while the
+window moves); null frames the visible region of the session's own chronovolumes.
 """
 
 from __future__ import annotations
@@ -27,10 +29,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 from chronocl.core.errors import InputNotFoundError, InvalidParameterError, InvalidSelectionError
 from chronocl.data.series import TimeSeries
+from chronocl.render.framing import framed
 from chronocl.render.image import Image
 from chronocl.render.views import compose_panels, describe, parse_color, raycaster
 from chronocl.viewer.datasets import Dataset, find_dataset
@@ -53,6 +57,7 @@ STATE_FIELDS = (
     "size",
     "background",
     "outline",
+    "shading",
 )
 
 
@@ -60,8 +65,15 @@ class SessionFileError(InvalidParameterError):
     """A session file that cannot be read, is not a session, or is of another version."""
 
 
-def session_of(state: ViewState, name: str, series: TimeSeries, path: str | None = None) -> dict:
-    """The session file's object for `state` on the data set `name` (stored at `path`)."""
+def session_of(
+    state: ViewState,
+    name: str,
+    series: TimeSeries,
+    path: str | None = None,
+    focus: Sequence[float] | None = None,
+) -> dict:
+    """The session file's object for `state` on the data set `name` (stored at `path`), its
+    views framing the world box `focus` (None: their visible region)."""
     described = describe_state(state)
     if state.data_tf.value_range is not None:
         described["data_tf"]["value_range"] = list(state.data_tf.value_range)
@@ -72,7 +84,7 @@ def session_of(state: ViewState, name: str, series: TimeSeries, path: str | None
         SESSION_KEY: SESSION_VERSION,
         "dataset": dataset,
         **{k: described[k] for k in STATE_FIELDS},
-        "shading": None,
+        "focus": None if focus is None else [float(v) for v in focus],
     }
 
 
@@ -113,6 +125,8 @@ def apply_session(state: ViewState, session: dict, n_steps: int) -> ViewState:
     """`state` with every state field of a validated session applied (one step: nothing is
     applied when a field does not fit the data set)."""
     fields = {k: session[k] for k in STATE_FIELDS if k in session}
+    if "shading" in fields and fields["shading"] is None:  # null: the lighting as it is
+        del fields["shading"]
     try:
         return merge(state, fields, n_steps)
     except InvalidSelectionError as exc:  # a window beyond the series' steps
@@ -130,16 +144,28 @@ def loaded_state(datasets: list[Dataset], state: ViewState, session: dict) -> tu
     return i, apply_session(base, session, series.n_steps)
 
 
-def save_session(downloads: Downloads, state: ViewState, ds: Dataset) -> tuple[str, str]:
-    """`state` as a session file download; returns its key and file name."""
+def checked_focus(state: ViewState, box: Sequence[float] | None) -> tuple | None:
+    """`box` as a camera focus (ChronoclError naming the problem), or None."""
+    if box is None:
+        return None
+    return dataclasses.replace(state.camera, focus=tuple(box)).focus
+
+
+def save_session(
+    downloads: Downloads, state: ViewState, ds: Dataset, focus: Sequence[float] | None = None
+) -> tuple[str, str]:
+    """`state` (framing `focus`) as a session file download; returns its key and name."""
     name = f"{ds.name}-session.json"
-    body = write_session(session_of(state, ds.name, ds.series, ds.path))
+    body = write_session(session_of(state, ds.name, ds.series, ds.path, focus))
     return downloads.add(body, name, "application/json"), name
 
 
 def session_state(session: dict, series: TimeSeries) -> ViewState:
-    """The viewer state a session describes on `series` (the viewer's defaults elsewhere)."""
-    return apply_session(default_state(0, series), session, series.n_steps)
+    """The viewer state a session describes on `series` (the viewer's defaults elsewhere), its
+    camera framing the session's focus."""
+    state = apply_session(default_state(0, series), session, series.n_steps)
+    focus = checked_focus(state, session.get("focus"))
+    return dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=focus))
 
 
 def dataset_path(session: dict, where: str) -> Path:
@@ -159,19 +185,20 @@ def render_session(
     *,
     engine: str = "opencl",
     device: str | None = None,
-    shading: dict | None = None,
+    time_labels: str = "labels",
     **spec_changes: object,
 ) -> Image:
     """The views of `state` drawn as the viewer's Save PNG draws them: the same chronovolumes,
-    camera (as the panels are drawn), size, clip, background and outline, each panel labelled,
-    the time-colour legend below. `spec_changes` replace fields of every view's
-    IntegrationSpec (e.g. a time_tf given on the command line). `shading` is accepted for the
-    lighting to come."""
+    camera (as the panels are drawn, framing its focus, else the visible region), size, clip,
+    lighting, background and outline, each panel labelled, the time-colour legend below.
+    `spec_changes` replace fields of every view's IntegrationSpec (e.g. a time_tf given on the
+    command line)."""
     from chronocl.integration.inmemory import integrate
 
     sel = state.selection(series.n_steps)
     specs = [dataclasses.replace(state.spec(i), **spec_changes) for i in range(len(state.views))]
     cvs = [integrate(series, sel, spec=s, engine=engine, device=device) for s in specs]
+    state = dataclasses.replace(state, camera=framed(state.camera, cvs))
     rc = raycaster()
     bg = parse_color(state.background)
     panels = []
@@ -187,8 +214,10 @@ def render_session(
                     clip=state.clip,
                     step=1.0,
                     outline=state.outline,
+                    shading=state.shading,
                 )
             )
         finally:
             volume.release()
-    return Image(compose_panels(panels, [describe(cv) for cv in cvs], cvs, None, bg))
+    labels = [describe(cv) for cv in cvs]
+    return Image(compose_panels(panels, labels, cvs, None, bg, time_labels=time_labels))

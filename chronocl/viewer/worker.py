@@ -8,7 +8,9 @@ that arrives while a frame is being made replaces older pending input instead of
 behind it. Each view keeps a `Session` (the moving window: a slide of the window goes through
 `Session.slide`, which updates incrementally) and its uploaded texture, so a camera change
 only re-renders and a window or TF change only re-integrates what changed. Histogram, probe
-and save requests wait in a short queue behind the newest frame.
+and save requests wait in a short queue behind the newest frame. The camera frames the visible
+region found at a data set's first frame and again at each camera reset (`refocus`), and keeps
+that framing while the window moves.
 
 OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared); GL
 work runs on the viewer's GL thread (`gl_thread.on_gl`).
@@ -28,7 +30,9 @@ from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.session import Session
+from chronocl.render.framing import framed
 from chronocl.render.views import describe, parse_color
+from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.errors import error_text
 from chronocl.viewer.frames import (
@@ -43,10 +47,11 @@ from chronocl.viewer.frames import (
     visible_fraction,
 )
 from chronocl.viewer.gl_thread import on_gl
-from chronocl.viewer.probe import box_fractions, probe_reply, project
-from chronocl.viewer.protocol import pack_frame
-from chronocl.viewer.saving import Downloads, save_chronovolume, save_image
-from chronocl.viewer.session_file import loaded_state, save_session
+from chronocl.viewer.movie import movie_states, render_movie
+from chronocl.viewer.probe import probe_reply, project
+from chronocl.viewer.protocol import MOVIE_FORMATS, pack_frame
+from chronocl.viewer.saving import Downloads, compose_image, save_chronovolume, save_image
+from chronocl.viewer.session_file import checked_focus, loaded_state, save_session
 from chronocl.viewer.slots import ViewSlot, upload
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
@@ -90,7 +95,15 @@ class ClientWorker:
         self._shown: ViewState | None = None  # the state of the last frame sent
         # The last probed voxel (view, x/y/z fractions of the box): each frame says where it is.
         self._probed: tuple[int, tuple[float, float, float]] | None = None
+        # The histogram's value range and the (data set, window) it was last sent for: a frame
+        # of another window queues a new one.
+        self._hist_range = [0.0, 1.0]
+        self._hist_window: tuple | None = None
         self._frame = 0
+        # The visible region framed: (generation, world box or None); a new data set or a
+        # camera reset starts a new generation, found again from that frame's chronovolumes.
+        self._focus_gen = 0
+        self._focus: tuple[int, tuple | None] | None = None
         self.thread = threading.Thread(target=self._run, name="chronocl-view", daemon=True)
         self.thread.start()
 
@@ -100,6 +113,7 @@ class ClientWorker:
         with self._cond:
             self.state = default_state(i, self.datasets[i].series)
             self._probed = None
+            self._focus_gen += 1
             self._pending = (self.state, rid)
             self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
             self._cond.notify()
@@ -115,19 +129,40 @@ class ClientWorker:
 
     def load(self, session: dict, rid: int | None) -> dict:
         """Apply a validated saved session as one step (nothing applied when it does not
-        fit); the reply is `open`'s."""
+        fit), framing its `focus` (none: the visible region of its first frame); the reply is
+        `open`'s."""
         with self._cond:
-            i, self.state = loaded_state(self.datasets, self.state, session)
+            i, state = loaded_state(self.datasets, self.state, session)
+            focus = checked_focus(state, session.get("focus"))
+            self.state = state
+            self._set_focus(focus)
             self._probed = None
             self._pending = (self.state, rid)
             self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
             self._cond.notify()
         return self._opened(i)
 
+    def _set_focus(self, box: tuple | None) -> None:
+        """Frame `box` from now on (None: the visible region of the next frame)."""
+        self._focus_gen += 1
+        self._focus = None if box is None else (self._focus_gen, box)
+
+    def shown_focus(self) -> list | None:
+        """The world box the views frame now (None: not known yet)."""
+        with self._cond:
+            known = self._focus
+            return None if known is None or known[0] != self._focus_gen else known[1]
+
     def update(self, msg: dict) -> None:
         with self._cond:
             n = self.datasets[self.state.dataset].series.n_steps
-            self.state = merge(self.state, msg, n)
+            state = merge(self.state, msg, n)
+            focus = checked_focus(state, msg.get("focus"))
+            self.state = state
+            if msg.get("refocus"):
+                self._focus_gen += 1
+            if "focus" in msg:
+                self._set_focus(focus)
             self._pending = (self.state, msg.get("id"))
             self._cond.notify()
 
@@ -275,6 +310,7 @@ class ClientWorker:
                 clip=state.clip,
                 step=1.0,
                 outline=state.outline,
+                shading=state.shading,
             )
             for slot in self._slots[: len(cvs)]
         ]
@@ -286,6 +322,11 @@ class ClientWorker:
         t_start = time.perf_counter()
         cvs, integrate_ms, incremental = self._chronovolumes(state)
         self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
+        window = (state.dataset, *state.window)
+        if state.quality == "full" and window != self._hist_window:
+            with self._cond:  # after the frames waiting, and only one
+                if not any(kind == "histogram" for kind, _ in self._tasks):
+                    self._tasks.append(("histogram", {"id": None, "range": self._hist_range}))
 
     def _refine(self) -> None:
         """The coarse or reduced frame shown, at full resolution and size; given up as soon as
@@ -312,6 +353,7 @@ class ClientWorker:
         """Draw, encode and send the frame. A frame answering input draws what the draw budget
         allows in DRAW_TARGET_MS; if that is less than the panels' size (within PIXEL_BUDGET),
         the frame is redrawn in full once input stops (`final`), as coarse levels are."""
+        state = self._framed(state, cvs)
         preview = state.quality == "preview"
         scale = PREVIEW_SCALE if preview else 1.0
         full_w, full_h = render_size(state.size, len(cvs), scale, PIXEL_BUDGET)
@@ -355,7 +397,9 @@ class ClientWorker:
                 for b, cv, pixels, (mode, _) in zip(images, cvs, panels, state.views, strict=True)
             ],
             "probe": self._probe_mark(state, cvs),
+            "clip_outline": clip_outline(cvs[0], state.panel_camera(), state.size, state.clip),
             "legend": legend(cvs[0]),
+            "focus": None if state.camera.focus is None else list(state.camera.focus),
             "level": level,
             "levels": levels,  # from the sessions: no store metadata read per frame
             "level_shape": list(cvs[0].shape),
@@ -374,6 +418,17 @@ class ClientWorker:
         }
         self.send(pack_frame(header, images))
 
+    def _framed(self, state: ViewState, cvs: list[Chronovolume]) -> ViewState:
+        """`state` with its camera framing this generation's visible region."""
+        with self._cond:
+            gen, known = self._focus_gen, self._focus
+        if known is None or known[0] != gen:
+            known = (gen, framed(dataclasses.replace(state.camera, focus=None), cvs).focus)
+            with self._cond:
+                if self._focus_gen == gen:
+                    self._focus = known
+        return dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=known[1]))
+
     def _probe_mark(self, state: ViewState, cvs: list[Chronovolume]) -> dict | None:
         """Where the probed voxel is on its panel in this frame (None: no probe, or off-panel)."""
         if self._probed is None or self._probed[0] >= len(cvs):
@@ -387,13 +442,17 @@ class ClientWorker:
         rid = msg.get("id")
         ds = self.datasets[self.state.dataset]
         if kind == "save" and msg["what"] == "session":
-            key, name = save_session(self.downloads, self.state, ds)
+            key, name = save_session(self.downloads, self.state, ds, self.shown_focus())
             self._reply(
                 {"type": "download", "id": rid, "url": f"/download/{key}", "filename": name}
             )
         elif kind == "histogram":
-            lo, hi = msg["range"]
-            self._reply({"type": "histogram", "id": rid, **ds.histogram(lo, hi)})
+            lo, hi = self._hist_range = list(msg["range"])
+            state = self.state
+            steps = state.selection(ds.series.n_steps).steps
+            self._hist_window = (state.dataset, *state.window)
+            hist = ds.histogram(lo, hi, steps, state.window[2])
+            self._reply({"type": "histogram", "id": rid, **hist, "window": list(state.window)})
         elif kind == "probe":
             self._probe(msg)
         elif kind == "save":
@@ -428,12 +487,8 @@ class ClientWorker:
         cv = self._slots[view].cv
         assert cv is not None
         reply = probe_reply(msg, view, state, cv, self.datasets[state.dataset])
-        voxel = reply["voxel"]
-        self._probed = (
-            None
-            if voxel is None
-            else (view, box_fractions(cv, (voxel["z"], voxel["y"], voxel["x"])))
-        )
+        where = reply.pop("where", None)
+        self._probed = None if where is None else (view, where)
         self._reply(reply)
 
     def _save(self, msg: dict) -> None:
@@ -441,6 +496,9 @@ class ClientWorker:
         self._full_resolution(range(len(state.views)))
         ds = self.datasets[state.dataset]
         sel = state.selection(ds.series.n_steps).describe().replace(":", "-")
+        if msg["what"] == "movie":
+            self._movie(msg, state, ds, sel)
+            return
         if msg["what"] == "image":
             cvs = [s.cv for s in self._slots[: len(state.views)]]
             bg = parse_color(state.background)
@@ -456,3 +514,33 @@ class ClientWorker:
         self._reply(
             {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}
         )
+
+    def _movie(self, msg: dict, state: ViewState, ds: Dataset, sel: str) -> None:
+        """An orbit or a play-through of the shown views as a video download, with a
+        `progress` message after every frame; the views are then as shown again."""
+        kind, fmt, rid = msg.get("movie", "orbit"), msg.get("format", "mp4"), msg.get("id")
+        states = movie_states(state, kind, msg.get("frames", 36), ds.series.n_steps)
+        bg = parse_color(state.background)
+
+        def frame(shown: ViewState):
+            self._chronovolumes(shown)
+            self._full_resolution(range(len(shown.views)))
+            cvs = [s.cv for s in self._slots[: len(shown.views)]]
+            panels, *_ = on_gl(self._draw, cvs, shown, shown.size, bg)
+            return compose_image(panels, cvs, bg)  # type: ignore[arg-type]
+
+        def progress(done: int, total: int) -> None:
+            self._reply(
+                {"type": "progress", "id": rid, "what": "movie", "done": done, "total": total}
+            )
+
+        try:
+            path = render_movie(
+                states, frame, fmt, msg.get("fps", 12), self.downloads.dir, progress
+            )
+        finally:
+            self._chronovolumes(state)
+            self._full_resolution(range(len(state.views)))
+        name = f"{ds.name}-{'orbit-' + sel if kind == 'orbit' else 'play-through'}.{fmt}"
+        key = self.downloads.add(path, name, MOVIE_FORMATS[fmt])
+        self._reply({"type": "download", "id": rid, "url": f"/download/{key}", "filename": name})

@@ -7,6 +7,11 @@
 // path of `unit_world` (one voxel), is corrected for the step: a' = 1 - (1 - a)^(step/unit),
 // and its premultiplied colour scaled alike. Early termination once A > 1 - 1/512 (less than
 // half an 8-bit step can still be added).
+//
+// With SHADING defined (the raycaster prepends it; chronocl/render/shading.py), each sample's
+// colour is lit before compositing: Blinn-Phong with a headlight, the normal being the
+// negated opacity gradient by central differences one voxel apart. Without it this is the
+// unshaded shader, unchanged.
 
 uniform sampler3D volume;
 uniform mat4 inv_view_proj;   // clip space -> world
@@ -21,9 +26,39 @@ uniform bool jitter;          // offset each ray's first sample by a per-pixel r
 uniform bool clip_enabled;
 uniform vec4 clip_plane;      // world-space plane n.x + d; the side where it is >= 0 is kept
 uniform vec3 background;
+#ifdef SHADING
+uniform vec3 texel;           // one voxel in texture coordinates (1 / size per axis)
+uniform vec3 grad_scale;      // texture differences -> opacity change per unit_world length
+uniform float ambient;
+uniform float diffuse;
+uniform float specular;
+uniform float shininess;
+#endif
 
 in vec2 ndc;
 out vec4 frag_color;
+
+#ifdef SHADING
+// The sample's premultiplied colour lit from the eye (light and view both along -dir).
+// Where the opacity is nearly constant the normal is noise: blend back to the flat colour.
+vec3 shade(vec3 tex, vec4 s, vec3 dir)
+{
+    vec3 dx = vec3(texel.x, 0.0, 0.0);
+    vec3 dy = vec3(0.0, texel.y, 0.0);
+    vec3 dz = vec3(0.0, 0.0, texel.z);
+    vec3 g = vec3(
+        texture(volume, tex + dx).a - texture(volume, tex - dx).a,
+        texture(volume, tex + dy).a - texture(volume, tex - dy).a,
+        texture(volume, tex + dz).a - texture(volume, tex - dz).a) * grad_scale;
+    float len = length(g);
+    float weight = smoothstep(0.002, 0.02, len);
+    if (weight <= 0.0) return s.rgb;
+    vec3 n = -g / len;
+    float nl = abs(dot(n, -dir));   // two-sided: inner walls of a shell are lit too
+    vec3 lit = s.rgb * (ambient + diffuse * nl) + vec3(specular * pow(nl, shininess) * s.a);
+    return mix(s.rgb, min(lit, vec3(s.a)), weight);
+}
+#endif
 
 float hash(vec2 p)
 {
@@ -68,6 +103,9 @@ void main()
             vec3 tex = (origin + t * dir - box_min) / size;
             vec4 s = texture(volume, tex);
             if (s.a > 0.0) {
+#ifdef SHADING
+                s.rgb = shade(tex, s, dir);
+#endif
                 float a = 1.0 - pow(max(1.0 - s.a, 0.0), ratio);
                 acc.rgb += (1.0 - acc.a) * s.rgb * (a / s.a);
                 acc.a += (1.0 - acc.a) * a;

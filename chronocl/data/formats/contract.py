@@ -8,8 +8,8 @@ them; the fronts (`ingest`, `outputs`, `export`) choose by the registry.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -38,6 +38,37 @@ class Reader:
     recognises: Callable[[Path], bool] | None
     single: bool = False
     common: tuple[str, ...] = COMMON_OPTIONS
+    # `steps(inputs, **options)`: the same inputs as `Steps`, unwritten (for --magnitude).
+    steps: Callable[..., Steps] | None = None
+
+
+@dataclass(frozen=True)
+class Steps:
+    """A reader's time steps before they are written: `read()` yields each (Z, Y, X) step in
+    turn (one in memory at a time) and the rest is what `write_series` records of them."""
+
+    read: Callable[[], Iterator[np.ndarray]]
+    n_steps: int
+    volume_shape: tuple[int, ...]
+    dtype: np.dtype
+    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    source: str = ""
+    times: Sequence | None = None
+    labels: Sequence[str] | None = None
+    attrs: Mapping[str, object] = field(default_factory=dict)
+
+    def written(self) -> dict:
+        """`write_series` keywords for these steps (all but the steps themselves)."""
+        return dict(
+            n_steps=self.n_steps,
+            volume_shape=self.volume_shape,
+            dtype=self.dtype,
+            spacing=self.spacing,
+            times=self.times,
+            source=self.source,
+            labels=self.labels,
+            attrs=dict(self.attrs),
+        )
 
 
 def has_suffix(*suffixes: str) -> Callable[[Path], bool]:

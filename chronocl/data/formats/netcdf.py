@@ -1,10 +1,11 @@
-"""Ingest one variable of a NetCDF (3 or 4) or HDF5 file into a chronocl store, a step at a time.
+"""Ingest a variable of a NetCDF (3 or 4) or HDF5 file into a chronocl store, a step at a time
+(or several variables side by side, or the magnitude of two or three: `chronocl.data.variables`).
 
 The file is opened lazily with xarray (h5netcdf first for HDF5-based files,
 netCDF4 as the fallback), so only one time step is in memory at once. The
 variable is picked by name or as the only one with four or more dimensions;
 its dimensions are mapped to (T, Z, Y, X) as `chronocl.data.labelled` maps
-those of any xarray array.
+those of any xarray array, which also refuses a non-uniform coordinate or resamples it.
 """
 
 from __future__ import annotations
@@ -23,11 +24,19 @@ from chronocl.core.errors import (
     InvalidParameterError,
 )
 from chronocl.core.paths import check_output
-from chronocl.data.formats.contract import Reader, has_suffix
-from chronocl.data.labelled import coordinate_spacing, map_dims, time_labels
+from chronocl.data.formats.contract import Reader, Steps, has_suffix
+from chronocl.data.labelled import (
+    RESAMPLE,
+    axis_grid,
+    map_dims,
+    resample_step,
+    resampled_dtype,
+    time_labels,
+)
 from chronocl.data.metadata import SUPPORTED_DTYPES
-from chronocl.data.series import write_series
+from chronocl.data.series import write_steps
 from chronocl.data.timeseries import TimeSeries
+from chronocl.data.variables import magnitude_steps, split_names, write_variables
 
 HDF5_SUFFIXES = (".nc", ".nc4", ".h5", ".hdf5", ".he5", ".hdf")
 
@@ -37,67 +46,97 @@ def ingest_netcdf(
     out: str | os.PathLike,
     *,
     var: str | None = None,
+    variables: str | Sequence[str] | None = None,
+    magnitude: str | Sequence[str] | None = None,
     time_dim: str | None = None,
     dims_order: str | Sequence[str] | None = None,
+    resample: str | None = None,
     nan_fill: float | None = None,
     overwrite: bool = False,
     progress: bool = False,
 ) -> TimeSeries:
     """Write variable `var` of a NetCDF/HDF5 file as a (T, Z, Y, X) store at `out`.
 
+    `variables` ('a,b' or a list) writes each as a variable of one store instead
+    (`chronocl.data.variables`); `magnitude` ('u,v,w') the magnitude of those two or three.
     `dims_order` names the file's dimensions in the order time, z, y, x (``"time,lev,lat,lon"``
-    or a list). Spacing comes from uniform z/y/x coordinates, time labels from the time
-    coordinate. Non-finite values (including decoded fill values) need `nan_fill`.
+    or a list). Spacing comes from the z/y/x coordinates: a non-uniform one is refused unless
+    `resample` is ``"uniform"``. Time labels come from the time coordinate. Non-finite values
+    (including decoded fill values) need `nan_fill`.
     """
     p = Path(path)
     if not p.is_file():
         raise InputNotFoundError(f"input file {str(p)!r} does not exist")
+    given = [
+        f for f, v in (("--var", var), ("--variables", variables), ("--magnitude", magnitude)) if v
+    ]
+    if len(given) > 1:
+        raise InvalidParameterError(f"{' and '.join(given)} exclude each other; give one")
+    if resample is not None and resample not in RESAMPLE:
+        raise InvalidParameterError(f"unknown resample {resample!r}; choose uniform")
     check_output(out, overwrite)
+    common = dict(overwrite=overwrite, progress=progress, nan_fill=nan_fill)
     ds = _open(p)
     try:
-        name = _pick_variable(ds, var, p.name)
-        v = ds[name]
-        tdim, zyx, squeeze = map_dims(ds, v, name, time_dim, dims_order)
-        if squeeze:
-            v = v.isel(dict.fromkeys(squeeze, 0))
-        dtype = v.dtype.newbyteorder("=")
-        if dtype.kind not in "biuf":
-            raise InvalidDataError(
-                f"variable {name} of {p.name} has data type {dtype.name}; a series needs numbers"
-            )
-        if dtype.name not in SUPPORTED_DTYPES:
-            # write_series takes few dtypes; float32 holds int8/int32/float16/bool exactly
-            # (int32 beyond 2**24 is rounded).
-            dtype = np.dtype(np.float32)
-        n_steps = int(v.sizes[tdim])
-        shape = tuple(int(v.sizes[d]) for d in zyx)
 
-        def steps() -> Iterator[np.ndarray]:
-            for t in range(n_steps):
-                try:
-                    step = v.isel({tdim: t}).transpose(*zyx).values
-                except ChronoclError:
-                    raise
-                except Exception as exc:  # the backends raise many kinds on damaged data
-                    raise _unreadable(p, exc) from None
-                yield np.asarray(step).astype(dtype, copy=False)
+        def steps(name: str) -> Steps:
+            return variable_steps(ds, p, name, time_dim, dims_order, resample)
 
-        return write_series(
-            out,
-            steps(),
-            n_steps=n_steps,
-            volume_shape=shape,
-            dtype=dtype,
-            spacing=tuple(coordinate_spacing(ds, d) for d in zyx),
-            times=time_labels(ds, tdim),
-            source=f"netcdf: {p}:{name}",
-            overwrite=overwrite,
-            progress=progress,
-            nan_fill=nan_fill,
-            labels=[f"{p.name}:{name} step {t}" for t in range(n_steps)],
-        )
+        if magnitude:
+            names = split_names(magnitude, "--magnitude", (2, 3))
+            parts = [steps(_pick_variable(ds, n, p.name)) for n in names]
+            return write_steps(out, magnitude_steps(parts, names, f"netcdf: {p}"), **common)
+        if variables:
+            names = split_names(variables, "--variables")
+            parts = [(n, steps(_pick_variable(ds, n, p.name))) for n in names]
+            return write_variables(out, parts, **common)
+        return write_steps(out, steps(_pick_variable(ds, var, p.name)), **common)
     finally:
         ds.close()
+
+
+def variable_steps(
+    ds, p: Path, name: str, time_dim=None, dims_order=None, resample: str | None = None
+) -> Steps:
+    """The steps of variable `name` of the open dataset `ds` (of file `p`), checked."""
+    v = ds[name]
+    tdim, zyx, squeeze = map_dims(ds, v, name, time_dim, dims_order)
+    if squeeze:
+        v = v.isel(dict.fromkeys(squeeze, 0))
+    dtype = v.dtype.newbyteorder("=")
+    if dtype.kind not in "biuf":
+        raise InvalidDataError(
+            f"variable {name} of {p.name} has data type {dtype.name}; a series needs numbers"
+        )
+    if dtype.name not in SUPPORTED_DTYPES:
+        # write_series takes few dtypes; float32 holds int8/int32/float16/bool exactly
+        # (int32 beyond 2**24 is rounded).
+        dtype = np.dtype(np.float32)
+    grids = [axis_grid(ds, d, resample) for d in zyx]
+    n_steps = int(v.sizes[tdim])
+
+    def read() -> Iterator[np.ndarray]:
+        for t in range(n_steps):
+            try:
+                step = v.isel({tdim: t}).transpose(*zyx).values
+            except ChronoclError:
+                raise
+            except Exception as exc:  # the backends raise many kinds on damaged data
+                raise _unreadable(p, exc) from None
+            yield resample_step(np.asarray(step).astype(dtype, copy=False), grids)
+
+    notes = [g.note for g in grids if g.note]
+    return Steps(
+        read,
+        n_steps=n_steps,
+        volume_shape=tuple(int(v.sizes[d]) for d in zyx),
+        dtype=resampled_dtype(dtype, grids),
+        spacing=tuple(g.spacing for g in grids),  # type: ignore[arg-type]
+        times=time_labels(ds, tdim),
+        source=f"netcdf: {p}:{name}",
+        labels=[f"{p.name}:{name} step {t}" for t in range(n_steps)],
+        attrs={"variable": name, "resampled": notes},
+    )
 
 
 def _open(p: Path):
@@ -230,7 +269,14 @@ def _pick_variable(ds, var: str | None, fname: str) -> str:
 READER = Reader(
     "netcdf",
     ingest_netcdf,
-    options={"var": None, "time_dim": None, "dims_order": None},
+    options={
+        "var": None,
+        "variables": None,
+        "magnitude": None,
+        "time_dim": None,
+        "dims_order": None,
+        "resample": None,
+    },
     recognises=has_suffix(".nc", ".nc4", ".cdf", ".netcdf", ".h5", ".hdf5", ".he5"),
     single=True,
 )

@@ -15,8 +15,8 @@ import numpy as np
 from chronocl.core.atomic import atomic_file
 from chronocl.core.errors import InputNotFoundError, InvalidDataError
 from chronocl.core.progress import track
-from chronocl.data.formats.contract import Exporter, Reader, StepExport, has_suffix
-from chronocl.data.series import write_series
+from chronocl.data.formats.contract import Exporter, Reader, StepExport, Steps, has_suffix
+from chronocl.data.series import write_steps
 from chronocl.data.timeseries import TimeSeries
 
 
@@ -30,6 +30,14 @@ def ingest_npy(
     progress: bool = False,
 ) -> TimeSeries:
     """A .npy of shape (T, Z, Y, X), read memory-mapped one step at a time."""
+    steps = npy_steps(path, spacing, times)
+    return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
+
+
+def npy_steps(
+    path: str | os.PathLike, spacing: Sequence[float] | None = None, times: Sequence | None = None
+) -> Steps:
+    """The steps of a (T, Z, Y, X) .npy, checked: `ingest_npy` before it writes."""
     p = Path(path)
     if not p.is_file():
         raise InputNotFoundError(f"input file {str(p)!r} does not exist")
@@ -43,18 +51,14 @@ def ingest_npy(
         )
     if arr.shape[0] == 0:
         raise InvalidDataError(f"{p.name} has zero time steps; a series needs at least one")
-    return write_series(
-        out,
-        (np.asarray(arr[t]) for t in range(arr.shape[0])),
+    return Steps(
+        lambda: (np.asarray(arr[t]) for t in range(arr.shape[0])),
         n_steps=arr.shape[0],
         volume_shape=arr.shape[1:],
         dtype=arr.dtype.newbyteorder("="),
-        spacing=(1.0, 1.0, 1.0) if spacing is None else spacing,
+        spacing=(1.0, 1.0, 1.0) if spacing is None else tuple(spacing),  # type: ignore[arg-type]
         times=times,
         source=f"npy: {p}",
-        overwrite=overwrite,
-        progress=progress,
-        nan_fill=nan_fill,
     )
 
 
@@ -79,5 +83,6 @@ READER = Reader(
     options={"spacing": None, "times": None},
     recognises=has_suffix(".npy"),
     single=True,
+    steps=npy_steps,
 )
 EXPORTER = Exporter("npy", export_npy)

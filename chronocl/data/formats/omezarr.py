@@ -38,7 +38,9 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import dask.array as da
@@ -47,13 +49,19 @@ import zarr
 from dask.diagnostics import ProgressBar
 
 from chronocl.core.atomic import atomic_directory
-from chronocl.core.errors import InvalidDataError, InvalidParameterError, StoreFormatError
+from chronocl.core.errors import (
+    InvalidDataError,
+    InvalidParameterError,
+    StoreFormatError,
+    UnknownNameError,
+)
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.data.formats.contract import Output, Reader
+from chronocl.data.formats.contract import Output, Reader, Steps
 from chronocl.data.metadata import parse_spacing
 from chronocl.data.pyramid import lazy_stats, level_shapes
 from chronocl.data.stores import open_group
 from chronocl.data.timeseries import TimeSeries
+from chronocl.data.variables import split_names, write_variables
 
 SPATIAL = ("z", "y", "x")
 FORMAT = "chronocl.chronovolume.omezarr"
@@ -149,6 +157,12 @@ def open_omezarr(
         series = TimeSeries.from_array(lazy, spacing=spacing, times=times, source=source)
     fast = tuple(axes) == ("t", *SPATIAL) and arr.chunks[0] == 1
     series = series.stored_in(p, arr if fast else None)
+    if c_axis is not None and arr.shape[c_axis] > 1:  # the channels are the variables
+        names = channel_names(dict(group.attrs), int(arr.shape[c_axis]))
+        series.meta = {"variable": names[channel], "variables": names}
+        series._variable = lambda name: open_omezarr(
+            p, channel=names.index(name), level=level, progress=progress
+        )
     series._lazy_levels = True
     if level == 0:
         _adopt_levels(series, group, datasets, index, order)
@@ -183,18 +197,64 @@ def _adopt_levels(series: TimeSeries, group, datasets: list, index: list, order:
         )
 
 
+def channel_names(attrs: dict, n: int) -> list[str]:
+    """Names of an image's `n` channels: its omero labels made fit to name a variable (letters,
+    digits, _ . + -; one of each name), else c0, c1, ..."""
+    omero = attrs.get("omero") if isinstance(attrs.get("omero"), dict) else {}
+    listed = omero.get("channels") if isinstance(omero.get("channels"), list) else []
+    names: list[str] = []
+    for i in range(n):
+        label = listed[i].get("label") if i < len(listed) and isinstance(listed[i], dict) else None
+        name = re.sub(r"[^A-Za-z0-9_.+-]", "_", str(label)).strip("._") if label else ""
+        if not name or name in names:
+            name = f"c{i}"
+        names.append(name)
+    return names
+
+
 def ingest_omezarr(
     path: str | os.PathLike,
     out: str | os.PathLike,
     *,
     channel: int = 0,
     level: int = 0,
+    variables: Sequence[str] | str | None = None,
     overwrite: bool = False,
     progress: bool = False,
 ) -> TimeSeries:
-    """Copy one channel and resolution level of an OME-Zarr image into a chronocl store."""
+    """Copy one channel and resolution level of an OME-Zarr image into a chronocl store; with
+    `variables` (channel names, or "all") several channels, each a variable of the store."""
     series = open_omezarr(path, channel=channel, level=level)
-    return series.save(out, overwrite=overwrite, progress=progress)
+    if not variables:
+        return series.save(out, overwrite=overwrite, progress=progress)
+    names = split_names(variables, "--variables")
+    have = series.variables or ("c0",)
+    if names == ["all"]:
+        names = list(have)
+    missing = [n for n in names if n not in have]
+    if missing:
+        raise UnknownNameError(
+            f"{Path(path).name} has no channel {missing[0]!r}; its channels: {', '.join(have)} "
+            "(or give --variables all)"
+        )
+    parts = []
+    for name in names:
+        one = series.variable(name) if series.variables else series
+        parts.append((name, _steps(one)))
+    return write_variables(out, parts, overwrite=overwrite, progress=progress)
+
+
+def _steps(series: TimeSeries) -> Steps:
+    """A lazily read series as a reader's unwritten steps (one step computed at a time)."""
+    return Steps(
+        read=lambda: (np.asarray(series.data[t].compute()) for t in range(series.n_steps)),
+        n_steps=series.n_steps,
+        volume_shape=series.volume_shape,
+        dtype=series.dtype,
+        spacing=series.spacing,
+        source=series.source,
+        times=list(series.times),
+    )
 
 
 # -- writing a chronovolume -------------------------------------------------------------
@@ -388,7 +448,7 @@ def _scale(ms: dict, ds: dict, ndim: int, p: Path) -> list[float]:
 READER = Reader(
     "omezarr",
     ingest_omezarr,
-    options={"channel": 0, "level": 0},
+    options={"channel": 0, "level": 0, "variables": None},
     recognises=is_omezarr,  # a folder
     single=True,
     common=("overwrite", "progress"),  # the image is copied as it is: no nan_fill

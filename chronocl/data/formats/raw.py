@@ -20,10 +20,10 @@ import numpy as np
 from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import InvalidDataError, InvalidParameterError, UnknownNameError
 from chronocl.core.progress import track
-from chronocl.data.formats.contract import Exporter, Reader, StepExport
+from chronocl.data.formats.contract import Exporter, Reader, StepExport, Steps
 from chronocl.data.inputs import expand_inputs
 from chronocl.data.metadata import SUPPORTED_DTYPES
-from chronocl.data.series import write_series
+from chronocl.data.series import write_steps
 from chronocl.data.timeseries import TimeSeries
 
 ENDIANS = ("little", "big")
@@ -42,6 +42,19 @@ def ingest_raw(
     progress: bool = False,
 ) -> TimeSeries:
     """One raw file per time step; `dims` is (NX, NY, NZ), `spacing` is (dz, dy, dx)."""
+    steps = raw_steps(inputs, dims, dtype, endian, spacing, times)
+    return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
+
+
+def raw_steps(
+    inputs: Sequence[str | os.PathLike],
+    dims: Sequence[int] | None = None,
+    dtype: str = "float32",
+    endian: str = "little",
+    spacing: Sequence[float] | None = None,
+    times: Sequence | None = None,
+) -> Steps:
+    """The steps of raw files, every size checked: `ingest_raw` before it writes."""
     if dims is None:
         raise InvalidParameterError(
             "raw input needs --dims NX NY NZ (and --dtype, --endian if not float32 little-endian)"
@@ -80,18 +93,14 @@ def ingest_raw(
             raw = np.fromfile(f, dtype=file_dtype, count=nx * ny * nz)
             yield raw.reshape(nz, ny, nx).astype(np.dtype(dtype), copy=False)
 
-    return write_series(
-        out,
-        steps(),
+    return Steps(
+        steps,
         n_steps=len(files),
         volume_shape=(nz, ny, nx),
-        dtype=dtype,
-        spacing=(1.0, 1.0, 1.0) if spacing is None else spacing,
+        dtype=np.dtype(dtype),
+        spacing=(1.0, 1.0, 1.0) if spacing is None else tuple(spacing),  # type: ignore[arg-type]
         times=times,
         source=f"raw: {files[0].parent}/{files[0].name} .. {files[-1].name} ({len(files)} files)",
-        overwrite=overwrite,
-        progress=progress,
-        nan_fill=nan_fill,
         labels=[f"{f.name} (step {t})" for t, f in enumerate(files)],
     )
 
@@ -142,5 +151,6 @@ READER = Reader(
     ingest_raw,
     options={"dims": None, "dtype": "float32", "endian": "little", "spacing": None, "times": None},
     recognises=None,  # headerless: any file that no other reader recognises
+    steps=raw_steps,
 )
 EXPORTER = Exporter("raw", export_raw)

@@ -25,10 +25,10 @@ import numpy as np
 
 from chronocl.core.errors import ChronoclError, InvalidDataError
 from chronocl.core.paths import check_output
-from chronocl.data.formats.contract import Reader, has_suffix
+from chronocl.data.formats.contract import Reader, Steps, has_suffix
 from chronocl.data.inputs import expand_inputs
 from chronocl.data.metadata import SUPPORTED_DTYPES, parse_spacing
-from chronocl.data.series import write_series
+from chronocl.data.series import write_steps
 from chronocl.data.timeseries import TimeSeries
 
 # Words in tifffile's log warnings that mean the file structure is damaged; tifffile logs
@@ -58,6 +58,15 @@ def ingest_tiff(
     """Several 3D TIFF stacks (one per step, globs allowed) or one 4D TIFF -> store at `out`."""
     files = expand_inputs(inputs)
     check_output(out, overwrite)
+    steps = tiff_steps(files, spacing=spacing)
+    return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
+
+
+def tiff_steps(
+    inputs: Sequence[str | os.PathLike], *, spacing: Sequence[float] | None = None
+) -> Steps:
+    """The steps of TIFF stacks, checked: `ingest_tiff` before it writes."""
+    files = expand_inputs(inputs)
     stacks = [_inspect(f) for f in files]
     if len(stacks) == 1:
         st = stacks[0]
@@ -103,17 +112,13 @@ def ingest_tiff(
         # write_series takes few dtypes; float32 holds int8/int32/float16/bool exactly
         # (int32/uint32 beyond 2**24 is rounded).
         dtype = np.dtype(np.float32)
-    return write_series(
-        out,
-        (s.astype(dtype, copy=False) for s in steps()),
+    return Steps(
+        lambda: (s.astype(dtype, copy=False) for s in steps()),
         n_steps=n_steps,
         volume_shape=volume,
         dtype=dtype,
         spacing=parse_spacing(spacing) if spacing is not None else stacks[0].spacing,
         source=source,
-        overwrite=overwrite,
-        progress=progress,
-        nan_fill=nan_fill,
         labels=labels,
     )
 
@@ -275,4 +280,5 @@ READER = Reader(
     ingest_tiff,
     options={"spacing": None},
     recognises=has_suffix(".tif", ".tiff"),  # .ome.tif(f) too
+    steps=tiff_steps,
 )

@@ -12,16 +12,18 @@
 //   legend.js      the time legend drawn in each view
 //   session.js     undo / redo, the URL fragment (#state=), Save / Load session
 //   controls.js    the other controls, filled from the server's choices
+//   shading.js     the lighting toggle and strengths
 
 import { connect, frameArrived, send, update } from './connection.js';
-import { bindControls, fillControls, syncControls } from './controls.js';
+import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
 import { bindKeys } from './keys.js';
 import { bindLegend, drawLegends } from './legend.js';
 import { bindOrientation, drawTriads } from './orientation.js';
-import { clearProbe, drawProbe, onProbe } from './probe.js';
-import { bindSession, fragmentSession, loadSession, resetHistory } from './session.js';
+import { clearProbe, drawProbe, exportProbe, onProbe } from './probe.js';
+import { bindSession, fragmentSession, loadSession, noteFocus, resetHistory } from './session.js';
+import { bindShading, syncShading } from './shading.js';
 import { $, S, setStatus, viewer } from './state.js';
-import { bindTF, drawTF } from './tf_editor.js';
+import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
 import { fillSelect, layoutViews, onFrame, showMark } from './views.js';
 
@@ -34,6 +36,7 @@ let urlLoad = null;
 // to offer. On a socket opened again (the server restarted) the page reopens its data set.
 function onInfo(msg) {
   S.choices = msg;
+  fillColormaps();
   fillControls(msg);
   fillSelect(
     $('dataset'),
@@ -65,6 +68,7 @@ function onDataset(msg) {
   restore = null;
   $('dataset').value = msg.index;
   syncControls();
+  syncShading();
   const size = layoutViews();
   update(Object.assign(restored || {}, { size, views: S.state.views }), 'full');
   drawTriads();
@@ -95,16 +99,21 @@ function onText(msg) {
       break;
     case 'histogram':
       S.histogram = msg;
+      noteHistogram();
       drawTF();
       break;
     case 'probe':
       onProbe(msg);
       showMark(msg.values && msg.mark ? { view: msg.view, x: msg.mark[0], y: msg.mark[1] } : null);
       break;
+    case 'progress':
+      movieProgress(msg);
+      break;
     case 'download':
       onDownload(msg);
       break;
     case 'error':
+      movieProgress(null);
       if (msg.id !== null && msg.id >= viewer.sent) frameArrived(); // no frame will come
       viewer.errors.push(msg);
       setStatus(`error: ${msg.message}`, true);
@@ -136,6 +145,7 @@ function relayout() {
 window.addEventListener('resize', relayout);
 new ResizeObserver(relayout).observe($('views'));
 
+$('probe-csv').addEventListener('click', exportProbe);
 $('side-toggle').addEventListener('click', () => {
   const hidden = document.body.classList.toggle('side-hidden');
   $('side-toggle').textContent = hidden ? 'panel ◂' : 'panel ▸';
@@ -145,8 +155,15 @@ $('side-toggle').addEventListener('click', () => {
 bindTimeline();
 bindTF();
 bindControls();
+bindShading();
 bindOrientation();
 bindKeys();
 bindSession();
 bindLegend();
-connect({ onText, onFrame });
+connect({
+  onText,
+  onFrame: (buf) => {
+    onFrame(buf);
+    noteFocus();
+  },
+});

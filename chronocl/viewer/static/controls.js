@@ -47,6 +47,11 @@ export function syncControls() {
   $('k2').value = st.enhance.k2;
   $('threshold').value = st.threshold;
   $('clip-on').checked = !!st.clip;
+  if (st.clip) {
+    const axis = st.clip.normal.map((c) => Math.round(c * 1e6) / 1e6).join(',');
+    const known = [...$('clip-axis').options].some((o) => o.value === axis);
+    $('clip-axis').value = known ? axis : 'custom';
+  }
   $('stride').value = st.window.stride;
   syncTimeControls();
   syncPointColor();
@@ -121,7 +126,8 @@ export function bindControls() {
 
   const clip = (quality) => {
     if (!$('clip-on').checked) return update({ clip: null }, quality);
-    const normal = $('clip-axis').value.split(',').map(Number);
+    const custom = $('clip-axis').value === 'custom' && S.state.clip;
+    const normal = custom ? S.state.clip.normal : $('clip-axis').value.split(',').map(Number);
     update({ clip: { normal, offset: Number($('clip-offset').value) } }, quality);
   };
   $('clip-on').addEventListener('change', () => clip('full'));
@@ -132,4 +138,23 @@ export function bindControls() {
   $('save-image').addEventListener('click', () => send({ type: 'save', what: 'image' }));
   $('save-cv').addEventListener('click', () =>
     send({ type: 'save', what: 'chronovolume', view: S.selectedView }));
+  $('save-movie').addEventListener('click', () => {
+    const int = (id, lo, hi) => Math.max(lo, Math.min(hi, Math.round(Number($(id).value)) || lo));
+    $('save-movie').disabled = true;
+    $('movie-progress').textContent = 'rendering…';
+    send({
+      type: 'save',
+      what: 'movie',
+      movie: $('movie-kind').value,
+      format: $('movie-format').value,
+      frames: int('movie-frames', 2, 360),
+      fps: int('movie-fps', 1, 60),
+    });
+  });
+}
+
+// A movie's frames as they are rendered; its download ends it (app.js), as does an error.
+export function movieProgress(msg) {
+  $('movie-progress').textContent = msg ? `frame ${msg.done} of ${msg.total}` : '';
+  if (!msg || msg.done >= msg.total) $('save-movie').disabled = false;
 }

@@ -31,11 +31,13 @@ function setCamera(fields) {
   drawTriads();
 }
 
-// The opening camera of the data set (projection kept).
+// The opening camera of the data set (projection kept), framing what is visible now.
 export function resetCamera() {
   if (!S.initialCamera) return;
   const { azimuth, elevation, zoom, fov } = S.initialCamera;
-  setCamera({ azimuth, elevation, zoom, fov });
+  update({ camera: { ...S.state.camera, azimuth, elevation, zoom, fov }, refocus: true }, 'full');
+  delete S.state.refocus; // a request, not part of the view
+  drawTriads();
 }
 
 // A standard view at the opening zoom, so the same key always gives the same frame.
@@ -63,6 +65,24 @@ function basis(cam) {
   const n = Math.hypot(...s);
   s = s.map((c) => c / n);
   return { s, u: cross(s, f), e };
+}
+
+// The clip normal `n` turned by a drag of (dx, dy) pixels with camera `cam`: about the screen's
+// up axis by dx and its right axis by dy, half a degree a pixel, as the plane would follow the
+// pointer when seen through the view.
+export function turnedNormal(n, cam, dx, dy) {
+  const { s, u } = basis(cam);
+  const turn = (v, axis, deg) => {
+    const a = (deg * Math.PI) / 180;
+    const [c, sn] = [Math.cos(a), Math.sin(a)];
+    const d = axis[0] * v[0] + axis[1] * v[1] + axis[2] * v[2];
+    const x = [axis[1] * v[2] - axis[2] * v[1], axis[2] * v[0] - axis[0] * v[2], axis[0] * v[1] - axis[1] * v[0]];
+    return v.map((vi, i) => vi * c + x[i] * sn + axis[i] * d * (1 - c));
+  };
+  const len = Math.hypot(...n) || 1;
+  const out = turn(turn(n.map((c) => c / len), u, dx * 0.5), s, dy * 0.5);
+  const m = Math.hypot(...out) || 1;
+  return out.map((c) => Math.max(-1, Math.min(1, c / m)));
 }
 
 const AXES = [

@@ -1,12 +1,15 @@
-// The probe plot: v(t) over every step at the voxel a click on a view met, the window's
-// steps marked on it. The window drawn is the page's current one (it follows play and the
-// brush); switching data sets clears the plot.
+// The probe plot: v(t) over every step at the voxel a click on a view met, or the mean over
+// the box a shift-drag spanned with its min-max band, the window's steps marked on it; and
+// its CSV export (the server's, the same columns as `chronocl probe -o curve.csv`). The window
+// drawn is the page's current one (it follows play and the brush); switching data sets clears
+// the plot.
 
 import { $, S, canvasSize, fmt, viewer } from './state.js';
 
 export function clearProbe() {
   viewer.probe = null;
   drawProbe();
+  $('probe-csv').disabled = true;
   $('probe-text').textContent =
     `click a pixel: v(t) at the voxel where the ray's opacity passes ${S.choices.limits.probe_threshold}`;
 }
@@ -15,13 +18,40 @@ export function onProbe(msg) {
   viewer.probe = msg;
   drawProbe();
   const txt = $('probe-text');
-  if (!msg.voxel) {
-    txt.textContent = 'this ray meets no opaque voxel; click on a feature';
+  $('probe-csv').disabled = !msg.csv;
+  if (!msg.values) {
+    txt.textContent = msg.x2 === undefined && !msg.box
+      ? 'this ray meets no opaque voxel; click on a feature'
+      : 'a corner of the box meets no opaque voxel; drag across a feature';
+    return;
+  }
+  const how = msg.reached ? `opacity passes ${msg.threshold}` : `strongest sample (opacity ${msg.opacity})`;
+  if (msg.box) {
+    const b = msg.box;
+    const n = (b.x[1] - b.x[0]) * (b.y[1] - b.y[0]) * (b.z[1] - b.z[0]);
+    txt.textContent =
+      `box x ${b.x[0]}:${b.x[1]} y ${b.y[0]}:${b.y[1]} z ${b.z[0]}:${b.z[1]} (${n} voxels): ` +
+      `mean, min-max band · view ${msg.view + 1}`;
     return;
   }
   const v = msg.voxel;
-  const how = msg.reached ? `opacity passes ${msg.threshold}` : `strongest sample (opacity ${msg.opacity})`;
   txt.textContent = `voxel x=${v.x} y=${v.y} z=${v.z} (${how}) · view ${msg.view + 1}`;
+}
+
+// The probed curve as a CSV file, named for the data set and what was probed.
+export function exportProbe() {
+  const msg = viewer.probe;
+  if (!msg || !msg.csv) return;
+  const at = msg.box
+    ? ['x', 'y', 'z'].map((a) => `${a}${msg.box[a][0]}-${msg.box[a][1]}`).join('_')
+    : `x${msg.voxel.x}_y${msg.voxel.y}_z${msg.voxel.z}`;
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(new Blob([msg.csv], { type: 'text/csv' }));
+  a.download = `${S.info?.name || 'series'}-probe-${at}.csv`;
+  document.body.appendChild(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(a.href), 1000);
 }
 
 export function drawProbe() {
@@ -45,6 +75,14 @@ export function drawProbe() {
   ctx.strokeStyle = '#343941';
   ctx.lineWidth = 1;
   ctx.strokeRect(p.l, p.t, w - p.l - p.r, h - p.t - p.b);
+  if (msg.min && msg.max) {
+    ctx.beginPath();
+    msg.max.forEach((v, s) => (s === 0 ? ctx.moveTo(X(s), Y(v)) : ctx.lineTo(X(s), Y(v))));
+    for (let s = T - 1; s >= 0; s--) ctx.lineTo(X(s), Y(msg.min[s]));
+    ctx.closePath();
+    ctx.fillStyle = 'rgba(127,184,255,0.22)';
+    ctx.fill();
+  }
   ctx.beginPath();
   msg.values.forEach((v, s) => (s === 0 ? ctx.moveTo(X(s), Y(v)) : ctx.lineTo(X(s), Y(v))));
   ctx.strokeStyle = '#7fb8ff';
@@ -64,8 +102,9 @@ export function drawProbe() {
   ctx.fillText(String(fmt(vmin)), p.l - 3, h - p.b - 2);
   ctx.textBaseline = 'bottom';
   ctx.textAlign = 'left';
-  ctx.fillText('t = 0', p.l, h);
+  const labels = S.info.time_labels;
+  ctx.fillText(labels ? labels[0] : 't = 0', p.l, h);
   ctx.textAlign = 'right';
-  ctx.fillText(String(T - 1), w - p.r, h);
+  ctx.fillText(labels ? labels[T - 1] : String(T - 1), w - p.r, h);
   c.dataset.drawn = String(Number(c.dataset.drawn || 0) + 1);
 }

@@ -8,6 +8,10 @@
 // state is committed, the one before it goes on the undo list (HISTORY at most), and the
 // fragment is rewritten. Preview updates during a drag are not commits; the drag's end is.
 // Play's slides move the committed state along without becoming edits.
+//
+// A session also holds `focus`, the world box the views frame (the server frames the visible
+// region of a data set's first frame and of the frame after a camera reset); frames report it
+// (S.focus), and the committed state takes it when it changes (`noteFocus`).
 
 import { hooks, send, update } from './connection.js';
 import { syncControls } from './controls.js';
@@ -19,7 +23,7 @@ import { layoutViews } from './views.js';
 
 const VERSION = 1;
 const HISTORY = 100;
-const FIELDS = ['window', 'views', 'camera', 'data_tf', 'time_tf', 'enhance', 'threshold', 'clip', 'background', 'outline'];
+const FIELDS = ['window', 'views', 'camera', 'data_tf', 'time_tf', 'enhance', 'threshold', 'clip', 'background', 'outline', 'shading'];
 
 const undoList = [];
 const redoList = [];
@@ -30,7 +34,8 @@ viewer.history = { undo: 0, redo: 0, commits: 0 };
 // The page's state as a session object.
 export function snapshot() {
   const s = { chronocl_session: VERSION, dataset: { name: S.info.name } };
-  for (const k of FIELDS) s[k] = S.state[k];
+  for (const k of FIELDS) if (k in S.state) s[k] = S.state[k];
+  s.focus = S.focus || null;
   return s;
 }
 
@@ -69,12 +74,14 @@ function restore(text) {
   const s = JSON.parse(text);
   const fields = {};
   for (const k of FIELDS) fields[k] = s[k];
+  if (s.focus) fields.focus = s.focus; // the framing as it was
   applying = true;
   try {
     Object.assign(S.state, fields);
     S.selectedView = Math.min(S.selectedView, S.state.views.length - 1);
     S.selectedPoint = Math.min(S.selectedPoint, S.state.data_tf.points.length - 1);
     update(Object.assign(fields, { size: layoutViews() }), 'full');
+    delete S.state.focus; // a request, not part of the page's state
   } finally {
     applying = false;
   }
@@ -92,6 +99,18 @@ function step(from, to, what) {
   to.push(committed);
   restore(from.pop());
   setStatus(`${what}: ${from.length} more`);
+}
+
+// A frame framing another box than the committed state says: the committed state frames it
+// (it changes only with the edit or the data set that was committed last).
+export function noteFocus() {
+  if (committed === null || applying) return;
+  const s = JSON.parse(committed);
+  const focus = S.focus || null;
+  if (JSON.stringify(s.focus || null) === JSON.stringify(focus)) return;
+  s.focus = focus;
+  committed = JSON.stringify(s);
+  writeFragment(committed);
 }
 
 export const undo = () => step(undoList, redoList, 'undone');

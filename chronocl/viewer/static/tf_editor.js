@@ -1,5 +1,8 @@
-// The data transfer function editor: a log histogram of the data under the opacity curve and
-// its colour strip; drag points, click to add, double-click to remove, wheel to zoom in u.
+// The data transfer function editor: a histogram of the window's values (log or linear) under
+// the opacity curve and its colour strip; drag points, click to add, double-click to remove,
+// wheel to zoom in u; the selected point's value and opacity typed in; a readout of value,
+// opacity and count under the pointer; colour-map presets (the server's stops,
+// chronocl/core/colormaps.py, applied as `DataTF.with_colormap` does: opacity kept).
 
 import { send, update } from './connection.js';
 import { $, S, canvasSize, fmt, viewer } from './state.js';
@@ -26,11 +29,12 @@ export function drawTF() {
   const hist = S.histogram;
   if (hist && hist.range[0] === S.zoom[0] && hist.range[1] === S.zoom[1]) {
     const n = hist.counts.length;
-    const top = Math.log1p(Math.max(...hist.counts, 1));
+    const scale = $('hist-log').checked ? Math.log1p : (c) => c;
+    const top = scale(Math.max(...hist.counts, 1));
     ctx.fillStyle = 'rgba(120,160,210,0.45)';
     const bw = (w - pad.l - pad.r) / n;
     hist.counts.forEach((c, i) => {
-      const bh = (Math.log1p(c) / top) * (h - pad.t - pad.b);
+      const bh = (scale(c) / top) * (h - pad.t - pad.b);
       ctx.fillRect(pad.l + i * bw, h - pad.b - bh, Math.max(1, bw - 0.5), bh);
     });
   }
@@ -84,11 +88,68 @@ function sendTF(quality) {
   drawTF();
 }
 
+// The selected point's colour, value and opacity into their fields.
 export function syncPointColor() {
   const p = S.state.data_tf.points[S.selectedPoint];
   if (!p) return;
   const hex = (v) => Math.round(v * 255).toString(16).padStart(2, '0');
   $('point-color').value = `#${hex(p[1])}${hex(p[2])}${hex(p[3])}`;
+  if (S.info) $('point-value').value = fmt(dataValue(p[0]));
+  $('point-alpha').value = fmt(p[4]);
+}
+
+// Piecewise-linear value of column j of sorted points [x, ...] at x (constant beyond the ends).
+function interp(pts, x, j) {
+  if (x <= pts[0][0]) return pts[0][j];
+  for (let k = 1; k < pts.length; k++) {
+    if (x <= pts[k][0]) {
+      const [a, b] = [pts[k - 1], pts[k]];
+      return b[0] === a[0] ? b[j] : a[j] + ((x - a[0]) / (b[0] - a[0])) * (b[j] - a[j]);
+    }
+  }
+  return pts[pts.length - 1][j];
+}
+
+// The points recoloured by colour map `name`: the map's stops and the existing positions, each
+// with the map's colour and the opacity the curve has there.
+function withColormap(pts, name) {
+  const stops = S.choices.colormaps[name];
+  const us = [...new Set([...pts.map((p) => p[0]), ...stops.map((s) => s[0])])].sort((a, b) => a - b);
+  return us
+    .filter((u, k) => k === 0 || u - us[k - 1] > 1e-9)
+    .map((u) => [u, interp(stops, u, 1), interp(stops, u, 2), interp(stops, u, 3), interp(pts, u, 4)]);
+}
+
+function showHover(u) {
+  const out = $('tf-hover');
+  if (u === null || !S.info) {
+    out.innerHTML = '&nbsp;';
+    return;
+  }
+  const pts = S.state.data_tf.points;
+  let text = `value ${fmt(dataValue(u))} · opacity ${fmt(interp(pts, u, 4))}`;
+  const hist = S.histogram;
+  if (hist && u >= hist.range[0] && u <= hist.range[1]) {
+    const n = hist.counts.length;
+    const i = Math.min(n - 1, Math.floor(((u - hist.range[0]) / (hist.range[1] - hist.range[0])) * n));
+    text += ` · ${hist.counts[i]} sampled voxels`;
+  }
+  out.textContent = text;
+}
+
+// The colour-map menu, from the server's presets.
+export function fillColormaps() {
+  const names = Object.keys(S.choices.colormaps);
+  $('tf-colormap').replaceChildren(new Option('choose…', ''), ...names.map((n) => new Option(n, n)));
+}
+
+// The note under the histogram: which steps it counts.
+export function noteHistogram() {
+  const hist = S.histogram;
+  if (!hist || !hist.steps) return;
+  const s = hist.steps;
+  const which = s.length === 1 ? `step ${s[0]}` : `${s.length} steps of the window (${s[0]}…${s[s.length - 1]})`;
+  $('hist-note').textContent = `histogram of ${which}; opacity up, value across`;
 }
 
 export function bindTF() {
@@ -129,7 +190,10 @@ export function bindTF() {
     sendTF('preview');
   });
   c.addEventListener('pointermove', (e) => {
-    if (!tf.drag) return;
+    if (!tf.drag) {
+      if (S.state) showHover(clamp01(tfGeom().U(at(e)[0])));
+      return;
+    }
     const g = tfGeom();
     const [x, y] = at(e);
     const pts = S.state.data_tf.points;
@@ -147,6 +211,42 @@ export function bindTF() {
   };
   c.addEventListener('pointerup', end);
   c.addEventListener('pointercancel', end);
+  c.addEventListener('pointerleave', () => showHover(null));
+  // A typed value or opacity for the selected point (only the field typed in: the other
+  // shows a rounded number).
+  const typed = (field) => () => {
+    const pts = S.state.data_tf.points;
+    const i = S.selectedPoint;
+    const p = pts[i];
+    const v = parseFloat($(field).value);
+    if (!p || !S.info || !Number.isFinite(v)) return syncPointColor();
+    if (field === 'point-alpha') p[4] = clamp01(v);
+    else {
+      const u = (v - S.info.vmin) / (S.info.vmax - S.info.vmin || 1);
+      const lo = i > 0 ? pts[i - 1][0] + 1e-4 : 0;
+      const hi = i < pts.length - 1 ? pts[i + 1][0] - 1e-4 : 1;
+      p[0] = Math.max(lo, Math.min(hi, u));
+    }
+    syncPointColor();
+    sendTF('full');
+  };
+  $('point-value').addEventListener('change', typed('point-value'));
+  $('point-alpha').addEventListener('change', typed('point-alpha'));
+  const maps = $('tf-colormap');
+  maps.addEventListener('change', () => {
+    if (!maps.value || !S.state) return;
+    const pts = withColormap(S.state.data_tf.points, maps.value);
+    maps.value = '';
+    if (pts.length > S.choices.limits.max_tf_points) {
+      $('tf-hover').textContent = `a colour map needs ${pts.length} points; remove some (at most ${S.choices.limits.max_tf_points})`;
+      return;
+    }
+    S.state.data_tf.points = pts;
+    S.selectedPoint = Math.min(S.selectedPoint, pts.length - 1);
+    syncPointColor();
+    sendTF('full');
+  });
+  $('hist-log').addEventListener('change', drawTF);
   const remove = () => {
     const pts = S.state.data_tf.points;
     if (pts.length <= 2) return;

@@ -54,13 +54,16 @@ export function drawTimeline() {
   ctx.fillStyle = '#8b949e';
   ctx.font = '10px system-ui, sans-serif';
   ctx.textBaseline = 'bottom';
-  ctx.fillText('0', 3, h - 1);
+  const label = (s) => (S.info.time_labels ? S.info.time_labels[s] : String(s));
+  ctx.fillText(label(0), 3, h - 1);
   ctx.textAlign = 'right';
-  ctx.fillText(String(T - 1), w - 3, h - 1);
+  ctx.fillText(label(T - 1), w - 3, h - 1);
   ctx.textAlign = 'left';
   ctx.textBaseline = 'top';
   ctx.fillText('max ─  mean ▆', 3, 2);
-  $('window-text').textContent = `steps ${t0}:${t1}${stride > 1 ? ':' + stride : ''} (${Math.ceil((t1 - t0) / stride)} of ${T})`;
+  const last = t0 + Math.floor((t1 - 1 - t0) / stride) * stride;
+  const span = S.info.time_labels ? `${label(t0)} .. ${label(last)}, ` : '';
+  $('window-text').textContent = `${span}steps ${t0}:${t1}${stride > 1 ? ':' + stride : ''} (${Math.ceil((t1 - t0) / stride)} of ${T})`;
 }
 
 function setWindow(t0, t1, stride, quality = 'full') {

@@ -3,7 +3,7 @@
 
 import { frameArrived, send, sentAt, settleLater, update } from './connection.js';
 import { drawLegends } from './legend.js';
-import { drawTriads } from './orientation.js';
+import { drawTriads, turnedNormal } from './orientation.js';
 import { drawProbe } from './probe.js';
 import { $, S, clamp, setStatus, viewer } from './state.js';
 import { drawTimeline } from './timeline.js';
@@ -71,7 +71,9 @@ function makePanel(i) {
     '<select class="mode" title="Integration mode"></select>' +
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
     '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
-    '<div class="probe-mark"></div><canvas class="legend"></canvas><canvas class="triad"></canvas>';
+    '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon/></svg>' +
+    '<div class="probe-mark"></div><div class="probe-band"></div><canvas class="legend"></canvas>' +
+    '<canvas class="triad"></canvas>';
   $('views').appendChild(el);
   const p = {
     el,
@@ -81,6 +83,8 @@ function makePanel(i) {
     label: el.querySelector('.view-label'),
     note: el.querySelector('.view-note'),
     mark: el.querySelector('.probe-mark'),
+    band: el.querySelector('.probe-band'),
+    outline: el.querySelector('.clip-outline polygon'),
     triad: el.querySelector('.triad'),
   };
   fillSelect(p.mode, S.choices.modes);
@@ -108,7 +112,8 @@ function bindOrbit(p, i) {
   p.img.addEventListener('pointerdown', (e) => {
     if (!S.state) return;
     p.img.setPointerCapture(e.pointerId);
-    start = { x: e.clientX, y: e.clientY, cam: { ...S.state.camera }, moved: false };
+    start = { x: e.clientX, y: e.clientY, cam: { ...S.state.camera }, moved: false, box: e.shiftKey };
+    if (S.state.clip && $('clip-drag').checked && !e.shiftKey) start.clip = { ...S.state.clip };
   });
   p.img.addEventListener('pointermove', (e) => {
     if (!start) return;
@@ -116,6 +121,15 @@ function bindOrbit(p, i) {
     const dy = e.clientY - start.y;
     if (!start.moved && Math.hypot(dx, dy) < 3) return;
     start.moved = true;
+    if (start.box) {
+      showBand(p, start, e);
+      return;
+    }
+    if (start.clip) {
+      const normal = turnedNormal(start.clip.normal, S.state.camera, dx, dy);
+      update({ clip: { normal, offset: start.clip.offset } }, 'preview');
+      return;
+    }
     const cam = { ...S.state.camera };
     cam.azimuth = start.cam.azimuth - dx * 0.5;
     cam.elevation = clamp(start.cam.elevation + dy * 0.5, ranges().elevation);
@@ -124,9 +138,16 @@ function bindOrbit(p, i) {
   });
   const end = (e) => {
     if (!start) return;
-    const wasDrag = start.moved;
+    const { moved, box } = start;
+    const from = start;
     start = null;
-    if (wasDrag) update({ camera: { ...S.state.camera } }, 'full');
+    p.band.style.display = 'none';
+    if (box && moved && e.type === 'pointerup') probeAt(p, i, e, from);
+    else if (moved && from.clip) {
+      $('clip-axis').value = 'custom';
+      update({ clip: { ...S.state.clip } }, 'full');
+    }
+    else if (moved) update({ camera: { ...S.state.camera } }, 'full');
     else if (e.type === 'pointerup') probeAt(p, i, e);
   };
   p.img.addEventListener('pointerup', end);
@@ -144,14 +165,36 @@ function bindOrbit(p, i) {
   );
 }
 
-function probeAt(p, i, e) {
+// A click probes the voxel its ray meets; a shift-drag from `from` probes the box between the
+// voxels the rays of its two corners meet.
+function probeAt(p, i, e, from) {
   const r = p.img.getBoundingClientRect();
-  const x = clamp((e.clientX - r.left) / r.width, [0, 1]);
-  const y = clamp((e.clientY - r.top) / r.height, [0, 1]);
+  const at = (cx, cy) => [
+    clamp((cx - r.left) / r.width, [0, 1]),
+    clamp((cy - r.top) / r.height, [0, 1]),
+  ];
+  const [x, y] = at(e.clientX, e.clientY);
   S.selectedView = i;
   panels.forEach((q, j) => q.el.classList.toggle('selected', j === i && panels.length > 1));
+  if (from) {
+    const [x2, y2] = at(from.x, from.y);
+    showMark({ view: i, x: (x + x2) / 2, y: (y + y2) / 2 });
+    send({ type: 'probe', view: i, x, y, x2, y2 });
+    return;
+  }
   showMark({ view: i, x, y });
   send({ type: 'probe', view: i, x, y });
+}
+
+// The rubber band of a shift-drag, from the drag's start to the pointer.
+function showBand(p, from, e) {
+  const r = p.el.getBoundingClientRect();
+  const b = p.band.style;
+  b.display = 'block';
+  b.left = `${Math.min(from.x, e.clientX) - r.left}px`;
+  b.top = `${Math.min(from.y, e.clientY) - r.top}px`;
+  b.width = `${Math.abs(e.clientX - from.x)}px`;
+  b.height = `${Math.abs(e.clientY - from.y)}px`;
 }
 
 // The probe marker at {view, x, y} (fractions of the panel), or none.
@@ -198,7 +241,11 @@ export function onFrame(buf) {
   });
   // Where the probed voxel is in this frame (it moves with the camera; none before a probe).
   if (viewer.probe && viewer.probe.values) showMark(header.probe || null);
+  // The clip plane's cut through the box, the same on every panel (one camera, one box).
+  const cut = (header.clip_outline || []).map(([x, y]) => `${x},${y}`).join(' ');
+  for (const p of panels) p.outline.setAttribute('points', cut);
   S.legend = header.legend || [];
+  S.focus = header.focus || null;
   drawLegends();
   const now = performance.now();
   const t0 = sentAt.get(header.id);

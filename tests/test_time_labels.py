@@ -1,0 +1,132 @@
+"""Time labels where a store has them: legends, panel captions, probe plots and the viewer's
+data set message show them instead of step numbers, and step numbers on request."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+from PIL import ImageDraw
+
+import chronocl
+from chronocl import render, render_views
+from chronocl.core.errors import UnknownNameError
+from chronocl.core.time_labels import compact, display_labels, span_text
+from chronocl.data.probe import time_axis
+from chronocl.render.views import describe
+
+TIMES = [f"2024-01-01T{h:02d}:00:00.000000000" for h in range(0, 24, 3)]  # NetCDF-style
+
+
+@pytest.fixture(scope="module")
+def series():
+    data = np.random.default_rng(1).random((8, 6, 7, 8)).astype(np.float32)
+    return chronocl.TimeSeries.from_array(data, times=TIMES, source="labelled")
+
+
+@pytest.fixture(scope="module")
+def cv(series):
+    return chronocl.integrate(series, "1:8:3", "alpha", engine="numpy")
+
+
+@pytest.fixture
+def drawn_text(monkeypatch) -> list[str]:
+    """Every string the legend and caption code hands to Pillow's drawing (drawn as usual)."""
+    texts: list[str] = []
+    original = ImageDraw.ImageDraw.text
+
+    def text(self, xy, content, *args, **kwargs):
+        texts.append(content)
+        return original(self, xy, content, *args, **kwargs)
+
+    monkeypatch.setattr(ImageDraw.ImageDraw, "text", text)
+    return texts
+
+
+def test_display_labels():
+    assert display_labels([0, 1], TIMES[:2]) == ["2024-01-01 00:00", "2024-01-01 03:00"]
+    midnights = ["2024-01-01T00:00:00", "2024-01-02T00:00:00"]
+    assert display_labels([0, 1], midnights) == ["2024-01-01", "2024-01-02"]
+    assert display_labels([4, 5], [0.25, 1.0]) == ["0.25", "1"]  # physical times
+    assert display_labels([0, 1], [0, 1]) == ["0", "1"]  # a store without labels
+    assert display_labels([2, 5], TIMES[2:6:3], "steps") == ["2", "5"]
+    assert display_labels([0, 1], ["2024-01-01T06:00:30.500", "spin-up"]) == [
+        "2024-01-01 06:00:30.5",
+        "spin-up",
+    ]
+    texts = display_labels([1, 2, 7], [TIMES[1], TIMES[2], "2024-01-02T03:00"])
+    assert compact(texts) == ["2024-01-01 03:00", "06:00", "2024-01-02 03:00"]
+    assert span_text(texts[:2]) == "2024-01-01 03:00 .. 06:00"
+    with pytest.raises(UnknownNameError, match=r"choose labels .* or steps"):
+        display_labels([0], [0], "dates")
+
+
+def test_the_legend_and_captions_show_the_time_labels(cv, drawn_text):
+    render(cv, size=(240, 96), legend=True)
+    assert "2024-01-01 03:00" in drawn_text and "06:00" not in drawn_text  # steps 1, 4, 7
+    assert "12:00" in drawn_text and "21:00" in drawn_text
+    assert not {"1", "4", "7"} & set(drawn_text)
+    drawn_text.clear()
+    render_views([cv, cv], size=(240, 96))
+    caption = "alpha, forward, 2024-01-01 03:00 .. 21:00 (3 steps)"
+    assert drawn_text.count(caption) == 2 and describe(cv) == caption
+
+
+def test_step_numbers_on_request(cv, drawn_text):
+    render_views([cv, cv], size=(240, 96), time_labels="steps")
+    assert {"1", "4", "7"} <= set(drawn_text)
+    assert "alpha, forward, steps 1:8:3" in drawn_text
+    assert not any("2024" in t for t in drawn_text)
+    with pytest.raises(UnknownNameError, match="time labels 'dates'"):
+        render(cv, time_labels="dates")
+
+
+def test_a_store_without_labels_shows_step_numbers(series, drawn_text):
+    plain = chronocl.TimeSeries.from_array(np.asarray(series.data), source="plain")
+    render(chronocl.integrate(plain, "1:8:3", "alpha", engine="numpy"), legend=True)
+    assert {"1", "4", "7"} <= set(drawn_text)
+
+
+def test_probe_plots_and_the_viewer_use_the_labels(series):
+    from chronocl.viewer.datasets import Dataset
+
+    steps = np.arange(8)
+    odd = ["spin-up", *TIMES[1:]]  # not all dates: ticks named by the display labels
+    _, title, names = time_axis(odd, steps)
+    assert title == "time" and names[:2] == ["spin-up", "2024-01-01 03:00"]
+    assert time_axis(odd, steps, "steps")[1:] == ("step", None)
+    assert time_axis(TIMES, steps)[0].dtype.kind == "M"  # dates: a date axis
+    curve = series.probe(1, 2, 3)
+    assert curve.figure(time_labels="steps").axes[0].get_xlabel() == "step"
+    assert curve.figure().axes[0].get_xlabel() == "time"
+    info = Dataset("labelled", series).info(0)
+    assert info["time_labels"] == display_labels(range(8), TIMES)
+    assert (
+        Dataset("p", chronocl.TimeSeries.from_array(np.zeros((2, 2, 2, 2)))).info(0)["time_labels"]
+        is None
+    )
+
+
+def test_cli_time_labels(tmp_path, series, monkeypatch, capsys, drawn_text):
+    from chronocl.cli import main
+
+    store = tmp_path / "l.zarr"
+    series.save(store)
+
+    def run(*args: str) -> int:
+        argv = ["chronocl", "render", str(store), "--engine", "numpy", "--size", "160x64"]
+        monkeypatch.setattr(sys, "argv", [*argv, "--window", "1:8:3", *args])
+        with pytest.raises(SystemExit) as info:
+            main()
+        return info.value.code or 0
+
+    assert run("-o", str(tmp_path / "a.png")) == 0
+    assert "2024-01-01 03:00" in drawn_text
+    drawn_text.clear()
+    assert run("-o", str(tmp_path / "b.png"), "--time-labels", "steps") == 0
+    assert {"1", "4", "7"} <= set(drawn_text)
+    capsys.readouterr()
+    assert run("-o", str(tmp_path / "c.png"), "--time-labels", "dates") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "choose labels" in err[0] and not (tmp_path / "c.png").exists()
