@@ -39,10 +39,22 @@ from chronocl.core.errors import InvalidParameterError
 
 
 def render(
-    store: Annotated[Path, typer.Argument(help="Series store.")],
+    ctx: typer.Context,
+    store: Annotated[
+        Path | None, typer.Argument(help="Series store (with --state: the session's).")
+    ] = None,
     out_path: Annotated[
-        Path, typer.Option("--out", "-o", metavar="OUT.png", help="Image to write.")
-    ],
+        Path | None,
+        typer.Option("--out", "-o", metavar="OUT.png", help="Image to write (required)."),
+    ] = None,
+    state: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="SESSION.json",
+            help="A session saved in the viewer: render what it showed (-o default: "
+            "SESSION.png); options given here override it.",
+        ),
+    ] = None,
     mode: Annotated[
         list[str],
         typer.Option(
@@ -126,7 +138,16 @@ def render(
       chronocl render plume.zarr -o whole.png --frame box --zoom 1.2
 
       chronocl render era5.zarr -o t.png --window 0:24:6 --time-labels steps
+
+      chronocl render --state vortex-session.json -o figure.png --size 1024x1024
     """
+    if state is not None:
+        from chronocl.cli.render_state import given, render_state
+
+        return render_state(state, given(ctx, locals()))
+    if store is None or out_path is None:
+        missing = "STORE" if store is None else "--out/-o"
+        raise InvalidParameterError(f"{missing} is missing; e.g. chronocl render v.zarr -o v.png")
     from chronocl.core.enhance import Enhance
     from chronocl.core.paths import check_distinct, check_input, check_target
     from chronocl.core.time_labels import check_prefer

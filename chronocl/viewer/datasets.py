@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chronocl.core.errors import InvalidParameterError
+from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.core.time_labels import display_labels, has_labels
 from chronocl.data.probe import TimeCurve, probe
 from chronocl.data.series import TimeSeries, open_series
@@ -35,11 +35,13 @@ def sample_steps(steps: Sequence[int], stride: int = 1) -> list[int]:
 
 
 class Dataset:
-    """One series the server was started with, named for the client; statistics cached."""
+    """One series the server was started with, named for the client (`path`: its store, which
+    saved sessions record); statistics cached."""
 
-    def __init__(self, name: str, series: TimeSeries) -> None:
+    def __init__(self, name: str, series: TimeSeries, path: str | None = None) -> None:
         self.name = name
         self.series = series
+        self.path = path
         self._lock = threading.Lock()
         self._samples: OrderedDict[int, np.ndarray] = OrderedDict()
 
@@ -103,6 +105,23 @@ class Dataset:
         return probe(self.series, x, y, z)
 
 
+def find_dataset(datasets: list[Dataset], ref: int | str, path: str | None = None) -> int:
+    """The index of a data set named by index or name (or, failing the name, by its store's
+    path); UnknownNameError listing those there are."""
+    if isinstance(ref, int):
+        if ref < len(datasets):
+            return ref
+    else:
+        for i, d in enumerate(datasets):
+            if d.name == ref:
+                return i
+        for i, d in enumerate(datasets):
+            if path is not None and d.path == path:
+                return i
+    names = ", ".join(f"{i}: {d.name}" for i, d in enumerate(datasets))
+    raise UnknownNameError(f"unknown data set {ref!r}; choose one of {names}")
+
+
 def open_datasets(stores: Sequence[str | os.PathLike]) -> list[Dataset]:
     """Open each store; names are the stores' stems, made unique with a suffix."""
     if not stores:
@@ -116,5 +135,5 @@ def open_datasets(stores: Sequence[str | os.PathLike]) -> list[Dataset]:
         while name in seen:
             name, n = f"{base}-{n}", n + 1
         seen.add(name)
-        datasets.append(Dataset(name, series))
+        datasets.append(Dataset(name, series, str(Path(store).resolve())))
     return datasets

@@ -6,14 +6,17 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     open       {"dataset": index or name}               switch data set (defaults reset)
     update     camera, views, window, data_tf, time_tf,  any subset; the server merges it
                enhance, threshold, clip, size, quality,  into the client's state and renders
-               background, outline, shading, refocus     the newest state only (refocus:
-                                                         frame the visible region again)
+               background, outline, shading, refocus,    the newest state only (refocus:
+               focus                                     frame the visible region again;
+                                                         focus: frame this world box)
     probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
                                                          x2, y2: a box between two rays' voxels
     histogram  {"range": [lo, hi]}                       normalised values u in the window
     save       {"what": "image" | "chronovolume", "view"}
                {"what": "movie", "movie": orbit | play,   a video download, a `progress`
                 "format": mp4 | gif, "frames", "fps"}     message after every frame
+               {"what": "session"}                       the state as a session file
+    load       {"session": a session file's object}     apply a saved session as one step
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
 (numbers must be finite; data values must fit float32, ranges need lo < hi) raise
@@ -50,6 +53,8 @@ from chronocl.viewer.schema import (
     Obj,
     ProtocolError,
     Range,
+    Text,
+    Version,
     show,
 )
 
@@ -138,7 +143,40 @@ SHADING = Obj(
     }
 )
 THRESHOLD = Num(0.0, 0.99)
+# The world box (x0, y0, z0, x1, y1, z1) the camera frames (render/framing.py; the box's
+# longest side is 1, centred on the origin).
+FOCUS = List(Num(-1.0, 1.0), 6, 6)
 ID = Int(0, 2**53)
+SIZE = List(Int(MIN_PANEL, MAX_PANEL), 2, 2)
+
+# A saved session (the viewer's Save session, the URL fragment, `chronocl render --state`):
+# the state fields of an update message plus the data set and the format's version. Camera,
+# enhancement and lighting are shared by the views, as in the viewer.
+SESSION_VERSION = 1
+SESSION_KEY = "chronocl_session"
+SESSION = Obj(
+    {
+        SESSION_KEY: Version(SESSION_VERSION, "session files of"),
+        "dataset": Obj(
+            {"name": Text(200), "path": Text(4096), "shape": List(Int(1, 2**31), 4, 4)},
+            frozenset({"name"}),
+        ),
+        "window": WINDOW,
+        "views": List(VIEW, 1, MAX_VIEWS),
+        "camera": CAMERA,
+        "data_tf": DATA_TF,
+        "time_tf": TIME_TF,
+        "enhance": ENHANCE,
+        "threshold": THRESHOLD,
+        "clip": Nullable(CLIP_PLANE),
+        "size": SIZE,
+        "background": Enum(BACKGROUNDS),
+        "outline": Bool(),
+        "shading": Nullable(SHADING),
+        "focus": Nullable(FOCUS),
+    },
+    frozenset({SESSION_KEY, "dataset", "window", "views", "camera", "data_tf", "time_tf"}),
+)
 
 MESSAGES: dict[str, Obj] = {
     "open": Obj({"type": Enum(("open",)), "id": ID, "dataset": Name()}, frozenset({"dataset"})),
@@ -154,12 +192,13 @@ MESSAGES: dict[str, Obj] = {
             "enhance": ENHANCE,
             "threshold": THRESHOLD,
             "clip": Nullable(CLIP_PLANE),
-            "size": List(Int(MIN_PANEL, MAX_PANEL), 2, 2),
+            "size": SIZE,
             "quality": Enum(("preview", "full")),
             "background": Enum(BACKGROUNDS),
             "outline": Bool(),
             "shading": SHADING,
             "refocus": Bool(),  # frame the visible region again (the camera reset)
+            "focus": FOCUS,  # frame this world box (a saved session's, an undone state's)
         }
     ),
     "probe": Obj(
@@ -182,7 +221,7 @@ MESSAGES: dict[str, Obj] = {
         {
             "type": Enum(("save",)),
             "id": ID,
-            "what": Enum(("image", "chronovolume", "movie")),
+            "what": Enum(("image", "chronovolume", "movie", "session")),
             "view": Int(0, MAX_VIEWS - 1),
             "movie": Enum(MOVIES),
             "format": Enum(tuple(MOVIE_FORMATS)),
@@ -191,6 +230,7 @@ MESSAGES: dict[str, Obj] = {
         },
         frozenset({"what"}),
     ),
+    "load": Obj({"type": Enum(("load",)), "id": ID, "session": SESSION}, frozenset({"session"})),
 }
 
 
@@ -269,7 +309,7 @@ def too_deep(text: str, limit: int = MAX_DEPTH) -> bool:
     return False
 
 
-def _decode(text: str) -> object:
+def decode_json(text: str) -> object:
     """json.loads without NaN/Infinity and without deep nesting (ProtocolError, ValueError)."""
     if too_deep(text):
         raise ProtocolError(
@@ -306,7 +346,7 @@ def parse_message(text: object) -> dict:
     if len(text.encode()) > MAX_MESSAGE_BYTES:
         raise ProtocolError(f"message is over the limit of {MAX_MESSAGE_BYTES} bytes")
     try:
-        msg = _decode(text)
+        msg = decode_json(text)
     except ProtocolError:
         raise
     except ValueError as exc:

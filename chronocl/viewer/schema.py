@@ -81,6 +81,34 @@ class Name:
 
 
 @dataclass(frozen=True)
+class Text:
+    """A string of 1 to `max_len` characters."""
+
+    max_len: int
+
+    def check(self, value: object, path: str) -> str:
+        if not isinstance(value, str) or not 0 < len(value) <= self.max_len:
+            raise ProtocolError(f"{path} must be a text of 1 to {self.max_len} characters")
+        return value
+
+
+@dataclass(frozen=True)
+class Version:
+    """The version number of a saved format: exactly `current`."""
+
+    current: int
+    what: str
+
+    def check(self, value: object, path: str) -> int:
+        if value != self.current or isinstance(value, bool):
+            raise ProtocolError(
+                f"{path} is {show(value)}: this chronocl reads {self.what} version "
+                f"{self.current}; save it again with this version"
+            )
+        return self.current
+
+
+@dataclass(frozen=True)
 class List:
     item: object
     min_len: int

@@ -44,6 +44,12 @@ def handle(worker: ClientWorker, msg: dict) -> dict | None:
             "id": msg.get("id"),
             **worker.open(msg["dataset"], msg.get("id")),
         }
+    if kind == "load":
+        return {
+            "type": "dataset",
+            "id": msg.get("id"),
+            **worker.load(msg["session"], msg.get("id")),
+        }
     if kind == "update":
         worker.update(msg)
         return None

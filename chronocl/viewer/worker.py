@@ -26,14 +26,14 @@ from collections import deque
 from collections.abc import Callable
 
 from chronocl import modes
-from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.session import Session
 from chronocl.render.framing import framed
 from chronocl.render.views import describe, parse_color
 from chronocl.viewer.clip_outline import clip_outline
-from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.errors import error_text
 from chronocl.viewer.frames import (
     JPEG_QUALITY,
@@ -51,6 +51,7 @@ from chronocl.viewer.movie import movie_states, render_movie
 from chronocl.viewer.probe import probe_reply, project
 from chronocl.viewer.protocol import MOVIE_FORMATS, pack_frame
 from chronocl.viewer.saving import Downloads, compose_image, save_chronovolume, save_image
+from chronocl.viewer.session_file import checked_focus, loaded_state, save_session
 from chronocl.viewer.slots import ViewSlot, upload
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
@@ -107,19 +108,8 @@ class ClientWorker:
         self.thread.start()
 
     # -- called from the server's event loop ----------------------------------------------
-    def find_dataset(self, ref: int | str) -> int:
-        if isinstance(ref, int):
-            if ref < len(self.datasets):
-                return ref
-        else:
-            for i, d in enumerate(self.datasets):
-                if d.name == ref:
-                    return i
-        names = ", ".join(f"{i}: {d.name}" for i, d in enumerate(self.datasets))
-        raise UnknownNameError(f"unknown data set {ref!r}; choose one of {names}")
-
     def open(self, ref: int | str, rid: int | None) -> dict:
-        i = self.find_dataset(ref)
+        i = find_dataset(self.datasets, ref)
         with self._cond:
             self.state = default_state(i, self.datasets[i].series)
             self._probed = None
@@ -127,14 +117,52 @@ class ClientWorker:
             self._pending = (self.state, rid)
             self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
             self._cond.notify()
-        return self.datasets[i].info(i) | {"state": describe_state(self.state)}
+        return self._opened(i)
+
+    def _opened(self, i: int) -> dict:
+        """The `dataset` reply: the data set, the state, and the data set's opening camera."""
+        opening = describe_state(default_state(i, self.datasets[i].series))["camera"]
+        return self.datasets[i].info(i) | {
+            "state": describe_state(self.state),
+            "opening_camera": opening,
+        }
+
+    def load(self, session: dict, rid: int | None) -> dict:
+        """Apply a validated saved session as one step (nothing applied when it does not
+        fit), framing its `focus` (none: the visible region of its first frame); the reply is
+        `open`'s."""
+        with self._cond:
+            i, state = loaded_state(self.datasets, self.state, session)
+            focus = checked_focus(state, session.get("focus"))
+            self.state = state
+            self._set_focus(focus)
+            self._probed = None
+            self._pending = (self.state, rid)
+            self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
+            self._cond.notify()
+        return self._opened(i)
+
+    def _set_focus(self, box: tuple | None) -> None:
+        """Frame `box` from now on (None: the visible region of the next frame)."""
+        self._focus_gen += 1
+        self._focus = None if box is None else (self._focus_gen, box)
+
+    def shown_focus(self) -> list | None:
+        """The world box the views frame now (None: not known yet)."""
+        with self._cond:
+            known = self._focus
+            return None if known is None or known[0] != self._focus_gen else known[1]
 
     def update(self, msg: dict) -> None:
         with self._cond:
             n = self.datasets[self.state.dataset].series.n_steps
-            self.state = merge(self.state, msg, n)
+            state = merge(self.state, msg, n)
+            focus = checked_focus(state, msg.get("focus"))
+            self.state = state
             if msg.get("refocus"):
                 self._focus_gen += 1
+            if "focus" in msg:
+                self._set_focus(focus)
             self._pending = (self.state, msg.get("id"))
             self._cond.notify()
 
@@ -371,6 +399,7 @@ class ClientWorker:
             "probe": self._probe_mark(state, cvs),
             "clip_outline": clip_outline(cvs[0], state.panel_camera(), state.size, state.clip),
             "legend": legend(cvs[0]),
+            "focus": None if state.camera.focus is None else list(state.camera.focus),
             "level": level,
             "levels": levels,  # from the sessions: no store metadata read per frame
             "level_shape": list(cvs[0].shape),
@@ -412,7 +441,12 @@ class ClientWorker:
     def _do_task(self, kind: str, msg: dict) -> None:
         rid = msg.get("id")
         ds = self.datasets[self.state.dataset]
-        if kind == "histogram":
+        if kind == "save" and msg["what"] == "session":
+            key, name = save_session(self.downloads, self.state, ds, self.shown_focus())
+            self._reply(
+                {"type": "download", "id": rid, "url": f"/download/{key}", "filename": name}
+            )
+        elif kind == "histogram":
             lo, hi = self._hist_range = list(msg["range"])
             state = self.state
             steps = state.selection(ds.series.n_steps).steps

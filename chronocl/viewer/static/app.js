@@ -9,14 +9,18 @@
 //   keys.js        the keyboard shortcuts (one table) and the `?` list
 //   tf_editor.js   the data transfer function editor
 //   probe.js       the v(t) plot of a probed voxel
+//   legend.js      the time legend drawn in each view
+//   session.js     undo / redo, the URL fragment (#state=), Save / Load session
 //   controls.js    the other controls, filled from the server's choices
 //   shading.js     the lighting toggle and strengths
 
 import { connect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
 import { bindKeys } from './keys.js';
+import { bindLegend, drawLegends } from './legend.js';
 import { bindOrientation, drawTriads } from './orientation.js';
 import { clearProbe, drawProbe, exportProbe, onProbe } from './probe.js';
+import { bindSession, fragmentSession, loadSession, noteFocus, resetHistory } from './session.js';
 import { bindShading, syncShading } from './shading.js';
 import { $, S, setStatus, viewer } from './state.js';
 import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
@@ -25,6 +29,8 @@ import { fillSelect, layoutViews, onFrame, showMark } from './views.js';
 
 // After a reconnect: the state the page had, sent back once the data set is open again.
 let restore = null;
+// The id of the load of the session the URL carried (#state=), until the server answers it.
+let urlLoad = null;
 
 // The first message on every socket: the data sets, and the modes, menus, defaults and bounds
 // to offer. On a socket opened again (the server restarted) the page reopens its data set.
@@ -38,15 +44,19 @@ function onInfo(msg) {
   );
   const again = S.info && S.state && msg.datasets.some((d) => d.index === S.info.index);
   restore = again ? { state: S.state, zoom: S.zoom, point: S.selectedPoint, camera: S.initialCamera } : null;
-  send({ type: 'open', dataset: again ? S.info.index : 0 });
+  const fromUrl = S.info ? null : fragmentSession();
+  if (fromUrl) urlLoad = loadSession(fromUrl);
+  else send({ type: 'open', dataset: again ? S.info.index : 0 });
 }
 
 function onDataset(msg) {
+  if (!S.info || S.info.index !== msg.index) resetHistory();
+  urlLoad = null;
   S.info = msg;
   S.state = msg.state;
   S.zoom = [0, 1];
   S.selectedPoint = Math.min(1, S.state.data_tf.points.length - 1);
-  S.initialCamera = { ...msg.state.camera };
+  S.initialCamera = { ...(msg.opening_camera || msg.state.camera) };
   if (restore) {
     // Every field the server describes, as the page had it before the socket closed.
     for (const k of Object.keys(msg.state)) if (k in restore.state) S.state[k] = restore.state[k];
@@ -107,6 +117,10 @@ function onText(msg) {
       if (msg.id !== null && msg.id >= viewer.sent) frameArrived(); // no frame will come
       viewer.errors.push(msg);
       setStatus(`error: ${msg.message}`, true);
+      if (urlLoad !== null && msg.id === urlLoad) {
+        urlLoad = null; // the URL's session does not fit: the default view instead
+        send({ type: 'open', dataset: 0 });
+      }
       break;
     default:
       break;
@@ -125,6 +139,7 @@ function relayout() {
     drawTimeline();
     drawTF();
     drawProbe();
+    drawLegends();
   }, 150);
 }
 window.addEventListener('resize', relayout);
@@ -143,4 +158,12 @@ bindControls();
 bindShading();
 bindOrientation();
 bindKeys();
-connect({ onText, onFrame });
+bindSession();
+bindLegend();
+connect({
+  onText,
+  onFrame: (buf) => {
+    onFrame(buf);
+    noteFocus();
+  },
+});

@@ -12,7 +12,7 @@ let busyTimer = 0;
 
 const params = new URLSearchParams(location.search);
 const token = params.get('token') || '';
-if (token) history.replaceState(null, '', location.pathname); // the cookie keeps us in
+if (token) history.replaceState(null, '', location.pathname + location.hash); // the cookie keeps us in
 
 let ws = null;
 let nextId = 1;
@@ -69,13 +69,16 @@ export function send(msg) {
   return msg.id;
 }
 
-// Updates are merged into S.state at once and sent once per animation frame.
+// Updates are merged into S.state at once and sent once per animation frame; each is told to
+// `hooks.edited(quality)` (session.js: undo history, URL fragment).
+export const hooks = { edited: null };
 let pending = null;
 let pendingQuality = 'full';
 export function update(fields, quality = 'full') {
   pending = Object.assign(pending || {}, fields);
   pendingQuality = quality;
   Object.assign(S.state, fields);
+  if (hooks.edited) hooks.edited(quality);
   requestAnimationFrame(flush);
 }
 

@@ -116,7 +116,7 @@ export function bindControls() {
   for (const id of ['k0', 'k1', 'k2']) {
     $(id).addEventListener('change', () => {
       const v = Number($(id).value);
-      if (within(v, S.choices.ranges.enhance[id])) update({ enhance: { [id]: v } });
+      if (within(v, S.choices.ranges.enhance[id])) update({ enhance: { ...S.state.enhance, [id]: v } });
     });
   }
   $('threshold').addEventListener('change', () => {

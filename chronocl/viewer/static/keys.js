@@ -1,8 +1,11 @@
 // The keyboard shortcuts: one table, SHORTCUTS, that both binds the keys (the page's only
 // keydown handler) and fills the list `?` opens, so the list cannot miss a key the page binds.
-// Keys are ignored while typing in a field and when Ctrl, Alt or Meta is held.
+// Keys are ignored while typing in a field (where Ctrl+Z is the field's own undo) and when
+// Alt is held; entries marked `ctrl` need Ctrl (or Meta), the others act without it.
 
+import { toggleLegend } from './legend.js';
 import { resetCamera, standardView, toggleTriad } from './orientation.js';
+import { redo, undo } from './session.js';
 import { $, S, viewer } from './state.js';
 import { play, scalePlaySpeed, setPlayMode, slide, togglePlaying } from './timeline.js';
 
@@ -27,11 +30,16 @@ export const SHORTCUTS = [
   { keys: ['z'], label: 'Z', does: 'look along +Z (from behind)', run: () => standardView('+z') },
   { keys: ['Z'], label: 'Shift+Z', does: 'look along −Z (the front view)', run: () => standardView('-z') },
   { keys: ['a'], label: 'A', does: 'show / hide the axes triads', run: toggleTriad },
+  { keys: ['l'], label: 'L', does: 'show / hide the time legends', run: () => toggleLegend() },
+  { keys: ['z'], ctrl: true, label: 'Ctrl+Z', does: 'undo the last edit', run: undo },
+  { keys: ['Z', 'y'], ctrl: true, label: 'Ctrl+Shift+Z, Ctrl+Y', does: 'redo the edit undone', run: redo },
   { keys: ['?'], label: '?', does: 'show / hide this list', run: () => showHelp($('help').hidden) },
   { keys: ['Escape'], label: 'Esc', does: 'close this list', run: () => showHelp(false), always: true },
 ];
 
-viewer.shortcuts = SHORTCUTS.map((s) => ({ keys: s.keys, label: s.label, does: s.does }));
+const TEXT_FIELDS = 'textarea, input:not([type=checkbox]):not([type=range]):not([type=file])';
+
+viewer.shortcuts = SHORTCUTS.map((s) => ({ keys: s.keys, ctrl: !!s.ctrl, label: s.label, does: s.does }));
 
 export function showHelp(on) {
   $('help').hidden = !on;
@@ -57,11 +65,15 @@ function fillHelp() {
 export function bindKeys() {
   fillHelp();
   const byKey = new Map();
-  for (const s of SHORTCUTS) for (const k of s.keys) byKey.set(k, s);
+  const byCtrlKey = new Map();
+  for (const s of SHORTCUTS) for (const k of s.keys) (s.ctrl ? byCtrlKey : byKey).set(k, s);
   document.addEventListener('keydown', (e) => {
-    if (e.ctrlKey || e.altKey || e.metaKey) return;
-    if (e.target.closest && e.target.closest('input, select, textarea')) return;
-    const s = byKey.get(e.key);
+    if (e.altKey) return;
+    const ctrl = e.ctrlKey || e.metaKey;
+    // Menus and checkboxes have no undo of their own: Ctrl+Z there is the page's.
+    const field = ctrl ? TEXT_FIELDS : 'input, select, textarea';
+    if (e.target.closest && e.target.closest(field)) return;
+    const s = (ctrl ? byCtrlKey : byKey).get(e.key);
     if (!s || (!S.info && !s.always && s.keys[0] !== '?')) return;
     s.run();
     e.preventDefault();

@@ -12,6 +12,7 @@ export const S = {
   selectedPoint: 1,
   selectedView: 0,
   legend: [],
+  focus: null, // the world box the last frame framed (session.js keeps it with the state)
   playing: false,
   initialCamera: null, // the data set's opening camera (camera reset returns to it)
 };

@@ -2,6 +2,7 @@
 // pointer, the probe click and its marker, and the frames the server sends into them.
 
 import { frameArrived, send, sentAt, settleLater, update } from './connection.js';
+import { drawLegends } from './legend.js';
 import { drawTriads, turnedNormal } from './orientation.js';
 import { drawProbe } from './probe.js';
 import { $, S, clamp, setStatus, viewer } from './state.js';
@@ -71,7 +72,8 @@ function makePanel(i) {
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
     '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
     '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon/></svg>' +
-    '<div class="probe-mark"></div><div class="probe-band"></div><canvas class="triad"></canvas>';
+    '<div class="probe-mark"></div><div class="probe-band"></div><canvas class="legend"></canvas>' +
+    '<canvas class="triad"></canvas>';
   $('views').appendChild(el);
   const p = {
     el,
@@ -243,6 +245,8 @@ export function onFrame(buf) {
   const cut = (header.clip_outline || []).map(([x, y]) => `${x},${y}`).join(' ');
   for (const p of panels) p.outline.setAttribute('points', cut);
   S.legend = header.legend || [];
+  S.focus = header.focus || null;
+  drawLegends();
   const now = performance.now();
   const t0 = sentAt.get(header.id);
   viewer.frames += 1;

@@ -1,0 +1,140 @@
+"""`chronocl render --state SESSION.json`: draw what the viewer showed when the session was
+saved (same data set, window, views, camera, transfer functions, clip, size), as the viewer's
+Save PNG draws it. Options given on the command line override the session's fields."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+from chronocl.cli.options import err, parse_floats, parse_order, parse_shading, parse_sizes
+from chronocl.core.errors import InvalidParameterError
+
+# Options that do not apply to a session's render (its integration and draw are the viewer's).
+NOT_WITH_STATE = (
+    "turntable",
+    "save_chronovolume",
+    "level",
+    "device_format",
+    "frames",
+    "variables",
+)
+
+
+def given(ctx, params: dict) -> dict:
+    """The options of `params` given on the command line (not left at their defaults)."""
+    # By name: typer's ParameterSource is its own enum, not click's.
+    source = ctx.get_parameter_source
+    return {
+        k: v
+        for k, v in params.items()
+        if k != "ctx" and getattr(source(k), "name", None) == "COMMANDLINE"
+    }
+
+
+def render_state(state_path: Path, options: dict) -> None:
+    """Render the session in `state_path`; `options` are those given on the command line."""
+    from chronocl.core.paths import check_target
+    from chronocl.core.tf import TFSetting, TimeTF
+    from chronocl.core.time_labels import check_prefer
+    from chronocl.data.series import open_series
+    from chronocl.render.raycaster import check_clip, check_size
+    from chronocl.render.views import parse_color
+    from chronocl.viewer.session_file import (
+        dataset_path,
+        read_session,
+        render_session,
+        session_state,
+    )
+
+    for name in NOT_WITH_STATE:
+        if name in options:
+            flag = "--" + name.replace("_", "-")
+            raise InvalidParameterError(f"{flag} does not combine with --state; leave it out")
+    session = read_session(state_path)
+    store = options.get("store") or dataset_path(session, state_path.name)
+    out = options.get("out_path") or state_path.with_suffix(".png")
+    overwrite = bool(options.get("overwrite", False))
+    check_target(out, overwrite, [store, state_path])
+    fields = _session_fields(session, options)
+    series = open_series(store)
+    state = session_state(session | fields, series)
+    replace: dict = {}
+    if "size" in options:
+        replace["size"] = check_size(parse_sizes(options["size"], 2, "WxH", "512x512"))
+    if "clip" in options:
+        replace["clip"] = check_clip(parse_floats(options["clip"], 4, "clip"))
+    if "background" in options:
+        parse_color(options["background"])
+        replace["background"] = options["background"]
+    if "shading" in options or "shading_params" in options:
+        lit = parse_shading(options.get("shading", False), options.get("shading_params"))
+        replace["shading"] = lit
+    if "frame" in options:
+        replace["camera"] = dataclasses.replace(state.camera, frame=options["frame"])
+    state = dataclasses.replace(state, **replace)
+    time_labels = options.get("time_labels", "labels")
+    check_prefer(time_labels)
+    setting = TFSetting.load(options["tf"]) if "tf" in options else None
+    time_tf = TimeTF.preset(options["time_tf"]) if "time_tf" in options else None
+    data_tf = setting.data_tf if setting else None
+    if "colormap" in options:
+        data_tf = (data_tf or state.data_tf).with_colormap(options["colormap"])
+    spec = {
+        "data_tf": data_tf,
+        "time_tf": time_tf or (setting.time_tf if setting else None),
+        "normalize": options.get("normalize"),
+    }
+    t0 = time.perf_counter()
+    image = render_session(
+        state,
+        series,
+        engine=options.get("engine", "opencl"),
+        device=options.get("device"),
+        time_labels=time_labels,
+        **{k: v for k, v in spec.items() if v is not None},
+    )
+    image.save(out, overwrite=overwrite)
+    modes = ", ".join(m for m, _ in state.views)
+    err.print(f"wrote {out} ({modes} from {state_path.name}; {time.perf_counter() - t0:.2f} s)")
+
+
+def _session_fields(session: dict, options: dict) -> dict:
+    """The session fields that command-line options replace (in the session's terms)."""
+    fields: dict = {}
+    views = [dict(v) for v in session["views"]]
+    if "mode" in options:
+        names = [m.strip() for item in options["mode"] for m in item.split(",") if m.strip()]
+        order = views[0].get("order", "forward")
+        views = [{"mode": m, "order": order} for m in names]
+    if "order" in options:
+        order = parse_order(options["order"])
+        if not isinstance(order, str):
+            raise InvalidParameterError("with --state, --order is forward or backward")
+        views = [v | {"order": order} for v in views]
+    fields["views"] = views
+    if "window" in options:
+        parts = str(options["window"]).split(":")
+        try:
+            t0, t1, *rest = (int(p) for p in parts)
+        except ValueError:
+            t0 = t1 = -1
+            rest = []
+        if len(parts) not in (2, 3) or t0 < 0:
+            raise InvalidParameterError(
+                f"with --state, --window is t0:t1[:stride], e.g. 0:10:2; got {options['window']!r}"
+            )
+        fields["window"] = {"t0": t0, "t1": t1, "stride": rest[0] if rest else 1}
+    camera = dict(session["camera"])
+    for key in ("azimuth", "elevation", "zoom", "projection"):
+        if key in options:
+            camera[key] = options[key]
+    fields["camera"] = camera
+    if "enhance" in options:
+        fields["enhance"] = {"kind": options["enhance"]}
+    if "threshold" in options:
+        fields["threshold"] = options["threshold"]
+    if "outline" in options:
+        fields["outline"] = options["outline"]
+    return fields

@@ -1,0 +1,223 @@
+"""A viewer session kept as a file: one versioned JSON object holding everything a frame
+depends on, so a view found interactively becomes a reproducible figure.
+
+The viewer's Save session writes it, Load session and the page's URL fragment
+(`#state=...`, the same object) apply it as one step, and `chronocl render --state FILE`
+draws it. Its fields are the state fields of the protocol's update message (checked by
+`protocol.SESSION`) plus the format's version and the data set:
+
+    {"chronocl_session": 1,
+     "dataset": {"name": "vortex", "path": "/data/vortex.zarr", "shape": [30, 96, 96, 96]},
+     "window": {"t0": 10, "t1": 20, "stride": 1},
+     "views": [{"mode": "alpha", "order": "forward"}, {"mode": "max", "order": "forward"}],
+     "camera": {"azimuth": 30, "elevation": 20, "zoom": 1.2, "fov": 30,
+                "projection": "perspective"},
+     "data_tf": {"points": [[0, 1, 1, 1, 0], [1, 1, 1, 1, 0.9]]},
+     "time_tf": {"color": "rgb", "alpha": "hat", "center": 0.5, "width": 0.6, ...},
+     "enhance": {"kind": "none"}, "threshold": 0.05, "clip": null,
+     "size": [512, 512], "background": "black", "outline": false,
+     "shading": {"enabled": false, ...}, "focus": [-0.3, -0.4, -0.5, 0.3, 0.4, 0.5]}
+
+Camera, enhancement and lighting are shared by the views (the viewer draws its views under
+one camera). `focus` is the world box the camera framed (the viewer frames the visible region
+of a data set's first frame, or of the frame after a camera reset, and keeps it while the
+window moves); null frames the visible region of the session's own chronovolumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from chronocl.core.errors import InputNotFoundError, InvalidParameterError, InvalidSelectionError
+from chronocl.data.series import TimeSeries
+from chronocl.render.framing import framed
+from chronocl.render.image import Image
+from chronocl.render.views import compose_panels, describe, parse_color, raycaster
+from chronocl.viewer.datasets import Dataset, find_dataset
+from chronocl.viewer.protocol import SESSION, SESSION_KEY, SESSION_VERSION, decode_json
+from chronocl.viewer.saving import Downloads
+from chronocl.viewer.schema import ProtocolError
+from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
+
+MAX_FILE_BYTES = 1 << 20
+# The fields `merge` applies (the rest: version, data set, shading).
+STATE_FIELDS = (
+    "window",
+    "views",
+    "camera",
+    "data_tf",
+    "time_tf",
+    "enhance",
+    "threshold",
+    "clip",
+    "size",
+    "background",
+    "outline",
+    "shading",
+)
+
+
+class SessionFileError(InvalidParameterError):
+    """A session file that cannot be read, is not a session, or is of another version."""
+
+
+def session_of(
+    state: ViewState,
+    name: str,
+    series: TimeSeries,
+    path: str | None = None,
+    focus: Sequence[float] | None = None,
+) -> dict:
+    """The session file's object for `state` on the data set `name` (stored at `path`), its
+    views framing the world box `focus` (None: their visible region)."""
+    described = describe_state(state)
+    if state.data_tf.value_range is not None:
+        described["data_tf"]["value_range"] = list(state.data_tf.value_range)
+    dataset = {"name": name, "shape": list(series.shape)}
+    if path is not None:
+        dataset["path"] = str(path)
+    return {
+        SESSION_KEY: SESSION_VERSION,
+        "dataset": dataset,
+        **{k: described[k] for k in STATE_FIELDS},
+        "focus": None if focus is None else [float(v) for v in focus],
+    }
+
+
+def check_session(obj: object, where: str = "session") -> dict:
+    """The validated session object; raises SessionFileError naming the first bad field."""
+    if not isinstance(obj, dict) or SESSION_KEY not in obj:
+        raise SessionFileError(
+            f"{where} is not a chronocl session (no {SESSION_KEY!r} field); "
+            "save one with the viewer's Save session button"
+        )
+    try:
+        return SESSION.check(obj, "session")
+    except ProtocolError as exc:
+        raise SessionFileError(f"{where}: {exc}") from None
+
+
+def read_session(path: str | os.PathLike) -> dict:
+    """A session file read and validated (SessionFileError or InputNotFoundError, one line)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputNotFoundError(f"session file {str(p)!r} not found; save one in the viewer")
+    if p.stat().st_size > MAX_FILE_BYTES:
+        raise SessionFileError(f"{p.name} is over {MAX_FILE_BYTES >> 20} MiB: not a session file")
+    try:
+        obj = decode_json(p.read_text(encoding="utf-8"))
+    except (ProtocolError, ValueError) as exc:  # UnicodeDecodeError and JSON errors too
+        raise SessionFileError(f"{p.name} is not valid JSON ({exc})") from None
+    return check_session(obj, p.name)
+
+
+def write_session(session: dict) -> bytes:
+    """The session as JSON text, one top-level field a line."""
+    lines = [f"  {json.dumps(k)}: {json.dumps(v)}" for k, v in session.items()]
+    return ("{\n" + ",\n".join(lines) + "\n}\n").encode()
+
+
+def apply_session(state: ViewState, session: dict, n_steps: int) -> ViewState:
+    """`state` with every state field of a validated session applied (one step: nothing is
+    applied when a field does not fit the data set)."""
+    fields = {k: session[k] for k in STATE_FIELDS if k in session}
+    if "shading" in fields and fields["shading"] is None:  # null: the lighting as it is
+        del fields["shading"]
+    try:
+        return merge(state, fields, n_steps)
+    except InvalidSelectionError as exc:  # a window beyond the series' steps
+        raise SessionFileError(f"the session does not fit its data set: {exc}") from None
+
+
+def loaded_state(datasets: list[Dataset], state: ViewState, session: dict) -> tuple[int, ViewState]:
+    """The data set a validated session names (by name, else by path) and the state it
+    describes there: `state` with the session applied when that data set is shown, else the
+    data set's defaults with it applied."""
+    ds = session["dataset"]
+    i = find_dataset(datasets, ds["name"], ds.get("path"))
+    series = datasets[i].series
+    base = state if i == state.dataset else default_state(i, series)
+    return i, apply_session(base, session, series.n_steps)
+
+
+def checked_focus(state: ViewState, box: Sequence[float] | None) -> tuple | None:
+    """`box` as a camera focus (ChronoclError naming the problem), or None."""
+    if box is None:
+        return None
+    return dataclasses.replace(state.camera, focus=tuple(box)).focus
+
+
+def save_session(
+    downloads: Downloads, state: ViewState, ds: Dataset, focus: Sequence[float] | None = None
+) -> tuple[str, str]:
+    """`state` (framing `focus`) as a session file download; returns its key and name."""
+    name = f"{ds.name}-session.json"
+    body = write_session(session_of(state, ds.name, ds.series, ds.path, focus))
+    return downloads.add(body, name, "application/json"), name
+
+
+def session_state(session: dict, series: TimeSeries) -> ViewState:
+    """The viewer state a session describes on `series` (the viewer's defaults elsewhere), its
+    camera framing the session's focus."""
+    state = apply_session(default_state(0, series), session, series.n_steps)
+    focus = checked_focus(state, session.get("focus"))
+    return dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=focus))
+
+
+def dataset_path(session: dict, where: str) -> Path:
+    """The store a session names (`dataset.path`), which must exist."""
+    path = session["dataset"].get("path")
+    if path is None:
+        raise SessionFileError(
+            f"{where} names the data set {session['dataset']['name']!r} but not its path; "
+            "give the store on the command line"
+        )
+    return Path(path)
+
+
+def render_session(
+    state: ViewState,
+    series: TimeSeries,
+    *,
+    engine: str = "opencl",
+    device: str | None = None,
+    time_labels: str = "labels",
+    **spec_changes: object,
+) -> Image:
+    """The views of `state` drawn as the viewer's Save PNG draws them: the same chronovolumes,
+    camera (as the panels are drawn, framing its focus, else the visible region), size, clip,
+    lighting, background and outline, each panel labelled, the time-colour legend below.
+    `spec_changes` replace fields of every view's IntegrationSpec (e.g. a time_tf given on the
+    command line)."""
+    from chronocl.integration.inmemory import integrate
+
+    sel = state.selection(series.n_steps)
+    specs = [dataclasses.replace(state.spec(i), **spec_changes) for i in range(len(state.views))]
+    cvs = [integrate(series, sel, spec=s, engine=engine, device=device) for s in specs]
+    state = dataclasses.replace(state, camera=framed(state.camera, cvs))
+    rc = raycaster()
+    bg = parse_color(state.background)
+    panels = []
+    for cv in cvs:
+        volume = rc.upload(cv)
+        try:
+            panels.append(
+                rc.draw(
+                    volume,
+                    state.panel_camera(),
+                    state.size,
+                    background=bg,
+                    clip=state.clip,
+                    step=1.0,
+                    outline=state.outline,
+                    shading=state.shading,
+                )
+            )
+        finally:
+            volume.release()
+    labels = [describe(cv) for cv in cvs]
+    return Image(compose_panels(panels, labels, cvs, None, bg, time_labels=time_labels))

@@ -1,0 +1,103 @@
+// The on-view legend: in each view, over its bottom left, the window's time colours as a bar
+// of one cell per step (oldest left) with step numbers under it, and the time-opacity curve
+// over the bar, as the saved PNG's legend shows them. It comes from each frame's `legend`
+// (S.legend: step, rgb, a); `L` or **legend** in the header shows or hides it.
+
+import { $, S, viewer } from './state.js';
+
+export const legendOn = { shown: true };
+
+const PAD = 12; // the left pad holds the curve's α
+const TOP = 5;
+const CURVE_H = 22;
+const BAR_H = 9;
+
+function draw(canvas) {
+  const items = S.legend || [];
+  canvas.hidden = !legendOn.shown || !items.length;
+  if (canvas.hidden) return;
+  const dpr = window.devicePixelRatio || 1;
+  const w = canvas.clientWidth;
+  const h = canvas.clientHeight;
+  if (canvas.width !== Math.round(w * dpr) || canvas.height !== Math.round(h * dpr)) {
+    canvas.width = Math.round(w * dpr);
+    canvas.height = Math.round(h * dpr);
+  }
+  const ctx = canvas.getContext('2d');
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  ctx.clearRect(0, 0, w, h);
+  ctx.fillStyle = 'rgba(16, 18, 21, 0.72)'; // readable on black and on white
+  ctx.beginPath();
+  ctx.roundRect(0, 0, w, h, 4);
+  ctx.fill();
+  const n = items.length;
+  const x0 = PAD;
+  const cell = (w - 2 * PAD) / n;
+  const top = TOP;
+  const barY = top + CURVE_H + 3;
+  items.forEach((it, k) => {
+    ctx.fillStyle = `rgb(${it.rgb.map((c) => Math.round(c * 255)).join(',')})`;
+    ctx.fillRect(x0 + k * cell, barY, Math.max(1, cell - (n > 1 ? 1 : 0)), BAR_H);
+  });
+  // The time-opacity curve, a point per step over its cell, between faint lines at opacity 0
+  // and 1; "α" names it.
+  const X = (k) => x0 + (k + 0.5) * cell;
+  const Y = (a) => top + 2 + (1 - a) * (CURVE_H - 4);
+  ctx.strokeStyle = 'rgba(255,255,255,0.22)';
+  ctx.lineWidth = 1;
+  ctx.beginPath();
+  for (const a of [0, 1]) {
+    ctx.moveTo(x0, Math.round(Y(a)) + 0.5);
+    ctx.lineTo(w - PAD, Math.round(Y(a)) + 0.5);
+  }
+  ctx.stroke();
+  ctx.beginPath();
+  items.forEach((it, k) => (k ? ctx.lineTo(X(k), Y(it.a)) : ctx.moveTo(X(k), Y(it.a))));
+  ctx.strokeStyle = '#f0a030';
+  ctx.lineWidth = 1.6;
+  ctx.stroke();
+  ctx.fillStyle = '#f0a030';
+  for (let k = 0; k < n && cell >= 6; k++) {
+    ctx.beginPath();
+    ctx.arc(X(k), Y(items[k].a), 1.8, 0, 2 * Math.PI);
+    ctx.fill();
+  }
+  // Step numbers: the first and last, and between them as many as fit.
+  ctx.fillStyle = '#e6e6e6';
+  ctx.font = '10px system-ui, sans-serif';
+  ctx.textBaseline = 'top';
+  ctx.textAlign = 'center';
+  const every = Math.max(1, Math.ceil(n / Math.max(1, Math.floor((w - 2 * PAD) / 28))));
+  items.forEach((it, k) => {
+    if (k % every && k !== n - 1) return;
+    if (k !== n - 1 && n - 1 - k < every && k) return; // keep clear of the last label
+    ctx.fillText(String(it.step), X(k), barY + BAR_H + 2);
+  });
+  ctx.textAlign = 'right';
+  ctx.textBaseline = 'middle';
+  ctx.fillStyle = '#9aa3ad';
+  ctx.fillText('α', x0 - 1, Y(0.5));
+  canvas.dataset.steps = items.map((it) => it.step).join(',');
+}
+
+// Every view's legend, for the frame shown.
+export function drawLegends() {
+  for (const c of document.querySelectorAll('#views .view canvas.legend')) draw(c);
+}
+
+// Where step k's colour cell is in a legend canvas (CSS px), for scripted use (the tests).
+viewer.legendCell = (k) => {
+  const c = document.querySelector('#views .view canvas.legend');
+  const cell = (c.clientWidth - 2 * PAD) / S.legend.length;
+  return { x: PAD + (k + 0.5) * cell, y: TOP + CURVE_H + 3 + BAR_H / 2 };
+};
+
+export function toggleLegend(on = !legendOn.shown) {
+  legendOn.shown = on;
+  $('legend-on').checked = on;
+  drawLegends();
+}
+
+export function bindLegend() {
+  $('legend-on').addEventListener('change', () => toggleLegend($('legend-on').checked));
+}
