@@ -13,6 +13,7 @@ import asyncio
 import math
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import google_crc32c
@@ -47,6 +48,17 @@ def level_compressors(data_compressors: object) -> tuple:
     """The codecs of the levels: a fast lz4, then a crc32c when the data's chain has one."""
     checked = any(isinstance(c, Crc32cCodec) for c in data_compressors or ())
     return (LEVEL_CODEC, Crc32cCodec()) if checked else (LEVEL_CODEC,)
+
+
+@dataclass(frozen=True)
+class Pooled:
+    """A step pooled into every level and pool (`levels`, by (n, pool)), and the step's own
+    minimum, maximum and mean, which the pooling gives almost for free."""
+
+    levels: dict
+    minimum: float
+    maximum: float
+    mean: float
 
 
 class LevelWriter:
@@ -91,6 +103,9 @@ class LevelWriter:
                     dtype=self.dtype,
                     compressors=self.compressors,
                     config={"write_empty_chunks": True},  # a missing chunk means damage
+                    # Chunk files side by side (c.T.Z.0.0), not in a folder per step and
+                    # chunk: six new folders a step cost more than pooling it on ext4.
+                    chunk_key_encoding={"name": "default", "separator": "."},
                 )
         self._direct = all(_direct_writable(a) for a in arrays.values())
         self._arrays = arrays
@@ -110,12 +125,15 @@ class LevelWriter:
         """Pool step `t` (Z, Y, X) into every level and pool and write them."""
         self.write(t, self.pool(t, step))
 
-    def pool(self, t: int, step: np.ndarray) -> dict:
+    def pool(self, t: int, step: np.ndarray) -> Pooled:
         """Step `t` (Z, Y, X) pooled into every level and pool, its statistics recorded.
 
         Steps come in order. The step is pooled in z-slabs of about SLAB_BYTES (a multiple of
         2^L planes, so every level's slab starts on an even plane), which stay in the CPU's
-        cache through all levels. Only this reads `step`; `write` needs just the result.
+        cache through all levels. Only this reads `step`; `write` needs just the result. The
+        step's own minimum and maximum are those of level 1's min and max pools, and its sum
+        comes with level 1's mean (`downsample`'s `total`), so `write_store` need not read the
+        step again for its statistics.
         """
         if t != self.done:
             raise InvalidDataError(f"levels got time step {t}, expected {self.done}")
@@ -136,12 +154,14 @@ class LevelWriter:
             if self.dtype.kind == "i"
             else np.float64
         )
+        step_sums: list = []  # the step's own sum, slab by slab
         for z0 in range(0, step.shape[0], planes):
             for pool in POOLS:
                 a = step[z0 : z0 + planes]
                 for n in range(1, depth + 1):
                     z = z0 >> n
-                    a = downsample(a, pool, out[n, pool][z : z + (a.shape[0] + 1) // 2])
+                    sums = step_sums if n == 1 and pool == "mean" else None
+                    a = downsample(a, pool, out[n, pool][z : z + (a.shape[0] + 1) // 2], sums)
                     lo, hi, total = parts[n, pool]  # statistics while the slab is in cache
                     lo.append(a.min())
                     hi.append(a.max())
@@ -153,15 +173,20 @@ class LevelWriter:
             smax.append(float(max(hi)))
             smean.append(float(math.fsum(float(v) for v in total) / a.size))
         self.done += 1
-        return out
+        return Pooled(
+            out,
+            minimum=self.stats[1, "min"][0][-1],
+            maximum=self.stats[1, "max"][1][-1],
+            mean=math.fsum(float(v) for v in step_sums) / step.size,
+        )
 
-    def write(self, t: int, out: dict) -> None:
+    def write(self, t: int, pooled: Pooled) -> None:
         """Write step `t`'s levels (what `pool` returned) into their arrays."""
         if self.direct:
-            for key, a in out.items():
+            for key, a in pooled.levels.items():
                 _write_step_chunks(self.arrays[key], t, a)
         else:
-            _write_together([(self.arrays[key], t, a) for key, a in out.items()])
+            _write_together([(self.arrays[key], t, a) for key, a in pooled.levels.items()])
 
     def finish(self) -> None:
         self.create()
@@ -236,7 +261,8 @@ def _write_step_chunks(arr: zarr.Array, t: int, a: np.ndarray) -> None:
         raw = np.ascontiguousarray(part, little)
         data = codec.encode(raw) if blosc is not None else raw.tobytes()
         file = root / meta.chunk_key_encoding.encode_chunk_key((t, i, 0, 0))
-        file.parent.mkdir(parents=True, exist_ok=True)
+        if file.parent != root:  # "/"-separated keys: a folder per step and chunk
+            file.parent.mkdir(parents=True, exist_ok=True)
         with open(file, "wb") as f:
             f.write(data)
             if crc:

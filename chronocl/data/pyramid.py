@@ -58,12 +58,15 @@ def check_pool(pool: str) -> None:
         raise InvalidParameterError(f"unknown pool {pool!r}; choose one of {', '.join(POOLS)}")
 
 
-def downsample(step: np.ndarray, pool: str, out: np.ndarray | None = None) -> np.ndarray:
+def downsample(
+    step: np.ndarray, pool: str, out: np.ndarray | None = None, total: list | None = None
+) -> np.ndarray:
     """One (Z, Y, X) step pooled over 2x2x2 blocks: (ceil(Z/2), ceil(Y/2), ceil(X/2)).
 
     Partial blocks at odd edges pool the voxels present. "mean" is the float64 mean (integer
     dtypes rounded half to even, as np.rint, and cast back); "max" and "min" are exact. `out`,
-    if given, receives the result (an array of that shape and the step's dtype).
+    if given, receives the result (an array of that shape and the step's dtype). `total`, if
+    given, receives the exact sum of the step's values (an int or float).
     """
     check_pool(pool)
     a = np.asarray(step)
@@ -71,7 +74,9 @@ def downsample(step: np.ndarray, pool: str, out: np.ndarray | None = None) -> np
         raise InvalidDataError(f"a step to downsample is (Z, Y, X); got shape {a.shape}")
     dtype = a.dtype
     if dtype == np.uint8 and a.flags.c_contiguous and not any(n % 2 for n in a.shape):
-        return _pool_uint8(a, pool, out)
+        return _pool_uint8(a, pool, out, total)
+    if total is not None:
+        total.append(a.sum(dtype=_SUMS.get(dtype.kind, np.float64)).item())
     if pool != "mean":
         op = np.maximum if pool == "max" else np.minimum
         for axis in range(3):
@@ -95,7 +100,9 @@ def downsample(step: np.ndarray, pool: str, out: np.ndarray | None = None) -> np
     return out
 
 
-def _pool_uint8(a: np.ndarray, pool: str, out: np.ndarray | None) -> np.ndarray:
+def _pool_uint8(
+    a: np.ndarray, pool: str, out: np.ndarray | None, total: list | None = None
+) -> np.ndarray:
     """`downsample` of a C-contiguous uint8 step with even sides: the same values, faster.
 
     Read as uint16, a row holds its x pairs, one voxel per byte (which byte is which does not
@@ -111,6 +118,8 @@ def _pool_uint8(a: np.ndarray, pool: str, out: np.ndarray | None) -> np.ndarray:
         s += w[0::2] >> shift
         s += w[1::2] >> shift
         s = s[:, 0::2] + s[:, 1::2]
+        if total is not None:  # the step's sum from its blocks' sums, a pass over an eighth
+            total.append(int(s.sum(dtype=np.uint64)))
         q = s >> np.uint16(3)  # rounded half to even, as in `downsample`
         q &= np.uint16(1)
         s += np.uint16(3)
@@ -121,11 +130,15 @@ def _pool_uint8(a: np.ndarray, pool: str, out: np.ndarray | None) -> np.ndarray:
         zy = op(a[0::2], a[1::2])
         zy = op(zy[:, 0::2], zy[:, 1::2]).view(np.uint16)
         s = op(zy & byte, zy >> shift)
+        if total is not None:
+            total.append(int(a.sum(dtype=np.uint64)))
     if out is None:
         return s.astype(np.uint8)
     np.copyto(out, s, casting="unsafe")
     return out
 
+
+_SUMS = {"u": np.uint64, "i": np.int64, "b": np.int64}  # exact sums of a step's values
 
 # Exact sums of 8 values: uint8 in uint16, 16-bit integers in int32, floats in float64.
 _ACCUMULATORS = {"uint8": np.uint16, "uint16": np.int32, "int16": np.int32}

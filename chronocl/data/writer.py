@@ -145,16 +145,21 @@ def write_store(
                 pooled = pools.submit(pyramid.pool, t, step) if pools else None
                 try:
                     arr[t] = step
-                    smin.append(float(step.min()))
-                    smax.append(float(step.max()))
-                    smean.append(float(step.mean(dtype=np.float64)))
+                    if pooled is None:  # else the pooling gives them
+                        smin.append(float(step.min()))
+                        smax.append(float(step.max()))
+                        smean.append(float(step.mean(dtype=np.float64)))
                 finally:  # the caller may reuse the step's buffer once it has the next
                     if pooled is not None:
                         wait([pooled])
                 if pooled is not None:
+                    done = pooled.result()
+                    smin.append(done.minimum)
+                    smax.append(done.maximum)
+                    smean.append(done.mean)
                     if written is not None:
                         written.result()
-                    written = writes.submit(pyramid.write, t, pooled.result())
+                    written = writes.submit(pyramid.write, t, done)
                 count += 1
             if written is not None:
                 written.result()
