@@ -364,3 +364,34 @@ def test_clip_plane_outline_and_turning_it_by_dragging(browser, server, tmp_path
         page.screenshot(path=os.path.join(shots_dir(tmp_path), "clip-turned.png"))
     finally:
         p.close()
+
+
+def test_two_periods_side_by_side(browser, server, tmp_path):  # noqa: F811
+    """Typing a window into a view's header gives that view its own period; emptying it links
+    the view to the timeline's window again."""
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        before = p.last()
+        page.select_option("#nviews", "2")
+        p.settle(before)
+        labels = "() => [...document.querySelectorAll('.view-label')].map(l => l.textContent)"
+        own = page.locator(".own-window").nth(1)
+        before = p.last()
+        own.fill("0:4")
+        own.press("Enter")
+        p.settle(before)
+        first, second = p.eval(labels)
+        assert second.endswith("steps 0:4") and not first.endswith("steps 0:4")
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "two-periods.png"))
+        before = p.last()
+        own.fill("")
+        own.press("Enter")
+        p.settle(before)
+        first, second = p.eval(labels)
+        assert first.split("steps")[1] == second.split("steps")[1]  # linked again
+        own.fill("9:99")
+        own.press("Enter")
+        assert "bad" in own.get_attribute("class")  # beyond the series: refused in the page
+    finally:
+        p.close()

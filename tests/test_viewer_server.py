@@ -483,3 +483,39 @@ def test_clip_plane_polygon_and_outline():
     assert square.shape == (4, 2)
     np.testing.assert_allclose(square.mean(axis=0), [0.5, 0.5], atol=1e-6)
     assert len(np.unique(square[:, 0].round(6))) == len(np.unique(square[:, 1].round(6))) == 2
+
+
+def test_a_view_may_have_its_own_window(client):
+    """Two periods side by side: a view with its own window integrates that window (its label,
+    its probe's window), the other follows the shared one; a session keeps both."""
+    from chronocl.viewer.session_file import apply_session, session_of
+    from chronocl.viewer.view_state import ViewState
+
+    client.open(0, size=(64, 64))
+    own = {"t0": 0, "t1": 4, "stride": 1}
+    rid = client.send(
+        {"type": "update", "views": [{"mode": "alpha"}, {"mode": "alpha", "window": own}]}
+    )
+    header = client.frame_for(rid)[1]
+    assert header["views"][0]["label"].endswith("steps 1:11")
+    assert header["views"][1]["label"].endswith("steps 0:4")
+    rid = client.send({"type": "update", "window": {"t0": 5, "t1": 9}})
+    header = client.frame_for(rid)[1]  # the shared window moved, the own one stayed
+    assert header["views"][0]["label"].endswith("steps 5:9")
+    assert header["views"][1]["label"].endswith("steps 0:4")
+    rid = client.send({"type": "probe", "view": 1, "x": 0.5, "y": 0.5})
+    assert client.wait("probe", rid)[1]["window"] == [0, 1, 2, 3]
+    bad = {"mode": "alpha", "window": {"t0": 8, "t1": 40}}
+    rid = client.send({"type": "update", "views": [{"mode": "alpha"}, bad]})
+    assert "view 2's own window" in client.wait("error", rid)[1]["message"]
+    # A session file holds each view's window; applied, it gives the same windows back.
+    state = ViewState(views=(("alpha", "forward"),) * 2, window=(5, 9, 1))
+    state = apply_session(state, {"views": [{"mode": "alpha"}, {"mode": "max", "window": own}]}, 12)
+    saved = session_of(state, "vortex", _Series())  # only the series' shape is written
+    assert saved["views"][1]["window"] == own and saved["views"][0]["window"] is None
+    again = apply_session(ViewState(), {k: saved[k] for k in ("views", "window")}, 12)
+    assert again.view_windows == (None, (0, 4, 1)) and again.selection(12, 1).steps == (0, 1, 2, 3)
+
+
+class _Series:
+    shape = (12, 32, 32, 32)

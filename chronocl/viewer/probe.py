@@ -138,7 +138,7 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     reply |= {"reached": all(h["reached"] for h in hits)}
     reply["opacity"] = round(min(h["opacity"] for h in hits), 4)
     reply["threshold"] = PROBE_THRESHOLD
-    window = list(state.selection(ds.series.n_steps).steps)
+    window = list(state.selection(ds.series.n_steps, view).steps)
     reply["window"] = window
     empty = {"voxel": None, "box": None, "values": None, "min": None, "max": None, "csv": None}
     if any(h["voxel"] is None for h in hits):

@@ -96,10 +96,14 @@ CAMERA = Obj(
         "projection": Enum(PROJECTIONS),
     }
 )
-VIEW = Obj({"mode": Enum(modes.names()), "order": Enum(ORDERS)}, frozenset({"mode"}))
 WINDOW = Obj(
     {"t0": Int(0, 10**7), "t1": Int(1, 10**7), "stride": Int(1, 10**7)},
     frozenset({"t0", "t1"}),
+)
+# A view's own window (null: it follows the shared one), to compare two periods side by side.
+VIEW = Obj(
+    {"mode": Enum(modes.names()), "order": Enum(ORDERS), "window": Nullable(WINDOW)},
+    frozenset({"mode"}),
 )
 DATA_TF = Obj(
     {

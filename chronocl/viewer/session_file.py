@@ -9,7 +9,8 @@ draws it. Its fields are the state fields of the protocol's update message (chec
     {"chronocl_session": 1,
      "dataset": {"name": "vortex", "path": "/data/vortex.zarr", "shape": [30, 96, 96, 96]},
      "window": {"t0": 10, "t1": 20, "stride": 1},
-     "views": [{"mode": "alpha", "order": "forward"}, {"mode": "max", "order": "forward"}],
+     "views": [{"mode": "alpha", "order": "forward", "window": null},
+               {"mode": "alpha", "order": "forward", "window": {"t0": 40, "t1": 50}}],
      "camera": {"azimuth": 30, "elevation": 20, "zoom": 1.2, "fov": 30,
                 "projection": "perspective"},
      "data_tf": {"points": [[0, 1, 1, 1, 0], [1, 1, 1, 1, 0.9]]},
@@ -18,7 +19,8 @@ draws it. Its fields are the state fields of the protocol's update message (chec
      "size": [512, 512], "background": "black", "outline": false,
      "shading": {"enabled": false, ...}, "focus": [-0.3, -0.4, -0.5, 0.3, 0.4, 0.5]}
 
-Camera, enhancement and lighting are shared by the views (the viewer draws its views under
+A view's `window` is its own (to compare two periods side by side); null follows the shared
+`window`. Camera, enhancement and lighting are shared by the views (the viewer draws its views under
 one camera). `focus` is the world box the camera framed (the viewer frames the visible region
 of a data set's first frame, or of the frame after a camera reset, and keeps it while the
 window moves); null frames the visible region of the session's own chronovolumes.
@@ -195,9 +197,11 @@ def render_session(
     command line)."""
     from chronocl.integration.inmemory import integrate
 
-    sel = state.selection(series.n_steps)
     specs = [dataclasses.replace(state.spec(i), **spec_changes) for i in range(len(state.views))]
-    cvs = [integrate(series, sel, spec=s, engine=engine, device=device) for s in specs]
+    cvs = [
+        integrate(series, state.selection(series.n_steps, i), spec=s, engine=engine, device=device)
+        for i, s in enumerate(specs)
+    ]
     state = dataclasses.replace(state, camera=framed(state.camera, cvs))
     rc = raycaster()
     bg = parse_color(state.background)

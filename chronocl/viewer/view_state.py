@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 from chronocl import modes
 from chronocl.core.enhance import Enhance
-from chronocl.core.errors import InvalidParameterError
+from chronocl.core.errors import ChronoclError, InvalidParameterError
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeAlpha, TimeColor, TimeTF
 from chronocl.data.series import TimeSeries
@@ -38,6 +38,9 @@ class ViewState:
         default_factory=lambda: ((modes.names()[0], ORDERS[0]),)
     )
     window: tuple[int, int, int] = (0, 1, 1)
+    # Each view's own window (t0, t1, stride), or None where it follows `window` (linked);
+    # as long as `views` or shorter (views past its end are linked).
+    view_windows: tuple[tuple[int, int, int] | None, ...] = ()
     data_tf: DataTF = field(default_factory=lambda: DataTF(points=DEFAULT_POINTS))
     time_tf: dict = field(
         default_factory=lambda: {
@@ -63,9 +66,16 @@ class ViewState:
     outline: bool = False
     shading: Shading = OFF  # lighting; off by default (llvmpipe draws a lit frame 3-7x slower)
 
-    def selection(self, n_steps: int) -> Selection:
-        t0, t1, stride = self.window
+    def selection(self, n_steps: int, view: int | None = None) -> Selection:
+        """The steps of the shared window, or of `view`'s own window where it has one."""
+        t0, t1, stride = self.own_window(view) or self.window
         return Selection.window(t0, t1, stride, n_steps)
+
+    def own_window(self, view: int | None) -> tuple[int, int, int] | None:
+        """`view`'s own window, None where it is linked to the shared one."""
+        if view is None or view >= len(self.view_windows):
+            return None
+        return self.view_windows[view]
 
     def panel_camera(self) -> Camera:
         """The camera as the panels are drawn: on a panel taller than wide the camera's field
@@ -123,6 +133,17 @@ def merge(state: ViewState, msg: dict, n_steps: int) -> ViewState:
         changes["camera"] = Camera(**cam)
     if "views" in msg:
         changes["views"] = tuple((v["mode"], v.get("order", ORDERS[0])) for v in msg["views"])
+        own = []
+        for i, v in enumerate(msg["views"]):
+            w = v.get("window")
+            if w is not None:
+                w = (w["t0"], w["t1"], w.get("stride", 1))
+                try:
+                    Selection.window(*w, n_steps)
+                except ChronoclError as exc:
+                    raise type(exc)(f"view {i + 1}'s own window: {exc}") from None
+            own.append(w)
+        changes["view_windows"] = tuple(own)
     if "window" in msg:
         w = msg["window"]
         window = (w["t0"], w["t1"], w.get("stride", 1))
@@ -176,7 +197,10 @@ def describe_state(state: ViewState) -> dict:
             "fov": cam.fov,
             "projection": cam.projection,
         },
-        "views": [{"mode": m, "order": o} for m, o in state.views],
+        "views": [
+            {"mode": m, "order": o, "window": _window_dict(state.own_window(i))}
+            for i, (m, o) in enumerate(state.views)
+        ],
         "window": dict(zip(("t0", "t1", "stride"), state.window, strict=True)),
         "data_tf": {"points": [list(p) for p in state.data_tf.points]},
         "time_tf": dict(state.time_tf),
@@ -195,3 +219,7 @@ def describe_state(state: ViewState) -> dict:
         "outline": state.outline,
         "shading": state.shading.to_dict(),
     }
+
+
+def _window_dict(window: tuple[int, int, int] | None) -> dict | None:
+    return None if window is None else dict(zip(("t0", "t1", "stride"), window, strict=True))

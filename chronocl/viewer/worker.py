@@ -5,15 +5,12 @@ thread that makes frames from it. Updates are merged into the desired state at o
 (validated there, so a bad one is answered with an error and changes nothing) and leave one
 "latest pending request" slot filled; the worker always renders the newest state, so input
 that arrives while a frame is being made replaces older pending input instead of queueing
-behind it. Each view keeps a `Session` (the moving window: a slide of the window goes through
-`Session.slide`, which updates incrementally) and its uploaded texture, so a camera change
-only re-renders and a window or TF change only re-integrates what changed. Histogram, probe
-and save requests wait in a short queue behind the newest frame. The camera frames the visible
-region found at a data set's first frame and again at each camera reset (`refocus`), and keeps
-that framing while the window moves.
-
-OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared); GL
-work runs on the viewer's GL thread (`gl_thread.on_gl`).
+behind it. The views' sessions and textures (`view_sessions.Views`) integrate only what
+changed, so a camera change only re-renders and a window slide updates incrementally.
+Histogram, probe and save requests (`tasks.Tasks`) wait in a short queue behind the newest
+frame. The camera frames the visible region found at a data set's first frame and again at
+each camera reset (`refocus`), and keeps that framing while the window moves. GL work runs on
+the viewer's GL thread (`gl_thread.on_gl`).
 """
 
 from __future__ import annotations
@@ -28,8 +25,6 @@ from collections.abc import Callable
 from chronocl import modes
 from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.data.window import WindowManager
-from chronocl.integration.session import Session
 from chronocl.render.framing import framed
 from chronocl.render.views import describe, parse_color
 from chronocl.viewer.clip_outline import clip_outline
@@ -47,21 +42,20 @@ from chronocl.viewer.frames import (
     visible_fraction,
 )
 from chronocl.viewer.gl_thread import on_gl
-from chronocl.viewer.movie import movie_states, render_movie
-from chronocl.viewer.probe import probe_reply, project
-from chronocl.viewer.protocol import MOVIE_FORMATS, pack_frame
-from chronocl.viewer.saving import Downloads, compose_image, save_chronovolume, save_image
-from chronocl.viewer.session_file import checked_focus, loaded_state, save_session
-from chronocl.viewer.slots import ViewSlot, upload
+from chronocl.viewer.probe import project
+from chronocl.viewer.protocol import pack_frame
+from chronocl.viewer.saving import Downloads
+from chronocl.viewer.session_file import checked_focus, loaded_state
+from chronocl.viewer.slots import upload
+from chronocl.viewer.tasks import Tasks
+from chronocl.viewer.view_sessions import Views
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
-INTEGRATE_LOCK = threading.Lock()
 MAX_TASKS = 8
-TARGET_MS = 150.0  # a coarse level is drawn first when full resolution would take longer
 REFINE_AFTER_S = 0.25  # idle time after a coarse frame before the full-resolution one
 
 
-class ClientWorker:
+class ClientWorker(Tasks):
     """The render thread of one client. `send(data)` delivers a text (str) or binary (bytes)
     message to the client and returns False once the client is gone."""
 
@@ -84,11 +78,7 @@ class ClientWorker:
         self._pending: tuple[ViewState, int | None] | None = None
         self._tasks: deque[tuple[str, dict]] = deque()
         self._closed = False
-        self._slots: list[ViewSlot] = []
-        self._slots_dataset = -1
-        # The views show one window of one data set: their sessions share its resident steps,
-        # one window manager per level and pooling.
-        self._managers: dict[tuple[int, str], WindowManager] = {}
+        self.views = Views(datasets, engine, device, memory)
         self._refine_at: float | None = None  # when the coarse frame shown is to be refined
         self._draw_budget = DrawBudget()  # pixels a frame answering input may draw
         self._last_rid: int | None = None
@@ -188,7 +178,7 @@ class ClientWorker:
             error_text(exc, "in a client's render thread")
         finally:
             try:
-                self._release()
+                self.views.release()
             except Exception as exc:
                 error_text(exc, "releasing a client's views")
 
@@ -223,81 +213,10 @@ class ClientWorker:
     def _reply(self, obj: dict) -> bool:
         return self.send(json.dumps(obj))
 
-    def _release(self) -> None:
-        slots, self._slots = self._slots, []
-        if any(s.volume is not None for s in slots):
-            on_gl(lambda rc: [s.release_gl() for s in slots])
-        for s in slots:
-            s.drop_session()
-        self._close_manager()
-
-    def _close_manager(self) -> None:
-        managers, self._managers = self._managers, {}
-        for m in managers.values():
-            m.close()
-
-    def _chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
-        """The views' chronovolumes for `state`, integrating only where something changed."""
-        series = self.datasets[state.dataset].series
-        if self._slots_dataset != state.dataset:
-            for s in self._slots:
-                s.drop_session()
-            self._close_manager()
-            self._slots_dataset = state.dataset
-        while len(self._slots) < len(state.views):
-            self._slots.append(ViewSlot())
-        sel = state.selection(series.n_steps)
-        integrate_ms, incremental = 0.0, False
-        cvs = []
-        for i in range(len(state.views)):
-            slot = self._slots[i]
-            spec = state.spec(i)
-            if (
-                state.quality == "preview"
-                and spec.enhance.kind == "silhouette"
-                and slot.session is not None
-                and slot.cv is not None
-            ):
-                # Silhouettes follow the camera; while dragging keep the last ones.
-                old = slot.session.spec
-                spec = dataclasses.replace(spec, enhance=old.enhance)
-            with INTEGRATE_LOCK:
-                cv, ms, inc = self._integrate(slot, series, spec, sel)
-            integrate_ms += ms
-            incremental = incremental or inc
-            cvs.append(cv)
-        for slot in self._slots[len(state.views) :]:
-            slot.drop_session()
-        return cvs, integrate_ms, incremental
-
-    def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
-        s = slot.session
-        if s is not None and slot.cv is not None and s.spec == spec and s.selection == sel:
-            return slot.cv, 0.0, False
-        if s is None or (s.spec != spec and s.selection != sel):
-            if s is not None:
-                s.close()
-            s = slot.session = Session(
-                series,
-                memory=self.memory,
-                engine=self.engine,
-                device=self.device,
-                spec=spec,
-                level="auto",
-                target_ms=TARGET_MS,
-                managers=self._managers,
-            )
-            cv = s.set_window(sel)
-        else:  # the session slides where the new window overlaps the old
-            cv = s.show(sel, spec)
-        slot.cv = cv
-        stats = s.stats or {}
-        return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
-
     def _draw(self, rc, cvs, state: ViewState, size, bg) -> tuple[list, float, float, float]:
         """Upload what changed and draw every view (on the GL thread)."""
         t_up = time.perf_counter()
-        for slot, cv in zip(self._slots, cvs, strict=False):
+        for slot, cv in zip(self.views.slots, cvs, strict=False):
             if slot.uploaded is not cv:
                 upload(rc, slot, cv)
         t_draw = time.perf_counter()
@@ -312,15 +231,15 @@ class ClientWorker:
                 outline=state.outline,
                 shading=state.shading,
             )
-            for slot in self._slots[: len(cvs)]
+            for slot in self.views.slots[: len(cvs)]
         ]
-        for slot in self._slots[len(cvs) :]:
+        for slot in self.views.slots[len(cvs) :]:
             slot.release_gl()
         return panels, t_up, t_draw, time.perf_counter()
 
     def _render(self, state: ViewState, rid: int | None) -> None:
         t_start = time.perf_counter()
-        cvs, integrate_ms, incremental = self._chronovolumes(state)
+        cvs, integrate_ms, incremental = self.views.chronovolumes(state)
         self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
         window = (state.dataset, *state.window)
         if state.quality == "full" and window != self._hist_window:
@@ -337,14 +256,14 @@ class ClientWorker:
             return
         t_start = time.perf_counter()
         integrate_ms = 0.0
-        for slot in self._slots[: len(state.views)]:
+        for slot in self.views.slots[: len(state.views)]:
             with self._cond:
                 if self._pending is not None:
                     return  # newer input: the frame for it comes instead
             if slot.session is None:
                 return
-            integrate_ms += self._refine_slot(slot)
-        cvs = [slot.cv for slot in self._slots[: len(state.views)]]
+            integrate_ms += self.views.refine_slot(slot)
+        cvs = [slot.cv for slot in self.views.slots[: len(state.views)]]
         self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
 
     def _send_frame(
@@ -368,7 +287,9 @@ class ClientWorker:
         t_enc = time.perf_counter()
         self._frame += 1
         self._shown, self._last_rid = state, rid
-        sessions = [slot.session for slot in self._slots[: len(cvs)] if slot.session is not None]
+        sessions = [
+            slot.session for slot in self.views.slots[: len(cvs)] if slot.session is not None
+        ]
         # The level model predicts frames answering input: a final frame's larger draw counts
         # as the share of it such a frame would draw.
         share = min(1.0, self._draw_budget.pixels() / max(1, w * h * len(cvs)))
@@ -399,6 +320,7 @@ class ClientWorker:
             "probe": self._probe_mark(state, cvs),
             "clip_outline": clip_outline(cvs[0], state.panel_camera(), state.size, state.clip),
             "legend": legend(cvs[0]),
+            "legends": [legend(cv) for cv in cvs],  # a view with its own window has its own
             "focus": None if state.camera.focus is None else list(state.camera.focus),
             "level": level,
             "levels": levels,  # from the sessions: no store metadata read per frame
@@ -436,111 +358,3 @@ class ClientWorker:
         view, where = self._probed
         at = project(cvs[view], state.panel_camera(), state.size, where)
         return None if at is None else {"view": view, "x": at[0], "y": at[1]}
-
-    # -- tasks ---------------------------------------------------------------------------
-    def _do_task(self, kind: str, msg: dict) -> None:
-        rid = msg.get("id")
-        ds = self.datasets[self.state.dataset]
-        if kind == "save" and msg["what"] == "session":
-            key, name = save_session(self.downloads, self.state, ds, self.shown_focus())
-            self._reply(
-                {"type": "download", "id": rid, "url": f"/download/{key}", "filename": name}
-            )
-        elif kind == "histogram":
-            lo, hi = self._hist_range = list(msg["range"])
-            state = self.state
-            steps = state.selection(ds.series.n_steps).steps
-            self._hist_window = (state.dataset, *state.window)
-            hist = ds.histogram(lo, hi, steps, state.window[2])
-            self._reply({"type": "histogram", "id": rid, **hist, "window": list(state.window)})
-        elif kind == "probe":
-            self._probe(msg)
-        elif kind == "save":
-            self._save(msg)
-
-    def _shown_view(self, msg: dict) -> tuple[ViewState, int]:
-        state = self._shown
-        view = msg.get("view", 0)
-        if state is None or view >= len(state.views) or view >= len(self._slots):
-            raise InvalidParameterError(f"view {view} is not shown; choose a view on the page")
-        return state, view
-
-    def _full_resolution(self, views: range) -> None:
-        """Bring the shown views to full resolution (probes and saves never use a coarse one)."""
-        for i in views:
-            if self._slots[i].session is not None:
-                self._refine_slot(self._slots[i])
-
-    @staticmethod
-    def _refine_slot(slot: ViewSlot) -> float:
-        """The slot's chronovolume at full resolution if it was coarse; the ms it took."""
-        with INTEGRATE_LOCK:
-            cv = slot.session.refine()  # type: ignore[union-attr]
-        if cv is None:
-            return 0.0
-        slot.cv = cv
-        return float(slot.session.stats.get("integrate_ms", 0.0))  # type: ignore[union-attr]
-
-    def _probe(self, msg: dict) -> None:
-        state, view = self._shown_view(msg)
-        self._full_resolution(range(view, view + 1))
-        cv = self._slots[view].cv
-        assert cv is not None
-        reply = probe_reply(msg, view, state, cv, self.datasets[state.dataset])
-        where = reply.pop("where", None)
-        self._probed = None if where is None else (view, where)
-        self._reply(reply)
-
-    def _save(self, msg: dict) -> None:
-        state, view = self._shown_view(msg)
-        self._full_resolution(range(len(state.views)))
-        ds = self.datasets[state.dataset]
-        sel = state.selection(ds.series.n_steps).describe().replace(":", "-")
-        if msg["what"] == "movie":
-            self._movie(msg, state, ds, sel)
-            return
-        if msg["what"] == "image":
-            cvs = [s.cv for s in self._slots[: len(state.views)]]
-            bg = parse_color(state.background)
-            panels, *_ = on_gl(self._draw, cvs, state, state.size, bg)
-            name = f"{ds.name}-{sel}.png"
-            key = save_image(self.downloads, panels, cvs, bg, name)  # type: ignore[arg-type]
-        else:
-            cv = self._slots[view].cv
-            assert cv is not None
-            mode = state.views[view][0]
-            name = f"{ds.name}-{mode}-{sel}.zarr.zip"
-            key = save_chronovolume(self.downloads, cv, name)
-        self._reply(
-            {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}
-        )
-
-    def _movie(self, msg: dict, state: ViewState, ds: Dataset, sel: str) -> None:
-        """An orbit or a play-through of the shown views as a video download, with a
-        `progress` message after every frame; the views are then as shown again."""
-        kind, fmt, rid = msg.get("movie", "orbit"), msg.get("format", "mp4"), msg.get("id")
-        states = movie_states(state, kind, msg.get("frames", 36), ds.series.n_steps)
-        bg = parse_color(state.background)
-
-        def frame(shown: ViewState):
-            self._chronovolumes(shown)
-            self._full_resolution(range(len(shown.views)))
-            cvs = [s.cv for s in self._slots[: len(shown.views)]]
-            panels, *_ = on_gl(self._draw, cvs, shown, shown.size, bg)
-            return compose_image(panels, cvs, bg)  # type: ignore[arg-type]
-
-        def progress(done: int, total: int) -> None:
-            self._reply(
-                {"type": "progress", "id": rid, "what": "movie", "done": done, "total": total}
-            )
-
-        try:
-            path = render_movie(
-                states, frame, fmt, msg.get("fps", 12), self.downloads.dir, progress
-            )
-        finally:
-            self._chronovolumes(state)
-            self._full_resolution(range(len(state.views)))
-        name = f"{ds.name}-{'orbit-' + sel if kind == 'orbit' else 'play-through'}.{fmt}"
-        key = self.downloads.add(path, name, MOVIE_FORMATS[fmt])
-        self._reply({"type": "download", "id": rid, "url": f"/download/{key}", "filename": name})

@@ -1,7 +1,8 @@
 // The on-view legend: in each view, over its bottom left, the window's time colours as a bar
 // of one cell per step (oldest left) with step numbers under it, and the time-opacity curve
 // over the bar, as the saved PNG's legend shows them. It comes from each frame's `legend`
-// (S.legend: step, rgb, a); `L` or **legend** in the header shows or hides it.
+// (S.legends: per view, its window's step, rgb, a); `L` or **legend** in the header shows or
+// hides it.
 
 import { $, S, viewer } from './state.js';
 
@@ -12,8 +13,7 @@ const TOP = 5;
 const CURVE_H = 22;
 const BAR_H = 9;
 
-function draw(canvas) {
-  const items = S.legend || [];
+function draw(canvas, items) {
   canvas.hidden = !legendOn.shown || !items.length;
   if (canvas.hidden) return;
   const dpr = window.devicePixelRatio || 1;
@@ -82,7 +82,8 @@ function draw(canvas) {
 
 // Every view's legend, for the frame shown.
 export function drawLegends() {
-  for (const c of document.querySelectorAll('#views .view canvas.legend')) draw(c);
+  const canvases = document.querySelectorAll('#views .view canvas.legend');
+  canvases.forEach((c, i) => draw(c, (S.legends && S.legends[i]) || S.legend || []));
 }
 
 // Where step k's colour cell is in a legend canvas (CSS px), for scripted use (the tests).

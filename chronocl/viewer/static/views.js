@@ -35,6 +35,8 @@ export function layoutViews() {
     p.mode.value = S.state.views[i].mode;
     p.mode.title = S.choices.modes.find((m) => m.name === p.mode.value)?.summary || '';
     p.order.textContent = S.state.views[i].order || S.choices.orders[0];
+    p.own.value = windowText(S.state.views[i].window);
+    p.own.classList.remove('bad');
     p.el.classList.toggle('selected', i === S.selectedView && n > 1);
   });
   // Panels fill the view area in a grid (columns x rows): the squarest grid with room for n
@@ -70,6 +72,9 @@ function makePanel(i) {
     '<img alt="view" draggable="false"><div class="view-head">' +
     '<select class="mode" title="Integration mode"></select>' +
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
+    '<input class="own-window" placeholder="linked" size="8" spellcheck="false" ' +
+    'title="This view\'s own window t0:t1[:stride], to compare two periods side by side; ' +
+    'empty: the timeline\'s window">' +
     '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
     '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon/></svg>' +
     '<div class="probe-mark"></div><div class="probe-band"></div><canvas class="legend"></canvas>' +
@@ -80,6 +85,7 @@ function makePanel(i) {
     img: el.querySelector('img'),
     mode: el.querySelector('.mode'),
     order: el.querySelector('.order'),
+    own: el.querySelector('.own-window'),
     label: el.querySelector('.view-label'),
     note: el.querySelector('.view-note'),
     mark: el.querySelector('.probe-mark'),
@@ -100,6 +106,15 @@ function makePanel(i) {
     const k = orders.indexOf(views[i].order || orders[0]);
     views[i].order = orders[(k + 1) % orders.length];
     p.order.textContent = views[i].order;
+    update({ views });
+  });
+  p.own.addEventListener('change', () => {
+    const text = p.own.value.trim();
+    const window = text ? parseWindow(text) : null;
+    p.own.classList.toggle('bad', window === undefined);
+    if (window === undefined) return;
+    const views = S.state.views.map((v) => ({ ...v }));
+    views[i].window = window;
     update({ views });
   });
   bindOrbit(p, i);
@@ -197,6 +212,21 @@ function showBand(p, from, e) {
   b.height = `${Math.abs(e.clientY - from.y)}px`;
 }
 
+// A view's own window as the panel shows it ('t0:t1' or 't0:t1:stride'), '' when linked.
+function windowText(w) {
+  if (!w) return '';
+  return `${w.t0}:${w.t1}${w.stride > 1 ? `:${w.stride}` : ''}`;
+}
+
+// 't0:t1[:stride]' as a window (end excluded), undefined when it is not one.
+function parseWindow(text) {
+  const m = /^(\d+):(\d+)(?::(\d+))?$/.exec(text);
+  if (!m) return undefined;
+  const [t0, t1, stride] = [Number(m[1]), Number(m[2]), Number(m[3] || 1)];
+  const n = S.info ? S.info.shape.t : Infinity;
+  return t1 > t0 && t1 <= n && stride >= 1 ? { t0, t1, stride } : undefined;
+}
+
 // The probe marker at {view, x, y} (fractions of the panel), or none.
 export function showMark(at) {
   panels.forEach((q, j) => {
@@ -245,6 +275,7 @@ export function onFrame(buf) {
   const cut = (header.clip_outline || []).map(([x, y]) => `${x},${y}`).join(' ');
   for (const p of panels) p.outline.setAttribute('points', cut);
   S.legend = header.legend || [];
+  S.legends = header.legends || null; // each view's, where views have their own windows
   S.focus = header.focus || null;
   drawLegends();
   const now = performance.now();

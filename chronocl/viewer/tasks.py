@@ -1,0 +1,113 @@
+"""The requests a client's render worker answers between frames: histogram, probe and saves
+(image, chronovolume, session, movie). `Tasks` is a part of `ClientWorker` (chronocl.viewer
+.worker), kept here so that each file holds one concern; it runs on the worker's thread and
+uses the worker's views, shown state and reply channel.
+"""
+
+from __future__ import annotations
+
+from chronocl.core.errors import InvalidParameterError
+from chronocl.render.views import parse_color
+from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.movie import movie_states, render_movie
+from chronocl.viewer.probe import probe_reply
+from chronocl.viewer.protocol import MOVIE_FORMATS
+from chronocl.viewer.saving import compose_image, save_chronovolume, save_image
+from chronocl.viewer.session_file import save_session
+from chronocl.viewer.view_state import ViewState
+
+
+class Tasks:
+    """Histogram, probe and save requests (the methods `ClientWorker` answers them with)."""
+
+    def _do_task(self, kind: str, msg: dict) -> None:
+        rid = msg.get("id")
+        ds = self.datasets[self.state.dataset]
+        if kind == "save" and msg["what"] == "session":
+            key, name = save_session(self.downloads, self.state, ds, self.shown_focus())
+            self._reply(
+                {"type": "download", "id": rid, "url": f"/download/{key}", "filename": name}
+            )
+        elif kind == "histogram":
+            lo, hi = self._hist_range = list(msg["range"])
+            state = self.state
+            steps = state.selection(ds.series.n_steps).steps
+            self._hist_window = (state.dataset, *state.window)
+            hist = ds.histogram(lo, hi, steps, state.window[2])
+            self._reply({"type": "histogram", "id": rid, **hist, "window": list(state.window)})
+        elif kind == "probe":
+            self._probe(msg)
+        elif kind == "save":
+            self._save(msg)
+
+    def _shown_view(self, msg: dict) -> tuple[ViewState, int]:
+        state = self._shown
+        view = msg.get("view", 0)
+        if state is None or view >= len(state.views) or view >= len(self.views.slots):
+            raise InvalidParameterError(f"view {view} is not shown; choose a view on the page")
+        return state, view
+
+    def _probe(self, msg: dict) -> None:
+        state, view = self._shown_view(msg)
+        self.views.full_resolution(range(view, view + 1))
+        cv = self.views.slots[view].cv
+        assert cv is not None
+        reply = probe_reply(msg, view, state, cv, self.datasets[state.dataset])
+        where = reply.pop("where", None)
+        self._probed = None if where is None else (view, where)
+        self._reply(reply)
+
+    def _save(self, msg: dict) -> None:
+        state, view = self._shown_view(msg)
+        self.views.full_resolution(range(len(state.views)))
+        ds = self.datasets[state.dataset]
+        sel = state.selection(ds.series.n_steps).describe().replace(":", "-")
+        if msg["what"] == "movie":
+            self._movie(msg, state, ds, sel)
+            return
+        if msg["what"] == "image":
+            cvs = [s.cv for s in self.views.slots[: len(state.views)]]
+            bg = parse_color(state.background)
+            panels, *_ = on_gl(self._draw, cvs, state, state.size, bg)
+            name = f"{ds.name}-{sel}.png"
+            key = save_image(self.downloads, panels, cvs, bg, name)  # type: ignore[arg-type]
+        else:
+            cv = self.views.slots[view].cv
+            assert cv is not None
+            mode = state.views[view][0]
+            name = f"{ds.name}-{mode}-{sel}.zarr.zip"
+            key = save_chronovolume(self.downloads, cv, name)
+        self._reply(
+            {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}
+        )
+
+    def _movie(self, msg: dict, state: ViewState, ds: Dataset, sel: str) -> None:
+        """An orbit or a play-through of the shown views as a video download, with a
+        `progress` message after every frame; the views are then as shown again."""
+        kind, fmt, rid = msg.get("movie", "orbit"), msg.get("format", "mp4"), msg.get("id")
+        states = movie_states(state, kind, msg.get("frames", 36), ds.series.n_steps)
+        bg = parse_color(state.background)
+
+        def frame(shown: ViewState):
+            self.views.chronovolumes(shown)
+            self.views.full_resolution(range(len(shown.views)))
+            cvs = [s.cv for s in self.views.slots[: len(shown.views)]]
+            panels, *_ = on_gl(self._draw, cvs, shown, shown.size, bg)
+            return compose_image(panels, cvs, bg)  # type: ignore[arg-type]
+
+        def progress(done: int, total: int) -> None:
+            self._reply(
+                {"type": "progress", "id": rid, "what": "movie", "done": done, "total": total}
+            )
+
+        try:
+            path = render_movie(
+                states, frame, fmt, msg.get("fps", 12), self.downloads.dir, progress
+            )
+        finally:
+            self.views.chronovolumes(state)
+            self.views.full_resolution(range(len(state.views)))
+        name = f"{ds.name}-{'orbit-' + sel if kind == 'orbit' else 'play-through'}.{fmt}"
+        key = self.downloads.add(path, name, MOVIE_FORMATS[fmt])
+        self._reply({"type": "download", "id": rid, "url": f"/download/{key}", "filename": name})

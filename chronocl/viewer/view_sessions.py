@@ -1,0 +1,126 @@
+"""The views of one client: a slot per panel (its integration session, chronovolume and texture)
+over one data set. The panels' sessions share the data set's resident steps (one window manager
+per level and pooling) and integrate only what changed: a slide of the window goes through
+`Session.show`, which updates incrementally; a camera change integrates nothing (silhouettes
+aside).
+
+OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.window import WindowManager
+from chronocl.integration.session import Session
+from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.slots import ViewSlot
+from chronocl.viewer.view_state import ViewState
+
+INTEGRATE_LOCK = threading.Lock()
+TARGET_MS = 150.0  # a coarse level is drawn first when full resolution would take longer
+
+
+class Views:
+    """The panels' slots of one client, for the data set of the newest state."""
+
+    def __init__(
+        self, datasets: list[Dataset], engine: str, device: str | None, memory: str | int | None
+    ) -> None:
+        self.datasets = datasets
+        self.engine, self.device, self.memory = engine, device, memory
+        self.slots: list[ViewSlot] = []
+        self._dataset = -1
+        self._managers: dict[tuple[int, str], WindowManager] = {}
+
+    def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
+        """The views' chronovolumes for `state`, integrating only where something changed;
+        with the milliseconds integration took and whether it was incremental."""
+        series = self.datasets[state.dataset].series
+        if self._dataset != state.dataset:
+            for s in self.slots:
+                s.drop_session()
+            self._close_managers()
+            self._dataset = state.dataset
+        while len(self.slots) < len(state.views):
+            self.slots.append(ViewSlot())
+        integrate_ms, incremental = 0.0, False
+        cvs = []
+        for i in range(len(state.views)):
+            slot = self.slots[i]
+            spec = state.spec(i)
+            if (
+                state.quality == "preview"
+                and spec.enhance.kind == "silhouette"
+                and slot.session is not None
+                and slot.cv is not None
+            ):
+                # Silhouettes follow the camera; while dragging keep the last ones.
+                old = slot.session.spec
+                spec = dataclasses.replace(spec, enhance=old.enhance)
+            with INTEGRATE_LOCK:
+                sel = state.selection(series.n_steps, i)  # its own window, or the shared one
+                cv, ms, inc = self._integrate(slot, series, spec, sel)
+            integrate_ms += ms
+            incremental = incremental or inc
+            cvs.append(cv)
+        for slot in self.slots[len(state.views) :]:
+            slot.drop_session()
+        return cvs, integrate_ms, incremental
+
+    def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
+        s = slot.session
+        if s is not None and slot.cv is not None and s.spec == spec and s.selection == sel:
+            return slot.cv, 0.0, False
+        if s is None or (s.spec != spec and s.selection != sel):
+            if s is not None:
+                s.close()
+            s = slot.session = Session(
+                series,
+                memory=self.memory,
+                engine=self.engine,
+                device=self.device,
+                spec=spec,
+                level="auto",
+                target_ms=TARGET_MS,
+                managers=self._managers,
+            )
+            cv = s.set_window(sel)
+        else:  # the session slides where the new window overlaps the old
+            cv = s.show(sel, spec)
+        slot.cv = cv
+        stats = s.stats or {}
+        return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
+
+    def full_resolution(self, views: range) -> None:
+        """Bring views to full resolution (probes, saves and movies never use a coarse one)."""
+        for i in views:
+            if self.slots[i].session is not None:
+                self.refine_slot(self.slots[i])
+
+    @staticmethod
+    def refine_slot(slot: ViewSlot) -> float:
+        """The slot's chronovolume at full resolution if it was coarse; the ms it took."""
+        with INTEGRATE_LOCK:
+            cv = slot.session.refine()  # type: ignore[union-attr]
+        if cv is None:
+            return 0.0
+        slot.cv = cv
+        return float(slot.session.stats.get("integrate_ms", 0.0))  # type: ignore[union-attr]
+
+    def release(self) -> None:
+        """Free the textures (on the GL thread), the sessions and the window managers."""
+        slots, self.slots = self.slots, []
+        if any(s.volume is not None for s in slots):
+            on_gl(lambda rc: [s.release_gl() for s in slots])
+        for s in slots:
+            s.drop_session()
+        self._close_managers()
+
+    def _close_managers(self) -> None:
+        managers, self._managers = self._managers, {}
+        for m in managers.values():
+            m.close()
