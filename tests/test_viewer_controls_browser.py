@@ -395,3 +395,24 @@ def test_two_periods_side_by_side(browser, server, tmp_path):  # noqa: F811
         assert "bad" in own.get_attribute("class")  # beyond the series: refused in the page
     finally:
         p.close()
+
+
+def test_movie_of_an_orbit_downloads(browser, server, tmp_path):  # noqa: F811
+    """Save movie renders an orbit with a frame count as it goes, then downloads the video."""
+    import imageio.v3 as iio
+
+    p = Page(browser, server, 1024, 640)
+    try:
+        page = p.page
+        page.click("summary:has-text('Movie')")
+        page.select_option("#movie-format", "gif")
+        page.fill("#movie-frames", "3")
+        with page.expect_download(timeout=120_000) as got:
+            page.click("#save-movie")
+        assert got.value.suggested_filename.startswith("vortex-orbit-")
+        frames = iio.imread(got.value.path(), index=None, extension=".gif")
+        assert frames.shape[0] == 3 and not (frames[0] == frames[1]).all()
+        assert page.inner_text("#movie-progress") == "frame 3 of 3"
+        assert page.is_enabled("#save-movie")
+    finally:
+        p.close()

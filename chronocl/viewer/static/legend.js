@@ -1,8 +1,8 @@
 // The on-view legend: in each view, over its bottom left, the window's time colours as a bar
-// of one cell per step (oldest left) with step numbers under it, and the time-opacity curve
-// over the bar, as the saved PNG's legend shows them. It comes from each frame's `legend`
-// (S.legends: per view, its window's step, rgb, a); `L` or **legend** in the header shows or
-// hides it.
+// of one cell per step (oldest left) with the steps' time labels (or numbers) under it, and
+// the time-opacity curve over the bar, as the saved PNG's legend shows them. It comes from
+// each frame's `legends` (S.legends: per view, its window's step, rgb, a); `L` or **legend** in
+// the header shows or hides it.
 
 import { $, S, viewer } from './state.js';
 
@@ -62,16 +62,22 @@ function draw(canvas, items) {
     ctx.arc(X(k), Y(items[k].a), 1.8, 0, 2 * Math.PI);
     ctx.fill();
   }
-  // Step numbers: the first and last, and between them as many as fit.
+  // The steps' time labels where the store has them, else their numbers: the first and last,
+  // and between them as many as fit; the ends are aligned to the bar's ends.
   ctx.fillStyle = '#e6e6e6';
   ctx.font = '10px system-ui, sans-serif';
   ctx.textBaseline = 'top';
-  ctx.textAlign = 'center';
-  const every = Math.max(1, Math.ceil(n / Math.max(1, Math.floor((w - 2 * PAD) / 28))));
+  const names = S.info && S.info.time_labels;
+  const label = (it) => (names && names[it.step] !== undefined ? names[it.step] : String(it.step));
+  const widest = Math.max(...items.map((it) => ctx.measureText(label(it)).width));
+  const every = Math.max(1, Math.ceil(n / Math.max(1, Math.floor((w - 2 * PAD) / (widest + 8)))));
   items.forEach((it, k) => {
     if (k % every && k !== n - 1) return;
     if (k !== n - 1 && n - 1 - k < every && k) return; // keep clear of the last label
-    ctx.fillText(String(it.step), X(k), barY + BAR_H + 2);
+    const end = k === 0 ? 'left' : k === n - 1 ? 'right' : 'center';
+    ctx.textAlign = n > 1 && widest > cell ? end : 'center';
+    const x = ctx.textAlign === 'left' ? x0 : ctx.textAlign === 'right' ? w - PAD : X(k);
+    ctx.fillText(label(it), x, barY + BAR_H + 2);
   });
   ctx.textAlign = 'right';
   ctx.textBaseline = 'middle';
