@@ -51,7 +51,7 @@ def raw_values(data, dtype: str, shape: tuple) -> np.ndarray:
     return np.clip(v, info.min, info.max).astype(dtype)
 
 
-@settings(max_examples=20)
+@settings(max_examples=14)
 @given(st.data())
 def test_max_min_keys_equal_reference_and_general_path(data):
     dtype = data.draw(st.sampled_from(DTYPES))
@@ -111,7 +111,7 @@ def coloured_tfs():
     return build()
 
 
-@settings(max_examples=20)
+@settings(max_examples=14)
 @given(st.data())
 def test_colour_pieces_equal_reference_and_lookups(data):
     dtype = data.draw(st.sampled_from(DTYPES))

@@ -38,6 +38,7 @@ def assert_same(a: chronocl.Chronovolume, b: chronocl.Chronovolume, atol: float 
         np.testing.assert_array_equal(a.t_index, b.t_index)
 
 
+@settings(max_examples=40)
 @given(st.data())
 def test_opencl_equals_reference(data):
     """Invariant 4 (and 3 on the device): any mode x order x enhancement, odd shapes, any bricks."""
@@ -51,7 +52,7 @@ def test_opencl_equals_reference(data):
     assert_same(ref, ocl)
 
 
-@settings(max_examples=30)  # six integrations per example
+@settings(max_examples=20)  # six integrations per example
 @given(st.data())
 def test_fast_paths_equal_the_general_path(data):
     """Early exit, uint8 LUT indexing, empty skipping, host pointers against the general path."""

@@ -48,7 +48,7 @@ def _check(cv, series, selection, spec, engine) -> None:
 
 @pytest.mark.parametrize("mode", modes.names())
 @pytest.mark.parametrize("engine", ENGINES)
-@settings(max_examples=6)
+@settings(max_examples=4)
 @given(data=st.data())
 def test_slides_and_jumps_equal_scratch(engine: str, mode: str, data) -> None:
     """Every registered mode: any walk of slides and jumps, W in 1..40, equals integrating

@@ -22,7 +22,7 @@ from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
 
 from .viewer_helpers import Client, make_stores, start_server
 
-SCRUB_SECONDS = float(os.environ.get("CHRONOCL_VIEWER_SCRUB_S", "30"))
+SCRUB_SECONDS = float(os.environ.get("CHRONOCL_VIEWER_SCRUB_S", "15"))
 
 
 @pytest.fixture(scope="module")

@@ -28,6 +28,7 @@ from chronocl.core.errors import (
 )
 from chronocl.core.memory import aligned_empty
 from chronocl.core.values import normalize
+from chronocl.data.formats.contract import Steps
 from chronocl.data.integrity import CheckedArray, CheckedStore, checked_read, damaged
 from chronocl.data.labelled import dataarray_layout
 from chronocl.data.metadata import (
@@ -344,22 +345,23 @@ class TimeSeries:
             meta=meta,
         )
 
-    def save(self, path: str | os.PathLike, overwrite: bool = False, progress: bool = False):
-        """Write this series as a chronocl store; returns the opened store."""
-        steps = (np.asarray(self.data[t].compute()) for t in range(self.n_steps))
-        write_store(
-            path,
-            steps,
+    def steps(self) -> Steps:
+        """This series as a reader's unwritten steps (each step computed as it is read)."""
+        return Steps(
+            read=lambda: (np.asarray(self.data[t].compute()) for t in range(self.n_steps)),
             n_steps=self.n_steps,
             volume_shape=self.volume_shape,
             dtype=self.dtype,
             spacing=self.spacing,
-            times=self.times,
             source=self.source,
-            overwrite=overwrite,
-            progress=progress,
+            times=list(self.times),
             attrs={k: v for k, v in self.meta.items() if k in ("quantity", "components")},
         )
+
+    def save(self, path: str | os.PathLike, overwrite: bool = False, progress: bool = False):
+        """Write this series as a chronocl store; returns the opened store."""
+        steps = self.steps()
+        write_store(path, steps.read(), **steps.written(), overwrite=overwrite, progress=progress)
         return open_store(path)
 
     def describe(self) -> dict:

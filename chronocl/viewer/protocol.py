@@ -158,6 +158,20 @@ SIZE = List(Int(MIN_PANEL, MAX_PANEL), 2, 2)
 # enhancement and lighting are shared by the views, as in the viewer.
 SESSION_VERSION = 1
 SESSION_KEY = "chronocl_session"
+# What a frame depends on, as the update message and a session file both give it.
+VIEW_FIELDS = {
+    "window": WINDOW,
+    "views": List(VIEW, 1, MAX_VIEWS),
+    "camera": CAMERA,
+    "data_tf": DATA_TF,
+    "time_tf": TIME_TF,
+    "enhance": ENHANCE,
+    "threshold": THRESHOLD,
+    "clip": Nullable(CLIP_PLANE),
+    "size": SIZE,
+    "background": Enum(BACKGROUNDS),
+    "outline": Bool(),
+}
 SESSION = Obj(
     {
         SESSION_KEY: Version(SESSION_VERSION, "session files of"),
@@ -165,17 +179,7 @@ SESSION = Obj(
             {"name": Text(200), "path": Text(4096), "shape": List(Int(1, 2**31), 4, 4)},
             frozenset({"name"}),
         ),
-        "window": WINDOW,
-        "views": List(VIEW, 1, MAX_VIEWS),
-        "camera": CAMERA,
-        "data_tf": DATA_TF,
-        "time_tf": TIME_TF,
-        "enhance": ENHANCE,
-        "threshold": THRESHOLD,
-        "clip": Nullable(CLIP_PLANE),
-        "size": SIZE,
-        "background": Enum(BACKGROUNDS),
-        "outline": Bool(),
+        **VIEW_FIELDS,
         "shading": Nullable(SHADING),
         "focus": Nullable(FOCUS),
     },
@@ -188,18 +192,8 @@ MESSAGES: dict[str, Obj] = {
         {
             "type": Enum(("update",)),
             "id": ID,
-            "camera": CAMERA,
-            "views": List(VIEW, 1, MAX_VIEWS),
-            "window": WINDOW,
-            "data_tf": DATA_TF,
-            "time_tf": TIME_TF,
-            "enhance": ENHANCE,
-            "threshold": THRESHOLD,
-            "clip": Nullable(CLIP_PLANE),
-            "size": SIZE,
+            **VIEW_FIELDS,
             "quality": Enum(("preview", "full")),
-            "background": Enum(BACKGROUNDS),
-            "outline": Bool(),
             "shading": SHADING,
             "refocus": Bool(),  # frame the visible region again (the camera reset)
             "focus": FOCUS,  # frame this world box (a saved session's, an undone state's)

@@ -56,7 +56,7 @@ from chronocl.core.errors import (
     UnknownNameError,
 )
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.data.formats.contract import Output, Reader, Steps
+from chronocl.data.formats.contract import Output, Reader
 from chronocl.data.metadata import parse_spacing
 from chronocl.data.pyramid import lazy_stats, level_shapes
 from chronocl.data.stores import open_group
@@ -240,21 +240,8 @@ def ingest_omezarr(
     parts = []
     for name in names:
         one = series.variable(name) if series.variables else series
-        parts.append((name, _steps(one)))
+        parts.append((name, one.steps()))
     return write_variables(out, parts, overwrite=overwrite, progress=progress)
-
-
-def _steps(series: TimeSeries) -> Steps:
-    """A lazily read series as a reader's unwritten steps (one step computed at a time)."""
-    return Steps(
-        read=lambda: (np.asarray(series.data[t].compute()) for t in range(series.n_steps)),
-        n_steps=series.n_steps,
-        volume_shape=series.volume_shape,
-        dtype=series.dtype,
-        spacing=series.spacing,
-        source=series.source,
-        times=list(series.times),
-    )
 
 
 # -- writing a chronovolume -------------------------------------------------------------
