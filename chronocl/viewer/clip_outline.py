@@ -10,7 +10,7 @@ import numpy as np
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import clip_plane
-from chronocl.viewer.slots import geometry
+from chronocl.viewer.slots import geometry, to_panel
 
 
 def plane_polygon(clip: tuple[float, float, float, float], extent: np.ndarray) -> np.ndarray:
@@ -55,11 +55,5 @@ def clip_outline(
     polygon = plane_polygon(clip, extent)
     if not len(polygon):
         return None
-    w, h = size
-    view, proj = camera.matrices(extent, w / h)
-    at = (proj @ view @ np.c_[polygon, np.ones(len(polygon))].T).T
-    if (at[:, 3] <= 1e-9).any():
-        return None
-    x = (at[:, 0] / at[:, 3] + 1) / 2
-    y = (1 - at[:, 1] / at[:, 3]) / 2
-    return [[round(float(a), 5), round(float(b), 5)] for a, b in zip(x, y, strict=True)]
+    at = to_panel(camera, extent, size, polygon)
+    return None if at is None else [[round(float(x), 5), round(float(y), 5)] for x, y in at]

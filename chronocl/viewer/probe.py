@@ -15,7 +15,7 @@ from chronocl.render.camera import Camera
 from chronocl.render.raycaster import clip_plane
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.protocol import PROBE_THRESHOLD
-from chronocl.viewer.slots import geometry
+from chronocl.viewer.slots import geometry, to_panel
 from chronocl.viewer.view_state import ViewState
 
 
@@ -97,13 +97,11 @@ def project(
     """Where the point at `where` (x, y, z as fractions of the box) lands on a panel of `size`
     with `camera`: (x, y) fractions, top-left origin; None if behind the camera or off-panel."""
     extent, _ = geometry(cv)
-    w, h = size
-    view, proj = camera.matrices(extent, w / h)
     world = (np.asarray(where, dtype=np.float64) - 0.5) * extent
-    clip = proj @ view @ np.append(world, 1.0)
-    if clip[3] <= 1e-9:
+    at = to_panel(camera, extent, size, world[None])
+    if at is None:
         return None
-    x, y = (clip[0] / clip[3] + 1) / 2, (1 - clip[1] / clip[3]) / 2
+    x, y = at[0]
     if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
         return None
     return round(float(x), 5), round(float(y), 5)

@@ -9,6 +9,7 @@ import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.session import Session
+from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Volume
 from chronocl.render.upload import convert, display_format
 
@@ -79,3 +80,17 @@ def geometry(cv: Chronovolume) -> tuple[np.ndarray, np.ndarray]:
     physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
     extent = physical / physical.max()
     return extent, extent / np.array([nx, ny, nz])
+
+
+def to_panel(
+    camera: Camera, extent: np.ndarray, size: tuple[int, int], world: np.ndarray
+) -> np.ndarray | None:
+    """Where world points (k, 3) land on a panel of `size` seen with `camera`: (k, 2) x, y
+    fractions of the panel, top-left origin (beyond 0..1 off the panel); None when a point is
+    behind the camera."""
+    w, h = size
+    view, proj = camera.matrices(extent, w / h)
+    at = (proj @ view @ np.c_[world, np.ones(len(world))].T).T
+    if (at[:, 3] <= 1e-9).any():
+        return None
+    return np.c_[(at[:, 0] / at[:, 3] + 1) / 2, (1 - at[:, 1] / at[:, 3]) / 2]

@@ -176,10 +176,7 @@ export function bindTF() {
       if (pts.some((p) => Math.abs(p[0] - u) < 1e-4) || pts.length >= S.choices.limits.max_tf_points) return;
       let k = pts.findIndex((p) => p[0] > u);
       if (k < 0) k = pts.length;
-      const a = pts[Math.max(0, k - 1)];
-      const b = pts[Math.min(pts.length - 1, k)];
-      const f = b[0] === a[0] ? 0 : (u - a[0]) / (b[0] - a[0]);
-      const rgb = [1, 2, 3].map((j) => a[j] + f * (b[j] - a[j]));
+      const rgb = [1, 2, 3].map((j) => interp(pts, u, j));
       pts.splice(k, 0, [u, ...rgb, clamp01(g.A(y))]);
       best = k;
     }
