@@ -21,7 +21,7 @@ pytest.importorskip("playwright.sync_api")
 from chronocl.viewer.server import ViewerServer
 
 from .test_viewer_page_browser import Page, browser, server, shots_dir  # noqa: F401
-from .viewer_helpers import CHROMIUM
+from .viewer_helpers import CHROMIUM, full_size_frames  # noqa: F401
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
@@ -208,7 +208,7 @@ def test_question_mark_lists_every_shortcut_and_escape_closes_it(browser, server
         p.close()
 
 
-def test_page_reconnects_after_a_server_restart(browser, tmp_path):  # noqa: F811
+def test_page_reconnects_after_a_server_restart(browser, tmp_path, full_size_frames):  # noqa: F811
     from .viewer_helpers import make_stores
 
     stores = make_stores(tmp_path)

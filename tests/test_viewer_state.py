@@ -22,18 +22,14 @@ from chronocl.viewer.session_file import (
 )
 from chronocl.viewer.view_state import default_state, describe_state, merge
 
-from .viewer_helpers import Client, make_stores, start_server
+from .viewer_helpers import Client, full_size_frames, make_stores, start_server  # noqa: F401
 
 pytest.importorskip("starlette")
 
 
 @pytest.fixture(autouse=True)
-def full_size_frames(monkeypatch):
-    """Frames drawn at the panels' full size (never a little smaller for the latency target,
-    as a slow moment on a busy machine would make them): frames compared are the same size."""
-    from chronocl.viewer import frames, worker
-
-    monkeypatch.setattr(worker, "DrawBudget", lambda: frames.DrawBudget(target_ms=1e9))
+def _full_size(full_size_frames):  # noqa: F811
+    """Every test here compares frames: all drawn at full size."""
 
 
 EDITS = {

@@ -20,7 +20,7 @@ pytest.importorskip("starlette")
 pytest.importorskip("playwright.sync_api")
 
 from .test_viewer_page_browser import Page, browser, drag, server, shots_dir  # noqa: F401
-from .viewer_helpers import CHROMIUM
+from .viewer_helpers import CHROMIUM, full_size_frames  # noqa: F401
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
@@ -28,12 +28,8 @@ pytestmark = pytest.mark.skipif(
 
 
 @pytest.fixture(autouse=True)
-def full_size_frames(monkeypatch):
-    """Frames drawn at the panels' full size (never a little smaller for the latency target,
-    as a slow moment on a busy machine would make them): frames compared are the same size."""
-    from chronocl.viewer import frames, worker
-
-    monkeypatch.setattr(worker, "DrawBudget", lambda: frames.DrawBudget(target_ms=1e9))
+def _full_size(full_size_frames):  # noqa: F811
+    """Every test here compares frames: all drawn at full size."""
 
 
 # The first panel's image as the page shows it, as PNG (a data URL).

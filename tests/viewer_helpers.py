@@ -6,6 +6,8 @@ import json
 import time
 from pathlib import Path
 
+import pytest
+
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
 from chronocl.viewer.protocol import unpack_frame
@@ -25,6 +27,16 @@ SETTLED_FRAME = """([seq]) => {
   const v = window.viewer, l = v && v.last;
   return !!l && l.seq > seq && l.quality === 'full' && l.id >= v.sent && !l.refining;
 }"""
+
+
+@pytest.fixture
+def full_size_frames(monkeypatch):
+    """Frames drawn at the panels' full size (never a little smaller for the latency target,
+    as a slow moment on a busy machine would make them): frames compared are the same size.
+    A module uses it by importing it (autouse there with `pytestmark` or by name)."""
+    from chronocl.viewer import frames, worker
+
+    monkeypatch.setattr(worker, "DrawBudget", lambda: frames.DrawBudget(target_ms=1e9))
 
 
 def launch_browser():
