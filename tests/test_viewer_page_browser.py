@@ -396,6 +396,26 @@ def test_render_size_keeps_the_aspect_within_the_budget():
     assert budget.pixels() == 100
 
 
+def test_a_frame_a_little_under_full_size_is_redrawn_too(server, monkeypatch):
+    """A frame drawn 4 % smaller than its panel is not final: the settled view is always the
+    same full-size frame (a slightly smaller one used to count as final)."""
+    full = frames.render_size((1024, 733), 1)
+    cap = int(0.96 * full[0] * full[1])
+    monkeypatch.setattr(worker_module, "DrawBudget", lambda: frames.DrawBudget(cap=cap))
+    monkeypatch.setattr(frames.DrawBudget, "record", lambda self, ms, pixels: None)
+    client = Client(server)
+    try:
+        client.open(0, size=(1024, 733))
+        rid = client.send({"type": "update", "threshold": 0.1})
+        _, first, _ = client.frame_for(rid)
+        assert first["reduced"] and first["refining"]
+        _, final, _ = client.frame_for(rid)
+        assert not final["reduced"] and not final["refining"]
+        assert (final["views"][0]["width"], final["views"][0]["height"]) == full
+    finally:
+        client.close()
+
+
 def test_a_frame_over_the_draw_budget_is_reduced_then_redrawn_in_full(server, monkeypatch):
     monkeypatch.setattr(worker_module, "DrawBudget", lambda: frames.DrawBudget(target_ms=1.0))
     client = Client(server)
