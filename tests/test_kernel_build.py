@@ -40,7 +40,8 @@ INTEGRATION_KEYS = {
     "QUANT",
     "LUT_N",
     "CONST_COLOR",
-    "COLOR_SEGS",
+    "TF_SEGS",
+    "SEG_ALPHA",
     "ENHANCE",
     "EARLY_EXIT",
     "SKIP_EMPTY",
@@ -82,13 +83,20 @@ def integration_combinations(name: str):
     norm = BOOLS if name == "additive" else (False,)
     partial = BOOLS if mode.slides == "invert" else (False,)
     time_order = (0, 1, 2) if name == "change" else (False,)
-    colour = ((True, 0), (False, 0), (False, 1), (False, 3), (False, 8))  # (CONST, SEGS)
+    # (CONST_COLOR, TF_SEGS, SEG_ALPHA) as the engine passes them: pieces of colour, opacity
+    # or both; their opacity is the value (1) or, in the threshold modes, decides lanes (2).
+    # TF_SEGS: one piece, some with a middle one, the most (2..7 compile as 3 does).
+    seg_alpha = 2 if mode.opacity_threshold else 1
+    colour = [(True, 0, 0), (False, 0, 0), (False, 3, 0), (False, 1, seg_alpha)]
+    colour += [(False, 8, seg_alpha), (True, 3, seg_alpha), (True, 8, seg_alpha)]
     for combo in itertools.product(
         data, lanes, colour, BOOLS, BOOLS, BOOLS, norm, partial, time_order, (256, 65536)
     ):
-        (t, quant, raw), (enh, vec), (const, segs), early, skip, aligned = combo[:6]
+        (t, quant, raw), (enh, vec), (const, segs, pieces_alpha), early, skip, aligned = combo[:6]
         norm_time, raw_partial, order, lut_n = combo[6:]
         if quant and (lut_n != 256 or mode.lut_by_value):  # one LUT entry per byte value
+            continue
+        if enh and pieces_alpha == 2:  # enhanced opacity is not bounded by the pieces'
             continue
         yield {
             "DATA_T": t,
@@ -103,7 +111,8 @@ def integration_combinations(name: str):
             "QUANT": quant,
             "LUT_N": lut_n,
             "CONST_COLOR": const,
-            "COLOR_SEGS": segs,
+            "TF_SEGS": segs,
+            "SEG_ALPHA": pieces_alpha,
             "ENHANCE": enh,
             "EARLY_EXIT": early,
             "SKIP_EMPTY": skip,
@@ -230,6 +239,8 @@ def test_the_builds_cover_the_engines_options(monkeypatch):
     for name, defines in seen:
         assert set(defines) <= INTEGRATION_KEYS, name  # a mode passes only the options it has
         full = {**dict.fromkeys(INTEGRATION_KEYS, False), **defines}
+        if 1 < full["TF_SEGS"] < 8:
+            full["TF_SEGS"] = 3
         names = [m for m in modes.names() if f"{modes.get(m).kernel}.cl" == name]
         assert any(full in integration_combinations(m) for m in names), (name, defines)
 

@@ -3,8 +3,10 @@
 - max / min compare keys instead of u: raw values of integer data in the data's lanes, the
   winning step in lanes as narrow (`extreme.raw_key_zones`), else t = (v - vmin) * scale
   unclamped; values beyond the range tie in u and are settled after the loop.
-- A coloured data TF made of a few straight pieces is evaluated piece by piece instead of
-  looked up (`opencl.colour_segments`).
+- A data TF made of a few straight pieces is evaluated piece by piece instead of looked up
+  (`opencl.tf_segments`): colour and opacity in alpha, additive and mean; in first_hit and
+  count (thresholds) the pieces' opacity decides only lanes farther than SEG_MARGIN from the
+  threshold and the exact opacity decides the rest, so their results equal the lookups' bits.
 
 Each is checked against the numpy reference (1e-5, t_index exactly) and against the engine
 with the fast path switched off, on every stored dtype, odd shapes and window lengths, value
@@ -25,7 +27,7 @@ from chronocl.engine import opencl
 from chronocl.modes import extreme
 from chronocl.modes.spec import IntegrationSpec
 
-from .strategies import time_tfs
+from .strategies import enhancements, time_tfs
 
 DTYPES = ["uint8", "uint16", "int16", "float32"]
 
@@ -96,16 +98,22 @@ def test_raw_keys_where_u_orders_integers():
     assert zones(np.float32, (0, 1), 5) is None
 
 
-def coloured_tfs():
-    """Coloured data TFs of 2-5 control points (at most 8 straight pieces, often fewer)."""
+def pieced_tfs():
+    """Data TFs of 2-5 control points (at most 8 straight pieces, often fewer): coloured or of
+    one colour, opacity sometimes exactly 0.1 or 0.5 (the thresholds drawn: plateaus where
+    the pieces cannot decide and the exact opacity must)."""
 
     @st.composite
     def build(draw):
         n = draw(st.integers(2, 5))
         us = sorted({*draw(st.lists(st.floats(0, 1), min_size=n, max_size=n)), 0.0, 1.0})
         unit = st.floats(0, 1)
-        opacity = st.one_of(st.just(0.0), st.floats(1e-3, 1))
-        points = [(u, draw(unit), draw(unit), draw(unit), draw(opacity)) for u in us]
+        opacity = st.one_of(st.just(0.0), st.floats(1e-3, 1), st.sampled_from([0.1, 0.5]))
+        if draw(st.booleans()):
+            points = [(u, draw(unit), draw(unit), draw(unit), draw(opacity)) for u in us]
+        else:
+            rgb = (draw(unit), draw(unit), draw(unit))
+            points = [(u, *rgb, draw(opacity)) for u in us]
         return DataTF(points=points, size=draw(st.sampled_from([256, 300, 1024])))
 
     return build()
@@ -113,7 +121,7 @@ def coloured_tfs():
 
 @settings(max_examples=14)
 @given(st.data())
-def test_colour_pieces_equal_reference_and_lookups(data):
+def test_tf_pieces_equal_reference_and_lookups(data):
     dtype = data.draw(st.sampled_from(DTYPES))
     w = data.draw(st.integers(1, 23))
     shape = (
@@ -127,11 +135,13 @@ def test_colour_pieces_equal_reference_and_lookups(data):
     if dtype != "float32":
         raw = np.round(raw)
     series = chronocl.TimeSeries.from_array(raw.astype(dtype))
+    mode = data.draw(st.sampled_from(modes.names()))
     spec = IntegrationSpec(
-        mode=data.draw(st.sampled_from(modes.names())),
+        mode=mode,
         order=data.draw(st.sampled_from(["forward", "backward"])),
-        data_tf=data.draw(coloured_tfs()),
+        data_tf=data.draw(pieced_tfs()),
         time_tf=data.draw(time_tfs()),
+        enhance=data.draw(enhancements),
         threshold=data.draw(st.sampled_from([0.0, 0.1, 0.5])),
         normalize=data.draw(st.sampled_from(["time", "max"])),
     )
@@ -139,20 +149,49 @@ def test_colour_pieces_equal_reference_and_lookups(data):
     ref = chronocl.integrate(series, None, spec=spec, engine="numpy")
     fast = chronocl.integrate(series, None, spec=spec, engine="opencl", slab=slab)
     assert_same(ref, fast)
-    with pytest.MonkeyPatch.context() as mp:  # colour looked up in the LUT
-        mp.setattr(opencl, "colour_segments", lambda rgb: None)
-        looked_up = chronocl.integrate(series, None, spec=spec, engine="opencl", slab=slab)
-    assert_same(looked_up, fast, atol=2e-6)
+    looked_up = chronocl.integrate(
+        series, None, spec=spec, engine=opencl.OpenCLEngine(pieces=False), slab=slab
+    )
+    # thresholds decide on the exact opacity: the same bits as the lookups
+    assert_same(looked_up, fast, atol=0 if modes.get(mode).opacity_threshold else 2e-6)
 
 
-def test_colour_pieces_follow_the_lut():
+def runs_of(table: np.ndarray, x: np.ndarray, n: int) -> np.ndarray:
+    """The kernels' evaluation of pieces `table` at LUT positions x, in float32: the value at 0
+    plus each piece's slope times x's run through it (clamped to the piece)."""
+    x0 = table[0]
+    length = np.diff(np.append(x0, np.float32(n - 1))).astype(np.float32)
+    out = np.repeat(table[1:5, :1], len(x), axis=1)
+    for j in range(table.shape[1]):
+        run = np.clip(x - x0[j], np.float32(0), length[j] if j + 1 < table.shape[1] else None)
+        out = out + table[5:9, j : j + 1] * run.astype(np.float32)
+    return out
+
+
+def test_tf_pieces_follow_the_lut():
     tf = DataTF(points=[(0, 0, 0, 1, 0.02), (0.5, 0, 1, 0, 0.1), (1, 1, 0, 0, 0.5)])
-    table = opencl.colour_segments(tf.lut[:, :3])
-    assert table is not None and table.shape == (7, 3)  # 0.5 falls between entries 127, 128
+    table = opencl.tf_segments(tf.lut, [0, 1, 2, 3])
+    assert table is not None and table.shape == (9, 3)  # 0.5 falls between entries 127, 128
     x = np.linspace(0, 255, 100_003, dtype=np.float32)
-    piece = np.searchsorted(table[0], x, side="right") - 1
-    got = table[1:4, piece] + table[4:7, piece] * (x - table[0, piece])
-    want = lut_lerp32(tf.lut, x / np.float32(255))[:, :3]
-    np.testing.assert_allclose(got.T, want, atol=1e-6, rtol=0)
+    got = runs_of(table, x, 256)
+    want = lut_lerp32(tf.lut, x / np.float32(255)).T
+    error = np.abs(got - want).max(axis=1)
+    assert error.max() < 1e-6
+    assert error[3] <= opencl.opacity_error(table, 256) < 5e-6  # what the thresholds trust
+    only_opacity = opencl.tf_segments(tf.lut, [3])
+    assert np.all(only_opacity[1:4] == 0) and np.all(only_opacity[5:8] == 0)
     many = DataTF(points=[(i / 11, i % 2, 0, 1 - i % 2, 1) for i in range(12)])
-    assert opencl.colour_segments(many.lut[:, :3]) is None  # more pieces than the kernels take
+    assert opencl.tf_segments(many.lut, [0, 1, 2]) is None  # more pieces than the kernels take
+
+
+def test_tf_pieces_scale_by_each_steps_time_factors():
+    table = opencl.tf_segments(
+        DataTF(points=[(0, 0, 0, 1, 0.0), (1, 1, 0, 0, 1.0)]).lut, [0, 1, 2, 3]
+    )
+    tc = np.array([[1, 1, 1, 1], [0.5, 0, 1, 0.25]], dtype=np.float32)
+    flat = opencl.timed(table, tc)
+    s = table.shape[1]
+    rows = flat[s:].reshape(2, 4, s + 1)
+    assert np.array_equal(flat[:s], table[0])
+    np.testing.assert_allclose(rows[1, 3], 0.25 * np.concatenate([table[4, :1], table[8]]))
+    np.testing.assert_allclose(rows[1, 1], 0.0)

@@ -3,9 +3,10 @@
 Transfer-function work is done once on the host: one data LUT shared by all
 steps and a (colour, alpha) factor per step, so a kernel does one interpolated
 lookup per voxel-step (quantised uint8 data index their LUT directly); when the
-data colour is constant (the default: colour by time) only opacity is looked up, when it
-is a few straight pieces (`colour_segments`) they are evaluated instead of looked up,
-and steps whose 16 voxels all map to zero opacity are skipped (exactly). Bricks are in xytz order
+data colour is constant (the default: colour by time) only opacity is looked up; when the
+data TF is a few straight pieces (`tf_segments`) they are evaluated instead (the modes that
+compare opacity with a threshold look it up where the pieces are too close to decide); and
+steps whose 16 voxels all map to zero opacity are skipped (exactly). Bricks are in xytz order
 (rows, W, Y, X). On CPU devices buffers wrap the host arrays
 (CL_MEM_USE_HOST_PTR) instead of copying; on GPUs (or with host_ptr=False) bricks are copied in
 chunks, the upload of one overlapping the kernel of the one before, in the device format asked
@@ -60,9 +61,9 @@ class OpenCLEngine:
     Each work-item integrates 16 consecutive voxels along x with OpenCL vector types
     (PoCL's implicit vectorisation across work-items is several times slower here);
     the x remainder and gradient enhancement run one voxel per work-item.
-    `host_ptr`, `early_exit`, `quantized` and `skip_empty` switch the fast paths
-    (default: host pointers on CPU devices, the rest on); tests check each against
-    the general path.
+    `host_ptr`, `early_exit`, `quantized`, `skip_empty` and `pieces` (the data TF evaluated
+    as straight pieces, `tf_segments`) switch the fast paths (default: host pointers on CPU
+    devices, the rest on); tests check each against the general path.
 
     Without host pointers bricks are copied: `device_format` (auto, float32, uint8, uint16,
     float16; `chronocl.engine.transfer`) is what they travel in, `overlap` uploads the next
@@ -80,6 +81,7 @@ class OpenCLEngine:
         early_exit: bool = True,
         quantized: bool = True,
         skip_empty: bool = True,
+        pieces: bool = True,
         local_size: tuple[int, int, int] | None = None,
         max_brick_bytes: int | None = None,
         device_format: str = "auto",
@@ -91,6 +93,7 @@ class OpenCLEngine:
         self.early_exit = early_exit
         self.quantized = quantized
         self.skip_empty = skip_empty
+        self.pieces = pieces
         self.local_size = local_size
         self._max_brick = max_brick_bytes
         self.device_format = check_format_name(device_format)
@@ -124,13 +127,15 @@ class OpenCLEngine:
         positions: np.ndarray,
         quant: bool,
         value_range: tuple[float, float],
-    ) -> tuple[np.ndarray, np.ndarray, bool, float]:
+    ) -> tuple[np.ndarray, np.ndarray, bool, float, np.ndarray | None, int]:
         """The device tables of one integration.
 
         Returns (data LUT planar (4, N) float32, per-step tc (W, 4) = (rgb_t, a_t), whether
         the data colour is constant (then folded into tc), the skip cut: LUT positions
-        below it (for quantised data: raw values below it) have data opacity exactly 0), and
-        the data colour as a few straight pieces (`colour_segments`) or None.
+        below it (for quantised data: raw values below it) have data opacity exactly 0), the
+        data TF as a few straight pieces (`tf_segments`) or None, and what the pieces' opacity
+        is for (SEG_ALPHA: 0 not in the pieces, 1 the opacity itself, 2 only a test that
+        skips the exact opacity where no lane can pass the threshold).
         """
         if quant:  # TF(u(v)) for every byte value, with the kernels' float32 arithmetic
             u = values.normalize(np.arange(256, dtype=np.uint8), *value_range)
@@ -139,9 +144,9 @@ class OpenCLEngine:
             lut = spec.data_tf.lut.astype(np.float64)
         rgb_t, a_t = spec.time_tf.evaluate(positions)
         const_color = bool(np.all(lut[:, :3] == lut[:1, :3]))
-        segments = None if const_color else colour_segments(lut[:, :3].astype(np.float32))
         colour = rgb_t * lut[0, :3] if const_color else rgb_t
         tc = np.concatenate([colour, a_t[:, None]], axis=1).astype(np.float32)
+        segments, seg_alpha = self._segments(lut, const_color, spec, a_t)
         nonzero = np.flatnonzero(lut[:, 3] > 0)
         first = int(nonzero[0]) if nonzero.size else len(lut)
         if quant:  # byte values below `first` have opacity 0
@@ -149,7 +154,26 @@ class OpenCLEngine:
         else:  # LUT positions x < first - 1 only mix entries that are 0
             cut = raw_cut(float(first - 1), value_range, len(lut))
         planar = np.ascontiguousarray(lut.T, dtype=np.float32)
-        return planar, tc, const_color, cut, segments
+        return planar, tc, const_color, cut, segments, seg_alpha
+
+    def _segments(self, lut, const_color: bool, spec: IntegrationSpec, a_t: np.ndarray):
+        """The pieces of the data TF the kernels evaluate, and their SEG_ALPHA (see `luts`).
+
+        Opacity joins the pieces where it is straight in as few pieces; a mode comparing it
+        with a threshold keeps the LUT's exact opacity and uses its pieces (within
+        SEGMENT_TOLERANCE, times a time opacity of at most 1) only to skip steps no lane of
+        which can pass."""
+        if not self.pieces:
+            return None, 0
+        lut32 = lut.astype(np.float32)
+        channels = [] if const_color else [0, 1, 2]
+        exact = spec.integration.opacity_threshold
+        # a threshold test trusts the pieces only where they bound the exact opacity
+        if not (exact and (float(a_t.max(initial=0.0)) > 1.0 or spec.enhance.needs_gradient)):
+            table = tf_segments(lut32, [*channels, 3])
+            if table is not None and not (exact and opacity_error(table, len(lut)) > 5e-6):
+                return table, 2 if exact else 1
+        return (tf_segments(lut32, channels) if channels else None), 0
 
     def accumulate(
         self,
@@ -185,7 +209,9 @@ class OpenCLEngine:
         nz_out = z1 - z0
         mode = spec.integration
         quant = self.quantized and dt == np.uint8 and not mode.lut_by_value
-        lut, tc, const_color, cut, segments = self.luts(spec, positions, quant, value_range)
+        lut, tc, const_color, cut, segments, seg_alpha = self.luts(
+            spec, positions, quant, value_range
+        )
         vmin, scale = values.normalization(*value_range)
         file, kernel_name = f"{mode.kernel}.cl", mode.kernel_function
         final = not raw and not mode.finalize_is_global(spec)
@@ -197,10 +223,12 @@ class OpenCLEngine:
             "QUANT": quant,
             "LUT_N": lut.shape[1],
             "CONST_COLOR": const_color,
-            "COLOR_SEGS": 0 if segments is None else len(segments[0]),
+            "TF_SEGS": 0 if segments is None else len(segments[0]),
+            "SEG_ALPHA": seg_alpha,
             "ENHANCE": ENHANCE_CODES[spec.enhance.kind],
             "EARLY_EXIT": self.early_exit,
-            "SKIP_EMPTY": self.skip_empty,
+            # a data TF with opacity everywhere leaves nothing to skip: no test per step
+            "SKIP_EMPTY": self.skip_empty and cut > (0.0 if quant else float("-inf")),
             "RAW_PARTIAL": raw,
             **mode_defines,
         }
@@ -235,7 +263,7 @@ class OpenCLEngine:
 
         args = [
             None,  # the brick (or a chunk of it), per launch
-            table(lut if segments is None else np.concatenate([lut.ravel(), segments.ravel()])),
+            table(lut if segments is None else np.concatenate([lut.ravel(), timed(segments, tc)])),
             table(tc),
             table(np.asarray(order, np.int32)),
             table(np.asarray(steps, np.int32)),
@@ -415,34 +443,59 @@ class OpenCLEngine:
         return (_round_up(count, lx), _round_up(ny, ly), _round_up(nz, lz)), (lx, ly, lz)
 
 
-MAX_SEGMENTS = 8  # straight pieces of the data colour evaluated without lookups
+MAX_SEGMENTS = 8  # straight pieces of the data TF evaluated without lookups
 SEGMENT_TOLERANCE = 2e-7  # how far a LUT entry may lie from its piece (float32 rounding)
 
 
-def colour_segments(rgb: np.ndarray) -> np.ndarray | None:
-    """The data colour of LUT `rgb` (N, 3) as at most MAX_SEGMENTS straight pieces, or None.
+def tf_segments(lut: np.ndarray, channels: list[int]) -> np.ndarray | None:
+    """`channels` of LUT `lut` (N, 4) as at most MAX_SEGMENTS straight pieces, or None.
 
-    Returns (7, S) float32: each piece's first LUT position x0, then its colour there (3) and
-    its slope per position (3); a piece runs to the next one's x0. Every entry lies within
-    SEGMENT_TOLERANCE of its piece, so the kernels' c0 + slope * (x - x0) equals the LUT's
-    interpolation to float32 rounding (docs/engine.md). A piece breaks where the second
-    difference of some channel is not zero.
+    Returns (9, S) float32: each piece's first LUT position x0, then the four channels there
+    and their slopes per position (channels not asked for are 0); a piece runs to the next
+    one's x0. Every entry of the channels asked for lies within SEGMENT_TOLERANCE of its
+    piece, so the kernels' c0 + slope * (x - x0) equals the LUT's interpolation to float32
+    rounding (docs/engine.md). A piece breaks where the second difference of a channel is
+    not zero.
     """
-    n = len(rgb)
-    v64 = rgb.astype(np.float64)
+    n = len(lut)
+    v64 = lut[:, channels].astype(np.float64)
     bend = np.abs(v64[:-2] - 2 * v64[1:-1] + v64[2:]).max(axis=1) > SEGMENT_TOLERANCE
     starts = np.concatenate([[0], np.flatnonzero(bend) + 1])
     if len(starts) > MAX_SEGMENTS:
         return None
     ends = np.concatenate([starts[1:], [n - 1]])
-    table = np.zeros((7, len(starts)), dtype=np.float64)
+    table = np.zeros((9, len(starts)), dtype=np.float64)
+    rows = np.asarray(channels, dtype=int)
     for j, (a, b) in enumerate(zip(starts, ends, strict=True)):
         slope = (v64[b] - v64[a]) / (b - a)
         line = v64[a] + slope * np.arange(b - a + 1)[:, None]
         if np.abs(line - v64[a : b + 1]).max() > SEGMENT_TOLERANCE:
             return None
-        table[0, j], table[1:4, j], table[4:7, j] = a, v64[a], slope
+        table[0, j] = a
+        table[1 + rows, j], table[5 + rows, j] = v64[a], slope
     return table.astype(np.float32)
+
+
+def opacity_error(table: np.ndarray, n: int) -> float:
+    """A bound on how far the opacity of pieces `table` (`tf_segments`, LUT of `n` entries)
+    evaluated as the kernels do lies from the LUT's interpolation: float32 rounding of each
+    product and sum (no partial sum exceeds the value at 0 plus the pieces' changes) and the
+    entries' distance from their pieces. The threshold modes trust the pieces beyond 1e-5
+    (SEG_MARGIN in kernels/opencl/common.h), so this must stay below half of that."""
+    x0 = table[0].astype(np.float64)
+    length = np.diff(np.append(x0, n - 1))
+    swing = abs(float(table[4, 0])) + float(np.sum(np.abs(table[8].astype(np.float64)) * length))
+    return 2.0**-24 * (table.shape[1] + 2) * swing + 2 * SEGMENT_TOLERANCE
+
+
+def timed(segments: np.ndarray, tc: np.ndarray) -> np.ndarray:
+    """The kernels' table of `segments` (9, S) for steps of time factors `tc` (W, 4): the
+    pieces' x0 (S), then per step and channel the value at 0 and the S slopes, times the
+    step's time colour (r, g, b) or opacity (a): (S + W * 4 * (S + 1),) float32."""
+    x0, c0, slopes = segments[0], segments[1:5, 0], segments[5:9]
+    rows = np.concatenate([c0[:, None], slopes], axis=1).astype(np.float64)  # (4, S + 1)
+    per_step = tc.astype(np.float64)[:, :, None] * rows[None]
+    return np.concatenate([x0, per_step.ravel()]).astype(np.float32)
 
 
 def t_size(rgba_shape: tuple) -> int:

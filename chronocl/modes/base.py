@@ -75,6 +75,8 @@ class Mode:
     leaf_span: ClassVar[int] = 1  # consecutive steps one sliding leaf integrates (ending at it)
     compares_values: ClassVar[bool] = False  # combine needs `leaf_value` in Partial.value
     lut_by_value: ClassVar[bool] = False  # looks the data TF up at a derived value, not v
+    # compares a step's opacity with the threshold: the kernels keep the LUT's exact opacity
+    opacity_threshold: ClassVar[bool] = False
     legend: ClassVar[str] = "time"  # what colour tells: "time", or "fraction" of the steps
     reads_values: ClassVar[bool] = False  # `accumulate` also takes `values=` (Values)
     # The coarse levels a mode integrates (docs/levels.md): "mean" for modes that show the

@@ -16,6 +16,7 @@ from chronocl.modes.base import Mode, Partial
 class Count(Mode):
     name = "count"
     summary = "occupancy: fraction of steps above the opacity threshold, via the data TF"
+    opacity_threshold = True
     kernel = "count"
     kernel_function = "integrate_count"
     slides = "invert"

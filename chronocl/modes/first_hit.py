@@ -14,6 +14,7 @@ from chronocl.modes.base import Mode, Partial
 class FirstHit(Mode):
     name = "first_hit"
     summary = "first temporal hit above the opacity threshold, with the step that made it"
+    opacity_threshold = True
     kernel = "first_hit"
     kernel_function = "integrate_first_hit"
     has_t_index = True

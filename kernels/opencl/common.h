@@ -12,7 +12,10 @@
  *   KEY_RAW     max/min compare raw values (extreme.cl), the winning step in IDX_T lanes
  *   LUT_N       entries per channel of the data LUT
  *   CONST_COLOR the data colour is the same everywhere: skip the colour lookups
- *   COLOR_SEGS  the data colour is this many (1..8) straight pieces: evaluate them, no lookups
+ *   TF_SEGS     the data TF is this many (1..8) straight pieces (0: none): the colour, unless
+ *               constant, is evaluated from them, no lookups
+ *   SEG_ALPHA   opacity in the pieces: 1 evaluated from them; 2 (threshold modes) deciding
+ *               the lanes far from the threshold, the others looked up exactly (THRESHOLD_TEST)
  *   ENHANCE     0 none, 1 edge, 2 silhouette (VEC must be 1)
  *   EARLY_EXIT  alpha: stop once every lane's transmittance is below 1e-6
  *   SKIP_EMPTY  skip steps whose lanes all map to zero data opacity (exact: they add nothing)
@@ -153,8 +156,16 @@ typedef int intv;
 #error "gradient enhancement is computed one voxel per work-item (VEC=1)"
 #endif
 
+/* x clamped to [0, 1]. A function, not VCLAMP: with the bound value written twice LLVM turns
+ * the outer comparison into mask arithmetic (seven instructions per 8 lanes, not two). */
+inline floatv clamp_unit(const floatv x)
+{
+    const floatv m = VMAX(x, 0.0f);
+    return VMIN(m, 1.0f);
+}
+
 /* u = clip((v - vmin) * scale, 0, 1), in float32 exactly as the reference. */
-#define NORMALIZE(v) VCLAMP((TO_FLOAT(v) - vmin) * scale, 0.0f, 1.0f)
+#define NORMALIZE(v) clamp_unit((TO_FLOAT(v) - vmin) * scale)
 
 /* Data TF of a step's values: position in the LUT, then interpolated channels. */
 typedef struct {
@@ -198,47 +209,68 @@ inline LutPos lut_pos_of(const floatv u)
 #define LOCATE(raw, p) (p) = lut_pos_of(NORMALIZE(raw));
 #endif
 
+#if TF_SEGS
+/* The data TF as TF_SEGS straight pieces of the LUT (found on the host, equal to the LUT's
+ * interpolation to float32 rounding), where looking a channel up takes two 16-lane gathers.
+ * A position's run through piece j is x - x0_j clamped to [0, the piece's length], and a
+ * channel is c0 + sum_j slope_j * run_j: no lane picks a piece, and no term is larger than
+ * the channel's change over its piece (no cancellation). The table follows the LUT in its
+ * buffer: x0[S], then per step k (W of them) and channel (r g b a) the value at 0 and the
+ * S slopes, times step k's time colour and opacity (chronocl/engine/opencl.py `tf_segments`).
+ * `PIECES(p, k)` declares the runs h0..h7 and step k's row; channels a build does not use
+ * cost nothing (the compiler drops them). */
+#define SEG_X(j) seg[(j)]
+#define SEG_ROW(k) (seg + TF_SEGS + (k) * 4 * (TF_SEGS + 1))
+#define SEG_C(c) segk[(c) * (TF_SEGS + 1)]
+#define SEG_S(c, j) segk[(c) * (TF_SEGS + 1) + 1 + (j)]
+#define RUN(p, j)                                                                        \
+    const floatv h##j = (j) >= TF_SEGS ? (floatv)(0.0f)                                  \
+                      : (j) + 1 == TF_SEGS ? VMAX((p).x - SEG_X(j), 0.0f)                \
+                      : VCLAMP((p).x - SEG_X(j), 0.0f, SEG_X((j) + 1) - SEG_X(j));
+#define PIECES(p, k)                                                                     \
+    const __global float *seg = lut + 4 * LUT_N;                                         \
+    const __global float *segk = SEG_ROW(k);                                             \
+    RUN(p, 0) RUN(p, 1) RUN(p, 2) RUN(p, 3) RUN(p, 4) RUN(p, 5) RUN(p, 6) RUN(p, 7)
+#define TERM(c, j) ((j) < TF_SEGS ? SEG_S(c, j) * h##j : (floatv)(0.0f))
+#define TERMS_FROM(c, base) ((base) + TERM(c, 0) + TERM(c, 1) + TERM(c, 2) + TERM(c, 3) \
+                             + TERM(c, 4) + TERM(c, 5) + TERM(c, 6) + TERM(c, 7))
+#define PIECE_OF(c) TERMS_FROM(c, SEG_C(c))
+#define CH_r 0
+#define CH_g 1
+#define CH_b 2
+#define CH_a 3
+/* Channel c (r, g, b or a) of the data TF times the time TF of the step PIECES took. */
+#define PIECE(c) PIECE_OF(CH_##c)
+/* How far a threshold test trusts the pieces' opacity: twice the error the host allows them
+ * (chronocl/engine/opencl.py `opacity_error`, at most 5e-6). */
+#define SEG_MARGIN 1e-5f
+#else
+#define PIECES(p, k)
+#endif
+
 #ifdef CONST_COLOR
 /* Colour is data colour (constant, folded into tc on the host) times time colour. */
 #define STEP_COLOR(lut, p, t, r, g, b) \
     r = (floatv)((t).x);               \
     g = (floatv)((t).y);               \
     b = (floatv)((t).z);
-#elif COLOR_SEGS
-/* The data colour is COLOR_SEGS straight pieces of the LUT (found on the host, equal to the
- * LUT's interpolation to float32 rounding): each lane picks its piece by comparisons and
- * evaluates c0 + slope * (x - x0), where looking the colour up would take six gathers. The
- * table follows the LUT in its buffer: x0[S], then c0 and slope per channel ([3][S] each). */
-#define SEG_X(j) seg[(j)]
-#define SEG_C(c, j) seg[COLOR_SEGS * (1 + (c)) + (j)]
-#define SEG_S(c, j) seg[COLOR_SEGS * (4 + (c)) + (j)]
-#define SEG_IN(j) ((p).x >= SEG_X(j))
-#define SEG_PICK(j)                                         \
-    if ((j) < COLOR_SEGS) {                                 \
-        x0 = SELECT(x0, (floatv)(SEG_X(j)), SEG_IN(j));     \
-        c0r = SELECT(c0r, (floatv)(SEG_C(0, j)), SEG_IN(j)); \
-        c0g = SELECT(c0g, (floatv)(SEG_C(1, j)), SEG_IN(j)); \
-        c0b = SELECT(c0b, (floatv)(SEG_C(2, j)), SEG_IN(j)); \
-        sr = SELECT(sr, (floatv)(SEG_S(0, j)), SEG_IN(j));   \
-        sg = SELECT(sg, (floatv)(SEG_S(1, j)), SEG_IN(j));   \
-        sb = SELECT(sb, (floatv)(SEG_S(2, j)), SEG_IN(j));   \
-    }
-#define STEP_COLOR(lut, p, t, r, g, b)                                                   \
-    {                                                                                    \
-        const __global float *seg = (lut) + 4 * LUT_N;                                   \
-        floatv x0 = SEG_X(0), c0r = SEG_C(0, 0), c0g = SEG_C(1, 0), c0b = SEG_C(2, 0);   \
-        floatv sr = SEG_S(0, 0), sg = SEG_S(1, 0), sb = SEG_S(2, 0);                     \
-        SEG_PICK(1) SEG_PICK(2) SEG_PICK(3) SEG_PICK(4) SEG_PICK(5) SEG_PICK(6) SEG_PICK(7) \
-        const floatv dx = (p).x - x0;                                                    \
-        r = (c0r + sr * dx) * (t).x;                                                     \
-        g = (c0g + sg * dx) * (t).y;                                                     \
-        b = (c0b + sb * dx) * (t).z;                                                     \
-    }
+#elif TF_SEGS
+#define STEP_COLOR(lut, p, t, r, g, b) \
+    r = PIECE(r);                      \
+    g = PIECE(g);                      \
+    b = PIECE(b);
 #else
 #define STEP_COLOR(lut, p, t, r, g, b)      \
     r = LUT_CHANNEL(lut, 0, p) * (t).x;     \
     g = LUT_CHANNEL(lut, 1, p) * (t).y;     \
     b = LUT_CHANNEL(lut, 2, p) * (t).z;
+#endif
+
+/* A step's data opacity times its time opacity: from the pieces, or looked up. */
+#if TF_SEGS && SEG_ALPHA == 1
+#define TIMED_ALPHA(lut, p, t) PIECE(a)
+#else
+#define TIMED_ALPHA(lut, p, t) (LUT_CHANNEL(lut, 3, p) * (t).w)
 #endif
 
 #if ENHANCE
@@ -273,10 +305,10 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 #endif
 }
 #define STEP_ALPHA(lut, p, t, k) \
-    VCLAMP(LUT_CHANNEL(lut, 3, p) * (t).w * \
+    VCLAMP(TIMED_ALPHA(lut, p, t) * \
           enhance_factor(data, k, x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view), 0.0f, 1.0f)
 #else
-#define STEP_ALPHA(lut, p, t, k) VCLAMP(LUT_CHANNEL(lut, 3, p) * (t).w, 0.0f, 1.0f)
+#define STEP_ALPHA(lut, p, t, k) clamp_unit(TIMED_ALPHA(lut, p, t))
 #endif
 
 /* The arguments every integration kernel takes, in this order. */
@@ -311,9 +343,32 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
     LutPos p;                           \
     LOCATE(raw, p)                      \
     const float4 t = tc[k];             \
+    PIECES(p, k)                        \
     floatv r, g, b;                     \
     STEP_COLOR(lut, p, t, r, g, b)      \
     const floatv ak = STEP_ALPHA(lut, p, t, k);
+
+/* `pass`: the lanes of step k whose opacity exceeds `threshold`, exactly as the LUT gives it.
+ * With SEG_ALPHA 2 the pieces' opacity (within SEG_MARGIN / 2 of the exact one; the host keeps
+ * time opacities at most 1 and gradient enhancement off) decides every lane farther than
+ * SEG_MARGIN from the threshold, and the exact opacity is looked up only when a lane of
+ * `open_` is that close; a step no lane of `open_` can pass is skipped (`continue`). */
+#if TF_SEGS && SEG_ALPHA == 2
+#define THRESHOLD_TEST(p, k, open_, pass)                              \
+    PIECES(p, k)                                                       \
+    const floatv near_ = TERMS_FROM(CH_a, SEG_C(CH_a) - threshold);   \
+    if (!ANY((open_) & (near_ > -SEG_MARGIN))) continue;               \
+    intv pass = near_ > SEG_MARGIN;                                    \
+    if (ANY((open_) & (VABS(near_) <= SEG_MARGIN))) {                  \
+        const float4 t = tc[k];                                        \
+        pass = STEP_ALPHA(lut, p, t, k) > threshold;                   \
+    }
+#else
+#define THRESHOLD_TEST(p, k, open_, pass) \
+    PIECES(p, k)                          \
+    const float4 t = tc[k];               \
+    const intv pass = STEP_ALPHA(lut, p, t, k) > threshold;
+#endif
 
 /* The colour r, g, b and opacity ak of the step that won (max, min, change): the data TF at
  * `value`, the time TF of selection index `win` (lanes), and that step's enhancement. */

@@ -7,8 +7,12 @@ __kernel void integrate_count(KERNEL_ARGS, const float threshold, __global float
     floatv n = 0.0f;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        STEP_RGBA(k, r, g, b, ak)
-        n = SELECT(n, n + 1.0f, ak > threshold);
+        const DATA_V raw = RAW(k);
+        SKIP_IF_EMPTY(raw)
+        LutPos p;
+        LOCATE(raw, p)
+        THRESHOLD_TEST(p, k, (intv)(-1), pass)
+        n = SELECT(n, n + 1.0f, pass);
     }
 #ifdef RAW_PARTIAL
     STORE_RGBA(o, n, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));

@@ -11,8 +11,13 @@ __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global f
     intv hk = -1;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        STEP_RGBA(k, r, g, b, ak)
-        const intv take = (hk < 0) & (ak > threshold);
+        const DATA_V raw = RAW(k);
+        SKIP_IF_EMPTY(raw)
+        LutPos p;
+        LOCATE(raw, p)
+        const intv open_ = hk < 0;
+        THRESHOLD_TEST(p, k, open_, pass)
+        const intv take = open_ & pass;
         hx = SELECT(hx, p.x, take);
         hk = SELECT(hk, (intv)(k), take);
         if (ALL(hk >= 0)) break;
