@@ -15,6 +15,8 @@ for (`chronocl.engine.transfer`).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from chronocl.core import values
@@ -503,6 +505,7 @@ def t_size(rgba_shape: tuple) -> int:
     return int(np.prod(rgba_shape[:-1]))
 
 
+@lru_cache(maxsize=256)  # a bisection of ~34 numpy steps (0.6 ms), asked again on every brick
 def raw_cut(position: float, value_range: tuple[float, float], lut_size: int) -> float:
     """The smallest float32 raw value v whose LUT position u(v) * (N - 1) is >= `position`.
 
