@@ -136,8 +136,8 @@ class OpenCLEngine:
         the data colour is constant (then folded into tc), the skip cut: LUT positions
         below it (for quantised data: raw values below it) have data opacity exactly 0), the
         data TF as a few straight pieces (`tf_segments`) or None, and what the pieces' opacity
-        is for (SEG_ALPHA: 0 not in the pieces, 1 the opacity itself, 2 only a test that
-        skips the exact opacity where no lane can pass the threshold).
+        is for (SEG_ALPHA: 0 not in the pieces, 1 the opacity itself, 2 a threshold test that
+        decides the lanes far from the threshold, the others looked up exactly).
         """
         if quant:  # TF(u(v)) for every byte value, with the kernels' float32 arithmetic
             u = values.normalize(np.arange(256, dtype=np.uint8), *value_range)
@@ -162,9 +162,9 @@ class OpenCLEngine:
         """The pieces of the data TF the kernels evaluate, and their SEG_ALPHA (see `luts`).
 
         Opacity joins the pieces where it is straight in as few pieces; a mode comparing it
-        with a threshold keeps the LUT's exact opacity and uses its pieces (within
-        SEGMENT_TOLERANCE, times a time opacity of at most 1) only to skip steps no lane of
-        which can pass."""
+        with a threshold keeps the LUT's exact opacity and lets its pieces decide only lanes
+        farther from the threshold than their error (`opacity_error`, at most 5e-6, times a
+        time opacity of at most 1; no gradient enhancement) could reach."""
         if not self.pieces:
             return None, 0
         lut32 = lut.astype(np.float32)
