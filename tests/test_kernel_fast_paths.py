@@ -177,7 +177,7 @@ def test_tf_pieces_follow_the_lut():
     want = lut_lerp32(tf.lut, x / np.float32(255)).T
     error = np.abs(got - want).max(axis=1)
     assert error.max() < 1e-6
-    assert error[3] <= opencl.opacity_error(table, 256) < 5e-6  # what the thresholds trust
+    assert error[3] <= opencl.opacity_error(table, 256) < opencl.OPACITY_ERROR_MAX
     only_opacity = opencl.tf_segments(tf.lut, [3])
     assert np.all(only_opacity[1:4] == 0) and np.all(only_opacity[5:8] == 0)
     many = DataTF(points=[(i / 11, i % 2, 0, 1 - i % 2, 1) for i in range(12)])

@@ -163,8 +163,9 @@ class OpenCLEngine:
 
         Opacity joins the pieces where it is straight in as few pieces; a mode comparing it
         with a threshold keeps the LUT's exact opacity and lets its pieces decide only lanes
-        farther from the threshold than their error (`opacity_error`, at most 5e-6, times a
-        time opacity of at most 1; no gradient enhancement) could reach."""
+        farther from the threshold than their error (`opacity_error`, at most
+        OPACITY_ERROR_MAX, times a time opacity of at most 1; no gradient enhancement) could
+        reach."""
         if not self.pieces:
             return None, 0
         lut32 = lut.astype(np.float32)
@@ -173,7 +174,9 @@ class OpenCLEngine:
         # a threshold test trusts the pieces only where they bound the exact opacity
         if not (exact and (float(a_t.max(initial=0.0)) > 1.0 or spec.enhance.needs_gradient)):
             table = tf_segments(lut32, [*channels, 3])
-            if table is not None and not (exact and opacity_error(table, len(lut)) > 5e-6):
+            if table is not None and (
+                not exact or opacity_error(table, len(lut)) <= OPACITY_ERROR_MAX
+            ):
                 return table, 2 if exact else 1
         return (tf_segments(lut32, channels) if channels else None), 0
 
@@ -447,6 +450,8 @@ class OpenCLEngine:
 
 MAX_SEGMENTS = 8  # straight pieces of the data TF evaluated without lookups
 SEGMENT_TOLERANCE = 2e-7  # how far a LUT entry may lie from its piece (float32 rounding)
+# the most `opacity_error` the threshold modes accept: half the kernels' SEG_MARGIN (1e-5)
+OPACITY_ERROR_MAX = 5e-6
 
 
 def tf_segments(lut: np.ndarray, channels: list[int]) -> np.ndarray | None:
@@ -455,7 +460,8 @@ def tf_segments(lut: np.ndarray, channels: list[int]) -> np.ndarray | None:
     Returns (9, S) float32: each piece's first LUT position x0, then the four channels there
     and their slopes per position (channels not asked for are 0); a piece runs to the next
     one's x0. Every entry of the channels asked for lies within SEGMENT_TOLERANCE of its
-    piece, so the kernels' c0 + slope * (x - x0) equals the LUT's interpolation to float32
+    piece, so the kernels' sum over the pieces (the value at 0 plus each slope times x's
+    run through its piece, kernels/opencl/common.h) equals the LUT's interpolation to float32
     rounding (docs/engine.md). A piece breaks where the second difference of a channel is
     not zero.
     """
@@ -483,7 +489,7 @@ def opacity_error(table: np.ndarray, n: int) -> float:
     evaluated as the kernels do lies from the LUT's interpolation: float32 rounding of each
     product and sum (no partial sum exceeds the value at 0 plus the pieces' changes) and the
     entries' distance from their pieces. The threshold modes trust the pieces beyond 1e-5
-    (SEG_MARGIN in kernels/opencl/common.h), so this must stay below half of that."""
+    (SEG_MARGIN in kernels/opencl/common.h), so this must stay below OPACITY_ERROR_MAX."""
     x0 = table[0].astype(np.float64)
     length = np.diff(np.append(x0, n - 1))
     swing = abs(float(table[4, 0])) + float(np.sum(np.abs(table[8].astype(np.float64)) * length))

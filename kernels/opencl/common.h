@@ -337,11 +337,14 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 #else
 #define SKIP_IF_EMPTY(raw)
 #endif
-#define STEP_RGBA(k, r, g, b, ak)       \
+/* Step k's LUT position p, inside a loop over the steps (SKIP_EMPTY: `continue` past it). */
+#define STEP_POSITION(k, p)             \
     const DATA_V raw = RAW(k);          \
     SKIP_IF_EMPTY(raw)                  \
     LutPos p;                           \
-    LOCATE(raw, p)                      \
+    LOCATE(raw, p)
+#define STEP_RGBA(k, r, g, b, ak)       \
+    STEP_POSITION(k, p)                 \
     const float4 t = tc[k];             \
     PIECES(p, k)                        \
     floatv r, g, b;                     \

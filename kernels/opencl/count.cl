@@ -7,10 +7,7 @@ __kernel void integrate_count(KERNEL_ARGS, const float threshold, __global float
     floatv n = 0.0f;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        const DATA_V raw = RAW(k);
-        SKIP_IF_EMPTY(raw)
-        LutPos p;
-        LOCATE(raw, p)
+        STEP_POSITION(k, p)
         THRESHOLD_TEST(p, k, (intv)(-1), pass)
         n = SELECT(n, n + 1.0f, pass);
     }

@@ -11,10 +11,7 @@ __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global f
     intv hk = -1;
     for (int i = 0; i < w; ++i) {
         const int k = order[i];
-        const DATA_V raw = RAW(k);
-        SKIP_IF_EMPTY(raw)
-        LutPos p;
-        LOCATE(raw, p)
+        STEP_POSITION(k, p)
         const intv open_ = hk < 0;
         THRESHOLD_TEST(p, k, open_, pass)
         const intv take = open_ & pass;
