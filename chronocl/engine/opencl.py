@@ -84,6 +84,7 @@ class OpenCLEngine:
         quantized: bool = True,
         skip_empty: bool = True,
         pieces: bool = True,
+        row_blocks: bool = True,
         local_size: tuple[int, int, int] | None = None,
         max_brick_bytes: int | None = None,
         device_format: str = "auto",
@@ -96,6 +97,7 @@ class OpenCLEngine:
         self.quantized = quantized
         self.skip_empty = skip_empty
         self.pieces = pieces
+        self.row_blocks = row_blocks
         self.local_size = local_size
         self._max_brick = max_brick_bytes
         self.device_format = check_format_name(device_format)
@@ -293,16 +295,18 @@ class OpenCLEngine:
         launches = [(vec, 0, n_vec)] if n_vec else []
         if n_vec * vec < nx:
             launches.append((1, n_vec * vec, nx - n_vec * vec))
-        built = [
-            (
-                kernel(
-                    self.dc, file, kernel_name, {**defines, "VEC": n, "DATA_V": lane_type(dt, n)}
-                ),
-                x0,
-                count,
-            )
-            for n, x0, count in launches
-        ]
+        rows = self._row_blocks(mode, vec, n_vec, ny, nz_out, defines["SKIP_EMPTY"])
+        built = []
+        for n, x0, count in launches:
+            lane_defines = {**defines, "VEC": n, "DATA_V": lane_type(dt, n)}
+            if rows and n == VEC:
+                state = cl.LocalMemory(rows * count * n * mode.rows_state)
+                tail = [np.int32(rows), np.int32(count), state]
+                kern = kernel(self.dc, file, mode.rows_kernel, lane_defines)
+                built.append((kern, x0, count, tail, -(-ny // rows)))
+            else:
+                kern = kernel(self.dc, file, kernel_name, lane_defines)
+                built.append((kern, x0, count, [], None))
 
         def launch(queue, data, c: Chunk, out_bufs: list, wait_for: list | None = None) -> list:
             """Enqueue the kernels of brick rows c.r0..c.r1 (output rows c.a..c.b)."""
@@ -311,10 +315,13 @@ class OpenCLEngine:
             args[_ARG_ZCROP] = np.int32(c.zcrop)
             args[_ARG_NZ_OUT] = np.int32(c.b - c.a)
             events = []
-            for kern, x0, count in built:
+            for kern, x0, count, tail, blocks in built:
                 args[_ARG_X0] = np.int32(x0)
-                kern.set_args(*args, *out_bufs)
-                global_size, local_size = self._launch_shape(count, ny, c.b - c.a)
+                kern.set_args(*args, *out_bufs, *tail)
+                if blocks is None:
+                    global_size, local_size = self._launch_shape(count, ny, c.b - c.a)
+                else:  # a work-item per block of rows (in a group of its own: local scratch)
+                    global_size, local_size = (blocks, c.b - c.a), (1, 1)
                 events.append(
                     cl.enqueue_nd_range_kernel(
                         queue, kern, global_size, local_size, wait_for=wait_for or None
@@ -437,6 +444,27 @@ class OpenCLEngine:
                 cl.enqueue_copy(queue, a, buf)
         queue.finish()
 
+    def _row_blocks(self, mode, vec: int, n_vec: int, ny: int, nz: int, skips: bool) -> int:
+        """Rows a work-item of the mode's rows kernel takes (`Mode.rows_kernel`), 0 where the
+        per-vector kernel runs. Blocks pay where reading bounds the kernel: on CPU devices
+        (GPUs' work-items read side by side already), where steps can be skipped, and in the
+        modes marked `Mode.rows_dense` (max / min, which read more than they compute; the
+        threshold modes). With a data TF that leaves nothing to skip, the modes that colour
+        every step compute more than they read and their per-vector kernel is as fast or
+        faster (bench/integrate.py). Each block's state stays within ROW_BLOCK_BYTES, and
+        there are blocks enough for every compute unit."""
+        if not (self.row_blocks and self.dc.is_cpu and mode.rows_kernel and vec == VEC):
+            return 0
+        if not (skips or mode.rows_dense):
+            return 0
+        row_bytes = n_vec * VEC * mode.rows_state
+        budget = min(ROW_BLOCK_BYTES, self.dc.device.local_mem_size // 2)
+        if not n_vec or row_bytes > budget:
+            return 0
+        rows = min(ny, budget // row_bytes)
+        busy = ny * nz // (ROW_BLOCKS_PER_UNIT * self.dc.info.compute_units)
+        return max(1, min(rows, busy))
+
     def _launch_shape(self, count: int, ny: int, nz: int):
         """Global and local size for `count` work-items along x."""
         if self.local_size is not None:
@@ -448,6 +476,11 @@ class OpenCLEngine:
         return (_round_up(count, lx), _round_up(ny, ly), _round_up(nz, lz)), (lx, ly, lz)
 
 
+# A block of rows keeps its state (Mode.rows_state a voxel) in local memory, at most this
+# much, so that it stays in a CPU's L2 cache while the steps stream past; blocks per compute
+# unit, for an even load.
+ROW_BLOCK_BYTES = 64 * 1024
+ROW_BLOCKS_PER_UNIT = 4
 MAX_SEGMENTS = 8  # straight pieces of the data TF evaluated without lookups
 SEGMENT_TOLERANCE = 2e-7  # how far a LUT entry may lie from its piece (float32 rounding)
 # the most `opacity_error` the threshold modes accept: half the kernels' SEG_MARGIN (1e-5)

@@ -37,6 +37,8 @@ class Additive(Mode):
     summary = "additive colours through time, normalised (white where all steps overlap)"
     kernel = "additive"
     kernel_function = "integrate_additive"
+    rows_kernel = "integrate_additive_rows"
+    rows_state = 16
     slides = "invert"
     state_bytes = 4  # the opacity slides by aggregation (a maximum)
     sum_channels = 3  # the colour sums, in fixed point

@@ -21,6 +21,8 @@ class Alpha(Mode):
     summary = "alpha compositing through time (front to back in the order)"
     kernel = "alpha"
     kernel_function = "integrate_alpha"
+    rows_kernel = "integrate_alpha_rows"
+    rows_state = 16
     state_bytes = 16
 
     def accumulate(self, u, steps, order, step_rgba, spec):

@@ -79,6 +79,12 @@ class Mode:
     opacity_threshold: ClassVar[bool] = False
     legend: ClassVar[str] = "time"  # what colour tells: "time", or "fraction" of the steps
     reads_values: ClassVar[bool] = False  # `accumulate` also takes `values=` (Values)
+    # CPU devices: a kernel in the same file taking a block of rows per work-item, the steps
+    # in the outer loop (chronocl/engine/opencl.py `_row_blocks`), and the bytes per voxel of
+    # the state it keeps in local memory; None: the per-vector kernel only
+    rows_kernel: ClassVar[str | None] = None
+    rows_state: ClassVar[int] = 0
+    rows_dense: ClassVar[bool] = False  # blocks also where no step can be skipped
     # The coarse levels a mode integrates (docs/levels.md): "mean" for modes that show the
     # whole field; max/min take levels pooled alike, so a thin peak or trough survives.
     pool: ClassVar[str] = "mean"

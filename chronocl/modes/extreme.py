@@ -55,6 +55,9 @@ def raw_key_zones(dtype, value_range, n_steps: int) -> tuple[float, float] | Non
 class Extreme(Mode):
     kernel = "extreme"
     kernel_function = "integrate_extreme"
+    rows_kernel = "integrate_extreme_rows"
+    rows_state = 8  # the key and the step, each in lanes of at most 4 bytes
+    rows_dense = True  # it reads more than it computes, whatever the TF
     has_t_index = True
     state_bytes = 24
     compares_values = True

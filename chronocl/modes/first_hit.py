@@ -17,6 +17,9 @@ class FirstHit(Mode):
     opacity_threshold = True
     kernel = "first_hit"
     kernel_function = "integrate_first_hit"
+    rows_kernel = "integrate_first_hit_rows"
+    rows_state = 8
+    rows_dense = True  # measured a little faster in blocks with a dense TF too
     has_t_index = True
     state_bytes = 20
 

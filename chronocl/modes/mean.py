@@ -16,6 +16,8 @@ class Mean(Mode):
     summary = "time average of the premultiplied colour and opacity over the window"
     kernel = "mean"
     kernel_function = "integrate_mean"
+    rows_kernel = "integrate_mean_rows"
+    rows_state = 16
     slides = "invert"
     state_bytes = 0
     sum_channels = 4

@@ -2,25 +2,47 @@
  * by N = sum a_t * rgb_t (norm.xyz; a channel with N = 0 gives 0) and clamped to A here;
  * otherwise the raw sums are written and the host normalises by the volume's maximum. */
 #ifndef SLIDING
+#define SUM_STEP(s, k)                           \
+    {                                            \
+        STEP_RGBA(k, r, g, b, ak)                \
+        s.r = madd(ak, r, s.r);                  \
+        s.g = madd(ak, g, s.g);                  \
+        s.b = madd(ak, b, s.b);                  \
+        s.a = VMAX(s.a, ak);                     \
+    }
+#ifdef NORM_TIME
+#define SUM_FINISH(s)                                                          \
+    STORE_RGBA(o, norm.x > 0.0f ? VMIN(s.r / norm.x, s.a) : (floatv)(0.0f),     \
+               norm.y > 0.0f ? VMIN(s.g / norm.y, s.a) : (floatv)(0.0f),       \
+               norm.z > 0.0f ? VMIN(s.b / norm.z, s.a) : (floatv)(0.0f), s.a);
+#else
+#define SUM_FINISH(s) STORE_RGBA(o, s.r, s.g, s.b, s.a);
+#endif
+
 __kernel void integrate_additive(KERNEL_ARGS, const float4 norm, __global float4 *out)
 {
     VOXEL_PROLOGUE
-    floatv cr = 0.0f, cg = 0.0f, cb = 0.0f, ca = 0.0f;
-    for (int i = 0; i < w; ++i) {
-        const int k = order[i];
-        STEP_RGBA(k, r, g, b, ak)
-        cr += ak * r;
-        cg += ak * g;
-        cb += ak * b;
-        ca = VMAX(ca, ak);
-    }
-#ifdef NORM_TIME
-    cr = norm.x > 0.0f ? VMIN(cr / norm.x, ca) : (floatv)(0.0f);
-    cg = norm.y > 0.0f ? VMIN(cg / norm.y, ca) : (floatv)(0.0f);
-    cb = norm.z > 0.0f ? VMIN(cb / norm.z, ca) : (floatv)(0.0f);
-#endif
-    STORE_RGBA(o, cr, cg, cb, ca);
+    Rgba s;
+    RGBA_ZERO(s)
+    STEPS(s, 0, w, SUM_STEP, NEVER_DONE)
+    SUM_FINISH(s)
 }
+
+#if VEC == 16
+__kernel void integrate_additive_rows(KERNEL_ARGS, const float4 norm, __global float4 *out,
+                                      ROWS_ARGS(Rgba))
+{
+    ROWS_PROLOGUE
+    FOR_BLOCK(v) { RGBA_ZERO(st[v]) }
+    BLOCK_STEPS(Rgba, 0, SUM_STEP, NEVER_DONE)
+    FOR_BLOCK(v) {
+        BLOCK_VOXEL(v)
+        const size_t o = OUT_INDEX(z, y, x);
+        const Rgba s = st[v];
+        SUM_FINISH(s)
+    }
+}
+#endif
 #else
 /* Combining the partials of two consecutive runs of steps, `front` integrated first
  * (chronocl/modes/additive.py `combine` is the oracle). One voxel per work-item. */

@@ -1,25 +1,46 @@
 /* alpha: front-to-back `over` through time, premultiplied; the first step in the order is in
  * front. C += (1 - A) * a_k * c_k; A += (1 - A) * a_k. */
 #ifndef SLIDING
+#define OVER_STEP(s, k)                          \
+    {                                            \
+        STEP_RGBA(k, r, g, b, ak)                \
+        const floatv tk = (1.0f - s.a) * ak;     \
+        s.r = madd(tk, r, s.r);                  \
+        s.g = madd(tk, g, s.g);                  \
+        s.b = madd(tk, b, s.b);                  \
+        s.a += tk;                               \
+    }
+#ifdef EARLY_EXIT
+/* What the remaining steps could add is at most the transmittance 1 - A. */
+#define OVER_DONE(s) ALL(1.0f - (s).a < 1e-6f)
+#else
+#define OVER_DONE(s) NEVER_DONE(s)
+#endif
+#define OVER_FINISH(s) STORE_RGBA(o, s.r, s.g, s.b, s.a);
+
 __kernel void integrate_alpha(KERNEL_ARGS, __global float4 *out)
 {
     VOXEL_PROLOGUE
-    floatv cr = 0.0f, cg = 0.0f, cb = 0.0f, ca = 0.0f;
-    for (int i = 0; i < w; ++i) {
-        const int k = order[i];
-        STEP_RGBA(k, r, g, b, ak)
-        const floatv tk = (1.0f - ca) * ak;
-        cr += tk * r;
-        cg += tk * g;
-        cb += tk * b;
-        ca += tk;
-#ifdef EARLY_EXIT
-        /* What the remaining steps could add is at most the transmittance 1 - A. */
-        if (ALL(1.0f - ca < 1e-6f)) break;
-#endif
-    }
-    STORE_RGBA(o, cr, cg, cb, ca);
+    Rgba s;
+    RGBA_ZERO(s)
+    STEPS(s, 0, w, OVER_STEP, OVER_DONE)
+    OVER_FINISH(s)
 }
+
+#if VEC == 16
+__kernel void integrate_alpha_rows(KERNEL_ARGS, __global float4 *out, ROWS_ARGS(Rgba))
+{
+    ROWS_PROLOGUE
+    FOR_BLOCK(v) { RGBA_ZERO(st[v]) }
+    BLOCK_STEPS(Rgba, 0, OVER_STEP, OVER_DONE)
+    FOR_BLOCK(v) {
+        BLOCK_VOXEL(v)
+        const size_t o = OUT_INDEX(z, y, x);
+        const Rgba s = st[v];
+        OVER_FINISH(s)
+    }
+}
+#endif
 #else
 /* Combining the partials of two consecutive runs of steps, `front` integrated first
  * (chronocl/modes/alpha.py `combine` is the oracle). One voxel per work-item. */

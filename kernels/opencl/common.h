@@ -164,6 +164,16 @@ inline floatv clamp_unit(const floatv x)
     return VMIN(m, 1.0f);
 }
 
+/* a * b + c with one rounding where the device fuses them (FMA): the data TF's pieces and the
+ * sums through time, which compute more than they read on a CPU. Elsewhere the file keeps
+ * contraction off, so a result follows the reference's rounding step by step. (fma() itself
+ * is called out of line for 16 lanes in PoCL 3.0, several times slower than the two.) */
+inline floatv madd(const floatv a, const floatv b, const floatv c)
+{
+#pragma OPENCL FP_CONTRACT ON
+    return a * b + c;
+}
+
 /* u = clip((v - vmin) * scale, 0, 1), in float32 exactly as the reference. */
 #define NORMALIZE(v) clamp_unit((TO_FLOAT(v) - vmin) * scale)
 
@@ -231,9 +241,10 @@ inline LutPos lut_pos_of(const floatv u)
     const __global float *seg = lut + 4 * LUT_N;                                         \
     const __global float *segk = SEG_ROW(k);                                             \
     RUN(p, 0) RUN(p, 1) RUN(p, 2) RUN(p, 3) RUN(p, 4) RUN(p, 5) RUN(p, 6) RUN(p, 7)
-#define TERM(c, j) ((j) < TF_SEGS ? SEG_S(c, j) * h##j : (floatv)(0.0f))
-#define TERMS_FROM(c, base) ((base) + TERM(c, 0) + TERM(c, 1) + TERM(c, 2) + TERM(c, 3) \
-                             + TERM(c, 4) + TERM(c, 5) + TERM(c, 6) + TERM(c, 7))
+#define TERM(c, j, acc) ((j) < TF_SEGS ? madd((floatv)(SEG_S(c, j)), h##j, acc) : (acc))
+#define TERMS_FROM(c, base)                                                              \
+    TERM(c, 7, TERM(c, 6, TERM(c, 5, TERM(c, 4, TERM(c, 3, TERM(c, 2, TERM(c, 1,         \
+         TERM(c, 0, (floatv)(base)))))))))
 #define PIECE_OF(c) TERMS_FROM(c, SEG_C(c))
 #define CH_r 0
 #define CH_g 1
@@ -329,6 +340,53 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 
 #define RAW(k) VLOAD(data + VOX_INDEX(zb, (k), y, x))
 
+/* Steps `from`..w-1 of the order into a mode's state s: STEP(s, k) each (which may `continue`
+ * past a step), stopping once DONE(s). */
+#define STEPS(s, from, to, STEP, DONE)  \
+    for (int i = (from); i < (to); ++i) { \
+        const int k = order[i];         \
+        STEP(s, k)                      \
+        if (DONE(s)) break;             \
+    }
+#define NEVER_DONE(s) 0
+
+/* Blocks of rows (CPU devices; chronocl/engine/opencl.py `_row_blocks`). A mode's `_rows`
+ * kernel takes `rows` rows of `nvec` vectors each (from x0) per work-item and runs the steps
+ * in the outer loop, STEP_GROUP at a time: each step of the block is then a few runs of
+ * consecutive memory, which a CPU's prefetchers stream, where one work-item per vector reads
+ * w places a step apart. The mode's state waits in local memory between groups (cache
+ * resident); each vector does the very arithmetic of the per-vector kernel, so the results
+ * are the same bits. */
+#ifndef STEP_GROUP
+#define STEP_GROUP 8
+#endif
+/* The state of the modes that sum or composite colour: planar RGBA of one vector. */
+typedef struct {
+    floatv r, g, b, a;
+} Rgba;
+#define RGBA_ZERO(s) s.r = s.g = s.b = s.a = 0.0f;
+#define ROWS_ARGS(T) const int rows, const int nvec, __local T *st
+#define ROWS_PROLOGUE                            \
+    const int y0 = rows * (int)get_global_id(0); \
+    const int z = get_global_id(1);              \
+    if (y0 >= ny || z >= nz_out) return;         \
+    const int zb = z + zcrop;                    \
+    const int nv = min(rows, ny - y0) * nvec;
+#define FOR_BLOCK(v) for (int v = 0; v < nv; ++v)
+/* Vector v of the block: its row y and first voxel x. */
+#define BLOCK_VOXEL(v)                           \
+    const int y = y0 + (v) / nvec;               \
+    const int x = x0 + VEC * ((v) % nvec);
+#define BLOCK_STEPS(T, from, STEP, DONE)                                 \
+    for (int i0 = (from); i0 < w; i0 += STEP_GROUP)                      \
+        FOR_BLOCK(v) {                                                   \
+            BLOCK_VOXEL(v)                                               \
+            T s = st[v];                                                 \
+            if (DONE(s)) continue;                                       \
+            STEPS(s, i0, min(w, i0 + STEP_GROUP), STEP, DONE)            \
+            st[v] = s;                                                   \
+        }
+
 /* Step k's colour r, g, b and opacity ak, inside a loop over the steps. With SKIP_EMPTY a step
  * whose lanes all map to zero data opacity is skipped (`continue`): every mode using this
  * gets nothing from such a step (over adds 0, no hit, sums add 0, a count does not grow). */
@@ -353,16 +411,18 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 
 /* `pass`: the lanes of step k whose opacity exceeds `threshold`, exactly as the LUT gives it.
  * With SEG_ALPHA 2 the pieces' opacity (within SEG_MARGIN / 2 of the exact one; the host keeps
- * time opacities at most 1 and gradient enhancement off) decides every lane farther than
- * SEG_MARGIN from the threshold, and the exact opacity is looked up only when a lane of
- * `open_` is that close; a step no lane of `open_` can pass is skipped (`continue`). */
+ * time opacities at most 1 and gradient enhancement off) decides every lane at least
+ * SEG_MARGIN below the threshold or more than SEG_MARGIN above it, and the exact opacity is
+ * looked up only when a lane of `open_` lies between; a step no lane of `open_` can pass is
+ * skipped (`continue`). */
 #if TF_SEGS && SEG_ALPHA == 2
 #define THRESHOLD_TEST(p, k, open_, pass)                              \
     PIECES(p, k)                                                       \
     const floatv near_ = TERMS_FROM(CH_a, SEG_C(CH_a) - threshold);   \
-    if (!ANY((open_) & (near_ > -SEG_MARGIN))) continue;               \
+    const intv can_ = (open_) & (near_ > -SEG_MARGIN);                 \
+    if (!ANY(can_)) continue;                                          \
     intv pass = near_ > SEG_MARGIN;                                    \
-    if (ANY((open_) & (VABS(near_) <= SEG_MARGIN))) {                  \
+    if (ANY(can_ & ~pass)) {                                           \
         const float4 t = tc[k];                                        \
         pass = STEP_ALPHA(lut, p, t, k) > threshold;                   \
     }

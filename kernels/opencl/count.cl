@@ -1,25 +1,52 @@
 /* count (occupancy): n = the number of steps whose opacity exceeds the threshold; the voxel is
  * the data TF at f = n / W, premultiplied. RAW_PARTIAL writes (n, 0, 0, 0) for sliding windows. */
 #ifndef SLIDING
+typedef struct {
+    floatv n;
+} Count;
+#define COUNT_INIT(s) s.n = 0.0f;
+#define COUNT_STEP(s, k)                                \
+    {                                                   \
+        STEP_POSITION(k, p)                             \
+        THRESHOLD_TEST(p, k, (intv)(-1), pass)          \
+        s.n = SELECT(s.n, s.n + 1.0f, pass);            \
+    }
+#ifdef RAW_PARTIAL
+#define COUNT_FINISH(s) STORE_RGBA(o, s.n, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));
+#else
+#define COUNT_FINISH(s)                                                  \
+    {                                                                    \
+        const LutPos q = lut_pos_of(s.n / (float)w);                     \
+        const floatv a = LUT_CHANNEL(lut, 3, q);                         \
+        STORE_RGBA(o, LUT_CHANNEL(lut, 0, q) * a, LUT_CHANNEL(lut, 1, q) * a, \
+                   LUT_CHANNEL(lut, 2, q) * a, a);                       \
+    }
+#endif
+
 __kernel void integrate_count(KERNEL_ARGS, const float threshold, __global float4 *out)
 {
     VOXEL_PROLOGUE
-    floatv n = 0.0f;
-    for (int i = 0; i < w; ++i) {
-        const int k = order[i];
-        STEP_POSITION(k, p)
-        THRESHOLD_TEST(p, k, (intv)(-1), pass)
-        n = SELECT(n, n + 1.0f, pass);
-    }
-#ifdef RAW_PARTIAL
-    STORE_RGBA(o, n, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));
-#else
-    const LutPos q = lut_pos_of(n / (float)w);
-    const floatv a = LUT_CHANNEL(lut, 3, q);
-    STORE_RGBA(o, LUT_CHANNEL(lut, 0, q) * a, LUT_CHANNEL(lut, 1, q) * a,
-               LUT_CHANNEL(lut, 2, q) * a, a);
-#endif
+    Count s;
+    COUNT_INIT(s)
+    STEPS(s, 0, w, COUNT_STEP, NEVER_DONE)
+    COUNT_FINISH(s)
 }
+
+#if VEC == 16
+__kernel void integrate_count_rows(KERNEL_ARGS, const float threshold, __global float4 *out,
+                                   ROWS_ARGS(Count))
+{
+    ROWS_PROLOGUE
+    FOR_BLOCK(v) { COUNT_INIT(st[v]) }
+    BLOCK_STEPS(Count, 0, COUNT_STEP, NEVER_DONE)
+    FOR_BLOCK(v) {
+        BLOCK_VOXEL(v)
+        const size_t o = OUT_INDEX(z, y, x);
+        const Count s = st[v];
+        COUNT_FINISH(s)
+    }
+}
+#endif
 #else
 /* The window's occupancy from its fixed-point counts (1 long per voxel) through the planar
  * data LUT (LUT_N entries per channel), as reference: f = n / W, premultiplied TF(f). */

@@ -45,42 +45,80 @@ typedef intv idxv;
 #define IDX(k) ((idxv)(k))
 #endif
 
+/* The best key so far and its step (ties keep the step integrated first). */
+typedef struct {
+    keyv best;
+    idxv best_k;
+} Best;
+#define BEST_INIT(s)                  \
+    s.best = KEY(RAW(order[0]));      \
+    s.best_k = IDX(order[0]);
+#define BEST_STEP(s, k)                                        \
+    {                                                          \
+        const keyv v_ = KEY(RAW(k));                           \
+        s.best_k = SELECT(s.best_k, IDX(k), v_ IS_BETTER s.best); \
+        s.best = SELECT(s.best, v_, v_ IS_BETTER s.best);      \
+    }
+
+#ifdef KEY_RAW
+#define UNIT_OF_KEY(key) NORMALIZE(key)
+#else
+#define UNIT_OF_KEY(key) clamp_unit(key)
+#endif
+
+/* The winner: `win` from the best key and its step, then a second pass over the steps where
+ * some lane lies beyond zhi (max) / zlo (min); the voxel's colour and t_index. */
+#define BEST_FINISH(s)                                                              \
+    {                                                                               \
+        const int first = order[0];                                                 \
+        const floatv kf = KEY_FLOAT(s.best);                                        \
+        intv win = SELECT(TO_INT(s.best_k), (intv)(first), BEHIND(kf));             \
+        const intv ahead = AHEAD(kf);                                               \
+        if (ANY(ahead)) {                                                           \
+            intv todo = ahead;                                                      \
+            for (int i = 0; i < w; ++i) {                                           \
+                const int k = order[i];                                             \
+                const intv hit = todo & AHEAD(KEY_FLOAT(KEY(RAW(k))));              \
+                win = SELECT(win, (intv)(k), hit);                                  \
+                todo &= ~hit;                                                       \
+                if (!ANY(todo)) break;                                              \
+            }                                                                       \
+        }                                                                           \
+        const floatv u = UNIT_OF_KEY(s.best);                                       \
+        WINNER_RGBA(u, win, r, g, b, ak)                                            \
+        STORE_RGBA(o, ak * r, ak * g, ak * b, ak);                                  \
+        STORE_INT(GATHER_INT(steps, win), t_index + o);                             \
+    }
+
 __kernel void integrate_extreme(KERNEL_ARGS, const float zlo, const float zhi,
                                 __global float4 *out, __global int *t_index)
 {
     VOXEL_PROLOGUE
-    const int first = order[0];
-    keyv best = KEY(RAW(first));
-    idxv best_k = IDX(first);
-    for (int i = 1; i < w; ++i) {
-        const int k = order[i];
-        const keyv v = KEY(RAW(k));
-        /* the mask's lanes are as wide as the key's (no named type: it follows DATA_T) */
-        best_k = SELECT(best_k, IDX(k), v IS_BETTER best);
-        best = SELECT(best, v, v IS_BETTER best);
-    }
-    const floatv kf = KEY_FLOAT(best);
-    intv win = SELECT(TO_INT(best_k), (intv)(first), BEHIND(kf));
-    const intv ahead = AHEAD(kf);
-    if (ANY(ahead)) {
-        intv todo = ahead;
-        for (int i = 0; i < w; ++i) {
-            const int k = order[i];
-            const intv hit = todo & AHEAD(KEY_FLOAT(KEY(RAW(k))));
-            win = SELECT(win, (intv)(k), hit);
-            todo &= ~hit;
-            if (!ANY(todo)) break;
-        }
-    }
-#ifdef KEY_RAW
-    const floatv u = NORMALIZE(best);
-#else
-    const floatv u = VCLAMP(best, 0.0f, 1.0f);
-#endif
-    WINNER_RGBA(u, win, r, g, b, ak)
-    STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
-    STORE_INT(GATHER_INT(steps, win), t_index + o);
+    Best s;
+    BEST_INIT(s)
+    STEPS(s, 1, w, BEST_STEP, NEVER_DONE)
+    BEST_FINISH(s)
 }
+
+#if VEC == 16
+__kernel void integrate_extreme_rows(KERNEL_ARGS, const float zlo, const float zhi,
+                                     __global float4 *out, __global int *t_index,
+                                     ROWS_ARGS(Best))
+{
+    ROWS_PROLOGUE
+    FOR_BLOCK(v) {
+        BLOCK_VOXEL(v)
+        BEST_INIT(st[v])
+    }
+    BLOCK_STEPS(Best, 1, BEST_STEP, NEVER_DONE)
+    FOR_BLOCK(v) {
+        BLOCK_VOXEL(v)
+        const size_t o = OUT_INDEX(z, y, x);
+        const Best s = st[v];
+        BEST_FINISH(s)
+    }
+}
+#endif
 #else
 /* Combining the partials of two consecutive runs of steps, `front` integrated first
  * (chronocl/modes/extreme.py `combine` is the oracle). One voxel per work-item. */

@@ -1,33 +1,61 @@
 /* first_hit: the first step in the order whose opacity exceeds the threshold supplies the
  * voxel: (a_k * c_k, a_k) and t_index = s_k; none: (0, 0, 0, 0) and -1. */
 #ifndef SLIDING
+/* The loop needs only each step's opacity (its colour goes unused and is not computed): it
+ * keeps the hit's LUT position hx and step hk (-1: none yet), and the hit is coloured once,
+ * after it. */
+typedef struct {
+    floatv hx;
+    intv hk;
+} Hit;
+#define HIT_INIT(s) s.hx = 0.0f; s.hk = -1;
+#define HIT_STEP(s, k)                                  \
+    {                                                   \
+        STEP_POSITION(k, p)                             \
+        const intv open_ = s.hk < 0;                    \
+        THRESHOLD_TEST(p, k, open_, pass)               \
+        const intv take = open_ & pass;                 \
+        s.hx = SELECT(s.hx, p.x, take);                 \
+        s.hk = SELECT(s.hk, (intv)(k), take);           \
+    }
+#define HIT_DONE(s) ALL((s).hk >= 0)
+#define HIT_FINISH(s)                                                              \
+    {                                                                              \
+        const intv none = s.hk < 0;                                                \
+        const intv win = VMAX(s.hk, 0);                                            \
+        const LutPos q = lut_pos_again(s.hx);                                      \
+        WINNER_RGBA_AT(q, win, r, g, b, ak)                                        \
+        const floatv zero = 0.0f;                                                  \
+        STORE_RGBA(o, SELECT(ak * r, zero, none), SELECT(ak * g, zero, none),      \
+                   SELECT(ak * b, zero, none), SELECT(ak, zero, none));            \
+        STORE_INT(SELECT(GATHER_INT(steps, win), (intv)(-1), none), t_index + o);  \
+    }
+
 __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global float4 *out,
                                   __global int *t_index)
 {
     VOXEL_PROLOGUE
-    /* The loop needs only each step's opacity (its colour goes unused and is not computed):
-     * it keeps the hit's LUT position and step, and the hit is coloured once, after it. */
-    floatv hx = 0.0f;
-    intv hk = -1;
-    for (int i = 0; i < w; ++i) {
-        const int k = order[i];
-        STEP_POSITION(k, p)
-        const intv open_ = hk < 0;
-        THRESHOLD_TEST(p, k, open_, pass)
-        const intv take = open_ & pass;
-        hx = SELECT(hx, p.x, take);
-        hk = SELECT(hk, (intv)(k), take);
-        if (ALL(hk >= 0)) break;
-    }
-    const intv none = hk < 0;
-    const intv win = VMAX(hk, 0);
-    const LutPos q = lut_pos_again(hx);
-    WINNER_RGBA_AT(q, win, r, g, b, ak)
-    const floatv zero = 0.0f;
-    STORE_RGBA(o, SELECT(ak * r, zero, none), SELECT(ak * g, zero, none),
-               SELECT(ak * b, zero, none), SELECT(ak, zero, none));
-    STORE_INT(SELECT(GATHER_INT(steps, win), (intv)(-1), none), t_index + o);
+    Hit s;
+    HIT_INIT(s)
+    STEPS(s, 0, w, HIT_STEP, HIT_DONE)
+    HIT_FINISH(s)
 }
+
+#if VEC == 16
+__kernel void integrate_first_hit_rows(KERNEL_ARGS, const float threshold, __global float4 *out,
+                                       __global int *t_index, ROWS_ARGS(Hit))
+{
+    ROWS_PROLOGUE
+    FOR_BLOCK(v) { HIT_INIT(st[v]) }
+    BLOCK_STEPS(Hit, 0, HIT_STEP, HIT_DONE)
+    FOR_BLOCK(v) {
+        BLOCK_VOXEL(v)
+        const size_t o = OUT_INDEX(z, y, x);
+        const Hit s = st[v];
+        HIT_FINISH(s)
+    }
+}
+#endif
 #else
 /* Combining the partials of two consecutive runs of steps, `front` integrated first
  * (chronocl/modes/first_hit.py `combine` is the oracle). One voxel per work-item. */

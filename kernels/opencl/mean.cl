@@ -1,27 +1,47 @@
 /* mean: the time average of premultiplied colour and opacity, (1/W) sum (a_k * c_k, a_k).
  * RAW_PARTIAL writes the sums (a sliding window divides once, after adding and subtracting steps). */
 #ifndef SLIDING
+#define MEAN_STEP(s, k)                          \
+    {                                            \
+        STEP_RGBA(k, r, g, b, ak)                \
+        s.r = madd(ak, r, s.r);                  \
+        s.g = madd(ak, g, s.g);                  \
+        s.b = madd(ak, b, s.b);                  \
+        s.a += ak;                               \
+    }
+#ifdef RAW_PARTIAL
+#define MEAN_FINISH(s) STORE_RGBA(o, s.r, s.g, s.b, s.a);
+#else
+#define MEAN_FINISH(s)                                                   \
+    {                                                                    \
+        const float n = (float)w;                                        \
+        STORE_RGBA(o, s.r / n, s.g / n, s.b / n, s.a / n);                \
+    }
+#endif
+
 __kernel void integrate_mean(KERNEL_ARGS, __global float4 *out)
 {
     VOXEL_PROLOGUE
-    floatv cr = 0.0f, cg = 0.0f, cb = 0.0f, ca = 0.0f;
-    for (int i = 0; i < w; ++i) {
-        const int k = order[i];
-        STEP_RGBA(k, r, g, b, ak)
-        cr += ak * r;
-        cg += ak * g;
-        cb += ak * b;
-        ca += ak;
-    }
-#ifndef RAW_PARTIAL
-    const float n = (float)w;
-    cr /= n;
-    cg /= n;
-    cb /= n;
-    ca /= n;
-#endif
-    STORE_RGBA(o, cr, cg, cb, ca);
+    Rgba s;
+    RGBA_ZERO(s)
+    STEPS(s, 0, w, MEAN_STEP, NEVER_DONE)
+    MEAN_FINISH(s)
 }
+
+#if VEC == 16
+__kernel void integrate_mean_rows(KERNEL_ARGS, __global float4 *out, ROWS_ARGS(Rgba))
+{
+    ROWS_PROLOGUE
+    FOR_BLOCK(v) { RGBA_ZERO(st[v]) }
+    BLOCK_STEPS(Rgba, 0, MEAN_STEP, NEVER_DONE)
+    FOR_BLOCK(v) {
+        BLOCK_VOXEL(v)
+        const size_t o = OUT_INDEX(z, y, x);
+        const Rgba s = st[v];
+        MEAN_FINISH(s)
+    }
+}
+#endif
 #else
 /* The window's average from its fixed-point sums (4 longs per voxel) and 1 / W. */
 __kernel void finish_mean(__global const long *acc, __global float4 *out, const float inv_w)
