@@ -8,6 +8,7 @@ so no step can be skipped), `speedup_vs_numpy`, `max_vs_vtk`, `u8_vs_f32` and `t
 (bench/transfer.py; null on CPU devices).
 
     python bench/integrate.py --quick      # 30x128^3 only, numpy on 10x128x128x64; < 2 minutes
+    python bench/integrate.py --quick --size 256   # the main case at 30x256^3 (about 5 GB)
     python bench/integrate.py              # every Table 1 case
 """
 
@@ -124,12 +125,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="30x128^3 only; under 2 minutes")
     parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument(
+        "--size", type=int, default=128, help="edge of the main case's cube (128: the paper's)"
+    )
     args = parser.parse_args()
+    main_label = f"{args.size}^3"
+    TABLE1.setdefault(main_label, (args.size,) * 3)
 
     emit(env_record("integrate", {"vtk": vtk_version()}))
     run = Runner(args.repeats)
-    main_case = case_name("128^3", 30, "float32")
-    cases = [("128^3", 30)] if args.quick else [(k, w) for k in TABLE1 for w in (10, 20, 30)]
+    main_case = case_name(main_label, 30, "float32")
+    cases = [(main_label, 30)] if args.quick else [(k, w) for k in TABLE1 for w in (10, 20, 30)]
     roof: dict[str, float] = {}
     for label, steps in cases:
         # float32 and uint8 of one workload race together, so their ratio sees the same machine.
@@ -175,7 +181,7 @@ def main() -> None:
         else None
     )
 
-    u8 = case_name("128^3", 30, "uint8")
+    u8 = case_name(main_label, 30, "uint8")
     summary = {
         "roofline_fraction": {
             m: round(run.results[(main_case, "opencl", m)] / roof[main_case], 3) for m in MODES

@@ -5,6 +5,11 @@ edge enhancement, normalisation by the maximum, brick splits and incremental sli
 integrated on both engines; each chronovolume's bytes are hashed and compared with
 `golden/chronovolumes.json`. After a deliberate change of results, regenerate with
 `CHRONOCL_WRITE_GOLDEN=1 pytest tests/test_golden_outputs.py` and say why in the commit.
+
+The OpenCL digests were recorded on a device that fuses multiply-adds (FMA: every x86-64 CPU
+since 2013-2015, GPUs): alpha, additive and mean contract their sums (`madd` in
+kernels/opencl/common.h), so on a device without FMA those three round differently and only
+the others are compared.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from chronocl.demo import FIGURES
 GOLDEN = Path(__file__).parent / "golden" / "chronovolumes.json"
 WRITE = os.environ.get("CHRONOCL_WRITE_GOLDEN") == "1"
 ENGINES = ("numpy", "opencl")
+FUSED_MODES = ("alpha", "additive", "mean")
 
 
 def _series(name: str, dtype: str = "float32") -> TimeSeries:
@@ -99,6 +105,14 @@ def _slid(engine: str, mode: str):
 CASES = dict(_cases())
 
 
+def _device_fuses() -> bool:
+    import pyopencl as cl
+
+    from chronocl.engine.device import get_context
+
+    return bool(get_context().device.single_fp_config & cl.device_fp_config.FMA)
+
+
 def _recorded() -> dict:
     return json.loads(GOLDEN.read_text()) if GOLDEN.exists() else {}
 
@@ -112,4 +126,6 @@ def test_outputs_are_unchanged(engine):
         pytest.skip("golden hashes written")
     recorded = _recorded()
     changed = [k for k, v in got.items() if recorded.get(k) != v]
+    if engine == "opencl" and not _device_fuses():
+        changed = [k for k in changed if k.rsplit(":", 1)[1] not in FUSED_MODES]
     assert not changed, f"{len(changed)} outputs differ from the recording: {changed[:8]}"
