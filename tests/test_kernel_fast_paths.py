@@ -88,8 +88,8 @@ def test_max_min_keys_equal_reference_and_general_path(data):
 
 
 ROW_MODES = [m for m in modes.names() if modes.get(m).rows_kernel]
-# Transparent below u = 0.3 (steps there are skipped, so blocks run in every mode), opaque at
-# the top (alpha stops early); or opacity everywhere (blocks in max / min only).
+# Transparent below u = 0.3 (steps skipped), opaque at the top (alpha stops early); or opacity
+# everywhere (nothing skipped).
 ROW_TFS = [
     [(0, 0, 0.2, 1, 0), (0.3, 0, 0.2, 1, 0), (0.6, 1, 0.5, 0, 0.6), (1, 1, 1, 1, 1)],
     [(0, 0, 0.2, 1, 0.1), (0.4, 1, 0.5, 0, 0.6), (1, 1, 1, 1, 1)],
@@ -102,8 +102,8 @@ def test_row_blocks_equal_the_per_vector_kernels_and_reference(data):
     """On CPU devices a work-item takes a block of rows, the steps in the outer loop a group at
     a time (kernels/opencl/common.h BLOCK_STEPS): bit for bit the per-vector kernel's result,
     in every mode that has one, with blocks cut small (several per slab, the last one short),
-    through host pointers and copied chunks, every dtype, float data as float16 on the device
-    too."""
+    through host pointers and copied chunks, the TF as pieces or looked up, every dtype, float
+    data as float16 on the device too."""
     dtype = data.draw(st.sampled_from(DTYPES))
     w = data.draw(st.integers(1, 23))
     shape = (w, data.draw(st.integers(1, 4)), data.draw(st.integers(1, 13)))
@@ -124,6 +124,7 @@ def test_row_blocks_equal_the_per_vector_kernels_and_reference(data):
     slab = data.draw(st.integers(1, shape[1] + 1))
     fmt = data.draw(st.sampled_from(["auto", "auto", "float16"])) if dtype == "float32" else "auto"
     options = {"host_ptr": data.draw(st.booleans()), "device_format": fmt}
+    options["pieces"] = data.draw(st.booleans())  # the TF as pieces, or looked up
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(opencl, "ROW_BLOCK_BYTES", data.draw(st.sampled_from([1024, 5000, 1 << 16])))
         mp.setattr(opencl, "ROW_BLOCKS_PER_UNIT", data.draw(st.sampled_from([1, 4])))
@@ -135,23 +136,21 @@ def test_row_blocks_equal_the_per_vector_kernels_and_reference(data):
         assert_same(chronocl.integrate(series, None, spec=spec, engine="numpy"), blocks)
 
 
-def test_row_blocks_only_where_they_help():
-    """Blocks of rows: on CPU devices, with whole vectors along x, in max / min whatever the TF
-    and in the other modes where steps can be skipped; each block's state within
-    ROW_BLOCK_BYTES; blocks enough for every compute unit."""
+def test_row_blocks_where_they_apply():
+    """Blocks of rows: on CPU devices, in every mode with a rows kernel, with whole vectors along
+    x; each block's state within ROW_BLOCK_BYTES; blocks enough for every compute unit."""
     engine = opencl.OpenCLEngine()
     units = engine.dc.info.compute_units
     blocks = engine._row_blocks
     alpha = modes.get("alpha")
-    assert blocks(extreme.MAX, 16, 8, 128, 128, False) == opencl.ROW_BLOCK_BYTES // (128 * 8)
-    assert blocks(alpha, 16, 8, 128, 128, True) == opencl.ROW_BLOCK_BYTES // (128 * 16)
-    assert blocks(alpha, 16, 8, 128, 128, False) == 0  # nothing to skip: it computes
-    assert blocks(modes.get("change"), 16, 8, 128, 128, True) == 0  # no rows kernel
-    assert blocks(extreme.MIN, 1, 8, 128, 128, True) == 0  # gradient enhancement
-    assert blocks(extreme.MIN, 16, 0, 128, 128, True) == 0  # narrower than a vector
-    assert blocks(extreme.MAX, 16, 4096, 128, 128, True) == 0  # a row over the budget
-    assert blocks(extreme.MAX, 16, 8, 4 * units, 1, True) == 1  # thin: a block per row
-    assert opencl.OpenCLEngine(row_blocks=False)._row_blocks(extreme.MAX, 16, 8, 9, 9, True) == 0
+    assert blocks(extreme.MAX, 16, 8, 128, 128) == opencl.ROW_BLOCK_BYTES // (128 * 8)
+    assert blocks(alpha, 16, 8, 128, 128) == opencl.ROW_BLOCK_BYTES // (128 * 16)
+    assert blocks(modes.get("change"), 16, 8, 128, 128) == 0  # no rows kernel
+    assert blocks(extreme.MIN, 1, 8, 128, 128) == 0  # gradient enhancement
+    assert blocks(extreme.MIN, 16, 0, 128, 128) == 0  # narrower than a vector
+    assert blocks(extreme.MAX, 16, 4096, 128, 128) == 0  # a row over the budget
+    assert blocks(extreme.MAX, 16, 8, 4 * units, 1) == 1  # thin: a block per row
+    assert opencl.OpenCLEngine(row_blocks=False)._row_blocks(extreme.MAX, 16, 8, 9, 9) == 0
 
 
 def test_raw_keys_where_u_orders_integers():

@@ -295,7 +295,7 @@ class OpenCLEngine:
         launches = [(vec, 0, n_vec)] if n_vec else []
         if n_vec * vec < nx:
             launches.append((1, n_vec * vec, nx - n_vec * vec))
-        rows = self._row_blocks(mode, vec, n_vec, ny, nz_out, defines["SKIP_EMPTY"])
+        rows = self._row_blocks(mode, vec, n_vec, ny, nz_out)
         built = []
         for n, x0, count in launches:
             lane_defines = {**defines, "VEC": n, "DATA_V": lane_type(dt, n)}
@@ -444,18 +444,12 @@ class OpenCLEngine:
                 cl.enqueue_copy(queue, a, buf)
         queue.finish()
 
-    def _row_blocks(self, mode, vec: int, n_vec: int, ny: int, nz: int, skips: bool) -> int:
+    def _row_blocks(self, mode, vec: int, n_vec: int, ny: int, nz: int) -> int:
         """Rows a work-item of the mode's rows kernel takes (`Mode.rows_kernel`), 0 where the
-        per-vector kernel runs. Blocks pay where reading bounds the kernel: on CPU devices
-        (GPUs' work-items read side by side already), where steps can be skipped, and in the
-        modes marked `Mode.rows_dense` (max / min, which read more than they compute; the
-        threshold modes). With a data TF that leaves nothing to skip, the modes that colour
-        every step compute more than they read and their per-vector kernel is as fast or
-        faster (bench/integrate.py). Each block's state stays within ROW_BLOCK_BYTES, and
-        there are blocks enough for every compute unit."""
+        per-vector kernel runs: on GPUs (whose work-items read side by side already), without
+        whole vectors along x, or with `row_blocks` off. Each block's state stays within
+        ROW_BLOCK_BYTES, and there are blocks enough for every compute unit."""
         if not (self.row_blocks and self.dc.is_cpu and mode.rows_kernel and vec == VEC):
-            return 0
-        if not (skips or mode.rows_dense):
             return 0
         row_bytes = n_vec * VEC * mode.rows_state
         budget = min(ROW_BLOCK_BYTES, self.dc.device.local_mem_size // 2)

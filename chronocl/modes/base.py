@@ -84,7 +84,6 @@ class Mode:
     # the state it keeps in local memory; None: the per-vector kernel only
     rows_kernel: ClassVar[str | None] = None
     rows_state: ClassVar[int] = 0
-    rows_dense: ClassVar[bool] = False  # blocks also where no step can be skipped
     # The coarse levels a mode integrates (docs/levels.md): "mean" for modes that show the
     # whole field; max/min take levels pooled alike, so a thin peak or trough survives.
     pool: ClassVar[str] = "mean"

@@ -57,7 +57,6 @@ class Extreme(Mode):
     kernel_function = "integrate_extreme"
     rows_kernel = "integrate_extreme_rows"
     rows_state = 8  # the key and the step, each in lanes of at most 4 bytes
-    rows_dense = True  # it reads more than it computes, whatever the TF
     has_t_index = True
     state_bytes = 24
     compares_values = True

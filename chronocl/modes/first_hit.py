@@ -19,7 +19,6 @@ class FirstHit(Mode):
     kernel_function = "integrate_first_hit"
     rows_kernel = "integrate_first_hit_rows"
     rows_state = 8
-    rows_dense = True  # measured a little faster in blocks with a dense TF too
     has_t_index = True
     state_bytes = 20
 
