@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 
 import chronocl
 from chronocl import modes
+from chronocl.core.enhance import Enhance
 from chronocl.core.tf import DataTF, lut_lerp32
 from chronocl.engine import opencl
 from chronocl.modes import extreme
@@ -220,6 +221,52 @@ def test_tf_pieces_equal_reference_and_lookups(data):
     )
     # thresholds decide on the exact opacity: the same bits as the lookups
     assert_same(looked_up, fast, atol=0 if modes.get(mode).opacity_threshold else 2e-6)
+
+
+@settings(max_examples=16)
+@given(st.data())
+def test_threshold_modes_skip_steps_that_cannot_pass(data):
+    """first_hit and count skip a step whose voxels all lie below the raw value where the data
+    TF's opacity times the largest time opacity could first exceed the threshold (`skip_bar`):
+    the same bits as without skipping (t_index included), and the reference; opacity plateaus
+    exactly at the threshold, hat-shaped time opacities, the TF as pieces or looked up."""
+    dtype = data.draw(st.sampled_from(DTYPES))
+    w = data.draw(st.integers(1, 23))
+    shape = (w, data.draw(st.integers(1, 3)), data.draw(st.integers(1, 5)))
+    shape += (data.draw(st.sampled_from([16, 21, 37])),)
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    raw = rng.random(shape) * 250
+    if dtype != "float32":
+        raw = np.round(raw)
+    series = chronocl.TimeSeries.from_array(raw.astype(dtype))
+    order = data.draw(
+        st.one_of(st.sampled_from(["forward", "backward"]), st.permutations(range(w)))
+    )
+    spec = IntegrationSpec(
+        mode=data.draw(st.sampled_from(["first_hit", "count"])),
+        order=order if isinstance(order, str) else tuple(order),
+        data_tf=data.draw(pieced_tfs()),
+        time_tf=data.draw(time_tfs()),
+        threshold=data.draw(st.sampled_from([0.05, 0.1, 0.5])),
+    )
+    pieces = data.draw(st.booleans())
+    slab = data.draw(st.integers(1, shape[1] + 1))
+    fast = chronocl.integrate(
+        series, None, spec=spec, engine=opencl.OpenCLEngine(pieces=pieces), slab=slab
+    )
+    every_step = opencl.OpenCLEngine(pieces=pieces, skip_empty=False, row_blocks=False)
+    assert_same(chronocl.integrate(series, None, spec=spec, engine=every_step), fast, atol=0)
+    assert_same(chronocl.integrate(series, None, spec=spec, engine="numpy"), fast)
+
+
+def test_skip_bar_of_each_mode():
+    a_t = np.array([0.25, 0.5, 0.125])
+    bar = opencl.skip_bar(IntegrationSpec(mode="first_hit", threshold=0.1), a_t)
+    assert bar == pytest.approx(0.2 / opencl.PASS_SLACK) and bar < 0.2
+    assert opencl.skip_bar(IntegrationSpec(mode="count", threshold=0.1), np.zeros(3)) == np.inf
+    assert opencl.skip_bar(IntegrationSpec(mode="alpha", threshold=0.1), a_t) == 0.0
+    edge = IntegrationSpec(mode="first_hit", threshold=0.1, enhance=Enhance("edge"))
+    assert opencl.skip_bar(edge, a_t) == 0.0  # enhancement may raise opacity
 
 
 def runs_of(table: np.ndarray, x: np.ndarray, n: int) -> np.ndarray:

@@ -135,8 +135,8 @@ class OpenCLEngine:
         """The device tables of one integration.
 
         Returns (data LUT planar (4, N) float32, per-step tc (W, 4) = (rgb_t, a_t), whether
-        the data colour is constant (then folded into tc), the skip cut: LUT positions
-        below it (for quantised data: raw values below it) have data opacity exactly 0), the
+        the data colour is constant (then folded into tc), the skip cut (raw values below it
+        look up data opacity 0, or in the threshold modes too little to pass: `skip_bar`), the
         data TF as a few straight pieces (`tf_segments`) or None, and what the pieces' opacity
         is for (SEG_ALPHA: 0 not in the pieces, 1 the opacity itself, 2 a threshold test that
         decides the lanes far from the threshold, the others looked up exactly).
@@ -151,12 +151,14 @@ class OpenCLEngine:
         colour = rgb_t * lut[0, :3] if const_color else rgb_t
         tc = np.concatenate([colour, a_t[:, None]], axis=1).astype(np.float32)
         segments, seg_alpha = self._segments(lut, const_color, spec, a_t)
-        nonzero = np.flatnonzero(lut[:, 3] > 0)
-        first = int(nonzero[0]) if nonzero.size else len(lut)
-        if quant:  # byte values below `first` have opacity 0
-            cut = float(min(first, 255))
-        else:  # LUT positions x < first - 1 only mix entries that are 0
-            cut = raw_cut(float(first - 1), value_range, len(lut))
+        bar = skip_bar(spec, a_t)
+        if quant:  # byte values below the first entry above the bar
+            live = np.flatnonzero(lut[:, 3] > bar)
+            cut = float(min(live[0], 255)) if live.size else 255.0
+        else:  # LUT positions x < j only mix entries of intervals below the first live one, j
+            live = np.flatnonzero(np.maximum(lut[:-1, 3], lut[1:, 3]) > bar)
+            first = int(live[0]) if live.size else len(lut) - 1
+            cut = raw_cut(float(first), value_range, len(lut))
         planar = np.ascontiguousarray(lut.T, dtype=np.float32)
         return planar, tc, const_color, cut, segments, seg_alpha
 
@@ -521,6 +523,24 @@ def opacity_error(table: np.ndarray, n: int) -> float:
     length = np.diff(np.append(x0, n - 1))
     swing = abs(float(table[4, 0])) + float(np.sum(np.abs(table[8].astype(np.float64)) * length))
     return 2.0**-24 * (table.shape[1] + 2) * swing + 2 * SEGMENT_TOLERANCE
+
+
+# How much a step's opacity may exceed its LUT entries times the time opacity: three float32
+# roundings of the interpolation and one of the product (about 4.8e-7), with room to spare.
+PASS_SLACK = 1.0 + 1e-5
+
+
+def skip_bar(spec: IntegrationSpec, a_t: np.ndarray) -> float:
+    """The data opacity a LUT entry must exceed for a step to matter: 0 (a step whose voxels
+    all look up entries of opacity 0 adds nothing), or, in the modes that compare opacity with
+    a threshold, the entry below which no step's opacity can exceed the threshold. Opacity is
+    the LUT's interpolation, at most its larger entry (to float32 rounding), times the step's
+    time opacity; gradient enhancement may raise it, so it keeps the bar at 0."""
+    mode = spec.integration
+    if not mode.opacity_threshold or spec.enhance.needs_gradient or spec.threshold <= 0:
+        return 0.0
+    a_max = float(np.max(a_t, initial=0.0))
+    return float("inf") if a_max <= 0 else spec.threshold / (a_max * PASS_SLACK)
 
 
 def timed(segments: np.ndarray, tc: np.ndarray) -> np.ndarray:
