@@ -90,7 +90,7 @@ def test_max_min_keys_equal_reference_and_general_path(data):
 
 ROW_MODES = [m for m in modes.names() if modes.get(m).rows_kernel]
 # Transparent below u = 0.3 (steps skipped), opaque at the top (alpha stops early); or opacity
-# everywhere (nothing skipped).
+# everywhere (nothing skipped). The test also draws random pieced TFs (`pieced_tfs`).
 ROW_TFS = [
     [(0, 0, 0.2, 1, 0), (0.3, 0, 0.2, 1, 0), (0.6, 1, 0.5, 0, 0.6), (1, 1, 1, 1, 1)],
     [(0, 0, 0.2, 1, 0.1), (0.4, 1, 0.5, 0, 0.6), (1, 1, 1, 1, 1)],
@@ -114,7 +114,7 @@ def test_row_blocks_equal_the_per_vector_kernels_and_reference(data):
     order = data.draw(
         st.one_of(st.sampled_from(["forward", "backward"]), st.permutations(range(w)))
     )
-    points = data.draw(st.sampled_from(ROW_TFS))
+    points = data.draw(st.one_of(st.sampled_from(ROW_TFS), pieced_tfs().map(lambda tf: tf.points)))
     spec = IntegrationSpec(
         mode=data.draw(st.sampled_from(ROW_MODES)),
         order=order if isinstance(order, str) else tuple(order),
