@@ -18,13 +18,17 @@
  *               the lanes far from the threshold, the others looked up exactly (THRESHOLD_TEST)
  *   ENHANCE     0 none, 1 edge, 2 silhouette (VEC must be 1)
  *   EARLY_EXIT  alpha: stop once every lane's transmittance is below 1e-6
- *   SKIP_EMPTY  skip steps whose lanes all map to zero data opacity (exact: they add nothing)
+ *   SKIP_EMPTY  skip steps whose lanes all lie below `cut`, where data opacity is 0 (or, in
+ *               first_hit and count, cannot exceed the threshold): exact, they add nothing
+ *   STEP_GROUP  steps a block of rows runs before its state goes back to local memory (8)
  *
  * The brick is in xytz order: (nzb, w, ny, nx), x fastest. A work-item integrates VEC
- * consecutive voxels starting at x0 + VEC * get_global_id(0); the output covers brick rows
+ * consecutive voxels starting at x0 + VEC * get_global_id(0), or, in a mode's `_rows` kernel
+ * (CPU devices), a block of rows (BLOCK_STEPS below); the output covers brick rows
  * [zcrop, zcrop + nz_out), the rest being the gradient halo. The data LUT is planar
  * (r[LUT_N], g[LUT_N], b[LUT_N], a[LUT_N]) and shared by all steps; tc[k] = (rgb_t, a_t) of
- * step k. Arithmetic follows chronocl/reference.py so results agree to float32 rounding.
+ * step k. Arithmetic follows chronocl/reference.py so results agree to float32 rounding
+ * (`madd` contracts a few sums to one rounding).
  */
 
 #pragma OPENCL FP_CONTRACT OFF
