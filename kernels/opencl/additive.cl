@@ -21,26 +21,14 @@
 
 __kernel void integrate_additive(KERNEL_ARGS, const float4 norm, __global float4 *out)
 {
-    VOXEL_PROLOGUE
-    Rgba s;
-    RGBA_ZERO(s)
-    STEPS(s, 0, w, SUM_STEP, NEVER_DONE)
-    SUM_FINISH(s)
+    VECTOR_BODY(Rgba, 0, RGBA_ZERO, SUM_STEP, NEVER_DONE, SUM_FINISH)
 }
 
 #if VEC == 16
 __kernel void integrate_additive_rows(KERNEL_ARGS, const float4 norm, __global float4 *out,
                                       ROWS_ARGS(Rgba))
 {
-    ROWS_PROLOGUE
-    FOR_BLOCK(v) { RGBA_ZERO(st[v]) }
-    BLOCK_STEPS(Rgba, 0, SUM_STEP, NEVER_DONE)
-    FOR_BLOCK(v) {
-        BLOCK_VOXEL(v)
-        const size_t o = OUT_INDEX(z, y, x);
-        const Rgba s = st[v];
-        SUM_FINISH(s)
-    }
+    ROWS_BODY(Rgba, 0, RGBA_ZERO, SUM_STEP, NEVER_DONE, SUM_FINISH)
 }
 #endif
 #else

@@ -391,6 +391,28 @@ typedef struct {
             st[v] = s;                                                   \
         }
 
+/* The bodies of a mode's two kernels, from its state type T and macros: INIT(s) (from the
+ * first step where `from` is 1), STEP(s, k), DONE(s) and FINISH(s) (which writes voxel o). */
+#define VECTOR_BODY(T, from, INIT, STEP, DONE, FINISH) \
+    VOXEL_PROLOGUE                                     \
+    T s;                                               \
+    INIT(s)                                            \
+    STEPS(s, from, w, STEP, DONE)                      \
+    FINISH(s)
+#define ROWS_BODY(T, from, INIT, STEP, DONE, FINISH) \
+    ROWS_PROLOGUE                                    \
+    FOR_BLOCK(v) {                                   \
+        BLOCK_VOXEL(v)                               \
+        INIT(st[v])                                  \
+    }                                                \
+    BLOCK_STEPS(T, from, STEP, DONE)                 \
+    FOR_BLOCK(v) {                                   \
+        BLOCK_VOXEL(v)                               \
+        const size_t o = OUT_INDEX(z, y, x);         \
+        const T s = st[v];                           \
+        FINISH(s)                                    \
+    }
+
 /* Step k's colour r, g, b and opacity ak, inside a loop over the steps. With SKIP_EMPTY a step
  * whose lanes all map to zero data opacity is skipped (`continue`): every mode using this
  * gets nothing from such a step (over adds 0, no hit, sums add 0, a count does not grow). */

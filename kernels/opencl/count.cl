@@ -25,26 +25,14 @@ typedef struct {
 
 __kernel void integrate_count(KERNEL_ARGS, const float threshold, __global float4 *out)
 {
-    VOXEL_PROLOGUE
-    Count s;
-    COUNT_INIT(s)
-    STEPS(s, 0, w, COUNT_STEP, NEVER_DONE)
-    COUNT_FINISH(s)
+    VECTOR_BODY(Count, 0, COUNT_INIT, COUNT_STEP, NEVER_DONE, COUNT_FINISH)
 }
 
 #if VEC == 16
 __kernel void integrate_count_rows(KERNEL_ARGS, const float threshold, __global float4 *out,
                                    ROWS_ARGS(Count))
 {
-    ROWS_PROLOGUE
-    FOR_BLOCK(v) { COUNT_INIT(st[v]) }
-    BLOCK_STEPS(Count, 0, COUNT_STEP, NEVER_DONE)
-    FOR_BLOCK(v) {
-        BLOCK_VOXEL(v)
-        const size_t o = OUT_INDEX(z, y, x);
-        const Count s = st[v];
-        COUNT_FINISH(s)
-    }
+    ROWS_BODY(Count, 0, COUNT_INIT, COUNT_STEP, NEVER_DONE, COUNT_FINISH)
 }
 #endif
 #else

@@ -93,11 +93,7 @@ typedef struct {
 __kernel void integrate_extreme(KERNEL_ARGS, const float zlo, const float zhi,
                                 __global float4 *out, __global int *t_index)
 {
-    VOXEL_PROLOGUE
-    Best s;
-    BEST_INIT(s)
-    STEPS(s, 1, w, BEST_STEP, NEVER_DONE)
-    BEST_FINISH(s)
+    VECTOR_BODY(Best, 1, BEST_INIT, BEST_STEP, NEVER_DONE, BEST_FINISH)
 }
 
 #if VEC == 16
@@ -105,18 +101,7 @@ __kernel void integrate_extreme_rows(KERNEL_ARGS, const float zlo, const float z
                                      __global float4 *out, __global int *t_index,
                                      ROWS_ARGS(Best))
 {
-    ROWS_PROLOGUE
-    FOR_BLOCK(v) {
-        BLOCK_VOXEL(v)
-        BEST_INIT(st[v])
-    }
-    BLOCK_STEPS(Best, 1, BEST_STEP, NEVER_DONE)
-    FOR_BLOCK(v) {
-        BLOCK_VOXEL(v)
-        const size_t o = OUT_INDEX(z, y, x);
-        const Best s = st[v];
-        BEST_FINISH(s)
-    }
+    ROWS_BODY(Best, 1, BEST_INIT, BEST_STEP, NEVER_DONE, BEST_FINISH)
 }
 #endif
 #else

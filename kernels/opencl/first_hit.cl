@@ -34,26 +34,14 @@ typedef struct {
 __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global float4 *out,
                                   __global int *t_index)
 {
-    VOXEL_PROLOGUE
-    Hit s;
-    HIT_INIT(s)
-    STEPS(s, 0, w, HIT_STEP, HIT_DONE)
-    HIT_FINISH(s)
+    VECTOR_BODY(Hit, 0, HIT_INIT, HIT_STEP, HIT_DONE, HIT_FINISH)
 }
 
 #if VEC == 16
 __kernel void integrate_first_hit_rows(KERNEL_ARGS, const float threshold, __global float4 *out,
                                        __global int *t_index, ROWS_ARGS(Hit))
 {
-    ROWS_PROLOGUE
-    FOR_BLOCK(v) { HIT_INIT(st[v]) }
-    BLOCK_STEPS(Hit, 0, HIT_STEP, HIT_DONE)
-    FOR_BLOCK(v) {
-        BLOCK_VOXEL(v)
-        const size_t o = OUT_INDEX(z, y, x);
-        const Hit s = st[v];
-        HIT_FINISH(s)
-    }
+    ROWS_BODY(Hit, 0, HIT_INIT, HIT_STEP, HIT_DONE, HIT_FINISH)
 }
 #endif
 #else

@@ -21,25 +21,13 @@
 
 __kernel void integrate_mean(KERNEL_ARGS, __global float4 *out)
 {
-    VOXEL_PROLOGUE
-    Rgba s;
-    RGBA_ZERO(s)
-    STEPS(s, 0, w, MEAN_STEP, NEVER_DONE)
-    MEAN_FINISH(s)
+    VECTOR_BODY(Rgba, 0, RGBA_ZERO, MEAN_STEP, NEVER_DONE, MEAN_FINISH)
 }
 
 #if VEC == 16
 __kernel void integrate_mean_rows(KERNEL_ARGS, __global float4 *out, ROWS_ARGS(Rgba))
 {
-    ROWS_PROLOGUE
-    FOR_BLOCK(v) { RGBA_ZERO(st[v]) }
-    BLOCK_STEPS(Rgba, 0, MEAN_STEP, NEVER_DONE)
-    FOR_BLOCK(v) {
-        BLOCK_VOXEL(v)
-        const size_t o = OUT_INDEX(z, y, x);
-        const Rgba s = st[v];
-        MEAN_FINISH(s)
-    }
+    ROWS_BODY(Rgba, 0, RGBA_ZERO, MEAN_STEP, NEVER_DONE, MEAN_FINISH)
 }
 #endif
 #else
