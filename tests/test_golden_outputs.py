@@ -5,6 +5,8 @@ edge enhancement, normalisation by the maximum, brick splits and incremental sli
 integrated on both engines; each chronovolume's bytes are hashed and compared with
 `golden/chronovolumes.json`. After a deliberate change of results, regenerate with
 `CHRONOCL_WRITE_GOLDEN=1 pytest tests/test_golden_outputs.py` and say why in the commit.
+The synthetic inputs are the same bits on every CPU (tests/test_synthetic.py checks that with
+numpy's SIMD paths off), so the digests hold on any machine.
 
 The OpenCL digests were recorded on a device that fuses multiply-adds (FMA: every x86-64 CPU
 since 2013-2015, GPUs): alpha, additive and mean contract their sums (`madd` in

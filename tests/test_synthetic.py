@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import itertools
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -51,6 +54,36 @@ def test_same_inputs_give_bit_identical_outputs(name: str) -> None:
     a = step(name, 4, 10, (20, 24, 28), seed=5)
     b = step(name, 4, 10, (20, 24, 28), seed=5)
     assert a.tobytes() == b.tobytes()
+
+
+def _digest_script() -> str:
+    return (
+        "import hashlib, numpy as np\n"
+        "from chronocl.data.synthetic import steps\n"
+        "h = hashlib.sha256()\n"
+        "for name in ('vortex', 'jet'):\n"
+        "    for a in steps(name, 4, (19, 23, 41), seed=5):\n"
+        "        h.update(a.tobytes())\n"
+        "print(h.hexdigest())\n"
+    )
+
+
+def test_outputs_do_not_depend_on_numpys_simd_code_paths() -> None:
+    """The same bits with every dispatched SIMD path of numpy turned off (an AVX2 or SSE
+    machine) as with them on: golden digests recorded on one CPU hold on another."""
+    dispatched = np._core._multiarray_umath.__cpu_dispatch__
+    runs = []
+    for disabled in ("", " ".join(dispatched)):
+        env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": disabled}
+        done = subprocess.run(
+            [sys.executable, "-c", _digest_script()],
+            env=env,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        runs.append(done.stdout.strip())
+    assert runs[0] == runs[1], dispatched
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -18,7 +18,10 @@ centres), so any shape works and features stay inside the box; a non-cubic box
 stretches the features with it. Values are float32 in [0, 1], background 0 and
 features near 1. ``seed`` only changes smooth parameters (phases, small offsets
 of paths and tilts), never adds voxel noise, and equal inputs give bit-identical
-outputs.
+outputs, on any machine: numpy's float32 exp, sin, arctan2 ... take different SIMD
+code paths on different CPUs (AVX2, AVX-512) and differ there in the last bit, so every
+transcendental function here is evaluated in float64 and rounded once to float32 (`_f64`),
+which makes a last-bit difference in float64 vanish in the rounding.
 """
 
 from __future__ import annotations
@@ -44,6 +47,22 @@ _CUT_FLOOR = float(np.exp(-0.5 * _CUT**2))
 # The jet's profile is 2 ** -(distance / half width) ** 2, cut the same way.
 _JET_CUT = 4.0
 _JET_FLOOR = float(2.0 ** -(_JET_CUT**2))
+
+
+# Elements per chunk of `_f64`: its float64 temporaries stay small at 512^3 and above.
+_CHUNK = 1 << 22
+
+
+def _f64(fn: Callable[..., np.ndarray], *args: np.ndarray) -> np.ndarray:
+    """fn(*args) evaluated in float64 and rounded to float32 (see the module docstring)."""
+    args = np.broadcast_arrays(*args)
+    out = np.empty(args[0].shape, dtype=_F)
+    flat_out = out.reshape(-1)
+    flat = [np.ascontiguousarray(a).reshape(-1) for a in args]
+    for i in range(0, flat_out.size, _CHUNK):
+        part = [a[i : i + _CHUNK].astype(np.float64) for a in flat]
+        flat_out[i : i + _CHUNK] = fn(*part)
+    return out
 
 
 def _check_int(value: object, what: str, fix: str) -> int:
@@ -97,7 +116,7 @@ def _index_range(lo: float, hi: float, n: int) -> slice:
 
 def _gauss(d2: np.ndarray, sigma: float) -> np.ndarray:
     """Gaussian of squared distance d2 with width sigma, 1 at 0, exactly 0 beyond _CUT sigma."""
-    g = np.exp(d2 * _F(-0.5 / sigma**2))
+    g = _f64(np.exp, d2 * _F(-0.5 / sigma**2))
     g -= _F(_CUT_FLOOR)
     g *= _F(1.0 / (1.0 - _CUT_FLOOR))
     return np.maximum(g, 0, out=g)
@@ -188,16 +207,16 @@ def _ring_field(
     u = dx * _F(e1[0]) + dy * _F(e1[1]) + dz * _F(e1[2])
     v = dx * _F(e2[0]) + dy * _F(e2[1]) + dz * _F(e2[2])
     w = dx * _F(normal[0]) + dy * _F(normal[1]) + dz * _F(normal[2])
-    rho = np.hypot(u, v)
-    azim = np.arctan2(v, u)
+    rho = _f64(np.hypot, u, v)
+    azim = _f64(np.arctan2, v, u)
     turn = _F(2 * np.pi * ring.spin * tau)
-    rr = radius + wobble * np.sin(3 * azim + (turn + _F(phase[0])))
+    rr = radius + wobble * _f64(np.sin, 3 * azim + (turn + _F(phase[0])))
     rho -= rr
     d2 = rho * rho
     d2 += w * w
     f = _gauss(d2, sigma)
     # Brighter and dimmer stretches along the ring, turning with it, make the spin visible.
-    f *= _F(0.85) + _F(0.15) * np.cos(2 * azim + (turn + _F(phase[1])))
+    f *= _F(0.85) + _F(0.15) * _f64(np.cos, 2 * azim + (turn + _F(phase[1])))
     _union(out, sl, f)
 
 
@@ -342,7 +361,7 @@ def _jet(shape: tuple[int, int, int], tau: float, rng: np.random.Generator) -> n
     w = lobes * width.astype(_F)
     r2 /= w * w
     r2 += tip.astype(_F)
-    f = np.exp2(-r2)
+    f = _f64(np.exp2, -r2)
     # Shift and rescale so the field reaches exactly 0 where the crop above cuts it.
     f -= _F(_JET_FLOOR)
     f *= (puffs / (1.0 - _JET_FLOOR)).astype(_F)
