@@ -13,6 +13,13 @@ $(STAMP): pyproject.toml
 			apt-get update -qq && apt-get install -y -qq libegl1 libgl1-mesa-dri libegl-mesa0; \
 		else echo "warning: EGL/Mesa missing; install libegl1 libgl1-mesa-dri to render"; fi; \
 	fi
+	@# PyPI's PoCL (LLVM 14) builds no kernel on CPUs newer than its LLVM (AMD Zen 4 and later);
+	@# Debian's PoCL does, and is listed first, so it is the default CPU device (README).
+	@if [ ! -e /etc/OpenCL/vendors/pocl.icd ]; then \
+		if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
+			apt-get update -qq && apt-get install -y -qq pocl-opencl-icd; \
+		else echo "warning: Debian's PoCL missing; PyPI's may fail on new CPUs: apt-get install pocl-opencl-icd"; fi; \
+	fi
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[dev]'

@@ -18,6 +18,7 @@ from chronocl.core.enhance import Enhance
 from chronocl.core.tf import DataTF
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries, write_series
+from chronocl.engine import get_engine
 from chronocl.integration.inmemory import integrate
 from chronocl.render import Camera, render_views
 
@@ -143,9 +144,11 @@ def run_demo(
     shape_xyz: tuple[int, int, int] = (96, 96, 96),
     n_steps: int = 30,
     size: int = 512,
+    engine: str = "opencl",
 ) -> list[Path]:
-    """Write the demo under `out_dir`; returns the PNG paths."""
+    """Write the demo under `out_dir` with engine `engine`; returns the PNG paths."""
     console = Console(stderr=True)
+    get_engine(engine)  # no usable OpenCL device: say so before anything is written
     out_dir.mkdir(parents=True, exist_ok=True)
     nx, ny, nz = shape_xyz
     shapes = {"vortex": (nz, ny, nx), "jet": (max(16, nz * 2 // 3), max(16, ny * 2 // 3), nx)}
@@ -181,7 +184,7 @@ def run_demo(
             args["enhance"] = Enhance(
                 "silhouette", k0=0.05, k1=1.5, k2=1.5, view=fig.camera.view_direction()
             )
-        cvs = [integrate(series[fig.data], fig.window, m, **args) for m in fig.modes]
+        cvs = [integrate(series[fig.data], fig.window, m, engine=engine, **args) for m in fig.modes]
         t1 = time.perf_counter()
         image = render_views(
             cvs, fig.camera, (size, size), legend=True, labels=None if len(cvs) > 1 else []

@@ -175,6 +175,7 @@ def builds(full: bool) -> list[tuple[str, list[str], bool]]:
         (f, {"SLIDING": True, **d}) for i, (f, d) in enumerate(sliding) if (f, d) not in sliding[:i]
     ]
     out += [(f, list(program.build_options(d)), True) for f, d in sliding]
+    out.append(("probe.cl", [], False))  # the device check (chronocl.engine.device)
     return out
 
 

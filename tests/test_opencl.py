@@ -187,6 +187,45 @@ def test_build_error_shows_options_device_and_log():
     assert dc.info.name in message and "error" in message.lower()
 
 
+def test_the_default_device_builds_kernels(monkeypatch):
+    from chronocl.engine.device import build_problem, pick_device, usable_devices
+
+    monkeypatch.delenv("CHRONOCL_DEVICE", raising=False)
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    info, _ = pick_device(None)
+    assert build_problem(info.index) is None
+    assert info in usable_devices()
+
+
+def test_a_device_whose_compiler_fails_is_passed_over_or_named(monkeypatch):
+    """PyPI's PoCL 3.0 (LLVM 14) lists its device on CPUs its LLVM does not know (AMD Zen 4)
+    and fails every build: the default skips it; with no device left the error names each
+    device's problem and the fix."""
+    from chronocl.engine import device
+
+    monkeypatch.delenv("CHRONOCL_DEVICE", raising=False)
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    found = list_devices()
+    real = device.build_problem
+    broken = {found[0].index}
+
+    def problem(index):
+        return "unknown target CPU 'generic'" if index in broken else real(index)
+
+    monkeypatch.setattr(device, "build_problem", problem)
+    others = [d for d in found[1:] if real(d.index) is None]
+    if others:
+        assert device.pick_device(None)[0].index != found[0].index
+        assert found[0] not in device.usable_devices()
+    broken.update(d.index for d in found)
+    with pytest.raises(EngineUnavailableError) as info:
+        device.pick_device(None)
+    message = str(info.value)
+    assert "unknown target CPU 'generic'" in message and found[0].label in message
+    assert "apt-get install pocl-opencl-icd" in message and "--engine numpy" in message
+    assert device.usable_devices() == []
+
+
 def test_no_platform_gives_install_hint(tmp_path):
     env = {**os.environ, "OCL_ICD_VENDORS": str(tmp_path / "none"), "CHRONOCL_DEVICE": ""}
     store = tmp_path / "s.zarr"

@@ -3,7 +3,10 @@
 `CHRONOCL_DEVICE` picks a device by index ("0:1" = platform 0, device 1) or by a
 case-insensitive substring of "platform: device"; `PYOPENCL_CTX` is honoured
 the way pyopencl does. Default: the first GPU if there is one, else the first
-CPU device. Contexts are cached per process and never shared across a fork:
+CPU device, among the devices that can build a kernel: a PoCL whose LLVM is older than
+the CPU (PyPI's PoCL 3.0 with LLVM 14 on AMD Zen 4, say) lists its device and then fails
+every build with "unknown target CPU 'generic'", so the default passes it over for one
+that builds (`build_problem`). Contexts are cached per process and never shared across a fork:
 anything multi-process must use the spawn start method (PoCL hangs in a forked
 child once a context exists in the parent).
 """
@@ -11,12 +14,17 @@ child once a context exists in the parent).
 from __future__ import annotations
 
 import os
+import re
 import threading
 from dataclasses import dataclass, field
 from functools import cache
 
 from chronocl.core.errors import EngineUnavailableError
 
+NO_BUILD = (
+    "no OpenCL device here can build kernels ({problems}); install Debian's PoCL, whose LLVM "
+    "knows newer CPUs, with 'apt-get install pocl-opencl-icd', or use --engine numpy"
+)
 NO_PLATFORM = (
     "no OpenCL platform found; install one with 'pip install pyopencl[pocl]' (PoCL on the CPU) "
     "or 'apt-get install pocl-opencl-icd', or use --engine numpy"
@@ -105,18 +113,51 @@ def pick_device(spec: str | None) -> tuple[DeviceInfo, object]:
                 if info.index == wanted:
                     return info, dev
         else:
-            for info, dev in devices:
-                if spec.lower() in info.label.lower():
+            matches = [(i, d) for i, d in devices if spec.lower() in i.label.lower()]
+            for info, dev in matches:  # "pocl" may name two PoCLs: the one that builds
+                if build_problem(info.index) is None:
                     return info, dev
+            if matches:
+                return matches[0]
         known = "; ".join(f"{i.index} {i.label}" for i, _ in devices)
         raise EngineUnavailableError(
             f"no OpenCL device matches {spec!r}; available: {known} (see 'chronocl devices')"
         )
-    for kind in ("GPU", "CPU"):
-        for info, dev in devices:
-            if kind in info.kind:
-                return info, dev
-    return devices[0]
+    ranked = sorted(devices, key=lambda d: _RANK.get(d[0].kind, len(_RANK)))  # stable
+    problems = []
+    for info, dev in ranked:
+        problem = build_problem(info.index)
+        if problem is None:
+            return info, dev
+        problems.append(f"{info.index} {info.label}: {problem}")
+    raise EngineUnavailableError(NO_BUILD.format(problems="; ".join(problems)))
+
+
+_RANK = {"GPU": 0, "CPU": 1}
+
+
+def usable_devices() -> list[DeviceInfo]:
+    """The devices that can build a kernel (see `build_problem`)."""
+    return [info for info, _ in _all_devices() if build_problem(info.index) is None]
+
+
+@cache
+def build_problem(index: str) -> str | None:
+    """Why device `index` cannot build a kernel (its compiler's first error line), or None.
+
+    Builds kernels/opencl/probe.cl once per process; its context is the one the device
+    keeps (`get_context`), so the check costs one tiny build.
+    """
+    from chronocl.core.errors import KernelBuildError
+    from chronocl.engine.program import build
+
+    try:
+        build(_context_for(index), "probe.cl", {}, common=False)
+    except KernelBuildError as exc:
+        text = str(exc)
+        first = re.search(r"error: ([^|]+)", text)
+        return first.group(1).strip() if first else text
+    return None
 
 
 @dataclass

@@ -100,8 +100,14 @@ def _compile(dc, name: str, src: str, options: tuple[str, ...]):
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
     if program is None:
+        hint = ""
+        if "unknown target CPU" in log:
+            hint = (
+                "; this OpenCL driver's LLVM does not know this CPU: pick another device "
+                "('chronocl devices') or install Debian's PoCL ('apt-get install pocl-opencl-icd')"
+            )
         raise KernelBuildError(
-            f"building {name} failed on {dc.info.label} with options {shown}: {log}"
+            f"building {name} failed on {dc.info.label} with options {shown}: {log}{hint}"
         )
     if verbose():
         text = _build_log(program) or "\n".join(compiler)

@@ -37,7 +37,13 @@ from chronocl.core.errors import EngineUnavailableError, InvalidParameterError
 from chronocl.core.timing import race_times
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries, open_series, write_series
-from chronocl.engine.device import NO_PLATFORM, DeviceInfo, list_devices, pick_device
+from chronocl.engine.device import (
+    NO_PLATFORM,
+    DeviceInfo,
+    list_devices,
+    pick_device,
+    usable_devices,
+)
 from chronocl.engine.roofline import read_roofline
 from chronocl.integration import distributed
 from chronocl.integration.streaming import integrate_to_store
@@ -85,13 +91,16 @@ def default_workers(most: int) -> tuple[int, ...]:
 
 def resolve_devices(text: str | None) -> list[DeviceInfo]:
     """The devices of --devices: none given, the chosen one (CHRONOCL_DEVICE or the default);
-    'all', every OpenCL device; else a comma list of indices or name parts."""
+    'all', every OpenCL device that can build kernels; else a comma list of indices or name
+    parts."""
     if not text:
         return [pick_device(None)[0]]
     if text.strip().lower() == "all":
-        found = list_devices()
-        if not found:
+        if not list_devices():
             raise EngineUnavailableError(NO_PLATFORM)
+        found = usable_devices()
+        if not found:
+            pick_device(None)  # raises the error that names each device's build problem
         return found
     chosen: dict[str, DeviceInfo] = {}
     for part in text.split(","):
