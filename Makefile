@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	fi
 	@# PyPI's PoCL (LLVM 14) builds no kernel on CPUs newer than its LLVM (AMD Zen 4 and later);
 	@# Debian's PoCL does, and is listed first, so it is the default CPU device (README).
-	@if [ ! -e /etc/OpenCL/vendors/pocl.icd ]; then \
+	@if ! dpkg-query -W -f '$${Status}' pocl-opencl-icd 2>/dev/null | grep -q 'ok installed'; then \
 		if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
 			apt-get update -qq && apt-get install -y -qq pocl-opencl-icd; \
 		else echo "warning: Debian's PoCL missing; PyPI's may fail on new CPUs: apt-get install pocl-opencl-icd"; fi; \
