@@ -8,10 +8,12 @@ integrated on both engines; each chronovolume's bytes are hashed and compared wi
 The synthetic inputs are the same bits on every CPU (tests/test_synthetic.py checks that with
 numpy's SIMD paths off), so the digests hold on any machine.
 
-The OpenCL digests were recorded on a device that fuses multiply-adds (FMA: every x86-64 CPU
-since 2013-2015, GPUs): alpha, additive and mean contract their sums (`madd` in
+The OpenCL digests were recorded on PoCL, a CPU device that fuses multiply-adds (FMA: every
+x86-64 CPU since 2013-2015): alpha, additive and mean contract their sums (`madd` in
 kernels/opencl/common.h), so on a device without FMA those three round differently and only
-the others are compared.
+the others are compared. A GPU driver rounds differently again (contraction, divisions within
+the OpenCL's 2.5 ulp; seen on an H100), so on a GPU each OpenCL output is compared with the
+numpy engine's (1e-5, t_index exactly) instead.
 """
 
 from __future__ import annotations
@@ -119,8 +121,24 @@ def _recorded() -> dict:
     return json.loads(GOLDEN.read_text()) if GOLDEN.exists() else {}
 
 
+def _device_is_cpu() -> bool:
+    from chronocl.engine.device import get_context
+
+    return get_context().is_cpu
+
+
 @pytest.mark.parametrize("engine", ENGINES)
 def test_outputs_are_unchanged(engine):
+    if engine == "opencl" and not WRITE and not _device_is_cpu():
+        # A GPU driver rounds otherwise (it contracts multiply-adds, divides within the 2.5 ulp
+        # OpenCL allows), so the digests recorded on PoCL cannot hold there: each output is
+        # held to the reference engine's instead, as in the property tests.
+        for name, run in CASES.items():
+            got, want = run("opencl"), run("numpy")
+            np.testing.assert_allclose(got.rgba, want.rgba, atol=1e-5, rtol=0, err_msg=name)
+            if want.t_index is not None:
+                np.testing.assert_array_equal(got.t_index, want.t_index, err_msg=name)
+        return
     got = {f"{engine}:{name}": _digest(run(engine)) for name, run in CASES.items()}
     if WRITE:
         recorded = {**_recorded(), **got}
