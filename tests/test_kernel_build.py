@@ -50,7 +50,10 @@ INTEGRATION_KEYS = {
     "RAW_PARTIAL",
     "TIME_ORDER",
     "ALIGNED",
+    "ORDER_FORWARD",
+    "ORDER_BACKWARD",
 }
+STEP_ORDERS = ("table", "forward", "backward")  # order[i], or the steps in turn / reversed
 BOOLS = (False, True)
 
 
@@ -90,10 +93,20 @@ def integration_combinations(name: str):
     colour = [(True, 0, 0), (False, 0, 0), (False, 3, 0), (False, 1, seg_alpha)]
     colour += [(False, 8, seg_alpha), (True, 3, seg_alpha), (True, 8, seg_alpha)]
     for combo in itertools.product(
-        data, lanes, colour, BOOLS, BOOLS, BOOLS, norm, partial, time_order, (256, 65536)
+        data,
+        lanes,
+        colour,
+        BOOLS,
+        BOOLS,
+        BOOLS,
+        norm,
+        partial,
+        time_order,
+        (256, 65536),
+        STEP_ORDERS,
     ):
         (t, quant, raw), (enh, vec), (const, segs, pieces_alpha), early, skip, aligned = combo[:6]
-        norm_time, raw_partial, order, lut_n = combo[6:]
+        norm_time, raw_partial, order, lut_n, steps = combo[6:]
         if quant and (lut_n != 256 or mode.lut_by_value):  # one LUT entry per byte value
             continue
         if enh and pieces_alpha == 2:  # enhanced opacity is not bounded by the pieces'
@@ -121,6 +134,8 @@ def integration_combinations(name: str):
             "RAW_PARTIAL": raw_partial,
             "TIME_ORDER": order,
             "ALIGNED": aligned,
+            "ORDER_FORWARD": steps == "forward",
+            "ORDER_BACKWARD": steps == "backward",
         }
 
 

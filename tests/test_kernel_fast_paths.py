@@ -137,6 +137,41 @@ def test_row_blocks_equal_the_per_vector_kernels_and_reference(data):
         assert_same(chronocl.integrate(series, None, spec=spec, engine="numpy"), blocks)
 
 
+def test_order_defines_name_steps_in_turn_or_reversed():
+    assert opencl.order_defines(np.arange(5), 5) == {"ORDER_FORWARD": True, "ORDER_BACKWARD": False}
+    assert opencl.order_defines([4, 3, 2, 1, 0], 5) == {
+        "ORDER_FORWARD": False,
+        "ORDER_BACKWARD": True,
+    }
+    assert opencl.order_defines([0], 1) == {"ORDER_FORWARD": True, "ORDER_BACKWARD": False}
+    assert not any(opencl.order_defines([0, 2, 1], 3).values())  # importance: the table
+
+
+@settings(max_examples=20)
+@given(st.data())
+def test_steps_in_turn_or_reversed_equal_the_order_table(data):
+    """ORDER_FORWARD / ORDER_BACKWARD (the kernels step through the brick without order[]) give
+    the bits of the order table, in every mode, dtype and order, blocks of rows or not."""
+    dtype = data.draw(st.sampled_from(DTYPES))
+    w = data.draw(st.integers(1, 17))
+    shape = (w, data.draw(st.integers(1, 3)), data.draw(st.integers(1, 9)))
+    shape += (data.draw(st.sampled_from([16, 19, 33])),)
+    raw = raw_values(data, dtype, shape)
+    spec = IntegrationSpec(
+        mode=data.draw(st.sampled_from(modes.names())),
+        order=data.draw(st.sampled_from(["forward", "backward"])),
+        time_tf=data.draw(time_tfs()),
+        enhance=data.draw(st.sampled_from([Enhance(), Enhance(), Enhance("edge")])),
+    )
+    series = chronocl.TimeSeries.from_array(raw)
+    options = {"row_blocks": data.draw(st.booleans()), "host_ptr": data.draw(st.booleans())}
+    stepped = chronocl.integrate(series, None, spec=spec, engine=opencl.OpenCLEngine(**options))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(opencl, "order_defines", lambda order, w: {})
+        table = chronocl.integrate(series, None, spec=spec, engine=opencl.OpenCLEngine(**options))
+    assert_same(stepped, table, 0)
+
+
 def test_row_blocks_where_they_apply():
     """Blocks of rows: on CPU devices, in every mode with a rows kernel, with whole vectors along
     x; each block's state within ROW_BLOCK_BYTES; blocks enough for every compute unit."""

@@ -46,6 +46,17 @@ VEC = 16  # voxels per work-item along x in the vectorised kernels
 _ARG_DATA, _ARG_X0, _ARG_NZB, _ARG_ZCROP, _ARG_NZ_OUT = 0, 5, 8, 10, 11
 
 
+def order_defines(order, w: int) -> dict[str, bool]:
+    """ORDER_FORWARD / ORDER_BACKWARD where the integration order is the brick's steps in turn
+    or reversed: the kernels then step through the brick without an index table (common.h)."""
+    order = np.asarray(order)
+    forward = np.array_equal(order, np.arange(w))
+    return {
+        "ORDER_FORWARD": forward,
+        "ORDER_BACKWARD": not forward and np.array_equal(order, np.arange(w)[::-1]),
+    }
+
+
 def device_dtype(dtype: np.dtype) -> np.dtype:
     """The dtype a brick is given to the device in (float64 goes as float32, like the reference)."""
     return stored_dtype(dtype)
@@ -239,6 +250,7 @@ class OpenCLEngine:
             # a data TF with opacity everywhere leaves nothing to skip: no test per step
             "SKIP_EMPTY": self.skip_empty and cut > (0.0 if quant else float("-inf")),
             "RAW_PARTIAL": raw,
+            **order_defines(order, w),
             **mode_defines,
         }
         if dt == np.float16:

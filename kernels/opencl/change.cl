@@ -62,7 +62,7 @@ __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
     floatv best = 0.0f;
     intv kk = -1;
     for (int i = 0; i < w; ++i) {
-        const int k = order[i];
+        const int k = ORDER_AT(i);
         if (k == 0) continue;
         const floatv d = VABS(CLIPPED(RAW(k)) - CLIPPED(RAW(k - 1)));
         const intv take = (kk < 0) | (d > best);

@@ -98,6 +98,39 @@ inline int all_lanes(int16 m)
     (float16)((l)[(i).s0], (l)[(i).s1], (l)[(i).s2], (l)[(i).s3], (l)[(i).s4],          \
               (l)[(i).s5], (l)[(i).s6], (l)[(i).s7], (l)[(i).s8], (l)[(i).s9],          \
               (l)[(i).sa], (l)[(i).sb], (l)[(i).sc], (l)[(i).sd], (l)[(i).se], (l)[(i).sf])
+#if defined(__has_builtin)
+#if __has_builtin(__builtin_shufflevector)
+#define SHUFFLE_STORE
+#endif
+#endif
+#ifdef SHUFFLE_STORE
+/* Interleave four planar vectors into the RGBA of 16 voxels at dst with two rounds of lane
+ * shuffles and four 64-byte stores, where the per-voxel float4 stores below build each float4
+ * from four lanes (5 % faster max, 10 % additive). Clang's shuffle builtin, where the OpenCL
+ * compiler has it (PoCL); else the float4 stores. */
+#define ZIP_LO 0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23
+#define ZIP_HI 8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31
+#define PAIRS_LO 0, 1, 16, 17, 2, 3, 18, 19, 4, 5, 20, 21, 6, 7, 22, 23
+#define PAIRS_HI 8, 9, 24, 25, 10, 11, 26, 27, 12, 13, 28, 29, 14, 15, 30, 31
+#ifdef ALIGNED
+#define STORE16(v, i, p) (((__global float16 *)(p))[i] = (v))
+#else
+#define STORE16(v, i, p) vstore16((v), (i), (__global float *)(p))
+#endif
+inline void store_rgba16(__global float4 *dst, const float16 r, const float16 g,
+                         const float16 b, const float16 a)
+{
+    const float16 rg_lo = __builtin_shufflevector(r, g, ZIP_LO);
+    const float16 rg_hi = __builtin_shufflevector(r, g, ZIP_HI);
+    const float16 ba_lo = __builtin_shufflevector(b, a, ZIP_LO);
+    const float16 ba_hi = __builtin_shufflevector(b, a, ZIP_HI);
+    STORE16(__builtin_shufflevector(rg_lo, ba_lo, PAIRS_LO), 0, dst);
+    STORE16(__builtin_shufflevector(rg_lo, ba_lo, PAIRS_HI), 1, dst);
+    STORE16(__builtin_shufflevector(rg_hi, ba_hi, PAIRS_LO), 2, dst);
+    STORE16(__builtin_shufflevector(rg_hi, ba_hi, PAIRS_HI), 3, dst);
+}
+#define STORE_RGBA(o, R_, G_, B_, A_) store_rgba16(out + (o), (R_), (G_), (B_), (A_))
+#else
 /* Interleave lane j of four planar vectors into out[o + n] (RGBA of voxel x + n). */
 #define ST1(o, j, n, R_, G_, B_, A_) \
     out[(o) + n] = (float4)((R_).s##j, (G_).s##j, (B_).s##j, (A_).s##j)
@@ -112,6 +145,7 @@ inline int all_lanes(int16 m)
         ST1(o, c, 12, R_, G_, B_, A_); ST1(o, d, 13, R_, G_, B_, A_);                     \
         ST1(o, e, 14, R_, G_, B_, A_); ST1(o, f, 15, R_, G_, B_, A_);                     \
     } while (0)
+#endif
 #elif VEC == 1
 typedef float floatv;
 typedef int intv;
@@ -344,11 +378,23 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 
 #define RAW(k) VLOAD(data + VOX_INDEX(zb, (k), y, x))
 
+/* The brick step integrated i-th. ORDER_FORWARD / ORDER_BACKWARD: the host found the order to
+ * be the brick's steps in turn or reversed (forward and backward orders over a window), so no
+ * step index is loaded and the compiler steps the addresses instead of multiplying each one out
+ * (max ran 15 % faster). Otherwise order[i]. */
+#if defined(ORDER_FORWARD)
+#define ORDER_AT(i) (i)
+#elif defined(ORDER_BACKWARD)
+#define ORDER_AT(i) (w - 1 - (i))
+#else
+#define ORDER_AT(i) order[i]
+#endif
+
 /* Steps `from`..w-1 of the order into a mode's state s: STEP(s, k) each (which may `continue`
  * past a step), stopping once DONE(s). */
 #define STEPS(s, from, to, STEP, DONE)  \
     for (int i = (from); i < (to); ++i) { \
-        const int k = order[i];         \
+        const int k = ORDER_AT(i);      \
         STEP(s, k)                      \
         if (DONE(s)) break;             \
     }

@@ -51,8 +51,8 @@ typedef struct {
     idxv best_k;
 } Best;
 #define BEST_INIT(s)                  \
-    s.best = KEY(RAW(order[0]));      \
-    s.best_k = IDX(order[0]);
+    s.best = KEY(RAW(ORDER_AT(0)));   \
+    s.best_k = IDX(ORDER_AT(0));
 #define BEST_STEP(s, k)                                        \
     {                                                          \
         const keyv v_ = KEY(RAW(k));                           \
@@ -70,14 +70,14 @@ typedef struct {
  * some lane lies beyond zhi (max) / zlo (min); the voxel's colour and t_index. */
 #define BEST_FINISH(s)                                                              \
     {                                                                               \
-        const int first = order[0];                                                 \
+        const int first = ORDER_AT(0);                                              \
         const floatv kf = KEY_FLOAT(s.best);                                        \
         intv win = SELECT(TO_INT(s.best_k), (intv)(first), BEHIND(kf));             \
         const intv ahead = AHEAD(kf);                                               \
         if (ANY(ahead)) {                                                           \
             intv todo = ahead;                                                      \
             for (int i = 0; i < w; ++i) {                                           \
-                const int k = order[i];                                             \
+                const int k = ORDER_AT(i);                                          \
                 const intv hit = todo & AHEAD(KEY_FLOAT(KEY(RAW(k))));              \
                 win = SELECT(win, (intv)(k), hit);                                  \
                 todo &= ~hit;                                                       \
