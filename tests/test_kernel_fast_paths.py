@@ -151,12 +151,15 @@ def test_order_defines_name_steps_in_turn_or_reversed():
 @given(st.data())
 def test_steps_in_turn_or_reversed_equal_the_order_table(data):
     """ORDER_FORWARD / ORDER_BACKWARD (the kernels step through the brick without order[]) give
-    the bits of the order table, in every mode, dtype and order, blocks of rows or not."""
+    the bits of the order table, in every mode, dtype and order, over all steps or a window,
+    blocks of rows or not."""
     dtype = data.draw(st.sampled_from(DTYPES))
-    w = data.draw(st.integers(1, 17))
-    shape = (w, data.draw(st.integers(1, 3)), data.draw(st.integers(1, 9)))
+    total = data.draw(st.integers(1, 17))
+    shape = (total, data.draw(st.integers(1, 3)), data.draw(st.integers(1, 9)))
     shape += (data.draw(st.sampled_from([16, 19, 33])),)
     raw = raw_values(data, dtype, shape)
+    chosen = data.draw(st.lists(st.integers(0, total - 1), min_size=min(3, total), unique=True))
+    window = data.draw(st.sampled_from([None, ",".join(map(str, sorted(chosen)))]))
     spec = IntegrationSpec(
         mode=data.draw(st.sampled_from(modes.names())),
         order=data.draw(st.sampled_from(["forward", "backward"])),
@@ -165,10 +168,11 @@ def test_steps_in_turn_or_reversed_equal_the_order_table(data):
     )
     series = chronocl.TimeSeries.from_array(raw)
     options = {"row_blocks": data.draw(st.booleans()), "host_ptr": data.draw(st.booleans())}
-    stepped = chronocl.integrate(series, None, spec=spec, engine=opencl.OpenCLEngine(**options))
+    engine = opencl.OpenCLEngine(**options)
+    stepped = chronocl.integrate(series, window, spec=spec, engine=engine)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(opencl, "order_defines", lambda order, w: {})
-        table = chronocl.integrate(series, None, spec=spec, engine=opencl.OpenCLEngine(**options))
+        table = chronocl.integrate(series, window, spec=spec, engine=engine)
     assert_same(stepped, table, 0)
 
 
