@@ -224,6 +224,11 @@ def test_a_device_whose_compiler_fails_is_passed_over_or_named(monkeypatch):
     assert "unknown target CPU 'generic'" in message and found[0].label in message
     assert "apt-get install pocl-opencl-icd" in message and "--engine numpy" in message
     assert device.usable_devices() == []
+    from chronocl.integration.scaling import resolve_devices
+
+    monkeypatch.setenv("CHRONOCL_DEVICE", found[0].index)  # a chosen device changes nothing
+    with pytest.raises(EngineUnavailableError, match="unknown target CPU 'generic'"):
+        resolve_devices("all")
 
 
 def test_no_platform_gives_install_hint(tmp_path):

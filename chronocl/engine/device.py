@@ -124,13 +124,16 @@ def pick_device(spec: str | None) -> tuple[DeviceInfo, object]:
             f"no OpenCL device matches {spec!r}; available: {known} (see 'chronocl devices')"
         )
     ranked = sorted(devices, key=lambda d: _RANK.get(d[0].kind, len(_RANK)))  # stable
-    problems = []
     for info, dev in ranked:
-        problem = build_problem(info.index)
-        if problem is None:
+        if build_problem(info.index) is None:
             return info, dev
-        problems.append(f"{info.index} {info.label}: {problem}")
-    raise EngineUnavailableError(NO_BUILD.format(problems="; ".join(problems)))
+    raise no_build_error([info for info, _ in devices])
+
+
+def no_build_error(devices: list[DeviceInfo]) -> EngineUnavailableError:
+    """The error for `devices` none of which can build a kernel, naming each one's problem."""
+    problems = "; ".join(f"{i.index} {i.label}: {build_problem(i.index)}" for i in devices)
+    return EngineUnavailableError(NO_BUILD.format(problems=problems))
 
 
 _RANK = {"GPU": 0, "CPU": 1}

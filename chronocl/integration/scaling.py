@@ -41,6 +41,7 @@ from chronocl.engine.device import (
     NO_PLATFORM,
     DeviceInfo,
     list_devices,
+    no_build_error,
     pick_device,
     usable_devices,
 )
@@ -96,11 +97,12 @@ def resolve_devices(text: str | None) -> list[DeviceInfo]:
     if not text:
         return [pick_device(None)[0]]
     if text.strip().lower() == "all":
-        if not list_devices():
+        every = list_devices()
+        if not every:
             raise EngineUnavailableError(NO_PLATFORM)
         found = usable_devices()
         if not found:
-            pick_device(None)  # raises the error that names each device's build problem
+            raise no_build_error(every)
         return found
     chosen: dict[str, DeviceInfo] = {}
     for part in text.split(","):

@@ -107,7 +107,7 @@ inline int all_lanes(int16 m)
 /* Interleave four planar vectors into the RGBA of 16 voxels at dst with two rounds of lane
  * shuffles and four 64-byte stores, where the per-voxel float4 stores below build each float4
  * from four lanes (5 % faster max, 10 % additive). Clang's shuffle builtin, where the OpenCL
- * compiler has it (PoCL); else the float4 stores. */
+ * compiler has it (PoCL, NVIDIA's); else the float4 stores. */
 #define ZIP_LO 0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23
 #define ZIP_HI 8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31
 #define PAIRS_LO 0, 1, 16, 17, 2, 3, 18, 19, 4, 5, 20, 21, 6, 7, 22, 23
