@@ -52,6 +52,7 @@ INTEGRATION_KEYS = {
     "ALIGNED",
     "ORDER_FORWARD",
     "ORDER_BACKWARD",
+    "TIME_TABLE",
 }
 STEP_ORDERS = ("table", "forward", "backward")  # order[i], or the steps in turn / reversed
 BOOLS = (False, True)
@@ -86,6 +87,8 @@ def integration_combinations(name: str):
     norm = BOOLS if name == "additive" else (False,)
     partial = BOOLS if mode.slides == "invert" else (False,)
     time_order = (0, 1, 2) if name == "change" else (False,)
+    # a winner's time tables in registers: rows kernels (VEC 16) of the modes with t_index
+    time_table = BOOLS if mode.has_t_index and mode.rows_kernel else (False,)
     # (CONST_COLOR, TF_SEGS, SEG_ALPHA) as the engine passes them: pieces of colour, opacity
     # or both; their opacity is the value (1) or, in the threshold modes, decides lanes (2).
     # TF_SEGS: one piece, some with a middle one, the most (2..7 compile as 3 does).
@@ -104,9 +107,12 @@ def integration_combinations(name: str):
         time_order,
         (256, 65536),
         STEP_ORDERS,
+        time_table,
     ):
         (t, quant, raw), (enh, vec), (const, segs, pieces_alpha), early, skip, aligned = combo[:6]
-        norm_time, raw_partial, order, lut_n, steps = combo[6:]
+        norm_time, raw_partial, order, lut_n, steps, table = combo[6:]
+        if table and vec != 16:
+            continue
         if quant and (lut_n != 256 or mode.lut_by_value):  # one LUT entry per byte value
             continue
         if enh and pieces_alpha == 2:  # enhanced opacity is not bounded by the pieces'
@@ -136,6 +142,7 @@ def integration_combinations(name: str):
             "ALIGNED": aligned,
             "ORDER_FORWARD": steps == "forward",
             "ORDER_BACKWARD": steps == "backward",
+            "TIME_TABLE": table,
         }
 
 

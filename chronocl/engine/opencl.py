@@ -314,6 +314,10 @@ class OpenCLEngine:
         for n, x0, count in launches:
             lane_defines = {**defines, "VEC": n, "DATA_V": lane_type(dt, n)}
             if rows and n == VEC:
+                # a block of rows keeps a winner's time colours and steps as tables in
+                # registers where it has at most TIME_TABLE_MAX steps (PERMUTE_TIME, common.h)
+                if spec.has_t_index and w <= TIME_TABLE_MAX:
+                    lane_defines["TIME_TABLE"] = True
                 state = cl.LocalMemory(rows * count * n * mode.rows_state)
                 tail = [np.int32(rows), np.int32(count), state]
                 kern = kernel(self.dc, file, mode.rows_kernel, lane_defines)
@@ -489,6 +493,7 @@ class OpenCLEngine:
 # unit, for an even load.
 ROW_BLOCK_BYTES = 64 * 1024
 ROW_BLOCKS_PER_UNIT = 4
+TIME_TABLE_MAX = 32  # steps a rows kernel may look up by register permutes (two 16-lane tables)
 MAX_SEGMENTS = 8  # straight pieces of the data TF evaluated without lookups
 SEGMENT_TOLERANCE = 2e-7  # how far a LUT entry may lie from its piece (float32 rounding)
 # the most `opacity_error` the threshold modes accept: half the kernels' SEG_MARGIN (1e-5)

@@ -73,5 +73,5 @@ __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
     const floatv delta = VMIN(best * scale, 1.0f);
     WINNER_RGBA(delta, kk, r, g, b, ak)
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
-    STORE_INT(GATHER_INT(steps, kk), t_index + o);
+    STORE_INT(STEP_AT(kk), t_index + o);
 }

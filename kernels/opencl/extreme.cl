@@ -87,7 +87,7 @@ typedef struct {
         const floatv u = UNIT_OF_KEY(s.best);                                       \
         WINNER_RGBA(u, win, r, g, b, ak)                                            \
         STORE_RGBA(o, ak * r, ak * g, ak * b, ak);                                  \
-        STORE_INT(GATHER_INT(steps, win), t_index + o);                             \
+        STORE_INT(STEP_AT(win), t_index + o);                                       \
     }
 
 __kernel void integrate_extreme(KERNEL_ARGS, const float zlo, const float zhi,

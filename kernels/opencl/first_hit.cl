@@ -28,7 +28,7 @@ typedef struct {
         const floatv zero = 0.0f;                                                  \
         STORE_RGBA(o, SELECT(ak * r, zero, none), SELECT(ak * g, zero, none),      \
                    SELECT(ak * b, zero, none), SELECT(ak, zero, none));            \
-        STORE_INT(SELECT(GATHER_INT(steps, win), (intv)(-1), none), t_index + o);  \
+        STORE_INT(SELECT(STEP_AT(win), (intv)(-1), none), t_index + o);            \
     }
 
 __kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global float4 *out,
