@@ -147,6 +147,44 @@ def test_early_exit_on_opaque_front_and_window_of_40():
     np.testing.assert_allclose(ocl.rgba[..., 3], 1.0)
 
 
+def test_device_tables_are_kept_and_an_edited_tf_gets_its_own():
+    """An engine keeps the device tables of its last LUT_CACHE integrations (read-only, so no
+    caller can change them), and an edited data TF, time TF, window or value range builds
+    tables of its own: each integration equals the reference."""
+    from chronocl.engine import opencl
+
+    engine = OpenCLEngine()
+    spec = IntegrationSpec(mode="max")
+    pos = np.linspace(0.0, 1.0, 5)
+    first = engine.luts(spec, pos, False, (0.0, 1.0))
+    assert engine.luts(spec, pos.copy(), False, (0.0, 1.0)) is first
+    assert not any(a.flags.writeable for a in first if isinstance(a, np.ndarray))
+    with pytest.raises(ValueError):
+        first[0][0, 0] = 1.0
+    edited = IntegrationSpec(
+        mode="max", data_tf=chronocl.DataTF(points=[(0, 1, 0, 0, 0), (1, 1, 0, 0, 1)])
+    )
+    assert not np.array_equal(engine.luts(edited, pos, False, (0.0, 1.0))[0], first[0])
+    assert not np.array_equal(engine.luts(spec, pos[::-1], False, (0.0, 1.0))[1], first[1])
+    assert engine.luts(spec, pos, False, (0.5, 1.0))[3] != first[3]  # the skip cut
+    assert first[4] is not None  # the default TF as pieces, but not for an engine without them
+    assert engine.with_options(pieces=False).luts(spec, pos, False, (0.0, 1.0))[4] is None
+    for n in range(2 * opencl.LUT_CACHE):
+        engine.luts(spec, np.linspace(0.0, 1.0, n + 2), False, (0.0, 1.0))
+    assert len(engine._luts) == opencl.LUT_CACHE
+
+    data = np.random.default_rng(8).random((6, 3, 4, 37)).astype(np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    for mode in ("max", "alpha", "first_hit"):
+        for points in ([(0, 1, 1, 1, 0), (1, 1, 1, 1, 1)], [(0, 0, 1, 0, 0.2), (1, 1, 0, 0, 0.9)]):
+            for window in ("0:6", "1:4"):
+                spec = IntegrationSpec(
+                    mode=mode, data_tf=chronocl.DataTF(points=points), threshold=0.3
+                )
+                ref = chronocl.integrate(series, window, spec=spec, engine="numpy")
+                assert_same(ref, chronocl.integrate(series, window, spec=spec, engine=engine))
+
+
 def test_window_larger_than_a_brick_is_split():
     """A device that holds only a few rows gets more bricks, not a failure."""
     data = np.random.default_rng(4).random((12, 9, 6, 5)).astype(np.float32)
