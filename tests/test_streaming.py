@@ -8,6 +8,7 @@ any slab split; peak memory must follow the budget, not the data; an interrupted
 from __future__ import annotations
 
 import json
+import mmap
 import tracemalloc
 
 import numpy as np
@@ -338,7 +339,10 @@ def test_growth_guard_trims_only_past_its_allowance():
     leaves the allocator alone while it stays within (memory handed back faults again)."""
     held = np.ones(64 * 2**20, np.uint8)
     small, large = GrowthGuard(allowance=16 * 2**20), GrowthGuard(allowance=2**40)
-    more = np.ones(32 * 2**20, np.uint8)  # the process grows by 32 MB
+    # The process grows by 32 MB: fresh pages of its own mapping, since an array from malloc
+    # may reuse memory that earlier tests freed and that is still resident (no growth).
+    more = np.frombuffer(mmap.mmap(-1, 32 * 2**20), np.uint8)
+    more[:] = 1
     small.check()
     large.check()
     can_trim = chronocl.core.budget.malloc_trim is not None
