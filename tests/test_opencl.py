@@ -169,9 +169,14 @@ def test_device_tables_are_kept_and_an_edited_tf_gets_its_own():
     assert engine.luts(spec, pos, False, (0.5, 1.0))[3] != first[3]  # the skip cut
     assert first[4] is not None  # the default TF as pieces, but not for an engine without them
     assert engine.with_options(pieces=False).luts(spec, pos, False, (0.0, 1.0))[4] is None
-    for n in range(2 * opencl.LUT_CACHE):
+    for n in range(2 * opencl.LUT_CACHE):  # the one in use stays, the others come and go
+        assert engine.luts(spec, pos, False, (0.0, 1.0)) is first
         engine.luts(spec, np.linspace(0.0, 1.0, n + 2), False, (0.0, 1.0))
     assert len(engine._luts) == opencl.LUT_CACHE
+    assert engine.luts(spec, pos, False, (0.0, 1.0)) is first
+    # points given to a preset that does not use them (a TF file may carry them) are dropped
+    unused = chronocl.TimeTF(color=chronocl.TimeColor("rgb", points=[[0, 0, 0, 1], [1, 1, 0, 0]]))
+    assert engine.luts(IntegrationSpec(mode="max", time_tf=unused), pos, False, (0.0, 1.0))
 
     data = np.random.default_rng(8).random((6, 3, 4, 37)).astype(np.float32)
     series = chronocl.TimeSeries.from_array(data)

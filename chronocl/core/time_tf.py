@@ -61,6 +61,8 @@ class TimeColor:
             object.__setattr__(
                 self, "points", parse_points(self.points, 4, "time colour", "p, r, g, b")
             )
+        else:  # unused: dropped, so equal colours compare (and hash) equal
+            object.__setattr__(self, "points", ())
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
         p = np.asarray(p, dtype=np.float64)
@@ -108,6 +110,8 @@ class TimeAlpha:
             raise bad(f"time alpha width is {self.width}; it must lie in (0, 2]")
         if self.shape == "points":
             object.__setattr__(self, "points", parse_points(self.points, 2, "time alpha", "p, a"))
+        else:  # unused: dropped, so equal opacities compare (and hash) equal
+            object.__setattr__(self, "points", ())
 
     def evaluate(self, p: np.ndarray) -> np.ndarray:
         p = np.asarray(p, dtype=np.float64)

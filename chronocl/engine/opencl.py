@@ -146,13 +146,16 @@ class OpenCLEngine:
         quant: bool,
         value_range: tuple[float, float],
     ) -> tuple[np.ndarray, np.ndarray, bool, float, np.ndarray | None, int]:
-        """The device tables of one integration (`_tables`), kept for the last LUT_CACHE specs:
-        a series integrated slab by slab, or again with the same transfer functions, builds
-        them once (about a third of a millisecond each time, where max over 30x128^3 takes 9)."""
+        """The host tables of one integration (`_tables`), kept for the LUT_CACHE most recently
+        used: a series integrated slab by slab, or again with the same transfer functions,
+        builds them once (about a third of a millisecond each time, where max over 30x128^3
+        takes 9)."""
         pos = np.asarray(positions)
         key = (spec, pos.dtype.str, pos.tobytes(), quant, *map(float, value_range), self.pieces)
         with self._luts_lock:  # specs are frozen and hold tuples: hashable
-            tables = self._luts.get(key)
+            tables = self._luts.pop(key, None)
+            if tables is not None:  # the most recently used go last, the oldest first
+                self._luts[key] = tables
         if tables is None:
             tables = self._tables(spec, positions, quant, value_range)
             for a in tables:
