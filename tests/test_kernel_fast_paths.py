@@ -140,6 +140,57 @@ def test_row_blocks_equal_the_per_vector_kernels_and_reference(data):
         assert_same(chronocl.integrate(series, None, spec=spec, engine="numpy"), blocks)
 
 
+@pytest.mark.parametrize("mode", ["max", "min", "first_hit"])
+@pytest.mark.parametrize("w", [32, 33])
+def test_time_tables_at_their_edge_equal_the_gathers(mode, w):
+    """A window of 32 steps, the most the register tables hold (PERMUTE_TIME), and one of 33,
+    which the gathers take: the rows kernels give the per-vector kernels' bits (and the
+    reference's), every step winning somewhere, reversed and importance orders too."""
+    rng = np.random.default_rng(w)
+    # each voxel's steps hold 0..w-1 in a random order: every step is the maximum somewhere
+    ranks = np.argsort(rng.random((2 * 3 * 48, w)), axis=1).astype(np.float32)
+    series = chronocl.TimeSeries.from_array(np.ascontiguousarray(ranks.T.reshape(w, 2, 3, 48)))
+    spec_args = {"threshold": 0.4} if mode == "first_hit" else {}
+    for order in ("forward", "backward", tuple(rng.permutation(w).tolist())):
+        spec = IntegrationSpec(
+            mode=mode, order=order, time_tf=chronocl.TimeTF.preset("rgb"), **spec_args
+        )
+        blocks = chronocl.integrate(series, None, spec=spec, engine=opencl.OpenCLEngine())
+        vectors = opencl.OpenCLEngine(row_blocks=False)
+        assert_same(chronocl.integrate(series, None, spec=spec, engine=vectors), blocks, 0)
+        assert_same(chronocl.integrate(series, None, spec=spec, engine="numpy"), blocks)
+        if mode != "first_hit":
+            assert len(np.unique(blocks.t_index)) == w
+
+
+def test_time_tables_are_built_on_avx512_cpus():
+    """PoCL names its CPU target in the device name: where that is an AVX-512 target, the rows
+    kernels of a window of at most 32 steps get the register tables (common.h PERMUTE_TIME)."""
+    from chronocl.engine import program
+
+    engine = opencl.OpenCLEngine()
+    if not (engine.dc.is_cpu and "avx512" in engine.dc.device.name.lower()):
+        pytest.skip(f"not an AVX-512 CPU target: {engine.dc.device.name}")
+    import pyopencl as cl
+
+    common = (program.kernel_dir() / "common.h").read_text()
+    probe = (
+        "__kernel void permutes(__global int *o) {\n#ifdef PERMUTE_TIME\n o[0] = 1;\n"
+        "#else\n o[0] = 0;\n#endif\n}\n"
+    )
+    defines = {"DATA_T": "float", "DATA_V": "float16", "VEC": 16, "LUT_N": 256}
+    out = np.full(1, -1, np.int32)
+    for table, expected in ((True, 1), (False, 0)):
+        prg = program.build(
+            engine.dc, "probe", {**defines, "TIME_TABLE": table}, text=common + probe
+        )
+        buf = cl.Buffer(engine.dc.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
+        with engine.dc.lock:
+            prg.permutes(engine.dc.queue, (1,), None, buf)
+            cl.enqueue_copy(engine.dc.queue, out, buf)
+        assert out[0] == expected, table
+
+
 def test_order_defines_name_steps_in_turn_or_reversed():
     assert opencl.order_defines(np.arange(5), 5) == {"ORDER_FORWARD": True, "ORDER_BACKWARD": False}
     assert opencl.order_defines([4, 3, 2, 1, 0], 5) == {

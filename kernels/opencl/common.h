@@ -516,7 +516,9 @@ typedef struct {
  * block of rows, and looks a vector up with one two-table permute (vpermi2ps) where a gather
  * takes 16 loads: max ran 8-13 % faster. Portable OpenCL has no lane permute by variable
  * indices (PoCL's shuffle2 ran at 0.8 of the gathers' speed), hence the x86 builtin, and the
- * gathers wherever it is missing. Both give the same bits. */
+ * gathers wherever it is missing. Both give the same bits. The permute reads an index's low
+ * 5 bits, so the host sets TIME_TABLE only for rows kernels of at most 32 steps, and only for
+ * modes whose finish runs in VECTOR_BODY / ROWS_BODY (which load the tables). */
 #if VEC == 16 && defined(TIME_TABLE) && defined(__AVX512F__) && defined(__has_builtin)
 #if __has_builtin(__builtin_ia32_vpermi2varps512)
 #define PERMUTE_TIME
