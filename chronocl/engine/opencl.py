@@ -526,7 +526,7 @@ class OpenCLEngine:
 # unit, for an even load.
 ROW_BLOCK_BYTES = 64 * 1024
 ROW_BLOCKS_PER_UNIT = 4
-LUT_CACHE = 16  # integrations whose device tables an engine keeps (OpenCLEngine.luts)
+LUT_CACHE = 16  # integrations whose host tables an engine keeps (OpenCLEngine.luts)
 TIME_TABLE_MAX = 32  # steps a rows kernel may look up by register permutes (two 16-lane tables)
 MAX_SEGMENTS = 8  # straight pieces of the data TF evaluated without lookups
 SEGMENT_TOLERANCE = 2e-7  # how far a LUT entry may lie from its piece (float32 rounding)
