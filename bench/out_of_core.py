@@ -186,7 +186,7 @@ def read_all(store: Path) -> float:
     read: `arr[t]` into a fresh array each step is up to 3x slower in a fresh process, which
     must fault in every new page.
     """
-    from zarr.core.buffer import default_buffer_prototype
+    from zarr.buffer import default_buffer_prototype
 
     arr = open_series(store)._zarr
     buf = np.empty(arr.shape[1:], arr.dtype)

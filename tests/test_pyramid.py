@@ -31,6 +31,8 @@ from chronocl.data.series import open_series, write_series
 from chronocl.data.timeseries import TimeSeries
 from chronocl.data.verify import verify
 
+from .strategies import examples
+
 DTYPES = ("uint8", "uint16", "int16", "float32", "float64")
 SHAPE = (3, 130, 9, 70)  # T, Z, Y, X: levels (65, 5, 35) and (33, 3, 18), odd edges on the way
 
@@ -111,7 +113,7 @@ def test_downsample_matches_the_oracle(dtype, shape):
         assert_pooled(downsample(a, pool), a, pool)
 
 
-@settings(max_examples=20)
+@settings(max_examples=examples(20))
 @given(
     shape=st.tuples(*[st.integers(1, 11)] * 3),
     dtype=st.sampled_from(DTYPES),
@@ -123,7 +125,7 @@ def test_downsample_property(shape, dtype, seed):
         assert_pooled(downsample(a, pool), a, pool)
 
 
-@settings(max_examples=15)
+@settings(max_examples=examples(15))
 @given(half=st.tuples(*[st.integers(1, 6)] * 3), seed=st.integers(0, 2**16))
 def test_uint8_fast_path_property(half, seed):
     """uint8 steps with even sides take a faster path; it gives the oracle's values, and so
@@ -181,9 +183,9 @@ def test_level_chunks_written_directly_are_zarrs_own(tmp_path, dtype, compressor
     import zarr
 
     from chronocl.data.level_writer import (
-        _direct_writable,
         _write_step_chunks,
         _write_together,
+        chunk_files,
         level_compressors,
     )
     from chronocl.data.writer import compressors
@@ -202,13 +204,31 @@ def test_level_chunks_written_directly_are_zarrs_own(tmp_path, dtype, compressor
                 config={"write_empty_chunks": True},
             )
         )
-    assert _direct_writable(arrays[1])
+    files = chunk_files(arrays[1])
+    assert files is not None
     for t in range(data.shape[0]):
         _write_together([(arrays[0], t, data[t])])
-        _write_step_chunks(arrays[1], t, data[t])
+        _write_step_chunks(arrays[1], t, data[t], files)
     assert _chunk_files(tmp_path / "zarr") == _chunk_files(tmp_path / "direct")
     reread = zarr.open_array(store=str(tmp_path / "direct"), path="a", mode="r")[:]
     np.testing.assert_array_equal(reread, data)
+
+
+@pytest.mark.parametrize("compressor", ["zstd", "blosc-lz4", "none"])
+@pytest.mark.parametrize("checksum", [True, False])
+def test_levels_in_a_local_store_are_written_as_files(tmp_path, compressor, checksum):
+    """The level writer's own arrays in a local directory take the direct writer, read from the
+    zarr v3 metadata of whichever zarr is installed (a zarr that spelled it otherwise would
+    silently fall back to zarr's slower writes)."""
+    import zarr
+
+    from chronocl.data.level_writer import LevelWriter
+    from chronocl.data.writer import compressors
+
+    group = zarr.open_group(store=str(tmp_path / "l"), mode="w", zarr_format=3)
+    codecs = compressors(compressor, checksum)
+    writer = LevelWriter(group, (2, 130, 9, 70), "float32", codecs, chunk_bytes=2**20)
+    assert writer.direct
 
 
 def test_levels_in_a_store_zarr_writes_itself():

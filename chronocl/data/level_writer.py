@@ -9,10 +9,10 @@ when complete (chronocl.core.atomic).
 
 from __future__ import annotations
 
-import asyncio
 import math
 import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,8 +20,8 @@ import google_crc32c
 import numpy as np
 import zarr
 from numcodecs import Blosc
-from zarr.codecs import BloscCodec, BytesCodec, Crc32cCodec
-from zarr.codecs.bytes import Endian
+from numcodecs.blosc import list_compressors
+from zarr.codecs import Crc32cCodec
 from zarr.storage import LocalStore
 
 from chronocl.core.atomic import partial_path, remove_path, remove_stale, replace
@@ -107,7 +107,8 @@ class LevelWriter:
                     # chunk: six new folders a step cost more than pooling it on ext4.
                     chunk_key_encoding={"name": "default", "separator": "."},
                 )
-        self._direct = all(_direct_writable(a) for a in arrays.values())
+        files = {key: chunk_files(a) for key, a in arrays.items()}
+        self._files = files if all(f is not None for f in files.values()) else None
         self._arrays = arrays
 
     @property
@@ -119,7 +120,7 @@ class LevelWriter:
     def direct(self) -> bool:
         """Whether the chunks are written as files by `_write_step_chunks` (else by zarr)."""
         self.create()
-        return self._direct
+        return self._files is not None
 
     def add(self, t: int, step: np.ndarray) -> None:
         """Pool step `t` (Z, Y, X) into every level and pool and write them."""
@@ -184,7 +185,7 @@ class LevelWriter:
         """Write step `t`'s levels (what `pool` returned) into their arrays."""
         if self.direct:
             for key, a in pooled.levels.items():
-                _write_step_chunks(self.arrays[key], t, a)
+                _write_step_chunks(self.arrays[key], t, a, self._files[key])
         else:
             _write_together([(self.arrays[key], t, a) for key, a in pooled.levels.items()])
 
@@ -210,81 +211,112 @@ class LevelWriter:
         }
 
 
-def _direct_writable(arr: zarr.Array) -> bool:
-    """Whether `_write_step_chunks` can write `arr`'s chunks: a zarr v3 array in a local
-    directory whose codecs are bytes (little-endian), then optionally blosc, then optionally
-    crc32c — the chains `level_compressors` makes."""
-    meta = arr.metadata
-    if not isinstance(arr.store, LocalStore) or getattr(meta, "zarr_format", None) != 3:
-        return False
-    codecs = list(meta.codecs)
-    if not codecs or not isinstance(codecs[0], BytesCodec):
-        return False
-    if codecs[0].endian not in (None, Endian.little):
-        return False
-    rest = codecs[1:]
-    if rest and isinstance(rest[0], BloscCodec):
-        rest = rest[1:]
-    if rest and isinstance(rest[0], Crc32cCodec):
-        rest = rest[1:]
-    return not rest
+# numcodecs' Blosc shuffle codes for zarr v3's blosc configuration
+_SHUFFLES = {"noshuffle": Blosc.NOSHUFFLE, "shuffle": Blosc.SHUFFLE, "bitshuffle": Blosc.BITSHUFFLE}
 
 
-def _write_step_chunks(arr: zarr.Array, t: int, a: np.ndarray) -> None:
+@dataclass(frozen=True)
+class ChunkFiles:
+    """Where and how `_write_step_chunks` writes an array's chunks as files, read from the
+    array's zarr v3 metadata as the specification spells it (`Array.metadata.to_dict()`, the
+    ``zarr.json`` document): its folder, chunk key separator, blosc settings, crc32c and fill."""
+
+    root: Path
+    separator: str
+    blosc: Blosc | None
+    crc: bool
+    fill: object
+
+
+def chunk_files(arr: zarr.Array) -> ChunkFiles | None:
+    """How to write `arr`'s chunks as files, or None when zarr must write them.
+
+    Files are written for a zarr v3 array in a local directory, keys of the default encoding,
+    whose codecs are bytes (little-endian), then optionally blosc, then optionally crc32c: the
+    chains `level_compressors` makes. Anything else (another store, codec or key encoding, one
+    a newer zarr spells otherwise) is left to zarr.
+    """
+    if not isinstance(arr.store, LocalStore):
+        return None
+    meta = arr.metadata.to_dict()
+    keys = meta.get("chunk_key_encoding") or {}
+    if (
+        meta.get("zarr_format") != 3
+        or meta.get("storage_transformers")
+        or keys.get("name") != ("default")
+    ):
+        return None
+    codecs = [(c.get("name"), c.get("configuration") or {}) for c in meta.get("codecs") or ()]
+    if not codecs or codecs[0][0] != "bytes" or codecs[0][1].get("endian", "little") != "little":
+        return None
+    rest, blosc = codecs[1:], None
+    if rest and rest[0][0] == "blosc":
+        conf = rest.pop(0)[1]
+        shuffle = _SHUFFLES.get(conf.get("shuffle"))
+        if shuffle is None or conf.get("cname") not in list_compressors():
+            return None
+        # typesize: numcodecs takes the itemsize of the typed array it encodes, as zarr does
+        blosc = Blosc(
+            cname=conf["cname"],
+            clevel=int(conf.get("clevel", 5)),
+            shuffle=shuffle,
+            blocksize=int(conf.get("blocksize", 0)),
+        )
+    crc = bool(rest) and rest[0][0] == "crc32c"
+    if crc:
+        rest.pop(0)
+    if rest:
+        return None
+    root = Path(str(arr.store.root)) / arr.path
+    return ChunkFiles(
+        root, keys.get("configuration", {}).get("separator", "/"), blosc, crc, arr.fill_value
+    )
+
+
+def _write_step_chunks(arr: zarr.Array, t: int, a: np.ndarray, files: ChunkFiles) -> None:
     """Write step `t` of `arr` (chunks (1, zc, Y, X)) as encoded chunk files, as zarr would.
 
     The levels' chunks are small and many; zarr's asynchronous pipeline costs several times
     the encoding itself per chunk, and it shares its one event loop with the data being written
     beside the levels. The encoding is zarr v3's, done by the same libraries (numcodecs' blosc,
-    google-crc32c), and tests read every chunk back through zarr. Edge chunks are padded with
-    the fill value, as zarr v3 stores them.
+    google-crc32c), and tests compare the files with zarr's own byte for byte. Edge chunks are
+    padded with the fill value, as zarr v3 stores them.
     """
-    meta = arr.metadata
     zc = int(arr.chunks[1])
-    blosc = next((c for c in meta.codecs if isinstance(c, BloscCodec)), None)
-    crc = any(isinstance(c, Crc32cCodec) for c in meta.codecs)
-    if blosc is not None:
-        codec = Blosc(
-            cname=blosc.cname.name,
-            clevel=blosc.clevel,
-            shuffle={"noshuffle": 0, "shuffle": 1, "bitshuffle": 2}[blosc.shuffle.name],
-            blocksize=blosc.blocksize,
-        )  # typesize: the itemsize of the typed array it encodes
     little = a.dtype.newbyteorder("<")
-    root = Path(str(arr.store.root)) / arr.path
     for i, z0 in enumerate(range(0, a.shape[0], zc)):
         part = a[z0 : z0 + zc]
         if part.shape[0] < zc:  # zarr v3 keeps edge chunks at full size
-            full = np.full((zc, *a.shape[1:]), meta.fill_value, little)
+            full = np.full((zc, *a.shape[1:]), files.fill, little)
             full[: part.shape[0]] = part
             part = full
         raw = np.ascontiguousarray(part, little)
-        data = codec.encode(raw) if blosc is not None else raw.tobytes()
-        file = root / meta.chunk_key_encoding.encode_chunk_key((t, i, 0, 0))
-        if file.parent != root:  # "/"-separated keys: a folder per step and chunk
+        data = files.blosc.encode(raw) if files.blosc is not None else raw.tobytes()
+        # zarr v3's default chunk key: "c", then the chunk's coordinates, by the separator
+        file = files.root / files.separator.join(("c", str(t), str(i), "0", "0"))
+        if file.parent != files.root:  # "/"-separated keys: a folder per step and chunk
             file.parent.mkdir(parents=True, exist_ok=True)
         with open(file, "wb") as f:
             f.write(data)
-            if crc:
+            if files.crc:
                 f.write(google_crc32c.value(data).to_bytes(4, "little"))
 
 
 def _write_together(writes: list[tuple[zarr.Array, int, np.ndarray]]) -> None:
-    """Write step t of several arrays in one batch: zarr encodes and stores their chunks
-    concurrently (one call per array costs a round trip through zarr's event loop each)."""
-    try:
-        from zarr.core.sync import sync
-
-        pending = [(arr._async_array, t, a) for arr, t, a in writes]
-    except (ImportError, AttributeError):  # another zarr: one call per array
-        for arr, t, a in writes:
-            arr[t] = a
+    """Write step t of several arrays at once: one thread per array, so zarr encodes and
+    stores their chunks concurrently (one call after another costs a round trip through zarr's
+    event loop each)."""
+    if len(writes) == 1:
+        arr, t, a = writes[0]
+        arr[t] = a
         return
 
-    async def batch() -> None:
-        await asyncio.gather(*(arr.setitem((t,), a) for arr, t, a in pending))
+    def write(item: tuple[zarr.Array, int, np.ndarray]) -> None:
+        arr, t, a = item
+        arr[t] = a
 
-    sync(batch())
+    with ThreadPoolExecutor(len(writes)) as pool:
+        list(pool.map(write, writes))
 
 
 def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = False) -> dict:

@@ -18,7 +18,7 @@ from pathlib import Path
 import dask.array as da
 import numpy as np
 import zarr
-from zarr.core.buffer import default_buffer_prototype
+from zarr.buffer import default_buffer_prototype
 
 from chronocl.core.errors import (
     InvalidDataError,
