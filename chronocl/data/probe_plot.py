@@ -86,7 +86,7 @@ def time_axis(
             return x, "time", None
     elif all(isinstance(t, str) for t in labels):
         dates = _dates(labels)
-        if dates is not None and np.all(np.diff(dates) > np.timedelta64(0)):
+        if dates is not None and np.all(np.diff(dates) > np.timedelta64(0, "s")):
             return dates, "time", None
     return steps.astype(np.float64), "time", display_labels(list(steps), labels)
 

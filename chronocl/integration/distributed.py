@@ -193,8 +193,7 @@ class DaskExecutor:
 
 def gather(client, futures: list, total: int, done: int, label: str, progress: bool) -> list:
     """The results of `futures` as they finish (a progress bar); cancels the rest on failure."""
-    from distributed import as_completed
-    from distributed.scheduler import KilledWorker
+    from distributed import KilledWorker, as_completed
 
     results = []
     try:
