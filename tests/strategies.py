@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from hypothesis import strategies as st
 
@@ -10,6 +12,14 @@ from chronocl.core.enhance import Enhance
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeAlpha, TimeColor, TimeTF
 from chronocl.modes.spec import IntegrationSpec
+
+
+def examples(n: int) -> int:
+    """A property test's number of examples: `n`, sized for CI's time, or CHRONOCL_EXAMPLES when
+    that is set (every property test then draws that many: a deeper search)."""
+    deeper = os.environ.get("CHRONOCL_EXAMPLES")
+    return int(deeper) if deeper else n
+
 
 shapes = st.tuples(st.integers(1, 7), st.integers(1, 6), st.integers(1, 6))
 # x spans 1..40 so the OpenCL engine's 16-voxel lanes and its scalar x tail are both exercised.

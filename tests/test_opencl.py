@@ -18,7 +18,7 @@ from chronocl.engine.device import list_devices
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.modes.spec import IntegrationSpec
 
-from .strategies import specs, windows
+from .strategies import examples, specs, windows
 
 
 def series_of(u: np.ndarray, sel, dtype=np.float32) -> chronocl.TimeSeries:
@@ -38,7 +38,7 @@ def assert_same(a: chronocl.Chronovolume, b: chronocl.Chronovolume, atol: float 
         np.testing.assert_array_equal(a.t_index, b.t_index)
 
 
-@settings(max_examples=40)
+@settings(max_examples=examples(40))
 @given(st.data())
 def test_opencl_equals_reference(data):
     """Invariant 4 (and 3 on the device): any mode x order x enhancement, odd shapes, any bricks."""
@@ -52,7 +52,7 @@ def test_opencl_equals_reference(data):
     assert_same(ref, ocl)
 
 
-@settings(max_examples=20)  # six integrations per example
+@settings(max_examples=examples(20))  # six integrations per example
 @given(st.data())
 def test_fast_paths_equal_the_general_path(data):
     """Early exit, uint8 LUT indexing, empty skipping, host pointers against the general path."""
@@ -176,7 +176,12 @@ def test_device_tables_are_kept_and_an_edited_tf_gets_its_own():
     assert engine.luts(spec, pos, False, (0.0, 1.0)) is first
     # points given to a preset that does not use them (a TF file may carry them) are dropped
     unused = chronocl.TimeTF(color=chronocl.TimeColor("rgb", points=[[0, 0, 0, 1], [1, 1, 0, 0]]))
-    assert engine.luts(IntegrationSpec(mode="max", time_tf=unused), pos, False, (0.0, 1.0))
+    got = engine.luts(IntegrationSpec(mode="max", time_tf=unused), pos, False, (0.0, 1.0))
+    rgb = chronocl.TimeTF(color=chronocl.TimeColor("rgb"))
+    plain = engine.luts(IntegrationSpec(mode="max", time_tf=rgb), pos, False, (0.0, 1.0))
+    assert len(got) == len(plain)
+    for a, b in zip(got, plain, strict=True):
+        np.testing.assert_array_equal(a, b)
 
     data = np.random.default_rng(8).random((6, 3, 4, 37)).astype(np.float32)
     series = chronocl.TimeSeries.from_array(data)
@@ -349,7 +354,7 @@ def test_kernels_load_from_an_installed_wheel(tmp_path):
     assert int(t_max) in (0, 1, 2)
 
 
-@settings(max_examples=25)
+@settings(max_examples=examples(25))
 @given(st.data())
 def test_change_in_byte_lanes_equals_reference(data):
     """change on bytes clipped to whole-number bounds is compared in byte lanes; other bounds

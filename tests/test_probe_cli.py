@@ -25,6 +25,7 @@ from chronocl.data.integrity import CheckedStore
 from chronocl.data.series import TimeSeries, open_series, write_series
 
 from .bad_input import digest
+from .strategies import examples
 
 SHAPE = (9, 10, 11)  # Z, Y, X: three stored chunks of 4, 4 and 1 rows per step
 STEPS = 7
@@ -73,7 +74,7 @@ def _box_stats(a: np.ndarray, box) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 # -- values ------------------------------------------------------------------------------------
-@settings(max_examples=20)
+@settings(max_examples=examples(20))
 @given(st.data())
 def test_store_probe_equals_numpy(series, data):
     a = _values()
@@ -97,7 +98,7 @@ def test_store_probe_equals_numpy(series, data):
     assert curve.box == tuple(box) and curve.mean is curve.values
 
 
-@settings(max_examples=15)
+@settings(max_examples=examples(15))
 @given(
     shape=st.tuples(*(st.integers(1, 6) for _ in range(4))),
     dtype=st.sampled_from(["uint8", "int16", "float32", "float64"]),

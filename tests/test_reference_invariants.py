@@ -15,7 +15,7 @@ from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate
 from chronocl.modes.spec import IntegrationSpec, resolve_order
 
-from .strategies import specs, windows
+from .strategies import examples, specs, windows
 
 
 def ref(u, sel: Selection, spec: IntegrationSpec):
@@ -24,7 +24,7 @@ def ref(u, sel: Selection, spec: IntegrationSpec):
 
 
 @pytest.mark.parametrize("mode", modes.names())
-@settings(max_examples=40)
+@settings(max_examples=examples(40))
 @given(data=st.data())
 def test_single_step_is_the_transfer_function(mode, data):
     """Invariant 1: W = 1 gives TF(u, p) premultiplied (additive: colour / N; count: the data

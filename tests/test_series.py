@@ -15,6 +15,8 @@ from chronocl.core.errors import InputNotFoundError, OutputExistsError, StoreFor
 from chronocl.data.series import write_series
 from chronocl.data.timeseries import step_runs
 
+from .strategies import examples
+
 
 def test_from_array_numpy_and_dask_are_lazy_and_equal(tmp_path):
     data = np.random.default_rng(0).random((4, 3, 5, 6)).astype(np.float32)
@@ -116,7 +118,7 @@ def chunked_store(tmp_path_factory):
     return series, data
 
 
-@settings(max_examples=60)
+@settings(max_examples=examples(60))
 @given(
     steps=st.lists(st.integers(0, 8), min_size=1, max_size=12),
     rows=st.tuples(st.integers(0, 10), st.integers(1, 11)).filter(lambda r: r[0] < r[1]),

@@ -24,7 +24,7 @@ from chronocl.integration.inmemory import integrate, make_spec
 from chronocl.integration.session import Session
 from chronocl.integration.sliding import SlidingAggregate
 
-from .strategies import specs
+from .strategies import examples, specs
 
 ENGINES = ["numpy", "opencl"]
 
@@ -48,7 +48,7 @@ def _check(cv, series, selection, spec, engine) -> None:
 
 @pytest.mark.parametrize("mode", modes.names())
 @pytest.mark.parametrize("engine", ENGINES)
-@settings(max_examples=4)
+@settings(max_examples=examples(4))
 @given(data=st.data())
 def test_slides_and_jumps_equal_scratch(engine: str, mode: str, data) -> None:
     """Every registered mode: any walk of slides and jumps, W in 1..40, equals integrating
@@ -154,7 +154,7 @@ def test_sliding_state_is_charged_to_the_budget() -> None:
         _check(cv, series, s.selection, s.spec, "numpy")
 
 
-@settings(max_examples=200)
+@settings(max_examples=examples(200))
 @given(st.integers(1, 40), st.lists(st.sampled_from(["f", "b", "grow", "shrink"]), max_size=80))
 def test_sliding_aggregate_both_ways(width: int, ops: list[str]) -> None:
     """Concatenation is associative but not commutative: any slip in order shows."""
@@ -199,7 +199,7 @@ def test_sliding_aggregate_cost_does_not_grow_with_width() -> None:
     assert per_slide[64][0] <= 1.5 * per_slide[8][0]
 
 
-@settings(max_examples=40)
+@settings(max_examples=examples(40))
 @given(data=st.data())
 def test_combine_kernels_match_the_reference(data) -> None:
     """Each mode's combine kernel against its reference combine on random partials (ties and
@@ -237,7 +237,7 @@ def test_combine_kernels_match_the_reference(data) -> None:
 
 
 @pytest.mark.parametrize("mode", [m for m in modes.names() if modes.get(m).slides == "invert"])
-@settings(max_examples=15)
+@settings(max_examples=examples(15))
 @given(data=st.data())
 def test_fixed_point_sums_cancel_exactly(mode, data) -> None:
     """Adding then subtracting the same steps returns the sums to exactly zero, and both

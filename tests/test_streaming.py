@@ -25,6 +25,7 @@ from chronocl.data.series import write_series
 from chronocl.integration.inmemory import prepare
 from chronocl.integration.streaming import integrate_to_store, partial_path
 
+from .strategies import examples
 from .test_cli import cli
 
 # (mode, integration arguments): every mode, enhancement across slab boundaries, both
@@ -86,7 +87,7 @@ def test_streamed_equals_in_memory(tmp_path, odd_store, references, engine, case
     assert not partial_path(out).exists()  # committed: nothing left behind
 
 
-@settings(max_examples=12)
+@settings(max_examples=examples(12))
 @given(
     slab=st.integers(1, 13),
     engine=st.sampled_from(["numpy", "opencl"]),
@@ -175,7 +176,7 @@ def chunked_store(tmp_path_factory):
     return chunked_series(tmp_path_factory.mktemp("chunked") / "s.zarr", (5, 24, 12, 16), 8)
 
 
-@settings(max_examples=40)
+@settings(max_examples=examples(40))
 @given(st.floats(0.0, 1.0))
 def test_plans_fit_and_keep_whole_chunks_while_any_option_allows(chunked_store, share):
     job = prepare(chunked_store, None, "max", None, {})

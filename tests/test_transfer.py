@@ -26,7 +26,7 @@ from chronocl.engine.opencl import OpenCLEngine
 from chronocl.engine.transfer import chunks_of, quantize, resolve_format
 from chronocl.modes.spec import IntegrationSpec
 
-from .strategies import specs, windows
+from .strategies import examples, specs, windows
 from .test_opencl import series_of
 
 DTYPES = [np.float32, np.float64, np.uint8, np.uint16, np.int16]
@@ -52,7 +52,7 @@ def row_bytes(series: chronocl.TimeSeries, width: int, dtype=None) -> int:
     return width * ny * nx * dt.itemsize
 
 
-@settings(max_examples=20)  # four integrations per example
+@settings(max_examples=examples(20))  # four integrations per example
 @given(st.data())
 def test_overlapped_chunks_equal_serial_and_host_paths(data):
     """Any mode, odd shapes, any slabs and chunks of 1-3 rows: the same bits on every path."""
@@ -137,7 +137,7 @@ def quantized_spec(spec: IntegrationSpec, value_range) -> IntegrationSpec:
     )
 
 
-@settings(max_examples=20)
+@settings(max_examples=examples(20))
 @given(st.data())
 def test_compact_formats_equal_the_reference_on_equally_converted_data(data):
     """uint8/uint16 quantised over the value range and float16: the engine's result is the
