@@ -35,6 +35,7 @@ import shutil
 import statistics
 import sys
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -58,10 +59,14 @@ class Client:
     def __init__(self, server: ViewerServer) -> None:
         from websockets.sync.client import connect
 
-        self.ws = connect(
-            f"ws://127.0.0.1:{server.port}/ws?token={server.token}",
-            compression=None,
-            max_size=2**26,
+        # Entered as a context manager: websockets 17.1 deprecates a bare connect().
+        self._stack = ExitStack()
+        self.ws = self._stack.enter_context(
+            connect(
+                f"ws://127.0.0.1:{server.port}/ws?token={server.token}",
+                compression=None,
+                max_size=2**26,
+            )
         )
         self.rid = 0
         self.t0 = 0.0

@@ -37,6 +37,7 @@ import sys
 import tempfile
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -85,11 +86,15 @@ class Client:
     def __init__(self, port: int, token: str, index: int) -> None:
         from websockets.sync.client import connect
 
-        self.ws = connect(
-            f"ws://127.0.0.1:{port}/ws?token={token}",
-            compression=None,
-            max_size=2**26,
-            open_timeout=RECV_TIMEOUT_S,
+        # Entered as a context manager: websockets 17.1 deprecates a bare connect().
+        self._stack = ExitStack()
+        self.ws = self._stack.enter_context(
+            connect(
+                f"ws://127.0.0.1:{port}/ws?token={token}",
+                compression=None,
+                max_size=2**26,
+                open_timeout=RECV_TIMEOUT_S,
+            )
         )
         self.index = index
         self.rid = 0
@@ -176,7 +181,7 @@ class Client:
         finally:
             self.first_frame.set()
             try:
-                self.ws.close()
+                self._stack.close()
             except Exception as exc:
                 self.errors.append(f"client {self.index} close failed: {exc!r}")
 

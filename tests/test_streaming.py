@@ -7,6 +7,7 @@ any slab split; peak memory must follow the budget, not the data; an interrupted
 
 from __future__ import annotations
 
+import gc
 import json
 import mmap
 import tracemalloc
@@ -339,10 +340,13 @@ def test_growth_guard_trims_only_past_its_allowance():
     """The guard hands freed memory back once the process grew past its allowance, and
     leaves the allocator alone while it stays within (memory handed back faults again)."""
     held = np.ones(64 * 2**20, np.uint8)
+    gc.collect()  # what earlier tests left is freed before the guards take their base
     small, large = GrowthGuard(allowance=16 * 2**20), GrowthGuard(allowance=2**40)
-    # The process grows by 32 MB: fresh pages of its own mapping, since an array from malloc
-    # may reuse memory that earlier tests freed and that is still resident (no growth).
-    more = np.frombuffer(mmap.mmap(-1, 32 * 2**20), np.uint8)
+    # The process grows by 128 MB: fresh pages of its own mapping, since an array from malloc
+    # may reuse memory that earlier tests freed and that is still resident (no growth), and
+    # eight times the allowance, so threads of earlier tests freeing memory meanwhile (a
+    # failed test's server winding down) cannot hide the growth.
+    more = np.frombuffer(mmap.mmap(-1, 128 * 2**20), np.uint8)
     more[:] = 1
     small.check()
     large.check()

@@ -404,12 +404,12 @@ def test_host_names_and_ip_hosts():
 
 def test_connections_over_the_cap_get_an_error_and_are_closed(server, good, fuzzer):
     extra = [Client(server) for _ in range(CAP - 2)]  # good and fuzzer hold two
-    over = connect(f"ws://127.0.0.1:{server.port}/ws?token={server.token}")
-    reply = json.loads(over.recv(30))
-    assert reply["type"] == "error" and "--max-clients" in reply["message"]
-    assert_clean(reply["message"])
-    with pytest.raises(ConnectionClosed) as exc:
-        over.recv(30)
+    with connect(f"ws://127.0.0.1:{server.port}/ws?token={server.token}") as over:
+        reply = json.loads(over.recv(30))
+        assert reply["type"] == "error" and "--max-clients" in reply["message"]
+        assert_clean(reply["message"])
+        with pytest.raises(ConnectionClosed) as exc:
+            over.recv(30)
     assert exc.value.rcvd is not None and exc.value.rcvd.code == 1013
     # The ones under the cap are served.
     for c in extra:
@@ -421,7 +421,8 @@ def test_connections_over_the_cap_get_an_error_and_are_closed(server, good, fuzz
         if k % 2:
             raw_upgrade(server).close()  # dropped without a close frame
         else:
-            connect(f"ws://127.0.0.1:{server.port}/ws?token={server.token}").close()
+            with connect(f"ws://127.0.0.1:{server.port}/ws?token={server.token}"):
+                pass  # closed cleanly on leaving
     deadline = time.monotonic() + 30
     while True:
         clients = []

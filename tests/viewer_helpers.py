@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import pytest
@@ -74,7 +75,10 @@ class Client:
     def __init__(self, server: ViewerServer, **kwargs) -> None:
         from websockets.sync.client import connect
 
-        self.ws = connect(f"ws://127.0.0.1:{server.port}/ws?token={server.token}", **kwargs)
+        # Entered as a context manager: websockets 17.1 deprecates a bare connect().
+        self._stack = ExitStack()
+        url = f"ws://127.0.0.1:{server.port}/ws?token={server.token}"
+        self.ws = self._stack.enter_context(connect(url, **kwargs))
         self.next_id = 1
         self.info = self.recv_json()
         assert self.info["type"] == "info"
@@ -145,7 +149,7 @@ class Client:
         return ds, self.frame_for(rid)
 
     def close(self) -> None:
-        self.ws.close()
+        self._stack.close()
 
 
 class CliServer:
