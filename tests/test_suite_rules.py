@@ -1,0 +1,99 @@
+"""The suite's own rules hold: deprecations from our code fail it, every property test takes
+CHRONOCL_EXAMPLES, and no test reaches into another package's private names."""
+
+from __future__ import annotations
+
+import ast
+import os
+import re
+import tomllib
+import warnings
+from importlib.metadata import version
+from pathlib import Path
+
+import pytest
+from packaging.requirements import Requirement
+
+from .strategies import examples
+
+TESTS = Path(__file__).parent
+PACKAGES = ("zarr", "numcodecs", "dask", "distributed", "pyopencl", "moderngl", "numpy", "np")
+
+
+@pytest.mark.parametrize("category", [DeprecationWarning, PendingDeprecationWarning, FutureWarning])
+@pytest.mark.parametrize("module", ["chronocl.data.level_writer", "tests.test_pyramid"])
+def test_a_deprecation_attributed_to_our_code_fails_the_suite(category, module):
+    """pyproject's filterwarnings turns them into errors (a library's warning about how we call
+    it is attributed to our frame), so the next API change fails a test before it crashes."""
+    with pytest.raises(category):
+        warnings.warn_explicit("old API", category, module.replace(".", "/") + ".py", 1, module)
+
+
+def test_a_librarys_own_deprecation_stays_a_warning():
+    with warnings.catch_warnings(record=True) as caught:  # keeps the suite's filters
+        warnings.warn_explicit("old API", DeprecationWarning, "zarr/core.py", 1, "zarr.core")
+    assert [w.category for w in caught] == [DeprecationWarning]
+
+
+def _settings_calls(tree: ast.AST):
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "settings":
+            yield node
+
+
+def test_every_property_test_takes_chronocl_examples(monkeypatch):
+    """A property test that fixes its own max_examples does so through `examples(n)`, so
+    CHRONOCL_EXAMPLES reaches it; the others take the profile conftest loads, which reads it."""
+    fixed = []
+    for path in sorted(TESTS.glob("test_*.py")):
+        for call in _settings_calls(ast.parse(path.read_text())):
+            for kw in call.keywords:
+                value = kw.value
+                if kw.arg == "max_examples" and not (
+                    isinstance(value, ast.Call) and getattr(value.func, "id", None) == "examples"
+                ):
+                    fixed.append(f"{path.name}:{call.lineno}")
+    assert not fixed, f"max_examples fixed without examples(): {fixed}"
+    monkeypatch.delenv("CHRONOCL_EXAMPLES", raising=False)
+    assert examples(14) == 14
+    monkeypatch.setenv("CHRONOCL_EXAMPLES", "500")
+    assert examples(14) == 500
+
+
+def test_no_private_names_of_other_packages():
+    """chronocl, bench and tests use other packages' public APIs (zarr's private objects
+    changed under us once: zarr 3.2 turned BloscCodec.cname from an enum into a string)."""
+    private = re.compile(
+        r"\b(?:" + "|".join(PACKAGES) + r")(?:\.[A-Za-z]\w*)*\._(?!_)\w*|"
+        r"\bfrom (?:" + "|".join(PACKAGES) + r")(?:\.\w+)*\._\w+|"
+        r"\b(?:zarr|numcodecs|dask|distributed|pyopencl|moderngl)\.core\.|"
+        r"\._async_array\b"
+    )
+    root = TESTS.parent
+    found = [
+        f"{path.relative_to(root)}:{n}: {line.strip()}"
+        for folder in ("chronocl", "bench", "tests")
+        for path in sorted((root / folder).rglob("*.py"))
+        if path != Path(__file__)
+        for n, line in enumerate(path.read_text().splitlines(), 1)
+        if private.search(line)
+    ]
+    assert not found, "\n".join(found)
+
+
+def test_installed_versions_are_within_pyproject_ranges():
+    """Every dependency installed is within its range in pyproject.toml; in CI's run on the
+    lower bounds (CHRONOCL_LOWEST=1, .ci/lowest.py's constraints) each is at its lower bound,
+    so the bounds chronocl claims are the versions it tests."""
+    project = tomllib.loads((TESTS.parent / "pyproject.toml").read_text())["project"]
+    lowest = os.environ.get("CHRONOCL_LOWEST") == "1"
+    wrong = []
+    for text in [*project["dependencies"], *project["optional-dependencies"]["dev"]]:
+        req = Requirement(text)
+        have = version(req.name)
+        if have not in req.specifier:
+            wrong.append(f"{req.name} {have} is outside {req.specifier}")
+        floor = next(s.version for s in req.specifier if s.operator == ">=")
+        if lowest and Requirement(f"{req.name}=={floor}").specifier.contains(have) is False:
+            wrong.append(f"{req.name} {have} is not its lower bound {floor}")
+    assert not wrong, wrong
