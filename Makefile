@@ -1,13 +1,20 @@
 # Set-up and everyday commands. Each target creates .venv when it is missing.
 PY ?= python3
-VENV := .venv
+VENV ?= .venv
 BIN := $(VENV)/bin
-STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint format bench clean
+.PHONY: demo test test-newest lint format bench clean system
 
-$(STAMP): pyproject.toml
-	@# Headless rendering needs EGL and Mesa (llvmpipe); install them where they are missing.
+# The runtime alone (a user's `pip install .`) for the demo; the dev extras (pytest, hypothesis,
+# ruff, vtk, playwright) for the tests. A venv with the dev extras has the runtime too.
+RUNTIME := $(VENV)/.runtime
+DEV := $(VENV)/.dev
+# The second interpreter: CPython 3.13 built from Debian's source package (.ci/newest-python)
+# with the newest version of every dependency.
+NEWEST := .venv-newest
+
+# Headless rendering needs EGL and Mesa (llvmpipe); OpenCL on the CPU needs a PoCL.
+system:
 	@if ! ldconfig -p | grep -q libEGL_mesa; then \
 		if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
 			apt-get update -qq && apt-get install -y -qq libegl1 libgl1-mesa-dri libegl-mesa0; \
@@ -20,15 +27,24 @@ $(STAMP): pyproject.toml
 			apt-get update -qq && apt-get install -y -qq pocl-opencl-icd; \
 		else echo "warning: Debian's PoCL missing; PyPI's may fail on new CPUs: apt-get install pocl-opencl-icd"; fi; \
 	fi
+
+$(RUNTIME): pyproject.toml | system
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[dev]'
-	touch $(STAMP)
+	$(BIN)/python -m pip install -q -e .
+	touch $(RUNTIME)
 
-demo: $(STAMP)
+# CONSTRAINTS: a pip constraints file for that install (.ci/run: the lower bounds, .ci/lowest.py).
+$(DEV): pyproject.toml | system
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[dev]' $(if $(CONSTRAINTS),-c $(CONSTRAINTS))
+	touch $(RUNTIME) $(DEV)
+
+demo: $(RUNTIME)
 	$(BIN)/chronocl demo --out demo-out
 
-lint: $(STAMP)
+lint: $(DEV)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
@@ -42,12 +58,26 @@ test: lint
 	fi
 	$(BIN)/python -m pytest -q
 
-format: $(STAMP)
+# The whole suite on CPython 3.13 with the newest dependencies (pip upgrades every one, each run).
+test-newest:
+	@py="$$(bash .ci/newest-python)" && \
+	if ! grep -qx "home = $$(dirname "$$py")" $(NEWEST)/pyvenv.cfg 2>/dev/null; then \
+		"$$py" -m venv --clear $(NEWEST); fi && \
+	$(NEWEST)/bin/python -m pip install -q --upgrade pip && \
+	$(NEWEST)/bin/python -m pip install -q --upgrade --upgrade-strategy eager -e '.[dev]' && \
+	touch $(NEWEST)/.runtime $(NEWEST)/.dev
+	@$(NEWEST)/bin/python -c 'import sys; from importlib.metadata import version as v; \
+		print("Python", sys.version.split()[0], "with", ", ".join(f"{p} {v(p)}" for p in \
+		("numpy", "zarr", "numcodecs", "dask", "pyopencl", "moderngl", "xarray", "starlette", \
+		"websockets", "pytest")))'
+	$(MAKE) test VENV=$(NEWEST)
+
+format: $(DEV)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
-bench: $(STAMP)
+bench: $(DEV)
 	@for b in $(wildcard bench/*.py); do echo "== $$b"; $(BIN)/python $$b --quick || exit 1; done
 
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache .hypothesis .ruff_cache
+	rm -rf $(VENV) $(NEWEST) demo-out .pytest_cache .hypothesis .ruff_cache
