@@ -3,6 +3,7 @@ data set message show them instead of step numbers, and step numbers on request.
 
 from __future__ import annotations
 
+import json
 import sys
 
 import numpy as np
@@ -130,3 +131,79 @@ def test_cli_time_labels(tmp_path, series, monkeypatch, capsys, drawn_text):
     assert run("-o", str(tmp_path / "c.png"), "--time-labels", "dates") == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "choose labels" in err[0] and not (tmp_path / "c.png").exists()
+
+
+def _cli(monkeypatch, *argv: str) -> int:
+    from chronocl.cli import main
+
+    monkeypatch.setattr(sys, "argv", ["chronocl", *argv])
+    with pytest.raises(SystemExit) as info:
+        main()
+    return info.value.code or 0
+
+
+@pytest.mark.parametrize("form", ["list", "lines", "json", "json-key"])
+def test_ingest_times_reach_the_store_and_the_legend(tmp_path, monkeypatch, drawn_text, form):
+    """`ingest --times` in each form gives raw steps their physical times, which the store
+    keeps and the rendered legend shows instead of step numbers."""
+    data = np.random.default_rng(2).random((4, 5, 6, 7)).astype(np.float32)
+    files = []
+    for t, step in enumerate(data):
+        files.append(tmp_path / f"s{t}.raw")
+        step.tofile(files[-1])
+    times = [0, 0.25, 0.5, 1.75]
+    value = {
+        "list": "0,0.25,0.5,1.75",
+        "lines": tmp_path / "times.txt",
+        "json": tmp_path / "times.json",
+        "json-key": f"{tmp_path / 'meta.json'}:run.times",
+    }[form]
+    (tmp_path / "times.txt").write_text("# time in s\n0\n0.25\n\n0.5\n1.75\n")
+    (tmp_path / "times.json").write_text(json.dumps(times))
+    (tmp_path / "meta.json").write_text(json.dumps({"run": {"times": times, "dt": 0.25}}))
+    store = tmp_path / "s.zarr"
+    args = ["ingest", *map(str, files), "-o", str(store), "--dims", "7", "6", "5"]
+    assert _cli(monkeypatch, *args, "--times", str(value)) == 0
+    series = chronocl.open(store)
+    assert list(series.times) == times and isinstance(series.times[0], int)
+    drawn_text.clear()
+    render(chronocl.integrate(series, "0:4", "alpha", engine="numpy"), size=(240, 96), legend=True)
+    assert {"0.25", "1.75"} <= set(drawn_text) and "3" not in drawn_text
+
+
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        ("0,0.5,1", "got 3 times for 4 steps; give one time per step"),
+        ("0,,1,2", "empty time"),
+        ("0,nan,1,2", "must be finite"),
+        ("missing/times.txt", "times file 'missing/times.txt' does not exist"),
+        ("META:nope", "has no key 'nope' (keys: run)"),
+        ("META", "is a JSON object; name the list of times in it"),
+        ("META:run.dt", "is not a list of times"),
+    ],
+)
+def test_bad_ingest_times_get_one_line_and_exit_2(tmp_path, monkeypatch, capsys, value, message):
+    step = np.zeros((2, 2, 2), np.float32)
+    files = [tmp_path / f"s{t}.raw" for t in range(4)]
+    for f in files:
+        step.tofile(f)
+    meta = tmp_path / "meta.json"
+    meta.write_text(json.dumps({"run": {"times": [0, 1, 2, 3], "dt": 1}}))
+    store = tmp_path / "s.zarr"
+    args = ["ingest", *map(str, files), "-o", str(store), "--dims", "2", "2", "2"]
+    code = _cli(monkeypatch, *args, "--times", value.replace("META", str(meta)))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0], err
+    assert not store.exists()
+
+
+def test_times_are_refused_for_a_format_with_its_own(tmp_path, monkeypatch, capsys):
+    xr = pytest.importorskip("xarray")
+    path = tmp_path / "o.nc"
+    xr.Dataset({"v": (("time", "z", "y", "x"), np.zeros((2, 2, 2, 2), np.float32))}).to_netcdf(
+        path, engine="h5netcdf"
+    )
+    code = _cli(monkeypatch, "ingest", str(path), "-o", str(tmp_path / "o.zarr"), "--times", "0,1")
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "--times applies to" in err[0], err

@@ -73,6 +73,15 @@ def ingest(
         tuple[float, float, float] | None,
         typer.Option(metavar="DX DY DZ", help="Raw/npy/TIFF: voxel spacing."),
     ] = None,
+    times: Annotated[
+        str | None,
+        typer.Option(
+            metavar="TIMES",
+            help="Raw/npy/TIFF: the physical time of each step, shown by legends, captions, the "
+            "viewer and probe plots: a comma list (0,0.5,1), a file with one time per line, or "
+            "FILE.json[:KEY] (e.g. meta.json:times, dots for nesting).",
+        ),
+    ] = None,
     nan_fill: Annotated[
         float | None, typer.Option(help="Replace NaN/Inf with this value (default: reject them).")
     ] = None,
@@ -90,6 +99,10 @@ def ingest(
 
       chronocl ingest series.npy -o series.zarr --spacing 1 1 2.5
 
+      chronocl ingest 'plume/*.raw' -o plume.zarr --dims 64 96 56 --times plume/meta.json:t
+
+      chronocl ingest series.npy -o series.zarr --times 0,0.25,0.5,0.75
+
       chronocl ingest ocean.nc -o ocean.zarr --var temp --time-dim time
 
       chronocl ingest flow.nc -o speed.zarr --magnitude u,v,w
@@ -105,6 +118,7 @@ def ingest(
       chronocl ingest embryo.ome.zarr -o embryo.zarr --variables all
     """
     from chronocl.core.paths import GLOB_CHARS, check_input, check_target
+    from chronocl.core.times_input import read_times
     from chronocl.data.ingest import ingest as run_ingest
 
     inputs = inputs or []
@@ -138,6 +152,8 @@ def ingest(
         options["dims_order"] = [d.strip() for d in dims_order.split(",")]
     if spacing is not None:
         options["spacing"] = (spacing[2], spacing[1], spacing[0])
+    if times is not None:
+        options["times"] = read_times(times)
     t0 = time.perf_counter()
     series = run_ingest(inputs, out_path, fmt, **options)
     for note in series.meta.get("resampled", []):

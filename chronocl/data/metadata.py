@@ -63,7 +63,7 @@ def parse_times(times: Sequence | None, n_steps: int) -> tuple:
         return tuple(range(n_steps))
     if len(times) != n_steps:
         raise InvalidParameterError(
-            f"got {len(times)} time labels for {n_steps} steps; give one label per step"
+            f"got {len(times)} times for {n_steps} steps; give one time per step (--times, times=)"
         )
     out = []
     for t in times:

@@ -51,6 +51,7 @@ def ingest_tiff(
     out: str | os.PathLike,
     *,
     spacing: Sequence[float] | None = None,
+    times: Sequence | None = None,
     nan_fill: float | None = None,
     overwrite: bool = False,
     progress: bool = False,
@@ -58,12 +59,15 @@ def ingest_tiff(
     """Several 3D TIFF stacks (one per step, globs allowed) or one 4D TIFF -> store at `out`."""
     files = expand_inputs(inputs)
     check_output(out, overwrite)
-    steps = tiff_steps(files, spacing=spacing)
+    steps = tiff_steps(files, spacing=spacing, times=times)
     return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
 
 
 def tiff_steps(
-    inputs: Sequence[str | os.PathLike], *, spacing: Sequence[float] | None = None
+    inputs: Sequence[str | os.PathLike],
+    *,
+    spacing: Sequence[float] | None = None,
+    times: Sequence | None = None,
 ) -> Steps:
     """The steps of TIFF stacks, checked: `ingest_tiff` before it writes."""
     files = expand_inputs(inputs)
@@ -118,6 +122,7 @@ def tiff_steps(
         volume_shape=volume,
         dtype=dtype,
         spacing=parse_spacing(spacing) if spacing is not None else stacks[0].spacing,
+        times=times,
         source=source,
         labels=labels,
     )
@@ -278,7 +283,7 @@ def _positive(value) -> float:
 READER = Reader(
     "tiff",
     ingest_tiff,
-    options={"spacing": None},
+    options={"spacing": None, "times": None},
     recognises=has_suffix(".tif", ".tiff"),  # .ome.tif(f) too
     steps=tiff_steps,
 )
