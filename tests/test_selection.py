@@ -29,8 +29,33 @@ def test_parse_strings(text, steps):
 
 def test_other_forms():
     assert parse_selection(slice(1, 7, 2), 10).steps == (1, 3, 5)
+    assert parse_selection(range(1, 7, 2), 10).steps == (1, 3, 5)
     assert parse_selection([0, 9], 10).steps == (0, 9)
+    assert parse_selection((0, 4, 9, 2)[:1], 10).steps == (0,)  # a 1-tuple is one step
     assert parse_selection(None, 4).steps == (0, 1, 2, 3)
+
+
+@pytest.mark.parametrize("window", [(0, 10), (0, 10, 2), (np.int64(2), 5)])
+def test_a_bare_tuple_of_two_or_three_is_refused_naming_both_readings(window):
+    """A Python user reads (0, 10) as a range, a list as steps 0 and 10: neither is guessed."""
+    numbers = [int(v) for v in window]
+    with pytest.raises(InvalidSelectionError) as info:
+        parse_selection(window, 12)
+    message = str(info.value)
+    assert "\n" not in message and "ambiguous" in message
+    assert f"'{':'.join(map(str, numbers))}'" in message  # the range
+    assert f"range({', '.join(map(str, numbers))})" in message
+    assert str(numbers) in message  # the steps alone
+
+
+def test_the_api_refuses_a_bare_pair_before_any_work():
+    import chronocl
+
+    series = chronocl.TimeSeries.from_array(np.zeros((12, 2, 2, 2), np.float32))
+    with pytest.raises(InvalidSelectionError, match=r"write '0:10' or range\(0, 10\)"):
+        chronocl.integrate(series, (0, 10), engine="numpy")
+    assert chronocl.integrate(series, range(0, 10), engine="numpy").steps == tuple(range(10))
+    assert chronocl.integrate(series, [0, 10], engine="numpy").steps == (0, 10)
 
 
 @pytest.mark.parametrize(

@@ -74,7 +74,11 @@ class Selection:
 
 
 def parse_selection(window: object, n_steps: int) -> Selection:
-    """Build a Selection from a string ('0:30', '0:30:2', '3,7,9'), slice, tuple or list."""
+    """Build a Selection from a string ('0:30', '0:30:2', '3,7,9'), slice, range or list of steps.
+
+    A tuple of two or three numbers is refused: ``(0, 10)`` reads as the range 0..9 to a
+    Python user and as the steps 0 and 10 to a list; the error names both spellings.
+    """
     if isinstance(window, Selection):
         if window.n_steps != n_steps:
             raise InvalidSelectionError(
@@ -90,6 +94,8 @@ def parse_selection(window: object, n_steps: int) -> Selection:
         return Selection.window(int(start), int(stop), int(step), n_steps)
     if isinstance(window, str):
         return _parse_string(window.strip(), n_steps)
+    if isinstance(window, tuple) and len(window) in (2, 3):
+        raise _ambiguous(window)
     if isinstance(window, Sequence):
         try:
             steps = tuple(int(s) for s in window)
@@ -100,6 +106,24 @@ def parse_selection(window: object, n_steps: int) -> Selection:
         return Selection(steps, n_steps)
     raise InvalidSelectionError(
         f"cannot read a time selection from {window!r}; use 't0:t1[:stride]' or a list of steps"
+    )
+
+
+def _ambiguous(window: tuple) -> InvalidSelectionError:
+    """The error for a 2- or 3-tuple window, naming both readings."""
+    try:
+        numbers = [int(v) for v in window]
+    except (TypeError, ValueError):
+        numbers = None
+    if numbers is None:
+        return InvalidSelectionError(
+            f"cannot read a time selection from {window!r}; use 't0:t1[:stride]' or a list of steps"
+        )
+    as_range = ":".join(map(str, numbers))
+    steps = " and ".join(map(str, numbers)) if len(numbers) == 2 else ", ".join(map(str, numbers))
+    return InvalidSelectionError(
+        f"window {tuple(numbers)} is ambiguous: for the range write '{as_range}' or "
+        f"range({', '.join(map(str, numbers))}); for steps {steps} alone write {numbers}"
     )
 
 
