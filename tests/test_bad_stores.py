@@ -392,3 +392,25 @@ def test_damaged_store_through_the_api_is_a_value_error(store):
     with pytest.raises(StoreCorruptError):
         series.data[3].compute()  # dask reads are checked too
     np.testing.assert_array_equal(series.read([2]).shape, (1, *SHAPE))
+
+
+def test_info_on_neither_a_series_nor_a_chronovolume_names_both_readings(tmp_path):
+    import zarr
+
+    group = tmp_path / "g.zarr"
+    zarr.open_group(str(group), mode="w")
+    assert_rejected(
+        ["info", group],
+        "is neither a series store nor a chronovolume: as a series, ",
+        [group],
+        folder=tmp_path,
+    )
+
+
+def test_repr_of_a_chronovolume_is_one_line():
+    data = np.random.default_rng(0).random((12, 4, 5, 6)).astype(np.float32)
+    series = chronocl.TimeSeries.from_array(data, source="demo")
+    cv = chronocl.integrate(series, "0:12:3", "max", engine="numpy")
+    assert repr(cv) == (
+        "Chronovolume(6×5×4 (x, y, z), mode=max, steps 0:10:3 (4 of 12), from 'demo', with t_index)"
+    )

@@ -27,10 +27,26 @@ def info(
     check_input(store, "store", hint=STORE_HINT)
     try:
         summary = open_series(store).describe()
-    except StoreFormatError:
-        cv = Chronovolume.load(store)
+    except StoreFormatError as as_series:
+        try:
+            cv = Chronovolume.load(store)
+        except StoreFormatError as as_cv:
+            # Neither: say what each reading found, the series' first (what most stores are).
+            raise StoreFormatError(
+                f"{str(store)!r} is neither a series store nor a chronovolume: as a series, "
+                f"{_reason(as_series, store)}; as a chronovolume, {_reason(as_cv, store)}"
+            ) from None
         summary = {"chronovolume": str(store), "shape (Z, Y, X)": list(cv.shape), **cv.metadata}
     if as_json:
         out.print_json(json.dumps(summary, default=str))
     else:
         print_summary(summary)
+
+
+def _reason(exc: Exception, store: Path) -> str:
+    """An error's message without the store's name it starts with."""
+    text = str(exc)
+    for prefix in (repr(str(store)), str(store)):
+        if text.startswith(prefix):
+            return text[len(prefix) :].strip(" :")
+    return text

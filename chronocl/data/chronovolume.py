@@ -17,6 +17,7 @@ import zarr
 
 from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import StoreFormatError
+from chronocl.core.selection import Selection
 from chronocl.data.integrity import checked_read
 from chronocl.data.stores import open_group
 from chronocl.data.writer import compressors
@@ -32,6 +33,22 @@ class Chronovolume:
     rgba: np.ndarray
     t_index: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        """One line: shape, mode, steps and where it came from (not the arrays' values)."""
+        meta = self.metadata
+        spec = meta.get("spec") or {}
+        sel = meta.get("selection") or {}
+        steps = sel.get("steps") or []
+        z, y, x = self.shape
+        parts = [f"{x}×{y}×{z} (x, y, z)", f"mode={spec.get('mode', '?')}"]
+        if steps:
+            shown = Selection(tuple(steps), int(sel.get("n_steps", max(steps) + 1))).describe()
+            parts.append(f"steps {shown} ({len(steps)} of {sel.get('n_steps', '?')})")
+        if meta.get("dataset"):
+            parts.append(f"from {meta['dataset']!r}")
+        parts.append("with t_index" if self.t_index is not None else "no t_index")
+        return f"Chronovolume({', '.join(parts)})"
 
     @property
     def shape(self) -> tuple[int, int, int]:
