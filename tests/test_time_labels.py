@@ -3,7 +3,9 @@ data set message show them instead of step numbers, and step numbers on request.
 
 from __future__ import annotations
 
+import itertools
 import json
+import math
 import sys
 
 import numpy as np
@@ -29,6 +31,24 @@ def series():
 @pytest.fixture(scope="module")
 def cv(series):
     return chronocl.integrate(series, "1:8:3", "alpha", engine="numpy")
+
+
+def nice_numbers(texts: list[str]) -> list[float]:
+    """The numbers among the drawn texts, checked to be evenly spaced by 1, 2 or 5 times a power
+    of ten (a legend's nice-number ticks)."""
+    numbers = []
+    for t in texts:
+        try:
+            numbers.append(float(t))
+        except ValueError:
+            continue
+    gaps = {round(b - a, 9) for a, b in itertools.pairwise(numbers)}
+    assert len(gaps) <= 1, numbers
+    for gap in gaps:
+        mantissa = gap / 10 ** math.floor(math.log10(gap))
+        assert round(mantissa, 6) in (1, 2, 5), numbers
+        assert all(abs(n / gap - round(n / gap)) < 1e-6 for n in numbers), numbers
+    return numbers
 
 
 @pytest.fixture
@@ -76,7 +96,7 @@ def test_the_legend_and_captions_show_the_time_labels(cv, drawn_text):
 
 def test_step_numbers_on_request(cv, drawn_text):
     render_views([cv, cv], size=(240, 96), time_labels="steps")
-    assert {"1", "4", "7"} <= set(drawn_text)
+    assert nice_numbers(drawn_text) == [2, 4, 6]  # steps 1, 4, 7: 1-2-5 ticks
     assert "alpha, forward, steps 1:8:3" in drawn_text
     assert not any("2024" in t for t in drawn_text)
     with pytest.raises(UnknownNameError, match="time labels 'dates'"):
@@ -86,7 +106,7 @@ def test_step_numbers_on_request(cv, drawn_text):
 def test_a_store_without_labels_shows_step_numbers(series, drawn_text):
     plain = chronocl.TimeSeries.from_array(np.asarray(series.data), source="plain")
     render(chronocl.integrate(plain, "1:8:3", "alpha", engine="numpy"), legend=True)
-    assert {"1", "4", "7"} <= set(drawn_text)
+    assert nice_numbers(drawn_text) == [2, 4, 6]  # steps 1, 4, 7: 1-2-5 ticks
 
 
 def test_probe_plots_and_the_viewer_use_the_labels(series):
@@ -126,7 +146,7 @@ def test_cli_time_labels(tmp_path, series, monkeypatch, capsys, drawn_text):
     assert "2024-01-01 03:00" in drawn_text
     drawn_text.clear()
     assert run("-o", str(tmp_path / "b.png"), "--time-labels", "steps") == 0
-    assert {"1", "4", "7"} <= set(drawn_text)
+    assert nice_numbers(drawn_text) == [2, 4, 6]  # steps 1, 4, 7: 1-2-5 ticks
     capsys.readouterr()
     assert run("-o", str(tmp_path / "c.png"), "--time-labels", "dates") == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -168,7 +188,7 @@ def test_ingest_times_reach_the_store_and_the_legend(tmp_path, monkeypatch, draw
     assert list(series.times) == times and isinstance(series.times[0], int)
     drawn_text.clear()
     render(chronocl.integrate(series, "0:4", "alpha", engine="numpy"), size=(240, 96), legend=True)
-    assert {"0.25", "1.75"} <= set(drawn_text) and "3" not in drawn_text
+    assert nice_numbers(drawn_text) == [0, 0.5, 1, 1.5]  # times 0 .. 1.75, not step numbers
 
 
 @pytest.mark.parametrize(
@@ -207,3 +227,32 @@ def test_times_are_refused_for_a_format_with_its_own(tmp_path, monkeypatch, caps
     code = _cli(monkeypatch, "ingest", str(path), "-o", str(tmp_path / "o.zarr"), "--times", "0,1")
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "--times applies to" in err[0], err
+
+
+@pytest.mark.parametrize(
+    "lo, hi, most, integer, ticks",
+    [
+        (3, 27, 6, True, [5, 10, 15, 20, 25]),  # not 2 8 16 26
+        (0, 0.83, 6, False, [0, 0.2, 0.4, 0.6, 0.8]),
+        (100, 1000, 5, False, [200, 400, 600, 800, 1000]),  # not 100 300 500 700 1000
+        (0, 1.75, 4, False, [0, 0.5, 1, 1.5]),
+        (0, 2, 10, True, [0, 1, 2]),  # steps: never 0.5
+        (5, 5, 3, True, [5]),
+        (-0.3, 0.3, 4, False, [-0.2, 0, 0.2]),
+    ],
+)
+def test_nice_number_ticks(lo, hi, most, integer, ticks):
+    from chronocl.core.ticks import nice_step, nice_ticks, tick_text
+
+    got = nice_ticks(lo, hi, most, integer)
+    assert got == pytest.approx(ticks) and len(got) <= most
+    step = nice_step(lo, hi, most, integer)
+    assert [float(tick_text(t, step)) for t in got] == pytest.approx(ticks)
+
+
+def test_a_long_window_gets_regular_ticks(drawn_text):
+    data = np.random.default_rng(3).random((300, 4, 5, 6)).astype(np.float32)
+    cv = chronocl.integrate(chronocl.TimeSeries.from_array(data), "7:293", "max", engine="numpy")
+    render(cv, size=(640, 96), legend=True)
+    numbers = nice_numbers(drawn_text)
+    assert 3 <= len(numbers) <= 20 and 7 <= numbers[0] and numbers[-1] <= 292

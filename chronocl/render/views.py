@@ -7,6 +7,7 @@ store can be reached (`chronocl.render.follow`)."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -14,7 +15,8 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.tf import lut_lookup
-from chronocl.core.time_labels import check_prefer, compact, display_labels, span_text
+from chronocl.core.ticks import nice_step, nice_ticks, tick_text
+from chronocl.core.time_labels import check_prefer, compact, display_labels, has_labels, span_text
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
 from chronocl.render.follow import following
@@ -267,9 +269,13 @@ def _legend(draw, cv: Chronovolume, box, font, text_rgb, time_labels="labels") -
     for i in range(span):
         colour = tuple(round(c * 255) for c in shown[i])
         draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
-    # Label the steps that fit without overlapping; the oldest and newest always.
-    texts = compact(step_texts(cv, time_labels))
     positions_x = [x_start + (k / max(1, len(steps) - 1)) * (span - 1) for k in range(len(steps))]
+    values = _tick_values(cv, time_labels)
+    if values is not None and len(steps) > 1:
+        _nice_ticks(draw, values, positions_x, (x0, y0 + bar_h, width), font, text_rgb)
+        return
+    # Text or date labels: the steps that fit without overlapping; the oldest and newest always.
+    texts = compact(step_texts(cv, time_labels))
     shown: list[tuple[float, float]] = []  # the labels' extents, 10 px apart at least
     for k in [0, len(steps) - 1, *range(1, len(steps) - 1)]:
         x, w = positions_x[k], draw.textlength(texts[k], font=font)
@@ -278,6 +284,42 @@ def _legend(draw, cv: Chronovolume, box, font, text_rgb, time_labels="labels") -
             shown.append((left, left + w))
             draw.line([(x, y0 + bar_h), (x, y0 + bar_h + 3)], fill=text_rgb)
             draw.text((left, y0 + bar_h + 4), texts[k], fill=text_rgb, font=font)
+
+
+def _tick_values(cv: Chronovolume, time_labels: str) -> list[float] | None:
+    """The number each selected step stands for on the legend's axis: its time where every
+    label is a number (increasing), its step number where the store has no labels or they are
+    not wanted; None for text and date labels, which are shown as they are."""
+    labels = cv.metadata.get("time_labels")
+    if time_labels == "steps" or not has_labels(list(cv.steps), labels):
+        return [float(s) for s in cv.steps]
+    if all(isinstance(t, int | float) and not isinstance(t, bool) for t in labels):
+        numbers = [float(t) for t in labels]
+        if all(b > a for a, b in itertools.pairwise(numbers)):
+            return numbers
+    return None
+
+
+def _nice_ticks(draw, values, positions_x, where, font, text_rgb) -> None:
+    """Ticks at 1-2-5 multiples of `values`' span, placed where they fall between the steps,
+    as many as fit 12 px apart (step numbers get whole-number ticks)."""
+    x0, y0, width = where
+    integer = all(float(v).is_integer() for v in values)
+    most = max(2, min(len(values), int(positions_x[-1] - positions_x[0]) // 16 + 1))
+    while True:
+        ticks = nice_ticks(values[0], values[-1], most, integer)
+        step = nice_step(min(values), max(values), most, integer)
+        texts = [tick_text(t, step) for t in ticks]
+        widest = max(draw.textlength(t, font=font) for t in texts) if texts else 0
+        if most <= 2 or len(ticks) * (widest + 12) <= positions_x[-1] - positions_x[0] + widest:
+            break
+        most -= 1
+    for t, text in zip(ticks, texts, strict=True):
+        x = float(np.interp(t, values, positions_x))
+        w = draw.textlength(text, font=font)
+        left = min(max(x - w / 2, x0), x0 + width - w)
+        draw.line([(x, y0), (x, y0 + 3)], fill=text_rgb)
+        draw.text((left, y0 + 4), text, fill=text_rgb, font=font)
 
 
 def _fraction_legend(draw, spec, box, font, text_rgb) -> None:
