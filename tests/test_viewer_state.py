@@ -182,12 +182,15 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
     from PIL import Image
 
     figure = np.asarray(Image.open(tmp_path / "vortex-session.png").convert("RGB"))
+    from chronocl.render.views import caption_height, label_font
+
     w, h = EDITS["size"]
-    assert figure.shape[1] == 2 * w and figure.shape[0] > h  # two panels, legend below
+    cap = caption_height(label_font(max(11, min(w, h) // 26)))  # the captions' band
+    assert figure.shape[1] == 2 * w and figure.shape[0] > cap + h  # two panels, legends below
     for k, jpeg in enumerate(images):
         frame = _frame_pixels(jpeg)
-        panel = figure[:h, k * w : (k + 1) * w].astype(np.int16)
-        diff = np.abs(panel - frame)[20:]  # below the panel's label
+        panel = figure[cap : cap + h, k * w : (k + 1) * w].astype(np.int16)
+        diff = np.abs(panel - frame)  # the whole picture: no caption over it
         assert diff.mean() < 2.0 and np.percentile(diff, 99) < 40, (diff.mean(), diff.max())
 
     # Options on the command line override the session; bad sessions are refused in one line

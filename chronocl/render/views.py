@@ -188,7 +188,7 @@ def describe(cv: Chronovolume, time_labels: str = "labels") -> str:
 
 def _grid(panels: list[np.ndarray], columns: int | None, bg) -> np.ndarray:
     n = len(panels)
-    cols = columns or n
+    cols = columns or default_columns(n)
     rows = math.ceil(n / cols)
     h, w, _ = panels[0].shape
     out = np.empty((rows * h, cols * w, 3), dtype=np.uint8)
@@ -208,33 +208,58 @@ def label_font(size: int):
         return ImageFont.load_default()
 
 
+def default_columns(n: int) -> int:
+    """Panels per row: one row up to four views, then the fewest rows of at most four, evened
+    out (5 -> 3 + 2, 8 -> 4 + 4, 9 -> 3 x 3)."""
+    if n <= 4:
+        return max(1, n)
+    return math.ceil(n / math.ceil(n / 4))
+
+
+def caption_height(font) -> int:
+    """The height of the band above a panel that holds its caption."""
+    top, bottom = font.getbbox("Ag,|")[1::2]
+    return int(bottom - top) + 12
+
+
+def fit_text(draw, text: str, font, width: float) -> str:
+    """`text`, shortened with '…' until it fits `width` pixels."""
+    if draw.textlength(text, font=font) <= width:
+        return text
+    while text and draw.textlength(text + "…", font=font) > width:
+        text = text[:-1]
+    return text.rstrip(" ,") + "…"
+
+
 def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels") -> np.ndarray:
+    """The panels in a grid (`columns` per row, else `default_columns`), each in a cell of its
+    own: its caption in a band above the picture, never over it, and, with `legend_of`, the
+    legend of its own chronovolume in a band below."""
     from PIL import Image as PILImage
     from PIL import ImageDraw
 
-    grid = _grid(panels, columns, bg)
+    n = len(panels)
     h, w, _ = panels[0].shape
+    cols = columns or default_columns(n)
+    rows = math.ceil(n / cols)
     text_rgb = (20, 20, 20) if sum(bg) > 1.5 else (235, 235, 235)
     font = label_font(max(11, min(w, h) // 26))
+    cap_h = caption_height(font) if labels else 0
     legend_h = max(36, h // 8) if legend_of else 0
-    canvas = PILImage.new(
-        "RGB", (grid.shape[1], grid.shape[0] + legend_h), tuple(round(c * 255) for c in bg)
-    )
-    canvas.paste(PILImage.fromarray(grid), (0, 0))
+    cell_h = cap_h + h + legend_h
+    canvas = PILImage.new("RGB", (cols * w, rows * cell_h), tuple(round(c * 255) for c in bg))
     draw = ImageDraw.Draw(canvas)
-    cols = columns or len(panels)
-    for i, text in enumerate(labels or []):
+    for i, panel in enumerate(panels):
         r, c = divmod(i, cols)
-        draw.text((c * w + 8, r * h + 6), text, fill=text_rgb, font=font)
-    if legend_of:
-        _legend(
-            draw,
-            legend_of[0],
-            (8, grid.shape[0] + 4, canvas.width - 8, legend_h - 8),
-            font,
-            text_rgb,
-            time_labels,
-        )
+        x, y = c * w, r * cell_h
+        canvas.paste(PILImage.fromarray(panel), (x, y + cap_h))
+        if labels and i < len(labels):
+            text = fit_text(draw, labels[i], font, w - 16)
+            draw.text((x + 8, y + 6), text, fill=text_rgb, font=font)
+        if legend_of:
+            cv = legend_of[i] if i < len(legend_of) else legend_of[0]
+            box = (x + 8, y + cap_h + h + 4, w - 16, legend_h - 8)
+            _legend(draw, cv, box, font, text_rgb, time_labels)
     return np.asarray(canvas)
 
 
