@@ -416,3 +416,32 @@ def test_movie_of_an_orbit_downloads(browser, server, tmp_path):  # noqa: F811
         assert page.is_enabled("#save-movie")
     finally:
         p.close()
+
+
+def test_saved_png_is_laid_out_as_the_screen(browser, server, tmp_path):  # noqa: F811
+    """Save PNG with four views writes the 2 x 2 grid the page shows, not a 1 x 4 strip, each
+    panel over its own legend."""
+    import numpy as np
+    from PIL import Image
+
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        before = p.last()
+        page.select_option("#nviews", "4")
+        p.settle(before)
+        columns = p.eval("() => window.viewer.S.columns")
+        tops = p.eval(
+            "() => [...document.querySelectorAll('#views .view')]"
+            ".map(v => Math.round(v.getBoundingClientRect().top))"
+        )
+        assert columns == 2 and len(set(tops)) == 2  # two rows of two on screen
+        w, h = p.eval("() => window.viewer.S.state.size")
+        with page.expect_download(timeout=120_000) as got:
+            page.click("#save-image")
+        got.value.save_as(os.path.join(shots_dir(tmp_path), "saved-4-views.png"))
+        image = np.asarray(Image.open(got.value.path()).convert("RGB"))
+        assert image.shape[1] == 2 * w and image.shape[0] > 2 * h  # 2 x 2, captions, legends
+        assert image.shape[0] < 4 * h
+    finally:
+        p.close()

@@ -225,6 +225,7 @@ MESSAGES: dict[str, Obj] = {
             "format": Enum(tuple(MOVIE_FORMATS)),
             "frames": Int(2, 360),
             "fps": Int(1, 60),
+            "columns": Int(1, MAX_VIEWS),  # panels per row, as on screen (image, movie)
         },
         frozenset({"what"}),
     ),

@@ -57,9 +57,15 @@ def zip_store(store: Path, archive: Path) -> None:
                 zf.write(path, path.relative_to(store).as_posix())
 
 
-def compose_image(panels: list[np.ndarray], cvs: list[Chronovolume], background: tuple):
-    """The panels side by side, each labelled with its chronovolume, with the legend."""
-    return compose_panels(panels, [describe(cv) for cv in cvs], cvs, None, background)
+def compose_image(
+    panels: list[np.ndarray],
+    cvs: list[Chronovolume],
+    background: tuple,
+    columns: int | None = None,
+):
+    """The panels in a grid of `columns` per row (as the page lays them out), each captioned
+    with its chronovolume and over its own legend."""
+    return compose_panels(panels, [describe(cv) for cv in cvs], cvs, columns, background)
 
 
 def save_image(
@@ -68,9 +74,10 @@ def save_image(
     cvs: list[Chronovolume],
     background: tuple,
     name: str,
+    columns: int | None = None,
 ) -> str:
     """`compose_image` as a PNG download."""
-    image = Image(compose_image(panels, cvs, background))
+    image = Image(compose_image(panels, cvs, background, columns))
     return downloads.add(image.png_bytes(), name, "image/png")
 
 

@@ -71,7 +71,14 @@ class Tasks:
             bg = parse_color(state.background)
             panels, *_ = on_gl(self._draw, cvs, state, state.size, bg)
             name = f"{ds.name}-{sel}.png"
-            key = save_image(self.downloads, panels, cvs, bg, name)  # type: ignore[arg-type]
+            key = save_image(
+                self.downloads,
+                panels,
+                cvs,  # type: ignore[arg-type]
+                bg,
+                name,
+                _columns(msg, len(cvs)),
+            )
         else:
             cv = self.views.slots[view].cv
             assert cv is not None
@@ -94,7 +101,7 @@ class Tasks:
             self.views.full_resolution(range(len(shown.views)))
             cvs = [s.cv for s in self.views.slots[: len(shown.views)]]
             panels, *_ = on_gl(self._draw, cvs, shown, shown.size, bg)
-            return compose_image(panels, cvs, bg)  # type: ignore[arg-type]
+            return compose_image(panels, cvs, bg, _columns(msg, len(cvs)))  # type: ignore[arg-type]
 
         def progress(done: int, total: int) -> None:
             self._reply(
@@ -111,3 +118,9 @@ class Tasks:
         name = f"{ds.name}-{'orbit-' + sel if kind == 'orbit' else 'play-through'}.{fmt}"
         key = self.downloads.add(path, name, MOVIE_FORMATS[fmt])
         self._reply({"type": "download", "id": rid, "url": f"/download/{key}", "filename": name})
+
+
+def _columns(msg: dict, n: int) -> int | None:
+    """The panels per row a save asks for (the page's layout), at most the number of views."""
+    columns = msg.get("columns")
+    return None if columns is None else min(int(columns), max(1, n))

@@ -135,7 +135,9 @@ export function bindControls() {
   $('clip-offset').addEventListener('input', () => $('clip-on').checked && clip('preview'));
   $('clip-offset').addEventListener('change', () => $('clip-on').checked && clip('full'));
 
-  $('save-image').addEventListener('click', () => send({ type: 'save', what: 'image' }));
+  // Saved as laid out on screen: the same panels per row.
+  $('save-image').addEventListener('click', () =>
+    send({ type: 'save', what: 'image', columns: S.columns }));
   $('save-cv').addEventListener('click', () =>
     send({ type: 'save', what: 'chronovolume', view: S.selectedView }));
   $('save-movie').addEventListener('click', () => {
@@ -149,6 +151,7 @@ export function bindControls() {
       format: $('movie-format').value,
       frames: int('movie-frames', 2, 360),
       fps: int('movie-fps', 1, 60),
+      columns: S.columns,
     });
   });
 }

@@ -15,6 +15,7 @@ export const S = {
   focus: null, // the world box the last frame framed (session.js keeps it with the state)
   playing: false,
   initialCamera: null, // the data set's opening camera (camera reset returns to it)
+  columns: 1, // panels per row on screen (layoutViews); saved images and movies use it too
 };
 
 export const viewer = (window.viewer = {

@@ -53,6 +53,7 @@ export function layoutViews() {
     const g = cell(c);
     if (Math.min(g.w, g.h) > 1.25 * Math.min(best.w, best.h)) best = g;
   }
+  S.columns = best.c;
   box.style.gridTemplateColumns = `repeat(${best.c}, minmax(0, 1fr))`;
   box.style.gridTemplateRows = `repeat(${best.r}, minmax(0, 1fr))`;
   // Render size: the cell in device pixels, the longest side within the server's limit (the
