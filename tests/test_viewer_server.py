@@ -519,3 +519,39 @@ def test_a_view_may_have_its_own_window(client):
 
 class _Series:
     shape = (12, 32, 32, 32)
+
+
+def test_a_tab_closed_mid_request_is_not_an_internal_error(server, caplog, monkeypatch):
+    """A client that goes while a request of its is being answered (a tab closed while a large
+    data set opens) is a normal end: the server logs no internal error, and serves the next."""
+    import logging
+    import socket
+
+    from chronocl.viewer.worker import ClientWorker
+
+    opened = ClientWorker.open
+
+    def slow_open(self, *args, **kwargs):
+        time.sleep(0.8)  # the client goes meanwhile
+        return opened(self, *args, **kwargs)
+
+    caplog.set_level(logging.DEBUG, logger="chronocl.viewer")
+    for graceful in (True, False):
+        c = Client(server)
+        monkeypatch.setattr(ClientWorker, "open", slow_open)
+        c.send({"type": "open", "dataset": 1})  # answered after the socket is gone
+        c.send({"type": "update", "window": {"t0": 0, "t1": 99}})  # then an error reply
+        if not graceful:
+            c.ws.socket.shutdown(socket.SHUT_RDWR)  # gone without a close frame
+        c.close()  # else as a closed tab: a close frame
+        time.sleep(1.5)
+        monkeypatch.setattr(ClientWorker, "open", opened)
+    after = Client(server)
+    after.open(0, size=(64, 64))
+    after.close()
+    errors = [
+        r.getMessage()
+        for r in caplog.records
+        if r.name.startswith("chronocl") and "internal error" in r.getMessage()
+    ]
+    assert not errors, errors

@@ -67,34 +67,43 @@ async def serve_socket(
     memory: str | int | None = None,
 ) -> None:
     """Serve one accepted-to-be Starlette WebSocket until the client goes."""
+    from starlette.websockets import WebSocketDisconnect
+
     await websocket.accept()
     loop = asyncio.get_running_loop()
     send_lock = asyncio.Lock()
     gone = threading.Event()
 
     async def deliver(data: str | bytes) -> None:
+        """Send to the client; one that has gone (a closed tab) ends the socket quietly."""
+        if gone.is_set():
+            return
         async with send_lock:
-            if isinstance(data, bytes):
-                await websocket.send_bytes(data)
-            else:
-                await websocket.send_text(data)
+            try:
+                if isinstance(data, bytes):
+                    await websocket.send_bytes(data)
+                else:
+                    await websocket.send_text(data)
+            except (WebSocketDisconnect, OSError, RuntimeError):
+                # Starlette raises WebSocketDisconnect for a connection that broke, and a
+                # RuntimeError (WebSocketDisconnected in Starlette 1) once it saw the close.
+                gone.set()
 
     def send_from_thread(data: str | bytes) -> bool:
         if gone.is_set():
             return False
         try:
             asyncio.run_coroutine_threadsafe(deliver(data), loop).result(SEND_TIMEOUT_S)
-        except Exception:  # closed socket, cancelled, timed out: the client is gone
+        except Exception:  # cancelled, timed out: the client is gone
             gone.set()
-            return False
-        return True
+        return not gone.is_set()
 
     worker = ClientWorker(
         datasets, send_from_thread, downloads, engine=engine, device=device, memory=memory
     )
     try:
         await deliver(json.dumps(info_message(datasets)))
-        while True:
+        while not gone.is_set():
             message = await websocket.receive()
             if message["type"] == "websocket.disconnect":
                 break
