@@ -290,7 +290,20 @@ def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, ser
         page.keyboard.press("ArrowRight")  # sends the window (1, 5)
         p.settle(before)
         page.wait_for_function(f"() => ({hist})().join() === '1,2,3,4'", timeout=60_000)
-        assert "4 steps of the window (1…4)" in page.inner_text("#hist-note")
+        assert "histogram of the 4 steps of window 1:5;" in page.inner_text("#hist-note")
+        # A long window is counted from some of its steps: the note says which, of how many.
+        before = p.last()
+        p.eval("() => { window.viewer.S.state.window = {t0: 0, t1: 10, stride: 1}; }")
+        page.keyboard.press("ArrowRight")  # sends the window (1, 11)
+        p.settle(before)
+        page.wait_for_function(f"() => ({hist})().join() === '2,4,6,8,10'", timeout=60_000)
+        note = page.inner_text("#hist-note")
+        assert "histogram of 5 of the 10 steps of window 1:11 (2, 4, 6, 8, 10);" in note, note
+        before = p.last()
+        p.eval("() => { window.viewer.S.state.window = {t0: 2, t1: 6, stride: 1}; }")
+        page.keyboard.press("ArrowLeft")  # back to the window (1, 5)
+        p.settle(before)
+        page.wait_for_function(f"() => ({hist})().join() === '1,2,3,4'", timeout=60_000)
         logged = p.eval(HIST_BARS)
         page.uncheck("#hist-log")
         assert 0 < p.eval(HIST_BARS) < logged  # linear counts: the rare values' bars shrink

@@ -143,12 +143,19 @@ export function fillColormaps() {
   $('tf-colormap').replaceChildren(new Option('choose…', ''), ...names.map((n) => new Option(n, n)));
 }
 
-// The note under the histogram: which steps it counts.
+// The note under the histogram: which steps it counts, named against the window, and the
+// steps themselves where it samples some of a long window (a window of 10 steps counted from
+// 5 of them must not read as a window of 20…28).
 export function noteHistogram() {
   const hist = S.histogram;
   if (!hist || !hist.steps) return;
   const s = hist.steps;
-  const which = s.length === 1 ? `step ${s[0]}` : `${s.length} steps of the window (${s[0]}…${s[s.length - 1]})`;
+  const [t0, t1, stride] = hist.window || [s[0], s[s.length - 1] + 1, 1];
+  const n = Math.ceil((t1 - t0) / stride);
+  const win = `window ${t0}:${t1}${stride > 1 ? `:${stride}` : ''}`;
+  let which = `step ${s[0]}`;
+  if (s.length > 1 && s.length >= n) which = `the ${n} steps of ${win}`;
+  else if (s.length > 1) which = `${s.length} of the ${n} steps of ${win} (${s.join(', ')})`;
   $('hist-note').textContent = `histogram of ${which}; opacity up, value across`;
 }
 
