@@ -225,6 +225,13 @@ def test_page_reconnects_after_a_server_restart(browser, tmp_path, full_size_fra
             "() => document.body.dataset.connection === 'retrying'", timeout=20_000
         )
         assert "reconnecting" in page.inner_text("#status")
+        dimmed = (
+            "() => [getComputedStyle(document.querySelector('.view img')).opacity,"
+            " getComputedStyle(document.querySelector('#views'), '::after').content]"
+        )
+        opacity, note = p.eval(dimmed)
+        assert float(opacity) < 0.5 and "stale" in note  # the last picture is not live
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "disconnected.png"))
         second = ViewerServer(stores, port=first.port, token=first.token)
         second.start()
         page.wait_for_function(
@@ -237,6 +244,8 @@ def test_page_reconnects_after_a_server_restart(browser, tmp_path, full_size_fra
         cam = p.eval("() => window.viewer.S.state.camera")
         assert (cam["azimuth"], cam["elevation"]) == (-90, 0)
         assert after["digest"] == before["digest"]  # the same view as before the restart
+        opacity, note = p.eval(dimmed)
+        assert float(opacity) == 1 and note == "none"
         p.problems.clear()  # the refused reconnects are logged by the browser, not errors
     finally:
         p.close()

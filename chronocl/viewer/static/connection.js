@@ -1,8 +1,8 @@
 // The WebSocket to the server, opened again after it closes (backoff, status shown). The server
 // renders the newest state only, so the page may send freely; it still coalesces input to one
 // update message per animation frame. While a frame
-// is awaited for longer than BUSY_AFTER_MS (a mode's first use compiles its kernels, a few
-// seconds) the #busy indicator says so, with the time waited.
+// is awaited for longer than BUSY_AFTER_MS (a large window's steps are read, a mode's first use
+// builds its kernels) the #busy indicator says so, with the time waited.
 
 import { $, S, setStatus, viewer } from './state.js';
 
@@ -99,7 +99,8 @@ function showBusy() {
   const waited = waitingSince === null ? 0 : performance.now() - waitingSince;
   el.hidden = waited < BUSY_AFTER_MS;
   if (!el.hidden) {
-    el.textContent = `working… ${(waited / 1000).toFixed(1)} s (a mode's first use compiles its kernels: a few seconds)`;
+    // The server does not say which part takes the time; name them all rather than guess one.
+    el.textContent = `working… ${(waited / 1000).toFixed(1)} s (reading the window's steps, building a new mode's kernels, integrating, drawing)`;
   }
 }
 
