@@ -345,6 +345,21 @@ def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, ser
         page.dispatch_event("#point-value", "change")
         last = p.eval("() => window.viewer.S.state.data_tf.points.at(-1)")
         assert last[0] == pytest.approx(0.999, abs=1e-9)
+        # A dragged point's value and opacity fields, and the readout, follow it as it moves.
+        at = p.eval("() => window.viewer.tfPointAt(1)")
+        page.mouse.move(at["x"], at["y"])
+        page.mouse.down()
+        page.mouse.move(at["x"] + 25, at["y"] - 30, steps=5)
+        moved = p.eval("() => window.viewer.S.state.data_tf.points[1]")
+        fields = p.eval(
+            "() => [document.querySelector('#point-value').value,"
+            " document.querySelector('#point-alpha').value]"
+        )
+        page.mouse.up()
+        value = info["vmin"] + moved[0] * (info["vmax"] - info["vmin"])
+        assert float(fields[0]) == pytest.approx(value, rel=2e-3)
+        assert float(fields[1]) == pytest.approx(moved[4], abs=2e-3) and moved[4] > 0.05
+        assert f"value {fields[0]} · opacity {fields[1]}" in page.inner_text("#tf-hover")
         # The readout under the pointer: value, opacity and the histogram's count there.
         box = page.locator("#tf").bounding_box()
         page.mouse.move(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.5)

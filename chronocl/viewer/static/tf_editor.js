@@ -206,6 +206,8 @@ export function bindTF() {
     const hi = i < pts.length - 1 ? pts[i + 1][0] - 1e-4 : 1;
     pts[i][0] = Math.max(lo, Math.min(hi, clamp01(g.U(x))));
     pts[i][4] = clamp01(g.A(y));
+    syncPointColor(); // the value and opacity fields follow the point as it moves
+    showHover(pts[i][0]);
     sendTF('preview');
   });
   const end = () => {
