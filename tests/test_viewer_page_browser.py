@@ -222,6 +222,19 @@ def test_probe_plot_and_marker_follow_window_camera_and_data_set(open_page):
     orbited = p.eval(MARK)[0]
     assert orbited != mark
 
+    # A shift-drag around the feature from empty corners probes the box it spans.
+    page.keyboard.down("Shift")
+    page.mouse.move(box["x"] + box["width"] * 0.04, box["y"] + box["height"] * 0.04)
+    page.mouse.down()
+    page.mouse.move(box["x"] + box["width"] * 0.96, box["y"] + box["height"] * 0.96, steps=6)
+    page.mouse.up()
+    page.keyboard.up("Shift")
+    page.wait_for_function(
+        "() => window.viewer.probe && window.viewer.probe.box && window.viewer.probe.values",
+        timeout=60_000,
+    )
+    assert page.inner_text("#probe-text").startswith("box x ")
+
     # Another data set: the old curve is not drawn against the new series.
     before = p.last()
     page.select_option("#dataset", "1")

@@ -239,11 +239,23 @@ def test_probe_finds_a_voxel_and_its_curve(client):
     np.testing.assert_array_equal(reply["min"], block.min(axis=1))
     np.testing.assert_array_equal(reply["max"], block.max(axis=1))
     assert reply["csv"].splitlines()[0] == "step,time,mean,min,max,in_window"
-    # A corner ray misses the (empty) border; so does a box with a corner there.
-    for corners in ({"x": 0.0, "y": 0.0}, {"x": 0.5, "y": 0.5, "x2": 0.0, "y2": 0.0}):
+    # A ray through the (empty) border misses; so does a box drawn wholly there.
+    for corners in ({"x": 0.0, "y": 0.0}, {"x": 0.0, "y": 0.0, "x2": 0.04, "y2": 0.04}):
         rid = client.send({"type": "probe", "view": 0, **corners})
         _, reply = client.wait("probe", rid)
         assert reply["voxel"] is None and reply["box"] is None and reply["values"] is None
+    # A box drawn around the feature from empty corners probes the feature: it holds what the
+    # centre's ray meets, and its values are numpy's over that box.
+    rid = client.send({"type": "probe", "view": 0, "x": 0.5, "y": 0.5, "x2": 0.0, "y2": 0.0})
+    _, reply = client.wait("probe", rid)
+    rid = client.send({"type": "probe", "view": 0, "x": 0.02, "y": 0.03, "x2": 0.97, "y2": 0.98})
+    _, around = client.wait("probe", rid)
+    b = around["box"]
+    assert reply["box"] is not None and b is not None
+    assert all(b[a][0] <= v[a] < b[a][1] for a in "xyz")
+    assert (b["x"][1] - b["x"][0]) * (b["y"][1] - b["y"][0]) > 32 * 32 / 4  # the feature's span
+    block = data[:, slice(*b["z"]), slice(*b["y"]), slice(*b["x"])].reshape(12, -1)
+    np.testing.assert_allclose(around["values"], block.mean(axis=1, dtype=np.float64), rtol=1e-12)
 
 
 def test_histogram_switch_dataset_and_downloads(server, client):

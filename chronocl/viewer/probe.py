@@ -117,22 +117,38 @@ def box_fractions(
     return (x + 0.5) / nx, (y + 0.5) / ny, (z + 0.5) / nz
 
 
+BOX_RAYS = 12  # rays along each side of a dragged rectangle (at most one per pixel)
+
+
+def _rectangle_rays(msg: dict, size: tuple[int, int]) -> list[tuple[float, float]]:
+    """Pixel fractions of a grid of rays over the rectangle from (x, y) to (x2, y2), its
+    corners and edges included."""
+    (x0, x1), (y0, y1) = sorted((msg["x"], msg["x2"])), sorted((msg["y"], msg["y2"]))
+    nx = max(2, min(BOX_RAYS, round((x1 - x0) * size[0]) + 1))
+    ny = max(2, min(BOX_RAYS, round((y1 - y0) * size[1]) + 1))
+    return [(x, y) for y in np.linspace(y0, y1, ny) for x in np.linspace(x0, x1, nx)]
+
+
 def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Dataset) -> dict:
     """The `probe` reply to `msg` for the shown `view` of `state`: the voxel met and v(t) there
     over every step, or with a second corner (x2, y2) the box spanned by the voxels the two
     rays meet and its mean, min and max per step; the window's steps, and the curve as CSV.
 
-    The box is the smallest one holding both voxels, so a drag across a feature's face probes
-    a slab one voxel deep where both rays stop at the same depth.
+    The box is the smallest one holding every voxel that the rays through the dragged
+    rectangle meet (a grid of up to BOX_RAYS x BOX_RAYS rays), so a box drawn around a feature
+    from empty space probes the feature; only a rectangle whose rays all miss is refused.
     """
     camera = state.panel_camera()
-    corners = [(msg["x"], msg["y"])]
-    if "x2" in msg and "y2" in msg:
-        corners.append((msg["x2"], msg["y2"]))
+    box_drag = "x2" in msg and "y2" in msg
+    if box_drag:
+        corners = _rectangle_rays(msg, state.size)
+    else:
+        corners = [(msg["x"], msg["y"])]
     hits = [probe_ray(cv, camera, state.size, x, y, state.clip) for x, y in corners]
     reply = {"type": "probe", "id": msg.get("id"), "view": view, "x": msg["x"], "y": msg["y"]}
-    if len(corners) == 2:
+    if box_drag:
         reply |= {"x2": msg["x2"], "y2": msg["y2"]}
+        hits = [h for h in hits if h["voxel"] is not None] or hits[:1]  # the rays that met one
     reply |= {"reached": all(h["reached"] for h in hits)}
     reply["opacity"] = round(min(h["opacity"] for h in hits), 4)
     reply["threshold"] = PROBE_THRESHOLD
@@ -141,9 +157,9 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     empty = {"voxel": None, "box": None, "values": None, "min": None, "max": None, "csv": None}
     if any(h["voxel"] is None for h in hits):
         return reply | empty
-    voxels = np.array([h["voxel"] for h in hits])  # (z, y, x) per corner
+    voxels = np.array([h["voxel"] for h in hits])  # (z, y, x) per ray
     lo, hi = voxels.min(axis=0), voxels.max(axis=0) + 1
-    if len(hits) == 1:
+    if not box_drag:
         z, y, x = hits[0]["voxel"]
         curve = ds.curve((z, y, x))
         reply |= {"voxel": {"z": z, "y": y, "x": x}, "box": None}

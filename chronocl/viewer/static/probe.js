@@ -22,7 +22,7 @@ export function onProbe(msg) {
   if (!msg.values) {
     txt.textContent = msg.x2 === undefined && !msg.box
       ? 'this ray meets no opaque voxel; click on a feature'
-      : 'a corner of the box meets no opaque voxel; drag across a feature';
+      : 'no ray through this box meets an opaque voxel; draw it around a feature';
     return;
   }
   const how = msg.reached ? `opacity passes ${msg.threshold}` : `strongest sample (opacity ${msg.opacity})`;
