@@ -179,3 +179,41 @@ def test_bad_options(tmp_path):
         ingest_raw(files, tmp_path / "s.zarr", dims=(3, 0, 5))
     with pytest.raises(ChronoclError, match="spacing"):
         ingest_raw(files, tmp_path / "s.zarr", dims=(3, 4, 5), spacing=(1, -1, 1))
+
+
+@pytest.mark.parametrize(
+    ("data", "given", "warned"),
+    [
+        ("smooth", (56, 96, 64), "--dims 64 96 56 but not with --dims 56 96 64"),
+        ("smooth", (96, 64, 56), "--dims 64 96 56 but not with --dims 96 64 56"),
+        ("smooth", (64, 96, 56), None),  # the right order
+        ("noise", (56, 96, 64), None),  # nothing to tell the orders apart
+    ],
+)
+def test_dims_in_a_wrong_order_get_a_one_line_warning(
+    tmp_path, monkeypatch, capsys, data, given, warned
+):
+    """Raw steps read with --dims in another order (the same byte count) come out as sheared
+    copies; ingest says so in one line and goes on (it cannot always know)."""
+    import sys
+
+    from chronocl.cli import main
+    from chronocl.data import synthetic
+
+    if data == "smooth":  # (Z, Y, X) = (56, 96, 64): NX 64, NY 96, NZ 56
+        step = next(synthetic.steps("vortex", 1, (56, 96, 64), 0)).astype(np.float32)
+    else:
+        step = np.random.default_rng(0).random((56, 96, 64)).astype(np.float32)
+    step.tofile(tmp_path / "s.raw")
+    dims = [str(n) for n in given]
+    argv = ["chronocl", "ingest", str(tmp_path / "s.raw"), "-o", str(tmp_path / "o.zarr")]
+    monkeypatch.setattr(sys, "argv", [*argv, "--dims", *dims])
+    with pytest.raises(SystemExit) as info:
+        main()
+    assert (info.value.code or 0) == 0 and (tmp_path / "o.zarr").exists()
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "warning" in ln]
+    if warned is None:
+        assert lines == []
+    else:
+        assert len(lines) == 1 and lines[0].startswith("chronocl: warning: s.raw reads")
+        assert warned in lines[0] and "check the order of --dims" in lines[0]

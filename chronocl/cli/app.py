@@ -10,6 +10,7 @@ from __future__ import annotations
 import errno
 import os
 import sys
+import warnings
 from typing import Annotated
 
 import typer
@@ -30,7 +31,7 @@ from chronocl.cli import (
     view,
 )
 from chronocl.cli.options import err
-from chronocl.core.errors import ChronoclError
+from chronocl.core.errors import ChronoclError, ChronoclWarning
 
 app = typer.Typer(
     name="chronocl",
@@ -100,12 +101,25 @@ def main() -> None:
     An OSError that escaped the checks made before the work (a folder made read-only
     meanwhile, a full disk) is one line naming the path, exit 2.
     """
+    warnings.showwarning = _show_warning
     try:
         app()
     except ChronoclError as exc:
         _fail(str(exc), exc.exit_code)
     except OSError as exc:
         _fail(_os_error_line(exc), 2)
+
+
+_python_showwarning = warnings.showwarning
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """chronocl's warnings as one line, 'chronocl: warning: ...'; others as Python shows them."""
+    if issubclass(category, ChronoclWarning):
+        text = " ".join(str(message).splitlines())
+        err.print(f"chronocl: warning: {text}", highlight=False, markup=False, soft_wrap=True)
+    else:
+        _python_showwarning(message, category, filename, lineno, file, line)
 
 
 def _fail(message: str, code: int) -> None:

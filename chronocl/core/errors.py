@@ -86,3 +86,8 @@ class OutputBusyError(ChronoclError, FileExistsError):
 
 class SlabTaskError(ChronoclError, RuntimeError):
     """A slab task was lost again and again (its workers died); a re-run resumes."""
+
+
+class ChronoclWarning(UserWarning):
+    """Input that is probably not what was meant but may be (the work goes on); the CLI
+    prints it as one line, 'chronocl: warning: ...'."""

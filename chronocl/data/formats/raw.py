@@ -10,15 +10,23 @@ them back.
 
 from __future__ import annotations
 
+import itertools
 import json
+import math
 import os
+import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from chronocl.core.atomic import atomic_directory
-from chronocl.core.errors import InvalidDataError, InvalidParameterError, UnknownNameError
+from chronocl.core.errors import (
+    ChronoclWarning,
+    InvalidDataError,
+    InvalidParameterError,
+    UnknownNameError,
+)
 from chronocl.core.progress import track
 from chronocl.data.formats.contract import Exporter, Reader, StepExport, Steps
 from chronocl.data.inputs import expand_inputs
@@ -88,6 +96,18 @@ def raw_steps(
             f"needs {expected}; check --dims and --dtype"
         )
 
+    # The check reads the first file's first slabs only (enough for every order's neighbours).
+    pair = max(a * b for a, b in itertools.combinations((nx, ny, nz), 2))
+    head = np.fromfile(files[0], dtype=file_dtype, count=min(nx * ny * nz, 2 * pair + DIMS_SAMPLES))
+    better = likelier_dims(head, (nx, ny, nz))
+    if better is not None:
+        warnings.warn(
+            f"{files[0].name} reads as a smooth volume with --dims {' '.join(map(str, better))}"
+            f" but not with --dims {nx} {ny} {nz} (x fastest): check the order of --dims",
+            ChronoclWarning,
+            stacklevel=2,
+        )
+
     def steps() -> Iterator[np.ndarray]:
         for f in files:
             raw = np.fromfile(f, dtype=file_dtype, count=nx * ny * nz)
@@ -103,6 +123,43 @@ def raw_steps(
         source=f"raw: {files[0].parent}/{files[0].name} .. {files[-1].name} ({len(files)} files)",
         labels=[f"{f.name} (step {t})" for t, f in enumerate(files)],
     )
+
+
+DIMS_SAMPLES = 1 << 20  # voxel pairs compared per axis by `likelier_dims`
+
+
+def likelier_dims(values: np.ndarray, dims: tuple[int, int, int]) -> tuple[int, ...] | None:
+    """Another order of `dims` (NX, NY, NZ) under which the flat step `values` is clearly
+    smoother, or None.
+
+    Read with the wrong row length, a smooth field's y and z neighbours lie far apart in it
+    (the volume comes out sheared into copies); the mean step between neighbours along y and z
+    shows it. Only clear cases count (less than half the given order's), so noise, constant
+    data and volumes with equal sizes give None.
+    """
+    flat = np.asarray(values).ravel()
+    if len(set(dims)) == 1 or flat.size < 8:
+        return None
+
+    def roughness(order: tuple[int, ...]) -> float:
+        nx, ny = order[0], order[1]
+        total = 0.0
+        for offset in (nx, nx * ny):
+            n = flat.size - offset
+            if n <= 0:
+                return math.inf
+            stride = max(1, n // DIMS_SAMPLES)
+            a = flat[:n:stride].astype(np.float64)
+            b = flat[offset : offset + n : stride].astype(np.float64)
+            total += float(np.mean(np.abs(b - a)))
+        return total
+
+    given = roughness(dims)
+    scores = {order: roughness(order) for order in set(itertools.permutations(dims))}
+    best = min(scores, key=scores.get)  # type: ignore[arg-type]
+    if best != tuple(dims) and scores[best] < 0.5 * given:
+        return best
+    return None
 
 
 def export_raw(job: StepExport) -> list[Path]:
