@@ -33,6 +33,7 @@ from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
 from chronocl.engine.transfer import with_device_format
 from chronocl.integration.levels import check_level
+from chronocl.integration.visibility import warn_invisible
 from chronocl.modes.spec import IntegrationSpec, resolve_order
 from chronocl.reference import Partial
 
@@ -241,7 +242,9 @@ def integrate(
     job = at_level(prepare(series, window, mode, spec, spec_args), level)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
     eng = with_device_format(eng, device_format, job.series.dtype, job.value_range)
-    return integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
+    cv = integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
+    warn_invisible(job, cv)  # steps, or a whole picture, the transfer functions hide
+    return cv
 
 
 def integrate_bricks(

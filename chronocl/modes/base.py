@@ -78,6 +78,9 @@ class Mode:
     # compares a step's opacity with the threshold: the kernels keep the LUT's exact opacity
     opacity_threshold: ClassVar[bool] = False
     legend: ClassVar[str] = "time"  # what colour tells: "time", or "fraction" of the steps
+    # each step's voxels are coloured by the data TF at their own values, so a step whose
+    # values all fall where the TF is transparent cannot show (chronocl.integration.visibility)
+    per_step_tf: ClassVar[bool] = True
     reads_values: ClassVar[bool] = False  # `accumulate` also takes `values=` (Values)
     # CPU devices: a kernel in the same file taking a block of rows per work-item, the steps
     # in the outer loop (chronocl/engine/opencl.py `_row_blocks`), and the bytes per voxel of

@@ -31,6 +31,7 @@ class Change(Mode):
     leaf_span = 2
     compares_values = True
     lut_by_value = True  # the data TF is looked up at δ
+    per_step_tf = False
     reads_values = True
 
     def accumulate(self, u, steps, order, step_rgba, spec, values):

@@ -25,6 +25,7 @@ class Count(Mode):
     state_bytes = 0
     sum_channels = 1
     lut_by_value = True  # the data TF is looked up at the fraction f
+    per_step_tf = False
     legend = "fraction"
 
     def accumulate(self, u, steps, order, step_rgba, spec):

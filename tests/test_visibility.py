@@ -1,0 +1,76 @@
+"""Pictures that cannot show what was selected say so: a step whose values all fall where the
+transfer functions are transparent, or a chronovolume with nothing opaque, gets one warning
+naming the steps and the option that fixes it (a plume whose early steps are faint)."""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import chronocl
+from chronocl.core.errors import ChronoclWarning
+from chronocl.data import synthetic
+
+
+@pytest.fixture(scope="module")
+def plume():
+    """A plume growing from faint to strong: step 0 peaks at 13 % of the series' maximum."""
+    data = np.stack(list(synthetic.steps("jet", 12, (24, 24, 32), 0))).astype(np.float32)
+    scale = np.linspace(0.13, 1.0, 12, dtype=np.float32)[:, None, None, None]
+    return chronocl.TimeSeries.from_array(data * scale / data.max(), source="plume")
+
+
+def _warned(fn) -> list[str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fn()
+    return [str(w.message) for w in caught if issubclass(w.category, ChronoclWarning)]
+
+
+@pytest.mark.parametrize("mode", ["alpha", "additive", "max", "first_hit", "mean"])
+def test_faint_early_steps_are_named_in_one_warning(plume, mode):
+    got = _warned(lambda: chronocl.integrate(plume, "0:10", mode, engine="numpy"))
+    assert len(got) == 1, got
+    assert got[0].startswith("steps 0, 1, 2 (3 of the 10 selected) are invisible")
+    assert "transparent below 0.35" in got[0] and "--tf FILE with a data_tf" in got[0]
+    # Each named step really is transparent; the next is not.
+    stats = plume.stats
+    top = [(stats.step_max[s] - plume.vmin) / (plume.vmax - plume.vmin) for s in range(4)]
+    assert max(top[:3]) < 0.35 <= top[3]
+
+
+def test_visible_windows_and_opaque_tfs_are_quiet(plume):
+    assert _warned(lambda: chronocl.integrate(plume, "5:12", "alpha", engine="numpy")) == []
+    opaque = chronocl.DataTF(points=[(0, 1, 1, 1, 0.4), (1, 1, 1, 1, 0.9)])
+    every = _warned(lambda: chronocl.integrate(plume, "0:10", data_tf=opaque, engine="numpy"))
+    assert every == []
+    # count and change colour a derived quantity, not each step's values
+    for mode in ("count", "change"):
+        assert not any(
+            "invisible" in m
+            for m in _warned(lambda m=mode: chronocl.integrate(plume, "0:10", m, engine="numpy"))
+        )
+
+
+def test_a_chronovolume_with_nothing_opaque_says_so(plume):
+    got = _warned(lambda: chronocl.integrate(plume, "0:12", "min", engine="numpy"))
+    assert len(got) == 1 and got[0].startswith("the min chronovolume shows nothing"), got
+    assert "opaque where the min values lie" in got[0]
+
+
+def test_the_cli_prints_one_warning_line_and_renders(plume, tmp_path, monkeypatch, capsys):
+    from chronocl.cli import main
+
+    store = tmp_path / "plume.zarr"
+    plume.save(store)
+    out = tmp_path / "p.png"
+    argv = ["chronocl", "render", str(store), "-o", str(out), "--window", "0:10"]
+    monkeypatch.setattr(sys, "argv", [*argv, "--engine", "numpy", "--size", "96x64"])
+    with pytest.raises(SystemExit) as info:
+        main()
+    assert (info.value.code or 0) == 0 and out.exists()
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "warning" in ln]
+    assert len(lines) == 1 and lines[0].startswith("chronocl: warning: steps 0, 1, 2"), lines
