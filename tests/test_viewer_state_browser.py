@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import base64
 import io
+import itertools
 import json
 import os
 
@@ -174,6 +175,16 @@ def test_time_legend_in_each_view(browser, server, tmp_path):  # noqa: F811
             assert got["steps"] == ",".join(str(item["step"]) for item in legend)
             want = [round(255 * c) for c in legend[k]["rgb"]]
             assert max(abs(a - b) for a, b in zip(got["rgb"], want, strict=True)) <= 3
+        # Its ticks: evenly spaced multiples of 1, 2 or 5 within the window's steps 1..10.
+        ticks = [
+            float(t)
+            for t in p.eval(
+                "() => document.querySelector('#views .view canvas.legend').dataset.ticks"
+            ).split(",")
+        ]
+        gaps = {round(b - a, 9) for a, b in itertools.pairwise(ticks)}
+        assert len(ticks) >= 2 and len(gaps) == 1 and gaps <= {1, 2, 5}, ticks
+        assert all(t % next(iter(gaps)) == 0 and 1 <= t <= 10 for t in ticks), ticks
         p.page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-time-legend.png"))
         p.page.keyboard.press("l")
         assert p.eval(LEGEND_CELL, [0])["hidden"]

@@ -13,6 +13,21 @@ const TOP = 5;
 const CURVE_H = 22;
 const BAR_H = 9;
 
+// The smallest 1-2-5 step whose multiples in [lo, hi] number at most `most`.
+function niceStep(lo, hi, most, integer) {
+  const span = Math.abs(hi - lo);
+  if (!span) return 1;
+  const e0 = Math.floor(Math.log10(span / most));
+  for (let e = e0 - 1; e < e0 + 3; e++) {
+    for (const m of [1, 2, 5]) {
+      const step = m * 10 ** e;
+      if (integer && step < 1) continue;
+      if (Math.floor(hi / step + 1e-9) - Math.ceil(lo / step - 1e-9) + 1 <= most) return step;
+    }
+  }
+  return 10 ** (e0 + 3);
+}
+
 function draw(canvas, items) {
   canvas.hidden = !legendOn.shown || !items.length;
   if (canvas.hidden) return;
@@ -62,23 +77,51 @@ function draw(canvas, items) {
     ctx.arc(X(k), Y(items[k].a), 1.8, 0, 2 * Math.PI);
     ctx.fill();
   }
-  // The steps' time labels where the store has them, else their numbers: the first and last,
-  // and between them as many as fit; the ends are aligned to the bar's ends.
+  // Ticks at nice numbers (1, 2 or 5 times a power of ten) of the steps' numbers, or of their
+  // times where every label is a number, placed where they fall between the steps' cells, as
+  // many as fit (chronocl.core.ticks, as the saved PNG's legend); text and date labels: the
+  // first and last, and between them as many as fit.
   ctx.fillStyle = '#e6e6e6';
   ctx.font = '10px system-ui, sans-serif';
   ctx.textBaseline = 'top';
   const names = S.info && S.info.time_labels;
   const label = (it) => (names && names[it.step] !== undefined ? names[it.step] : String(it.step));
-  const widest = Math.max(...items.map((it) => ctx.measureText(label(it)).width));
-  const every = Math.max(1, Math.ceil(n / Math.max(1, Math.floor((w - 2 * PAD) / (widest + 8)))));
-  items.forEach((it, k) => {
-    if (k % every && k !== n - 1) return;
-    if (k !== n - 1 && n - 1 - k < every && k) return; // keep clear of the last label
-    const end = k === 0 ? 'left' : k === n - 1 ? 'right' : 'center';
-    ctx.textAlign = n > 1 && widest > cell ? end : 'center';
-    const x = ctx.textAlign === 'left' ? x0 : ctx.textAlign === 'right' ? w - PAD : X(k);
-    ctx.fillText(label(it), x, barY + BAR_H + 2);
-  });
+  const numeric = items.map((it) => (names ? Number(names[it.step]) : it.step));
+  const increasing = numeric.every((v, k) => Number.isFinite(v) && (k === 0 || v > numeric[k - 1]));
+  const ticks = [];
+  if (n > 1 && increasing && (!names || items.every((it) => String(names[it.step]).trim() !== ''))) {
+    const integer = numeric.every(Number.isInteger);
+    const widest = Math.max(...numeric.map((v) => ctx.measureText(String(v)).width));
+    const most = Math.max(2, Math.floor((w - 2 * PAD) / (widest + 12)));
+    const step = niceStep(numeric[0], numeric[n - 1], most, integer);
+    const decimals = Math.max(0, -Math.floor(Math.log10(step) + 1e-9));
+    const last = Math.floor(numeric[n - 1] / step + 1e-9);
+    for (let j = Math.ceil(numeric[0] / step - 1e-9); j <= last; j++) {
+      const t = j * step; // placed where it falls between the steps' cell centres
+      let k = 1;
+      while (k < n - 1 && numeric[k] < t) k++;
+      const f = (t - numeric[k - 1]) / (numeric[k] - numeric[k - 1]);
+      ticks.push({ text: t.toFixed(decimals), x: X(k - 1) + Math.max(0, Math.min(1, f)) * (X(k) - X(k - 1)) });
+    }
+    ctx.textAlign = 'center';
+    ticks.forEach((t) => {
+      const tw = ctx.measureText(t.text).width;
+      ctx.fillText(t.text, Math.max(x0 + tw / 2, Math.min(w - PAD - tw / 2, t.x)), barY + BAR_H + 2);
+    });
+  } else {
+    const widest = Math.max(...items.map((it) => ctx.measureText(label(it)).width));
+    const every = Math.max(1, Math.ceil(n / Math.max(1, Math.floor((w - 2 * PAD) / (widest + 8)))));
+    items.forEach((it, k) => {
+      if (k % every && k !== n - 1) return;
+      if (k !== n - 1 && n - 1 - k < every && k) return; // keep clear of the last label
+      const end = k === 0 ? 'left' : k === n - 1 ? 'right' : 'center';
+      ctx.textAlign = n > 1 && widest > cell ? end : 'center';
+      const x = ctx.textAlign === 'left' ? x0 : ctx.textAlign === 'right' ? w - PAD : X(k);
+      ctx.fillText(label(it), x, barY + BAR_H + 2);
+      ticks.push({ text: label(it), x });
+    });
+  }
+  canvas.dataset.ticks = ticks.map((t) => t.text).join(',');
   ctx.textAlign = 'right';
   ctx.textBaseline = 'middle';
   ctx.fillStyle = '#9aa3ad';
