@@ -30,6 +30,10 @@ from chronocl.modes.spec import IntegrationSpec
 
 from .strategies import enhancements, examples, time_tfs
 
+# Drawn transfer functions and data are often transparent on purpose; the warnings saying so
+# (chronocl.integration.visibility) are tested in test_visibility.py.
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
 DTYPES = ["uint8", "uint16", "int16", "float32"]
 
 

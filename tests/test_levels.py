@@ -14,6 +14,10 @@ from chronocl.data import synthetic
 from chronocl.integration.levels import LatencyModel
 from chronocl.integration.session import Session
 
+# Drawn transfer functions and data are often transparent on purpose; the warnings saying so
+# (chronocl.integration.visibility) are tested in test_visibility.py.
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
 # Odd sizes: the longest axis 130 gives levels 1 (65) and 2 (33).
 SHAPE = (20, 18, 130)
 

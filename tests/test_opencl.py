@@ -20,6 +20,10 @@ from chronocl.modes.spec import IntegrationSpec
 
 from .strategies import examples, specs, windows
 
+# Drawn transfer functions and data are often transparent on purpose; the warnings saying so
+# (chronocl.integration.visibility) are tested in test_visibility.py.
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
 
 def series_of(u: np.ndarray, sel, dtype=np.float32) -> chronocl.TimeSeries:
     raw = np.zeros((sel.n_steps, *u.shape[1:]), dtype=np.float32)

@@ -17,6 +17,10 @@ from chronocl.modes.spec import IntegrationSpec, resolve_order
 
 from .strategies import examples, specs, windows
 
+# Drawn transfer functions and data are often transparent on purpose; the warnings saying so
+# (chronocl.integration.visibility) are tested in test_visibility.py.
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
 
 def ref(u, sel: Selection, spec: IntegrationSpec):
     pos = spec.time_tf.positions_of(sel.steps, sel.n_steps)

@@ -26,6 +26,10 @@ from chronocl.integration.sliding import SlidingAggregate
 
 from .strategies import examples, specs
 
+# Drawn transfer functions and data are often transparent on purpose; the warnings saying so
+# (chronocl.integration.visibility) are tested in test_visibility.py.
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
 ENGINES = ["numpy", "opencl"]
 
 

@@ -29,6 +29,10 @@ from chronocl.modes.spec import IntegrationSpec
 from .strategies import examples, specs, windows
 from .test_opencl import series_of
 
+# Drawn transfer functions and data are often transparent on purpose; the warnings saying so
+# (chronocl.integration.visibility) are tested in test_visibility.py.
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
 DTYPES = [np.float32, np.float64, np.uint8, np.uint16, np.int16]
 
 
