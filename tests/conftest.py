@@ -18,6 +18,7 @@ os.makedirs(os.environ["XDG_CACHE_HOME"])
 os.makedirs(os.environ["POCL_CACHE_DIR"])
 atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)
 
+import pytest  # noqa: E402
 from hypothesis import HealthCheck, settings  # noqa: E402
 
 settings.register_profile(
@@ -27,3 +28,19 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )
 settings.load_profile("default")
+
+
+@pytest.fixture
+def drawn_text(monkeypatch) -> list[str]:
+    """Every string the legend and caption code hands to Pillow's drawing (drawn as usual)."""
+    from PIL import ImageDraw
+
+    texts: list[str] = []
+    original = ImageDraw.ImageDraw.text
+
+    def text(self, xy, content, *args, **kwargs):
+        texts.append(content)
+        return original(self, xy, content, *args, **kwargs)
+
+    monkeypatch.setattr(ImageDraw.ImageDraw, "text", text)
+    return texts

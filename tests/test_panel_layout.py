@@ -42,22 +42,12 @@ def test_captions_sit_in_a_band_above_each_picture_never_over_it(n):
         assert ty.size and ty.max() < top  # the caption, wholly above the picture
 
 
-def test_every_panel_keeps_its_own_legend(monkeypatch):
-    from PIL import ImageDraw
-
-    drawn: list[str] = []
-    original = ImageDraw.ImageDraw.text
-
-    def text(self, xy, content, *args, **kwargs):
-        drawn.append(content)
-        return original(self, xy, content, *args, **kwargs)
-
-    monkeypatch.setattr(ImageDraw.ImageDraw, "text", text)
+def test_every_panel_keeps_its_own_legend(drawn_text):
     data = np.random.default_rng(0).random((10, 6, 7, 8)).astype(np.float32)
     series = chronocl.TimeSeries.from_array(data)
     cvs = [chronocl.integrate(series, "0:10", m, engine="numpy") for m in ("alpha", "count")]
     image = render_views(cvs, size=(240, 120))
-    assert drawn.count("oldest") == 1 and drawn.count("no step") == 1  # each its own
+    assert drawn_text.count("oldest") == 1 and drawn_text.count("no step") == 1  # each its own
     assert image.array.shape[1] == 2 * 240
 
 

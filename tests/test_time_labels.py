@@ -10,7 +10,6 @@ import sys
 
 import numpy as np
 import pytest
-from PIL import ImageDraw
 
 import chronocl
 from chronocl import render, render_views
@@ -52,20 +51,6 @@ def nice_numbers(texts: list[str]) -> list[float]:
         assert round(mantissa, 6) in (1, 2, 5), numbers
         assert all(abs(n / gap - round(n / gap)) < 1e-6 for n in numbers), numbers
     return numbers
-
-
-@pytest.fixture
-def drawn_text(monkeypatch) -> list[str]:
-    """Every string the legend and caption code hands to Pillow's drawing (drawn as usual)."""
-    texts: list[str] = []
-    original = ImageDraw.ImageDraw.text
-
-    def text(self, xy, content, *args, **kwargs):
-        texts.append(content)
-        return original(self, xy, content, *args, **kwargs)
-
-    monkeypatch.setattr(ImageDraw.ImageDraw, "text", text)
-    return texts
 
 
 def test_display_labels():

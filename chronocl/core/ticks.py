@@ -24,33 +24,34 @@ def nice_step(lo: float, hi: float, most: int, integer: bool = False) -> float:
             step = m * 10.0**e
             if integer and step < 1:
                 continue
-            if _count(lo, hi, step) <= most:
+            if len(_indices(lo, hi, step)) <= most:
                 return float(step)
     return float(10.0 ** (exponent + 3))
 
 
+def multiples(lo: float, hi: float, step: float) -> list[float]:
+    """The multiples of `step` in [lo, hi], in increasing order."""
+    decimals = _decimals(step) + 1  # rounds away the float noise of k * step (0.3000...04)
+    return [round(k * step, decimals) for k in _indices(lo, hi, step)]
+
+
 def nice_ticks(lo: float, hi: float, most: int, integer: bool = False) -> list[float]:
     """The multiples of `nice_step` in [lo, hi], in increasing order."""
-    a, b = min(lo, hi), max(lo, hi)
-    step = nice_step(a, b, most, integer)
-    first = math.ceil(a / step - 1e-9)
-    last = math.floor(b / step + 1e-9)
-    return [_clean(k * step, step) for k in range(first, last + 1)]
+    return multiples(lo, hi, nice_step(lo, hi, most, integer))
 
 
 def tick_text(value: float, step: float) -> str:
     """A tick's label with as many decimals as the step needs (0.2 -> '0.2', 5 -> '5')."""
-    decimals = max(0, -math.floor(math.log10(step) + 1e-9)) if step > 0 else 0
-    text = f"{value:.{decimals}f}"
+    text = f"{value:.{_decimals(step) if step > 0 else 0}f}"
     return "0" if text.strip("-0.") == "" else text
 
 
-def _count(lo: float, hi: float, step: float) -> int:
+def _indices(lo: float, hi: float, step: float) -> range:
+    """k for each multiple k * step in [lo, hi]."""
     a, b = min(lo, hi), max(lo, hi)
-    return math.floor(b / step + 1e-9) - math.ceil(a / step - 1e-9) + 1
+    return range(math.ceil(a / step - 1e-9), math.floor(b / step + 1e-9) + 1)
 
 
-def _clean(value: float, step: float) -> float:
-    """`value` without the float noise of k * step (0.30000000000000004 -> 0.3)."""
-    decimals = max(0, -math.floor(math.log10(step) + 1e-9)) + 1
-    return round(value, decimals)
+def _decimals(step: float) -> int:
+    """Decimals a multiple of `step` needs (0.2 -> 1, 0.05 -> 2, 5 -> 0)."""
+    return max(0, -math.floor(math.log10(step) + 1e-9))

@@ -243,7 +243,7 @@ def chunk_files(arr: zarr.Array) -> ChunkFiles | None:
     if (
         meta.get("zarr_format") != 3
         or meta.get("storage_transformers")
-        or keys.get("name") != ("default")
+        or keys.get("name") != "default"
     ):
         return None
     codecs = [(c.get("name"), c.get("configuration") or {}) for c in meta.get("codecs") or ()]
@@ -306,15 +306,14 @@ def _write_together(writes: list[tuple[zarr.Array, int, np.ndarray]]) -> None:
     """Write step t of several arrays at once: one thread per array, so zarr encodes and
     stores their chunks concurrently (one call after another costs a round trip through zarr's
     event loop each)."""
-    if len(writes) == 1:
-        arr, t, a = writes[0]
-        arr[t] = a
-        return
 
     def write(item: tuple[zarr.Array, int, np.ndarray]) -> None:
         arr, t, a = item
         arr[t] = a
 
+    if len(writes) == 1:  # no thread for one array
+        write(writes[0])
+        return
     with ThreadPoolExecutor(len(writes)) as pool:
         list(pool.map(write, writes))
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.tf import lut_lookup
-from chronocl.core.ticks import nice_step, nice_ticks, tick_text
+from chronocl.core.ticks import multiples, nice_step, tick_text
 from chronocl.core.time_labels import check_prefer, compact, display_labels, has_labels, span_text
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
@@ -155,8 +155,8 @@ def render_views(
                 volume.release()
     if labels is None and len(chronovolumes) > 1:
         labels = [describe(cv, time_labels) for cv in chronovolumes]
-    if not labels and not legend:
-        return Image(panels[0]) if len(panels) == 1 else Image(_grid(panels, columns, bg))
+    if not labels and not legend and len(panels) == 1:
+        return Image(panels[0])
     legend_of = chronovolumes if legend else None
     return Image(compose_panels(panels, labels, legend_of, columns, bg, time_labels))
 
@@ -184,19 +184,6 @@ def describe(cv: Chronovolume, time_labels: str = "labels") -> str:
     if enhance != "none":
         extra = f", {enhance}"
     return f"{spec.get('mode', '?')}, {order}, {steps}{extra}"
-
-
-def _grid(panels: list[np.ndarray], columns: int | None, bg) -> np.ndarray:
-    n = len(panels)
-    cols = columns or default_columns(n)
-    rows = math.ceil(n / cols)
-    h, w, _ = panels[0].shape
-    out = np.empty((rows * h, cols * w, 3), dtype=np.uint8)
-    out[...] = (np.array(bg) * 255).round().astype(np.uint8)
-    for i, p in enumerate(panels):
-        r, c = divmod(i, cols)
-        out[r * h : (r + 1) * h, c * w : (c + 1) * w] = p
-    return out
 
 
 def label_font(size: int):
@@ -351,8 +338,8 @@ def _nice_ticks(draw, values, positions_x, where, font, text_rgb) -> None:
     integer = all(float(v).is_integer() for v in values)
     most = max(2, min(len(values), int(positions_x[-1] - positions_x[0]) // 16 + 1))
     while True:
-        ticks = nice_ticks(values[0], values[-1], most, integer)
-        step = nice_step(min(values), max(values), most, integer)
+        step = nice_step(values[0], values[-1], most, integer)
+        ticks = multiples(values[0], values[-1], step)
         texts = [tick_text(t, step) for t in ticks]
         widest = max(draw.textlength(t, font=font) for t in texts) if texts else 0
         if most <= 2 or len(ticks) * (widest + 12) <= positions_x[-1] - positions_x[0] + widest:

@@ -140,11 +140,8 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     """
     camera = state.panel_camera()
     box_drag = "x2" in msg and "y2" in msg
-    if box_drag:
-        corners = _rectangle_rays(msg, state.size)
-    else:
-        corners = [(msg["x"], msg["y"])]
-    hits = [probe_ray(cv, camera, state.size, x, y, state.clip) for x, y in corners]
+    rays = _rectangle_rays(msg, state.size) if box_drag else [(msg["x"], msg["y"])]
+    hits = [probe_ray(cv, camera, state.size, x, y, state.clip) for x, y in rays]
     reply = {"type": "probe", "id": msg.get("id"), "view": view, "x": msg["x"], "y": msg["y"]}
     if box_drag:
         reply |= {"x2": msg["x2"], "y2": msg["y2"]}
