@@ -87,7 +87,7 @@ def test_ingest_command(tmp_path):
     assert result.returncode == 0, result.stderr
     series = chronocl.open(tmp_path / "s.zarr")
     np.testing.assert_array_equal(series.read([0, 1]), data)
-    assert series.spacing == (2, 1, 1)
+    assert series.spacing == (1, 1, 2)  # --spacing DX DY DZ, x first
 
 
 @pytest.fixture(scope="module")

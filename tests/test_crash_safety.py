@@ -181,7 +181,7 @@ def chunks(store: Path, pid: int) -> int:
 def test_killed_ingest_leaves_nothing_and_the_rerun_is_a_clean_run(tmp_path):
     files = raw_steps(tmp_path / "raw", 1)
     clean = tmp_path / "clean" / "v.zarr"
-    ingest_raw(files, clean, dims=(NX, NY, NZ), spacing=(3.0, 2.0, 1.0))  # (dz, dy, dx)
+    ingest_raw(files, clean, dims=(NX, NY, NZ), spacing=(1.0, 2.0, 3.0))  # (dx, dy, dz)
     assert files_under(clean / "data" / "c") == STEPS  # one chunk per step
     out = tmp_path / "v.zarr"
     ingest_raw(raw_steps(tmp_path / "old", 2), out, dims=(NX, NY, NZ))  # to be replaced
@@ -381,6 +381,7 @@ def test_a_locked_streamed_run_is_neither_removed_nor_run_twice(tmp_path, monkey
     assert hidden(tmp_path, out.name) == []
 
 
+@pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")  # flat test data
 def test_failures_leave_no_partial(tmp_path, monkeypatch):
     series = chronocl.TimeSeries.from_array(1 + np.zeros((3, 5, 4, 6), np.float32))
     # A .npy onto a folder (the final rename would fail): refused, nothing left.
@@ -416,6 +417,7 @@ def test_failures_leave_no_partial(tmp_path, monkeypatch):
         (2, InvalidDataError, False),  # bad input: the same re-run would fail again
     ],
 )
+@pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")  # flat test data
 def test_a_failed_streamed_run_keeps_its_partial_only_to_resume(
     tmp_path, monkeypatch, after, error, kept
 ):

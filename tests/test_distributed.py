@@ -181,6 +181,7 @@ def test_worker_without_the_device_fails_clearly(tmp_path, client, store):
     assert not (tmp_path / "cv.zarr").exists()
 
 
+@pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")  # flat test data
 def test_in_memory_series_cannot_go_to_workers(tmp_path, client):
     series = chronocl.TimeSeries.from_array(np.ones((2, 3, 4, 5), dtype=np.float32))
     with pytest.raises(InvalidParameterError, match="save it first"):

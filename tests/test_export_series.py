@@ -21,7 +21,7 @@ from chronocl.data.formats.raw import ingest_raw
 from .test_export_vti import read_vti
 
 T, Z, Y, X = 6, 5, 4, 3  # all different, so an axis mix-up shows
-SPACING = (2.0, 1.5, 0.5)  # dz, dy, dx
+SPACING = (0.5, 1.5, 2.0)  # dx, dy, dz
 
 
 def _series(dtype=np.float32, times=None) -> TimeSeries:
@@ -59,7 +59,7 @@ def test_vti_all_steps(tmp_path):
     expected = series.read(range(T))
     for s, p in enumerate(paths[1:]):
         image, values = _read_vti(p)
-        assert image.GetSpacing() == (SPACING[2], SPACING[1], SPACING[0])
+        assert image.GetSpacing() == SPACING
         assert image.GetExtent() == (0, X - 1, 0, Y - 1, 0, Z - 1)
         assert values.dtype == np.float32
         np.testing.assert_array_equal(values, expected[s])
@@ -80,7 +80,7 @@ def test_vti_window_slab_and_time_labels(tmp_path):
     expected = series.read([1, 3, 5], 1, 4)
     for i, p in enumerate(paths[1:]):
         image, values = _read_vti(p)
-        assert image.GetOrigin() == (0.0, 0.0, 1 * SPACING[0])
+        assert image.GetOrigin() == (0.0, 0.0, 1 * SPACING[2])
         assert image.GetDimensions() == (X, Y, 3)
         assert values.dtype == np.uint16
         np.testing.assert_array_equal(values, expected[i])
@@ -128,7 +128,7 @@ def test_raw_files_and_sidecar(tmp_path):
     assert meta["dims"] == [X, Y, 2]
     assert meta["dtype"] == "uint16"
     assert meta["endian"] == "little"
-    assert meta["spacing"] == {"x": SPACING[2], "y": SPACING[1], "z": SPACING[0]}
+    assert meta["spacing"] == dict(zip("xyz", SPACING, strict=True))
     assert meta["steps"] == [1, 2, 3, 4]
     assert meta["files"] == names
     expected = series.read([1, 2, 3, 4], 1, 3)
@@ -147,7 +147,7 @@ def test_raw_reads_back_with_ingest(tmp_path):
         dims=meta["dims"],
         dtype=meta["dtype"],
         endian=meta["endian"],
-        spacing=(sp["z"], sp["y"], sp["x"]),
+        spacing=(sp["x"], sp["y"], sp["z"]),
         times=meta["times"],
     )
     np.testing.assert_array_equal(back.read(range(T)), series.read(range(T)))

@@ -10,7 +10,7 @@ from chronocl.core.errors import InvalidParameterError, OutputExistsError
 from chronocl.data.formats.vti import save_chronovolume_vti, write_vti
 
 Z, Y, X = 3, 4, 5  # odd and all different, so an axis mix-up shows
-SPACING = (2.5, 1.5, 0.5)  # dz, dy, dx
+SPACING = (0.5, 1.5, 2.5)  # dx, dy, dz
 
 
 def read_vti(path):
@@ -37,7 +37,7 @@ def _chronovolume() -> Chronovolume:
     rng = np.random.default_rng(3)
     rgba = rng.random((Z, Y, X, 4), dtype=np.float32)
     t_index = rng.integers(-1, 9, size=(Z, Y, X), dtype=np.int32)
-    sp = {"z": SPACING[0], "y": SPACING[1], "x": SPACING[2]}
+    sp = dict(zip("xyz", SPACING, strict=True))
     return Chronovolume(rgba=rgba, t_index=t_index, metadata={"spacing": sp})
 
 
@@ -49,7 +49,7 @@ def test_chronovolume_round_trip(tmp_path):
     image, arrays = read_vti(out)
     assert image.GetDimensions() == (X, Y, Z)
     assert image.GetExtent() == (0, X - 1, 0, Y - 1, 0, Z - 1)
-    assert image.GetSpacing() == (SPACING[2], SPACING[1], SPACING[0])
+    assert image.GetSpacing() == SPACING
     assert image.GetOrigin() == (0.0, 0.0, 0.0)
     assert set(arrays) == {"rgba", "t_index"}
     assert arrays["rgba"].dtype == np.float32
@@ -74,7 +74,7 @@ def test_dtypes_and_origin(tmp_path, dtype):
     big = a.astype(a.dtype.newbyteorder(">"))  # byte order of the input must not matter
     path = write_vti(tmp_path / "a.vti", {"a": a, "b": big}, spacing=SPACING, origin=(3, 2, 1))
     image, arrays = read_vti(path)
-    assert image.GetOrigin() == (1.0, 2.0, 3.0)
+    assert image.GetOrigin() == (3.0, 2.0, 1.0)  # (ox, oy, oz) as given
     for name in ("a", "b"):
         assert arrays[name].dtype == np.dtype(dtype)
         np.testing.assert_array_equal(arrays[name], a)

@@ -37,7 +37,7 @@ def test_round_trip_is_exact(tmp_path):
     np.testing.assert_array_equal(back.t_index, cv.t_index)
     assert back.rgba.dtype == np.float32 and back.rgba.shape == (3, 4, 5, 4)
     assert back.t_index.dtype == np.int32
-    assert back.metadata == META and back.spacing == (2.0, 1.0, 0.5)
+    assert back.metadata == META and back.spacing == (0.5, 1.0, 2.0)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no partial left
     with pytest.raises(OutputExistsError):
         save_chronovolume_omezarr(cv, out)

@@ -25,7 +25,7 @@ def omezarr(tmp_path):
 def test_open_omezarr_in_place_and_integrate(omezarr):
     path, data = omezarr
     series = chronocl.open(path)
-    assert series.shape == (4, 5, 6, 7) and series.spacing == (2.0, 0.5, 0.5)
+    assert series.shape == (4, 5, 6, 7) and series.spacing == (0.5, 0.5, 2.0)
     np.testing.assert_array_equal(series.read(range(4)), data[:, 0])
     ref = chronocl.integrate(series, "0:4", "max", engine="numpy")
     np.testing.assert_allclose(chronocl.integrate(series, "0:4", "max").rgba, ref.rgba, atol=1e-5)
@@ -37,7 +37,7 @@ def test_ingest_omezarr_channel_into_a_store(omezarr, tmp_path):
     assert result.returncode == 0, result.stderr
     series = chronocl.open(tmp_path / "s.zarr")
     np.testing.assert_array_equal(series.read(range(4)), data[:, 1])
-    assert series.data.chunksize[0] == 1 and series.spacing == (2.0, 0.5, 0.5)
+    assert series.data.chunksize[0] == 1 and series.spacing == (0.5, 0.5, 2.0)
 
 
 def test_chronovolume_outputs_by_suffix(tmp_path):

@@ -52,7 +52,7 @@ def test_round_trip_spacing_and_times(tmp_path, engine):
     for s in (series, reopened):
         assert s.shape == (T, Z, Y, X) and s.dtype == np.float32
         np.testing.assert_array_equal(s.read(range(T)), data)
-        assert s.spacing == (2.5, 1.0, 0.5)
+        assert s.spacing == (0.5, 1.0, 2.5)  # (dx, dy, dz)
         assert s.times == ("2020-01-01T00:00:00.000000000", *s.times[1:])
         assert s.times[2].startswith("2020-01-01T12:00")
         assert s.vmin == data.min() and s.vmax == data.max()
@@ -91,7 +91,7 @@ def test_dims_mapped_by_name_and_unsupported_dtype(tmp_path):
     series = ingest_netcdf(tmp_path / "a.nc", tmp_path / "s.zarr")
     assert series.shape == (T, Z, Y, X) and series.dtype == np.float32  # int32 -> float32
     np.testing.assert_array_equal(series.read(range(T)), data.astype(np.float32))
-    assert series.spacing == (2.5, 1.0, 1.0)
+    assert series.spacing == (1.0, 1.0, 2.5)
 
 
 def test_dims_order_override_and_squeeze(tmp_path):

@@ -82,13 +82,13 @@ def test_ngff04_channel_level_and_scale(tmp_path):
     s = open_omezarr(path, channel=1, level=0)
     np.testing.assert_array_equal(s.data.compute(), full[:, 1])
     np.testing.assert_array_equal(s.read([2, 0], 1, 3), full[[2, 0], 1, 1:3])
-    assert s.shape == (3, 4, 6, 8) and s.spacing == (2.0, 0.25, 0.25)
+    assert s.shape == (3, 4, 6, 8) and s.spacing == (0.25, 0.25, 2.0)
     assert s.times == (0.0, 1.0, 2.0)  # t * dt, dt = 0.5 * 2.0 (dataset and top-level scales)
     assert s.path == path and s._zarr is None  # a channel axis: reads go through dask
     assert s.vmin == pytest.approx(full[:, 1].min()) and s.vmax == pytest.approx(full[:, 1].max())
     low = open_omezarr(path, channel=0, level=1)
     np.testing.assert_array_equal(low.data.compute(), half[:, 0])
-    assert low.shape == (3, 2, 3, 4) and low.spacing == (4.0, 0.5, 0.5)
+    assert low.shape == (3, 2, 3, 4) and low.spacing == (0.5, 0.5, 4.0)
 
 
 def test_channels_are_variables_in_place_and_in_an_ingested_store(tmp_path, monkeypatch, capsys):
@@ -140,7 +140,7 @@ def test_ngff05_opens_in_place_with_fast_reads_and_statistics(tmp_path):
     np.testing.assert_allclose(s.stats.step_min, data.min(axis=(1, 2, 3)))
     np.testing.assert_allclose(s.stats.step_max, data.max(axis=(1, 2, 3)))
     np.testing.assert_allclose(s.stats.step_mean, data.mean(axis=(1, 2, 3)))
-    assert s.spacing == (3.0, 2.0, 1.5) and s.times == (0, 1, 2, 3)
+    assert s.spacing == (1.5, 2.0, 3.0) and s.times == (0, 1, 2, 3)
 
 
 def test_an_image_read_in_place_is_unchanged_until_its_level_changes(tmp_path):

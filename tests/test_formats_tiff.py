@@ -76,7 +76,7 @@ def test_imagej_hyperstack_and_spacing(tmp_path):
     )
     series = ingest_tiff([tmp_path / "a.tif"], tmp_path / "s.zarr")
     np.testing.assert_array_equal(series.read(range(T)), data)
-    assert series.spacing == (2.5, 0.25, 0.5)
+    assert series.spacing == (0.5, 0.25, 2.5)  # (dx, dy, dz)
 
 
 def test_single_3d_file_and_channels(tmp_path):

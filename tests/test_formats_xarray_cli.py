@@ -29,7 +29,7 @@ def dataarray(rng) -> xr.DataArray:
 def test_from_xarray_maps_dims_and_keeps_coordinates():
     array, data = dataarray(np.random.default_rng(0))
     series = chronocl.TimeSeries.from_array(array)
-    assert series.shape == (4, 3, 5, 6) and series.spacing == (2.5, 0.5, 0.25)
+    assert series.shape == (4, 3, 5, 6) and series.spacing == (0.25, 0.5, 2.5)
     assert series.times[0].startswith("2026-01-01T00")
     np.testing.assert_array_equal(series.read(range(4)), data)
     lazy = chronocl.TimeSeries.from_array(array.chunk({"time": 1}))  # dask-backed stays lazy

@@ -42,7 +42,7 @@ def test_netcdf_non_uniform_refused_or_resampled(tmp_path, monkeypatch, capsys):
     code, err = run_cli(monkeypatch, capsys, "ingest", src, "-o", out, "--resample", "uniform")
     assert code == 0 and "note: depth: non-uniform coordinate" in err, err
     series = chronocl.open(out)
-    assert series.spacing == pytest.approx((3.75, 0.5, 0.1), rel=1e-4)
+    assert series.spacing == pytest.approx((0.1, 0.5, 3.75), rel=1e-4)
     assert series.meta["resampled"][0].startswith("depth: non-uniform coordinate (steps 1 to 8)")
     np.testing.assert_allclose(series.read(range(3)), expected_resampled(array.values), rtol=1e-5)
     cubic = ("--resample", "cubic")
@@ -56,11 +56,11 @@ def test_xarray_non_uniform_refused_or_resampled():
     with pytest.raises(InvalidDataError, match="resample='uniform'"):
         chronocl.TimeSeries.from_array(array)
     series = chronocl.TimeSeries.from_array(array, resample="uniform")
-    assert series.spacing == pytest.approx((3.75, 0.5, 0.1), rel=1e-4)
+    assert series.spacing == pytest.approx((0.1, 0.5, 3.75), rel=1e-4)
     assert series.meta["resampled"] and series.dtype == np.float32
     np.testing.assert_allclose(series.read(range(3)), expected_resampled(array.values), rtol=1e-5)
     uniform = array.isel(depth=[0, 1])  # depth steps 1: the spacing is the coordinate step
-    assert chronocl.TimeSeries.from_array(uniform).spacing == pytest.approx((1.0, 0.5, 0.1))
+    assert chronocl.TimeSeries.from_array(uniform).spacing == pytest.approx((0.1, 0.5, 1.0))
     np.testing.assert_array_equal(chronocl.TimeSeries.from_array(uniform).read([1]), uniform[[1]])
 
 

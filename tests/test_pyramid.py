@@ -314,12 +314,12 @@ def test_level_series(tmp_path):
     data = values(SHAPE, "float32", 5)
     series = store(tmp_path / "s.zarr", data)
     assert series.level(0) is series and series.level_index == 0
-    extent = np.array(series.volume_shape) * np.array(series.spacing)
+    extent = np.array(series.dims) * np.array(series.spacing)
     for n, pool in itertools.product((1, 2), POOLS):
         level = series.level(n, pool)
         assert level.level_index == n and level.volume_shape == level_shapes(SHAPE[1:])[n - 1]
         assert (level.vmin, level.vmax) == (series.vmin, series.vmax)
-        np.testing.assert_allclose(np.array(level.volume_shape) * level.spacing, extent)
+        np.testing.assert_allclose(np.array(level.dims) * level.spacing, extent)
         assert level.times == series.times and level.path == series.path
         assert level.source == series.source
         arr = np.asarray(level.data.compute())
@@ -332,7 +332,7 @@ def test_level_series(tmp_path):
         assert level.level(0) is series and level.n_levels == 3
     assert series.level(2, "max").stats.step_max == series.stats.step_max
     assert series.level(2, "min").stats.step_min == series.stats.step_min
-    assert series.describe()["levels"] == "0..2 (130×9×70, 65×5×35, 33×3×18)"
+    assert series.describe()["levels"] == "0..2 (70×9×130, 35×5×65, 18×3×33)"  # x×y×z
     assert verify(tmp_path / "s.zarr")["levels checked"] == "1..2 (mean, max, min)"
 
 

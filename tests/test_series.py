@@ -40,7 +40,7 @@ def test_save_and_open_round_trip(tmp_path):
     assert (s.spacing, s.times, s.source) == ((3, 2, 1), ("a", "b", "c"), "x")
     summary = s.describe()
     assert summary["shape (T, Z, Y, X)"] == [3, 4, 5, 6]
-    assert summary["spacing (x, y, z)"] == [1, 2, 3]
+    assert summary["spacing (x, y, z)"] == [3, 2, 1]
     assert "size on disk" in summary
     with pytest.raises(OutputExistsError):
         a.save(tmp_path / "s.zarr")

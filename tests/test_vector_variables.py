@@ -61,7 +61,7 @@ def test_netcdf_magnitude_equals_numpy(tmp_path):
     src = netcdf(tmp_path / "flow.nc", c)
     series = ingest([src], tmp_path / "m.zarr", magnitude="u,v,w")
     np.testing.assert_allclose(series.read(range(T)), expected_magnitude(c), rtol=1e-6)
-    assert series.dtype == np.float32 and series.spacing == (2.0, 1.0, 0.25)
+    assert series.dtype == np.float32 and series.spacing == (0.25, 1.0, 2.0)
     assert series.meta["quantity"] == "magnitude" and series.meta["components"] == ["u", "v", "w"]
     reopened = chronocl.open(tmp_path / "m.zarr")
     assert reopened.meta == series.meta and reopened.n_levels == 2

@@ -36,7 +36,12 @@ def info(
                 f"{str(store)!r} is neither a series store nor a chronovolume: as a series, "
                 f"{_reason(as_series, store)}; as a chronovolume, {_reason(as_cv, store)}"
             ) from None
-        summary = {"chronovolume": str(store), "shape (Z, Y, X)": list(cv.shape), **cv.metadata}
+        summary = {
+            "chronovolume": str(store),
+            "dims (x, y, z)": list(cv.dims),
+            "shape (Z, Y, X)": list(cv.shape),
+            **cv.metadata,
+        }
     if as_json:
         out.print_json(json.dumps(summary, default=str))
     else:

@@ -71,7 +71,10 @@ def ingest(
     level: Annotated[int, typer.Option(help="OME-Zarr: resolution level (0 = full).")] = 0,
     spacing: Annotated[
         tuple[float, float, float] | None,
-        typer.Option(metavar="DX DY DZ", help="Raw/npy/TIFF: voxel spacing."),
+        typer.Option(
+            metavar="DX DY DZ",
+            help="Raw/npy/TIFF: voxel spacing, x first (as TimeSeries.from_array(spacing=...)).",
+        ),
     ] = None,
     times: Annotated[
         str | None,
@@ -151,7 +154,7 @@ def ingest(
     if dims_order is not None:
         options["dims_order"] = [d.strip() for d in dims_order.split(",")]
     if spacing is not None:
-        options["spacing"] = (spacing[2], spacing[1], spacing[0])
+        options["spacing"] = spacing  # x first, as the Python API takes it
     if times is not None:
         options["times"] = read_times(times)
     t0 = time.perf_counter()

@@ -52,7 +52,13 @@ class Chronovolume:
 
     @property
     def shape(self) -> tuple[int, int, int]:
+        """(Z, Y, X): the arrays' shape (`dims` is the same, x first)."""
         return self.rgba.shape[:3]  # type: ignore[return-value]
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        """(nx, ny, nz), x first: voxels along each axis."""
+        return self.rgba.shape[2::-1]  # type: ignore[return-value]
 
     @property
     def spec(self) -> IntegrationSpec:
@@ -64,8 +70,14 @@ class Chronovolume:
 
     @property
     def spacing(self) -> tuple[float, float, float]:
+        """(dx, dy, dz), x first: the voxel spacing of the series it was integrated from."""
         sp = self.metadata.get("spacing", {"x": 1.0, "y": 1.0, "z": 1.0})
-        return (sp["z"], sp["y"], sp["x"])
+        return (sp["x"], sp["y"], sp["z"])
+
+    @property
+    def spacing_zyx(self) -> tuple[float, float, float]:
+        """(dz, dy, dx): `spacing` in the arrays' axis order, for code indexing (Z, Y, X)."""
+        return self.spacing[::-1]  # type: ignore[return-value]
 
     def save(self, path: str | os.PathLike, overwrite: bool = False) -> Path:
         """Write to a zarr store atomically."""

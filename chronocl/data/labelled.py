@@ -244,7 +244,8 @@ def dataarray_layout(
 ) -> tuple[object, tuple[float, float, float], list | None, list[str]]:
     """An xarray DataArray with a time dimension as (T, Z, Y, X): (its data, a view where the
     data allow, resampled lazily when `resample` is ``"uniform"`` and a coordinate is not
-    uniform; its spacing (dz, dy, dx) from the coordinates; time labels; resampling notes)."""
+    uniform; its spacing (dx, dy, dz), x first, from the coordinates; time labels; resampling
+    notes)."""
     name = str(array.name) if array.name is not None else "data"
     ds = array.to_dataset(name=name)
     tdim, zyx, squeeze = map_dims(ds, array, name, time_dim, dims_order)
@@ -256,6 +257,6 @@ def dataarray_layout(
         lazy = da.asarray(data).rechunk({1: -1, 2: -1, 3: -1})
         apply = functools.partial(resample_step, grids=grids, first_axis=1)
         data = lazy.map_blocks(apply, dtype=resampled_dtype(lazy.dtype, grids))
-    spacing = tuple(g.spacing for g in grids)
+    spacing = tuple(g.spacing for g in reversed(grids))  # grids are z, y, x
     notes = [g.note for g in grids if g.note]
     return data, spacing, time_labels(ds, tdim), notes  # type: ignore[return-value]

@@ -45,14 +45,14 @@ def stats_from_steps(smin, smax, smean) -> SeriesStats:
 
 
 def parse_spacing(spacing: Sequence[float]) -> tuple[float, float, float]:
-    """Validate a voxel spacing (dz, dy, dx): three finite numbers > 0."""
+    """Validate a voxel spacing (dx, dy, dz), x first: three finite numbers > 0."""
     try:
         sp = tuple(float(s) for s in spacing)
     except (TypeError, ValueError):
         raise InvalidParameterError(f"spacing {spacing!r} must be three numbers") from None
     if len(sp) != 3 or not all(math.isfinite(s) and s > 0 for s in sp):
         raise InvalidParameterError(
-            f"spacing {list(sp)} must be three finite numbers > 0 (one per axis)"
+            f"spacing {list(sp)} must be three finite numbers > 0: dx, dy, dz (x first)"
         )
     return sp  # type: ignore[return-value]
 
@@ -110,7 +110,8 @@ def unreadable_metadata(path: Path) -> str | None:
 
 
 def checked_attrs(path: Path, arr, attrs: dict) -> tuple[SeriesStats, tuple, tuple]:
-    """The statistics, spacing and time labels of a chronocl store, checked against its array.
+    """The statistics, spacing (dx, dy, dz), x first, and time labels of a chronocl store,
+    checked against its array.
 
     Raises StoreCorruptError when they are missing, malformed or disagree with the array.
     """
@@ -158,7 +159,8 @@ def checked_attrs(path: Path, arr, attrs: dict) -> tuple[SeriesStats, tuple, tup
         )
     sp = attrs.get("spacing", {})
     try:
-        spacing = parse_spacing((sp.get("z", 1.0), sp.get("y", 1.0), sp.get("x", 1.0)))
+        # Stored by axis name ({"x", "y", "z"}), so no order is assumed on disk.
+        spacing = parse_spacing((sp.get("x", 1.0), sp.get("y", 1.0), sp.get("z", 1.0)))
     except (ChronoclError, AttributeError):
         raise damaged(path, f"its voxel spacing {sp!r} is not three numbers > 0") from None
     times = attrs.get("times", [])

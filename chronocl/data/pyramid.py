@@ -166,9 +166,12 @@ def _pool_axis(a: np.ndarray, axis: int, op, acc, out: np.ndarray | None = None)
 
 # -- reading ----------------------------------------------------------------------------------
 def describe_levels(volume_shape: Sequence[int], n_levels: int) -> str:
-    """'0..2 (256³, 128³, 64³)' for a series with n_levels levels (level 0 included)."""
+    """'0..2 (256³, 128³, 64³)' for a series with n_levels levels (level 0 included); each
+    level's size x×y×z, x first, from `volume_shape` (Z, Y, X)."""
     shapes = [tuple(volume_shape), *level_shapes(volume_shape)][:n_levels]
-    text = ", ".join(f"{s[0]}³" if len(set(s)) == 1 else "×".join(map(str, s)) for s in shapes)
+    text = ", ".join(
+        f"{s[0]}³" if len(set(s)) == 1 else "×".join(map(str, s[::-1])) for s in shapes
+    )
     return f"{'0' if n_levels == 1 else f'0..{n_levels - 1}'} ({text})"
 
 
@@ -296,7 +299,8 @@ def count_levels(series) -> int:
 
 
 def level_parts(series, n: int, pool: str) -> dict:
-    """The fields of level `n` (> 0) of `series` (level 0): data, stats, spacing, _zarr."""
+    """The fields of level `n` (> 0) of `series` (level 0): data, stats, spacing (x first),
+    _zarr."""
     check_pool(pool)
     if isinstance(n, bool) or not isinstance(n, int | np.integer):
         raise InvalidParameterError(f"level {n!r} is not a whole number; give 0, 1, ...")
@@ -310,7 +314,7 @@ def level_parts(series, n: int, pool: str) -> dict:
         have = f"levels 0..{top}" if top else "only level 0"
         raise InvalidParameterError(f"level {n} is out of range: {name} has {have}")
     factor = tuple(a / b for a, b in zip(series.volume_shape, shapes[n - 1], strict=True))
-    spacing = tuple(s * f for s, f in zip(series.spacing, factor, strict=True))
+    spacing = tuple(s * f for s, f in zip(series.spacing, factor[::-1], strict=True))
     if lazy:
         data = lazy_level(series.data, n, pool)
         stats = lazy_stats(data, series.vmin, series.vmax)

@@ -39,8 +39,9 @@ def write_series(
 ) -> TimeSeries:
     """Write steps (each (Z, Y, X)) to a new store atomically and open it.
 
-    The options (n_steps, volume_shape and dtype required; spacing, times, source, overwrite,
-    progress, nan_fill, labels, chunk_bytes, compressor, checksum) are `write_store`'s.
+    The options (n_steps, volume_shape (Z, Y, X) and dtype required; spacing (dx, dy, dz), x
+    first; times, source, overwrite, progress, nan_fill, labels, chunk_bytes, compressor,
+    checksum) are `write_store`'s.
     """
     write_store(path, steps, **options)  # type: ignore[arg-type]
     return open_store(path)

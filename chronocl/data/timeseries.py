@@ -53,14 +53,16 @@ STEPS_PER_READ = 8
 
 @dataclass
 class TimeSeries:
-    """A (T, Z, Y, X) series with its statistics, spacing (dz, dy, dx) and time labels.
+    """A (T, Z, Y, X) series with its statistics, voxel spacing and time labels.
 
-    `level_index` is 0 for the series itself, n for its coarse level n (`level(n)`).
+    `spacing` is (dx, dy, dz), x first, like every per-axis triple of the API (`dims`, probe
+    points and boxes); only array shapes (`shape`, `volume_shape`) follow the array's (T, Z,
+    Y, X). `level_index` is 0 for the series itself, n for its coarse level n (`level(n)`).
     """
 
     data: da.Array
     stats: SeriesStats
-    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)  # (dx, dy, dz), x first
     times: tuple = ()
     source: str = ""
     path: Path | None = None
@@ -107,8 +109,18 @@ class TimeSeries:
 
     @property
     def volume_shape(self) -> tuple[int, int, int]:
-        """(Z, Y, X) of one step."""
+        """(Z, Y, X) of one step: the array's shape (`dims` is the same, x first)."""
         return self.shape[1:]  # type: ignore[return-value]
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        """(nx, ny, nz), x first: voxels along each axis of one step (`ingest --dims`)."""
+        return self.shape[:0:-1]  # type: ignore[return-value]
+
+    @property
+    def spacing_zyx(self) -> tuple[float, float, float]:
+        """(dz, dy, dx): `spacing` in the array's axis order, for code indexing (Z, Y, X)."""
+        return self.spacing[::-1]  # type: ignore[return-value]
 
     @property
     def dtype(self) -> np.dtype:
@@ -300,9 +312,12 @@ class TimeSeries:
         source: str = "array",
         resample: str | None = None,
     ) -> TimeSeries:
-        """Wrap a numpy or dask array (T, Z, Y, X), or an xarray DataArray with a time
-        dimension (dimensions mapped by name, spacing and time labels from its coordinates);
-        no copy is made. Statistics are computed in one pass.
+        """Wrap a numpy or dask array (T, Z, Y, X) with voxel `spacing` (dx, dy, dz), x first.
+
+        An xarray DataArray with a time dimension has its dimensions mapped by name, spacing
+        and time labels from its coordinates. No copy is made; statistics are computed in one
+        pass. `spacing` is x first although the array is (T, Z, Y, X): a simulation's
+        ``[dx, dy, dz]`` goes in as it is.
 
         A DataArray coordinate that is not uniformly spaced is refused, or with
         ``resample="uniform"`` interpolated lazily onto uniform spacing (noted in `meta`).
@@ -370,12 +385,13 @@ class TimeSeries:
         d = {
             "path": str(self.path) if self.path else None,
             "source": self.source,
+            "dims (x, y, z)": [x, y, z],
             "shape (T, Z, Y, X)": [t, z, y, x],
             "dtype": str(self.dtype),
             "value range": [self.vmin, self.vmax],
             "steps": t,
             "time labels": f"{self.times[0]} .. {self.times[-1]}",
-            "spacing (x, y, z)": [self.spacing[2], self.spacing[1], self.spacing[0]],
+            "spacing (x, y, z)": list(self.spacing),
             "chunks": list(self.data.chunksize),
             "size in memory": _human(t * z * y * x * self.dtype.itemsize),
             "levels": describe_levels(self.volume_shape, self.n_levels),

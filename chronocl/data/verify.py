@@ -29,7 +29,12 @@ def verify(path: str | os.PathLike, progress: bool = False) -> dict:
         series = open_series(path)
     except StoreFormatError:
         cv = Chronovolume.load(path)  # reads and checks every chunk
-        return {"chronovolume": str(path), "shape (Z, Y, X)": list(cv.shape), "status": "ok"}
+        return {
+            "chronovolume": str(path),
+            "dims (x, y, z)": list(cv.dims),
+            "shape (Z, Y, X)": list(cv.shape),
+            "status": "ok",
+        }
     summary = {"series": str(path), "steps checked": series.n_steps}
     for name in [None, *series.variables[1:]]:  # every variable of a multi-variable store
         one = series if name is None else series.variable(name)

@@ -83,7 +83,8 @@ def write_store(
     levels: bool = True,
     attrs: dict | None = None,
 ) -> None:
-    """Write steps (each (Z, Y, X)) to a new store at `path` atomically.
+    """Write steps (each (Z, Y, X)) to a new store at `path` atomically; `spacing` is (dx, dy,
+    dz), x first.
 
     Non-finite values are rejected unless `nan_fill` is given, which replaces them.
     `labels` name each step's origin (e.g. its file) in error messages. Chunks are
@@ -181,7 +182,7 @@ def write_store(
             "step_min": list(stats.step_min),
             "step_max": list(stats.step_max),
             "step_mean": list(stats.step_mean),
-            "spacing": {"x": spacing[2], "y": spacing[1], "z": spacing[0]},
+            "spacing": dict(zip("xyz", spacing, strict=True)),
             "times": list(times),
             "source": source,
             **extra,

@@ -97,12 +97,11 @@ class Dataset:
         return {"range": [lo, hi], "counts": counts.tolist(), "steps": chosen}
 
     def curve(self, voxel: tuple[int, int, int] | None = None, box: object = None) -> TimeCurve:
-        """v(t) at `voxel` (z, y, x), or the mean/min/max over `box` ((x0, x1), (y0, y1),
+        """v(t) at `voxel` (x, y, z), or the mean/min/max over `box` ((x0, x1), (y0, y1),
         (z0, z1)), over every step of the series: `chronocl.data.probe.probe`'s curve."""
         if box is not None:
             return probe(self.series, region=box)
-        z, y, x = voxel  # type: ignore[misc]
-        return probe(self.series, x, y, z)
+        return probe(self.series, *voxel)  # type: ignore[misc]
 
 
 def find_dataset(datasets: list[Dataset], ref: int | str, path: str | None = None) -> int:

@@ -31,7 +31,7 @@ def probe_ray(
     """March the ray through pixel (x, y) (fractions of the panel, top-left origin) over the
     chronovolume's opacity on the CPU, with the raycaster's camera, box and compositing.
 
-    Returns {"voxel": (z, y, x) or None, "opacity": accumulated opacity there,
+    Returns {"voxel": (x, y, z) voxel indices or None, "opacity": accumulated opacity there,
     "reached": whether the accumulated opacity passed `threshold`}. When it never does, the
     voxel of the largest opacity increment is returned (None if the ray sees nothing).
     """
@@ -87,8 +87,7 @@ def probe_ray(
         if not (gained > 0).any():
             return none
         k, reached = int(np.argmax(gained)), False
-    ix, iy, iz = (int(v) for v in idx[k])
-    return {"voxel": (iz, iy, ix), "opacity": float(acc[k]), "reached": reached}
+    return {"voxel": tuple(int(v) for v in idx[k]), "opacity": float(acc[k]), "reached": reached}
 
 
 def project(
@@ -110,11 +109,9 @@ def project(
 def box_fractions(
     cv: Chronovolume, voxel: tuple[float, float, float]
 ) -> tuple[float, float, float]:
-    """The centre of voxel (z, y, x) of `cv` (a fractional index: between voxels) as x, y, z
+    """The centre of voxel (x, y, z) of `cv` (a fractional index: between voxels) as x, y, z
     fractions of its box."""
-    nz, ny, nx = cv.shape
-    z, y, x = voxel
-    return (x + 0.5) / nx, (y + 0.5) / ny, (z + 0.5) / nz
+    return tuple((v + 0.5) / n for v, n in zip(voxel, cv.dims, strict=True))  # type: ignore[return-value]
 
 
 BOX_RAYS = 12  # rays along each side of a dragged rectangle (at most one per pixel)
@@ -154,14 +151,14 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     empty = {"voxel": None, "box": None, "values": None, "min": None, "max": None, "csv": None}
     if any(h["voxel"] is None for h in hits):
         return reply | empty
-    voxels = np.array([h["voxel"] for h in hits])  # (z, y, x) per ray
+    voxels = np.array([h["voxel"] for h in hits])  # (x, y, z) per ray
     lo, hi = voxels.min(axis=0), voxels.max(axis=0) + 1
     if not box_drag:
-        z, y, x = hits[0]["voxel"]
-        curve = ds.curve((z, y, x))
-        reply |= {"voxel": {"z": z, "y": y, "x": x}, "box": None}
+        x, y, z = hits[0]["voxel"]
+        curve = ds.curve((x, y, z))
+        reply |= {"voxel": {"x": x, "y": y, "z": z}, "box": None}
     else:
-        box = tuple((int(lo[a]), int(hi[a])) for a in (2, 1, 0))  # x, y, z ranges
+        box = tuple((int(a), int(b)) for a, b in zip(lo, hi, strict=True))  # x, y, z ranges
         curve = ds.curve(box=box)
         reply |= {"voxel": None, "box": {a: list(r) for a, r in zip("xyz", box, strict=True)}}
     centre = tuple(float(v) for v in (lo + hi - 1) / 2)

@@ -76,7 +76,7 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
 def geometry(cv: Chronovolume) -> tuple[np.ndarray, np.ndarray]:
     """World extent (x, y, z; longest side 1) and voxel size, as the raycaster lays them out."""
     nz, ny, nx = cv.shape
-    dz, dy, dx = cv.spacing
+    dx, dy, dz = cv.spacing
     physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
     extent = physical / physical.max()
     return extent, extent / np.array([nx, ny, nz])

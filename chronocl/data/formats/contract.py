@@ -51,7 +51,7 @@ class Steps:
     n_steps: int
     volume_shape: tuple[int, ...]
     dtype: np.dtype
-    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)  # (dx, dy, dz), x first
     source: str = ""
     times: Sequence | None = None
     labels: Sequence[str] | None = None

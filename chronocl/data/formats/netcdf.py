@@ -131,7 +131,7 @@ def variable_steps(
         n_steps=n_steps,
         volume_shape=tuple(int(v.sizes[d]) for d in zyx),
         dtype=resampled_dtype(dtype, grids),
-        spacing=tuple(g.spacing for g in grids),  # type: ignore[arg-type]
+        spacing=tuple(g.spacing for g in reversed(grids)),  # type: ignore[arg-type]  # x first
         times=time_labels(ds, tdim),
         source=f"netcdf: {p}:{name}",
         labels=[f"{p.name}:{name} step {t}" for t in range(n_steps)],

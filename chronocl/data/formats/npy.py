@@ -29,7 +29,8 @@ def ingest_npy(
     overwrite: bool = False,
     progress: bool = False,
 ) -> TimeSeries:
-    """A .npy of shape (T, Z, Y, X), read memory-mapped one step at a time."""
+    """A .npy of shape (T, Z, Y, X) with voxel `spacing` (dx, dy, dz), x first, read
+    memory-mapped one step at a time."""
     steps = npy_steps(path, spacing, times)
     return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
 

@@ -9,7 +9,7 @@ resolution level (``multiscales[0].datasets[level]``) and one channel are
 picked; the level array is wrapped with ``dask.array.from_zarr`` and
 transposed to (T, Z, Y, X) without copying anything.
 
-Voxel spacing (dz, dy, dx) comes from the dataset's ``scale`` transformation
+Voxel spacing (dx, dy, dz) comes from the dataset's ``scale`` transformation
 times the multiscale's top-level ``scale`` when present; a time scale ``dt``
 other than 1 makes the time labels ``t * dt``. Translations are ignored.
 
@@ -137,7 +137,7 @@ def open_omezarr(
             f"channel {channel} is out of range: {str(p)!r} has no channel axis (1 channel, 0)"
         )
     scale = _scale(ms, ds, len(axes), p)
-    spacing = parse_spacing([scale[roles[a]] for a in SPATIAL])
+    spacing = parse_spacing([scale[roles[a]] for a in "xyz"])
     dt = scale[roles["t"]]
     times = None
     if dt != 1.0:
@@ -182,8 +182,8 @@ def _adopt_levels(series: TimeSeries, group, datasets: list, index: list, order:
         if data.shape[0] != series.n_steps or tuple(data.shape[1:]) not in shapes:
             continue
         n = shapes.index(tuple(data.shape[1:])) + 1
-        extent = [s * a for s, a in zip(series.spacing, series.volume_shape, strict=True)]
-        spacing = tuple(e / b for e, b in zip(extent, data.shape[1:], strict=True))
+        extent = [s * a for s, a in zip(series.spacing, series.dims, strict=True)]  # x first
+        spacing = tuple(e / b for e, b in zip(extent, data.shape[:0:-1], strict=True))
         stats = lazy_stats(data, series.vmin, series.vmax)
         series._levels[n, "mean"] = dataclasses.replace(
             series,
@@ -256,8 +256,7 @@ def save_chronovolume_omezarr(
         raise StoreFormatError(f"chronovolume rgba has shape {rgba.shape}; expected (Z, Y, X, 4)")
     z, y, x, _ = rgba.shape
     zc = max(1, min(z, (8 * 2**20) // max(1, y * x * 4)))
-    dz, dy, dx = (float(s) for s in cv.spacing)
-    scale = [dz, dy, dx]
+    scale = [float(s) for s in cv.spacing_zyx]  # the axes are z, y, x
     with atomic_directory(path, overwrite) as tmp:
         root = zarr.open_group(store=str(tmp), mode="w", zarr_format=2)
         _create(root, "0", np.moveaxis(rgba, 3, 0), (1, zc, y, x))

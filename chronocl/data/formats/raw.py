@@ -49,7 +49,7 @@ def ingest_raw(
     overwrite: bool = False,
     progress: bool = False,
 ) -> TimeSeries:
-    """One raw file per time step; `dims` is (NX, NY, NZ), `spacing` is (dz, dy, dx)."""
+    """One raw file per time step; `dims` is (NX, NY, NZ) and `spacing` (dx, dy, dz), x first."""
     steps = raw_steps(inputs, dims, dtype, endian, spacing, times)
     return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
 
@@ -171,7 +171,7 @@ def export_raw(job: StepExport) -> list[Path]:
     names = [job.step_name(s, ".raw") for s in steps]
     little = series.dtype.newbyteorder("<")
     _, _, ny, nx = series.shape
-    dz, dy, dx = series.spacing
+    dx, dy, dz = series.spacing
     dims = [nx, ny, job.z1 - job.z0]
     sidecar = {
         "format": "chronocl.raw",

@@ -6,7 +6,7 @@ as (T, Z, Y, X). Length-1 axes (an ImageJ channel axis with C == 1) are
 dropped; more channels or colour samples are refused. Data are read through
 tifffile's zarr view, so one step (a few pages) is in memory at once.
 
-Spacing (dz, dy, dx) comes from the ``spacing`` argument when given, else from
+Spacing (dx, dy, dz), x first, comes from the ``spacing`` argument when given, else from
 the first file: x and y from the XResolution/YResolution tags, z from the
 ImageJ ``spacing`` entry, 1.0 where missing.
 """
@@ -42,7 +42,7 @@ class _Stack:
     shape: tuple[int, ...]  # series shape with length-1 axes dropped
     axes: str
     dtype: np.dtype
-    spacing: tuple[float, float, float]
+    spacing: tuple[float, float, float]  # (dx, dy, dz), x first
     kept: tuple[int, ...]  # index in the file's series of each axis in `shape`
 
 
@@ -56,7 +56,8 @@ def ingest_tiff(
     overwrite: bool = False,
     progress: bool = False,
 ) -> TimeSeries:
-    """Several 3D TIFF stacks (one per step, globs allowed) or one 4D TIFF -> store at `out`."""
+    """Several 3D TIFF stacks (one per step, globs allowed) or one 4D TIFF -> store at `out`;
+    `spacing` is (dx, dy, dz), x first (default: the first file's)."""
     files = expand_inputs(inputs)
     check_output(out, overwrite)
     steps = tiff_steps(files, spacing=spacing, times=times)
@@ -201,9 +202,9 @@ def _inspect(p: Path) -> _Stack:
             page = tif.pages.first
             ij = tif.imagej_metadata or {}
             spacing = (
-                _positive(ij.get("spacing")),
-                _resolution(page.tags.get("YResolution")),
                 _resolution(page.tags.get("XResolution")),
+                _resolution(page.tags.get("YResolution")),
+                _positive(ij.get("spacing")),
             )
     except ChronoclError:
         raise

@@ -7,8 +7,7 @@ count then its little-endian bytes, x fastest). Arrays are point data on the
 grid; (Z, Y, X) arrays are scalars and (Z, Y, X, C) arrays have C components.
 Files are written to a temporary sibling and renamed when complete.
 
-Spacing and origin are given in chronocl's (z, y, x) order and written in
-VTK's (x, y, z) order.
+Spacing and origin are (x, y, z), x first, as everywhere in chronocl's API and in VTK.
 
 An export of steps writes a folder OUT holding ``<stem>_t{step:05d}.vti`` per step, each with
 the point array ``value``, and ``<stem>.pvd``; a z slab's files carry the slab's origin.
@@ -61,7 +60,7 @@ def write_vti(
 ) -> Path:
     """Write `arrays` ({name: (Z, Y, X) or (Z, Y, X, C)}) as point data of one .vti file.
 
-    `spacing` is (dz, dy, dx) and `origin` (oz, oy, ox). Returns the path written.
+    `spacing` is (dx, dy, dz) and `origin` (ox, oy, oz), x first. Returns the path written.
     """
     named = _check_arrays(arrays)
     sp = _check_triple(spacing, "spacing", positive=True)
@@ -117,7 +116,7 @@ def save_chronovolume_vti(
 def export_vti(job: StepExport) -> list[Path]:
     """Write each step as a .vti and the .pvd collection of them; the .pvd comes first."""
     series, target, steps = job.series, job.target, job.steps
-    dz = series.spacing[0]
+    dz = series.spacing[2]
     names = [job.step_name(s, ".vti") for s in steps]
     with atomic_directory(target, job.overwrite) as tmp:
         tmp.mkdir(parents=True)
@@ -128,7 +127,7 @@ def export_vti(job: StepExport) -> list[Path]:
                 tmp / name,
                 {VTI_ARRAY: job.read(s)},
                 spacing=series.spacing,
-                origin=(job.z0 * dz, 0.0, 0.0),
+                origin=(0.0, 0.0, job.z0 * dz),
             )
         entries = "\n".join(
             f'    <DataSet timestep="{_time_value(series, s)}" group="" part="0" '
@@ -188,16 +187,16 @@ def _check_triple(values: Sequence[float], what: str, positive: bool) -> tuple[f
     try:
         t = tuple(float(v) for v in values)
     except (TypeError, ValueError):
-        raise InvalidParameterError(f"{what} {values!r} must be three numbers (z, y, x)") from None
+        raise InvalidParameterError(f"{what} {values!r} must be three numbers (x, y, z)") from None
     ok = len(t) == 3 and all(math.isfinite(v) and (v > 0 or not positive) for v in t)
     if not ok:
         need = "finite numbers > 0" if positive else "finite numbers"
-        raise InvalidParameterError(f"{what} {list(t)} must be three {need} (z, y, x)")
+        raise InvalidParameterError(f"{what} {list(t)} must be three {need} (x, y, z)")
     return t
 
 
-def _xyz(zyx: Sequence[float]) -> str:
-    return " ".join(repr(float(v)) for v in (zyx[2], zyx[1], zyx[0]))
+def _xyz(xyz: Sequence[float]) -> str:
+    return " ".join(repr(float(v)) for v in xyz)
 
 
 def _write_block(f: BinaryIO, a: np.ndarray) -> None:
