@@ -1,6 +1,7 @@
 """`chronocl render --state SESSION.json`: draw what the viewer showed when the session was
-saved (same data set, window, views, camera, transfer functions, clip, size), as the viewer's
-Save PNG draws it. Options given on the command line override the session's fields."""
+saved (same data set, window, views, camera, transfer functions, clip, box outline, size), as
+the viewer's Save PNG draws it. Options given on the command line override the session's
+fields; the axis triad is drawn only when --axes is given (the Save PNG has none)."""
 
 from __future__ import annotations
 
@@ -81,11 +82,10 @@ def render_state(state_path: Path, options: dict) -> None:
     data_tf = setting.data_tf if setting else None
     if "colormap" in options:
         data_tf = (data_tf or state.data_tf).with_colormap(options["colormap"])
-    spec = {
-        "data_tf": data_tf,
-        "time_tf": time_tf or (setting.time_tf if setting else None),
-        "normalize": options.get("normalize"),
-    }
+    time_tf = time_tf or (setting.time_tf if setting else None)
+    if time_tf is None and data_tf is not None:
+        time_tf = _following(state.time_tf_object(), data_tf)
+    spec = {"data_tf": data_tf, "time_tf": time_tf, "normalize": options.get("normalize")}
     t0 = time.perf_counter()
     image = render_session(
         state,
@@ -93,11 +93,23 @@ def render_state(state_path: Path, options: dict) -> None:
         engine=options.get("engine", "opencl"),
         device=options.get("device"),
         time_labels=time_labels,
+        axes=bool(options.get("axes", False)),
         **{k: v for k, v in spec.items() if v is not None},
     )
     image.save(out, overwrite=overwrite)
     modes = ", ".join(m for m, _ in state.views)
     err.print(f"wrote {out} ({modes} from {state_path.name}; {time.perf_counter() - t0:.2f} s)")
+
+
+def _following(time_tf, data_tf):
+    """The session's time TF with its colours following a new data TF as where none is chosen
+    (`TimeTF.for_data`: lightness under a colour map, rgb under grey), if they are one of
+    those two; None where the session chose others (kept)."""
+    from chronocl.core.tf import TimeTF
+
+    if time_tf.color.preset not in ("rgb", "lightness"):
+        return None
+    return dataclasses.replace(time_tf, color=TimeTF.for_data(data_tf.points).color)
 
 
 def _session_fields(session: dict, options: dict) -> dict:
@@ -127,7 +139,11 @@ def _session_fields(session: dict, options: dict) -> dict:
             )
         fields["window"] = {"t0": t0, "t1": t1, "stride": rest[0] if rest else 1}
     camera = dict(session["camera"])
-    for key in ("azimuth", "elevation", "zoom", "projection"):
+    if "up" in options:
+        from chronocl.render.camera import Camera
+
+        Camera(up=options["up"])  # an unknown axis is named as on the command line
+    for key in ("azimuth", "elevation", "zoom", "projection", "up"):
         if key in options:
             camera[key] = options[key]
     fields["camera"] = camera

@@ -1,7 +1,11 @@
-"""The orbit camera: azimuth and elevation around what it frames, zoom, field of view.
+"""The orbit camera: azimuth and elevation around what it frames, zoom, field of view, up axis.
 
-World space: the volume box is centred at the origin with x right, y up, z towards the
-viewer at azimuth = elevation = 0, and its longest side has length 1 (voxel spacing honoured).
+World space: the volume box, in the data's own axes, centred at the origin, its longest side
+of length 1 (voxel spacing honoured). `up` names the data axis that points up on the screen
+at elevation 0; azimuth turns around it. At azimuth = elevation = 0 the first other axis (in
+x, y, z order) points right and the last towards or away from the viewer, as a right-handed
+frame has it (`UP_BASES`): up y (the default) has x right and z towards the viewer; up z has
+x right and y away from the viewer (the viewer on the -y side); up x has y right and z away.
 The camera frames the whole box, or (`frame="visible"`, the default) a `focus` box: the part of
 the volume that is not transparent, which `chronocl.render.framing` finds and fills in before
 drawing. It orbits about the centre of what it frames; zoom 1 fits that box's bounding sphere.
@@ -20,12 +24,22 @@ from chronocl.core.errors import InvalidParameterError, UnknownNameError
 PROJECTIONS = ("perspective", "orthographic")
 FRAMES = ("visible", "box")  # what zoom 1 fits: the non-transparent region, or the whole box
 MIN_ZOOM, MAX_ZOOM = 0.01, 100.0  # beyond, the volume is a dot or the view is inside one voxel
+UP_AXES = ("x", "y", "z")
+# For each up axis, the data axes (rows) that point right, up and towards the viewer at
+# azimuth = elevation = 0: a rotation, so `up z` draws what `up y` draws of the data turned
+# to put z where y was.
+UP_BASES = {
+    "x": np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]),
+    "y": np.eye(3),
+    "z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+}
 
 
 @dataclass(frozen=True)
 class Camera:
     """Orbit camera. `zoom` > 1 magnifies; `view_height` (world units) fixes an orthographic
-    view's height exactly, for pixel-exact views.
+    view's height exactly, for pixel-exact views. `up` (x, y or z) is the data axis that
+    points up on the screen at elevation 0, the axis azimuth turns around.
 
     `frame="visible"` frames `focus`, a world box (x0, y0, z0, x1, y1, z1), when it is set
     (`render` sets it to the visible region of what it draws); `frame="box"` always frames
@@ -39,6 +53,7 @@ class Camera:
     view_height: float | None = None
     frame: str = "visible"
     focus: tuple[float, float, float, float, float, float] | None = None
+    up: str = "y"
 
     def __post_init__(self) -> None:
         for name in ("azimuth", "elevation", "zoom", "fov"):
@@ -62,6 +77,11 @@ class Camera:
             math.isfinite(self.view_height) and self.view_height > 0
         ):
             raise InvalidParameterError(f"view_height is {self.view_height}; it must be > 0")
+        if self.up not in UP_AXES:
+            raise UnknownNameError(
+                f"unknown up axis {self.up!r}; choose x, y or z (the data axis that points "
+                "up on the screen)"
+            )
         if self.frame not in FRAMES:
             raise UnknownNameError(
                 f"unknown frame {self.frame!r}; choose visible (the non-transparent region) "
@@ -81,9 +101,25 @@ class Camera:
         return replace(self, azimuth=self.azimuth + degrees)
 
     def eye_direction(self) -> np.ndarray:
-        """Unit vector from the centre towards the eye."""
+        """Unit vector from the centre towards the eye, in data axes (x, y, z)."""
+        return UP_BASES[self.up].T @ self._orbit_direction()
+
+    def _orbit_direction(self) -> np.ndarray:
+        # The eye direction in the up basis (right, up, towards the viewer at 0, 0).
         az, el = math.radians(self.azimuth), math.radians(self.elevation)
         return np.array([math.cos(el) * math.sin(az), math.sin(el), math.cos(el) * math.cos(az)])
+
+    def screen_axes(self) -> np.ndarray:
+        """Rows: the unit vectors (data axes x, y, z) that point right, up and towards the
+        eye on the screen; the view's rotation, which the axis triad draws."""
+        return look_at(self.eye_direction(), np.zeros(3), self._up_vector())[:3, :3]
+
+    def _up_vector(self) -> np.ndarray:
+        # Looking straight down or up the up axis, it is parallel to the view: the axis
+        # towards the viewer at azimuth 0 stands in for it.
+        basis = UP_BASES[self.up]
+        y = self._orbit_direction()[1]
+        return -basis[2] if y > 0.999 else basis[2] if y < -0.999 else basis[1]
 
     def view_direction(self) -> tuple[float, float, float]:
         """Unit viewing direction (eye towards the centre), for silhouette enhancement."""
@@ -103,7 +139,7 @@ class Camera:
         half_fov = math.radians(self.fov) / 2
         distance = radius / math.sin(half_fov) / self.zoom
         eye = centre + self.eye_direction() * distance
-        view = look_at(eye, centre, _up_for(self.eye_direction()))
+        view = look_at(eye, centre, self._up_vector())
         # The whole box lies within box_radius of the origin: near and far keep all of it.
         off = float(np.linalg.norm(centre))
         near = max(distance - off - 2 * box_radius, 1e-3 * distance)
@@ -114,15 +150,6 @@ class Camera:
             height = self.view_height if self.view_height is not None else 2 * radius / self.zoom
             proj = orthographic(height * aspect, height, near, far)
         return view, proj
-
-
-def _up_for(eye_dir: np.ndarray) -> np.ndarray:
-    # Looking straight down or up, world y is parallel to the view: use z as "up" instead.
-    return (
-        np.array([0.0, 0.0, -1.0 if eye_dir[1] > 0 else 1.0])
-        if abs(eye_dir[1]) > 0.999
-        else (np.array([0.0, 1.0, 0.0]))
-    )
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:

@@ -82,7 +82,7 @@ class Raycaster:
             )
         )
         tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-        dz, dy, dx = cv.spacing
+        dx, dy, dz = cv.spacing
         physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
         extent = physical / physical.max()
         voxel = extent / np.array([nx, ny, nz])

@@ -58,7 +58,7 @@ class ModeViews:
     `size`, with a legend (and a label per panel when there are several).
 
     `spec_args` are the arguments of `chronocl.make_spec` shared by every mode; `draw_args`
-    those of `render_views` (background, clip, outline, time_labels).
+    those of `render_views` (background, clip, outline, axes, time_labels).
     """
 
     series: TimeSeries

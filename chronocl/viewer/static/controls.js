@@ -18,6 +18,7 @@ function setRange(id, [lo, hi]) {
 export function fillControls(c) {
   fillSelect($('nviews'), Array.from({ length: c.limits.max_views }, (_, k) => k + 1));
   fillSelect($('projection'), c.projections);
+  fillSelect($('up'), c.up_axes);
   fillSelect($('background'), c.backgrounds);
   fillSelect($('time-color'), c.time_colors);
   fillSelect($('time-alpha'), c.time_alphas);
@@ -35,6 +36,7 @@ export function syncControls() {
   const st = S.state;
   $('nviews').value = st.views.length;
   $('projection').value = st.camera.projection;
+  $('up').value = st.camera.up;
   $('background').value = st.background;
   $('outline').checked = st.outline;
   $('time-color').value = st.time_tf.color;

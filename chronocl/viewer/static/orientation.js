@@ -2,10 +2,11 @@
 // camera reset (the data set's opening camera) and the six standard views, named as in
 // ParaView: "+X" looks along +X (the eye on the -X side), and so on.
 //
-// The triad is computed here from the camera's azimuth and elevation with the same basis the
-// server renders with (chronocl/render/camera.py: eye_direction, _up_for, look_at), so it
-// shows the world axes of the frame being drawn: x right, y up, z towards the viewer at
-// azimuth = elevation = 0.
+// The triad is computed here from the camera's azimuth, elevation and up axis with the same
+// basis the server renders with (chronocl/render/camera.py: UP_BASES, eye_direction,
+// _up_vector, look_at), so it shows the data axes of the frame being drawn: with up y, x right,
+// y up, z towards the viewer at azimuth = elevation = 0; with up z, x right, z up, y away;
+// with up x, y right, x up, z away. The up menu picks that axis; azimuth turns around it.
 
 import { update } from './connection.js';
 import { $, S } from './state.js';
@@ -13,15 +14,35 @@ import { panels } from './views.js';
 
 const POLE = 89.9; // the protocol's elevation limit
 
-// Camera angles of each standard view (view direction = -eye direction).
-export const STANDARD_VIEWS = {
-  '+x': { azimuth: -90, elevation: 0, label: '+X', title: 'look along +X (from the −X side)' },
-  '-x': { azimuth: 90, elevation: 0, label: '−X', title: 'look along −X (from the +X side)' },
-  '+y': { azimuth: 0, elevation: -POLE, label: '+Y', title: 'look along +Y (from below)' },
-  '-y': { azimuth: 0, elevation: POLE, label: '−Y', title: 'look along −Y (from above)' },
-  '+z': { azimuth: 180, elevation: 0, label: '+Z', title: 'look along +Z (from behind)' },
-  '-z': { azimuth: 0, elevation: 0, label: '−Z', title: 'look along −Z (from the front)' },
+// For each up axis, the data axes (rows) pointing right, up and towards the viewer at
+// azimuth = elevation = 0 (render/camera.py's UP_BASES).
+const UP_BASES = {
+  x: [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
+  y: [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+  z: [[1, 0, 0], [0, 0, 1], [0, -1, 0]],
 };
+
+// The standard views: each looks along a data axis (view direction = -eye direction); their
+// camera angles depend on the up axis (`viewAngles`).
+export const STANDARD_VIEWS = {
+  '+x': { eye: [-1, 0, 0], label: '+X', title: 'look along +X (from the −X side)' },
+  '-x': { eye: [1, 0, 0], label: '−X', title: 'look along −X (from the +X side)' },
+  '+y': { eye: [0, -1, 0], label: '+Y', title: 'look along +Y (from the −Y side)' },
+  '-y': { eye: [0, 1, 0], label: '−Y', title: 'look along −Y (from the +Y side)' },
+  '+z': { eye: [0, 0, -1], label: '+Z', title: 'look along +Z (from the −Z side)' },
+  '-z': { eye: [0, 0, 1], label: '−Z', title: 'look along −Z (from the +Z side)' },
+};
+
+const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+const round = (v) => Math.round(v * 1e9) / 1e9 + 0; // + 0: no -0
+
+// Azimuth and elevation that put the eye along the data direction `eye` with up axis `up`:
+// with up y, +X is (-90, 0), -Y (0, 89.9), +Z (180, 0).
+export function viewAngles(eye, up = 'y') {
+  const [r, u, t] = UP_BASES[up].map((row) => dot(row, eye));
+  if (Math.abs(u) > 0.999) return { azimuth: 0, elevation: u > 0 ? POLE : -POLE };
+  return { azimuth: round((Math.atan2(r, t) * 180) / Math.PI), elevation: round((Math.asin(u) * 180) / Math.PI) };
+}
 
 export const triad = { shown: true };
 
@@ -43,8 +64,14 @@ export function resetCamera() {
 // A standard view at the opening zoom, so the same key always gives the same frame.
 export function standardView(name) {
   const v = STANDARD_VIEWS[name];
-  if (!v || !S.initialCamera) return;
-  setCamera({ azimuth: v.azimuth, elevation: v.elevation, zoom: S.initialCamera.zoom });
+  if (!v || !S.initialCamera || !S.state) return;
+  setCamera({ ...viewAngles(v.eye, S.state.camera.up), zoom: S.initialCamera.zoom });
+}
+
+// The data axis drawn upwards (the up menu): the angles are kept, so the view turns.
+export function setUp(axis) {
+  if (!UP_BASES[axis]) return;
+  setCamera({ up: axis });
 }
 
 export function toggleTriad() {
@@ -53,12 +80,15 @@ export function toggleTriad() {
   drawTriads();
 }
 
-// Screen right (s), screen up (u) and towards-the-eye (e) vectors for the camera.
+// Screen right (s), screen up (u) and towards-the-eye (e) vectors for the camera, in data axes.
 function basis(cam) {
   const az = (cam.azimuth * Math.PI) / 180;
   const el = (cam.elevation * Math.PI) / 180;
-  const e = [Math.cos(el) * Math.sin(az), Math.sin(el), Math.cos(el) * Math.cos(az)];
-  const up = Math.abs(e[1]) > 0.999 ? [0, 0, e[1] > 0 ? -1 : 1] : [0, 1, 0];
+  const o = [Math.cos(el) * Math.sin(az), Math.sin(el), Math.cos(el) * Math.cos(az)];
+  const B = UP_BASES[cam.up || 'y'];
+  const e = [0, 1, 2].map((i) => B[0][i] * o[0] + B[1][i] * o[1] + B[2][i] * o[2]);
+  // Looking straight along the up axis, the axis towards the viewer at azimuth 0 stands in.
+  const up = o[1] > 0.999 ? B[2].map((c) => -c) : o[1] < -0.999 ? B[2] : B[1];
   const f = e.map((c) => -c);
   const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
   let s = cross(f, up);
@@ -135,6 +165,7 @@ function drawTriad(canvas, cam) {
   }
   ctx.globalAlpha = 1;
   canvas.dataset.camera = `${cam.azimuth},${cam.elevation}`;
+  canvas.dataset.up = cam.up || 'y';
 }
 
 // Every view's triad, for the page's current camera.
@@ -155,6 +186,7 @@ export function bindOrientation() {
     b.addEventListener('click', () => standardView(name));
     box.appendChild(b);
   }
+  $('up').addEventListener('change', () => setUp($('up').value));
   $('triad-on').addEventListener('change', () => {
     triad.shown = $('triad-on').checked;
     drawTriads();
