@@ -165,8 +165,9 @@ def test_a_colour_map_recolours_and_keeps_the_opacity_curve(name):
     before = DataTF()
     after = before.with_colormap(name)
     u = np.linspace(0.0, 1.0, 2001)
-    np.testing.assert_array_equal(
-        interp_points(after.points, u)[:, 3], interp_points(before.points, u)[:, 3]
+    # The same curve: a point inserted on a segment moves the interpolation by rounding only.
+    np.testing.assert_allclose(
+        interp_points(after.points, u)[:, 3], interp_points(before.points, u)[:, 3], atol=1e-12
     )
     stops = np.linspace(0.0, 1.0, STOPS)
     want = colormaps[{"grey": "gray"}.get(name, name)](stops)[:, :3]

@@ -183,7 +183,9 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
 
     figure = np.asarray(Image.open(tmp_path / "vortex-session.png").convert("RGB"))
     w, h = EDITS["size"]
-    cap = figure.shape[0] - h - max(36, h // 8)  # the captions' band: above picture and legend
+    # The captions' band: above the picture and the legend band, which holds the time legend
+    # and under it the data colour bar (the session's data TF is coloured; a narrow panel).
+    cap = figure.shape[0] - h - 2 * max(36, h // 8)
     assert figure.shape[1] == 2 * w and figure.shape[0] > cap + h  # two panels, legends below
     for k, jpeg in enumerate(images):
         frame = _frame_pixels(jpeg)

@@ -29,12 +29,16 @@ ColormapOpt = Annotated[
     str | None,
     typer.Option(
         help="Colour the data TF with a colour map (viridis, magma, inferno, cividis, grey, "
-        "coolwarm, RdBu_r, turbo or any matplotlib name); its opacity curve is kept."
+        "coolwarm, RdBu_r, turbo or any matplotlib name); its opacity curve is kept. Without "
+        "--time-tf, time then shows as lightness (old dark, new bright) under the map's hue."
     ),
 ]
 TimeTfOpt = Annotated[
     str | None,
-    typer.Option(help="Time TF preset: rgb, warm-cool, luminance, white, hat, inverted-hat."),
+    typer.Option(
+        help="Time TF preset: rgb, warm-cool, lightness, luminance, white, hat, inverted-hat "
+        "(default: rgb, or lightness with a coloured data TF such as --colormap)."
+    ),
 ]
 ThresholdOpt = Annotated[float, typer.Option(help="first_hit opacity threshold.")]
 NormalizeOpt = Annotated[str, typer.Option(help="additive normalisation: time or max.")]
@@ -131,7 +135,8 @@ def parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
 
 def spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap=None) -> dict:
     """The integration options that integrate and render share, with the TF file loaded and
-    coloured by `colormap` if one is given."""
+    coloured by `colormap` if one is given (the time colours, unless --time-tf or the file
+    gives them, then follow it: `chronocl.integration.inmemory.make_spec`)."""
     from chronocl.core.tf import TFSetting
 
     setting = TFSetting.load(tf) if tf is not None else None

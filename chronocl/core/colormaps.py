@@ -6,6 +6,10 @@ range, which a rendering does not show). Applying a map keeps the opacity curve 
 point takes the curve's opacity at its position, and the existing points keep theirs. The
 viewer gets the same stops in its `info` message, so a preset chosen in the page and
 `--colormap` on the command line give the same transfer function.
+
+`has_hue` and `is_white` classify a data TF's colours: one with hue makes the time colours
+default to lightness (`chronocl.core.time_tf.TimeTF.for_data`), and any but plain white gets a
+data colour bar beside the time legend (`chronocl.render.colorbar`).
 """
 
 from __future__ import annotations
@@ -21,6 +25,9 @@ from chronocl.core.errors import InvalidTransferFunctionError
 PRESETS = ("viridis", "magma", "inferno", "cividis", "grey", "coolwarm", "RdBu_r", "turbo")
 STOPS = 33
 _ALIASES = {"grey": "gray", "gray_r": "gray_r", "grey_r": "gray_r"}
+# Channels further apart than this make a colour a hue rather than a grey (a map entered as
+# stops, rounded to 6 decimals, keeps its greys exactly grey).
+HUE_TOLERANCE = 0.02
 
 
 def colormap_stops(name: str) -> list[list[float]]:
@@ -63,3 +70,16 @@ def apply_colormap(
         (float(x), float(r), float(g), float(b), float(a))
         for x, r, g, b, a in zip(u, *rgb, alpha, strict=True)
     )
+
+
+def has_hue(points: Sequence[Sequence[float]]) -> bool:
+    """Whether some control point (u, r, g, b, ...) has a colour that is not a grey."""
+    rgb = np.asarray(points, dtype=np.float64)[:, 1:4]
+    return bool((np.ptp(rgb, axis=1) > HUE_TOLERANCE).any())
+
+
+def is_white(points: Sequence[Sequence[float]]) -> bool:
+    """Whether every control point (u, r, g, b, ...) is plain white: colour then tells time
+    alone, and a data colour bar would say nothing."""
+    rgb = np.asarray(points, dtype=np.float64)[:, 1:4]
+    return bool((rgb >= 1.0 - 1e-6).all())

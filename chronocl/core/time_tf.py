@@ -2,6 +2,12 @@
 
 Time positions are ``relative`` (k / (W - 1), the paper's) or ``absolute`` (s_k / (T - 1), so
 a step keeps its colour while a window slides); see docs/semantics.md.
+
+Colour is c_k = rgb_d(u) * rgb_t(p_k), so a data TF with hue (a colour map) times hued time
+colours multiplies into dark mud. Where the time colours are not chosen they follow the data
+TF (`TimeTF.for_data`): hue tells time (``rgb``) while the data TF is grey or white, and
+lightness tells time (``lightness``, a grey ramp) once the data TF has hue, so each encoding
+keeps a channel of its own.
 """
 
 from __future__ import annotations
@@ -11,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from chronocl.core.colormaps import has_hue
 from chronocl.core.errors import UnknownNameError
 from chronocl.core.tf_input import (
     bad,
@@ -22,14 +29,19 @@ from chronocl.core.tf_input import (
     show,
 )
 
-TIME_COLORS = ("rgb", "warm-cool", "luminance", "white", "points")
+TIME_COLORS = ("rgb", "warm-cool", "lightness", "luminance", "white", "points")
 TIME_ALPHAS = ("constant", "hat", "inverted-hat", "points")
 TIME_POSITIONS = ("relative", "absolute")
+
+# The grey of the oldest step under ``lightness``: dark enough to read as old, light enough
+# that a colour map's hue still shows (at 0.35 viridis' darkest purple is still purple).
+LIGHTNESS_FLOOR = 0.35
 
 # Colours of the presets at p = 0, 0.5, 1 (oldest, middle, newest), interpolated linearly.
 _PRESET_STOPS = {
     "rgb": ((0.0, 0.0, 0.0, 1.0), (0.5, 0.0, 1.0, 0.0), (1.0, 1.0, 0.0, 0.0)),
     "warm-cool": ((0.0, 0.23, 0.42, 1.0), (0.5, 0.80, 0.80, 0.80), (1.0, 1.0, 0.35, 0.08)),
+    "lightness": ((0.0, LIGHTNESS_FLOOR, LIGHTNESS_FLOOR, LIGHTNESS_FLOOR), (1.0, 1.0, 1.0, 1.0)),
     "white": ((0.0, 1.0, 1.0, 1.0), (1.0, 1.0, 1.0, 1.0)),
 }
 
@@ -39,8 +51,9 @@ class TimeColor:
     """Colour over time position p in [0, 1].
 
     Presets: ``rgb`` (oldest blue -> green -> newest red), ``warm-cool`` (cool blue
-    -> grey -> warm orange), ``luminance`` (white at `focus`, fading linearly to black
-    over a distance `falloff` in p), ``white``, and ``points`` ((p, r, g, b), ...).
+    -> grey -> warm orange), ``lightness`` (grey LIGHTNESS_FLOOR oldest -> white newest: time
+    as lightness under a colour map's hue), ``luminance`` (white at `focus`, fading linearly
+    to black over a distance `falloff` in p), ``white``, and ``points`` ((p, r, g, b), ...).
     """
 
     preset: str = "rgb"
@@ -153,17 +166,25 @@ class TimeTF:
 
     @classmethod
     def preset(cls, name: str, positions: str = "relative", **params: float) -> TimeTF:
-        """A named preset: colours rgb, warm-cool, luminance, white; alphas hat, inverted-hat."""
+        """A named preset: colours rgb, warm-cool, lightness, luminance, white; alphas hat,
+        inverted-hat."""
         if name in ("hat", "inverted-hat"):
             return cls(color=TimeColor("rgb"), alpha=TimeAlpha(name, **params), positions=positions)
-        if name in ("rgb", "warm-cool", "luminance", "white"):
+        if name in ("rgb", "warm-cool", "lightness", "luminance", "white"):
             return cls(color=TimeColor(name, **params), positions=positions)
         if name == "constant":
             return cls(alpha=TimeAlpha("constant", **params), positions=positions)
         raise UnknownNameError(
             f"unknown time TF preset {name!r}; choose one of "
-            "rgb, warm-cool, luminance, white, hat, inverted-hat, constant"
+            "rgb, warm-cool, lightness, luminance, white, hat, inverted-hat, constant"
         )
+
+    @classmethod
+    def for_data(cls, data_points: Sequence[Sequence[float]]) -> TimeTF:
+        """The time TF where none is chosen, for a data TF with control points (u, r, g, b, a):
+        ``rgb`` colours (time as hue) while the data TF is grey or white, ``lightness`` (time
+        as lightness) once it has hue, e.g. a colour map; constant opacity 1, relative."""
+        return cls(color=TimeColor("lightness" if has_hue(data_points) else "rgb"))
 
     def positions_of(self, steps: Sequence[int], n_steps: int) -> np.ndarray:
         """Time positions p_k in [0, 1] of the selected steps."""

@@ -78,6 +78,9 @@ class Mode:
     # compares a step's opacity with the threshold: the kernels keep the LUT's exact opacity
     opacity_threshold: ClassVar[bool] = False
     legend: ClassVar[str] = "time"  # what colour tells: "time", or "fraction" of the steps
+    # what the data TF is looked up at, as its colour bar names it: the "value", or the
+    # "change" between steps (δ, in units of the value range; chronocl.render.colorbar)
+    data_axis: ClassVar[str] = "value"
     # each step's voxels are coloured by the data TF at their own values, so a step whose
     # values all fall where the TF is transparent cannot show (chronocl.integration.visibility)
     per_step_tf: ClassVar[bool] = True

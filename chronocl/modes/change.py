@@ -31,6 +31,7 @@ class Change(Mode):
     leaf_span = 2
     compares_values = True
     lut_by_value = True  # the data TF is looked up at δ
+    data_axis = "change"
     per_step_tf = False
     reads_values = True
 

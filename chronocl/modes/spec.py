@@ -31,19 +31,22 @@ class IntegrationSpec:
     `order` is ``forward``, ``backward`` or an importance permutation given as the
     selected step numbers, most important first. `threshold` is first_hit's opacity
     threshold; `normalize` is additive's normalisation (``time``: divide by
-    N = Σ a_t·rgb_t; ``max``: by the volume's largest channel value).
+    N = Σ a_t·rgb_t; ``max``: by the volume's largest channel value). No `time_tf`: the one
+    that follows the data TF (`TimeTF.for_data`: rgb, or lightness under a colour map).
     """
 
     mode: str = modes.DEFAULT
     order: str | tuple[int, ...] = "forward"
     data_tf: DataTF = field(default_factory=DataTF)
-    time_tf: TimeTF = field(default_factory=TimeTF)
+    time_tf: TimeTF = None  # type: ignore[assignment]  # None: TimeTF.for_data(data_tf.points)
     enhance: Enhance = field(default_factory=Enhance)
     threshold: float = 0.0
     normalize: str = "time"
 
     def __post_init__(self) -> None:
         modes.get(self.mode)  # an unknown name raises, naming the choices
+        if self.time_tf is None:
+            object.__setattr__(self, "time_tf", TimeTF.for_data(self.data_tf.points))
         if isinstance(self.order, str):
             if self.order not in ORDERS:
                 raise UnknownNameError(

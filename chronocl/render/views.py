@@ -1,5 +1,7 @@
 """Render chronovolumes: one view, or parallel views of several under one camera, labelled,
-with a legend bar of the time colours (oldest .. newest, the steps' time labels or numbers).
+with a legend bar of the time colours (oldest .. newest, the steps' time labels or numbers)
+and, where the data TF is coloured (a colour map), a data colour bar beside it with ticks in
+data units (`chronocl.render.colorbar`).
 
 The camera frames what is visible (`chronocl.render.framing`) unless it frames the box, and a
 silhouette taken along another view is integrated again for the camera where the chronovolume's
@@ -19,11 +21,13 @@ from chronocl.core.ticks import multiples, nice_step, tick_text
 from chronocl.core.time_labels import check_prefer, compact, display_labels, has_labels, span_text
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
+from chronocl.render.colorbar import DataBar, data_bar
 from chronocl.render.follow import following
 from chronocl.render.framing import framed
 from chronocl.render.image import Image
 from chronocl.render.raycaster import Raycaster, Volume, check_clip, check_size
 from chronocl.render.shading import Shading, as_shading
+from chronocl.render.triad import draw_triad
 
 _raycaster: Raycaster | None = None
 
@@ -67,6 +71,7 @@ def render(
     jitter: bool = True,
     step: float = 1.0,
     outline: bool = False,
+    axes: bool = False,
     nearest: bool = False,
     label: str | None = None,
     legend: bool = False,
@@ -79,7 +84,9 @@ def render(
     "labels" writes the store's time labels in the legend where it has them, "steps" the step
     numbers. A silhouette taken along another view is integrated again along the camera's
     where the store it came from can be opened, else a warning says so. `shading=True` (or a
-    `Shading`) lights it from the camera by its opacity gradient; off by default (flat colour)."""
+    `Shading`) lights it from the camera by its opacity gradient; off by default (flat colour).
+    `outline` draws the volume's box, `axes` the axis triad (x, y, z in red, green, blue) in
+    the bottom-right corner; both off by default here (the command line draws both)."""
     return render_views(
         [chronovolume],
         camera,
@@ -89,6 +96,7 @@ def render(
         jitter=jitter,
         step=step,
         outline=outline,
+        axes=axes,
         nearest=nearest,
         labels=[label] if label else None,
         legend=legend,
@@ -107,6 +115,7 @@ def render_views(
     jitter: bool = True,
     step: float = 1.0,
     outline: bool = False,
+    axes: bool = False,
     nearest: bool = False,
     labels: Sequence[str] | None = None,
     legend: bool = True,
@@ -119,7 +128,7 @@ def render_views(
 
     `volumes`, the chronovolumes already uploaded with `raycaster().upload` (and released by
     the caller), spare the upload when one set is rendered many times, e.g. a turntable.
-    `shading`: as in `render`.
+    `shading`, `outline` and `axes`: as in `render`.
     """
     if not chronovolumes:
         raise InvalidParameterError("nothing to render: give at least one chronovolume")
@@ -137,19 +146,18 @@ def render_views(
     for i, cv in enumerate(chronovolumes):
         volume = volumes[i] if volumes is not None else rc.upload(cv, nearest=nearest)
         try:
-            panels.append(
-                rc.draw(
-                    volume,
-                    camera,
-                    (w, h),
-                    background=bg,
-                    clip=clip,
-                    jitter=jitter,
-                    step=step,
-                    outline=outline,
-                    shading=lighting,
-                )
+            panel = rc.draw(
+                volume,
+                camera,
+                (w, h),
+                background=bg,
+                clip=clip,
+                jitter=jitter,
+                step=step,
+                outline=outline,
+                shading=lighting,
             )
+            panels.append(draw_triad(panel, camera) if axes else panel)
         finally:
             if volumes is None:
                 volume.release()
@@ -251,7 +259,13 @@ def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels")
     measure = ImageDraw.Draw(PILImage.new("RGB", (1, 1)))
     wrapped = [wrap_text(measure, t, font, w - 16) for t in labels or []]
     cap_h = caption_height(font, max(map(len, wrapped))) if wrapped else 0
+    bars = [data_bar(cv) for cv in legend_of] if legend_of else []
+    # A data colour bar sits beside the time legend where the band is wide enough for both
+    # to show several ticks, else under it (the band twice as tall).
+    beside = w - 16 >= measure.textlength("0" * BESIDE_MIN_DIGITS, font=font)
     legend_h = max(36, h // 8) if legend_of else 0
+    if any(bars) and not beside:
+        legend_h *= 2
     cell_h = cap_h + h + legend_h
     canvas = PILImage.new("RGB", (cols * w, rows * cell_h), tuple(round(c * 255) for c in bg))
     draw = ImageDraw.Draw(canvas)
@@ -263,10 +277,51 @@ def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels")
             text = "\n".join(wrapped[i])
             draw.text((x + 8, y + 6), text, fill=text_rgb, font=font, spacing=3)
         if legend_of:
-            cv = legend_of[i] if i < len(legend_of) else legend_of[0]
+            k = i if i < len(legend_of) else 0
             box = (x + 8, y + cap_h + h + 4, w - 16, legend_h - 8)
-            _legend(draw, cv, box, font, text_rgb, time_labels)
+            if bars[k] is None:
+                _legend(draw, legend_of[k], box, font, text_rgb, time_labels)
+                continue
+            time_box, bar_box = _split_legend(box, beside)
+            _legend(draw, legend_of[k], time_box, font, text_rgb, time_labels)
+            # Under the time legend, the colour bar starts where the time bar does.
+            title_w = 0 if beside else draw.textlength("oldest", font=font)
+            _colour_bar(draw, bars[k], bar_box, font, text_rgb, title_w)
     return np.asarray(canvas)
+
+
+# A legend band as wide as this many digits holds a time legend and a colour bar side by side.
+BESIDE_MIN_DIGITS = 64
+TIME_SHARE = 0.55  # of a shared band's width, the time legend's
+
+
+def _split_legend(box, beside: bool):
+    """The legend band `box` (x, y, width, height) shared by the time legend and a data colour
+    bar: side by side (time on the left), or one above the other."""
+    x0, y0, width, height = box
+    if beside:
+        time_w = round(width * TIME_SHARE)
+        gap = 36  # "newest" and the colour bar's title must not read as one label
+        return (x0, y0, time_w, height), (x0 + time_w + gap, y0, width - time_w - gap, height)
+    half = (height + 8) // 2
+    return (x0, y0, width, half - 8), (x0, y0 + half, width, height - half)
+
+
+def _colour_bar(draw, bar: DataBar, box, font, text_rgb, title_w: float = 0) -> None:
+    """The data TF's colours rgb_d over the value range, its title ("value") on the left in
+    a column `title_w` wide at least, 1-2-5 ticks in data units under it
+    (`chronocl.render.colorbar`)."""
+    x0, y0, width, height = box
+    bar_h = max(8, height // 2)
+    x_start = x0 + int(max(title_w, draw.textlength(bar.title, font=font))) + 8
+    span = max(2, x0 + width - x_start)
+    draw.text((x0, y0 + 1), bar.title, fill=text_rgb, font=font)
+    rgb = np.clip(bar.rgb(span), 0.0, 1.0)
+    for i in range(span):
+        colour = tuple(round(c * 255) for c in rgb[i])
+        draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
+    ends = [x_start, x_start + span - 1]
+    _nice_ticks(draw, [bar.lo, bar.hi], ends, (x0, y0 + bar_h, width), font, text_rgb, most=10)
 
 
 def _legend(draw, cv: Chronovolume, box, font, text_rgb, time_labels="labels") -> None:
@@ -331,12 +386,14 @@ def _tick_values(cv: Chronovolume, time_labels: str) -> list[float] | None:
     return None
 
 
-def _nice_ticks(draw, values, positions_x, where, font, text_rgb) -> None:
+def _nice_ticks(draw, values, positions_x, where, font, text_rgb, most=None) -> None:
     """Ticks at 1-2-5 multiples of `values`' span, placed where they fall between the steps,
-    as many as fit 12 px apart (step numbers get whole-number ticks)."""
+    as many as fit 12 px apart, `most` at most (default: one per step; step numbers get
+    whole-number ticks)."""
     x0, y0, width = where
-    integer = all(float(v).is_integer() for v in values)
-    most = max(2, min(len(values), int(positions_x[-1] - positions_x[0]) // 16 + 1))
+    integer = most is None and all(float(v).is_integer() for v in values)
+    most = len(values) if most is None else most
+    most = max(2, min(most, int(positions_x[-1] - positions_x[0]) // 16 + 1))
     while True:
         step = nice_step(values[0], values[-1], most, integer)
         ticks = multiples(values[0], values[-1], step)

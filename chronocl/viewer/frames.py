@@ -1,8 +1,8 @@
 """What a frame is made of besides the draws: the size the panels are drawn at (the page's
 panel size in device pixels, within a pixel budget that follows the latency target), JPEG
 encoding of the panels, the preview scale and qualities, the legend of the window's time
-colours that the page's timeline shows, and the note a panel gets when almost nothing in it
-is visible."""
+colours that the page's timeline shows, the data colour bar of a coloured data TF, and the
+note a panel gets when almost nothing in it is visible."""
 
 from __future__ import annotations
 
@@ -11,7 +11,9 @@ import io
 import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.render.colorbar import data_bar
 
+COLOUR_BAR_SAMPLES = 64  # colours a colour bar sends (the page draws a gradient through them)
 PREVIEW_SCALE = 0.5
 JPEG_QUALITY = {"preview": 70, "full": 88}
 # Drawing time grows with the pixels drawn (llvmpipe: ~80-140 ms for a 128^3 volume at 512^2,
@@ -101,3 +103,18 @@ def legend(cv: Chronovolume) -> list[dict]:
         }
         for k, s in enumerate(steps)
     ]
+
+
+def colour_bar(cv: Chronovolume) -> dict | None:
+    """A view's data colour bar (`chronocl.render.colorbar`) for the page's legend: its title,
+    the value range the chronovolume used (data units) and the data TF's colours over it as
+    #rrggbb; None where the data TF is plain white (colour tells time alone)."""
+    bar = data_bar(cv)
+    if bar is None:
+        return None
+    rgb = np.clip(np.round(bar.rgb(COLOUR_BAR_SAMPLES) * 255), 0, 255).astype(int)
+    return {
+        "title": bar.title,
+        "range": [bar.lo, bar.hi],
+        "colors": ["#{:02x}{:02x}{:02x}".format(*c) for c in rgb.tolist()],
+    }

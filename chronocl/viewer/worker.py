@@ -35,6 +35,7 @@ from chronocl.viewer.frames import (
     PIXEL_BUDGET,
     PREVIEW_SCALE,
     DrawBudget,
+    colour_bar,
     empty_note,
     encode,
     legend,
@@ -323,6 +324,7 @@ class ClientWorker(Tasks):
             "clip_outline": clip_outline(cvs[0], state.panel_camera(), state.size, state.clip),
             "legend": legend(cvs[0]),
             "legends": [legend(cv) for cv in cvs],  # a view with its own window has its own
+            "colorbars": [colour_bar(cv) for cv in cvs],  # null where the data TF is white
             "focus": None if state.camera.focus is None else list(state.camera.focus),
             "level": level,
             "levels": levels,  # from the sessions: no store metadata read per frame

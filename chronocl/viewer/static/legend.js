@@ -1,8 +1,10 @@
-// The on-view legend: in each view, over its bottom left, the window's time colours as a bar
-// of one cell per step (oldest left) with the steps' time labels (or numbers) under it, and
-// the time-opacity curve over the bar, as the saved PNG's legend shows them. It comes from
-// each frame's `legends` (S.legends: per view, its window's step, rgb, a); `L` or **legend** in
-// the header shows or hides it.
+// The on-view legend: in each view's foot band, the window's time colours as a bar of one cell
+// per step (oldest left) with the steps' time labels (or numbers) under it, and the
+// time-opacity curve over the bar, as the saved PNG's legend shows them. It comes from each
+// frame's `legends` (S.legends: per view, its window's step, rgb, a). Beside it, where the
+// data TF is coloured (a colour map), the data colour bar: the data TF's colours over the value
+// range the view used, with ticks in data units (each frame's `colorbars`, from
+// chronocl/render/colorbar.py). `L` or **legend** in the header shows or hides both.
 
 import { $, S, viewer } from './state.js';
 
@@ -31,20 +33,7 @@ function niceStep(lo, hi, most, integer) {
 function draw(canvas, items) {
   canvas.hidden = !legendOn.shown || !items.length;
   if (canvas.hidden) return;
-  const dpr = window.devicePixelRatio || 1;
-  const w = canvas.clientWidth;
-  const h = canvas.clientHeight;
-  if (canvas.width !== Math.round(w * dpr) || canvas.height !== Math.round(h * dpr)) {
-    canvas.width = Math.round(w * dpr);
-    canvas.height = Math.round(h * dpr);
-  }
-  const ctx = canvas.getContext('2d');
-  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-  ctx.clearRect(0, 0, w, h);
-  ctx.fillStyle = 'rgba(16, 18, 21, 0.72)'; // readable on black and on white
-  ctx.beginPath();
-  ctx.roundRect(0, 0, w, h, 4);
-  ctx.fill();
+  const [ctx, w] = backdrop(canvas);
   const n = items.length;
   const x0 = PAD;
   const cell = (w - 2 * PAD) / n;
@@ -129,10 +118,87 @@ function draw(canvas, items) {
   canvas.dataset.steps = items.map((it) => it.step).join(',');
 }
 
-// Every view's legend, for the frame shown.
+// A canvas sized to its CSS box in device pixels, cleared, with the legends' dark backdrop.
+function backdrop(canvas) {
+  const dpr = window.devicePixelRatio || 1;
+  const w = canvas.clientWidth;
+  const h = canvas.clientHeight;
+  if (canvas.width !== Math.round(w * dpr) || canvas.height !== Math.round(h * dpr)) {
+    canvas.width = Math.round(w * dpr);
+    canvas.height = Math.round(h * dpr);
+  }
+  const ctx = canvas.getContext('2d');
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  ctx.clearRect(0, 0, w, h);
+  ctx.fillStyle = 'rgba(16, 18, 21, 0.72)'; // readable on black and on white
+  ctx.beginPath();
+  ctx.roundRect(0, 0, w, h, 4);
+  ctx.fill();
+  return [ctx, w, h];
+}
+
+// The data colour bar `bar` ({title, range: [lo, hi], colors: ['#rrggbb', ...]}) or none: the
+// title over its left end, the colours as a gradient ending level with the time bar, and
+// ticks at nice numbers (1, 2 or 5 times a power of ten) of the value range in data units, as
+// many as fit (as the saved PNG's colour bar: chronocl/render/views.py).
+function drawColourBar(canvas, bar) {
+  canvas.hidden = !legendOn.shown || !bar;
+  if (canvas.hidden) return;
+  const [ctx, w] = backdrop(canvas);
+  const x0 = PAD;
+  const x1 = w - PAD;
+  const bottom = TOP + CURVE_H + 3 + BAR_H; // level with the time bar's foot
+  const y = TOP + 13;
+  const grad = ctx.createLinearGradient(x0, 0, x1, 0);
+  bar.colors.forEach((c, k) => grad.addColorStop(k / Math.max(1, bar.colors.length - 1), c));
+  ctx.fillStyle = grad;
+  ctx.fillRect(x0, y, x1 - x0, bottom - y);
+  ctx.fillStyle = '#9aa3ad';
+  ctx.font = '10px system-ui, sans-serif';
+  ctx.textBaseline = 'top';
+  ctx.textAlign = 'left';
+  ctx.fillText(bar.title, x0, TOP - 1);
+  const [lo, hi] = bar.range;
+  const X = (v) => x0 + ((v - lo) / (hi - lo || 1)) * (x1 - x0);
+  let most = Math.max(2, Math.floor((x1 - x0) / 16) + 1);
+  let ticks;
+  for (;;) {
+    const step = niceStep(lo, hi, most, false);
+    const decimals = Math.max(0, -Math.floor(Math.log10(step) + 1e-9));
+    ticks = [];
+    const last = Math.floor(hi / step + 1e-9);
+    for (let j = Math.ceil(lo / step - 1e-9); j <= last; j++) {
+      const text = (j * step).toFixed(decimals);
+      ticks.push({ text: /^-?[0.]+$/.test(text) ? '0' : text, x: X(j * step) });
+    }
+    const widest = Math.max(0, ...ticks.map((t) => ctx.measureText(t.text).width));
+    if (most <= 2 || ticks.length * (widest + 12) <= x1 - x0 + widest) break;
+    most -= 1;
+  }
+  ctx.fillStyle = '#e6e6e6';
+  ctx.strokeStyle = '#e6e6e6';
+  ctx.textAlign = 'center';
+  ticks.forEach((t) => {
+    const tw = ctx.measureText(t.text).width;
+    ctx.beginPath();
+    ctx.moveTo(Math.round(t.x) + 0.5, bottom);
+    ctx.lineTo(Math.round(t.x) + 0.5, bottom + 2);
+    ctx.stroke();
+    ctx.fillText(t.text, Math.max(tw / 2 + 1, Math.min(w - tw / 2 - 1, t.x)), bottom + 2);
+  });
+  // For scripted use (the tests): the ticks, the range and where the colours lie (CSS px).
+  canvas.dataset.ticks = ticks.map((t) => t.text).join(',');
+  canvas.dataset.range = `${lo},${hi}`;
+  canvas.dataset.bar = `${x0},${x1},${(y + bottom) / 2}`;
+}
+
+// Every view's legend and colour bar, for the frame shown.
 export function drawLegends() {
-  const canvases = document.querySelectorAll('#views .view canvas.legend');
-  canvases.forEach((c, i) => draw(c, (S.legends && S.legends[i]) || S.legend || []));
+  document.querySelectorAll('#views .view').forEach((view, i) => {
+    draw(view.querySelector('canvas.legend'), (S.legends && S.legends[i]) || S.legend || []);
+    const bar = view.querySelector('canvas.colorbar');
+    if (bar) drawColourBar(bar, S.colorbars ? S.colorbars[i] : null);
+  });
 }
 
 // Where step k's colour cell is in a legend canvas (CSS px), for scripted use (the tests).
