@@ -328,10 +328,10 @@ def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, ser
             assert g == pytest.approx(list(w), abs=1e-9)
         assert after["digest"] != before["digest"]
         page.screenshot(path=os.path.join(shots_dir(tmp_path), "tf-viridis.png"))
-        # The selected point's value and opacity typed in.
-        at = p.eval(
-            "() => window.viewer.tfPointAt(window.viewer.S.state.data_tf.points.length - 1)"
-        )
+        # The selected point's value and opacity typed in (under the map, of a handle: the
+        # curve's own points; the last one keeps its place at the end of the range).
+        handles = p.eval("() => window.viewer.tfHandles()")
+        at = p.eval(f"() => window.viewer.tfPointAt({handles[-1]})")
         page.mouse.click(at["x"], at["y"])
         info = p.eval("() => window.viewer.S.info")
         before = p.last()
@@ -340,17 +340,19 @@ def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, ser
         p.settle(before)
         last = p.eval("() => window.viewer.S.state.data_tf.points.at(-1)")
         assert last[4] == 0.25 and last[0] == 1.0
-        mid = info["vmin"] + 0.999 * (info["vmax"] - info["vmin"])
+        at = p.eval(f"() => window.viewer.tfPointAt({handles[-2]})")
+        page.mouse.click(at["x"], at["y"])
+        mid = info["vmin"] + 0.7 * (info["vmax"] - info["vmin"])
         page.fill("#point-value", str(mid))
         page.dispatch_event("#point-value", "change")
-        last = p.eval("() => window.viewer.S.state.data_tf.points.at(-1)")
-        assert last[0] == pytest.approx(0.999, abs=1e-9)
+        typed = p.eval("() => window.viewer.S.state.data_tf.points[window.viewer.S.selectedPoint]")
+        assert typed[0] == pytest.approx(0.7, abs=1e-9)
         # A dragged point's value and opacity fields, and the readout, follow it as it moves.
-        at = p.eval("() => window.viewer.tfPointAt(1)")
+        at = p.eval(f"() => window.viewer.tfPointAt({handles[1]})")
         page.mouse.move(at["x"], at["y"])
         page.mouse.down()
         page.mouse.move(at["x"] + 25, at["y"] - 30, steps=5)
-        moved = p.eval("() => window.viewer.S.state.data_tf.points[1]")
+        moved = p.eval("() => window.viewer.S.state.data_tf.points[window.viewer.S.selectedPoint]")
         fields = p.eval(
             "() => [document.querySelector('#point-value').value,"
             " document.querySelector('#point-alpha').value]"

@@ -119,8 +119,9 @@ def boxes(p: Page) -> dict:
           return {
             area: r(document.getElementById('views')),
             panels: [...document.querySelectorAll('.view')].map(r),
-            inner: [...document.querySelectorAll('.view')].map(
+            inner: [...document.querySelectorAll('.view .view-pic')].map(
               (el) => ({w: el.clientWidth, h: el.clientHeight})),
+            pictures: [...document.querySelectorAll('.view .view-pic')].map(r),
             images: [...document.querySelectorAll('.view img')].map(r),
             side: r(document.getElementById('side')),
             controls: [...document.querySelectorAll('#bar button, #bar select, footer button')]
@@ -132,8 +133,10 @@ def boxes(p: Page) -> dict:
     )
 
 
-def check_fills(b: dict, n: int) -> float:
-    """Panels inside the view area, not overlapping, covering >= 80 % of it; returns that."""
+def check_fills(b: dict, n: int, grid: tuple[int, int] | None = None) -> float:
+    """Panels inside the view area, not overlapping, covering >= 80 % of it, four views in a
+    full grid (2x2, or a row of four where that gives larger pictures), `grid` (columns, rows)
+    if given; returns the fraction covered."""
     area = b["area"]
     assert len(b["panels"]) == n
     for q in b["panels"]:
@@ -142,9 +145,12 @@ def check_fills(b: dict, n: int) -> float:
         assert q["y"] + q["h"] <= area["y"] + area["h"] + 0.5
     covered = sum(q["w"] * q["h"] for q in b["panels"]) / (area["w"] * area["h"])
     assert covered >= 0.8, f"{n} views cover {covered:.0%} of the view area"
-    if n == 4:  # a 2x2 grid
-        assert len({round(q["x"]) for q in b["panels"]}) == 2
-        assert len({round(q["y"]) for q in b["panels"]}) == 2
+    columns = len({round(q["x"]) for q in b["panels"]})
+    rows = len({round(q["y"]) for q in b["panels"]})
+    if n == 4:
+        assert columns * rows == 4
+    if grid is not None:
+        assert (columns, rows) == grid
     return covered
 
 
@@ -260,12 +266,14 @@ def test_panels_fill_the_view_area_at_1_2_and_4_views(open_page, tmp_path, width
         assert b["side"]["x"] + b["side"]["w"] <= vw + 0.5
         for c in b["controls"]:
             assert c["x"] >= 0 and c["x"] + c["w"] <= vw + 0.5 and c["y"] + c["h"] <= vh + 0.5
-        check_fills(b, n)
-        # The image fills its panel (the render follows the panel's shape).
-        for img, q in zip(b["images"], b["panels"], strict=True):
-            assert img["w"] >= q["w"] - 4 and img["h"] >= q["h"] - 4
+        check_fills(b, n, (2, 2) if n == 4 else None)
+        # The image fills its panel's picture box, between the panel's bands (the render
+        # follows the box's shape), and that box takes most of the panel.
+        for img, pic, q in zip(b["images"], b["pictures"], b["panels"], strict=True):
+            assert img == pic
+            assert pic["w"] >= q["w"] - 4 and pic["h"] * pic["w"] >= 0.5 * q["h"] * q["w"]
         w, h = b["size"]
-        assert abs(w / h - b["panels"][0]["w"] / b["panels"][0]["h"]) < 0.05
+        assert abs(w / h - b["pictures"][0]["w"] / b["pictures"][0]["h"]) < 0.05
         p.page.screenshot(path=os.path.join(shots, f"viewer-{width}x{height}-{n}views.png"))
 
 
@@ -274,9 +282,9 @@ def test_side_panel_folds_and_render_follows_device_pixels(open_page, tmp_path):
     set_views(p, 4)
     b = boxes(p)
     check_fills(b, 4)
-    q = b["inner"][0]  # inside the panel's border
+    q = b["inner"][0]  # the picture's box
     w, h = b["size"]
-    # Device pixels of the panel (2x its CSS size), the longest side within the server's cap.
+    # Device pixels of the picture (2x its CSS size), the longest side within the server's cap.
     cap = p.eval("() => window.viewer.S.choices.limits.max_panel")
     scale = min(2.0, cap / max(q["w"], q["h"]))
     assert abs(w - q["w"] * scale) <= 2 and abs(h - q["h"] * scale) <= 2
@@ -291,7 +299,8 @@ def test_side_panel_folds_and_render_follows_device_pixels(open_page, tmp_path):
     assert folded["side"]["w"] == 0
     assert folded["area"]["w"] > b["area"]["w"] + 250
     check_fills(folded, 4)
-    assert folded["size"][0] > w  # wider panels, wider renders
+    # Larger pictures (a row of four where that suits them better), larger renders.
+    assert min(folded["size"]) > min(w, h) and folded["size"][0] * folded["size"][1] > w * h
     p.page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-1024x640-folded-dpr2.png"))
     p.page.click("#side-toggle")
     p.page.wait_for_timeout(300)

@@ -40,6 +40,7 @@ from chronocl.core import tf
 from chronocl.core.colormaps import PRESETS as COLORMAP_PRESETS
 from chronocl.core.colormaps import colormap_stops
 from chronocl.core.enhance import ENHANCE_KINDS, Enhance
+from chronocl.render.camera import UP_AXES
 from chronocl.render.shading import MAX_COEFFICIENT, MAX_SHININESS, MIN_SHININESS
 from chronocl.viewer.schema import (
     FLOAT32_MAX,
@@ -80,11 +81,18 @@ TIME_ALPHAS = tuple(a for a in tf.TIME_ALPHAS if a != "points")
 # What the page's menus say for a choice, where its name alone says too little.
 LABELS = {
     "rgb": "rgb (old blue → new red)",
+    "lightness": "lightness (dark → bright)",
     "inverted-hat": "inverted hat",
-    "relative": "relative (window spans the ramp)",
-    "absolute": "absolute (a step keeps its colour)",
+    "relative": "relative (to the window)",
+    "absolute": "absolute (in the series)",
     "edge": "edge (gradient)",
     "silhouette": "silhouette (view)",
+}
+# A choice's tooltip, where its short label needs more words.
+SUMMARIES = {
+    "lightness": "old steps dark, new steps bright: time as lightness under the colour map's hue",
+    "relative": "the window spans the colour ramp: its first step old, its last step new",
+    "absolute": "a step keeps its colour while the window slides (its place in the whole series)",
 }
 
 CAMERA = Obj(
@@ -94,6 +102,7 @@ CAMERA = Obj(
         "zoom": Num(0.1, 20.0),
         "fov": Num(5.0, 90.0),
         "projection": Enum(PROJECTIONS),
+        "up": Enum(UP_AXES),  # the data axis up on the screen (render/camera.py)
     }
 )
 WINDOW = Obj(
@@ -234,7 +243,14 @@ MESSAGES: dict[str, Obj] = {
 
 
 def _menu(names: tuple[str, ...]) -> list[dict]:
-    return [{"name": n, "label": LABELS.get(n, n)} for n in names]
+    return [
+        {
+            "name": n,
+            "label": LABELS.get(n, n),
+            **({"summary": SUMMARIES[n]} if n in SUMMARIES else {}),
+        }
+        for n in names
+    ]
 
 
 def _ranges(obj: Obj) -> dict:
@@ -255,6 +271,7 @@ def choices() -> dict:
         ],
         "orders": list(ORDERS),
         "projections": list(PROJECTIONS),
+        "up_axes": list(UP_AXES),
         "backgrounds": list(BACKGROUNDS),
         "time_colors": _menu(TIME_COLORS),
         "time_alphas": [  # with the parameters each shape reads

@@ -12,7 +12,7 @@ draws it. Its fields are the state fields of the protocol's update message (chec
      "views": [{"mode": "alpha", "order": "forward", "window": null},
                {"mode": "alpha", "order": "forward", "window": {"t0": 40, "t1": 50}}],
      "camera": {"azimuth": 30, "elevation": 20, "zoom": 1.2, "fov": 30,
-                "projection": "perspective"},
+                "projection": "perspective", "up": "y"},
      "data_tf": {"points": [[0, 1, 1, 1, 0], [1, 1, 1, 1, 0.9]]},
      "time_tf": {"color": "rgb", "alpha": "hat", "center": 0.5, "width": 0.6, ...},
      "enhance": {"kind": "none"}, "threshold": 0.05, "clip": null,
@@ -38,6 +38,7 @@ from chronocl.core.errors import InputNotFoundError, InvalidParameterError, Inva
 from chronocl.data.series import TimeSeries
 from chronocl.render.framing import framed
 from chronocl.render.image import Image
+from chronocl.render.triad import draw_triad
 from chronocl.render.views import compose_panels, describe, parse_color, raycaster
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.protocol import SESSION, SESSION_KEY, SESSION_VERSION, decode_json
@@ -77,7 +78,7 @@ def session_of(
     """The session file's object for `state` on the data set `name` (stored at `path`), its
     views framing the world box `focus` (None: their visible region)."""
     described = describe_state(state)
-    if state.data_tf.value_range is not None:
+    if isinstance(state.data_tf.value_range, tuple):
         described["data_tf"]["value_range"] = list(state.data_tf.value_range)
     dataset = {"name": name, "shape": list(series.shape)}
     if path is not None:
@@ -188,11 +189,13 @@ def render_session(
     engine: str = "opencl",
     device: str | None = None,
     time_labels: str = "labels",
+    axes: bool = False,
     **spec_changes: object,
 ) -> Image:
     """The views of `state` drawn as the viewer's Save PNG draws them: the same chronovolumes,
     camera (as the panels are drawn, framing its focus, else the visible region), size, clip,
-    lighting, background and outline, each panel labelled, the time-colour legend below.
+    lighting, background and outline, each panel labelled, the time-colour legend below;
+    `axes` adds the axis triad to each panel (`chronocl render --state --axes`).
     `spec_changes` replace fields of every view's IntegrationSpec (e.g. a time_tf given on the
     command line)."""
     from chronocl.integration.inmemory import integrate
@@ -221,6 +224,8 @@ def render_session(
                     shading=state.shading,
                 )
             )
+            if axes:
+                panels[-1] = draw_triad(panels[-1], state.panel_camera())
         finally:
             volume.release()
     labels = [describe(cv) for cv in cvs]

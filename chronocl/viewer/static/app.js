@@ -9,7 +9,8 @@
 //   keys.js        the keyboard shortcuts (one table) and the `?` list
 //   tf_editor.js   the data transfer function editor
 //   probe.js       the v(t) plot of a probed voxel
-//   legend.js      the time legend drawn in each view
+//   legend.js      the time legend and the data colour bar drawn in each view
+//   time_follow.js time colours that follow a colour-map preset (lightness under its hue)
 //   session.js     undo / redo, the URL fragment (#state=), Save / Load session
 //   controls.js    the other controls, filled from the server's choices
 //   shading.js     the lighting toggle and strengths
@@ -24,8 +25,9 @@ import { bindSession, fragmentSession, loadSession, noteFocus, resetHistory } fr
 import { bindShading, syncShading } from './shading.js';
 import { $, S, setStatus, viewer } from './state.js';
 import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
+import { bindTimeFollow } from './time_follow.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
-import { fillSelect, layoutViews, onFrame, showMark } from './views.js';
+import { fillSelect, layoutViews, observePictures, onFrame, showMark } from './views.js';
 
 // After a reconnect: the state the page had, sent back once the data set is open again.
 let restore = null;
@@ -40,7 +42,11 @@ function onInfo(msg) {
   fillControls(msg);
   fillSelect(
     $('dataset'),
-    msg.datasets.map((d) => ({ name: d.index, label: `${d.name} (${d.shape.join('×')})` })),
+    // shape is the array's (T, Z, Y, X); the label reads x×y×z like --dims and info.
+    msg.datasets.map((d) => ({
+      name: d.index,
+      label: `${d.name} (${d.shape.slice(1).reverse().join('×')}, ${d.shape[0]} steps)`,
+    })),
   );
   const again = S.info && S.state && msg.datasets.some((d) => d.index === S.info.index);
   restore = again ? { state: S.state, zoom: S.zoom, point: S.selectedPoint, camera: S.initialCamera } : null;
@@ -128,7 +134,8 @@ function onText(msg) {
 }
 
 // The panels follow the view area (window size, side panel shown or not) and the device
-// pixel ratio (browser zoom fires 'resize'); the render size follows the panels.
+// pixel ratio (browser zoom fires 'resize'); the render size follows the pictures (which also
+// change size when the legend or the axes are shown or hidden).
 let resizeTimer = 0;
 function relayout() {
   clearTimeout(resizeTimer);
@@ -144,6 +151,7 @@ function relayout() {
 }
 window.addEventListener('resize', relayout);
 new ResizeObserver(relayout).observe($('views'));
+observePictures(relayout);
 
 $('probe-csv').addEventListener('click', exportProbe);
 $('side-toggle').addEventListener('click', () => {
@@ -160,6 +168,7 @@ bindOrientation();
 bindKeys();
 bindSession();
 bindLegend();
+bindTimeFollow();
 connect({
   onText,
   onFrame: (buf) => {

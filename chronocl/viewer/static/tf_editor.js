@@ -3,9 +3,16 @@
 // wheel to zoom in u; the selected point's value and opacity typed in; a readout of value,
 // opacity and count under the pointer; colour-map presets (the server's stops,
 // chronocl/core/colormaps.py, applied as `DataTF.with_colormap` does: opacity kept).
+//
+// A colour map enters the points the server gets as one point per stop (33), so the colours
+// follow the map; the editor shows as handles only the opacity curve's own points, and an edit
+// of a handle recomputes the stops' opacities from the handles (`mapped`). Which points are
+// handles is read off the points themselves (`handles`), so undo, sessions and the page's
+// address need nothing more than the points.
 
 import { send, update } from './connection.js';
 import { $, S, canvasSize, fmt, viewer } from './state.js';
+import { followDataTF } from './time_follow.js';
 
 const tf = { drag: null };
 const pad = { l: 6, r: 6, t: 8, b: 18 };
@@ -25,6 +32,8 @@ export function drawTF() {
   if (!S.state) return;
   const { ctx, w, h, X, Y } = tfGeom();
   const pts = S.state.data_tf.points;
+  const { map, idx } = handles(pts);
+  followMap(map, idx);
   ctx.clearRect(0, 0, w, h);
   const hist = S.histogram;
   if (hist && hist.range[0] === S.zoom[0] && hist.range[1] === S.zoom[1]) {
@@ -59,14 +68,15 @@ export function drawTF() {
   ctx.stroke();
   ctx.restore();
   const zspan = S.zoom[1] - S.zoom[0];
-  pts.forEach((p, i) => {
+  idx.forEach((i) => {
+    const p = pts[i];
     if (p[0] < S.zoom[0] - 1e-3 * zspan || p[0] > S.zoom[1] + 1e-3 * zspan) return;
     ctx.beginPath();
     ctx.arc(X(p[0]), Y(p[4]), i === S.selectedPoint ? 6 : 4.5, 0, 2 * Math.PI);
     ctx.fillStyle = rgbCss(p);
     ctx.fill();
     ctx.lineWidth = i === S.selectedPoint ? 2.5 : 1.2;
-    ctx.strokeStyle = i === S.selectedPoint ? '#f0a030' : '#222';
+    ctx.strokeStyle = i === S.selectedPoint ? '#f0a030' : '#c8ccd2'; // seen round a dark map colour too
     ctx.stroke();
   });
   ctx.fillStyle = '#8b949e';
@@ -110,14 +120,100 @@ function interp(pts, x, j) {
   return pts[pts.length - 1][j];
 }
 
-// The points recoloured by colour map `name`: the map's stops and the existing positions, each
-// with the map's colour and the opacity the curve has there.
-function withColormap(pts, name) {
+// The points the server gets for opacity handles `hs` ([u, a], sorted) under colour map
+// `name`: a point at each handle and each of the map's stops, coloured by the map, with the
+// opacity of the handles' curve (on a TF's own points, what `DataTF.with_colormap` gives).
+function mapped(hs, name) {
   const stops = S.choices.colormaps[name];
-  const us = [...new Set([...pts.map((p) => p[0]), ...stops.map((s) => s[0])])].sort((a, b) => a - b);
+  const us = [...hs.map((q) => q[0]), ...stops.map((q) => q[0])].sort((a, b) => a - b);
   return us
     .filter((u, k) => k === 0 || u - us[k - 1] > 1e-9)
-    .map((u) => [u, interp(stops, u, 1), interp(stops, u, 2), interp(stops, u, 3), interp(pts, u, 4)]);
+    .map((u) => [u, interp(stops, u, 1), interp(stops, u, 2), interp(stops, u, 3), interp(hs, u, 1)]);
+}
+
+const SAME_U = 1e-7; // a stop's position, as the points carry it
+const SAME_RGB = 2e-3; // a colour as the map has it (well under 1/255)
+const SAME_A = 1e-6; // an opacity on the line between its neighbours'
+
+// The colour map whose colours the points follow: every stop of it among the points and every
+// point coloured as the map is at its position; null if none.
+function mapOf(pts) {
+  for (const [name, stops] of Object.entries((S.choices && S.choices.colormaps) || {})) {
+    if (pts.length < stops.length) continue;
+    let k = 0;
+    const present = stops.every((q) => {
+      while (k < pts.length && pts[k][0] < q[0] - SAME_U) k++;
+      return k < pts.length && Math.abs(pts[k][0] - q[0]) <= SAME_U;
+    });
+    if (!present) continue;
+    const coloured = pts.every((p) => [1, 2, 3].every((j) => Math.abs(p[j] - interp(stops, p[0], j)) <= SAME_RGB));
+    if (coloured) return name;
+  }
+  return null;
+}
+
+// The points the editor shows as handles (indices): all of them, or under a colour map only the
+// opacity curve's own points: its two ends (at 0 and 1, as the map's stops are; they keep
+// their place), the points off the map's stops and those where the curve bends.
+export function handles(pts) {
+  const all = pts.map((_, i) => i);
+  const map = mapOf(pts);
+  if (!map) return { map: null, idx: all };
+  const stops = S.choices.colormaps[map];
+  const onStop = (u) => stops.some((q) => Math.abs(q[0] - u) <= SAME_U);
+  const n = pts.length;
+  const bends = (i) => {
+    const [a, p, b] = [pts[i - 1], pts[i], pts[i + 1]];
+    return Math.abs(p[4] - (a[4] + ((p[0] - a[0]) / (b[0] - a[0])) * (b[4] - a[4]))) > SAME_A;
+  };
+  return { map, idx: all.filter((i) => i === 0 || i === n - 1 || !onStop(pts[i][0]) || bends(i)) };
+}
+
+// Whether handle k of `hs` keeps its value: the ends under a map (the map spans 0 to 1).
+const pinned = (hs, map, k) => !!map && (k === 0 || k === hs.length - 1);
+
+// The handles as [u, a] pairs, and which of them is the selected point (-1: none).
+function handlePairs(pts) {
+  const { map, idx } = handles(pts);
+  return { map, idx, hs: idx.map((i) => [pts[i][0], pts[i][4]]), at: idx.indexOf(S.selectedPoint) };
+}
+
+// The points for handles `hs` under colour map `map` ([u, a] pairs), or without one (`hs` are
+// then the points, [u, r, g, b, a]); handle `sel` (an index into hs) selected. False, and the
+// points kept, where the map would need more points than the server takes.
+function setHandles(hs, map, sel) {
+  if (!map) {
+    S.state.data_tf.points = hs;
+    S.selectedPoint = sel;
+    return true;
+  }
+  const pts = mapped(hs, map);
+  const most = S.choices.limits.max_tf_points;
+  if (pts.length > most) {
+    $('tf-hover').textContent = `colour map ${map} needs ${pts.length} points; remove some (at most ${most})`;
+    return false;
+  }
+  S.state.data_tf.points = pts;
+  const u = hs[sel][0];
+  S.selectedPoint = pts.findIndex((p) => Math.abs(p[0] - u) <= 1e-9);
+  return true;
+}
+
+// The colour-map menu names the map the colours follow, the colour field (one point's colour)
+// is off under one, and the selected point is a handle (the nearest one).
+function followMap(map, idx) {
+  $('tf-colormap').value = map || '';
+  const picker = $('point-color');
+  picker.disabled = !!map;
+  picker.title = map
+    ? `the colours follow colour map ${map}; choose "none" there to colour the points one by one`
+    : "the selected point's colour";
+  if (!idx.includes(S.selectedPoint)) {
+    const pts = S.state.data_tf.points;
+    const u = pts[Math.min(S.selectedPoint, pts.length - 1)][0];
+    S.selectedPoint = idx.reduce((b, i) => (Math.abs(pts[i][0] - u) < Math.abs(pts[b][0] - u) ? i : b), idx[0]);
+    syncPointColor();
+  }
 }
 
 function showHover(u) {
@@ -140,7 +236,9 @@ function showHover(u) {
 // The colour-map menu, from the server's presets.
 export function fillColormaps() {
   const names = Object.keys(S.choices.colormaps);
-  $('tf-colormap').replaceChildren(new Option('choose…', ''), ...names.map((n) => new Option(n, n)));
+  const none = new Option('none', '');
+  none.title = 'each point has its own colour (leaving a map, the handles keep the colours it gave them)';
+  $('tf-colormap').replaceChildren(none, ...names.map((n) => new Option(n, n)));
 }
 
 // The note under the histogram: which steps it counts, named against the window, and the
@@ -171,26 +269,28 @@ export function bindTF() {
     const g = tfGeom();
     const [x, y] = at(e);
     const pts = S.state.data_tf.points;
+    // Under a map the drag edits the [u, a] handles; without one, the points themselves.
+    const { map, idx, hs } = handlePairs(pts);
+    const own = map ? hs : pts.map((p) => p.slice());
     let best = -1;
     let bestD = 9;
-    pts.forEach((p, i) => {
-      const d = Math.hypot(g.X(p[0]) - x, g.Y(p[4]) - y);
-      if (d < bestD) [best, bestD] = [i, d];
+    idx.forEach((i, k) => {
+      const d = Math.hypot(g.X(pts[i][0]) - x, g.Y(pts[i][4]) - y);
+      if (d < bestD) [best, bestD] = [k, d];
     });
     if (best < 0) {
-      // A new point on the curve's colour at that value.
+      // A new handle there (without a map, on the curve's colour at that value).
       const u = clamp01(g.U(x));
-      if (pts.some((p) => Math.abs(p[0] - u) < 1e-4) || pts.length >= S.choices.limits.max_tf_points) return;
-      let k = pts.findIndex((p) => p[0] > u);
-      if (k < 0) k = pts.length;
-      const rgb = [1, 2, 3].map((j) => interp(pts, u, j));
-      pts.splice(k, 0, [u, ...rgb, clamp01(g.A(y))]);
-      best = k;
+      if (own.some((q) => Math.abs(q[0] - u) < 1e-4) || pts.length >= S.choices.limits.max_tf_points) return;
+      best = own.findIndex((q) => q[0] > u);
+      if (best < 0) best = own.length;
+      const a = clamp01(g.A(y));
+      own.splice(best, 0, map ? [u, a] : [u, ...[1, 2, 3].map((j) => interp(pts, u, j)), a]);
     }
-    S.selectedPoint = best;
+    if (!setHandles(own, map, best)) return;
     syncPointColor();
     c.setPointerCapture(e.pointerId);
-    tf.drag = { i: best };
+    tf.drag = { k: best, hs: own, map };
     sendTF('preview');
   });
   c.addEventListener('pointermove', (e) => {
@@ -200,14 +300,15 @@ export function bindTF() {
     }
     const g = tfGeom();
     const [x, y] = at(e);
-    const pts = S.state.data_tf.points;
-    const i = tf.drag.i;
-    const lo = i > 0 ? pts[i - 1][0] + 1e-4 : 0;
-    const hi = i < pts.length - 1 ? pts[i + 1][0] - 1e-4 : 1;
-    pts[i][0] = Math.max(lo, Math.min(hi, clamp01(g.U(x))));
-    pts[i][4] = clamp01(g.A(y));
+    const { k, hs, map } = tf.drag;
+    const A = map ? 1 : 4; // where a handle keeps its opacity
+    const lo = k > 0 ? hs[k - 1][0] + 1e-4 : 0;
+    const hi = k < hs.length - 1 ? hs[k + 1][0] - 1e-4 : 1;
+    if (!pinned(hs, map, k)) hs[k][0] = Math.max(lo, Math.min(hi, clamp01(g.U(x))));
+    hs[k][A] = clamp01(g.A(y));
+    if (!setHandles(hs.map((q) => q.slice()), map, k)) return;
     syncPointColor(); // the value and opacity fields follow the point as it moves
-    showHover(pts[i][0]);
+    showHover(hs[k][0]);
     sendTF('preview');
   });
   const end = () => {
@@ -222,48 +323,60 @@ export function bindTF() {
   // shows a rounded number).
   const typed = (field) => () => {
     const pts = S.state.data_tf.points;
-    const i = S.selectedPoint;
-    const p = pts[i];
+    const { map, hs, at: k } = handlePairs(pts);
+    const own = map ? hs : pts.map((p) => p.slice());
+    const A = map ? 1 : 4; // where a handle keeps its opacity
+    const p = own[k];
     const v = parseFloat($(field).value);
     if (!p || !S.info || !Number.isFinite(v)) return syncPointColor();
-    if (field === 'point-alpha') p[4] = clamp01(v);
-    else {
+    if (field === 'point-alpha') p[A] = clamp01(v);
+    else if (!pinned(own, map, k)) {
       const u = (v - S.info.vmin) / (S.info.vmax - S.info.vmin || 1);
-      const lo = i > 0 ? pts[i - 1][0] + 1e-4 : 0;
-      const hi = i < pts.length - 1 ? pts[i + 1][0] - 1e-4 : 1;
+      const lo = k > 0 ? own[k - 1][0] + 1e-4 : 0;
+      const hi = k < own.length - 1 ? own[k + 1][0] - 1e-4 : 1;
       p[0] = Math.max(lo, Math.min(hi, u));
     }
+    setHandles(own, map, k);
     syncPointColor();
     sendTF('full');
   };
   $('point-value').addEventListener('change', typed('point-value'));
   $('point-alpha').addEventListener('change', typed('point-alpha'));
+  // A map: its stops join the opacity curve's handles (every point is one where no map is
+  // followed yet). None: the handles stay, each with the colour the map gave it; the stops go.
   const maps = $('tf-colormap');
   maps.addEventListener('change', () => {
-    if (!maps.value || !S.state) return;
-    const pts = withColormap(S.state.data_tf.points, maps.value);
-    maps.value = '';
-    if (pts.length > S.choices.limits.max_tf_points) {
-      $('tf-hover').textContent = `a colour map needs ${pts.length} points; remove some (at most ${S.choices.limits.max_tf_points})`;
+    if (!S.state) return;
+    const pts = S.state.data_tf.points;
+    const { map, idx, hs, at: k } = handlePairs(pts);
+    if (maps.value === (map || '')) return;
+    const sel = Math.max(0, k);
+    const ok = maps.value
+      ? setHandles(hs, maps.value, sel)
+      : setHandles(idx.map((i) => pts[i].slice()), null, sel);
+    if (!ok) {
+      maps.value = map || '';
       return;
     }
-    S.state.data_tf.points = pts;
-    S.selectedPoint = Math.min(S.selectedPoint, pts.length - 1);
     syncPointColor();
+    followDataTF(S.state.data_tf.points); // time as lightness under a map's hue, unless time colours were chosen
     sendTF('full');
   });
   $('hist-log').addEventListener('change', drawTF);
   const remove = () => {
     const pts = S.state.data_tf.points;
-    if (pts.length <= 2) return;
-    pts.splice(S.selectedPoint, 1);
-    S.selectedPoint = Math.min(S.selectedPoint, pts.length - 1);
+    const { map, hs, at: k } = handlePairs(pts);
+    const own = map ? hs : pts.map((p) => p.slice());
+    if (own.length <= 2 || k < 0) return;
+    own.splice(k, 1);
+    setHandles(own, map, Math.min(k, own.length - 1));
     syncPointColor();
     sendTF('full');
   };
   c.addEventListener('dblclick', remove);
   $('tf-delete').addEventListener('click', remove);
   $('point-color').addEventListener('input', () => {
+    if (mapOf(S.state.data_tf.points)) return; // the colours follow a map (the field is off)
     const p = S.state.data_tf.points[S.selectedPoint];
     const hex = $('point-color').value;
     [1, 2, 3].forEach((j, k) => (p[j] = parseInt(hex.slice(1 + 2 * k, 3 + 2 * k), 16) / 255));
@@ -304,6 +417,8 @@ function setZoom(lo, hi) {
   histTimer = setTimeout(() => send({ type: 'histogram', range: [lo, hi] }), 120);
 }
 
+// The indices of the points the editor shows as handles, for scripted use (the browser tests).
+viewer.tfHandles = () => handles(S.state.data_tf.points).idx;
 // Page coordinates of a TF point's handle, for scripted use (the browser tests).
 viewer.tfPointAt = (i) => {
   const g = tfGeom();

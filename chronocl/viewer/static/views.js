@@ -29,7 +29,11 @@ export function layoutViews() {
   const n = S.state.views.length;
   const box = $('views');
   const { min_panel: minPanel, max_panel: maxPanel } = S.choices.limits;
-  while (panels.length > n) panels.pop().el.remove();
+  while (panels.length > n) {
+    const p = panels.pop();
+    if (pictureObserver) pictureObserver.unobserve(p.pic);
+    p.el.remove();
+  }
   while (panels.length < n) panels.push(makePanel(panels.length));
   panels.forEach((p, i) => {
     p.mode.value = S.state.views[i].mode;
@@ -40,13 +44,16 @@ export function layoutViews() {
     p.el.classList.toggle('selected', i === S.selectedView && n > 1);
   });
   // Panels fill the view area in a grid (columns x rows): the squarest grid with room for n
-  // (2x2 for four views) unless another gives cells with a clearly (25 %) longer short side,
-  // as a row of two on a wide area or a column of two on a tall one.
+  // (2x2 for four views) unless another gives pictures with a clearly (25 %) longer short
+  // side, as a row of two on a wide area or a column of two on a tall one. A panel is its
+  // picture between two bands (controls and caption above, legend and axes below), so the
+  // picture is the cell less the bands' height.
   const W = box.clientWidth - 2 * GAP;
   const H = box.clientHeight - 2 * GAP;
+  const bands = panels[0].head.offsetHeight + panels[0].foot.offsetHeight + 2; // + border
   const cell = (c) => {
     const r = Math.ceil(n / c);
-    return { c, r, w: (W - GAP * (c - 1)) / c, h: (H - GAP * (r - 1)) / r };
+    return { c, r, w: (W - GAP * (c - 1)) / c - 2, h: (H - GAP * (r - 1)) / r - bands };
   };
   let best = cell(Math.ceil(Math.sqrt(n)));
   for (let c = 1; c <= n; c++) {
@@ -56,33 +63,50 @@ export function layoutViews() {
   S.columns = best.c;
   box.style.gridTemplateColumns = `repeat(${best.c}, minmax(0, 1fr))`;
   box.style.gridTemplateRows = `repeat(${best.r}, minmax(0, 1fr))`;
-  // Render size: the cell in device pixels, the longest side within the server's limit (the
-  // server draws fewer pixels still when the views together exceed its budget).
+  // Render size: the picture's box (measured, now the grid is set) in device pixels, the
+  // longest side within the server's limit (the server draws fewer pixels still when the
+  // views together exceed its budget).
   const dpr = window.devicePixelRatio || 1;
-  const w = Math.max(1, best.w - 2) * dpr; // less the panel's border
-  const h = Math.max(1, best.h - 2) * dpr;
+  const w = Math.max(1, panels[0].pic.clientWidth) * dpr;
+  const h = Math.max(1, panels[0].pic.clientHeight) * dpr;
   const fit = Math.min(1, maxPanel / Math.max(w, h));
   return [Math.max(minPanel, Math.round(w * fit)), Math.max(minPanel, Math.round(h * fit))];
+}
+
+// Pictures that change size (the window, the side panel, the legend or axes shown or hidden)
+// call `cb` (app.js: a new layout and render size).
+let pictureObserver = null;
+export function observePictures(cb) {
+  pictureObserver = new ResizeObserver(cb);
+  for (const p of panels) pictureObserver.observe(p.pic);
 }
 
 function makePanel(i) {
   const el = document.createElement('div');
   el.className = 'view';
   el.dataset.i = i;
+  // Above the picture its controls and caption, below it the legend and the axes: no text
+  // over the picture but the note of a (nearly) empty one.
   el.innerHTML =
-    '<img alt="view" draggable="false"><div class="view-head">' +
+    '<div class="view-head">' +
     '<select class="mode" title="Integration mode"></select>' +
     '<button class="order" title="Integration order (which steps are in front)"></button>' +
     '<input class="own-window" placeholder="linked" size="8" spellcheck="false" ' +
     'title="This view\'s own window t0:t1[:stride], to compare two periods side by side; ' +
     'empty: the timeline\'s window">' +
-    '</div><div class="view-label"></div><div class="view-note" hidden></div>' +
+    '<div class="view-label"></div></div>' +
+    '<div class="view-pic"><img alt="view" draggable="false">' +
     '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon/></svg>' +
-    '<div class="probe-mark"></div><div class="probe-band"></div><canvas class="legend"></canvas>' +
-    '<canvas class="triad"></canvas>';
+    '<div class="probe-mark"></div><div class="probe-band"></div>' +
+    '<div class="view-note" hidden></div></div>' +
+    '<div class="view-foot"><canvas class="legend"></canvas><canvas class="colorbar" hidden></canvas>' +
+    '<canvas class="triad"></canvas></div>';
   $('views').appendChild(el);
   const p = {
     el,
+    head: el.querySelector('.view-head'),
+    pic: el.querySelector('.view-pic'),
+    foot: el.querySelector('.view-foot'),
     img: el.querySelector('img'),
     mode: el.querySelector('.mode'),
     order: el.querySelector('.order'),
@@ -94,6 +118,7 @@ function makePanel(i) {
     outline: el.querySelector('.clip-outline polygon'),
     triad: el.querySelector('.triad'),
   };
+  if (pictureObserver) pictureObserver.observe(p.pic);
   fillSelect(p.mode, S.choices.modes);
   p.mode.addEventListener('change', () => {
     const views = S.state.views.map((v) => ({ ...v }));
@@ -204,7 +229,7 @@ function probeAt(p, i, e, from) {
 
 // The rubber band of a shift-drag, from the drag's start to the pointer.
 function showBand(p, from, e) {
-  const r = p.el.getBoundingClientRect();
+  const r = p.pic.getBoundingClientRect();
   const b = p.band.style;
   b.display = 'block';
   b.left = `${Math.min(from.x, e.clientX) - r.left}px`;
@@ -266,7 +291,7 @@ export function onFrame(buf) {
     p.img.src = url;
     p.img.dataset.url = url;
     if (old) URL.revokeObjectURL(old);
-    p.label.textContent = v.label;
+    showLabel(p, S.state.views[i], v.label);
     p.note.textContent = v.note || '';
     p.note.hidden = !v.note;
   });
@@ -277,6 +302,7 @@ export function onFrame(buf) {
   for (const p of panels) p.outline.setAttribute('points', cut);
   S.legend = header.legend || [];
   S.legends = header.legends || null; // each view's, where views have their own windows
+  S.colorbars = header.colorbars || null; // each view's data colour bar, null where TF is white
   S.focus = header.focus || null;
   drawLegends();
   const now = performance.now();
@@ -298,6 +324,22 @@ export function onFrame(buf) {
   drawTriads();
   drawTimeline();
   drawProbe();
+}
+
+// A panel's caption in its head band, beside the mode and order menus that say its first part:
+// that part ('alpha, forward, ') is the one cut short where the band is narrow, so the steps
+// (or times) after it always show. The whole caption is the label's text and its tooltip.
+function showLabel(p, view, label) {
+  const what = view ? `${view.mode}, ${view.order || S.choices.orders[0]}, ` : '';
+  const cut = what && label.startsWith(what) ? what.length : 0;
+  const head = document.createElement('span');
+  head.className = 'what';
+  head.textContent = label.slice(0, cut);
+  const tail = document.createElement('span');
+  tail.className = 'when';
+  tail.textContent = label.slice(cut);
+  p.label.replaceChildren(head, tail);
+  p.label.title = label;
 }
 
 function showTimings(h) {
