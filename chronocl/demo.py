@@ -1,7 +1,9 @@
 """`make demo` / `chronocl demo`: the built-in data sets and a gallery after the paper's Figure 3.
 
 Writes the vortex and jet series, one PNG per figure, `gallery.png` (all figures with their
-captions) and `index.html`, and prints where they are and how long each took.
+captions) and `index.html`, and prints where they are and how long each took. Then every
+mode's default picture of a Gray–Scott run (`defaults-gray-scott.png`, `chronocl.demo_defaults`)
+with the fraction of the window's steps each shows.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ from chronocl.core.enhance import Enhance
 from chronocl.core.tf import DataTF
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries, write_series
+from chronocl.data.simulations import simulate
+from chronocl.demo_defaults import default_pictures
 from chronocl.engine import get_engine
 from chronocl.integration.inmemory import integrate
 from chronocl.render import Camera, render_views
@@ -145,8 +149,10 @@ def run_demo(
     n_steps: int = 30,
     size: int = 512,
     engine: str = "opencl",
+    run_shape: tuple[int, int, int] = (48, 48, 48),
 ) -> list[Path]:
-    """Write the demo under `out_dir` with engine `engine`; returns the PNG paths."""
+    """Write the demo under `out_dir` with engine `engine`; returns the PNG paths (the
+    figures, then the default pictures of a Gray–Scott run on a grid of `run_shape`)."""
     console = Console(stderr=True)
     get_engine(engine)  # no usable OpenCL device: say so before anything is written
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -201,7 +207,26 @@ def run_demo(
     _index(out_dir, written)
     Console().print(timings)
     console.print(f"gallery: {out_dir / 'gallery.png'}   page: {out_dir / 'index.html'}")
-    return written
+    t0 = time.perf_counter()
+    run = TimeSeries.from_array(
+        simulate("gray-scott", run_shape, 24),
+        source="chronocl demo: Gray-Scott reaction-diffusion from the (0, 0, 0) corner",
+    )
+    path = out_dir / "defaults-gray-scott.png"
+    print_shown(default_pictures(run, "0:24:3", path, engine=engine), path, console)
+    console.print(f"({time.perf_counter() - t0:.1f} s)")
+    return [*written, path]
+
+
+def print_shown(results, path: Path, console: Console) -> None:
+    """The fraction of the window's steps each default picture shows, a table on the console."""
+    table = Table(title=f"default pictures -> {path.resolve()}")
+    for col in ("mode", "steps shown", "hidden steps", "warnings"):
+        table.add_column(col)
+    for r in results:
+        hidden = ", ".join(map(str, r.shown.hidden)) or "-"
+        table.add_row(r.mode, f"{r.shown.fraction:.0%}", hidden, str(len(r.warnings)))
+    console.print(table)
 
 
 def _gallery(out_dir: Path, paths: list[Path]) -> Path:

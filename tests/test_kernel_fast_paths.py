@@ -157,7 +157,11 @@ def test_time_tables_at_their_edge_equal_the_gathers(mode, w):
     spec_args = {"threshold": 0.4} if mode == "first_hit" else {}
     for order in ("forward", "backward", tuple(rng.permutation(w).tolist())):
         spec = IntegrationSpec(
-            mode=mode, order=order, time_tf=chronocl.TimeTF.preset("rgb"), **spec_args
+            mode=mode,
+            order=order,
+            time_tf=chronocl.TimeTF.preset("rgb"),
+            data_tf=chronocl.DataTF(value_range="global"),  # every rank its own u
+            **spec_args,
         )
         blocks = chronocl.integrate(series, None, spec=spec, engine=opencl.OpenCLEngine())
         vectors = opencl.OpenCLEngine(row_blocks=False)

@@ -29,7 +29,7 @@ def series() -> chronocl.TimeSeries:
 
 
 def extent(cv) -> np.ndarray:
-    return np.array(cv.shape) * np.array(cv.spacing)
+    return np.array(cv.dims) * np.array(cv.spacing)
 
 
 @pytest.mark.parametrize("mode", modes.names())
@@ -42,7 +42,10 @@ def test_integrate_a_level_keeps_the_extent_and_pools_as_the_mode_asks(series, m
         assert cv.shape == coarse.volume_shape
         np.testing.assert_allclose(extent(cv), extent(full))
         assert cv.metadata["level"] == level
-        direct = chronocl.integrate(coarse, "0:6", mode)
+        # Every level is normalised by level 0's range (fitted to level 0's window).
+        same = chronocl.DataTF(value_range=tuple(full.metadata["value_range"]))
+        assert cv.metadata["value_range"] == full.metadata["value_range"]
+        direct = chronocl.integrate(coarse, "0:6", mode, data_tf=same)
         np.testing.assert_array_equal(cv.rgba, direct.rgba)
     assert full.metadata["level"] == 0
 
@@ -68,7 +71,8 @@ def test_auto_scrubs_incrementally_at_the_level_it_picked(series):
         s.set_window(0, 4)
         cvs = [s.slide(+1) for _ in range(3)]
         assert s.stats["incremental"] and s.stats["level"] == 2
-        ref = chronocl.integrate(series, "3:7", "max", time_tf=rgb, level=2)
+        # The range fitted to the first window holds while the window slides.
+        ref = chronocl.integrate(series, "3:7", spec=s.spec, level=2)
         np.testing.assert_array_equal(cvs[-1].rgba, ref.rgba)
 
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 import chronocl
+from chronocl import modes
 from chronocl.demo import FIGURES, run_demo
 
 from .test_cli import assert_one_line_error, cli
@@ -138,8 +141,15 @@ def test_bad_render_options(tmp_path, vortex, args, needle):
 
 
 def test_demo_writes_the_gallery(tmp_path):
-    paths = run_demo(tmp_path, shape_xyz=(24, 24, 24), n_steps=30, size=64)
-    assert len(paths) == len(FIGURES) and all(p.exists() for p in paths)
+    paths = run_demo(tmp_path, shape_xyz=(24, 24, 24), n_steps=30, size=64, run_shape=(20, 20, 20))
+    *figures, defaults = paths
+    assert len(figures) == len(FIGURES) and all(p.exists() for p in paths)
     assert (tmp_path / "gallery.png").exists()
     page = (tmp_path / "index.html").read_text()
-    assert all(p.name in page for p in paths) and "white where all steps" in page
+    assert all(p.name in page for p in figures) and "white where all steps" in page
+    # Every mode's default picture of the reaction-diffusion run, with what it shows.
+    report = json.loads(defaults.with_suffix(".json").read_text())
+    assert set(report["modes"]) == set(modes.names())
+    for shown in report["modes"].values():
+        assert 0 <= shown["fraction_shown"] <= 1
+        assert len(shown["shown"]) + len(shown["hidden"]) == 8  # window 0:24:3

@@ -66,7 +66,7 @@ def test_slides_and_jumps_equal_scratch(engine: str, mode: str, data) -> None:
     session = Session(series, engine=engine, spec=spec, memory="64MB")
     t0 = data.draw(st.integers(0, n_steps - width))
     cv = session.set_window(t0, t0 + width)
-    _check(cv, series, session.selection, spec, engine)
+    _check(cv, series, session.selection, session.spec, engine)
     for _ in range(data.draw(st.integers(1, 10))):
         if data.draw(st.integers(0, 4)) == 0:  # a jump anywhere
             t0 = data.draw(st.integers(0, n_steps - width))
@@ -79,7 +79,7 @@ def test_slides_and_jumps_equal_scratch(engine: str, mode: str, data) -> None:
             overlap = set(before.steps) & set(session.selection.steps)
             if moved and overlap:
                 assert session.stats["path"] == "incremental"
-        _check(cv, series, session.selection, spec, engine)
+        _check(cv, series, session.selection, session.spec, engine)
     session.close()
 
 
@@ -95,7 +95,7 @@ def test_strided_windows_slide_by_strides(engine: str, mode: str) -> None:
             cv = session.slide(k)
             assert session.stats["path"] == "incremental"
             assert np.all(np.diff(cv.steps) == 3)
-            _check(cv, series, session.selection, spec, engine)
+            _check(cv, series, session.selection, session.spec, engine)
 
 
 @pytest.mark.parametrize("engine", ENGINES)

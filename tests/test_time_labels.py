@@ -247,6 +247,7 @@ def test_nice_number_ticks(lo, hi, most, integer, ticks):
     assert [float(tick_text(t, step)) for t in got] == pytest.approx(ticks)
 
 
+@pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")  # random data
 def test_a_long_window_gets_regular_ticks(drawn_text):
     data = np.random.default_rng(3).random((300, 4, 5, 6)).astype(np.float32)
     cv = chronocl.integrate(chronocl.TimeSeries.from_array(data), "7:293", "max", engine="numpy")

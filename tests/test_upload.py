@@ -33,7 +33,11 @@ def demo() -> dict[tuple[str, str], chronocl.Chronovolume]:
         data = np.stack(list(synthetic.steps(name, 8, (40, 40, 40))))
         series = chronocl.TimeSeries.from_array(data)
         for mode in ("alpha", "additive", "max"):
-            out[name, mode] = chronocl.integrate(series, "0:8", mode, engine="numpy")
+            # as the viewer shows it: the default data TF over the series' range
+            viewer_tf = chronocl.DataTF(value_range="global")
+            out[name, mode] = chronocl.integrate(
+                series, "0:8", mode, engine="numpy", data_tf=viewer_tf
+            )
     return out
 
 
@@ -100,9 +104,11 @@ def test_rgba8_image_difference_is_invisible(rc, demo):
     Measured (docs/display.md, 128^3 and 256^3 at 512^2): PSNR 56-60 dB, 99.9 % of pixel
     values within 3/255, the largest difference 7/255 at a few silhouette pixels; here
     (40^3 at 160^2, llvmpipe) PSNR 56.4-60.8 dB, at most 0.007 % of values beyond 3/255, the
-    largest 5/255. The bounds (50 dB, 0.1 %, 10/255) leave room for another driver's
-    filtering of 8-bit texels and stay where no one sees a difference on a still: the
-    viewer's own JPEG frames (quality 88) move pixel values by far more (43 dB, up to 50/255).
+    largest 5/255; with the default TF translucent from u = 0.05 (more faint material along
+    each ray) up to 0.15 % beyond 3/255. The bounds (50 dB, 0.3 %, 10/255) leave room for
+    another driver's filtering of 8-bit texels and stay where no one sees a difference on a
+    still: the viewer's own JPEG frames (quality 88) move pixel values by far more (43 dB,
+    up to 50/255).
     """
     for (name, mode), cv in demo.items():
         slot4, slot1 = ViewSlot(), ViewSlot()
@@ -117,7 +123,7 @@ def test_rgba8_image_difference_is_invisible(rc, demo):
             where = f"{name} {mode} on {background}"
             assert (a != a[0, 0]).any(), where  # something drawn
             assert psnr >= 50.0, f"{where}: PSNR {psnr:.1f} dB"
-            assert (diff > 3).mean() <= 0.001, f"{where}: {(diff > 3).mean():.3%} beyond 3/255"
+            assert (diff > 3).mean() <= 0.003, f"{where}: {(diff > 3).mean():.3%} beyond 3/255"
             assert diff.max() <= 10, f"{where}: largest difference {diff.max()}/255"
         slot4.release_gl()
         slot1.release_gl()

@@ -398,12 +398,12 @@ def test_probe_ray_matches_a_known_block():
     cv = Chronovolume(rgba, metadata={"spacing": {"x": 1.0, "y": 1.0, "z": 1.0}})
     cam = Camera(azimuth=0.0, elevation=0.0, projection="orthographic", zoom=1.0)
     hit = probe_ray(cv, cam, (200, 200), 0.5, 0.5)
-    assert hit["reached"] and hit["voxel"] == (14, 10, 10)  # the face nearest the eye (+z)
+    assert hit["reached"] and hit["voxel"] == (10, 10, 14)  # x, y, z: the face nearest the eye
     behind = Camera(azimuth=180.0, elevation=0.0, projection="orthographic")
-    assert probe_ray(cv, behind, (200, 200), 0.5, 0.5)["voxel"] == (5, 10, 10)
+    assert probe_ray(cv, behind, (200, 200), 0.5, 0.5)["voxel"] == (10, 10, 5)
     # The slicing plane keeps z <= centre only: the hit moves to the plane.
     cut = probe_ray(cv, cam, (200, 200), 0.5, 0.5, clip=(0, 0, -1, 0.0))
-    assert cut["voxel"][0] == 9
+    assert cut["voxel"][2] == 9
     assert probe_ray(cv, cam, (200, 200), 0.02, 0.5)["voxel"] is None
 
 

@@ -23,6 +23,13 @@ def plume():
     return chronocl.TimeSeries.from_array(data * scale / data.max(), source="plume")
 
 
+# The data TF that was the default until it was fitted to the window: transparent below 35 %
+# of the series' range (a TF drawn by hand is read against the series' range).
+HIDES_LOW = chronocl.DataTF(
+    points=[(0, 1, 1, 1, 0), (0.35, 1, 1, 1, 0), (0.6, 1, 1, 1, 0.5), (1, 1, 1, 1, 0.9)]
+)
+
+
 def _warned(fn) -> list[str]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -32,7 +39,9 @@ def _warned(fn) -> list[str]:
 
 @pytest.mark.parametrize("mode", ["alpha", "additive", "max", "first_hit", "mean"])
 def test_faint_early_steps_are_named_in_one_warning(plume, mode):
-    got = _warned(lambda: chronocl.integrate(plume, "0:10", mode, engine="numpy"))
+    got = _warned(
+        lambda: chronocl.integrate(plume, "0:10", mode, engine="numpy", data_tf=HIDES_LOW)
+    )
     assert len(got) == 1, got
     assert got[0].startswith("steps 0, 1, 2 (3 of the 10 selected) are invisible")
     assert "(0.00 .. 0.28 of the value range) lie where the data TF's opacity is under" in got[0]
@@ -43,8 +52,16 @@ def test_faint_early_steps_are_named_in_one_warning(plume, mode):
     assert max(top[:3]) < 0.35 <= top[3]
 
 
+def test_the_defaults_show_the_faint_steps(plume):
+    for mode in ("alpha", "additive", "max", "first_hit", "mean", "min"):
+        assert _warned(lambda m=mode: chronocl.integrate(plume, "0:10", m, engine="numpy")) == []
+
+
 def test_visible_windows_and_opaque_tfs_are_quiet(plume):
-    assert _warned(lambda: chronocl.integrate(plume, "5:12", "alpha", engine="numpy")) == []
+    late = _warned(
+        lambda: chronocl.integrate(plume, "5:12", "alpha", engine="numpy", data_tf=HIDES_LOW)
+    )
+    assert late == []
     opaque = chronocl.DataTF(points=[(0, 1, 1, 1, 0.4), (1, 1, 1, 1, 0.9)])
     every = _warned(lambda: chronocl.integrate(plume, "0:10", data_tf=opaque, engine="numpy"))
     assert every == []
@@ -67,7 +84,9 @@ def test_an_enhanced_picture_and_a_tf_opaque_only_low_are_judged_right(plume):
 
 
 def test_a_chronovolume_with_nothing_opaque_says_so(plume):
-    got = _warned(lambda: chronocl.integrate(plume, "0:12", "min", engine="numpy"))
+    got = _warned(
+        lambda: chronocl.integrate(plume, "0:12", "min", engine="numpy", data_tf=HIDES_LOW)
+    )
     assert len(got) == 1 and got[0].startswith("the min chronovolume shows nothing"), got
     assert "opaque where the min values lie" in got[0]
 
@@ -77,8 +96,10 @@ def test_the_cli_prints_one_warning_line_and_renders(plume, tmp_path, monkeypatc
 
     store = tmp_path / "plume.zarr"
     plume.save(store)
+    tf = tmp_path / "tf.json"
+    chronocl.TFSetting(data_tf=HIDES_LOW).save(tf)
     out = tmp_path / "p.png"
-    argv = ["chronocl", "render", str(store), "-o", str(out), "--window", "0:10"]
+    argv = ["chronocl", "render", str(store), "-o", str(out), "--window", "0:10", "--tf", str(tf)]
     monkeypatch.setattr(sys, "argv", [*argv, "--engine", "numpy", "--size", "96x64"])
     with pytest.raises(SystemExit) as info:
         main()

@@ -71,8 +71,22 @@ def render(
     ] = "none",
     threshold: ThresholdOpt = 0.0,
     normalize: NormalizeOpt = "time",
-    azimuth: Annotated[float, typer.Option(help="Degrees around the vertical axis.")] = 30.0,
-    elevation: Annotated[float, typer.Option(help="Degrees above the horizon.")] = 20.0,
+    azimuth: Annotated[
+        float | None,
+        typer.Option(
+            help="Degrees around the --up axis. Without --azimuth and --elevation the camera "
+            "looks from the side where the window's first steps lie (else 30, 20)."
+        ),
+    ] = None,
+    elevation: Annotated[
+        float | None, typer.Option(help="Degrees above the plane across the --up axis.")
+    ] = None,
+    up: Annotated[
+        str,
+        typer.Option(
+            help="Data axis that points up on the screen: x, y or z (azimuth turns around it)."
+        ),
+    ] = "y",
     zoom: Annotated[float, typer.Option(help="Magnification (1 fits what --frame frames).")] = 1.0,
     frame: Annotated[
         str,
@@ -88,7 +102,11 @@ def render(
         typer.Option(help="Slicing plane nx,ny,nz,offset (offset -1..1; keeps the normal's side)."),
     ] = None,
     background: Annotated[str, typer.Option(help="Colour name or #rrggbb.")] = "black",
-    outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = False,
+    outline: Annotated[bool, typer.Option(help="Draw the volume's bounding box.")] = True,
+    axes: Annotated[
+        bool,
+        typer.Option(help="Draw the axis triad (x, y, z in red, green, blue) in a corner."),
+    ] = True,
     shading: ShadingOpt = False,
     shading_params: ShadingParamsOpt = None,
     time_labels: TimeLabelsOpt = "labels",
@@ -117,6 +135,10 @@ def render(
 ) -> None:
     """Integrate a window and render it; several modes become parallel views in one image.
 
+    Every panel shows the volume's box outline and an axis triad (x red, y green, z blue) in
+    its bottom-right corner; --no-outline and --no-axes leave them out. --up names the data
+    axis drawn upwards (y by default); azimuth turns around it.
+
     Examples:
 
       chronocl render vortex.zarr -o alpha.png --mode alpha --window 0:20:9
@@ -125,7 +147,13 @@ def render(
 
       chronocl render vortex.zarr -o cut.png --clip 1,0,0,0 --azimuth 60 --zoom 1.4
 
-      chronocl render vortex.zarr -o v.png --mode max --time-tf luminance --colormap viridis
+      chronocl render plume.zarr -o side.png --up z --azimuth 0 --elevation 10
+
+      chronocl render vortex.zarr -o bare.png --no-axes --no-outline --background white
+
+      chronocl render vortex.zarr -o v.png --mode max --colormap viridis
+
+      chronocl render vortex.zarr -o v.png --mode max --time-tf luminance --colormap magma
 
       chronocl render vortex.zarr -o s.png --enhance silhouette --turntable s.mp4
 
@@ -158,6 +186,7 @@ def render(
     from chronocl.integration.inmemory import at_level, prepare
     from chronocl.integration.levels import check_level
     from chronocl.render import Camera
+    from chronocl.render.default_view import early_side
     from chronocl.render.raycaster import check_clip, check_size
     from chronocl.render.turntable import ModeViews, check_video
     from chronocl.render.views import describe, parse_color, render_views
@@ -171,7 +200,14 @@ def render(
         raise InvalidParameterError(f"--mode {twice} is given twice; name each mode once")
     check_engine(engine)
     check_format_name(device_format)
-    camera = Camera(azimuth, elevation, zoom, projection=projection, frame=frame)
+    camera = Camera(
+        30.0 if azimuth is None else azimuth,
+        20.0 if elevation is None else elevation,
+        zoom,
+        projection=projection,
+        frame=frame,
+        up=up,
+    )
     check_prefer(time_labels)
     panel = check_size(parse_sizes(size, 2, "WxH", "512x512"))
     parse_color(background)
@@ -206,6 +242,8 @@ def render(
         check_level(one, level)
         for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
             job = prepare(one, window, m, None, args)
+    if azimuth is None and elevation is None:  # the default view: from the first steps' side
+        camera = early_side(picked[0], job.selection, job.value_range, camera)
     if device_format != "auto":  # over the level's value range, which it quantises
         job = at_level(job, level)
         check_device_format(device_format, engine, job.series.dtype, job.value_range)
@@ -221,6 +259,7 @@ def render(
             background=background,
             clip=clip_plane,
             outline=outline,
+            axes=axes,
             shading=lighting,
             time_labels=time_labels,
         ),

@@ -59,25 +59,33 @@ MAX_JSON_BYTES = 16 * 2**20  # a transfer-function file larger than this is not 
 # --------------------------------------------------------------------------- data TF
 
 
+# Transparent at the bottom of the range (by default the window's background), rising from
+# just above it, so the faint parts of a window show beside its peaks.
 DEFAULT_DATA_POINTS = (
     (0.0, 1.0, 1.0, 1.0, 0.0),
-    (0.35, 1.0, 1.0, 1.0, 0.0),
-    (0.6, 1.0, 1.0, 1.0, 0.5),
+    (0.05, 1.0, 1.0, 1.0, 0.0),
+    (0.3, 1.0, 1.0, 1.0, 0.25),
     (1.0, 1.0, 1.0, 1.0, 0.9),
 )
+# value_range: fitted to the selected window, or the series' range recorded at ingest.
+FITTED, GLOBAL = "window", "global"
 
 
 @dataclass(frozen=True)
 class DataTF:
     """Piecewise-linear RGBA over the normalised value u, sampled into a LUT of `size` entries.
 
-    `value_range` overrides the series' global (vmin, vmax) used to normalise values.
+    `value_range` is what normalises values to u: ``"window"`` fits it to the selected
+    window's own values per mode (`chronocl.integration.fit_range`), ``"global"`` takes the
+    series' range recorded at ingest, (min, max) gives it. ``None`` (the default) means
+    ``"window"`` for a TF with the default opacity curve (whatever its colours, e.g. a colour
+    map) and ``"global"`` for one whose opacity was drawn by hand, against the series' range.
     The default colours by time: data colour white, opacity rising with the value.
     """
 
     points: tuple[tuple[float, ...], ...] = DEFAULT_DATA_POINTS
     size: int = 256
-    value_range: tuple[float, float] | None = None
+    value_range: tuple[float, float] | str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "points", parse_points(self.points, 5, "data_tf", "u, r, g, b, a"))
@@ -86,8 +94,21 @@ class DataTF:
         if not 256 <= self.size <= 65536:
             raise bad(f"data_tf size is {self.size}; use a LUT of 256 to 65536 entries")
         object.__setattr__(self, "size", int(self.size))
-        if self.value_range is not None:
+        if self.value_range is not None and self.value_range not in (FITTED, GLOBAL):
             object.__setattr__(self, "value_range", _value_range(self.value_range))
+
+    @property
+    def range_kind(self) -> str:
+        """What normalises values: "window" (fitted), "global" or "given"."""
+        vr = self.value_range
+        if isinstance(vr, tuple):
+            return "given"
+        if vr is None:
+            u = np.linspace(0.0, 1.0, 257)
+            mine = interp_points(self.points, u)[:, 3]
+            default = interp_points(DEFAULT_DATA_POINTS, u)[:, 3]
+            return FITTED if np.allclose(mine, default, rtol=0, atol=1e-9) else GLOBAL
+        return vr
 
     @property
     def lut(self) -> np.ndarray:
@@ -102,7 +123,8 @@ class DataTF:
     def to_dict(self) -> dict:
         d: dict = {"points": [list(p) for p in self.points], "size": self.size}
         if self.value_range is not None:
-            d["value_range"] = list(self.value_range)
+            vr = self.value_range
+            d["value_range"] = vr if isinstance(vr, str) else list(vr)
         return d
 
     @classmethod
@@ -122,8 +144,8 @@ def _value_range(vr: object) -> tuple[float, float]:
         vr = vr.tolist()
     if not isinstance(vr, list | tuple) or len(vr) != 2:
         raise bad(
-            f"data_tf value_range must be a list of two numbers [min, max], got {got(vr)}; "
-            "e.g. [0, 1]"
+            f"data_tf value_range must be a list of two numbers [min, max], "
+            f'"{FITTED}" or "{GLOBAL}", got {got(vr)}; e.g. [0, 1]'
         )
     lo, hi = (number(v, "data_tf value_range") for v in vr)
     big = float(np.finfo(np.float32).max)
@@ -169,13 +191,20 @@ def lut_lerp32(lut: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class TFSetting:
-    """A complete transfer-function setting: data TF and time TF, saved as JSON."""
+    """A transfer-function setting: data TF and time TF, saved as JSON.
+
+    `time_tf` None (a file without one) leaves the time TF unchosen: integration then takes
+    `TimeTF.for_data(data_tf.points)`, time as hue for a grey data TF and as lightness for a
+    coloured one (docs/semantics.md)."""
 
     data_tf: DataTF = field(default_factory=DataTF)
-    time_tf: TimeTF = field(default_factory=TimeTF)
+    time_tf: TimeTF | None = None
 
     def to_dict(self) -> dict:
-        return {"data_tf": self.data_tf.to_dict(), "time_tf": self.time_tf.to_dict()}
+        d: dict = {"data_tf": self.data_tf.to_dict()}
+        if self.time_tf is not None:
+            d["time_tf"] = self.time_tf.to_dict()
+        return d
 
     @classmethod
     def from_dict(cls, d: object) -> TFSetting:
@@ -183,7 +212,7 @@ class TFSetting:
         assert isinstance(d, dict)
         return cls(
             data_tf=DataTF.from_dict(d.get("data_tf", {})),
-            time_tf=TimeTF.from_dict(d.get("time_tf", {})),
+            time_tf=TimeTF.from_dict(d["time_tf"]) if "time_tf" in d else None,
         )
 
     def save(self, path: str | os.PathLike) -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -25,13 +25,14 @@ from chronocl.core.errors import InvalidParameterError
 from chronocl.core.memory import aligned_empty
 from chronocl.core.progress import track
 from chronocl.core.selection import Selection, parse_selection
-from chronocl.core.tf import DataTF, TFSetting, TimeTF
+from chronocl.core.tf import GLOBAL, DataTF, TFSetting, TimeTF
 from chronocl.data.bricks import BrickSource, SeriesBricks, Slab, slabs
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
 from chronocl.engine.transfer import with_device_format
+from chronocl.integration.fit_range import window_range
 from chronocl.integration.levels import check_level
 from chronocl.integration.visibility import warn_invisible
 from chronocl.modes.spec import IntegrationSpec, resolve_order
@@ -49,17 +50,24 @@ def make_spec(
     threshold: float = 0.0,
     normalize: str = "time",
 ) -> IntegrationSpec:
-    """Build a validated IntegrationSpec; explicit data_tf / time_tf override those in `tf`."""
+    """Build a validated IntegrationSpec; explicit data_tf / time_tf override those in `tf`.
+    With no time colours given (no time TF here or in `tf`, or only an opacity preset: hat,
+    inverted-hat, constant) they follow the data TF: time as hue (rgb) for a grey or white
+    one, as lightness for a coloured one such as a colour map (`TimeTF.for_data`)."""
     setting = tf if isinstance(tf, TFSetting) else TFSetting.load(tf) if tf else TFSetting()
+    data_tf = data_tf or setting.data_tf
     if isinstance(time_tf, str):
+        shape = time_tf in ("hat", "inverted-hat", "constant")  # an opacity: colours unchosen
         time_tf = TimeTF.preset(time_tf)
+        if shape:
+            time_tf = replace(time_tf, color=TimeTF.for_data(data_tf.points).color)
     if isinstance(enhance, str):
         enhance = Enhance(enhance)
     return IntegrationSpec(
         mode=mode,
         order=order if isinstance(order, str) else tuple(order),
-        data_tf=data_tf or setting.data_tf,
-        time_tf=time_tf or setting.time_tf,
+        data_tf=data_tf,
+        time_tf=time_tf or setting.time_tf,  # None: IntegrationSpec takes TimeTF.for_data
         enhance=enhance or Enhance(),
         threshold=threshold,
         normalize=normalize,
@@ -109,7 +117,6 @@ class Job:
     def metadata(self, engine: str) -> dict:
         """The chronovolume metadata of this integration."""
         series, selection = self.series, self.selection
-        dz, dy, dx = series.spacing
         return {
             "dataset": series.source or (str(series.path) if series.path else ""),
             # Where to read the series again (a silhouette re-integrated for another view).
@@ -117,7 +124,7 @@ class Job:
             "selection": {"steps": list(selection.steps), "n_steps": selection.n_steps},
             "time_labels": [series.times[s] for s in selection.steps],
             "spec": self.spec.to_dict(),
-            "spacing": {"x": dx, "y": dy, "z": dz},
+            "spacing": dict(zip("xyz", series.spacing, strict=True)),
             "value_range": [float(self.value_range[0]), float(self.value_range[1])],
             "engine": engine,
             "level": series.level_index,
@@ -137,7 +144,19 @@ def prepare(
     elif spec_args:
         raise InvalidParameterError("pass either spec= or the integration arguments, not both")
     selection = parse_selection(window, series.n_steps)
-    return Job.of(series, selection, spec, spec.data_tf.value_range or (series.vmin, series.vmax))
+    return Job.of(series, selection, spec, value_range(series, selection, spec))
+
+
+def value_range(series: TimeSeries, selection: Selection, spec: IntegrationSpec):
+    """The (min, max) that normalises values: the data TF's own, the series' recorded range,
+    or one fitted to the selected window for the mode (`DataTF.range_kind`,
+    `chronocl.integration.fit_range`)."""
+    kind = spec.data_tf.range_kind
+    if kind == "given":
+        return spec.data_tf.value_range
+    if kind == GLOBAL:
+        return (series.vmin, series.vmax)
+    return window_range(series, selection, spec.integration)
 
 
 def at_level(job: Job, level: int) -> Job:
@@ -145,7 +164,7 @@ def at_level(job: Job, level: int) -> Job:
     if level == 0:
         return job
     coarse = job.series.level(check_level(job.series, level), job.spec.integration.pool)
-    return prepare(coarse, job.selection, spec=job.spec)
+    return Job.of(coarse, job.selection, job.spec, job.value_range)  # one range at every level
 
 
 def engine_rows(eng: Engine, job: Job) -> int:

@@ -31,12 +31,13 @@ import numpy as np
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.selection import Selection, parse_selection
+from chronocl.core.tf import FITTED
 from chronocl.data.bricks import ResidentBricks, SeriesBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.engine import get_engine
-from chronocl.integration.inmemory import integrate_bricks, make_spec, prepare
+from chronocl.integration.inmemory import integrate_bricks, make_spec, prepare, value_range
 from chronocl.integration.levels import AutoLevels, check_level
 from chronocl.integration.slider import Slider
 from chronocl.integration.sliding import block_size
@@ -74,7 +75,9 @@ class Session:
         **spec_args: object,
     ) -> None:
         self.base = series
-        self.spec = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
+        # The spec as asked; `self.spec` is it with its value range fixed (`_fix_range`).
+        self.asked = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
+        self.spec = self.asked
         self.engine = get_engine(engine, device) if isinstance(engine, str) else engine
         self.budget = parse_memory(memory)
         self.selection: Selection | None = None
@@ -117,13 +120,17 @@ class Session:
 
     def set_spec(self, spec: IntegrationSpec | None = None, **changes: object) -> Chronovolume:
         """Change the integration: a whole spec, or fields of the current one (mode="max")."""
-        new = spec if spec is not None else dataclasses.replace(self.spec, **changes)
+        new = spec if spec is not None else dataclasses.replace(self.asked, **changes)
         return self.show(self._require(), new)
 
     def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume:
         """The chronovolume of `selection` under `spec` (default: the current one): a window
         and a spec change at once, integrated once."""
-        spec = self.spec if spec is None else spec
+        if spec is None or spec in (self.asked, self.spec):
+            spec = self.spec if self.spec is not self.asked else self._fix_range(None, selection)
+        else:
+            self.asked = spec
+            spec = self._fix_range(spec, selection)
         if self._auto is not None:
             self.spec, self.selection = spec, selection
             return self._auto.show(selection, spec)
@@ -189,6 +196,18 @@ class Session:
         self.close()
 
     # -- internals -----------------------------------------------------------------------
+    def _fix_range(self, spec: IntegrationSpec | None, selection: Selection) -> IntegrationSpec:
+        """`spec` (default: as asked) with its value range fixed: a range fitted to a window
+        is fitted once, to the window shown when the spec is set, and kept while the window
+        slides (sliding then equals integrating each window with that range)."""
+        spec = self.asked if spec is None else spec
+        if spec.data_tf.range_kind != FITTED:  # the same for every window already
+            return spec
+        fixed = value_range(self.base, selection, spec)
+        return dataclasses.replace(
+            spec, data_tf=dataclasses.replace(spec.data_tf, value_range=fixed)
+        )
+
     def _require(self) -> Selection:
         if self.selection is None:
             self.selection = parse_selection(None, self.series.n_steps)

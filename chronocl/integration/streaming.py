@@ -57,6 +57,7 @@ from chronocl.integration.runstore import (
     target_of,
     volume_maxima,
 )
+from chronocl.integration.visibility import warn_invisible
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.reference import Partial
 
@@ -249,6 +250,7 @@ def integrate_to_store(
     mode = str(spec_args.pop("mode", modes.DEFAULT))
     job = prepare(series, window, mode, spec, spec_args)
     check_device_format(device_format, engine, job.series.dtype, job.value_range)
+    warn_invisible(job)  # steps the transfer functions hide: said before hours of streaming
     budget = parse_memory(memory)
     if client is None:
         executor: LocalExecutor | DaskExecutor = LocalExecutor(get_engine(engine, device), progress)

@@ -44,10 +44,10 @@ def invisible_steps(job) -> dict[int, str]:
     return out
 
 
-def warn_invisible(job, cv) -> None:
+def warn_invisible(job, cv=None) -> None:
     """Warn about the steps of `job` that cannot show and about its chronovolume `cv` when
-    nothing in it is opaque."""
-    empty = _empty(cv)
+    nothing in it is opaque (without `cv`, before the work: the steps alone)."""
+    empty = cv is not None and _empty(cv)
     stats, (lo, hi) = job.series.stats, job.value_range
     hidden = {} if empty else invisible_steps(job)  # an empty picture says it all
     w = job.selection.width

@@ -73,9 +73,9 @@ class Views:
 
     def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
         s = slot.session
-        if s is not None and slot.cv is not None and s.spec == spec and s.selection == sel:
+        if s is not None and slot.cv is not None and s.asked == spec and s.selection == sel:
             return slot.cv, 0.0, False
-        if s is None or (s.spec != spec and s.selection != sel):
+        if s is None or (s.asked != spec and s.selection != sel):
             if s is not None:
                 s.close()
             s = slot.session = Session(

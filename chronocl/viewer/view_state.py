@@ -11,20 +11,17 @@ from chronocl import modes
 from chronocl.core.enhance import Enhance
 from chronocl.core.errors import ChronoclError, InvalidParameterError
 from chronocl.core.selection import Selection
-from chronocl.core.tf import DataTF, TimeAlpha, TimeColor, TimeTF
+from chronocl.core.tf import GLOBAL, DataTF, TimeAlpha, TimeColor, TimeTF
 from chronocl.data.series import TimeSeries
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.camera import Camera
 from chronocl.render.shading import OFF, Shading
 from chronocl.viewer.protocol import ORDERS
 
-# The viewer's default data TF: translucent shells rising with the value, white (colour by time).
-DEFAULT_POINTS = (
-    (0.0, 1.0, 1.0, 1.0, 0.0),
-    (0.2, 1.0, 1.0, 1.0, 0.0),
-    (0.55, 1.0, 1.0, 1.0, 0.35),
-    (1.0, 1.0, 1.0, 1.0, 0.9),
-)
+# The viewer normalises every frame by the series' recorded range: its TF editor, histogram and
+# probe plots are drawn over that range (a range fitted per window is the CLI's and API's
+# default; docs/display.md).
+VIEWER_RANGE = GLOBAL
 
 
 @dataclass(frozen=True)
@@ -41,7 +38,7 @@ class ViewState:
     # Each view's own window (t0, t1, stride), or None where it follows `window` (linked);
     # as long as `views` or shorter (views past its end are linked).
     view_windows: tuple[tuple[int, int, int] | None, ...] = ()
-    data_tf: DataTF = field(default_factory=lambda: DataTF(points=DEFAULT_POINTS))
+    data_tf: DataTF = field(default_factory=lambda: DataTF(value_range=VIEWER_RANGE))
     time_tf: dict = field(
         default_factory=lambda: {
             "color": "rgb",
@@ -152,7 +149,9 @@ def merge(state: ViewState, msg: dict, n_steps: int) -> ViewState:
     if "data_tf" in msg:
         d = msg["data_tf"]
         vr = d.get("value_range")
-        changes["data_tf"] = DataTF(points=d["points"], value_range=tuple(vr) if vr else None)
+        changes["data_tf"] = DataTF(
+            points=d["points"], value_range=tuple(vr) if vr else VIEWER_RANGE
+        )
     if "time_tf" in msg:
         changes["time_tf"] = state.time_tf | msg["time_tf"]
     if "enhance" in msg:
@@ -196,6 +195,7 @@ def describe_state(state: ViewState) -> dict:
             "zoom": cam.zoom,
             "fov": cam.fov,
             "projection": cam.projection,
+            "up": cam.up,
         },
         "views": [
             {"mode": m, "order": o, "window": _window_dict(state.own_window(i))}

@@ -1,0 +1,171 @@
+"""The defaults show the data: a value range fitted to the window per mode, and a default view
+from the side of the first steps, on runs like users bring (a plume whose first steps are
+faint, a reaction-diffusion front spreading from a corner), measured as the fraction of the
+selected steps each picture shows (`chronocl.render.visible_steps`)."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from chronocl import Session, integrate
+from chronocl.core.selection import parse_selection
+from chronocl.core.tf import DataTF
+from chronocl.data.series import TimeSeries
+from chronocl.data.simulations import simulate
+from chronocl.integration.inmemory import prepare
+from chronocl.render import Camera, render
+from chronocl.render.default_view import early_side
+from chronocl.render.visible_steps import steps_shown
+
+from .test_cli import assert_one_line_error, cli
+
+SIZE = (96, 96)
+
+
+@pytest.fixture(scope="module")
+def plume() -> TimeSeries:
+    return TimeSeries.from_array(simulate("plume", (32, 32, 32), 20))
+
+
+@pytest.fixture(scope="module")
+def front() -> TimeSeries:
+    return TimeSeries.from_array(simulate("gray-scott", (24, 24, 24), 16))
+
+
+def picture(camera: Camera):
+    return lambda cv: render(cv, camera, SIZE, jitter=False).array
+
+
+def test_the_plume_starts_faint(plume):
+    peaks = plume.stats.step_max
+    assert peaks[0] < 0.15 * max(peaks)  # what the defaults must cope with
+
+
+def test_fitted_range_is_the_windows_own(plume):
+    job = prepare(plume, "0:10")
+    lo, hi = job.value_range
+    assert plume.vmin <= lo < hi <= max(plume.stats.step_max[:10])
+    assert hi < 0.6 * plume.vmax  # the early window is normalised by its own top
+    assert prepare(
+        plume, "0:10", spec_args={"data_tf": DataTF(value_range="global")}
+    ).value_range == (
+        plume.vmin,
+        plume.vmax,
+    )
+    assert prepare(
+        plume, "0:10", spec_args={"data_tf": DataTF(value_range=(0, 2))}
+    ).value_range == (0, 2)
+
+
+def test_min_is_fitted_to_the_minima(plume):
+    hi = prepare(plume, "0:10", "min").value_range[1]
+    minima = plume.read(list(range(10))).min(axis=0)
+    assert hi <= float(minima.max()) + 1e-9
+    assert prepare(plume, "0:10", "max").value_range[1] > hi
+
+
+def test_min_shows_more_than_at_the_global_range(plume):
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        fitted = integrate(plume, "0:10", "min", engine="numpy")
+    assert not [w for w in said if "shows nothing" in str(w.message)]
+    at_global = integrate(
+        plume, "0:10", "min", engine="numpy", data_tf=DataTF(value_range="global")
+    )
+    opaque = [int((cv.rgba[..., 3] > 0.05).sum()) for cv in (fitted, at_global)]
+    assert opaque[0] > 2 * opaque[1], opaque
+
+
+@pytest.mark.parametrize("mode", ["alpha", "additive", "mean", "first_hit"])
+def test_every_step_of_the_faint_plume_shows(plume, mode):
+    shown = steps_shown(plume, "0:10:2", mode, picture(Camera(30, 20)), engine="numpy")
+    assert shown.fraction == 1.0, shown
+    at_global = steps_shown(
+        plume,
+        "0:10:2",
+        mode,
+        picture(Camera(30, 20)),
+        engine="numpy",
+        data_tf=DataTF(value_range="global"),
+    )
+    assert len(at_global.shown) <= len(shown.shown)
+
+
+def test_the_default_view_looks_from_the_first_steps(front):
+    selection = parse_selection("0:16:3", front.n_steps)
+    fitted = prepare(front, "0:16:3").value_range
+    base = Camera(30, 25, zoom=1.15)
+    camera = early_side(front, selection, fitted, base)
+    # The seed is in the (0, 0, 0) corner: the camera's eye lies on that side of the box.
+    assert all(c < 0 for c in camera.eye_direction())
+    for mode in ("alpha", "first_hit", "max", "change"):
+        away = steps_shown(front, "0:16:3", mode, picture(base), engine="numpy")
+        near = steps_shown(front, "0:16:3", mode, picture(camera), engine="numpy")
+        assert near.fraction == 1.0, (mode, near)
+        assert near.fraction >= away.fraction
+
+
+def test_a_plume_rising_is_seen_from_the_side(plume):
+    # Its first steps lie below the last: looking up from below would read upside down.
+    base = Camera(30, 20)
+    for window in ("0:2", "0:10", "0:20"):
+        selection = parse_selection(window, plume.n_steps)
+        assert early_side(plume, selection, (0.0, 1.0), base) == base
+
+
+def test_a_session_fits_once_and_slides_at_that_range(plume):
+    with Session(plume, engine="numpy", spec=None, mode="alpha") as s:
+        s.set_window(0, 6)
+        fixed = s.spec.data_tf.value_range
+        assert isinstance(fixed, tuple)
+        for _ in range(3):
+            cv = s.slide(1)
+            assert s.spec.data_tf.value_range == fixed
+        again = integrate(plume, s.selection.steps, spec=s.spec, engine="numpy")
+        np.testing.assert_allclose(cv.rgba, again.rgba, atol=1e-5)
+        s.set_spec(mode="min")  # a new mode is fitted again, to the window shown
+        assert s.spec.data_tf.value_range == prepare(plume, s.selection, "min").value_range
+
+
+def test_demo_draws_a_users_series_with_the_steps_each_picture_shows(front, tmp_path):
+    store = front.save(tmp_path / "front.zarr").path
+    out = tmp_path / "out"
+    done = cli("demo", "--data", store, "--window", "0:16:3", "--out", out, "--engine", "numpy")
+    assert done.returncode == 0, done.stderr
+    report = json.loads((out / "defaults-front.json").read_text())
+    assert (out / "defaults-front.png").stat().st_size > 1000
+    assert report["window"] == "0:16:3"
+    # The default view looks from the seed's corner: the front's history shows.
+    for mode in ("alpha", "first_hit", "max", "change"):
+        assert report["modes"][mode]["fraction_shown"] == 1.0, (mode, report["modes"][mode])
+    assert "first_hit" in done.stderr  # the table of what each picture shows
+    bad = cli("demo", "--data", store, "--window", "0:99", "--out", out, "--engine", "numpy")
+    assert_one_line_error(bad, "99")
+
+
+def test_cli_render_looks_from_the_first_steps_unless_told(front, tmp_path):
+    store = front.save(tmp_path / "front.zarr").path
+    told = tmp_path / "told.png"
+    chosen = tmp_path / "chosen.png"
+    done = cli("render", store, "-o", chosen, "--window", "0:16:3", "--engine", "numpy")
+    assert done.returncode == 0, done.stderr
+    done = cli(
+        "render",
+        store,
+        "-o",
+        told,
+        "--window",
+        "0:16:3",
+        "--engine",
+        "numpy",
+        "--azimuth",
+        "30",
+        "--elevation",
+        "20",
+    )
+    assert done.returncode == 0, done.stderr
+    assert chosen.read_bytes() != told.read_bytes()
