@@ -20,6 +20,7 @@ spaced selected steps. Results are kept per series, selection and mode.
 from __future__ import annotations
 
 import math
+import weakref
 from collections import OrderedDict
 
 import numpy as np
@@ -38,11 +39,11 @@ def window_range(series, selection: Selection, mode) -> tuple[float, float]:
     (a registered Mode), lo < hi; the window's own (min, max) where the sample is flat."""
     key = (id(series), series.path, tuple(selection.steps), mode.name)
     hit = _CACHE.get(key)
-    if hit is not None and hit[0] is series:
+    if hit is not None and hit[0]() is series:
         _CACHE.move_to_end(key)
         return hit[1]
     fitted = _fit(series, selection, mode)
-    _CACHE[key] = (series, fitted)
+    _CACHE[key] = (weakref.ref(series), fitted)  # the cache keeps no series alive
     while len(_CACHE) > _CACHE_SIZE:
         _CACHE.popitem(last=False)
     return fitted

@@ -203,10 +203,7 @@ class Session:
         spec = self.asked if spec is None else spec
         if spec.data_tf.range_kind != FITTED:  # the same for every window already
             return spec
-        fixed = value_range(self.base, selection, spec)
-        return dataclasses.replace(
-            spec, data_tf=dataclasses.replace(spec.data_tf, value_range=fixed)
-        )
+        return spec.with_value_range(value_range(self.base, selection, spec))
 
     def _require(self) -> Selection:
         if self.selection is None:

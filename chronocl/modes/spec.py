@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -88,6 +88,10 @@ class IntegrationSpec:
     def finalize_is_global(self) -> bool:
         """Whether finishing needs the whole volume (additive normalised by its maximum)."""
         return self.integration.finalize_is_global(self)
+
+    def with_value_range(self, value_range) -> IntegrationSpec:
+        """This spec with its data TF normalising over `value_range` (a fixed pair)."""
+        return replace(self, data_tf=replace(self.data_tf, value_range=tuple(value_range)))
 
     def to_dict(self) -> dict:
         return {

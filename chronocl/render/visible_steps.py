@@ -14,14 +14,12 @@ for data of demo and test sizes.
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from chronocl.core.errors import ChronoclWarning
-from chronocl.core.selection import parse_selection
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate, prepare
 
@@ -49,12 +47,9 @@ def steps_shown(series: TimeSeries, window, mode: str, picture, **args) -> Steps
     data_tf=, engine=, ...)."""
     spec_args = {k: v for k, v in args.items() if k != "engine"}
     job = prepare(series, window, mode, spec_args.pop("spec", None), spec_args or None)
-    spec = dataclasses.replace(
-        job.spec, data_tf=dataclasses.replace(job.spec.data_tf, value_range=job.value_range)
-    )
+    spec = job.spec.with_value_range(job.value_range)
     engine = args.get("engine", "numpy")
-    selection = parse_selection(window, series.n_steps)
-    steps = list(selection.steps)
+    steps = list(job.selection.steps)
     data = series.read(steps)
 
     def pixels(values: np.ndarray) -> np.ndarray:
