@@ -32,8 +32,8 @@ from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection
 from chronocl.data import synthetic
 from chronocl.engine.device import get_context
+from chronocl.engine.device_formats import resolve_format
 from chronocl.engine.opencl import OpenCLEngine
-from chronocl.engine.transfer import resolve_format
 from chronocl.integration.inmemory import make_spec
 from chronocl.modes.spec import resolve_order
 

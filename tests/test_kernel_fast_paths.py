@@ -4,7 +4,7 @@
   winning step in lanes as narrow (`extreme.raw_key_zones`), else t = (v - vmin) * scale
   unclamped; values beyond the range tie in u and are settled after the loop.
 - A data TF made of a few straight pieces is evaluated piece by piece instead of looked up
-  (`opencl.tf_segments`): colour and opacity in alpha, additive and mean; in first_hit and
+  (`tables.tf_segments`): colour and opacity in alpha, additive and mean; in first_hit and
   count (thresholds) the pieces' opacity decides only lanes farther than SEG_MARGIN from the
   threshold and the exact opacity decides the rest, so their results equal the lookups' bits.
 
@@ -24,7 +24,7 @@ import chronocl
 from chronocl import modes
 from chronocl.core.enhance import Enhance
 from chronocl.core.tf import DataTF, lut_lerp32
-from chronocl.engine import opencl
+from chronocl.engine import opencl, tables
 from chronocl.modes import extreme
 from chronocl.modes.spec import IntegrationSpec
 
@@ -376,12 +376,12 @@ def test_threshold_modes_skip_steps_that_cannot_pass(data):
 
 def test_skip_bar_of_each_mode():
     a_t = np.array([0.25, 0.5, 0.125])
-    bar = opencl.skip_bar(IntegrationSpec(mode="first_hit", threshold=0.1), a_t)
-    assert bar == pytest.approx(0.2 / opencl.PASS_SLACK) and bar < 0.2
-    assert opencl.skip_bar(IntegrationSpec(mode="count", threshold=0.1), np.zeros(3)) == np.inf
-    assert opencl.skip_bar(IntegrationSpec(mode="alpha", threshold=0.1), a_t) == 0.0
+    bar = tables.skip_bar(IntegrationSpec(mode="first_hit", threshold=0.1), a_t)
+    assert bar == pytest.approx(0.2 / tables.PASS_SLACK) and bar < 0.2
+    assert tables.skip_bar(IntegrationSpec(mode="count", threshold=0.1), np.zeros(3)) == np.inf
+    assert tables.skip_bar(IntegrationSpec(mode="alpha", threshold=0.1), a_t) == 0.0
     edge = IntegrationSpec(mode="first_hit", threshold=0.1, enhance=Enhance("edge"))
-    assert opencl.skip_bar(edge, a_t) == 0.0  # enhancement may raise opacity
+    assert tables.skip_bar(edge, a_t) == 0.0  # enhancement may raise opacity
 
 
 def runs_of(table: np.ndarray, x: np.ndarray, n: int) -> np.ndarray:
@@ -398,26 +398,26 @@ def runs_of(table: np.ndarray, x: np.ndarray, n: int) -> np.ndarray:
 
 def test_tf_pieces_follow_the_lut():
     tf = DataTF(points=[(0, 0, 0, 1, 0.02), (0.5, 0, 1, 0, 0.1), (1, 1, 0, 0, 0.5)])
-    table = opencl.tf_segments(tf.lut, [0, 1, 2, 3])
+    table = tables.tf_segments(tf.lut, [0, 1, 2, 3])
     assert table is not None and table.shape == (9, 3)  # 0.5 falls between entries 127, 128
     x = np.linspace(0, 255, 100_003, dtype=np.float32)
     got = runs_of(table, x, 256)
     want = lut_lerp32(tf.lut, x / np.float32(255)).T
     error = np.abs(got - want).max(axis=1)
     assert error.max() < 1e-6
-    assert error[3] <= opencl.opacity_error(table, 256) < opencl.OPACITY_ERROR_MAX
-    only_opacity = opencl.tf_segments(tf.lut, [3])
+    assert error[3] <= tables.opacity_error(table, 256) < tables.OPACITY_ERROR_MAX
+    only_opacity = tables.tf_segments(tf.lut, [3])
     assert np.all(only_opacity[1:4] == 0) and np.all(only_opacity[5:8] == 0)
     many = DataTF(points=[(i / 11, i % 2, 0, 1 - i % 2, 1) for i in range(12)])
-    assert opencl.tf_segments(many.lut, [0, 1, 2]) is None  # more pieces than the kernels take
+    assert tables.tf_segments(many.lut, [0, 1, 2]) is None  # more pieces than the kernels take
 
 
 def test_tf_pieces_scale_by_each_steps_time_factors():
-    table = opencl.tf_segments(
+    table = tables.tf_segments(
         DataTF(points=[(0, 0, 0, 1, 0.0), (1, 1, 0, 0, 1.0)]).lut, [0, 1, 2, 3]
     )
     tc = np.array([[1, 1, 1, 1], [0.5, 0, 1, 0.25]], dtype=np.float32)
-    flat = opencl.timed(table, tc)
+    flat = tables.timed(table, tc)
     s = table.shape[1]
     rows = flat[s:].reshape(2, 4, s + 1)
     assert np.array_equal(flat[:s], table[0])

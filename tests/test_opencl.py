@@ -155,7 +155,7 @@ def test_device_tables_are_kept_and_an_edited_tf_gets_its_own():
     """An engine keeps the device tables of its last LUT_CACHE integrations (read-only, so no
     caller can change them), and an edited data TF, time TF, window or value range builds
     tables of its own: each integration equals the reference."""
-    from chronocl.engine import opencl
+    from chronocl.engine import tables
 
     engine = OpenCLEngine()
     spec = IntegrationSpec(mode="max")
@@ -173,10 +173,10 @@ def test_device_tables_are_kept_and_an_edited_tf_gets_its_own():
     assert engine.luts(spec, pos, False, (0.5, 1.0))[3] != first[3]  # the skip cut
     assert first[4] is not None  # the default TF as pieces, but not for an engine without them
     assert engine.with_options(pieces=False).luts(spec, pos, False, (0.0, 1.0))[4] is None
-    for n in range(2 * opencl.LUT_CACHE):  # the one in use stays, the others come and go
+    for n in range(2 * tables.LUT_CACHE):  # the one in use stays, the others come and go
         assert engine.luts(spec, pos, False, (0.0, 1.0)) is first
         engine.luts(spec, np.linspace(0.0, 1.0, n + 2), False, (0.0, 1.0))
-    assert len(engine._luts) == opencl.LUT_CACHE
+    assert len(engine._luts) == tables.LUT_CACHE
     assert engine.luts(spec, pos, False, (0.0, 1.0)) is first
     # points given to a preset that does not use them (a TF file may carry them) are dropped
     unused = chronocl.TimeTF(color=chronocl.TimeColor("rgb", points=[[0, 0, 0, 1], [1, 1, 0, 0]]))
@@ -276,7 +276,7 @@ def test_a_device_whose_compiler_fails_is_passed_over_or_named(monkeypatch):
     assert "unknown target CPU 'generic'" in message and found[0].label in message
     assert "apt-get install pocl-opencl-icd" in message and "--engine numpy" in message
     assert device.usable_devices() == []
-    from chronocl.integration.scaling import resolve_devices
+    from chronocl.report.scaling import resolve_devices
 
     monkeypatch.setenv("CHRONOCL_DEVICE", found[0].index)  # a chosen device changes nothing
     with pytest.raises(EngineUnavailableError, match="unknown target CPU 'generic'"):

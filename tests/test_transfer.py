@@ -22,8 +22,9 @@ from chronocl.core import values
 from chronocl.core.errors import ChronoclError, InvalidParameterError, UnknownNameError
 from chronocl.engine import opencl as opencl_module
 from chronocl.engine import transfer
+from chronocl.engine.device_formats import PARALLEL_MIN, quantize, resolve_format, stored_dtype
 from chronocl.engine.opencl import OpenCLEngine
-from chronocl.engine.transfer import chunks_of, quantize, resolve_format
+from chronocl.engine.transfer import chunks_of
 from chronocl.modes.spec import IntegrationSpec
 
 from .strategies import examples, specs, windows
@@ -52,7 +53,7 @@ def assert_close(a: chronocl.Chronovolume, b: chronocl.Chronovolume) -> None:
 
 def row_bytes(series: chronocl.TimeSeries, width: int, dtype=None) -> int:
     _, ny, nx = series.volume_shape
-    dt = transfer.stored_dtype(series.dtype) if dtype is None else np.dtype(dtype)
+    dt = stored_dtype(series.dtype) if dtype is None else np.dtype(dtype)
     return width * ny * nx * dt.itemsize
 
 
@@ -379,7 +380,7 @@ def test_bench_transfer_reports_null_on_cpu_and_figures_when_forced():
 
 @pytest.mark.parametrize("name", ["float16", "uint8", "uint16", "float32", "auto"])
 def test_conversions_split_over_threads_equal_one_pass(name):
-    v = np.random.default_rng(3).normal(0, 3e4, transfer.PARALLEL_MIN * 2 + 7).astype(np.float32)
+    v = np.random.default_rng(3).normal(0, 3e4, PARALLEL_MIN * 2 + 7).astype(np.float32)
     fmt = resolve_format(name, np.float32, (-1e4, 2e4))
     split = fmt.encode(v)
     np.testing.assert_array_equal(split, fmt._encode(v, np.empty(v.shape, fmt.dtype)))
@@ -390,7 +391,7 @@ def test_conversions_split_over_threads_equal_one_pass(name):
 @pytest.mark.parametrize("mode", ["max", "additive"])
 def test_streamed_runs_send_the_same_device_format(stores, tmp_path, mode):
     """Slab by slab into a store (and a resume key of its own): the in-memory result."""
-    from chronocl.integration.streaming import integrate_to_store
+    from chronocl.integration.runs.streaming import integrate_to_store
 
     series = chronocl.open_series(stores / "f.zarr")
     out = tmp_path / "s.zarr"

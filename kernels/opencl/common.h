@@ -266,7 +266,7 @@ inline LutPos lut_pos_of(const floatv u)
  * channel is c0 + sum_j slope_j * run_j: no lane picks a piece, and no term is larger than
  * the channel's change over its piece (no cancellation). The table follows the LUT in its
  * buffer: x0[S], then per step k (W of them) and channel (r g b a) the value at 0 and the
- * S slopes, times step k's time colour and opacity (chronocl/engine/opencl.py `tf_segments`).
+ * S slopes, times step k's time colour and opacity (chronocl/engine/tables.py `tf_segments`).
  * `PIECES(p, k)` declares the runs h0..h7 and step k's row; channels a build does not use
  * cost nothing (the compiler drops them). */
 #define SEG_X(j) seg[(j)]
@@ -293,7 +293,7 @@ inline LutPos lut_pos_of(const floatv u)
 /* Channel c (r, g, b or a) of the data TF times the time TF of the step PIECES took. */
 #define PIECE(c) PIECE_OF(CH_##c)
 /* How far a threshold test trusts the pieces' opacity: twice the error the host allows them
- * (chronocl/engine/opencl.py `opacity_error`, at most 5e-6). */
+ * (chronocl/engine/tables.py `opacity_error`, at most 5e-6). */
 #define SEG_MARGIN 1e-5f
 #else
 #define PIECES(p, k)
@@ -362,7 +362,10 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 #define STEP_ALPHA(lut, p, t, k) clamp_unit(TIMED_ALPHA(lut, p, t))
 #endif
 
-/* The arguments every integration kernel takes, in this order. */
+/* The arguments every integration kernel takes, in this order: declared for the host in
+ * chronocl/engine/kernel_args.py (INTEGRATE), which sets them by name; a mode's kernels follow
+ * them with the mode's extras, `out` (and `t_index`) and, for `_rows`, ROWS_ARGS.
+ * tests/test_kernel_args.py checks every kernel against the declaration. */
 #define KERNEL_ARGS                                                                        \
     __global const DATA_T *data, __global const float *lut, __global const float4 *tc,     \
     __global const int *order, __global const int *steps, const int x0, const int nx,      \
@@ -417,7 +420,7 @@ typedef struct {
     floatv r, g, b, a;
 } Rgba;
 #define RGBA_ZERO(s) s.r = s.g = s.b = s.a = 0.0f;
-#define ROWS_ARGS(T) const int rows, const int nvec, __local T *st
+#define ROWS_ARGS(T) const int rows, const int nvec, __local T *st /* kernel_args.ROWS */
 #define ROWS_PROLOGUE                            \
     const int y0 = rows * (int)get_global_id(0); \
     const int z = get_global_id(1);              \
