@@ -52,10 +52,10 @@ def main() -> None:
     repeats = args.repeats or (2 if args.quick else 5)
     budget = parse_memory(args.memory)
 
-    import chronocl.integration.distributed as dist
+    import chronocl.integration.runs.distributed as dist
     from chronocl.engine import get_engine
     from chronocl.integration.inmemory import prepare
-    from chronocl.integration.streaming import SlabTask, integrate_to_store
+    from chronocl.integration.runs.streaming import SlabTask, integrate_to_store
 
     emit(env_record("distributed", {"workers": args.workers, "budget": budget}))
     tmp = Path(tempfile.mkdtemp(prefix="chronocl-dist-"))

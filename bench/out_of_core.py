@@ -2,7 +2,7 @@
 
 Generates a smooth time-varying float32 series in a temporary folder (deleted afterwards) and,
 in this process, alternately reads it with plain zarr and integrates it with
-`chronocl.integration.streaming.integrate_to_store` under `--budget` (after a warm-up of
+`chronocl.integration.runs.streaming.integrate_to_store` under `--budget` (after a warm-up of
 each, with the store written back to disk and hot in the page cache). Then it times the
 integration's own
 work alone (kernels on bricks in memory, writing the output) and runs the integration twice
@@ -118,8 +118,8 @@ def child(store: str, out: str, budget: int, mode: str, compressor: str) -> None
     import chronocl
     from chronocl.engine import get_engine
     from chronocl.integration.inmemory import engine_rows, prepare
-    from chronocl.integration.plan import plan_slabs
-    from chronocl.integration.streaming import integrate_to_store
+    from chronocl.integration.runs.plan import plan_slabs
+    from chronocl.integration.runs.streaming import integrate_to_store
 
     series = open_series(store)
     _, ny, nx = series.volume_shape
@@ -233,7 +233,7 @@ def stages_alone(series, out: Path, budget: int, mode: str, compressor: str) -> 
     from chronocl.data.writer import compressors
     from chronocl.engine import get_engine
     from chronocl.integration.inmemory import engine_rows, integrate_brick, prepare
-    from chronocl.integration.plan import plan_slabs
+    from chronocl.integration.runs.plan import plan_slabs
 
     job = prepare(series, None, mode, None, {})
     eng = get_engine("opencl")
@@ -352,9 +352,9 @@ def pipeline_parts(integrate) -> dict:
     part costs: reading the bricks alone, then reading and integrating without writing."""
     from unittest import mock
 
-    import chronocl.integration.streaming as streaming
+    import chronocl.integration.runs.streaming as streaming
     from chronocl.engine import get_engine
-    from chronocl.reference import Partial
+    from chronocl.modes.base import Partial
 
     engine_class = type(get_engine("opencl"))
 
@@ -379,7 +379,7 @@ def pipeline_parts(integrate) -> dict:
 
 
 def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Path) -> dict:
-    from chronocl.integration.streaming import integrate_to_store
+    from chronocl.integration.runs.streaming import integrate_to_store
 
     store = tmp / f"series-{comp}.zarr"
     out = tmp / "cv.zarr"

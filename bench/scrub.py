@@ -35,7 +35,7 @@ from chronocl import modes
 from chronocl.core.tf import DataTF, TimeTF
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
-from chronocl.integration.session import Session
+from chronocl.integration.interactive.session import Session
 
 MODES = modes.names()
 # Opacity everywhere: no voxel is empty, so no step can be skipped.

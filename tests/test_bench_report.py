@@ -20,7 +20,7 @@ import pytest
 from chronocl.cli.app import main
 from chronocl.core.errors import OutputExistsError
 from chronocl.data.series import write_series
-from chronocl.integration.scaling_report import FIGURES, SCHEMA, check_report_target
+from chronocl.report.scaling_report import FIGURES, SCHEMA, check_report_target
 
 pytest.importorskip("distributed")
 
@@ -165,7 +165,7 @@ def test_a_scheduler_cluster(tmp_path):
     from distributed import LocalCluster
 
     from chronocl.core.errors import InvalidParameterError
-    from chronocl.integration.scaling_run import run_report
+    from chronocl.report.scaling_run import run_report
 
     with LocalCluster(
         n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"

@@ -200,7 +200,7 @@ def test_every_registered_mode_integrates(monkeypatch, small_store, tmp_path, mo
 
 def test_plan_run_picks_where_the_integration_runs(small_store, tmp_path):
     from chronocl.core.errors import InvalidParameterError
-    from chronocl.integration.auto import DASK, IN_MEMORY, STREAMED, plan_run
+    from chronocl.integration.runs.auto import DASK, IN_MEMORY, STREAMED, plan_run
 
     series = chronocl.open(small_store)
     assert plan_run(series, None, tmp_path / "a.vti").where == IN_MEMORY

@@ -35,14 +35,14 @@ import numpy as np
 import pytest
 
 import chronocl
-import chronocl.integration.streaming as streaming
+import chronocl.integration.runs.streaming as streaming
 from chronocl.core import atomic
 from chronocl.core.errors import InvalidDataError, OutputBusyError, OutputExistsError
 from chronocl.data.formats.export import export_series
 from chronocl.data.formats.raw import ingest_raw
 from chronocl.data.series import write_series
 from chronocl.integration.inmemory import prepare
-from chronocl.integration.streaming import integrate_to_store, partial_path
+from chronocl.integration.runs.streaming import integrate_to_store, partial_path
 
 # The real command line, with every chunk written (zarr) and every step exported paused for
 # CRASH_TEST_DELAY seconds, so that a poll sees the partial between two writes.

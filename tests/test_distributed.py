@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 import chronocl
-import chronocl.integration.distributed as dist
-import chronocl.integration.streaming as streaming
+import chronocl.integration.runs.distributed as dist
+import chronocl.integration.runs.streaming as streaming
 from chronocl.core.errors import EngineUnavailableError, InvalidParameterError
 from chronocl.data.series import write_series
-from chronocl.integration.streaming import RUN_DIR, integrate_to_store, partial_path
+from chronocl.integration.runs.streaming import RUN_DIR, integrate_to_store, partial_path
 
 from .test_cli import cli
 from .test_streaming import CASES, WINDOW, assert_same_bytes

@@ -11,8 +11,9 @@ from chronocl import modes
 from chronocl.core.errors import ChronoclError, InvalidParameterError
 from chronocl.core.tf import TimeTF
 from chronocl.data import synthetic
-from chronocl.integration.levels import LatencyModel
-from chronocl.integration.session import Session
+from chronocl.integration.interactive.levels import LatencyModel
+from chronocl.integration.interactive.session import Session
+from chronocl.modes.spec import IntegrationSpec
 
 # Drawn transfer functions and data are often transparent on purpose; the warnings saying so
 # (chronocl.integration.visibility) are tested in test_visibility.py.
@@ -43,9 +44,10 @@ def test_integrate_a_level_keeps_the_extent_and_pools_as_the_mode_asks(series, m
         np.testing.assert_allclose(extent(cv), extent(full))
         assert cv.metadata["level"] == level
         # Every level is normalised by level 0's range (fitted to level 0's window).
-        same = chronocl.DataTF(value_range=tuple(full.metadata["value_range"]))
+        spec = IntegrationSpec.from_dict(full.metadata["spec"])
+        same = spec.with_value_range(full.metadata["value_range"])
         assert cv.metadata["value_range"] == full.metadata["value_range"]
-        direct = chronocl.integrate(coarse, "0:6", mode, data_tf=same)
+        direct = chronocl.integrate(coarse, "0:6", spec=same)
         np.testing.assert_array_equal(cv.rgba, direct.rgba)
     assert full.metadata["level"] == 0
 
@@ -92,6 +94,21 @@ def test_fixed_level_session_follows_the_modes_pooling(series):
         assert a.shape == m.shape == series.level(1).volume_shape
         ref = chronocl.integrate(series, "0:4", "max", level=1)
         np.testing.assert_array_equal(m.rgba, ref.rgba)
+
+
+def test_every_level_takes_the_keywords_of_the_other(series):
+    """A fixed level ignores `target_ms`, and level="auto" ignores `manager` (it holds one
+    level's steps; `managers` shares them per level), as they did before sessions split."""
+    with Session(series, mode="max", level=0, target_ms=100) as fixed:
+        assert type(fixed) is Session and fixed.shown_level == 0
+        want = fixed.set_window(0, 4)
+        with Session(series, mode="max", level="auto", manager=fixed.manager) as auto:
+            auto.set_window(0, 4)
+            got = auto.refine()
+            assert auto.shown_level == 0
+            assert all(s.manager is not fixed.manager for s in auto.pool.sessions.values())
+        assert fixed.slide(+1).steps == (1, 2, 3, 4)  # its manager outlives the auto session
+    np.testing.assert_array_equal(got.rgba, want.rgba)
 
 
 def test_latency_model_picks_the_finest_level_within_target():

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import chronocl
-from chronocl.render.views import compose_panels, default_columns, render_views
+from chronocl.render.panels import compose_panels, default_columns
+from chronocl.render.views import render_views
 
 PICTURE = (255, 0, 255)  # a colour no caption, legend or background uses
 
@@ -54,7 +55,7 @@ def test_every_panel_keeps_its_own_legend(drawn_text):
 def test_a_long_caption_wraps_above_the_picture_and_ends_in_an_ellipsis():
     from PIL import Image, ImageDraw
 
-    from chronocl.render.views import label_font, wrap_text
+    from chronocl.render.panels import label_font, wrap_text
 
     draw = ImageDraw.Draw(Image.new("RGB", (1, 1)))
     font = label_font(11)

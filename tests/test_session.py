@@ -21,8 +21,8 @@ from chronocl.core.errors import InvalidSelectionError
 from chronocl.core.tf import TimeTF
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate, make_spec
-from chronocl.integration.session import Session
-from chronocl.integration.sliding import SlidingAggregate
+from chronocl.integration.interactive.session import Session
+from chronocl.integration.interactive.sliding import SlidingAggregate
 
 from .strategies import examples, specs
 
@@ -209,7 +209,7 @@ def test_combine_kernels_match_the_reference(data) -> None:
     """Each mode's combine kernel against its reference combine on random partials (ties and
     misses included); modes that slide by inversion combine their aggregated opacity."""
     from chronocl.engine import NumpyEngine, get_engine
-    from chronocl.reference import Partial
+    from chronocl.modes.base import Partial
 
     engine = get_engine("opencl")
     shape = data.draw(st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(1, 37)))

@@ -1,4 +1,4 @@
-"""Streaming integration (chronocl.integration.streaming): slabs from the store into a
+"""Streaming integration (chronocl.integration.runs.streaming): slabs from the store into a
 chronovolume store.
 
 Streamed output must be the bytes `chronocl.integrate` gives in memory, for every mode and
@@ -19,12 +19,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import chronocl
-import chronocl.integration.streaming as streaming
+import chronocl.integration.runs.streaming as streaming
 from chronocl.core.budget import GrowthGuard, resident_bytes
 from chronocl.core.errors import InvalidParameterError, OutputExistsError
 from chronocl.data.series import write_series
 from chronocl.integration.inmemory import prepare
-from chronocl.integration.streaming import integrate_to_store, partial_path
+from chronocl.integration.runs.streaming import integrate_to_store, partial_path
 
 from .strategies import examples
 from .test_cli import cli

@@ -71,8 +71,8 @@ def bench(
       chronocl bench vortex.zarr --devices all --repeats 5 -o report/
       chronocl bench big.zarr --scheduler tcp://head:8786 --workers 1,4,16 -o /shared/report/
     """
-    from chronocl.integration.scaling import parse_counts, parse_size
-    from chronocl.integration.scaling_run import run_report
+    from chronocl.report.scaling import parse_counts, parse_size
+    from chronocl.report.scaling_run import run_report
 
     size = parse_size(synthetic) if synthetic is not None else None
     report = run_report(

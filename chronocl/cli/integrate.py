@@ -1,5 +1,5 @@
 """`chronocl integrate`: integrate a window into a chronovolume file, in memory, streamed or on
-dask as `chronocl.integration.auto` decides."""
+dask as `chronocl.integration.runs.auto` decides."""
 
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ def integrate(
     time_tf: TimeTfOpt = None,
     colormap: ColormapOpt = None,
     enhance: Annotated[str, typer.Option(help="none, edge or silhouette.")] = "none",
-    threshold: ThresholdOpt = 0.0,
+    threshold: ThresholdOpt = None,
     normalize: NormalizeOpt = "time",
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
@@ -86,9 +86,9 @@ def integrate(
     """
     from chronocl.core.paths import check_input, check_target
     from chronocl.data.series import open_series
-    from chronocl.engine.transfer import check_format_name
-    from chronocl.integration.auto import check_run_options, plan_run
-    from chronocl.integration.levels import check_level
+    from chronocl.engine.device_formats import check_format_name
+    from chronocl.integration.inmemory import check_level
+    from chronocl.integration.runs.auto import check_run_options, plan_run
 
     # Everything is checked before any work: no kernel built, no brick read, nothing written.
     check_run_options(out_path, memory, engine, scheduler, workers)

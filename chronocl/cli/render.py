@@ -69,7 +69,7 @@ def render(
     enhance: Annotated[
         str, typer.Option(help="none, edge or silhouette (follows the camera).")
     ] = "none",
-    threshold: ThresholdOpt = 0.0,
+    threshold: ThresholdOpt = None,
     normalize: NormalizeOpt = "time",
     azimuth: Annotated[
         float | None,
@@ -182,9 +182,8 @@ def render(
     from chronocl.data.formats.outputs import output_kind
     from chronocl.data.formats.outputs import save_chronovolume as save_any
     from chronocl.data.series import open_series
-    from chronocl.engine.transfer import check_device_format, check_format_name
-    from chronocl.integration.inmemory import at_level, prepare
-    from chronocl.integration.levels import check_level
+    from chronocl.engine.device_formats import check_device_format, check_format_name
+    from chronocl.integration.inmemory import at_level, check_level, prepare
     from chronocl.render import Camera
     from chronocl.render.default_view import early_side
     from chronocl.render.raycaster import check_clip, check_size

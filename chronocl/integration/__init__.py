@@ -1,1 +1,6 @@
-"""Integration runs: in memory, interactive sessions with sliding windows, out of core, on dask."""
+"""Integration: a window of a series into a chronovolume.
+
+`inmemory` integrates a window at once (`integrate`), `interactive` keeps a moving window's
+chronovolume up to date (`Session`), and `runs` integrates into a file larger than memory,
+streamed or on dask.
+"""

@@ -20,6 +20,7 @@ spaced selected steps. Results are kept per series, selection and mode.
 from __future__ import annotations
 
 import math
+import threading
 import weakref
 from collections import OrderedDict
 
@@ -32,20 +33,23 @@ SAMPLE_STEPS = 16
 TOP_PERCENTILE = 99.9
 _CACHE: OrderedDict = OrderedDict()
 _CACHE_SIZE = 64
+_CACHE_LOCK = threading.Lock()  # the viewer fits from several clients' threads
 
 
 def window_range(series, selection: Selection, mode) -> tuple[float, float]:
     """(lo, hi) for normalising the values of `selection` of `series` integrated by `mode`
     (a registered Mode), lo < hi; the window's own (min, max) where the sample is flat."""
     key = (id(series), series.path, tuple(selection.steps), mode.name)
-    hit = _CACHE.get(key)
-    if hit is not None and hit[0]() is series:
-        _CACHE.move_to_end(key)
-        return hit[1]
-    fitted = _fit(series, selection, mode)
-    _CACHE[key] = (weakref.ref(series), fitted)  # the cache keeps no series alive
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
+    with _CACHE_LOCK:
+        hit = _CACHE.get(key)
+        if hit is not None and hit[0]() is series:
+            _CACHE.move_to_end(key)
+            return hit[1]
+    fitted = _fit(series, selection, mode)  # outside the lock: it reads data
+    with _CACHE_LOCK:
+        _CACHE[key] = (weakref.ref(series), fitted)  # the cache keeps no series alive
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
     return fitted
 
 

@@ -7,7 +7,9 @@ volume. The engine computes each slab; ``numpy`` is the reference. Bricks come
 from a `chronocl.data.bricks.BrickSource`: the series by default, or steps
 already in memory (`integrate_bricks`). `prepare`, `engine_rows`, `integrate_brick`
 and `integrate_slabs` are shared with the out-of-core run
-(`chronocl.integration.streaming`), which writes the slabs to a store instead.
+(`chronocl.integration.runs.streaming`), which writes the slabs to a store instead.
+`chronovolume_metadata` is what every chronovolume records, whichever path made it: a window
+integrated here, slid (`chronocl.integration.interactive`) or streamed.
 """
 
 from __future__ import annotations
@@ -25,18 +27,17 @@ from chronocl.core.errors import InvalidParameterError
 from chronocl.core.memory import aligned_empty
 from chronocl.core.progress import track
 from chronocl.core.selection import Selection, parse_selection
-from chronocl.core.tf import GLOBAL, DataTF, TFSetting, TimeTF
+from chronocl.core.tf import FITTED, GLOBAL, DataTF, TFSetting, TimeTF
 from chronocl.data.bricks import BrickSource, SeriesBricks, Slab, slabs
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
-from chronocl.engine.transfer import with_device_format
+from chronocl.engine.device_formats import with_device_format
 from chronocl.integration.fit_range import window_range
-from chronocl.integration.levels import check_level
 from chronocl.integration.visibility import warn_invisible
+from chronocl.modes.base import Partial
 from chronocl.modes.spec import IntegrationSpec, resolve_order
-from chronocl.reference import Partial
 
 
 def make_spec(
@@ -47,7 +48,7 @@ def make_spec(
     time_tf: TimeTF | str | None = None,
     order: str | Sequence[int] = "forward",
     enhance: Enhance | str | None = None,
-    threshold: float = 0.0,
+    threshold: float | None = None,
     normalize: str = "time",
 ) -> IntegrationSpec:
     """Build a validated IntegrationSpec; explicit data_tf / time_tf override those in `tf`.
@@ -55,7 +56,11 @@ def make_spec(
     inverted-hat, constant) they follow the data TF: time as hue (rgb) for a grey or white
     one, as lightness for a coloured one such as a colour map (`TimeTF.for_data`)."""
     setting = tf if isinstance(tf, TFSetting) else TFSetting.load(tf) if tf else TFSetting()
-    data_tf = data_tf or setting.data_tf
+    # No data TF given (here or in `tf`): the mode's default (IntegrationSpec).
+    own = IntegrationSpec(mode=mode) if not (data_tf or tf) else None
+    data_tf = data_tf or (setting.data_tf if tf else own.data_tf)
+    if threshold is None and own is not None:
+        threshold = own.threshold
     if isinstance(time_tf, str):
         shape = time_tf in ("hat", "inverted-hat", "constant")  # an opacity: colours unchosen
         time_tf = TimeTF.preset(time_tf)
@@ -116,19 +121,9 @@ class Job:
 
     def metadata(self, engine: str) -> dict:
         """The chronovolume metadata of this integration."""
-        series, selection = self.series, self.selection
-        return {
-            "dataset": series.source or (str(series.path) if series.path else ""),
-            # Where to read the series again (a silhouette re-integrated for another view).
-            "store": str(series.path.resolve()) if series.path is not None else None,
-            "selection": {"steps": list(selection.steps), "n_steps": selection.n_steps},
-            "time_labels": [series.times[s] for s in selection.steps],
-            "spec": self.spec.to_dict(),
-            "spacing": dict(zip("xyz", series.spacing, strict=True)),
-            "value_range": [float(self.value_range[0]), float(self.value_range[1])],
-            "engine": engine,
-            "level": series.level_index,
-        }
+        return chronovolume_metadata(
+            self.series, self.selection, self.spec, self.value_range, engine
+        )
 
 
 def prepare(
@@ -143,7 +138,39 @@ def prepare(
         spec = make_spec(mode, **(spec_args or {}))  # type: ignore[arg-type]
     elif spec_args:
         raise InvalidParameterError("pass either spec= or the integration arguments, not both")
-    selection = parse_selection(window, series.n_steps)
+    return window_job(series, parse_selection(window, series.n_steps), spec)
+
+
+def chronovolume_metadata(
+    series: TimeSeries,
+    selection: Selection,
+    spec: IntegrationSpec,
+    value_range: tuple[float, float],
+    engine: str,
+) -> dict:
+    """The metadata of `selection` of `series` integrated under `spec` by the engine named."""
+    return {
+        "dataset": series.source or (str(series.path) if series.path else ""),
+        # Where to read the series again (a silhouette re-integrated for another view).
+        "store": str(series.path.resolve()) if series.path is not None else None,
+        "selection": {"steps": list(selection.steps), "n_steps": selection.n_steps},
+        "time_labels": [series.times[s] for s in selection.steps],
+        "time_unit": series.time_unit,
+        "spec": spec.to_dict(),
+        "spacing": dict(zip("xyz", series.spacing, strict=True)),
+        "value_range": [float(value_range[0]), float(value_range[1])],
+        "engine": engine,
+        "level": series.level_index,
+    }
+
+
+def engine_name(engine: object) -> str:
+    """The name an engine goes by in metadata ('opencl', 'numpy', or its class name)."""
+    return getattr(engine, "name", type(engine).__name__)
+
+
+def window_job(series: TimeSeries, selection: Selection, spec: IntegrationSpec) -> Job:
+    """The Job of `spec` over a parsed `selection`, with the value range the spec implies."""
     return Job.of(series, selection, spec, value_range(series, selection, spec))
 
 
@@ -157,6 +184,34 @@ def value_range(series: TimeSeries, selection: Selection, spec: IntegrationSpec)
     if kind == GLOBAL:
         return (series.vmin, series.vmax)
     return window_range(series, selection, spec.integration)
+
+
+def check_level(series: TimeSeries, level: object) -> int:
+    """A fixed level of `series`: an integer in 0..n_levels-1, else one clear line."""
+    n = series.n_levels
+    if isinstance(level, bool) or not isinstance(level, int):
+        raise InvalidParameterError(
+            f"level {level!r} must be an integer 0..{n - 1} (0: full resolution) or 'auto'"
+        )
+    if not 0 <= level < n:
+        name = series.source or "the series"
+        have = (
+            "only level 0 (add coarse levels with 'chronocl pyramid')"
+            if n == 1
+            else f"levels 0..{n - 1}"
+        )
+        raise InvalidParameterError(f"level {level} is out of range: {name} has {have}")
+    return level
+
+
+def fix_range(series: TimeSeries, spec: IntegrationSpec, selection: Selection) -> IntegrationSpec:
+    """`spec` with its value range fixed: one fitted to `selection` when the data TF asks for
+    a fitted range, else `spec` itself (its range is the same for every window). A session
+    fixes it once, when the spec is set, and keeps it while the window slides: sliding then
+    equals integrating each window with that range (docs/semantics.md)."""
+    if spec.data_tf.range_kind != FITTED:
+        return spec
+    return spec.with_value_range(value_range(series, selection, spec))
 
 
 def at_level(job: Job, level: int) -> Job:
@@ -203,13 +258,13 @@ def integrate_slabs(
     parts: Sequence[Slab],
     steps: Sequence[int],
     bricks: BrickSource,
-    integrate: Integrate,
+    integrate_one: Integrate,
     out: OutFor,
     read_ahead: bool = True,
 ) -> Iterator[tuple[Slab, Partial, bool]]:
     """Integrate `parts` one after the other; yields (slab, partial, final) per slab.
 
-    `integrate(slab, brick, out)` integrates one brick (`integrate_brick` with a job and an
+    `integrate_one(slab, brick, out)` integrates one brick (`integrate_brick` with a job and an
     engine), `out(slab)` gives the C-contiguous buffers the slab's result is written to.
     With `read_ahead` the next brick is read from `bricks` on a background thread while this
     one is integrated (double buffering), so at most two bricks are held; without, one.
@@ -223,7 +278,7 @@ def integrate_slabs(
             nxt = parts[i + 1] if i + 1 < len(parts) else None
             if nxt is not None and read_ahead:
                 pending = reader.submit(bricks.read, steps, nxt.r0, nxt.r1)
-            partial, final = integrate(s, brick, out(s))
+            partial, final = integrate_one(s, brick, out(s))
             del brick
             if nxt is not None and not read_ahead:
                 pending = reader.submit(bricks.read, steps, nxt.r0, nxt.r1)
@@ -252,7 +307,7 @@ def integrate(
     `engine` is ``opencl`` (default; `device` picks one, see `chronocl devices`),
     ``numpy`` (the reference) or an engine object. `slab` sets the z rows per brick
     (default: as many as fit the engine's brick size). For outputs larger than memory
-    see `chronocl.integration.streaming.integrate_to_store`. `level` integrates a coarse
+    see `chronocl.integration.runs.streaming.integrate_to_store`. `level` integrates a coarse
     level of the series (0: full resolution; docs/levels.md), pooled as the mode asks; the
     chronovolume keeps the physical extent, so it renders in the same place.
     `device_format` is what bricks travel to the device in: auto (as stored), float32,
@@ -296,8 +351,7 @@ def integrate_bricks(
         final = last
     if not final:
         rgba = reference.finalize(Partial(rgba, t_index), job.positions, job.spec)
-    name = getattr(eng, "name", type(eng).__name__)
-    meta = job.metadata(name)
+    meta = job.metadata(engine_name(eng))
     fmt = getattr(eng, "device_format", "auto")
     if fmt != "auto":  # a lossy format changes the result: say so where the result is kept
         meta["device_format"] = fmt

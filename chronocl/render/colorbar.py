@@ -5,7 +5,7 @@ A chronovolume gets one whenever its data TF's colours are not plain white (a co
 any coloured TF): the bar shows rgb_d over the value range the integration actually used, the
 one its metadata records (`value_range`: given, the series', or fitted to the window), so its
 ticks name the values the picture shows. The saved PNG draws it beside the time legend
-(`chronocl.render.views`), the viewer beside its on-view legend (`chronocl.viewer.frames`).
+(`chronocl.render.legends`), the viewer beside its on-view legend (`chronocl.viewer.frames`).
 
 A mode that looks the data TF up at a change (its `data_axis`) has its bar over that: `change`
 looks it up at δ, a change in units of the value range, so its bar runs from 0 to the range's

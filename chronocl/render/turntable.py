@@ -70,7 +70,7 @@ class ModeViews:
     spec_args: Mapping[str, object] = field(default_factory=dict)
     draw_args: Mapping[str, object] = field(default_factory=dict)
     level: int = 0  # a coarse level of the series (docs/levels.md)
-    device_format: str = "auto"  # what bricks travel to the device in (engine.transfer)
+    device_format: str = "auto"  # what bricks travel to the device in (engine.device_formats)
 
     @property
     def follows_camera(self) -> bool:

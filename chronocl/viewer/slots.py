@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.integration.session import Session
+from chronocl.integration.interactive.levels import AutoSession
+from chronocl.integration.interactive.session import Session
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Volume
 from chronocl.render.upload import convert, display_format
@@ -18,7 +19,7 @@ from chronocl.render.upload import convert, display_format
 class ViewSlot:
     """One panel: its session (window + spec), current chronovolume and texture."""
 
-    session: Session | None = None
+    session: AutoSession | Session | None = None
     cv: Chronovolume | None = None
     volume: Volume | None = None
     uploaded: Chronovolume | None = None

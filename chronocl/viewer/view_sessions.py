@@ -14,7 +14,7 @@ import threading
 
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
-from chronocl.integration.session import Session
+from chronocl.integration.interactive.session import Session
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.slots import ViewSlot

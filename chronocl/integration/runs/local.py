@@ -1,10 +1,10 @@
 """The local executor: an out-of-core run's slab tasks in this process.
 
-It runs the same slab task a dask worker runs (`chronocl.integration.streaming.SlabTask`:
+It runs the same slab task a dask worker runs (`chronocl.integration.runs.streaming.SlabTask`:
 integrate one slab, write it, leave its marker), overlapping its steps: the next brick is
 read on one thread while this one is integrated, and the slab before is written on another,
 into two output buffers used in turn. Memory stays what the plan counted
-(`chronocl.integration.plan.slab_bytes`); a `GrowthGuard` hands freed pages back when the
+(`chronocl.integration.runs.plan.slab_bytes`); a `GrowthGuard` hands freed pages back when the
 process grows past it.
 """
 
@@ -23,14 +23,14 @@ from chronocl.core.progress import meter
 from chronocl.data.bricks import SeriesBricks, Slab
 from chronocl.engine.base import Engine
 from chronocl.integration.inmemory import Job, Out, engine_rows, integrate_slabs
-from chronocl.integration.plan import Plan
-from chronocl.reference import Partial
+from chronocl.integration.runs.plan import Plan
+from chronocl.modes.base import Partial
 
 Bounds = tuple[int, int, int, int]  # Slab.bounds
 
 
 class SlabWork(Protocol):
-    """What an executor runs per slab: `chronocl.integration.streaming.SlabTask`."""
+    """What an executor runs per slab: `chronocl.integration.runs.streaming.SlabTask`."""
 
     job: Job
 

@@ -40,9 +40,9 @@ from chronocl.data.bricks import Slab
 from chronocl.data.chronovolume import FORMAT
 from chronocl.data.writer import compressors
 from chronocl.integration.inmemory import Job
-from chronocl.integration.plan import Plan
+from chronocl.integration.runs.plan import Plan
+from chronocl.modes.base import Partial
 from chronocl.modes.spec import IntegrationSpec
-from chronocl.reference import Partial
 
 log = logging.getLogger("chronocl")
 

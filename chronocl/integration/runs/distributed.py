@@ -1,6 +1,6 @@
 """The dask executor: an out-of-core run's slab tasks on a dask.distributed cluster.
 
-`chronocl.integration.streaming.integrate_to_store(..., client=client)` plans the slabs and
+`chronocl.integration.runs.streaming.integrate_to_store(..., client=client)` plans the slabs and
 `DaskExecutor` submits one task per slab: the same slab task the local executor runs
 (`streaming.SlabTask`), in the small form it travels in (`SlabTask.remote`): paths, the spec
 as a dict and the slab's bounds. On its worker it opens the series (a shared file system or
@@ -38,8 +38,8 @@ from chronocl.data.series import TimeSeries, open_series
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
 from chronocl.integration.inmemory import Job
-from chronocl.integration.local import Bounds, SlabWork
-from chronocl.integration.plan import Plan
+from chronocl.integration.runs.local import Bounds, SlabWork
+from chronocl.integration.runs.plan import Plan
 
 CONNECT_TIMEOUT = 5.0  # seconds before an unreachable scheduler is reported
 

@@ -1,9 +1,10 @@
 """Choosing the level of a multiscale series to draw next, for a latency target.
 
-A session with ``level="auto"`` keeps one fixed-level session per level it has shown (and
-per pooling, docs/levels.md) and asks a `LatencyModel` which level to integrate for each new
-window or spec: the finest whose predicted time to a drawn frame (integrate, plus upload and
-render as the display reports them) meets the target. The model starts from the coarsest
+An `AutoSession` (what ``Session(series, level="auto")`` returns) takes one fixed-level
+session per level it has shown (and per pooling, docs/levels.md) from a `SessionPool` and
+asks a `LatencyModel` which level to integrate for each new window or spec: the finest whose
+predicted time to a drawn frame (integrate, plus upload and render as the display reports
+them) meets the target. The model starts from the coarsest
 level, whose frame is always cheap, and learns from every frame's own timings. `refine`
 then brings the same window and spec to full resolution when the caller is idle.
 """
@@ -11,38 +12,17 @@ then brings the same window and spec to full resolution when the caller is idle.
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.selection import Selection, parse_selection
+from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.pyramid import level_shapes
-from chronocl.data.window import WindowManager
-
-if TYPE_CHECKING:
-    from chronocl.core.selection import Selection
-    from chronocl.data.chronovolume import Chronovolume
-    from chronocl.data.series import TimeSeries
-    from chronocl.integration.session import Session
-    from chronocl.modes.spec import IntegrationSpec
+from chronocl.data.series import TimeSeries
+from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
+from chronocl.modes.spec import IntegrationSpec
 
 SMOOTHING = 0.5  # weight of the newest measurement in the running estimates
-
-
-def check_level(series: TimeSeries, level: object) -> int:
-    """A fixed level of `series`: an integer in 0..n_levels-1, else one clear line."""
-    n = series.n_levels
-    if isinstance(level, bool) or not isinstance(level, int):
-        raise InvalidParameterError(
-            f"level {level!r} must be an integer 0..{n - 1} (0: full resolution) or 'auto'"
-        )
-    if not 0 <= level < n:
-        name = series.source or "the series"
-        have = (
-            "only level 0 (add coarse levels with 'chronocl pyramid')"
-            if n == 1
-            else f"levels 0..{n - 1}"
-        )
-        raise InvalidParameterError(f"level {level} is out of range: {name} has {have}")
-    return level
 
 
 class LatencyModel:
@@ -97,57 +77,88 @@ class LatencyModel:
         return coarsest, f"no level predicted within {self.target_ms:g} ms: the coarsest"
 
 
-class AutoLevels:
-    """The fixed-level sessions behind a ``level="auto"`` session (`owner`)."""
+class Pool(Protocol):
+    """What an `AutoSession` needs of its pool (`chronocl.integration.interactive.session.
+    SessionPool`): the series and a fixed-level session per level and pooling."""
 
-    def __init__(self, owner: Session, target_ms: float) -> None:
-        self.owner = owner
-        series = owner.base
+    series: TimeSeries
+
+    def session(self, level: int, spec: IntegrationSpec) -> FixedLevel: ...
+
+    def close(self) -> None: ...
+
+
+class FixedLevel(Protocol):
+    """What an `AutoSession` uses of a fixed-level `Session`."""
+
+    stats: dict
+
+    def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume: ...
+
+
+class AutoSession:
+    """A session that draws each window at the finest level predicted to meet `target_ms`
+    (a coarse frame first) and refines it to full resolution when asked (`refine`).
+
+    Built by ``Session(series, level="auto", ...)``; it moves like a `Session` (set_window,
+    slide, set_spec, show, current; the moves in `chronocl.integration.interactive.moves`)
+    and passes each window to the fixed-level session of the level chosen, from `pool`.
+    `stats` are that session's, with the level chosen and why.
+    """
+
+    def __init__(self, pool: Pool, spec: IntegrationSpec, target_ms: float) -> None:
+        self.pool = pool
+        self.base = series = pool.series
+        self.asked = self.spec = spec
+        self.selection: Selection | None = None
+        self.stats: dict = {}
         # The shapes by the rule: building the level series here would pool lazy levels.
         shapes = [series.volume_shape, *level_shapes(series.volume_shape)][: series.n_levels]
         self.model = LatencyModel([int(z) * int(y) * int(x) for z, y, x in shapes], target_ms)
-        self.sessions: dict[tuple[int, str], Session] = {}
         self.shown = len(shapes) - 1
         self.why = ""
         self._last: tuple[Selection, IntegrationSpec] | None = None
         self._cv: Chronovolume | None = None
 
-    def session(self, level: int, spec: IntegrationSpec) -> Session:
-        key = (level, spec.integration.pool)
-        s = self.sessions.get(key)
-        if s is None:
-            o = self.owner
-            # Coarse levels hold 1/8 of the voxels of the next finer one or less.
-            budget = o.budget if level == 0 else max(1, o.budget // 8)
-            manager = None
-            if o._managers is not None:  # views of one window share resident steps per level
-                manager = o._managers.get(key)
-                if manager is None:
-                    series = o.base.level(level, spec.integration.pool)
-                    manager = WindowManager(series, budget, prefetch=o._prefetch)
-                    o._managers[key] = manager
-            s = self.sessions[key] = type(o)(  # a fixed-level session like the owner
-                o.base,
-                memory=budget,
-                engine=o.engine,
-                spec=spec,
-                level=level,
-                prefetch=o._prefetch,
-                manager=manager,
-            )
-        return s
+    @property
+    def shown_level(self) -> int:
+        """The level of the last chronovolume returned (0: full resolution)."""
+        return self.shown
 
-    def show(self, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
+    def set_window(self, t0: Window, t1: int | None = None, stride: int = 1) -> Chronovolume:
+        """Jump to the window [t0, t1) with a stride (or a '0:16:2' string, list or Selection)."""
+        return self.show(jump(t0, t1, stride, self.base.n_steps))
+
+    def slide(self, k: int = 1) -> Chronovolume:
+        """Move the window by k strides (negative: back in time), clamped at either end."""
+        return self.show(slid(self.window(), k, self.base.n_steps))
+
+    def set_spec(self, spec: IntegrationSpec | None = None, **changes: object) -> Chronovolume:
+        """Change the integration: a whole spec, or fields of the current one (mode="max")."""
+        return self.show(self.window(), changed(self.asked, spec, changes))
+
+    def window(self) -> Selection:
+        """The window shown (before any: every step)."""
+        if self.selection is None:
+            self.selection = parse_selection(None, self.base.n_steps)
+        return self.selection
+
+    def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume:
+        """The chronovolume of `selection` under `spec` (default: the current one), at the
+        level the latency model picks. The value range is fixed here, as `Session.show`
+        fixes it, so every level is normalised by level 0's range."""
+        self.asked, spec = fixed(self.base, self.asked, self.spec, spec, selection)
+        self.spec, self.selection = spec, selection
         level, self.why = self.model.pick(selection.width)
         return self._at(level, selection, spec)
 
     def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
-        s = self.session(level, spec)
+        s = self.pool.session(level, spec)
         t = time.perf_counter()
         cv = s.show(selection, spec)
         self.model.record_integrate(level, 1e3 * (time.perf_counter() - t), selection.width)
         self.shown, self._last, self._cv = level, (selection, spec), cv
-        self.owner.stats = {
+        self.stats = {
             **s.stats,
             "level": level,
             "levels": len(self.model.voxels),
@@ -157,21 +168,29 @@ class AutoLevels:
         return cv
 
     def refine(self) -> Chronovolume | None:
+        """The full-resolution chronovolume of what was last shown coarse (None when the last
+        one was full resolution already)."""
         if self.shown == 0 or self._last is None:
             return None
         self.why = "refined to full resolution"
         return self._at(0, *self._last)
 
     def current(self) -> Chronovolume:
+        """The chronovolume of the current window and spec."""
         if self._cv is None:
-            return self.show(self.owner._require(), self.owner.spec)
+            return self.show(self.window(), self.spec)
         return self._cv
 
     def record_display(self, ms: float) -> None:
-        """The display's upload + render time of the last chronovolume shown."""
+        """The display's upload + render time of the last chronovolume returned: the model
+        learns from it which level meets the target next time."""
         self.model.record_display(self.shown, ms)
 
     def close(self) -> None:
-        for s in self.sessions.values():
-            s.close()
-        self.sessions = {}
+        self.pool.close()
+
+    def __enter__(self) -> AutoSession:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

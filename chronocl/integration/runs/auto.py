@@ -3,7 +3,7 @@
 `plan_run` validates the window and the spec and picks the way: in memory and saved in the
 format the output's suffix names when the window's brick and the chronovolume fit the
 memory budget; otherwise streamed z-slab by z-slab into a .zarr store
-(`chronocl.integration.streaming.integrate_to_store`); on a dask cluster, one task per slab,
+(`chronocl.integration.runs.streaming.integrate_to_store`); on a dask cluster, one task per slab,
 when a client, a scheduler address or a number of local workers is given. `Run.execute`
 does the work. `check_run_options` checks what needs no data first, so that a caller can
 refuse bad options before it opens anything.
@@ -24,10 +24,10 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.formats.outputs import output_kind, save_chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine import ENGINES
-from chronocl.engine.transfer import check_device_format
+from chronocl.engine.device_formats import check_device_format
 from chronocl.integration.inmemory import Job, at_level, integrate, prepare
-from chronocl.integration.plan import fits_in_memory
-from chronocl.integration.streaming import integrate_to_store
+from chronocl.integration.runs.plan import fits_in_memory
+from chronocl.integration.runs.streaming import integrate_to_store
 from chronocl.modes.spec import IntegrationSpec
 
 IN_MEMORY, STREAMED, DASK = "in memory", "streamed", "dask"
@@ -128,7 +128,7 @@ class Run:
         elif self.client is not None:
             integrate_to_store(job.series, job.selection, self.out_path, client=self.client, **args)
         else:
-            from chronocl.integration.distributed import connect, dashboard_link
+            from chronocl.integration.runs.distributed import connect, dashboard_link
 
             with connect(self.scheduler, self.workers) as client:
                 link = dashboard_link(client)
@@ -163,7 +163,7 @@ def plan_run(
     slabs on dask. Nothing is read or written yet. A window that does not fit the budget needs
     a .zarr output (streamed) or a cluster; any other output raises InvalidParameterError.
     `level` integrates a coarse level of the series (docs/levels.md). `device_format` is what
-    bricks travel to the device in (`chronocl.engine.transfer`).
+    bricks travel to the device in (`chronocl.engine.device_formats`).
     """
     budget = check_run_options(out_path, memory, engine, scheduler, workers)
     job = at_level(prepare(series, window, mode, spec, spec_args), level)

@@ -46,8 +46,8 @@ from chronocl.engine.device import (
     usable_devices,
 )
 from chronocl.engine.roofline import read_roofline
-from chronocl.integration import distributed
-from chronocl.integration.streaming import integrate_to_store
+from chronocl.integration.runs import distributed
+from chronocl.integration.runs.streaming import integrate_to_store
 
 MAX_SIDE = 4096
 ROOFLINE_BYTES = 512 * 2**20  # the roofline reads at most this much of the window

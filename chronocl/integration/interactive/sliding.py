@@ -26,7 +26,6 @@ leaves and combines, independent of W.
 from __future__ import annotations
 
 import math
-import weakref
 from collections.abc import Callable, Sequence
 from typing import Generic, TypeVar
 
@@ -36,26 +35,35 @@ P = TypeVar("P")
 class _Stack(Generic[P]):
     """Steps from the middle of the window (bottom) to one end (top), with level aggregates."""
 
-    def __init__(self, owner: SlidingAggregate[P], outer_is_later: bool) -> None:
-        # A weak link: a cycle would keep every dropped aggregate's partial volumes alive
-        # until the next full garbage collection, which Python seldom runs.
-        self.owner = weakref.proxy(owner)
+    def __init__(self, leaf: Callable[[int], P], op: Callable[[P, P], P], outer_is_later: bool):
+        # The stack holds the leaf and combine functions, not its aggregate: no cycle, so a
+        # dropped aggregate frees its partial volumes at once.
+        self.leaf, self.op = leaf, op
         self.outer_is_later = outer_is_later
+        self.block = 1  # checkpoint spacing, set by the aggregate for the window's width
         self.items: list[int] = []
         self.aggs: dict[int, P] = {}
+        self.leaves = 0  # leaf evaluations so far
+        self.combines = 0  # op evaluations so far
 
-    def rebuild(self, items: Sequence[int]) -> None:
+    def rebuild(self, items: Sequence[int], block: int) -> None:
         self.items = list(items)
         self.aggs = {}
+        self.block = block
+
+    def _leaf(self, step: int) -> P:
+        self.leaves += 1
+        return self.leaf(step)
 
     def _up(self, below: P | None, leaf: P) -> P:
         """The aggregate one level up: the new step sits on the outer side."""
         if below is None:
             return leaf
-        return self.owner._op(below, leaf) if self.outer_is_later else self.owner._op(leaf, below)
+        self.combines += 1
+        return self.op(below, leaf) if self.outer_is_later else self.op(leaf, below)
 
     def _keep(self, level: int) -> bool:
-        b = self.owner.block
+        b = self.block
         return level % b == 0 or level > len(self.items) - 1 - b
 
     def _trim(self) -> None:
@@ -74,7 +82,7 @@ class _Stack(Generic[P]):
         start = max((lv for lv in self.aggs if lv < level), default=-1)
         acc = self.aggs.get(start)
         for j in range(start + 1, level + 1):
-            acc = self._up(acc, self.owner._leaf(self.items[j]))
+            acc = self._up(acc, self._leaf(self.items[j]))
             if self._keep(j):
                 self.aggs[j] = acc
         assert acc is not None
@@ -83,7 +91,7 @@ class _Stack(Generic[P]):
     def push(self, step: int) -> None:
         below = self.top()
         self.items.append(step)
-        self.aggs[len(self.items) - 1] = self._up(below, self.owner._leaf(step))
+        self.aggs[len(self.items) - 1] = self._up(below, self._leaf(step))
         self._trim()
 
     def pop(self) -> int:
@@ -99,13 +107,21 @@ class SlidingAggregate(Generic[P]):
     """
 
     def __init__(self, leaf: Callable[[int], P], op: Callable[[P, P], P]) -> None:
-        self.leaf = leaf
         self.op = op
-        self.leaves = 0  # leaf evaluations so far
-        self.combines = 0  # op evaluations so far
-        self._front: _Stack[P] = _Stack(self, outer_is_later=False)
-        self._back: _Stack[P] = _Stack(self, outer_is_later=True)
+        self._front: _Stack[P] = _Stack(leaf, op, outer_is_later=False)
+        self._back: _Stack[P] = _Stack(leaf, op, outer_is_later=True)
+        self._combines = 0  # op evaluations of `value` (the stacks count their own)
         self.reset(())
+
+    @property
+    def leaves(self) -> int:
+        """Leaf evaluations so far."""
+        return self._front.leaves + self._back.leaves
+
+    @property
+    def combines(self) -> int:
+        """op evaluations so far."""
+        return self._front.combines + self._back.combines + self._combines
 
     def reset(self, steps: Sequence[int], front_share: int | None = None) -> None:
         """Start over with `steps` (oldest first); nothing is computed until needed.
@@ -113,10 +129,10 @@ class SlidingAggregate(Generic[P]):
         The oldest `front_share` steps (default: half, rounded up) go to the front stack.
         """
         steps = list(steps)
-        self.block = block_size(len(steps))
+        block = block_size(len(steps))
         half = (len(steps) + 1) // 2 if front_share is None else front_share
-        self._front.rebuild(steps[:half][::-1])
-        self._back.rebuild(steps[half:])
+        self._front.rebuild(steps[:half][::-1], block)
+        self._back.rebuild(steps[half:], block)
 
     @property
     def steps(self) -> list[int]:
@@ -155,21 +171,14 @@ class SlidingAggregate(Generic[P]):
             raise IndexError("the sliding window is empty")
         if front is None or back is None:
             return front if back is None else back  # type: ignore[return-value]
-        return self._op(front, back)
+        self._combines += 1
+        return self.op(front, back)
 
     def _split(self, front_share: int) -> None:
         steps = self.steps
         if not steps:
             raise IndexError("pop from an empty sliding window")
         self.reset(steps, front_share)
-
-    def _leaf(self, step: int) -> P:
-        self.leaves += 1
-        return self.leaf(step)
-
-    def _op(self, a: P, b: P) -> P:
-        self.combines += 1
-        return self.op(a, b)
 
 
 def block_size(n: int) -> int:

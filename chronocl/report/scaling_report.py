@@ -1,6 +1,6 @@
 """The scalability report's folder: report.json, three plots and index.html.
 
-`write_report(folder, report)` writes what `chronocl.integration.bench` measured:
+`write_report(folder, report)` writes what `chronocl.report.scaling` measured:
 
 - report.json: the schema version, machine and devices, parameters, every cell, the roofline
   and a summary (strong-scaling speed-ups, weak-scaling efficiencies);

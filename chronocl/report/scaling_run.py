@@ -1,6 +1,6 @@
 """`chronocl bench` as a function: check everything, measure the matrix on one dask cluster,
-write the report folder atomically (`chronocl.integration.scaling` measures,
-`chronocl.integration.scaling_report` writes).
+write the report folder atomically (`chronocl.report.scaling` measures,
+`chronocl.report.scaling_report` writes).
 
 Nothing is measured before every input is checked: the store (or the synthetic size), the
 windows against its steps, the worker counts against its rows, the devices, the mode and the
@@ -22,7 +22,7 @@ from chronocl.core.errors import InvalidParameterError
 from chronocl.core.paths import check_apart, check_input, check_writable
 from chronocl.core.progress import meter
 from chronocl.data.series import TimeSeries, open_series
-from chronocl.integration.scaling import (
+from chronocl.report.scaling import (
     check_matrix,
     check_mode,
     cluster,
@@ -34,7 +34,7 @@ from chronocl.integration.scaling import (
     resolve_devices,
     runs_needed,
 )
-from chronocl.integration.scaling_report import SCHEMA, check_report_target, write_report
+from chronocl.report.scaling_report import SCHEMA, check_report_target, write_report
 
 STORE_HINT = "create one with 'chronocl ingest' or 'chronocl generate', or use --synthetic SIZE"
 MAX_SYNTHETIC_VOXELS = 2**30  # a step is computed in memory (as 'chronocl generate')

@@ -1,11 +1,11 @@
 """Integration larger than memory: z-slabs streamed from the series into a chronovolume store.
 
-`integrate_to_store` plans slabs that fit the memory budget (`chronocl.integration.plan`),
-opens or resumes the run's store (`chronocl.integration.runstore`) and has an executor run
+`integrate_to_store` plans slabs that fit the memory budget (`chronocl.integration.runs.plan`),
+opens or resumes the run's store (`chronocl.integration.runs.runstore`) and has an executor run
 one `SlabTask` per slab not yet done: read the slab's brick (rows plus gradient halo, all W
 steps), integrate it, write it into the store and leave its marker. The local executor
-(`chronocl.integration.local`) runs the task in this process, reading ahead and writing
-behind; the dask executor (`chronocl.integration.distributed`) submits it to a cluster, in
+(`chronocl.integration.runs.local`) runs the task in this process, reading ahead and writing
+behind; the dask executor (`chronocl.integration.runs.distributed`) submits it to a cluster, in
 the small form that travels (`SlabTask.remote`). Both write the same bytes and the same
 markers, so a run cut short on one resumes on the other.
 
@@ -38,13 +38,19 @@ from chronocl.data.series import TimeSeries
 from chronocl.data.timeseries import STEPS_PER_READ
 from chronocl.data.writer import compressors
 from chronocl.engine import get_engine
-from chronocl.engine.transfer import check_device_format, with_device_format
-from chronocl.integration import distributed
-from chronocl.integration.distributed import DaskExecutor
+from chronocl.engine.device_formats import check_device_format, with_device_format
 from chronocl.integration.inmemory import Job, Out, integrate_brick, prepare
-from chronocl.integration.local import Bounds, LocalExecutor
-from chronocl.integration.plan import READ_OPTIONS, Plan, fits_in_memory, plan_slabs, slab_bytes
-from chronocl.integration.runstore import (
+from chronocl.integration.runs import distributed
+from chronocl.integration.runs.distributed import DaskExecutor
+from chronocl.integration.runs.local import Bounds, LocalExecutor
+from chronocl.integration.runs.plan import (
+    READ_OPTIONS,
+    Plan,
+    fits_in_memory,
+    plan_slabs,
+    slab_bytes,
+)
+from chronocl.integration.runs.runstore import (
     FinishTask,
     commit,
     done_slabs,
@@ -58,8 +64,8 @@ from chronocl.integration.runstore import (
     volume_maxima,
 )
 from chronocl.integration.visibility import warn_invisible
+from chronocl.modes.base import Partial
 from chronocl.modes.spec import IntegrationSpec
-from chronocl.reference import Partial
 
 __all__ = [
     "READ_OPTIONS",
@@ -107,7 +113,7 @@ class SlabTask:
     engine: str = "opencl"
     device: str | None = None
     steps_per_read: int = STEPS_PER_READ
-    device_format: str = "auto"  # what bricks travel to the device in (engine.transfer)
+    device_format: str = "auto"  # what bricks travel to the device in (engine.device_formats)
 
     @cached_property
     def group(self) -> zarr.Group:
@@ -229,7 +235,7 @@ def integrate_to_store(
     `memory`, the budget ('2GB', '512MiB', bytes; default 2GB) that sets the slab size
     (per worker with a client), `slab`, at most this many rows per slab, and `client`, a
     dask.distributed Client that runs one task per slab on its workers (see
-    `chronocl.integration.distributed`). `compressor` compresses the output chunks:
+    `chronocl.integration.runs.distributed`). `compressor` compresses the output chunks:
     blosc-lz4 (default; as small as zstd here and about twice as fast to write), zstd (as
     `Chronovolume.save`)
     or none. `device_format` is what bricks travel to the device in (`chronocl.integrate`).

@@ -1,0 +1,354 @@
+"""Interactive sessions: a series, a moving time window, and the chronovolume kept up to date.
+
+A `Session` is what a viewer or notebook scrubs through time with. Its steps
+come from a `WindowManager` (resident under the memory budget, prefetched in
+the scrub direction, no step read twice while resident). How a new window is
+integrated depends on the time positions (docs/semantics.md, sliding windows):
+
+- ``absolute`` positions with forward or backward order: a step's colour does
+  not depend on the window, so the window's state is updated instead of
+  recomputed. Each mode says how (`chronocl.modes`): modes that slide by
+  inversion keep sums in fixed point and add the entering and subtract the
+  leaving steps exactly (a part they aggregate, like additive's opacity, slides
+  like the others); the rest slide through a `SlidingAggregate` of partial
+  chronovolumes, combined on the engine.
+- ``relative`` positions, importance orders, jumps to a window that does not
+  overlap the last one, and spec changes: the window is re-integrated, from
+  resident data only.
+
+The partial volumes that sliding holds are charged to the same memory budget
+as the resident steps; when both do not fit, the session re-integrates.
+
+A `Session` integrates one level of the series. ``Session(series, level="auto")`` gives an
+`AutoSession` instead (`chronocl.integration.interactive.levels`), which picks a level per
+frame from a `SessionPool` of these fixed-level sessions.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import NamedTuple
+
+import numpy as np
+
+from chronocl.core.budget import human, parse_memory
+from chronocl.core.errors import InvalidParameterError
+from chronocl.core.selection import Selection, parse_selection
+from chronocl.data.bricks import ResidentBricks, SeriesBricks
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.data.window import WindowManager
+from chronocl.engine import get_engine
+from chronocl.engine.base import Engine
+from chronocl.integration.inmemory import check_level, integrate_bricks, make_spec, window_job
+from chronocl.integration.interactive.levels import AutoSession
+from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
+from chronocl.integration.interactive.slider import Slider
+from chronocl.integration.interactive.sliding import block_size
+from chronocl.modes.spec import IntegrationSpec
+
+Managers = dict[tuple[int, str], WindowManager]
+
+
+class Settings(NamedTuple):
+    """What every session of a series is built from, whatever its level (`settings`)."""
+
+    asked: IntegrationSpec  # the spec as asked, its value range not fixed yet
+    engine: Engine
+    budget: int  # bytes
+    prefetch: int | None
+    managers: Managers | None
+
+
+def settings(
+    *,
+    memory: str | int | None = None,
+    engine: str | Engine = "opencl",
+    device: str | None = None,
+    spec: IntegrationSpec | None = None,
+    prefetch: int | None = None,
+    managers: Managers | None = None,
+    **spec_args: object,
+) -> Settings:
+    """The keywords a `Session` takes at any level (`Session`'s docstring says what each is)."""
+    asked = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
+    eng = get_engine(engine, device) if isinstance(engine, str) else engine
+    return Settings(asked, eng, parse_memory(memory), prefetch, managers)
+
+
+class Session:
+    """A series, a window and an integration spec at one level; every call returns the
+    current Chronovolume.
+
+        s = Session(series, memory="2GB", mode="max", time_tf="rgb")
+        cv = s.set_window(0, 16)       # steps 0..15
+        cv = s.slide(+1)               # steps 1..16, updated incrementally
+        cv = s.set_spec(mode="alpha")  # re-integrated from resident steps
+
+    Keywords (`settings` reads those every level shares): `memory` is the budget for resident
+    steps plus sliding state; `engine` (a name, with `device`, or an `Engine`); `spec`, or the
+    fields of one (`mode`, `time_tf`, ... as `make_spec` takes them); `prefetch`, the steps
+    read ahead in the scrub direction; `managers` (a dict the caller owns and closes) shares
+    one window manager per (level, pooling) among sessions, and `manager` shares another
+    session's resident steps (parallel views of one window) instead.
+
+    `level` is a coarse level of the series (0: full resolution). ``level="auto"`` does not
+    make a `Session`: ``Session(...)`` then returns an `AutoSession`
+    (`chronocl.integration.interactive.levels`), which chooses a level per frame to meet
+    `target_ms` and moves like a `Session`; it takes the same keywords, but not `manager` (one
+    manager cannot serve every level: pass `managers`), which it ignores. A fixed level ignores
+    `target_ms`.
+
+    `slide` clamps at either end of the series (the window keeps its width);
+    `set_window` raises InvalidSelectionError for steps outside the series.
+    Returned chronovolumes are new arrays each time: keep them as long as needed.
+    """
+
+    def __new__(cls, series: TimeSeries, *, level: int | str = 0, **options: object):
+        if level == "auto":
+            return auto_session(series, **options)  # type: ignore[arg-type]
+        return super().__new__(cls)
+
+    def __init__(
+        self,
+        series: TimeSeries,
+        *,
+        level: int = 0,
+        manager: WindowManager | None = None,
+        target_ms: float = 150.0,
+        **options: object,
+    ) -> None:
+        setup = settings(**options)  # type: ignore[arg-type]
+        self.base = series
+        # The spec as asked; `self.spec` is it with its value range fixed (`fix_range`).
+        self.asked = self.spec = setup.asked
+        self.engine = setup.engine
+        self.budget = setup.budget
+        self.selection: Selection | None = None
+        self.stats: dict = {}
+        self._arrays: dict[int, np.ndarray] = {}
+        self._bricks = ResidentBricks(self._arrays)
+        self._slider: Slider | None = None
+        self._cv: Chronovolume | None = None
+        self._prefetch = prefetch = setup.prefetch
+        self.level = check_level(series, level)
+        self.series = series.level(self.level, self.spec.integration.pool)
+        # Sessions that show one window in several views can share one manager's resident steps.
+        managers = setup.managers
+        self._owns_manager = manager is None and managers is None
+        if manager is None and managers is not None:
+            key = (self.level, self.spec.integration.pool)
+            if key not in managers:
+                managers[key] = WindowManager(self.series, self.budget, prefetch=prefetch)
+            manager = managers[key]
+        self.manager = manager or WindowManager(self.series, self.budget, prefetch=prefetch)
+
+    # -- public --------------------------------------------------------------------------
+    def set_window(self, t0: Window, t1: int | None = None, stride: int = 1) -> Chronovolume:
+        """Jump to the window [t0, t1) with a stride (or a '0:16:2' string, list or Selection)."""
+        return self.show(jump(t0, t1, stride, self.base.n_steps))
+
+    def slide(self, k: int = 1) -> Chronovolume:
+        """Move the window by k strides (negative: back in time), clamped at either end."""
+        return self.show(slid(self.window(), k, self.base.n_steps))
+
+    def set_spec(self, spec: IntegrationSpec | None = None, **changes: object) -> Chronovolume:
+        """Change the integration: a whole spec, or fields of the current one (mode="max")."""
+        return self.show(self.window(), changed(self.asked, spec, changes))
+
+    def window(self) -> Selection:
+        """The window shown (before any: every step)."""
+        if self.selection is None:
+            self.selection = parse_selection(None, self.base.n_steps)
+        return self.selection
+
+    def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume:
+        """The chronovolume of `selection` under `spec` (default: the current one): a window
+        and a spec change at once, integrated once."""
+        self.asked, spec = fixed(self.base, self.asked, self.spec, spec, selection)
+        if spec != self.spec:
+            if self.level and spec.integration.pool != self.spec.integration.pool:
+                self._repool(spec.integration.pool)
+            self.spec = spec
+            self._slider = None
+            self._cv = None
+        return self._update(selection)
+
+    def current(self) -> Chronovolume:
+        """The chronovolume of the current window and spec."""
+        if self._cv is None:
+            return self._update(self.window())
+        return self._cv
+
+    def refine(self) -> Chronovolume | None:
+        """None: a fixed level is never refined (`AutoSession.refine` is)."""
+        return None
+
+    def record_display(self, ms: float) -> None:
+        """The display's time for the last chronovolume: only `AutoSession` learns from it."""
+
+    @property
+    def shown_level(self) -> int:
+        """The level of the last chronovolume returned (0: full resolution)."""
+        return self.level
+
+    def close(self) -> None:
+        if self._owns_manager:
+            self.manager.close()
+        self._arrays = {}
+        self._bricks.forget()
+        self._slider = None
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- internals -----------------------------------------------------------------------
+    def _repool(self, pool: str) -> None:
+        """A coarse session whose new mode pools levels differently reads the other level."""
+        if not self._owns_manager:
+            raise InvalidParameterError(
+                f"mode {self.spec.mode!r} pools coarse levels differently; give this session "
+                "its own window manager, or use level='auto'"
+            )
+        self.manager.close()
+        self.series = self.base.level(self.level, pool)
+        self.manager = WindowManager(self.series, self.budget, prefetch=self._prefetch)
+        self._arrays = {}
+        self._bricks.forget()
+        self.selection = None
+
+    def _update(self, selection: Selection) -> Chronovolume:
+        t = time.perf_counter()
+        old = self.selection
+        if old is not None and selection == old and self._cv is not None:
+            return self._cv
+        window = selection.width * self.manager.step_bytes
+        if window > self.budget:
+            return self._stream(selection, window, t)
+        reason, keep, state = self._budget(selection, window)
+        self._bricks.keep = keep
+        if self._owns_manager:
+            self.manager.budget = self.budget - (0 if reason else state) - keep * window
+        direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
+        arrays = dict(
+            zip(selection.steps, self.manager.get(selection.steps, direction), strict=True)
+        )
+        leaving = {s: a for s, a in self._arrays.items() if s not in arrays}
+        self._arrays = arrays
+        self.selection = selection
+        slider = self._slider
+        path = "reintegrate"
+        if reason is None and slider is not None and slider.can_move_to(selection):
+            cv = slider.move_to(selection, {**leaving, **arrays})
+            path = "incremental"
+        else:
+            job = window_job(self.series, selection, self.spec)
+            self._bricks.arrays = self._arrays  # its `keep` was decided above
+            cv = integrate_bricks(job, self.engine, self._bricks)
+            # Jumps and spec changes integrate directly (one pass over the window); the
+            # sliding state starts from this window and is filled lazily on the next slide.
+            self._slider = None
+            if reason is None:
+                self._slider = Slider(
+                    self.series, self.engine, self.spec, selection, job.value_range
+                )
+        self._cv = cv
+        self._record(t, path, reason)
+        return cv
+
+    def _budget(self, selection: Selection, window: int) -> tuple[str | None, bool, int]:
+        """How the budget splits for `selection`, whose steps take `window` bytes: why it
+        cannot slide incrementally (None: it can); whether its stacked brick is kept for the
+        next spec change (when it fits beside the steps and the sliding state); and the bytes
+        of the state sliding holds (2 stacks of ~2 sqrt(W) partials, work, sums)."""
+        spec, mode = self.spec, self.spec.integration
+        voxels = int(np.prod(self.series.volume_shape))
+        partials = (4 * block_size(selection.width) + 4) * mode.state_bytes * voxels
+        state = partials + 8 * mode.sum_channels * voxels
+        keep = 2 * window + state <= self.budget
+        reason = None
+        if spec.time_tf.positions != "absolute":
+            reason = "relative time positions recolour every step on a slide"
+        elif not isinstance(spec.order, str):
+            reason = "importance orders are not sliding windows"
+        elif window + state > self.budget:
+            need, budget = human(window + state), human(self.budget)
+            reason = f"window and sliding state need {need} > budget {budget}"
+        return reason, keep, state
+
+    def _stream(self, selection: Selection, window: int, t: float) -> Chronovolume:
+        """A window larger than the budget: integrated z-slab by z-slab from the store, each
+        slab's brick a quarter of the budget at most (nothing resident, no sliding)."""
+        job = window_job(self.series, selection, self.spec)
+        rows = max(1, self.budget // (4 * max(1, job.row_bytes)))
+        self._arrays, self._slider, self.selection = {}, None, selection
+        self._bricks.forget()
+        self._cv = integrate_bricks(job, self.engine, SeriesBricks(self.series), slab=rows)
+        why = f"the window needs {human(window)} > budget {human(self.budget)}: streamed by z-slabs"
+        self._record(t, "streamed", why)
+        return self._cv
+
+    def _record(self, t: float, path: str, reason: str | None) -> None:
+        self.stats = {
+            "level": self.level,
+            "integrate_ms": 1e3 * (time.perf_counter() - t),
+            "path": path,
+            "incremental": path == "incremental",
+            "why_not_incremental": reason,
+            "steps": list(self.selection.steps),
+            "resident_steps": len(self.manager.resident()),
+            "reads": sum(self.manager.reads.values()),
+            "held_partials": 0 if self._slider is None else self._slider.held,
+        }
+
+
+class SessionPool:
+    """The fixed-level sessions behind an `AutoSession`: one per (level, pooling) of `series`,
+    built when first asked for from `setup`, sharing its engine and, when it has `managers`,
+    the window managers in it (the views of one client)."""
+
+    def __init__(self, series: TimeSeries, setup: Settings) -> None:
+        self.series = series
+        self.setup = setup
+        self.sessions: dict[tuple[int, str], Session] = {}
+
+    def session(self, level: int, spec: IntegrationSpec) -> Session:
+        """The session of `level` for `spec`'s pooling."""
+        key = (level, spec.integration.pool)
+        if key not in self.sessions:
+            o = self.setup
+            # Coarse levels hold 1/8 of the voxels of the next finer one or less.
+            budget = o.budget if level == 0 else max(1, o.budget // 8)
+            self.sessions[key] = Session(
+                self.series,
+                memory=budget,
+                engine=o.engine,
+                spec=spec,
+                level=level,
+                prefetch=o.prefetch,
+                managers=o.managers,
+            )
+        return self.sessions[key]
+
+    def close(self) -> None:
+        for s in self.sessions.values():
+            s.close()
+        self.sessions = {}
+
+
+def auto_session(
+    series: TimeSeries,
+    *,
+    target_ms: float = 150.0,
+    manager: WindowManager | None = None,
+    **options: object,
+) -> AutoSession:
+    """`Session(series, level="auto", ...)`: a session that draws each frame at the finest
+    level predicted to meet `target_ms`, from a pool of fixed-level sessions.
+    `options` are those of every level (`settings`); `manager` is ignored (it holds one level's
+    steps: `managers` shares one per level)."""
+    setup = settings(**options)  # type: ignore[arg-type]
+    return AutoSession(SessionPool(series, setup), setup.asked, target_ms)

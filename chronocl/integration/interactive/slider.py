@@ -1,0 +1,198 @@
+"""The incremental state of a session's window under one spec (absolute time positions).
+
+A `Session` moves its window through a `Slider` when the new window overlaps the old one:
+modes that slide by inversion add the entering and subtract the leaving steps' fixed-point
+sums; the rest slide through a `SlidingAggregate` of partial chronovolumes (docs/window.md).
+The slider is built from what it needs (the series, the engine, the spec, the window and its
+value range) and knows nothing of the session. Its aggregate gets two plain functions at
+construction: `Leaves.for_aggregate` (a step's partial, from the resident arrays) and
+`Combine` (the engine's combine in the spec's order).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chronocl.core.memory import aligned_empty
+from chronocl.core.selection import Selection
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.engine.base import Engine
+from chronocl.integration.inmemory import chronovolume_metadata, engine_name
+from chronocl.integration.interactive.sliding import SlidingAggregate
+from chronocl.modes.base import Partial, Values
+from chronocl.modes.spec import IntegrationSpec
+
+
+class Combine:
+    """`op(earlier, later)` of a sliding aggregate: the engine's combine, in the spec's order."""
+
+    def __init__(self, engine: Engine, spec: IntegrationSpec) -> None:
+        self.engine, self.spec = engine, spec
+
+    def __call__(self, earlier: Partial, later: Partial) -> Partial:
+        if self.spec.order == "backward":
+            return self.engine.combine(later, earlier, self.spec)
+        return self.engine.combine(earlier, later, self.spec)
+
+
+class Leaves:
+    """The leaves of a window: each step integrated alone from the resident arrays.
+
+    A leaf is one step, or for a mode whose leaves span several steps (change: a pair), the
+    steps ending at it. Inverting modes get raw partials (sums to add and subtract).
+    """
+
+    def __init__(
+        self, n_steps: int, engine: Engine, spec: IntegrationSpec, value_range: tuple
+    ) -> None:
+        self.n_steps, self.engine, self.spec = n_steps, engine, spec
+        self.mode = spec.integration
+        self.value_range = value_range
+        self.inverts = self.mode.slides == "invert"
+        self.arrays: dict[int, np.ndarray] = {}  # step -> its resident (Z, Y, X) values
+        self.before: dict[int, tuple[int, ...]] = {}  # leaf -> the earlier steps it spans
+        self._full: dict[int, Partial] = {}
+
+    def full(self, step: int) -> Partial:
+        """The leaf ending at `step` integrated alone: its partial (inverting modes: raw)."""
+        if step in self._full:
+            return self._full[step]
+        steps = (*self.before.get(step, ()), step) if self.mode.leaf_span > 1 else (step,)
+        arrays = [self.arrays[s] for s in steps]
+        # One step is a (Z, 1, Y, X) xytz brick without a copy.
+        brick = arrays[0][:, None] if len(arrays) == 1 else np.stack(arrays, axis=1)
+        positions = self.spec.time_tf.positions_of(list(steps), self.n_steps)
+        partial, _ = self.engine.accumulate(
+            brick,
+            slice(0, arrays[0].shape[0]),
+            steps,
+            positions,
+            np.arange(len(steps)),
+            self.spec,
+            self.value_range,
+            raw=self.inverts,
+        )
+        if self.mode.compares_values:
+            partial.value = self.mode.leaf_value(Values(np.stack(arrays), self.value_range))
+        if self.inverts:
+            self._full[step] = partial
+        return partial
+
+    def for_aggregate(self, step: int) -> Partial:
+        """The leaf as the sliding aggregate holds it (inverting modes: its opacity only)."""
+        full = self.full(step)
+        self._full.pop(step, None)  # cached only for the push that follows a fixed_add
+        if self.inverts:  # only the aggregated opacity slides here
+            alpha = aligned_empty(full.rgba.shape[:-1], np.float32)
+            alpha[...] = full.rgba[..., 3]
+            return Partial(alpha, None)
+        return full
+
+    def forget(self, step: int | None = None) -> None:
+        """Drop the cached raw partial of `step` (default: of every step)."""
+        if step is None:
+            self._full.clear()
+        else:
+            self._full.pop(step, None)
+
+
+class Slider:
+    """The incremental state of one window under one spec (absolute positions).
+
+    The sliding items are the steps that end a leaf. Modes that slide by inversion add and
+    subtract their leaves' raw sums; the rest (and an inverting mode's aggregated opacity)
+    slide through a `SlidingAggregate`.
+    """
+
+    def __init__(
+        self,
+        series: TimeSeries,
+        engine: Engine,
+        spec: IntegrationSpec,
+        selection: Selection,
+        value_range: tuple[float, float],
+    ) -> None:
+        self.series, self.engine, self.spec = series, engine, spec
+        self.mode = spec.integration
+        self.selection = selection
+        self.value_range = value_range
+        self.leaves = Leaves(series.n_steps, engine, spec, value_range)
+        self.inverts = self.leaves.inverts
+        self.agg: SlidingAggregate[Partial] | None = None
+        if not self.inverts or self.mode.state_bytes:
+            self.agg = SlidingAggregate(self.leaves.for_aggregate, Combine(engine, spec))
+            self.agg.reset(self._items(selection))
+        self.acc: np.ndarray | None = None  # inverting modes: fixed-point sums (Z, Y, X, C)
+
+    @property
+    def held(self) -> int:
+        return 0 if self.agg is None else self.agg.held
+
+    def _items(self, selection: Selection) -> tuple[int, ...]:
+        return selection.steps[self.mode.leaf_span - 1 :]
+
+    def can_move_to(self, selection: Selection) -> bool:
+        old, new = self.selection.steps, selection.steps
+        if len(new) != len(old):
+            return False
+        shift = new[0] - old[0]
+        # A slide keeps the steps' spacing and overlaps the old window.
+        return tuple(s + shift for s in old) == new and bool(set(old) & set(new))
+
+    def move_to(self, selection: Selection, arrays: dict[int, np.ndarray]) -> Chronovolume:
+        """The chronovolume of `selection`, from the old window's state and `arrays` (the
+        resident steps of both windows)."""
+        engine, leaves = self.engine, self.leaves
+        leaves.arrays = arrays
+        old_items = self._items(self.selection)
+        # Leaves spanning several steps find their earlier steps in the window they are in.
+        leaves.before = {**self._before_of(self.selection), **self._before_of(selection)}
+        if self.inverts and self.acc is None:
+            self.acc = np.zeros((*self.series.volume_shape, self.mode.sum_channels), np.int64)
+            for s in old_items:
+                engine.fixed_add(self.acc, leaves.full(s).rgba, +1)
+                leaves.forget(s)
+        old, new = old_items, self._items(selection)
+        old_set, new_set = set(old), set(new)
+        entering = [s for s in new if s not in old_set]
+        leaving = [s for s in old if s not in new_set]
+        forward = selection.steps[0] > self.selection.steps[0]
+        for s in entering if forward else entering[::-1]:
+            if self.inverts:
+                engine.fixed_add(self.acc, leaves.full(s).rgba, +1)
+            if self.agg is not None:
+                self.agg.push_back(s) if forward else self.agg.push_front(s)
+        for s in leaving if forward else leaving[::-1]:
+            if self.inverts:
+                engine.fixed_add(self.acc, leaves.full(s).rgba, -1)
+            if self.agg is not None:
+                self.agg.pop_front() if forward else self.agg.pop_back()
+        leaves.forget()
+        self.selection = selection
+        return self._chronovolume()
+
+    def _before_of(self, selection: Selection) -> dict[int, tuple[int, ...]]:
+        span, steps = self.mode.leaf_span, selection.steps
+        return {steps[i]: steps[i - span + 1 : i] for i in range(span - 1, len(steps))}
+
+    def _chronovolume(self) -> Chronovolume:
+        series, spec, selection = self.series, self.spec, self.selection
+        shape = series.volume_shape
+        value = None
+        if self.agg is not None and self.agg.steps:
+            value = self.agg.value()
+        if self.inverts:
+            alpha = None if value is None else value.rgba
+            positions = spec.time_tf.positions_of(selection.steps, series.n_steps)
+            rgba, t_index = self.engine.finish_sums(self.acc, alpha, positions, spec), None
+        elif value is None:  # no leaf in the window (change over one step): nothing changed
+            rgba = np.zeros((*shape, 4), np.float32)
+            t_index = np.full(shape, -1, np.int32) if spec.has_t_index else None
+        else:
+            rgba = np.asarray(value.rgba, dtype=np.float32)
+            t_index = None if value.t_index is None else np.array(value.t_index, dtype=np.int32)
+        meta = chronovolume_metadata(
+            series, selection, spec, self.value_range, engine_name(self.engine)
+        )
+        return Chronovolume(rgba, t_index, meta)

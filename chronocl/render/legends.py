@@ -1,0 +1,184 @@
+"""The legends under a rendered panel: a bar of the time colours over the selected steps
+(oldest .. newest, with the steps' time labels or numbers at 1-2-5 ticks), count's bar over the
+fraction of steps, and, where the data TF is coloured, a data colour bar beside or under it with
+ticks in data units (`chronocl.render.colorbar`)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from chronocl.core.tf import lut_lookup
+from chronocl.core.ticks import multiples, nice_step, tick_text
+from chronocl.core.time_labels import compact, display_labels, has_labels
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.render.colorbar import DataBar
+
+
+def step_texts(cv: Chronovolume, prefer: str = "labels") -> list[str]:
+    """The display labels of the chronovolume's steps (`chronocl.core.time_labels`)."""
+    meta = cv.metadata
+    return display_labels(cv.steps, meta.get("time_labels"), prefer, meta.get("time_unit"))
+
+
+# A legend band as wide as this many digits holds a time legend and a colour bar side by side.
+BESIDE_MIN_DIGITS = 64
+TIME_SHARE = 0.55  # of a shared band's width, the time legend's
+
+
+def legend_band(draw, cv, bar, box, beside, font, text_rgb, time_labels="labels") -> None:
+    """The band under a panel: the time legend of `cv`, and its data colour bar `bar` (None:
+    none) beside it or under it."""
+    if bar is None:
+        time_legend(draw, cv, box, font, text_rgb, time_labels)
+        return
+    time_box, bar_box = split_legend(box, beside)
+    time_legend(draw, cv, time_box, font, text_rgb, time_labels)
+    # Under the time legend, the colour bar starts where the time bar does.
+    title_w = 0 if beside else draw.textlength("oldest", font=font)
+    draw_colour_bar(draw, bar, bar_box, font, text_rgb, title_w)
+
+
+def split_legend(box, beside: bool):
+    """The legend band `box` (x, y, width, height) shared by the time legend and a data colour
+    bar: side by side (time on the left), or one above the other."""
+    x0, y0, width, height = box
+    if beside:
+        time_w = round(width * TIME_SHARE)
+        gap = 36  # "newest" and the colour bar's title must not read as one label
+        return (x0, y0, time_w, height), (x0 + time_w + gap, y0, width - time_w - gap, height)
+    half = (height + 8) // 2
+    return (x0, y0, width, half - 8), (x0, y0 + half, width, height - half)
+
+
+def draw_colour_bar(draw, bar: DataBar, box, font, text_rgb, title_w: float = 0) -> None:
+    """The data TF's colours rgb_d over the value range, its title ("value") on the left in
+    a column `title_w` wide at least, 1-2-5 ticks in data units under it
+    (`chronocl.render.colorbar`)."""
+    x0, y0, width, height = box
+    bar_h = max(8, height // 2)
+    x_start = x0 + int(max(title_w, draw.textlength(bar.title, font=font))) + 8
+    span = max(2, x0 + width - x_start)
+    draw.text((x0, y0 + 1), bar.title, fill=text_rgb, font=font)
+    rgb = np.clip(bar.rgb(span), 0.0, 1.0)
+    for i in range(span):
+        colour = tuple(round(c * 255) for c in rgb[i])
+        draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
+    ends = [x_start, x_start + span - 1]
+    _nice_ticks(draw, [bar.lo, bar.hi], ends, (x0, y0 + bar_h, width), font, text_rgb, most=10)
+
+
+def time_legend(draw, cv: Chronovolume, box, font, text_rgb, time_labels="labels") -> None:
+    """A bar of the time colours over the selected steps, oldest on the left."""
+    from chronocl.modes.spec import IntegrationSpec
+
+    spec = IntegrationSpec.from_dict(cv.metadata["spec"])
+    if spec.integration.legend == "fraction":
+        _fraction_legend(draw, spec, box, font, text_rgb)
+        return
+    steps = cv.steps
+    n_steps = cv.metadata["selection"]["n_steps"]
+    positions = spec.time_tf.positions_of(steps, n_steps)
+    x0, y0, width, height = box
+    bar_h = max(8, height // 2)
+    gap = 8
+    x_start = x0 + int(draw.textlength("oldest", font=font)) + gap
+    x_end = x0 + width - int(draw.textlength("newest", font=font)) - gap
+    draw.text((x0, y0 + 1), "oldest", fill=text_rgb, font=font)
+    draw.text((x_end + gap, y0 + 1), "newest", fill=text_rgb, font=font)
+    span = max(1, x_end - x_start)
+    # Colour by position within the window: blend between the steps' colours.
+    xs = np.linspace(0.0, 1.0, span)
+    p_of_x = (
+        np.interp(xs, np.linspace(0, 1, len(positions)), positions)
+        if len(steps) > 1
+        else (np.full(span, positions[0]))
+    )
+    rgb, alpha = spec.time_tf.evaluate(p_of_x)
+    shown = np.clip(rgb * np.maximum(alpha, 0.25)[:, None], 0, 1)
+    for i in range(span):
+        colour = tuple(round(c * 255) for c in shown[i])
+        draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
+    positions_x = [x_start + (k / max(1, len(steps) - 1)) * (span - 1) for k in range(len(steps))]
+    values = _tick_values(cv, time_labels)
+    if values is not None and len(steps) > 1:
+        unit = cv.metadata.get("time_unit") if time_labels == "labels" else None
+        where = (x0, y0 + bar_h, width)
+        _nice_ticks(draw, values, positions_x, where, font, text_rgb, unit=unit)
+        return
+    # Text or date labels: the steps that fit without overlapping; the oldest and newest always.
+    texts = compact(step_texts(cv, time_labels))
+    shown: list[tuple[float, float]] = []  # the labels' extents, 10 px apart at least
+    for k in [0, len(steps) - 1, *range(1, len(steps) - 1)]:
+        x, w = positions_x[k], draw.textlength(texts[k], font=font)
+        left = min(max(x - w / 2, x0), x0 + width - w)  # centred on its tick, inside the bar
+        if all(left + w + 10 <= a or left >= b + 10 for a, b in shown):
+            shown.append((left, left + w))
+            draw.line([(x, y0 + bar_h), (x, y0 + bar_h + 3)], fill=text_rgb)
+            draw.text((left, y0 + bar_h + 4), texts[k], fill=text_rgb, font=font)
+
+
+def _tick_values(cv: Chronovolume, time_labels: str) -> list[float] | None:
+    """The number each selected step stands for on the legend's axis: its time where every
+    label is a number (increasing), its step number where the store has no labels or they are
+    not wanted; None for text and date labels, which are shown as they are."""
+    labels = cv.metadata.get("time_labels")
+    unit = cv.metadata.get("time_unit")
+    if time_labels == "steps" or not has_labels(list(cv.steps), labels, unit):
+        return [float(s) for s in cv.steps]
+    if all(isinstance(t, int | float) and not isinstance(t, bool) for t in labels):
+        numbers = [float(t) for t in labels]
+        if all(b > a for a, b in itertools.pairwise(numbers)):
+            return numbers
+    return None
+
+
+def _nice_ticks(draw, values, positions_x, where, font, text_rgb, most=None, unit=None) -> None:
+    """Ticks at 1-2-5 multiples of `values`' span, placed where they fall between the steps,
+    as many as fit 12 px apart, `most` at most (default: one per step; step numbers get
+    whole-number ticks); a time `unit` follows each tick's number."""
+    x0, y0, width = where
+    integer = most is None and all(float(v).is_integer() for v in values)
+    most = len(values) if most is None else most
+    most = max(2, min(most, int(positions_x[-1] - positions_x[0]) // 16 + 1))
+    while True:
+        step = nice_step(values[0], values[-1], most, integer)
+        ticks = multiples(values[0], values[-1], step)
+        texts = [tick_text(t, step) + (f" {unit}" if unit else "") for t in ticks]
+        widest = max(draw.textlength(t, font=font) for t in texts) if texts else 0
+        if most <= 2 or len(ticks) * (widest + 12) <= positions_x[-1] - positions_x[0] + widest:
+            break
+        most -= 1
+    for t, text in zip(ticks, texts, strict=True):
+        x = float(np.interp(t, values, positions_x))
+        w = draw.textlength(text, font=font)
+        left = min(max(x - w / 2, x0), x0 + width - w)
+        draw.line([(x, y0), (x, y0 + 3)], fill=text_rgb)
+        draw.text((left, y0 + 4), text, fill=text_rgb, font=font)
+
+
+def _fraction_legend(draw, spec, box, font, text_rgb) -> None:
+    """A bar of the data TF over the fraction of steps, for modes that show one (count)."""
+    x0, y0, width, height = box
+    bar_h = max(8, height // 2)
+    gap = 8
+    left, right = "no step", "every step"
+    x_start = x0 + int(draw.textlength(left, font=font)) + gap
+    x_end = x0 + width - int(draw.textlength(right, font=font)) - gap
+    draw.text((x0, y0 + 1), left, fill=text_rgb, font=font)
+    draw.text((x_end + gap, y0 + 1), right, fill=text_rgb, font=font)
+    span = max(1, x_end - x_start)
+    rgba = lut_lookup(spec.data_tf.lut, np.linspace(0.0, 1.0, span))
+    # Opacity relative to the ramp's peak: a translucent ramp (count's own) stays legible,
+    # and where it is transparent the bar is dark.
+    weight = rgba[:, 3] / max(float(rgba[:, 3].max()), 1e-6)
+    shown = np.clip(rgba[:, :3] * np.maximum(weight, 0.25)[:, None], 0, 1)
+    for i in range(span):
+        colour = tuple(round(c * 255) for c in shown[i])
+        draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
+    for f in (0.0, 0.25, 0.5, 0.75, 1.0):
+        x = x_start + f * (span - 1)
+        label = f"{round(100 * f)}%"
+        draw.line([(x, y0 + bar_h), (x, y0 + bar_h + 3)], fill=text_rgb)
+        draw.text((x - 4 * len(label), y0 + bar_h + 4), label, fill=text_rgb, font=font)

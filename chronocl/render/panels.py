@@ -1,0 +1,100 @@
+"""Panels laid out in a grid, each in a cell of its own: its caption wrapped in a band above the
+picture (never over it) and its own legends in a band below (`chronocl.render.legends`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from chronocl.render.colorbar import data_bar
+from chronocl.render.legends import BESIDE_MIN_DIGITS, legend_band
+
+
+def label_font(size: int):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # Pillow without FreeType sizes
+        return ImageFont.load_default()
+
+
+def default_columns(n: int) -> int:
+    """Panels per row: one row up to four views, then the fewest rows of at most four, evened
+    out (5 -> 3 + 2, 8 -> 4 + 4, 9 -> 3 x 3)."""
+    if n <= 4:
+        return max(1, n)
+    return math.ceil(n / math.ceil(n / 4))
+
+
+def caption_height(font, lines: int = 1) -> int:
+    """The height of the band above a panel that holds a caption of `lines` lines."""
+    return line_height(font) * lines + 12
+
+
+def line_height(font) -> int:
+    top, bottom = font.getbbox("Ag,|")[1::2]
+    return int(bottom - top) + 3
+
+
+CAPTION_LINES = 3  # a caption wraps onto at most this many lines, then ends in '…'
+
+
+def wrap_text(draw, text: str, font, width: float, most: int = CAPTION_LINES) -> list[str]:
+    """`text` broken at spaces into lines of at most `width` pixels, at most `most` of them (the
+    last shortened with '…' when the text is longer still)."""
+    lines: list[str] = []
+    for word in text.split(" "):
+        if lines and draw.textlength(f"{lines[-1]} {word}", font=font) <= width:
+            lines[-1] = f"{lines[-1]} {word}"
+        else:
+            lines.append(word)
+    if len(lines) > most:
+        lines = [*lines[: most - 1], " ".join(lines[most - 1 :])]
+    last = lines[-1]
+    if draw.textlength(last, font=font) > width:
+        while last and draw.textlength(last + "…", font=font) > width:
+            last = last[:-1]
+        lines[-1] = last.rstrip(" ,") + "…"
+    return lines
+
+
+def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels") -> np.ndarray:
+    """The panels in a grid (`columns` per row, else `default_columns`), each in a cell of its
+    own: its caption in a band above the picture, never over it, and, with `legend_of`, the
+    legend of its own chronovolume in a band below."""
+    from PIL import Image as PILImage
+    from PIL import ImageDraw
+
+    n = len(panels)
+    h, w, _ = panels[0].shape
+    cols = columns or default_columns(n)
+    rows = math.ceil(n / cols)
+    text_rgb = (20, 20, 20) if sum(bg) > 1.5 else (235, 235, 235)
+    font = label_font(max(11, min(w, h) // 26))
+    measure = ImageDraw.Draw(PILImage.new("RGB", (1, 1)))
+    wrapped = [wrap_text(measure, t, font, w - 16) for t in labels or []]
+    cap_h = caption_height(font, max(map(len, wrapped))) if wrapped else 0
+    bars = [data_bar(cv) for cv in legend_of] if legend_of else []
+    # A data colour bar sits beside the time legend where the band is wide enough for both
+    # to show several ticks, else under it (the band twice as tall).
+    beside = w - 16 >= measure.textlength("0" * BESIDE_MIN_DIGITS, font=font)
+    legend_h = max(36, h // 8) if legend_of else 0
+    if any(bars) and not beside:
+        legend_h *= 2
+    cell_h = cap_h + h + legend_h
+    canvas = PILImage.new("RGB", (cols * w, rows * cell_h), tuple(round(c * 255) for c in bg))
+    draw = ImageDraw.Draw(canvas)
+    for i, panel in enumerate(panels):
+        r, c = divmod(i, cols)
+        x, y = c * w, r * cell_h
+        canvas.paste(PILImage.fromarray(panel), (x, y + cap_h))
+        if i < len(wrapped):
+            text = "\n".join(wrapped[i])
+            draw.text((x + 8, y + 6), text, fill=text_rgb, font=font, spacing=3)
+        if legend_of:
+            k = i if i < len(legend_of) else 0
+            box = (x + 8, y + cap_h + h + 4, w - 16, legend_h - 8)
+            legend_band(draw, legend_of[k], bars[k], box, beside, font, text_rgb, time_labels)
+    return np.asarray(canvas)
