@@ -18,10 +18,11 @@ from chronocl.core.errors import ChronoclError
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TFSetting, TimeAlpha, TimeColor, TimeTF
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.probe import TimeCurve, probe
 from chronocl.data.series import TimeSeries, open_series
 from chronocl.data.window import WindowManager
 from chronocl.integration.inmemory import integrate, make_spec
-from chronocl.integration.session import Session
+from chronocl.integration.interactive.session import Session
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import Camera, render, render_views
 
@@ -40,6 +41,7 @@ __all__ = [
     "TFSetting",
     "TimeAlpha",
     "TimeColor",
+    "TimeCurve",
     "TimeSeries",
     "TimeTF",
     "WindowManager",
@@ -48,6 +50,7 @@ __all__ = [
     "make_spec",
     "open",
     "open_series",
+    "probe",
     "render",
     "render_views",
 ]

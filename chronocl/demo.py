@@ -234,7 +234,7 @@ def _gallery(out_dir: Path, paths: list[Path]) -> Path:
     from PIL import Image as PILImage
     from PIL import ImageDraw
 
-    from chronocl.render.views import label_font
+    from chronocl.render.panels import label_font
 
     thumbs = [PILImage.open(p).convert("RGB") for p in paths]
     height = 360

@@ -23,7 +23,6 @@ from chronocl.modes.base import Partial, Values
 from chronocl.modes.spec import IntegrationSpec
 
 __all__ = [
-    "Partial",
     "accumulate",
     "additive_norm",
     "combine",
@@ -73,7 +72,8 @@ def accumulate(
 def combine(front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
     """The partial of two consecutive runs of steps, `front` integrated before `back`.
 
-    Associative for every mode, which is what sliding a window needs (docs/semantics.md).
+    Associative for every mode that aggregates (`Combines`), which is what sliding a window
+    needs (docs/semantics.md).
     """
     return spec.integration.combine(front, back, spec)
 

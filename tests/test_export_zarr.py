@@ -10,7 +10,10 @@ import zarr
 
 from chronocl.core.errors import OutputExistsError, StoreFormatError
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.data.formats.omezarr import load_chronovolume_omezarr, save_chronovolume_omezarr
+from chronocl.data.formats.omezarr_chronovolume import (
+    load_chronovolume_omezarr,
+    save_chronovolume_omezarr,
+)
 
 META = {
     "dataset": "rand",

@@ -44,7 +44,7 @@ def test_chronovolume_outputs_by_suffix(tmp_path):
     import vtk
     from vtk.util.numpy_support import vtk_to_numpy
 
-    from chronocl.data.formats.omezarr import load_chronovolume_omezarr
+    from chronocl.data.formats.omezarr_chronovolume import load_chronovolume_omezarr
 
     series = chronocl.TimeSeries.from_array(np.random.default_rng(1).random((5, 3, 4, 6)))
     store = tmp_path / "s.zarr"

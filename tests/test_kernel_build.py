@@ -94,7 +94,8 @@ def integration_combinations(name: str):
     # TF_SEGS: one piece, some with a middle one, the most (2..7 compile as 3 does).
     seg_alpha = 2 if mode.opacity_threshold else 1
     colour = [(True, 0, 0), (False, 0, 0), (False, 3, 0), (False, 1, seg_alpha)]
-    colour += [(False, 8, seg_alpha), (True, 3, seg_alpha), (True, 8, seg_alpha)]
+    colour += [(False, 3, seg_alpha), (False, 8, seg_alpha), (True, 3, seg_alpha)]
+    colour += [(True, 8, seg_alpha)]  # (False, 3, 2): count's own ramp, coloured and in pieces
     for combo in itertools.product(
         data,
         lanes,

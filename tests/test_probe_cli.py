@@ -1,4 +1,4 @@
-"""Probes outside the viewer: `series.probe` (a voxel, a box) and `chronocl probe`.
+"""Probes outside the viewer: `probe(series, ...)` (a voxel, a box) and `chronocl probe`.
 
 Values equal numpy on the series (points and boxes, odd shapes, boxes at the edges, stores
 chunked along z and arrays in memory); only the probed chunks are read; damaged chunks are
@@ -22,6 +22,7 @@ from PIL import Image
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, StoreCorruptError
 from chronocl.data import probe as probe_module
 from chronocl.data.integrity import CheckedStore
+from chronocl.data.probe import probe
 from chronocl.data.series import TimeSeries, open_series, write_series
 
 from .bad_input import digest
@@ -82,7 +83,7 @@ def test_store_probe_equals_numpy(series, data):
     x = data.draw(st.integers(0, nx - 1))
     y = data.draw(st.integers(0, ny - 1))
     z = data.draw(st.integers(0, nz - 1))
-    curve = series.probe(x, y, z)
+    curve = probe(series, x, y, z)
     np.testing.assert_array_equal(curve.values, a[:, z, y, x].astype(np.float64))
     assert curve.point == (x, y, z) and curve.min is None and curve.mean is None
 
@@ -90,7 +91,7 @@ def test_store_probe_equals_numpy(series, data):
     for n in (nx, ny, nz):
         lo = data.draw(st.integers(0, n - 1))
         box.append((lo, data.draw(st.integers(lo + 1, n))))
-    curve = series.probe(region=box)
+    curve = probe(series, region=box)
     mean, lo, hi = _box_stats(a, box)
     np.testing.assert_allclose(curve.values, mean, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(curve.min, lo)
@@ -110,9 +111,9 @@ def test_in_memory_probe_equals_numpy(shape, dtype, data):
     s = TimeSeries.from_array(a)
     _, nz, ny, nx = shape
     x, y, z = (data.draw(st.integers(0, n - 1)) for n in (nx, ny, nz))
-    np.testing.assert_array_equal(s.probe(x, y, z).values, a[:, z, y, x].astype(np.float64))
+    np.testing.assert_array_equal(probe(s, x, y, z).values, a[:, z, y, x].astype(np.float64))
     box = [(data.draw(st.integers(0, n - 1)), None) for n in (nx, ny, nz)]  # to the far edges
-    curve = s.probe(region=[slice(lo, hi) for lo, hi in box])
+    curve = probe(s, region=[slice(lo, hi) for lo, hi in box])
     mean, lo, hi = _box_stats(a, [(lo, n) for (lo, _), n in zip(box, (nx, ny, nz), strict=True)])
     np.testing.assert_allclose(curve.values, mean, rtol=1e-12)
     np.testing.assert_array_equal(curve.min, lo)
@@ -122,20 +123,20 @@ def test_in_memory_probe_equals_numpy(shape, dtype, data):
 
 def test_box_forms_and_edges(series):
     a = _values()
-    whole = series.probe(region=":,:,:")
+    whole = probe(series, region=":,:,:")
     np.testing.assert_allclose(whole.values, a.mean(axis=(1, 2, 3), dtype=np.float64), rtol=1e-12)
     np.testing.assert_array_equal(whole.max, a.max(axis=(1, 2, 3)))
-    corner = series.probe(region="10:11,9:,8:9")  # the last voxel alone
+    corner = probe(series, region="10:11,9:,8:9")  # the last voxel alone
     np.testing.assert_array_equal(corner.values, a[:, 8, 9, 10])
     np.testing.assert_array_equal(corner.min, corner.max)
-    plane = series.probe(region=(slice(None), (2, 5), 0))  # slice, pair, one index
+    plane = probe(series, region=(slice(None), (2, 5), 0))  # slice, pair, one index
     mean, _, _ = _box_stats(a, [(0, 11), (2, 5), (0, 1)])
     np.testing.assert_allclose(plane.values, mean, rtol=1e-12)
     assert plane.describe() == "box x 0:11, y 2:5, z 0:1 (33 voxels)"
 
 
 def test_time_labels_reach_the_curve(series):
-    curve = series.probe(1, 2, 3)
+    curve = probe(series, 1, 2, 3)
     assert curve.times == TIMES
     assert list(curve.steps) == list(range(STEPS))
     assert len(curve) == STEPS
@@ -151,11 +152,11 @@ def test_only_the_probed_chunks_are_read(series, monkeypatch):
         return await get(self, key, *args, **kwargs)
 
     monkeypatch.setattr(CheckedStore, "get", spy)
-    series.probe(4, 5, 8)
+    probe(series, 4, 5, 8)
     chunks = sorted(k for k in keys if k.startswith("data/c/"))
     assert chunks == [f"data/c/{t}/2/0/0" for t in range(STEPS)]
     keys.clear()
-    series.probe(region="0:3,0:3,3:5")  # rows 3 and 4: chunks 0 and 1 of each step
+    probe(series, region="0:3,0:3,3:5")  # rows 3 and 4: chunks 0 and 1 of each step
     chunks = sorted(k for k in keys if k.startswith("data/c/"))
     assert chunks == sorted(f"data/c/{t}/{c}/0/0" for t in range(STEPS) for c in (0, 1))
 
@@ -164,16 +165,16 @@ def test_damaged_chunk_is_an_error_not_zeros(store):
     (store / "data" / "c" / "3" / "2" / "0" / "0").write_bytes(b"\x00garbage" * 40)
     s = open_series(store)
     with pytest.raises(StoreCorruptError, match="step 3"):
-        s.probe(0, 0, 8)
+        probe(s, 0, 0, 8)
     with pytest.raises(StoreCorruptError, match="step 3"):
-        s.probe(region=":,:,7:9")
-    np.testing.assert_array_equal(s.probe(0, 0, 0).values, _values()[:, 0, 0, 0])  # elsewhere
+        probe(s, region=":,:,7:9")
+    np.testing.assert_array_equal(probe(s, 0, 0, 0).values, _values()[:, 0, 0, 0])  # elsewhere
 
 
 def test_missing_chunk_is_an_error(store):
     (store / "data" / "c" / "5" / "0" / "0" / "0").unlink()
     with pytest.raises(StoreCorruptError, match="missing"):
-        open_series(store).probe(1, 1, 1)
+        probe(open_series(store), 1, 1, 1)
 
 
 @pytest.mark.parametrize(
@@ -198,7 +199,7 @@ def test_missing_chunk_is_an_error(store):
 )
 def test_bad_probes_are_refused(series, args, kwargs, needle):
     with pytest.raises(InvalidParameterError, match=None) as info:
-        series.probe(*args, **kwargs)
+        probe(series, *args, **kwargs)
     assert needle in str(info.value) and "\n" not in str(info.value)
     assert isinstance(info.value, ValueError)
 
@@ -210,13 +211,13 @@ def _rows(text: str) -> list[dict]:
 
 def test_csv_of_a_voxel_and_a_box(series, tmp_path):
     a = _values()
-    rows = _rows(series.probe(2, 3, 4).csv_text())
+    rows = _rows(probe(series, 2, 3, 4).csv_text())
     assert list(rows[0]) == ["step", "time", "value"]
     assert [r["step"] for r in rows] == [str(t) for t in range(STEPS)]
     assert tuple(r["time"] for r in rows) == TIMES
     assert [float(r["value"]) for r in rows] == [float(v) for v in a[:, 4, 3, 2]]  # exact
 
-    curve = series.probe(region="0:5,1:2,6:9")
+    curve = probe(series, region="0:5,1:2,6:9")
     path = curve.to_csv(tmp_path / "box.csv", window="2:5")
     rows = _rows(path.read_text())
     assert list(rows[0]) == ["step", "time", "mean", "min", "max", "in_window"]
@@ -236,7 +237,7 @@ def _pixels(path: Path) -> np.ndarray:
 
 
 def test_plot_is_a_png_with_the_window_shaded(series, tmp_path):
-    curve = series.probe(region="2:9,2:8,1:8")
+    curve = probe(series, region="2:9,2:8,1:8")
     path = curve.plot(tmp_path / "box.png", window="1:4")
     px = _pixels(path)
     assert px.shape == (450, 800, 3) and px.std() > 10  # not blank
@@ -255,35 +256,35 @@ def _tick_labels(fig) -> list[str]:
 def test_plot_axis_shows_the_time_labels():
     a = np.arange(5 * 2 * 2 * 2, dtype=np.float32).reshape(5, 2, 2, 2)
     named = TimeSeries.from_array(a, times=["spin-up", "t1", "t2", "t3", "end"])
-    fig = named.probe(0, 0, 0).figure(window="1:3")
+    fig = probe(named, 0, 0, 0).figure(window="1:3")
     assert set(_tick_labels(fig)) <= {"spin-up", "t1", "t2", "t3", "end"}
     assert "spin-up" in _tick_labels(fig) and fig.axes[0].get_xlabel() == "time"
     assert any("window 1:3" in t.get_text() for t in fig.axes[0].get_legend().get_texts())
 
     dated = TimeSeries.from_array(a, times=[f"2021-02-0{i + 1}" for i in range(5)])
-    fig = dated.probe(region=":,:,:").figure()
+    fig = probe(dated, region=":,:,:").figure()
     line = fig.axes[0].get_lines()[0]
     assert np.issubdtype(np.asarray(line.get_xdata()).dtype, np.datetime64)
     assert any("Feb" in t or "02" in t for t in _tick_labels(fig))
 
     numbers = TimeSeries.from_array(a, times=[0.0, 0.5, 2.0, 4.5, 8.0])
-    fig = numbers.probe(1, 1, 1).figure()
+    fig = probe(numbers, 1, 1, 1).figure()
     np.testing.assert_array_equal(fig.axes[0].get_lines()[0].get_xdata(), [0, 0.5, 2, 4.5, 8])
 
-    plain = TimeSeries.from_array(a).probe(1, 1, 1).figure()
+    plain = probe(TimeSeries.from_array(a), 1, 1, 1).figure()
     assert plain.axes[0].get_xlabel() == "step"
 
 
 def test_curve_of_one_step_plots(tmp_path):
     s = TimeSeries.from_array(np.ones((1, 2, 3, 4), np.float32))
-    path = s.probe(region=":,:,:").plot(tmp_path / "one.png", window="0:1")
+    path = probe(s, region=":,:,:").plot(tmp_path / "one.png", window="0:1")
     assert _pixels(path).std() > 10
 
 
 def test_progress_bar_appears_when_slow(series, monkeypatch, capsys):
     monkeypatch.setattr(probe_module, "BAR_AFTER_S", -1.0)
     monkeypatch.setattr(probe_module, "MAX_STEPS_PER_READ", 2)
-    curve = series.probe(3, 3, 3, progress=True)
+    curve = probe(series, 3, 3, 3, progress=True)
     assert "probe" in capsys.readouterr().err
     np.testing.assert_array_equal(curve.values, _values()[:, 3, 3, 3])
 
@@ -302,7 +303,7 @@ def _run(monkeypatch, capsys, *args) -> tuple[int, str, str]:
 def test_cli_writes_csv_to_stdout_and_files(base, tmp_path, monkeypatch, capsys):
     code, out, _ = _run(monkeypatch, capsys, base, "--at", "2,3,4")
     assert code == 0
-    assert _rows(out) == _rows(open_series(base).probe(2, 3, 4).csv_text())
+    assert _rows(out) == _rows(probe(open_series(base), 2, 3, 4).csv_text())
     code, _, err = _run(monkeypatch, capsys, base, "--box", "0:5,1:2,6:9", "-o", tmp_path / "b.csv")
     assert code == 0 and "wrote" in err
     assert list(_rows((tmp_path / "b.csv").read_text())[0]) == [
@@ -380,7 +381,7 @@ def test_cli_missing_store_and_help(tmp_path, monkeypatch, capsys):
 
 
 def test_window_refused_through_the_api(series, tmp_path):
-    curve = series.probe(1, 1, 1)
+    curve = probe(series, 1, 1, 1)
     with pytest.raises(InvalidSelectionError):
         curve.plot(tmp_path / "c.png", window="3:99")
     with pytest.raises(InvalidParameterError, match=r"must end in \.png"):

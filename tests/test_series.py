@@ -13,7 +13,7 @@ import chronocl
 from chronocl import modes
 from chronocl.core.errors import InputNotFoundError, OutputExistsError, StoreFormatError
 from chronocl.data.series import write_series
-from chronocl.data.timeseries import step_runs
+from chronocl.data.store_reads import step_runs
 
 from .strategies import examples
 

@@ -19,6 +19,7 @@ import chronocl
 from chronocl import Camera, render
 from chronocl.core.errors import ChronoclError
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.probe import probe
 
 T, Z, Y, X = 4, 6, 10, 14  # every axis its own size, so no transposition goes unseen
 SPACING = (1.0, 2.0, 4.0)  # (dx, dy, dz)
@@ -156,10 +157,10 @@ def test_every_public_triple_of_a_series_is_x_first(tmp_path):
         np.multiply(level.dims, level.spacing), np.multiply((65, 9, 3), SPACING)
     )
     # Probes: a point (x, y, z) and a box x0:x1,y0:y1,z0:z1.
-    curve = series.probe(11, 7, 2)
+    curve = probe(series, 11, 7, 2)
     assert curve.point == (11, 7, 2)
     np.testing.assert_array_equal(curve.values, data[:, 2, 7, 11])
-    box = series.probe(region="9:13,1:4,3:5")
+    box = probe(series, region="9:13,1:4,3:5")
     assert box.box == ((9, 13), (1, 4), (3, 5))
     np.testing.assert_allclose(
         box.values, data[:, 3:5, 1:4, 9:13].mean(axis=(1, 2, 3), dtype=np.float64)

@@ -40,7 +40,13 @@ TimeTfOpt = Annotated[
         "(default: rgb, or lightness with a coloured data TF such as --colormap)."
     ),
 ]
-ThresholdOpt = Annotated[float, typer.Option(help="first_hit opacity threshold.")]
+ThresholdOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Opacity a step must exceed: first_hit's first hit, count's presence "
+        "(default 0; count 0.25 under its own default TF)."
+    ),
+]
 NormalizeOpt = Annotated[str, typer.Option(help="additive normalisation: time or max.")]
 EngineOpt = Annotated[str, typer.Option(help="opencl (default) or numpy (the reference).")]
 DeviceOpt = Annotated[

@@ -60,7 +60,14 @@ def probe(
     """
     from chronocl.core.paths import check_input, check_target
     from chronocl.core.time_labels import check_prefer
-    from chronocl.data.probe import check_box, check_point, check_suffix, parse_box, parse_point
+    from chronocl.data.probe import (
+        check_box,
+        check_point,
+        check_suffix,
+        parse_box,
+        parse_point,
+        probe,
+    )
     from chronocl.data.series import open_series
 
     # Every option is checked before any read: nothing is written on bad input.
@@ -87,9 +94,9 @@ def probe(
         parse_selection(window, series.n_steps)
 
     if point is not None:
-        curve = series.probe(*point, progress=True)
+        curve = probe(series, *point, progress=True)
     else:
-        curve = series.probe(region=ranges, progress=True)
+        curve = probe(series, region=ranges, progress=True)
     if out_path is None:
         typer.echo(curve.csv_text(window), nl=False)
         return

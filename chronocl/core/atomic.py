@@ -9,7 +9,7 @@ NAME, and no partial of it stays behind:
 - A write killed outright (kill -9, power loss) cannot clean up. The next write of the same
   NAME that commits, by whichever path, removes the partials that such dead writers left:
   those whose pid is no longer a live process, the older names without a pid, and the
-  streamed run's ``.NAME.partial-run`` folder (`chronocl.integration.streaming`) unless a
+  streamed run's ``.NAME.partial-run`` folder (`chronocl.integration.runs.streaming`) unless a
   live run holds its lock. A partial of a live concurrent writer is never touched. (Liveness is
   that of the
   pid on this machine: writers of one output on several hosts are not told apart.)
@@ -245,11 +245,6 @@ def rename_new(tmp: Path, target: Path) -> bool:
             return False
         raise
     return True
-
-
-def commit_directory(tmp: Path, target: Path) -> None:
-    """Move the finished directory `tmp` to `target`, replacing whatever is there."""
-    replace(tmp, target)
 
 
 @contextlib.contextmanager

@@ -88,6 +88,11 @@ class SlabTaskError(ChronoclError, RuntimeError):
     """A slab task was lost again and again (its workers died); a re-run resumes."""
 
 
+class ModeDefinitionError(ChronoclError, TypeError):
+    """A mode class promises a hook it lacks, or sets a flag out of its choices (raised where
+    the class is defined, at import)."""
+
+
 class ChronoclWarning(UserWarning):
     """Input that is probably not what was meant but may be (the work goes on); the CLI
     prints it as one line, 'chronocl: warning: ...'."""

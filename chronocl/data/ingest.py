@@ -50,9 +50,14 @@ def ingest(
     inputs: Sequence[str | os.PathLike],
     out: str | os.PathLike,
     fmt: str = "auto",
+    *,
+    flags: dict[str, str] | None = None,
     **options: object,
 ) -> TimeSeries:
     """Ingest with the reader for `fmt` (``auto``: by file type; raw files need dims=).
+
+    `flags` names the command-line option an option came from where it is not ``--key``
+    (``times`` read by ``--times-from-meta``), for the message that refuses it.
 
     ``magnitude="u,v,w"`` names variables of the one NetCDF input; with no `inputs` it names
     two or three raw / npy / TIFF inputs (paths or globs) of one shape instead, whose magnitude
@@ -71,13 +76,13 @@ def ingest(
             f"--magnitude with {reader.name} input names the component inputs themselves: "
             "give them as --magnitude 'u*.raw,v*.raw,w*.raw' and no other inputs"
         )
-    _reader_options(reader, options)
+    _reader_options(reader, options, flags or {})
     if reader.single and len(inputs) != 1:
         raise InvalidParameterError(f"{reader.name} input is one file; got {len(inputs)}")
     return reader.read(inputs[0] if reader.single else inputs, out, **options)
 
 
-def _reader_options(reader: Reader, options: dict) -> None:
+def _reader_options(reader: Reader, options: dict, flags: dict[str, str] | None = None) -> None:
     """Drop the common options `reader` does not take; refuse others meant for other readers."""
     for key in set(options) & set(COMMON_OPTIONS) - set(reader.common):
         del options[key]  # e.g. nan_fill for an OME-Zarr image, which is copied as it is
@@ -85,7 +90,7 @@ def _reader_options(reader: Reader, options: dict) -> None:
         if key in options and reader not in takers:
             value = options.pop(key)
             if value not in (None, takers[0].options[key]):
-                flag = "--" + key.replace("_", "-")
+                flag = (flags or {}).get(key, "--" + key.replace("_", "-"))
                 names = "/".join(r.name for r in takers)
                 raise InvalidParameterError(f"{flag} applies to {names} input, not {reader.name}")
 

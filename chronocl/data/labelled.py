@@ -216,12 +216,6 @@ def resampled_dtype(dtype: np.dtype, grids: Sequence[AxisGrid]) -> np.dtype:
     return np.dtype(dtype)
 
 
-def coordinate_spacing(ds, dim: str) -> float:
-    """The coordinate step of `dim` (1.0 without a numeric coordinate); a non-uniform one is
-    refused (`axis_grid`)."""
-    return axis_grid(ds, dim).spacing
-
-
 def time_labels(ds, tdim: str) -> list | None:
     """Labels of the time coordinate (ISO dates, seconds or numbers), None without one."""
     if tdim not in ds.coords or ds[tdim].ndim != 1:

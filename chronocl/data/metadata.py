@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from chronocl.core.errors import ChronoclError, InvalidDataError, InvalidParameterError
+from chronocl.core.times_meta import Cadence
 from chronocl.data.integrity import damaged
 
 FORMAT = "chronocl.series"
@@ -58,12 +59,16 @@ def parse_spacing(spacing: Sequence[float]) -> tuple[float, float, float]:
 
 
 def parse_times(times: Sequence | None, n_steps: int) -> tuple:
-    """One JSON-friendly label per step (numbers or text); the step indices when none given."""
+    """One JSON-friendly label per step (numbers or text) from a list or a `Cadence`; the step
+    indices when none given."""
+    if isinstance(times, Cadence):
+        times = times.times(n_steps)
     if times is None or len(times) == 0:
         return tuple(range(n_steps))
     if len(times) != n_steps:
+        where = getattr(times, "found", "") or "--times, times="
         raise InvalidParameterError(
-            f"got {len(times)} times for {n_steps} steps; give one time per step (--times, times=)"
+            f"got {len(times)} times for {n_steps} steps; give one time per step ({where})"
         )
     out = []
     for t in times:

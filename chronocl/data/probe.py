@@ -63,6 +63,7 @@ class TimeCurve:
     point: tuple[int, int, int] | None = None
     box: Box | None = None
     source: str = ""
+    time_unit: str | None = None  # of numeric `times` ('s'), where the store names one
 
     @property
     def is_box(self) -> bool:
@@ -304,6 +305,7 @@ def probe(
         point=point,
         box=box,
         source=str(series.path) if series.path is not None else series.source,
+        time_unit=series.time_unit,
     )
 
 

@@ -6,25 +6,41 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from chronocl.core.selection import Selection
 from chronocl.core.time_labels import check_prefer, display_labels, has_labels
 
-if TYPE_CHECKING:
-    from chronocl.data.probe import TimeCurve
+
+class Curve(Protocol):
+    """What a plot reads of a probe's curve (`chronocl.data.probe.TimeCurve`, which plots
+    itself through this module)."""
+
+    steps: np.ndarray
+    times: tuple
+    values: np.ndarray
+    min: np.ndarray | None
+    max: np.ndarray | None
+    source: str
+    time_unit: str | None
+
+    @property
+    def is_box(self) -> bool: ...
+    def __len__(self) -> int: ...
+    def describe(self) -> str: ...
+    def window_steps(self, window: object) -> tuple[int, ...]: ...
 
 
-def figure(curve: TimeCurve, window: object = None, title: str | None = None, time_labels="labels"):
+def figure(curve: Curve, window: object = None, title: str | None = None, time_labels="labels"):
     """The curve against its time labels (`time_labels="steps"`: the step numbers): a voxel's
     values as a line; a box's mean as a line over its min-max band; the window's span shaded
     and its steps marked."""
     from matplotlib.figure import Figure  # no pyplot: no display, no global state
 
     chosen = curve.window_steps(window)
-    x, xlabel, names = time_axis(curve.times, curve.steps, time_labels)
+    x, xlabel, names = time_axis(curve.times, curve.steps, time_labels, curve.time_unit)
     fig = Figure(figsize=(8, 4.5), dpi=100, layout="constrained")
     ax = fig.add_subplot()
     if chosen:
@@ -67,28 +83,28 @@ def figure(curve: TimeCurve, window: object = None, title: str | None = None, ti
 
 
 def time_axis(
-    times: Sequence, steps: np.ndarray, prefer: str = "labels"
+    times: Sequence, steps: np.ndarray, prefer: str = "labels", unit: str | None = None
 ) -> tuple[np.ndarray, str, list[str] | None]:
     """(x positions, axis label, tick names) for plotting against the time labels.
 
     Increasing numbers are their own positions; increasing ISO dates (strings such as
     '2024-01-01T06:00') are datetime64 positions; any other labels sit at their steps, the
-    ticks named by their display labels. Labels that are the step numbers, or `prefer`
-    "steps", give an axis named 'step'.
+    ticks named by their display labels. Labels that are the step numbers (and have no
+    `unit`), or `prefer` "steps", give an axis named 'step'; numbers with a unit, 'time (s)'.
     """
     labels = list(times)
     steps = np.asarray(steps)
-    if check_prefer(prefer) == "steps" or not has_labels([int(s) for s in steps], labels):
+    if check_prefer(prefer) == "steps" or not has_labels([int(s) for s in steps], labels, unit):
         return steps.astype(np.float64), "step", None
     if all(isinstance(t, int | float) and not isinstance(t, bool) for t in labels):
         x = np.asarray(labels, np.float64)
         if np.all(np.diff(x) > 0):
-            return x, "time", None
+            return x, f"time ({unit})" if unit else "time", None
     elif all(isinstance(t, str) for t in labels):
         dates = _dates(labels)
         if dates is not None and np.all(np.diff(dates) > np.timedelta64(0, "s")):
             return dates, "time", None
-    return steps.astype(np.float64), "time", display_labels(list(steps), labels)
+    return steps.astype(np.float64), "time", display_labels(list(steps), labels, unit=unit)
 
 
 def _dates(labels: list[str]) -> np.ndarray | None:

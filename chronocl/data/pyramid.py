@@ -12,7 +12,9 @@ largest axis is > COARSEST. Each level pools 2x2x2 blocks of the previous level 
 pool (partial blocks at odd edges use the voxels present): "mean" in float64 (integer data
 rounded half to even and cast back), "max" and "min" exact. See docs/levels.md.
 
-Writing levels (with a store, or added to one) is `chronocl.data.level_writer`'s.
+Writing levels (with a store, or added to one) is `chronocl.data.level_writer`'s; where a
+series takes its levels from (this store, pooling on the fly, an image's own) is
+`chronocl.data.level_sources`'.
 """
 
 from __future__ import annotations
@@ -27,12 +29,8 @@ import numpy as np
 import zarr
 from zarr.codecs import BloscCodec
 
-from chronocl.core.errors import (
-    InvalidDataError,
-    InvalidParameterError,
-    StoreFormatError,
-)
-from chronocl.data.integrity import CheckedArray, CheckedStore, damaged
+from chronocl.core.errors import InvalidDataError, InvalidParameterError
+from chronocl.data.integrity import CheckedStore, damaged
 from chronocl.data.metadata import SeriesStats, stats_from_steps
 
 POOLS = ("mean", "max", "min")
@@ -287,47 +285,3 @@ def keep_range(stats: SeriesStats, vmin: float, vmax: float) -> SeriesStats:
     """`stats` with the global range [vmin, vmax] of level 0, so one TF maps alike at every
     level."""
     return SeriesStats(vmin, vmax, stats.step_min, stats.step_max, stats.step_mean)
-
-
-# -- the series' hooks (duck-typed: TimeSeries lives above this module) -------------------------
-def count_levels(series) -> int:
-    """1 + the coarse levels a series has: its store's, or those level_shapes gives in memory."""
-    if series.path is None or series._lazy_levels:
-        return 1 + len(level_shapes(series.volume_shape))
-    levels = read_levels(series.path, series.shape)
-    return 1 if levels is None else 1 + len(levels)
-
-
-def level_parts(series, n: int, pool: str) -> dict:
-    """The fields of level `n` (> 0) of `series` (level 0): data, stats, spacing (x first),
-    _zarr."""
-    check_pool(pool)
-    if isinstance(n, bool) or not isinstance(n, int | np.integer):
-        raise InvalidParameterError(f"level {n!r} is not a whole number; give 0, 1, ...")
-    n = int(n)
-    shapes = level_shapes(series.volume_shape)
-    name = series.path.name if series.path is not None else series.source or "the series"
-    lazy = series.path is None or series._lazy_levels
-    levels = None if lazy else read_levels(series.path, series.shape)
-    top = len(shapes) if lazy or levels is not None else 0
-    if not 1 <= n <= len(shapes):
-        have = f"levels 0..{top}" if top else "only level 0"
-        raise InvalidParameterError(f"level {n} is out of range: {name} has {have}")
-    factor = tuple(a / b for a, b in zip(series.volume_shape, shapes[n - 1], strict=True))
-    spacing = tuple(s * f for s, f in zip(series.spacing, factor[::-1], strict=True))
-    if lazy:
-        data = lazy_level(series.data, n, pool)
-        stats = lazy_stats(data, series.vmin, series.vmax)
-        return {"data": data, "stats": stats, "spacing": spacing, "_zarr": None}
-    if levels is None:
-        raise StoreFormatError(
-            f"{name} has no coarse levels; add them with 'chronocl pyramid {series.path}'"
-        )
-    stats = keep_range(levels[n - 1]["stats"][pool], series.vmin, series.vmax)
-    arr = open_level_array(series.path, n, pool, (series.n_steps, *shapes[n - 1]), series.dtype)
-    data = da.from_array(
-        CheckedArray(series.path, arr),
-        chunks=arr.chunks,
-        name=f"chronocl-{series.path}-{LEVELS}-{n}-{pool}-{id(arr)}",
-    )
-    return {"data": data, "stats": stats, "spacing": spacing, "_zarr": arr}

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from chronocl.data.formats.contract import Steps
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
+from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries, open_store
 from chronocl.data.writer import write_store
 

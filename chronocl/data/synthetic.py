@@ -18,10 +18,8 @@ centres), so any shape works and features stay inside the box; a non-cubic box
 stretches the features with it. Values are float32 in [0, 1], background 0 and
 features near 1. ``seed`` only changes smooth parameters (phases, small offsets
 of paths and tilts), never adds voxel noise, and equal inputs give bit-identical
-outputs, on any machine: numpy's float32 exp, sin, arctan2 ... take different SIMD
-code paths on different CPUs (AVX2, AVX-512) and differ there in the last bit, so every
-transcendental function here is evaluated in float64 and rounded once to float32 (`_f64`),
-which makes a last-bit difference in float64 vanish in the rounding.
+outputs, on any machine (every transcendental function is evaluated in float64 and rounded
+once to float32: `chronocl.data.synthetic_shapes`, which holds the shared building blocks).
 """
 
 from __future__ import annotations
@@ -33,6 +31,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.data.synthetic_shapes import (
+    CUT,
+    box_axis,
+    f64,
+    frame,
+    gauss,
+    index_range,
+    union,
+    unit,
+)
 
 DATASETS: dict[str, str] = {
     "vortex": "vortex rings and a twisting tube that move, tilt, spin, grow and merge",
@@ -40,29 +48,9 @@ DATASETS: dict[str, str] = {
 }
 
 _F = np.float32
-# Gaussian features are cut off at this many standard deviations; the profile is
-# shifted and rescaled so that it reaches exactly 0 there (continuous, no seams).
-_CUT = 3.5
-_CUT_FLOOR = float(np.exp(-0.5 * _CUT**2))
-# The jet's profile is 2 ** -(distance / half width) ** 2, cut the same way.
+# The jet's profile is 2 ** -(distance / half width) ** 2, cut to exactly 0 like `gauss`.
 _JET_CUT = 4.0
 _JET_FLOOR = float(2.0 ** -(_JET_CUT**2))
-
-
-# Elements per chunk of `_f64`: its float64 temporaries stay small at 512^3 and above.
-_CHUNK = 1 << 22
-
-
-def _f64(fn: Callable[..., np.ndarray], *args: np.ndarray) -> np.ndarray:
-    """fn(*args) evaluated in float64 and rounded to float32 (see the module docstring)."""
-    args = np.broadcast_arrays(*args)
-    out = np.empty(args[0].shape, dtype=_F)
-    flat_out = out.reshape(-1)
-    flat = [np.ascontiguousarray(a).reshape(-1) for a in args]
-    for i in range(0, flat_out.size, _CHUNK):
-        part = [a[i : i + _CHUNK].astype(np.float64) for a in flat]
-        flat_out[i : i + _CHUNK] = fn(*part)
-    return out
 
 
 def _check_int(value: object, what: str, fix: str) -> int:
@@ -102,59 +90,6 @@ def _validate(
     return n_steps, shape, seed  # type: ignore[return-value]
 
 
-def _axis(n: int) -> np.ndarray:
-    """Voxel-centre coordinates of an axis of n voxels, normalised to [-1, 1]."""
-    return ((np.arange(n, dtype=np.float64) * 2.0 + 1.0) / n - 1.0).astype(_F)
-
-
-def _index_range(lo: float, hi: float, n: int) -> slice:
-    """Voxels of an axis of n voxels whose centres may lie in [lo, hi]."""
-    i0 = max(int(np.floor((lo + 1.0) * n / 2.0 - 0.5)), 0)
-    i1 = min(int(np.ceil((hi + 1.0) * n / 2.0 - 0.5)) + 1, n)
-    return slice(i0, max(i0, i1))
-
-
-def _gauss(d2: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian of squared distance d2 with width sigma, 1 at 0, exactly 0 beyond _CUT sigma."""
-    g = _f64(np.exp, d2 * _F(-0.5 / sigma**2))
-    g -= _F(_CUT_FLOOR)
-    g *= _F(1.0 / (1.0 - _CUT_FLOOR))
-    return np.maximum(g, 0, out=g)
-
-
-def _union(out: np.ndarray, sl: tuple[slice, ...], f: np.ndarray) -> None:
-    """out = 1 - (1 - out)(1 - f) on the sub-box sl: overlapping features fuse smoothly."""
-    o = out[sl]
-    o += f * (1 - o)
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
-
-
-def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotate v by `angle` about the unit vector `axis` (Rodrigues' formula)."""
-    c, s = np.cos(angle), np.sin(angle)
-    return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1 - c)
-
-
-def _frame(n0: np.ndarray, n1: np.ndarray, s: float) -> tuple[np.ndarray, ...]:
-    """Orthonormal (e1, e2, normal) turning from normal n0 (s = 0) to n1 (s = 1).
-
-    The in-plane vectors are carried along with the normal, so the frame turns
-    smoothly over time and a pattern fixed in it does not jump between steps.
-    """
-    n0, n1 = _unit(n0), _unit(n1)
-    helper = np.array([0.0, 0.0, 1.0]) if abs(n0[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    e1 = _unit(np.cross(n0, helper))
-    axis = np.cross(n0, n1)
-    if np.linalg.norm(axis) > 1e-9:
-        axis = _unit(axis)
-        angle = s * float(np.arccos(np.clip(np.dot(n0, n1), -1.0, 1.0)))
-        n0, e1 = _rotate(n0, axis, angle), _rotate(e1, axis, angle)
-    return e1, np.cross(n0, e1), n0
-
-
 # ---------------------------------------------------------------------------- vortex
 
 
@@ -189,15 +124,15 @@ def _ring_field(
         + 4 * tau * (1 - tau) * np.array(ring.bend)
         + jitter * np.sin(np.pi * tau)
     )
-    e1, e2, normal = _frame(np.array(ring.n0), np.array(ring.n1), tau)
+    e1, e2, normal = frame(np.array(ring.n0), np.array(ring.n1), tau)
     radius = ring.r0 + (ring.r1 - ring.r0) * tau
     sigma = ring.s0 + (ring.s1 - ring.s0) * tau
     wobble = 0.1 * radius  # amplitude of the 3-lobed wobble of the ring's radius
-    reach = radius + wobble + _CUT * sigma
+    reach = radius + wobble + CUT * sigma
     sl = (
-        _index_range(c[2] - reach, c[2] + reach, z.size),
-        _index_range(c[1] - reach, c[1] + reach, y.size),
-        _index_range(c[0] - reach, c[0] + reach, x.size),
+        index_range(c[2] - reach, c[2] + reach, z.size),
+        index_range(c[1] - reach, c[1] + reach, y.size),
+        index_range(c[0] - reach, c[0] + reach, x.size),
     )
     if any(s.start >= s.stop for s in sl):
         return
@@ -207,22 +142,22 @@ def _ring_field(
     u = dx * _F(e1[0]) + dy * _F(e1[1]) + dz * _F(e1[2])
     v = dx * _F(e2[0]) + dy * _F(e2[1]) + dz * _F(e2[2])
     w = dx * _F(normal[0]) + dy * _F(normal[1]) + dz * _F(normal[2])
-    rho = _f64(np.hypot, u, v)
-    azim = _f64(np.arctan2, v, u)
+    rho = f64(np.hypot, u, v)
+    azim = f64(np.arctan2, v, u)
     turn = _F(2 * np.pi * ring.spin * tau)
-    rr = radius + wobble * _f64(np.sin, 3 * azim + (turn + _F(phase[0])))
+    rr = radius + wobble * f64(np.sin, 3 * azim + (turn + _F(phase[0])))
     rho -= rr
     d2 = rho * rho
     d2 += w * w
-    f = _gauss(d2, sigma)
+    f = gauss(d2, sigma)
     # Brighter and dimmer stretches along the ring, turning with it, make the spin visible.
-    f *= _F(0.85) + _F(0.15) * _f64(np.cos, 2 * azim + (turn + _F(phase[1])))
-    _union(out, sl, f)
+    f *= _F(0.85) + _F(0.15) * f64(np.cos, 2 * azim + (turn + _F(phase[1])))
+    union(out, sl, f)
 
 
 def _vortex_rings() -> tuple[_Ring, ...]:
     merge = (0.15, 0.05, 0.05)  # rings A and B end up here, coaxial along n_merge
-    n_merge = tuple(_unit(np.array([0.3, 1.0, 0.4])))
+    n_merge = tuple(unit(np.array([0.3, 1.0, 0.4])))
     gap = 0.05  # half their remaining separation along the common axis at the end
     return (
         _Ring(  # A: from the lower left, tilting to the shared axis, growing
@@ -275,11 +210,11 @@ def _tube_field(
     cx0, cy0 = 0.6 - 0.2 * tau, 0.5 + 0.15 * tau
     amp = 0.18 + 0.04 * tau
     sigma = 0.05 + 0.015 * tau
-    reach = amp + _CUT * sigma
+    reach = amp + CUT * sigma
     sl = (
-        _index_range(-0.95, 0.95, z.size),
-        _index_range(cy0 - reach, cy0 + reach, y.size),
-        _index_range(cx0 - reach, cx0 + reach, x.size),
+        index_range(-0.95, 0.95, z.size),
+        index_range(cy0 - reach, cy0 + reach, y.size),
+        index_range(cx0 - reach, cx0 + reach, x.size),
     )
     if any(s.start >= s.stop for s in sl):
         return
@@ -291,15 +226,15 @@ def _tube_field(
     cy = (cy0 + amp * np.sin(psi)).astype(_F)[:, None, None]
     dx = x[sl[2]][None, None, :] - cx
     dy = y[sl[1]][None, :, None] - cy
-    f = _gauss(dx * dx + dy * dy, sigma)
+    f = gauss(dx * dx + dy * dy, sigma)
     # Taper the ends smoothly instead of cutting the tube at the box faces.
     ends = np.clip((0.85 - np.abs(zz)) / 0.2, 0.0, 1.0)
     f *= (ends * ends * (3 - 2 * ends)).astype(_F)[:, None, None]
-    _union(out, sl, f)
+    union(out, sl, f)
 
 
 def _vortex(shape: tuple[int, int, int], tau: float, rng: np.random.Generator) -> np.ndarray:
-    axes = (_axis(shape[0]), _axis(shape[1]), _axis(shape[2]))
+    axes = (box_axis(shape[0]), box_axis(shape[1]), box_axis(shape[2]))
     out = np.zeros(shape, dtype=_F)
     rings = _vortex_rings()
     phases = rng.uniform(0.0, 2 * np.pi, size=(len(rings) + 1, 2))
@@ -314,7 +249,7 @@ def _vortex(shape: tuple[int, int, int], tau: float, rng: np.random.Generator) -
 
 
 def _jet(shape: tuple[int, int, int], tau: float, rng: np.random.Generator) -> np.ndarray:
-    z, y, x = _axis(shape[0]), _axis(shape[1]), _axis(shape[2])
+    z, y, x = box_axis(shape[0]), box_axis(shape[1]), box_axis(shape[2])
     p = rng.uniform(0.0, 2 * np.pi, size=6)
     yc0, zc0 = rng.uniform(-0.05, 0.05, size=2)
 
@@ -324,7 +259,7 @@ def _jet(shape: tuple[int, int, int], tau: float, rng: np.random.Generator) -> n
     front = -0.8 + 1.65 * tau
     base = front - cap  # where the head's rounded cap begins
     out = np.zeros(shape, dtype=_F)
-    xs = _index_range(-1.0, base + _JET_CUT * cap, x.size)
+    xs = index_range(-1.0, base + _JET_CUT * cap, x.size)
     if xs.start >= xs.stop:
         return out
     xx = x[xs].astype(np.float64)
@@ -361,7 +296,7 @@ def _jet(shape: tuple[int, int, int], tau: float, rng: np.random.Generator) -> n
     w = lobes * width.astype(_F)
     r2 /= w * w
     r2 += tip.astype(_F)
-    f = _f64(np.exp2, -r2)
+    f = f64(np.exp2, -r2)
     # Shift and rescale so the field reaches exactly 0 where the crop above cuts it.
     f -= _F(_JET_FLOOR)
     f *= (puffs / (1.0 - _JET_FLOOR)).astype(_F)

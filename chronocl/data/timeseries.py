@@ -3,8 +3,10 @@
 A series opens from a chronocl store (zarr v3 written by `chronocl.data.writer`, v2 read), whose
 attribute ``chronocl`` holds its statistics, spacing and time labels; from a bare zarr array (v2
 or v3) without them, whose statistics are then computed in one dask pass; or from any array
-(`TimeSeries.from_array`). Reads of a zarr-backed series go to zarr directly, decoding straight
-into the caller's buffer, and through `chronocl.data.integrity` so damage is never read as zeros.
+(`TimeSeries.from_array`, checked in `chronocl.data.array_fields`). A store's array is opened in
+`chronocl.data.store_open`; reads of a zarr-backed series go to zarr directly
+(`chronocl.data.store_reads`), decoding straight into the caller's buffer, and through
+`chronocl.data.integrity` so damage is never read as zeros.
 """
 
 from __future__ import annotations
@@ -18,33 +20,20 @@ from pathlib import Path
 import dask.array as da
 import numpy as np
 import zarr
-from zarr.buffer import default_buffer_prototype
 
-from chronocl.core.errors import (
-    InvalidDataError,
-    StoreChangedError,
-    StoreFormatError,
-    UnknownNameError,
-)
+from chronocl.core.errors import StoreChangedError, UnknownNameError
 from chronocl.core.memory import aligned_empty
 from chronocl.core.values import normalize
-from chronocl.data.formats.contract import Steps
-from chronocl.data.integrity import CheckedArray, CheckedStore, checked_read, damaged
-from chronocl.data.labelled import dataarray_layout
-from chronocl.data.metadata import (
-    FORMAT,
-    SeriesStats,
-    check_dtype,
-    check_shape,
-    checked_attrs,
-    parse_spacing,
-    parse_times,
-    stats_from_steps,
-    unreadable_metadata,
-)
-from chronocl.data.pyramid import check_pool, count_levels, describe_levels, level_parts
-from chronocl.data.stores import require_store
-from chronocl.data.writer import EXTRA_KEYS, VARIABLES, write_store
+from chronocl.data.array_fields import array_fields
+from chronocl.data.integrity import checked_read
+from chronocl.data.level_sources import POOLED, STORED, LevelSource
+from chronocl.data.metadata import SeriesStats
+from chronocl.data.pyramid import check_pool, describe_levels
+from chronocl.data.sizes import disk_usage, human_size
+from chronocl.data.steps import Steps
+from chronocl.data.store_open import open_array
+from chronocl.data.store_reads import metadata_stamp, read_runs, stored_shape
+from chronocl.data.writer import VARIABLES, write_store
 
 # Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at
 # once, zarr's async.concurrency). The streaming plan chooses fewer when the budget is tight.
@@ -58,6 +47,11 @@ class TimeSeries:
     `spacing` is (dx, dy, dz), x first, like every per-axis triple of the API (`dims`, probe
     points and boxes); only array shapes (`shape`, `volume_shape`) follow the array's (T, Z,
     Y, X). `level_index` is 0 for the series itself, n for its coarse level n (`level(n)`).
+
+    A reader that is not a chronocl store's says where the coarse levels come from
+    (`level_source`, `chronocl.data.level_sources`) and how another variable of the same source
+    opens (`open_variable`, given a name `variables` lists); by default levels are the store's
+    own (or pooled on the fly in memory) and variables the store's.
     """
 
     data: da.Array
@@ -70,23 +64,21 @@ class TimeSeries:
     _stamp: int | None = field(default=None, repr=False)
     level_index: int = 0
     _root: TimeSeries | None = field(default=None, repr=False)
-    _levels: dict = field(default_factory=dict, repr=False)
-    # Coarse levels pooled on the fly (in-memory series, OME-Zarr images read in place) rather
-    # than read from a chronocl store's `levels`.
-    _lazy_levels: bool = field(default=False, repr=False)
+    _levels: dict = field(default_factory=dict, repr=False)  # the levels built, by (n, pool)
     # What a store records beside the data (`writer.EXTRA_KEYS`): the variable's name and the
     # store's variables, a derived quantity and its components, resampling notes.
     meta: dict = field(default_factory=dict, repr=False)
+    # Where the coarse levels come from; None: the store's (`path`), else pooled on the fly.
+    level_source: LevelSource | None = field(default=None, repr=False)
     # Opens another variable of the same source by name where it is not a chronocl store's
     # (an OME-Zarr image's channels, read in place).
-    _variable: Callable[[str], TimeSeries] | None = field(default=None, repr=False)
+    open_variable: Callable[[str], TimeSeries] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.times:
             self.times = tuple(range(self.n_steps))
         if self.path is not None and self._zarr is not None:
-            meta = _metadata_file(self.path, self._zarr)
-            self._stamp = meta.stat().st_mtime_ns if meta is not None else None
+            self._stamp = metadata_stamp(self.path, self._zarr)
 
     def stored_in(self, path: Path, arr: zarr.Array | None = None) -> TimeSeries:
         """Note that this series is read from the store at `path`; returns the series.
@@ -123,6 +115,11 @@ class TimeSeries:
         return self.spacing[::-1]  # type: ignore[return-value]
 
     @property
+    def time_unit(self) -> str | None:
+        """The unit of the steps' numeric times ('s', 'days'), None where the store names none."""
+        return self.meta.get("time_unit")
+
+    @property
     def dtype(self) -> np.dtype:
         return self.data.dtype
 
@@ -153,8 +150,8 @@ class TimeSeries:
             raise UnknownNameError(f"{where} has no variable {name!r}; it holds {found}")
         if name == own:
             return self
-        if self._variable is not None:
-            return self._variable(name)
+        if self.open_variable is not None:
+            return self.open_variable(name)
         if root is None:
             return self
         return open_store(root if name == names[0] else root / VARIABLES / name)
@@ -163,7 +160,13 @@ class TimeSeries:
     @property
     def n_levels(self) -> int:
         """1 + the coarse levels: stored ones, or (in memory) those `level_shapes` gives."""
-        return count_levels(self._root or self)
+        root = self._root or self
+        return root._source().count(root)
+
+    def _source(self) -> LevelSource:
+        if self.level_source is not None:
+            return self.level_source
+        return STORED if self.path is not None else POOLED
 
     def level(self, n: int, pool: str = "mean") -> TimeSeries:
         """Coarse level `n` pooled by `pool` (mean, max, min); level 0 is the series itself.
@@ -176,8 +179,16 @@ class TimeSeries:
         if n == 0 and not isinstance(n, bool):
             return root
         if (n, pool) not in root._levels:
+            parts = root._source().parts(root, n, pool)
             root._levels[n, pool] = dataclasses.replace(
-                root, **level_parts(root, n, pool), level_index=int(n), _root=root, _levels={}
+                root,
+                data=parts.data,
+                stats=parts.stats,
+                spacing=parts.spacing,
+                _zarr=parts.array,
+                level_index=int(n),
+                _root=root,
+                _levels={},
             )
         return root._levels[n, pool]
 
@@ -208,17 +219,7 @@ class TimeSeries:
             for i, s in enumerate(steps):
                 out[:, i] = self.data[int(s), z0:z1].compute()
             return out
-        wrap = default_buffer_prototype().nd_buffer.from_numpy_array
-        for i0, i1, run in step_runs(steps, per_call):
-            # (rows, n, Y, X) of the brick seen as (n, rows, Y, X), the store's order.
-            view = out[:, i0:i1].transpose(1, 0, 2, 3)
-            selection = (run, slice(z0, z1))
-            checked_read(
-                self.path,
-                self._zarr,
-                lambda sel=selection, v=view: self._zarr.get_basic_selection(sel, out=wrap(v)),
-                selection,
-            )
+        read_runs(self.path, self._zarr, steps, z0, z1, out, per_call)
         return out
 
     @property
@@ -247,22 +248,6 @@ class TimeSeries:
             return np.asarray(self.data[sel].compute())
         return checked_read(self.path, self._zarr, lambda: self._zarr.get_basic_selection(sel), sel)
 
-    def probe(
-        self,
-        x: int | None = None,
-        y: int | None = None,
-        z: int | None = None,
-        *,
-        region: object = None,
-        progress: bool = False,
-    ):
-        """v(t) at voxel (x, y, z), or the mean, min and max per step over the box `region`
-        ('x0:x1,y0:y1,z0:z1' or three slices), with the time labels: a TimeCurve
-        (`chronocl.data.probe`)."""
-        from chronocl.data.probe import probe
-
-        return probe(self, x, y, z, region=region, progress=progress)
-
     def check_unchanged(self) -> None:
         """Raise StoreChangedError when the store on disk no longer has this series' shape.
 
@@ -270,19 +255,13 @@ class TimeSeries:
         """
         if self.path is None or self._zarr is None:
             return
-        meta = _metadata_file(self.path, self._zarr)
         try:
-            stamp = meta.stat().st_mtime_ns if meta is not None else None
+            stamp = metadata_stamp(self.path, self._zarr)
         except OSError:
             stamp = -1
         if stamp == self._stamp:
             return
-        try:
-            node = zarr.open(store=str(self.path), mode="r")
-            inner = self._zarr.path  # "data" in a chronocl store, "" for a bare array
-            shape = tuple((node[inner] if isinstance(node, zarr.Group) else node).shape)
-        except Exception:
-            shape = None
+        shape = stored_shape(self.path, self._zarr)
         if shape != self.shape:
             now = "is gone" if shape is None else f"now has shape {shape}"
             raise StoreChangedError(
@@ -311,6 +290,7 @@ class TimeSeries:
         times: Sequence | None = None,
         source: str = "array",
         resample: str | None = None,
+        time_unit: str | None = None,
     ) -> TimeSeries:
         """Wrap a numpy or dask array (T, Z, Y, X) with voxel `spacing` (dx, dy, dz), x first.
 
@@ -321,44 +301,10 @@ class TimeSeries:
 
         A DataArray coordinate that is not uniformly spaced is refused, or with
         ``resample="uniform"`` interpolated lazily onto uniform spacing (noted in `meta`).
+        `time_unit` ('s', 'ms', 'days') is the unit of numeric `times`, written after them by
+        legends, captions, the viewer and probe plots.
         """
-        meta: dict = {}
-        if type(array).__module__.startswith("xarray"):
-            array, coord_spacing, coord_times, notes = dataarray_layout(array, resample=resample)
-            spacing = coord_spacing if spacing is None else spacing
-            times = coord_times if times is None else times
-            if notes:
-                meta["resampled"] = notes
-        spacing = (1.0, 1.0, 1.0) if spacing is None else spacing
-        if not isinstance(array, da.Array):
-            try:
-                array = np.asarray(array)
-            except (ValueError, TypeError) as exc:
-                raise InvalidDataError(
-                    f"{source} is not a rectangular array ({exc}); pass a (T, Z, Y, X) array"
-                ) from None
-        check_shape(array.shape, "array")
-        check_dtype(array.dtype)
-        arr = array if isinstance(array, da.Array) else da.from_array(array)
-        finite = da.isfinite(arr).all() if arr.dtype.kind == "f" else da.from_array(True)
-        smin, smax, smean, ok = da.compute(
-            arr.min(axis=(1, 2, 3)), arr.max(axis=(1, 2, 3)), arr.mean(axis=(1, 2, 3)), finite
-        )
-        if not ok:
-            bad = int(np.argmax(~np.isfinite(smin + smax)))
-            raise InvalidDataError(
-                f"time step {bad} of {source} holds NaN or infinite values; "
-                "replace them first (e.g. numpy.nan_to_num) so the value range is defined"
-            )
-        stats = stats_from_steps(smin, smax, smean)
-        return cls(
-            data=arr,
-            stats=stats,
-            spacing=parse_spacing(spacing),
-            times=parse_times(times, arr.shape[0]),
-            source=source,
-            meta=meta,
-        )
+        return cls(**array_fields(array, spacing, times, source, resample, time_unit))
 
     def steps(self) -> Steps:
         """This series as a reader's unwritten steps (each step computed as it is read)."""
@@ -370,7 +316,9 @@ class TimeSeries:
             spacing=self.spacing,
             source=self.source,
             times=list(self.times),
-            attrs={k: v for k, v in self.meta.items() if k in ("quantity", "components")},
+            attrs={
+                k: v for k, v in self.meta.items() if k in ("quantity", "components", "time_unit")
+            },
         )
 
     def save(self, path: str | os.PathLike, overwrite: bool = False, progress: bool = False):
@@ -390,10 +338,11 @@ class TimeSeries:
             "dtype": str(self.dtype),
             "value range": [self.vmin, self.vmax],
             "steps": t,
-            "time labels": f"{self.times[0]} .. {self.times[-1]}",
+            "time labels": f"{self.times[0]} .. {self.times[-1]}"
+            + (f" {self.time_unit}" if self.time_unit else ""),
             "spacing (x, y, z)": list(self.spacing),
             "chunks": list(self.data.chunksize),
-            "size in memory": _human(t * z * y * x * self.dtype.itemsize),
+            "size in memory": human_size(t * z * y * x * self.dtype.itemsize),
             "levels": describe_levels(self.volume_shape, self.n_levels),
         }
         if self.level_index:
@@ -407,96 +356,22 @@ class TimeSeries:
                 "choose with --variables or .variable(name))"
             )
         if self.path is not None:
-            d["size on disk"] = _human(_disk_usage(self.path))
+            d["size on disk"] = human_size(disk_usage(self.path))
         return d
 
 
 def open_store(path: str | os.PathLike) -> TimeSeries:
     """Open a chronocl store (zarr v3 or v2), or a bare (T, Z, Y, X) zarr array."""
-    p = Path(path)
-    require_store(p)
-    store = CheckedStore(p)
-    try:
-        node = zarr.open(store=store, mode="r")
-        has_data = isinstance(node, zarr.Group) and "data" in node
-        arr = node["data"] if has_data else node
-    except Exception as exc:  # zarr raises several kinds for a non-store folder
-        bad = unreadable_metadata(p)
-        if bad is not None:
-            raise damaged(p, f"its metadata file {bad} cannot be read") from None
-        raise StoreFormatError(
-            f"{str(p)!r} is not a zarr store ({type(exc).__name__}); "
-            "ingest your data with 'chronocl ingest'"
-        ) from None
-    if isinstance(arr, zarr.Group):
-        raise StoreFormatError(
-            f"zarr group {str(p)!r} has no array 'data'; "
-            "it is not a chronocl series (is it a chronovolume?)"
+    stored = open_array(Path(path))
+    if stored.stats is None:  # a bare array: its statistics computed in one dask pass
+        series = TimeSeries.from_array(stored.data, source=stored.source)
+    else:
+        series = TimeSeries(
+            data=stored.data,
+            stats=stored.stats,
+            spacing=stored.spacing,
+            times=stored.times,
+            source=stored.source,
+            meta=stored.meta,
         )
-    if not has_data:
-        store.arrays = ("",)
-    attrs = dict(node.attrs).get("chronocl", {})
-    check_shape(arr.shape, str(p))
-    check_dtype(arr.dtype)
-    lazy = da.from_array(CheckedArray(p, arr), chunks=arr.chunks, name=f"chronocl-{p}-{id(arr)}")
-    if isinstance(attrs, dict) and attrs.get("format") == FORMAT:
-        stats, spacing, times = checked_attrs(p, arr, attrs)
-        if attrs.get("chunks") == "complete":
-            store.complete = True
-        else:  # written before stores kept empty chunks: a step may lack all-fill chunks
-            fill = float(arr.fill_value)
-            store.may_miss = frozenset(
-                t for t in range(arr.shape[0]) if stats.step_min[t] <= fill <= stats.step_max[t]
-            )
-        return TimeSeries(
-            data=lazy,
-            stats=stats,
-            spacing=spacing,
-            times=times,
-            source=str(attrs.get("source", p)),
-            path=p,
-            _zarr=arr,
-            meta={k: attrs[k] for k in EXTRA_KEYS if k in attrs},
-        )
-    return TimeSeries.from_array(lazy, source=str(p)).stored_in(p, arr)
-
-
-def step_runs(steps: Sequence[int], most: int) -> list[tuple[int, int, slice]]:
-    """Split `steps` into runs of at most `most` evenly spaced, increasing steps.
-
-    Each run is (i0, i1, slice): steps[i0:i1] are the stored steps the slice selects.
-    """
-    runs, i, n = [], 0, len(steps)
-    while i < n:
-        j = i + 1
-        if j < n and most > 1 and steps[j] > steps[i]:
-            d = steps[j] - steps[i]
-            while j + 1 < n and j + 1 - i < most and steps[j + 1] - steps[j] == d:
-                j += 1
-            j += 1
-        else:
-            d = 1
-        runs.append((i, j, slice(int(steps[i]), int(steps[j - 1]) + 1, int(d))))
-        i = j
-    return runs
-
-
-def _metadata_file(path: Path, arr: zarr.Array) -> Path | None:
-    """The file holding an array's shape in a local store (zarr v3 or v2), if there is one."""
-    folder = Path(path) / arr.path if arr.path else Path(path)
-    for name in ("zarr.json", ".zarray"):
-        if (folder / name).is_file():
-            return folder / name
-    return None
-
-
-def _disk_usage(path: Path) -> int:
-    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
-
-
-def _human(n: float) -> str:
-    for unit in ("B", "KB", "MB", "GB", "TB"):
-        if n < 1024 or unit == "TB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n} B"
+    return series.stored_in(stored.path, stored.array)

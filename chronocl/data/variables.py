@@ -18,7 +18,7 @@ import numpy as np
 
 from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import InvalidDataError, InvalidParameterError
-from chronocl.data.formats.contract import Steps
+from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries, open_store
 from chronocl.data.writer import VARIABLES, write_store
 

@@ -22,6 +22,7 @@ from zarr.codecs import BloscCodec, Crc32cCodec, ZstdCodec
 from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import InvalidDataError, InvalidParameterError
 from chronocl.core.progress import track
+from chronocl.core.times_meta import Cadence
 from chronocl.data.level_writer import LevelWriter
 from chronocl.data.metadata import (
     FORMAT,
@@ -38,7 +39,7 @@ CHUNK_BYTES = 16 * 2**20
 # `variable` (its name) and `variables` (all of a multi-variable store, whose others sit in
 # VARIABLES/<name>/ as stores of their own), `quantity` ("magnitude") and its `components`,
 # `resampled` (notes on coordinates resampled to uniform spacing).
-EXTRA_KEYS = ("variable", "variables", "quantity", "components", "resampled")
+EXTRA_KEYS = ("variable", "variables", "quantity", "components", "resampled", "time_unit")
 VARIABLES = "variables"
 COMPRESSORS = ("zstd", "blosc-lz4", "none")
 
@@ -106,6 +107,11 @@ def write_store(
     ):
         raise InvalidParameterError(
             f"--nan-fill {nan_fill} must be a finite number (it replaces NaN and infinite values)"
+        )
+    given = times is not None and (isinstance(times, Cadence) or len(times) > 0)
+    if "time_unit" in extra and not given:
+        raise InvalidParameterError(
+            f"a time unit ({extra['time_unit']}) needs the steps' times; give --times (times=)"
         )
     shape = (int(n_steps), *(int(n) for n in volume_shape))
     check_shape(shape, source or str(path))

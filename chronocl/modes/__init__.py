@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from chronocl.core.errors import UnknownNameError
 from chronocl.modes import additive, alpha, change, count, extreme, first_hit, mean
-from chronocl.modes.base import Mode, Partial
+from chronocl.modes.base import Mode
 
 _MODES: tuple[Mode, ...] = (
     alpha.MODE,
@@ -25,7 +25,7 @@ _MODES: tuple[Mode, ...] = (
 REGISTRY: dict[str, Mode] = {m.name: m for m in _MODES}
 DEFAULT = alpha.MODE.name  # the mode used when none is named
 
-__all__ = ["DEFAULT", "REGISTRY", "Mode", "Partial", "get", "names"]
+__all__ = ["DEFAULT", "REGISTRY", "Mode", "get", "names"]
 
 
 def names() -> tuple[str, ...]:

@@ -89,7 +89,7 @@ class Additive(Mode):
     def kernel_options(self, spec, positions, raw, given):
         norm = additive_norm(spec, positions)
         final = spec.normalize == "time" and not raw
-        return {"NORM_TIME": final}, [np.array([*norm, 0.0], dtype=np.float32)]
+        return {"NORM_TIME": final}, {"norm": np.array([*norm, 0.0], dtype=np.float32)}
 
 
 MODE = Additive()

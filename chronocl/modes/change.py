@@ -70,7 +70,7 @@ class Change(Mode):
         whole = all(b == np.floor(b) for b in (np.clip(lo, 0, 255), np.clip(hi, 0, 255)))
         as_bytes = given.dtype == np.uint8 and whole and given.n_steps <= 255
         defines = {"TIME_ORDER": order, "CHANGE_BYTES": bool(order and as_bytes)}
-        return defines, [lo, hi]
+        return defines, {"lo": lo, "hi": hi}
 
     def combine_kernel(self, spec):
         return "extreme", "combine_extreme", {}

@@ -27,6 +27,17 @@ class Count(Mode):
     lut_by_value = True  # the data TF is looked up at the fraction f
     per_step_tf = False
     legend = "fraction"
+    # With no TF given: a voxel is present where its opacity exceeds 0.25, i.e. its value lies
+    # above about 17 % of the window's fitted range, and f shows through an occupancy ramp
+    # (purple once, teal about a quarter of the time, yellow always), translucent enough
+    # (0.15 to 0.5) that the always-present core shows through the rest.
+    default_data_points = (
+        (0.0, 0.55, 0.25, 0.85, 0.0),
+        (0.02, 0.55, 0.25, 0.85, 0.15),
+        (0.25, 0.1, 0.75, 0.7, 0.3),
+        (1.0, 1.0, 0.9, 0.1, 0.5),
+    )
+    default_threshold = 0.25
 
     def accumulate(self, u, steps, order, step_rgba, spec):
         rgba = np.zeros((*u.shape[1:], 4), dtype=np.float64)
@@ -45,7 +56,7 @@ class Count(Mode):
         return np.concatenate([d[..., :3] * d[..., 3:4], d[..., 3:4]], axis=-1)
 
     def kernel_options(self, spec, positions, raw, given):
-        return {}, [np.float32(spec.threshold)]
+        return {}, {"threshold": np.float32(spec.threshold)}
 
     def finish_kernel(self, acc, positions, spec):
         lut = np.ascontiguousarray(spec.data_tf.lut.T, dtype=np.float32)

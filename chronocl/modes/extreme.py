@@ -52,7 +52,7 @@ def raw_key_zones(dtype, value_range, n_steps: int) -> tuple[float, float] | Non
     return _integer_zones(dtype.name, (float(value_range[0]), float(value_range[1])))
 
 
-class Extreme(Mode):
+class Extreme(Mode, abstract=True):
     kernel = "extreme"
     kernel_function = "integrate_extreme"
     rows_kernel = "integrate_extreme_rows"
@@ -87,7 +87,7 @@ class Extreme(Mode):
         if zones is not None:
             defines["IDX_T"] = "uchar" if given.dtype == np.uint8 else "ushort"
         zlo, zhi = zones if zones is not None else (0.0, 1.0)
-        return defines, [np.float32(zlo), np.float32(zhi)]
+        return defines, {"zlo": np.float32(zlo), "zhi": np.float32(zhi)}
 
     def combine_kernel(self, spec):
         return "extreme", "combine_extreme", {"IS_MIN": self.is_min}

@@ -38,7 +38,7 @@ class FirstHit(Mode):
         return "first_hit", "combine_first", {}
 
     def kernel_options(self, spec, positions, raw, given):
-        return {}, [np.float32(spec.threshold)]
+        return {}, {"threshold": np.float32(spec.threshold)}
 
     def combine(self, front, back, spec):
         keep = front.t_index >= 0

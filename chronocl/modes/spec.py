@@ -17,7 +17,7 @@ from chronocl import modes
 from chronocl.core.enhance import Enhance
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, UnknownNameError
 from chronocl.core.selection import Selection
-from chronocl.core.tf import DataTF, TimeTF
+from chronocl.core.tf import FITTED, DataTF, TimeTF
 from chronocl.modes import Mode
 
 ORDERS = ("forward", "backward")
@@ -29,22 +29,32 @@ class IntegrationSpec:
     """How to integrate a selection through time (docs/semantics.md).
 
     `order` is ``forward``, ``backward`` or an importance permutation given as the
-    selected step numbers, most important first. `threshold` is first_hit's opacity
-    threshold; `normalize` is additive's normalisation (``time``: divide by
-    N = Σ a_t·rgb_t; ``max``: by the volume's largest channel value). No `time_tf`: the one
-    that follows the data TF (`TimeTF.for_data`: rgb, or lightness under a colour map).
+    selected step numbers, most important first. `threshold` is the opacity a step must
+    exceed for first_hit (to be hit) and count (to count as present); `normalize` is
+    additive's normalisation (``time``: divide by N = Σ a_t·rgb_t; ``max``: by the volume's
+    largest channel value). No `data_tf`: the mode's default (`Mode.default_data_points`:
+    white, count its occupancy ramp); no `threshold`: 0, or with the mode's own TF its
+    `Mode.default_threshold` (count: 0.25). No `time_tf`: the one that follows the data TF
+    (`TimeTF.for_data`: rgb, or lightness under a colour map).
     """
 
     mode: str = modes.DEFAULT
     order: str | tuple[int, ...] = "forward"
-    data_tf: DataTF = field(default_factory=DataTF)
+    data_tf: DataTF = None  # type: ignore[assignment]  # None: the mode's default (below)
     time_tf: TimeTF = None  # type: ignore[assignment]  # None: TimeTF.for_data(data_tf.points)
     enhance: Enhance = field(default_factory=Enhance)
-    threshold: float = 0.0
+    threshold: float = None  # type: ignore[assignment]  # None: the mode's default
     normalize: str = "time"
 
     def __post_init__(self) -> None:
-        modes.get(self.mode)  # an unknown name raises, naming the choices
+        mode = modes.get(self.mode)  # an unknown name raises, naming the choices
+        own_tf = self.data_tf is None
+        if own_tf:  # the mode's own default (count's occupancy ramp), fitted
+            points = mode.default_data_points
+            default = DataTF(points=points, value_range=FITTED) if points else DataTF()
+            object.__setattr__(self, "data_tf", default)
+        if self.threshold is None:  # the mode's default threshold goes with its own TF
+            object.__setattr__(self, "threshold", mode.default_threshold if own_tf else 0.0)
         if self.time_tf is None:
             object.__setattr__(self, "time_tf", TimeTF.for_data(self.data_tf.points))
         if isinstance(self.order, str):
@@ -70,7 +80,7 @@ class IntegrationSpec:
         t = float(self.threshold)
         if not (math.isfinite(t) and 0.0 <= t < 1.0):
             raise InvalidParameterError(
-                f"first-hit threshold is {self.threshold}; it must lie in [0, 1)"
+                f"opacity threshold is {self.threshold}; it must lie in [0, 1)"
             )
         # Opacities are float32 in every engine: compare against the float32 threshold.
         object.__setattr__(self, "threshold", float(np.float32(t)))

@@ -8,12 +8,15 @@ them; the fronts (`ingest`, `outputs`, `export`) choose by the registry.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from chronocl.core.times_meta import check_time_unit
+from chronocl.data.steps import Steps
 
 if TYPE_CHECKING:
     from chronocl.data.timeseries import TimeSeries
@@ -42,33 +45,9 @@ class Reader:
     steps: Callable[..., Steps] | None = None
 
 
-@dataclass(frozen=True)
-class Steps:
-    """A reader's time steps before they are written: `read()` yields each (Z, Y, X) step in
-    turn (one in memory at a time) and the rest is what `write_series` records of them."""
-
-    read: Callable[[], Iterator[np.ndarray]]
-    n_steps: int
-    volume_shape: tuple[int, ...]
-    dtype: np.dtype
-    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)  # (dx, dy, dz), x first
-    source: str = ""
-    times: Sequence | None = None
-    labels: Sequence[str] | None = None
-    attrs: Mapping[str, object] = field(default_factory=dict)
-
-    def written(self) -> dict:
-        """`write_series` keywords for these steps (all but the steps themselves)."""
-        return dict(
-            n_steps=self.n_steps,
-            volume_shape=self.volume_shape,
-            dtype=self.dtype,
-            spacing=self.spacing,
-            times=self.times,
-            source=self.source,
-            labels=self.labels,
-            attrs=dict(self.attrs),
-        )
+def time_attrs(time_unit: str | None) -> dict[str, str]:
+    """The store attributes that record the unit of the steps' times (none when not given)."""
+    return {"time_unit": check_time_unit(time_unit)} if time_unit else {}
 
 
 def has_suffix(*suffixes: str) -> Callable[[Path], bool]:

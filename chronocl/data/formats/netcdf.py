@@ -24,7 +24,7 @@ from chronocl.core.errors import (
     InvalidParameterError,
 )
 from chronocl.core.paths import check_output
-from chronocl.data.formats.contract import Reader, Steps, has_suffix
+from chronocl.data.formats.contract import Reader, has_suffix
 from chronocl.data.labelled import (
     RESAMPLE,
     axis_grid,
@@ -35,6 +35,7 @@ from chronocl.data.labelled import (
 )
 from chronocl.data.metadata import SUPPORTED_DTYPES
 from chronocl.data.series import write_steps
+from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries
 from chronocl.data.variables import magnitude_steps, split_names, write_variables
 

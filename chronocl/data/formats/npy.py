@@ -15,8 +15,15 @@ import numpy as np
 from chronocl.core.atomic import atomic_file
 from chronocl.core.errors import InputNotFoundError, InvalidDataError
 from chronocl.core.progress import track
-from chronocl.data.formats.contract import Exporter, Reader, StepExport, Steps, has_suffix
+from chronocl.data.formats.contract import (
+    Exporter,
+    Reader,
+    StepExport,
+    has_suffix,
+    time_attrs,
+)
 from chronocl.data.series import write_steps
+from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries
 
 
@@ -28,15 +35,19 @@ def ingest_npy(
     nan_fill: float | None = None,
     overwrite: bool = False,
     progress: bool = False,
+    time_unit: str | None = None,
 ) -> TimeSeries:
     """A .npy of shape (T, Z, Y, X) with voxel `spacing` (dx, dy, dz), x first, read
     memory-mapped one step at a time."""
-    steps = npy_steps(path, spacing, times)
+    steps = npy_steps(path, spacing, times, time_unit)
     return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
 
 
 def npy_steps(
-    path: str | os.PathLike, spacing: Sequence[float] | None = None, times: Sequence | None = None
+    path: str | os.PathLike,
+    spacing: Sequence[float] | None = None,
+    times: Sequence | None = None,
+    time_unit: str | None = None,
 ) -> Steps:
     """The steps of a (T, Z, Y, X) .npy, checked: `ingest_npy` before it writes."""
     p = Path(path)
@@ -59,6 +70,7 @@ def npy_steps(
         dtype=arr.dtype.newbyteorder("="),
         spacing=(1.0, 1.0, 1.0) if spacing is None else tuple(spacing),  # type: ignore[arg-type]
         times=times,
+        attrs=time_attrs(time_unit),
         source=f"npy: {p}",
     )
 
@@ -81,7 +93,7 @@ def export_npy(job: StepExport) -> list[Path]:
 READER = Reader(
     "npy",
     ingest_npy,
-    options={"spacing": None, "times": None},
+    options={"spacing": None, "times": None, "time_unit": None},
     recognises=has_suffix(".npy"),
     single=True,
     steps=npy_steps,

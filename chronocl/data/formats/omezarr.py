@@ -1,7 +1,6 @@
-"""OME-Zarr: read an image (OME-NGFF 0.4 on zarr v2, 0.5 on zarr v3) as a TimeSeries in place,
-and write a chronovolume as an image (NGFF 0.4 on zarr v2) that napari can open.
+"""OME-Zarr: read an image (OME-NGFF 0.4 on zarr v2, 0.5 on zarr v3) as a TimeSeries in place.
 
-Reading. NGFF 0.4 keeps ``multiscales`` in the group attributes; 0.5 nests it (and
+NGFF 0.4 keeps ``multiscales`` in the group attributes; 0.5 nests it (and
 ``version``) under ``attributes["ome"]``. The image must have a time axis
 (name ``t`` or type ``time``), the spatial axes ``z``, ``y``, ``x`` and at most
 one channel axis (name ``c`` or type ``channel``), in any order. One
@@ -19,19 +18,7 @@ reads go through dask, which works for any chunking but reads whole chunks;
 ``chronocl ingest`` rewrites such an image into a chronocl store chunked one
 step per chunk.
 
-Writing. Layout of the written group::
-
-    .zattrs        multiscales (axes c, z, y, x; one level "0" whose scale is
-                   the chronovolume's spacing), omero (channels red, green,
-                   blue, alpha, windows 0..1) and chronocl (metadata)
-    0/             float32 (4, Z, Y, X): the RGBA channels, premultiplied by
-                   alpha exactly as the chronovolume holds them
-    labels/        present when the chronovolume has a t_index:
-      t_index/0    int32 (Z, Y, X) label image (-1 where no step contributed)
-
-NGFF 0.4 on zarr v2 (chunk keys separated by "/") is what napari-ome-zarr and
-most other OME-Zarr readers read today. `load_chronovolume_omezarr` reads the
-file back.
+A chronovolume is written as an OME-Zarr image by `chronocl.data.formats.omezarr_chronovolume`.
 """
 
 from __future__ import annotations
@@ -44,30 +31,24 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import dask.array as da
-import numpy as np
 import zarr
 from dask.diagnostics import ProgressBar
 
-from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import (
     InvalidDataError,
     InvalidParameterError,
     StoreFormatError,
     UnknownNameError,
 )
-from chronocl.data.chronovolume import Chronovolume
-from chronocl.data.formats.contract import Output, Reader
+from chronocl.data.formats.contract import Reader
+from chronocl.data.level_sources import POOLED, AdoptedLevels
 from chronocl.data.metadata import parse_spacing
-from chronocl.data.pyramid import lazy_stats, level_shapes
+from chronocl.data.pyramid import level_shapes
 from chronocl.data.stores import open_group
 from chronocl.data.timeseries import TimeSeries
 from chronocl.data.variables import split_names, write_variables
 
 SPATIAL = ("z", "y", "x")
-FORMAT = "chronocl.chronovolume.omezarr"
-NGFF_VERSION = "0.4"
-CHANNELS = (("red", "FF0000"), ("green", "00FF00"), ("blue", "0000FF"), ("alpha", "FFFFFF"))
-_SPACE_AXES = [{"name": n, "type": "space"} for n in SPATIAL]
 
 
 def is_omezarr(path: str | os.PathLike) -> bool:
@@ -155,46 +136,40 @@ def open_omezarr(
             series = TimeSeries.from_array(lazy, spacing=spacing, times=times, source=source)
     else:
         series = TimeSeries.from_array(lazy, spacing=spacing, times=times, source=source)
-    fast = tuple(axes) == ("t", *SPATIAL) and arr.chunks[0] == 1
-    series = series.stored_in(p, arr if fast else None)
+    meta, open_variable = series.meta, None
     if c_axis is not None and arr.shape[c_axis] > 1:  # the channels are the variables
         names = channel_names(dict(group.attrs), int(arr.shape[c_axis]))
-        series.meta = {"variable": names[channel], "variables": names}
-        series._variable = lambda name: open_omezarr(
-            p, channel=names.index(name), level=level, progress=progress
-        )
-    series._lazy_levels = True
-    if level == 0:
-        _adopt_levels(series, group, datasets, index, order)
-    return series
+        meta = {"variable": names[channel], "variables": names}
+
+        def open_variable(name: str) -> TimeSeries:
+            return open_omezarr(p, channel=names.index(name), level=level, progress=progress)
+
+    own = _own_levels(lazy, group, datasets, index, order) if level == 0 else {}
+    series = dataclasses.replace(
+        series,
+        meta=meta,
+        level_source=AdoptedLevels(own) if own else POOLED,
+        open_variable=open_variable,
+    )
+    fast = tuple(axes) == ("t", *SPATIAL) and arr.chunks[0] == 1
+    return series.stored_in(p, arr if fast else None)
 
 
-def _adopt_levels(series: TimeSeries, group, datasets: list, index: list, order: list) -> None:
-    """Use the image's own resolution levels, read in place, as the series' "mean" levels
-    where their shapes are those of chronocl's rule (docs/levels.md); the other levels and
-    pools are pooled on the fly."""
-    shapes = level_shapes(series.volume_shape)
+def _own_levels(lazy: da.Array, group, datasets: list, index: list, order: list) -> dict:
+    """The image's own resolution levels whose shapes are those of chronocl's rule
+    (docs/levels.md), by level n, read in place: the series' "mean" levels (`AdoptedLevels`;
+    the other levels and pools are pooled on the fly)."""
+    shapes = level_shapes(lazy.shape[1:])
+    own = {}
     for ds in datasets[1:]:
         arr = group.get(str(ds.get("path", "")))
-        if not isinstance(arr, zarr.Array) or arr.dtype != series.dtype:
+        if not isinstance(arr, zarr.Array) or arr.dtype != lazy.dtype:
             continue
         data = da.from_zarr(arr)[tuple(index)].transpose(order)
-        if data.shape[0] != series.n_steps or tuple(data.shape[1:]) not in shapes:
+        if data.shape[0] != lazy.shape[0] or tuple(data.shape[1:]) not in shapes:
             continue
-        n = shapes.index(tuple(data.shape[1:])) + 1
-        extent = [s * a for s, a in zip(series.spacing, series.dims, strict=True)]  # x first
-        spacing = tuple(e / b for e, b in zip(extent, data.shape[:0:-1], strict=True))
-        stats = lazy_stats(data, series.vmin, series.vmax)
-        series._levels[n, "mean"] = dataclasses.replace(
-            series,
-            data=data,
-            stats=stats,
-            spacing=spacing,
-            _zarr=None,
-            level_index=n,
-            _root=series,
-            _levels={},
-        )
+        own[shapes.index(tuple(data.shape[1:])) + 1] = data
+    return own
 
 
 def channel_names(attrs: dict, n: int) -> list[str]:
@@ -242,117 +217,6 @@ def ingest_omezarr(
         one = series.variable(name) if series.variables else series
         parts.append((name, one.steps()))
     return write_variables(out, parts, overwrite=overwrite, progress=progress)
-
-
-# -- writing a chronovolume -------------------------------------------------------------
-
-
-def save_chronovolume_omezarr(
-    cv: Chronovolume, path: str | os.PathLike, overwrite: bool = False
-) -> Path:
-    """Write `cv` as an OME-Zarr image (NGFF 0.4, zarr v2) atomically; returns the path."""
-    rgba = np.asarray(cv.rgba, dtype=np.float32)
-    if rgba.ndim != 4 or rgba.shape[3] != 4:
-        raise StoreFormatError(f"chronovolume rgba has shape {rgba.shape}; expected (Z, Y, X, 4)")
-    z, y, x, _ = rgba.shape
-    zc = max(1, min(z, (8 * 2**20) // max(1, y * x * 4)))
-    scale = [float(s) for s in cv.spacing_zyx]  # the axes are z, y, x
-    with atomic_directory(path, overwrite) as tmp:
-        root = zarr.open_group(store=str(tmp), mode="w", zarr_format=2)
-        _create(root, "0", np.moveaxis(rgba, 3, 0), (1, zc, y, x))
-        root.attrs.update(
-            {
-                "multiscales": [
-                    {
-                        "version": NGFF_VERSION,
-                        "name": "chronovolume",
-                        "axes": [{"name": "c", "type": "channel"}, *_SPACE_AXES],
-                        "datasets": [_dataset([1.0, *scale])],
-                        "type": "none",
-                        "metadata": {"description": "RGBA premultiplied by alpha"},
-                    }
-                ],
-                "omero": {
-                    "version": NGFF_VERSION,
-                    "name": "chronovolume",
-                    "rdefs": {"model": "color", "defaultZ": z // 2, "defaultT": 0},
-                    "channels": [_channel(label, color) for label, color in CHANNELS],
-                },
-                "chronocl": {
-                    "format": FORMAT,
-                    "version": 1,
-                    "premultiplied": True,
-                    "channels": [label for label, _ in CHANNELS],
-                    "metadata": cv.metadata,
-                },
-            }
-        )
-        if cv.t_index is not None:
-            t_index = np.asarray(cv.t_index, dtype=np.int32)
-            if t_index.shape != (z, y, x):
-                raise StoreFormatError(
-                    f"chronovolume t_index has shape {t_index.shape}; expected {(z, y, x)}"
-                )
-            labels = root.create_group("labels")
-            labels.attrs["labels"] = ["t_index"]
-            label = labels.create_group("t_index")
-            _create(label, "0", t_index, (zc, y, x))
-            label.attrs.update(
-                {
-                    "multiscales": [
-                        {
-                            "version": NGFF_VERSION,
-                            "name": "t_index",
-                            "axes": list(_SPACE_AXES),
-                            "datasets": [_dataset(scale)],
-                        }
-                    ],
-                    "image-label": {"version": NGFF_VERSION, "source": {"image": "../../"}},
-                }
-            )
-    return Path(path)
-
-
-def load_chronovolume_omezarr(path: str | os.PathLike) -> Chronovolume:
-    """Read a chronovolume written by `save_chronovolume_omezarr`."""
-    p = Path(path)
-    root = open_group(p, "OME-Zarr chronovolume")
-    attrs = dict(root.attrs).get("chronocl", {})
-    if not isinstance(attrs, dict) or attrs.get("format") != FORMAT or "0" not in root:
-        raise StoreFormatError(f"{str(p)!r} is not a chronovolume exported as OME-Zarr by chronocl")
-    rgba = np.ascontiguousarray(np.moveaxis(np.asarray(root["0"][...]), 0, 3), dtype=np.float32)
-    t_index = None
-    if "labels" in root and "t_index" in root["labels"]:
-        t_index = np.asarray(root["labels"]["t_index"]["0"][...], dtype=np.int32)
-    return Chronovolume(rgba=rgba, t_index=t_index, metadata=dict(attrs.get("metadata", {})))
-
-
-def _create(group: zarr.Group, name: str, data: np.ndarray, chunks: tuple[int, ...]) -> None:
-    """A zarr v2 array with "/"-separated chunk keys, as NGFF 0.4 asks."""
-    arr = group.create_array(
-        name,
-        shape=data.shape,
-        dtype=data.dtype,
-        chunks=chunks,
-        chunk_key_encoding={"name": "v2", "separator": "/"},
-    )
-    arr[...] = data
-
-
-def _dataset(scale: list[float]) -> dict:
-    return {"path": "0", "coordinateTransformations": [{"type": "scale", "scale": scale}]}
-
-
-def _channel(label: str, color: str) -> dict:
-    return {
-        "label": label,
-        "color": color,
-        "active": label != "alpha",
-        "coefficient": 1,
-        "family": "linear",
-        "inverted": False,
-        "window": {"start": 0.0, "end": 1.0, "min": 0.0, "max": 1.0},
-    }
 
 
 # -- reading: metadata ------------------------------------------------------------------
@@ -439,4 +303,3 @@ READER = Reader(
     single=True,
     common=("overwrite", "progress"),  # the image is copied as it is: no nan_fill
 )
-OUTPUT = Output(".ome.zarr", "napari", save_chronovolume_omezarr)

@@ -28,10 +28,11 @@ from chronocl.core.errors import (
     UnknownNameError,
 )
 from chronocl.core.progress import track
-from chronocl.data.formats.contract import Exporter, Reader, StepExport, Steps
+from chronocl.data.formats.contract import Exporter, Reader, StepExport, time_attrs
 from chronocl.data.inputs import expand_inputs
 from chronocl.data.metadata import SUPPORTED_DTYPES
 from chronocl.data.series import write_steps
+from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries
 
 ENDIANS = ("little", "big")
@@ -48,9 +49,10 @@ def ingest_raw(
     nan_fill: float | None = None,
     overwrite: bool = False,
     progress: bool = False,
+    time_unit: str | None = None,
 ) -> TimeSeries:
     """One raw file per time step; `dims` is (NX, NY, NZ) and `spacing` (dx, dy, dz), x first."""
-    steps = raw_steps(inputs, dims, dtype, endian, spacing, times)
+    steps = raw_steps(inputs, dims, dtype, endian, spacing, times, time_unit)
     return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
 
 
@@ -61,6 +63,7 @@ def raw_steps(
     endian: str = "little",
     spacing: Sequence[float] | None = None,
     times: Sequence | None = None,
+    time_unit: str | None = None,
 ) -> Steps:
     """The steps of raw files, every size checked: `ingest_raw` before it writes."""
     if dims is None:
@@ -120,6 +123,7 @@ def raw_steps(
         dtype=np.dtype(dtype),
         spacing=(1.0, 1.0, 1.0) if spacing is None else tuple(spacing),  # type: ignore[arg-type]
         times=times,
+        attrs=time_attrs(time_unit),
         source=f"raw: {files[0].parent}/{files[0].name} .. {files[-1].name} ({len(files)} files)",
         labels=[f"{f.name} (step {t})" for t, f in enumerate(files)],
     )
@@ -209,7 +213,14 @@ def export_raw(job: StepExport) -> list[Path]:
 READER = Reader(
     "raw",
     ingest_raw,
-    options={"dims": None, "dtype": "float32", "endian": "little", "spacing": None, "times": None},
+    options={
+        "dims": None,
+        "dtype": "float32",
+        "endian": "little",
+        "spacing": None,
+        "times": None,
+        "time_unit": None,
+    },
     recognises=None,  # headerless: any file that no other reader recognises
     steps=raw_steps,
 )

@@ -10,14 +10,14 @@ import os
 from pathlib import Path
 
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.data.formats import netcdf, npy, omezarr, raw, tiff, vti
+from chronocl.data.formats import netcdf, npy, omezarr, omezarr_chronovolume, raw, tiff, vti
 from chronocl.data.formats.contract import Exporter, Output, Reader
 
 # Each table in the order its entries are named in messages.
 READERS: dict[str, Reader] = {m.READER.name: m.READER for m in (raw, npy, netcdf, tiff, omezarr)}
 OUTPUTS: tuple[Output, ...] = (
     Output(".zarr", "chronocl", Chronovolume.save),  # chronocl's own; `Chronovolume.load` reads it
-    omezarr.OUTPUT,
+    omezarr_chronovolume.OUTPUT,
     vti.OUTPUT,
 )
 EXPORTERS: dict[str, Exporter] = {m.EXPORTER.name: m.EXPORTER for m in (vti, npy, raw)}

@@ -25,10 +25,11 @@ import numpy as np
 
 from chronocl.core.errors import ChronoclError, InvalidDataError
 from chronocl.core.paths import check_output
-from chronocl.data.formats.contract import Reader, Steps, has_suffix
+from chronocl.data.formats.contract import Reader, has_suffix, time_attrs
 from chronocl.data.inputs import expand_inputs
 from chronocl.data.metadata import SUPPORTED_DTYPES, parse_spacing
 from chronocl.data.series import write_steps
+from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries
 
 # Words in tifffile's log warnings that mean the file structure is damaged; tifffile logs
@@ -52,6 +53,7 @@ def ingest_tiff(
     *,
     spacing: Sequence[float] | None = None,
     times: Sequence | None = None,
+    time_unit: str | None = None,
     nan_fill: float | None = None,
     overwrite: bool = False,
     progress: bool = False,
@@ -60,7 +62,7 @@ def ingest_tiff(
     `spacing` is (dx, dy, dz), x first (default: the first file's)."""
     files = expand_inputs(inputs)
     check_output(out, overwrite)
-    steps = tiff_steps(files, spacing=spacing, times=times)
+    steps = tiff_steps(files, spacing=spacing, times=times, time_unit=time_unit)
     return write_steps(out, steps, overwrite=overwrite, progress=progress, nan_fill=nan_fill)
 
 
@@ -69,6 +71,7 @@ def tiff_steps(
     *,
     spacing: Sequence[float] | None = None,
     times: Sequence | None = None,
+    time_unit: str | None = None,
 ) -> Steps:
     """The steps of TIFF stacks, checked: `ingest_tiff` before it writes."""
     files = expand_inputs(inputs)
@@ -124,6 +127,7 @@ def tiff_steps(
         dtype=dtype,
         spacing=parse_spacing(spacing) if spacing is not None else stacks[0].spacing,
         times=times,
+        attrs=time_attrs(time_unit),
         source=source,
         labels=labels,
     )
@@ -284,7 +288,7 @@ def _positive(value) -> float:
 READER = Reader(
     "tiff",
     ingest_tiff,
-    options={"spacing": None, "times": None},
+    options={"spacing": None, "times": None, "time_unit": None},
     recognises=has_suffix(".tif", ".tiff"),  # .ome.tif(f) too
     steps=tiff_steps,
 )
