@@ -1,147 +1,187 @@
-"""The package reads top-down: no import cycles, no upward imports, no private names borrowed.
+"""The package reads top-down: no import cycles (runtime or type-only), no upward imports, no
+private names borrowed or reached into from another module (the rules: tests/layer_rules.py).
 
-Every import in every module counts, including those inside functions (those under
-`if TYPE_CHECKING:`, for annotations only, never run). Layers, lowest first
-(docs/architecture.md): core <- modes <- data <- engine <- integration <- render <- viewer
-<- the command line (cli, demo, the package's face).
+Layers, lowest first (docs/architecture.md): core <- modes <- data <- engine <- integration
+<- render <- viewer <- report <- the command line (cli, demo, the package's face). Each rule runs on
+chronocl and on a known-bad fixture package, which it must reject at the named lines (a
+broken parser would otherwise pass everything).
 """
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
-import chronocl
+import pytest
 
-PACKAGE = Path(chronocl.__file__).parent
-LAYERS = (
-    ("core", ("chronocl.core",)),
-    ("modes", ("chronocl.modes", "chronocl.reference")),
-    ("data", ("chronocl.data",)),
-    ("engine", ("chronocl.engine",)),
-    ("integration", ("chronocl.integration",)),
-    ("render", ("chronocl.render",)),
-    ("viewer", ("chronocl.viewer",)),
-    ("cli", ("chronocl.cli", "chronocl.demo", "chronocl.__main__", "chronocl")),
+from .js_layer_rules import Scripts, js_import_cycles, shared_state_imports
+from .layer_rules import (
+    Package,
+    borrowed_private_names,
+    import_cycles,
+    private_reaches,
+    unlayered,
+    upward_imports,
 )
 
-
-def _module_name(path: Path) -> str:
-    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-
-
-MODULES = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
-
-
-def _layer(module: str) -> int:
-    best = None
-    for rank, (_, prefixes) in enumerate(LAYERS):
-        for prefix in prefixes:
-            if module == prefix or module.startswith(prefix + "."):
-                if best is None or len(prefix) > best[1]:
-                    best = (rank, len(prefix))
-    assert best is not None, f"{module} is in no layer: add it to LAYERS"
-    return best[0]
-
-
-def _imports(module: str) -> list[tuple[str, str | None, int]]:
-    """(imported module, imported name or None, line) for every import in `module`."""
-    path = MODULES[module]
-    is_pkg = path.name == "__init__.py"
-    found = []
-    tree = ast.parse(path.read_text())
-    # Imports under `if TYPE_CHECKING:` are for annotations only and never run.
-    typing_only = {
-        id(n)
-        for block in ast.walk(tree)
-        if isinstance(block, ast.If) and ast.unparse(block.test).endswith("TYPE_CHECKING")
-        for stmt in block.body
-        for n in ast.walk(stmt)
-    }
-    for node in ast.walk(tree):
-        if id(node) in typing_only:
-            continue
-        if isinstance(node, ast.Import):
-            found += [(a.name, None, node.lineno) for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parts = module.split(".")
-                parts = parts if is_pkg else parts[:-1]
-                parts = parts[: len(parts) - (node.level - 1)]
-                base = ".".join(parts + ([base] if base else []))
-            for a in node.names:
-                target = f"{base}.{a.name}"
-                if target in MODULES:
-                    found.append((target, None, node.lineno))
-                else:
-                    found.append((base, a.name, node.lineno))
-    return [(m, n, line) for m, n, line in found if m == "chronocl" or m.startswith("chronocl.")]
-
-
-GRAPH = {m: _imports(m) for m in MODULES}
+TESTS = Path(__file__).parent
+CHRONOCL = Package(
+    TESTS.parent / "chronocl",
+    (
+        ("core", ("chronocl.core",)),
+        ("modes", ("chronocl.modes", "chronocl.reference")),
+        ("data", ("chronocl.data",)),
+        ("engine", ("chronocl.engine",)),
+        ("integration", ("chronocl.integration",)),
+        ("render", ("chronocl.render",)),
+        ("viewer", ("chronocl.viewer",)),
+        ("report", ("chronocl.report",)),
+        (
+            "cli",
+            (
+                "chronocl.cli",
+                "chronocl.demo",
+                "chronocl.demo_defaults",
+                "chronocl.__main__",
+                "chronocl",
+            ),
+        ),
+    ),
+)
+BAD = Package(
+    TESTS / "layer_fixtures" / "badpkg",
+    (("low", ("badpkg.low",)), ("high", ("badpkg.high",)), ("top", ("badpkg",))),
+)
+VIEWER_JS = TESTS.parent / "chronocl" / "viewer" / "static"
+BAD_JS = TESTS / "layer_fixtures" / "badjs"
+RULES = {
+    "upward imports": upward_imports,
+    "private names borrowed": borrowed_private_names,
+    "private attributes reached": private_reaches,
+    "import cycles": import_cycles,
+}
 
 
 def test_every_module_has_a_layer():
-    for module in MODULES:
-        _layer(module)
+    missing = unlayered(CHRONOCL)
+    assert not missing, f"in no layer (add them to CHRONOCL's layers): {missing}"
 
 
-def test_no_upward_imports():
-    upward = [
-        f"{m}:{line} imports {target} ({LAYERS[_layer(target)][0]} is above {LAYERS[_layer(m)][0]})"
-        for m, edges in GRAPH.items()
-        for target, _, line in edges
-        if _layer(target) > _layer(m)
-    ]
-    assert not upward, "\n".join(upward)
+@pytest.mark.parametrize("rule", RULES)
+def test_chronocl_keeps_the_rule(rule):
+    broken = [str(f) for f in RULES[rule](CHRONOCL)]
+    assert not broken, f"{rule}:\n" + "\n".join(broken)
 
 
-def test_no_private_names_from_other_modules():
-    borrowed = [
-        f"{m}:{line} imports {name} from {target}"
-        for m, edges in GRAPH.items()
-        for target, name, line in edges
-        if name and name.startswith("_") and target != m
-    ]
-    assert not borrowed, "\n".join(borrowed)
+def _found(check) -> set[tuple[str, int, str]]:
+    return {(f.file, f.line, f.what) for f in check(BAD)}
 
 
-def test_no_import_cycles():
-    edges = {
-        m: {t for t, _, _ in GRAPH[m] if t in MODULES and t != m and t != "chronocl"}
-        for m in MODULES
+def test_the_fixture_has_a_layer_each():
+    assert unlayered(BAD) == []
+    assert "badpkg.low.ring_a" in BAD.modules  # the parser sees the fixture at all
+
+
+def test_a_subpackage_left_out_of_the_layers_is_in_none():
+    """The package's own name places its face alone, not every module under it."""
+    without_high = Package(BAD.root, (("low", ("badpkg.low",)), ("top", ("badpkg",))))
+    assert unlayered(without_high) == ["badpkg.high", "badpkg.high.top"]
+
+
+def test_an_upward_import_is_rejected():
+    assert _found(upward_imports) == {
+        ("badpkg/low/climbs.py", 3, "imports badpkg.high.top"),
     }
-    # Tarjan's strongly connected components: any with two or more modules is a cycle.
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on_stack: set[str] = set()
-    cycles: list[list[str]] = []
 
-    def visit(v: str) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on_stack.add(v)
-        for w in edges[v]:
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on_stack:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            component = []
-            while True:
-                w = stack.pop()
-                on_stack.discard(w)
-                component.append(w)
-                if w == v:
-                    break
-            if len(component) > 1:
-                cycles.append(sorted(component))
 
-    for v in sorted(edges):
-        if v not in index:
-            visit(v)
-    assert not cycles, "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
+def test_a_borrowed_private_name_is_rejected():
+    assert _found(borrowed_private_names) == {
+        ("badpkg/low/borrows.py", 3, "imports _secret from badpkg.low.owner"),
+    }
+
+
+def test_attribute_reaches_into_another_modules_private_names_are_rejected():
+    """A module's `_secret`, another module's object's `_slot` read and `_hidden` written; not
+    `self`, `cls`, `super()`, `type(self)`, the module's own class and names, dunders or
+    namedtuple's `_replace` (badpkg/low/reaches.py and owner.py use each)."""
+    assert _found(private_reaches) == {
+        ("badpkg/low/reaches.py", 11, "reaches owner._secret"),
+        ("badpkg/low/reaches.py", 12, "reaches thing._slot"),
+        ("badpkg/low/reaches.py", 16, "reaches thing._hidden"),
+    }
+
+
+def test_runtime_and_type_only_cycles_are_rejected():
+    cycles = {f.what: f for f in import_cycles(BAD)}
+    assert set(cycles) == {
+        "runtime import cycle badpkg.low.ring_a <-> badpkg.low.ring_b",
+        "type-only import cycle badpkg.low.typed_a <-> badpkg.low.typed_b",
+        "runtime import cycle badpkg.low.guard_a <-> badpkg.low.guard_b",
+    }
+    ring = cycles["runtime import cycle badpkg.low.ring_a <-> badpkg.low.ring_b"]
+    assert "badpkg/low/ring_b.py:5 imports badpkg.low.ring_a" in ring.detail  # in a function
+    typed = cycles["type-only import cycle badpkg.low.typed_a <-> badpkg.low.typed_b"]
+    assert "badpkg/low/typed_b.py:8 type-only imports badpkg.low.typed_a" in typed.detail
+
+
+def test_if_not_type_checking_runs_and_its_else_does_not():
+    """`if not TYPE_CHECKING:` ends in TYPE_CHECKING too; its body runs (a runtime import),
+    its `else:` is for type checkers (a type-only import)."""
+    edges = {(i.target, i.line, i.type_only) for i in BAD.imports["badpkg.low.guard_a"]}
+    assert edges == {
+        ("badpkg.low.guard_b", 8, False),
+        ("badpkg.low.typed_b", 10, True),
+        ("badpkg.low.typed_b", 13, False),
+        ("badpkg.low.typed_a", 15, True),
+    }
+
+
+def test_the_viewer_modules_have_no_import_cycle():
+    scripts = Scripts(VIEWER_JS)
+    assert len(scripts.imports["app.js"]) > 10  # the parser reads the modules' imports
+    cycles = js_import_cycles(scripts)
+    assert not cycles, "\n".join(map(str, cycles))
+
+
+def test_the_viewer_modules_are_passed_their_state():
+    """app.js makes the page's state (state.js: pageState) and gives it to each module's bind
+    function; no module imports state another module changes."""
+    found = shared_state_imports(Scripts(VIEWER_JS))
+    assert not found, "shared mutable state imported:\n" + "\n".join(map(str, found))
+
+
+def test_a_js_import_cycle_is_rejected():
+    (cycle,) = js_import_cycles(Scripts(BAD_JS))
+    assert (cycle.file, cycle.line, cycle.what) == (
+        "badjs/ring_a.js",
+        2,
+        "import cycle ring_a.js <-> ring_b.js",
+    )
+    assert "badjs/ring_b.js:2 imports ring_a.js" in cycle.detail
+
+
+def test_shared_mutable_js_state_is_rejected():
+    """`store` is mutated by writer.js (under another name), `list` by pusher.js through a
+    method, `count` is an `export let`; `fixed` is only read and `tick` is a function."""
+    found = {(f.file, f.line, f.what) for f in shared_state_imports(Scripts(BAD_JS))}
+    assert found == {
+        ("badjs/writer.js", 2, "imports shared mutable store from store.js"),
+        ("badjs/pusher.js", 2, "imports shared mutable list from store.js"),
+        ("badjs/reader.js", 2, "imports shared mutable store from store.js"),
+        ("badjs/reader.js", 2, "imports shared mutable count from store.js"),
+    }
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        "import thing from './x.js';",
+        "import * as x from './x.js';",
+        "import './x.js';",
+        'import { a } from "./x.js";',
+        "export { a } from './x.js';",
+    ],
+)
+def test_an_import_the_js_parser_does_not_read_fails(tmp_path, line):
+    (tmp_path / "m.js").write_text("// a module\n" + line + "\n")
+    with pytest.raises(ValueError, match=r"m\.js:2: an import form not read"):
+        Scripts(tmp_path)

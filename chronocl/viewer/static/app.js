@@ -1,13 +1,14 @@
 // chronocl viewer page: sends state changes over a WebSocket, shows the frames the server
 // renders. Plain ES modules, no build step, no dependencies. This module routes the server's
 // text messages and wires the parts together:
-//   state.js       what the page shows (S, window.viewer) and small helpers
+//   state.js       what the page shows (S, window.viewer: made here, given to each bind) and helpers
 //   connection.js  the socket: send, coalesced updates
 //   views.js       the view panels, orbit/zoom/probe input, incoming frames
 //   timeline.js    the window brush, play (speed, loop/bounce)
 //   orientation.js the axes triads, camera reset, standard views
 //   keys.js        the keyboard shortcuts (one table) and the `?` list
 //   tf_editor.js   the data transfer function editor
+//   fit.js         Fit to window: the data TF's range fitted as the command line fits it
 //   probe.js       the v(t) plot of a probed voxel
 //   legend.js      the time legend and the data colour bar drawn in each view
 //   time_follow.js time colours that follow a colour-map preset (lightness under its hue)
@@ -17,17 +18,22 @@
 
 import { connect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
+import { bindFit, fitFailed, forgetFits, onFit, refitMode } from './fit.js';
 import { bindKeys } from './keys.js';
 import { bindLegend, drawLegends } from './legend.js';
 import { bindOrientation, drawTriads } from './orientation.js';
-import { clearProbe, drawProbe, exportProbe, onProbe } from './probe.js';
+import { bindProbe, clearProbe, drawProbe, onProbe } from './probe.js';
 import { bindSession, fragmentSession, loadSession, noteFocus, resetHistory } from './session.js';
 import { bindShading, syncShading } from './shading.js';
-import { $, S, setStatus, viewer } from './state.js';
+import { $, pageState, setStatus } from './state.js';
 import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
 import { bindTimeFollow } from './time_follow.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
-import { fillSelect, layoutViews, observePictures, onFrame, showMark } from './views.js';
+import { bindViews, fillSelect, layoutViews, onFrame, showMark } from './views.js';
+
+// The page's state, given to every module that reads or changes it.
+const page = pageState();
+const { S, viewer } = page;
 
 // After a reconnect: the state the page had, sent back once the data set is open again.
 let restore = null;
@@ -48,21 +54,26 @@ function onInfo(msg) {
       label: `${d.name} (${d.shape.slice(1).reverse().join('×')}, ${d.shape[0]} steps)`,
     })),
   );
+  const refit = forgetFits(); // asked on the socket that closed: a mode change's is asked again
   const again = S.info && S.state && msg.datasets.some((d) => d.index === S.info.index);
-  restore = again ? { state: S.state, zoom: S.zoom, point: S.selectedPoint, camera: S.initialCamera } : null;
+  restore = again ? { state: S.state, zoom: S.zoom, point: S.selectedPoint, camera: S.initialCamera, refit } : null;
   const fromUrl = S.info ? null : fragmentSession();
   if (fromUrl) urlLoad = loadSession(fromUrl);
-  else send({ type: 'open', dataset: again ? S.info.index : 0 });
+  // The page's own state follows a reopen (its data TF fitted as it was): no fit to replace.
+  else if (again) send({ type: 'open', dataset: S.info.index, fit: false });
+  else send({ type: 'open', dataset: 0 });
 }
 
 function onDataset(msg) {
   if (!S.info || S.info.index !== msg.index) resetHistory();
+  forgetFits(); // a fit asked before is for the state this replaces
   urlLoad = null;
   S.info = msg;
   S.state = msg.state;
   S.zoom = [0, 1];
   S.selectedPoint = Math.min(1, S.state.data_tf.points.length - 1);
   S.initialCamera = { ...(msg.opening_camera || msg.state.camera) };
+  if (!restore) S.fits = msg.fitted ? [msg.fitted] : []; // a data set opens fitted to its window
   if (restore) {
     // Every field the server describes, as the page had it before the socket closed.
     for (const k of Object.keys(msg.state)) if (k in restore.state) S.state[k] = restore.state[k];
@@ -71,12 +82,14 @@ function onDataset(msg) {
     if (restore.camera) S.initialCamera = restore.camera;
   }
   const restored = restore ? { ...S.state } : null;
+  const refit = restore && restore.refit;
   restore = null;
   $('dataset').value = msg.index;
   syncControls();
   syncShading();
   const size = layoutViews();
   update(Object.assign(restored || {}, { size, views: S.state.views }), 'full');
+  if (refit) refitMode();
   drawTriads();
   drawTimeline();
   drawTF();
@@ -108,6 +121,9 @@ function onText(msg) {
       noteHistogram();
       drawTF();
       break;
+    case 'fit':
+      onFit(msg);
+      break;
     case 'probe':
       onProbe(msg);
       showMark(msg.values && msg.mark ? { view: msg.view, x: msg.mark[0], y: msg.mark[1] } : null);
@@ -122,6 +138,7 @@ function onText(msg) {
       movieProgress(null);
       if (msg.id !== null && msg.id >= viewer.sent) frameArrived(); // no frame will come
       viewer.errors.push(msg);
+      fitFailed(msg.id);
       setStatus(`error: ${msg.message}`, true);
       if (urlLoad !== null && msg.id === urlLoad) {
         urlLoad = null; // the URL's session does not fit: the default view instead
@@ -151,25 +168,25 @@ function relayout() {
 }
 window.addEventListener('resize', relayout);
 new ResizeObserver(relayout).observe($('views'));
-observePictures(relayout);
-
-$('probe-csv').addEventListener('click', exportProbe);
+bindViews(page, relayout);
+bindProbe(page);
 $('side-toggle').addEventListener('click', () => {
   const hidden = document.body.classList.toggle('side-hidden');
   $('side-toggle').textContent = hidden ? 'panel ◂' : 'panel ▸';
   $('side-toggle').setAttribute('aria-expanded', String(!hidden));
 });
 
-bindTimeline();
-bindTF();
-bindControls();
-bindShading();
-bindOrientation();
-bindKeys();
-bindSession();
-bindLegend();
-bindTimeFollow();
-connect({
+bindTimeline(page);
+bindTF(page);
+bindFit(page);
+bindControls(page);
+bindShading(page);
+bindOrientation(page);
+bindKeys(page);
+bindSession(page);
+bindLegend(page);
+bindTimeFollow(page);
+connect(page, {
   onText,
   onFrame: (buf) => {
     onFrame(buf);

@@ -3,9 +3,12 @@
 // server's `info` message (`fillControls`), so nothing here copies a list from the server.
 
 import { send, update } from './connection.js';
-import { $, S } from './state.js';
+import { $ } from './state.js';
 import { syncPointColor } from './tf_editor.js';
 import { fillSelect, layoutViews } from './views.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindControls.
+let S;
 
 const TIME_PARAMS = ['center', 'width', 'floor']; // the sliders t-center, t-width, t-floor
 
@@ -75,7 +78,8 @@ function newView(views) {
 
 const within = (v, [lo, hi]) => Number.isFinite(v) && v >= lo && v <= hi;
 
-export function bindControls() {
+export function bindControls(page) {
+  ({ S } = page);
   $('dataset').addEventListener('change', () => send({ type: 'open', dataset: Number($('dataset').value) }));
   $('nviews').addEventListener('change', () => {
     const n = Number($('nviews').value);

@@ -3,11 +3,16 @@
 // Keys are ignored while typing in a field (where Ctrl+Z is the field's own undo) and when
 // Alt is held; entries marked `ctrl` need Ctrl (or Meta), the others act without it.
 
+import { fitToWindow } from './fit.js';
 import { toggleLegend } from './legend.js';
 import { resetCamera, standardView, toggleTriad } from './orientation.js';
 import { redo, undo } from './session.js';
-import { $, S, viewer } from './state.js';
+import { $ } from './state.js';
 import { play, scalePlaySpeed, setPlayMode, slide, togglePlaying } from './timeline.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindKeys.
+let S;
+let viewer;
 
 // keys: KeyboardEvent.key values; label: how the list shows them.
 export const SHORTCUTS = [
@@ -31,6 +36,7 @@ export const SHORTCUTS = [
   { keys: ['Z'], label: 'Shift+Z', does: 'look along −Z (the front view with up y)', run: () => standardView('-z') },
   { keys: ['a'], label: 'A', does: 'show / hide the axes triads', run: toggleTriad },
   { keys: ['l'], label: 'L', does: 'show / hide the time legends', run: () => toggleLegend() },
+  { keys: ['f'], label: 'F', does: "fit the data TF's range to the selected view's window and mode", run: fitToWindow },
   { keys: ['z'], ctrl: true, label: 'Ctrl+Z', does: 'undo the last edit', run: undo },
   { keys: ['Z', 'y'], ctrl: true, label: 'Ctrl+Shift+Z, Ctrl+Y', does: 'redo the edit undone', run: redo },
   { keys: ['?'], label: '?', does: 'show / hide this list', run: () => showHelp($('help').hidden) },
@@ -38,8 +44,6 @@ export const SHORTCUTS = [
 ];
 
 const TEXT_FIELDS = 'textarea, input:not([type=checkbox]):not([type=range]):not([type=file])';
-
-viewer.shortcuts = SHORTCUTS.map((s) => ({ keys: s.keys, ctrl: !!s.ctrl, label: s.label, does: s.does }));
 
 export function showHelp(on) {
   $('help').hidden = !on;
@@ -62,7 +66,9 @@ function fillHelp() {
   $('help-keys').replaceChildren(...rows);
 }
 
-export function bindKeys() {
+export function bindKeys(page) {
+  ({ S, viewer } = page);
+  viewer.shortcuts = SHORTCUTS.map((s) => ({ keys: s.keys, ctrl: !!s.ctrl, label: s.label, does: s.does }));
   fillHelp();
   const byKey = new Map();
   const byCtrlKey = new Map();

@@ -6,7 +6,11 @@
 // range the view used, with ticks in data units (each frame's `colorbars`, from
 // chronocl/render/colorbar.py). `L` or **legend** in the header shows or hides both.
 
-import { $, S, viewer } from './state.js';
+import { $ } from './state.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindLegend.
+let S;
+let viewer;
 
 export const legendOn = { shown: true };
 
@@ -140,7 +144,7 @@ function backdrop(canvas) {
 // The data colour bar `bar` ({title, range: [lo, hi], colors: ['#rrggbb', ...]}) or none: the
 // title over its left end, the colours as a gradient ending level with the time bar, and
 // ticks at nice numbers (1, 2 or 5 times a power of ten) of the value range in data units, as
-// many as fit (as the saved PNG's colour bar: chronocl/render/views.py).
+// many as fit (as the saved PNG's colour bar: chronocl/render/legends.py).
 function drawColourBar(canvas, bar) {
   canvas.hidden = !legendOn.shown || !bar;
   if (canvas.hidden) return;
@@ -201,19 +205,19 @@ export function drawLegends() {
   });
 }
 
-// Where step k's colour cell is in a legend canvas (CSS px), for scripted use (the tests).
-viewer.legendCell = (k) => {
-  const c = document.querySelector('#views .view canvas.legend');
-  const cell = (c.clientWidth - 2 * PAD) / S.legend.length;
-  return { x: PAD + (k + 0.5) * cell, y: TOP + CURVE_H + 3 + BAR_H / 2 };
-};
-
 export function toggleLegend(on = !legendOn.shown) {
   legendOn.shown = on;
   $('legend-on').checked = on;
   drawLegends();
 }
 
-export function bindLegend() {
+export function bindLegend(page) {
+  ({ S, viewer } = page);
+  // Where step k's colour cell is in a legend canvas (CSS px), for scripted use (the tests).
+  viewer.legendCell = (k) => {
+    const c = document.querySelector('#views .view canvas.legend');
+    const cell = (c.clientWidth - 2 * PAD) / S.legend.length;
+    return { x: PAD + (k + 0.5) * cell, y: TOP + CURVE_H + 3 + BAR_H / 2 };
+  };
   $('legend-on').addEventListener('change', () => toggleLegend($('legend-on').checked));
 }

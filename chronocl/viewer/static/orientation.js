@@ -9,8 +9,10 @@
 // with up x, y right, x up, z away. The up menu picks that axis; azimuth turns around it.
 
 import { update } from './connection.js';
-import { $, S } from './state.js';
-import { panels } from './views.js';
+import { $ } from './state.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindOrientation.
+let S;
 
 const POLE = 89.9; // the protocol's elevation limit
 
@@ -168,13 +170,15 @@ function drawTriad(canvas, cam) {
   canvas.dataset.up = cam.up || 'y';
 }
 
-// Every view's triad, for the page's current camera.
+// Every view's triad (views.js puts one in each panel's foot band), for the page's current
+// camera. Found in the page, so that this module needs nothing from views.js, which needs it.
 export function drawTriads() {
   if (!S.state) return;
-  for (const p of panels) if (p.triad) drawTriad(p.triad, S.state.camera);
+  for (const c of document.querySelectorAll('#views .view .triad')) drawTriad(c, S.state.camera);
 }
 
-export function bindOrientation() {
+export function bindOrientation(page) {
+  ({ S } = page);
   $('reset-camera').addEventListener('click', resetCamera);
   const box = $('std-views');
   for (const [name, v] of Object.entries(STANDARD_VIEWS)) {

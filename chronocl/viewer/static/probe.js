@@ -4,7 +4,11 @@
 // drawn is the page's current one (it follows play and the brush); switching data sets clears
 // the plot.
 
-import { $, S, canvasSize, fmt, viewer } from './state.js';
+import { $, canvasSize, fmt } from './state.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindProbe.
+let S;
+let viewer;
 
 export function clearProbe() {
   viewer.probe = null;
@@ -107,4 +111,9 @@ export function drawProbe() {
   ctx.textAlign = 'right';
   ctx.fillText(labels ? labels[T - 1] : String(T - 1), w - p.r, h);
   c.dataset.drawn = String(Number(c.dataset.drawn || 0) + 1);
+}
+
+export function bindProbe(page) {
+  ({ S, viewer } = page);
+  $('probe-csv').addEventListener('click', exportProbe);
 }

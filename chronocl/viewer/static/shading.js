@@ -4,11 +4,15 @@
 // choices (ranges.shading). Sliders preview while dragged and ask for a full frame on release.
 
 import { update } from './connection.js';
-import { $, S } from './state.js';
+import { $ } from './state.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindShading.
+let S;
 
 const STRENGTHS = ['ambient', 'diffuse', 'specular'];
 
-export function bindShading() {
+export function bindShading(page) {
+  ({ S } = page);
   const box = $('lighting');
   box.innerHTML = `
     <summary>Lighting</summary>

@@ -1,29 +1,34 @@
-// What the page shows and the small helpers every part of it uses.
+// What the page shows (made by pageState) and the small helpers every part of it uses.
 // `viewer` (window.viewer) is also read by the tests and the benchmarks.
 
 export const $ = (id) => document.getElementById(id);
 
-export const S = {
-  choices: null, // the server's `info` message: modes, orders, presets, defaults, bounds
-  info: null, // the data set: shape, stats
-  state: null, // protocol state (camera, views, window, data_tf, time_tf, ...)
-  histogram: null,
-  zoom: [0, 1], // data TF editor's visible range of u
-  selectedPoint: 1,
-  selectedView: 0,
-  legend: [],
-  focus: null, // the world box the last frame framed (session.js keeps it with the state)
-  playing: false,
-  initialCamera: null, // the data set's opening camera (camera reset returns to it)
-  columns: 1, // panels per row on screen (layoutViews); saved images and movies use it too
-};
-
-export const viewer = (window.viewer = {
-  frames: 0, full: 0, sent: 0, last: null, errors: [], probe: null, downloads: [], S,
-  levels: [],  // the level of each frame received, latest last (at most 50)
-  playLog: [],  // {at, t0} for each slide play made, latest last (at most 200)
-  connects: 0,  // sockets opened (1 + reconnects)
-});
+// The page's state (S) and window.viewer, made once by app.js and given to each module's bind
+// function (no module imports them).
+export function pageState() {
+  const S = {
+    choices: null, // the server's `info` message: modes, orders, presets, defaults, bounds
+    info: null, // the data set: shape, stats
+    state: null, // protocol state (camera, views, window, data_tf, time_tf, ...)
+    histogram: null,
+    fits: [], // the fits made on this data set, {range, window, mode}, newest last (fit.js)
+    zoom: [0, 1], // data TF editor's visible range of u
+    selectedPoint: 1,
+    selectedView: 0,
+    legend: [],
+    focus: null, // the world box the last frame framed (session.js keeps it with the state)
+    playing: false,
+    initialCamera: null, // the data set's opening camera (camera reset returns to it)
+    columns: 1, // panels per row on screen (layoutViews); saved images and movies use it too
+  };
+  const viewer = (window.viewer = {
+    frames: 0, full: 0, sent: 0, last: null, errors: [], probe: null, downloads: [], S,
+    levels: [],  // the level of each frame received, latest last (at most 50)
+    playLog: [],  // {at, t0} for each slide play made, latest last (at most 200)
+    connects: 0,  // sockets opened (1 + reconnects)
+  });
+  return { S, viewer };
+}
 
 // A canvas sized to its box in device pixels; returns its context (in CSS pixels) and size.
 export function canvasSize(c) {

@@ -6,7 +6,10 @@
 // chosen in this page (the time colour menu) or are another preset than those two.
 
 import { update } from './connection.js';
-import { $, S } from './state.js';
+import { $ } from './state.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindTimeFollow.
+let S;
 
 const HUE_TOLERANCE = 0.02; // chronocl/core/colormaps.py: channels further apart make a hue
 const chosen = { byUser: false };
@@ -27,7 +30,8 @@ export function followDataTF(points) {
 }
 
 // A time colour chosen in the menu is kept from then on.
-export function bindTimeFollow() {
+export function bindTimeFollow(page) {
+  ({ S } = page);
   $('time-color').addEventListener('change', () => {
     chosen.byUser = true;
   });

@@ -3,7 +3,11 @@
 // Its keys (arrows, space, +, -, b) are in keys.js's table.
 
 import { update } from './connection.js';
-import { $, S, canvasSize, viewer } from './state.js';
+import { $, canvasSize } from './state.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindTimeline.
+let S;
+let viewer;
 
 const tl = { drag: null };
 
@@ -86,7 +90,13 @@ export function slide(k) {
   return setWindow(t0 + shift, t1 + shift, stride);
 }
 
-export function bindTimeline() {
+export function bindTimeline(page) {
+  ({ S, viewer } = page);
+  // Page coordinates of a step on the timeline, for scripted use (the browser tests).
+  viewer.timelineAt = (step) => {
+    const r = $('timeline').getBoundingClientRect();
+    return { x: r.left + ((step + 0.5) / S.info.shape.t) * r.width, y: r.top + r.height / 2 };
+  };
   const c = $('timeline');
   const stepAt = (e) => {
     const r = c.getBoundingClientRect();
@@ -203,9 +213,3 @@ function tick() {
   if (viewer.playLog.length > 200) viewer.playLog.shift();
   playTimer = setTimeout(tick, 1000 / play.speed);
 }
-
-// Page coordinates of a step on the timeline, for scripted use (the browser tests).
-viewer.timelineAt = (step) => {
-  const r = $('timeline').getBoundingClientRect();
-  return { x: r.left + ((step + 0.5) / S.info.shape.t) * r.width, y: r.top + r.height / 2 };
-};

@@ -1,0 +1,1 @@
+"""Layer high: above low."""

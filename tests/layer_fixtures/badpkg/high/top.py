@@ -1,0 +1,5 @@
+"""Something a low module must not import."""
+
+
+def above() -> str:
+    return "high"

@@ -1,0 +1,1 @@
+"""Layer low: the bottom of the fixture."""
