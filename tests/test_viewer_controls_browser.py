@@ -333,7 +333,8 @@ def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, ser
         handles = p.eval("() => window.viewer.tfHandles()")
         at = p.eval(f"() => window.viewer.tfPointAt({handles[-1]})")
         page.mouse.click(at["x"], at["y"])
-        info = p.eval("() => window.viewer.S.info")
+        # Values are the TF's: over its fitted range (a data set opens fitted to its window).
+        lo, hi = p.eval("() => window.viewer.S.state.data_tf.value_range")
         before = p.last()
         page.fill("#point-alpha", "0.25")
         page.dispatch_event("#point-alpha", "change")
@@ -342,7 +343,7 @@ def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, ser
         assert last[4] == 0.25 and last[0] == 1.0
         at = p.eval(f"() => window.viewer.tfPointAt({handles[-2]})")
         page.mouse.click(at["x"], at["y"])
-        mid = info["vmin"] + 0.7 * (info["vmax"] - info["vmin"])
+        mid = lo + 0.7 * (hi - lo)
         page.fill("#point-value", str(mid))
         page.dispatch_event("#point-value", "change")
         typed = p.eval("() => window.viewer.S.state.data_tf.points[window.viewer.S.selectedPoint]")
@@ -358,7 +359,7 @@ def test_tf_editor_window_histogram_colormap_typed_values_and_hover(browser, ser
             " document.querySelector('#point-alpha').value]"
         )
         page.mouse.up()
-        value = info["vmin"] + moved[0] * (info["vmax"] - info["vmin"])
+        value = lo + moved[0] * (hi - lo)
         assert float(fields[0]) == pytest.approx(value, rel=2e-3)
         assert float(fields[1]) == pytest.approx(moved[4], abs=2e-3) and moved[4] > 0.05
         assert f"value {fields[0]} · opacity {fields[1]}" in page.inner_text("#tf-hover")

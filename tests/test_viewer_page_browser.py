@@ -28,7 +28,7 @@ from .viewer_helpers import (  # noqa: E402
     Client,
     launch_browser,
     make_stores,
-    start_server,
+    serving,
 )
 
 pytestmark = pytest.mark.skipif(
@@ -38,9 +38,7 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    srv = start_server(make_stores(tmp_path_factory.mktemp("viewer-page")))
-    yield srv
-    srv.stop()
+    yield from serving(make_stores(tmp_path_factory.mktemp("viewer-page")))
 
 
 @pytest.fixture(scope="module")

@@ -20,28 +20,14 @@ from chronocl import modes
 from chronocl.data import synthetic
 from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
 
-from .viewer_helpers import Client, make_stores, start_server
+from .viewer_helpers import Client, connected_client, make_stores, serving  # noqa: F401
 
 SCRUB_SECONDS = float(os.environ.get("CHRONOCL_VIEWER_SCRUB_S", "15"))
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    # As after other tests: the process's GL context is current in this (the main) thread.
-    from chronocl.render.views import raycaster
-
-    raycaster()
-    stores = make_stores(tmp_path_factory.mktemp("viewer"))
-    srv = start_server(stores)
-    yield srv
-    srv.stop()
-
-
-@pytest.fixture
-def client(server):
-    c = Client(server)
-    yield c
-    c.close()
+    yield from serving(make_stores(tmp_path_factory.mktemp("viewer")), gl_current=True)
 
 
 def get(url: str, headers: dict | None = None):

@@ -69,6 +69,28 @@ def start_server(stores: list[Path]) -> ViewerServer:
     return server
 
 
+def serving(stores: list[Path], gl_current: bool = False):
+    """A server on `stores` for a module's `server` fixture (a generator: `yield from` it),
+    stopped after. `gl_current`: the process's GL context made current in this (the main)
+    thread first, as after other tests have rendered."""
+    if gl_current:
+        from chronocl.render.views import raycaster
+
+        raycaster()
+    server = start_server(stores)
+    yield server
+    server.stop()
+
+
+@pytest.fixture(name="client")
+def connected_client(server):
+    """`client`: a socket client of the module's `server` fixture, closed after the test. A
+    module uses it by importing `connected_client`."""
+    c = Client(server)
+    yield c
+    c.close()
+
+
 class Client:
     """A blocking WebSocket client that speaks the viewer protocol."""
 

@@ -62,7 +62,11 @@ class Dataset:
             "step_mean": [float(v) for v in st.step_mean],
             "times": [str(v) for v in s.times],
             # What the timeline writes for each step; None: the store has no time labels.
-            "time_labels": display_labels(steps, s.times) if has_labels(steps, s.times) else None,
+            "time_labels": (
+                display_labels(steps, s.times, unit=s.time_unit)
+                if has_labels(steps, s.times, s.time_unit)
+                else None
+            ),
         }
 
     def step_sample(self, step: int) -> np.ndarray:

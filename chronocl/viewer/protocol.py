@@ -3,7 +3,8 @@
 Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each with a
 `type` and an optional request `id` (echoed in replies and frames):
 
-    open       {"dataset": index or name}               switch data set (defaults reset)
+    open       {"dataset": index or name[, "fit"]}      switch data set (defaults reset; the
+                                                         TF fitted unless "fit" is false)
     update     camera, views, window, data_tf, time_tf,  any subset; the server merges it
                enhance, threshold, clip, size, quality,  into the client's state and renders
                background, outline, shading, refocus,    the newest state only (refocus:
@@ -12,6 +13,7 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
                                                          x2, y2: a box between two rays' voxels
     histogram  {"range": [lo, hi]}                       normalised values u in the window
+    fit        {"view"[, "mode"]}                       the TF's range fitted to a view's window
     save       {"what": "image" | "chronovolume", "view"}
                {"what": "movie", "movie": orbit | play,   a video download, a `progress`
                 "format": mp4 | gif, "frames", "fps"}     message after every frame
@@ -22,8 +24,8 @@ Every field is checked against its schema: unknown fields, wrong types and out-o
 (numbers must be finite; data values must fit float32, ranges need lo < hi) raise
 `ProtocolError` naming the field; so do messages nested deeper than `MAX_DEPTH`, refused
 before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
-Server -> client: JSON text messages (info, dataset, histogram, probe, progress, download, error)
-and binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON header, then the
+Server -> client: JSON text messages (info, dataset, histogram, fit, probe, progress, download,
+error) and binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON header, then the
 images' bytes back to back). `info`, sent first on every socket, lists the data sets and
 `choices()`: the registered modes and every other menu, default and bound the page offers, so
 the page copies nothing from here. The schema primitives are in `schema`.
@@ -110,10 +112,8 @@ WINDOW = Obj(
     frozenset({"t0", "t1"}),
 )
 # A view's own window (null: it follows the shared one), to compare two periods side by side.
-VIEW = Obj(
-    {"mode": Enum(modes.names()), "order": Enum(ORDERS), "window": Nullable(WINDOW)},
-    frozenset({"mode"}),
-)
+MODE = Enum(modes.names())
+VIEW = Obj({"mode": MODE, "order": Enum(ORDERS), "window": Nullable(WINDOW)}, frozenset({"mode"}))
 DATA_TF = Obj(
     {
         "points": List(List(Num(0.0, 1.0), 5, 5), 1, MAX_TF_POINTS),
@@ -196,7 +196,10 @@ SESSION = Obj(
 )
 
 MESSAGES: dict[str, Obj] = {
-    "open": Obj({"type": Enum(("open",)), "id": ID, "dataset": Name()}, frozenset({"dataset"})),
+    "open": Obj(
+        {"type": Enum(("open",)), "id": ID, "dataset": Name(), "fit": Bool()},
+        frozenset({"dataset"}),
+    ),
     "update": Obj(
         {
             "type": Enum(("update",)),
@@ -224,6 +227,7 @@ MESSAGES: dict[str, Obj] = {
         {"type": Enum(("histogram",)), "id": ID, "range": Range(Num(0.0, 1.0))},
         frozenset({"range"}),
     ),
+    "fit": Obj({"type": Enum(("fit",)), "id": ID, "view": Int(0, MAX_VIEWS - 1), "mode": MODE}),
     "save": Obj(
         {
             "type": Enum(("save",)),
@@ -280,6 +284,7 @@ def choices() -> dict:
         ],
         "positions": _menu(tf.TIME_POSITIONS),
         "colormaps": {name: colormap_stops(name) for name in COLORMAP_PRESETS},
+        "data_tf_default": [list(p) for p in tf.DEFAULT_DATA_POINTS],
         "enhance": [
             item | {"k": [e.k0, e.k1, e.k2]}
             for item, e in zip(_menu(ENHANCE_KINDS), map(Enhance, ENHANCE_KINDS), strict=True)
@@ -378,10 +383,8 @@ def parse_message(text: object) -> dict:
 
 
 def pack_frame(header: dict, images: list[bytes]) -> bytes:
-    """A binary frame: header length (uint32, big-endian), JSON header, image bytes in order.
-
-    The header lists each image's byte length under `views[i].bytes`.
-    """
+    """A binary frame: header length (uint32, big-endian), JSON header, image bytes in order
+    (the header lists each image's byte length under `views[i].bytes`)."""
     head = json.dumps(header, separators=(",", ":")).encode()
     return b"".join([struct.pack(">I", len(head)), head, *images])
 

@@ -14,7 +14,8 @@ import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.image import Image
-from chronocl.render.views import compose_panels, describe
+from chronocl.render.panels import compose_panels
+from chronocl.render.views import describe
 
 
 class Downloads:

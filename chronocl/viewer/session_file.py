@@ -38,8 +38,9 @@ from chronocl.core.errors import InputNotFoundError, InvalidParameterError, Inva
 from chronocl.data.series import TimeSeries
 from chronocl.render.framing import framed
 from chronocl.render.image import Image
+from chronocl.render.panels import compose_panels
 from chronocl.render.triad import draw_triad
-from chronocl.render.views import compose_panels, describe, parse_color, raycaster
+from chronocl.render.views import describe, parse_color, raycaster
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.protocol import SESSION, SESSION_KEY, SESSION_VERSION, decode_json
 from chronocl.viewer.saving import Downloads
@@ -77,9 +78,7 @@ def session_of(
 ) -> dict:
     """The session file's object for `state` on the data set `name` (stored at `path`), its
     views framing the world box `focus` (None: their visible region)."""
-    described = describe_state(state)
-    if isinstance(state.data_tf.value_range, tuple):
-        described["data_tf"]["value_range"] = list(state.data_tf.value_range)
+    described = describe_state(state)  # a fitted data TF with its value range
     dataset = {"name": name, "shape": list(series.shape)}
     if path is not None:
         dataset["path"] = str(path)

@@ -42,7 +42,7 @@ def handle(worker: ClientWorker, msg: dict) -> dict | None:
         return {
             "type": "dataset",
             "id": msg.get("id"),
-            **worker.open(msg["dataset"], msg.get("id")),
+            **worker.open(msg["dataset"], msg.get("id"), msg.get("fit", True)),
         }
     if kind == "load":
         return {
@@ -112,7 +112,10 @@ async def serve_socket(
                 if text is None:
                     raise ProtocolError("binary messages are not accepted; send JSON text")
                 msg = parse_message(text)
-                reply = handle(worker, msg)
+                if msg["type"] == "open":  # reads a sample of the data to fit the data TF
+                    reply = await asyncio.to_thread(handle, worker, msg)
+                else:
+                    reply = handle(worker, msg)
                 if reply is not None:
                     await deliver(json.dumps(reply))
             except ChronoclError as exc:

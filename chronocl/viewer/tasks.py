@@ -1,5 +1,5 @@
-"""The requests a client's render worker answers between frames: histogram, probe and saves
-(image, chronovolume, session, movie). `Tasks` is a part of `ClientWorker` (chronocl.viewer
+"""The requests a client's render worker answers between frames: histogram, fit, probe and
+saves (image, chronovolume, session, movie). `Tasks` is a part of `ClientWorker` (chronocl.viewer
 .worker), kept here so that each file holds one concern; it runs on the worker's thread and
 uses the worker's views, shown state and reply channel.
 """
@@ -9,6 +9,7 @@ from __future__ import annotations
 from chronocl.core.errors import InvalidParameterError
 from chronocl.render.views import parse_color
 from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.fit import fit_reply
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.movie import movie_states, render_movie
 from chronocl.viewer.probe import probe_reply
@@ -19,7 +20,7 @@ from chronocl.viewer.view_state import ViewState
 
 
 class Tasks:
-    """Histogram, probe and save requests (the methods `ClientWorker` answers them with)."""
+    """Histogram, fit, probe and save requests (the methods `ClientWorker` answers them with)."""
 
     def _do_task(self, kind: str, msg: dict) -> None:
         rid = msg.get("id")
@@ -36,6 +37,8 @@ class Tasks:
             self._hist_window = (state.dataset, *state.window)
             hist = ds.histogram(lo, hi, steps, state.window[2])
             self._reply({"type": "histogram", "id": rid, **hist, "window": list(state.window)})
+        elif kind == "fit":
+            self._reply(fit_reply(msg, self.state, ds.series))
         elif kind == "probe":
             self._probe(msg)
         elif kind == "save":

@@ -18,9 +18,9 @@ from chronocl.render.camera import Camera
 from chronocl.render.shading import OFF, Shading
 from chronocl.viewer.protocol import ORDERS
 
-# The viewer normalises every frame by the series' recorded range: its TF editor, histogram and
-# probe plots are drawn over that range (a range fitted per window is the CLI's and API's
-# default; docs/display.md).
+# A data TF sent without a value range normalises by the series' recorded range, the axis the
+# TF editor, histogram and probe plots are drawn over; a fitted TF carries its range (lo, hi)
+# (chronocl/viewer/fit.py; a data set opens fitted, as the CLI fits; docs/display.md).
 VIEWER_RANGE = GLOBAL
 
 
@@ -202,7 +202,7 @@ def describe_state(state: ViewState) -> dict:
             for i, (m, o) in enumerate(state.views)
         ],
         "window": dict(zip(("t0", "t1", "stride"), state.window, strict=True)),
-        "data_tf": {"points": [list(p) for p in state.data_tf.points]},
+        "data_tf": _data_tf_dict(state.data_tf),
         "time_tf": dict(state.time_tf),
         "enhance": {
             "kind": e["kind"],
@@ -219,6 +219,13 @@ def describe_state(state: ViewState) -> dict:
         "outline": state.outline,
         "shading": state.shading.to_dict(),
     }
+
+
+def _data_tf_dict(data_tf: DataTF) -> dict:
+    """Points, and the value range where one is given (a fitted TF's); none: the series'."""
+    vr = data_tf.value_range
+    d: dict = {"points": [list(p) for p in data_tf.points]}
+    return d | {"value_range": list(vr)} if isinstance(vr, tuple) else d
 
 
 def _window_dict(window: tuple[int, int, int] | None) -> dict | None:

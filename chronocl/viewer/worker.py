@@ -30,6 +30,7 @@ from chronocl.render.views import describe, parse_color
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.errors import error_text
+from chronocl.viewer.fit import fit_reply, fitted_default
 from chronocl.viewer.frames import (
     JPEG_QUALITY,
     PIXEL_BUDGET,
@@ -99,16 +100,26 @@ class ClientWorker(Tasks):
         self.thread.start()
 
     # -- called from the server's event loop ----------------------------------------------
-    def open(self, ref: int | str, rid: int | None) -> dict:
+    def open(self, ref: int | str, rid: int | None, fit: bool = True) -> dict:
+        """The data set's default state, its data TF fitted to the first window and view's
+        mode (reads a sample of the window: the socket calls it off its event loop). Not
+        fitted where `fit` is false: a page opened again after a reconnect sends the state it
+        had next, its own fitted range with it."""
         i = find_dataset(self.datasets, ref)
+        series = self.datasets[i].series
+        state = default_state(i, series)
+        if fit:
+            state = fitted_default(series, state)
         with self._cond:
-            self.state = default_state(i, self.datasets[i].series)
+            self.state = state
             self._probed = None
             self._focus_gen += 1
             self._pending = (self.state, rid)
             self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
             self._cond.notify()
-        return self._opened(i)
+        if not fit:
+            return self._opened(i)
+        return self._opened(i) | {"fitted": fit_reply({}, state, series)}  # (cached)
 
     def _opened(self, i: int) -> dict:
         """The `dataset` reply: the data set, the state, and the data set's opening camera."""

@@ -4,7 +4,11 @@
 // is awaited for longer than BUSY_AFTER_MS (a large window's steps are read, a mode's first use
 // builds its kernels) the #busy indicator says so, with the time waited.
 
-import { $, S, setStatus, viewer } from './state.js';
+import { $, setStatus } from './state.js';
+
+// The page's state (state.js: pageState), made by app.js and given to connect.
+let S;
+let viewer;
 
 const BUSY_AFTER_MS = 400;
 let waitingSince = null; // when the oldest update not yet answered by a frame was sent
@@ -27,7 +31,8 @@ let handlers = null;
 let attempt = 0;
 let retryTimer = 0;
 
-export function connect(h) {
+export function connect(page, h) {
+  ({ S, viewer } = page);
   handlers = h;
   open();
 }
@@ -70,15 +75,19 @@ export function send(msg) {
 }
 
 // Updates are merged into S.state at once and sent once per animation frame; each is told to
-// `hooks.edited(quality)` (session.js: undo history, URL fragment).
-export const hooks = { edited: null };
+// the function given to `onEdited` (session.js: undo history, URL fragment), with `merge`: the
+// update completes the last edit (a mode change's refit, fit.js) rather than being one itself.
+let edited = null;
+export function onEdited(fn) {
+  edited = fn;
+}
 let pending = null;
 let pendingQuality = 'full';
-export function update(fields, quality = 'full') {
+export function update(fields, quality = 'full', merge = false) {
   pending = Object.assign(pending || {}, fields);
   pendingQuality = quality;
   Object.assign(S.state, fields);
-  if (hooks.edited) hooks.edited(quality);
+  if (edited) edited(quality, merge);
   requestAnimationFrame(flush);
 }
 

@@ -13,13 +13,17 @@
 // region of a data set's first frame and of the frame after a camera reset); frames report it
 // (S.focus), and the committed state takes it when it changes (`noteFocus`).
 
-import { hooks, send, update } from './connection.js';
+import { onEdited, send, update } from './connection.js';
 import { syncControls } from './controls.js';
 import { drawTriads } from './orientation.js';
-import { $, S, setStatus, viewer } from './state.js';
+import { $, setStatus } from './state.js';
 import { drawTF } from './tf_editor.js';
 import { drawTimeline } from './timeline.js';
 import { layoutViews } from './views.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindSession.
+let S;
+let viewer;
 
 const VERSION = 1;
 const HISTORY = 100;
@@ -29,7 +33,6 @@ const undoList = [];
 const redoList = [];
 let committed = null; // JSON text of the committed session
 let applying = false;
-viewer.history = { undo: 0, redo: 0, commits: 0 };
 
 // The page's state as a session object.
 export function snapshot() {
@@ -54,11 +57,12 @@ export function resetHistory() {
   showCounts();
 }
 
-function edited(quality) {
+// `merge`: the edit completes the committed one (a mode change's refit), one undo step with it.
+function edited(quality, merge) {
   if (applying || quality !== 'full' || !S.info) return;
   const text = JSON.stringify(snapshot());
   if (text === committed) return;
-  if (committed !== null && !S.playing) {
+  if (committed !== null && !S.playing && !merge) {
     undoList.push(committed);
     if (undoList.length > HISTORY) undoList.shift();
     redoList.length = 0;
@@ -155,8 +159,10 @@ export function loadSession(session) {
   return send({ type: 'load', session: s });
 }
 
-export function bindSession() {
-  hooks.edited = edited;
+export function bindSession(page) {
+  ({ S, viewer } = page);
+  viewer.history = { undo: 0, redo: 0, commits: 0 };
+  onEdited(edited);
   $('undo').addEventListener('click', undo);
   $('redo').addEventListener('click', redo);
   $('save-session').addEventListener('click', () => send({ type: 'save', what: 'session' }));

@@ -9,13 +9,23 @@
 // of a handle recomputes the stops' opacities from the handles (`mapped`). Which points are
 // handles is read off the points themselves (`handles`), so undo, sessions and the page's
 // address need nothing more than the points.
+//
+// Two scales: the curve's points are over u in [0, 1] of the TF's value range, and the axis
+// (the zoom, the histogram, the value labels) is over the series' range. A TF fitted to a
+// window (fit.js) has its own range, inside the series': u = 0 and u = 1 of the curve land on
+// its lo and hi (`toAxis`), the curve is flat beyond them, and points stay between them.
 
 import { send, update } from './connection.js';
-import { $, S, canvasSize, fmt, viewer } from './state.js';
+import { $, canvasSize, fmt } from './state.js';
 import { followDataTF } from './time_follow.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindTF.
+let S;
+let viewer;
 
 const tf = { drag: null };
 const pad = { l: 6, r: 6, t: 8, b: 18 };
+// X, U: axis u <-> canvas x; PX, PU: a point's u (the TF's range) <-> canvas x.
 function tfGeom() {
   const [ctx, w, h] = canvasSize($('tf'));
   const [lo, hi] = S.zoom;
@@ -23,14 +33,22 @@ function tfGeom() {
   const U = (x) => lo + ((x - pad.l) / (w - pad.l - pad.r)) * (hi - lo);
   const Y = (a) => h - pad.b - a * (h - pad.t - pad.b);
   const A = (y) => (h - pad.b - y) / (h - pad.t - pad.b);
-  return { ctx, w, h, X, U, Y, A };
+  return { ctx, w, h, X, U, Y, A, PX: (u) => X(toAxis(u)), PU: (x) => fromAxis(U(x)) };
 }
 const rgbCss = (p, a = 1) => `rgba(${Math.round(p[1] * 255)},${Math.round(p[2] * 255)},${Math.round(p[3] * 255)},${a})`;
-const dataValue = (u) => S.info.vmin + u * (S.info.vmax - S.info.vmin);
+const series = () => (S.info ? [S.info.vmin, S.info.vmax] : [0, 1]);
+// The data value at axis u, and at a point's u.
+const dataValue = (g) => series()[0] + g * (series()[1] - series()[0]);
+const pointValue = (u) => tfRange()[0] + u * (tfRange()[1] - tfRange()[0]);
+// The TF's value range: a fitted TF's [lo, hi], else the series'.
+const tfRange = () => S.state.data_tf.value_range || series();
+// A point's u on the axis, and back.
+export const toAxis = (u) => (pointValue(u) - series()[0]) / (series()[1] - series()[0] || 1);
+const fromAxis = (g) => (dataValue(g) - tfRange()[0]) / (tfRange()[1] - tfRange()[0] || 1);
 
 export function drawTF() {
   if (!S.state) return;
-  const { ctx, w, h, X, Y } = tfGeom();
+  const { ctx, w, h, X, Y, PX } = tfGeom();
   const pts = S.state.data_tf.points;
   const { map, idx } = handles(pts);
   followMap(map, idx);
@@ -48,7 +66,7 @@ export function drawTF() {
     });
   }
   // Colour strip under the curve: the TF's colour with its opacity.
-  const grad = ctx.createLinearGradient(X(pts[0][0]), 0, X(pts[pts.length - 1][0]), 0);
+  const grad = ctx.createLinearGradient(PX(pts[0][0]), 0, PX(pts[pts.length - 1][0]), 0);
   const span = pts[pts.length - 1][0] - pts[0][0] || 1;
   for (const p of pts) grad.addColorStop((p[0] - pts[0][0]) / span, rgbCss(p, 0.25 + 0.75 * p[4]));
   ctx.fillStyle = grad;
@@ -59,10 +77,23 @@ export function drawTF() {
   ctx.beginPath();
   ctx.rect(pad.l, 0, w - pad.l - pad.r, h - pad.b + 1);
   ctx.clip();
+  if (S.state.data_tf.value_range) {
+    // A fitted range: its ends, where the curve's first and last points sit.
+    ctx.setLineDash([3, 3]);
+    ctx.strokeStyle = 'rgba(240,160,48,0.55)';
+    ctx.lineWidth = 1;
+    for (const u of [0, 1]) {
+      ctx.beginPath();
+      ctx.moveTo(PX(u), pad.t);
+      ctx.lineTo(PX(u), h - pad.b);
+      ctx.stroke();
+    }
+    ctx.setLineDash([]);
+  }
   ctx.beginPath();
-  ctx.moveTo(X(Math.min(S.zoom[0], pts[0][0])), Y(pts[0][4]));
-  for (const p of pts) ctx.lineTo(X(p[0]), Y(p[4]));
-  ctx.lineTo(X(Math.max(S.zoom[1], pts[pts.length - 1][0])), Y(pts[pts.length - 1][4]));
+  ctx.moveTo(X(Math.min(S.zoom[0], toAxis(pts[0][0]))), Y(pts[0][4]));
+  for (const p of pts) ctx.lineTo(PX(p[0]), Y(p[4]));
+  ctx.lineTo(X(Math.max(S.zoom[1], toAxis(pts[pts.length - 1][0]))), Y(pts[pts.length - 1][4]));
   ctx.strokeStyle = '#f0a030';
   ctx.lineWidth = 1.5;
   ctx.stroke();
@@ -70,9 +101,10 @@ export function drawTF() {
   const zspan = S.zoom[1] - S.zoom[0];
   idx.forEach((i) => {
     const p = pts[i];
-    if (p[0] < S.zoom[0] - 1e-3 * zspan || p[0] > S.zoom[1] + 1e-3 * zspan) return;
+    const g = toAxis(p[0]);
+    if (g < S.zoom[0] - 1e-3 * zspan || g > S.zoom[1] + 1e-3 * zspan) return;
     ctx.beginPath();
-    ctx.arc(X(p[0]), Y(p[4]), i === S.selectedPoint ? 6 : 4.5, 0, 2 * Math.PI);
+    ctx.arc(PX(p[0]), Y(p[4]), i === S.selectedPoint ? 6 : 4.5, 0, 2 * Math.PI);
     ctx.fillStyle = rgbCss(p);
     ctx.fill();
     ctx.lineWidth = i === S.selectedPoint ? 2.5 : 1.2;
@@ -91,11 +123,34 @@ export function drawTF() {
     $('zoom-lo').value = fmt(dataValue(S.zoom[0]));
     $('zoom-hi').value = fmt(dataValue(S.zoom[1]));
   }
+  noteRange();
+}
+
+// The data TF as the server gets it: its points, and its range where it has its own.
+export function dataTF(points = S.state.data_tf.points, valueRange = S.state.data_tf.value_range) {
+  const d = { points: points.map((p) => p.slice()) };
+  if (valueRange) d.value_range = valueRange.slice();
+  return d;
 }
 
 function sendTF(quality) {
-  update({ data_tf: { points: S.state.data_tf.points.map((p) => p.slice()) } }, quality);
+  update({ data_tf: dataTF() }, quality);
   drawTF();
+}
+
+// The line under the editor: the range the curve spans (fitted, or the series').
+function noteRange() {
+  const vr = S.state.data_tf.value_range;
+  let text = "curve over the series' range";
+  if (vr) {
+    text = `curve over ${fmt(vr[0])} … ${fmt(vr[1])}`;
+    const f = S.fits.findLast((q) => q.range[0] === vr[0] && q.range[1] === vr[1]);
+    if (f) {
+      const [t0, t1, stride] = f.window;
+      text += ` (fitted to ${f.mode}, window ${t0}:${t1}${stride > 1 ? `:${stride}` : ''})`;
+    }
+  }
+  $('tf-range').textContent = text;
 }
 
 // The selected point's colour, value and opacity into their fields.
@@ -104,12 +159,12 @@ export function syncPointColor() {
   if (!p) return;
   const hex = (v) => Math.round(v * 255).toString(16).padStart(2, '0');
   $('point-color').value = `#${hex(p[1])}${hex(p[2])}${hex(p[3])}`;
-  if (S.info) $('point-value').value = fmt(dataValue(p[0]));
+  if (S.info) $('point-value').value = fmt(pointValue(p[0]));
   $('point-alpha').value = fmt(p[4]);
 }
 
 // Piecewise-linear value of column j of sorted points [x, ...] at x (constant beyond the ends).
-function interp(pts, x, j) {
+export function interp(pts, x, j) {
   if (x <= pts[0][0]) return pts[0][j];
   for (let k = 1; k < pts.length; k++) {
     if (x <= pts[k][0]) {
@@ -181,7 +236,7 @@ function handlePairs(pts) {
 // The points for handles `hs` under colour map `map` ([u, a] pairs), or without one (`hs` are
 // then the points, [u, r, g, b, a]); handle `sel` (an index into hs) selected. False, and the
 // points kept, where the map would need more points than the server takes.
-function setHandles(hs, map, sel) {
+export function setHandles(hs, map, sel) {
   if (!map) {
     S.state.data_tf.points = hs;
     S.selectedPoint = sel;
@@ -216,6 +271,7 @@ function followMap(map, idx) {
   }
 }
 
+// The readout at axis u.
 function showHover(u) {
   const out = $('tf-hover');
   if (u === null || !S.info) {
@@ -223,7 +279,7 @@ function showHover(u) {
     return;
   }
   const pts = S.state.data_tf.points;
-  let text = `value ${fmt(dataValue(u))} · opacity ${fmt(interp(pts, u, 4))}`;
+  let text = `value ${fmt(dataValue(u))} · opacity ${fmt(interp(pts, fromAxis(u), 4))}`;
   const hist = S.histogram;
   if (hist && u >= hist.range[0] && u <= hist.range[1]) {
     const n = hist.counts.length;
@@ -257,7 +313,17 @@ export function noteHistogram() {
   $('hist-note').textContent = `histogram of ${which}; opacity up, value across`;
 }
 
-export function bindTF() {
+export function bindTF(page) {
+  ({ S, viewer } = page);
+  // The indices of the points the editor shows as handles, for scripted use (the browser tests).
+  viewer.tfHandles = () => handles(S.state.data_tf.points).idx;
+  // Page coordinates of a TF point's handle, for scripted use (the browser tests).
+  viewer.tfPointAt = (i) => {
+    const g = tfGeom();
+    const r = $('tf').getBoundingClientRect();
+    const p = S.state.data_tf.points[i];
+    return { x: r.left + g.PX(p[0]), y: r.top + g.Y(p[4]) };
+  };
   const c = $('tf');
   const at = (e) => {
     const r = c.getBoundingClientRect();
@@ -275,12 +341,13 @@ export function bindTF() {
     let best = -1;
     let bestD = 9;
     idx.forEach((i, k) => {
-      const d = Math.hypot(g.X(pts[i][0]) - x, g.Y(pts[i][4]) - y);
+      const d = Math.hypot(g.PX(pts[i][0]) - x, g.Y(pts[i][4]) - y);
       if (d < bestD) [best, bestD] = [k, d];
     });
     if (best < 0) {
-      // A new handle there (without a map, on the curve's colour at that value).
-      const u = clamp01(g.U(x));
+      // A new handle there (without a map, on the curve's colour at that value); within a
+      // fitted range, the curve's ends.
+      const u = clamp01(g.PU(x));
       if (own.some((q) => Math.abs(q[0] - u) < 1e-4) || pts.length >= S.choices.limits.max_tf_points) return;
       best = own.findIndex((q) => q[0] > u);
       if (best < 0) best = own.length;
@@ -304,11 +371,11 @@ export function bindTF() {
     const A = map ? 1 : 4; // where a handle keeps its opacity
     const lo = k > 0 ? hs[k - 1][0] + 1e-4 : 0;
     const hi = k < hs.length - 1 ? hs[k + 1][0] - 1e-4 : 1;
-    if (!pinned(hs, map, k)) hs[k][0] = Math.max(lo, Math.min(hi, clamp01(g.U(x))));
+    if (!pinned(hs, map, k)) hs[k][0] = Math.max(lo, Math.min(hi, clamp01(g.PU(x))));
     hs[k][A] = clamp01(g.A(y));
     if (!setHandles(hs.map((q) => q.slice()), map, k)) return;
     syncPointColor(); // the value and opacity fields follow the point as it moves
-    showHover(hs[k][0]);
+    showHover(toAxis(hs[k][0]));
     sendTF('preview');
   });
   const end = () => {
@@ -331,7 +398,8 @@ export function bindTF() {
     if (!p || !S.info || !Number.isFinite(v)) return syncPointColor();
     if (field === 'point-alpha') p[A] = clamp01(v);
     else if (!pinned(own, map, k)) {
-      const u = (v - S.info.vmin) / (S.info.vmax - S.info.vmin || 1);
+      const [v0, v1] = tfRange();
+      const u = (v - v0) / (v1 - v0 || 1);
       const lo = k > 0 ? own[k - 1][0] + 1e-4 : 0;
       const hi = k < own.length - 1 ? own[k + 1][0] - 1e-4 : 1;
       p[0] = Math.max(lo, Math.min(hi, u));
@@ -416,13 +484,3 @@ function setZoom(lo, hi) {
   clearTimeout(histTimer);
   histTimer = setTimeout(() => send({ type: 'histogram', range: [lo, hi] }), 120);
 }
-
-// The indices of the points the editor shows as handles, for scripted use (the browser tests).
-viewer.tfHandles = () => handles(S.state.data_tf.points).idx;
-// Page coordinates of a TF point's handle, for scripted use (the browser tests).
-viewer.tfPointAt = (i) => {
-  const g = tfGeom();
-  const r = $('tf').getBoundingClientRect();
-  const p = S.state.data_tf.points[i];
-  return { x: r.left + g.X(p[0]), y: r.top + g.Y(p[4]) };
-};

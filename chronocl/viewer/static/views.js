@@ -2,14 +2,19 @@
 // pointer, the probe click and its marker, and the frames the server sends into them.
 
 import { frameArrived, send, sentAt, settleLater, update } from './connection.js';
+import { modeChanged } from './fit.js';
 import { drawLegends } from './legend.js';
 import { drawTriads, turnedNormal } from './orientation.js';
 import { drawProbe } from './probe.js';
-import { $, S, clamp, setStatus, viewer } from './state.js';
+import { $, clamp, setStatus } from './state.js';
 import { drawTimeline } from './timeline.js';
 
+// The page's state (state.js: pageState), made by app.js and given to bindViews.
+let S;
+let viewer;
+
 const GAP = 6; // between panels and around them (the #views padding), CSS px
-export const panels = [];
+const panels = [];
 
 // One option per item: a name, or {name, label, summary}.
 export function fillSelect(el, items) {
@@ -73,10 +78,11 @@ export function layoutViews() {
   return [Math.max(minPanel, Math.round(w * fit)), Math.max(minPanel, Math.round(h * fit))];
 }
 
-// Pictures that change size (the window, the side panel, the legend or axes shown or hidden)
-// call `cb` (app.js: a new layout and render size).
+// The page's state, and `cb` for pictures that change size (the window, the side panel, the
+// legend or axes shown or hidden; app.js: a new layout and render size).
 let pictureObserver = null;
-export function observePictures(cb) {
+export function bindViews(page, cb) {
+  ({ S, viewer } = page);
   pictureObserver = new ResizeObserver(cb);
   for (const p of panels) pictureObserver.observe(p.pic);
 }
@@ -124,7 +130,7 @@ function makePanel(i) {
     const views = S.state.views.map((v) => ({ ...v }));
     views[i].mode = p.mode.value;
     p.mode.title = S.choices.modes.find((m) => m.name === p.mode.value)?.summary || '';
-    update({ views });
+    modeChanged(i, views); // the default curve fitted again to the first view's mode
   });
   p.order.addEventListener('click', () => {
     const orders = S.choices.orders;
