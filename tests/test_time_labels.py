@@ -15,6 +15,7 @@ import chronocl
 from chronocl import render, render_views
 from chronocl.core.errors import UnknownNameError
 from chronocl.core.time_labels import compact, display_labels, span_text
+from chronocl.data.probe import probe
 from chronocl.data.probe_plot import time_axis
 from chronocl.render.views import describe
 
@@ -107,7 +108,7 @@ def test_probe_plots_and_the_viewer_use_the_labels(series):
     assert title == "time" and names[:2] == ["spin-up", "2024-01-01 03:00"]
     assert time_axis(odd, steps, "steps")[1:] == ("step", None)
     assert time_axis(TIMES, steps)[0].dtype.kind == "M"  # dates: a date axis
-    curve = series.probe(1, 2, 3)
+    curve = probe(series, 1, 2, 3)
     assert curve.figure(time_labels="steps").axes[0].get_xlabel() == "step"
     assert curve.figure().axes[0].get_xlabel() == "time"
     info = Dataset("labelled", series).info(0)

@@ -85,6 +85,23 @@ def ingest(
             "FILE.json[:KEY] (e.g. meta.json:times, dots for nesting).",
         ),
     ] = None,
+    times_from_meta: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="META.json",
+            help="Raw/npy/TIFF: the steps' times from the JSON metadata a simulation wrote: a "
+            "list under times/time/t/output_times, or a time step dt (with save_every or "
+            "output_interval, and t0) from which each step's time is counted; its time_unit too.",
+        ),
+    ] = None,
+    time_unit: Annotated[
+        str | None,
+        typer.Option(
+            metavar="UNIT",
+            help="The unit of the times (s, ms, min, h, days, ...), written after them in "
+            "legends, captions, the viewer and probe plots; overrides the metadata's.",
+        ),
+    ] = None,
     nan_fill: Annotated[
         float | None, typer.Option(help="Replace NaN/Inf with this value (default: reject them).")
     ] = None,
@@ -104,7 +121,9 @@ def ingest(
 
       chronocl ingest 'plume/*.raw' -o plume.zarr --dims 64 96 56 --times plume/meta.json:t
 
-      chronocl ingest series.npy -o series.zarr --times 0,0.25,0.5,0.75
+      chronocl ingest series.npy -o series.zarr --times 0,0.25,0.5,0.75 --time-unit s
+
+      chronocl ingest 'smoke/*.raw' -o smoke.zarr --dims 64 96 56 --times-from-meta smoke/run.json
 
       chronocl ingest ocean.nc -o ocean.zarr --var temp --time-dim time
 
@@ -120,8 +139,11 @@ def ingest(
 
       chronocl ingest embryo.ome.zarr -o embryo.zarr --variables all
     """
+    from chronocl.core.errors import InvalidParameterError
     from chronocl.core.paths import GLOB_CHARS, check_input, check_target
     from chronocl.core.times_input import read_times
+    from chronocl.core.times_meta import check_time_unit
+    from chronocl.core.times_meta import times_from_meta as read_meta_times
     from chronocl.data.ingest import ingest as run_ingest
 
     inputs = inputs or []
@@ -155,13 +177,38 @@ def ingest(
         options["dims_order"] = [d.strip() for d in dims_order.split(",")]
     if spacing is not None:
         options["spacing"] = spacing  # x first, as the Python API takes it
+    found = None
+    if times is not None and times_from_meta is not None:
+        raise InvalidParameterError(
+            "give --times or --times-from-meta, not both (--times FILE.json:KEY picks one list)"
+        )
     if times is not None:
         options["times"] = read_times(times)
+    if times_from_meta is not None:
+        found = read_meta_times(times_from_meta)
+        options["times"] = found.times
+        if found.unit and time_unit is None:  # --time-unit overrides the file's
+            options["time_unit"] = found.unit_of()
+    if time_unit is not None:
+        if "times" not in options:
+            raise InvalidParameterError(
+                "--time-unit names the unit of the steps' times; give them with --times or "
+                "--times-from-meta"
+            )
+        options["time_unit"] = check_time_unit(time_unit)
+    flags = {}
+    if found is not None:  # a reader that takes no times refuses the option that gave them
+        flags = {"times": "--times-from-meta", "time_unit": "--times-from-meta"}
+        if time_unit is not None:
+            flags["time_unit"] = "--time-unit"
     t0 = time.perf_counter()
-    series = run_ingest(inputs, out_path, fmt, **options)
+    series = run_ingest(inputs, out_path, fmt, flags=flags, **options)
     for note in series.meta.get("resampled", []):
         err.print(f"note: {note}")
     err.print(f"wrote {out_path} in {time.perf_counter() - t0:.1f} s")
+    if found is not None:
+        unit = f" {series.time_unit}" if series.time_unit else ""
+        err.print(f"times: {series.times[0]} .. {series.times[-1]}{unit}, from {found.found}")
     if len(series.variables) > 1:
         err.print(f"variables: {', '.join(series.variables)}")
     print_summary(series.describe())

@@ -30,30 +30,37 @@ def check_prefer(prefer: str) -> str:
     return prefer
 
 
-def has_labels(steps: Sequence[int], labels: Sequence | None) -> bool:
-    """Whether `labels` (one per step) say more than the step numbers themselves."""
+def has_labels(steps: Sequence[int], labels: Sequence | None, unit: str | None = None) -> bool:
+    """Whether `labels` (one per step) say more than the step numbers themselves: times with
+    a `unit` always do, even where they equal the step numbers."""
     if not labels or len(labels) != len(steps):
         return False
-    return any(
+    return bool(unit) or any(
         isinstance(t, bool) or not isinstance(t, int | float) or t != s
         for s, t in zip(steps, labels, strict=True)
     )
 
 
 def display_labels(
-    steps: Sequence[int], labels: Sequence | None, prefer: str = "labels"
+    steps: Sequence[int], labels: Sequence | None, prefer: str = "labels", unit: str | None = None
 ) -> list[str]:
     """One display string per step: its time label, or its number when the store has no
-    labels or `prefer` is 'steps'."""
+    labels or `prefer` is 'steps'. A `unit` follows each numeric label ('0.5 s')."""
     check_prefer(prefer)
-    if prefer == "steps" or not has_labels(steps, labels):
+    if prefer == "steps" or not has_labels(steps, labels, unit):
         return [str(int(s)) for s in steps]
     assert labels is not None
-    texts = [_text(t) for t in labels]
+    texts = [_text(t) + unit_suffix(t, unit) for t in labels]
     # Every ISO datetime at midnight: the dates say it all.
     if all(_ISO.match(str(t)) for t in labels) and all(t.endswith(" 00:00") for t in texts):
         texts = [t[:-6] for t in texts]
     return texts
+
+
+def unit_suffix(label: object, unit: str | None) -> str:
+    """' s' after a numeric time label when the store names a unit; nothing otherwise."""
+    numeric = isinstance(label, int | float) and not isinstance(label, bool)
+    return f" {unit}" if unit and numeric else ""
 
 
 def compact(texts: Sequence[str]) -> list[str]:
@@ -65,11 +72,6 @@ def compact(texts: Sequence[str]) -> list[str]:
     if not clock or not _ISO.match(texts[0]):
         return list(texts)
     return [texts[0]] + [t[len(date) + 1 :] if t.startswith(date + " ") else t for t in texts[1:]]
-
-
-def axis_title(steps: Sequence[int], labels: Sequence | None, prefer: str = "labels") -> str:
-    """'time' when `display_labels` shows labels, else 'step'."""
-    return "time" if check_prefer(prefer) == "labels" and has_labels(steps, labels) else "step"
 
 
 def span_text(texts: Sequence[str]) -> str:
