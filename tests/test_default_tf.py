@@ -140,7 +140,7 @@ def test_demo_draws_a_users_series_with_the_steps_each_picture_shows(front, tmp_
     assert (out / "defaults-front.png").stat().st_size > 1000
     assert report["window"] == "0:16:3"
     # The default view looks from the seed's corner: the front's history shows.
-    for mode in ("alpha", "first_hit", "max", "change"):
+    for mode in ("alpha", "first_hit", "max", "change", "count"):
         assert report["modes"][mode]["fraction_shown"] == 1.0, (mode, report["modes"][mode])
     assert "first_hit" in done.stderr  # the table of what each picture shows
     bad = cli("demo", "--data", store, "--window", "0:99", "--out", out, "--engine", "numpy")
@@ -169,3 +169,35 @@ def test_cli_render_looks_from_the_first_steps_unless_told(front, tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert chosen.read_bytes() != told.read_bytes()
+
+
+def test_count_has_its_own_default_tf_and_threshold():
+    """count with no TF: its occupancy ramp over the fitted range and threshold 0.25; a TF
+    given (here, in a file or a colour map) keeps the plain threshold 0 unless one is given."""
+    from chronocl.integration.inmemory import make_spec
+    from chronocl.modes import get
+    from chronocl.modes.spec import IntegrationSpec
+
+    own = IntegrationSpec(mode="count")
+    assert own.data_tf.points == get("count").default_data_points
+    assert own.data_tf.value_range == "window" and own.threshold == 0.25
+    assert make_spec("count") == own
+    assert make_spec("count", threshold=0.1).threshold == pytest.approx(0.1)
+    given = DataTF().with_colormap("viridis")
+    assert make_spec("count", data_tf=given).threshold == 0.0
+    assert IntegrationSpec(mode="count", data_tf=DataTF()).threshold == 0.0
+    assert IntegrationSpec(mode="alpha").data_tf == DataTF()  # other modes: the white default
+    assert IntegrationSpec.from_dict(own.to_dict()) == own
+
+
+@pytest.mark.parametrize("series, window", [("plume", "0:10:2"), ("front", "0:16:3")])
+def test_every_step_shows_in_counts_default_picture(request, series, window):
+    """In the default view, the occupancy ramp tells one step more or less apart where the
+    white default's saturated blob did not (there half the steps of the front showed)."""
+    data = request.getfixturevalue(series)
+    selection = parse_selection(window, data.n_steps)
+    camera = early_side(data, selection, prepare(data, window).value_range, Camera(30, 25))
+    shown = steps_shown(data, window, "count", picture(camera), engine="numpy")
+    assert shown.fraction == 1.0, shown
+    white = steps_shown(data, window, "count", picture(camera), engine="numpy", data_tf=DataTF())
+    assert len(white.shown) <= len(shown.shown)
