@@ -2,7 +2,12 @@
 
 Cases are the paper's Table 1 workloads (10/20/30 steps of 128^3, 512x64x64, 128x128x64) of the
 built-in vortex data, float32 and uint8, every mode, the window resident in memory as one xytz
-brick. Prints JSON lines (../shared/BENCH.md) and a summary with `roofline_fraction`,
+brick, and end to end beside it: `chronocl.integrate` on the same steps as an in-memory series
+(`end_to_end_roofline_fraction`, what a user calling it gets) and a `Session` re-integrating its
+resident window after a transfer-function edit (`tf_edit_roofline_fraction`, every edit a new
+TF, so none is a cache hit); `end_to_end_vs_kernel` is the first over the kernel's own
+throughput on the prepared brick. Prints JSON lines (../shared/BENCH.md) and a summary with
+`roofline_fraction`,
 `dense_tf_roofline_fraction` (every mode with a coloured data TF that has opacity everywhere,
 so no step can be skipped), `speedup_vs_numpy`, `max_vs_vtk`, `u8_vs_f32` and `transfer_overlap`
 (bench/transfer.py; null on CPU devices).
@@ -15,6 +20,7 @@ so no step can be skipped), `speedup_vs_numpy`, `max_vs_vtk`, `u8_vs_f32` and `t
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 from pathlib import Path
 
@@ -26,7 +32,7 @@ from common import emit, env_record, race
 from transfer import transfer_overlap
 from vtk_peer import make_pipeline, run_max, vtk_available, vtk_version
 
-from chronocl import modes, reference
+from chronocl import Session, TimeSeries, integrate, modes, reference
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF
@@ -42,6 +48,11 @@ TABLE1 = {"128^3": (128, 128, 128), "512x64x64": (512, 64, 64), "128x128x64": (1
 SPEC_ARGS = {"first_hit": {"threshold": 0.05}}
 # A coloured data TF with opacity everywhere: no voxel is empty, nothing can be skipped.
 DENSE_TF = DataTF(points=[(0, 0, 0, 1, 0.02), (0.5, 0, 1, 0, 0.1), (1, 1, 0, 0, 0.5)])
+# Two opacity curves a TF edit alternates between (a user dragging a point).
+EDIT_POINTS = (
+    [(0, 1, 1, 1, 0), (0.05, 1, 1, 1, 0), (0.3, 1, 1, 1, 0.25), (1, 1, 1, 1, 0.9)],
+    [(0, 1, 1, 1, 0), (0.08, 1, 1, 1, 0), (0.35, 1, 1, 1, 0.3), (1, 1, 1, 1, 0.85)],
+)
 
 
 def make_brick(shape_xyz, steps: int, dtype: str) -> np.ndarray:
@@ -109,6 +120,26 @@ class Runner:
 
         return run
 
+    def end_to_end_fns(self, brick, mode) -> dict:
+        """`chronocl.integrate` on the brick's steps as an in-memory (T, Z, Y, X) series, and a
+        resident `Session` re-integrating after a TF edit (two TFs taken in turn)."""
+        steps = np.ascontiguousarray(np.moveaxis(brick, 1, 0))
+        series = TimeSeries.from_array(steps)
+        w = steps.shape[0]
+        args = SPEC_ARGS.get(mode, {})
+
+        def call():
+            integrate(series, f"0:{w}", mode, engine=self.ocl, **args)
+
+        session = Session(series, engine=self.ocl, mode=mode, memory=4 * steps.nbytes, **args)
+        session.set_window(0, w)
+        edits = itertools.cycle([DataTF(points=p) for p in EDIT_POINTS])
+
+        def tf_edit():
+            session.set_spec(data_tf=next(edits))
+
+        return {("integrate-end-to-end", mode): call, ("session-tf-edit", mode): tf_edit}
+
     def roofline_fns(self, brick) -> dict:
         """(a) an OpenCL kernel that reads the brick once and sums it, (b) numpy max over it."""
         fns = read_fns(self.ocl.dc, brick)
@@ -148,6 +179,10 @@ def main() -> None:
                 contenders[(case, *key)] = fn
             for mode in MODES:
                 contenders[(case, "opencl", mode)] = run.integrate_fn(run.ocl, brick, mode)
+            if dtype == "float32":  # what a user gets end to end, beside the kernel alone
+                for mode in MODES:
+                    for key, fn in run.end_to_end_fns(brick, mode).items():
+                        contenders[(case, *key)] = fn
             for mode in MODES:  # opacity everywhere, coloured: nothing can be skipped
                 contenders[(case, "opencl-dense-tf", mode)] = run.integrate_fn(
                     run.ocl, brick, mode, data_tf=DENSE_TF
@@ -193,6 +228,22 @@ def main() -> None:
             for m in MODES
         },
         "roofline_gvox_s": round(roof[main_case], 3),
+        "end_to_end_roofline_fraction": {
+            m: round(run.results[(main_case, "integrate-end-to-end", m)] / roof[main_case], 3)
+            for m in MODES
+        },
+        "tf_edit_roofline_fraction": {
+            m: round(run.results[(main_case, "session-tf-edit", m)] / roof[main_case], 3)
+            for m in MODES
+        },
+        "end_to_end_vs_kernel": {
+            m: round(
+                run.results[(main_case, "integrate-end-to-end", m)]
+                / run.results[(main_case, "opencl", m)],
+                3,
+            )
+            for m in MODES
+        },
         "dense_tf_roofline_fraction": {
             m: round(run.results[(main_case, "opencl-dense-tf", m)] / roof[main_case], 3)
             for m in MODES
