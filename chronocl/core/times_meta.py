@@ -36,12 +36,10 @@ UNIT_MOST = 16
 
 @dataclass(frozen=True)
 class Cadence:
-    """Steps written at a fixed interval: step k is at ``start + k * interval``. `found`
-    says where (the file and keys), for messages."""
+    """Steps written at a fixed interval: step k is at ``start + k * interval``."""
 
     start: float
     interval: float
-    found: str = ""
 
     def times(self, n_steps: int) -> list[float]:
         # round away the float noise of k * interval (0.30000000000000004 -> 0.3)
@@ -146,7 +144,7 @@ def times_from_meta(path: str | Path) -> MetaTimes:
         raise InvalidParameterError(
             f"{found} gives an output interval of {interval:g}; it must be > 0"
         )
-    cadence = Cadence(float(obj[start[0]]) if start else 0.0, interval, found)
+    cadence = Cadence(float(obj[start[0]]) if start else 0.0, interval)
     return MetaTimes(cadence, _unit(obj), found)
 
 

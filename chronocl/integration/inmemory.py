@@ -37,7 +37,7 @@ from chronocl.engine.device_formats import with_device_format
 from chronocl.integration.fit_range import window_range
 from chronocl.integration.visibility import warn_invisible
 from chronocl.modes.base import Partial
-from chronocl.modes.spec import IntegrationSpec, resolve_order
+from chronocl.modes.spec import IntegrationSpec, default_data_tf, resolve_order
 
 
 def make_spec(
@@ -56,16 +56,15 @@ def make_spec(
     inverted-hat, constant) they follow the data TF: time as hue (rgb) for a grey or white
     one, as lightness for a coloured one such as a colour map (`TimeTF.for_data`)."""
     setting = tf if isinstance(tf, TFSetting) else TFSetting.load(tf) if tf else TFSetting()
-    # No data TF given (here or in `tf`): the mode's default (IntegrationSpec).
-    own = IntegrationSpec(mode=mode) if not (data_tf or tf) else None
-    data_tf = data_tf or (setting.data_tf if tf else own.data_tf)
-    if threshold is None and own is not None:
-        threshold = own.threshold
+    # No data TF given (here or in `tf`): None, the mode's own, and with it its threshold
+    # (IntegrationSpec resolves both).
+    data_tf = data_tf or (setting.data_tf if tf else None)
     if isinstance(time_tf, str):
         shape = time_tf in ("hat", "inverted-hat", "constant")  # an opacity: colours unchosen
         time_tf = TimeTF.preset(time_tf)
         if shape:
-            time_tf = replace(time_tf, color=TimeTF.for_data(data_tf.points).color)
+            points = (data_tf or default_data_tf(mode)).points
+            time_tf = replace(time_tf, color=TimeTF.for_data(points).color)
     if isinstance(enhance, str):
         enhance = Enhance(enhance)
     return IntegrationSpec(

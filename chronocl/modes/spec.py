@@ -24,6 +24,14 @@ ORDERS = ("forward", "backward")
 NORMALIZE = ("time", "max")
 
 
+def default_data_tf(mode: str) -> DataTF:
+    """The data TF a spec of `mode` gets when none is given: the mode's own
+    (`Mode.default_data_points`, count's occupancy ramp) over the fitted window range, else
+    the white default."""
+    points = modes.get(mode).default_data_points
+    return DataTF(points=points, value_range=FITTED) if points else DataTF()
+
+
 @dataclass(frozen=True)
 class IntegrationSpec:
     """How to integrate a selection through time (docs/semantics.md).
@@ -49,10 +57,8 @@ class IntegrationSpec:
     def __post_init__(self) -> None:
         mode = modes.get(self.mode)  # an unknown name raises, naming the choices
         own_tf = self.data_tf is None
-        if own_tf:  # the mode's own default (count's occupancy ramp), fitted
-            points = mode.default_data_points
-            default = DataTF(points=points, value_range=FITTED) if points else DataTF()
-            object.__setattr__(self, "data_tf", default)
+        if own_tf:
+            object.__setattr__(self, "data_tf", default_data_tf(self.mode))
         if self.threshold is None:  # the mode's default threshold goes with its own TF
             object.__setattr__(self, "threshold", mode.default_threshold if own_tf else 0.0)
         if self.time_tf is None:
