@@ -8,44 +8,30 @@ from __future__ import annotations
 import json
 import urllib.request
 
-import numpy as np
 import pytest
 
 pytest.importorskip("starlette")
 pytest.importorskip("websockets")
 
-from chronocl import modes
-from chronocl.core.selection import Selection
-from chronocl.data.series import TimeSeries, open_series
-from chronocl.data.simulations import simulate
-from chronocl.integration.fit_range import window_range
 
-from .viewer_helpers import Client, connected_client, serving  # noqa: F401
-
-
-def plume_steps() -> np.ndarray:
-    """10 steps of a rising plume whose first step is faint: every 5th of a 48-step run
-    (step 0 peaks at about a twelfth of the last step's maximum)."""
-    return simulate("plume", (24, 40, 24), 48)[::5]
+from .viewer_helpers import (  # noqa: F401
+    Client,
+    connected_client,
+    fitted,
+    plume_steps,
+    plume_store,
+    serving,
+)
 
 
 @pytest.fixture(scope="module")
 def plume(tmp_path_factory):
-    path = tmp_path_factory.mktemp("viewer-fit") / "plume.zarr"
-    TimeSeries.from_array(plume_steps(), source="plume").save(path)
-    return path
+    return plume_store(tmp_path_factory, "viewer-fit")
 
 
 @pytest.fixture(scope="module")
 def server(plume):
     yield from serving([plume], gl_current=True)
-
-
-def expected(plume, t0: int, t1: int, mode: str, stride: int = 1) -> list[float]:
-    series = open_series(plume)
-    return list(
-        window_range(series, Selection.window(t0, t1, stride, series.n_steps), modes.get(mode))
-    )
 
 
 def saved_session(server, client: Client) -> dict:
@@ -74,7 +60,7 @@ def test_a_data_set_opens_fitted_to_its_first_window_and_mode(client, plume):
     mode = state["views"][0]["mode"]
     w = state["window"]
     assert (w["t0"], w["t1"]) == (0, 10)  # the whole run: step 0 is in the first picture
-    want = expected(plume, 0, 10, mode)
+    want = fitted(plume, 0, 10, mode)
     assert state["data_tf"]["value_range"] == pytest.approx(want, rel=1e-12)
     assert ds["fitted"]["range"] == state["data_tf"]["value_range"]
     assert ds["fitted"]["window"] == [0, 10, 1] and ds["fitted"]["mode"] == mode
@@ -92,10 +78,10 @@ def test_fit_answers_the_ranges_fit_range_gives(client, plume):
     client.frame_for(rid)
     got = fit(client, view=0)
     assert got["window"] == [0, 2, 1] and got["mode"] == "alpha" and got["view"] == 0
-    assert got["range"] == pytest.approx(expected(plume, 0, 2, "alpha"), rel=1e-12)
+    assert got["range"] == pytest.approx(fitted(plume, 0, 2, "alpha"), rel=1e-12)
     # Another mode, asked for (the page's refit on a mode change, before it sends the mode).
     for mode in ("max", "min", "additive", "change"):
-        want = expected(plume, 0, 2, mode)
+        want = fitted(plume, 0, 2, mode)
         assert fit(client, view=0, mode=mode)["range"] == pytest.approx(want, rel=1e-12)
     # A view with its own window, and a second view following the shared one.
     views = [{"mode": "max", "window": {"t0": 3, "t1": 9, "stride": 2}}, {"mode": "min"}]
@@ -103,10 +89,10 @@ def test_fit_answers_the_ranges_fit_range_gives(client, plume):
     client.frame_for(rid)
     own = fit(client, view=0)
     assert own["window"] == [3, 9, 2] and own["mode"] == "max"
-    assert own["range"] == pytest.approx(expected(plume, 3, 9, "max", 2), rel=1e-12)
+    assert own["range"] == pytest.approx(fitted(plume, 3, 9, "max", 2), rel=1e-12)
     shared = fit(client, view=1)
     assert shared["window"] == [0, 2, 1] and shared["mode"] == "min"
-    assert shared["range"] == pytest.approx(expected(plume, 0, 2, "min"), rel=1e-12)
+    assert shared["range"] == pytest.approx(fitted(plume, 0, 2, "min"), rel=1e-12)
     # A view not shown: one line naming it; the socket keeps serving.
     rid = client.send({"type": "fit", "view": 3})
     err = client.wait("error", rid)[1]

@@ -21,15 +21,16 @@ import pytest
 pytest.importorskip("starlette")
 pytest.importorskip("playwright.sync_api")
 
-from chronocl import modes
-from chronocl.core.selection import Selection
 from chronocl.core.tf import DEFAULT_DATA_POINTS
-from chronocl.data.series import TimeSeries, open_series
-from chronocl.integration.fit_range import window_range
 
-from .test_viewer_fit import plume_steps
 from .test_viewer_page_browser import Page, browser, shots_dir  # noqa: F401
-from .viewer_helpers import CHROMIUM, full_size_frames, serving  # noqa: F401
+from .viewer_helpers import (  # noqa: F401
+    CHROMIUM,
+    fitted,
+    full_size_frames,
+    plume_store,
+    serving,
+)
 
 pytestmark = [
     pytest.mark.skipif(
@@ -96,9 +97,7 @@ UPDATE = """async (fields) => {
 
 @pytest.fixture(scope="module")
 def plume(tmp_path_factory):
-    path = tmp_path_factory.mktemp("viewer-fit-browser") / "plume.zarr"
-    TimeSeries.from_array(plume_steps(), source="plume").save(path)
-    return path
+    return plume_store(tmp_path_factory, "viewer-fit-browser")
 
 
 @pytest.fixture(scope="module")
@@ -134,12 +133,6 @@ def slow_fits(monkeypatch):
     while running and time.monotonic() < deadline:
         time.sleep(0.05)
     time.sleep(0.2)  # the thread's last step after its reply: its views released
-
-
-def fitted(plume, t0: int, t1: int, mode: str) -> list[float]:
-    series = open_series(plume)
-    sel = Selection.window(t0, t1, 1, series.n_steps)
-    return list(window_range(series, sel, modes.get(mode)))
 
 
 def act(p: Page, do) -> dict:

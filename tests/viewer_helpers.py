@@ -7,10 +7,15 @@ import time
 from contextlib import ExitStack
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from chronocl import modes
+from chronocl.core.selection import Selection
 from chronocl.data import synthetic
-from chronocl.data.series import TimeSeries
+from chronocl.data.series import TimeSeries, open_series
+from chronocl.data.simulations import simulate
+from chronocl.integration.fit_range import window_range
 from chronocl.viewer.protocol import unpack_frame
 from chronocl.viewer.server import ViewerServer
 
@@ -52,8 +57,6 @@ def launch_browser():
 
 def make_stores(root: Path) -> list[Path]:
     """A 32^3 vortex of 12 steps and a 32x24x24 jet of 10 steps, as chronocl stores."""
-    import numpy as np
-
     out = []
     for name, steps, shape in (("vortex", 12, (32, 32, 32)), ("jet", 10, (24, 24, 32))):
         data = np.stack(list(synthetic.steps(name, steps, shape)))
@@ -225,3 +228,23 @@ class CliServer:
         if self.proc.stdout is not None:
             self.proc.stdout.close()
         self._err.close()
+
+
+def plume_steps() -> np.ndarray:
+    """10 steps of a rising plume whose first step is faint: every 5th of a 48-step run
+    (step 0 peaks at about a twelfth of the last step's maximum)."""
+    return simulate("plume", (24, 40, 24), 48)[::5]
+
+
+def plume_store(tmp_path_factory, name: str) -> Path:
+    """`plume_steps` saved as a store in a fresh folder named `name`."""
+    path = tmp_path_factory.mktemp(name) / "plume.zarr"
+    TimeSeries.from_array(plume_steps(), source="plume").save(path)
+    return path
+
+
+def fitted(store: Path, t0: int, t1: int, mode: str, stride: int = 1) -> list[float]:
+    """The range `fit_range.window_range` fits to the window [t0, t1) of `store` for `mode`."""
+    series = open_series(store)
+    sel = Selection.window(t0, t1, stride, series.n_steps)
+    return list(window_range(series, sel, modes.get(mode)))

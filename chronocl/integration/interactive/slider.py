@@ -147,7 +147,12 @@ class Slider:
         leaves.arrays = arrays
         old_items = self._items(self.selection)
         # Leaves spanning several steps find their earlier steps in the window they are in.
-        leaves.before = {**self._before_of(self.selection), **self._before_of(selection)}
+        span = self.mode.leaf_span
+        leaves.before = {
+            steps[i]: steps[i - span + 1 : i]
+            for steps in (self.selection.steps, selection.steps)
+            for i in range(span - 1, len(steps))
+        }
         if self.inverts and self.acc is None:
             self.acc = np.zeros((*self.series.volume_shape, self.mode.sum_channels), np.int64)
             for s in old_items:
@@ -171,10 +176,6 @@ class Slider:
         leaves.forget()
         self.selection = selection
         return self._chronovolume()
-
-    def _before_of(self, selection: Selection) -> dict[int, tuple[int, ...]]:
-        span, steps = self.mode.leaf_span, selection.steps
-        return {steps[i]: steps[i - span + 1 : i] for i in range(span - 1, len(steps))}
 
     def _chronovolume(self) -> Chronovolume:
         series, spec, selection = self.series, self.spec, self.selection

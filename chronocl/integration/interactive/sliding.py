@@ -89,9 +89,8 @@ class _Stack(Generic[P]):
         return acc
 
     def push(self, step: int) -> None:
-        below = self.top()
         self.items.append(step)
-        self.aggs[len(self.items) - 1] = self._up(below, self._leaf(step))
+        self._at(len(self.items) - 1)  # the new top combines onto the level below it
         self._trim()
 
     def pop(self) -> int:
