@@ -53,6 +53,7 @@ INTEGRATION_KEYS = {
     "ORDER_FORWARD",
     "ORDER_BACKWARD",
     "TIME_TABLE",
+    "SLOTS",
 }
 STEP_ORDERS = ("table", "forward", "backward")  # order[i], or the steps in turn / reversed
 BOOLS = (False, True)
@@ -109,9 +110,10 @@ def integration_combinations(name: str):
         (256, 65536),
         STEP_ORDERS,
         time_table,
+        BOOLS,  # SLOTS: the steps read where they lie (step_base, zstride)
     ):
         (t, quant, raw), (enh, vec), (const, segs, pieces_alpha), early, skip, aligned = combo[:6]
-        norm_time, raw_partial, order, lut_n, steps, table = combo[6:]
+        norm_time, raw_partial, order, lut_n, steps, table, slots = combo[6:]
         if table and vec != 16:
             continue
         if quant and (lut_n != 256 or mode.lut_by_value):  # one LUT entry per byte value
@@ -144,6 +146,7 @@ def integration_combinations(name: str):
             "ORDER_FORWARD": steps == "forward",
             "ORDER_BACKWARD": steps == "backward",
             "TIME_TABLE": table,
+            "SLOTS": slots,
         }
 
 

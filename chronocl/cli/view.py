@@ -23,7 +23,11 @@ def view(
     engine: EngineOpt = "opencl",
     device: DeviceOpt = None,
     memory: Annotated[
-        str | None, typer.Option(help="Memory budget of each view's window (e.g. 2GB).")
+        str | None,
+        typer.Option(
+            help="Memory budget of each client's windows, e.g. 8GB "
+            "(default: half the memory free, at least 2GB)."
+        ),
     ] = None,
     max_clients: Annotated[
         int, typer.Option(help="Most browser connections served at once (each has a thread).")

@@ -36,6 +36,16 @@ def parse_memory(value: str | int | float | None, default: str = DEFAULT_MEMORY)
     return n
 
 
+def interactive_memory() -> int:
+    """The default budget of an interactive session (the viewer's, `Session`'s): half the
+    memory free now, at least DEFAULT_MEMORY, so that a window of the sizes users bring (10
+    float32 steps of 512^3 are 5.4 GB) stays resident and an edit never reads it again.
+    `--memory` / `memory=` still sets it."""
+    import psutil
+
+    return max(parse_memory(DEFAULT_MEMORY), int(psutil.virtual_memory().available) // 2)
+
+
 def human(n: float) -> str:
     """Bytes for people: '1.50 GiB'."""
     return format_bytes(int(n))

@@ -71,6 +71,7 @@ def array_fields(
     stats = stats_from_steps(smin, smax, smean)
     return {
         "data": arr,
+        "host": array if isinstance(array, np.ndarray) else None,
         "stats": stats,
         "spacing": parse_spacing(spacing),
         "times": parse_times(times, arr.shape[0]),

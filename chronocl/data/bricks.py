@@ -6,7 +6,12 @@ rows of the window's W steps in xytz order: (r1 - r0, W, Y, X).
 
 A `BrickSource` gives bricks: `read(steps, z0, z1)`. Every integration path takes one:
 `SeriesBricks` reads a `TimeSeries` (decoding a store straight into reused buffers), and
-`ResidentBricks` stacks whole steps already in memory (the window manager's, a session's).
+`ResidentBricks` serves whole steps already in memory (the window manager's, a session's).
+
+Steps already in memory are not stacked where they lie in one block of memory (an in-memory
+series' array, the window manager's slots): a `SlotBrick` names them where they are, and an
+engine that reads host memory in place (OpenCL on a CPU device) integrates them without a
+copy. Any other reader gets the stacked brick from `numpy.asarray`.
 """
 
 from __future__ import annotations
@@ -19,7 +24,8 @@ from typing import Protocol
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
-from chronocl.core.memory import aligned_empty
+from chronocl.core.host_threads import copy_all
+from chronocl.core.memory import ALIGN, aligned_empty
 from chronocl.data.timeseries import STEPS_PER_READ, TimeSeries
 
 
@@ -54,12 +60,100 @@ def slabs(nz: int, slab: int, halo: int = 0) -> list[Slab]:
     return out
 
 
+@dataclass(frozen=True, eq=False)
+class SlotBrick:
+    """An xytz brick (rows, W, Y, X) left where its steps lie: in the flat `block`, voxel
+    (z, i, y, x) of brick step i is at `offsets[i] + z * zstride + y * X + x` (the steps of an
+    in-memory series, whose rows follow one another; the window manager's slots, whose rows
+    interleave with the other slots'). `holds` keeps the step arrays it was made from alive
+    while it is in use: the window manager reuses a slot only once nothing holds its step."""
+
+    block: np.ndarray  # 1-D, the steps' dtype
+    offsets: np.ndarray  # int64, one per step of the brick
+    zstride: int  # elements from one row of a step to its next
+    shape: tuple[int, int, int, int]
+    holds: tuple = ()
+
+    @property
+    def dtype(self) -> np.dtype:
+        return self.block.dtype
+
+    @property
+    def nbytes(self) -> int:
+        return int(np.prod(self.shape)) * self.dtype.itemsize
+
+    def step(self, i: int) -> np.ndarray:
+        """The rows of brick step i (rows, Y, X), a view."""
+        rows, _, ny, nx = self.shape
+        item = self.dtype.itemsize
+        start = self.block[int(self.offsets[i]) :]
+        return np.lib.stride_tricks.as_strided(
+            start, (rows, ny, nx), (self.zstride * item, nx * item, item), writeable=False
+        )
+
+    def rows(self, r0: int, r1: int) -> SlotBrick:
+        """Brick rows [r0, r1) as a brick whose block spans only them, starting on a 64-byte
+        boundary where the memory allows (16-lane loads need no fix-up)."""
+        ny, nx = self.shape[2:]
+        first = self.offsets + r0 * self.zstride
+        lo = int(first.min())
+        lo -= min(lo, self.block[lo:].ctypes.data % ALIGN // self.dtype.itemsize)
+        hi = int(first.max()) + (r1 - r0 - 1) * self.zstride + ny * nx
+        rows = (r1 - r0, self.shape[1], ny, nx)
+        return SlotBrick(self.block[lo:hi], first - lo, self.zstride, rows, self.holds)
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        out = aligned_empty(self.shape, self.dtype)
+        copy_all([(out[:, i], self.step(i)) for i in range(self.shape[1])])
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+
+def slot_brick(
+    arrays: Sequence[np.ndarray], z0: int = 0, z1: int | None = None
+) -> SlotBrick | None:
+    """Rows [z0, z1) of whole-volume step arrays (Z, Y, X) as a `SlotBrick`, where all of them
+    lie in the memory of one C-contiguous array, each with contiguous rows and the same row
+    stride; else None (stack them)."""
+    first = arrays[0]
+    root = _owner(first)
+    dt, shape, item = first.dtype, first.shape, first.dtype.itemsize
+    nz, ny, nx = shape
+    zs = first.strides[0]
+    if not root.flags.c_contiguous or zs <= 0 or zs % item:
+        return None
+    for a in arrays:
+        if (
+            a.shape != shape
+            or a.dtype != dt
+            or a.strides[1:] != (nx * item, item)
+            or (nz > 1 and a.strides[0] != zs)
+            or _owner(a) is not root
+        ):
+            return None
+    raw = root.reshape(-1).view(np.uint8)
+    skip = -raw.ctypes.data % item  # the first byte of root at which a `dt` element may start
+    origin = raw.ctypes.data + skip
+    starts = np.array([a.ctypes.data - origin for a in arrays], np.int64)
+    if (starts % item).any():
+        return None
+    flat = raw[skip : skip + (raw.size - skip) // item * item].view(dt)
+    whole = SlotBrick(flat, starts // item, zs // item, (nz, len(arrays), ny, nx), tuple(arrays))
+    return whole.rows(z0, nz if z1 is None else z1)
+
+
+def _owner(a: np.ndarray) -> np.ndarray:
+    """The array whose memory `a` views (`a` itself if it owns its data)."""
+    while isinstance(a.base, np.ndarray):
+        a = a.base
+    return a
+
+
 class BrickSource(Protocol):
     """Where bricks come from. A brick returned stays valid until two more reads (a source
     may reuse its buffers in turn: one brick integrated while the next is read)."""
 
-    def read(self, steps: Sequence[int], z0: int, z1: int) -> np.ndarray:
-        """Rows [z0, z1) of `steps` as an xytz brick (z1 - z0, W, Y, X)."""
+    def read(self, steps: Sequence[int], z0: int, z1: int) -> np.ndarray | SlotBrick:
+        """Rows [z0, z1) of `steps` as an xytz brick (z1 - z0, W, Y, X), stacked or in place."""
         ...
 
 
@@ -113,7 +207,12 @@ class SeriesBricks:
             _held.bricks = {key: held}
         return cls(series, [held], per_call)
 
-    def read(self, steps: Sequence[int], z0: int, z1: int) -> np.ndarray:
+    def read(self, steps: Sequence[int], z0: int, z1: int) -> np.ndarray | SlotBrick:
+        host = self.series.host
+        if host is not None:
+            brick = slot_brick([host[int(s)] for s in steps], z0, z1)
+            if brick is not None:
+                return brick
         if not self.buffers:
             return self.series.read_brick(steps, z0, z1)
         brick = self.buffers[self.turn][: z1 - z0]
@@ -131,19 +230,31 @@ def brick_shape(series: TimeSeries, rows: int, width: int) -> tuple[int, int, in
 
 
 class ResidentBricks:
-    """Bricks stacked from whole steps held in memory: {step: (Z, Y, X) array}.
+    """Bricks of whole steps held in memory: {step: (Z, Y, X) array}, in place where they lie
+    in one block of memory (`slot_brick`), else stacked.
 
-    With `keep` the last brick is kept and served again for the same steps and rows: an
-    interactive session re-integrating one window under a new transfer function then stacks
-    nothing (at 256^3 the stacking copy costs more than the kernel).
+    `in_place` False always stacks, for an engine that cannot read host memory in place (a
+    GPU's, the numpy reference). With `keep` the last stacked brick is kept and served again
+    for the same steps and rows: an interactive session re-integrating one window under a new
+    transfer function then stacks nothing (at 256^3 the stacking copy costs more than the
+    kernel).
     """
 
-    def __init__(self, arrays: Mapping[int, np.ndarray], keep: bool = False) -> None:
+    def __init__(
+        self, arrays: Mapping[int, np.ndarray], keep: bool = False, in_place: bool = True
+    ) -> None:
         self.arrays = arrays
         self.keep = keep
+        self.in_place = in_place  # False: an engine that would stack a SlotBrick itself
         self._kept: tuple[tuple, np.ndarray] | None = None
 
-    def read(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
+    def read(
+        self, steps: Sequence[int], z0: int = 0, z1: int | None = None
+    ) -> np.ndarray | SlotBrick:
+        if self.in_place:
+            brick = slot_brick([self.arrays[int(s)] for s in steps], z0, z1)
+            if brick is not None:
+                return brick
         key = (tuple(int(s) for s in steps), z0, z1)
         if self._kept is not None:
             if self._kept[0] == key and self.keep:
@@ -164,6 +275,5 @@ def stack_brick(arrays: Sequence[np.ndarray], z0: int = 0, z1: int | None = None
     first = arrays[0]
     z1 = first.shape[0] if z1 is None else z1
     out = aligned_empty((z1 - z0, len(arrays), *first.shape[1:]), first.dtype)
-    for i, a in enumerate(arrays):
-        out[:, i] = a[z0:z1]
+    copy_all([(out[:, i], a[z0:z1]) for i, a in enumerate(arrays)])
     return out

@@ -22,6 +22,7 @@ import numpy as np
 import zarr
 
 from chronocl.core.errors import StoreChangedError, UnknownNameError
+from chronocl.core.host_threads import copy_all
 from chronocl.core.memory import aligned_empty
 from chronocl.core.values import normalize
 from chronocl.data.array_fields import array_fields
@@ -73,6 +74,9 @@ class TimeSeries:
     # Opens another variable of the same source by name where it is not a chronocl store's
     # (an OME-Zarr image's channels, read in place).
     open_variable: Callable[[str], TimeSeries] | None = field(default=None, repr=False)
+    # The numpy array `data` wraps, for a series made from one (`from_array`): its steps are
+    # read in place (`chronocl.data.bricks.SlotBrick`), not copied out through dask.
+    host: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.times:
@@ -189,6 +193,7 @@ class TimeSeries:
                 level_index=int(n),
                 _root=root,
                 _levels={},
+                host=None,
             )
         return root._levels[n, pool]
 
@@ -216,8 +221,7 @@ class TimeSeries:
         if out is None:
             out = aligned_empty((z1 - z0, len(steps), *self.shape[2:]), self.dtype)
         if self._zarr is None:
-            for i, s in enumerate(steps):
-                out[:, i] = self.data[int(s), z0:z1].compute()
+            copy_all([(out[:, i], self.step_rows(int(s), z0, z1)) for i, s in enumerate(steps)])
             return out
         read_runs(self.path, self._zarr, steps, z0, z1, out, per_call)
         return out
@@ -235,7 +239,14 @@ class TimeSeries:
             sel = (int(step), slice(z0, z1))
             out[...] = checked_read(self.path, self._zarr, lambda: self._zarr[sel], sel)
         else:
-            out[...] = self.data[int(step), z0:z1].compute()
+            out[...] = self.step_rows(int(step), z0, z1)
+
+    def step_rows(self, step: int, z0: int, z1: int) -> np.ndarray:
+        """Rows [z0, z1) of one step of a series in memory: a view of `host` where there is
+        one, else computed through dask."""
+        if self.host is not None:
+            return self.host[step, z0:z1]
+        return np.asarray(self.data[step, z0:z1].compute())
 
     def read_region(self, steps: slice, z: slice, y: slice, x: slice) -> np.ndarray:
         """Raw values of a run of steps over one (z, y, x) sub-block: (steps, z, y, x).

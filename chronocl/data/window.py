@@ -1,8 +1,8 @@
 """The window manager: the time steps of interest resident in memory, under a byte budget.
 
-A `WindowManager` serves whole time steps of one `TimeSeries` as aligned
-(Z, Y, X) numpy blocks, the layout the engine takes as a one-step xytz brick;
-`brick` stacks them into wider ones through `chronocl.data.bricks.ResidentBricks`.
+A `WindowManager` serves whole time steps of one `TimeSeries` as (Z, Y, X) views of
+slots in one block of memory (`chronocl.data.slots`), laid out as the kernels read bricks,
+so a window integrates where it lies (`chronocl.data.bricks.ResidentBricks`, `SlotBrick`).
 A request names the steps of the current window:
 
 - steps already resident are not read again; missing ones are read on
@@ -19,6 +19,7 @@ A request names the steps of the current window:
 from __future__ import annotations
 
 import threading
+import time
 from collections import Counter, OrderedDict
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -28,9 +29,10 @@ import numpy as np
 
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, SupersededError
-from chronocl.core.memory import aligned_empty
+from chronocl.core.interrupt import checkpoint, watched
 from chronocl.data.bricks import ResidentBricks
 from chronocl.data.series import TimeSeries
+from chronocl.data.slots import StepSlots
 
 
 @dataclass
@@ -95,6 +97,9 @@ class WindowManager:
         self._failed: dict[int, BaseException] = {}  # read errors, raised to whoever waits
         self._lock = threading.Condition()
         self._pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="chronocl-window")
+        # Steps are read into slots of one block, where a window integrates in place.
+        count = min(series.n_steps, self.capacity)
+        self.slots = StepSlots(series.volume_shape, series.dtype, count)
         self._closed = False
 
     # -- public --------------------------------------------------------------------------
@@ -209,7 +214,7 @@ class WindowManager:
 
     def _start(self, step: int) -> None:
         """Reserve the step's memory and submit its read (locked)."""
-        load = _Load(step, aligned_empty(self.series.volume_shape, self.series.dtype))
+        load = _Load(step, self.slots.take())
         self._loads[step] = load
         load.future = self._pool.submit(self._read, load)
 
@@ -248,6 +253,9 @@ class WindowManager:
             self._lock.notify_all()
 
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        # Work that may be given up (`chronocl.core.interrupt`) looks up every 50 ms.
+        poll = WATCHED_POLL_S if watched() else None
         with self._lock:
             while True:
                 missing = [s for s in request.steps if s not in self._cache]
@@ -266,8 +274,17 @@ class WindowManager:
                         raise SupersededError(
                             f"step {s} of the request was dropped; request the window again"
                         )
-                if not self._lock.wait(timeout):
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
                     raise TimeoutError(f"steps {missing} did not load within {timeout} s")
+                wait = left if poll is None else poll if left is None else min(poll, left)
+                self._lock.wait(wait)
+                if poll is not None:
+                    loaded = len(request.steps) - len(missing)
+                    checkpoint("reading steps", loaded, len(request.steps))
+
+
+WATCHED_POLL_S = 0.05
 
 
 def _round_up_mb(n: int) -> int:

@@ -13,13 +13,11 @@ uploads them.
 from __future__ import annotations
 
 import itertools
-import os
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 
 FORMATS = ("auto", "float32", "uint8", "uint16", "float16")
@@ -27,24 +25,6 @@ QUANT_MAX = {"uint8": 255, "uint16": 65535}
 HALF_MAX = 65504.0  # the largest finite float16
 HALF_EPS = 2.0**-11  # float16 rounding: relative error of a normal value
 PARALLEL_MIN = 1 << 18  # values from which a conversion is split over threads
-
-
-def _workers() -> int:
-    return min(8, os.cpu_count() or 1)
-
-
-_pool_lock = threading.Lock()
-_pool_held: list[ThreadPoolExecutor] = []
-
-
-def _pool() -> ThreadPoolExecutor:
-    """The threads that convert bricks on the host (made when first needed)."""
-    with _pool_lock:
-        if not _pool_held:
-            _pool_held.append(
-                ThreadPoolExecutor(max_workers=_workers(), thread_name_prefix="chronocl-encode")
-            )
-        return _pool_held[0]
 
 
 def stored_dtype(dtype: np.dtype) -> np.dtype:
@@ -101,12 +81,12 @@ class DeviceFormat:
         """
         if out is None:
             out = np.empty(src.shape, self.dtype)
-        parts = _workers() if src.size >= PARALLEL_MIN else 1
+        parts = host_threads.workers() if src.size >= PARALLEL_MIN else 1
         if parts > 1 and src.flags.c_contiguous and out.flags.c_contiguous:
             flat_src, flat_out = src.reshape(-1), out.reshape(-1)
             bounds = np.linspace(0, src.size, parts + 1).astype(int)
             pieces = [slice(a, b) for a, b in itertools.pairwise(bounds)]
-            list(_pool().map(lambda p: self._encode(flat_src[p], flat_out[p]), pieces))
+            list(host_threads.pool().map(lambda p: self._encode(flat_src[p], flat_out[p]), pieces))
             return out
         return self._encode(src, out)
 

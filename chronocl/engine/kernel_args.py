@@ -19,7 +19,8 @@ import numpy as np
 # The C text of common.h's KERNEL_ARGS, argument by argument.
 INTEGRATE_C = """
     __global const DATA_T *data, __global const float *lut, __global const float4 *tc,
-    __global const int *order, __global const int *steps, const int x0, const int nx,
+    __global const int *order, __global const int *steps, __global const long *step_base,
+    const long zstride, const int x0, const int nx,
     const int ny, const int nzb, const int w, const int zcrop, const int nz_out,
     const float vmin, const float scale, const float cut, const float4 enh, const float4 view
 """
@@ -27,7 +28,12 @@ OUTPUTS_C = "__global float4 *out, __global int *t_index"
 ROWS_C = "const int rows, const int nvec, __local T *st"  # ROWS_ARGS(T)
 
 # Host dtypes of the scalar C types (lanes: a float4 is four float32).
-SCALARS = {"int": (np.int32, 1), "float": (np.float32, 1), "float4": (np.float32, 4)}
+SCALARS = {
+    "int": (np.int32, 1),
+    "long": (np.int64, 1),
+    "float": (np.float32, 1),
+    "float4": (np.float32, 4),
+}
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ class NumpyEngine:
         out: tuple[np.ndarray, np.ndarray | None] | None = None,
         raw: bool = False,
     ) -> tuple[Partial, bool]:
-        window = np.moveaxis(brick, 1, 0)
+        window = np.moveaxis(np.asarray(brick), 1, 0)  # a SlotBrick stacked
         u = values.normalize(window, *value_range)
         raw_values = Values(window, value_range)
         partial = reference.accumulate(u, steps, positions, order, spec, raw_values)

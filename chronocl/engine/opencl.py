@@ -16,6 +16,7 @@ import numpy as np
 
 from chronocl.core import values
 from chronocl.core.memory import aligned_empty, is_aligned
+from chronocl.data.bricks import SlotBrick
 from chronocl.engine import elementwise
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.device_formats import check_format_name, resolve_format
@@ -114,6 +115,11 @@ class OpenCLEngine:
         return other
 
     @property
+    def reads_in_place(self) -> bool:
+        """Whether the kernels read host memory where it lies (a `SlotBrick` unstacked)."""
+        return self.host_ptr
+
+    @property
     def max_brick_bytes(self) -> int:
         """Largest brick one buffer may hold on this device (or the limit given)."""
         device = min(self.dc.info.max_alloc, self.dc.info.global_mem // 4)
@@ -142,7 +148,8 @@ class OpenCLEngine:
         out: tuple[np.ndarray, np.ndarray | None] | None = None,
         raw: bool = False,
     ) -> tuple[Partial, bool]:
-        """Integrate brick rows `crop` of an xytz brick (rows, W, Y, X).
+        """Integrate brick rows `crop` of an xytz brick (rows, W, Y, X): an array, or a
+        `SlotBrick` whose steps a CPU device reads where they lie (others stack it).
 
         `out` = (rgba, t_index) receives the result when given (C-contiguous, float32
         (rows, Y, X, 4) and int32 (rows, Y, X)): a caller that integrates again and again,
@@ -155,7 +162,14 @@ class OpenCLEngine:
         fmt = resolve_format(self.device_format, brick.dtype, value_range)
         value_range = fmt.device_range  # quantised data: (0, 255) or (0, 65535)
         dt = fmt.dtype
-        if self.host_ptr:
+        slots = isinstance(brick, SlotBrick)
+        halo = 1 if spec.enhance.needs_gradient else 0
+        if slots:
+            in_place = self.host_ptr and not fmt.converts and brick.dtype == fmt.source
+            parts = self._slot_chunks(brick, crop, halo) if in_place else None
+            if parts is None:
+                brick, slots = np.asarray(brick), False  # stacked: it travels or converts
+        if self.host_ptr and not slots:
             brick = np.ascontiguousarray(brick, dtype=fmt.source)
             if fmt.converts:
                 brick = fmt.encode(brick, aligned_empty(brick.shape, dt))
@@ -184,6 +198,7 @@ class OpenCLEngine:
             # a data TF with opacity everywhere leaves nothing to skip: no test per step
             "SKIP_EMPTY": self.skip_empty and cut > (0.0 if quant else float("-inf")),
             "RAW_PARTIAL": raw,
+            "SLOTS": slots,
             **order_defines(order, w),
             **mode_defines,
         }
@@ -202,7 +217,16 @@ class OpenCLEngine:
         else:
             t_index = None
         e = spec.enhance
-        if self.host_ptr:
+        if slots:
+            aligned = (
+                nx % VEC == 0
+                and brick.zstride % VEC == 0
+                and all(is_aligned(brick.rows(c.r0, c.r1).block) for c in parts)
+                and not (brick.offsets % VEC).any()
+                and is_aligned(rgba)
+                and (t_index is None or is_aligned(t_index))
+            )
+        elif self.host_ptr:
             aligned = (
                 nx % VEC == 0
                 and is_aligned(brick)
@@ -222,6 +246,8 @@ class OpenCLEngine:
             tc=table(tables.tc),
             order=table(np.asarray(order, np.int32)),
             steps=table(np.asarray(steps, np.int32)),
+            step_base=None,  # per launch
+            zstride=brick.zstride if slots else 0,
             x0=None,  # per launch
             nx=nx,
             ny=ny,
@@ -260,9 +286,11 @@ class OpenCLEngine:
                 kern = kernel(self.dc, file, kernel_name, lane_defines)
                 built.append((kern, x0, count, [], None))
 
+        step_base = table(np.zeros(1, np.int64))  # stacked bricks: unused
+
         def launch(queue, data, c: Chunk, out_bufs: list, wait_for: list | None = None) -> list:
             """Enqueue the kernels of brick rows c.r0..c.r1 (output rows c.a..c.b)."""
-            args.set(data=data, nzb=c.rows, zcrop=c.zcrop, nz_out=c.b - c.a)
+            args.set(data=data, step_base=step_base, nzb=c.rows, zcrop=c.zcrop, nz_out=c.b - c.a)
             events = []
             for kern, x0, count, tail, blocks in built:
                 args.set(x0=x0)
@@ -280,15 +308,26 @@ class OpenCLEngine:
 
         with self.dc.lock:
             if self.host_ptr:
-                data = cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick)
                 flags = mf.WRITE_ONLY | mf.USE_HOST_PTR
-                out_bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in outputs]
-                launch(self.dc.queue, data, Chunk(z0, z1, 0, nzb), out_bufs)
-                elementwise.read_back(self.dc, self.host_ptr, outputs, out_bufs)
+                if slots:  # a chunk of rows per buffer where the steps span more than one holds
+                    done, held = [], []
+                    for c in parts:
+                        part = brick.rows(c.r0, c.r1)
+                        data = cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=part.block)
+                        step_base = table(part.offsets)
+                        rows = [a[c.a - z0 : c.b - z0] for a in outputs]
+                        bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in rows]
+                        launch(self.dc.queue, data, Chunk(c.a, c.b, c.r0, c.r1), bufs)
+                        done, held = done + rows, held + bufs
+                    elementwise.read_back(self.dc, self.host_ptr, done, held)
+                else:
+                    out_bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in outputs]
+                    data = cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick)
+                    launch(self.dc.queue, data, Chunk(z0, z1, 0, nzb), out_bufs)
+                    elementwise.read_back(self.dc, self.host_ptr, outputs, out_bufs)
                 self.last_transfer = None
             else:
                 row_bytes = w * ny * nx * dt.itemsize
-                halo = 1 if spec.enhance.needs_gradient else 0
                 chunks = chunks_of(nzb, crop, halo, row_bytes, self.chunk_bytes)
                 self.last_transfer = run_chunks(
                     self.dc.streams(), ctx, fmt, brick, chunks, z0, outputs, launch, self.overlap
@@ -313,6 +352,19 @@ class OpenCLEngine:
     ) -> np.ndarray:
         """The finished RGBA of a window kept as fixed-point sums (see Mode.finish_sums)."""
         return elementwise.finish_sums(self.dc, self.host_ptr, acc, alpha, positions, spec)
+
+    def _slot_chunks(self, brick: SlotBrick, crop: slice, halo: int) -> list[Chunk] | None:
+        """The chunks of brick rows `crop` whose in-place spans each fit one buffer (one chunk
+        where the whole brick does), or None where not even one row and its halo fits."""
+        limit = self.max_brick_bytes
+        if brick.block.nbytes <= limit:
+            return [Chunk(crop.start, crop.stop, 0, brick.shape[0])]
+        item = brick.dtype.itemsize
+        row = brick.zstride * item  # the span grows by this per row
+        fixed = brick.rows(0, 1).block.nbytes + ALIGN_SLACK
+        if fixed + 2 * halo * row > limit:
+            return None
+        return chunks_of(brick.shape[0], crop, halo, row, limit - fixed + row)
 
     def _row_blocks(self, mode, vec: int, n_vec: int, ny: int, nz: int) -> int:
         """Rows a work-item of the mode's rows kernel takes (`Mode.rows_kernel`), 0 where the
@@ -345,6 +397,7 @@ class OpenCLEngine:
 # unit, for an even load.
 ROW_BLOCK_BYTES = 64 * 1024
 ROW_BLOCKS_PER_UNIT = 4
+ALIGN_SLACK = 64  # bytes a chunk's buffer may start early to begin on an aligned address
 TIME_TABLE_MAX = 32  # steps a rows kernel may look up by register permutes (two 16-lane tables)
 
 

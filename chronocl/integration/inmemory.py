@@ -24,6 +24,7 @@ import numpy as np
 from chronocl import modes, reference
 from chronocl.core.enhance import Enhance
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.interrupt import checkpoint
 from chronocl.core.memory import aligned_empty
 from chronocl.core.progress import track
 from chronocl.core.selection import Selection, parse_selection
@@ -273,6 +274,7 @@ def integrate_slabs(
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="chronocl-read") as reader:
         pending = reader.submit(bricks.read, steps, parts[0].r0, parts[0].r1)
         for i, s in enumerate(parts):
+            checkpoint("integrating", i, len(parts))  # given up here when newer input came
             brick = pending.result()
             nxt = parts[i + 1] if i + 1 < len(parts) else None
             if nxt is not None and read_ahead:

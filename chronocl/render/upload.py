@@ -10,16 +10,14 @@ volume is read once. Which format the viewer sends at which size, and why: docs/
 
 from __future__ import annotations
 
-import os
 import sys
 import threading
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from functools import cache
 from itertools import pairwise
 
 import numpy as np
 
+from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
 
 FORMATS: dict[str, type] = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
@@ -106,10 +104,10 @@ def convert(
     if nz * ny * nx <= SERIAL_VOXELS or nz == 1:
         parts = [_convert_slab(rgba, out, fmt, 0, nz, as_is)]
     else:
-        workers = _workers()
+        workers = host_threads.workers()
         cuts = np.linspace(0, nz, min(nz, 2 * workers) + 1).astype(int)
         jobs = [
-            _pool().submit(_convert_slab, rgba, out, fmt, a, b, as_is)
+            host_threads.pool().submit(_convert_slab, rgba, out, fmt, a, b, as_is)
             for a, b in pairwise(cuts.tolist())
             if b > a
         ]
@@ -157,12 +155,3 @@ def _convert_slab(rgba, out, fmt: str, z0: int, z1: int, as_is: bool):
                 occ_y[r0 : r0 + rows] |= in_rows
                 occ_x |= filled.any(axis=0)
     return z0, occ_z, occ_y, occ_x
-
-
-def _workers() -> int:
-    return max(1, min(8, os.cpu_count() or 1))
-
-
-@cache
-def _pool() -> ThreadPoolExecutor:
-    return ThreadPoolExecutor(max_workers=_workers(), thread_name_prefix="chronocl-upload")

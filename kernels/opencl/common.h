@@ -24,7 +24,8 @@
  *   TIME_TABLE  a rows kernel of a mode with t_index, at most 32 steps: the winner's time colour
  *               and step may come from register tables (PERMUTE_TIME)
  *
- * The brick is in xytz order: (nzb, w, ny, nx), x fastest. A work-item integrates VEC
+ * The brick is in xytz order: (nzb, w, ny, nx), x fastest, or with SLOTS its steps lie apart
+ * (VOX_INDEX below). A work-item integrates VEC
  * consecutive voxels starting at x0 + VEC * get_global_id(0), or, in a mode's `_rows` kernel
  * (CPU devices), a block of rows (BLOCK_STEPS below); the output covers brick rows
  * [zcrop, zcrop + nz_out), the rest being the gradient halo. The data LUT is planar
@@ -53,7 +54,13 @@
 /* SLIDING builds hold only a mode's combine / finish kernels: one voxel per work-item, none of
  * the integrate kernels' build options. */
 #ifndef SLIDING
+#ifdef SLOTS
+/* The steps are not stacked but read where they lie (chronocl.data.bricks.SlotBrick): brick
+ * step k's first row starts at step_base[k], and its rows are zstride elements apart. */
+#define VOX_INDEX(zb, k, y, x) (step_base[k] + (size_t)(zb) * zstride + (size_t)(y) * nx + (x))
+#else
 #define VOX_INDEX(zb, k, y, x) ((((size_t)(zb) * w + (k)) * ny + (y)) * nx + (x))
+#endif
 #define OUT_INDEX(z, y, x) (((size_t)(z) * ny + (y)) * nx + (x))
 
 #if VEC == 16
@@ -336,9 +343,9 @@ inline float axis_gradient(float lo, float mid, float hi, int i, int n)
 }
 
 /* Enhancement factor e of step k at brick voxel (x, y, zb); enh = (k0, k1, k2, -). */
-inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, int zb, int nx,
-                            int ny, int nzb, int w, float vmin, float scale, float4 enh,
-                            float4 view)
+inline float enhance_factor(__global const DATA_T *data, __global const long *step_base,
+                            long zstride, int k, int x, int y, int zb, int nx, int ny, int nzb,
+                            int w, float vmin, float scale, float4 enh, float4 view)
 {
 #define U(zz, yy, xx) NORMALIZE(LOAD1(data + VOX_INDEX(zz, k, yy, xx)))
     const float mid = U(zb, y, x);
@@ -357,7 +364,7 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
 }
 #define STEP_ALPHA(lut, p, t, k) \
     VCLAMP(TIMED_ALPHA(lut, p, t) * \
-          enhance_factor(data, k, x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view), 0.0f, 1.0f)
+          enhance_factor(data, step_base, zstride, k, x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view), 0.0f, 1.0f)
 #else
 #define STEP_ALPHA(lut, p, t, k) clamp_unit(TIMED_ALPHA(lut, p, t))
 #endif
@@ -368,7 +375,8 @@ inline float enhance_factor(__global const DATA_T *data, int k, int x, int y, in
  * tests/test_kernel_args.py checks every kernel against the declaration. */
 #define KERNEL_ARGS                                                                        \
     __global const DATA_T *data, __global const float *lut, __global const float4 *tc,     \
-    __global const int *order, __global const int *steps, const int x0, const int nx,      \
+    __global const int *order, __global const int *steps, __global const long *step_base, \
+    const long zstride, const int x0, const int nx,                                        \
     const int ny, const int nzb, const int w, const int zcrop, const int nz_out,           \
     const float vmin, const float scale, const float cut, const float4 enh, const float4 view
 
@@ -576,7 +584,7 @@ inline TimeTable time_table(__global const float4 *tc, __global const int *steps
 #endif
 #if ENHANCE
 #define WINNER_ENHANCE(win) \
-    *enhance_factor(data, (win), x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view)
+    *enhance_factor(data, step_base, zstride, (win), x, y, zb, nx, ny, nzb, w, vmin, scale, enh, view)
 #else
 #define WINNER_ENHANCE(win)
 #endif

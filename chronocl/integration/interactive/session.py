@@ -31,8 +31,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from chronocl.core.budget import human, parse_memory
+from chronocl.core.budget import human, interactive_memory, parse_memory
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.interrupt import watched
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.data.bricks import ResidentBricks, SeriesBricks
 from chronocl.data.chronovolume import Chronovolume
@@ -48,6 +49,7 @@ from chronocl.integration.interactive.sliding import block_size
 from chronocl.modes.spec import IntegrationSpec
 
 Managers = dict[tuple[int, str], WindowManager]
+REFINE_SLABS = 8  # slabs of a window integrated where it may be given up (`Session._slab_rows`)
 
 
 class Settings(NamedTuple):
@@ -73,7 +75,8 @@ def settings(
     """The keywords a `Session` takes at any level (`Session`'s docstring says what each is)."""
     asked = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
-    return Settings(asked, eng, parse_memory(memory), prefetch, managers)
+    budget = interactive_memory() if memory is None else parse_memory(memory)
+    return Settings(asked, eng, budget, prefetch, managers)
 
 
 class Session:
@@ -86,11 +89,12 @@ class Session:
         cv = s.set_spec(mode="alpha")  # re-integrated from resident steps
 
     Keywords (`settings` reads those every level shares): `memory` is the budget for resident
-    steps plus sliding state; `engine` (a name, with `device`, or an `Engine`); `spec`, or the
-    fields of one (`mode`, `time_tf`, ... as `make_spec` takes them); `prefetch`, the steps
-    read ahead in the scrub direction; `managers` (a dict the caller owns and closes) shares
-    one window manager per (level, pooling) among sessions, and `manager` shares another
-    session's resident steps (parallel views of one window) instead.
+    steps plus sliding state (default: half the memory free, at least 2 GB); `engine` (a
+    name, with `device`, or an `Engine`); `spec`, or the fields of one (`mode`, `time_tf`,
+    ... as `make_spec` takes them); `prefetch`, the steps read ahead in the scrub direction;
+    `managers` (a dict the caller owns and closes) shares one window manager per (level,
+    pooling) among sessions, and `manager` shares another session's resident steps
+    (parallel views of one window) instead.
 
     `level` is a coarse level of the series (0: full resolution). ``level="auto"`` does not
     make a `Session`: ``Session(...)`` then returns an `AutoSession`
@@ -127,7 +131,9 @@ class Session:
         self.selection: Selection | None = None
         self.stats: dict = {}
         self._arrays: dict[int, np.ndarray] = {}
-        self._bricks = ResidentBricks(self._arrays)
+        # CPU devices read the window where the manager's slots hold it; others stack it.
+        in_place = bool(getattr(self.engine, "reads_in_place", False))
+        self._bricks = ResidentBricks(self._arrays, in_place=in_place)
         self._slider: Slider | None = None
         self._cv: Chronovolume | None = None
         self._prefetch = prefetch = setup.prefetch
@@ -247,7 +253,8 @@ class Session:
         else:
             job = window_job(self.series, selection, self.spec)
             self._bricks.arrays = self._arrays  # its `keep` was decided above
-            cv = integrate_bricks(job, self.engine, self._bricks)
+            self._cv = None  # none for this window until the integration below completes
+            cv = integrate_bricks(job, self.engine, self._bricks, slab=self._slab_rows())
             # Jumps and spec changes integrate directly (one pass over the window); the
             # sliding state starts from this window and is filled lazily on the next slide.
             self._slider = None
@@ -284,12 +291,20 @@ class Session:
         slab's brick a quarter of the budget at most (nothing resident, no sliding)."""
         job = window_job(self.series, selection, self.spec)
         rows = max(1, self.budget // (4 * max(1, job.row_bytes)))
-        self._arrays, self._slider, self.selection = {}, None, selection
+        self._arrays, self._slider, self.selection, self._cv = {}, None, selection, None
         self._bricks.forget()
         self._cv = integrate_bricks(job, self.engine, SeriesBricks(self.series), slab=rows)
         why = f"the window needs {human(window)} > budget {human(self.budget)}: streamed by z-slabs"
         self._record(t, "streamed", why)
         return self._cv
+
+    def _slab_rows(self) -> int | None:
+        """Rows per slab: work that may be given up (a viewer's refine) integrates a window
+        read in place in REFINE_SLABS slabs, so newer input stops it within one slab's time
+        (slabs in place cost no copy); otherwise as many rows as the engine takes at once."""
+        if not (watched() and self._bricks.in_place):
+            return None
+        return -(-self.series.volume_shape[0] // REFINE_SLABS)
 
     def _record(self, t: float, path: str, reason: str | None) -> None:
         self.stats = {

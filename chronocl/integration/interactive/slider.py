@@ -15,6 +15,7 @@ import numpy as np
 
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection
+from chronocl.data.bricks import slot_brick
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine.base import Engine
@@ -60,8 +61,12 @@ class Leaves:
             return self._full[step]
         steps = (*self.before.get(step, ()), step) if self.mode.leaf_span > 1 else (step,)
         arrays = [self.arrays[s] for s in steps]
-        # One step is a (Z, 1, Y, X) xytz brick without a copy.
-        brick = arrays[0][:, None] if len(arrays) == 1 else np.stack(arrays, axis=1)
+        # Read in place where the engine can and the steps lie in one block (the window
+        # manager's slots); one contiguous step is a (Z, 1, Y, X) brick without a copy.
+        brick = slot_brick(arrays) if getattr(self.engine, "reads_in_place", False) else None
+        if brick is None:
+            one = len(arrays) == 1 and arrays[0].flags.c_contiguous
+            brick = arrays[0][:, None] if one else np.stack(arrays, axis=1)
         positions = self.spec.time_tf.positions_of(list(steps), self.n_steps)
         partial, _ = self.engine.accumulate(
             brick,

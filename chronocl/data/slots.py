@@ -1,0 +1,59 @@
+"""Step slots: one block of memory that holds a window manager's resident steps side by side.
+
+The block is laid out as the kernels read bricks, (Z, S, Y, X) for S slots: the rows of the
+slots interleave, so the rows of any window of resident steps lie within S * Y * X elements
+of each other and a window integrates where it lies (`chronocl.data.bricks.SlotBrick`, one
+device buffer per slab) instead of being stacked. A slide reads one step into one slot. The
+block is reserved, not written: its pages fill only as steps are read into it.
+
+A slot is handed out as a (Z, Y, X) view and goes back to the free list only once nothing
+holds that view (a weak reference's callback): a step evicted while a session still reads it
+is never overwritten. The lowest free slot is taken first, which keeps the steps close
+together. With every slot taken a step gets an array of its own: correct, only not in place.
+"""
+
+from __future__ import annotations
+
+import heapq
+import threading
+import weakref
+
+import numpy as np
+
+from chronocl.core.memory import aligned_empty
+
+
+class StepSlots:
+    """`count` slots for steps of `shape` (Z, Y, X) and `dtype`."""
+
+    def __init__(self, shape: tuple[int, int, int], dtype: np.dtype, count: int) -> None:
+        self.shape, self.dtype, self.count = tuple(shape), np.dtype(dtype), max(0, int(count))
+        self._block: np.ndarray | None = None
+        self._free = list(range(self.count))  # a heap: the lowest slot first
+        # Re-entrant: a view can be collected (and its slot given back) inside `take`.
+        self._lock = threading.RLock()
+        self.own_arrays = 0  # steps that found no free slot
+
+    def take(self) -> np.ndarray:
+        """A (Z, Y, X) array for one step: a free slot, else an array of its own."""
+        with self._lock:
+            if not self._free:
+                self.own_arrays += 1
+                return aligned_empty(self.shape, self.dtype)
+            if self._block is None:
+                nz, ny, nx = self.shape
+                self._block = aligned_empty((nz, self.count, ny, nx), self.dtype)
+            i = heapq.heappop(self._free)
+            view = self._block[:, i]
+        weakref.finalize(view, self._give_back, i)
+        return view
+
+    @property
+    def free(self) -> int:
+        """Slots free now."""
+        with self._lock:
+            return len(self._free)
+
+    def _give_back(self, i: int) -> None:
+        with self._lock:
+            heapq.heappush(self._free, i)

@@ -1,0 +1,176 @@
+"""Windows integrated where their steps lie (issue 32, no copy per integration).
+
+The window manager reads steps into slots of one block (`chronocl.data.slots`), and an
+in-memory series' steps lie in its own array: an OpenCL engine on a CPU device reads both in
+place through a `SlotBrick` (kernels' SLOTS build), in chunks of rows where a brick spans
+more than one buffer may hold. Each of these equals the numpy reference, on odd shapes, odd
+windows, strides, orders and slabs, and a session's slides both ways over slots equal it too.
+"""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import chronocl
+from chronocl.core.selection import Selection
+from chronocl.data.bricks import ResidentBricks, SeriesBricks, SlotBrick, slot_brick
+from chronocl.data.slots import StepSlots
+from chronocl.engine.opencl import OpenCLEngine
+from chronocl.integration.inmemory import integrate_bricks, window_job
+from chronocl.integration.interactive.session import Session
+
+from .strategies import examples, specs
+
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
+
+def assert_same(a, b, atol: float = 1e-5) -> None:
+    np.testing.assert_allclose(a.rgba, b.rgba, atol=atol, rtol=0)
+    if b.t_index is None:
+        assert a.t_index is None
+    else:
+        np.testing.assert_array_equal(a.t_index, b.t_index)
+
+
+class Counting(OpenCLEngine):
+    """The OpenCL engine, counting the bricks it was given in place."""
+
+    def __init__(self, **options) -> None:
+        super().__init__(**options)
+        self.in_place = 0
+
+    def accumulate(self, brick, *args, **kwargs):
+        self.in_place += isinstance(brick, SlotBrick)
+        return super().accumulate(brick, *args, **kwargs)
+
+
+@st.composite
+def slotted_windows(draw):
+    """A series, a window of it (any stride) and its steps held in slots of one block, in a
+    random order among more slots than the window has steps."""
+    shape = draw(st.tuples(st.integers(1, 6), st.integers(1, 5), st.integers(1, 40)))
+    n_steps = draw(st.integers(1, 14))
+    stride = draw(st.integers(1, 3))
+    t0 = draw(st.integers(0, n_steps - 1))
+    steps = tuple(range(t0, n_steps, stride))[: draw(st.integers(1, 14))]
+    rng = np.random.default_rng(draw(st.integers(0, 2**31)))
+    dtype = draw(st.sampled_from([np.float32, np.uint8, np.uint16]))
+    data = rng.random((n_steps, *shape), dtype=np.float32)
+    data[rng.random(data.shape) < 0.3] = 0.0  # empty lanes beside live ones
+    if dtype != np.float32:
+        data = np.round(data * np.iinfo(dtype).max).astype(dtype)
+    series = chronocl.TimeSeries.from_array(data)
+    slots = StepSlots(shape, data.dtype, len(steps) + draw(st.integers(0, 5)))
+    held = [slots.take() for _ in range(slots.count)]
+    order = draw(st.permutations(range(slots.count)))
+    arrays = {}
+    for s, i in zip(steps, order, strict=False):
+        held[i][...] = data[s]
+        arrays[s] = held[i]
+    return series, Selection(steps, n_steps), arrays
+
+
+@settings(max_examples=examples(30))
+@given(st.data())
+def test_steps_in_slots_integrate_in_place_as_the_reference(data):
+    series, sel, arrays = data.draw(slotted_windows())
+    spec = data.draw(specs(selection=sel))
+    slab = data.draw(st.integers(1, series.volume_shape[0] + 1))
+    # A small buffer limit makes the engine cut the in-place brick into chunks of rows.
+    limit = data.draw(st.sampled_from([None, 1, 3]))
+    row = series.volume_shape[1] * series.volume_shape[2] * series.dtype.itemsize
+    engine = Counting(max_brick_bytes=None if limit is None else limit * row * 20)
+    job = window_job(series, sel, spec)
+    got = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab)
+    ref = chronocl.integrate(series, sel, spec=spec, engine="numpy")
+    assert_same(got, ref)
+
+
+@settings(max_examples=examples(20))
+@given(st.data())
+def test_an_in_memory_series_integrates_in_place_as_the_reference(data):
+    series, sel, _ = data.draw(slotted_windows())
+    spec = data.draw(specs(selection=sel))
+    engine = Counting()
+    slab = data.draw(st.integers(1, series.volume_shape[0] + 1))
+    got = chronocl.integrate(series, sel, spec=spec, engine=engine, slab=slab)
+    assert_same(got, chronocl.integrate(series, sel, spec=spec, engine="numpy"))
+    assert engine.in_place > 0
+
+
+@pytest.mark.parametrize("mode", ["alpha", "max", "first_hit", "additive", "change"])
+def test_a_session_over_slots_slides_both_ways_as_the_reference(mode, tmp_path):
+    """A store-backed session: steps read into the manager's slots, every window integrated
+    in place (never stacked), slides both ways and a TF edit equal to the numpy reference."""
+    rng = np.random.default_rng(3)
+    path = tmp_path / "s.zarr"
+    chronocl.TimeSeries.from_array(rng.random((16, 7, 9, 37), dtype=np.float32)).save(path)
+    series = chronocl.open(path)
+    engine = Counting()
+    with Session(series, mode=mode, engine=engine, memory="64MB") as session:
+        session.set_window(3, 11)
+        for k in (1, 1, 3, -1, -4, 2, -2):
+            cv = session.slide(k)
+            ref = chronocl.integrate(series, session.window(), spec=session.spec, engine="numpy")
+            assert_same(cv, ref)
+        session.set_spec(order="backward")
+        ref = chronocl.integrate(series, session.window(), spec=session.spec, engine="numpy")
+        assert_same(session.current(), ref)
+        assert session.manager.slots.own_arrays == 0
+    assert engine.in_place > 0
+
+
+def test_a_held_slot_is_never_handed_out_again():
+    slots = StepSlots((2, 3, 4), np.float32, 2)
+    a, b = slots.take(), slots.take()
+    a[...], b[...] = 1.0, 2.0
+    rows = a[1:]  # a slice alone does not hold the slot: the view does
+    extra = slots.take()  # every slot taken: an array of its own
+    assert slots.own_arrays == 1 and not np.shares_memory(extra, a)
+    del b
+    gc.collect()
+    c = slots.take()  # b's slot, free again
+    c[...] = 3.0
+    assert (a == 1.0).all() and (rows == 1.0).all()
+    assert slot_brick([a, c]) is not None
+
+
+def test_steps_that_do_not_share_a_block_are_stacked():
+    a = np.zeros((2, 3, 16), np.float32)
+    b = np.ones((2, 3, 16), np.float32)
+    assert slot_brick([a, b]) is None
+    assert slot_brick([a]) is not None
+    brick = ResidentBricks({0: a, 1: b}).read([0, 1])
+    assert isinstance(brick, np.ndarray) and brick.shape == (2, 2, 3, 16)
+    together = np.arange(3 * 2 * 3 * 16, dtype=np.float32).reshape(3, 2, 3, 16)
+    brick = SeriesBricks(chronocl.TimeSeries.from_array(together)).read([2, 0], 1, 2)
+    assert isinstance(brick, SlotBrick)
+    np.testing.assert_array_equal(np.asarray(brick), together[[2, 0], 1:2].swapaxes(0, 1))
+
+
+@pytest.mark.parametrize("enhance", ["none", "edge"])
+def test_a_brick_wider_than_one_buffer_goes_in_chunks_of_rows(enhance):
+    """Two steps in slots 0 and 7 of eight: a 6-row brick spans 8 steps' rows, more than a
+    buffer of 40 rows may hold, so the engine reads it in place in chunks (halo rows too)."""
+    rng = np.random.default_rng(5)
+    data = rng.random((2, 6, 4, 32), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    slots = StepSlots((6, 4, 32), np.float32, 8)
+    held = [slots.take() for _ in range(8)]
+    held[0][...], held[7][...] = data[0], data[1]
+    row = 4 * 32 * 4
+    engine = Counting(max_brick_bytes=40 * row)
+    sel = Selection((0, 1), 2)
+    brick = ResidentBricks({0: held[0], 1: held[7]}).read([0, 1])
+    chunks = engine._slot_chunks(brick, slice(0, 6), 1 if enhance != "none" else 0)
+    assert chunks is not None and len(chunks) > 1
+    spec = chronocl.make_spec("max", enhance=enhance)
+    job = window_job(series, sel, spec)
+    got = integrate_bricks(job, engine, ResidentBricks({0: held[0], 1: held[7]}))
+    assert_same(got, chronocl.integrate(series, sel, spec=spec, engine="numpy"))
+    assert engine.in_place > 0
