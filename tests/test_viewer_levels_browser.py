@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 pytest.importorskip("starlette")
-playwright_api = pytest.importorskip("playwright.sync_api")
+pytest.importorskip("playwright.sync_api")
 
-import chronocl  # noqa: E402
-from chronocl.data import synthetic  # noqa: E402
+import chronocl
+from chronocl.data import synthetic
 
-from .viewer_helpers import BROWSER_ARGS, CHROMIUM, start_server  # noqa: E402
+from .viewer_helpers import CHROMIUM, browser_page, start_server
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
@@ -30,12 +30,7 @@ def test_a_256_cube_arrives_coarse_then_refines(tmp_path):
     shots = os.environ.get("CHRONOCL_SCREENSHOTS", str(tmp_path))
     server = start_server([path])
     try:
-        with playwright_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=BROWSER_ARGS)
-            context = browser.new_context(viewport={"width": 1280, "height": 820}, bypass_csp=True)
-            page = context.new_page()
-            problems: list[str] = []
-            page.on("pageerror", lambda e: problems.append(str(e)))
+        with browser_page(1280, 820) as (page, problems):
             page.goto(server.url)
             page.wait_for_function(
                 "() => window.viewer && window.viewer.frames >= 1", timeout=120_000
@@ -53,7 +48,5 @@ def test_a_256_cube_arrives_coarse_then_refines(tmp_path):
             assert page.evaluate("() => document.body.dataset.refining") == "no"
             page.screenshot(path=os.path.join(shots, "levels-full.png"))
             assert problems == []
-            context.close()
-            browser.close()
     finally:
         server.stop()

@@ -1,26 +1,39 @@
 """The data sets a viewer serves: each series named for the client, with its statistics, the
-histogram of the values in a window (from cached per-step samples), and v(t) at a voxel or over
-a box for the probe."""
+histogram of the values in a window, and v(t) at a voxel or over a box for the probe.
+
+A window's histogram never reads full-resolution steps: it is the sum of small per-step
+counts, each counted once per (step, range) from a small sample of that step (`step_sample`):
+the series' coarsest stored level that still holds about HIST_MIN_VOXELS voxels (the "mean"
+pool), else a strided sample of the step that decodes at most HIST_READ_BYTES of its stored
+chunks (a series in memory: a strided view of its array).
+"""
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.core.time_labels import display_labels, has_labels
+from chronocl.core.values import normalize
+from chronocl.data.level_sources import AdoptedLevels
 from chronocl.data.probe import TimeCurve, probe
+from chronocl.data.pyramid import level_shapes
 from chronocl.data.series import TimeSeries, open_series
 
 HIST_BINS = 128
 HIST_SAMPLE_STEPS = 8  # at most this many steps of the window are sampled
 HIST_SAMPLE_VOXELS = 2**18  # about this many voxels of each (strided along every axis)
+HIST_MIN_VOXELS = 2**15  # the coarsest stored level with at least this many voxels is sampled
+HIST_READ_BYTES = 32 * 2**20  # a step without such a level: at most this much decoded for it
 HIST_CACHE_STEPS = 64  # steps whose samples are kept (a window sliding by one reads one step)
+HIST_CACHE_COUNTS = 4096  # per-(step, range) counts kept (a KiB each)
 
 
 def sample_steps(steps: Sequence[int], stride: int = 1) -> list[int]:
@@ -34,6 +47,55 @@ def sample_steps(steps: Sequence[int], stride: int = 1) -> list[int]:
     return [s for s in steps if (s // max(1, stride)) % m == 0]
 
 
+def sample_level(series: TimeSeries) -> int:
+    """The level a step's histogram sample is read from: the coarsest level read from storage
+    (not pooled on the fly from level 0) with at least HIST_MIN_VOXELS voxels; 0: none."""
+    source = series.level_source
+    if source is None and series.path is not None:
+        stored = range(1, series.n_levels)  # the store's own levels
+    elif isinstance(source, AdoptedLevels):
+        stored = sorted(n for n in source.arrays if n > 0)  # a format's own "mean" levels
+    else:
+        return 0  # levels would be pooled from level 0: sample level 0 instead
+    shapes = level_shapes(series.volume_shape)
+    big = [n for n in stored if n <= len(shapes) and math.prod(shapes[n - 1]) >= HIST_MIN_VOXELS]
+    return max(big, default=0)
+
+
+def _stride(voxels: int) -> int:
+    """The stride along every axis that leaves about HIST_SAMPLE_VOXELS of `voxels`."""
+    return max(1, round(float(np.cbrt(voxels / HIST_SAMPLE_VOXELS))))
+
+
+def raw_sample(series: TimeSeries, step: int, level: int | None = None) -> np.ndarray:
+    """The raw values of one step that its histogram counts (see the module's docstring), read
+    from `level` (None: `sample_level`'s)."""
+    level = sample_level(series) if level is None else level
+    source = series.level(level) if level else series
+    shape = source.volume_shape
+    s = _stride(math.prod(shape))
+    every = slice(None, None, s)
+    if level or source.path is None:  # a small level, or a series in memory
+        if source.host is not None:
+            return np.array(source.host[step, every, every, every])
+        return source.read_region(slice(step, step + 1), every, every, every)[0]
+    # A stored step without levels: whole z chunks, decoding at most HIST_READ_BYTES of them.
+    zc = source.z_chunk
+    n_chunks = -(-shape[0] // zc)
+    chunk_bytes = zc * shape[1] * shape[2] * source.dtype.itemsize
+    keep = max(1, min(n_chunks, HIST_READ_BYTES // max(1, chunk_bytes)))
+    if keep == n_chunks:
+        return source.read_region(slice(step, step + 1), every, every, every)[0]
+    s = _stride(keep * zc * shape[1] * shape[2])
+    every = slice(None, None, s)
+    # The middle chunk of each of `keep` equal stretches of z (a volume's edges are often empty).
+    chunks = sorted({(2 * i + 1) * n_chunks // (2 * keep) for i in range(keep)})
+    rows = [slice(c * zc, min(shape[0], (c + 1) * zc), s) for c in chunks]
+    return np.concatenate(
+        [source.read_region(slice(step, step + 1), z, every, every)[0] for z in rows]
+    )
+
+
 class Dataset:
     """One series the server was started with, named for the client (`path`: its store, which
     saved sessions record); statistics cached."""
@@ -44,6 +106,8 @@ class Dataset:
         self.path = path
         self._lock = threading.Lock()
         self._samples: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._counts: OrderedDict[tuple[int, float, float], np.ndarray] = OrderedDict()
+        self._level: int | None = None  # the level step samples are read from
 
     def info(self, index: int) -> dict:
         s = self.series
@@ -70,34 +134,59 @@ class Dataset:
         }
 
     def step_sample(self, step: int) -> np.ndarray:
-        """Normalised values u of one step, strided to about HIST_SAMPLE_VOXELS (cached)."""
+        """Normalised values u of one step's histogram sample, about HIST_SAMPLE_VOXELS of them
+        (`raw_sample`; cached)."""
         with self._lock:
             got = self._samples.get(step)
             if got is not None:
                 self._samples.move_to_end(step)
                 return got
         s = self.series
-        shape = np.array(s.volume_shape)
-        stride = max(1, round(float(np.cbrt(shape.prod() / HIST_SAMPLE_VOXELS))))
-        u = s.normalized([step], 0, int(shape[0]))[0]
-        got = np.ascontiguousarray(u[::stride, ::stride, ::stride], np.float32).ravel()
+        if self._level is None:
+            self._level = sample_level(s)  # (reads the store's level metadata)
+        got = normalize(raw_sample(s, step, self._level), s.vmin, s.vmax).ravel()
         with self._lock:
             self._samples[step] = got
             while len(self._samples) > HIST_CACHE_STEPS:
                 self._samples.popitem(last=False)
         return got
 
+    def step_counts(self, step: int, lo: float, hi: float) -> np.ndarray:
+        """HIST_BINS counts of one step's sample over [lo, hi] (cached per step and range)."""
+        key = (int(step), float(lo), float(hi))
+        with self._lock:
+            got = self._counts.get(key)
+            if got is not None:
+                self._counts.move_to_end(key)
+                return got
+        got = np.histogram(self.step_sample(step), bins=HIST_BINS, range=(lo, hi))[0]
+        got = got.astype(np.int64)
+        with self._lock:
+            self._counts[key] = got
+            while len(self._counts) > HIST_CACHE_COUNTS:
+                self._counts.popitem(last=False)
+        return got
+
     def histogram(
-        self, lo: float = 0.0, hi: float = 1.0, steps: Sequence[int] | None = None, stride: int = 1
-    ) -> dict:
+        self,
+        lo: float = 0.0,
+        hi: float = 1.0,
+        steps: Sequence[int] | None = None,
+        stride: int = 1,
+        given_up: Callable[[], bool] | None = None,
+    ) -> dict | None:
         """Counts of u in HIST_BINS bins over [lo, hi] in the window of `steps` (None: the
-        whole series), sampled by `sample_steps`; which steps were sampled is in "steps"."""
+        whole series): the sum of the per-step counts (`step_counts`) of the steps
+        `sample_steps` picks, which are in "steps". None where `given_up()` turned true
+        between two steps (a newer request replaces this one; the steps counted stay cached)."""
         if not hi > lo:
             raise InvalidParameterError(f"histogram range [{lo}, {hi}] must have lo < hi")
         chosen = sample_steps(range(self.series.n_steps) if steps is None else steps, stride)
         counts = np.zeros(HIST_BINS, np.int64)
         for step in chosen:
-            counts += np.histogram(self.step_sample(step), bins=HIST_BINS, range=(lo, hi))[0]
+            if given_up is not None and given_up():
+                return None
+            counts += self.step_counts(step, lo, hi)
         return {"range": [lo, hi], "counts": counts.tolist(), "steps": chosen}
 
     def curve(self, voxel: tuple[int, int, int] | None = None, box: object = None) -> TimeCurve:

@@ -19,6 +19,7 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
                 "format": mp4 | gif, "frames", "fps"}     message after every frame
                {"what": "session"}                       the state as a session file
     load       {"session": a session file's object}     apply a saved session as one step
+    cancel     {}                                       stop refining the frame shown
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
 (numbers must be finite; data values must fit float32, ranges need lo < hi) raise
@@ -195,6 +196,7 @@ SESSION = Obj(
     frozenset({SESSION_KEY, "dataset", "window", "views", "camera", "data_tf", "time_tf"}),
 )
 
+UNIT_RANGE, NEEDS_RANGE = Range(Num(0.0, 1.0)), frozenset({"range"})  # histogram
 MESSAGES: dict[str, Obj] = {
     "open": Obj(
         {"type": Enum(("open",)), "id": ID, "dataset": Name(), "fit": Bool()},
@@ -223,10 +225,7 @@ MESSAGES: dict[str, Obj] = {
         },
         frozenset({"x", "y"}),
     ),
-    "histogram": Obj(
-        {"type": Enum(("histogram",)), "id": ID, "range": Range(Num(0.0, 1.0))},
-        frozenset({"range"}),
-    ),
+    "histogram": Obj({"type": Enum(("histogram",)), "id": ID, "range": UNIT_RANGE}, NEEDS_RANGE),
     "fit": Obj({"type": Enum(("fit",)), "id": ID, "view": Int(0, MAX_VIEWS - 1), "mode": MODE}),
     "save": Obj(
         {
@@ -243,6 +242,7 @@ MESSAGES: dict[str, Obj] = {
         frozenset({"what"}),
     ),
     "load": Obj({"type": Enum(("load",)), "id": ID, "session": SESSION}, frozenset({"session"})),
+    "cancel": Obj({"type": Enum(("cancel",)), "id": ID}),
 }
 
 

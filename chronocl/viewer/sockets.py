@@ -15,6 +15,7 @@ import threading
 from chronocl.core.errors import ChronoclError
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import internal_error, log
+from chronocl.viewer.progress import refine_progress
 from chronocl.viewer.protocol import ProtocolError, choices, parse_message, request_id
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.worker import ClientWorker
@@ -53,6 +54,9 @@ def handle(worker: ClientWorker, msg: dict) -> dict | None:
     if kind == "update":
         worker.update(msg)
         return None
+    if kind == "cancel":
+        worker.cancel_refine()
+        return {**refine_progress("cancelled", 0, 0, 0, 0), "id": msg.get("id")}
     worker.task(kind, msg)
     return None
 

@@ -1,14 +1,18 @@
-"""The requests a client's render worker answers between frames: histogram, fit, probe and
-saves (image, chronovolume, session, movie). `Tasks` is a part of `ClientWorker` (chronocl.viewer
-.worker), kept here so that each file holds one concern; it runs on the worker's thread and
-uses the worker's views, shown state and reply channel.
+"""The requests a client's render worker answers beside its frames: probe and saves (image,
+chronovolume, session, movie) between frames, on the worker's thread (they use its views);
+histogram and fit on the client's side thread (`chronocl.viewer.side_work`), so that they never
+delay a frame. `Tasks` is a part of `ClientWorker` (chronocl.viewer.worker), kept here so that
+each file holds one concern; it uses the worker's views, shown state and reply channel.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Hashable
+
 from chronocl.core.errors import InvalidParameterError
 from chronocl.render.views import parse_color
 from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.errors import error_text
 from chronocl.viewer.fit import fit_reply
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.movie import movie_states, render_movie
@@ -22,6 +26,67 @@ from chronocl.viewer.view_state import ViewState
 class Tasks:
     """Histogram, fit, probe and save requests (the methods `ClientWorker` answers them with)."""
 
+    # -- on the side thread (the worker's `side`) -------------------------------------------
+    def _beside(self, key: Hashable, rid: int | None, what: str, job: Callable[[], None]) -> None:
+        """Run `job` on the side thread, in place of a waiting job of `key`; its error goes
+        to the client as the answer to `rid`."""
+
+        def run() -> None:
+            try:
+                job()
+            except Exception as exc:
+                self._reply({"type": "error", "id": rid, "message": error_text(exc, f"on {what}")})
+
+        if not self.side.submit(key, run) and not self._closed:
+            raise InvalidParameterError("too many requests are waiting; wait for their replies")
+
+    def _beside_frames(self, kind: str, msg: dict) -> bool:
+        """Send a histogram or fit request to the side thread; False for other kinds."""
+        if kind == "histogram":
+            self._request_histogram(msg.get("id"), list(msg["range"]))
+        elif kind == "fit":
+            self._request_fit(msg)
+        return kind in ("histogram", "fit")
+
+    def _histogram_after(self, state: ViewState) -> None:
+        """After a full-quality frame of another window than the histogram's: its histogram
+        (unless one waits: it counts the window wanted when it runs)."""
+        window = (state.dataset, *state.window)
+        if state.quality == "full" and window != self._hist_window:
+            self._hist_window = window
+            if not self.side.waiting("histogram"):
+                self._request_histogram(None, self._hist_range)
+
+    def _request_histogram(self, rid: int | None, value_range: list[float]) -> None:
+        """Count the histogram over `value_range` of the window wanted when it runs; a newer
+        request replaces one still waiting (its `id` then gets no answer of its own)."""
+        self._hist_range = list(value_range)
+        lo, hi = value_range
+        self._beside("histogram", rid, "histogram", lambda: self._histogram(rid, lo, hi))
+
+    def _histogram(self, rid: int | None, lo: float, hi: float) -> None:
+        with self._cond:
+            state = self.state
+        ds = self.datasets[state.dataset]
+        steps = state.selection(ds.series.n_steps).steps
+        hist = ds.histogram(
+            lo, hi, steps, state.window[2], given_up=lambda: self.side.waiting("histogram")
+        )
+        if hist is None:
+            return  # a newer request waits: it answers instead
+        self._hist_window = (state.dataset, *state.window)
+        self._reply({"type": "histogram", "id": rid, **hist, "window": list(state.window)})
+
+    def _request_fit(self, msg: dict) -> None:
+        def fit() -> None:
+            with self._cond:
+                state = self.state
+            self._reply(fit_reply(msg, state, self.datasets[state.dataset].series))
+
+        self._beside(("fit", id(msg)), msg.get("id"), "fit", fit)
+
+    # -- on the render thread, between frames ---------------------------------------------
+
     def _do_task(self, kind: str, msg: dict) -> None:
         rid = msg.get("id")
         ds = self.datasets[self.state.dataset]
@@ -30,15 +95,6 @@ class Tasks:
             self._reply(
                 {"type": "download", "id": rid, "url": f"/download/{key}", "filename": name}
             )
-        elif kind == "histogram":
-            lo, hi = self._hist_range = list(msg["range"])
-            state = self.state
-            steps = state.selection(ds.series.n_steps).steps
-            self._hist_window = (state.dataset, *state.window)
-            hist = ds.histogram(lo, hi, steps, state.window[2])
-            self._reply({"type": "histogram", "id": rid, **hist, "window": list(state.window)})
-        elif kind == "fit":
-            self._reply(fit_reply(msg, self.state, ds.series))
         elif kind == "probe":
             self._probe(msg)
         elif kind == "save":

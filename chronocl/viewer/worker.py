@@ -7,10 +7,11 @@ thread that makes frames from it. Updates are merged into the desired state at o
 that arrives while a frame is being made replaces older pending input instead of queueing
 behind it. The views' sessions and textures (`view_sessions.Views`) integrate only what
 changed, so a camera change only re-renders and a window slide updates incrementally.
-Histogram, probe and save requests (`tasks.Tasks`) wait in a short queue behind the newest
-frame. The camera frames the visible region found at a data set's first frame and again at
-each camera reset (`refocus`), and keeps that framing while the window moves. GL work runs on
-the viewer's GL thread (`gl_thread.on_gl`).
+Probe and save requests (`tasks.Tasks`) wait in a short queue behind the newest frame;
+histogram and fit requests run on the client's side thread (`side_work.SideWork`), so they
+never delay a frame. The camera frames the visible region found at a data set's first frame
+and again at each camera reset (`refocus`), and keeps that framing while the window moves. GL
+work runs on the viewer's GL thread (`gl_thread.on_gl`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from collections import deque
 from collections.abc import Callable
 
 from chronocl import modes
-from chronocl.core.errors import InvalidParameterError
+from chronocl.core.errors import InvalidParameterError, SupersededError
+from chronocl.core.interrupt import interruptible
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.framing import framed
 from chronocl.render.views import describe, parse_color
@@ -45,9 +47,11 @@ from chronocl.viewer.frames import (
 )
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.probe import project
+from chronocl.viewer.progress import RefineProgress
 from chronocl.viewer.protocol import pack_frame
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.session_file import checked_focus, loaded_state
+from chronocl.viewer.side_work import SideWork
 from chronocl.viewer.slots import upload
 from chronocl.viewer.tasks import Tasks
 from chronocl.viewer.view_sessions import Views
@@ -79,9 +83,11 @@ class ClientWorker(Tasks):
         self._cond = threading.Condition()
         self._pending: tuple[ViewState, int | None] | None = None
         self._tasks: deque[tuple[str, dict]] = deque()
+        self.side = SideWork()  # histograms and fits, beside the frames
         self._closed = False
         self.views = Views(datasets, engine, device, memory)
         self._refine_at: float | None = None  # when the coarse frame shown is to be refined
+        self._cancelled = False  # the client cancelled the refine of the frame shown
         self._draw_budget = DrawBudget()  # pixels a frame answering input may draw
         self._last_rid: int | None = None
         self._shown: ViewState | None = None  # the state of the last frame sent
@@ -115,7 +121,7 @@ class ClientWorker(Tasks):
             self._probed = None
             self._focus_gen += 1
             self._pending = (self.state, rid)
-            self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
+            self._hist_range, self._hist_window = [0.0, 1.0], None  # sent after its frame
             self._cond.notify()
         if not fit:
             return self._opened(i)
@@ -140,7 +146,7 @@ class ClientWorker(Tasks):
             self._set_focus(focus)
             self._probed = None
             self._pending = (self.state, rid)
-            self._tasks.append(("histogram", {"id": rid, "range": [0.0, 1.0]}))
+            self._hist_range, self._hist_window = [0.0, 1.0], None  # sent after its frame
             self._cond.notify()
         return self._opened(i)
 
@@ -166,9 +172,12 @@ class ClientWorker(Tasks):
             if "focus" in msg:
                 self._set_focus(focus)
             self._pending = (self.state, msg.get("id"))
+            self._cancelled = False
             self._cond.notify()
 
     def task(self, kind: str, msg: dict) -> None:
+        if self._beside_frames(kind, msg):
+            return
         with self._cond:
             if len(self._tasks) >= MAX_TASKS:
                 raise InvalidParameterError(
@@ -177,10 +186,22 @@ class ClientWorker(Tasks):
             self._tasks.append((kind, msg))
             self._cond.notify()
 
+    def cancel_refine(self) -> None:
+        """Stop refining the frame shown (until the next input)."""
+        with self._cond:
+            self._cancelled = True
+            self._refine_at = None
+            self._cond.notify()
+
+    def _given_up(self) -> bool:
+        with self._cond:
+            return self._pending is not None or self._cancelled or self._closed
+
     def close(self) -> None:
         with self._cond:
             self._closed = True
             self._cond.notify()
+        self.side.close()
 
     # -- the thread ----------------------------------------------------------------------
     def _run(self) -> None:
@@ -253,28 +274,29 @@ class ClientWorker(Tasks):
         t_start = time.perf_counter()
         cvs, integrate_ms, incremental = self.views.chronovolumes(state)
         self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
-        window = (state.dataset, *state.window)
-        if state.quality == "full" and window != self._hist_window:
-            with self._cond:  # after the frames waiting, and only one
-                if not any(kind == "histogram" for kind, _ in self._tasks):
-                    self._tasks.append(("histogram", {"id": None, "range": self._hist_range}))
+        self._histogram_after(state)
 
     def _refine(self) -> None:
         """The coarse or reduced frame shown, at full resolution and size; given up as soon as
-        new input comes."""
+        new input (or a `cancel`) comes: between views, between the slabs of a view's
+        integration and while its steps are read (`chronocl.core.interrupt`), each of which
+        the client hears of in a `progress` message."""
         self._refine_at = None
         state = self._shown
         if state is None:
             return
         t_start = time.perf_counter()
         integrate_ms = 0.0
-        for slot in self.views.slots[: len(state.views)]:
-            with self._cond:
-                if self._pending is not None:
-                    return  # newer input: the frame for it comes instead
-            if slot.session is None:
-                return
-            integrate_ms += self.views.refine_slot(slot)
+        progress = RefineProgress(self._reply, len(state.views))
+        try:
+            with interruptible(self._given_up, progress):
+                for i, slot in enumerate(self.views.slots[: len(state.views)]):
+                    progress.view = i
+                    if self._given_up() or slot.session is None:
+                        return  # newer input: the frame for it comes instead
+                    integrate_ms += self.views.refine_slot(slot)
+        except SupersededError:
+            return
         cvs = [slot.cv for slot in self.views.slots[: len(state.views)]]
         self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
 
@@ -313,7 +335,7 @@ class ClientWorker(Tasks):
             session.record_display(display_ms)
         level = max((session.shown_level for session in sessions), default=0)
         levels = max((session.stats.get("levels", 1) for session in sessions), default=1)
-        refining = level > 0 or reduced
+        refining = (level > 0 or reduced) and not self._cancelled
         self._refine_at = time.monotonic() + REFINE_AFTER_S if refining else None
         header = {
             "type": "frame",

@@ -29,7 +29,7 @@ import { $, pageState, setStatus } from './state.js';
 import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
 import { bindTimeFollow } from './time_follow.js';
 import { bindTimeline, drawTimeline } from './timeline.js';
-import { bindViews, fillSelect, layoutViews, onFrame, showMark } from './views.js';
+import { bindViews, fillSelect, layoutViews, onFrame, showMark, showRefineProgress } from './views.js';
 
 // The page's state, given to every module that reads or changes it.
 const page = pageState();
@@ -129,7 +129,8 @@ function onText(msg) {
       showMark(msg.values && msg.mark ? { view: msg.view, x: msg.mark[0], y: msg.mark[1] } : null);
       break;
     case 'progress':
-      movieProgress(msg);
+      if (msg.what === 'refine') showRefineProgress(msg);
+      else movieProgress(msg);
       break;
     case 'download':
       onDownload(msg);

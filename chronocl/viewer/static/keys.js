@@ -9,6 +9,7 @@ import { resetCamera, standardView, toggleTriad } from './orientation.js';
 import { redo, undo } from './session.js';
 import { $ } from './state.js';
 import { play, scalePlaySpeed, setPlayMode, slide, togglePlaying } from './timeline.js';
+import { cancelRefine } from './views.js';
 
 // The page's state (state.js: pageState), made by app.js and given to bindKeys.
 let S;
@@ -40,7 +41,16 @@ export const SHORTCUTS = [
   { keys: ['z'], ctrl: true, label: 'Ctrl+Z', does: 'undo the last edit', run: undo },
   { keys: ['Z', 'y'], ctrl: true, label: 'Ctrl+Shift+Z, Ctrl+Y', does: 'redo the edit undone', run: redo },
   { keys: ['?'], label: '?', does: 'show / hide this list', run: () => showHelp($('help').hidden) },
-  { keys: ['Escape'], label: 'Esc', does: 'close this list', run: () => showHelp(false), always: true },
+  {
+    keys: ['Escape'],
+    label: 'Esc',
+    does: 'close this list; stop refining to full resolution',
+    run: () => {
+      showHelp(false);
+      cancelRefine();
+    },
+    always: true,
+  },
 ];
 
 const TEXT_FIELDS = 'textarea, input:not([type=checkbox]):not([type=range]):not([type=file])';

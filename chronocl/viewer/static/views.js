@@ -348,6 +348,24 @@ function showLabel(p, view, label) {
   p.label.title = label;
 }
 
+// How far the refine of the frame shown got (a `progress` message of what 'refine'): the
+// status line says it and that Esc cancels it; a frame's timings replace it.
+export function showRefineProgress(msg) {
+  viewer.refineProgress = msg;
+  if (msg.stage === 'cancelled') return; // the answer to `cancel`: cancelRefine said so
+  const what = msg.stage === 'integrating' ? 'slabs' : 'steps';
+  const of = msg.views > 1 ? ` (view ${msg.view + 1} of ${msg.views})` : '';
+  setStatus(`refining to full resolution: ${msg.stage} ${msg.done}/${msg.total} ${what}${of} · Esc cancels`);
+}
+
+// Stop refining the frame shown (Esc): the server keeps the coarse frame until the next input.
+export function cancelRefine() {
+  if (document.body.dataset.refining !== 'yes') return;
+  send({ type: 'cancel' });
+  document.body.dataset.refining = 'cancelled';
+  setStatus('refine cancelled: the coarse frame stays until the next change');
+}
+
 function showTimings(h) {
   const t = h.timings;
   const v = h.views[0];
