@@ -1,39 +1,58 @@
-"""Viewer latency at 128^3, 256^3 and 512^3: from a client's edit to the frame in its hands.
+"""Viewer latency as users see it: from a client's input to the frame in its hands.
 
-For each size the built-in vortex is generated on the fly into a chronocl store with its
-coarse levels (float32, 20 steps; 512^3: uint8, 12 steps, about 1.7 GB on disk) and served
-by a viewer server on a thread of this process; a WebSocket client sets a 10-step window and
-a 512^2 view, then times
+Each case generates the built-in vortex into a chronocl store with its coarse levels and serves
+it from a viewer server on a thread of this process. A WebSocket client (bench/latency_client.py)
+opens it as the page does (open, then the panel size), makes the time positions absolute and
+times:
 
-- data-TF edits (an opacity control point moved): to the first frame (a coarse level when
-  full resolution would miss the viewer's latency target) and to the full-resolution frame
-  that follows once input stops;
-- scrub steps (the window slid by one step, one after the other as a drag sends them): to
-  the first frame, and whether the session updated incrementally.
+- open -> the first full-resolution ("sharp") frame. A frame is sharp when its header says
+  level 0 and not `reduced` (drawn smaller than the panel for the latency target);
+- data-TF edits (an opacity control point moved, the fitted range kept, as the page sends
+  them; every edit a value no edit before it had, warm-up included: none is a cache hit): to
+  the first frame and to the sharp frame; then the same edits in max mode;
+- scrub steps (the window slid by one step, each sent when the last one's frame came, as a
+  drag does): to the first frame, whether the session updated incrementally, and the longest
+  stall (the largest gap between consecutive frames, from the first slide's send; and whether
+  a histogram reply came within it);
+- scrub stops (SLIDES_PER_STOP one-step slides in a row, then the sharp frame of the last,
+  timed from its send);
+- input during a refine: an edit sent 50-300 ms after the refine of the last edit's coarse
+  frame was due (REFINE_AFTER_S after that frame), timed to the first frame answering it.
 
-The server's own timings come with each frame (the median split is reported). The baseline,
-measured in the same run at 128^3, is the same edit done directly in-process at full
-resolution (integrate + upload + draw + JPEG), without server or socket.
+The sharp frames' split (integrate / read-back / upload / render / encode) comes from the frame
+headers; read-back is null while the server counts it inside integrate_ms. The direct baseline
+makes the same edits without server or socket on a resident `Session` holding the same window
+under the same memory budget: set_spec, upload (the viewer's), draw, JPEG, each timed.
+
+Cases: by default 128^3, 256^3 (float32, 20 steps) and 512^3 (uint8, 12 steps), a 10-step
+window, a 512x512 panel, a 12GB budget, the direct baseline at 128^3. `--users` runs the users'
+case instead (issue 32): float32 512^3 x 20 steps (about 10.7 GB written), a 10-step window,
+the 930x640 panel of a 1400x900 page, the viewer's default memory budget, with the direct
+baseline; `--users-side 256` is a dry run of the same path. `--keep DIR` keeps the stores there
+and reuses them.
 
     python bench/viewer_latency.py --quick
-    python bench/viewer_latency.py --quick --sizes 128,256
-    python bench/viewer_latency.py --quick --sizes 128 --image 1024x733   # a panel's size
+    python bench/viewer_latency.py --quick --sizes 128 --image 1024x733
+    python bench/viewer_latency.py --quick --users [--users-side 256] [--keep DIR]
 
-`--image` is the panel size the client asks for (default 512x512); the server draws it within
-its pixel budget (chronocl/viewer/frames.py::render_size), as it does for the page.
-
-Summary keys (per size): `first_frame_ms` (TF edit -> first frame), `full_res_ms` (TF edit
--> full-resolution frame), `scrub_first_frame_ms`, `scrub_incremental` ("k/n"),
-`first_frame_level`, `split_ms`; `direct_tf_edit_ms` at 128^3 and the targets.
+Summary keys (per size; under `users` for --users): `first_frame_ms`, `full_res_ms` (TF edit ->
+sharp frame), `max_full_res_ms`, `open_full_res_ms`, `open_first_frame_ms`,
+`scrub_first_frame_ms`, `scrub_incremental` ("k/n"), `scrub_stall_ms`, `scrub_stop_full_res_ms`,
+`refine_input_wait_ms` (longest; `refine_probes_in_refine` "k/n"), `first_frame_level`,
+`full_res_split_ms` (`full_split`), `integrate_gvoxel_steps_s` (the full-resolution integration
+of a TF edit), `split_ms` (median timings of each action's frames), `drawn`, `rss_mb` (this
+process, server and client, at the end), `memory` (the budget); `direct_tf_edit_ms_128` /
+`direct_split_ms_128` (`direct_tf_edit_ms` / `direct_split_ms` under `users`) and `targets`
+(issue 32's bounds, each named for the figure it bounds).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import shutil
+import itertools
 import statistics
 import sys
+import tempfile
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -43,73 +62,46 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import emit, env_record
+from latency_client import WINDOW, Client, Edits, refine_probes, scrub, scrub_stops, sharp, tf_edits
 
+from chronocl.core.budget import resident_bytes
 from chronocl.data import synthetic
-from chronocl.data.series import TimeSeries
+from chronocl.data.series import open_series
 from chronocl.viewer.datasets import Dataset
-from chronocl.viewer.protocol import unpack_frame
 from chronocl.viewer.server import ViewerServer
 
 BENCH = "viewer_latency"
-TARGETS = {"first_frame_ms": 200, "first_frame_ms_128": 150, "full_res_ms_256": 1500}
-SPLIT = ("integrate_ms", "upload_ms", "render_ms", "encode_ms", "server_ms")
+USERS_PANEL = (930, 640)  # the view area of a 1400x900 page showing one view
+ABSOLUTE = {"color": "rgb", "positions": "absolute"}
+# Issue 32, "Targets" (here: 2 cores, llvmpipe; gpu_*: on a lent H100 or H200).
+TARGETS = {
+    "first_frame_ms": 150,  # every size
+    "full_res_ms_256": 400,
+    "full_res_ms_512": 1200,
+    "max_full_res_ms_512": 500,  # a max-mode TF edit: a recolour only
+    "users_full_res_ms": 1500,  # the users' case: sharp frame after a TF edit
+    "users_scrub_stop_full_res_ms": 2000,
+    "users_open_full_res_ms": 8000,
+    "users_refine_input_wait_ms": 250,
+    "users_scrub_stall_ms": 300,
+    # integrate_gvoxel_steps_s over bench/integrate.py's kernel speed on the same machine, at least
+    "users_integrate_vs_kernel": 0.5,
+    "gpu_full_res_ms_512": 100,
+    "gpu_scrub_stop_full_res_ms_512": 100,
+}
+SPLIT = ("integrate_ms", "readback_ms", "upload_ms", "render_ms", "encode_ms", "server_ms")
 
 
-class Client:
-    def __init__(self, server: ViewerServer) -> None:
-        from websockets.sync.client import connect
-
-        # Entered as a context manager: websockets 17.1 deprecates a bare connect().
-        self._stack = ExitStack()
-        self.ws = self._stack.enter_context(
-            connect(
-                f"ws://127.0.0.1:{server.port}/ws?token={server.token}",
-                compression=None,
-                max_size=2**26,
-            )
-        )
-        self.rid = 0
-        self.t0 = 0.0
-        self.kind = ""
-        json.loads(self.ws.recv())  # info
-
-    def request(self, msg: dict) -> tuple[float, dict]:
-        """Send `msg`; returns (ms until its first frame arrived, the frame header)."""
-        self.rid += 1
-        msg = {**msg, "id": self.rid}
-        self.t0 = time.perf_counter()
-        self.kind = msg["type"]
-        self.ws.send(json.dumps(msg))
-        return self.frame()
-
-    def full_resolution(self) -> tuple[float, dict]:
-        """Wait for the last request's full-resolution frame: (ms since it was sent, header)."""
-        while True:
-            ms, header = self.frame()
-            if header.get("level", 0) == 0:
-                return ms, header
-
-    def frame(self) -> tuple[float, dict]:
-        t0 = self.t0
-        while True:
-            m = self.ws.recv(timeout=120)
-            if isinstance(m, bytes):
-                header, _ = unpack_frame(m)
-                if header["id"] == self.rid:
-                    return 1e3 * (time.perf_counter() - t0), header
-            else:
-                d = json.loads(m)
-                if d["type"] == "error":
-                    raise RuntimeError(d["message"])
-                if d["type"] == "dataset" and self.kind == "open":
-                    continue
-
-
-def summarise(op: str, totals: list[float], headers: list[dict], case: str) -> dict:
-    split = {k: statistics.median(h["timings"][k] for h in headers) for k in SPLIT}
+def summarise(op: str, got: list, case: str) -> dict:
+    totals, headers = [g[0] for g in got], [g[1] for g in got]
+    split = {
+        k: statistics.median(h["timings"][k] for h in headers)
+        for k in SPLIT
+        if all(k in h["timings"] for h in headers)
+    }
     transfer = [t - h["timings"]["server_ms"] for t, h in zip(totals, headers, strict=True)]
-    split["transfer_ms"] = statistics.median(transfer)
     split = {k: round(v, 2) for k, v in split.items()}
+    split["transfer_ms"] = round(statistics.median(transfer), 2)
     record = {
         "bench": BENCH,
         "case": case,
@@ -117,10 +109,12 @@ def summarise(op: str, totals: list[float], headers: list[dict], case: str) -> d
         "op": op,
         "median_ms": round(statistics.median(totals), 2),
         "min_ms": round(min(totals), 2),
+        "max_ms": round(max(totals), 2),
         "repeats": len(totals),
         "split_ms": split,
         "incremental": sum(bool(h["timings"].get("incremental")) for h in headers),
         "levels": sorted({h.get("level", 0) for h in headers}),
+        "sharp": sum(sharp(h) for h in headers),
         "frame_bytes": int(statistics.median(h["views"][0]["bytes"] for h in headers)),
         # the image size drawn (the server draws less than asked for when over its draw budget)
         "drawn": sorted({f"{h['views'][0]['width']}x{h['views'][0]['height']}" for h in headers}),
@@ -129,48 +123,93 @@ def summarise(op: str, totals: list[float], headers: list[dict], case: str) -> d
     return record
 
 
-def direct_baseline(series: TimeSeries, points: list, repeats: int) -> list[float]:
-    """The same edit's work without the server: integrate, upload, draw, encode."""
-    import chronocl
-    from chronocl import modes
-    from chronocl.core.tf import DataTF
-    from chronocl.render import Camera
+def full_split(chains: list[list[dict]]) -> dict:
+    """What the server did for a sharp frame after a TF edit: per edit the sum of each timing
+    over its frames (the first to the sharp one; null where the headers have none), and
+    `integrate_level0_ms`, the full-resolution integration (in whichever frame it ran); medians
+    over the edits."""
+    keys = ("integrate_ms", "readback_ms", "upload_ms", "render_ms", "encode_ms", "server_ms")
+    rows = []
+    for chain in chains:
+        t = [h["timings"] for h in chain]
+        row = {k: sum(x[k] for x in t) for k in keys if all(k in x for x in t)}
+        level0 = [h["timings"]["integrate_ms"] for h in chain if h.get("level", 0) == 0]
+        rows.append(row | {"integrate_level0_ms": sum(level0)})
+    keys = (*keys, "integrate_level0_ms")
+    got = {k: [row[k] for row in rows if k in row] for k in keys}
+    return {k: round(statistics.median(v), 2) if v else None for k, v in got.items()}
+
+
+def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, case: str) -> dict:
+    """The same edits without the server: a resident level-0 `Session` over the same window and
+    budget, set_spec per edit, then the viewer's upload, a draw at the server's size, JPEG."""
+    from chronocl.integration.interactive.session import Session
     from chronocl.render.gl import gl_context
     from chronocl.render.views import raycaster
-    from chronocl.viewer.frames import encode
+    from chronocl.viewer.fit import fitted_default
+    from chronocl.viewer.frames import JPEG_QUALITY, PIXEL_BUDGET, encode, render_size
+    from chronocl.viewer.slots import ViewSlot, upload
+    from chronocl.viewer.view_state import default_state, describe_state, merge
 
-    times = []
-    cam = Camera(azimuth=30.0, elevation=20.0, zoom=1.2)
-    with gl_context():
-        rc = raycaster()
-        for k in range(repeats + 2):
-            pts = [list(p) for p in points]
-            pts[2][4] = 0.3 + 0.02 * (k % 10)
-            t0 = time.perf_counter()
-            cv = chronocl.integrate(
-                series, "0:10", modes.names()[0], data_tf=DataTF(points=pts), time_tf="rgb"
-            )  # the viewer's default view: the first registered mode
-            vol = rc.upload(cv)
-            pixels = rc.draw(vol, cam, (512, 512))
-            encode(pixels, 88)
-            vol.release()
-            if k >= 2:
-                times.append(1e3 * (time.perf_counter() - t0))
-    return times
+    series = open_series(path)
+    n = series.n_steps
+    state = fitted_default(series, default_state(0, series))
+    state = merge(state, {"size": list(size), "time_tf": ABSOLUTE}, n)
+    edit = Edits(describe_state(state)["data_tf"])
+    draw_size = render_size(state.size, 1, 1.0, PIXEL_BUDGET)
+    rows = []
+    with gl_context(), Session(series, memory=memory, spec=state.spec(0)) as s:
+        rc, slot = raycaster(), ViewSlot()
+        s.show(state.selection(n))
+        for k in range(repeats + 1):  # a warm-up first (the kernels are built by `show`)
+            spec = merge(state, edit(), n).spec(0)
+            t = [time.perf_counter()]
+            cv = s.set_spec(spec)
+            t.append(time.perf_counter())
+            slot.volume, slot.uploaded = upload(rc, slot, cv), cv
+            t.append(time.perf_counter())
+            pixels = rc.draw(slot.volume, state.panel_camera(), draw_size)
+            t.append(time.perf_counter())
+            encode(pixels, JPEG_QUALITY["full"])
+            t.append(time.perf_counter())
+            moved = getattr(s.engine, "last_transfer", None)
+            back = None if moved is None or moved.download_s is None else 1e3 * moved.download_s
+            if k >= 1:
+                ms = [1e3 * (b - a) for a, b in itertools.pairwise(t)]
+                rows.append([sum(ms), *ms, back])
+        slot.release_gl()
+    cols = ("total_ms", "integrate_ms", "upload_ms", "render_ms", "encode_ms", "readback_ms")
+    med = {
+        k: None
+        if any(r[i] is None for r in rows)
+        else round(statistics.median(r[i] for r in rows), 2)
+        for i, k in enumerate(cols)
+    }
+    record = {"bench": BENCH, "case": case, "impl": "direct", "op": "tf_edit_full_resolution"}
+    emit(record | {"median_ms": med["total_ms"], "repeats": len(rows), "split_ms": med})
+    return med
 
 
-def make_store(root: Path, n: int) -> tuple[Path, str]:
-    """The vortex at n^3 as a chronocl store with levels (512^3 and up: uint8, 12 steps)."""
+def make_store(root: Path, n: int, steps: int, dtype) -> tuple[Path, str]:
+    """The vortex at n^3 x `steps` as a chronocl store with levels (uint8: clipped to [0, 1]
+    and scaled); one already at the path is reused."""
     from chronocl.data.writer import write_store
 
-    big = n >= 512
-    steps, dtype = (12, np.uint8) if big else (20, np.float32)
+    name = f"{n}^3x{steps}-{np.dtype(dtype).name}-W{WINDOW}"
+    path = root / f"vortex-{n}-{steps}-{np.dtype(dtype).name}.zarr"
+    if path.exists():
+        try:
+            s = open_series(path)
+            if s.shape == (steps, n, n, n) and s.dtype == np.dtype(dtype):
+                return path, name
+        except Exception:  # a store that does not open as written is written again
+            pass
 
     def generate():
         for step in synthetic.steps("vortex", steps, (n, n, n)):
-            yield np.round(np.clip(step, 0, 1) * 255).astype(np.uint8) if big else step
+            u8 = np.dtype(dtype) == np.uint8
+            yield np.round(np.clip(step, 0, 1) * 255).astype(np.uint8) if u8 else step
 
-    path = root / f"vortex-{n}.zarr"
     write_store(
         path,
         generate(),
@@ -179,116 +218,130 @@ def make_store(root: Path, n: int) -> tuple[Path, str]:
         dtype=dtype,
         source=f"vortex {n}^3",
         progress=True,
+        overwrite=True,
     )
-    return path, f"{n}^3x{steps}-{np.dtype(dtype).name}-W10"
+    return path, name
 
 
-def measure(
-    path: Path, case: str, edits: int, scrubs: int, image: tuple[int, int] = (512, 512)
-) -> dict:
-    """TF edits and scrub steps against a server on the store at `path`."""
-    from chronocl.data.series import open_series
-    from chronocl.viewer.view_state import DEFAULT_POINTS
-
+def measure(path: Path, case: str, size, memory, edits: int, scrubs: int) -> dict:
+    """Every timed action against a server on the store at `path`."""
     series = open_series(path)
-    server = ViewerServer(datasets=[Dataset("vortex", series)], memory="12GB")
+    server = ViewerServer(datasets=[Dataset("vortex", series)], memory=memory)
     server.start()
+    r: dict = {}
     try:
-        client = Client(server)
-        client.request({"type": "open", "dataset": 0})
-        client.request(
-            {
-                "type": "update",
-                "size": list(image),
-                "window": {"t0": 0, "t1": 10, "stride": 1},
-                "time_tf": {"color": "rgb", "positions": "absolute"},
-            }
-        )
-        client.full_resolution()
-        points = [list(p) for p in DEFAULT_POINTS]
-
-        def tf_edit(k: int) -> tuple[tuple[float, dict], tuple[float, dict]]:
-            pts = [list(p) for p in points]
-            pts[2][4] = 0.3 + 0.02 * (k % 10)  # a drag of one control point
-            first = client.request({"type": "update", "data_tf": {"points": pts}})
-            full = first if first[1].get("level", 0) == 0 else client.full_resolution()
-            return first, full
-
-        for k in range(2):  # warm-up: kernels built, textures allocated, the levels measured
-            tf_edit(k)
-        edits_done = [tf_edit(k + 1) for k in range(edits)]
-        first = summarise(
-            "tf_edit_first_frame", *zip(*[e[0] for e in edits_done], strict=True), case
-        )
-        full = summarise(
-            "tf_edit_full_resolution", *zip(*[e[1] for e in edits_done], strict=True), case
-        )
-
-        totals, headers = [], []
-        t0, step = 0, 1
-        n = series.n_steps
-        for _ in range(scrubs):
-            if not 0 <= t0 + step <= n - 10:
-                step = -step
-            t0 += step
-            window = {"t0": t0, "t1": t0 + 10, "stride": 1}
-            t, h = client.request({"type": "update", "window": window})
-            totals.append(t)
-            headers.append(h)
-        scrub = summarise("scrub_step", totals, headers, case)
-        client.ws.close()
+        c = Client(server)
+        opened = c.open(size)
+        c.request({"type": "update", "time_tf": ABSOLUTE}, full=True)
+        edit = Edits(c.dataset["state"]["data_tf"])
+        tf_edits(c, edit, 2)  # warm-up: kernels built, textures allocated, the levels measured
+        firsts, fulls, chains = tf_edits(c, edit, edits)
+        r["first"] = summarise("tf_edit_first_frame", firsts, case)
+        r["full"] = summarise("tf_edit_full_resolution", fulls, case)
+        got, r["stall"] = scrub(c, series.n_steps, scrubs)
+        r["scrub"] = summarise("scrub_step", got, case)
+        emit({"bench": BENCH, "case": case, "op": "scrub_stall", **r["stall"]})
+        stops = scrub_stops(c, series.n_steps, max(2, scrubs // 8))
+        r["stop"] = summarise("scrub_stop_full_resolution", stops, case)
+        r["probes"] = refine_probes(c, edit)
+        emit({"bench": BENCH, "case": case, "op": "refine_input", "probes": r["probes"]})
+        c.request({"type": "update", "views": [{"mode": "max", "order": "forward"}]}, full=True)
+        tf_edits(c, edit, 1)
+        _, max_edits, _ = tf_edits(c, edit, min(3, edits))
+        r["max"] = summarise("max_tf_edit_full_resolution", max_edits, case)
+        r["open"] = summarise("open_full_resolution", [(opened["full_ms"], opened["header"])], case)
+        r["open_first_ms"] = round(opened["first_ms"], 2)
+        r["chains"] = chains
+        r["rss_mb"] = round((resident_bytes() or 0) / 2**20)  # this process: server and client
+        c.ws.close()
     finally:
         server.stop()
-    return {"first": first, "full": full, "scrub": scrub}
+    return r
+
+
+def record_case(summary: dict, key: str, r: dict, n: int, scrubs: int) -> None:
+    """The case's figures into the summary's per-size maps."""
+    probes = r["probes"]
+    in_refine = [p["wait_ms"] for p in probes if p["in_refine"]]
+    split = full_split(r["chains"])
+    figures = {
+        "first_frame_ms": r["first"]["median_ms"],
+        "full_res_ms": r["full"]["median_ms"],
+        "max_full_res_ms": r["max"]["median_ms"],
+        "open_full_res_ms": r["open"]["median_ms"],
+        "open_first_frame_ms": r["open_first_ms"],
+        "scrub_first_frame_ms": r["scrub"]["median_ms"],
+        "scrub_incremental": f"{r['scrub']['incremental']}/{scrubs}",
+        "scrub_stall_ms": r["stall"]["ms"],
+        "scrub_stall_after_histogram": r["stall"]["after_histogram"],
+        "scrub_stop_full_res_ms": r["stop"]["median_ms"],
+        "refine_input_wait_ms": max(in_refine or [p["wait_ms"] for p in probes]),
+        "refine_probes_in_refine": f"{len(in_refine)}/{len(probes)}",
+        "first_frame_level": r["first"]["levels"],
+        "full_res_split_ms": split,
+        "integrate_gvoxel_steps_s": (
+            round(WINDOW * n**3 / split["integrate_level0_ms"] / 1e6, 3)
+            if split["integrate_level0_ms"]
+            else None
+        ),
+        "split_ms": {k: r[k]["split_ms"] for k in ("first", "full", "scrub", "stop", "max")},
+        "drawn": {k: r[k]["drawn"] for k in ("first", "full", "scrub")},
+        "rss_mb": r["rss_mb"],
+    }
+    for k, v in figures.items():
+        summary.setdefault(k, {})[key] = v
 
 
 def main() -> None:
-    import tempfile
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer repeats")
     ap.add_argument("--sizes", default="128,256,512", help="volume sides (default 128,256,512)")
-    ap.add_argument("--edits", type=int, default=None, help="TF edits per size (default 10/20)")
-    ap.add_argument("--keep", type=Path, default=None, help="folder to keep the stores in")
-    ap.add_argument("--image", default="512x512", help="panel size WxH (default 512x512)")
+    ap.add_argument(
+        "--edits", type=int, default=None, help="TF edits per size (10/20; --users 512: 3/6)"
+    )
+    ap.add_argument("--keep", type=Path, default=None, help="folder to keep (and reuse) stores in")
+    ap.add_argument("--image", default=None, help="panel size WxH (default 512x512)")
+    ap.add_argument("--users", action="store_true", help="the users' case only (issue 32)")
+    ap.add_argument("--users-side", type=int, default=512, help="its volume side (dry run: 256)")
     args = ap.parse_args()
-    image = tuple(int(v) for v in args.image.lower().split("x"))
-    if len(image) != 2:
-        ap.error(f"--image {args.image!r}: give WxH, e.g. 512x512")
-    label = f"{image[0]}^2" if image[0] == image[1] else f"{image[0]}x{image[1]}"
+    image = args.image or ("x".join(map(str, USERS_PANEL)) if args.users else "512x512")
+    try:
+        size = tuple(int(v) for v in image.lower().split("x"))
+        assert len(size) == 2 and min(size) > 0
+    except (ValueError, AssertionError):
+        ap.error(f"--image {image!r}: give WxH, e.g. 512x512")
+    label = f"{size[0]}^2" if size[0] == size[1] else f"{size[0]}x{size[1]}"
     edits = args.edits or (10 if args.quick else 20)
+    if args.users and args.users_side >= 384 and not args.edits:  # a sharp frame takes seconds
+        edits = 3 if args.quick else 6
     scrubs = 20 if args.quick else 40
-    sizes = [int(v) for v in args.sizes.split(",")]
-    emit(env_record(BENCH, {"sizes": sizes, "window": 10, "image": list(image)}))
+    if args.users:  # float32, 20 steps, the viewer's default budget
+        cases = [(args.users_side, 20, np.float32, None)]
+    else:
+        sides = [int(v) for v in args.sizes.split(",")]
+        cases = [
+            (n, 12, np.uint8, "12GB") if n >= 512 else (n, 20, np.float32, "12GB") for n in sides
+        ]
+    emit(env_record(BENCH, {"cases": [c[:2] for c in cases], "window": WINDOW, "image": size}))
 
-    summary: dict = {k: {} for k in ("first_frame_ms", "full_res_ms", "scrub_first_frame_ms")}
-    summary |= {"scrub_incremental": {}, "first_frame_level": {}, "split_ms": {}}
-    with tempfile.TemporaryDirectory(prefix="chronocl-latency-", dir=args.keep) as tmp:
-        for n in sizes:
-            path, case = make_store(Path(tmp), n)
-            r = measure(path, f"{case}-{label}", edits, scrubs, image)
-            key = str(n)
-            summary["first_frame_ms"][key] = r["first"]["median_ms"]
-            summary["full_res_ms"][key] = r["full"]["median_ms"]
-            summary["scrub_first_frame_ms"][key] = r["scrub"]["median_ms"]
-            summary["scrub_incremental"][key] = f"{r['scrub']['incremental']}/{scrubs}"
-            summary["first_frame_level"][key] = r["first"]["levels"]
-            summary.setdefault("drawn", {})[key] = {
-                k: r[k]["drawn"] for k in ("first", "full", "scrub")
-            }
-            summary["split_ms"][key] = {
-                "first": r["first"]["split_ms"],
-                "full": r["full"]["split_ms"],
-                "scrub": r["scrub"]["split_ms"],
-            }
-            if n == 128:
-                from chronocl.data.series import open_series
-                from chronocl.viewer.view_state import DEFAULT_POINTS
-
-                points = [list(p) for p in DEFAULT_POINTS]
-                direct = direct_baseline(open_series(path), points, max(5, edits // 2))
-                summary["direct_tf_edit_ms_128"] = round(statistics.median(direct), 2)
-            shutil.rmtree(path)
+    summary: dict = {}
+    with ExitStack() as stack:
+        root = args.keep or Path(
+            stack.enter_context(tempfile.TemporaryDirectory(prefix="chronocl-latency-"))
+        )
+        root.mkdir(parents=True, exist_ok=True)
+        for n, steps, dtype, memory in cases:
+            path, name = make_store(root, n, steps, dtype)
+            case = f"{'users-' if args.users else ''}{name}-{label}"
+            r = measure(path, case, size, memory, edits, scrubs)
+            out = summary.setdefault("users", {}) if args.users else summary
+            record_case(out, str(n), r, n, scrubs)
+            out.setdefault("memory", {})[str(n)] = memory or "the viewer's default"
+            if args.users or n == 128:
+                direct = direct_baseline(path, size, memory, max(2, edits // 3), case)
+                suffix = "" if args.users else "_128"
+                out[f"direct_tf_edit_ms{suffix}"] = direct["total_ms"]
+                out[f"direct_split_ms{suffix}"] = direct
     emit({"bench": BENCH, "summary": {**summary, "targets": TARGETS}})
 
 
