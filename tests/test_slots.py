@@ -17,7 +17,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import chronocl
+from chronocl.core.errors import SupersededError
+from chronocl.core.interrupt import interruptible
 from chronocl.core.selection import Selection
+from chronocl.core.time_tf import TimeTF
 from chronocl.data.bricks import ResidentBricks, SeriesBricks, SlotBrick, slot_brick
 from chronocl.data.slots import StepSlots
 from chronocl.engine.opencl import OpenCLEngine
@@ -38,15 +41,16 @@ def assert_same(a, b, atol: float = 1e-5) -> None:
 
 
 class Counting(OpenCLEngine):
-    """The OpenCL engine, counting the bricks it was given in place."""
+    """The OpenCL engine, counting the bricks it read where their steps lie."""
 
     def __init__(self, **options) -> None:
         super().__init__(**options)
         self.in_place = 0
 
     def accumulate(self, brick, *args, **kwargs):
-        self.in_place += isinstance(brick, SlotBrick)
-        return super().accumulate(brick, *args, **kwargs)
+        out = super().accumulate(brick, *args, **kwargs)
+        self.in_place += self.last_in_place  # read where the steps lie, not stacked
+        return out
 
 
 @st.composite
@@ -174,3 +178,46 @@ def test_a_brick_wider_than_one_buffer_goes_in_chunks_of_rows(enhance):
     got = integrate_bricks(job, engine, ResidentBricks({0: held[0], 1: held[7]}))
     assert_same(got, chronocl.integrate(series, sel, spec=spec, engine="numpy"))
     assert engine.in_place > 0
+
+
+@pytest.mark.parametrize("mode", ["additive", "alpha"])
+def test_a_window_given_up_mid_integration_leaves_the_session_sound(mode):
+    """A refine given up between two slabs (`chronocl.core.interrupt`): the session neither
+    keeps a chronovolume nor sliding state for that window, and the windows after it, slid
+    from the last one completed or not, equal the reference."""
+    rng = np.random.default_rng(9)
+    series = chronocl.TimeSeries.from_array(rng.random((40, 12, 8, 32), dtype=np.float32))
+    time_tf = TimeTF.preset("rgb", positions="absolute")
+    with Session(series, mode=mode, time_tf=time_tf, memory="64MB") as session:
+        session.set_window(0, 10)
+        seen: list[tuple[str, int]] = []
+
+        def note(stage: str, done: int, total: int) -> None:
+            seen.append((stage, done))
+
+        with interruptible(lambda: ("integrating", 1) in seen, note):
+            with pytest.raises(SupersededError):
+                session.set_window(20, 30)
+        assert ("integrating", 1) in seen  # given up between slabs, not before
+        for window in ((1, 11), (2, 12), (20, 30), (21, 31)):
+            cv = session.set_window(*window)
+            ref = chronocl.integrate(series, session.window(), spec=session.spec, engine="numpy")
+            assert_same(cv, ref)
+
+
+def test_a_long_scrub_keeps_every_window_in_one_block():
+    """40 steps, a budget of 14, a 10-step window slid 25 times: steps are read ahead only
+    into free slots, so every window the session integrates lies in one block of slots."""
+    rng = np.random.default_rng(4)
+    data = rng.random((40, 4, 8, 32), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    step = data[0].nbytes
+    time_tf = TimeTF.preset("rgb", positions="absolute")
+    engine = Counting()
+    with Session(series, mode="max", time_tf=time_tf, engine=engine, memory=14 * step) as s:
+        s.manager.budget = 14 * step
+        s.set_window(0, 10)
+        for _ in range(25):
+            s.slide(1)
+            assert slot_brick(list(s._arrays.values())) is not None
+        assert s.manager.slots.own_arrays == 0

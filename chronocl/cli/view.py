@@ -26,7 +26,7 @@ def view(
         str | None,
         typer.Option(
             help="Memory budget of each client's windows, e.g. 8GB "
-            "(default: half the memory free, at least 2GB)."
+            "(default: a third of the memory free, at least 2GB)."
         ),
     ] = None,
     max_clients: Annotated[

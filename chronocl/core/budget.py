@@ -37,13 +37,30 @@ def parse_memory(value: str | int | float | None, default: str = DEFAULT_MEMORY)
 
 
 def interactive_memory() -> int:
-    """The default budget of an interactive session (the viewer's, `Session`'s): half the
-    memory free now, at least DEFAULT_MEMORY, so that a window of the sizes users bring (10
-    float32 steps of 512^3 are 5.4 GB) stays resident and an edit never reads it again.
+    """The default budget of an interactive session (a viewer client's, `Session`'s): a third
+    of the memory free now (within a container's limit), at least DEFAULT_MEMORY, so that a
+    window of the sizes users bring (10 float32 steps of 512^3 are 5.4 GB) stays resident and
+    an edit never reads it again, with room left for the chronovolumes and their textures.
     `--memory` / `memory=` still sets it."""
     import psutil
 
-    return max(parse_memory(DEFAULT_MEMORY), int(psutil.virtual_memory().available) // 2)
+    free = int(psutil.virtual_memory().available)
+    limit = _cgroup_room()
+    if limit is not None:
+        free = min(free, limit)
+    return max(parse_memory(DEFAULT_MEMORY), free // 3)
+
+
+def _cgroup_room() -> int | None:
+    """Bytes a cgroup v2 memory limit leaves this process's group (None: no limit)."""
+    try:
+        with open("/sys/fs/cgroup/memory.max") as f:
+            text = f.read().strip()
+        with open("/sys/fs/cgroup/memory.current") as f:
+            used = int(f.read().strip())
+    except (OSError, ValueError):
+        return None
+    return None if text == "max" else max(0, int(text) - used)
 
 
 def human(n: float) -> str:

@@ -160,7 +160,9 @@ class WindowManager:
             for s in ahead:
                 if s in self._cache or s in self._loads:
                     continue
-                if not self._make_room(protect=keep):
+                # Read ahead only into a free slot: with every slot held (steps the session
+                # still reads), a step read ahead would lie apart from its window.
+                if not self._make_room(protect=keep) or not self.slots.free:
                     break
                 self._start(s)
             return Request(self, self.generation, steps)
@@ -172,7 +174,7 @@ class WindowManager:
     def brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
         """Rows [z0, z1) of resident steps as an xytz brick (z1 - z0, W, Y, X)."""
         arrays = dict(zip(steps, self.get(steps), strict=True))
-        return ResidentBricks(arrays).read(steps, z0, z1)
+        return ResidentBricks(arrays, in_place=False).read(steps, z0, z1)
 
     def close(self) -> None:
         with self._lock:
@@ -256,8 +258,8 @@ class WindowManager:
         deadline = None if timeout is None else time.monotonic() + timeout
         # Work that may be given up (`chronocl.core.interrupt`) looks up every 50 ms.
         poll = WATCHED_POLL_S if watched() else None
-        with self._lock:
-            while True:
+        while True:
+            with self._lock:
                 missing = [s for s in request.steps if s not in self._cache]
                 if request.superseded and missing:
                     raise SupersededError(
@@ -279,9 +281,10 @@ class WindowManager:
                     raise TimeoutError(f"steps {missing} did not load within {timeout} s")
                 wait = left if poll is None else poll if left is None else min(poll, left)
                 self._lock.wait(wait)
-                if poll is not None:
-                    loaded = len(request.steps) - len(missing)
-                    checkpoint("reading steps", loaded, len(request.steps))
+                loaded = len(request.steps) - len(missing)
+            # Outside the lock: a checkpoint may tell the client how far the read got.
+            if poll is not None:
+                checkpoint("reading steps", loaded, len(request.steps))
 
 
 WATCHED_POLL_S = 0.05

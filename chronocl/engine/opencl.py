@@ -98,6 +98,7 @@ class OpenCLEngine:
         self.overlap = overlap
         self.chunk_bytes = chunk_bytes
         self.last_transfer: TransferStats | None = None
+        self.last_in_place = False  # whether the last brick was read where its steps lie
         self._luts = TableCache()
 
     def with_options(self, **options) -> OpenCLEngine:
@@ -169,6 +170,7 @@ class OpenCLEngine:
             parts = self._slot_chunks(brick, crop, halo) if in_place else None
             if parts is None:
                 brick, slots = np.asarray(brick), False  # stacked: it travels or converts
+        self.last_in_place = slots
         if self.host_ptr and not slots:
             brick = np.ascontiguousarray(brick, dtype=fmt.source)
             if fmt.converts:
@@ -221,8 +223,7 @@ class OpenCLEngine:
             aligned = (
                 nx % VEC == 0
                 and brick.zstride % VEC == 0
-                and all(is_aligned(brick.rows(c.r0, c.r1).block) for c in parts)
-                and not (brick.offsets % VEC).any()
+                and all(_aligned_part(brick.rows(c.r0, c.r1)) for c in parts)
                 and is_aligned(rgba)
                 and (t_index is None or is_aligned(t_index))
             )
@@ -399,6 +400,11 @@ ROW_BLOCK_BYTES = 64 * 1024
 ROW_BLOCKS_PER_UNIT = 4
 ALIGN_SLACK = 64  # bytes a chunk's buffer may start early to begin on an aligned address
 TIME_TABLE_MAX = 32  # steps a rows kernel may look up by register permutes (two 16-lane tables)
+
+
+def _aligned_part(part: SlotBrick) -> bool:
+    """Whether every step of a chunk's in-place brick starts on a VEC-lane boundary."""
+    return is_aligned(part.block) and not (part.offsets % VEC).any()
 
 
 def _check_out(a: np.ndarray, shape: tuple, dtype) -> None:

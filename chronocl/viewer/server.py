@@ -26,7 +26,7 @@ import sys
 import threading
 from collections.abc import Sequence
 
-from chronocl.core.budget import parse_memory
+from chronocl.core.budget import interactive_memory, parse_memory
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.viewer.app import MAX_CLIENTS, make_app
 from chronocl.viewer.datasets import Dataset, open_datasets
@@ -129,6 +129,8 @@ class ViewerServer:
             token=token,
         )
         self.datasets = datasets if datasets is not None else open_datasets(stores or [])
+        # One budget per client, taken from the memory free when the server starts.
+        memory = interactive_memory() if memory is None else memory
         self.token = token or secrets.token_urlsafe(24)
         self.host = host
         self.max_clients = max_clients

@@ -93,11 +93,15 @@ async def serve_socket(
                 # RuntimeError (WebSocketDisconnected in Starlette 1) once it saw the close.
                 gone.set()
 
-    def send_from_thread(data: str | bytes) -> bool:
+    def send_from_thread(data: str | bytes, wait: bool = True) -> bool:
+        """Send from a worker's thread; with `wait` false (a progress note) without waiting
+        for the client to take it."""
         if gone.is_set():
             return False
         try:
-            asyncio.run_coroutine_threadsafe(deliver(data), loop).result(SEND_TIMEOUT_S)
+            sent = asyncio.run_coroutine_threadsafe(deliver(data), loop)
+            if wait:
+                sent.result(SEND_TIMEOUT_S)
         except Exception:  # cancelled, timed out: the client is gone
             gone.set()
         return not gone.is_set()

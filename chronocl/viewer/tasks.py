@@ -7,6 +7,7 @@ each file holds one concern; it uses the worker's views, shown state and reply c
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Hashable
 
 from chronocl.core.errors import InvalidParameterError
@@ -25,6 +26,13 @@ from chronocl.viewer.view_state import ViewState
 
 class Tasks:
     """Histogram, fit, probe and save requests (the methods `ClientWorker` answers them with)."""
+
+    def _reply(self, obj: dict) -> bool:
+        return self.send(json.dumps(obj))
+
+    def _note(self, obj: dict) -> bool:
+        """Send without waiting for the client to take it (a refine's progress)."""
+        return self.send(json.dumps(obj), False)
 
     # -- on the side thread (the worker's `side`) -------------------------------------------
     def _beside(self, key: Hashable, rid: int | None, what: str, job: Callable[[], None]) -> None:
@@ -75,7 +83,10 @@ class Tasks:
         if hist is None:
             return  # a newer request waits: it answers instead
         self._hist_window = (state.dataset, *state.window)
-        self._reply({"type": "histogram", "id": rid, **hist, "window": list(state.window)})
+        window = list(state.window)
+        self._reply(
+            {"type": "histogram", "id": rid, **hist, "window": window, "dataset": state.dataset}
+        )
 
     def _request_fit(self, msg: dict) -> None:
         def fit() -> None:

@@ -17,7 +17,6 @@ work runs on the viewer's GL thread (`gl_thread.on_gl`).
 from __future__ import annotations
 
 import dataclasses
-import json
 import threading
 import time
 from collections import deque
@@ -62,13 +61,14 @@ REFINE_AFTER_S = 0.25  # idle time after a coarse frame before the full-resoluti
 
 
 class ClientWorker(Tasks):
-    """The render thread of one client. `send(data)` delivers a text (str) or binary (bytes)
-    message to the client and returns False once the client is gone."""
+    """The render thread of one client. `send(data, wait=True)` delivers a text (str) or binary
+    (bytes) message to the client (with `wait` false not waiting for it to be taken) and
+    returns False once the client is gone."""
 
     def __init__(
         self,
         datasets: list[Dataset],
-        send: Callable[[str | bytes], bool],
+        send: Callable[..., bool],
         downloads: Downloads,
         *,
         engine: str = "opencl",
@@ -121,6 +121,7 @@ class ClientWorker(Tasks):
             self._probed = None
             self._focus_gen += 1
             self._pending = (self.state, rid)
+            self._cancelled = False
             self._hist_range, self._hist_window = [0.0, 1.0], None  # sent after its frame
             self._cond.notify()
         if not fit:
@@ -146,6 +147,7 @@ class ClientWorker(Tasks):
             self._set_focus(focus)
             self._probed = None
             self._pending = (self.state, rid)
+            self._cancelled = False
             self._hist_range, self._hist_window = [0.0, 1.0], None  # sent after its frame
             self._cond.notify()
         return self._opened(i)
@@ -243,9 +245,6 @@ class ClientWorker(Tasks):
                 if not self._reply({"type": "error", "id": rid, "message": text}):
                     return
 
-    def _reply(self, obj: dict) -> bool:
-        return self.send(json.dumps(obj))
-
     def _draw(self, rc, cvs, state: ViewState, size, bg) -> tuple[list, float, float, float]:
         """Upload what changed and draw every view (on the GL thread)."""
         t_up = time.perf_counter()
@@ -287,7 +286,7 @@ class ClientWorker(Tasks):
             return
         t_start = time.perf_counter()
         integrate_ms = 0.0
-        progress = RefineProgress(self._reply, len(state.views))
+        progress = RefineProgress(self._note, len(state.views))
         try:
             with interruptible(self._given_up, progress):
                 for i, slot in enumerate(self.views.slots[: len(state.views)]):

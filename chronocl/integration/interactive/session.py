@@ -89,7 +89,7 @@ class Session:
         cv = s.set_spec(mode="alpha")  # re-integrated from resident steps
 
     Keywords (`settings` reads those every level shares): `memory` is the budget for resident
-    steps plus sliding state (default: half the memory free, at least 2 GB); `engine` (a
+    steps plus sliding state (default: a third of the memory free, at least 2 GB); `engine` (a
     name, with `device`, or an `Engine`); `spec`, or the fields of one (`mode`, `time_tf`,
     ... as `make_spec` takes them); `prefetch`, the steps read ahead in the scrub direction;
     `managers` (a dict the caller owns and closes) shares one window manager per (level,
@@ -253,7 +253,9 @@ class Session:
         else:
             job = window_job(self.series, selection, self.spec)
             self._bricks.arrays = self._arrays  # its `keep` was decided above
-            self._cv = None  # none for this window until the integration below completes
+            # Neither the last chronovolume nor the sliding state holds for this window until
+            # the integration below completes (it may be given up: `chronocl.core.interrupt`).
+            self._cv, self._slider = None, None
             cv = integrate_bricks(job, self.engine, self._bricks, slab=self._slab_rows())
             # Jumps and spec changes integrate directly (one pass over the window); the
             # sliding state starts from this window and is filled lazily on the next slide.

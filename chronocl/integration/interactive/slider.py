@@ -180,7 +180,9 @@ class Slider:
                 self.agg.pop_front() if forward else self.agg.pop_back()
         leaves.forget()
         self.selection = selection
-        return self._chronovolume()
+        cv = self._chronovolume()
+        leaves.arrays = {}  # the leaving steps' slots free for the next steps read
+        return cv
 
     def _chronovolume(self) -> Chronovolume:
         series, spec, selection = self.series, self.spec, self.selection

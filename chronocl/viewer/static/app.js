@@ -117,6 +117,7 @@ function onText(msg) {
       onDataset(msg);
       break;
     case 'histogram':
+      if (S.info && msg.dataset !== S.info.index) break; // counted for the data set left
       S.histogram = msg;
       noteHistogram();
       drawTF();

@@ -352,7 +352,8 @@ function showLabel(p, view, label) {
 // status line says it and that Esc cancels it; a frame's timings replace it.
 export function showRefineProgress(msg) {
   viewer.refineProgress = msg;
-  if (msg.stage === 'cancelled') return; // the answer to `cancel`: cancelRefine said so
+  // The answer to `cancel`, or a note that left before it: cancelRefine said so already.
+  if (msg.stage === 'cancelled' || document.body.dataset.refining !== 'yes') return;
   const what = msg.stage === 'integrating' ? 'slabs' : 'steps';
   const of = msg.views > 1 ? ` (view ${msg.view + 1} of ${msg.views})` : '';
   setStatus(`refining to full resolution: ${msg.stage} ${msg.done}/${msg.total} ${what}${of} · Esc cancels`);
