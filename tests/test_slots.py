@@ -23,6 +23,7 @@ from chronocl.core.selection import Selection
 from chronocl.core.time_tf import TimeTF
 from chronocl.data.bricks import ResidentBricks, SeriesBricks, SlotBrick, slot_brick
 from chronocl.data.slots import StepSlots
+from chronocl.engine.in_place import slot_chunks
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.integration.inmemory import integrate_bricks, window_job
 from chronocl.integration.interactive.session import Session
@@ -171,7 +172,8 @@ def test_a_brick_wider_than_one_buffer_goes_in_chunks_of_rows(enhance):
     engine = Counting(max_brick_bytes=40 * row)
     sel = Selection((0, 1), 2)
     brick = ResidentBricks({0: held[0], 1: held[7]}).read([0, 1])
-    chunks = engine._slot_chunks(brick, slice(0, 6), 1 if enhance != "none" else 0)
+    halo = 1 if enhance != "none" else 0
+    chunks = slot_chunks(brick, slice(0, 6), halo, engine.max_brick_bytes)
     assert chunks is not None and len(chunks) > 1
     spec = chronocl.make_spec("max", enhance=enhance)
     job = window_job(series, sel, spec)

@@ -256,6 +256,9 @@ class ResidentBricks:
             if brick is not None:
                 return brick
         key = (tuple(int(s) for s in steps), z0, z1)
+        one = self.arrays[key[0][0]]
+        if len(key[0]) == 1 and one.flags.c_contiguous:  # a (rows, 1, Y, X) view, no copy
+            return one[z0:z1, None]
         if self._kept is not None:
             if self._kept[0] == key and self.keep:
                 return self._kept[1]

@@ -20,6 +20,7 @@ from chronocl.data.bricks import SlotBrick
 from chronocl.engine import elementwise
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.device_formats import check_format_name, resolve_format
+from chronocl.engine.in_place import aligned_part, slot_chunks
 from chronocl.engine.kernel_args import INTEGRATE, ROWS
 from chronocl.engine.program import kernel
 from chronocl.engine.tables import TableCache, Tables
@@ -167,7 +168,7 @@ class OpenCLEngine:
         halo = 1 if spec.enhance.needs_gradient else 0
         if slots:
             in_place = self.host_ptr and not fmt.converts and brick.dtype == fmt.source
-            parts = self._slot_chunks(brick, crop, halo) if in_place else None
+            parts = slot_chunks(brick, crop, halo, self.max_brick_bytes) if in_place else None
             if parts is None:
                 brick, slots = np.asarray(brick), False  # stacked: it travels or converts
         self.last_in_place = slots
@@ -223,7 +224,7 @@ class OpenCLEngine:
             aligned = (
                 nx % VEC == 0
                 and brick.zstride % VEC == 0
-                and all(_aligned_part(brick.rows(c.r0, c.r1)) for c in parts)
+                and all(aligned_part(brick.rows(c.r0, c.r1), VEC) for c in parts)
                 and is_aligned(rgba)
                 and (t_index is None or is_aligned(t_index))
             )
@@ -354,19 +355,6 @@ class OpenCLEngine:
         """The finished RGBA of a window kept as fixed-point sums (see Mode.finish_sums)."""
         return elementwise.finish_sums(self.dc, self.host_ptr, acc, alpha, positions, spec)
 
-    def _slot_chunks(self, brick: SlotBrick, crop: slice, halo: int) -> list[Chunk] | None:
-        """The chunks of brick rows `crop` whose in-place spans each fit one buffer (one chunk
-        where the whole brick does), or None where not even one row and its halo fits."""
-        limit = self.max_brick_bytes
-        if brick.block.nbytes <= limit:
-            return [Chunk(crop.start, crop.stop, 0, brick.shape[0])]
-        item = brick.dtype.itemsize
-        row = brick.zstride * item  # the span grows by this per row
-        fixed = brick.rows(0, 1).block.nbytes + ALIGN_SLACK
-        if fixed + 2 * halo * row > limit:
-            return None
-        return chunks_of(brick.shape[0], crop, halo, row, limit - fixed + row)
-
     def _row_blocks(self, mode, vec: int, n_vec: int, ny: int, nz: int) -> int:
         """Rows a work-item of the mode's rows kernel takes (`Mode.rows_kernel`), 0 where the
         per-vector kernel runs: on GPUs (whose work-items read side by side already), without
@@ -398,13 +386,7 @@ class OpenCLEngine:
 # unit, for an even load.
 ROW_BLOCK_BYTES = 64 * 1024
 ROW_BLOCKS_PER_UNIT = 4
-ALIGN_SLACK = 64  # bytes a chunk's buffer may start early to begin on an aligned address
 TIME_TABLE_MAX = 32  # steps a rows kernel may look up by register permutes (two 16-lane tables)
-
-
-def _aligned_part(part: SlotBrick) -> bool:
-    """Whether every step of a chunk's in-place brick starts on a VEC-lane boundary."""
-    return is_aligned(part.block) and not (part.offsets % VEC).any()
 
 
 def _check_out(a: np.ndarray, shape: tuple, dtype) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection
-from chronocl.data.bricks import slot_brick
+from chronocl.data.bricks import ResidentBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine.base import Engine
@@ -52,6 +52,9 @@ class Leaves:
         self.value_range = value_range
         self.inverts = self.mode.slides == "invert"
         self.arrays: dict[int, np.ndarray] = {}  # step -> its resident (Z, Y, X) values
+        # Read in place where the engine can and the steps lie in one block (the window
+        # manager's slots), else stacked.
+        self.bricks = ResidentBricks({}, in_place=bool(getattr(engine, "reads_in_place", False)))
         self.before: dict[int, tuple[int, ...]] = {}  # leaf -> the earlier steps it spans
         self._full: dict[int, Partial] = {}
 
@@ -61,12 +64,8 @@ class Leaves:
             return self._full[step]
         steps = (*self.before.get(step, ()), step) if self.mode.leaf_span > 1 else (step,)
         arrays = [self.arrays[s] for s in steps]
-        # Read in place where the engine can and the steps lie in one block (the window
-        # manager's slots); one contiguous step is a (Z, 1, Y, X) brick without a copy.
-        brick = slot_brick(arrays) if getattr(self.engine, "reads_in_place", False) else None
-        if brick is None:
-            one = len(arrays) == 1 and arrays[0].flags.c_contiguous
-            brick = arrays[0][:, None] if one else np.stack(arrays, axis=1)
+        self.bricks.arrays = self.arrays
+        brick = self.bricks.read(steps)
         positions = self.spec.time_tf.positions_of(list(steps), self.n_steps)
         partial, _ = self.engine.accumulate(
             brick,
