@@ -29,16 +29,9 @@ from chronocl.integration.inmemory import integrate_bricks, window_job
 from chronocl.integration.interactive.session import Session
 
 from .strategies import examples, specs
+from .test_opencl import assert_same
 
 pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
-
-
-def assert_same(a, b, atol: float = 1e-5) -> None:
-    np.testing.assert_allclose(a.rgba, b.rgba, atol=atol, rtol=0)
-    if b.t_index is None:
-        assert a.t_index is None
-    else:
-        np.testing.assert_array_equal(a.t_index, b.t_index)
 
 
 class Counting(OpenCLEngine):
