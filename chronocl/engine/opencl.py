@@ -311,22 +311,20 @@ class OpenCLEngine:
         with self.dc.lock:
             if self.host_ptr:
                 flags = mf.WRITE_ONLY | mf.USE_HOST_PTR
-                if slots:  # a chunk of rows per buffer where the steps span more than one holds
-                    done, held = [], []
-                    for c in parts:
-                        part = brick.rows(c.r0, c.r1)
-                        data = cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=part.block)
+                # A stacked brick is one chunk; steps read in place, a chunk of rows per
+                # buffer where they span more than one holds.
+                done, held = [], []
+                for c in parts if slots else [Chunk(z0, z1, 0, nzb)]:
+                    part = brick.rows(c.r0, c.r1) if slots else None
+                    host = brick if part is None else part.block
+                    data = cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=host)
+                    if part is not None:
                         step_base = table(part.offsets)
-                        rows = [a[c.a - z0 : c.b - z0] for a in outputs]
-                        bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in rows]
-                        launch(self.dc.queue, data, Chunk(c.a, c.b, c.r0, c.r1), bufs)
-                        done, held = done + rows, held + bufs
-                    elementwise.read_back(self.dc, self.host_ptr, done, held)
-                else:
-                    out_bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in outputs]
-                    data = cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick)
-                    launch(self.dc.queue, data, Chunk(z0, z1, 0, nzb), out_bufs)
-                    elementwise.read_back(self.dc, self.host_ptr, outputs, out_bufs)
+                    rows = [a[c.a - z0 : c.b - z0] for a in outputs]
+                    bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in rows]
+                    launch(self.dc.queue, data, Chunk(c.a, c.b, c.r0, c.r1), bufs)
+                    done, held = done + rows, held + bufs
+                elementwise.read_back(self.dc, self.host_ptr, done, held)
                 self.last_transfer = None
             else:
                 row_bytes = w * ny * nx * dt.itemsize

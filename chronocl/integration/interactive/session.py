@@ -259,7 +259,6 @@ class Session:
             cv = integrate_bricks(job, self.engine, self._bricks, slab=self._slab_rows())
             # Jumps and spec changes integrate directly (one pass over the window); the
             # sliding state starts from this window and is filled lazily on the next slide.
-            self._slider = None
             if reason is None:
                 self._slider = Slider(
                     self.series, self.engine, self.spec, selection, job.value_range
