@@ -12,6 +12,14 @@ throughput on the prepared brick. Prints JSON lines (../shared/BENCH.md) and a s
 so no step can be skipped), `speedup_vs_numpy`, `max_vs_vtk`, `u8_vs_f32` and `transfer_overlap`
 (bench/transfer.py; null on CPU devices).
 
+The roofline is one bound, `chronocl.engine.roofline`: the memory read over the same bytes on
+every core (numpy's max in one thread per core, STREAM-like; on a GPU the slower of that and
+the copy to the device), so every fraction is <= 1 and one above 1 means the bound is wrong.
+The OpenCL read kernel is reported beside it (`read-opencl`), not used.
+`max_vs_vtk` is chronocl on every core against VTK's single-threaded TemporalStatistics;
+`max_vs_vtk_one_core` races both in a child pinned to one core (PoCL on one thread). chronocl
+writes RGBA and t_index per voxel where VTK writes one scalar.
+
     python bench/integrate.py --quick      # 30x128^3 only, numpy on 10x128x128x64; < 2 minutes
     python bench/integrate.py --quick --size 256   # the main case at 30x256^3 (about 5 GB)
     python bench/integrate.py              # every Table 1 case
@@ -21,6 +29,9 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -39,7 +50,7 @@ from chronocl.core.tf import DataTF
 from chronocl.data import synthetic
 from chronocl.engine import NumpyEngine
 from chronocl.engine.opencl import OpenCLEngine
-from chronocl.engine.roofline import read_fns
+from chronocl.engine.roofline import LIMITS, bound_of, read_fns
 from chronocl.integration.inmemory import make_spec
 from chronocl.modes.spec import resolve_order
 
@@ -141,15 +152,62 @@ class Runner:
         return {("integrate-end-to-end", mode): call, ("session-tf-edit", mode): tf_edit}
 
     def roofline_fns(self, brick) -> dict:
-        """(a) an OpenCL kernel that reads the brick once and sums it, (b) numpy max over it."""
+        """The readers of `chronocl.engine.roofline.read_fns`: the OpenCL read kernel, numpy
+        on every core and, on a GPU, the copy to the device."""
         fns = read_fns(self.ocl.dc, brick)
         return {(name, "read"): fn for name, fn in fns.items()}
 
-    def roofline(self, case: str) -> float:
-        return max(
-            self.results[(case, "read-opencl", "read")],
-            self.results[(case, "read-numpy-max", "read")],
+    def roofline(self, case: str) -> tuple[str, float]:
+        """(what limits, G voxel-steps/s): the one bound of `chronocl.engine.roofline.bound_of`."""
+        rates = {
+            impl: v for (c, impl, mode), v in self.results.items() if c == case and mode == "read"
+        }
+        limit, gvox = bound_of(rates)
+        return LIMITS[limit], gvox
+
+
+def one_core_vs_vtk(size: int, repeats: int) -> float | None:
+    """chronocl's max over VTK's on one core: the main case raced in a child process pinned to
+    one core, with PoCL on one thread and chronocl's host threads at one."""
+    if not vtk_available():
+        return None
+    env = {**os.environ, "POCL_MAX_PTHREAD_COUNT": "1", "CHRONOCL_THREADS": "1"}
+    child = [sys.executable, __file__, "--one-core-child", str(size), "--repeats", str(repeats)]
+    result = subprocess.run(child, capture_output=True, text=True, env=env, check=False)
+    if result.returncode != 0:
+        raise RuntimeError(result.stderr)
+    record = json.loads(result.stdout.strip().splitlines()[-1])
+    emit(record)
+    return record["max_vs_vtk_one_core"]
+
+
+def one_core_child(size: int, repeats: int) -> None:
+    """Race chronocl's max against VTK's on the main case, this process on one core."""
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    run = Runner(repeats)
+    assert run.ocl.dc.info.compute_units == 1, "PoCL did not take POCL_MAX_PTHREAD_COUNT=1"
+    case = case_name(f"{size}^3", 30, "float32")
+    brick = make_brick((size,) * 3, 30, "float32")
+    pipeline = make_pipeline(np.ascontiguousarray(np.moveaxis(brick, 1, 0)))
+    contenders = {
+        (case, "opencl-one-core", "max"): run.integrate_fn(run.ocl, brick, "max"),
+        (case, "vtk-temporal-statistics", "max"): lambda: run_max(pipeline),
+    }
+    run.race(brick.shape, contenders)
+    ratio = (
+        run.results[(case, "opencl-one-core", "max")]
+        / run.results[(case, "vtk-temporal-statistics", "max")]
+    )
+    print(
+        json.dumps(
+            {
+                "bench": "integrate",
+                "case": case,
+                "impl": "one-core",
+                "max_vs_vtk_one_core": round(ratio, 2),
+            }
         )
+    )
 
 
 def main() -> None:
@@ -159,7 +217,11 @@ def main() -> None:
     parser.add_argument(
         "--size", type=int, default=128, help="edge of the main case's cube (128: the paper's)"
     )
+    parser.add_argument("--one-core-child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.one_core_child:
+        one_core_child(args.one_core_child, args.repeats)
+        return
     main_label = f"{args.size}^3"
     TABLE1.setdefault(main_label, (args.size,) * 3)
 
@@ -168,6 +230,7 @@ def main() -> None:
     main_case = case_name(main_label, 30, "float32")
     cases = [(main_label, 30)] if args.quick else [(k, w) for k in TABLE1 for w in (10, 20, 30)]
     roof: dict[str, float] = {}
+    limits: dict[str, str] = {}
     for label, steps in cases:
         # float32 and uint8 of one workload race together, so their ratio sees the same machine.
         contenders: dict = {}
@@ -194,7 +257,7 @@ def main() -> None:
         run.race(bricks["float32"].shape, contenders)
         for dtype in ("float32", "uint8"):
             case = case_name(label, steps, dtype)
-            roof[case] = run.roofline(case)
+            limits[case], roof[case] = run.roofline(case)
 
     # numpy reference, raced against OpenCL: the main case in full runs; with --quick the
     # smallest Table 1 workload (10 steps of 128x128x64), to stay under two minutes.
@@ -223,11 +286,16 @@ def main() -> None:
         },
         "speedup_vs_numpy": {m: round(v, 1) for m, v in speedup.items()},
         "max_vs_vtk": None if max_vs_vtk is None else round(max_vs_vtk, 2),
+        "max_vs_vtk_one_core": one_core_vs_vtk(args.size, min(args.repeats, 7)),
+        "vtk_note": "chronocl writes RGBA (4 float32) and t_index (int32) per voxel, VTK's "
+        "TemporalStatistics one scalar; max_vs_vtk is chronocl on every core against VTK on "
+        "one, max_vs_vtk_one_core both pinned to one core (PoCL one thread, CHRONOCL_THREADS=1)",
         "u8_vs_f32": {
             m: round(run.results[(u8, "opencl", m)] / run.results[(main_case, "opencl", m)], 2)
             for m in MODES
         },
         "roofline_gvox_s": round(roof[main_case], 3),
+        "roofline_limit": limits[main_case],
         "end_to_end_roofline_fraction": {
             m: round(run.results[(main_case, "integrate-end-to-end", m)] / roof[main_case], 3)
             for m in MODES

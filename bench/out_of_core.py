@@ -15,10 +15,16 @@ summary with
 - `cpu_bound_throughput_vs_read`: the best ratio the cores allow, read time / ((CPU seconds
   of the read + kernels + output writes, each measured alone) / cores). The integration does
   all of that work, so where the bound is below the target no pipeline can meet it here;
+- `parallel_bound_vs_read`: the best ratio with the stages overlapped: each stage (the
+  pipeline's own brick reads with decompression, kernels, compress and write) runs one call
+  at a time, so the run takes at least the longest stage alone, and at least their CPU
+  seconds over the cores; the finish (commit, a second pass) follows. `--breakdown` prints
+  each stage's CPU and wall seconds, alone and inside the pipeline;
+  `throughput_over_parallel_bound` = bound / streamed time (target >= 0.85);
 - `peak_rss_over_budget` = (peak RSS - baseline RSS) / budget, where the baseline is the
   child's RSS after importing chronocl, creating the OpenCL context and building the kernels
   (the interpreter, numpy, zarr, pyopencl and PoCL), measured just before the integration;
-  target <= 1.25;
+  target <= 1.05 (the budget is a promise, at any thread count);
 - `memory_copy_gb_s`: copying into memory touched for the first time vs into reused memory.
   The output's new page-cache pages pay the first; where it is far below the second (a VM
   that returns freed pages to its host), writing the output costs far more than a copy.
@@ -26,7 +32,7 @@ summary with
     python bench/out_of_core.py --quick           # zstd (chronocl ingest's default), < 2 minutes
     python bench/out_of_core.py                   # zstd, blosc-lz4 and none; 5 repeats each
     python bench/out_of_core.py --compressor none --mode max
-    python bench/out_of_core.py --quick --breakdown   # what the kernels and the writes cost
+    python bench/out_of_core.py --quick --breakdown   # each stage's CPU and wall seconds
 """
 
 from __future__ import annotations
@@ -34,7 +40,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shutil
 import statistics
 import subprocess
@@ -45,15 +50,23 @@ import time
 from pathlib import Path
 
 import numpy as np
-import zarr
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import emit, env_record
+from ooc_stages import (
+    breakdown_table,
+    median_stages,
+    parallel_bound,
+    print_table,
+    stages_alone,
+    timed,
+)
 
 from chronocl.core.budget import parse_memory
 from chronocl.data.series import open_series, write_series
 from chronocl.data.writer import COMPRESSORS
+from chronocl.integration.runs import stages
 
 
 def field(t: int, n: int, steps: int) -> np.ndarray:
@@ -197,14 +210,6 @@ def read_all(store: Path) -> float:
     return time.perf_counter() - t0
 
 
-def timed(fn) -> tuple[float, float]:
-    """(wall seconds, CPU seconds of every thread of this process) of fn()."""
-    r0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
-    fn()
-    r1, wall = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter() - t0
-    return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
-
-
 def first_touch(nbytes: int = 2**28) -> dict:
     """GB/s of copying into memory touched for the first time vs into the same memory again.
 
@@ -226,57 +231,6 @@ def first_touch(nbytes: int = 2**28) -> dict:
     }
 
 
-def stages_alone(series, out: Path, budget: int, mode: str, compressor: str) -> dict:
-    """CPU seconds of the integration's work done alone: kernels on bricks already in memory,
-    and writing the output it produced (same chunks and codec) into a new store."""
-    from chronocl.data.bricks import SeriesBricks
-    from chronocl.data.writer import compressors
-    from chronocl.engine import get_engine
-    from chronocl.integration.inmemory import engine_rows, integrate_brick, prepare
-    from chronocl.integration.runs.plan import plan_slabs
-
-    job = prepare(series, None, mode, None, {})
-    eng = get_engine("opencl")
-    plan = plan_slabs(job, budget, "opencl", engine_rows(eng, job))
-    rows = plan.slab_rows + 2 * job.halo
-    bricks = SeriesBricks.buffered(series, rows, job.selection.width, 1, plan.steps_per_read)
-    kernel_wall = kernel_cpu = 0.0
-    for s in plan.slabs:
-        brick = bricks.read(job.selection.steps, s.r0, s.r1)
-        w, c = timed(lambda b=brick, s=s: integrate_brick(job, eng, s, b))
-        kernel_wall, kernel_cpu = kernel_wall + w, kernel_cpu + c
-    src = zarr.open_group(str(out), mode="r")
-    dst = zarr.open_group(str(out.with_name("write-alone.zarr")), mode="w", zarr_format=3)
-    names = [n for n in ("rgba", "t_index") if n in src]
-    for n in names:
-        a = src[n]
-        dst.create_array(
-            n,
-            shape=a.shape,
-            chunks=a.chunks,
-            dtype=a.dtype,
-            compressors=compressors(compressor),
-            config={"write_empty_chunks": True},
-        )
-    write_wall = write_cpu = 0.0
-    for s in plan.slabs:
-        slab = {n: np.asarray(src[n][s.z0 : s.z1]) for n in names}
-
-        def write(slab=slab, s=s) -> None:
-            for n in names:
-                dst[n][s.z0 : s.z1] = slab[n]
-
-        w, c = timed(write)
-        write_wall, write_cpu = write_wall + w, write_cpu + c
-    shutil.rmtree(out.with_name("write-alone.zarr"))
-    return {
-        "kernel_s": kernel_wall,
-        "kernel_cpu_s": kernel_cpu,
-        "write_s": write_wall,
-        "write_cpu_s": write_cpu,
-    }
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one compressor (zstd), 3 repeats")
@@ -291,7 +245,8 @@ def main() -> None:
     parser.add_argument(
         "--breakdown",
         action="store_true",
-        help="also time the pipeline without its writes, and without kernels and writes",
+        help="each stage's CPU and wall seconds (read+decompress, integrate, compress+write, "
+        "finish), alone and in the pipeline, and the parallel bound they set",
     )
     parser.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -320,7 +275,14 @@ def main() -> None:
     summary = {
         **{
             k: results[main_comp][k]
-            for k in ("peak_rss_over_budget", "throughput_vs_read", "cpu_bound_throughput_vs_read")
+            for k in (
+                "peak_rss_over_budget",
+                "throughput_vs_read",
+                "cpu_bound_throughput_vs_read",
+                "parallel_bound_vs_read",
+                "throughput_over_parallel_bound",
+                "bound_limit",
+            )
         },
         "compressor": main_comp,
         "output_compressor": args.output_compressor,
@@ -337,6 +299,11 @@ def main() -> None:
             "cpu_bound_throughput_vs_read": "the best throughput_vs_read the cores allow: read "
             "time / (CPU seconds of the read + kernels + output writes, each measured alone) "
             "/ cores",
+            "parallel_bound_vs_read": "the best throughput_vs_read with the stages overlapped: "
+            "read time / (max(the longest stage alone, CPU seconds of the pipeline's own reads + "
+            "kernels + writes alone / cores) + finish)",
+            "throughput_over_parallel_bound": "the parallel bound's wall time / the streamed "
+            "integration's; target >= 0.85",
             "peak_rss_over_budget": "(peak RSS - baseline RSS) / budget of a fresh process; "
             "baseline = its RSS after importing chronocl, creating the OpenCL context and "
             "building the kernels",
@@ -345,37 +312,6 @@ def main() -> None:
         },
     }
     emit({"bench": "out_of_core", "summary": summary})
-
-
-def pipeline_parts(integrate) -> dict:
-    """The streamed integration with parts left out (no-ops in their place), to see what each
-    part costs: reading the bricks alone, then reading and integrating without writing."""
-    from unittest import mock
-
-    import chronocl.integration.runs.streaming as streaming
-    from chronocl.engine import get_engine
-    from chronocl.modes.base import Partial
-
-    engine_class = type(get_engine("opencl"))
-
-    def no_kernel(self, brick, crop, steps, positions, order, spec, value_range, out, raw=False):
-        return Partial(*out), True
-
-    def no_write(*args) -> None:
-        return None
-
-    def reads_only() -> None:
-        with (
-            mock.patch.object(engine_class, "accumulate", no_kernel),
-            mock.patch.object(streaming, "write_slab", no_write),
-        ):
-            integrate()
-
-    def reads_and_kernels() -> None:
-        with mock.patch.object(streaming, "write_slab", no_write):
-            integrate()
-
-    return {"stream-reads-only": reads_only, "stream-no-writes": reads_and_kernels}
 
 
 def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Path) -> dict:
@@ -414,17 +350,13 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
     def read() -> None:
         read_all(store)
 
-    parts = pipeline_parts(integrate) if args.breakdown else {}
     runs: dict[str, list[tuple[float, float]]] = {"read": [], "integrate": []}
-    runs.update({name: [] for name in parts})
+    inside: list[dict] = []  # each streamed run's own stage times
     read(), integrate()  # warm-up: page cache, kernels, this process's heap
-    for part in parts.values():
-        part()
     for _ in range(repeats):  # alternate, so machine noise hits all alike
         runs["read"].append(timed(read))
         runs["integrate"].append(timed(integrate))
-        for name, part in parts.items():
-            runs[name].append(timed(part))
+        inside.append(stages.last())
     alone = stages_alone(series, out, budget, args.mode, args.output_compressor)
     fresh = [run_child(store, out, budget, args.mode, args.output_compressor) for _ in range(2)]
 
@@ -448,7 +380,6 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
                 "steps_per_read": fresh[0]["steps_per_read"],
             },
         ),
-        *((name, name, {"vs_read": round(read_s / med(name, 0), 3)}) for name in parts),
     ):
         emit(
             {
@@ -467,6 +398,15 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
     work = med("read", 1) + alone["kernel_cpu_s"] + alone["write_cpu_s"]
     bound = read_s / max(read_s, work / (os.cpu_count() or 1))
     emit({"bench": "out_of_core", "case": case, "impl": "stages-alone", **_round(alone)})
+    pipeline = median_stages(inside)
+    fin = pipeline["finish"]
+    cores = os.cpu_count() or 1
+    par = parallel_bound(alone, (fin["wall_s"], fin["thread_cpu_s"]), cores)
+    if args.breakdown:
+        records = breakdown_table(case, alone, pipeline, par, int_s)
+        for record in records:
+            emit(record)
+        print_table(records, cores)
     peak = max(f["peak_rss"] for f in fresh)
     baseline = statistics.median(f["baseline_rss"] for f in fresh)
     emit(
@@ -486,6 +426,9 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
         "peak_rss_over_budget": round((peak - baseline) / budget, 3),
         "throughput_vs_read": round(read_s / int_s, 3),
         "cpu_bound_throughput_vs_read": round(bound, 3),
+        "parallel_bound_vs_read": round(read_s / par["bound_s"], 3),
+        "throughput_over_parallel_bound": round(par["bound_s"] / int_s, 3),
+        "bound_limit": par["limit"],
         "read_gb_s": round(data_bytes / read_s / 1e9, 3),
         "integrate_gb_s": round(data_bytes / int_s / 1e9, 3),
         "read_cpu_s": round(med("read", 1), 3),

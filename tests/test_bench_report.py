@@ -77,11 +77,22 @@ def test_report_json_schema(report):
     roof = data["roofline"]
     assert roof["store_read_gb_s"] > 0 and roof["window"] == 3
     r = roof["devices"][device]
-    assert r["gb_s"] == max(r["opencl_read_gb_s"], r["numpy_read_gb_s"]) > 0
+    # One bound, no maximum of several: the memory read on every core (no GPU copy here).
+    assert r["gb_s"] == r["memory_read_gb_s"] > 0 and r["opencl_read_gb_s"] > 0
+    assert r["limit"] == "memory read on every core" and r["copy_to_device_gb_s"] is None
+    assert r["memory_read_threads"] == data["machine"]["cpu_count"]
     s = data["summary"]
     assert s["strong_speedup"][device]["1"] == 1.0 and s["strong_speedup"][device]["2"] > 0
     assert s["weak_efficiency"][device]["1"] == 1.0 and s["weak_efficiency"][device]["2"] > 0
+    # The fastest cell is held against the lower of its two bounds, which it cannot beat.
+    best = s["best"][device]
+    n = min(best["workers"], data["machine"]["cpu_count"])
+    store, memory = roof["store_read_gvox_steps_s"] * n, r["gvox_steps_s"]
+    assert best["bound_gvox_steps_s"] == pytest.approx(min(store, memory))
+    assert best["limit"] == ("store read" if store < memory else "memory read")
+    assert 0 < best["fraction"] and 0 < best["memory_read_fraction"] <= 1
     assert "strong speed-up" in stdout and "weak efficiency" in stdout  # the summary
+    assert f"of its bound, the {best['limit']}" in stdout
 
 
 def test_plots_are_drawn_and_shown(report):

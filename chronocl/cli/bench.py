@@ -56,7 +56,8 @@ def bench(
     mode: Annotated[str, typer.Option(help="Integration mode measured.")] = "alpha",
 ) -> None:
     """Scalability report: integration throughput (G voxel-steps/s, GB/s) against window length,
-    volume size, worker count and device, beside the read roofline of the same machine.
+    volume size, worker count and device, each beside the bound that limits it (the store read
+    with decompression on its workers, or the memory read on every core) on the same machine.
 
     Each cell is a streamed integration of the window 0:W, store to store, on the first n
     workers of one dask cluster (a local one of the largest count, or --scheduler); strong
@@ -95,7 +96,17 @@ def bench(
         weak = summary["weak_efficiency"][device]
         lines[f"{device} strong speed-up"] = ", ".join(f"{n}: {s:.2f}×" for n, s in strong.items())
         lines[f"{device} weak efficiency"] = ", ".join(f"{n}: {e:.2f}" for n, e in weak.items())
-        lines[f"{device} best / roofline"] = (
-            f"{100 * summary['best_roofline_fraction'][device]:.2g} %"
+        best = summary["best"][device]
+        lines[f"{device} fastest cell"] = (
+            f"{best['gvox_steps_s']:.3g} G voxel-steps/s ({best['workers']} worker"
+            f"{'s' if best['workers'] > 1 else ''}, "
+            f"W = {best['window']}): {100 * best['fraction']:.0f} % of its bound, the "
+            f"{best['limit']} ({best['bound_gvox_steps_s']:.3g}); "
+            f"{100 * best['memory_read_fraction']:.2g} % of the memory read"
+        )
+    if summary["cores_limit_scaling"]:
+        lines["cores"] = (
+            f"more workers than this machine's {summary['cores']} cores: beyond them the "
+            "cores, not the code, limit scaling"
         )
     print_summary(lines)

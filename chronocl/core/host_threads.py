@@ -1,6 +1,8 @@
 """The threads that share host-side copies and conversions among the cores.
 
-One pool for the process, made when first needed, with a thread per core (at most 8): the
+One pool for the process, made when first needed, with a thread per core (at most 8; the
+environment variable CHRONOCL_THREADS sets the count exactly, e.g. 1 to pin chronocl's host
+work to one core or 16 to test what grows with threads on a small machine): the
 stacking of bricks that cannot be read in place, the conversion of bricks to a device format
 and of chronovolumes to display textures all split their work over it. numpy releases the
 GIL while it copies and converts plain arrays, so the pieces run side by side.
@@ -16,6 +18,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from chronocl.core.errors import InvalidParameterError
+
 MAX_THREADS = 8
 PARALLEL_MIN_BYTES = 1 << 22  # copies smaller than this run on the calling thread
 
@@ -23,8 +27,20 @@ _lock = threading.Lock()
 _held: list[ThreadPoolExecutor] = []
 
 
+THREADS_ENV = "CHRONOCL_THREADS"
+MAX_FORCED = 256  # more is a typo
+
+
 def workers() -> int:
-    """Threads in the pool: one per core, at most MAX_THREADS."""
+    """Threads in the pool: CHRONOCL_THREADS if set, else one per core, at most MAX_THREADS."""
+    forced = os.environ.get(THREADS_ENV, "").strip()
+    if forced:
+        if not forced.isdigit() or not 1 <= int(forced) <= MAX_FORCED:
+            raise InvalidParameterError(
+                f"{THREADS_ENV}={forced!r} is not a thread count; set it to a whole number "
+                f"from 1 to {MAX_FORCED}, or unset it to use one thread per core"
+            )
+        return int(forced)
     return max(1, min(MAX_THREADS, os.cpu_count() or 1))
 
 

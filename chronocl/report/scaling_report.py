@@ -5,9 +5,11 @@
 - report.json: the schema version, machine and devices, parameters, every cell, the roofline
   and a summary (strong-scaling speed-ups, weak-scaling efficiencies);
 - throughput_vs_window.png: G voxel-steps/s (and GB/s) against the window, one line per
-  device and worker count, with the read rooflines;
-- strong_scaling.png: speed-up against workers on the whole volume, with the ideal line;
-- weak_scaling.png: efficiency against workers with the rows per worker fixed;
+  device and worker count, with the bounds (`chronocl.report.bounds`): the memory read
+  roofline and the store read on as many workers as there are cores;
+- strong_scaling.png: speed-up against workers on the whole volume, with the ideal line and,
+  where there are more workers than cores, the cores' bound;
+- weak_scaling.png: efficiency against workers with the rows per worker fixed, likewise;
 - index.html: the figures and a table of the cells, plain HTML without external assets.
 
 The plots are drawn with matplotlib's Agg canvas (no display, no pyplot state).
@@ -15,17 +17,17 @@ The plots are drawn with matplotlib's Agg canvas (no display, no pyplot state).
 
 from __future__ import annotations
 
-import html
 import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
 
 from chronocl.core.errors import OutputExistsError
+from chronocl.report import bounds
+from chronocl.report.scaling_page import FIGURES, page
 
 SCHEMA = "chronocl-bench/1"
 REPORT = "report.json"
-FIGURES = ("throughput_vs_window.png", "strong_scaling.png", "weak_scaling.png")
 
 
 # -- the output folder ------------------------------------------------------------------------
@@ -94,6 +96,9 @@ def summary(report: dict) -> dict:
             d: {str(n): round(e, 3) for n, e in efficiencies(_series(cells, "weak", d)).items()}
             for d in p["devices"]
         },
+        "cores": bounds.cores(report),
+        "cores_limit_scaling": bounds.cores_limited(p["workers"], bounds.cores(report)),
+        "best": bounds.best_cells(report),
         "best_roofline_fraction": {
             d: round(
                 max(c["gvox_steps_s"] for c in cells if c["device"] == d) / roof[d]["gvox_steps_s"],
@@ -147,15 +152,19 @@ def throughput_figure(report: dict):
             color=f"C{i * len(p['workers']) % 10}",
             linestyle="--",
             linewidth=1,
-            label=f"memory read roofline, {d}",
+            label=f"memory read bound (every core), {d}",
         )
-    ax.axhline(
-        roof["store_read_gvox_steps_s"],
-        color="0.3",
-        linestyle=":",
-        linewidth=1.5,
-        label="store read (decode), one process",
-    )
+    n_cores = bounds.cores(report)
+    for n in sorted({min(n, n_cores) for n in p["workers"]}):
+        ax.axhline(
+            roof["store_read_gvox_steps_s"] * n,
+            color="0.3",
+            linestyle=":",
+            linewidth=1 + n / max(p["workers"]),
+            label=f"store read bound (decompression included), {n} worker"
+            + ("s" if n > 1 else "")
+            + (f", all {n_cores} cores" if n == n_cores else ""),
+        )
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")
     ax.set_xticks(p["windows"], [str(w) for w in p["windows"]])
@@ -166,8 +175,10 @@ def throughput_figure(report: dict):
     nx, ny, nz = p["size_xyz"]
     ax.set_title(f"Integration throughput, {nx}×{ny}×{nz}, mode {p['mode']}")
     ax.grid(alpha=0.3, which="both")
-    # below the axes: the rooflines run along the top, where a legend inside would hide them
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize="small")
+    # below the axes (the bounds run along the top, where a legend inside would hide them), in
+    # room the layout makes for it, so that long device names are not cut off
+    fig.set_figheight(5 + 0.2 * len(ax.get_lines()))
+    fig.legend(loc="outside lower center", ncol=1, fontsize="small")
     return fig
 
 
@@ -177,6 +188,16 @@ def strong_figure(report: dict):
     cells, p = report["cells"], report["parameters"]
     workers = p["workers"]
     ax.plot(workers, workers, color="0.5", linestyle="--", label="ideal (speed-up = workers)")
+    n_cores = bounds.cores(report)
+    if bounds.cores_limited(workers, n_cores):
+        ax.plot(
+            workers,
+            bounds.speedup_bound(workers, n_cores),
+            color="k",
+            linewidth=2,
+            alpha=0.6,
+            label=f"bound from the machine's {n_cores} cores",
+        )
     k = 0
     for d in p["devices"]:
         for w in p["windows"]:
@@ -206,6 +227,16 @@ def weak_figure(report: dict):
     cells, p = report["cells"], report["parameters"]
     workers = p["workers"]
     ax.axhline(1.0, color="0.5", linestyle="--", label="ideal (efficiency 1)")
+    n_cores = bounds.cores(report)
+    if bounds.cores_limited(workers, n_cores):
+        ax.plot(
+            workers,
+            bounds.efficiency_bound(workers, n_cores),
+            color="k",
+            linewidth=2,
+            alpha=0.6,
+            label=f"bound from the machine's {n_cores} cores",
+        )
     for i, d in enumerate(p["devices"]):
         rows = _series(cells, "weak", d)
         e = efficiencies(rows)
@@ -246,89 +277,3 @@ def write_report(folder: Path, report: dict) -> dict:
         draw(report).savefig(folder / name, format="png")
     (folder / "index.html").write_text(page(report))
     return report
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-    body = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in row) + "</tr>" for row in rows
-    )
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-
-
-def page(report: dict) -> str:
-    """index.html: parameters, machine, figures, rooflines and every cell."""
-    p, m, roof = report["parameters"], report["machine"], report["roofline"]
-    info = [(k, v if isinstance(v, str) else json.dumps(v)) for k, v in (*p.items(), *m.items())]
-    info.append(("cluster", json.dumps(report["cluster"])))
-    devices = [(d["index"], d["name"], d["kind"], d["platform"]) for d in report["devices"]]
-    roofs = [
-        (
-            d,
-            f"{r['opencl_read_gb_s']:.2f}",
-            f"{r['numpy_read_gb_s']:.2f}",
-            f"{r['gb_s']:.2f}",
-            f"{r['gvox_steps_s']:.3f}",
-        )
-        for d, r in roof["devices"].items()
-    ]
-    cells = [
-        (
-            c["study"],
-            c["device"],
-            c["workers"],
-            c["window"],
-            "×".join(map(str, c["shape_zyx"][::-1])),
-            f"{c['median_s']:.4f}",
-            f"{c['min_s']:.4f}",
-            f"{c['gvox_steps_s']:.4f}",
-            f"{c['gb_s']:.4f}",
-        )
-        for c in report["cells"]
-    ]
-    figures = "".join(f'<p><img src="{name}" alt="{name}"></p>' for name in FIGURES)
-    store = (
-        f"<p>Store read (decoded, one process: {html.escape(str(roof['where']))}): "
-        f"{roof['store_read_gb_s']:.2f} GB/s = {roof['store_read_gvox_steps_s']:.3f} "
-        "G voxel-steps/s.</p>"
-    )
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>chronocl scalability report</title>
-<style>body{{font-family:sans-serif;margin:2em;max-width:70em}}table{{border-collapse:collapse;
-margin:1em 0}}td,th{{border:1px solid #ccc;padding:2px 8px;text-align:right}}
-td:first-child,th:first-child{{text-align:left}}
-img{{max-width:100%}}</style></head><body>
-<h1>chronocl scalability report</h1>
-<p>Schema {html.escape(report["schema"])}, written {html.escape(report["created"])}.
-Each cell is the median of {p["repeats"]} runs (after one warm-up) of a streamed integration
-of the window 0:W, store to store, on the first n workers of one dask cluster.</p>
-{_table(("parameter", "value"), info)}
-<h2>Figures</h2>{figures}
-<h2>Devices</h2>{_table(("index", "name", "kind", "platform"), devices)}
-<h2>Read roofline</h2>
-{
-        _table(
-            ("device", "OpenCL read GB/s", "numpy max GB/s", "roofline GB/s", "G voxel-steps/s"),
-            roofs,
-        )
-    }
-{store}
-<h2>Cells</h2>
-{
-        _table(
-            (
-                "study",
-                "device",
-                "workers",
-                "window",
-                "size X×Y×Z",
-                "median s",
-                "min s",
-                "G voxel-steps/s",
-                "GB/s",
-            ),
-            cells,
-        )
-    }
-</body></html>
-"""

@@ -10,6 +10,7 @@ whether the next brick is read ahead. `fits_in_memory` says when no streaming is
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from operator import itemgetter
@@ -17,6 +18,7 @@ from operator import itemgetter
 import numpy as np
 import zarr
 
+from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
 from chronocl.data.bricks import Slab, slabs, stored_z_chunk
 from chronocl.data.timeseries import STEPS_PER_READ
@@ -24,6 +26,10 @@ from chronocl.integration.inmemory import Job
 
 CHUNK_BYTES = 8 * 2**20  # output chunk size, as Chronovolume.save
 BASE_BYTES = 2 * 2**20  # tables, small buffers and bookkeeping of one slab
+# What each thread of a run holds besides the buffers counted: its stack pages, its malloc
+# arena's head and small blocks. 16 forced threads of each kind grew a run by 6-8 MB more than
+# 2 did (tests/test_budget_threads.py).
+THREAD_BYTES = 256 * 2**10
 
 # (steps decoded at once, read-ahead) from fastest to leanest: on two cores 8 steps per read
 # streamed 1.1x faster than 4 with read-ahead, which was 1.15x faster than 2.
@@ -42,6 +48,17 @@ class Plan:
     steps_per_read: int = STEPS_PER_READ  # steps whose chunks are decoded at once
 
 
+def run_threads() -> int:
+    """Threads an out-of-core run may have working at once: chronocl's host threads, zarr's
+    decode and encode threads and PoCL's (one per compute unit: the cores, or as forced by
+    POCL_MAX_PTHREAD_COUNT / POCL_CPU_MAX_CU_COUNT; a GPU's driver has fewer)."""
+    cores = os.cpu_count() or 1
+    zarr_threads = zarr.config.get("threading.max_workers") or min(32, cores + 4)
+    pocl = os.environ.get("POCL_MAX_PTHREAD_COUNT") or os.environ.get("POCL_CPU_MAX_CU_COUNT")
+    device = int(pocl) if pocl and pocl.strip().isdigit() else cores
+    return host_threads.workers() + int(zarr_threads) + device
+
+
 def slab_bytes(
     job: Job,
     rows: int,
@@ -49,6 +66,7 @@ def slab_bytes(
     read_ahead: bool = True,
     write_behind: bool | None = None,
     steps_per_read: int = STEPS_PER_READ,
+    threads: int | None = None,
 ) -> int:
     """Memory held while a slab of `rows` output rows is read, integrated and written.
 
@@ -57,13 +75,15 @@ def slab_bytes(
     and decoded; at most zarr's async.concurrency), the engine's own work arrays (float64
     input goes to OpenCL as float32; the numpy reference works in float64), the slab's output
     and the previous one being written (write-behind; by default where there is read-ahead),
-    and zarr's encoded copies while writing.
+    and zarr's encoded copies while writing, and THREAD_BYTES for each of `threads` (default:
+    `run_threads()`), so that the budget holds at any thread count.
     """
     nz, ny, nx = job.series.volume_shape
     plane, w, item = ny * nx, job.selection.width, job.series.dtype.itemsize
     read_rows = min(nz, rows + 2 * job.halo)
     brick = read_rows * w * plane * item
     total = BASE_BYTES + brick * (2 if read_ahead else 1)
+    total += THREAD_BYTES * (run_threads() if threads is None else threads)
     zc = stored_z_chunk(job.series)
     if zc:
         # Stored chunks a read of these rows can touch: as many as they fill when a slab of

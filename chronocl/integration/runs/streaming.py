@@ -29,7 +29,7 @@ import zarr
 
 from chronocl import modes, reference
 from chronocl.core.atomic import RUN_DIR
-from chronocl.core.budget import parse_memory
+from chronocl.core.budget import bound_allocator, parse_memory
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.paths import check_apart, check_output
 from chronocl.core.selection import Selection
@@ -40,7 +40,7 @@ from chronocl.data.writer import compressors
 from chronocl.engine import get_engine
 from chronocl.engine.device_formats import check_device_format, with_device_format
 from chronocl.integration.inmemory import Job, Out, integrate_brick, prepare
-from chronocl.integration.runs import distributed
+from chronocl.integration.runs import distributed, stages
 from chronocl.integration.runs.distributed import DaskExecutor
 from chronocl.integration.runs.local import Bounds, LocalExecutor
 from chronocl.integration.runs.plan import (
@@ -170,6 +170,7 @@ class RemoteSlabTask:
     device_format: str = "auto"
 
     def __call__(self, bounds: Bounds) -> dict:
+        bound_allocator()  # as the local executor: a worker's threads hand freed blocks back
         series = distributed.open_on_worker(self.job["store"], self.job["shape"])
         job = job_from_dict(self.job, series)
         distributed.engine_on_worker(self.engine, self.device)
@@ -271,10 +272,13 @@ def integrate_to_store(
     tmp = partial_path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     lock = open_run(tmp, job, plan, digest, compressor)
+    times = stages.begin()
     try:
         task = SlabTask(job, tmp, digest, engine, device, plan.steps_per_read, device_format)
         run(task, plan, executor)
-        commit(tmp, target, job, engine, overwrite)
+        with times.stage("finish"):
+            commit(tmp, target, job, engine, overwrite)
+        times.end()
     except BaseException as exc:
         drop_unless_resumable(tmp, digest, exc)
         raise
