@@ -8,26 +8,36 @@ from typing import Annotated
 
 import typer
 
-from chronocl.cli.options import STORE_HINT, out, print_summary
+from chronocl.cli.options import AnonOpt, StorageOpt, out, print_summary, series_store
 
 
 def info(
-    store: Annotated[Path, typer.Argument(help="A chronocl series or chronovolume store.")],
+    store: Annotated[
+        str,
+        typer.Argument(
+            metavar="STORE",
+            help="A chronocl series or chronovolume store (a series also at an http(s):// or "
+            "s3:// URL).",
+        ),
+    ],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    anon: AnonOpt = False,
+    storage_option: StorageOpt = None,
 ) -> None:
     """Show shape, dtype, value range, steps, chunking and size on disk.
 
     Example: chronocl info vortex.zarr --json
     """
     from chronocl.core.errors import StoreFormatError
-    from chronocl.core.paths import check_input
     from chronocl.data.chronovolume import Chronovolume
     from chronocl.data.series import open_series
 
-    check_input(store, "store", hint=STORE_HINT)
+    store, storage_options = series_store(store, anon, storage_option)
     try:
-        summary = open_series(store).describe()
+        summary = open_series(store, storage_options=storage_options).describe()
     except StoreFormatError as as_series:
+        if not isinstance(store, Path):  # a URL: chronovolumes are read from local paths
+            raise
         try:
             cv = Chronovolume.load(store)
         except StoreFormatError as as_cv:

@@ -13,7 +13,7 @@ import typer
 
 from chronocl import modes
 from chronocl.cli.options import (
-    STORE_HINT,
+    AnonOpt,
     ColormapOpt,
     DeviceFormatOpt,
     DeviceOpt,
@@ -21,24 +21,29 @@ from chronocl.cli.options import (
     LevelOpt,
     NormalizeOpt,
     OrderOpt,
+    StorageOpt,
+    StoreArg,
     TfOpt,
     ThresholdOpt,
     TimeTfOpt,
     WindowOpt,
     err,
+    local_input,
     mode_choices,
     modes_help,
+    series_store,
     spec_args,
 )
 
 
 def integrate(
-    store: Annotated[Path, typer.Argument(help="Series store.")],
+    store: StoreArg,
     out_path: Annotated[
-        Path,
+        str,
         typer.Argument(
             metavar="OUT",
-            help="Chronovolume to write: .zarr, .ome.zarr (napari) or .vti (ParaView).",
+            help="Chronovolume to write: .zarr, .ome.zarr (napari) or .vti (ParaView); a path "
+            "or an s3:// URL (written locally, then published whole).",
         ),
     ],
     mode: Annotated[str, typer.Option(help=f"{mode_choices()}.")] = modes.DEFAULT,
@@ -67,6 +72,8 @@ def integrate(
         typer.Option(help="Start a local dask cluster of N worker processes (spawned)."),
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    anon: AnonOpt = False,
+    storage_option: StorageOpt = None,
 ) -> None:
     """Integrate a window of time steps into a chronovolume store.
 
@@ -83,22 +90,49 @@ def integrate(
       chronocl integrate big.zarr a.zarr --memory 4GB --workers 2
 
       chronocl integrate big.zarr quick.zarr --mode max --level 2
+
+      chronocl integrate s3://bucket/run.zarr m.zarr --mode max --window 0:10 --anon
+
+      chronocl integrate run.zarr s3://bucket/m.zarr --mode max --window 0:10
     """
-    from chronocl.core.paths import check_input, check_target
+    from chronocl.core.paths import check_target
+    from chronocl.data.remote import is_url
+    from chronocl.data.remote_write import (
+        check_remote_output,
+        output_path,
+        split_storage_options,
+    )
     from chronocl.data.series import open_series
     from chronocl.engine.device_formats import check_format_name
     from chronocl.integration.inmemory import check_level
-    from chronocl.integration.runs.auto import check_run_options, plan_run
+    from chronocl.integration.runs.auto import check_run_options
+
+    t0 = time.perf_counter()
 
     # Everything is checked before any work: no kernel built, no brick read, nothing written.
     check_run_options(out_path, memory, engine, scheduler, workers)
     check_format_name(device_format)
-    check_input(store, "store", hint=STORE_HINT)
+    reading, out_options = split_storage_options(store, out_path, anon, storage_option)
+    store, storage_options = series_store(store, *reading)
     args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap)
-    check_target(out_path, overwrite, [store, tf])
-    series = open_series(store)
+    if is_url(out_path):
+        check_remote_output(out_path, overwrite, out_options, (store,))
+    else:
+        check_target(Path(out_path), overwrite, [local_input(store), tf])
+    series = open_series(store, storage_options=storage_options)
     check_level(series, level)
-    t0 = time.perf_counter()
+    with output_path(out_path, overwrite, out_options) as out:
+        what = _run(series, window, out, mode, level, overwrite, args, memory, engine, device,
+                    scheduler, workers, device_format)  # fmt: skip
+    took = time.perf_counter() - t0
+    err.print(f"wrote {out_path} ({mode}, {what}) in {took:.2f} s")
+
+
+def _run(series, window, out_path, mode, level, overwrite, args, memory, engine, device,
+         scheduler, workers, device_format) -> str:  # fmt: skip
+    """Plan and run the integration into the local `out_path`; what was written, in words."""
+    from chronocl.integration.runs.auto import plan_run
+
     run = plan_run(
         series,
         window,
@@ -120,11 +154,7 @@ def integrate(
         progress=True,
         on_dashboard=lambda link: err.print(f"dask dashboard: {link}", highlight=False),
     )
-    took = time.perf_counter() - t0
-    if cv is None:
-        err.print(f"wrote {out_path} ({mode}, streamed) in {took:.2f} s")
-    else:
-        err.print(f"wrote {out_path} ({mode}, steps {cv.steps}) in {took:.2f} s")
+    return "streamed" if cv is None else f"steps {cv.steps}"
 
 
 def _show_run_notes() -> None:

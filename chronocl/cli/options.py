@@ -67,6 +67,28 @@ TimeLabelsOpt = Annotated[
         "where it has them) or steps (step numbers)."
     ),
 ]
+# Where a series store is read from: a local path, or an http(s):// or s3:// URL.
+StoreArg = Annotated[
+    str,
+    typer.Argument(
+        metavar="STORE",
+        help="Series store: a path, or an http(s):// or s3:// URL read in place.",
+    ),
+]
+AnonOpt = Annotated[
+    bool,
+    typer.Option("--anon", help="Read an s3:// store of a public bucket without credentials."),
+]
+StorageOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--storage-option",
+        metavar="KEY=VALUE",
+        help="fsspec option for a remote STORE, repeatable (endpoint_url=http://host:9000 for "
+        "MinIO, requester_pays=true); values are read as JSON where they parse.",
+    ),
+]
+
 LevelOpt = Annotated[
     int,
     typer.Option(help="Coarse level to integrate (0: full resolution; see 'chronocl pyramid')."),
@@ -88,6 +110,26 @@ ShadingParamsOpt = Annotated[
         "shininess (1..256); implies --shading. Default 0.3,0.7,0.3,24.",
     ),
 ]
+
+
+def series_store(
+    text: str | Path, anon: bool = False, storage_option: list[str] | None = None
+) -> tuple[str | Path, dict]:
+    """STORE and the storage options to open it with (`chronocl.open(store, storage_options=
+    ...)`): a URL as it is, a local path checked to exist (options refused for it)."""
+    from chronocl.core.paths import check_input
+    from chronocl.data.remote import is_url, parse_storage_options, storage_options_for
+
+    text = str(text)
+    options = storage_options_for(text, parse_storage_options(storage_option, anon))
+    if is_url(text):
+        return text, options
+    return check_input(text, "store", hint=STORE_HINT), options
+
+
+def local_input(store: str | Path) -> Path | None:
+    """`store` where it is a local path (an output must stay apart from it), else None."""
+    return store if isinstance(store, Path) else None
 
 
 def mode_choices() -> str:

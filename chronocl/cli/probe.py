@@ -8,12 +8,20 @@ from typing import Annotated
 
 import typer
 
-from chronocl.cli.options import STORE_HINT, TimeLabelsOpt, err
+from chronocl.cli.options import (
+    AnonOpt,
+    StorageOpt,
+    StoreArg,
+    TimeLabelsOpt,
+    err,
+    local_input,
+    series_store,
+)
 from chronocl.core.errors import InvalidParameterError
 
 
 def probe(
-    store: Annotated[Path, typer.Argument(help="Series store.")],
+    store: StoreArg,
     at: Annotated[
         str | None,
         typer.Option(metavar="X,Y,Z", help="Voxel indices x,y,z (x the fastest axis)."),
@@ -44,6 +52,8 @@ def probe(
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
     time_labels: TimeLabelsOpt = "labels",
+    anon: AnonOpt = False,
+    storage_option: StorageOpt = None,
 ) -> None:
     """Values over time at a voxel (--at) or over a box (--box: mean, min, max), with time labels.
 
@@ -58,7 +68,7 @@ def probe(
       chronocl probe vortex.zarr --box 24:40,24:40,28:36 -o box.png --window 0:30:10
       chronocl probe era5.zarr --at 10,20,3 -o steps.png --time-labels steps
     """
-    from chronocl.core.paths import check_input, check_target
+    from chronocl.core.paths import check_target
     from chronocl.core.time_labels import check_prefer
     from chronocl.data.probe import (
         check_box,
@@ -80,10 +90,10 @@ def probe(
     ranges = parse_box(box, "--box") if box is not None else None
     if out_path is not None:
         check_suffix(out_path)
-    check_input(store, "store", hint=STORE_HINT)
+    store, storage_options = series_store(store, anon, storage_option)
     if out_path is not None:
-        check_target(out_path, overwrite, [store])
-    series = open_series(store)
+        check_target(out_path, overwrite, [local_input(store)])
+    series = open_series(store, storage_options=storage_options)
     if point is not None:
         point = check_point(point, series.volume_shape, "--at")
     else:

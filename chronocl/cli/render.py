@@ -12,7 +12,7 @@ import typer
 
 from chronocl import modes
 from chronocl.cli.options import (
-    STORE_HINT,
+    AnonOpt,
     ColormapOpt,
     DeviceFormatOpt,
     DeviceOpt,
@@ -22,6 +22,7 @@ from chronocl.cli.options import (
     OrderOpt,
     ShadingOpt,
     ShadingParamsOpt,
+    StorageOpt,
     TfOpt,
     ThresholdOpt,
     TimeLabelsOpt,
@@ -29,10 +30,12 @@ from chronocl.cli.options import (
     WindowOpt,
     check_engine,
     err,
+    local_input,
     mode_choices,
     parse_floats,
     parse_shading,
     parse_sizes,
+    series_store,
     spec_args,
 )
 from chronocl.core.errors import InvalidParameterError
@@ -41,7 +44,12 @@ from chronocl.core.errors import InvalidParameterError
 def render(
     ctx: typer.Context,
     store: Annotated[
-        Path | None, typer.Argument(help="Series store (with --state: the session's).")
+        str | None,
+        typer.Argument(
+            metavar="[STORE]",
+            help="Series store, a path or an http(s):// or s3:// URL (with --state: the "
+            "session's).",
+        ),
     ] = None,
     out_path: Annotated[
         Path | None,
@@ -132,6 +140,8 @@ def render(
             metavar="A,B", help="Variables of the store side by side: a panel each (per mode)."
         ),
     ] = None,
+    anon: AnonOpt = False,
+    storage_option: StorageOpt = None,
 ) -> None:
     """Integrate a window and render it; several modes become parallel views in one image.
 
@@ -177,7 +187,7 @@ def render(
         missing = "STORE" if store is None else "--out/-o"
         raise InvalidParameterError(f"{missing} is missing; e.g. chronocl render v.zarr -o v.png")
     from chronocl.core.enhance import Enhance
-    from chronocl.core.paths import check_distinct, check_input, check_target
+    from chronocl.core.paths import check_distinct, check_target
     from chronocl.core.time_labels import check_prefer
     from chronocl.data.formats.outputs import output_kind
     from chronocl.data.formats.outputs import save_chronovolume as save_any
@@ -220,13 +230,13 @@ def render(
     saves = chronovolume_paths(save_chronovolume, modes)
     for path in saves:
         output_kind(path)
-    check_input(store, "store", hint=STORE_HINT)
+    store, storage_options = series_store(store, anon, storage_option)
     args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap)
     outputs = [out_path, *([turntable] if turntable is not None else []), *saves]
     check_distinct(outputs)
     for path in outputs:
-        check_target(path, overwrite, [store, tf])
-    series = open_series(store)
+        check_target(path, overwrite, [local_input(store), tf])
+    series = open_series(store, storage_options=storage_options)
     names = [n.strip() for item in variables or [] for n in item.split(",") if n.strip()]
     if names and (turntable is not None or saves):
         raise InvalidParameterError(

@@ -96,3 +96,12 @@ class ModeDefinitionError(ChronoclError, TypeError):
 class ChronoclWarning(UserWarning):
     """Input that is probably not what was meant but may be (the work goes on); the CLI
     prints it as one line, 'chronocl: warning: ...'."""
+
+
+class RemoteStoreError(ChronoclError, ConnectionError):
+    """A remote store (HTTP, S3) that could not be read after the retries: the URL and the
+    status are named; nothing is read as zeros."""
+
+
+class RemoteAccessError(ChronoclError, PermissionError):
+    """A remote store that refuses access (HTTP 401/403, S3 AccessDenied, wrong credentials)."""

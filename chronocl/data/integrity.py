@@ -5,7 +5,8 @@ bytes no longer decode fails with whatever its codec raises (zstd's RuntimeError
 checksum's ValueError, a reshape error). chronocl reads through the pieces here instead:
 
 - `CheckedStore`, a local zarr store that raises `StoreCorruptError` for a missing chunk of a
-  store that was written whole (every store chronocl writes keeps its empty chunks);
+  store that was written whole (every store chronocl writes keeps its empty chunks), through
+  `MissingChunks`, which the remote store (`chronocl.data.remote_store`) shares;
 - `checked_read`, which runs a read and turns a codec failure into `StoreCorruptError` naming
   the chunk and the time step that failed;
 - `CheckedArray`, a zarr array whose reads go through `checked_read`, for dask.
@@ -16,7 +17,6 @@ from __future__ import annotations
 import itertools
 import os
 from collections.abc import Callable, Sequence
-from pathlib import Path
 
 import numpy as np
 from zarr.storage import LocalStore
@@ -32,27 +32,33 @@ def damaged(path: str | os.PathLike, what: str) -> StoreCorruptError:
     return StoreCorruptError(f"store {str(path)!r} is damaged: {what}; {FIX}")
 
 
-class CheckedStore(LocalStore):
-    """A read-only local store that notes the chunks it was asked for and did not find.
+class MissingChunks:
+    """What a checked store (local or remote) does with the chunks it was asked for and did
+    not find: notes them, for `checked_read` to raise StoreCorruptError after the read.
 
-    `checked_read` raises StoreCorruptError after a read that touched a noted chunk; raising
-    here, inside zarr's event loop, would leave its other reads of the batch pending.
+    Raising inside zarr's event loop would leave its other reads of the batch pending.
 
     Only chunks of the arrays named in `arrays` are checked: every chunk when `complete` says
     the store was written with all its chunks; else, when `may_miss` is set, those of steps not
     in it (the steps whose statistics allow a chunk of only the fill value, which stores
-    written before chunks were kept could leave out).
+    written before chunks were kept could leave out). `where` names the store in errors.
     """
 
-    def __init__(self, root: str | os.PathLike, arrays: tuple[str, ...] = ("data",)) -> None:
-        super().__init__(root, read_only=True)
+    arrays: tuple[str, ...]
+    complete: bool
+    may_miss: frozenset[int] | None
+    missing: dict[tuple[int, ...], str]
+    where: str
+
+    def _init_checks(self, where: str, arrays: tuple[str, ...]) -> None:
+        self.where = where
         self.arrays = arrays
         self.complete = False
-        self.may_miss: frozenset[int] | None = None
-        self.missing: dict[tuple[int, ...], str] = {}
+        self.may_miss = None
+        self.missing = {}
 
-    async def get(self, key, prototype=None, byte_range=None):
-        buf = await super().get(key, prototype, byte_range)
+    def _note(self, key: str, buf) -> None:
+        """Note `key` if its chunk must exist but `buf` says it was not found."""
         if buf is None and (self.complete or self.may_miss is not None):
             coords = self._chunk_coords(key)
             allowed = (
@@ -60,7 +66,6 @@ class CheckedStore(LocalStore):
             )
             if coords is not None and not allowed:
                 self.missing[coords] = key
-        return buf
 
     def check(self, touched: list[Sequence[int]]) -> None:
         """Raise StoreCorruptError if a noted missing chunk lies in the chunk index ranges."""
@@ -70,11 +75,11 @@ class CheckedStore(LocalStore):
                     a.startswith("levels/") for a in self.arrays
                 )  # series and their coarse levels are chunked one step per chunk
                 where = f" ({_where(coords)})" if by_step else ""
-                raise damaged(self.root, f"chunk {key}{where} is missing")
+                raise damaged(self.where, f"chunk {key}{where} is missing")
 
     def _chunk_coords(self, key: str) -> tuple[int, ...] | None:
         """The chunk coordinates a key names ('data/c/3/0/0/0', 'data/3.0.0.0'), else None."""
-        if Path(key).name in _METADATA_NAMES:
+        if key.rsplit("/", 1)[-1] in _METADATA_NAMES:
             return None
         for array in self.arrays:
             prefix = f"{array}/" if array else ""
@@ -89,6 +94,20 @@ class CheckedStore(LocalStore):
             return tuple(int(c) for c in rest.replace(".", "/").split("/"))
         except ValueError:
             return None
+
+
+class CheckedStore(MissingChunks, LocalStore):
+    """A read-only local store that notes the chunks it was asked for and did not find
+    (`MissingChunks`; a remote store does the same in `chronocl.data.remote_store`)."""
+
+    def __init__(self, root: str | os.PathLike, arrays: tuple[str, ...] = ("data",)) -> None:
+        super().__init__(root, read_only=True)
+        self._init_checks(str(self.root), arrays)
+
+    async def get(self, key, prototype=None, byte_range=None):
+        buf = await super().get(key, prototype, byte_range)
+        self._note(key, buf)
+        return buf
 
     def __reduce__(self):  # for dask.distributed workers
         return _rebuild, (str(self.root), self.arrays, self.complete, self.may_miss)
@@ -118,6 +137,8 @@ def checked_read(
     `selection` is what the read covers, one slice, list or int per dimension; on failure the
     chunks it touches are read one by one to name the first that fails.
     """
+    if path is None and isinstance(getattr(arr, "store", None), MissingChunks):
+        path = arr.store.where  # a remote store, named by its URL
     try:
         values = read()
     except (ChronoclError, MemoryError):
@@ -125,7 +146,7 @@ def checked_read(
     except Exception as exc:  # every codec raises its own kind of error
         raise _locate(path, arr, selection, exc) from None
     store = getattr(arr, "store", None)
-    if isinstance(store, CheckedStore) and store.missing:
+    if isinstance(store, MissingChunks) and store.missing:
         store.check(_touched(arr, selection))
     return values
 

@@ -29,7 +29,7 @@ import numpy as np
 import zarr
 from zarr.codecs import BloscCodec
 
-from chronocl.core.errors import InvalidDataError, InvalidParameterError
+from chronocl.core.errors import ChronoclError, InvalidDataError, InvalidParameterError
 from chronocl.data.integrity import CheckedStore, damaged
 from chronocl.data.metadata import SeriesStats, stats_from_steps
 
@@ -183,17 +183,29 @@ def read_levels(path: Path, shape: Sequence[int]) -> list[dict] | None:
     folder = Path(path) / LEVELS
     if not folder.exists():
         return None
-    fix = f"rebuild them with 'chronocl pyramid {path} --force'"
-
-    def bad(what: str) -> Exception:
-        return damaged(path, f"{what} ({fix})")
-
+    bad = _bad_levels(path)
     try:
         doc = json.loads((folder / "zarr.json").read_bytes())
     except FileNotFoundError:
         raise bad("its levels group has no metadata (levels/zarr.json is missing)") from None
     except (OSError, ValueError, RecursionError):
         raise bad("its levels metadata levels/zarr.json cannot be read") from None
+    return check_levels(doc, path, shape)
+
+
+def _bad_levels(path: Path | str):
+    fix = f"rebuild them with 'chronocl pyramid {path} --force'"
+
+    def bad(what: str) -> Exception:
+        return damaged(path, f"{what} ({fix})")
+
+    return bad
+
+
+def check_levels(doc: object, path: Path | str, shape: Sequence[int]) -> list[dict]:
+    """`read_levels` of the levels group's metadata document `doc` (parsed zarr.json) of the
+    store at `path` (a local path or a URL, named in errors)."""
+    bad = _bad_levels(path)
     attrs = doc.get("attributes", {}).get("chronocl") if isinstance(doc, dict) else None
     if not isinstance(attrs, dict) or attrs.get("format") != LEVELS_FORMAT:
         raise bad("its levels group lacks the chronocl.levels attribute")
@@ -242,14 +254,20 @@ def _pool_stats(stats: object, t: int, bad) -> SeriesStats:
     return stats_from_steps(*lists)
 
 
-def open_level_array(path: Path, n: int, pool: str, shape: Sequence[int], dtype) -> zarr.Array:
+def open_level_array(
+    path: Path | str, n: int, pool: str, shape: Sequence[int], dtype, store=None
+) -> zarr.Array:
     """The checked array ``levels/<n>/<pool>`` of the store at `path` (a missing or undecodable
-    chunk raises StoreCorruptError on read)."""
+    chunk raises StoreCorruptError on read); `store`, if given, is the checked store to read
+    it through (a remote one), else a local one at `path`."""
     name = f"{LEVELS}/{n}/{pool}"
-    store = CheckedStore(path, (name,))
+    if store is None:
+        store = CheckedStore(path, (name,))
     store.complete = True
     try:
         arr = zarr.open_array(store=store, path=name, mode="r")
+    except ChronoclError:  # a remote store's network failure or refusal
+        raise
     except Exception:
         raise damaged(path, f"its level array {name} cannot be opened") from None
     if tuple(arr.shape) != tuple(shape) or arr.dtype != dtype or arr.chunks[0] != 1:

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
+from chronocl.data.remote_store import is_url
 from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries, open_store
 from chronocl.data.writer import write_store
@@ -22,13 +23,29 @@ from chronocl.data.writer import write_store
 __all__ = ["TimeSeries", "open_series", "write_series", "write_steps"]
 
 
-def open_series(path: str | os.PathLike, variable: str | None = None) -> TimeSeries:
+def open_series(
+    path: str | os.PathLike,
+    variable: str | None = None,
+    storage_options: dict | None = None,
+) -> TimeSeries:
     """Open a chronocl store (zarr v3 or v2), a bare (T, Z, Y, X) zarr array or an OME-Zarr
     image (in place: channel 0, full resolution).
 
     A store of several variables opens at its first; `variable` names another
     (`TimeSeries.variables` lists them, `TimeSeries.variable(name)` switches).
+
+    `path` may be an http(s):// or s3:// URL, read in place (`chronocl.data.remote`);
+    `storage_options` then go to fsspec (``anon=True`` for a public bucket, ``endpoint_url``).
     """
+    if is_url(path):
+        from chronocl.data.remote import open_remote
+
+        url = str(path)
+        if is_omezarr(url, storage_options):
+            series = open_omezarr(url, storage_options=storage_options)
+        else:
+            series = open_remote(url, storage_options)
+        return series if variable is None else series.variable(variable)
     p = Path(path)
     series = open_omezarr(p) if is_omezarr(p) else open_store(p)
     return series if variable is None else series.variable(variable)

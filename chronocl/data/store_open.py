@@ -15,7 +15,7 @@ from pathlib import Path
 import dask.array as da
 import zarr
 
-from chronocl.core.errors import StoreFormatError
+from chronocl.core.errors import ChronoclError, StoreFormatError
 from chronocl.data.integrity import CheckedArray, CheckedStore, damaged
 from chronocl.data.metadata import (
     FORMAT,
@@ -25,6 +25,7 @@ from chronocl.data.metadata import (
     checked_attrs,
     unreadable_metadata,
 )
+from chronocl.data.remote_store import is_url, missing_store, remote_store
 from chronocl.data.stores import require_store
 from chronocl.data.writer import EXTRA_KEYS
 
@@ -37,7 +38,7 @@ class StoredArray:
     fields then keep their defaults.
     """
 
-    path: Path
+    path: Path | None
     array: zarr.Array
     data: da.Array
     source: str
@@ -47,15 +48,29 @@ class StoredArray:
     meta: dict = field(default_factory=dict)
 
 
-def open_array(p: Path) -> StoredArray:
-    """Open the array of the chronocl store or bare zarr array at `p`, its metadata checked."""
-    require_store(p)
-    store = CheckedStore(p)
+def open_array(p: Path | str, storage_options: dict | None = None) -> StoredArray:
+    """Open the array of the chronocl store or bare zarr array at `p`, its metadata checked.
+
+    `p` is a local path, or an http(s):// or s3:// URL (`chronocl.data.remote_store`, whose
+    `storage_options` go to fsspec); a remote store's `path` is None and `source` its URL
+    where the store records no other.
+    """
+    remote = is_url(p)
+    if remote:
+        store = remote_store(str(p), storage_options)
+    else:
+        require_store(p)
+        store = CheckedStore(p)
     try:
-        node = zarr.open(store=store, mode="r")
-        has_data = isinstance(node, zarr.Group) and "data" in node
-        arr = node["data"] if has_data else node
+        node = _open_node(store, remote)
+        inner = node.get("data") if isinstance(node, zarr.Group) else None  # one lookup
+        has_data = inner is not None
+        arr = inner if has_data else node
+    except ChronoclError:  # a remote store's network failure or refusal
+        raise
     except Exception as exc:  # zarr raises several kinds for a non-store folder
+        if remote:
+            raise missing_store(str(p), storage_options) from None
         bad = unreadable_metadata(p)
         if bad is not None:
             raise damaged(p, f"its metadata file {bad} cannot be read") from None
@@ -74,8 +89,9 @@ def open_array(p: Path) -> StoredArray:
     check_shape(arr.shape, str(p))
     check_dtype(arr.dtype)
     lazy = da.from_array(CheckedArray(p, arr), chunks=arr.chunks, name=f"chronocl-{p}-{id(arr)}")
+    where = None if remote else p
     if not (isinstance(attrs, dict) and attrs.get("format") == FORMAT):
-        return StoredArray(path=p, array=arr, data=lazy, source=str(p))
+        return StoredArray(path=where, array=arr, data=lazy, source=str(p))
     stats, spacing, times = checked_attrs(p, arr, attrs)
     if attrs.get("chunks") == "complete":
         store.complete = True
@@ -85,7 +101,7 @@ def open_array(p: Path) -> StoredArray:
             t for t in range(arr.shape[0]) if stats.step_min[t] <= fill <= stats.step_max[t]
         )
     return StoredArray(
-        path=p,
+        path=where,
         array=arr,
         data=lazy,
         source=str(attrs.get("source", p)),
@@ -94,3 +110,16 @@ def open_array(p: Path) -> StoredArray:
         times=times,
         meta={k: attrs[k] for k in EXTRA_KEYS if k in attrs},
     )
+
+
+def _open_node(store, remote: bool):
+    """The group or array at the store's root. Over a network a chronocl store (a zarr v3
+    group) is tried first: zarr.open probes every format, a round trip or two more."""
+    if remote:
+        try:
+            return zarr.open_group(store=store, mode="r", zarr_format=3)
+        except ChronoclError:
+            raise
+        except Exception:  # not a v3 group: a bare array, or zarr v2
+            pass
+    return zarr.open(store=store, mode="r")

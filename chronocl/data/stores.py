@@ -7,8 +7,9 @@ from pathlib import Path
 
 import zarr
 
-from chronocl.core.errors import InputNotFoundError, StoreFormatError
+from chronocl.core.errors import ChronoclError, InputNotFoundError, StoreFormatError
 from chronocl.data.integrity import CheckedStore
+from chronocl.data.remote_store import is_url, missing_store, remote_store
 
 
 def require_store(p: Path) -> None:
@@ -20,24 +21,35 @@ def require_store(p: Path) -> None:
         )
 
 
-def open_group(path: str | os.PathLike, what: str, checked: tuple[str, ...] = ()) -> zarr.Group:
+def open_group(
+    path: str | os.PathLike,
+    what: str,
+    checked: tuple[str, ...] = (),
+    storage_options: dict | None = None,
+) -> zarr.Group:
     """Open the zarr group at `path` read-only; `what` names the expected thing in errors.
 
     Missing chunks of the `checked` arrays raise StoreCorruptError when the group's
-    attribute ``chronocl.chunks`` says that every chunk was written.
+    attribute ``chronocl.chunks`` says that every chunk was written. `path` may be an
+    http(s):// or s3:// URL (`chronocl.data.remote_store`, given `storage_options`).
     """
-    p = Path(path)
-    if not p.exists():
+    remote = is_url(path)
+    p = str(path).rstrip("/") if remote else Path(path)
+    if not remote and not p.exists():
         raise InputNotFoundError(f"{what} {str(p)!r} does not exist")
     try:
-        store = CheckedStore(p, checked)
+        store = remote_store(p, storage_options, checked) if remote else CheckedStore(p, checked)
         group = zarr.open_group(store=store, mode="r")
         attrs = dict(group.attrs).get("chronocl")
         store.complete = (
             bool(checked) and isinstance(attrs, dict) and attrs.get("chunks") == "complete"
         )
         return group
+    except ChronoclError:  # a remote store's network failure or refusal
+        raise
     except Exception:  # zarr raises several kinds for a folder that is not a group
+        if remote:
+            raise missing_store(p, storage_options) from None
         raise StoreFormatError(f"{str(p)!r} is not a zarr group, so not {_article(what)}") from None
 
 

@@ -342,7 +342,7 @@ class TimeSeries:
         """A summary for `chronocl info` and the demo."""
         t, z, y, x = self.shape
         d = {
-            "path": str(self.path) if self.path else None,
+            "path": str(self.path) if self.path else self.meta.get("url"),
             "source": self.source,
             "dims (x, y, z)": [x, y, z],
             "shape (T, Z, Y, X)": [t, z, y, x],

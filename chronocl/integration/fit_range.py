@@ -89,7 +89,8 @@ def sample_steps(series, steps: list[int], pool: str = "mean") -> np.ndarray:
     coarse level (pooled by `pool`) when there is a small enough one, else every n-th voxel."""
     budget = SAMPLE_VALUES / len(steps)
     source = series
-    if series.path is not None:  # stored levels read cheaply; in memory they would pool it all
+    stored = series.path is not None or getattr(series.level_source, "stored", False)
+    if stored:  # stored levels (local or remote) read cheaply; in memory they would pool it all
         for n in range(1, series.n_levels):
             if math.prod(series.level(n, pool).volume_shape) <= budget:
                 source = series.level(n, pool)

@@ -35,6 +35,7 @@ import zarr
 from dask.diagnostics import ProgressBar
 
 from chronocl.core.errors import (
+    InputNotFoundError,
     InvalidDataError,
     InvalidParameterError,
     StoreFormatError,
@@ -44,6 +45,7 @@ from chronocl.data.formats.contract import Reader
 from chronocl.data.level_sources import POOLED, AdoptedLevels
 from chronocl.data.metadata import parse_spacing
 from chronocl.data.pyramid import level_shapes
+from chronocl.data.remote_store import Url, is_url
 from chronocl.data.stores import open_group
 from chronocl.data.timeseries import TimeSeries
 from chronocl.data.variables import split_names, write_variables
@@ -51,8 +53,15 @@ from chronocl.data.variables import split_names, write_variables
 SPATIAL = ("z", "y", "x")
 
 
-def is_omezarr(path: str | os.PathLike) -> bool:
-    """True when `path` is a zarr group whose metadata holds NGFF ``multiscales`` (0.4 or 0.5)."""
+def is_omezarr(path: str | os.PathLike, storage_options: dict | None = None) -> bool:
+    """True when `path` is a zarr group whose metadata holds NGFF ``multiscales`` (0.4 or 0.5);
+    `path` may be an http(s):// or s3:// URL (a network failure is raised, not False)."""
+    if is_url(path):
+        try:
+            group = open_group(path, "OME-Zarr image", storage_options=storage_options)
+        except (StoreFormatError, InputNotFoundError):
+            return False
+        return _multiscales(dict(group.attrs)) is not None
     p = Path(path)
     if not p.is_dir():
         return False
@@ -64,15 +73,22 @@ def is_omezarr(path: str | os.PathLike) -> bool:
 
 
 def open_omezarr(
-    path: str | os.PathLike, *, channel: int = 0, level: int = 0, progress: bool = False
+    path: str | os.PathLike,
+    *,
+    channel: int = 0,
+    level: int = 0,
+    progress: bool = False,
+    storage_options: dict | None = None,
 ) -> TimeSeries:
     """Open one channel and resolution level of an OME-Zarr image as a lazy (T, Z, Y, X) series.
 
     Nothing is copied: the series reads the image's own chunks. Statistics
-    (global and per-step min/max/mean) are computed in one dask pass.
+    (global and per-step min/max/mean) are computed in one dask pass. `path` may be an
+    http(s):// or s3:// URL, read in place with `storage_options`.
     """
-    p = Path(path)
-    group = open_group(p, "OME-Zarr image")
+    remote = is_url(path)
+    p = Url(path) if remote else Path(path)
+    group = open_group(p, "OME-Zarr image", storage_options=storage_options)
     ms = _multiscales(dict(group.attrs))
     if ms is None:
         raise StoreFormatError(
@@ -142,7 +158,13 @@ def open_omezarr(
         meta = {"variable": names[channel], "variables": names}
 
         def open_variable(name: str) -> TimeSeries:
-            return open_omezarr(p, channel=names.index(name), level=level, progress=progress)
+            return open_omezarr(
+                path,
+                channel=names.index(name),
+                level=level,
+                progress=progress,
+                storage_options=storage_options,
+            )
 
     own = _own_levels(lazy, group, datasets, index, order) if level == 0 else {}
     series = dataclasses.replace(
@@ -152,7 +174,7 @@ def open_omezarr(
         open_variable=open_variable,
     )
     fast = tuple(axes) == ("t", *SPATIAL) and arr.chunks[0] == 1
-    return series.stored_in(p, arr if fast else None)
+    return series.stored_in(None if remote else p, arr if fast else None)
 
 
 def _own_levels(lazy: da.Array, group, datasets: list, index: list, order: list) -> dict:

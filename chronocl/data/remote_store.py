@@ -1,0 +1,224 @@
+"""Stores over HTTP(S) and S3, read through zarr's `FsspecStore` with chronocl's checks.
+
+`RemoteStore` is the remote twin of `chronocl.data.integrity.CheckedStore`: a chunk that the
+store's metadata says must exist (``chunks: "complete"``) and that the server does not have
+(HTTP 404, S3 NoSuchKey) is noted and reported as `StoreCorruptError` naming its key. A
+network failure (refused or dropped connection, a timeout — over HTTP a read stalled for 60 s,
+unless `client_kwargs` are given —, HTTP 5xx or 429) is retried with
+exponential backoff, then raised as one `RemoteStoreError` naming the URL and the status; a
+refusal (HTTP 401/403, S3 AccessDenied or unknown keys) is one `RemoteAccessError`. Neither is
+ever read as zeros.
+
+fsspec, aiohttp and s3fs are imported only when a URL is opened: local use pays nothing.
+Credentials come the usual way (s3fs/botocore: environment, ``~/.aws`` profiles,
+``AWS_PROFILE``); `storage_options` go to the fsspec filesystem as they are (``anon=True`` for
+a public bucket, ``endpoint_url`` for MinIO and other S3-compatible servers).
+
+Retries: ``CHRONOCL_REMOTE_RETRIES`` (default 3 retries after the first try) and
+``CHRONOCL_REMOTE_BACKOFF_S`` (default 0.2 s, doubled each retry).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+from collections.abc import Mapping
+from typing import Any
+
+from chronocl.core.errors import (
+    ChronoclError,
+    InputNotFoundError,
+    InvalidParameterError,
+    RemoteAccessError,
+    RemoteStoreError,
+)
+from chronocl.data.integrity import MissingChunks
+
+SCHEMES = ("http://", "https://", "s3://")
+DEFAULT_RETRIES = 3
+DEFAULT_BACKOFF_S = 0.2
+
+
+def is_url(path: object) -> bool:
+    """True for a store named by an http(s):// or s3:// URL (never for a local path)."""
+    return isinstance(path, str) and path.lower().startswith(SCHEMES)
+
+
+def retry_policy() -> tuple[int, float]:
+    """(retries after the first try, first backoff in seconds), from the environment."""
+    try:
+        retries = int(os.environ.get("CHRONOCL_REMOTE_RETRIES", DEFAULT_RETRIES))
+        backoff = float(os.environ.get("CHRONOCL_REMOTE_BACKOFF_S", DEFAULT_BACKOFF_S))
+    except ValueError:
+        raise InvalidParameterError(
+            "CHRONOCL_REMOTE_RETRIES must be a whole number and CHRONOCL_REMOTE_BACKOFF_S a "
+            "number of seconds"
+        ) from None
+    return max(0, retries), max(0.0, backoff)
+
+
+class Url(str):
+    """A store's URL, without a trailing slash, with a path's `name` (its last part)."""
+
+    def __new__(cls, url: object) -> Url:
+        return super().__new__(cls, str(url).rstrip("/"))
+
+    @property
+    def name(self) -> str:
+        return self.rsplit("/", 1)[-1]
+
+
+def join(url: str, key: str) -> str:
+    """`key` under the store URL `url`."""
+    return f"{url.rstrip('/')}/{key}" if key else url.rstrip("/")
+
+
+class RemoteStore(MissingChunks):
+    """Built by `remote_store`: a read-only `FsspecStore` with the checks of `MissingChunks`,
+    retries with backoff and one-line errors (the class mixes into FsspecStore lazily, so
+    importing this module imports no fsspec)."""
+
+    url: str
+    storage_options: dict
+
+    async def get(self, key, prototype=None, byte_range=None):
+        retries, backoff = retry_policy()
+        for attempt in range(retries + 1):
+            try:
+                buf = await super().get(key, prototype, byte_range)  # type: ignore[misc]
+                break
+            except ChronoclError:
+                raise
+            except Exception as exc:
+                failure = classify(exc)
+                if failure is None:
+                    raise
+                refused, status = failure
+                where = join(self.url, key)
+                if refused:
+                    raise access_error(where, status) from None
+                if attempt == retries:
+                    tries = f"{retries + 1} tries" if retries else "1 try"
+                    raise RemoteStoreError(
+                        f"reading {where} failed after {tries}: {status}; check the URL and "
+                        "the network (CHRONOCL_REMOTE_RETRIES sets the retries)"
+                    ) from None
+                await asyncio.sleep(backoff * 2**attempt)
+        self._note(key, buf)
+        return buf
+
+    def __reduce__(self):  # for dask.distributed workers
+        return _rebuild, (self.url, self.storage_options, self.arrays, self.complete, self.may_miss)
+
+
+def _rebuild(url, options, arrays, complete, may_miss):
+    store = remote_store(url, options, arrays)
+    store.complete, store.may_miss = complete, may_miss
+    return store
+
+
+_classes: dict[str, type] = {}
+
+
+def remote_store(
+    url: str, storage_options: Mapping[str, Any] | None = None, arrays: tuple[str, ...] = ("data",)
+):
+    """A read-only checked store at `url` (http(s):// or s3://) with `storage_options`."""
+    if "fsspec" not in _classes:
+        from zarr.storage import FsspecStore
+
+        _classes["fsspec"] = type("RemoteFsspecStore", (RemoteStore, FsspecStore), {})
+    options = dict(storage_options or {})
+    url = url.rstrip("/")
+    try:
+        if url.lower().startswith(("http://", "https://")) and "client_kwargs" not in options:
+            import aiohttp
+
+            # A stalled server is a network failure (retried), not a read waiting for minutes.
+            options["client_kwargs"] = {
+                "timeout": aiohttp.ClientTimeout(total=None, sock_connect=15, sock_read=60)
+            }
+        store = _classes["fsspec"].from_url(url, storage_options=options, read_only=True)
+    except ImportError as exc:
+        raise InvalidParameterError(
+            f"reading {url} needs {exc.name or 'fsspec'}; install chronocl with its remote "
+            "dependencies (pip install 'fsspec[http]' s3fs)"
+        ) from None
+    except (TypeError, ValueError) as exc:
+        raise InvalidParameterError(f"cannot open {url}: {exc}; check --storage-option") from None
+    store._init_checks(url, arrays)
+    store.url, store.storage_options = url, options
+    return store
+
+
+def classify(exc: BaseException) -> tuple[bool, str] | None:
+    """(refused, status) of a remote read's failure; None for an error that is not the
+    network's or the server's (a bug, which is raised as it is)."""
+    status = getattr(exc, "status", None)
+    name = type(exc).__name__
+    if isinstance(exc, PermissionError):
+        return True, _short(exc)
+    if isinstance(status, int):  # aiohttp's ClientResponseError
+        message = getattr(exc, "message", "") or ""
+        text = f"HTTP {status} {message}".strip()
+        return status in (401, 403), text
+    if name == "ClientPayloadError" or "ContentLengthError" in name:
+        return False, f"the connection dropped mid-read ({_short(exc)})"
+    if "Connector" in name or isinstance(exc, ConnectionError):
+        return False, f"cannot connect ({_short(exc)})"
+    if isinstance(exc, asyncio.TimeoutError | TimeoutError):
+        return False, "timed out"
+    module = type(exc).__module__ or ""
+    if isinstance(exc, OSError) or module.startswith(("aiohttp", "botocore", "aiobotocore")):
+        return False, _short(exc)
+    return None
+
+
+def access_error(where: str, status: str) -> RemoteAccessError:
+    """The one line for a store that refuses access."""
+    fix = (
+        "check the credentials (AWS_ACCESS_KEY_ID/AWS_SECRET_ACCESS_KEY or AWS_PROFILE), or "
+        "pass --anon for a public bucket"
+        if where.lower().startswith("s3://")
+        else "check the URL and the credentials the server wants (--storage-option headers={...})"
+    )
+    return RemoteAccessError(f"access to {where} was refused ({status}); {fix}")
+
+
+def missing_store(url: str, storage_options: Mapping[str, Any] | None) -> ChronoclError:
+    """The one line for a URL where no zarr metadata was found: for S3, whether the bucket
+    itself is missing, refused or the key is wrong."""
+    if url.lower().startswith("s3://"):
+        bucket = url[5:].split("/", 1)[0]
+        try:
+            import s3fs
+
+            fs = s3fs.S3FileSystem(**dict(storage_options or {}))
+            fs.ls(bucket)  # NoSuchBucket -> FileNotFoundError, wrong keys -> PermissionError
+        except FileNotFoundError:
+            return InputNotFoundError(
+                f"bucket {bucket!r} of {url} does not exist; check the bucket's name "
+                "(and --storage-option endpoint_url=... for a server other than AWS)"
+            )
+        except PermissionError as exc:
+            return access_error(f"s3://{bucket}", _short(exc))
+        except Exception as exc:
+            failure = classify(exc)
+            if failure is None:
+                raise
+            return RemoteStoreError(f"reading s3://{bucket} failed: {failure[1]}")
+        from chronocl.data.remote_write import incomplete_store
+
+        partial = incomplete_store(url, storage_options)  # keys, but the root metadata missing
+        if partial is not None:
+            return partial
+    return InputNotFoundError(
+        f"no zarr store at {url} (neither zarr.json nor .zarray/.zgroup found); check the URL"
+    )
+
+
+def _short(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    if len(text) > 160:
+        text = text[:157] + "..."
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
