@@ -3,7 +3,9 @@
 See kernels/glsl/raycast.frag for the compositing. A `Volume` is an uploaded chronovolume
 (RGBA16F or RGBA8 texture, trilinear or nearest) with its world-space box; `draw` renders one
 view of it into an (H, W, 3) uint8 array, top-down; with `shading` (chronocl/render/shading.py)
-it runs the lit build of the shader, without it the unlit one, unchanged.
+it runs the lit build of the shader, without it the unlit one, unchanged. Each volume carries
+its brick occupancy grid (chronocl/render/brick_grid.py), across whose empty bricks rays jump
+(`skip`, on by default; the picture is the same), and `samples` counts what a ray costs.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.render import brick_grid
 from chronocl.render.camera import Camera
 from chronocl.render.gl import gl_context, program
 from chronocl.render.shading import OFF, Shading
@@ -22,6 +25,7 @@ from chronocl.render.upload import FORMATS, convert, occupancy
 
 MIN_SIZE, MAX_SIZE = 16, 8192
 TEXTURE_TYPES = FORMATS
+BRICKS_UNIT = 5  # the brick grid's texture unit, clear of the volume's (0) and others' low units
 
 
 def check_size(size: tuple[int, int]) -> tuple[int, int]:
@@ -45,9 +49,14 @@ class Volume:
     extent: np.ndarray  # world size (x, y, z); the longest side is 1
     unit: float  # world length of one voxel (the smallest side), the opacity reference
     occupied: tuple[np.ndarray, np.ndarray]  # world corners of the voxels with opacity > 0
+    # the brick grid's R8 texture (brick_grid.texture), read to skip empty space; None: no skipping
+    bricks: object | None = None
 
     def release(self) -> None:
         self.texture.release()
+        if self.bricks is not None:
+            self.bricks.release()
+            self.bricks = None
 
 
 class Raycaster:
@@ -59,6 +68,7 @@ class Raycaster:
         self.prog = program(self.ctx, "raycast")
         self.vao = self.ctx.vertex_array(self.prog, [])
         self._lit: tuple | None = None  # the lit program and its vertex array, on first use
+        self._counting: tuple | None = None  # the COUNT_SAMPLES build, on first use
         self.outline_prog = program(self.ctx, "outline")
         self._fbos: dict[tuple[int, int], object] = {}
 
@@ -87,7 +97,8 @@ class Raycaster:
         extent = physical / physical.max()
         voxel = extent / np.array([nx, ny, nz])
         unit = float(np.min(voxel))
-        return Volume(tex, extent, unit, occ.corners(extent, voxel))
+        bricks = brick_grid.texture(self.ctx, brick_grid.from_rgba(data))
+        return Volume(tex, extent, unit, occ.corners(extent, voxel), bricks)
 
     def draw(
         self,
@@ -101,6 +112,7 @@ class Raycaster:
         step: float = 1.0,
         outline: bool = False,
         shading: Shading = OFF,
+        skip: bool = True,
     ) -> np.ndarray:
         """Render one view; returns (H, W, 3) uint8, top-down.
 
@@ -108,17 +120,65 @@ class Raycaster:
         part of the volume on the normal's side of a plane; offset -1..1 moves the plane from
         the box's back (everything kept) to its front (nothing kept), 0 through the centre.
         `shading` lights the samples (chronocl/render/shading.py); off, the unlit shader runs.
+        `skip` jumps rays across the empty bricks of the volume's brick grid (same picture).
         """
         w, h = check_size(size)
-        if not (math.isfinite(step) and 0.05 <= step <= 8):
-            raise InvalidParameterError(f"step is {step} voxels; use 0.05 to 8")
         fbo = self._fbo((w, h))
         fbo.use()
         fbo.clear(*background, 1.0)
+        prog, vao = self.lit() if shading.enabled else (self.prog, self.vao)
+        view_proj, half = self._set_uniforms(
+            prog, volume, camera, (w, h), background, clip, jitter, step, skip
+        )
+        if shading.enabled:
+            set_shading(prog, shading, volume)
+        self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
+        vao.render(vertices=3)
+        if outline:
+            self._draw_outline(view_proj, half, background)
+        pixels = np.frombuffer(fbo.read(components=3, alignment=1), dtype=np.uint8)
+        return pixels.reshape(h, w, 3)[::-1].copy()
+
+    def samples(
+        self,
+        volume: Volume,
+        camera: Camera,
+        size: tuple[int, int],
+        *,
+        clip: tuple[float, float, float, float] | None = None,
+        jitter: bool = True,
+        step: float = 1.0,
+        skip: bool = True,
+    ) -> np.ndarray:
+        """What each ray of `draw` costs: (H, W, 2) float32, top-down, of (volume samples
+        taken, brick grid reads), from the COUNT_SAMPLES build of the shader (lighting changes
+        no count: it reads neighbours only of samples that are taken)."""
+        w, h = check_size(size)
+        if self._counting is None:
+            prog = program(self.ctx, "raycast", ("COUNT_SAMPLES",))
+            self._counting = (prog, self.ctx.vertex_array(prog, []), {})
+        prog, vao, fbos = self._counting
+        fbo = fbos.get((w, h))
+        if fbo is None:
+            rb = self.ctx.renderbuffer((w, h), 4, dtype="f4")
+            fbo = fbos[w, h] = self.ctx.framebuffer(color_attachments=[rb])
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self._set_uniforms(prog, volume, camera, (w, h), (0.0, 0.0, 0.0), clip, jitter, step, skip)
+        self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
+        vao.render(vertices=3)
+        counts = np.frombuffer(fbo.read(components=4, dtype="f4"), dtype=np.float32)
+        return counts.reshape(h, w, 4)[::-1, :, :2].copy()
+
+    def _set_uniforms(self, prog, volume, camera, size, background, clip, jitter, step, skip):
+        """The uniforms and textures every build of raycast.frag takes; returns (view_proj,
+        half the extent) for the outline."""
+        if not (math.isfinite(step) and 0.05 <= step <= 8):
+            raise InvalidParameterError(f"step is {step} voxels; use 0.05 to 8")
+        w, h = size
         view, proj = camera.matrices(volume.extent, w / h)
         view_proj = proj @ view
         half = volume.extent / 2
-        prog, vao = self.lit() if shading.enabled else (self.prog, self.vao)
         prog["inv_view_proj"].write(np.linalg.inv(view_proj).T.astype("f4").tobytes())
         prog["box_min"].value = tuple(-half)
         prog["box_max"].value = tuple(half)
@@ -129,19 +189,20 @@ class Raycaster:
         diagonal_steps = float(np.linalg.norm(volume.extent)) / (step * volume.unit)
         prog["max_steps"].value = int(diagonal_steps) + 2
         prog["jitter"].value = bool(jitter)
-        prog["background"].value = tuple(float(c) for c in background)
+        if prog.get("background", None) is not None:  # the COUNT_SAMPLES build has none
+            prog["background"].value = tuple(float(c) for c in background)
         prog["clip_enabled"].value = clip is not None
         prog["clip_plane"].value = clip_plane(clip, volume.extent) if clip else (0, 0, 0, 0)
-        if shading.enabled:
-            set_shading(prog, shading, volume)
         volume.texture.use(location=0)
         prog["volume"].value = 0
-        self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
-        vao.render(vertices=3)
-        if outline:
-            self._draw_outline(view_proj, half, background)
-        pixels = np.frombuffer(fbo.read(components=3, alignment=1), dtype=np.uint8)
-        return pixels.reshape(h, w, 3)[::-1].copy()
+        bricks = volume.bricks if skip else None
+        prog["skip_empty"].value = bricks is not None
+        prog["brick_voxels"].value = float(brick_grid.BRICK)
+        if bricks is not None:
+            bricks.use(location=BRICKS_UNIT)
+            prog["brick_count"].value = tuple(bricks.size)
+        prog["bricks"].value = BRICKS_UNIT
+        return view_proj, half
 
     def lit(self) -> tuple:
         """The shading program (raycast.frag with SHADING) and its vertex array."""

@@ -8,6 +8,11 @@
 // and its premultiplied colour scaled alike. Early termination once A > 1 - 1/512 (less than
 // half an 8-bit step can still be added).
 //
+// With `skip_empty`, rays jump across the empty bricks of a brick grid (max opacity per B^3
+// brick, grown by a voxel: chronocl/render/brick_grid.py) onto the same sample phase, so the
+// picture equals the unskipped one. With COUNT_SAMPLES defined (bench/render_skip.py, the
+// tests) the output is (samples taken, brick grid reads) per ray, for a float framebuffer.
+//
 // With SHADING defined (the raycaster prepends it; chronocl/render/shading.py), each sample's
 // colour is lit before compositing: Blinn-Phong with a headlight, the normal being the
 // negated opacity gradient by central differences one voxel apart. Without it this is the
@@ -26,6 +31,10 @@ uniform bool jitter;          // offset each ray's first sample by a per-pixel r
 uniform bool clip_enabled;
 uniform vec4 clip_plane;      // world-space plane n.x + d; the side where it is >= 0 is kept
 uniform vec3 background;
+uniform bool skip_empty;      // jump across empty bricks of the brick grid
+uniform sampler3D bricks;     // the brick grid: max opacity per brick (R8, texelFetch)
+uniform float brick_voxels;   // voxels along a brick's side
+uniform ivec3 brick_count;    // bricks along x, y, z
 #ifdef SHADING
 uniform vec3 texel;           // one voxel in texture coordinates (1 / size per axis)
 uniform vec3 grad_scale;      // texture differences -> opacity change per unit_world length
@@ -94,13 +103,61 @@ void main()
     }
 
     vec4 acc = vec4(0.0);
+#ifdef COUNT_SAMPLES
+    float samples = 0.0;   // volume samples taken
+    float lookups = 0.0;   // brick grid reads
+#endif
     if (t_exit > t_enter) {
         float offset = jitter ? hash(gl_FragCoord.xy) : 0.5;
         float ratio = step_world / unit_world;
         vec3 size = box_max - box_min;
-        float t = t_enter + offset * step_world;
-        for (int i = 0; i < max_steps && t < t_exit; ++i) {
+        float t_first = t_enter + offset * step_world;
+        // Sample k sits at t_first + k * step_world whether bricks are skipped or not, so a
+        // skip lands on the same samples the unskipped loop takes (the same picture).
+        vec3 dims = vec3(textureSize(volume, 0));
+        vec3 vdir = dir / size * dims;           // voxels per unit of t
+        ivec3 last_brick = ivec3(-1);
+        bool brick_empty = false;
+        int hops = brick_count.x + brick_count.y + brick_count.z + 3;  // bricks a ray can cross
+        int k = 0;
+        for (int i = 0; i < max_steps; ++i) {
+            float t = t_first + float(k) * step_world;
+            if (k >= max_steps || t >= t_exit) break;
             vec3 tex = (origin + t * dir - box_min) / size;
+            if (skip_empty) {
+                // Empty-space skipping: a brick whose grid value is 0 holds no sample with
+                // opacity > 0 (chronocl/render/brick_grid.py); jump to the first sample past
+                // its exit (slab test in voxel units), brick after brick, then take one
+                // sample: every pass of the outer loop samples once, so neighbouring rays
+                // (which the GPU or llvmpipe runs in lockstep) stay in step.
+                bool done = false;
+                for (int j = 0; j < hops; ++j) {
+                    vec3 p = tex * dims;
+                    ivec3 b = clamp(ivec3(floor(p / brick_voxels)), ivec3(0), brick_count - 1);
+                    if (b != last_brick) {
+                        last_brick = b;
+                        brick_empty = texelFetch(bricks, b, 0).r == 0.0;
+#ifdef COUNT_SAMPLES
+                        lookups += 1.0;
+#endif
+                    }
+                    if (!brick_empty) break;
+                    vec3 bound = (vec3(b) + step(0.0, vdir)) * brick_voxels;
+                    vec3 dt = mix(vec3(1e30), (bound - p) / vdir, notEqual(vdir, vec3(0.0)));
+                    float t_out = t + min(min(dt.x, dt.y), dt.z);
+                    k = max(k + 1, int(ceil((t_out - t_first) / step_world)));
+                    t = t_first + float(k) * step_world;
+                    if (k >= max_steps || t >= t_exit) {
+                        done = true;
+                        break;
+                    }
+                    tex = (origin + t * dir - box_min) / size;
+                }
+                if (done) break;
+            }
+#ifdef COUNT_SAMPLES
+            samples += 1.0;
+#endif
             vec4 s = texture(volume, tex);
             if (s.a > 0.0) {
 #ifdef SHADING
@@ -111,8 +168,12 @@ void main()
                 acc.a += (1.0 - acc.a) * a;
                 if (acc.a > 1.0 - 1.0 / 512.0) break;
             }
-            t += step_world;
+            ++k;
         }
     }
+#ifdef COUNT_SAMPLES
+    frag_color = vec4(samples, lookups, 0.0, 1.0);
+#else
     frag_color = vec4(acc.rgb + (1.0 - acc.a) * background, 1.0);
+#endif
 }
