@@ -10,7 +10,8 @@ A request names the steps of the current window:
 - steps that are neither requested nor prefetched stay cached (least recently
   used first out) only while the budget allows;
 - after a request, the next steps in the scrub direction are prefetched, as far
-  as the budget allows without evicting the window;
+  as the budget allows without evicting the window: by default as many as the
+  scrub's speed times a step's read time covers (`chronocl.data.scrub_model`);
 - a newer request supersedes older ones: loads nobody wants any more are
   cancelled before they start, or stop at the next chunk row, and waiting on a
   superseded request raises `SupersededError` instead of queueing behind it.
@@ -31,6 +32,7 @@ from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, SupersededError
 from chronocl.core.interrupt import checkpoint, watched
 from chronocl.data.bricks import ResidentBricks
+from chronocl.data.scrub_model import ScrubModel
 from chronocl.data.series import TimeSeries
 from chronocl.data.slots import StepSlots
 
@@ -40,7 +42,7 @@ class _Load:
     """One step being read: its destination, future and whether it is still wanted."""
 
     step: int
-    array: np.ndarray
+    array: np.ndarray | None  # None once cancelled: its slot goes back before the read runs
     future: Future | None = None
     abort: threading.Event = field(default_factory=threading.Event)
 
@@ -66,7 +68,8 @@ class WindowManager:
     """Resident time steps of `series` under `memory` bytes, with prefetch and cancellation.
 
     `prefetch` is how many steps beyond the window to read ahead in the scrub
-    direction (default: as many as the window is wide, budget permitting);
+    direction (default None: time-aware, as many as the scrub's speed times a step's read
+    time covers, at least one, as far as the free slots allow; 0: none);
     `threads` is the number of background readers.
     """
 
@@ -88,6 +91,8 @@ class WindowManager:
                 f"use --memory {_round_up_mb(self.step_bytes)}MB or more"
             )
         self.prefetch = prefetch
+        self.scrub = ScrubModel()  # the scrub's speed and a step's read time (prefetch=None)
+        self._ahead: tuple[int, ...] = ()  # the steps the last request read ahead
         self.generation = 0
         self.reads: Counter[int] = Counter()  # completed reads per step (tests: never twice)
         self.cancelled = 0  # loads dropped before they finished
@@ -118,6 +123,17 @@ class WindowManager:
         with self._lock:
             return sorted(self._cache)
 
+    def state(self) -> dict[str, list[int]]:
+        """What is in memory now, from any thread: `resident` steps, steps `loading` (being
+        fetched) and those of them read `ahead` of the last request's window."""
+        with self._lock:
+            loading = sorted(self._loads)
+            return {
+                "resident": sorted(self._cache),
+                "loading": loading,
+                "ahead": [s for s in self._ahead if s in self._loads or s in self._cache],
+            }
+
     def request(self, steps: Sequence[int], direction: int = 0) -> Request:
         """Start loading `steps` (and prefetching beyond them in `direction`: +1, -1 or 0).
 
@@ -138,6 +154,8 @@ class WindowManager:
                 f"{human(self.budget)}; use --memory {_round_up_mb(len(steps) * self.step_bytes)}"
                 "MB or more, or a shorter window (integrate streams windows of any size)"
             )
+        if steps:
+            self.scrub.record_request(min(steps), direction)
         ahead = self._prefetch_steps(steps, direction)
         with self._lock:
             if self._closed:
@@ -157,6 +175,7 @@ class WindowManager:
                 if s not in self._cache and s not in self._loads:
                     self._make_room(protect=self._wanted)
                     self._start(s)
+            self._ahead = tuple(ahead)
             for s in ahead:
                 if s in self._cache or s in self._loads:
                     continue
@@ -196,7 +215,10 @@ class WindowManager:
             return []
         stride = abs(steps[-1] - steps[0]) // (len(steps) - 1) if len(steps) > 1 else 1
         stride = max(1, stride)
-        count = len(steps) if self.prefetch is None else self.prefetch
+        if self.prefetch is None:  # time-aware, within the slots the window leaves free
+            count = min(self.scrub.ahead(stride), self.capacity - len(set(steps)))
+        else:
+            count = self.prefetch
         edge = max(steps) if direction > 0 else min(steps)
         ahead = [edge + direction * stride * (i + 1) for i in range(count)]
         return [s for s in ahead if 0 <= s < self.series.n_steps]
@@ -225,6 +247,9 @@ class WindowManager:
         load.abort.set()
         if load.future is not None:
             load.future.cancel()
+        # A queued read's work item keeps the load until a reader takes it: let go of the
+        # slot now, or steps cancelled behind a slow store hold slots that reads ahead need.
+        load.array = None
         self._loads.pop(load.step, None)
         self.cancelled += 1
         self._lock.notify_all()
@@ -233,12 +258,14 @@ class WindowManager:
         """Read one step chunk row by chunk row, stopping early when cancelled."""
         nz = self.series.volume_shape[0]
         rows = self.series.z_chunk
+        array = load.array
+        t0 = time.perf_counter()
         try:
             for z0 in range(0, nz, rows):
-                if load.abort.is_set():
+                if load.abort.is_set() or array is None:
                     return
                 z1 = min(nz, z0 + rows)
-                self.series.read_rows(load.step, z0, z1, load.array[z0:z1])
+                self.series.read_rows(load.step, z0, z1, array[z0:z1])
         except BaseException as exc:
             with self._lock:
                 if self._loads.get(load.step) is load:
@@ -250,9 +277,10 @@ class WindowManager:
             if load.abort.is_set() or self._loads.get(load.step) is not load:
                 return
             del self._loads[load.step]
-            self._cache[load.step] = load.array
+            self._cache[load.step] = array
             self.reads[load.step] += 1
             self._lock.notify_all()
+        self.scrub.record_read(time.perf_counter() - t0)
 
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
         deadline = None if timeout is None else time.monotonic() + timeout

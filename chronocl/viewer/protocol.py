@@ -26,10 +26,10 @@ Every field is checked against its schema: unknown fields, wrong types and out-o
 `ProtocolError` naming the field; so do messages nested deeper than `MAX_DEPTH`, refused
 before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
 Server -> client: JSON text messages (info, dataset, histogram, fit, probe, progress, download,
-error) and binary frames (`pack_frame`: a 4-byte big-endian header length, a JSON header, then the
-images' bytes back to back). `info`, sent first on every socket, lists the data sets and
-`choices()`: the registered modes and every other menu, default and bound the page offers, so
-the page copies nothing from here. The schema primitives are in `schema`.
+error, steps: `residency`) and binary frames (`pack_frame`: a 4-byte big-endian header length,
+a JSON header, then the images' bytes back to back). `info`, sent first on every socket, lists
+the data sets and `choices()`: the registered modes and every other menu, default and bound
+the page offers, so the page copies nothing from here. The schema primitives are in `schema`.
 """
 
 from __future__ import annotations

@@ -17,6 +17,7 @@ from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import internal_error, log
 from chronocl.viewer.progress import refine_progress
 from chronocl.viewer.protocol import ProtocolError, choices, parse_message, request_id
+from chronocl.viewer.residency import report_steps
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.worker import ClientWorker
 
@@ -109,8 +110,10 @@ async def serve_socket(
     worker = ClientWorker(
         datasets, send_from_thread, downloads, engine=engine, device=device, memory=memory
     )
+    steps = None
     try:
         await deliver(json.dumps(info_message(datasets)))
+        steps = asyncio.create_task(report_steps(worker.views, deliver, gone))  # the timeline's
         while not gone.is_set():
             message = await websocket.receive()
             if message["type"] == "websocket.disconnect":
@@ -137,4 +140,6 @@ async def serve_socket(
                 await deliver(json.dumps(err | {"message": internal_error(exc, "on a message")}))
     finally:
         gone.set()
+        if steps is not None:
+            steps.cancel()
         worker.close()

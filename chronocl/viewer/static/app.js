@@ -28,7 +28,7 @@ import { bindShading, syncShading } from './shading.js';
 import { $, pageState, setStatus } from './state.js';
 import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
 import { bindTimeFollow } from './time_follow.js';
-import { bindTimeline, drawTimeline } from './timeline.js';
+import { bindTimeline, drawTimeline, onSteps } from './timeline.js';
 import { bindViews, fillSelect, layoutViews, onFrame, showMark, showRefineProgress } from './views.js';
 
 // The page's state, given to every module that reads or changes it.
@@ -135,6 +135,9 @@ function onText(msg) {
       break;
     case 'download':
       onDownload(msg);
+      break;
+    case 'steps':
+      onSteps(msg);
       break;
     case 'error':
       movieProgress(null);

@@ -1,6 +1,8 @@
 // The timeline under the views: per-step sparklines of the data, the window brush (drag to
 // select, move or resize it), stride, and play (speed in slides a second, loop or bounce).
-// Its keys (arrows, space, +, -, b) are in keys.js's table.
+// Its keys (arrows, space, +, -, b) are in keys.js's table. A thin bar under the step ticks
+// shows which steps are in memory (the server's `steps` messages, residency.py): filled =
+// resident, hatched = being fetched, empty = not loaded.
 
 import { update } from './connection.js';
 import { $, canvasSize } from './state.js';
@@ -50,6 +52,7 @@ export function drawTimeline() {
     ctx.fillStyle = l ? `rgb(${l.rgb.map((c) => Math.round(c * 255)).join(',')})` : '#f0a030';
     ctx.fillRect(s * cell + cell * 0.15, bottom + 2, Math.max(2, cell * 0.7), 5);
   }
+  drawResidency(ctx, cell, bottom + 8, w);
   // Brush edges.
   ctx.strokeStyle = '#f0a030';
   ctx.lineWidth = 2;
@@ -68,6 +71,70 @@ export function drawTimeline() {
   const last = t0 + Math.floor((t1 - 1 - t0) / stride) * stride;
   const span = S.info.time_labels ? `${label(t0)} .. ${label(last)}, ` : '';
   $('window-text').textContent = `${span}steps ${t0}:${t1}${stride > 1 ? ':' + stride : ''} (${Math.ceil((t1 - t0) / stride)} of ${T})`;
+}
+
+// Steps in memory over all views (each view's full-resolution window manager).
+export function onSteps(msg) {
+  const resident = new Set();
+  const loading = new Set();
+  for (const v of msg.views) {
+    if (!v) continue;
+    v.resident.forEach((s) => resident.add(s));
+    v.loading.forEach((s) => loading.add(s));
+  }
+  resident.forEach((s) => loading.delete(s));
+  S.residency = { resident, loading };
+  viewer.residency = { resident: [...resident].sort((a, b) => a - b), loading: [...loading].sort((a, b) => a - b) };
+  drawTimeline();
+}
+
+let hatch = null;
+function hatchPattern(ctx) {
+  if (!hatch) {
+    const c = document.createElement('canvas');
+    c.width = c.height = 6;
+    const g = c.getContext('2d');
+    g.fillStyle = 'rgba(88,166,255,0.25)';
+    g.fillRect(0, 0, 6, 6);
+    g.strokeStyle = 'rgba(88,166,255,0.95)';
+    g.lineWidth = 1.5;
+    g.beginPath();
+    g.moveTo(-1, 7);
+    g.lineTo(7, -1);
+    g.stroke();
+    hatch = c;
+  }
+  return ctx.createPattern(hatch, 'repeat');
+}
+
+function drawResidency(ctx, cell, y, w) {
+  const r = S.residency;
+  if (!r) return;
+  const T = S.info.shape.t;
+  const hgt = 4;
+  ctx.strokeStyle = 'rgba(139,148,158,0.45)';
+  ctx.lineWidth = 1;
+  ctx.strokeRect(0.5, y - 0.5, w - 1, hgt + 1);
+  const pattern = hatchPattern(ctx);
+  for (let s = 0; s < T; s++) {
+    const fill = r.resident.has(s) ? '#58a6ff' : r.loading.has(s) ? pattern : null;
+    if (!fill) continue;
+    ctx.fillStyle = fill;
+    ctx.fillRect(s * cell + 0.5, y, Math.max(1, cell - 1), hgt);
+  }
+  // The key, top right: a swatch after each word.
+  ctx.font = '10px system-ui, sans-serif';
+  ctx.textBaseline = 'top';
+  ctx.textAlign = 'right';
+  let x = w - 3;
+  for (const [label, fill] of [['fetching', pattern], ['in memory', '#58a6ff']]) {
+    ctx.fillStyle = fill;
+    ctx.fillRect(x - 8, 3, 8, 8);
+    ctx.fillStyle = '#8b949e';
+    ctx.fillText(label, x - 11, 2);
+    x -= 14 + ctx.measureText(label).width + 8;
+  }
+  ctx.textAlign = 'left';
 }
 
 function setWindow(t0, t1, stride, quality = 'full') {

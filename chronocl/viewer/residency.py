@@ -1,0 +1,50 @@
+"""Which steps each view holds in memory, for the page's timeline: resident, being fetched, or
+not loaded.
+
+While a socket is open, `report_steps` asks the full-resolution (level 0) window manager of
+each view's session for its `state()` every `POLL_S` seconds and, when it changed, sends
+
+    {"type": "steps", "views": [{"resident": [steps], "loading": [steps]} or null, ...]}
+
+(null: the view has no session yet). Level 0 is what a refine needs: a coarse frame asks it
+for the window in the background (`Session.read_ahead`), and a scrub at full resolution reads
+ahead in it (`chronocl.data.window`). The poll runs on the event loop and takes each manager's
+lock for a moment, never the render thread's: steps being fetched show while a frame is drawn.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+from collections.abc import Awaitable, Callable
+
+POLL_S = 0.2
+
+
+def residency(views) -> list[dict | None]:
+    """Per view of `views` (`chronocl.viewer.view_sessions.Views`): its level-0 manager's
+    resident and loading steps, or None."""
+    out: list[dict | None] = []
+    for slot in list(views.slots):
+        session = slot.session
+        manager = None if session is None else views.manager(0, session.spec.integration.pool)
+        if manager is None:
+            out.append(None)
+            continue
+        state = manager.state()
+        out.append({"resident": state["resident"], "loading": state["loading"]})
+    return out
+
+
+async def report_steps(
+    views, deliver: Callable[[str], Awaitable[None]], gone: threading.Event
+) -> None:
+    """Send a `steps` message whenever the views' residency changes, until `gone`."""
+    last = None
+    while not gone.is_set():
+        now = residency(views)
+        if now != last and any(v is not None for v in now):
+            await deliver(json.dumps({"type": "steps", "views": now}))
+            last = now
+        await asyncio.sleep(POLL_S)

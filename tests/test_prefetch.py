@@ -1,0 +1,184 @@
+"""Time-aware prefetch over a real HTTP store on loopback with latency (tests/remote_servers.py).
+
+The scrub's speed comes from the requests' times: the tests give the manager's `ScrubModel`
+a clock of their own, so a "fast" and a "slow" scrub are exactly that, while the read time of
+a step is measured from the real reads. Interleavings are forced with a gate in the server
+(chunk requests wait for it), not with sleeps.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+import chronocl
+from chronocl import WindowManager
+from chronocl.data.scrub_model import ScrubModel
+from chronocl.data.series import write_series
+
+from .remote_servers import StoreServer, _Handler
+
+pytest.importorskip("aiohttp")
+
+SHAPE = (40, 4, 8, 16)  # 2 rows of 8 x 16 float32 a chunk: 2 chunks a step
+ROWS = 2
+STEP_BYTES = 4 * 8 * 16 * 4
+LATENCY_S = 0.03
+
+
+class _GatedHandler(_Handler):
+    """Chunk requests wait for the server's `gate` (metadata does not)."""
+
+    def do_GET(self) -> None:
+        if "/c/" in self.path:
+            assert self.server.gate.wait(30), "the test never opened the gate"
+        super().do_GET()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    root = tmp_path_factory.mktemp("prefetch")
+    data = np.random.default_rng(3).random(SHAPE, dtype=np.float32)
+    write_series(
+        root / "p.zarr",
+        list(data),
+        n_steps=SHAPE[0],
+        volume_shape=SHAPE[1:],
+        dtype=np.float32,
+        chunk_bytes=ROWS * SHAPE[2] * SHAPE[3] * 4,
+    )
+    with StoreServer(root, latency_s=LATENCY_S) as srv:
+        srv.gate = threading.Event()
+        srv.gate.set()
+        srv.RequestHandlerClass = _GatedHandler
+        yield srv
+        srv.gate.set()
+
+
+class Clock:
+    """A clock that moves only when told: the scrub's requests are `dt` apart."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def manager(server, clock: Clock, steps: int = 16) -> WindowManager:
+    series = chronocl.open(server.url("p.zarr"))
+    wm = WindowManager(series, memory=steps * STEP_BYTES, threads=2)
+    wm.scrub.clock = clock
+    return wm
+
+
+def within_budget(wm: WindowManager) -> bool:
+    state = wm.state()
+    held = len(state["resident"]) + len(state["loading"])
+    return held <= wm.capacity and wm.resident_bytes <= wm.budget
+
+
+def scrub(wm: WindowManager, clock: Clock, starts, dt: float, width: int = 4) -> list[int]:
+    """Slide forward through `starts`, `dt` seconds apart; the steps read ahead each time."""
+    aheads = []
+    for start in starts:
+        clock.now += dt
+        wm.get(range(start, start + width), direction=+1)
+        aheads.append(wm.state()["ahead"])
+        assert within_budget(wm)
+    return aheads
+
+
+def test_a_fast_scrub_reads_further_ahead_than_a_slow_one(server) -> None:
+    clock = Clock()
+    with manager(server, clock) as slow, manager(server, clock) as fast:
+        slow_ahead = scrub(slow, clock, range(0, 4), dt=1.0)  # 1 step a second
+        fast_ahead = scrub(fast, clock, range(0, 4), dt=0.01)  # 100 steps a second
+        assert fast.scrub.read_s >= LATENCY_S  # measured: a step is two requests
+        assert [len(a) for a in slow_ahead] == [1, 1, 1, 1]
+        assert len(fast_ahead[0]) == 1  # the first request: speed unknown
+        # 100 steps/s x >= 0.06 s a step x 1.5: at least 9, capped by the 12 free slots.
+        assert len(fast_ahead[-1]) >= 5 > len(slow_ahead[-1])
+        assert fast_ahead[-1] == list(range(7, 7 + len(fast_ahead[-1])))
+        # What was planned is fetched, once each.
+        last = fast_ahead[-1]
+        fast.request(range(3, last[-1] + 1)).result(timeout=30)
+        assert all(fast.reads[s] == 1 for s in range(0, last[-1] + 1))
+        assert within_budget(fast)
+
+
+def test_a_turn_cancels_the_loads_ahead_in_the_old_direction(server) -> None:
+    clock = Clock()
+    with manager(server, clock) as wm:
+        scrub(wm, clock, range(0, 3), dt=0.01)  # measures a step's read time
+        clock.now += 10  # a pause: the old speed is forgotten
+        server.gate.clear()
+        server.requests.clear()
+        try:
+            for start in (20, 21, 22):  # fast, forward, nothing arrives
+                clock.now += 0.01
+                wm.request(range(start, start + 4), direction=+1)
+            before = wm.state()
+            old_ahead = before["ahead"]
+            assert len(old_ahead) >= 3 and old_ahead[0] == 26
+            assert set(old_ahead) <= set(before["loading"])
+            cancelled = wm.cancelled
+            assert within_budget(wm)
+            clock.now += 0.01
+            back = wm.request(range(21, 25), direction=-1)  # the user turns
+            after = wm.state()
+            assert not set(after["loading"]) & set(old_ahead)
+            assert after["ahead"] == [20]  # a new direction: speed unknown, one step
+            assert wm.cancelled - cancelled >= len(old_ahead)
+        finally:
+            server.gate.set()
+        back.result(timeout=30)
+        assert all(wm.reads[s] == 0 for s in old_ahead)
+        # Two readers: the steps ahead were queued behind the window's, never requested.
+        asked = {int(p.split("/c/")[1].split("/")[0]) for p in server.chunk_requests()}
+        assert not asked & set(old_ahead)
+        assert within_budget(wm)
+
+
+def test_the_model_forgets_a_stopped_scrub_and_a_turn() -> None:
+    clock = Clock()
+    model = ScrubModel(clock)
+    model.record_read(0.19)
+    for start in range(5):
+        clock.now += 0.05
+        model.record_request(start, +1)
+    assert model.velocity() == pytest.approx(20.0)
+    assert model.ahead() == 6  # 1.5 x 20 steps/s x 0.19 s = 5.7
+    assert model.ahead(stride=3) == 2
+    clock.now += 5.0
+    assert model.velocity() == 0.0 and model.ahead() == 1  # stopped
+    model.record_request(5, +1)
+    clock.now += 0.05
+    model.record_request(4, -1)  # a turn starts a new history
+    assert model.velocity() == 0.0
+
+
+def test_the_viewer_sends_each_views_resident_steps(tmp_path) -> None:
+    pytest.importorskip("starlette")
+    from .viewer_helpers import Client, make_stores, start_server
+
+    server = start_server(make_stores(tmp_path)[:1])  # 12 steps: the window is [1, 11)
+    client = Client(server)
+    try:
+        client.open(0, size=(64, 64))
+        rid = client.send({"type": "update", "views": [{"mode": "max"}, {"mode": "alpha"}]})
+        client.frame_for(rid)
+        while True:  # messages while steps load first, then the whole window resident
+            _, msg = client.wait("steps", timeout=30)
+            views = msg["views"]
+            if len(views) == 2 and all(
+                v and set(range(1, 11)) <= set(v["resident"]) for v in views
+            ):
+                break
+        assert views[0] == views[1]  # one manager: the views share the data set's steps
+        assert not set(views[0]["resident"]) & set(views[0]["loading"])
+    finally:
+        client.close()
+        server.stop()
