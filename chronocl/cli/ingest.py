@@ -13,7 +13,13 @@ from chronocl.cli.options import err, print_summary
 
 def ingest(
     out_path: Annotated[
-        Path, typer.Option("--out", "-o", metavar="OUT.zarr", help="Store to write.")
+        str,
+        typer.Option(
+            "--out",
+            "-o",
+            metavar="OUT.zarr",
+            help="Store to write: a path, or an s3:// URL (published whole, root metadata last).",
+        ),
     ],
     inputs: Annotated[
         list[str] | None,
@@ -106,6 +112,15 @@ def ingest(
         float | None, typer.Option(help="Replace NaN/Inf with this value (default: reject them).")
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    storage_option: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--storage-option",
+            metavar="KEY=VALUE",
+            help="s3fs option for an s3:// OUT, repeatable (endpoint_url=http://host:9000 for "
+            "MinIO); values are read as JSON where they parse.",
+        ),
+    ] = None,
 ) -> None:
     """Convert time steps into a chronocl store (zarr v3), with statistics.
 
@@ -138,6 +153,8 @@ def ingest(
       chronocl ingest embryo.ome.zarr -o embryo.zarr --channel 1 --level 0
 
       chronocl ingest embryo.ome.zarr -o embryo.zarr --variables all
+
+      chronocl ingest series.npy -o s3://bucket/series.zarr
     """
     from chronocl.core.errors import InvalidParameterError
     from chronocl.core.paths import GLOB_CHARS, check_input, check_target
@@ -145,14 +162,26 @@ def ingest(
     from chronocl.core.times_meta import check_time_unit
     from chronocl.core.times_meta import times_from_meta as read_meta_times
     from chronocl.data.ingest import ingest as run_ingest
+    from chronocl.data.remote import is_url, parse_storage_options
+    from chronocl.data.remote_write import check_remote_output
 
     inputs = inputs or []
     named = magnitude.split(",") if magnitude and not inputs else []
     for item in [*inputs, *(n.strip() for n in named)]:
         if not GLOB_CHARS & set(item):
             check_input(item, "input", hint="check the path, or quote a glob such as 'v_*.raw'")
-    check_target(out_path, overwrite, [*inputs, *named])
-    options: dict = {"nan_fill": nan_fill, "overwrite": overwrite, "progress": True}
+    out_options = parse_storage_options(storage_option)
+    if is_url(out_path):
+        check_remote_output(out_path, overwrite, out_options)  # before any work
+        options: dict = {"storage_options": out_options}
+    else:
+        check_target(Path(out_path), overwrite, [*inputs, *named])
+        if out_options:
+            raise InvalidParameterError(
+                f"--storage-option applies to an s3:// OUT, not to the local path {out_path!r}"
+            )
+        options = {}
+    options.update(nan_fill=nan_fill, overwrite=overwrite, progress=True)
     if dims is not None:
         options["dims"] = dims
     for key, value, default in (

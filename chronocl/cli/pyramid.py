@@ -2,19 +2,19 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from chronocl.cli.options import STORE_HINT, err, print_summary
+from chronocl.cli.options import StorageOpt, err, print_summary, series_store
 
 
 def pyramid(
-    store: Annotated[Path, typer.Argument(help="A chronocl series store.")],
+    store: Annotated[str, typer.Argument(help="A chronocl series store: a path or an s3:// URL.")],
     force: Annotated[
         bool, typer.Option("--force", help="Rebuild the levels when the store has them.")
     ] = False,
+    storage_option: StorageOpt = None,
 ) -> None:
     """Add coarse levels to a series store, for drawing a coarse level first.
 
@@ -29,15 +29,27 @@ def pyramid(
       chronocl pyramid jet.zarr
 
       chronocl pyramid jet.zarr --force
+
+      chronocl pyramid s3://bucket/jet.zarr
+
+    An s3:// store gets its levels built locally and uploaded, levels/zarr.json last: until
+    then readers find no levels and pool them on the fly.
     """
     import time
 
-    from chronocl.core.paths import check_input
     from chronocl.data.level_writer import add_levels
+    from chronocl.data.remote import is_url
+    from chronocl.data.remote_levels import add_remote_levels
+    from chronocl.data.remote_write import split_url
 
-    check_input(store, "store", hint=STORE_HINT)
+    store, options = series_store(store, False, storage_option)
+    if is_url(store):
+        split_url(store)  # s3:// only: HTTP servers take no writes
     t0 = time.perf_counter()
-    summary = add_levels(store, progress=True, force=force)
+    if is_url(store):
+        summary = add_remote_levels(store, options, progress=True, force=force)
+    else:
+        summary = add_levels(store, progress=True, force=force)
     if summary["status"] in ("added", "rebuilt"):
         err.print(f"{summary['status']} levels of {store} in {time.perf_counter() - t0:.1f} s")
     print_summary(summary)

@@ -2,25 +2,34 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from chronocl.cli.options import STORE_HINT, print_summary
+from chronocl.cli.options import AnonOpt, StorageOpt, print_summary, series_store
 
 
 def verify(
-    store: Annotated[Path, typer.Argument(help="A chronocl series or chronovolume store.")],
+    store: Annotated[
+        str,
+        typer.Argument(
+            help="A chronocl series or chronovolume store: a path, or an http(s):// or s3:// URL."
+        ),
+    ],
+    anon: AnonOpt = False,
+    storage_option: StorageOpt = None,
 ) -> None:
     """Read a whole store back: every chunk must decode and every step match its statistics.
 
     Exits 0 when the store is sound, 2 with one line naming the first damage otherwise.
 
-    Example: chronocl verify vortex.zarr
+    Examples:
+
+      chronocl verify vortex.zarr
+
+      chronocl verify s3://bucket/vortex.zarr
     """
-    from chronocl.core.paths import check_input
     from chronocl.data.verify import verify as run_verify
 
-    check_input(store, "store", hint=STORE_HINT)
-    print_summary(run_verify(store, progress=True))
+    store, storage_options = series_store(store, anon, storage_option)
+    print_summary(run_verify(store, progress=True, storage_options=storage_options))

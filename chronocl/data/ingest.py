@@ -19,7 +19,9 @@ from chronocl.core.paths import check_apart, check_output
 from chronocl.data.formats.contract import COMMON_OPTIONS, Reader
 from chronocl.data.formats.registry import READERS, recognise
 from chronocl.data.inputs import NO_INPUTS
-from chronocl.data.series import write_steps
+from chronocl.data.remote_store import is_url
+from chronocl.data.remote_write import remote_output
+from chronocl.data.series import open_series, write_steps
 from chronocl.data.timeseries import TimeSeries
 from chronocl.data.variables import magnitude_steps, split_names
 
@@ -57,12 +59,19 @@ def ingest(
     """Ingest with the reader for `fmt` (``auto``: by file type; raw files need dims=).
 
     `flags` names the command-line option an option came from where it is not ``--key``
-    (``times`` read by ``--times-from-meta``), for the message that refuses it.
+    (``times`` read by ``--times-from-meta``), for the message that refuses it. `out` may be
+    an s3:// URL (``storage_options=`` for s3fs): the store is written locally, then published
+    whole, root metadata last (`chronocl.data.remote_write`); the series returned reads it there.
 
     ``magnitude="u,v,w"`` names variables of the one NetCDF input; with no `inputs` it names
     two or three raw / npy / TIFF inputs (paths or globs) of one shape instead, whose magnitude
     is stored.
     """
+    storage_options = options.pop("storage_options", None)
+    if is_url(str(out)):
+        with remote_output(str(out), bool(options.get("overwrite")), storage_options) as local:
+            ingest(inputs, local, fmt, flags=flags, **options)
+        return open_series(str(out), storage_options=storage_options)
     check_apart(out, inputs)  # never onto, into or around an input
     if fmt not in FORMATS:
         raise UnknownNameError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")

@@ -23,12 +23,15 @@ from chronocl.data.pyramid import POOLS
 from chronocl.data.series import TimeSeries, open_series
 
 
-def verify(path: str | os.PathLike, progress: bool = False) -> dict:
-    """Check the series or chronovolume at `path`; returns a summary, raises when damaged."""
+def verify(
+    path: str | os.PathLike, progress: bool = False, storage_options: dict | None = None
+) -> dict:
+    """Check the series or chronovolume at `path` (a local path, or an http(s):// or s3:// URL
+    read with `storage_options`); returns a summary, raises when damaged."""
     try:
-        series = open_series(path)
+        series = open_series(path, storage_options=storage_options)
     except StoreFormatError:
-        cv = Chronovolume.load(path)  # reads and checks every chunk
+        cv = Chronovolume.load(path, storage_options)  # reads and checks every chunk
         return {
             "chronovolume": str(path),
             "dims (x, y, z)": list(cv.dims),
@@ -50,7 +53,7 @@ def verify(path: str | os.PathLike, progress: bool = False) -> dict:
 
 
 def _check_steps(series: TimeSeries, progress: bool, what: str = "verifying steps") -> None:
-    stats, path = series.stats, Path(series.path or "array")
+    stats, path = series.stats, Path(series.path or series.meta.get("url") or "array")
     level = f"level {series.level_index} " if series.level_index else ""
     for t in track(range(series.n_steps), series.n_steps, what, progress):
         step = series.read([t])[0]

@@ -33,6 +33,7 @@ from chronocl.data.metadata import (
     stats_from_steps,
 )
 from chronocl.data.pyramid import LEVELS, level_shapes
+from chronocl.data.remote_store import is_url
 
 CHUNK_BYTES = 16 * 2**20
 # Optional attributes a store may record beside its statistics (`write_store(attrs=...)`):
@@ -83,9 +84,11 @@ def write_store(
     checksum: bool = True,
     levels: bool = True,
     attrs: dict | None = None,
+    storage_options: dict | None = None,
 ) -> None:
     """Write steps (each (Z, Y, X)) to a new store at `path` atomically; `spacing` is (dx, dy,
-    dz), x first.
+    dz), x first. `path` may be an s3:// URL: the store is published whole, root metadata
+    last (`chronocl.data.remote_write`, given `storage_options`).
 
     Non-finite values are rejected unless `nan_fill` is given, which replaces them.
     `labels` name each step's origin (e.g. its file) in error messages. Chunks are
@@ -94,6 +97,16 @@ def write_store(
     the coarse levels (group ``levels``) in the same pass when the volume has any. `attrs`
     adds the EXTRA_KEYS it has to the store's metadata.
     """
+    if is_url(str(path)):
+        from chronocl.data.remote_write import remote_output
+
+        with remote_output(str(path), overwrite, storage_options) as local:
+            return write_store(
+                local, steps, n_steps=n_steps, volume_shape=volume_shape, dtype=dtype,
+                spacing=spacing, times=times, source=source, progress=progress,
+                nan_fill=nan_fill, labels=labels, chunk_bytes=chunk_bytes,
+                compressor=compressor, checksum=checksum, levels=levels, attrs=attrs,
+            )  # fmt: skip
     dt = np.dtype(dtype)
     check_dtype(dt)
     extra = {k: v for k, v in (attrs or {}).items() if v}
