@@ -54,6 +54,7 @@ INTEGRATION_KEYS = {
     "ORDER_BACKWARD",
     "TIME_TABLE",
     "SLOTS",
+    "RGBA8",
 }
 STEP_ORDERS = ("table", "forward", "backward")  # order[i], or the steps in turn / reversed
 BOOLS = (False, True)
@@ -164,13 +165,16 @@ def all_pairs(combinations: list[dict]) -> list[dict]:
 
 
 def with_slots(combinations: list[dict], full: bool) -> list[dict]:
-    """SLOTS (the steps read where they lie) changes only how a voxel's address is computed:
-    in the full matrix every combination with and without it; otherwise every other build
-    with it, so both forms compile beside every option (a dimension of its own in the product
-    doubled the all-pairs search for no build more)."""
+    """SLOTS (the steps read where they lie) changes only how a voxel's address is computed,
+    RGBA8 (the display format written instead of float32) only how a result is stored: in the
+    full matrix every combination with and without each; otherwise the builds take the four
+    pairs of them in turn, so every form compiles beside every option (dimensions of their own
+    in the product doubled the all-pairs search for no build more)."""
     if full:
-        return [{**c, "SLOTS": s} for c in combinations for s in BOOLS]
-    return [{**c, "SLOTS": i % 2 == 1} for i, c in enumerate(combinations)]
+        return [{**c, "SLOTS": s, "RGBA8": r} for c in combinations for s in BOOLS for r in BOOLS]
+    return [
+        {**c, "SLOTS": i % 2 == 1, "RGBA8": i // 2 % 2 == 1} for i, c in enumerate(combinations)
+    ]
 
 
 def builds(full: bool) -> list[tuple[str, list[str], bool]]:
@@ -276,7 +280,7 @@ def test_the_builds_cover_the_engines_options(monkeypatch):
     for name, defines in seen:
         assert set(defines) <= INTEGRATION_KEYS, name  # a mode passes only the options it has
         full = {**dict.fromkeys(INTEGRATION_KEYS, False), **defines}
-        del full["SLOTS"]  # any combination builds with and without it (`with_slots`)
+        del full["SLOTS"], full["RGBA8"]  # any combination builds with and without (`with_slots`)
         if 1 < full["TF_SEGS"] < 8:
             full["TF_SEGS"] = 3
         names = [m for m in modes.names() if f"{modes.get(m).kernel}.cl" == name]

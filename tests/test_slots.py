@@ -82,7 +82,9 @@ def test_steps_in_slots_integrate_in_place_as_the_reference(data):
     # A small buffer limit makes the engine cut the in-place brick into chunks of rows.
     limit = data.draw(st.sampled_from([None, 1, 3]))
     row = series.volume_shape[1] * series.volume_shape[2] * series.dtype.itemsize
-    engine = Counting(max_brick_bytes=None if limit is None else limit * row * 20)
+    # Room for `limit` rows of the window with a gradient's halo rows (3 rows each at least).
+    most = None if limit is None else limit * row * 3 * max(20, len(sel.steps))
+    engine = Counting(max_brick_bytes=most)
     job = window_job(series, sel, spec)
     got = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab)
     ref = chronocl.integrate(series, sel, spec=spec, engine="numpy")

@@ -1,5 +1,7 @@
 """Chronovolume: the integrated RGBA volume, its t_index and the metadata that made it.
 
+A viewer's frames may hold RGBA8 instead of float32 (display chronovolumes, written by the
+kernels in the format the raycaster samples: `integrate_bricks(display=True)`).
 Saved as a zarr v3 group: array ``rgba`` (Z, Y, X, 4) premultiplied float32,
 array ``t_index`` (Z, Y, X) int32 for first_hit / max / min (-1 where no step
 contributed), and attribute ``chronocl`` with the metadata (dataset,
@@ -19,6 +21,8 @@ from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import StoreFormatError
 from chronocl.core.selection import Selection
 from chronocl.data.integrity import checked_read
+from chronocl.data.remote_store import is_url
+from chronocl.data.remote_write import remote_output
 from chronocl.data.stores import open_group
 from chronocl.data.writer import compressors
 from chronocl.modes.spec import IntegrationSpec
@@ -79,16 +83,28 @@ class Chronovolume:
         """(dz, dy, dx): `spacing` in the arrays' axis order, for code indexing (Z, Y, X)."""
         return self.spacing[::-1]  # type: ignore[return-value]
 
-    def save(self, path: str | os.PathLike, overwrite: bool = False) -> Path:
-        """Write to a zarr store atomically."""
+    def float_rgba(self) -> np.ndarray:
+        """The RGBA as float32: a display chronovolume's RGBA8 (a viewer's frame,
+        `integrate_bricks(display=True)`) divided by 255, any other's as it is."""
+        if self.rgba.dtype == np.uint8:
+            return self.rgba.astype(np.float32) / np.float32(255)
+        return self.rgba.astype(np.float32, copy=False)
+
+    def save(
+        self, path: str | os.PathLike, overwrite: bool = False, storage_options: dict | None = None
+    ) -> Path | str:
+        """Write to a zarr store atomically: a local path, or an s3:// URL (published whole,
+        root metadata last: `chronocl.data.remote_write`, given `storage_options`)."""
+        if is_url(str(path)):
+            with remote_output(str(path), overwrite, storage_options) as local:
+                self.save(local)
+            return str(path)
         z, y, x, _ = self.rgba.shape
         zc = max(1, min(z, (8 * 2**20) // max(1, y * x * 16)))
         keep = {"compressors": compressors("zstd"), "config": {"write_empty_chunks": True}}
         with atomic_directory(path, overwrite) as tmp:
             group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
-            group.create_array(
-                "rgba", data=self.rgba.astype(np.float32), chunks=(zc, y, x, 4), **keep
-            )
+            group.create_array("rgba", data=self.float_rgba(), chunks=(zc, y, x, 4), **keep)
             if self.t_index is not None:
                 group.create_array(
                     "t_index", data=self.t_index.astype(np.int32), chunks=(zc, y, x), **keep
@@ -102,9 +118,10 @@ class Chronovolume:
         return Path(path)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> Chronovolume:
-        p = Path(path)
-        group = open_group(p, "chronovolume", checked=("rgba", "t_index"))
+    def load(cls, path: str | os.PathLike, storage_options: dict | None = None) -> Chronovolume:
+        """Read the chronovolume at `path`: a local path or an http(s):// or s3:// URL."""
+        p = str(path).rstrip("/") if is_url(str(path)) else Path(path)
+        group = open_group(p, "chronovolume", ("rgba", "t_index"), storage_options)
         attrs = dict(dict(group.attrs).get("chronocl", {}))
         if attrs.pop("format", None) != FORMAT or "rgba" not in group:
             raise StoreFormatError(

@@ -24,7 +24,7 @@ INTEGRATE_C = """
     const int ny, const int nzb, const int w, const int zcrop, const int nz_out,
     const float vmin, const float scale, const float cut, const float4 enh, const float4 view
 """
-OUTPUTS_C = "__global float4 *out, __global int *t_index"
+OUTPUTS_C = "__global out_t *out, __global int *t_index"  # out_t: float4, or uchar4 (RGBA8)
 ROWS_C = "const int rows, const int nvec, __local T *st"  # ROWS_ARGS(T)
 
 # Host dtypes of the scalar C types (lanes: a float4 is four float32).

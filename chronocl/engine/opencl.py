@@ -18,8 +18,17 @@ from chronocl.core import values
 from chronocl.core.memory import aligned_empty, is_aligned
 from chronocl.data.bricks import SlotBrick
 from chronocl.engine import elementwise
+from chronocl.engine.defines import (
+    DEVICE_TYPES,
+    ENHANCE_CODES,
+    HALF_DEFINES,
+    VEC,
+    lane_type,
+    order_defines,
+)
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.device_formats import check_format_name, resolve_format
+from chronocl.engine.device_steps import DeviceBrick, run_resident
 from chronocl.engine.in_place import aligned_part, slot_chunks
 from chronocl.engine.kernel_args import INTEGRATE, ROWS
 from chronocl.engine.program import kernel
@@ -27,29 +36,6 @@ from chronocl.engine.tables import TableCache, Tables
 from chronocl.engine.transfer import Chunk, TransferStats, chunks_of, run_chunks
 from chronocl.modes.base import KernelInput, Partial
 from chronocl.modes.spec import IntegrationSpec
-
-DEVICE_TYPES = {"uint8": "uchar", "uint16": "ushort", "int16": "short", "float32": "float"}
-# float16 bricks (device format float16): DATA_T half, loaded with vload_half into float lanes.
-HALF_DEFINES = {"DATA_T": "half", "HALF_DATA": True}
-ENHANCE_CODES = {"none": 0, "edge": 1, "silhouette": 2}
-VEC = 16  # voxels per work-item along x in the vectorised kernels
-
-
-def order_defines(order, w: int) -> dict[str, bool]:
-    """ORDER_FORWARD / ORDER_BACKWARD where the integration order is the brick's steps in turn
-    or reversed: the kernels then step through the brick without an index table (common.h)."""
-    order = np.asarray(order)
-    forward = np.array_equal(order, np.arange(w))
-    return {
-        "ORDER_FORWARD": forward,
-        "ORDER_BACKWARD": not forward and np.array_equal(order, np.arange(w)[::-1]),
-    }
-
-
-def lane_type(dt: np.dtype, lanes: int) -> str:
-    """The kernels' DATA_V: the device type with `lanes` lanes (float lanes for float16 data)."""
-    base = "float" if dt == np.float16 else DEVICE_TYPES[dt.name]
-    return base + (str(lanes) if lanes > 1 else "")
 
 
 class OpenCLEngine:
@@ -69,6 +55,7 @@ class OpenCLEngine:
     """
 
     name = "opencl"
+    writes_display = True  # a uint8 `out` of `accumulate` gets RGBA8 (common.h)
 
     def __init__(
         self,
@@ -155,7 +142,8 @@ class OpenCLEngine:
 
         `out` = (rgba, t_index) receives the result when given (C-contiguous, float32
         (rows, Y, X, 4) and int32 (rows, Y, X)): a caller that integrates again and again,
-        or slab by slab into one volume, avoids allocating and copying.
+        or slab by slab into one volume, avoids allocating and copying. A uint8 `rgba` gets
+        the display format (`chronocl.render.upload`'s "f1") of a final result.
         Returns the partial result and whether it is final: a mode whose finish is global
         (additive normalised by the volume maximum) or a `raw` call is finished elsewhere.
         """
@@ -164,14 +152,17 @@ class OpenCLEngine:
         fmt = resolve_format(self.device_format, brick.dtype, value_range)
         value_range = fmt.device_range  # quantised data: (0, 255) or (0, 65535)
         dt = fmt.dtype
-        slots = isinstance(brick, SlotBrick)
+        resident = isinstance(brick, DeviceBrick)  # steps already on the device
+        if resident and (fmt.converts or brick.dtype != fmt.source):
+            raise ValueError("steps resident on the device travel in the format they are in")
+        slots = resident or isinstance(brick, SlotBrick)
         halo = 1 if spec.enhance.needs_gradient else 0
-        if slots:
+        if slots and not resident:
             in_place = self.host_ptr and not fmt.converts and brick.dtype == fmt.source
             parts = slot_chunks(brick, crop, halo, self.max_brick_bytes) if in_place else None
             if parts is None:
                 brick, slots = np.asarray(brick), False  # stacked: it travels or converts
-        self.last_in_place = slots
+        self.last_in_place = slots and not resident
         if self.host_ptr and not slots:
             brick = np.ascontiguousarray(brick, dtype=fmt.source)
             if fmt.converts:
@@ -214,13 +205,18 @@ class OpenCLEngine:
             rgba = aligned_empty((nz_out, ny, nx, 4), np.float32)
         if t_index is None and spec.has_t_index:
             t_index = aligned_empty((nz_out, ny, nx), np.int32)
-        _check_out(rgba, (nz_out, ny, nx, 4), np.float32)
+        display = defines["RGBA8"] = rgba.dtype == np.uint8  # common.h: final results only
+        if display and not final:
+            raise ValueError("RGBA8 output takes a final result (not raw, no global finish)")
+        _check_out(rgba, (nz_out, ny, nx, 4), np.uint8 if display else np.float32)
         if spec.has_t_index:
             _check_out(t_index, (nz_out, ny, nx), np.int32)
         else:
             t_index = None
         e = spec.enhance
-        if slots:
+        if resident:
+            aligned = nx % VEC == 0 and brick.zstride % VEC == 0 and not (brick.offsets % VEC).any()
+        elif slots:
             aligned = (
                 nx % VEC == 0
                 and brick.zstride % VEC == 0
@@ -309,7 +305,11 @@ class OpenCLEngine:
             return events
 
         with self.dc.lock:
-            if self.host_ptr:
+            if resident:
+                step_base = table(brick.offsets)
+                run_resident(self.dc, brick, outputs, launch, Chunk(z0, z1, 0, nzb))
+                self.last_transfer = None
+            elif self.host_ptr:
                 flags = mf.WRITE_ONLY | mf.USE_HOST_PTR
                 # A stacked brick is one chunk; steps read in place, a chunk of rows per
                 # buffer where they span more than one holds.
@@ -379,9 +379,8 @@ class OpenCLEngine:
         return (_round_up(count, lx), _round_up(ny, ly), _round_up(nz, lz)), (lx, ly, lz)
 
 
-# A block of rows keeps its state (Mode.rows_state a voxel) in local memory, at most this
-# much, so that it stays in a CPU's L2 cache while the steps stream past; blocks per compute
-# unit, for an even load.
+# A block of rows keeps its state (Mode.rows_state a voxel) in local memory, at most this much,
+# so that it stays in L2 while the steps stream past; blocks per compute unit, for an even load.
 ROW_BLOCK_BYTES = 64 * 1024
 ROW_BLOCKS_PER_UNIT = 4
 TIME_TABLE_MAX = 32  # steps a rows kernel may look up by register permutes (two 16-lane tables)

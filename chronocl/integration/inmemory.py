@@ -328,15 +328,23 @@ def integrate_bricks(
     bricks: BrickSource,
     slab: int | None = None,
     progress: bool = False,
+    display: bool = False,
 ) -> Chronovolume:
     """Integrate a prepared `job` with bricks from `bricks` (e.g. steps already resident:
-    `chronocl.data.bricks.ResidentBricks`) into a Chronovolume, as `integrate` does."""
+    `chronocl.data.bricks.ResidentBricks`) into a Chronovolume, as `integrate` does.
+
+    With `display`, where the engine can (`writes_display`) and the mode finishes each voxel
+    on its own, its kernels write the display format, premultiplied RGBA8 (a viewer's frame:
+    a quarter of the bytes, nothing to convert); else the chronovolume is float32 as always."""
     fit = engine_rows(eng, job)
     slab = fit if slab is None else min(slab, fit)
     nz, ny, nx = job.series.volume_shape
     parts = slabs(nz, slab, job.halo)
 
-    rgba = aligned_empty((nz, ny, nx, 4), np.float32)
+    spec = job.spec
+    rgba8 = display and getattr(eng, "writes_display", False)
+    rgba8 = rgba8 and not spec.integration.finalize_is_global(spec)
+    rgba = aligned_empty((nz, ny, nx, 4), np.uint8 if rgba8 else np.float32)
     t_index = aligned_empty((nz, ny, nx), np.int32) if job.spec.has_t_index else None
 
     def out(s: Slab) -> Out:

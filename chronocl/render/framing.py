@@ -37,6 +37,8 @@ def visible_box(cv: Chronovolume, threshold: float = VISIBLE_ALPHA) -> np.ndarra
     alpha = cv.rgba[..., 3]
     stride = max(1, math.ceil((alpha.size / SAMPLE_VOXELS) ** (1 / 3)))
     sample = alpha[::stride, ::stride, ::stride]
+    if sample.dtype == np.uint8:  # a display chronovolume's RGBA8
+        sample = sample / np.float32(255)
     top = float(sample.max()) if sample.size else 0.0
     if not top > 0:
         return None

@@ -88,15 +88,20 @@ def convert(
     """Premultiplied RGBA (Z, Y, X, 4) as texture data of format `fmt`, and its occupancy.
 
     The data is written into `staging` when it fits (see `staging_for`; keep the returned
-    array and pass it back next time). For "f4" a C-contiguous float32 input is returned
-    as it is (nothing to convert; only the occupancy is computed).
+    array and pass it back next time). A C-contiguous float32 input for "f4", or uint8 (RGBA8,
+    a display chronovolume) for "f1", is returned as it is (only the occupancy is computed).
     """
     if fmt not in FORMATS:
         raise InvalidParameterError(f"texture format {fmt!r}; use one of {', '.join(FORMATS)}")
     if rgba.ndim != 4 or rgba.shape[3] != 4:
         raise InvalidParameterError(f"RGBA volume of shape {rgba.shape}; expected (Z, Y, X, 4)")
     nz, ny, nx, _ = rgba.shape
-    as_is = fmt == "f4" and rgba.dtype == np.float32 and rgba.flags.c_contiguous
+    # RGBA8 in (a display chronovolume: the kernels wrote it) goes out as it is, as f1.
+    if rgba.dtype == np.uint8 and fmt != "f1":
+        raise InvalidParameterError(f"RGBA8 volume for texture format {fmt!r}; use 'f1'")
+    as_is = rgba.flags.c_contiguous and (
+        (fmt == "f4" and rgba.dtype == np.float32) or (fmt == "f1" and rgba.dtype == np.uint8)
+    )
     out = rgba if as_is else staging_for(rgba.shape, fmt, staging)
     z = np.zeros(nz, dtype=bool)
     y = np.zeros(ny, dtype=bool)
@@ -127,7 +132,7 @@ def _convert_slab(rgba, out, fmt: str, z0: int, z1: int, as_is: bool):
     occ_y = np.zeros(ny, dtype=bool)
     occ_x = np.zeros(nx, dtype=bool)
     scratch = None
-    if fmt == "f1":
+    if fmt == "f1" and not as_is:
         scratch = getattr(_scratch, "block", None)
         if scratch is None or scratch.size < rows * nx * 4:
             scratch = _scratch.block = np.empty(rows * nx * 4, dtype=np.float32)
@@ -145,6 +150,10 @@ def _convert_slab(rgba, out, fmt: str, z0: int, z1: int, as_is: bool):
                     filled = dst.view(np.uint32)[..., 0] > 0xFFFFFF
                 else:
                     filled = dst[..., 3] > 0
+            elif src.dtype == np.uint8:  # RGBA8 as it is: only the occupancy
+                filled = (
+                    src.view(np.uint32)[..., 0] > 0xFFFFFF if LITTLE_ENDIAN else src[..., 3] > 0
+                )
             else:
                 if not as_is:
                     np.copyto(dst, src, casting="same_kind")

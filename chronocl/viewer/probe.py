@@ -76,6 +76,8 @@ def probe_ray(
     n_xyz = np.array(cv.shape[::-1])
     idx = np.clip(np.floor((points + half) / extent * n_xyz).astype(int), 0, n_xyz - 1)
     a = cv.rgba[idx[:, 2], idx[:, 1], idx[:, 0], 3].astype(np.float64)
+    if cv.rgba.dtype == np.uint8:  # a display chronovolume (RGBA8)
+        a /= 255.0
     a = 1.0 - np.power(np.clip(1.0 - a, 0.0, 1.0), 0.5)  # half-voxel steps
     transmitted = np.cumprod(1.0 - a)
     acc = 1.0 - transmitted

@@ -12,7 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
+from chronocl.core.selection import Selection
+from chronocl.data.bricks import SeriesBricks
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.engine.base import Engine
+from chronocl.integration.inmemory import Job, integrate_bricks
 from chronocl.render.image import Image
 from chronocl.render.panels import compose_panels
 from chronocl.render.views import describe
@@ -80,6 +85,18 @@ def save_image(
     """`compose_image` as a PNG download."""
     image = Image(compose_image(panels, cvs, background, columns))
     return downloads.add(image.png_bytes(), name, "image/png")
+
+
+def full_precision(cv: Chronovolume, series: TimeSeries, engine: Engine) -> Chronovolume:
+    """`cv` as `chronocl integrate` writes it: a display chronovolume (RGBA8, the viewer's
+    full-resolution frame) integrated again in float32 from `series`; others as they are."""
+    if cv.rgba.dtype != np.uint8:
+        return cv
+    meta, spec = cv.metadata, cv.spec
+    level = int(meta.get("level") or 0)
+    src = series.level(level, spec.integration.pool) if level else series
+    job = Job.of(src, Selection(cv.steps, src.n_steps), spec, tuple(meta["value_range"]))
+    return integrate_bricks(job, engine, SeriesBricks(src))
 
 
 def save_chronovolume(downloads: Downloads, cv: Chronovolume, name: str) -> str:

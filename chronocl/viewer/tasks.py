@@ -11,6 +11,7 @@ import json
 from collections.abc import Callable, Hashable
 
 from chronocl.core.errors import InvalidParameterError
+from chronocl.engine import get_engine
 from chronocl.render.views import parse_color
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import error_text
@@ -19,7 +20,7 @@ from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.movie import movie_states, render_movie
 from chronocl.viewer.probe import probe_reply
 from chronocl.viewer.protocol import MOVIE_FORMATS
-from chronocl.viewer.saving import compose_image, save_chronovolume, save_image
+from chronocl.viewer.saving import compose_image, full_precision, save_chronovolume, save_image
 from chronocl.viewer.session_file import save_session
 from chronocl.viewer.view_state import ViewState
 
@@ -154,6 +155,9 @@ class Tasks:
             assert cv is not None
             mode = state.views[view][0]
             name = f"{ds.name}-{mode}-{sel}.zarr.zip"
+            eng = self.views.engine
+            eng = get_engine(eng, self.views.device) if isinstance(eng, str) else eng
+            cv = full_precision(cv, ds.series, eng)
             key = save_chronovolume(self.downloads, cv, name)
         self._reply(
             {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}

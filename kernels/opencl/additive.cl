@@ -19,13 +19,13 @@
 #define SUM_FINISH(s) STORE_RGBA(o, s.r, s.g, s.b, s.a);
 #endif
 
-__kernel void integrate_additive(KERNEL_ARGS, const float4 norm, __global float4 *out)
+__kernel void integrate_additive(KERNEL_ARGS, const float4 norm, __global out_t *out)
 {
     VECTOR_BODY(Rgba, 0, RGBA_ZERO, SUM_STEP, NEVER_DONE, SUM_FINISH)
 }
 
 #if VEC == 16
-__kernel void integrate_additive_rows(KERNEL_ARGS, const float4 norm, __global float4 *out,
+__kernel void integrate_additive_rows(KERNEL_ARGS, const float4 norm, __global out_t *out,
                                       ROWS_ARGS(Rgba))
 {
     ROWS_BODY(Rgba, 0, RGBA_ZERO, SUM_STEP, NEVER_DONE, SUM_FINISH)

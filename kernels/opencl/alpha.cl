@@ -18,13 +18,13 @@
 #endif
 #define OVER_FINISH(s) STORE_RGBA(o, s.r, s.g, s.b, s.a);
 
-__kernel void integrate_alpha(KERNEL_ARGS, __global float4 *out)
+__kernel void integrate_alpha(KERNEL_ARGS, __global out_t *out)
 {
     VECTOR_BODY(Rgba, 0, RGBA_ZERO, OVER_STEP, OVER_DONE, OVER_FINISH)
 }
 
 #if VEC == 16
-__kernel void integrate_alpha_rows(KERNEL_ARGS, __global float4 *out, ROWS_ARGS(Rgba))
+__kernel void integrate_alpha_rows(KERNEL_ARGS, __global out_t *out, ROWS_ARGS(Rgba))
 {
     ROWS_BODY(Rgba, 0, RGBA_ZERO, OVER_STEP, OVER_DONE, OVER_FINISH)
 }

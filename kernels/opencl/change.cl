@@ -18,7 +18,7 @@
 #endif
 
 __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
-                               __global float4 *out, __global int *t_index)
+                               __global out_t *out, __global int *t_index)
 {
     VOXEL_PROLOGUE
     if (w < 2) { /* one step: nothing changed */

@@ -23,13 +23,13 @@ typedef struct {
     }
 #endif
 
-__kernel void integrate_count(KERNEL_ARGS, const float threshold, __global float4 *out)
+__kernel void integrate_count(KERNEL_ARGS, const float threshold, __global out_t *out)
 {
     VECTOR_BODY(Count, 0, COUNT_INIT, COUNT_STEP, NEVER_DONE, COUNT_FINISH)
 }
 
 #if VEC == 16
-__kernel void integrate_count_rows(KERNEL_ARGS, const float threshold, __global float4 *out,
+__kernel void integrate_count_rows(KERNEL_ARGS, const float threshold, __global out_t *out,
                                    ROWS_ARGS(Count))
 {
     ROWS_BODY(Count, 0, COUNT_INIT, COUNT_STEP, NEVER_DONE, COUNT_FINISH)

@@ -91,14 +91,14 @@ typedef struct {
     }
 
 __kernel void integrate_extreme(KERNEL_ARGS, const float zlo, const float zhi,
-                                __global float4 *out, __global int *t_index)
+                                __global out_t *out, __global int *t_index)
 {
     VECTOR_BODY(Best, 1, BEST_INIT, BEST_STEP, NEVER_DONE, BEST_FINISH)
 }
 
 #if VEC == 16
 __kernel void integrate_extreme_rows(KERNEL_ARGS, const float zlo, const float zhi,
-                                     __global float4 *out, __global int *t_index,
+                                     __global out_t *out, __global int *t_index,
                                      ROWS_ARGS(Best))
 {
     ROWS_BODY(Best, 1, BEST_INIT, BEST_STEP, NEVER_DONE, BEST_FINISH)

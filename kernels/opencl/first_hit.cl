@@ -31,14 +31,14 @@ typedef struct {
         STORE_INT(SELECT(STEP_AT(win), (intv)(-1), none), t_index + o);            \
     }
 
-__kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global float4 *out,
+__kernel void integrate_first_hit(KERNEL_ARGS, const float threshold, __global out_t *out,
                                   __global int *t_index)
 {
     VECTOR_BODY(Hit, 0, HIT_INIT, HIT_STEP, HIT_DONE, HIT_FINISH)
 }
 
 #if VEC == 16
-__kernel void integrate_first_hit_rows(KERNEL_ARGS, const float threshold, __global float4 *out,
+__kernel void integrate_first_hit_rows(KERNEL_ARGS, const float threshold, __global out_t *out,
                                        __global int *t_index, ROWS_ARGS(Hit))
 {
     ROWS_BODY(Hit, 0, HIT_INIT, HIT_STEP, HIT_DONE, HIT_FINISH)

@@ -19,13 +19,13 @@
     }
 #endif
 
-__kernel void integrate_mean(KERNEL_ARGS, __global float4 *out)
+__kernel void integrate_mean(KERNEL_ARGS, __global out_t *out)
 {
     VECTOR_BODY(Rgba, 0, RGBA_ZERO, MEAN_STEP, NEVER_DONE, MEAN_FINISH)
 }
 
 #if VEC == 16
-__kernel void integrate_mean_rows(KERNEL_ARGS, __global float4 *out, ROWS_ARGS(Rgba))
+__kernel void integrate_mean_rows(KERNEL_ARGS, __global out_t *out, ROWS_ARGS(Rgba))
 {
     ROWS_BODY(Rgba, 0, RGBA_ZERO, MEAN_STEP, NEVER_DONE, MEAN_FINISH)
 }

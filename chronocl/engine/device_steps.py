@@ -1,0 +1,182 @@
+"""A window's steps resident on an OpenCL device, so an edit of the transfer function uploads
+nothing and a slide uploads only the entering step.
+
+`DeviceSteps` is one device buffer of `count` step slots laid out (Z, S, Y, X), as the kernels'
+SLOTS build reads them (common.h's VOX_INDEX: a table of each step's offset and a row stride),
+so a window integrates from the slots its steps occupy, in any order, without a copy on the
+device either. Steps are kept by index until their slot is needed (least recently used first):
+scrubbing back finds them still there. `DeviceBricks` is the brick source a session integrates
+from: it uploads what is missing and hands the engine a `DeviceBrick`.
+
+Only engines that copy bricks use it (a GPU; a CPU device reads host memory in place, where a
+second copy would double the memory). The device budget is a share of the device's global
+memory (`DEVICE_SHARE`, or ``CHRONOCL_DEVICE_MEMORY``); a window that does not fit is streamed
+from the host as before, and the session says so.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from chronocl.core.budget import human, parse_memory
+
+DEVICE_SHARE = 0.6  # of the device's global memory, for resident steps (the rest: outputs, tables)
+SPARE_SLOTS = 2  # beyond the window: the steps a slide or a scrub back needs next
+
+
+def device_budget(global_mem: int) -> int:
+    """Bytes of device memory resident steps may take: ``CHRONOCL_DEVICE_MEMORY`` when set
+    (e.g. "6GB"), else `DEVICE_SHARE` of the device's global memory."""
+    given = os.environ.get("CHRONOCL_DEVICE_MEMORY")
+    return parse_memory(given) if given else int(global_mem * DEVICE_SHARE)
+
+
+@dataclass(frozen=True)
+class DeviceBrick:
+    """Brick rows (rows, W, Y, X) whose steps lie in a device buffer: voxel (z, i, y, x) of
+    brick step i at element `offsets[i] + z * zstride + y * X + x`."""
+
+    buffer: object  # a pyopencl Buffer
+    offsets: np.ndarray  # int64, one per step
+    zstride: int
+    shape: tuple[int, int, int, int]
+    dtype: np.dtype
+
+    @property
+    def nbytes(self) -> int:
+        return int(np.prod(self.shape)) * self.dtype.itemsize
+
+
+class DeviceSteps:
+    """`count` step slots of `shape` (Z, Y, X) and `dtype` in one buffer on the device of `dc`
+    (a `chronocl.engine.device.DeviceContext`)."""
+
+    def __init__(self, dc, shape: tuple[int, int, int], dtype: np.dtype, count: int) -> None:
+        import pyopencl as cl
+
+        self.dc, self.shape, self.dtype, self.count = dc, tuple(shape), np.dtype(dtype), count
+        nz, ny, nx = self.shape
+        self.nbytes = nz * count * ny * nx * self.dtype.itemsize
+        self.buffer = cl.Buffer(dc.context, cl.mem_flags.READ_ONLY, self.nbytes)
+        self._slot: OrderedDict[int, int] = OrderedDict()  # step -> slot, least recent first
+        self.uploads = 0  # steps uploaded so far
+        self.uploaded_bytes = 0
+
+    @classmethod
+    def fitting(
+        cls, dc, shape: tuple[int, int, int], dtype: np.dtype, width: int
+    ) -> DeviceSteps | None:
+        """Slots for a window of `width` steps and `SPARE_SLOTS` more, where they fit the
+        device budget and one buffer; None where the window alone does not."""
+        step = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        room = min(device_budget(dc.info.global_mem), dc.info.max_alloc) // max(1, step)
+        if room < width:
+            return None
+        return cls(dc, shape, dtype, min(room, width + SPARE_SLOTS))
+
+    def resident(self) -> list[int]:
+        return list(self._slot)
+
+    def brick(self, arrays: Mapping[int, np.ndarray], steps: Sequence[int], z0: int, z1: int):
+        """Rows [z0, z1) of `steps` as a `DeviceBrick`, uploading from `arrays` ({step: (Z, Y,
+        X) array}) the steps not resident yet, into the least recently used free slots."""
+        steps = [int(s) for s in steps]
+        if len(set(steps)) > self.count:
+            raise ValueError(f"{len(set(steps))} steps do not fit {self.count} device slots")
+        for s in steps:
+            if s in self._slot:
+                self._slot.move_to_end(s)
+        missing = [s for s in dict.fromkeys(steps) if s not in self._slot]
+        free = sorted(set(range(self.count)) - set(self._slot.values()))
+        for s in missing:
+            if free:
+                slot = free.pop(0)
+            else:  # the least recently used step not in this brick gives its slot up
+                old = next(t for t in self._slot if t not in steps)
+                slot = self._slot.pop(old)
+            self._upload(arrays[s], slot)
+            self._slot[s] = slot
+        _, ny, nx = self.shape
+        offsets = np.array([self._slot[s] * ny * nx for s in steps], np.int64)
+        zstride = self.count * ny * nx
+        return DeviceBrick(
+            self.buffer, offsets + z0 * zstride, zstride, (z1 - z0, len(steps), ny, nx), self.dtype
+        )
+
+    def _upload(self, a: np.ndarray, slot: int) -> None:
+        """Step array `a` (Z, Y, X) into `slot`: one copy per z-row (each row is contiguous on
+        the host however the step lies there: a slot of the host's own block, or an array)."""
+        import pyopencl as cl
+
+        if a.shape != self.shape or a.dtype != self.dtype:
+            raise ValueError(f"step of {a.dtype} {a.shape}; slots of {self.dtype} {self.shape}")
+        nz, ny, nx = self.shape
+        row = ny * nx * self.dtype.itemsize
+        with self.dc.lock:
+            for z in range(nz):
+                src = np.ascontiguousarray(a[z])
+                at = (z * self.count + slot) * row
+                cl.enqueue_copy(self.dc.queue, self.buffer, src, dst_offset=at, is_blocking=False)
+            self.dc.queue.finish()
+        self.uploads += 1
+        self.uploaded_bytes += nz * row
+
+
+class DeviceBricks:
+    """A brick source over steps in memory ({step: array}, as `ResidentBricks`) that keeps them
+    resident on the device (`DeviceSteps`): each read uploads only the steps not there yet."""
+
+    def __init__(self, arrays: Mapping[int, np.ndarray], slots: DeviceSteps) -> None:
+        self.arrays = arrays
+        self.slots = slots
+
+    def read(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> DeviceBrick:
+        return self.slots.brick(self.arrays, steps, z0, self.slots.shape[0] if z1 is None else z1)
+
+
+def run_resident(dc, brick: DeviceBrick, outputs: list[np.ndarray], launch, chunk) -> None:
+    """Launch the kernels (`launch(queue, data, chunk, out_buffers)`, the engine's) on a
+    resident brick into device buffers, and read those back into `outputs`."""
+    import pyopencl as cl
+
+    bufs = [cl.Buffer(dc.context, cl.mem_flags.WRITE_ONLY, a.nbytes) for a in outputs]
+    launch(dc.queue, brick.buffer, chunk, bufs)
+    for a, b in zip(outputs, bufs, strict=True):
+        cl.enqueue_copy(dc.queue, a, b, is_blocking=False)
+    dc.queue.finish()
+
+
+class DeviceWindow:
+    """A session's steps on its engine's device: slots for its window, made again for a wider
+    one. `bricks` is None where the steps stay on the host (a CPU device reads them in place,
+    bricks that travel converted, or a window over the device budget: `why` then says so)."""
+
+    def __init__(self, engine, shape: tuple[int, int, int], dtype: np.dtype) -> None:
+        copies = getattr(engine, "dc", None) is not None and not engine.host_ptr
+        self.engine = engine if copies and engine.device_format == "auto" else None
+        self.shape, self.dtype = tuple(shape), np.dtype(dtype)
+        self.slots: DeviceSteps | None = None
+        self.why: str | None = None
+
+    def bricks(self, arrays: Mapping[int, np.ndarray], width: int) -> DeviceBricks | None:
+        if self.engine is None:
+            return None
+        if self.slots is None or self.slots.count < width:
+            self.slots = None  # freed before a wider one is made
+            dc = self.engine.dc
+            self.slots = DeviceSteps.fitting(dc, self.shape, self.dtype, width)
+            if self.slots is None:
+                need = width * int(np.prod(self.shape)) * self.dtype.itemsize
+                budget = min(device_budget(dc.info.global_mem), dc.info.max_alloc)
+                self.why = (
+                    f"the window needs {human(need)} of device memory > {human(budget)}: "
+                    "its steps are sent from the host for every integration"
+                )
+                return None
+        self.why = None
+        return DeviceBricks(arrays, self.slots)

@@ -1,0 +1,99 @@
+"""Steps resident on the device (issue 32): an engine that copies bricks (a GPU; here PoCL with
+host pointers off, the same code path) keeps a session's window in device slots
+(`chronocl.engine.device_steps`). Integrations from them equal the numpy reference on odd
+shapes, windows of 1-40 steps in any sequence (slides both ways, jumps), slabs and both output
+formats; a TF edit uploads no step and a slide only the entering one; a window over the device
+budget is sent from the host as before, and the session says why.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import chronocl
+from chronocl.core.selection import Selection
+from chronocl.core.time_tf import TimeTF
+from chronocl.engine.device_steps import DeviceBricks, DeviceSteps
+from chronocl.engine.opencl import OpenCLEngine
+from chronocl.integration.inmemory import integrate_bricks, window_job
+from chronocl.integration.interactive.session import Session
+
+from .strategies import examples, specs
+from .test_display_output import assert_display_of
+from .test_opencl import assert_same
+
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
+
+@pytest.fixture(scope="module")
+def copying():
+    return OpenCLEngine(host_ptr=False)  # bricks travel to the device, as on a GPU
+
+
+@settings(max_examples=examples(10), deadline=None)
+@given(st.data())
+def test_windows_from_device_slots_equal_the_reference(copying, data):
+    shape = data.draw(st.tuples(st.integers(1, 5), st.integers(1, 4), st.integers(1, 37)))
+    n_steps = data.draw(st.integers(1, 40))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    values = rng.random((n_steps, *shape), dtype=np.float32)
+    values[rng.random(values.shape) < 0.3] = 0.0
+    series = chronocl.TimeSeries.from_array(values)
+    arrays = {s: values[s] for s in range(n_steps)}
+    widest = data.draw(st.integers(1, n_steps))
+    slots = DeviceSteps(copying.dc, shape, np.float32, widest + data.draw(st.integers(0, 3)))
+    for _ in range(data.draw(st.integers(1, 4))):  # a sequence of windows: slides, jumps
+        width = data.draw(st.integers(1, widest))
+        t0 = data.draw(st.integers(0, n_steps - width))
+        sel = Selection(tuple(range(t0, t0 + width)), n_steps)
+        spec = data.draw(specs(selection=sel))
+        job = window_job(series, sel, spec)
+        slab = data.draw(st.integers(1, shape[0] + 1))
+        display = data.draw(st.booleans())
+        got = integrate_bricks(job, copying, DeviceBricks(arrays, slots), slab, display=display)
+        ref = chronocl.integrate(series, sel, spec=spec, engine="numpy")
+        if got.rgba.dtype == np.uint8:
+            assert_display_of(got, ref, exact=False)
+        else:
+            assert_same(got, ref)
+        assert set(sel.steps) <= set(slots.resident())
+
+
+def test_an_edit_uploads_no_step_and_a_slide_one(copying, tmp_path):
+    rng = np.random.default_rng(4)
+    path = tmp_path / "s.zarr"
+    chronocl.TimeSeries.from_array(rng.random((14, 6, 5, 19), dtype=np.float32)).save(path)
+    series = chronocl.open(path)
+    rgb = TimeTF.preset("rgb", positions="absolute")
+    with Session(series, mode="max", time_tf=rgb, engine=copying, memory="64MB") as session:
+        session.set_window(2, 10)
+        slots = session._device.slots
+        assert slots is not None and slots.uploads == 8
+        assert session.stats["why_not_on_device"] is None
+        for change in ({"order": "backward"}, {"mode": "alpha"}, {"order": "forward"}):
+            cv = session.set_spec(**change)  # integrated again, from the device's slots
+            ref = chronocl.integrate(series, session.window(), spec=session.spec, engine="numpy")
+            assert_same(cv, ref)
+            assert slots.uploads == 8
+        session.slide(1)  # incremental: the sliding state integrates the entering step only
+        assert session.stats["path"] == "incremental" and slots.uploads == 8
+        cv = session.set_spec(order="backward")  # the window again: one new step on the device
+        assert_same(cv, chronocl.integrate(series, session.window(), spec=session.spec))
+        assert slots.uploads == 9
+        session.slide(-1)
+        session.set_spec(order="forward")  # the step that left is still on the device
+        assert slots.uploads == 9
+
+
+def test_a_window_over_the_device_budget_is_sent_from_the_host(copying, tmp_path, monkeypatch):
+    monkeypatch.setenv("CHRONOCL_DEVICE_MEMORY", "20KB")
+    rng = np.random.default_rng(2)
+    series = chronocl.TimeSeries.from_array(rng.random((6, 8, 9, 33), dtype=np.float32))
+    with Session(series, mode="alpha", engine=copying, memory="64MB") as session:
+        cv = session.set_window(0, 5)
+        assert session._device.slots is None
+        assert "device memory" in session.stats["why_not_on_device"]
+        assert_same(cv, chronocl.integrate(series, session.window(), spec=session.spec))
