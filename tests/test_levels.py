@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -76,6 +78,24 @@ def test_auto_scrubs_incrementally_at_the_level_it_picked(series):
         # The range fitted to the first window holds while the window slides.
         ref = chronocl.integrate(series, "3:7", spec=s.spec, level=2)
         np.testing.assert_array_equal(cvs[-1].rgba, ref.rgba)
+
+
+def test_a_coarse_frame_reads_its_full_resolution_steps_ahead(series):
+    """While a coarse level shows a window, level 0's manager reads its steps in the
+    background: the refine after a scrub finds them resident and reads nothing more."""
+    with Session(series, mode="max", level="auto", target_ms=1e-3, memory="1GB") as s:
+        s.set_window(0, 4)
+        for _ in range(3):
+            s.slide(+1)
+        assert s.shown_level == 2
+        full = s.pool.session(0, s.spec)
+        deadline = time.monotonic() + 60  # no request here: the reads are already under way
+        while not set(full.manager.resident()) >= {3, 4, 5, 6} and time.monotonic() < deadline:
+            time.sleep(0.02)
+        reads = dict(full.manager.reads)
+        assert set(reads) >= {3, 4, 5, 6}
+        s.refine()
+        assert s.shown_level == 0 and dict(full.manager.reads) == reads
 
 
 def test_auto_picks_finer_levels_once_they_are_predicted_to_fit(series):

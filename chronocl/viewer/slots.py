@@ -10,6 +10,7 @@ import numpy as np
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.session import Session
+from chronocl.render import brick_grid
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Volume
 from chronocl.render.upload import convert, display_format
@@ -24,8 +25,12 @@ class ViewSlot:
     volume: Volume | None = None
     uploaded: Chronovolume | None = None
     staging: np.ndarray | None = None  # the texture data's host buffer, reused frame to frame
+    recolour: object | None = None  # the window's winners on the GPU (viewer/recolouring.py)
 
     def release_gl(self) -> None:
+        if self.recolour is not None:
+            self.recolour.release()  # type: ignore[attr-defined]
+            self.recolour = None
         if self.volume is not None:
             self.volume.release()
             self.volume = None
@@ -55,8 +60,10 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
     import moderngl
 
     nz, ny, nx, _ = cv.rgba.shape
-    fmt = display_format(nz * ny * nx)
+    # RGBA8 from the kernels (a display chronovolume) as it is, whatever the size
+    fmt = "f1" if cv.rgba.dtype == np.uint8 else display_format(nz * ny * nx)
     data, occ = convert(cv.rgba, fmt, slot.staging)
+    bricks = brick_grid.submit(data)  # the empty-space grid, beside the texture write
     vol = slot.volume
     if vol is not None and vol.texture.size == (nx, ny, nz) and vol.texture.dtype == fmt:
         vol.texture.write(data)
@@ -70,6 +77,7 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
     extent, voxel = geometry(cv)
     vol.extent, vol.unit = extent, float(np.min(voxel))
     vol.occupied = occ.corners(extent, voxel)
+    vol.bricks = brick_grid.texture(rc.ctx, bricks.result(), vol.bricks)
     slot.volume, slot.uploaded = vol, cv
     return vol
 

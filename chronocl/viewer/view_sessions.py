@@ -17,6 +17,7 @@ from chronocl.data.window import WindowManager
 from chronocl.integration.interactive.session import Session
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.recolouring import Recolouring
 from chronocl.viewer.slots import ViewSlot
 from chronocl.viewer.view_state import ViewState
 
@@ -35,6 +36,7 @@ class Views:
         self.slots: list[ViewSlot] = []
         self._dataset = -1
         self._managers: dict[tuple[int, str], WindowManager] = {}
+        self.recolouring = Recolouring(device)  # TF edits that only recolour (recolouring.py)
 
     def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed;
@@ -48,6 +50,7 @@ class Views:
         while len(self.slots) < len(state.views):
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
+        self.recolouring.ms = 0.0
         cvs = []
         for i in range(len(state.views)):
             slot = self.slots[i]
@@ -87,13 +90,18 @@ class Views:
                 level="auto",
                 target_ms=TARGET_MS,
                 managers=self._managers,
+                display=True,  # full-resolution frames as RGBA8 from the kernels
             )
             cv = s.set_window(sel)
-        else:  # the session slides where the new window overlaps the old
-            cv = s.show(sel, spec)
+        else:  # recoloured where a TF edit allows, else slid where the windows overlap
+            cv = self.recolouring.view(slot, spec, sel) or s.show(sel, spec)
         slot.cv = cv
         stats = s.stats or {}
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
+
+    def manager(self, level: int, pool: str) -> WindowManager | None:
+        """The window manager of `level` and `pool` the views share, if one was made."""
+        return self._managers.get((level, pool))
 
     def full_resolution(self, views: range) -> None:
         """Bring views to full resolution (probes, saves and movies never use a coarse one)."""

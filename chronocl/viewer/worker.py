@@ -57,7 +57,7 @@ from chronocl.viewer.view_sessions import Views
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
 MAX_TASKS = 8
-REFINE_AFTER_S = 0.25  # idle time after a coarse frame before the full-resolution one
+REFINE_AFTER_S = 0.25  # after a drag's coarse frame; an edit's end refines at once
 
 
 class ClientWorker(Tasks):
@@ -273,6 +273,7 @@ class ClientWorker(Tasks):
         t_start = time.perf_counter()
         cvs, integrate_ms, incremental = self.views.chronovolumes(state)
         self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
+        self.views.recolouring.finish()  # a recoloured view's RGBA, read after the frame went
         self._histogram_after(state)
 
     def _refine(self) -> None:
@@ -335,7 +336,8 @@ class ClientWorker(Tasks):
         level = max((session.shown_level for session in sessions), default=0)
         levels = max((session.stats.get("levels", 1) for session in sessions), default=1)
         refining = (level > 0 or reduced) and not self._cancelled
-        self._refine_at = time.monotonic() + REFINE_AFTER_S if refining else None
+        wait = REFINE_AFTER_S if state.quality == "preview" else 0.0  # newer input gives it up
+        self._refine_at = time.monotonic() + wait if refining else None
         header = {
             "type": "frame",
             "id": rid,
@@ -365,6 +367,7 @@ class ClientWorker(Tasks):
             "reduced": reduced,  # drawn smaller than the panels for the latency target
             "timings": {
                 "integrate_ms": round(integrate_ms, 2),
+                "recolour_ms": round(self.views.recolouring.ms, 2),  # a TF edit's, not integrated
                 "incremental": incremental,
                 "upload_ms": round(1e3 * (t_draw - t_up), 2),
                 "render_ms": round(1e3 * (t_done - t_draw), 2),
@@ -381,6 +384,7 @@ class ClientWorker(Tasks):
         with self._cond:
             gen, known = self._focus_gen, self._focus
         if known is None or known[0] != gen:
+            self.views.recolouring.finish()  # framing reads the RGBA
             known = (gen, framed(dataclasses.replace(state.camera, focus=None), cvs).focus)
             with self._cond:
                 if self._focus_gen == gen:

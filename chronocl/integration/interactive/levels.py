@@ -85,6 +85,8 @@ class Pool(Protocol):
 
     def session(self, level: int, spec: IntegrationSpec) -> FixedLevel: ...
 
+    def read_ahead(self, selection: Selection, spec: IntegrationSpec) -> None: ...
+
     def close(self) -> None: ...
 
 
@@ -157,6 +159,8 @@ class AutoSession:
         t = time.perf_counter()
         cv = s.show(selection, spec)
         self.model.record_integrate(level, 1e3 * (time.perf_counter() - t), selection.width)
+        if level > 0:  # the refine to come then finds the window's full-resolution steps read
+            self.pool.read_ahead(selection, spec)
         self.shown, self._last, self._cv = level, (selection, spec), cv
         self.stats = {
             **s.stats,
@@ -174,6 +178,15 @@ class AutoSession:
             return None
         self.why = "refined to full resolution"
         return self._at(0, *self._last)
+
+    def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
+        """Show `cv`, the window at full resolution recoloured under `spec` (asked as `asked`),
+        as if integrated (`Session.adopt`, which its level-0 session is told too)."""
+        self.asked, self.spec, self._cv = asked, spec, cv
+        self.shown, self._last = 0, (self.window(), spec)
+        self.why = "recoloured at full resolution"
+        self.stats = {**self.stats, "level": 0, "why_level": self.why, "refining": False}
+        self.stats.update(integrate_ms=0.0, path="recoloured", incremental=False)
 
     def current(self) -> Chronovolume:
         """The chronovolume of the current window and spec."""

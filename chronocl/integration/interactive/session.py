@@ -27,11 +27,10 @@ frame from a `SessionPool` of these fixed-level sessions.
 from __future__ import annotations
 
 import time
-from typing import NamedTuple
 
 import numpy as np
 
-from chronocl.core.budget import human, interactive_memory, parse_memory
+from chronocl.core.budget import human
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.interrupt import watched
 from chronocl.core.selection import Selection, parse_selection
@@ -39,44 +38,17 @@ from chronocl.data.bricks import ResidentBricks, SeriesBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
-from chronocl.engine import get_engine
-from chronocl.engine.base import Engine
-from chronocl.integration.inmemory import check_level, integrate_bricks, make_spec, window_job
+from chronocl.engine.device_steps import DeviceWindow
+from chronocl.integration.inmemory import check_level, integrate_bricks, window_job
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
+from chronocl.integration.interactive.settings import Settings, settings
 from chronocl.integration.interactive.slider import Slider
 from chronocl.integration.interactive.sliding import block_size
+from chronocl.integration.interactive.winners import Winners, of_window, recolours
 from chronocl.modes.spec import IntegrationSpec
 
-Managers = dict[tuple[int, str], WindowManager]
 REFINE_SLABS = 8  # slabs of a window integrated where it may be given up (`Session._slab_rows`)
-
-
-class Settings(NamedTuple):
-    """What every session of a series is built from, whatever its level (`settings`)."""
-
-    asked: IntegrationSpec  # the spec as asked, its value range not fixed yet
-    engine: Engine
-    budget: int  # bytes
-    prefetch: int | None
-    managers: Managers | None
-
-
-def settings(
-    *,
-    memory: str | int | None = None,
-    engine: str | Engine = "opencl",
-    device: str | None = None,
-    spec: IntegrationSpec | None = None,
-    prefetch: int | None = None,
-    managers: Managers | None = None,
-    **spec_args: object,
-) -> Settings:
-    """The keywords a `Session` takes at any level (`Session`'s docstring says what each is)."""
-    asked = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
-    eng = get_engine(engine, device) if isinstance(engine, str) else engine
-    budget = interactive_memory() if memory is None else parse_memory(memory)
-    return Settings(asked, eng, budget, prefetch, managers)
 
 
 class Session:
@@ -94,7 +66,9 @@ class Session:
     ... as `make_spec` takes them); `prefetch`, the steps read ahead in the scrub direction;
     `managers` (a dict the caller owns and closes) shares one window manager per (level,
     pooling) among sessions, and `manager` shares another session's resident steps
-    (parallel views of one window) instead.
+    (parallel views of one window) instead. With `display` (a viewer's), a window integrated
+    from its steps comes back in the display format where the engine writes it: RGBA8
+    (`integrate_bricks`); slides and other engines still return float32.
 
     `level` is a coarse level of the series (0: full resolution). ``level="auto"`` does not
     make a `Session`: ``Session(...)`` then returns an `AutoSession`
@@ -128,12 +102,15 @@ class Session:
         self.asked = self.spec = setup.asked
         self.engine = setup.engine
         self.budget = setup.budget
+        self.display = setup.display
         self.selection: Selection | None = None
         self.stats: dict = {}
         self._arrays: dict[int, np.ndarray] = {}
         # CPU devices read the window where the manager's slots hold it; others stack it.
         in_place = bool(getattr(self.engine, "reads_in_place", False))
         self._bricks = ResidentBricks(self._arrays, in_place=in_place)
+        # GPUs keep the window's steps in device memory: an edit uploads none, a slide one.
+        self._device = DeviceWindow(self.engine, series.volume_shape, series.dtype)
         self._slider: Slider | None = None
         self._cv: Chronovolume | None = None
         self._prefetch = prefetch = setup.prefetch
@@ -185,6 +162,32 @@ class Session:
         if self._cv is None:
             return self._update(self.window())
         return self._cv
+
+    def winners(self, gather=None) -> Winners | None:
+        """The window's winners, to recolour a TF edit without integrating (`winners.of_window`)."""
+        return of_window(
+            self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather
+        )
+
+    def recolours(self, spec: IntegrationSpec) -> tuple[IntegrationSpec, str | None]:
+        """`spec` fixed for the window, and None where it only recolours (else why not)."""
+        sel = self.window()
+        _, new = fixed(self.base, self.asked, self.spec, spec, sel)
+        if self._cv is None:
+            return new, "nothing is integrated yet"
+        new_range = window_job(self.series, sel, new).value_range
+        return new, recolours(self._cv, self.spec, new, new_range, self.base.n_steps)
+
+    def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
+        """Show `cv`, this window recoloured under `spec` (asked as `asked`), as if integrated.
+        The sliding state held the old colours: the next slide integrates the window again."""
+        self.asked, self.spec, self._cv, self._slider = asked, spec, cv, None
+
+    def read_ahead(self, selection: Selection) -> None:
+        """Start reading `selection`'s steps in the background where they fit the budget (an
+        `AutoSession` shows the window at a coarse level meanwhile)."""
+        if selection.width * self.manager.step_bytes <= self.manager.budget:
+            self.manager.request(selection.steps)
 
     def refine(self) -> Chronovolume | None:
         """None: a fixed level is never refined (`AutoSession.refine` is)."""
@@ -253,10 +256,13 @@ class Session:
         else:
             job = window_job(self.series, selection, self.spec)
             self._bricks.arrays = self._arrays  # its `keep` was decided above
+            bricks = self._device.bricks(self._arrays, selection.width) or self._bricks
             # Neither the last chronovolume nor the sliding state holds for this window until
             # the integration below completes (it may be given up: `chronocl.core.interrupt`).
             self._cv, self._slider = None, None
-            cv = integrate_bricks(job, self.engine, self._bricks, slab=self._slab_rows())
+            cv = integrate_bricks(
+                job, self.engine, bricks, slab=self._slab_rows(), display=self.display
+            )
             # Jumps and spec changes integrate directly (one pass over the window); the
             # sliding state starts from this window and is filled lazily on the next slide.
             if reason is None:
@@ -294,7 +300,9 @@ class Session:
         rows = max(1, self.budget // (4 * max(1, job.row_bytes)))
         self._arrays, self._slider, self.selection, self._cv = {}, None, selection, None
         self._bricks.forget()
-        self._cv = integrate_bricks(job, self.engine, SeriesBricks(self.series), slab=rows)
+        self._cv = integrate_bricks(
+            job, self.engine, SeriesBricks(self.series), slab=rows, display=self.display
+        )
         why = f"the window needs {human(window)} > budget {human(self.budget)}: streamed by z-slabs"
         self._record(t, "streamed", why)
         return self._cv
@@ -318,6 +326,8 @@ class Session:
             "resident_steps": len(self.manager.resident()),
             "reads": sum(self.manager.reads.values()),
             "held_partials": 0 if self._slider is None else self._slider.held,
+            "device_steps": None if self._device.slots is None else self._device.slots.resident(),
+            "why_not_on_device": self._device.why,
         }
 
 
@@ -346,8 +356,13 @@ class SessionPool:
                 level=level,
                 prefetch=o.prefetch,
                 managers=o.managers,
+                display=o.display,
             )
         return self.sessions[key]
+
+    def read_ahead(self, selection: Selection, spec: IntegrationSpec) -> None:
+        """Full-resolution steps of `selection` read in the background (`Session.read_ahead`)."""
+        self.session(0, spec).read_ahead(selection)
 
     def close(self) -> None:
         for s in self.sessions.values():

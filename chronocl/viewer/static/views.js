@@ -376,7 +376,11 @@ function showTimings(h) {
   const level = h.level ? `level ${h.level} (${shape}) · refining…` : `full resolution (${shape})`;
   const parts = [
     level,
-    `integrate ${t.integrate_ms.toFixed(1)} ms${t.incremental ? ' (incremental)' : ''}`,
+    // a TF edit that only recoloured (max, min, first_hit, change) integrated nothing
+    ...(t.recolour_ms > 0 ? [`recolour ${t.recolour_ms.toFixed(1)} ms`] : []),
+    ...(t.recolour_ms > 0 && !t.integrate_ms
+      ? []
+      : [`integrate ${t.integrate_ms.toFixed(1)} ms${t.incremental ? ' (incremental)' : ''}`]),
     `upload ${t.upload_ms.toFixed(1)} ms`,
     `render ${t.render_ms.toFixed(1)} ms`,
     `encode ${t.encode_ms.toFixed(1)} ms`,

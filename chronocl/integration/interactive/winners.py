@@ -1,0 +1,219 @@
+"""Recolouring without re-integration: when a TF edit may only recolour, and what it recolours.
+
+In the modes whose voxel is one step's colour at one value (max, min, first_hit, change:
+docs/semantics.md) a voxel's RGBA is TF(u*, p_k*) premultiplied, where k* is the step that won
+it and u* the value it won with (change: the change δ). Keep (u*, k*) per voxel and an edit of
+the transfer functions only looks them up again (`chronocl.render.recolour`, on the GPU), as
+long as the edit cannot change who won:
+
+- max, min, change: the winner depends on the values only (and ties on the order), so any edit
+  of the data TF's colours and opacities, and of the time TF, recolours, as long as the value
+  range that normalises the values stays the same (clipping to another range makes new ties).
+- first_hit: the winner is the first step whose opacity a_d(u)·a_t(p_k) exceeds the threshold,
+  so the edit must keep, at every step, which values pass (`same_hits`).
+- Enhancement (edge: gradients of u; silhouette: also the view) multiplies each step's opacity
+  by a factor that is not kept here: a spec with enhancement integrates. So does any change of
+  mode, order, threshold or normalisation, and every other mode.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from chronocl.core import host_threads
+from chronocl.core import values as _values
+from chronocl.core.memory import aligned_empty
+from chronocl.core.selection import Selection
+from chronocl.core.tf import lut_lerp32
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.modes.spec import IntegrationSpec
+
+RECOLOURED = ("max", "min", "first_hit", "change")
+
+
+@dataclass(frozen=True)
+class Winners:
+    """Per voxel the value that won (float32 u, or δ for change) and the index of the winning
+    step in the window (`steps`; `none` where no step won), for the spec integrated."""
+
+    u: np.ndarray  # (Z, Y, X) float32
+    k: np.ndarray  # (Z, Y, X) uint8 or uint16
+    steps: tuple[int, ...]
+    n_steps: int
+    value_range: tuple[float, float]
+    spec: IntegrationSpec
+
+    @property
+    def none(self) -> int:
+        return int(np.iinfo(self.k.dtype).max)
+
+
+def why_not(
+    old: IntegrationSpec,
+    new: IntegrationSpec,
+    old_range: tuple[float, float],
+    new_range: tuple[float, float],
+    steps: tuple[int, ...],
+    n_steps: int,
+) -> str | None:
+    """None when `new` shows the window integrated under `old` by recolouring it; else why it
+    must integrate (one line)."""
+    if old.mode not in RECOLOURED:
+        return f"{old.mode} mixes every step's colour"
+    if new.mode != old.mode:
+        return "the mode changed"
+    if old.enhance.kind != "none" or new.enhance.kind != "none":
+        return "enhancement depends on gradients (silhouettes on the view)"
+    if new.order != old.order or new.threshold != old.threshold:
+        return "the order or threshold changed"
+    if tuple(map(float, old_range)) != tuple(map(float, new_range)):
+        return "the value range changed: other values may win"
+    if old.mode == "first_hit" and not same_hits(old, new, steps, n_steps):
+        return "the edit changes which values pass the opacity threshold"
+    return None
+
+
+def recolours(
+    cv: Chronovolume,
+    old: IntegrationSpec,
+    new: IntegrationSpec,
+    new_range: tuple[float, float],
+    n_steps: int,
+) -> str | None:
+    """`why_not` for `cv`, integrated under `old`, shown under `new` (normalised by
+    `new_range`) in a series of `n_steps`."""
+    steps = tuple(cv.metadata["selection"]["steps"])
+    return why_not(old, new, tuple(cv.metadata["value_range"]), new_range, steps, n_steps)
+
+
+def of_window(
+    cv: Chronovolume | None,
+    selection: Selection | None,
+    arrays: dict[int, np.ndarray],
+    n_steps: int,
+    spec: IntegrationSpec,
+    gather=None,
+) -> Winners | None:
+    """The winners of `cv` (the window `selection` integrated under `spec`) from the window's
+    resident raw values `arrays` (step -> (Z, Y, X)), gathered by `gather` (`winners`'s
+    arguments; default `winners`, e.g. chronocl.render.recolour_host.gather); None where the
+    mode has none, nothing is integrated or a step of the window is not resident."""
+    if cv is None or selection is None or cv.t_index is None or spec.mode not in RECOLOURED:
+        return None
+    if any(s not in arrays for s in selection.steps):
+        return None
+    vr = tuple(cv.metadata["value_range"])
+    return (gather or winners)(cv.t_index, arrays, selection.steps, n_steps, vr, spec)
+
+
+def _passes(spec: IntegrationSpec, steps: tuple[int, ...], n_steps: int) -> np.ndarray:
+    """(W, size) bool: at each step, whether each LUT entry's opacity passes the threshold, in
+    float32 as the kernels compute it (enhancement excluded: `why_not` refuses it)."""
+    lut = spec.data_tf.lut
+    _, a_t = spec.time_tf.evaluate(spec.time_tf.positions_of(steps, n_steps))
+    a = lut[None, :, 3] * a_t.astype(np.float32)[:, None]
+    return np.clip(a, np.float32(0), np.float32(1)) > np.float32(spec.threshold)
+
+
+def same_hits(
+    old: IntegrationSpec, new: IntegrationSpec, steps: tuple[int, ...], n_steps: int
+) -> bool:
+    """Whether every value passes first_hit's threshold at every step under `new` exactly
+    where it does under `old`. The opacity is linear between LUT entries: where both ends of a
+    segment pass (or both fail) so does the segment; where they differ, the crossing is where
+    it was only if the segment is unchanged. Sufficient, not necessary (data not looked at)."""
+    if old.data_tf.size != new.data_tf.size:
+        return False
+    p_old, p_new = _passes(old, steps, n_steps), _passes(new, steps, n_steps)
+    if not np.array_equal(p_old, p_new):
+        return False
+    crossing = p_old[:, 1:] != p_old[:, :-1]  # (W, size - 1) segments the threshold cuts
+    if not crossing.any():
+        return True
+    lut_o, lut_n = old.data_tf.lut[:, 3], new.data_tf.lut[:, 3]
+    _, at_o = old.time_tf.evaluate(old.time_tf.positions_of(steps, n_steps))
+    _, at_n = new.time_tf.evaluate(new.time_tf.positions_of(steps, n_steps))
+    seg = np.flatnonzero(crossing.any(axis=0))
+    ends_same = (lut_o[seg] == lut_n[seg]) & (lut_o[seg + 1] == lut_n[seg + 1])
+    steps_same = np.float32(at_o) == np.float32(at_n)
+    return bool(ends_same.all() and steps_same[crossing.any(axis=1)].all())
+
+
+def winners(
+    t_index: np.ndarray,
+    arrays: dict[int, np.ndarray],
+    steps: tuple[int, ...],
+    n_steps: int,
+    value_range: tuple[float, float],
+    spec: IntegrationSpec,
+) -> Winners:
+    """The winners of an integrated window: its t_index (the selected step of each voxel, -1:
+    none) and the window's raw resident values (step -> (Z, Y, X)); gathered on the host
+    threads, slab by slab."""
+    dtype = np.uint8 if len(steps) < 255 else np.uint16
+    none = np.iinfo(dtype).max
+    table = np.full(max(steps) + 2, none, dtype=dtype)  # t_index -1 reads the last entry
+    table[list(steps)] = np.arange(len(steps), dtype=dtype)
+    u = aligned_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
+    k = aligned_empty(t_index.shape, dtype)
+    nz = t_index.shape[0]
+    cuts = np.linspace(0, nz, min(nz, 4 * host_threads.workers()) + 1).astype(int)
+    args = (t_index, arrays, steps, value_range, spec.mode, table, u, k)
+    jobs = [
+        host_threads.pool().submit(_gather, *args, int(a), int(b))
+        for a, b in itertools.pairwise(cuts.tolist())
+        if b > a
+    ]
+    for job in jobs:
+        job.result()
+    return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
+
+
+def _gather(t_index, arrays, steps, value_range, mode, table, u, k, z0: int, z1: int) -> None:
+    ti = t_index[z0:z1]
+    kk = k[z0:z1]
+    np.take(table, ti, out=kk)
+    raw = u[z0:z1]
+    raw[...] = 0
+    if mode == "change":
+        before = np.zeros_like(raw)
+    for i, s in enumerate(steps):
+        if i == 0 and mode == "change":
+            continue  # step 0 of the window starts no change
+        where = kk == i
+        if not where.any():
+            continue
+        np.copyto(raw, arrays[s][z0:z1], where=where, casting="unsafe")
+        if mode == "change":
+            np.copyto(before, arrays[steps[i - 1]][z0:z1], where=where, casting="unsafe")
+    if mode == "change":
+        lo, hi = _values.clip_bounds(*value_range)
+        _, scale = _values.normalization(*value_range)
+        d = np.abs(np.clip(raw, lo, hi) - np.clip(before, lo, hi))
+        raw[...] = np.minimum(d * scale, np.float32(1.0))
+    else:
+        raw[...] = _values.normalize(raw, *value_range)
+
+
+def step_table(spec: IntegrationSpec, steps: tuple[int, ...], n_steps: int) -> np.ndarray:
+    """(W, 4) float32: each window step's time colour and opacity (rgb_t, a_t)."""
+    rgb_t, a_t = spec.time_tf.evaluate(spec.time_tf.positions_of(steps, n_steps))
+    return np.concatenate([rgb_t, a_t[:, None]], axis=1).astype(np.float32)
+
+
+def recoloured(w: Winners, spec: IntegrationSpec) -> np.ndarray:
+    """The premultiplied RGBA float32 (Z, Y, X, 4) the winners take under `spec`, on the host
+    (the oracle of the GPU's recolouring; the viewer never calls it)."""
+    d = lut_lerp32(spec.data_tf.lut, w.u)
+    table = step_table(spec, w.steps, w.n_steps)
+    won = w.k != w.none
+    t = table[np.where(won, w.k, 0)]
+    a = np.clip(d[..., 3] * t[..., 3], np.float32(0), np.float32(1))
+    rgba = np.zeros((*w.u.shape, 4), np.float32)
+    rgba[..., :3] = a[..., None].astype(np.float64) * (d[..., :3] * t[..., :3].astype(np.float64))
+    rgba[..., 3] = a
+    rgba[~won] = 0
+    return rgba

@@ -1,0 +1,367 @@
+"""Recolouring on the OpenCL device of the host: a TF edit of max, min, first_hit or change
+without integrating, where the GL renderer is a software one (llvmpipe).
+
+llvmpipe runs compute shaders far slower than PoCL runs the same arithmetic (2 cores: about
+15 M voxels/s against several hundred; bench/recolour.py), and its textures live in host memory
+anyway, so there the recolouring runs as an OpenCL kernel over the winners (value and step per
+voxel, `chronocl.integration.interactive.winners.Winners`) into premultiplied RGBA8 or float32,
+the display format, and goes up as an integrated chronovolume does (the viewer's `upload`,
+which finds its occupancy and brick grid). The arithmetic is the GPU path's
+(kernels/glsl/recolour.comp) and the kernels' (`lut_lerp32`). On a CPU device the winners and
+the output are read and written where they lie (host pointers, nothing copied).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from chronocl.core.memory import ALIGN, aligned_empty, is_aligned
+from chronocl.integration.interactive.winners import Winners, step_table
+from chronocl.modes.spec import IntegrationSpec
+
+SOURCE = r"""
+__kernel void recolour(__global const float *won_u, __global const K_T *won_k,
+                       __global const float4 *lut, const int lut_size,
+                       __global const float4 *table, const uint none_k,
+                       __global OUT_T *out, const ulong n)
+{
+    // a run of RUN voxels per work-item: PoCL's per-item cost and the LUT gathers (which
+    // keep it from vectorising across items) would otherwise dominate
+    size_t start = get_global_id(0) * RUN;
+    size_t end = min(start + RUN, (size_t)n);
+    for (size_t i = start; i < end; ++i) {
+        uint k = won_k[i];
+        float4 rgba = (float4)(0.0f);
+        if (k != none_k) {
+            float x = won_u[i] * (float)(lut_size - 1);
+            int i0 = min((int)x, lut_size - 2);
+            float f = x - (float)i0;
+            float4 d = lut[i0] * (1.0f - f) + lut[i0 + 1] * f;
+            float4 t = table[k];
+            float a = clamp(d.w * t.w, 0.0f, 1.0f);
+            rgba = (float4)(a * (d.xyz * t.xyz), a);
+        }
+#ifdef RGBA8
+        out[i] = convert_uchar4_sat_rte(rgba * 255.0f);
+#else
+        out[i] = rgba;
+#endif
+    }
+}
+"""
+RUN = 1024  # voxels per work-item of the recolour kernel
+GATHER = r"""
+// The winners' step index (into the window; none: none_k) from t_index (the selected step, -1:
+// none) through `table` (step + 1 -> index), then their value u: the window's steps go in
+// chunks of up to 8 (p1..p8 the chunk's steps, p0 the step before the first, which change
+// reads), normalised as chronocl.core.values does (change: the clipped difference, scaled).
+__kernel void window_index(__global const int *t_index, __global const K_T *table,
+                           __global K_T *won_k)
+{
+    size_t i = get_global_id(0);
+    won_k[i] = table[t_index[i] + 1];
+}
+
+// The window's steps as views of one block (the window manager's slots: any strides, each
+// step at its element offset `offs[k]`): each voxel reads its winner where it lies.
+__kernel void gather_block(__global const K_T *won_k, __global float *won_u,
+                           __global const V_T *block, __global const long *offs,
+                           const long sz, const long sy, const long sx, const long nx,
+                           const long ny, const uint none_k, const float lo, const float hi,
+                           const float scale)
+{
+    size_t i = get_global_id(0);
+    uint k = won_k[i];
+    if (k == none_k) return;
+    long x = i % nx, y = (i / nx) % ny, z = i / (nx * ny);
+    long at = z * sz + y * sy + x * sx;
+    float v = (float)block[offs[k] + at];
+#ifdef CHANGE
+    float b = (float)block[offs[k - 1] + at];
+    won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
+#else
+    won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
+#endif
+}
+
+__kernel void gather(__global const K_T *won_k, __global float *won_u,
+                     const uint base, const uint count,
+                     __global const V_T *p0, __global const V_T *p1, __global const V_T *p2,
+                     __global const V_T *p3, __global const V_T *p4, __global const V_T *p5,
+                     __global const V_T *p6, __global const V_T *p7, __global const V_T *p8,
+                     const float lo, const float hi, const float scale)
+{
+    size_t i = get_global_id(0);
+    uint k = won_k[i];
+    if (k < base || k >= base + count) return;
+    float v, b = 0.0f;
+    switch (k - base) {
+        case 0: v = (float)p1[i]; break;
+        case 1: v = (float)p2[i]; break;
+        case 2: v = (float)p3[i]; break;
+        case 3: v = (float)p4[i]; break;
+        case 4: v = (float)p5[i]; break;
+        case 5: v = (float)p6[i]; break;
+        case 6: v = (float)p7[i]; break;
+        default: v = (float)p8[i]; break;
+    }
+#ifdef CHANGE
+    switch (k - base) {
+        case 0: b = (float)p0[i]; break;
+        case 1: b = (float)p1[i]; break;
+        case 2: b = (float)p2[i]; break;
+        case 3: b = (float)p3[i]; break;
+        case 4: b = (float)p4[i]; break;
+        case 5: b = (float)p5[i]; break;
+        case 6: b = (float)p6[i]; break;
+        default: b = (float)p7[i]; break;
+    }
+    won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
+#else
+    won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
+#endif
+}
+"""
+CHUNK = 8  # steps per gather pass (the kernel's p1..p8)
+CL_TYPES = {  # numpy's name -> OpenCL's, for the raw values the gather reads
+    "float32": "float",
+    "float64": "double",
+    "uint8": "uchar",
+    "uint16": "ushort",
+    "int16": "short",
+    "int32": "int",
+}
+SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "lavapipe")
+
+_programs: dict[tuple, object] = {}  # built programs and kernels, per context and options
+_lock = threading.Lock()
+
+
+def software_gl(ctx) -> bool:
+    """Whether the GL context renders on the CPU (Mesa's llvmpipe and kin)."""
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(name in renderer for name in SOFTWARE_GL)
+
+
+def gather(
+    t_index: np.ndarray,
+    arrays: dict[int, np.ndarray],
+    steps: tuple[int, ...],
+    n_steps: int,
+    value_range: tuple[float, float],
+    spec: IntegrationSpec,
+    device: str | None = None,
+) -> Winners:
+    """`chronocl.integration.interactive.winners.winners` on the OpenCL device: each voxel reads
+    its winning step's value alone (the numpy gather reads every step), in place on a CPU
+    device. Falls back to the numpy gather for data types the kernel does not take."""
+    import pyopencl as cl
+
+    from chronocl.core import values as _values
+    from chronocl.engine.device import get_context
+    from chronocl.integration.interactive.winners import winners
+
+    dtype = np.dtype(arrays[steps[0]].dtype)
+    if dtype.name not in CL_TYPES or any(arrays[s].dtype != dtype for s in steps):
+        return winners(t_index, arrays, steps, n_steps, value_range, spec)
+    block = _block(arrays, steps)
+    in_place = all(arrays[s].flags.c_contiguous and is_aligned(arrays[s]) for s in steps)
+    if block is None and not in_place:  # a copy would cost more than numpy's gather
+        return winners(t_index, arrays, steps, n_steps, value_range, spec)
+    dc = get_context(device)
+    k_dtype = np.uint8 if len(steps) < 255 else np.uint16
+    none = np.iinfo(k_dtype).max
+    table = np.full(max(steps) + 2, none, dtype=k_dtype)
+    table[np.asarray(steps) + 1] = np.arange(len(steps), dtype=k_dtype)
+    shape = t_index.shape
+    u = aligned_empty(shape, np.float32)  # PoCL reads and writes aligned host memory in place
+    u[...] = 0
+    k = aligned_empty(shape, k_dtype)
+    ctx, mf = dc.context, cl.mem_flags
+    host = mf.USE_HOST_PTR if dc.is_cpu else mf.COPY_HOST_PTR
+
+    def buf(a: np.ndarray, flags) -> object:
+        return cl.Buffer(ctx, flags | host, hostbuf=aligned(a))
+
+    change = spec.mode == "change"
+    opts = [
+        f"-DK_T={'uchar' if k_dtype == np.uint8 else 'ushort'}",
+        f"-DV_T={CL_TYPES[dtype.name]}",
+    ]
+    if change:
+        opts.append("-DCHANGE")
+    lo, hi = _values.clip_bounds(*value_range)
+    vmin, scale = _values.normalization(*value_range)
+    n = t_index.size
+    with dc.lock:
+        key = (id(ctx), "gather", *opts)
+        if key not in _programs:
+            _programs[key] = cl.Program(ctx, GATHER).build(options=opts)
+        program = _programs[key]
+        ti_buf, table_buf = (
+            buf(t_index.astype(np.int32, copy=False), mf.READ_ONLY),
+            buf(table, mf.READ_ONLY),
+        )
+        k_buf, u_buf = buf(k, mf.READ_WRITE), buf(u, mf.READ_WRITE)
+        index = cl.Kernel(program, "window_index")
+        index.set_args(ti_buf, table_buf, k_buf)
+        cl.enqueue_nd_range_kernel(dc.queue, index, (n,), None)
+        if block is not None:
+            owner, offs, strides = block
+            kern = cl.Kernel(program, "gather_block")
+            _, ny, nx = shape
+            held = [buf(owner, mf.READ_ONLY), buf(offs, mf.READ_ONLY)]  # alive until finish
+            kern.set_args(
+                k_buf, u_buf, *held,
+                *(np.int64(v) for v in (*strides, nx, ny)), np.uint32(none),
+                np.float32(lo if change else vmin), np.float32(hi), np.float32(scale),
+            )  # fmt: skip
+            cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
+        kern = cl.Kernel(program, "gather")
+        step_bufs = {} if block is not None else {s: buf(arrays[s], mf.READ_ONLY) for s in steps}
+        first = 1 if change else 0  # change: the window's first step starts no change
+        for base in range(first, len(steps) if block is None else 0, CHUNK):
+            count = min(CHUNK, len(steps) - base)
+            ptrs = [step_bufs[steps[max(base - 1, 0)]]]
+            ptrs += [step_bufs[steps[min(base + j, len(steps) - 1)]] for j in range(CHUNK)]
+            kern.set_args(
+                k_buf, u_buf, np.uint32(base), np.uint32(count), *ptrs,
+                np.float32(lo if change else vmin), np.float32(hi), np.float32(scale),
+            )  # fmt: skip
+            cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
+        for a, b in ((k, k_buf), (u, u_buf)):
+            if dc.is_cpu:
+                mapped, _ = cl.enqueue_map_buffer(
+                    dc.queue, b, cl.map_flags.READ, 0, a.shape, a.dtype
+                )
+                mapped.base.release(dc.queue)
+            else:
+                cl.enqueue_copy(dc.queue, a, b)
+        dc.queue.finish()
+    return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
+
+
+def aligned(a: np.ndarray) -> np.ndarray:
+    """`a` where PoCL can use it in place (C-contiguous, 64-byte aligned), else a copy."""
+    if a.flags.c_contiguous and is_aligned(a):
+        return a
+    out = aligned_empty(a.shape, a.dtype)
+    out[...] = a
+    return out
+
+
+def _block(arrays: dict[int, np.ndarray], steps) -> tuple | None:
+    """(a 64-byte aligned byte view of the block, element offset of each window step in it,
+    element strides z, y, x) where the steps are views of one C-contiguous block with the
+    same strides (the window manager's slots), else None."""
+    views = [arrays[s] for s in steps]
+    owners = []
+    for a in views:
+        while isinstance(a.base, np.ndarray):
+            a = a.base
+        owners.append(a)
+    owner, item, strides = owners[0], views[0].dtype.itemsize, views[0].strides
+    if any(o is not owner for o in owners) or not owner.flags.c_contiguous:
+        return None
+    if any(v.strides != strides for v in views) or any(st % item or st < 0 for st in strides):
+        return None
+    first = min(v.ctypes.data for v in views)
+    start = first - first % ALIGN  # the block from an aligned address: read in place
+    if start < owner.ctypes.data:
+        return None
+    base = owner.reshape(-1).view(np.uint8)[start - owner.ctypes.data :]
+    offsets = [v.ctypes.data - start for v in views]
+    if any(o % item for o in offsets):
+        return None
+    offs = np.array([o // item for o in offsets], dtype=np.int64)
+    return base, offs, tuple(st // item for st in strides)
+
+
+class HostRecolour:
+    """A window's winners on the OpenCL device (`chronocl.engine.device.get_context`)."""
+
+    def __init__(self, w: Winners, device: str | None = None) -> None:
+        import pyopencl as cl
+
+        from chronocl.engine.device import get_context
+
+        self.w = w
+        self.dc = get_context(device)
+        flags = cl.mem_flags.READ_ONLY | (
+            cl.mem_flags.USE_HOST_PTR if self.dc.is_cpu else cl.mem_flags.COPY_HOST_PTR
+        )
+        self._u, self._k = aligned(w.u), aligned(w.k)
+        self._spare: list[np.ndarray] = []  # the last two results, with `reuse`
+        self.u = cl.Buffer(self.dc.context, flags, hostbuf=self._u)
+        self.k = cl.Buffer(self.dc.context, flags, hostbuf=self._k)
+
+    def _kernel(self, rgba8: bool):
+        import pyopencl as cl
+
+        k_t = "uchar" if self._k.dtype == np.uint8 else "ushort"
+        key = (id(self.dc.context), k_t, rgba8)
+        with _lock:
+            if key not in _programs:
+                opts = [
+                    f"-DK_T={k_t}",
+                    "-DOUT_T=" + ("uchar4" if rgba8 else "float4"),
+                    f"-DRUN={RUN}",
+                ]
+                if rgba8:
+                    opts.append("-DRGBA8")
+                program = cl.Program(self.dc.context, SOURCE).build(options=opts)
+                _programs[key] = cl.Kernel(program, "recolour")
+            return _programs[key]
+
+    def recolour(self, spec: IntegrationSpec, fmt: str = "f1", reuse: bool = False) -> np.ndarray:
+        """Premultiplied RGBA (Z, Y, X, 4) of the winners under `spec`: uint8 for "f1"
+        (RGBA8, rounded as the display conversion rounds), float32 for "f4". With `reuse`
+        the result is written into the one before last (a viewer shows one while the next is
+        made): a fresh 512 MB array costs more in page faults than the kernel's work."""
+        import pyopencl as cl
+
+        w = self.w
+        rgba8 = fmt == "f1"
+        dtype = np.uint8 if rgba8 else np.float32
+        spare = self._spare.pop(0) if reuse and len(self._spare) == 2 else None
+        if spare is None or spare.dtype != dtype:
+            spare = aligned_empty((*w.u.shape, 4), dtype)
+        out = spare
+        if reuse:
+            self._spare.append(out)
+        ctx = self.dc.context
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        lut = np.ascontiguousarray(spec.data_tf.lut, dtype=np.float32)
+        table = step_table(spec, w.steps, w.n_steps)
+        with self.dc.lock:
+            lut_buf = cl.Buffer(ctx, ro, hostbuf=lut)
+            table_buf = cl.Buffer(ctx, ro, hostbuf=table)
+            if self.dc.is_cpu:
+                out_buf = cl.Buffer(
+                    ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out
+                )
+            else:
+                out_buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
+            kern = self._kernel(rgba8)  # shared: its arguments are set under the device's lock
+            kern.set_args(
+                self.u, self.k, lut_buf, np.int32(lut.shape[0]), table_buf,
+                np.uint32(w.none), out_buf, np.uint64(w.u.size),
+            )  # fmt: skip
+            items = -(-w.u.size // RUN)
+            cl.enqueue_nd_range_kernel(self.dc.queue, kern, (items,), None)
+            if self.dc.is_cpu:  # the host pointer holds the result once mapped back
+                mapped, _ = cl.enqueue_map_buffer(
+                    self.dc.queue, out_buf, cl.map_flags.READ, 0, out.shape, out.dtype
+                )
+                mapped.base.release(self.dc.queue)
+            else:
+                cl.enqueue_copy(self.dc.queue, out, out_buf)
+            self.dc.queue.finish()
+        return out
+
+    def release(self) -> None:
+        self.u.release()
+        self.k.release()
+        self._spare = []

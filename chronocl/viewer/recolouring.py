@@ -1,0 +1,132 @@
+"""A TF edit that only recolours: max, min, first_hit and change, at full resolution.
+
+When a view's new spec differs from the one shown only where `winners.why_not` allows (the
+transfer functions, for first_hit keeping which values pass its threshold) and the view
+shows its window at full resolution, its texture is recoloured on the GL thread
+(chronocl/render/recolour.py) instead of integrating: no step is read, nothing integrated,
+nothing uploaded but two small tables. The winners (value and step per voxel) are gathered
+from the level-0 session's resident steps and uploaded on the first such edit of a window,
+then kept in the slot for the next edits; any integration of the window makes them stale.
+
+Where GL renders on the GPU, the compute pass rewrites the view's texture; the frame's
+chronovolume (the new spec in its metadata, the window's t_index: the winners are the same)
+gets its RGBA read back after the frame is sent (`finish`), so probes, saves and framing read
+the recoloured volume without delaying the frame. Where GL is llvmpipe, the OpenCL device
+recolours into RGBA8 on the host (several times faster there than llvmpipe's compute
+shaders: bench/recolour.py) and the texture is written as an integrated frame's is.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from chronocl.core.selection import Selection
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.integration.interactive.levels import AutoSession
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.render.recolour import RecolourVolume, available, recolourer
+from chronocl.render.recolour_host import HostRecolour, gather, software_gl
+from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.slots import ViewSlot
+
+
+@dataclass
+class Prepared:
+    """A slot's winners (on the GPU or the OpenCL device), for the window integrated whose
+    t_index is `t_index` (weakly held: a new integration frees the old one)."""
+
+    t_index: weakref.ref
+    volume: RecolourVolume | HostRecolour
+
+    def release(self) -> None:
+        self.volume.release()
+
+
+class Recolouring:
+    """Recolours the views of one client where a TF edit allows it."""
+
+    def __init__(self, device: str | None = None) -> None:
+        self.device = device  # the OpenCL device of recolouring on the host
+        self.ms = 0.0  # recolouring time of the last frame's views
+        self._unread: list[tuple[Chronovolume, object]] = []
+
+    def view(self, slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> Chronovolume | None:
+        """The view's chronovolume for `spec` recoloured, its texture rewritten; None where the
+        edit integrates (a coarse window shown, another window, or an edit that may change
+        the winners)."""
+        s, shown = slot.session, slot.cv
+        if not isinstance(s, AutoSession) or shown is None or shown.t_index is None:
+            return None
+        if s.shown_level != 0 or s.selection != sel or s.asked == spec:
+            return None
+        if slot.volume is None or slot.uploaded is not shown:
+            return None
+        full = s.pool.sessions.get((0, spec.integration.pool))
+        if full is None or full.selection != sel:
+            return None
+        new, reason = full.recolours(spec)  # a reason when it has integrated nothing
+        if reason is not None or full.current() is not shown:
+            return None
+        t = time.perf_counter()
+        prepared = slot.recolour
+        if not isinstance(prepared, Prepared) or prepared.t_index() is not shown.t_index:
+            prepared = self._prepare(slot, full, shown)
+            if prepared is None:
+                return None
+        fmt = slot.volume.texture.dtype
+        meta = {**shown.metadata, "spec": new.to_dict()}
+        if isinstance(prepared.volume, HostRecolour):  # RGBA on the host, uploaded as integrated
+            cv = Chronovolume(prepared.volume.recolour(new, fmt, reuse=True), shown.t_index, meta)
+            slot.cv = cv
+        else:  # the texture rewritten on the GPU, its RGBA read back by `finish`
+            vol = on_gl(_recolour, prepared.volume, new, shown.spacing, fmt, slot.volume)
+            rgba = np.empty((*shown.shape, 4), dtype=np.uint8 if fmt == "f1" else np.float32)
+            cv = Chronovolume(rgba, shown.t_index, meta)
+            slot.cv, slot.volume, slot.uploaded = cv, vol, cv
+            self._unread.append((cv, vol))
+        full.adopt(spec, new, cv)
+        s.adopt(spec, new, cv)
+        self.ms += 1e3 * (time.perf_counter() - t)
+        return cv
+
+    def _prepare(self, slot: ViewSlot, full, shown: Chronovolume) -> Prepared | None:
+        """The window's winners where the recolouring runs: on the GPU where GL is one with
+        compute shaders, else (llvmpipe) on the OpenCL device (chronocl/render/recolour_host.py)."""
+        on_gpu = on_gl(_release_and_pick, slot)
+        if on_gpu is None:
+            return None
+        w = full.winners(functools.partial(gather, device=self.device))
+        if w is None:
+            return None
+        volume = on_gl(_upload, w) if on_gpu else HostRecolour(w, self.device)
+        slot.recolour = Prepared(weakref.ref(shown.t_index), volume)
+        return slot.recolour
+
+    def finish(self) -> None:
+        """Read the recoloured textures back into their chronovolumes' RGBA."""
+        unread, self._unread = self._unread, []
+        if unread:
+            on_gl(lambda rc: [vol.texture.read_into(cv.rgba) for cv, vol in unread])
+
+
+def _release_and_pick(rc, slot: ViewSlot) -> bool | None:
+    """Free the slot's old winners; whether to recolour on the GPU (None: nowhere)."""
+    if slot.recolour is not None:
+        slot.recolour.release()  # type: ignore[attr-defined]
+        slot.recolour = None
+    if not software_gl(rc.ctx):
+        return True if available(rc.ctx) else None
+    return False
+
+
+def _upload(rc, w) -> RecolourVolume:
+    return recolourer(rc.ctx).upload(w)
+
+
+def _recolour(rc, rv: RecolourVolume, spec, spacing, fmt: str, volume):
+    return recolourer(rc.ctx).recolour(rv, spec, spacing, fmt, volume=volume)

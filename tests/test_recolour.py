@@ -1,0 +1,262 @@
+"""Recolouring max, min, first_hit and change equals integrating the edited TF.
+
+The winners (value and step per voxel) of a window integrated under one spec, recoloured under
+another on the GPU (chronocl/render/recolour.py) or the OpenCL device (recolour_host.py),
+give the display texture, its occupied box and brick grid, and the picture that integrating
+the other spec gives (the render tests' tolerance), including after slides both ways;
+`why_not` lets through only edits that cannot change who won.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from chronocl import reference
+from chronocl.core.enhance import Enhance
+from chronocl.core.memory import aligned_empty
+from chronocl.core.tf import DataTF, TimeAlpha, TimeTF
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.integration.inmemory import integrate
+from chronocl.integration.interactive.session import Session
+from chronocl.integration.interactive.winners import (
+    RECOLOURED,
+    recoloured,
+    same_hits,
+    why_not,
+    winners,
+)
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.render import brick_grid
+from chronocl.render.camera import Camera
+from chronocl.render.raycaster import Raycaster
+from chronocl.render.recolour import Recolourer, available
+from chronocl.render.recolour_host import HostRecolour, gather
+from chronocl.render.upload import convert, display_format
+
+from .strategies import data_tfs, examples, time_tfs
+
+UNIT = (0.0, 1.0)
+
+
+@pytest.fixture(scope="module")
+def gl():
+    rc = Raycaster()
+    if not available(rc.ctx):
+        pytest.skip("this OpenGL has no compute shaders (4.3)")
+    rec = Recolourer(rc.ctx)
+    yield rc, rec
+    rec.release()
+
+
+def _spec(mode, data_tf, time_tf, order="forward", threshold=0.0, value_range=UNIT):
+    tf = dataclasses.replace(data_tf, value_range=value_range)
+    return IntegrationSpec(mode=mode, order=order, data_tf=tf, time_tf=time_tf, threshold=threshold)
+
+
+def _texture(vol) -> np.ndarray:
+    nx, ny, nz = vol.texture.size
+    dtype = np.uint8 if vol.texture.dtype == "f1" else np.float32
+    return np.frombuffer(vol.texture.read(), dtype=dtype).reshape(nz, ny, nx, 4)
+
+
+def _same_picture(rc, got_vol, rgba: np.ndarray, spacing=(1.0, 1.0, 1.0)) -> None:
+    """`got_vol` (recoloured) draws as the integrated `rgba` does, uploaded in the viewer's
+    format: the render tests' tolerance (max 8, at most 1 % of pixels over 3)."""
+    fmt = display_format(rgba[..., 0].size)
+    meta = {"spacing": dict(zip("xyz", spacing, strict=True))}
+    want_vol = rc.upload(Chronovolume(rgba, None, meta), dtype=fmt)
+    data, _ = convert(rgba, fmt)
+    np.testing.assert_allclose(_texture(got_vol), data, rtol=0, atol=1 if fmt == "f1" else 1e-6)
+    for name, a, b in (
+        ("occupied min", *[v.occupied[0] for v in (got_vol, want_vol)]),
+        ("occupied max", *[v.occupied[1] for v in (got_vol, want_vol)]),
+    ):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12, err_msg=name)
+    # the brick grid of empty-space skipping: empty exactly where the integrated one is
+    gx, gy, gz = got_vol.bricks.size
+    grid = np.frombuffer(got_vol.bricks.read(), dtype=np.uint8).reshape(gz, gy, gx)
+    np.testing.assert_array_equal(grid > 0, brick_grid.from_rgba(data) > 0)
+    for camera in (Camera(30, 20), Camera(-120, -40, projection="orthographic")):
+        want = rc.draw(want_vol, camera, (48, 40), jitter=False)
+        got = rc.draw(got_vol, camera, (48, 40), jitter=False)
+        diff = np.abs(got.astype(int) - want.astype(int))
+        assert diff.max() <= 8 and (diff > 3).mean() <= 0.01, (diff.max(), (diff > 3).mean())
+    want_vol.release()
+
+
+@settings(
+    max_examples=examples(12),
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+@given(data=st.data())
+def test_recolour_equals_integrating_the_edit(gl, data) -> None:
+    """Any TF edit `why_not` lets through, at odd shapes and W in 1..40: the recoloured
+    texture and picture equal integrating the edited spec; first_hit edits it refuses do
+    change who won somewhere, or could."""
+    rc, rec = gl
+    mode = data.draw(st.sampled_from(RECOLOURED))
+    shape = data.draw(st.tuples(*[st.integers(5, 19)] * 3))
+    width = data.draw(st.integers(1, 40))
+    n_steps = width + data.draw(st.integers(0, 5))
+    steps = tuple(range(n_steps - width, n_steps))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    raw = rng.random((width, *shape), dtype=np.float32)
+    if data.draw(st.booleans()):  # exact ties: first in the order wins
+        raw = (np.round(raw * 4) / 4).astype(np.float32)
+    order = data.draw(st.sampled_from(["forward", "backward"]))
+    threshold = data.draw(st.sampled_from([0.0, 0.1]))
+    old = _spec(mode, data.draw(data_tfs()), data.draw(time_tfs()), order, threshold)
+    new = _spec(mode, data.draw(data_tfs()), data.draw(time_tfs()), order, threshold)
+    if mode == "first_hit" and data.draw(st.booleans()):
+        new = dataclasses.replace(new, data_tf=old.data_tf, time_tf=old.time_tf)
+        # a colour-only edit keeps every opacity, so the hits
+        pts = tuple((p[0], *rng.random(3), p[4]) for p in old.data_tf.points)
+        new = dataclasses.replace(new, data_tf=dataclasses.replace(new.data_tf, points=pts))
+    order_idx = np.arange(width) if order == "forward" else np.arange(width)[::-1]
+
+    def run(spec):
+        pos = spec.time_tf.positions_of(steps, n_steps)
+        return reference.integrate(raw, steps, pos, order_idx, spec)
+
+    _, t_index = run(old)
+    reason = why_not(old, new, UNIT, UNIT, steps, n_steps)
+    if reason is not None:
+        assert mode == "first_hit" and not same_hits(old, new, steps, n_steps)
+        return
+    want, want_t = run(new)
+    np.testing.assert_array_equal(want_t, t_index)  # the winners did not change
+    w = winners(t_index, dict(zip(steps, raw, strict=True)), steps, n_steps, UNIT, old)
+    np.testing.assert_allclose(recoloured(w, new), want, rtol=0, atol=1e-6)
+    rv = rec.upload(w)
+    try:
+        vol = rec.recolour(rv, new, (1.0, 1.0, 1.0))
+        _same_picture(rc, vol, want)
+    finally:
+        rv.release()
+    _same_on_host(w, new, want)
+
+
+def _same_on_host(w, spec, want: np.ndarray) -> None:
+    """The OpenCL recolouring (llvmpipe's path) gives the display texture's data too."""
+    host = HostRecolour(w)
+    try:
+        for fmt in ("f1", "f4"):
+            data, _ = convert(want, fmt)
+            got = host.recolour(spec, fmt)
+            np.testing.assert_allclose(got, data, rtol=0, atol=1 if fmt == "f1" else 1e-6)
+    finally:
+        host.release()
+
+
+def _series(rng, n_steps: int, shape) -> TimeSeries:
+    data = (rng.random((n_steps, *shape), dtype=np.float32) * 40 - 10).astype(np.float32)
+    return TimeSeries.from_array(data)
+
+
+@pytest.mark.parametrize("mode", RECOLOURED)
+def test_session_recolours_after_slides_both_ways(gl, mode) -> None:
+    """A session's window, slid forward and back (incrementally), recoloured under an edited
+    TF equals integrating that window under it from scratch: at 41 x 37 x 43 (RGBA8 display
+    texture) with spacing, on the OpenCL engine."""
+    rc, rec = gl
+    rng = np.random.default_rng(11)
+    series = _series(rng, 14, (43, 37, 41))
+    absolute = TimeTF(positions="absolute")
+    vr = (-10.0, 30.0)  # the edit keeps the range: a hand-drawn opacity would take the series'
+    spec = _spec(mode, DataTF(), absolute, value_range=vr)
+    edit = _spec(
+        mode,
+        DataTF(points=((0, 0.2, 0.4, 1, 0.0), (0.4, 1, 0.5, 0, 0.3), (1, 1, 1, 0.2, 0.9))),
+        TimeTF.preset("warm-cool", positions="absolute"),
+        value_range=vr,
+    )
+    if mode == "first_hit":  # keep the hits: colours change, opacities stay
+        edit = dataclasses.replace(
+            edit, data_tf=dataclasses.replace(spec.data_tf, points=_recoloured_points(spec))
+        )
+    with Session(series, engine="opencl", spec=spec, memory="256MB") as s:
+        s.set_window(2, 9)
+        for move in (+2, -3, +1):
+            s.slide(move)
+            assert s.stats["path"] == "incremental"
+            fixed, reason = s.recolours(edit)
+            assert reason is None, reason
+            w = s.winners()
+            assert w is not None and w.steps == s.selection.steps
+            want = integrate(series, s.selection, spec=fixed, engine="opencl")
+            rv = rec.upload(w)
+            try:
+                _same_picture(rc, rec.recolour(rv, fixed, series.spacing), want.rgba)
+            finally:
+                rv.release()
+            _same_on_host(w, fixed, want.rgba)
+
+
+def _recoloured_points(spec):
+    return tuple((p[0], 1.0 - p[1], 0.5, p[3] * 0.5, p[4]) for p in spec.data_tf.points)
+
+
+def test_why_not_names_what_integrates() -> None:
+    steps, n = (3, 4, 5), 8
+    base = _spec("max", DataTF(), TimeTF())
+    recolour = _spec("max", DataTF(points=((0, 1, 0, 0, 1), (1, 0, 0, 1, 0))), TimeTF.preset("rgb"))
+    assert why_not(base, recolour, UNIT, UNIT, steps, n) is None
+    assert "mixes" in why_not(_spec("alpha", DataTF(), TimeTF()), base, UNIT, UNIT, steps, n)
+    assert "mode" in why_not(base, _spec("min", DataTF(), TimeTF()), UNIT, UNIT, steps, n)
+    edge = dataclasses.replace(base, enhance=Enhance("edge", 0.5, 1.0, 1.0))
+    assert "enhancement" in why_not(base, edge, UNIT, UNIT, steps, n)
+    assert "value range" in why_not(base, base, UNIT, (0.0, 2.0), steps, n)
+    backward = dataclasses.replace(base, order="backward")
+    assert "order" in why_not(base, backward, UNIT, UNIT, steps, n)
+    hit = _spec("first_hit", DataTF(), TimeTF())
+    colours = dataclasses.replace(
+        hit, data_tf=dataclasses.replace(hit.data_tf, points=_recoloured_points(hit))
+    )
+    assert why_not(hit, colours, UNIT, UNIT, steps, n) is None
+    # opacity zero at a step now: its voxels are no longer hit there
+    hat = dataclasses.replace(hit, time_tf=TimeTF(alpha=TimeAlpha("hat", center=0.0, width=0.2)))
+    assert "threshold" in why_not(hit, hat, UNIT, UNIT, steps, n)
+
+
+@pytest.mark.parametrize("mode", RECOLOURED)
+@pytest.mark.parametrize("dtype", [np.float32, np.uint8, np.int16, np.float64])
+def test_opencl_gather_equals_the_numpy_one(mode, dtype) -> None:
+    """The winners gathered on the OpenCL device equal numpy's bit for bit: every data type
+    it takes, windows over one and three chunks of steps, steps apart or in one block, values
+    beyond the range clipped."""
+    rng = np.random.default_rng(5)
+    for width in (1, 3, 9, 17):
+        shape = (7, 9, 11)
+        if dtype == np.uint8:
+            raw = rng.integers(0, 256, (width, *shape)).astype(dtype)
+        else:
+            raw = (rng.random((width, *shape)) * 300 - 20).astype(dtype)
+        steps, vr = tuple(range(2, 2 + width)), (10.0, 200.0)
+        spec = _spec(mode, DataTF(), TimeTF(), value_range=vr)
+        t_index = rng.choice(np.array([*steps, -1]), size=shape).astype(np.int32)
+        if mode == "change":  # the first step of a window starts no change
+            t_index[t_index == steps[0]] = -1
+        # steps apart, and steps as views of one (Z, W, Y, X) block (the window manager's slots)
+        block = aligned_empty((shape[0], width, *shape[1:]), dtype)
+        block[...] = np.moveaxis(raw, 0, 1)
+        for arrays in (
+            dict(zip(steps, [aligned_copy(r) for r in raw], strict=True)),
+            {s: block[:, i] for i, s in enumerate(steps)},
+        ):
+            want = winners(t_index, arrays, steps, 30, vr, spec)
+            got = gather(t_index, arrays, steps, 30, vr, spec)
+            np.testing.assert_array_equal(got.k, want.k)
+            np.testing.assert_array_equal(got.u, want.u)
+
+
+def aligned_copy(a: np.ndarray) -> np.ndarray:
+    out = aligned_empty(a.shape, a.dtype)
+    out[...] = a
+    return out

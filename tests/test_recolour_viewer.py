@@ -1,0 +1,85 @@
+"""The viewer recolours a max-mode TF edit without integrating, and shows what integrating the
+edit shows (a WebSocket client of a real server; tests/viewer_helpers.py)."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("websockets")
+
+from chronocl.viewer import recolouring
+
+from .viewer_helpers import Client, connected_client, make_stores, serving  # noqa: F401
+
+EDIT = {
+    "data_tf": {"points": [[0, 0.2, 0.5, 1, 0], [0.3, 1, 0.6, 0, 0.4], [1, 1, 1, 1, 1]]},
+    "time_tf": {"color": "warm-cool"},
+}
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    yield from serving(make_stores(tmp_path_factory.mktemp("recolour")), gl_current=True)
+
+
+def _sharp(client: Client, msg: dict):
+    """The full-resolution frame answering `msg` (its refine, where the first is coarse)."""
+    rid = client.send({"type": "update", **msg})
+    got = client.frame_for(rid)
+    while got[1]["refining"]:
+        got = client.wait("frame")
+    return got[1], got[2]
+
+
+def _pixels(jpeg: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(jpeg)).convert("RGB")).astype(int)
+
+
+@pytest.mark.parametrize(
+    ("mode", "where"), [("max", "host"), ("first_hit", "host"), ("max", "gpu")]
+)
+def test_tf_edit_recolours_without_integrating(client, monkeypatch, mode, where) -> None:
+    """A TF edit in max mode (and first_hit, where it keeps who is hit) integrates nothing:
+    the frame's split shows a recolour and no integration, at full resolution; the picture
+    equals the one integrating the same window and TFs gives (after a window round trip).
+    On llvmpipe the OpenCL device recolours ("host"); the GPU's compute pass ("gpu") runs on
+    llvmpipe too when the viewer is told its GL is not a software one."""
+    if where == "gpu":
+        monkeypatch.setattr(recolouring, "software_gl", lambda ctx: False)
+    ds, _ = client.open(0, size=(96, 96))
+    fitted = ds["state"]["data_tf"]["value_range"]  # the page sends its range with an edit
+    header, _ = _sharp(client, {"views": [{"mode": mode}], "threshold": 0.0})
+    assert header["level"] == 0 and header["timings"]["recolour_ms"] == 0
+    edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
+    if mode == "first_hit":  # the same opacities (so the same hits), other colours
+        white = [[0, 1, 1, 1, 0], [1, 1, 1, 1, 0.9]]
+        _sharp(client, {"data_tf": {"points": white, "value_range": fitted}})
+        coloured = [[0, 0.2, 0.5, 1, 0], [1, 1, 0.3, 0, 0.9]]
+        edit = {"data_tf": {"points": coloured, "value_range": fitted}}
+    header, recoloured = _sharp(client, edit)
+    t = header["timings"]
+    assert header["level"] == 0 and not header["refining"]
+    assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0 and not t["incremental"]
+    # the same window and TFs integrated: away and back (the recolour dropped the sliding state)
+    _sharp(client, {"window": {"t0": 0, "t1": 4}})
+    header, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
+    assert header["timings"]["integrate_ms"] > 0 and header["timings"]["recolour_ms"] == 0
+    diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
+    assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+
+
+def test_edit_that_changes_the_hits_integrates(client) -> None:
+    """first_hit: an edit making low values transparent changes which step is hit first, so
+    the frame integrates."""
+    ds, _ = client.open(0, size=(96, 96))
+    fitted = ds["state"]["data_tf"]["value_range"]
+    _sharp(client, {"views": [{"mode": "first_hit"}], "threshold": 0.0})
+    cut = {"points": [[0, 1, 1, 1, 0], [0.6, 1, 1, 1, 0], [1, 1, 1, 1, 1]], "value_range": fitted}
+    header, _ = _sharp(client, {"data_tf": cut})
+    assert header["timings"]["recolour_ms"] == 0 and header["timings"]["integrate_ms"] > 0
