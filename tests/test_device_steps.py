@@ -16,8 +16,10 @@ from hypothesis import strategies as st
 import chronocl
 from chronocl.core.selection import Selection
 from chronocl.core.time_tf import TimeTF
+from chronocl.data import synthetic
 from chronocl.engine.device_steps import DeviceBricks, DeviceSteps
 from chronocl.engine.opencl import OpenCLEngine
+from chronocl.integration import inmemory
 from chronocl.integration.inmemory import integrate_bricks, window_job
 from chronocl.integration.interactive.session import Session
 
@@ -26,6 +28,14 @@ from .test_display_output import assert_display_of
 from .test_opencl import assert_same
 
 pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
+
+@pytest.fixture(autouse=True, scope="module")
+def rgba8_at_any_size():
+    """The small volumes here get the display format too (the viewer's threshold is 32^3)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(inmemory, "DISPLAY_VOXELS", 0)
+        yield
 
 
 @pytest.fixture(scope="module")
@@ -97,3 +107,46 @@ def test_a_window_over_the_device_budget_is_sent_from_the_host(copying, tmp_path
         assert session._device.slots is None
         assert "device memory" in session.stats["why_not_on_device"]
         assert_same(cv, chronocl.integrate(series, session.window(), spec=session.spec))
+
+
+@pytest.mark.parametrize("level", [1, "auto"])
+def test_coarse_levels_and_repooling_keep_their_own_steps_on_the_device(copying, level):
+    """A coarse session's slots hold its level's steps; a mode pooling levels differently
+    reads the other pooling, never the steps left on the device by the first."""
+    shape = (20, 18, 130)  # levels 1 (65) and 2 (33)
+    data = np.stack(list(synthetic.steps("vortex", 8, shape)))
+    series = chronocl.TimeSeries.from_array(data)
+    with Session(series, mode="max", engine=copying, memory="256MB", level=level) as s:
+        for mode in ("max", "mean", "max"):
+            cv = s.set_spec(mode=mode) if s.selection is not None else s.set_window(0, 5)
+            lvl = s.shown_level if level == "auto" else level
+            ref = chronocl.integrate(series, s.window(), spec=s.spec, level=lvl, engine="numpy")
+            assert_same(cv, ref)
+
+
+def test_float64_steps_stay_on_the_host(copying):
+    rng = np.random.default_rng(6)
+    series = chronocl.TimeSeries.from_array(rng.random((6, 4, 5, 17)))  # float64
+    with Session(series, mode="alpha", engine=copying, memory="64MB") as session:
+        cv = session.set_window(0, 4)
+        assert session._device.slots is None
+        assert_same(cv, chronocl.integrate(series, session.window(), spec=session.spec))
+
+
+def test_slots_count_against_one_device_budget(copying, monkeypatch):
+    """Two sessions on one device share its budget: the second gets what the first left."""
+    rng = np.random.default_rng(8)
+    series = chronocl.TimeSeries.from_array(rng.random((8, 8, 8, 64), dtype=np.float32))
+    step = 8 * 8 * 64 * 4
+    monkeypatch.setenv("CHRONOCL_DEVICE_MEMORY", str(9 * step))
+    with Session(series, mode="alpha", engine=copying, memory="64MB") as a:
+        a.set_window(0, 5)
+        assert a._device.slots is not None and a._device.slots.count == 7  # 5 + 2 spare
+        with Session(series, mode="max", engine=copying, memory="64MB") as b:
+            cv = b.set_window(0, 4)  # 2 slots left on the device: sent from the host
+            assert b._device.slots is None and "free" in b.stats["why_not_on_device"]
+            assert_same(cv, chronocl.integrate(series, b.window(), spec=b.spec))
+        a.close()
+        with Session(series, mode="max", engine=copying, memory="64MB") as c:
+            c.set_window(0, 4)  # the first's slots were given back
+            assert c._device.slots is not None

@@ -20,8 +20,10 @@ from chronocl.core.selection import Selection
 from chronocl.core.time_tf import TimeTF
 from chronocl.data.bricks import ResidentBricks
 from chronocl.engine.opencl import OpenCLEngine
-from chronocl.integration.inmemory import integrate_bricks, window_job
+from chronocl.integration import inmemory
+from chronocl.integration.inmemory import DISPLAY_VOXELS, integrate_bricks, window_job
 from chronocl.integration.interactive.session import Session
+from chronocl.render import upload
 from chronocl.render.upload import convert
 from chronocl.viewer.saving import full_precision
 
@@ -30,6 +32,14 @@ from .test_opencl import assert_same
 from .test_slots import slotted_windows
 
 pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
+
+@pytest.fixture(autouse=True, scope="module")
+def rgba8_at_any_size():
+    """The small volumes here get the display format too (the viewer's threshold is 32^3)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(inmemory, "DISPLAY_VOXELS", 0)
+        yield
 
 
 def as_rgba8(rgba: np.ndarray) -> np.ndarray:
@@ -88,7 +98,7 @@ def test_a_display_session_integrates_rgba8_and_slides_in_float32(mode, tmp_path
         ref = chronocl.integrate(series, session.window(), spec=session.spec, engine="numpy")
         assert_display_of(cv, ref, exact=False)
         # the viewer's download: the same window integrated again in float32
-        again = full_precision(cv, series, session.engine)
+        again = full_precision(cv, series, session.engine, 2**20)  # slabs of a small budget
         assert again.rgba.dtype == np.float32
         assert_same(again, ref)
 
@@ -104,3 +114,16 @@ def test_a_display_chronovolume_saves_as_float32(tmp_path):
     back = chronocl.Chronovolume.load(cv.save(tmp_path / "cv.zarr"))
     assert back.rgba.dtype == np.float32
     np.testing.assert_array_equal(back.rgba, cv.rgba.astype(np.float32) / np.float32(255))
+
+
+def test_small_volumes_stay_float32_as_the_viewer_shows_them(monkeypatch):
+    """Below the viewer's RGBA8 size its textures are float32: display frames stay float32 so a
+    panel's format does not flip between integrated and slid frames."""
+    assert DISPLAY_VOXELS == upload.COMPACT_VOXELS
+    monkeypatch.setattr(inmemory, "DISPLAY_VOXELS", DISPLAY_VOXELS)  # the module's fixture: 0
+    rng = np.random.default_rng(2)
+    series = chronocl.TimeSeries.from_array(rng.random((4, 8, 8, 8), dtype=np.float32))
+    job = window_job(series, Selection((0, 1, 2), 4), chronocl.make_spec("max"))
+    arrays = {s: series.host[s] for s in range(4)}
+    cv = integrate_bricks(job, OpenCLEngine(), ResidentBricks(arrays), display=True)
+    assert cv.rgba.dtype == np.float32

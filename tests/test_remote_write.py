@@ -31,7 +31,8 @@ from chronocl.data.formats.outputs import save_chronovolume
 from chronocl.data.ingest import ingest
 from chronocl.data.level_sources import POOLED
 from chronocl.data.level_writer import add_levels
-from chronocl.data.remote_levels import RemoteLevels, add_remote_levels
+from chronocl.data.remote import add_remote_levels
+from chronocl.data.remote_levels import RemoteLevels
 from chronocl.data.remote_write import output_path, split_storage_options
 from chronocl.data.verify import verify
 from chronocl.data.writer import write_store

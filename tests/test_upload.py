@@ -180,7 +180,19 @@ def test_shape_or_format_change_reallocates(rc):
     texture = vol.texture
     vol = upload_as(rc, slot, other, "f4")
     assert vol.texture is not texture and vol.texture.dtype == "f4"
+    # Shapes that alternate (a coarse level, then full resolution) reuse their kept textures.
+    first = upload_as(rc, slot, small, "f1").texture
+    assert upload_as(rc, slot, other, "f1").texture is texture
+    again = upload_as(rc, slot, small, "f1")
+    assert again.texture is first
+    fresh_slot = ViewSlot()
+    a = rc.draw(again, CAMERA, (64, 64), jitter=False)
+    b = rc.draw(upload_as(rc, fresh_slot, small, "f1"), CAMERA, (64, 64), jitter=False)
+    np.testing.assert_array_equal(a, b)
+    assert len(slot.kept) <= 2
     slot.release_gl()
+    fresh_slot.release_gl()
+    assert not slot.kept
 
 
 def test_raycaster_upload_formats_agree(rc):

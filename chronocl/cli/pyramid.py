@@ -38,8 +38,7 @@ def pyramid(
     import time
 
     from chronocl.data.level_writer import add_levels
-    from chronocl.data.remote import is_url
-    from chronocl.data.remote_levels import add_remote_levels
+    from chronocl.data.remote import add_remote_levels, is_url
     from chronocl.data.remote_write import split_url
 
     store, options = series_store(store, False, storage_option)

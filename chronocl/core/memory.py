@@ -21,7 +21,11 @@ def aligned_empty(shape: tuple[int, ...], dtype: object, align: int = ALIGN) -> 
     dt = np.dtype(dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
     if nbytes >= MAPPED_BYTES and align <= mmap.PAGESIZE:
-        return np.frombuffer(mmap.mmap(-1, nbytes), dtype=dt).reshape(shape)
+        try:
+            mapped = mmap.mmap(-1, nbytes)
+        except OSError as exc:  # ENOMEM: out of memory, as numpy's allocation would say
+            raise MemoryError(f"cannot allocate {nbytes} bytes: {exc}") from None
+        return np.frombuffer(mapped, dtype=dt).reshape(shape)
     raw = np.empty(nbytes + align, dtype=np.uint8)
     offset = (-raw.ctypes.data) % align
     return raw[offset : offset + nbytes].view(dt).reshape(shape)

@@ -88,7 +88,7 @@ class Chronovolume:
         `integrate_bricks(display=True)`) divided by 255, any other's as it is."""
         if self.rgba.dtype == np.uint8:
             return self.rgba.astype(np.float32) / np.float32(255)
-        return self.rgba.astype(np.float32, copy=False)
+        return np.asarray(self.rgba, dtype=np.float32)
 
     def save(
         self, path: str | os.PathLike, overwrite: bool = False, storage_options: dict | None = None

@@ -83,7 +83,7 @@ class LevelSource(Protocol):
         ...
 
 
-def _whole(n: object, pool: str) -> int:
+def level_number(n: object, pool: str) -> int:
     """`n` as an int, for a known `pool` and a whole number n; else one clear line."""
     check_pool(pool)
     if isinstance(n, bool) or not isinstance(n, int | np.integer):
@@ -91,7 +91,7 @@ def _whole(n: object, pool: str) -> int:
     return int(n)
 
 
-def _shape(series: LevelZero, n: int, top: int) -> tuple[int, int, int]:
+def level_shape(series: LevelZero, n: int, top: int) -> tuple[int, int, int]:
     """Level n's (Z, Y, X) shape for n in 1..L of the rule; else one line naming the levels
     0..top that `series` has (`top` 0: only level 0)."""
     shapes = level_shapes(series.volume_shape)
@@ -105,7 +105,7 @@ def _name(series: LevelZero) -> str:
     return series.path.name if series.path is not None else series.source or "the series"
 
 
-def _spacing(series: LevelZero, shape: Sequence[int]) -> tuple[float, ...]:
+def level_spacing(series: LevelZero, shape: Sequence[int]) -> tuple[float, ...]:
     """Spacing (x first) of a level of (Z, Y, X) `shape`: level 0's scaled by its factor."""
     factor = tuple(a / b for a, b in zip(series.volume_shape, shape, strict=True))
     return tuple(s * f for s, f in zip(series.spacing, factor[::-1], strict=True))
@@ -118,10 +118,12 @@ class PooledLevels:
         return 1 + len(level_shapes(series.volume_shape))
 
     def parts(self, series: LevelZero, n: int, pool: str) -> LevelParts:
-        n = _whole(n, pool)
-        shape = _shape(series, n, len(level_shapes(series.volume_shape)))
+        n = level_number(n, pool)
+        shape = level_shape(series, n, len(level_shapes(series.volume_shape)))
         data = lazy_level(series.data, n, pool)
-        return LevelParts(data, lazy_stats(data, series.vmin, series.vmax), _spacing(series, shape))
+        return LevelParts(
+            data, lazy_stats(data, series.vmin, series.vmax), level_spacing(series, shape)
+        )
 
 
 class StoredLevels:
@@ -132,11 +134,11 @@ class StoredLevels:
         return 1 if levels is None else 1 + len(levels)
 
     def parts(self, series: LevelZero, n: int, pool: str) -> LevelParts:
-        n, path = _whole(n, pool), series.path
+        n, path = level_number(n, pool), series.path
         levels = read_levels(path, series.shape)
         top = len(level_shapes(series.volume_shape)) if levels is not None else 0
-        shape = _shape(series, n, top)
-        spacing = _spacing(series, shape)
+        shape = level_shape(series, n, top)
+        spacing = level_spacing(series, shape)
         if levels is None:
             raise StoreFormatError(
                 f"{_name(series)} has no coarse levels; add them with 'chronocl pyramid {path}'"
@@ -167,7 +169,7 @@ class AdoptedLevels:
         return POOLED.count(series)
 
     def parts(self, series: LevelZero, n: int, pool: str) -> LevelParts:
-        data = self.arrays.get(_whole(n, pool)) if pool == "mean" else None
+        data = self.arrays.get(level_number(n, pool)) if pool == "mean" else None
         if data is None:
             return POOLED.parts(series, n, pool)
         extent = [s * a for s, a in zip(series.spacing, series.dims, strict=True)]  # x first

@@ -4,7 +4,8 @@ The store is read in place through `chronocl.data.remote_store` (zarr's FsspecSt
 same damage checks as a local store, retries and one-line errors). The series has no local
 `path`; it is named by its URL (`meta["url"]`), its other variables open from the same URL,
 and its coarse levels are the store's own ``levels`` group where it has one
-(`chronocl.data.remote_levels`), else pooled on the fly.
+(`chronocl.data.remote_levels`), else pooled on the fly; `add_remote_levels` builds that group
+for an s3:// store.
 
 `parse_storage_options` reads the CLI's ``--storage-option k=v`` (values parsed as JSON where
 they parse: ``anon=true``, ``requester_pays=true``, ``client_kwargs={"region_name": "..."}``).
@@ -12,23 +13,36 @@ they parse: ``anon=true``, ``requester_pays=true``, ``client_kwargs={"region_nam
 
 from __future__ import annotations
 
-import json
-from collections.abc import Iterable, Mapping
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
-from chronocl.core.errors import InvalidParameterError
-from chronocl.data.remote_store import is_url, join
+import zarr
+
+from chronocl.core.errors import InvalidParameterError, StoreFormatError
+from chronocl.core.progress import track
+from chronocl.data.level_writer import LevelWriter
+from chronocl.data.pyramid import COARSEST, LEVELS, describe_levels, level_shapes
+from chronocl.data.remote_levels import remote_levels
+from chronocl.data.remote_store import filesystem, is_url, join, parse_storage_options
+from chronocl.data.remote_write import publish, split_url
 from chronocl.data.store_open import open_array
 from chronocl.data.timeseries import TimeSeries
 from chronocl.data.writer import VARIABLES
 
-__all__ = ["is_url", "open_remote", "parse_storage_options", "storage_options_for"]
+__all__ = [
+    "add_remote_levels",
+    "is_url",
+    "open_remote",
+    "parse_storage_options",
+    "storage_options_for",
+]
 
 
 def open_remote(url: str, storage_options: Mapping[str, Any] | None = None) -> TimeSeries:
     """Open the chronocl store or bare (T, Z, Y, X) zarr array at `url` in place."""
-    from chronocl.data.remote_levels import remote_levels
-
     options = dict(storage_options or {})
     url = url.rstrip("/")
     stored = open_array(url, options)
@@ -44,7 +58,7 @@ def open_remote(url: str, storage_options: Mapping[str, Any] | None = None) -> T
             source=source,
             meta={**stored.meta, "url": url},
         )
-    series._zarr = stored.array  # reads go to zarr directly, through the remote store
+    series.zarr_array = stored.array  # reads go to zarr directly, through the remote store
     names = series.variables
     own = series.meta.get("variable")
     if len(names) > 1:
@@ -61,26 +75,6 @@ def open_remote(url: str, storage_options: Mapping[str, Any] | None = None) -> T
     return series
 
 
-def parse_storage_options(items: Iterable[str] | None, anon: bool = False) -> dict[str, Any]:
-    """``k=v`` strings as fsspec storage options; `anon` adds ``anon=True`` (a public bucket)."""
-    options: dict[str, Any] = {}
-    for item in items or ():
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise InvalidParameterError(
-                f"--storage-option {item!r} must be KEY=VALUE, e.g. "
-                "endpoint_url=http://localhost:9000"
-            )
-        try:
-            options[key] = json.loads(value)
-        except ValueError:
-            options[key] = value
-    if anon:
-        options["anon"] = True
-    return options
-
-
 def storage_options_for(store: str, options: dict[str, Any]) -> dict[str, Any]:
     """The options that apply to `store`: none for a local path; S3's own (``anon``,
     ``endpoint_url``) dropped for HTTP, whose filesystem takes only client arguments."""
@@ -94,3 +88,48 @@ def storage_options_for(store: str, options: dict[str, Any]) -> dict[str, Any]:
     if store.lower().startswith(("http://", "https://")):
         return {k: v for k, v in options.items() if k != "anon"}
     return options
+
+
+def add_remote_levels(
+    url: str, options: Mapping[str, Any], progress: bool = False, force: bool = False
+) -> dict:
+    """`chronocl pyramid` for an s3:// store: the levels are built from the store's steps in a
+    local staging folder, then published under ``levels`` with ``levels/zarr.json`` last
+    (`chronocl.data.remote_write.publish`). Until that last key a reader finds no levels and
+    pools them on the fly; keys of an interrupted earlier build (no ``levels/zarr.json``) are
+    removed first, as are old levels with `force`. ``data`` and the root are only read."""
+    bucket, key = split_url(url)
+    series = open_remote(url, options)
+    if series.stats is None or series.zarr_array is None:
+        raise StoreFormatError(f"{url} is not a chronocl store; ingest it with 'chronocl ingest'")
+    arr, shape = series.zarr_array, tuple(int(n) for n in series.shape)
+    summary = {"store": url}
+    if not level_shapes(shape[1:]):
+        return {
+            **summary,
+            "levels": describe_levels(shape[1:], 1),
+            "status": f"nothing to add: levels are made while the largest axis is > {COARSEST}",
+        }
+    has = filesystem(options).exists(f"{bucket}/{key}/{LEVELS}/zarr.json")
+    if has and not force:
+        series.level(1).read([0])  # damaged levels metadata is reported, not kept silently
+        return {
+            **summary,
+            "levels": describe_levels(shape[1:], series.n_levels),
+            "status": "levels already present (pass --force to rebuild them)",
+        }
+    chunk_bytes = int(arr.chunks[1]) * shape[2] * shape[3] * arr.dtype.itemsize
+    where = os.environ.get("CHRONOCL_TMPDIR") or None  # as `remote_write.remote_output`
+    with tempfile.TemporaryDirectory(prefix="chronocl-upload-", dir=where) as staging:
+        local = Path(staging) / LEVELS
+        group = zarr.open_group(store=str(local), mode="w", zarr_format=3)
+        writer = LevelWriter(group, shape, arr.dtype, arr.compressors, chunk_bytes)
+        for t in track(range(shape[0]), shape[0], "building levels", progress):
+            writer.add(t, series.read([t])[0])
+        writer.finish()
+        publish(local, f"{url.rstrip('/')}/{LEVELS}", options, overwrite=True)
+    return {
+        **summary,
+        "levels": describe_levels(shape[1:], 1 + len(writer.shapes)),
+        "status": "rebuilt" if has else "added",
+    }

@@ -16,13 +16,18 @@ a public bucket, ``endpoint_url`` for MinIO and other S3-compatible servers).
 
 Retries: ``CHRONOCL_REMOTE_RETRIES`` (default 3 retries after the first try) and
 ``CHRONOCL_REMOTE_BACKOFF_S`` (default 0.2 s, doubled each retry).
+
+`parse_storage_options` reads the CLI's ``--storage-option k=v`` (values parsed as JSON where
+they parse). An s3:// prefix with keys but no root metadata is a write that did not finish
+(`incomplete_store`; `chronocl.data.remote_write` writes the root metadata last).
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from chronocl.core.errors import (
@@ -31,6 +36,7 @@ from chronocl.core.errors import (
     InvalidParameterError,
     RemoteAccessError,
     RemoteStoreError,
+    StoreCorruptError,
 )
 from chronocl.data.integrity import MissingChunks
 
@@ -80,6 +86,11 @@ class RemoteStore(MissingChunks):
 
     url: str
     storage_options: dict
+
+    def setup(self, url: str, storage_options: dict, arrays: tuple[str, ...]) -> None:
+        """Note the URL and options the store was opened with; check the chunks of `arrays`."""
+        self._init_checks(url, arrays)
+        self.url, self.storage_options = url, storage_options
 
     async def get(self, key, prototype=None, byte_range=None):
         retries, backoff = retry_policy()
@@ -146,8 +157,7 @@ def remote_store(
         ) from None
     except (TypeError, ValueError) as exc:
         raise InvalidParameterError(f"cannot open {url}: {exc}; check --storage-option") from None
-    store._init_checks(url, arrays)
-    store.url, store.storage_options = url, options
+    store.setup(url, options, arrays)
     return store
 
 
@@ -207,13 +217,67 @@ def missing_store(url: str, storage_options: Mapping[str, Any] | None) -> Chrono
             if failure is None:
                 raise
             return RemoteStoreError(f"reading s3://{bucket} failed: {failure[1]}")
-        from chronocl.data.remote_write import incomplete_store
-
         partial = incomplete_store(url, storage_options)  # keys, but the root metadata missing
         if partial is not None:
             return partial
     return InputNotFoundError(
         f"no zarr store at {url} (neither zarr.json nor .zarray/.zgroup found); check the URL"
+    )
+
+
+def parse_storage_options(items: Iterable[str] | None, anon: bool = False) -> dict[str, Any]:
+    """``k=v`` strings as fsspec storage options; `anon` adds ``anon=True`` (a public bucket)."""
+    options: dict[str, Any] = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise InvalidParameterError(
+                f"--storage-option {item!r} must be KEY=VALUE, e.g. "
+                "endpoint_url=http://localhost:9000"
+            )
+        try:
+            options[key] = json.loads(value)
+        except ValueError:
+            options[key] = value
+    if anon:
+        options["anon"] = True
+    return options
+
+
+def filesystem(storage_options: Mapping[str, Any] | None):
+    """An s3fs filesystem with `storage_options` (its listings not cached: writes change them)."""
+    try:
+        import s3fs
+    except ImportError as exc:
+        raise InvalidParameterError(
+            f"writing to s3:// needs {exc.name or 's3fs'}; pip install s3fs"
+        ) from None
+    try:
+        return s3fs.S3FileSystem(
+            **dict(storage_options or {}), skip_instance_cache=True, use_listings_cache=False
+        )
+    except (TypeError, ValueError) as exc:
+        raise InvalidParameterError(
+            f"cannot use the S3 options: {exc}; check --storage-option"
+        ) from None
+
+
+def incomplete_store(url: str, storage_options: Mapping[str, Any] | None) -> ChronoclError | None:
+    """StoreCorruptError for an s3:// store that has keys but no root metadata (its write did
+    not finish); None where the prefix is empty (or cannot be listed)."""
+    if not url.lower().startswith("s3://"):
+        return None
+    try:
+        fs = filesystem(storage_options)
+        found = fs.ls(url[5:].rstrip("/"), detail=False)  # one level: bounded
+    except Exception:  # FileNotFoundError: nothing there
+        return None
+    if not found:
+        return None
+    return StoreCorruptError(
+        f"store {url} is incomplete: it has keys but no root zarr.json, which "
+        "chronocl writes last; a write to it did not finish, so write it again (--overwrite)"
     )
 
 

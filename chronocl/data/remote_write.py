@@ -7,8 +7,8 @@ then uploaded under its URL with the **markers last**: the files at the output's
 name what it is (a zarr store's root ``zarr.json`` / ``.zgroup`` / ``.zattrs``, a .pvd or
 .json manifest). A zarr store is opened from its root metadata, so until the last upload
 `chronocl.open` and `Chronovolume.load` find no store there and say it is incomplete
-(`incomplete_store`), never read a part of it. A one-file output is one PUT, which S3 makes
-visible whole or not at all.
+(`chronocl.data.remote_store.incomplete_store`), never read a part of it. A one-file output is
+one PUT, which S3 makes visible whole or not at all.
 
 A failed or interrupted write (an exception, Ctrl-C, a refused upload) removes its staging
 folder and every key it uploaded; nothing of the user's that existed before is touched unless
@@ -22,13 +22,11 @@ as incomplete until written again with ``--overwrite``.)
 
 from __future__ import annotations
 
-import asyncio
 import concurrent.futures
 import contextlib
 import os
 import shutil
 import tempfile
-import threading
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -41,9 +39,8 @@ from chronocl.core.errors import (
     OutputIsInputError,
     RemoteAccessError,
     RemoteStoreError,
-    StoreCorruptError,
 )
-from chronocl.data.remote_store import Url, classify, is_url
+from chronocl.data.remote_store import Url, classify, filesystem, is_url, parse_storage_options
 
 ROOT_MARKERS = ("zarr.json", ".zgroup", ".zattrs", ".zarray", ".zmetadata")
 MANIFEST_SUFFIXES = (".json", ".pvd")  # written last too: they list what the output holds
@@ -63,24 +60,6 @@ def split_url(url: str) -> tuple[str, str]:
             f"output {url} names no key inside the bucket; give s3://BUCKET/NAME.zarr"
         )
     return bucket, key
-
-
-def filesystem(storage_options: Mapping[str, Any] | None):
-    """An s3fs filesystem with `storage_options` (its listings not cached: writes change them)."""
-    try:
-        import s3fs
-    except ImportError as exc:
-        raise InvalidParameterError(
-            f"writing to s3:// needs {exc.name or 's3fs'}; pip install s3fs"
-        ) from None
-    try:
-        return s3fs.S3FileSystem(
-            **dict(storage_options or {}), skip_instance_cache=True, use_listings_cache=False
-        )
-    except (TypeError, ValueError) as exc:
-        raise InvalidParameterError(
-            f"cannot use the S3 options: {exc}; check --storage-option"
-        ) from None
 
 
 def _failure(url: str, exc: BaseException, doing: str) -> ChronoclError:
@@ -188,6 +167,8 @@ def publish(
     bucket, key = split_url(url)
     target = f"{bucket}/{key}"
     fs = filesystem(storage_options)
+    if not overwrite and fs.exists(target):  # written by someone else while this run ran
+        raise OutputExistsError(f"{url} appeared while this run wrote it; nothing was uploaded")
     if local.is_file():
         try:
             if overwrite and fs.isdir(target):
@@ -202,6 +183,7 @@ def publish(
     last = [p for p in files if p.parent == local and _is_marker(p.name)]
     first = [p for p in files if p not in last]
     removed_old = False
+    keys = [f"{target}/{p.relative_to(local).as_posix()}" for p in (*first, *last)]
     try:
         if overwrite and fs.exists(target):
             _remove_old(fs, target)
@@ -209,7 +191,7 @@ def publish(
         for batch in (first, last):
             upload(fs, [(p, f"{target}/{p.relative_to(local).as_posix()}") for p in batch])
     except BaseException as exc:
-        _clean(fs, target)
+        _clean(fs, target if removed_old else keys)  # only this run's keys beside others
         if isinstance(exc, Exception):
             error = _failure(url, exc, "uploading to")
             if removed_old:
@@ -219,37 +201,24 @@ def publish(
 
 
 def upload(fs, pairs: list[tuple[Path, str]]) -> None:
-    """PUT each (local file, key) of `pairs`, UPLOAD_CONCURRENCY at a time, on s3fs's event
-    loop. Interrupted (Ctrl-C, an error), every upload still in flight is cancelled and waited
-    for before this returns, so that the cleanup that follows is not outrun by a late PUT."""
+    """PUT each (local file, key) of `pairs`, UPLOAD_CONCURRENCY at a time: threads calling
+    s3fs's `put_file`, whose requests share its event loop. Interrupted (Ctrl-C, an error), the
+    uploads not yet started are dropped and those in flight waited for (up to 60 s) before this
+    returns, so that the cleanup that follows is not outrun by a late PUT."""
     if not pairs:
         return
-    finished = threading.Event()
-
-    async def put_all() -> None:
-        try:
-            limit = asyncio.Semaphore(UPLOAD_CONCURRENCY)
-
-            async def put(path: Path, key: str) -> None:
-                async with limit:
-                    await fs._put_file(str(path), key)
-
-            await asyncio.gather(*(put(path, key) for path, key in pairs))
-        finally:
-            finished.set()
-
-    future = asyncio.run_coroutine_threadsafe(put_all(), fs.loop)
+    pool = concurrent.futures.ThreadPoolExecutor(UPLOAD_CONCURRENCY, "chronocl-upload")
+    pending = {pool.submit(fs.put_file, str(path), key) for path, key in pairs}
     try:
-        while True:
-            try:
-                future.result(timeout=0.25)  # a short wait, so Ctrl-C lands here
-                return
-            except concurrent.futures.TimeoutError:
-                continue
-    except BaseException:
-        future.cancel()
-        finished.wait(60)
-        raise
+        while pending:  # short waits, so Ctrl-C lands here
+            done, pending = concurrent.futures.wait(
+                pending, 0.25, concurrent.futures.FIRST_EXCEPTION
+            )
+            for future in done:
+                future.result()  # the first failure is raised
+    finally:
+        pool.shutdown(wait=False, cancel_futures=True)  # those not started: never done
+        concurrent.futures.wait([f for f in pending if not f.cancelled()], 60)
 
 
 def _is_marker(name: str) -> bool:
@@ -269,28 +238,14 @@ def _remove_old(fs, target: str) -> None:
     fs.rm(target, recursive=True)
 
 
-def _clean(fs, target: str) -> None:
-    """Remove what a failed upload put at `target` (best effort: the write's error matters)."""
+def _clean(fs, written: str | list[str]) -> None:
+    """Remove what a failed upload wrote: the keys it PUT, or the whole `target` it had
+    emptied first (best effort: the write's error matters)."""
     with contextlib.suppress(Exception):
-        fs.rm(target, recursive=True)
-
-
-def incomplete_store(url: str, storage_options: Mapping[str, Any] | None) -> ChronoclError | None:
-    """StoreCorruptError for an s3:// store that has keys but no root metadata (its write did
-    not finish); None where the prefix is empty (or cannot be listed)."""
-    if not url.lower().startswith("s3://"):
-        return None
-    try:
-        fs = filesystem(storage_options)
-        found = fs.ls(url[5:].rstrip("/"), detail=False)  # one level: bounded
-    except Exception:  # FileNotFoundError: nothing there
-        return None
-    if not found:
-        return None
-    return StoreCorruptError(
-        f"store {url} is incomplete: it has keys but no root zarr.json, which "
-        "chronocl writes last; a write to it did not finish, so write it again (--overwrite)"
-    )
+        if isinstance(written, str):
+            fs.rm(written, recursive=True)
+        else:
+            fs.rm([k for k in written if fs.exists(k)])
 
 
 def split_storage_options(
@@ -299,8 +254,6 @@ def split_storage_options(
     """The CLI's ``--anon`` / ``--storage-option`` shared by STORE and OUT: (anon, items) to
     read STORE with (`chronocl.cli.options.series_store`), and the options to write an s3://
     OUT with (the same ``--storage-option``s, never ``--anon``: writes are signed)."""
-    from chronocl.data.remote import parse_storage_options
-
     if not is_url(str(out)):
         return (anon, storage_option), {}
     out_options = parse_storage_options(storage_option)

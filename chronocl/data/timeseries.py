@@ -94,6 +94,16 @@ class TimeSeries:
         self.__post_init__()
         return self
 
+    @property
+    def zarr_array(self) -> zarr.Array | None:
+        """The zarr array `data` wraps step for step, which reads go to directly; None where
+        they go through dask. Set for a store read in place (`chronocl.data.remote`)."""
+        return self._zarr
+
+    @zarr_array.setter
+    def zarr_array(self, arr: zarr.Array | None) -> None:
+        self._zarr = arr
+
     # -- shape ---------------------------------------------------------------------------
     @property
     def shape(self) -> tuple[int, int, int, int]:

@@ -17,6 +17,8 @@ from the host as before, and the session says so.
 from __future__ import annotations
 
 import os
+import threading
+import weakref
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -24,9 +26,28 @@ from dataclasses import dataclass
 import numpy as np
 
 from chronocl.core.budget import human, parse_memory
+from chronocl.engine.device_formats import stored_dtype
 
 DEVICE_SHARE = 0.6  # of the device's global memory, for resident steps (the rest: outputs, tables)
 SPARE_SLOTS = 2  # beyond the window: the steps a slide or a scrub back needs next
+
+
+# Bytes of device slots held per device context, by every session of the process: the budget
+# is the device's, shared by the views and levels that each keep their window there.
+_held: dict[int, int] = {}
+_lock = threading.Lock()
+
+
+def _give_back(dc_id: int, nbytes: int) -> None:
+    with _lock:
+        _held[dc_id] = _held.get(dc_id, 0) - nbytes
+
+
+def budget_left(dc) -> int:
+    """The device budget less what other sessions' slots on `dc` hold now."""
+    with _lock:
+        held = _held.get(id(dc), 0)
+    return max(0, device_budget(dc.info.global_mem) - held)
 
 
 def device_budget(global_mem: int) -> int:
@@ -63,6 +84,9 @@ class DeviceSteps:
         nz, ny, nx = self.shape
         self.nbytes = nz * count * ny * nx * self.dtype.itemsize
         self.buffer = cl.Buffer(dc.context, cl.mem_flags.READ_ONLY, self.nbytes)
+        with _lock:
+            _held[id(dc)] = _held.get(id(dc), 0) + self.nbytes
+        self._held = weakref.finalize(self, _give_back, id(dc), self.nbytes)
         self._slot: OrderedDict[int, int] = OrderedDict()  # step -> slot, least recent first
         self.uploads = 0  # steps uploaded so far
         self.uploaded_bytes = 0
@@ -74,13 +98,19 @@ class DeviceSteps:
         """Slots for a window of `width` steps and `SPARE_SLOTS` more, where they fit the
         device budget and one buffer; None where the window alone does not."""
         step = int(np.prod(shape)) * np.dtype(dtype).itemsize
-        room = min(device_budget(dc.info.global_mem), dc.info.max_alloc) // max(1, step)
+        room = min(budget_left(dc), dc.info.max_alloc) // max(1, step)
         if room < width:
             return None
         return cls(dc, shape, dtype, min(room, width + SPARE_SLOTS))
 
     def resident(self) -> list[int]:
         return list(self._slot)
+
+    def release(self) -> None:
+        """Free the device buffer now (the slots are not used again)."""
+        self.buffer.release()
+        self._slot.clear()
+        self._held()  # counted off the device's budget once
 
     def brick(self, arrays: Mapping[int, np.ndarray], steps: Sequence[int], z0: int, z1: int):
         """Rows [z0, z1) of `steps` as a `DeviceBrick`, uploading from `arrays` ({step: (Z, Y,
@@ -153,13 +183,16 @@ def run_resident(dc, brick: DeviceBrick, outputs: list[np.ndarray], launch, chun
 
 class DeviceWindow:
     """A session's steps on its engine's device: slots for its window, made again for a wider
-    one. `bricks` is None where the steps stay on the host (a CPU device reads them in place,
-    bricks that travel converted, or a window over the device budget: `why` then says so)."""
+    one. `bricks` is None where the steps stay on the host (a CPU device reads them in place;
+    bricks that travel converted, float64 integrated as float32; a window over what the device
+    budget has left beside the other sessions' slots: `why` then says so)."""
 
-    def __init__(self, engine, shape: tuple[int, int, int], dtype: np.dtype) -> None:
+    def __init__(self, engine, series) -> None:
         copies = getattr(engine, "dc", None) is not None and not engine.host_ptr
-        self.engine = engine if copies and engine.device_format == "auto" else None
-        self.shape, self.dtype = tuple(shape), np.dtype(dtype)
+        as_stored = stored_dtype(series.dtype) == series.dtype
+        keeps = copies and as_stored and engine.device_format == "auto"
+        self.engine = engine if keeps else None
+        self.shape, self.dtype = tuple(series.volume_shape), np.dtype(series.dtype)
         self.slots: DeviceSteps | None = None
         self.why: str | None = None
 
@@ -167,16 +200,24 @@ class DeviceWindow:
         if self.engine is None:
             return None
         if self.slots is None or self.slots.count < width:
-            self.slots = None  # freed before a wider one is made
+            self.release()  # freed before a wider one is made
             dc = self.engine.dc
-            self.slots = DeviceSteps.fitting(dc, self.shape, self.dtype, width)
+            try:
+                self.slots = DeviceSteps.fitting(dc, self.shape, self.dtype, width)
+            except MemoryError:  # pyopencl's allocation failure is a MemoryError too
+                self.slots = None
             if self.slots is None:
                 need = width * int(np.prod(self.shape)) * self.dtype.itemsize
-                budget = min(device_budget(dc.info.global_mem), dc.info.max_alloc)
+                room = budget_left(dc)
                 self.why = (
-                    f"the window needs {human(need)} of device memory > {human(budget)}: "
-                    "its steps are sent from the host for every integration"
+                    f"the window needs {human(need)} of device memory, {human(room)} is free "
+                    "for steps: they are sent from the host for every integration"
                 )
                 return None
         self.why = None
         return DeviceBricks(arrays, self.slots)
+
+    def release(self) -> None:
+        if self.slots is not None:
+            self.slots.release()
+            self.slots = None

@@ -239,6 +239,9 @@ def engine_rows(eng: Engine, job: Job) -> int:
 
 
 Out = tuple[np.ndarray, np.ndarray | None]
+# Above this many voxels the viewer's textures are RGBA8, below float32 (chronocl.render.upload's
+# COMPACT_VOXELS, which tests/test_display_output.py checks this equals): display frames follow.
+DISPLAY_VOXELS = 2**15
 OutFor = Callable[[Slab], Out]
 Integrate = Callable[[Slab, np.ndarray, Out | None], tuple[Partial, bool]]
 
@@ -333,16 +336,17 @@ def integrate_bricks(
     """Integrate a prepared `job` with bricks from `bricks` (e.g. steps already resident:
     `chronocl.data.bricks.ResidentBricks`) into a Chronovolume, as `integrate` does.
 
-    With `display`, where the engine can (`writes_display`) and the mode finishes each voxel
-    on its own, its kernels write the display format, premultiplied RGBA8 (a viewer's frame:
-    a quarter of the bytes, nothing to convert); else the chronovolume is float32 as always."""
+    With `display`, where the engine can (`writes_display`), the mode finishes each voxel on
+    its own and the volume is larger than `DISPLAY_VOXELS`, its kernels write the display
+    format, premultiplied RGBA8 (a viewer's frame: a quarter of the bytes, nothing to convert);
+    else the chronovolume is float32 as always."""
     fit = engine_rows(eng, job)
     slab = fit if slab is None else min(slab, fit)
     nz, ny, nx = job.series.volume_shape
     parts = slabs(nz, slab, job.halo)
 
     spec = job.spec
-    rgba8 = display and getattr(eng, "writes_display", False)
+    rgba8 = display and getattr(eng, "writes_display", False) and nz * ny * nx > DISPLAY_VOXELS
     rgba8 = rgba8 and not spec.integration.finalize_is_global(spec)
     rgba = aligned_empty((nz, ny, nx, 4), np.uint8 if rgba8 else np.float32)
     t_index = aligned_empty((nz, ny, nx), np.int32) if job.spec.has_t_index else None

@@ -81,6 +81,7 @@ class Raycaster:
         import moderngl
 
         nz, ny, nx, _ = cv.rgba.shape
+        dtype = "f1" if cv.rgba.dtype == np.uint8 else dtype  # RGBA8 from the kernels as it is
         data, occ = convert(cv.rgba, dtype)
         tex = self.ctx.texture3d((nx, ny, nz), 4, data, dtype=dtype)
         tex.filter = (

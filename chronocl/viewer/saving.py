@@ -87,16 +87,20 @@ def save_image(
     return downloads.add(image.png_bytes(), name, "image/png")
 
 
-def full_precision(cv: Chronovolume, series: TimeSeries, engine: Engine) -> Chronovolume:
+def full_precision(
+    cv: Chronovolume, series: TimeSeries, engine: Engine, budget: int
+) -> Chronovolume:
     """`cv` as `chronocl integrate` writes it: a display chronovolume (RGBA8, the viewer's
-    full-resolution frame) integrated again in float32 from `series`; others as they are."""
+    full-resolution frame) integrated again in float32 from `series`, in z-slabs whose bricks
+    take a quarter of `budget` bytes at most; others as they are."""
     if cv.rgba.dtype != np.uint8:
         return cv
     meta, spec = cv.metadata, cv.spec
     level = int(meta.get("level") or 0)
     src = series.level(level, spec.integration.pool) if level else series
     job = Job.of(src, Selection(cv.steps, src.n_steps), spec, tuple(meta["value_range"]))
-    return integrate_bricks(job, engine, SeriesBricks(src))
+    rows = max(1, budget // (4 * max(1, job.row_bytes)))  # slabs of the budget, as streamed
+    return integrate_bricks(job, engine, SeriesBricks(src), slab=rows)
 
 
 def save_chronovolume(downloads: Downloads, cv: Chronovolume, name: str) -> str:

@@ -3,7 +3,7 @@ chronovolume's 3D texture, and how a chronovolume is laid out in the raycaster's
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -14,6 +14,8 @@ from chronocl.render import brick_grid
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Volume
 from chronocl.render.upload import convert, display_format
+
+KEPT_TEXTURES = 2  # textures of other shapes a panel keeps (`ViewSlot.swap_volume`)
 
 
 @dataclass
@@ -26,16 +28,37 @@ class ViewSlot:
     uploaded: Chronovolume | None = None
     staging: np.ndarray | None = None  # the texture data's host buffer, reused frame to frame
     recolour: object | None = None  # the window's winners on the GPU (viewer/recolouring.py)
+    # Textures of other shapes or formats, kept for reuse: frames alternate between a coarse
+    # level and full resolution, and allocating a 512^3 texture costs about a second here.
+    kept: dict = field(default_factory=dict)
 
     def release_gl(self) -> None:
-        if self.recolour is not None:
-            self.recolour.release()  # type: ignore[attr-defined]
-            self.recolour = None
+        self._release_recolour()
         if self.volume is not None:
             self.volume.release()
             self.volume = None
             self.uploaded = None
+        for vol in self.kept.values():
+            vol.release()
+        self.kept = {}
         self.staging = None
+
+    def swap_volume(self, key: tuple) -> Volume | None:
+        """Keep the current texture under its (size, format) and take the one kept for `key`
+        (None: none kept); at most `KEPT_TEXTURES` stay besides the current one."""
+        self._release_recolour()  # its winners are the old texture's
+        if self.volume is not None:
+            self.kept[(self.volume.texture.size, self.volume.texture.dtype)] = self.volume
+        self.volume = self.uploaded = None
+        vol = self.kept.pop(key, None)
+        while len(self.kept) > KEPT_TEXTURES:
+            self.kept.pop(next(iter(self.kept))).release()
+        return vol
+
+    def _release_recolour(self) -> None:
+        if self.recolour is not None:
+            self.recolour.release()  # type: ignore[attr-defined]
+            self.recolour = None
 
     def drop_session(self) -> None:
         if self.session is not None:
@@ -46,7 +69,8 @@ class ViewSlot:
 def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
     """The chronovolume as a 3D texture, rewriting the slot's texture in place when its shape
     and format are unchanged (allocating a new 3D texture costs more than the write); a new
-    shape or format allocates a new one.
+    shape or format takes the texture kept for it (`ViewSlot.swap_volume`: the coarse level and
+    full resolution alternate), else allocates one.
 
     The format follows `display_format` (docs/display.md, measured by bench/upload.py): RGBA8
     above 32^3 (a quarter of float32's bytes, and llvmpipe draws it faster at every size
@@ -65,15 +89,17 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
     data, occ = convert(cv.rgba, fmt, slot.staging)
     bricks = brick_grid.submit(data)  # the empty-space grid, beside the texture write
     vol = slot.volume
-    if vol is not None and vol.texture.size == (nx, ny, nz) and vol.texture.dtype == fmt:
+    if vol is None or vol.texture.size != (nx, ny, nz) or vol.texture.dtype != fmt:
+        vol = slot.swap_volume(((nx, ny, nz), fmt))
+    if vol is not None:
         vol.texture.write(data)
     else:
-        slot.release_gl()
         tex = rc.ctx.texture3d((nx, ny, nz), 4, data, dtype=fmt)
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         tex.repeat_x = tex.repeat_y = tex.repeat_z = False
         vol = Volume(tex, np.zeros(3), 0.0, (np.zeros(3), np.zeros(3)))
-    slot.staging = None if data is cv.rgba else data
+    if data is not cv.rgba:  # RGBA8 from the kernels is sent as it is: the staging stays
+        slot.staging = data
     extent, voxel = geometry(cv)
     vol.extent, vol.unit = extent, float(np.min(voxel))
     vol.occupied = occ.corners(extent, voxel)

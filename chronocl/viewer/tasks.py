@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Hashable
 
+from chronocl.core.budget import interactive_memory, parse_memory
 from chronocl.core.errors import InvalidParameterError
 from chronocl.engine import get_engine
 from chronocl.render.views import parse_color
@@ -157,7 +158,8 @@ class Tasks:
             name = f"{ds.name}-{mode}-{sel}.zarr.zip"
             eng = self.views.engine
             eng = get_engine(eng, self.views.device) if isinstance(eng, str) else eng
-            cv = full_precision(cv, ds.series, eng)
+            budget = interactive_memory() if self.views.memory is None else self.views.memory
+            cv = full_precision(cv, ds.series, eng, parse_memory(budget))
             key = save_chronovolume(self.downloads, cv, name)
         self._reply(
             {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}

@@ -91,10 +91,8 @@ class ClientWorker(Tasks):
         self._draw_budget = DrawBudget()  # pixels a frame answering input may draw
         self._last_rid: int | None = None
         self._shown: ViewState | None = None  # the state of the last frame sent
-        # The last probed voxel (view, x/y/z fractions of the box): each frame says where it is.
-        self._probed: tuple[int, tuple[float, float, float]] | None = None
-        # The histogram's value range and the (data set, window) it was last sent for: a frame
-        # of another window queues a new one.
+        self._probed: tuple[int, tuple[float, float, float]] | None = None  # view, box fractions
+        # The histogram's range and (data set, window) last sent: another window queues one.
         self._hist_range = [0.0, 1.0]
         self._hist_window: tuple | None = None
         self._frame = 0
@@ -272,8 +270,10 @@ class ClientWorker(Tasks):
     def _render(self, state: ViewState, rid: int | None) -> None:
         t_start = time.perf_counter()
         cvs, integrate_ms, incremental = self.views.chronovolumes(state)
-        self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
-        self.views.recolouring.finish()  # a recoloured view's RGBA, read after the frame went
+        try:
+            self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
+        finally:  # a recoloured view's RGBA, read after the frame went (probes, saves read it)
+            self.views.recolouring.finish()
         self._histogram_after(state)
 
     def _refine(self) -> None:

@@ -40,7 +40,7 @@ def save_chronovolume_omezarr(
     cv: Chronovolume, path: str | os.PathLike, overwrite: bool = False
 ) -> Path:
     """Write `cv` as an OME-Zarr image (NGFF 0.4, zarr v2) atomically; returns the path."""
-    rgba = np.asarray(cv.rgba, dtype=np.float32)
+    rgba = cv.float_rgba()  # a display chronovolume's RGBA8 as float32
     if rgba.ndim != 4 or rgba.shape[3] != 4:
         raise StoreFormatError(f"chronovolume rgba has shape {rgba.shape}; expected (Z, Y, X, 4)")
     z, y, x, _ = rgba.shape

@@ -107,7 +107,7 @@ def save_chronovolume_vti(
     cv: Chronovolume, path: str | os.PathLike, overwrite: bool = False
 ) -> Path:
     """Write a chronovolume's ``rgba`` (premultiplied, 4 components) and ``t_index`` as a .vti."""
-    arrays: dict[str, np.ndarray] = {"rgba": np.asarray(cv.rgba, dtype=np.float32)}
+    arrays: dict[str, np.ndarray] = {"rgba": cv.float_rgba()}
     if cv.t_index is not None:
         arrays["t_index"] = np.asarray(cv.t_index, dtype=np.int32)
     return write_vti(path, arrays, spacing=cv.spacing, overwrite=overwrite)

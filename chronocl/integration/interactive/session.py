@@ -109,13 +109,13 @@ class Session:
         # CPU devices read the window where the manager's slots hold it; others stack it.
         in_place = bool(getattr(self.engine, "reads_in_place", False))
         self._bricks = ResidentBricks(self._arrays, in_place=in_place)
-        # GPUs keep the window's steps in device memory: an edit uploads none, a slide one.
-        self._device = DeviceWindow(self.engine, series.volume_shape, series.dtype)
         self._slider: Slider | None = None
         self._cv: Chronovolume | None = None
         self._prefetch = prefetch = setup.prefetch
         self.level = check_level(series, level)
         self.series = series.level(self.level, self.spec.integration.pool)
+        # GPUs keep the window's steps in device memory: an edit uploads none, a slide one.
+        self._device = DeviceWindow(self.engine, self.series)
         # Sessions that show one window in several views can share one manager's resident steps.
         managers = setup.managers
         self._owns_manager = manager is None and managers is None
@@ -204,6 +204,7 @@ class Session:
     def close(self) -> None:
         if self._owns_manager:
             self.manager.close()
+        self._device.release()
         self._arrays = {}
         self._bricks.forget()
         self._slider = None
@@ -224,6 +225,8 @@ class Session:
             )
         self.manager.close()
         self.series = self.base.level(self.level, pool)
+        self._device.release()  # its steps are the other pooling's
+        self._device = DeviceWindow(self.engine, self.series)
         self.manager = WindowManager(self.series, self.budget, prefetch=self._prefetch)
         self._arrays = {}
         self._bricks.forget()
