@@ -210,3 +210,30 @@ def test_raycaster_upload_formats_agree(rc):
     vol.release()
     assert np.abs(images["f2"] - images["f4"]).max() <= 1
     assert np.abs(images["f1"] - images["f4"]).max() <= 12
+
+
+def test_a_refines_upload_is_given_up_between_slabs_and_written_again(rc, monkeypatch):
+    """A refine's texture write stops between z-slabs once newer input comes; the slot then
+    shows nothing uploaded, and its next upload draws what a fresh one draws."""
+    from chronocl.core.errors import SupersededError
+
+    slot = ViewSlot()
+    first, second = cv_of(random_rgba((24, 10, 8), seed=4)), cv_of(random_rgba((24, 10, 8), 5))
+    upload_as(rc, slot, first, "f1")
+    asked = []
+
+    def given_up() -> bool:
+        asked.append(1)
+        return len(asked) > 2  # newer input after two slabs
+
+    monkeypatch.setattr(texture_upload, "COMPACT_VOXELS", 0)  # RGBA8, as upload_as(..., "f1")
+    with pytest.raises(SupersededError):
+        upload(rc, slot, second, given_up)
+    assert slot.uploaded is None and slot.volume is not None and len(asked) == 3
+    vol = upload_as(rc, slot, second, "f1")
+    fresh_slot = ViewSlot()
+    a = rc.draw(vol, CAMERA, (64, 64), jitter=False)
+    b = rc.draw(upload_as(rc, fresh_slot, second, "f1"), CAMERA, (64, 64), jitter=False)
+    np.testing.assert_array_equal(a, b)
+    slot.release_gl()
+    fresh_slot.release_gl()

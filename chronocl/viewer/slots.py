@@ -4,9 +4,11 @@ chronovolume's 3D texture, and how a chronovolume is laid out in the raycaster's
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 
+from chronocl.core.errors import SupersededError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.session import Session
@@ -16,6 +18,7 @@ from chronocl.render.raycaster import Volume
 from chronocl.render.upload import convert, display_format
 
 KEPT_TEXTURES = 2  # textures of other shapes a panel keeps (`ViewSlot.swap_volume`)
+UPLOAD_SLABS = 8  # z-slabs of a texture write that may be given up (`upload`)
 
 
 @dataclass
@@ -66,11 +69,13 @@ class ViewSlot:
         self.session, self.cv = None, None
 
 
-def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
+def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     """The chronovolume as a 3D texture, rewriting the slot's texture in place when its shape
     and format are unchanged (allocating a new 3D texture costs more than the write); a new
     shape or format takes the texture kept for it (`ViewSlot.swap_volume`: the coarse level and
-    full resolution alternate), else allocates one.
+    full resolution alternate), else allocates one. With `given_up` (a refine's frame) the
+    texture is written in `UPLOAD_SLABS` z-slabs and SupersededError raised between them once it
+    returns true; the slot then shows nothing uploaded (its next frame writes it again).
 
     The format follows `display_format` (docs/display.md, measured by bench/upload.py): RGBA8
     above 32^3 (a quarter of float32's bytes, and llvmpipe draws it faster at every size
@@ -84,6 +89,8 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
     import moderngl
 
     nz, ny, nx, _ = cv.rgba.shape
+    if given_up is not None and given_up():  # before the occupancy pass, too
+        raise SupersededError("newer input came before the refined frame was uploaded")
     # RGBA8 from the kernels (a display chronovolume) as it is, whatever the size
     fmt = "f1" if cv.rgba.dtype == np.uint8 else display_format(nz * ny * nx)
     data, occ = convert(cv.rgba, fmt, slot.staging)
@@ -92,7 +99,7 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
     if vol is None or vol.texture.size != (nx, ny, nz) or vol.texture.dtype != fmt:
         vol = slot.swap_volume(((nx, ny, nz), fmt))
     if vol is not None:
-        vol.texture.write(data)
+        _write(slot, vol, data, given_up)
     else:
         tex = rc.ctx.texture3d((nx, ny, nz), 4, data, dtype=fmt)
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
@@ -106,6 +113,20 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume) -> Volume:
     vol.bricks = brick_grid.texture(rc.ctx, bricks.result(), vol.bricks)
     slot.volume, slot.uploaded = vol, cv
     return vol
+
+
+def _write(slot: ViewSlot, vol: Volume, data: np.ndarray, given_up) -> None:
+    """Write `data` into the volume's texture, in slabs where it may be given up."""
+    nz, ny, nx = data.shape[:3]
+    if given_up is None or nz < UPLOAD_SLABS:
+        vol.texture.write(data)
+        return
+    cuts = np.linspace(0, nz, UPLOAD_SLABS + 1).astype(int)
+    for z0, z1 in pairwise(cuts.tolist()):
+        if given_up():
+            slot.volume, slot.uploaded = vol, None  # half written: uploaded again next time
+            raise SupersededError("newer input came while the refined frame was uploaded")
+        vol.texture.write(np.ascontiguousarray(data[z0:z1]), viewport=(0, 0, z0, nx, ny, z1 - z0))
 
 
 def geometry(cv: Chronovolume) -> tuple[np.ndarray, np.ndarray]:

@@ -93,11 +93,9 @@ class ClientWorker(Tasks):
         self._shown: ViewState | None = None  # the state of the last frame sent
         self._probed: tuple[int, tuple[float, float, float]] | None = None  # view, box fractions
         # The histogram's range and (data set, window) last sent: another window queues one.
-        self._hist_range = [0.0, 1.0]
-        self._hist_window: tuple | None = None
+        self._hist_range, self._hist_window = [0.0, 1.0], None
         self._frame = 0
-        # The visible region framed: (generation, world box or None); a new data set or a
-        # camera reset starts a new generation, found again from that frame's chronovolumes.
+        # The framed region: (generation, world box or None); a data set or camera reset adds one.
         self._focus_gen = 0
         self._focus: tuple[int, tuple | None] | None = None
         self.thread = threading.Thread(target=self._run, name="chronocl-view", daemon=True)
@@ -243,13 +241,16 @@ class ClientWorker(Tasks):
                 if not self._reply({"type": "error", "id": rid, "message": text}):
                     return
 
-    def _draw(self, rc, cvs, state: ViewState, size, bg) -> tuple[list, float, float, float]:
-        """Upload what changed and draw every view (on the GL thread)."""
+    def _draw(self, rc, cvs, state, size, bg, given_up=None) -> tuple[list, float, float, float]:
+        """Upload what changed and draw every view (on the GL thread); `given_up` (a refine's)
+        true between upload slabs or before the draw raises SupersededError."""
         t_up = time.perf_counter()
         for slot, cv in zip(self.views.slots, cvs, strict=False):
             if slot.uploaded is not cv:
-                upload(rc, slot, cv)
+                upload(rc, slot, cv, given_up)
         t_draw = time.perf_counter()
+        if given_up is not None and given_up():
+            raise SupersededError("newer input came before the refined frame was drawn")
         panels = [
             rc.draw(
                 slot.volume,
@@ -279,8 +280,8 @@ class ClientWorker(Tasks):
     def _refine(self) -> None:
         """The coarse or reduced frame shown, at full resolution and size; given up as soon as
         new input (or a `cancel`) comes: between views, between the slabs of a view's
-        integration and while its steps are read (`chronocl.core.interrupt`), each of which
-        the client hears of in a `progress` message."""
+        integration, while its steps are read (`chronocl.core.interrupt`; the client hears of
+        each in a `progress` message), between its upload's slabs and before its draw."""
         self._refine_at = None
         state = self._shown
         if state is None:
@@ -295,10 +296,10 @@ class ClientWorker(Tasks):
                     if self._given_up() or slot.session is None:
                         return  # newer input: the frame for it comes instead
                     integrate_ms += self.views.refine_slot(slot)
+            cvs = [slot.cv for slot in self.views.slots[: len(state.views)]]
+            self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
         except SupersededError:
             return
-        cvs = [slot.cv for slot in self.views.slots[: len(state.views)]]
-        self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
 
     def _send_frame(
         self, state, rid, cvs, integrate_ms, incremental, t_start, final: bool = False
@@ -313,12 +314,12 @@ class ClientWorker(Tasks):
         w, h = full_w, full_h
         if not final:
             w, h = render_size(state.size, len(cvs), scale, self._draw_budget.pixels())
-        # Any shrink, however small, is redrawn: a view that has settled is always the same
-        # frame (a 4 % smaller final frame differed from the same view drawn again).
+        # Any shrink is redrawn: a settled view is always the same frame (4 % smaller differed).
         reduced = not preview and (w, h) != (full_w, full_h)
         bg = parse_color(state.background)
         t0 = time.perf_counter()
-        panels, t_up, t_draw, t_done = on_gl(self._draw, cvs, state, (w, h), bg)
+        stop = self._given_up if final else None  # a refine's upload and draw are given up too
+        panels, t_up, t_draw, t_done = on_gl(self._draw, cvs, state, (w, h), bg, stop)
         images = [encode(p, JPEG_QUALITY[state.quality]) for p in panels]
         t_enc = time.perf_counter()
         self._frame += 1
@@ -326,8 +327,7 @@ class ClientWorker(Tasks):
         sessions = [
             slot.session for slot in self.views.slots[: len(cvs)] if slot.session is not None
         ]
-        # The level model predicts frames answering input: a final frame's larger draw counts
-        # as the share of it such a frame would draw.
+        # The level model predicts frames answering input: a final frame counts as their share.
         share = min(1.0, self._draw_budget.pixels() / max(1, w * h * len(cvs)))
         self._draw_budget.record(1e3 * (t_done - t_draw), w * h * len(cvs))
         display_ms = 1e3 * ((t_draw - t_up) + share * (t_done - t_draw)) / max(1, len(cvs))

@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from typing import Protocol
 
+from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.data.chronovolume import Chronovolume
@@ -75,6 +76,9 @@ class LatencyModel:
         if self.predict(coarsest, steps) is None:
             return coarsest, "first frame: the coarsest level, measuring this machine"
         return coarsest, f"no level predicted within {self.target_ms:g} ms: the coarsest"
+
+
+READ_AHEAD_CORES = 4  # host threads from which coarse frames read level 0's steps ahead
 
 
 class Pool(Protocol):
@@ -159,7 +163,10 @@ class AutoSession:
         t = time.perf_counter()
         cv = s.show(selection, spec)
         self.model.record_integrate(level, 1e3 * (time.perf_counter() - t), selection.width)
-        if level > 0:  # the refine to come then finds the window's full-resolution steps read
+        # The refine to come finds the window's full-resolution steps read, where the machine
+        # has cores to spare: on 2 cores those reads doubled the longest scrub stall at normal
+        # priority, and at the readers' lower one left the scrub stop as slow (docs/window.md).
+        if level > 0 and host_threads.workers() >= READ_AHEAD_CORES:
             self.pool.read_ahead(selection, spec)
         self.shown, self._last, self._cv = level, (selection, spec), cv
         self.stats = {
