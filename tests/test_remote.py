@@ -287,3 +287,39 @@ def test_omezarr_over_http_in_place(tmp_path):
         assert remote.times == local.times and remote.spacing == local.spacing
         np.testing.assert_array_equal(remote.read(range(3)), data[:, 0])
         np.testing.assert_array_equal(remote.variable("c1").read([2])[0], data[2, 1])
+
+
+def test_the_viewer_shows_remote_stores(served, http, s3):
+    """`chronocl view URL`: the viewer opens HTTP and S3 stores in place (named by the URL's
+    stem, made unique), the same series as the local copy, and serves frames of them."""
+    pytest.importorskip("websockets")
+    from chronocl.viewer.datasets import open_datasets
+
+    from .viewer_helpers import Client, start_server
+
+    (local,) = open_datasets([served / "s.zarr"])
+    remote = [
+        *open_datasets([http.url("s.zarr"), http.url("s.zarr")]),
+        *open_datasets([s3.url], s3.storage_options()),
+    ]
+    assert [d.name for d in remote] == ["s", "s-2", "s"]
+    assert remote[0].path == http.url("s.zarr") and remote[2].path == s3.url
+    for d in remote:
+        same_series(d.series, local.series)
+    server = start_server([http.url("s.zarr")])
+    try:
+        c = Client(server)
+        ds, (_, header, images) = c.open(0)
+        assert ds["name"] == "s" and len(ds["step_mean"]) == SHAPE[0]
+        assert header["views"] and len(images) == 1 and len(images[0]) > 100
+        c.close()
+    finally:
+        server.stop()
+    bad = subprocess.run(
+        [sys.executable, "-m", "chronocl", "view", str(served / "s.zarr"), "--anon"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env_without_aws(),
+    )
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--anon" in bad.stderr

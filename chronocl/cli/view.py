@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from chronocl.cli.options import DeviceOpt, EngineOpt
+from chronocl.cli.options import AnonOpt, DeviceOpt, EngineOpt, StorageOpt
 from chronocl.core.errors import InvalidParameterError
 
 
 def view(
-    stores: Annotated[list[Path], typer.Argument(help="Series store(s) to offer in the viewer.")],
+    stores: Annotated[
+        list[str],
+        typer.Argument(help="Series store(s) to offer: paths, or http(s):// or s3:// URLs."),
+    ],
     host: Annotated[
         str, typer.Option(help="Interface to listen on; other than 127.0.0.1 exposes the data.")
     ] = "127.0.0.1",
@@ -32,6 +34,8 @@ def view(
     max_clients: Annotated[
         int, typer.Option(help="Most browser connections served at once (each has a thread).")
     ] = 32,
+    anon: AnonOpt = False,
+    storage_option: StorageOpt = None,
 ) -> None:
     """Interactive viewer in the browser, rendered here (OpenCL + EGL) and streamed as frames.
 
@@ -44,6 +48,8 @@ def view(
       chronocl view vortex.zarr jet.zarr
 
       chronocl view vortex.zarr --port 8765 --no-browser
+
+      chronocl view s3://open-data/plume.zarr --anon
     """
     from chronocl.viewer import serve
 
@@ -54,6 +60,12 @@ def view(
         raise InvalidParameterError(
             f"the viewer needs {exc.name}; pip install 'starlette' 'uvicorn[standard]'"
         ) from None
+    from chronocl.data.remote import is_url, parse_storage_options
+
+    if (anon or storage_option) and not any(is_url(s) for s in stores):
+        raise InvalidParameterError(
+            "--anon and --storage-option apply to http(s):// and s3:// stores; none was given"
+        )
     serve(
         stores,
         host=host,
@@ -63,4 +75,5 @@ def view(
         device=device,
         memory=memory,
         max_clients=max_clients,
+        storage_options=parse_storage_options(storage_option, anon),
     )

@@ -25,6 +25,8 @@ from chronocl.core.values import normalize
 from chronocl.data.level_sources import AdoptedLevels
 from chronocl.data.probe import TimeCurve, probe
 from chronocl.data.pyramid import level_shapes
+from chronocl.data.remote import storage_options_for
+from chronocl.data.remote_store import is_url
 from chronocl.data.series import TimeSeries, open_series
 
 HIST_BINS = 128
@@ -214,18 +216,27 @@ def find_dataset(datasets: list[Dataset], ref: int | str, path: str | None = Non
     raise UnknownNameError(f"unknown data set {ref!r}; choose one of {names}")
 
 
-def open_datasets(stores: Sequence[str | os.PathLike]) -> list[Dataset]:
-    """Open each store; names are the stores' stems, made unique with a suffix."""
+def open_datasets(
+    stores: Sequence[str | os.PathLike], options: dict | None = None
+) -> list[Dataset]:
+    """Open each store (a path, or an http(s):// or s3:// URL read in place with
+    storage `options`); names are the stores' stems, made unique with a suffix."""
     if not stores:
         raise InvalidParameterError("no store given; name at least one series store to view")
     datasets: list[Dataset] = []
     seen: set[str] = set()
     for store in stores:
-        series = open_series(store)
-        base = Path(store).name.removesuffix(".zarr") or "series"
+        if is_url(store):
+            where = str(store)
+            series = open_series(where, storage_options=storage_options_for(where, options or {}))
+            base = where.rstrip("/").rsplit("/", 1)[-1]
+        else:
+            series = open_series(store)
+            where, base = str(Path(store).resolve()), Path(store).name
+        base = base.removesuffix(".zarr") or "series"
         name, n = base, 2
         while name in seen:
             name, n = f"{base}-{n}", n + 1
         seen.add(name)
-        datasets.append(Dataset(name, series, str(Path(store).resolve())))
+        datasets.append(Dataset(name, series, where))
     return datasets

@@ -109,6 +109,7 @@ class ViewerServer:
         device: str | None = None,
         memory: str | int | None = None,
         max_clients: int = MAX_CLIENTS,
+        storage_options: dict | None = None,
     ) -> None:
         import uvicorn
 
@@ -128,7 +129,9 @@ class ViewerServer:
             max_clients=max_clients,
             token=token,
         )
-        self.datasets = datasets if datasets is not None else open_datasets(stores or [])
+        if datasets is None:
+            datasets = open_datasets(stores or [], storage_options)
+        self.datasets = datasets
         # One budget per client, taken from the memory free when the server starts.
         memory = interactive_memory() if memory is None else memory
         self.token = token or secrets.token_urlsafe(24)
@@ -220,8 +223,10 @@ def serve(
     device: str | None = None,
     memory: str | int | None = None,
     max_clients: int = MAX_CLIENTS,
+    storage_options: dict | None = None,
 ) -> None:
     """Run the viewer: print the URL (with its token), open the browser, serve until Ctrl-C.
+    `stores` are paths or http(s):// / s3:// URLs (read with `storage_options`).
 
     Every argument is checked first; a bad one raises the ChronoclError naming it and the fix.
     """
@@ -235,6 +240,7 @@ def serve(
         device=device,
         memory=memory,
         max_clients=max_clients,
+        storage_options=storage_options,
     )
     warning = server.warn_if_exposed()
     if warning:
