@@ -19,23 +19,14 @@ from chronocl.core.time_tf import TimeTF
 from chronocl.data import synthetic
 from chronocl.engine.device_steps import DeviceBricks, DeviceSteps
 from chronocl.engine.opencl import OpenCLEngine
-from chronocl.integration import inmemory
 from chronocl.integration.inmemory import integrate_bricks, window_job
 from chronocl.integration.interactive.session import Session
 
 from .strategies import examples, specs
-from .test_display_output import assert_display_of
+from .test_display_output import assert_display_of, rgba8_at_any_size  # noqa: F401
 from .test_opencl import assert_same
 
 pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
-
-
-@pytest.fixture(autouse=True, scope="module")
-def rgba8_at_any_size():
-    """The small volumes here get the display format too (the viewer's threshold is 32^3)."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(inmemory, "DISPLAY_VOXELS", 0)
-        yield
 
 
 @pytest.fixture(scope="module")

@@ -29,7 +29,7 @@ from chronocl.data.remote_levels import remote_levels
 from chronocl.data.remote_store import filesystem, is_url, join, parse_storage_options
 from chronocl.data.remote_write import publish, split_url
 from chronocl.data.store_open import open_array
-from chronocl.data.timeseries import TimeSeries
+from chronocl.data.timeseries import TimeSeries, from_stored
 from chronocl.data.writer import VARIABLES
 
 __all__ = [
@@ -46,18 +46,7 @@ def open_remote(url: str, storage_options: Mapping[str, Any] | None = None) -> T
     options = dict(storage_options or {})
     url = url.rstrip("/")
     stored = open_array(url, options)
-    source = stored.source or url
-    if stored.stats is None:  # a bare array: its statistics computed in one dask pass
-        series = TimeSeries.from_array(stored.data, source=source)
-    else:
-        series = TimeSeries(
-            data=stored.data,
-            stats=stored.stats,
-            spacing=stored.spacing,
-            times=stored.times,
-            source=source,
-            meta={**stored.meta, "url": url},
-        )
+    series = from_stored(stored, stored.source or url, {**stored.meta, "url": url})
     series.zarr_array = stored.array  # reads go to zarr directly, through the remote store
     names = series.variables
     own = series.meta.get("variable")

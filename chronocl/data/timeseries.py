@@ -384,15 +384,15 @@ class TimeSeries:
 def open_store(path: str | os.PathLike) -> TimeSeries:
     """Open a chronocl store (zarr v3 or v2), or a bare (T, Z, Y, X) zarr array."""
     stored = open_array(Path(path))
-    if stored.stats is None:  # a bare array: its statistics computed in one dask pass
-        series = TimeSeries.from_array(stored.data, source=stored.source)
-    else:
-        series = TimeSeries(
-            data=stored.data,
-            stats=stored.stats,
-            spacing=stored.spacing,
-            times=stored.times,
-            source=stored.source,
-            meta=stored.meta,
-        )
-    return series.stored_in(stored.path, stored.array)
+    return from_stored(stored).stored_in(stored.path, stored.array)
+
+
+def from_stored(stored, source: str | None = None, meta: dict | None = None) -> TimeSeries:
+    """The series of an opened store (`open_array`'s, local or remote), named `source` with
+    `meta` where given; a bare array's statistics computed in one dask pass."""
+    source = stored.source if source is None else source
+    if stored.stats is None:
+        return TimeSeries.from_array(stored.data, source=source)
+    meta = stored.meta if meta is None else meta
+    spacing, times = stored.spacing, stored.times
+    return TimeSeries(stored.data, stored.stats, spacing, times, source=source, meta=meta)
