@@ -26,6 +26,7 @@ from chronocl.core.host_threads import copy_all
 from chronocl.core.memory import aligned_empty
 from chronocl.core.values import normalize
 from chronocl.data.array_fields import array_fields
+from chronocl.data.chunk_reads import read_rows
 from chronocl.data.integrity import checked_read
 from chronocl.data.level_sources import POOLED, STORED, LevelSource
 from chronocl.data.metadata import SeriesStats
@@ -246,8 +247,7 @@ class TimeSeries:
     def read_rows(self, step: int, z0: int, z1: int, out: np.ndarray) -> None:
         """Read z rows [z0, z1) of one step into `out` (z1 - z0, Y, X)."""
         if self._zarr is not None:
-            sel = (int(step), slice(z0, z1))
-            out[...] = checked_read(self.path, self._zarr, lambda: self._zarr[sel], sel)
+            read_rows(self.path, self._zarr, int(step), z0, z1, out)
         else:
             out[...] = self.step_rows(int(step), z0, z1)
 
