@@ -140,6 +140,21 @@ def test_a_held_slot_is_never_handed_out_again():
     assert slot_brick([a, c]) is not None
 
 
+def test_a_slot_held_only_by_a_reference_cycle_is_taken_again_not_a_new_array():
+    """A step evicted while an object in a reference cycle (a session's state, say) still
+    held its view: its slot comes back for the next step, which stays in the block."""
+    slots = StepSlots((2, 3, 4), np.float32, 1)
+    gc.disable()  # the cycle stays uncollected until `take` asks for it
+    try:
+        cycle = {"view": slots.take()}
+        cycle["self"] = cycle
+        del cycle
+        again = slots.take()
+    finally:
+        gc.enable()
+    assert slots.own_arrays == 0 and slot_brick([again]) is not None
+
+
 def test_steps_that_do_not_share_a_block_are_stacked():
     a = np.zeros((2, 3, 16), np.float32)
     b = np.ones((2, 3, 16), np.float32)

@@ -14,6 +14,7 @@ together. With every slot taken a step gets an array of its own: correct, only n
 
 from __future__ import annotations
 
+import gc
 import heapq
 import threading
 import weakref
@@ -37,6 +38,11 @@ class StepSlots:
     def take(self) -> np.ndarray:
         """A (Z, Y, X) array for one step: a free slot, else an array of its own."""
         with self._lock:
+            if not self._free:
+                # Views of evicted steps caught in reference cycles give their slots back only
+                # when collected: collect before giving a step an array of its own, which
+                # would make every window holding it stack (5 GB copied per 512^3 window).
+                gc.collect()
             if not self._free:
                 self.own_arrays += 1
                 return aligned_empty(self.shape, self.dtype)
