@@ -6,16 +6,20 @@ selected steps each picture shows (`chronocl.render.visible_steps`)."""
 from __future__ import annotations
 
 import json
+import math
+import shutil
 import warnings
 
 import numpy as np
 import pytest
 
-from chronocl import Session, integrate
+from chronocl import Session, integrate, modes
 from chronocl.core.selection import parse_selection
 from chronocl.core.tf import DataTF
-from chronocl.data.series import TimeSeries
+from chronocl.data import synthetic
+from chronocl.data.series import TimeSeries, open_series
 from chronocl.data.simulations import simulate
+from chronocl.integration import fit_range
 from chronocl.integration.inmemory import prepare
 from chronocl.render import Camera, render
 from chronocl.render.default_view import early_side
@@ -59,6 +63,25 @@ def test_fitted_range_is_the_windows_own(plume):
     assert prepare(
         plume, "0:10", spec_args={"data_tf": DataTF(value_range=(0, 2))}
     ).value_range == (0, 2)
+
+
+def test_a_store_too_large_for_any_level_is_fitted_from_its_coarsest_level(tmp_path, monkeypatch):
+    """Where no stored level is as small as the sample, the coarsest is sampled with a
+    stride, never level 0 (a stride through level 0 decodes every chunk of every step)."""
+    path = tmp_path / "p.zarr"
+    steps = np.stack(list(synthetic.steps("vortex", 12, (128, 96, 112)))).astype(np.float32)
+    TimeSeries.from_array(steps, source="p").save(path)  # a stored level: 64x48x56
+    series = open_series(path)
+    assert series.n_levels >= 2
+    coarsest = series.level(series.n_levels - 1)
+    monkeypatch.setattr(fit_range, "SAMPLE_VALUES", 2000)  # smaller than every level
+    assert math.prod(coarsest.volume_shape) > 2000 / 10
+    shutil.rmtree(path / "data" / "c")  # level 0's chunks gone: reading one would fail
+    selection = parse_selection("0:10", series.n_steps)
+    for mode in ("alpha", "max"):
+        got = fit_range.window_range(series, selection, modes.get(mode))
+        assert got == fit_range.window_range(coarsest, selection, modes.get(mode))
+        assert series.vmin <= got[0] < got[1] <= series.vmax
 
 
 def test_min_is_fitted_to_the_minima(plume):

@@ -86,14 +86,17 @@ def _fit(series, selection: Selection, mode) -> tuple[float, float]:
 
 def sample_steps(series, steps: list[int], pool: str = "mean") -> np.ndarray:
     """(n, z, y, x) float32 values of `steps`, about SAMPLE_VALUES voxels in all: a stored
-    coarse level (pooled by `pool`) when there is a small enough one, else every n-th voxel."""
+    coarse level (pooled by `pool`) when there is a small enough one, else every n-th voxel of
+    the coarsest stored level (of level 0 where none is stored)."""
     budget = SAMPLE_VALUES / len(steps)
     source = series
     stored = series.path is not None or getattr(series.level_source, "stored", False)
     if stored:  # stored levels (local or remote) read cheaply; in memory they would pool it all
+        # The first level small enough, else the coarsest: a stride through level 0 would
+        # still decode every chunk of every sampled step (1.5 s for ten 512^3 float32 steps).
         for n in range(1, series.n_levels):
-            if math.prod(series.level(n, pool).volume_shape) <= budget:
-                source = series.level(n, pool)
+            source = series.level(n, pool)
+            if math.prod(source.volume_shape) <= budget:
                 break
     nz, ny, nx = source.volume_shape
     stride = max(1, math.ceil((nz * ny * nx / budget) ** (1 / 3)))
