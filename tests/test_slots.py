@@ -17,12 +17,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import chronocl
+from chronocl.core.budget import resident_bytes
 from chronocl.core.errors import SupersededError
 from chronocl.core.interrupt import interruptible
+from chronocl.core.memory import prefault
 from chronocl.core.selection import Selection
 from chronocl.core.time_tf import TimeTF
 from chronocl.data.bricks import ResidentBricks, SeriesBricks, SlotBrick, slot_brick
-from chronocl.data.slots import StepSlots
+from chronocl.data.slots import StepSlots, _warmer
 from chronocl.engine.in_place import slot_chunks
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.integration.inmemory import integrate_bricks, window_job
@@ -153,6 +155,23 @@ def test_a_slot_held_only_by_a_reference_cycle_is_taken_again_not_a_new_array():
     finally:
         gc.enable()
     assert slots.own_arrays == 0 and slot_brick([again]) is not None
+
+
+@pytest.mark.skipif(resident_bytes() is None, reason="reads /proc/self/statm")
+def test_the_next_free_slots_are_faulted_in_ahead_and_keep_what_they_hold():
+    slots = StepSlots((64, 256, 256), np.float32, 5)  # 16 MB a slot: a memory map
+    step = 64 * 256 * 256 * 4
+    first = slots.take()
+    first[...] = 1.0
+    _warmer().submit(lambda: None).result()  # slots 1 and 2 warmed by the first take
+    before = resident_bytes()
+    second = slots.take()  # slot 1; now slot 3 is warmed
+    _warmer().submit(lambda: None).result()
+    grown = resident_bytes() - before
+    assert 0.9 * step <= grown <= 1.5 * step  # slot 3's pages, not the whole block
+    assert prefault(first) and (first == 1.0).all()  # faulting in changes no data
+    second[...] = 2.0
+    assert (first == 1.0).all() and slots.own_arrays == 0
 
 
 def test_steps_that_do_not_share_a_block_are_stacked():
