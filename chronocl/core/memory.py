@@ -55,6 +55,6 @@ def prefault(a: np.ndarray) -> bool:
             lo = row.ctypes.data - start
             first = lo - lo % mmap.PAGESIZE
             owner.madvise(MADV_POPULATE_WRITE, first, lo + row.nbytes - first)
-    except (OSError, ValueError):  # an older kernel (EINVAL), or out of memory
+    except (OSError, ValueError, AttributeError):  # an older kernel, no madvise, out of memory
         return False
     return True
