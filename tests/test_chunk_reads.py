@@ -1,10 +1,11 @@
 """Direct chunk reads (`chronocl.data.chunk_reads`) against zarr's own read of the same array.
 
-A step's rows read directly equal zarr's read for every layout the direct path takes (bytes,
-zstd or none, with or without crc32c; chunks of any number of rows; contiguous and strided
-destinations, aligned and unaligned row ranges); damage never reads as data: a flipped byte, a
-truncated file and a frame of the wrong size all end in StoreCorruptError naming the chunk,
-and a layout the direct path does not take (sharding, chunked y-x planes) reads through zarr.
+Rows read directly equal zarr's read for every layout the direct path takes (bytes, zstd or
+none, with or without crc32c; chunks of any number of rows; contiguous and strided
+destinations, aligned and unaligned row ranges; one step's rows, and bricks of several steps).
+Damage never reads as data: a flipped byte, a truncated file and a frame of the wrong size all
+end in StoreCorruptError naming the chunk, and a layout the direct path does not take
+(sharding, chunked y-x planes) reads through zarr.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from zarr.codecs import BytesCodec, Crc32cCodec, ZstdCodec
 
 import chronocl
 from chronocl.core.errors import StoreCorruptError
-from chronocl.data.chunk_reads import DirectChunks, read_rows
+from chronocl.data.chunk_reads import DirectChunks, read_rows, read_steps
 from chronocl.data.integrity import CheckedStore
 from chronocl.data.series import write_series
 
@@ -73,6 +74,11 @@ def test_direct_rows_equal_zarrs(tmp_path_factory, shape, rows, codecs, dtype, d
     np.testing.assert_array_equal(out, values[step, z0:z1])
     if strided:  # nothing outside the slot's rows was written
         assert (block[:, 0] == 7).all() and (block[:, 2] == 7).all()
+    # A brick of several steps (the integrations' reads), its chunks decoded side by side.
+    steps = data.draw(st.lists(st.integers(0, shape[0] - 1), min_size=1, max_size=4))
+    brick = np.full((z1 - z0, len(steps), *shape[2:]), 7, dtype)
+    assert read_steps(None, arr, steps, z0, z1, brick)
+    np.testing.assert_array_equal(brick, values[steps, z0:z1].transpose(1, 0, 2, 3))
 
 
 @pytest.fixture
@@ -120,6 +126,8 @@ def test_a_damaged_chunk_is_reported_not_read(store, how):
         series.read_rows(2, 0, 9, out)
     series.read_rows(1, 0, 9, out)  # the other steps still read
     np.testing.assert_array_equal(out, series.zarr_array[1])
+    with pytest.raises(StoreCorruptError, match="c/2/1/0/0"):  # in a brick too
+        series.read_brick([1, 2, 3], 2, 7)
 
 
 def test_a_missing_chunk_is_reported(store):

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import sys
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import google_crc32c
@@ -25,12 +27,14 @@ import numpy as np
 import zarr
 from zarr.storage import LocalStore
 
+from chronocl.core import host_threads
 from chronocl.data.integrity import checked_read
 
 _ZSTD_MAGIC = 0xFD2FB528
-# Larger chunks that land in strided rows go through zarr: a reader keeps one decode buffer.
+# Larger chunks that land in strided rows go through zarr: each decode in flight holds one
+# buffer of a chunk's size.
 SCRATCH_BYTES = 64 * 2**20
-_scratch = threading.local()
+KEEP_BUFFERS = 2  # decode buffers kept between reads (their pages stay faulted in)
 
 
 class DirectChunks:
@@ -72,9 +76,13 @@ class DirectChunks:
             return None
         return cls(Path(store.root) / arr.path, arr, bool(middle), crc)
 
-    def read_chunk(self, step: int, zc: int, out: np.ndarray) -> bool:
-        """Decode chunk (step, zc) into `out` (its first `len(out)` rows); False where zarr
-        must read it (missing, failing a check, or not decoding to exactly its size)."""
+    def read_chunk(self, step: int, zc: int, out: np.ndarray, first: int = 0) -> bool:
+        """Decode chunk (step, zc) and put its rows [first, first + len(out)) in `out`;
+        False where zarr must read it (missing, failing a check, or not decoding to exactly
+        its size, or too large to decode aside)."""
+        whole = first == 0 and out.shape == self.chunk_shape and out.flags.c_contiguous
+        if not whole and self.nbytes > SCRATCH_BYTES:
+            return False
         try:
             data = (self.folder / self.arr.metadata.encode_chunk_key((step, zc, 0, 0))).read_bytes()
         except OSError:
@@ -86,39 +94,72 @@ class DirectChunks:
             ):
                 return False
             body = body[:-4]
-        whole = out.shape == self.chunk_shape and out.flags.c_contiguous
-        if not whole and self.nbytes > SCRATCH_BYTES:
-            return False
-        dest = out if whole else _buffer(self.nbytes)
-        flat = dest.view(np.uint8).reshape(-1)
+        if whole:
+            return self._decode(body, out.view(np.uint8).reshape(-1))
+        with _BUFFERS.held(self.nbytes) as flat:
+            if not self._decode(body, flat):
+                return False
+            out[...] = flat.view(self.dtype).reshape(self.chunk_shape)[first : first + len(out)]
+        return True
+
+    def _decode(self, body: np.ndarray, flat: np.ndarray) -> bool:
         if self._zstd is None:
             if len(body) != self.nbytes:
                 return False
             flat[:] = body
-        else:
-            if _zstd_content_size(body) != self.nbytes:
-                return False
-            try:
-                self._zstd.decode(body, out=flat)
-            except Exception:  # numcodecs raises RuntimeError for a damaged frame
-                return False
-        if not whole:
-            out[...] = flat.view(self.dtype).reshape(self.chunk_shape)[: len(out)]
+            return True
+        if _zstd_content_size(body) != self.nbytes:
+            return False
+        try:
+            self._zstd.decode(body, out=flat)
+        except Exception:  # numcodecs raises RuntimeError for a damaged frame
+            return False
         return True
 
 
 def read_rows(path: Path | None, arr: zarr.Array, step: int, z0: int, z1: int, out: np.ndarray):
-    """Read z rows [z0, z1) of `step` of `arr` into `out` (z1 - z0, Y, X): directly
-    (`DirectChunks`) where the rows are whole chunks, else through zarr."""
+    """Read z rows [z0, z1) of `step` of `arr` into `out` (z1 - z0, Y, X): each chunk
+    directly (`DirectChunks`) where it can be, else through zarr."""
     direct = DirectChunks.of(arr)
-    nz = arr.shape[1]
-    if direct is not None and z0 % direct.rows == 0 and (z1 % direct.rows == 0 or z1 == nz):
-        for c0 in range(z0, z1, direct.rows):
-            rows = out[c0 - z0 : min(z1, c0 + direct.rows) - z0]
-            if not direct.read_chunk(step, c0 // direct.rows, rows):
-                _through_zarr(path, arr, step, c0, c0 + len(rows), rows)
+    if direct is None:
+        _through_zarr(path, arr, step, z0, z1, out)
         return
-    _through_zarr(path, arr, step, z0, z1, out)
+    for part in _parts(direct, step, z0, z1, out):
+        _read_part(path, arr, direct, part)
+
+
+def read_steps(
+    path: Path | None, arr: zarr.Array, steps, z0: int, z1: int, out: np.ndarray
+) -> bool:
+    """Fill the xytz brick `out` (z1 - z0, W, Y, X) with rows [z0, z1) of `steps`, their
+    chunks decoded directly on the host threads side by side; False (nothing read) where
+    `arr` is not laid out for it."""
+    direct = DirectChunks.of(arr)
+    if direct is None:
+        return False
+    parts = [p for i, s in enumerate(steps) for p in _parts(direct, int(s), z0, z1, out[:, i])]
+    if len(parts) == 1 or host_threads.workers() == 1:
+        for part in parts:
+            _read_part(path, arr, direct, part)
+    else:
+        list(host_threads.pool().map(lambda p: _read_part(path, arr, direct, p), parts))
+    return True
+
+
+def _parts(direct: DirectChunks, step: int, z0: int, z1: int, out: np.ndarray) -> list[tuple]:
+    """(step, chunk, first row in it, rows of `out`, first stored row) per chunk of the rows."""
+    rows = direct.rows
+    parts = []
+    for zc in range(z0 // rows, (z1 - 1) // rows + 1):
+        a, b = max(z0, zc * rows), min(z1, (zc + 1) * rows)
+        parts.append((step, zc, a - zc * rows, out[a - z0 : b - z0], a))
+    return parts
+
+
+def _read_part(path, arr, direct: DirectChunks, part: tuple) -> None:
+    step, zc, first, rows, a = part
+    if not direct.read_chunk(step, zc, rows, first):
+        _through_zarr(path, arr, step, a, a + len(rows), rows)
 
 
 def _through_zarr(path, arr, step: int, z0: int, z1: int, out: np.ndarray) -> None:
@@ -126,12 +167,28 @@ def _through_zarr(path, arr, step: int, z0: int, z1: int, out: np.ndarray) -> No
     out[...] = checked_read(path, arr, lambda: arr[sel], sel)
 
 
-def _buffer(nbytes: int) -> np.ndarray:
-    """This thread's decode buffer of `nbytes` (kept, so its pages are touched once)."""
-    buf = getattr(_scratch, "buf", None)
-    if buf is None or buf.nbytes != nbytes:
-        buf = _scratch.buf = np.empty(nbytes, np.uint8)
-    return buf
+class _Buffers:
+    """Decode buffers of one chunk's size, reused: as many exist as decodes run at once (at
+    most the host threads plus the window's readers), and KEEP_BUFFERS stay between reads."""
+
+    def __init__(self) -> None:
+        self._free: list[np.ndarray] = []
+        self._lock = threading.Lock()
+
+    @contextmanager
+    def held(self, nbytes: int) -> Iterator[np.ndarray]:
+        with self._lock:
+            at = next((i for i, b in enumerate(self._free) if b.nbytes == nbytes), None)
+            buf = np.empty(nbytes, np.uint8) if at is None else self._free.pop(at)
+        try:
+            yield buf
+        finally:
+            with self._lock:
+                self._free.append(buf)
+                del self._free[:-KEEP_BUFFERS]
+
+
+_BUFFERS = _Buffers()
 
 
 def _zstd_content_size(frame: np.ndarray) -> int | None:

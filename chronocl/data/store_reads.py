@@ -2,7 +2,8 @@
 
 Steps are read in runs of evenly spaced steps (`step_runs`), one zarr call a run, decoding
 straight into the caller's brick through the damage checks of `chronocl.data.integrity`
-(`read_runs`). The stamp of the array's metadata file tells cheaply whether the store may have
+(`read_runs`), or chunk by chunk on the host threads where `chronocl.data.chunk_reads` decodes
+the store directly. The stamp of the array's metadata file tells cheaply whether the store may have
 changed (`metadata_stamp`); `stored_shape` then reads the shape it has now.
 """
 
@@ -15,6 +16,7 @@ import numpy as np
 import zarr
 from zarr.buffer import default_buffer_prototype
 
+from chronocl.data.chunk_reads import read_steps
 from chronocl.data.integrity import checked_read
 
 
@@ -52,6 +54,8 @@ def read_runs(
     Up to `per_call` evenly spaced steps go in one call: zarr fetches and decodes the chunks of
     one call concurrently, where one call per step would decode them one at a time.
     """
+    if read_steps(path, arr, steps, z0, z1, out):  # a local store's chunks, decoded directly
+        return
     wrap = default_buffer_prototype().nd_buffer.from_numpy_array
     for i0, i1, run in step_runs(steps, per_call):
         # (rows, n, Y, X) of the brick seen as (n, rows, Y, X), the store's order.

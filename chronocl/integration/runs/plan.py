@@ -92,8 +92,10 @@ def slab_bytes(
             touched = read_rows // zc
         else:
             touched = min(1 + math.ceil((read_rows - 1) / zc), math.ceil(nz / zc))
-        # zarr decodes at most async.concurrency chunks of one call at once.
+        # zarr decodes at most async.concurrency chunks of one call at once; a store decoded
+        # directly (`chronocl.data.chunk_reads`), one chunk per host thread.
         in_flight = min(min(w, steps_per_read) * touched, zarr.config.get("async.concurrency"))
+        in_flight = max(in_flight, min(w * touched, host_threads.workers()))
         total += 2 * in_flight * zc * plane * item
     total += read_rows * plane * item
     if engine == "numpy":
