@@ -100,6 +100,31 @@ def test_a_window_over_the_device_budget_is_sent_from_the_host(copying, tmp_path
         assert_same(cv, chronocl.integrate(series, session.window(), spec=session.spec))
 
 
+def test_the_viewer_says_when_a_window_is_not_on_the_device(copying, monkeypatch):
+    """The frame's timings carry the session's reason (`steps_on_host`), which the page's
+    status line shows; None where the steps are on the device."""
+    from chronocl.viewer.datasets import Dataset
+    from chronocl.viewer.view_sessions import Views
+    from chronocl.viewer.view_state import default_state
+
+    series = chronocl.TimeSeries.from_array(
+        np.random.default_rng(4).random((6, 8, 9, 33), dtype=np.float32)
+    )
+    views = Views([Dataset("d", series)], copying, None, "64MB")
+    try:
+        state = default_state(0, series)
+        monkeypatch.setenv("CHRONOCL_DEVICE_MEMORY", "64MB")
+        views.chronovolumes(state)
+        assert views.host_steps_why is None
+        views.release()
+        monkeypatch.setenv("CHRONOCL_DEVICE_MEMORY", "20KB")
+        views = Views([Dataset("d", series)], copying, None, "64MB")
+        views.chronovolumes(state)
+        assert "device memory" in views.host_steps_why
+    finally:
+        views.release()
+
+
 @pytest.mark.parametrize("level", [1, "auto"])
 def test_coarse_levels_and_repooling_keep_their_own_steps_on_the_device(copying, level):
     """A coarse session's slots hold its level's steps; a mode pooling levels differently

@@ -37,6 +37,7 @@ class Views:
         self._dataset = -1
         self._managers: dict[tuple[int, str], WindowManager] = {}
         self.recolouring = Recolouring(device)  # TF edits that only recolour (recolouring.py)
+        self.host_steps_why: str | None = None  # the last frame's steps_on_host
 
     def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed;
@@ -50,7 +51,8 @@ class Views:
         while len(self.slots) < len(state.views):
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
-        self.recolouring.ms = 0.0
+        self.recolouring.ms = self.recolouring.upload_ms = 0.0
+        self.host_steps_why = None
         cvs = []
         for i in range(len(state.views)):
             slot = self.slots[i]
@@ -97,6 +99,8 @@ class Views:
             cv = self.recolouring.view(slot, spec, sel) or s.show(sel, spec)
         slot.cv = cv
         stats = s.stats or {}
+        # A GPU session whose window does not fit the device: its steps go up every time.
+        self.host_steps_why = stats.get("why_not_on_device") or self.host_steps_why
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
 
     def manager(self, level: int, pool: str) -> WindowManager | None:

@@ -324,9 +324,7 @@ class ClientWorker(Tasks):
         t_enc = time.perf_counter()
         self._frame += 1
         self._shown, self._last_rid = state, rid
-        sessions = [
-            slot.session for slot in self.views.slots[: len(cvs)] if slot.session is not None
-        ]
+        sessions = [s.session for s in self.views.slots[: len(cvs)] if s.session is not None]
         # The level model predicts frames answering input: a final frame counts as their share.
         share = min(1.0, self._draw_budget.pixels() / max(1, w * h * len(cvs)))
         self._draw_budget.record(1e3 * (t_done - t_draw), w * h * len(cvs))
@@ -369,11 +367,13 @@ class ClientWorker(Tasks):
                 "integrate_ms": round(integrate_ms, 2),
                 "recolour_ms": round(self.views.recolouring.ms, 2),  # a TF edit's, not integrated
                 "incremental": incremental,
-                "upload_ms": round(1e3 * (t_draw - t_up), 2),
+                # a recolour's texture write (llvmpipe) is made before the draw's uploads
+                "upload_ms": round(1e3 * (t_draw - t_up) + self.views.recolouring.upload_ms, 2),
                 "render_ms": round(1e3 * (t_done - t_draw), 2),
                 "gl_wait_ms": round(1e3 * (t_up - t0), 2),
                 "encode_ms": round(1e3 * (t_enc - t_done), 2),
                 "server_ms": round(1e3 * (t_enc - t_start), 2),
+                "steps_on_host": self.views.host_steps_why,  # None: on the device, or a CPU's
             },
             "sent_at": time.time(),
         }

@@ -382,6 +382,8 @@ function showTimings(h) {
       ? []
       : [`integrate ${t.integrate_ms.toFixed(1)} ms${t.incremental ? ' (incremental)' : ''}`]),
     `upload ${t.upload_ms.toFixed(1)} ms`,
+    // a GPU whose memory cannot hold the window: its steps travel for every integration
+    ...(t.steps_on_host ? [`steps not on the GPU: ${t.steps_on_host}`] : []),
     `render ${t.render_ms.toFixed(1)} ms`,
     `encode ${t.encode_ms.toFixed(1)} ms`,
     `${h.views.length}× ${v.width}×${v.height}${h.reduced ? ' (reduced for speed, sharpening…)' : ''} ${h.format} ${kb.toFixed(0)} KB (${h.quality})`,
