@@ -22,6 +22,7 @@ writes RGBA and t_index per voxel where VTK writes one scalar.
 
     python bench/integrate.py --quick      # 30x128^3 only, numpy on 10x128x128x64; < 2 minutes
     python bench/integrate.py --quick --size 256   # the main case at 30x256^3 (about 5 GB)
+    python bench/integrate.py --quick --size 512 --steps 10   # issue 32's users' window
     python bench/integrate.py              # every Table 1 case
 """
 
@@ -166,13 +167,14 @@ class Runner:
         return LIMITS[limit], gvox
 
 
-def one_core_vs_vtk(size: int, repeats: int) -> float | None:
+def one_core_vs_vtk(size: int, steps: int, repeats: int) -> float | None:
     """chronocl's max over VTK's on one core: the main case raced in a child process pinned to
     one core, with PoCL on one thread and chronocl's host threads at one."""
     if not vtk_available():
         return None
     env = {**os.environ, "POCL_MAX_PTHREAD_COUNT": "1", "CHRONOCL_THREADS": "1"}
-    child = [sys.executable, __file__, "--one-core-child", str(size), "--repeats", str(repeats)]
+    child = [sys.executable, __file__, "--one-core-child", str(size), "--steps", str(steps)]
+    child += ["--repeats", str(repeats)]
     result = subprocess.run(child, capture_output=True, text=True, env=env, check=False)
     if result.returncode != 0:
         raise RuntimeError(result.stderr)
@@ -181,13 +183,13 @@ def one_core_vs_vtk(size: int, repeats: int) -> float | None:
     return record["max_vs_vtk_one_core"]
 
 
-def one_core_child(size: int, repeats: int) -> None:
+def one_core_child(size: int, steps: int, repeats: int) -> None:
     """Race chronocl's max against VTK's on the main case, this process on one core."""
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     run = Runner(repeats)
     assert run.ocl.dc.info.compute_units == 1, "PoCL did not take POCL_MAX_PTHREAD_COUNT=1"
-    case = case_name(f"{size}^3", 30, "float32")
-    brick = make_brick((size,) * 3, 30, "float32")
+    case = case_name(f"{size}^3", steps, "float32")
+    brick = make_brick((size,) * 3, steps, "float32")
     pipeline = make_pipeline(np.ascontiguousarray(np.moveaxis(brick, 1, 0)))
     contenders = {
         (case, "opencl-one-core", "max"): run.integrate_fn(run.ocl, brick, "max"),
@@ -217,18 +219,23 @@ def main() -> None:
     parser.add_argument(
         "--size", type=int, default=128, help="edge of the main case's cube (128: the paper's)"
     )
+    parser.add_argument(
+        "--steps", type=int, default=30, help="steps of the main case's window (30: the paper's)"
+    )
     parser.add_argument("--one-core-child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one_core_child:
-        one_core_child(args.one_core_child, args.repeats)
+        one_core_child(args.one_core_child, args.steps, args.repeats)
         return
     main_label = f"{args.size}^3"
     TABLE1.setdefault(main_label, (args.size,) * 3)
 
     emit(env_record("integrate", {"vtk": vtk_version()}))
     run = Runner(args.repeats)
-    main_case = case_name(main_label, 30, "float32")
-    cases = [(main_label, 30)] if args.quick else [(k, w) for k in TABLE1 for w in (10, 20, 30)]
+    main_case = case_name(main_label, args.steps, "float32")
+    cases = [(main_label, args.steps)]
+    if not args.quick:
+        cases = sorted({*cases, *((k, w) for k in TABLE1 for w in (10, 20, 30))})
     roof: dict[str, float] = {}
     limits: dict[str, str] = {}
     for label, steps in cases:
@@ -279,14 +286,14 @@ def main() -> None:
         else None
     )
 
-    u8 = case_name(main_label, 30, "uint8")
+    u8 = case_name(main_label, args.steps, "uint8")
     summary = {
         "roofline_fraction": {
             m: round(run.results[(main_case, "opencl", m)] / roof[main_case], 3) for m in MODES
         },
         "speedup_vs_numpy": {m: round(v, 1) for m, v in speedup.items()},
         "max_vs_vtk": None if max_vs_vtk is None else round(max_vs_vtk, 2),
-        "max_vs_vtk_one_core": one_core_vs_vtk(args.size, min(args.repeats, 7)),
+        "max_vs_vtk_one_core": one_core_vs_vtk(args.size, args.steps, min(args.repeats, 7)),
         "vtk_note": "chronocl writes RGBA (4 float32) and t_index (int32) per voxel, VTK's "
         "TemporalStatistics one scalar; max_vs_vtk is chronocl on every core against VTK on "
         "one, max_vs_vtk_one_core both pinned to one core (PoCL one thread, CHRONOCL_THREADS=1)",
