@@ -56,7 +56,7 @@ test: lint
 			$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq chromium; \
 		else echo "warning: /usr/bin/chromium missing; the browser tests will be skipped"; fi; \
 	fi
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=30
 
 # The whole suite on CPython 3.13 with the newest dependencies (pip upgrades every one, each run).
 test-newest:

@@ -25,6 +25,8 @@ from chronocl.data.chunk_reads import DirectChunks, read_rows, read_steps
 from chronocl.data.integrity import CheckedStore
 from chronocl.data.series import write_series
 
+from .strategies import examples
+
 CODECS = {
     "zstd+crc": [BytesCodec(), ZstdCodec(level=1), Crc32cCodec()],
     "zstd": [BytesCodec(), ZstdCodec(level=1)],
@@ -50,7 +52,9 @@ def _bare(path: Path, values: np.ndarray, rows: int, codecs: str, **kw) -> zarr.
 
 
 @settings(
-    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+    max_examples=examples(25),
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
 @given(
     shape=st.tuples(st.integers(1, 3), st.integers(1, 13), st.integers(1, 9), st.integers(1, 11)),
