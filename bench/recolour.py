@@ -10,9 +10,12 @@ and time-TF edits (each a value no edit before it had):
   the texture, the raycaster draws it;
 - after: `Session.recolours` says the edit only recolours, `Recolourer.recolour` rewrites the
   texture from the winners (kernels/glsl/recolour.comp), the raycaster draws it ("gl", the GPU
-  path); or `HostRecolour.recolour` writes RGBA8 on the OpenCL device and the viewer's `upload`
-  sends it ("host", the viewer's path on llvmpipe). Preparing the winners (gathered by numpy
-  and by OpenCL, the GL upload) is timed on its own: it happens once per integrated window,
+  path); or `BrickRecolour.sparse` writes RGBA8 on the OpenCL device over the bricks the edit
+  may colour or the array held, and `recolour_upload.show` writes what changed into a texture
+  of its own ("bricks", the viewer's path on llvmpipe; `bricks_recoloured` the share of
+  bricks); or `HostRecolour.recolour` writes every voxel and the viewer's `upload` sends it
+  all ("host", the path before). Preparing the winners (gathered by numpy and by OpenCL, the
+  GL upload, the brick summaries) is timed on its own: it happens once per integrated window,
   at its first edit.
 
 Each edit's recoloured picture is compared with the integrated one (max / 99th percentile
@@ -22,7 +25,7 @@ reuses it), so only the window's resident steps take memory.
 
     python bench/recolour.py [--quick] [--side 512] [--png DIR] [--keep DIR]
 
-Figures are bounded by the same 2-core llvmpipe for both paths (compute shader and raycaster
+Figures are bounded by the same 2-core llvmpipe for every path (compute shader and raycaster
 on the CPU); on a GPU the recolour pass is a few milliseconds (not measured here).
 """
 
@@ -49,7 +52,9 @@ from chronocl.integration.interactive.session import Session
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
 from chronocl.render.recolour import Recolourer
+from chronocl.render.recolour_bricks import BrickRecolour
 from chronocl.render.recolour_host import HostRecolour, gather
+from chronocl.render.recolour_upload import show
 from chronocl.viewer.slots import ViewSlot, upload
 
 TIME_COLOURS = ("warm-cool", "rgb", "lightness", "white")
@@ -101,8 +106,8 @@ def main() -> None:
     ap.add_argument("--keep", type=Path, default=None)
     ap.add_argument(
         "--paths",
-        default="integrate,host,gl",
-        help="which of integrate, host, gl to time (gl holds the winners in GL textures too)",
+        default="integrate,bricks,host,gl",
+        help="which of integrate, bricks, host, gl to time (gl: the winners in GL textures too)",
     )
     args = ap.parse_args()
     edits = 2 if args.quick else args.edits
@@ -133,8 +138,8 @@ def main() -> None:
     won = s.winners(gather)  # the OpenCL one (each voxel reads its winner), as the viewer does
     c = time.perf_counter()
     paths = tuple(args.paths.split(","))
-    if "integrate" not in paths or not set(paths) <= {"integrate", "host", "gl"}:
-        raise SystemExit("--paths: integrate (the reference) and any of host, gl")
+    if "integrate" not in paths or not set(paths) <= {"integrate", "bricks", "host", "gl"}:
+        raise SystemExit("--paths: integrate (the reference) and any of bricks, host, gl")
     rv = rec.upload(won) if "gl" in paths else None
     d = time.perf_counter()
     prepare = {
@@ -142,10 +147,18 @@ def main() -> None:
         "gather_opencl_ms": round(1e3 * (c - b), 1),
         "upload_winners_ms": round(1e3 * (d - c), 1),
     }
-    emit({"path": "recolour", "prepare": prepare})
 
     host = HostRecolour(won)
+    e = time.perf_counter()
+    bricks = BrickRecolour(won) if "bricks" in paths else None
+    prepare["summarise_bricks_ms"] = round(1e3 * (time.perf_counter() - e), 1)
+    emit({"path": "recolour", "prepare": prepare})
+    own = ViewSlot()  # the bricks path's texture: it writes what changed since its last edit
+    if bricks is not None:
+        upload(rc, own, s.current())
+    held = None
     rows: dict[str, list] = {p: [] for p in paths}
+    rewritten: dict[int, float] = {}  # the bricks path's share of bricks recoloured per edit
     for i in range(edits):  # each edit three ways, in a rotating order (a shared machine)
         data_tf, time_tf = edit(i, fitted)
         spec = dataclasses.replace(s.asked, data_tf=data_tf, time_tf=time_tf)
@@ -162,6 +175,15 @@ def main() -> None:
                 rgba = host.recolour(new, "f1", reuse=True)
                 b = time.perf_counter()
                 vol = upload(rc, slot, Chronovolume(rgba, None, cv.metadata))
+            elif path == "bricks":  # PoCL recolours the bricks that may be coloured
+                new, reason = s.recolours(spec)
+                assert reason is None, reason
+                sp = bricks.sparse(new)
+                b = time.perf_counter()
+                vol = own.volume
+                show(rc.ctx, vol, sp, held, series.spacing)
+                held = sp.coloured
+                rewritten[i] = sp.rewritten / sp.coloured.size
             else:  # the compute pass rewrites the texture: nothing uploaded
                 new, reason = s.recolours(spec)
                 assert reason is None, reason
@@ -178,6 +200,8 @@ def main() -> None:
             row = {"path": path, "edit": i, **{k: round(v, 1) for k, v in rows[path][-1].items()}}
             diff = np.abs(pictures[path].astype(int) - pictures["integrate"].astype(int))
             row.update(max_diff=int(diff.max()), p99_diff=float(np.percentile(diff, 99)))
+            if path == "bricks":
+                row["bricks_recoloured"] = round(rewritten[i], 3)
             emit(row)
             if args.png:
                 save(pictures[path], args.png / f"max_edit_{i}_{path}.png")
@@ -197,6 +221,8 @@ def main() -> None:
     if rv is not None:
         rv.release()
     host.release()
+    if bricks is not None:
+        bricks.release()
     s.close()
 
 

@@ -36,7 +36,9 @@ from chronocl.render import brick_grid
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
 from chronocl.render.recolour import Recolourer, available
+from chronocl.render.recolour_bricks import BrickRecolour
 from chronocl.render.recolour_host import HostRecolour, gather
+from chronocl.render.recolour_upload import show
 from chronocl.render.upload import convert, display_format
 
 from .strategies import data_tfs, examples, time_tfs
@@ -65,10 +67,10 @@ def _texture(vol) -> np.ndarray:
     return np.frombuffer(vol.texture.read(), dtype=dtype).reshape(nz, ny, nx, 4)
 
 
-def _same_picture(rc, got_vol, rgba: np.ndarray, spacing=(1.0, 1.0, 1.0)) -> None:
+def _same_picture(rc, got_vol, rgba: np.ndarray, spacing=(1.0, 1.0, 1.0), fmt=None) -> None:
     """`got_vol` (recoloured) draws as the integrated `rgba` does, uploaded in the viewer's
-    format: the render tests' tolerance (max 8, at most 1 % of pixels over 3)."""
-    fmt = display_format(rgba[..., 0].size)
+    format (or `fmt`): the render tests' tolerance (max 8, at most 1 % of pixels over 3)."""
+    fmt = fmt or display_format(rgba[..., 0].size)
     meta = {"spacing": dict(zip("xyz", spacing, strict=True))}
     want_vol = rc.upload(Chronovolume(rgba, None, meta), dtype=fmt)
     data, _ = convert(rgba, fmt)
@@ -141,6 +143,29 @@ def test_recolour_equals_integrating_the_edit(gl, data) -> None:
     finally:
         rv.release()
     _same_on_host(w, new, want)
+    mid = _spec(mode, data.draw(data_tfs()), data.draw(time_tfs()), order, threshold)
+    if why_not(old, mid, UNIT, UNIT, steps, n_steps) is None:
+        _same_by_bricks(rc, w, [old, mid, new], run(old)[0], want)
+
+
+def _same_by_bricks(rc, w, specs, first: np.ndarray, want: np.ndarray) -> None:
+    """llvmpipe's brick-wise recolouring (recolour_bricks.py): edits in turn into one RGBA8
+    texture holding the integrated `first`, each writing what changed since the one before
+    (the last writes into the first's array again); the last equals the integrated `want`."""
+    bricks = BrickRecolour(w)
+    vol = rc.upload(Chronovolume(first, None, {}), dtype="f1")
+    try:
+        held = None
+        for spec in specs:
+            sp = bricks.sparse(spec)
+            show(rc.ctx, vol, sp, held, (1.0, 1.0, 1.0))
+            held = sp.coloured
+        data, _ = convert(want, "f1")
+        np.testing.assert_allclose(sp.rgba, data, rtol=0, atol=1)
+        _same_picture(rc, vol, want, fmt="f1")
+    finally:
+        vol.release()
+        bricks.release()
 
 
 def _same_on_host(w, spec, want: np.ndarray) -> None:

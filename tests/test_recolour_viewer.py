@@ -83,3 +83,54 @@ def test_edit_that_changes_the_hits_integrates(client) -> None:
     cut = {"points": [[0, 1, 1, 1, 0], [0.6, 1, 1, 1, 0], [1, 1, 1, 1, 1]], "value_range": fitted}
     header, _ = _sharp(client, {"data_tf": cut})
     assert header["timings"]["recolour_ms"] == 0 and header["timings"]["integrate_ms"] > 0
+
+
+@pytest.fixture(scope="module")
+def rgba8_server(tmp_path_factory):
+    """A vortex above 32^3 (odd sides), whose texture is RGBA8: llvmpipe's brick-wise path."""
+    from chronocl.data import synthetic
+    from chronocl.data.series import TimeSeries
+
+    path = tmp_path_factory.mktemp("recolour8") / "vortex.zarr"
+    data = np.stack(list(synthetic.steps("vortex", 12, (44, 36, 40))))
+    TimeSeries.from_array(data, source="vortex").save(path)
+    yield from serving([path], gl_current=True)
+
+
+def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
+    """RGBA8 on llvmpipe: successive max-mode edits recolour the bricks they may colour, write
+    only those into the texture (the split counts the write as upload), and each picture
+    equals the one integrating the same window and TFs gives."""
+    from chronocl.render import recolour_bricks
+
+    sparse = []
+    real = recolour_bricks.BrickRecolour.sparse
+
+    def counted(self, spec):
+        sp = real(self, spec)
+        sparse.append(sp.rewritten / sp.coloured.size)
+        return sp
+
+    monkeypatch.setattr(recolour_bricks.BrickRecolour, "sparse", counted)
+    client = Client(rgba8_server)
+    try:
+        ds, _ = client.open(0, size=(96, 96))
+        fitted = ds["state"]["data_tf"]["value_range"]
+        _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+        # opacity from x on: every brick coloured, then few (the others must be cleared)
+        for x in (0.01, 0.75, 0.6):
+            points = [[0, 0.2, 0.5, 1, 0.3 * (x < 0.1)], [x, 1, 0.6, 0, 0], [1, 1, 1, 1, 0.9]]
+            edit = {"data_tf": {"points": points, "value_range": fitted}}
+            header, recoloured = _sharp(client, edit)
+            t = header["timings"]
+            assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0
+            assert t["upload_ms"] > 0
+        assert len(sparse) == 3 and min(sparse) < 0.5, sparse  # transparent bricks left out
+        # the same window and TFs integrated: away and back
+        _sharp(client, {"window": {"t0": 0, "t1": 4}})
+        header, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
+        assert header["timings"]["integrate_ms"] > 0
+        diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
+        assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+    finally:
+        client.close()

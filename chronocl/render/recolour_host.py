@@ -6,9 +6,11 @@ llvmpipe runs compute shaders far slower than PoCL runs the same arithmetic (2 c
 anyway, so there the recolouring runs as an OpenCL kernel over the winners (value and step per
 voxel, `chronocl.integration.interactive.winners.Winners`) into premultiplied RGBA8 or float32,
 the display format, and goes up as an integrated chronovolume does (the viewer's `upload`,
-which finds its occupancy and brick grid). The arithmetic is the GPU path's
-(kernels/glsl/recolour.comp) and the kernels' (`lut_lerp32`). On a CPU device the winners and
-the output are read and written where they lie (host pointers, nothing copied).
+which finds its occupancy and brick grid). The viewer does this for float32 textures (up to
+32^3); RGBA8 ones are recoloured brick by brick (recolour_bricks.py, built on this class).
+The arithmetic is the GPU path's (kernels/glsl/recolour.comp) and the kernels' (`lut_lerp32`).
+On a CPU device the winners and the output are read and written where they lie (host
+pointers, nothing copied).
 """
 
 from __future__ import annotations

@@ -13,7 +13,9 @@ chronovolume (the new spec in its metadata, the window's t_index: the winners ar
 gets its RGBA read back after the frame is sent (`finish`), so probes, saves and framing read
 the recoloured volume without delaying the frame. Where GL is llvmpipe, the OpenCL device
 recolours into RGBA8 on the host (several times faster there than llvmpipe's compute
-shaders: bench/recolour.py) and the texture is written as an integrated frame's is.
+shaders: bench/recolour.py), only the bricks the new TFs or the last ones may colour
+(chronocl/render/recolour_bricks.py), and only those go up into the texture
+(recolour_upload.py): the frame's `upload_ms` counts that write, `recolour_ms` the rest.
 """
 
 from __future__ import annotations
@@ -30,7 +32,9 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour import RecolourVolume, available, recolourer
+from chronocl.render.recolour_bricks import BrickRecolour, Sparse
 from chronocl.render.recolour_host import HostRecolour, gather, software_gl
+from chronocl.render.recolour_upload import show
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.slots import ViewSlot
 
@@ -41,7 +45,10 @@ class Prepared:
     t_index is `t_index` (weakly held: a new integration frees the old one)."""
 
     t_index: weakref.ref
-    volume: RecolourVolume | HostRecolour
+    volume: RecolourVolume | BrickRecolour
+    written: weakref.ref | None = None  # the chronovolume last written into `texture`
+    texture: object | None = None
+    held: np.ndarray | None = None  # the bricks that may be coloured in it
 
     def release(self) -> None:
         self.volume.release()
@@ -53,6 +60,7 @@ class Recolouring:
     def __init__(self, device: str | None = None) -> None:
         self.device = device  # the OpenCL device of recolouring on the host
         self.ms = 0.0  # recolouring time of the last frame's views
+        self.upload_ms = 0.0  # of which writing textures (llvmpipe's brick-wise path)
         self._unread: list[tuple[Chronovolume, object]] = []
 
     def view(self, slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> Chronovolume | None:
@@ -72,7 +80,7 @@ class Recolouring:
         new, reason = full.recolours(spec)  # a reason when it has integrated nothing
         if reason is not None or full.current() is not shown:
             return None
-        t = time.perf_counter()
+        t, uploaded = time.perf_counter(), self.upload_ms
         prepared = slot.recolour
         if not isinstance(prepared, Prepared) or prepared.t_index() is not shown.t_index:
             prepared = self._prepare(slot, full, shown)
@@ -80,7 +88,11 @@ class Recolouring:
                 return None
         fmt = slot.volume.texture.dtype
         meta = {**shown.metadata, "spec": new.to_dict()}
-        if isinstance(prepared.volume, HostRecolour):  # RGBA on the host, uploaded as integrated
+        if isinstance(prepared.volume, BrickRecolour) and fmt == "f1":  # llvmpipe: by bricks
+            sp = prepared.volume.sparse(new)
+            cv = Chronovolume(sp.rgba, shown.t_index, meta)
+            self._show(slot, prepared, sp, shown, cv)
+        elif isinstance(prepared.volume, HostRecolour):  # RGBA on the host, uploaded as integrated
             cv = Chronovolume(prepared.volume.recolour(new, fmt, reuse=True), shown.t_index, meta)
             slot.cv = cv
         else:  # the texture rewritten on the GPU, its RGBA read back by `finish`
@@ -91,19 +103,31 @@ class Recolouring:
             self._unread.append((cv, vol))
         full.adopt(spec, new, cv)
         s.adopt(spec, new, cv)
-        self.ms += 1e3 * (time.perf_counter() - t)
+        self.ms += 1e3 * (time.perf_counter() - t) - (self.upload_ms - uploaded)
         return cv
+
+    def _show(self, slot: ViewSlot, prepared: Prepared, sp: Sparse, shown, cv) -> None:
+        """Write what changed of `sp` into the slot's texture (all of it unless the texture
+        holds the last one written)."""
+        ours = prepared.written is not None and prepared.written() is shown
+        held = prepared.held if ours and prepared.texture is slot.volume.texture else None
+        t = time.perf_counter()
+        on_gl(_write, slot.volume, sp, held, shown.spacing)
+        self.upload_ms += 1e3 * (time.perf_counter() - t)
+        prepared.written, prepared.texture = weakref.ref(cv), slot.volume.texture
+        prepared.held = sp.coloured
+        slot.cv, slot.uploaded = cv, cv
 
     def _prepare(self, slot: ViewSlot, full, shown: Chronovolume) -> Prepared | None:
         """The window's winners where the recolouring runs: on the GPU where GL is one with
-        compute shaders, else (llvmpipe) on the OpenCL device (chronocl/render/recolour_host.py)."""
+        compute shaders, else (llvmpipe) on the OpenCL device (render/recolour_bricks.py)."""
         on_gpu = on_gl(_release_and_pick, slot)
         if on_gpu is None:
             return None
         w = full.winners(functools.partial(gather, device=self.device))
         if w is None:
             return None
-        volume = on_gl(_upload, w) if on_gpu else HostRecolour(w, self.device)
+        volume = on_gl(_upload, w) if on_gpu else BrickRecolour(w, self.device)
         slot.recolour = Prepared(weakref.ref(shown.t_index), volume)
         return slot.recolour
 
@@ -126,6 +150,10 @@ def _release_and_pick(rc, slot: ViewSlot) -> bool | None:
 
 def _upload(rc, w) -> RecolourVolume:
     return recolourer(rc.ctx).upload(w)
+
+
+def _write(rc, vol, sp: Sparse, held, spacing) -> None:
+    show(rc.ctx, vol, sp, held, spacing)
 
 
 def _recolour(rc, rv: RecolourVolume, spec, spacing, fmt: str, volume):

@@ -1,0 +1,339 @@
+"""Recolouring brick by brick on the OpenCL device, and writing only what changed (llvmpipe).
+
+A TF edit in max, min, first_hit or change mode recolours the window's winners (value u* and
+step k* per voxel, `chronocl.integration.interactive.winners.Winners`). Most of a volume is
+empty under the usual TFs (the vortex: 10-16 % of its 8^3 bricks hold any opacity), and a
+voxel's opacity is exactly 0 where the data TF's opacity is 0 at both LUT entries around u*
+or the time TF's opacity is 0 at k*. So, once per window, each brick of the empty-space grid
+(chronocl/render/brick_grid.py's 8^3) gets a summary of its winners: the smallest and largest
+u* and a bit per step k* present (bit 63: step 63 or later). Per edit a brick may be coloured
+only where the data TF has opacity on a LUT segment of [min, max] and the time TF on a step
+present (a sufficient test: the others are 0 for sure, as the kernel computes them).
+
+The recolour kernel then runs over the bricks that may be coloured now or were in the array
+it writes into (the one before last: a viewer shows one while the next is made), in the
+arithmetic of the full pass (`recolour_host.SOURCE`, RGBA8 rounded to nearest even), and a
+second kernel reads back the occupied voxels' box and the brick grid (grown by one voxel, as
+brick_grid.py defines it) over the bricks next to a coloured one: both are then exactly what
+the viewer's upload finds in the whole array. The texture is written only over the bricks
+that may differ from what it holds (coloured before or now), a box of them per z-slab of
+bricks, straight from the array (GL's unpack row length: no copy).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from chronocl.core.memory import aligned_empty
+from chronocl.integration.interactive.winners import Winners, step_table
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.render import brick_grid
+from chronocl.render.recolour_host import HostRecolour
+
+B = brick_grid.BRICK
+RUN_BRICKS = 64  # bricks a work-item recolours at most (a 512-voxel row)
+STEP_BITS = 64  # bits of a brick's step mask; the last stands for every step from 63 on
+SOURCE = r"""
+#define B BRICK
+// The voxel range of brick `b` (x fastest), clamped to the volume.
+#define BRICK_RANGE(b)                                                                    \
+    int bx = (b) % gx, by = ((b) / gx) % gy, bz = (b) / (gx * gy);                         \
+    int x0 = bx * B, y0 = by * B, z0 = bz * B;                                             \
+    int x1 = min(x0 + B, nx), y1 = min(y0 + B, ny), z1 = min(z0 + B, nz);
+
+__kernel void summarise(__global const float *won_u, __global const K_T *won_k,
+                        const uint none_k, const int nx, const int ny, const int nz,
+                        const int gx, const int gy, __global float *umin,
+                        __global float *umax, __global ulong *steps)
+{
+    int b = get_global_id(0);
+    BRICK_RANGE(b)
+    float lo = INFINITY, hi = -INFINITY;
+    ulong mask = 0;
+    for (int z = z0; z < z1; ++z)
+        for (int y = y0; y < y1; ++y) {
+            size_t row = ((size_t)z * ny + y) * nx;
+            for (int x = x0; x < x1; ++x) {
+                uint k = won_k[row + x];
+                if (k == none_k) continue;
+                float u = won_u[row + x];
+                lo = fmin(lo, u);
+                hi = fmax(hi, u);
+                mask |= 1UL << min(k, 63u);
+            }
+        }
+    umin[b] = lo;
+    umax[b] = hi;
+    steps[b] = mask;
+}
+
+// Per run of listed bricks (consecutive along x, `runs`: where each starts in `list`): their
+// voxels recoloured, row by row along x, and what the grid and the occupied box need of each:
+// in `peaks` (27 a brick) the largest opacity byte over each of its parts [cz][cy][cx], a
+// class per axis (0: the low face's voxels, 1: all, 2: the high face's), in `box` the box of
+// its voxels whose byte is > 0 (x, y, z lows, then highs; -1: none).
+__kernel void recolour(__global const float *won_u, __global const K_T *won_k,
+                       __global const float4 *lut, const int lut_size,
+                       __global const float4 *table, const uint none_k,
+                       __global uchar4 *out, __global const int *list,
+                       __global const int *runs, const int nx, const int ny, const int nz,
+                       const int gx, const int gy, __global uchar *peaks, __global int *box)
+{
+    int p0 = runs[get_global_id(0)], p1 = runs[get_global_id(0) + 1];
+    BRICK_RANGE(list[p0])
+    for (int p = p0; p < p1; ++p)
+        for (int j = 0; j < 27; ++j) {
+            peaks[27 * p + j] = 0;
+            if (j < 6) box[6 * p + j] = j < 3 ? INT_MAX : -1;
+        }
+    for (int z = z0; z < z1; ++z)
+        for (int y = y0; y < y1; ++y) {
+            size_t row = ((size_t)z * ny + y) * nx;
+            int xe = min(x0 + (p1 - p0) * B, nx);
+            // the whole run's row in one loop (several times faster than brick by brick:
+            // the compiler vectorises it), then its bricks' opacities from the cache
+            for (int x = x0; x < xe; ++x) {
+                size_t i = row + x;
+                uint k = won_k[i];
+                float4 rgba = (float4)(0.0f);
+                if (k != none_k) {
+                    float v = won_u[i] * (float)(lut_size - 1);
+                    int i0 = min((int)v, lut_size - 2);
+                    float f = v - (float)i0;
+                    float4 d = lut[i0] * (1.0f - f) + lut[i0 + 1] * f;
+                    float4 t = table[k];
+                    float a = clamp(d.w * t.w, 0.0f, 1.0f);
+                    rgba = (float4)(a * (d.xyz * t.xyz), a);
+                }
+                // round to nearest even and clamp: convert_uchar4_sat_rte's result, twice
+                // as fast on PoCL
+                out[i] = convert_uchar4(clamp(rint(rgba * 255.0f), 0.0f, 255.0f));
+            }
+            for (int p = p0; p < p1; ++p) {
+                int xs = x0 + (p - p0) * B, xb = min(xs + B, nx);
+                uint rowmax = 0, first = out[row + xs].w, last = out[row + xb - 1].w;
+#ifdef __ENDIAN_LITTLE__
+                // the largest uint32 has the largest opacity (its top byte): vector loads
+                __global const uint *word = (__global const uint *)out + row;
+                for (int x = xs; x < xb; ++x)
+                    rowmax = max(rowmax, word[x]);
+                rowmax >>= 24;
+#else
+                for (int x = xs; x < xb; ++x)
+                    rowmax = max(rowmax, (uint)out[row + x].w);
+#endif
+                int lox = xb, hix = -1;
+                for (int x = xs; rowmax > 0 && x < xb; ++x)
+                    if (out[row + x].w > 0) {
+                        lox = min(lox, x);
+                        hix = x;
+                    }
+                // the row is in class 1 of y and z, and in 0 or 2 on a face
+                uint part[3] = {first, rowmax, last};
+                for (int cz = 0; cz < 3; ++cz) {
+                    if ((cz == 0 && z != z0) || (cz == 2 && z != z1 - 1)) continue;
+                    for (int cy = 0; cy < 3; ++cy) {
+                        if ((cy == 0 && y != y0) || (cy == 2 && y != y1 - 1)) continue;
+                        __global uchar *s = peaks + 27 * p + 9 * cz + 3 * cy;
+                        for (int cx = 0; cx < 3; ++cx) s[cx] = max((uint)s[cx], part[cx]);
+                    }
+                }
+                if (rowmax > 0) {
+                    __global int *c = box + 6 * p;
+                    c[0] = min(c[0], lox); c[3] = max(c[3], hix);
+                    c[1] = min(c[1], y); c[4] = max(c[4], y);
+                    c[2] = min(c[2], z); c[5] = max(c[5], z);
+                }
+            }
+        }
+}
+"""
+
+
+@dataclass
+class Sparse:
+    """One brick-wise recolour: the RGBA8 array (Z, Y, X, 4), the bricks that may be coloured
+    (`coloured`, (Z, Y, X)/B bool), those rewritten, the brick grid and the occupied box."""
+
+    rgba: np.ndarray
+    coloured: np.ndarray
+    rewritten: int  # bricks recoloured
+    bricks: np.ndarray  # uint8 grid, as brick_grid.from_rgba(rgba) gives it
+    bounds: np.ndarray  # int32 (lo x, y, z, hi x, y, z) of voxels with opacity > 0; hi -1: none
+
+
+class BrickRecolour(HostRecolour):
+    """A window's winners on the OpenCL device with their brick summaries, recoloured into
+    RGBA8 brick by brick (`sparse`); `recolour` (the whole volume, any format) as before."""
+
+    def __init__(self, w: Winners, device: str | None = None) -> None:
+        import pyopencl as cl
+
+        super().__init__(w, device)
+        nz, ny, nx = w.u.shape
+        self.dims = (nx, ny, nz)
+        self.grid = brick_grid.grid_shape((nz, ny, nx))
+        n = int(np.prod(self.grid))
+        self.umin, self.umax = np.empty(n, np.float32), np.empty(n, np.float32)
+        self.steps = np.empty(n, np.uint64)
+        # the two arrays written in turn, with the bricks that may be coloured in each: zeroed
+        # here, so that no edit pays for first touching their pages (512^3: 0.3-1 s)
+        none = np.zeros(self.grid, bool)
+        self._held = [(aligned_zeros((*w.u.shape, 4)), none) for _ in range(2)]
+        program = self._program()
+        mf, ctx = cl.mem_flags, self.dc.context
+        with self.dc.lock:
+            outs = [cl.Buffer(ctx, mf.WRITE_ONLY, a.nbytes) for a in self._summary()]
+            kern = cl.Kernel(program, "summarise")
+            kern.set_args(
+                self.u, self.k, np.uint32(w.none), *self._shape_args(), *outs
+            )  # fmt: skip
+            cl.enqueue_nd_range_kernel(self.dc.queue, kern, (n,), None)
+            for a, buf in zip(self._summary(), outs, strict=True):
+                cl.enqueue_copy(self.dc.queue, a, buf)
+            self.dc.queue.finish()
+
+    def _summary(self) -> tuple[np.ndarray, ...]:
+        return self.umin, self.umax, self.steps
+
+    def _shape_args(self) -> list:
+        _, gy, gx = self.grid
+        return [np.int32(v) for v in (*self.dims, gx, gy)]
+
+    def _program(self):
+        import pyopencl as cl
+
+        from chronocl.render import recolour_host
+
+        k_t = "uchar" if self._k.dtype == np.uint8 else "ushort"
+        key = (id(self.dc.context), "bricks", k_t)
+        with recolour_host._lock:
+            if key not in recolour_host._programs:
+                opts = [f"-DK_T={k_t}", f"-DBRICK={B}"]
+                recolour_host._programs[key] = cl.Program(self.dc.context, SOURCE).build(opts)
+            return recolour_host._programs[key]
+
+    def coloured(self, spec: IntegrationSpec) -> np.ndarray:
+        """(Z, Y, X)/B bool: the bricks whose voxels may have opacity > 0 under `spec`."""
+        lut = np.asarray(spec.data_tf.lut, dtype=np.float32)
+        table = step_table(spec, self.w.steps, self.w.n_steps)
+        n = lut.shape[0]
+        # segment i (entries i, i + 1) colours a value whose i0 is i, if either has opacity
+        segment = (lut[:-1, 3] != 0) | (lut[1:, 3] != 0)
+        prefix = np.concatenate([[0], np.cumsum(segment)])
+        held = self.umax >= self.umin  # a brick with any winner
+        scale = np.float32(n - 1)
+        lo = np.nan_to_num(self.umin * scale, posinf=0, neginf=0).astype(np.int64) - 1
+        hi = np.nan_to_num(self.umax * scale, posinf=0, neginf=0).astype(np.int64) + 1
+        lo, hi = np.clip(lo, 0, n - 2), np.clip(hi, 0, n - 2)  # a segment of margin each side
+        data = prefix[hi + 1] > prefix[lo]
+        alpha = table[:, 3] != 0
+        bits = np.uint64(0)
+        for k in np.flatnonzero(alpha[: STEP_BITS - 1]):
+            bits |= np.uint64(1) << np.uint64(k)
+        if alpha[STEP_BITS - 1 :].any():
+            bits |= np.uint64(1) << np.uint64(STEP_BITS - 1)
+        steps = (self.steps & bits) != 0
+        return (held & data & steps).reshape(self.grid)
+
+    def sparse(self, spec: IntegrationSpec) -> Sparse:
+        """Premultiplied RGBA8 (Z, Y, X, 4) of the winners under `spec`, written into the
+        array before last (`HostRecolour.recolour`'s `reuse`) over the bricks coloured now or
+        in it; with the grid and occupied box of the result."""
+        import pyopencl as cl
+
+        w = self.w
+        coloured = self.coloured(spec)
+        out, before = self._held.pop(0)
+        redo = (coloured | before).ravel()
+        self._held.append((out, coloured))
+        todo = np.flatnonzero(redo).astype(np.int32)
+        peaks = np.zeros((max(len(todo), 1), 27), np.uint8)
+        box = np.zeros((max(len(todo), 1), 6), np.int32)
+        lut = np.ascontiguousarray(spec.data_tf.lut, dtype=np.float32)
+        table = step_table(spec, w.steps, w.n_steps)
+        mf, ctx, q = cl.mem_flags, self.dc.context, self.dc.queue
+        ro = mf.READ_ONLY | mf.COPY_HOST_PTR
+        program = self._program()
+        with self.dc.lock:
+            out_buf = cl.Buffer(ctx, mf.READ_WRITE | mf.USE_HOST_PTR, hostbuf=out)
+            if len(todo):
+                kern = cl.Kernel(program, "recolour")
+                runs = _runs(todo, self.grid[2])
+                held = [cl.Buffer(ctx, ro, hostbuf=a) for a in (lut, table, todo, runs)]
+                held += [cl.Buffer(ctx, mf.WRITE_ONLY, a.nbytes) for a in (peaks, box)]
+                kern.set_args(
+                    self.u, self.k, held[0], np.int32(lut.shape[0]), held[1],
+                    np.uint32(w.none), out_buf, *held[2:4], *self._shape_args(), *held[4:],
+                )  # fmt: skip
+                cl.enqueue_nd_range_kernel(q, kern, (len(runs) - 1,), None)
+                cl.enqueue_copy(q, peaks, held[4])
+                cl.enqueue_copy(q, box, held[5])
+            if self.dc.is_cpu:  # the host pointer holds the result once mapped back
+                mapped, _ = cl.enqueue_map_buffer(
+                    q, out_buf, cl.map_flags.READ, 0, out.shape, out.dtype
+                )
+                mapped.base.release(q)
+            else:
+                cl.enqueue_copy(q, out, out_buf)
+            q.finish()
+        # bricks not rewritten hold nothing: not coloured now, nor in the array before
+        stats = np.zeros((*self.grid, 27), np.uint8)
+        stats.reshape(-1, 27)[todo] = peaks[: len(todo)]
+        bounds = np.array([1 << 30] * 3 + [-1] * 3, dtype=np.int32)
+        filled = box[: len(todo), 3] >= 0
+        if len(todo) and filled.any():
+            bounds[:3] = box[: len(todo)][filled, :3].min(axis=0)
+            bounds[3:] = box[: len(todo)][filled, 3:].max(axis=0)
+        grid = grown_grid(stats)
+        return Sparse(out, coloured, len(todo), grid, bounds)
+
+    def release(self) -> None:
+        super().release()
+        self._held = []
+
+
+def aligned_zeros(shape) -> np.ndarray:
+    """Zeroed uint8 of `shape`, 64-byte aligned (PoCL writes it in place), its pages touched."""
+    out = aligned_empty(shape, np.uint8)
+    out[...] = 0
+    return out
+
+
+def grown_grid(stats: np.ndarray) -> np.ndarray:
+    """The brick grid (brick_grid.py: the largest opacity of each brick grown by one voxel)
+    from per brick (Z, Y, X, 27) the largest opacity of its parts [cz][cy][cx] (per axis 0:
+    the low face, 1: all, 2: the high face): the neighbour at offset d lends the part facing
+    the brick (its high face where d < 0, all where d = 0, its low face where d > 0)."""
+    parts = stats.reshape(*stats.shape[:3], 3, 3, 3)
+    grid = parts[..., 1, 1, 1].copy()
+    gz, gy, gx = grid.shape
+    for d in itertools.product((-1, 0, 1), repeat=3):
+        if d == (0, 0, 0):
+            continue
+        dz, dy, dx = (1 - s for s in d)  # the class lent: 2 for -1, 1 for 0, 0 for +1
+        lent = parts[..., dz, dy, dx]
+        sizes = zip(d, (gz, gy, gx), strict=True)
+        src, dst = zip(*[(_part(s, n), _part(-s, n)) for s, n in sizes], strict=True)
+        np.maximum(grid[dst], lent[src], out=grid[dst])
+    return grid
+
+
+def _runs(todo: np.ndarray, gx: int) -> np.ndarray:
+    """Where the runs of `todo` (ascending brick indices, x fastest) start, and its length:
+    bricks consecutive along x in one row of bricks, at most RUN_BRICKS a run."""
+    n = len(todo)
+    start = np.ones(n, bool)
+    start[1:] = (todo[1:] != todo[:-1] + 1) | (todo[1:] % gx == 0)
+    first = np.flatnonzero(start)
+    at = np.arange(n) - first[np.cumsum(start) - 1]  # place in its run
+    start |= at % RUN_BRICKS == 0
+    return np.append(np.flatnonzero(start), n).astype(np.int32)
+
+
+def _part(shift: int, n: int) -> slice:
+    """The indices i of an axis of n whose i - shift is inside it too."""
+    return slice(max(shift, 0), n + min(shift, 0))
