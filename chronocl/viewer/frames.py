@@ -45,10 +45,12 @@ class DrawBudget:
         old = self.ms_per_pixel
         self.ms_per_pixel = rate if old is None else 0.5 * old + 0.5 * rate
 
-    def pixels(self) -> int:
+    def pixels(self, target_ms: float | None = None) -> int:
+        """Pixels drawn in `target_ms` (default: the budget's own target)."""
         if self.ms_per_pixel is None:
             return self.cap
-        return int(min(self.cap, max(self.floor, self.target_ms / self.ms_per_pixel)))
+        target = self.target_ms if target_ms is None else target_ms
+        return int(min(self.cap, max(self.floor, target / self.ms_per_pixel)))
 
 
 def render_size(

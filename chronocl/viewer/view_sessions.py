@@ -103,6 +103,10 @@ class Views:
         self.host_steps_why = stats.get("why_not_on_device") or self.host_steps_why
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
 
+    def sharp(self, n: int) -> bool:
+        """Whether the first `n` views show full resolution (no coarser level to refine)."""
+        return all(s.session is not None and not s.session.shown_level for s in self.slots[:n])
+
     def manager(self, level: int, pool: str) -> WindowManager | None:
         """The window manager of `level` and `pool` the views share, if one was made."""
         return self._managers.get((level, pool))
@@ -113,9 +117,10 @@ class Views:
             if self.slots[i].session is not None:
                 self.refine_slot(self.slots[i])
 
-    @staticmethod
-    def refine_slot(slot: ViewSlot) -> float:
-        """The slot's chronovolume at full resolution if it was coarse; the ms it took."""
+    def refine_slot(self, slot: ViewSlot) -> float:
+        """The slot's chronovolume at full resolution if it was coarse; the ms it took. A
+        refine recolours nothing: its frame must not repeat the last frame's recolour times."""
+        self.recolouring.ms = self.recolouring.upload_ms = 0.0
         with INTEGRATE_LOCK:
             cv = slot.session.refine()  # type: ignore[union-attr]
         if cv is None:
