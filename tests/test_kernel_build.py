@@ -1,7 +1,8 @@
 """Kernel builds are silent: every kernel file builds without a warning with the options the
 engine uses, on a cold cache, and a CLI run prints nothing of the compiler's.
 
-The options are those of OpenCLEngine.accumulate / _elementwise and bench/integrate.py.
+The options are those of OpenCLEngine.accumulate / _elementwise and bench/integrate.py, and
+every one of the host recolouring's (chronocl/render/recolour_host.py, recolour_bricks.py).
 Options a file never mentions cannot change its preprocessed source, so they are held
 fixed; of the rest, a set of combinations holding every pair of values (all-pairs) is
 built, in the test process with pyopencl's CompilerWarning an error.
@@ -28,34 +29,15 @@ from chronocl.engine import opencl, program
 from chronocl.engine.opencl import DEVICE_TYPES, OpenCLEngine
 from chronocl.modes.base import KernelInput
 from chronocl.modes.spec import IntegrationSpec
+from chronocl.render.recolour_bricks import bricks_defines
+from chronocl.render.recolour_host import CL_TYPES, gather_defines, recolour_defines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-INTEGRATION_KEYS = {
-    "DATA_T",
-    "DATA_V",
-    "VEC",
-    "KEY_RAW",
-    "IDX_T",
-    "CHANGE_BYTES",
-    "QUANT",
-    "LUT_N",
-    "CONST_COLOR",
-    "TF_SEGS",
-    "SEG_ALPHA",
-    "ENHANCE",
-    "EARLY_EXIT",
-    "SKIP_EMPTY",
-    "IS_MIN",
-    "NORM_TIME",
-    "RAW_PARTIAL",
-    "TIME_ORDER",
-    "ALIGNED",
-    "ORDER_FORWARD",
-    "ORDER_BACKWARD",
-    "TIME_TABLE",
-    "SLOTS",
-    "RGBA8",
-}
+INTEGRATION_KEYS = set(
+    "DATA_T DATA_V VEC KEY_RAW IDX_T CHANGE_BYTES QUANT LUT_N CONST_COLOR TF_SEGS SEG_ALPHA "
+    "ENHANCE EARLY_EXIT SKIP_EMPTY IS_MIN NORM_TIME RAW_PARTIAL TIME_ORDER ALIGNED "
+    "ORDER_FORWARD ORDER_BACKWARD TIME_TABLE SLOTS RGBA8".split()
+)
 STEP_ORDERS = ("table", "forward", "backward")  # order[i], or the steps in turn / reversed
 BOOLS = (False, True)
 
@@ -229,6 +211,11 @@ def builds(full: bool) -> list[tuple[str, list[str], bool]]:
     ]
     out += [(f, list(program.build_options(d)), True) for f, d in sliding]
     out.append(("probe.cl", [], False))  # the device check (chronocl.engine.device)
+    for k in (np.uint8, np.uint16):  # the host recolouring's, without common.h
+        host = [("recolour_bricks.cl", bricks_defines(k))]
+        host += [("recolour.cl", recolour_defines(k, rgba8)) for rgba8 in BOOLS]
+        host += [("recolour_gather.cl", gather_defines(k, t, c)) for t in CL_TYPES for c in BOOLS]
+        out += [(f, list(program.build_options(d)), False) for f, d in host]
     return out
 
 

@@ -12,8 +12,8 @@ present (a sufficient test: the others are 0 for sure, as the kernel computes th
 
 The recolour kernel then runs over the bricks that may be coloured now or were in the array
 it writes into (the one before last: a viewer shows one while the next is made), in the
-arithmetic of the full pass (`recolour_host.SOURCE`, RGBA8 rounded to nearest even), and a
-second kernel reads back the occupied voxels' box and the brick grid (grown by one voxel, as
+arithmetic of the full pass (kernels/opencl/recolour.cl, RGBA8 rounded to nearest even), and
+a second kernel reads back the occupied voxels' box and the brick grid (grown by one voxel, as
 brick_grid.py defines it) over the bricks next to a coloured one: both are then exactly what
 the viewer's upload finds in the whole array. The texture is written only over the bricks
 that may differ from what it holds (coloured before or now), a box of them per z-slab of
@@ -31,126 +31,16 @@ from chronocl.core.memory import aligned_empty
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
-from chronocl.render.recolour_host import HostRecolour
+from chronocl.render.recolour_host import HostRecolour, index_type
 
 B = brick_grid.BRICK
 RUN_BRICKS = 64  # bricks a work-item recolours at most (a 512-voxel row)
 STEP_BITS = 64  # bits of a brick's step mask; the last stands for every step from 63 on
-SOURCE = r"""
-#define B BRICK
-// The voxel range of brick `b` (x fastest), clamped to the volume.
-#define BRICK_RANGE(b)                                                                    \
-    int bx = (b) % gx, by = ((b) / gx) % gy, bz = (b) / (gx * gy);                         \
-    int x0 = bx * B, y0 = by * B, z0 = bz * B;                                             \
-    int x1 = min(x0 + B, nx), y1 = min(y0 + B, ny), z1 = min(z0 + B, nz);
 
-__kernel void summarise(__global const float *won_u, __global const K_T *won_k,
-                        const uint none_k, const int nx, const int ny, const int nz,
-                        const int gx, const int gy, __global float *umin,
-                        __global float *umax, __global ulong *steps)
-{
-    int b = get_global_id(0);
-    BRICK_RANGE(b)
-    float lo = INFINITY, hi = -INFINITY;
-    ulong mask = 0;
-    for (int z = z0; z < z1; ++z)
-        for (int y = y0; y < y1; ++y) {
-            size_t row = ((size_t)z * ny + y) * nx;
-            for (int x = x0; x < x1; ++x) {
-                uint k = won_k[row + x];
-                if (k == none_k) continue;
-                float u = won_u[row + x];
-                lo = fmin(lo, u);
-                hi = fmax(hi, u);
-                mask |= 1UL << min(k, 63u);
-            }
-        }
-    umin[b] = lo;
-    umax[b] = hi;
-    steps[b] = mask;
-}
 
-// Per run of listed bricks (consecutive along x, `runs`: where each starts in `list`): their
-// voxels recoloured, row by row along x, and what the grid and the occupied box need of each:
-// in `peaks` (27 a brick) the largest opacity byte over each of its parts [cz][cy][cx], a
-// class per axis (0: the low face's voxels, 1: all, 2: the high face's), in `box` the box of
-// its voxels whose byte is > 0 (x, y, z lows, then highs; -1: none).
-__kernel void recolour(__global const float *won_u, __global const K_T *won_k,
-                       __global const float4 *lut, const int lut_size,
-                       __global const float4 *table, const uint none_k,
-                       __global uchar4 *out, __global const int *list,
-                       __global const int *runs, const int nx, const int ny, const int nz,
-                       const int gx, const int gy, __global uchar *peaks, __global int *box)
-{
-    int p0 = runs[get_global_id(0)], p1 = runs[get_global_id(0) + 1];
-    BRICK_RANGE(list[p0])
-    for (int p = p0; p < p1; ++p)
-        for (int j = 0; j < 27; ++j) {
-            peaks[27 * p + j] = 0;
-            if (j < 6) box[6 * p + j] = j < 3 ? INT_MAX : -1;
-        }
-    for (int z = z0; z < z1; ++z)
-        for (int y = y0; y < y1; ++y) {
-            size_t row = ((size_t)z * ny + y) * nx;
-            int xe = min(x0 + (p1 - p0) * B, nx);
-            // the whole run's row in one loop (several times faster than brick by brick:
-            // the compiler vectorises it), then its bricks' opacities from the cache
-            for (int x = x0; x < xe; ++x) {
-                size_t i = row + x;
-                uint k = won_k[i];
-                float4 rgba = (float4)(0.0f);
-                if (k != none_k) {
-                    float v = won_u[i] * (float)(lut_size - 1);
-                    int i0 = min((int)v, lut_size - 2);
-                    float f = v - (float)i0;
-                    float4 d = lut[i0] * (1.0f - f) + lut[i0 + 1] * f;
-                    float4 t = table[k];
-                    float a = clamp(d.w * t.w, 0.0f, 1.0f);
-                    rgba = (float4)(a * (d.xyz * t.xyz), a);
-                }
-                // round to nearest even and clamp: convert_uchar4_sat_rte's result, twice
-                // as fast on PoCL
-                out[i] = convert_uchar4(clamp(rint(rgba * 255.0f), 0.0f, 255.0f));
-            }
-            for (int p = p0; p < p1; ++p) {
-                int xs = x0 + (p - p0) * B, xb = min(xs + B, nx);
-                uint rowmax = 0, first = out[row + xs].w, last = out[row + xb - 1].w;
-#ifdef __ENDIAN_LITTLE__
-                // the largest uint32 has the largest opacity (its top byte): vector loads
-                __global const uint *word = (__global const uint *)out + row;
-                for (int x = xs; x < xb; ++x)
-                    rowmax = max(rowmax, word[x]);
-                rowmax >>= 24;
-#else
-                for (int x = xs; x < xb; ++x)
-                    rowmax = max(rowmax, (uint)out[row + x].w);
-#endif
-                int lox = xb, hix = -1;
-                for (int x = xs; rowmax > 0 && x < xb; ++x)
-                    if (out[row + x].w > 0) {
-                        lox = min(lox, x);
-                        hix = x;
-                    }
-                // the row is in class 1 of y and z, and in 0 or 2 on a face
-                uint part[3] = {first, rowmax, last};
-                for (int cz = 0; cz < 3; ++cz) {
-                    if ((cz == 0 && z != z0) || (cz == 2 && z != z1 - 1)) continue;
-                    for (int cy = 0; cy < 3; ++cy) {
-                        if ((cy == 0 && y != y0) || (cy == 2 && y != y1 - 1)) continue;
-                        __global uchar *s = peaks + 27 * p + 9 * cz + 3 * cy;
-                        for (int cx = 0; cx < 3; ++cx) s[cx] = max((uint)s[cx], part[cx]);
-                    }
-                }
-                if (rowmax > 0) {
-                    __global int *c = box + 6 * p;
-                    c[0] = min(c[0], lox); c[3] = max(c[3], hix);
-                    c[1] = min(c[1], y); c[4] = max(c[4], y);
-                    c[2] = min(c[2], z); c[5] = max(c[5], z);
-                }
-            }
-        }
-}
-"""
+def bricks_defines(k_dtype) -> dict[str, object]:
+    """The -D options of kernels/opencl/recolour_bricks.cl (summaries, recolour, peaks)."""
+    return {"K_T": index_type(k_dtype), "BRICK": B}
 
 
 @dataclass
@@ -204,17 +94,9 @@ class BrickRecolour(HostRecolour):
         return [np.int32(v) for v in (*self.dims, gx, gy)]
 
     def _program(self):
-        import pyopencl as cl
+        from chronocl.engine.program import build
 
-        from chronocl.render import recolour_host
-
-        k_t = "uchar" if self._k.dtype == np.uint8 else "ushort"
-        key = (id(self.dc.context), "bricks", k_t)
-        with recolour_host._lock:
-            if key not in recolour_host._programs:
-                opts = [f"-DK_T={k_t}", f"-DBRICK={B}"]
-                recolour_host._programs[key] = cl.Program(self.dc.context, SOURCE).build(opts)
-            return recolour_host._programs[key]
+        return build(self.dc, "recolour_bricks.cl", bricks_defines(self._k.dtype), common=False)
 
     def coloured(self, spec: IntegrationSpec) -> np.ndarray:
         """(Z, Y, X)/B bool: the bricks whose voxels may have opacity > 0 under `spec`."""

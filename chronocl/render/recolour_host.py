@@ -3,19 +3,18 @@ without integrating, where the GL renderer is a software one (llvmpipe).
 
 llvmpipe runs compute shaders far slower than PoCL runs the same arithmetic (2 cores: about
 15 M voxels/s against several hundred; bench/recolour.py), and its textures live in host memory
-anyway, so there the recolouring runs as an OpenCL kernel over the winners (value and step per
-voxel, `chronocl.integration.interactive.winners.Winners`) into premultiplied RGBA8 or float32,
-the display format, and goes up as an integrated chronovolume does (the viewer's `upload`,
-which finds its occupancy and brick grid). The viewer does this for float32 textures (up to
-32^3); RGBA8 ones are recoloured brick by brick (recolour_bricks.py, built on this class).
-The arithmetic is the GPU path's (kernels/glsl/recolour.comp) and the kernels' (`lut_lerp32`).
-On a CPU device the winners and the output are read and written where they lie (host
-pointers, nothing copied).
+anyway, so there the recolouring runs as an OpenCL kernel (kernels/opencl/recolour.cl) over
+the winners (value and step per voxel, `chronocl.integration.interactive.winners.Winners`)
+into premultiplied RGBA8 or float32, the display format, and goes up as an integrated
+chronovolume does (the viewer's `upload`, which finds its occupancy and brick grid). The
+viewer does this for float32 textures (up to 32^3); RGBA8 ones are recoloured brick by brick
+(recolour_bricks.py, built on this class). The arithmetic is the GPU path's
+(kernels/glsl/recolour.comp) and the kernels' (`lut_lerp32`). On a CPU device the winners and
+the output are read and written where they lie (host pointers, nothing copied). The kernels
+are built through chronocl.engine.program (cached per device and options), without common.h.
 """
 
 from __future__ import annotations
-
-import threading
 
 import numpy as np
 
@@ -23,109 +22,7 @@ from chronocl.core.memory import ALIGN, aligned_empty, is_aligned
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 
-SOURCE = r"""
-__kernel void recolour(__global const float *won_u, __global const K_T *won_k,
-                       __global const float4 *lut, const int lut_size,
-                       __global const float4 *table, const uint none_k,
-                       __global OUT_T *out, const ulong n)
-{
-    // a run of RUN voxels per work-item: PoCL's per-item cost and the LUT gathers (which
-    // keep it from vectorising across items) would otherwise dominate
-    size_t start = get_global_id(0) * RUN;
-    size_t end = min(start + RUN, (size_t)n);
-    for (size_t i = start; i < end; ++i) {
-        uint k = won_k[i];
-        float4 rgba = (float4)(0.0f);
-        if (k != none_k) {
-            float x = won_u[i] * (float)(lut_size - 1);
-            int i0 = min((int)x, lut_size - 2);
-            float f = x - (float)i0;
-            float4 d = lut[i0] * (1.0f - f) + lut[i0 + 1] * f;
-            float4 t = table[k];
-            float a = clamp(d.w * t.w, 0.0f, 1.0f);
-            rgba = (float4)(a * (d.xyz * t.xyz), a);
-        }
-#ifdef RGBA8
-        out[i] = convert_uchar4_sat_rte(rgba * 255.0f);
-#else
-        out[i] = rgba;
-#endif
-    }
-}
-"""
 RUN = 1024  # voxels per work-item of the recolour kernel
-GATHER = r"""
-// The winners' step index (into the window; none: none_k) from t_index (the selected step, -1:
-// none) through `table` (step + 1 -> index), then their value u: the window's steps go in
-// chunks of up to 8 (p1..p8 the chunk's steps, p0 the step before the first, which change
-// reads), normalised as chronocl.core.values does (change: the clipped difference, scaled).
-__kernel void window_index(__global const int *t_index, __global const K_T *table,
-                           __global K_T *won_k)
-{
-    size_t i = get_global_id(0);
-    won_k[i] = table[t_index[i] + 1];
-}
-
-// The window's steps as views of one block (the window manager's slots: any strides, each
-// step at its element offset `offs[k]`): each voxel reads its winner where it lies.
-__kernel void gather_block(__global const K_T *won_k, __global float *won_u,
-                           __global const V_T *block, __global const long *offs,
-                           const long sz, const long sy, const long sx, const long nx,
-                           const long ny, const uint none_k, const float lo, const float hi,
-                           const float scale)
-{
-    size_t i = get_global_id(0);
-    uint k = won_k[i];
-    if (k == none_k) return;
-    long x = i % nx, y = (i / nx) % ny, z = i / (nx * ny);
-    long at = z * sz + y * sy + x * sx;
-    float v = (float)block[offs[k] + at];
-#ifdef CHANGE
-    float b = (float)block[offs[k - 1] + at];
-    won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
-#else
-    won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
-#endif
-}
-
-__kernel void gather(__global const K_T *won_k, __global float *won_u,
-                     const uint base, const uint count,
-                     __global const V_T *p0, __global const V_T *p1, __global const V_T *p2,
-                     __global const V_T *p3, __global const V_T *p4, __global const V_T *p5,
-                     __global const V_T *p6, __global const V_T *p7, __global const V_T *p8,
-                     const float lo, const float hi, const float scale)
-{
-    size_t i = get_global_id(0);
-    uint k = won_k[i];
-    if (k < base || k >= base + count) return;
-    float v, b = 0.0f;
-    switch (k - base) {
-        case 0: v = (float)p1[i]; break;
-        case 1: v = (float)p2[i]; break;
-        case 2: v = (float)p3[i]; break;
-        case 3: v = (float)p4[i]; break;
-        case 4: v = (float)p5[i]; break;
-        case 5: v = (float)p6[i]; break;
-        case 6: v = (float)p7[i]; break;
-        default: v = (float)p8[i]; break;
-    }
-#ifdef CHANGE
-    switch (k - base) {
-        case 0: b = (float)p0[i]; break;
-        case 1: b = (float)p1[i]; break;
-        case 2: b = (float)p2[i]; break;
-        case 3: b = (float)p3[i]; break;
-        case 4: b = (float)p4[i]; break;
-        case 5: b = (float)p5[i]; break;
-        case 6: b = (float)p6[i]; break;
-        default: b = (float)p7[i]; break;
-    }
-    won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
-#else
-    won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
-#endif
-}
-"""
 CHUNK = 8  # steps per gather pass (the kernel's p1..p8)
 CL_TYPES = {  # numpy's name -> OpenCL's, for the raw values the gather reads
     "float32": "float",
@@ -137,8 +34,21 @@ CL_TYPES = {  # numpy's name -> OpenCL's, for the raw values the gather reads
 }
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "lavapipe")
 
-_programs: dict[tuple, object] = {}  # built programs and kernels, per context and options
-_lock = threading.Lock()
+
+def index_type(k_dtype) -> str:
+    """OpenCL's type of the winners' step indices (uint8 or uint16)."""
+    return "uchar" if np.dtype(k_dtype) == np.uint8 else "ushort"
+
+
+def recolour_defines(k_dtype, rgba8: bool) -> dict[str, object]:
+    """The -D options of kernels/opencl/recolour.cl: RGBA8 (uchar4) or float4 out."""
+    out_t = "uchar4" if rgba8 else "float4"
+    return {"K_T": index_type(k_dtype), "OUT_T": out_t, "RUN": RUN, "RGBA8": rgba8}
+
+
+def gather_defines(k_dtype, dtype, change: bool) -> dict[str, object]:
+    """The -D options of kernels/opencl/recolour_gather.cl for raw values of `dtype`."""
+    return {"K_T": index_type(k_dtype), "V_T": CL_TYPES[np.dtype(dtype).name], "CHANGE": change}
 
 
 def software_gl(ctx) -> bool:
@@ -157,12 +67,14 @@ def gather(
     device: str | None = None,
 ) -> Winners:
     """`chronocl.integration.interactive.winners.winners` on the OpenCL device: each voxel reads
-    its winning step's value alone (the numpy gather reads every step), in place on a CPU
-    device. Falls back to the numpy gather for data types the kernel does not take."""
+    its winning step's value alone (the numpy gather reads every step;
+    kernels/opencl/recolour_gather.cl), in place on a CPU device. Falls back to the numpy
+    gather for data types the kernel does not take."""
     import pyopencl as cl
 
     from chronocl.core import values as _values
     from chronocl.engine.device import get_context
+    from chronocl.engine.program import build
     from chronocl.integration.interactive.winners import winners
 
     dtype = np.dtype(arrays[steps[0]].dtype)
@@ -188,20 +100,11 @@ def gather(
         return cl.Buffer(ctx, flags | host, hostbuf=aligned(a))
 
     change = spec.mode == "change"
-    opts = [
-        f"-DK_T={'uchar' if k_dtype == np.uint8 else 'ushort'}",
-        f"-DV_T={CL_TYPES[dtype.name]}",
-    ]
-    if change:
-        opts.append("-DCHANGE")
+    program = build(dc, "recolour_gather.cl", gather_defines(k_dtype, dtype, change), common=False)
     lo, hi = _values.clip_bounds(*value_range)
     vmin, scale = _values.normalization(*value_range)
     n = t_index.size
     with dc.lock:
-        key = (id(ctx), "gather", *opts)
-        if key not in _programs:
-            _programs[key] = cl.Program(ctx, GATHER).build(options=opts)
-        program = _programs[key]
         ti_buf, table_buf = (
             buf(t_index.astype(np.int32, copy=False), mf.READ_ONLY),
             buf(table, mf.READ_ONLY),
@@ -300,22 +203,10 @@ class HostRecolour:
         self.k = cl.Buffer(self.dc.context, flags, hostbuf=self._k)
 
     def _kernel(self, rgba8: bool):
-        import pyopencl as cl
+        from chronocl.engine.program import kernel
 
-        k_t = "uchar" if self._k.dtype == np.uint8 else "ushort"
-        key = (id(self.dc.context), k_t, rgba8)
-        with _lock:
-            if key not in _programs:
-                opts = [
-                    f"-DK_T={k_t}",
-                    "-DOUT_T=" + ("uchar4" if rgba8 else "float4"),
-                    f"-DRUN={RUN}",
-                ]
-                if rgba8:
-                    opts.append("-DRGBA8")
-                program = cl.Program(self.dc.context, SOURCE).build(options=opts)
-                _programs[key] = cl.Kernel(program, "recolour")
-            return _programs[key]
+        defines = recolour_defines(self._k.dtype, rgba8)
+        return kernel(self.dc, "recolour.cl", "recolour", defines, common=False)
 
     def recolour(self, spec: IntegrationSpec, fmt: str = "f1", reuse: bool = False) -> np.ndarray:
         """Premultiplied RGBA (Z, Y, X, 4) of the winners under `spec`: uint8 for "f1"

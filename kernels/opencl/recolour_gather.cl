@@ -1,0 +1,75 @@
+/* The winners of a window gathered on the OpenCL device (chronocl/render/recolour_host.py,
+ * gather): each voxel's step index from the chronovolume's t_index and its value read from
+ * that step alone. Built alone (no common.h) with K_T (the step index type), V_T (the raw
+ * values' type) and, in change mode, CHANGE. */
+
+// The winners' step index (into the window; none: none_k) from t_index (the selected step, -1:
+// none) through `table` (step + 1 -> index), then their value u: the window's steps go in
+// chunks of up to 8 (p1..p8 the chunk's steps, p0 the step before the first, which change
+// reads), normalised as chronocl.core.values does (change: the clipped difference, scaled).
+__kernel void window_index(__global const int *t_index, __global const K_T *table,
+                           __global K_T *won_k)
+{
+    size_t i = get_global_id(0);
+    won_k[i] = table[t_index[i] + 1];
+}
+
+// The window's steps as views of one block (the window manager's slots: any strides, each
+// step at its element offset `offs[k]`): each voxel reads its winner where it lies.
+__kernel void gather_block(__global const K_T *won_k, __global float *won_u,
+                           __global const V_T *block, __global const long *offs,
+                           const long sz, const long sy, const long sx, const long nx,
+                           const long ny, const uint none_k, const float lo, const float hi,
+                           const float scale)
+{
+    size_t i = get_global_id(0);
+    uint k = won_k[i];
+    if (k == none_k) return;
+    long x = i % nx, y = (i / nx) % ny, z = i / (nx * ny);
+    long at = z * sz + y * sy + x * sx;
+    float v = (float)block[offs[k] + at];
+#ifdef CHANGE
+    float b = (float)block[offs[k - 1] + at];
+    won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
+#else
+    won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
+#endif
+}
+
+__kernel void gather(__global const K_T *won_k, __global float *won_u,
+                     const uint base, const uint count,
+                     __global const V_T *p0, __global const V_T *p1, __global const V_T *p2,
+                     __global const V_T *p3, __global const V_T *p4, __global const V_T *p5,
+                     __global const V_T *p6, __global const V_T *p7, __global const V_T *p8,
+                     const float lo, const float hi, const float scale)
+{
+    size_t i = get_global_id(0);
+    uint k = won_k[i];
+    if (k < base || k >= base + count) return;
+    float v, b = 0.0f;
+    switch (k - base) {
+        case 0: v = (float)p1[i]; break;
+        case 1: v = (float)p2[i]; break;
+        case 2: v = (float)p3[i]; break;
+        case 3: v = (float)p4[i]; break;
+        case 4: v = (float)p5[i]; break;
+        case 5: v = (float)p6[i]; break;
+        case 6: v = (float)p7[i]; break;
+        default: v = (float)p8[i]; break;
+    }
+#ifdef CHANGE
+    switch (k - base) {
+        case 0: b = (float)p0[i]; break;
+        case 1: b = (float)p1[i]; break;
+        case 2: b = (float)p2[i]; break;
+        case 3: b = (float)p3[i]; break;
+        case 4: b = (float)p4[i]; break;
+        case 5: b = (float)p5[i]; break;
+        case 6: b = (float)p6[i]; break;
+        default: b = (float)p7[i]; break;
+    }
+    won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
+#else
+    won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
+#endif
+}
