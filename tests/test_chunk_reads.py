@@ -153,3 +153,12 @@ def test_other_layouts_read_through_zarr(tmp_path, kw):
     out = np.empty((8, 6, 5), np.float32)
     read_rows(None, arr, 1, 0, 8, out)
     np.testing.assert_array_equal(out, values[1])
+
+
+def test_rows_of_another_dtype_are_converted_not_reinterpreted(tmp_path):
+    values = np.arange(2 * 4 * 3 * 5, dtype=np.uint16).reshape(2, 4, 3, 5) * 7
+    arr = _bare(tmp_path / "a.zarr", values, 2, "zstd+crc")
+    for dtype in (np.float32, np.float64, np.int32):
+        out = np.empty((2, 3, 5), dtype)  # one whole chunk's rows
+        read_rows(None, arr, 1, 2, 4, out)
+        np.testing.assert_array_equal(out, values[1, 2:4].astype(dtype))

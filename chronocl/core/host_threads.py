@@ -28,6 +28,7 @@ _held: list[ThreadPoolExecutor] = []
 
 
 THREADS_ENV = "CHRONOCL_THREADS"
+THREAD_PREFIX = "chronocl-host"  # the pool's thread names
 MAX_FORCED = 256  # more is a typo
 
 
@@ -48,7 +49,7 @@ def pool() -> ThreadPoolExecutor:
     """The process's host-thread pool."""
     with _lock:
         if not _held:
-            _held.append(ThreadPoolExecutor(workers(), thread_name_prefix="chronocl-host"))
+            _held.append(ThreadPoolExecutor(workers(), thread_name_prefix=THREAD_PREFIX))
         return _held[0]
 
 

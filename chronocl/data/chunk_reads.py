@@ -6,7 +6,8 @@ of them. At 512³ float32 that made a step cost about three times its decode (0.
 0.1 s here). For the layouts chronocl's writer and zarr write by default (bytes, then zstd or
 nothing, then optionally crc32c; no sharding; a chunk holding whole y-x planes of one step) a
 chunk's file is read, its checksum checked and its frame decoded here, into the destination
-where it is contiguous and else into a buffer each thread keeps.
+where it is contiguous and else into a buffer of a small process-wide pool (KEEP_BUFFERS stay
+between reads).
 
 Anything else goes through zarr, and so does any chunk that is missing, fails its checksum or
 does not decode to exactly its size: `checked_read` then reports the damage by its key, or
@@ -80,7 +81,8 @@ class DirectChunks:
         """Decode chunk (step, zc) and put its rows [first, first + len(out)) in `out`;
         False where zarr must read it (missing, failing a check, or not decoding to exactly
         its size, or too large to decode aside)."""
-        whole = first == 0 and out.shape == self.chunk_shape and out.flags.c_contiguous
+        whole = out.dtype == self.dtype and out.shape == self.chunk_shape and first == 0
+        whole = whole and out.flags.c_contiguous
         if not whole and self.nbytes > SCRATCH_BYTES:
             return False
         try:
@@ -138,7 +140,9 @@ def read_steps(
     if direct is None:
         return False
     parts = [p for i, s in enumerate(steps) for p in _parts(direct, int(s), z0, z1, out[:, i])]
-    if len(parts) == 1 or host_threads.workers() == 1:
+    # On a host thread itself (a task of the pool), waiting on the pool could deadlock.
+    nested = threading.current_thread().name.startswith(host_threads.THREAD_PREFIX)
+    if len(parts) == 1 or host_threads.workers() == 1 or nested:
         for part in parts:
             _read_part(path, arr, direct, part)
     else:

@@ -24,6 +24,7 @@ import gc
 import heapq
 import os
 import threading
+import time
 import weakref
 from concurrent.futures import ThreadPoolExecutor
 
@@ -33,6 +34,7 @@ from chronocl.core.memory import aligned_empty, prefault
 
 WARM_SPARES = 2
 WARM_NICE = 10  # the pre-faulting thread's nice value: it takes idle cores only
+COLLECT_EVERY_S = 5.0
 
 
 class StepSlots:
@@ -46,14 +48,19 @@ class StepSlots:
         self._lock = threading.RLock()
         self.own_arrays = 0  # steps that found no free slot
         self._warm: set[int] = set()  # slots handed out or faulted in once
+        self._collected = -COLLECT_EVERY_S  # when `take` last ran the garbage collector
 
-    def take(self) -> np.ndarray:
-        """A (Z, Y, X) array for one step: a free slot, else an array of its own."""
+    def take(self, spares: int = WARM_SPARES) -> np.ndarray:
+        """A (Z, Y, X) array for one step: a free slot, else an array of its own. At most
+        `spares` of the next free slots are warmed (the caller's budget may hold fewer)."""
         with self._lock:
-            if not self._free:
+            now = time.monotonic()
+            if not self._free and now - self._collected > COLLECT_EVERY_S:
                 # Views of evicted steps caught in reference cycles give their slots back only
                 # when collected: collect before giving a step an array of its own, which
                 # would make every window holding it stack (5 GB copied per 512^3 window).
+                # A full collection takes 30-130 ms in a viewer: at most once in a while.
+                self._collected = now
                 gc.collect()
             if not self._free:
                 self.own_arrays += 1
@@ -64,7 +71,7 @@ class StepSlots:
             i = heapq.heappop(self._free)
             view = self._block[:, i]
             self._warm.add(i)
-            spares = heapq.nsmallest(WARM_SPARES, self._free)  # the next slots taken
+            spares = heapq.nsmallest(min(spares, WARM_SPARES), self._free)  # taken next
             cold = [self._block[:, j] for j in spares if j not in self._warm]
             self._warm.update(j for j in spares)
         weakref.finalize(view, self._give_back, i)

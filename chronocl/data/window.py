@@ -244,7 +244,9 @@ class WindowManager:
 
     def _start(self, step: int) -> None:
         """Reserve the step's memory and submit its read (locked)."""
-        load = _Load(step, self.slots.take())
+        # Slots warmed ahead stay within the budget: the steps held and under way, this one.
+        room = self.capacity - len(self._cache) - len(self._loads) - 1
+        load = _Load(step, self.slots.take(spares=max(0, room)))
         self._loads[step] = load
         load.future = self._pool.submit(self._read, load)
 

@@ -79,6 +79,7 @@ class Views:
     def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
         s = slot.session
         if s is not None and slot.cv is not None and s.asked == spec and s.selection == sel:
+            self.host_steps_why = (s.stats or {}).get("why_not_on_device") or self.host_steps_why
             return slot.cv, 0.0, False
         if s is None or (s.asked != spec and s.selection != sel):
             if s is not None:
