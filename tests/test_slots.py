@@ -252,3 +252,23 @@ def test_a_long_scrub_keeps_every_window_in_one_block():
             s.slide(1)
             assert slot_brick(list(s._arrays.values())) is not None
         assert s.manager.slots.own_arrays == 0
+
+
+def test_a_window_integrated_anew_takes_the_slots_of_the_steps_that_left():
+    """A budget of one step more than the window, windows jumping by 3 and integrated anew
+    (relative time positions cannot slide): the session lets go of the leaving steps before
+    the entering ones are read, so they take their slots and every window stays in place."""
+    rng = np.random.default_rng(5)
+    data = rng.random((30, 4, 8, 32), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    step = data[0].nbytes
+    engine = Counting()
+    with Session(series, mode="max", engine=engine, memory=11 * step, prefetch=0) as s:
+        s.set_window(0, 10)
+        for t0 in range(3, 19, 3):
+            before = engine.in_place
+            cv = s.set_window(t0, t0 + 10)
+            assert engine.in_place > before  # read where the steps lie
+            assert_same(cv, chronocl.integrate(series, s.window(), spec=s.spec))
+        assert s.stats["why_not_incremental"] is not None
+        assert s.manager.slots.own_arrays == 0

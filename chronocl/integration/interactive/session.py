@@ -245,6 +245,8 @@ class Session:
         if self._owns_manager:
             self.manager.budget = self.budget - (0 if reason else state) - keep * window
         direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
+        if not (reason is None and self._slider and self._slider.can_move_to(selection)):
+            self._let_go(selection)
         arrays = dict(
             zip(selection.steps, self.manager.get(selection.steps, direction), strict=True)
         )
@@ -295,6 +297,16 @@ class Session:
             need, budget = human(window + state), human(self.budget)
             reason = f"window and sliding state need {need} > budget {budget}"
         return reason, keep, state
+
+    def _let_go(self, selection: Selection) -> None:
+        """Drop the steps that leave a window integrated anew before the entering ones are
+        read, so that their slots take them: held, they left entering steps arrays outside
+        the slots' block, and each window holding one was stacked (5 GB copied at 512^3)."""
+        wanted = set(selection.steps)
+        self._arrays = {s: a for s, a in self._arrays.items() if s in wanted}
+        self._bricks.arrays = self._arrays
+        self._bricks.forget()
+        self._slider = None
 
     def _stream(self, selection: Selection, window: int, t: float) -> Chronovolume:
         """A window larger than the budget: integrated z-slab by z-slab from the store, each
