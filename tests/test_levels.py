@@ -145,6 +145,19 @@ def test_latency_model_picks_the_finest_level_within_target():
     assert model.pick(10)[0] == 2
 
 
+def test_latency_model_counts_the_steps_a_level_must_read_first():
+    """A level whose window is not resident pays for reading it: a scrub at a coarse level
+    does not jump to a finer one whose steps it would first read."""
+    model = LatencyModel([8000, 1000, 125], target_ms=100)
+    model.record_integrate(2, ms=1.0, steps=10)
+    model.record_display(2, ms=5.0)
+    model.record_read(2, seconds=0.0025)  # 2.5 ms a step of 125 voxels: 0.02 ms a voxel
+    assert model.predict(1, 10, missing=0) == pytest.approx(48.0)
+    assert model.predict(1, 10, missing=10) == pytest.approx(48.0 + 10 * 0.02 * 1000)
+    assert model.pick(10, lambda level: 0)[0] == 1  # its steps resident: within the target
+    assert model.pick(10, lambda level: 10 if level < 2 else 1)[0] == 2  # read first: not
+
+
 @pytest.mark.parametrize(
     ("level", "text"),
     [(3, "level 3 is out of range: vortex has levels 0..2"), ("fine", "must be an integer")],

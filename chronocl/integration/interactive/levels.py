@@ -12,6 +12,7 @@ then brings the same window and spec to full resolution when the caller is idle.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 from chronocl.core import host_threads
@@ -42,6 +43,7 @@ class LatencyModel:
         self.target_ms = float(target_ms)
         self.rate: dict[int, float] = {}  # level -> ms per voxel-step of integration
         self.display: dict[int, float] = {}  # level -> ms of upload + render
+        self.reads: dict[int, float] = {}  # level -> ms per voxel of reading one step
 
     def record_integrate(self, level: int, ms: float, steps: int) -> None:
         self._blend(self.rate, level, ms / max(1, self.voxels[level] * steps))
@@ -49,13 +51,20 @@ class LatencyModel:
     def record_display(self, level: int, ms: float) -> None:
         self._blend(self.display, level, ms)
 
+    def record_read(self, level: int, seconds: float | None) -> None:
+        """A step's read time at `level` (the window manager's running average)."""
+        if seconds:
+            self._blend(self.reads, level, 1e3 * seconds / self.voxels[level])
+
     @staticmethod
     def _blend(table: dict[int, float], level: int, value: float) -> None:
         old = table.get(level)
         table[level] = value if old is None else (1 - SMOOTHING) * old + SMOOTHING * value
 
-    def predict(self, level: int, steps: int) -> float | None:
-        """Predicted ms for `level` (None: nothing measured yet)."""
+    def predict(self, level: int, steps: int, missing: int = 0) -> float | None:
+        """Predicted ms for `level` (None: nothing measured yet), `missing` of the window's
+        steps to be read first (a level not shown lately has none of them resident: a scrub
+        at 64^3 that tried 256^3 waited 0.7 s for ten of its steps)."""
         if not self.rate:
             return None
         finest = min(self.rate)
@@ -63,13 +72,16 @@ class LatencyModel:
         if self.display:
             near = min(self.display, key=lambda m: abs(m - level))
             ms += self.display[near] * self.voxels[level] / self.voxels[near]
+        if missing and self.reads:
+            read = max(self.reads[min(self.reads)], self.reads.get(level, 0.0))
+            ms += missing * read * self.voxels[level]
         return ms
 
-    def pick(self, steps: int) -> tuple[int, str]:
-        """The level to draw next and why."""
+    def pick(self, steps: int, missing: Callable[[int], int] = lambda level: 0) -> tuple[int, str]:
+        """The level to draw next and why; `missing(level)`: the steps it would read."""
         coarsest = len(self.voxels) - 1
         for level in range(coarsest + 1):
-            ms = self.predict(level, steps)
+            ms = self.predict(level, steps, missing(level))
             if ms is not None and ms <= self.target_ms:
                 finer = "" if level == 0 else "; finer levels predicted over it"
                 return level, f"level {level} predicted at {ms:.0f} ms, within the target{finer}"
@@ -155,14 +167,24 @@ class AutoSession:
         fixes it, so every level is normalised by level 0's range."""
         self.asked, spec = fixed(self.base, self.asked, self.spec, spec, selection)
         self.spec, self.selection = spec, selection
-        level, self.why = self.model.pick(selection.width)
+        level, self.why = self.model.pick(selection.width, lambda n: self._missing(n, selection))
         return self._at(level, selection, spec)
+
+    def _missing(self, level: int, selection: Selection) -> int:
+        """The steps of `selection` not resident at `level` (all, where it has no session)."""
+        held = getattr(self.pool, "sessions", {}).get((level, self.spec.integration.pool))
+        if held is None:
+            return selection.width
+        resident = set(held.manager.resident())
+        return sum(1 for t in selection.steps if t not in resident)
 
     def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
         s = self.pool.session(level, spec)
         t = time.perf_counter()
         cv = s.show(selection, spec)
         self.model.record_integrate(level, 1e3 * (time.perf_counter() - t), selection.width)
+        manager = getattr(s, "manager", None)
+        self.model.record_read(level, None if manager is None else manager.scrub.read_s)
         # The refine to come finds the window's full-resolution steps read, where the machine
         # has cores to spare: on 2 cores those reads doubled the longest scrub stall at normal
         # priority, and at the readers' lower one left the scrub stop as slow (docs/window.md).
