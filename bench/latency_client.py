@@ -108,12 +108,14 @@ class Client:
         ms_full = ms + 1e3 * (self.sent[rid] - t_open)
         return {"first_ms": 1e3 * (first - t_open), "full_ms": ms_full, "header": header}
 
-    def slide(self, n_steps: int) -> dict:
-        """A one-step slide of the window, turning at either end of the series."""
+    def slide(self, n_steps: int, quality: str = "preview") -> dict:
+        """A one-step slide of the window, turning at either end of the series: a drag's
+        (the page's timeline sends "preview" while dragging, "full" when it is let go)."""
         if not 0 <= self.t0 + self.step <= n_steps - WINDOW:
             self.step = -self.step
         self.t0 += self.step
-        return {"type": "update", "window": {"t0": self.t0, "t1": self.t0 + WINDOW, "stride": 1}}
+        window = {"t0": self.t0, "t1": self.t0 + WINDOW, "stride": 1}
+        return {"type": "update", "window": window, "quality": quality}
 
 
 class Edits:
@@ -166,7 +168,7 @@ def scrub_stops(c: Client, n_steps: int, count: int) -> list:
     for _ in range(count):
         for _ in range(SLIDES_PER_STOP - 1):
             c.request(c.slide(n_steps))
-        out.append(c.request(c.slide(n_steps), full=True))
+        out.append(c.request(c.slide(n_steps, "full"), full=True))  # let go
     return out
 
 

@@ -10,12 +10,12 @@ times:
 - data-TF edits (an opacity control point moved, the fitted range kept, as the page sends
   them; every edit a value no edit before it had, warm-up included: none is a cache hit): to
   the first frame and to the sharp frame; then the same edits in max mode;
-- scrub steps (the window slid by one step, each sent when the last one's frame came, as a
-  drag does): to the first frame, whether the session updated incrementally, and the longest
-  stall (the largest gap between consecutive frames, from the first slide's send; and whether
-  a histogram reply came within it);
-- scrub stops (SLIDES_PER_STOP one-step slides in a row, then the sharp frame of the last,
-  timed from its send);
+- scrub steps (the window slid by one step, each sent when the last one's frame came, at
+  "preview" quality, as the page's timeline drag does): to the first frame, whether the
+  session updated incrementally, and the longest stall (the largest gap between consecutive
+  frames, from the first slide's send; and whether a histogram reply came within it);
+- scrub stops (SLIDES_PER_STOP one-step slides in a row, the last at "full" quality as when the
+  drag is let go, timed from its send to its sharp frame);
 - input during a refine: an edit sent 50-300 ms after the refine of the last edit's coarse
   frame was due (REFINE_AFTER_S after that frame), timed to the first frame answering it.
 
