@@ -179,3 +179,32 @@ def test_viewer_slot_keeps_its_grid_in_step(rc):
             )
     finally:
         slot.release_gl()
+
+
+def test_a_draw_that_may_be_given_up_is_the_same_picture_and_stops_between_bands(rc):
+    """A refine's draw goes in bands of rows with a look at newer input before each: the
+    picture is the one drawn at once, and the draw stops at the first band after input."""
+    from chronocl.core.errors import SupersededError
+    from chronocl.render.raycaster import DRAW_BANDS
+
+    cv = sparse_chronovolume((33, 33, 17), 7)
+    vol = rc.upload(cv)
+    size = (61, 47)
+    try:
+        wholes = []
+        for view in VIEWS:
+            args = {k: v for k, v in view.items() if k != "camera"}
+            wholes.append(rc.draw(vol, view["camera"], size, **args))
+            looks: list[int] = []
+            banded = rc.draw(
+                vol, view["camera"], size, stop=lambda seen=looks: seen.append(1) or False, **args
+            )
+            assert np.array_equal(wholes[-1], banded) and len(looks) == DRAW_BANDS
+        calls = iter([False, False, True])
+        with pytest.raises(SupersededError):
+            rc.draw(vol, VIEWS[0]["camera"], size, stop=lambda: next(calls))
+        args = {k: v for k, v in VIEWS[0].items() if k != "camera"}
+        again = rc.draw(vol, VIEWS[0]["camera"], size, **args)  # no band's scissor left behind
+        assert np.array_equal(again, wholes[0]) and again.max() > 0
+    finally:
+        vol.release()

@@ -243,14 +243,12 @@ class ClientWorker(Tasks):
 
     def _draw(self, rc, cvs, state, size, bg, given_up=None) -> tuple[list, float, float, float]:
         """Upload what changed and draw every view (on the GL thread); `given_up` (a refine's)
-        true between upload slabs or before the draw raises SupersededError."""
+        true between upload slabs, before the draw or between its bands: SupersededError."""
         t_up = time.perf_counter()
         for slot, cv in zip(self.views.slots, cvs, strict=False):
             if slot.uploaded is not cv:
                 upload(rc, slot, cv, given_up)
         t_draw = time.perf_counter()
-        if given_up is not None and given_up():
-            raise SupersededError("newer input came before the refined frame was drawn")
         panels = [
             rc.draw(
                 slot.volume,
@@ -261,6 +259,7 @@ class ClientWorker(Tasks):
                 step=1.0,
                 outline=state.outline,
                 shading=state.shading,
+                stop=given_up,
             )
             for slot in self.views.slots[: len(cvs)]
         ]
