@@ -89,6 +89,7 @@ class Runner:
         self.repeats = repeats
         self.ocl = OpenCLEngine()
         self.results: dict[tuple[str, str, str], float] = {}  # (case, impl, mode) -> Gvox/s
+        self._series: tuple[np.ndarray, TimeSeries] | None = None  # end_to_end_fns' last
 
     def race(self, shape: tuple, contenders: dict, repeats: int | None = None) -> None:
         """Time contenders {(case, impl, mode): fn} round-robin on bricks of `shape`."""
@@ -135,8 +136,13 @@ class Runner:
     def end_to_end_fns(self, brick, mode) -> dict:
         """`chronocl.integrate` on the brick's steps as an in-memory (T, Z, Y, X) series, and a
         resident `Session` re-integrating after a TF edit (two TFs taken in turn)."""
-        steps = np.ascontiguousarray(np.moveaxis(brick, 1, 0))
-        series = TimeSeries.from_array(steps)
+        # One (T, Z, Y, X) copy of the brick for every mode (a copy per mode ran 10 x 256^3
+        # out of memory on 23 GB).
+        if self._series is None or self._series[0] is not brick:
+            steps = np.ascontiguousarray(np.moveaxis(brick, 1, 0))
+            self._series = (brick, TimeSeries.from_array(steps))
+        series = self._series[1]
+        steps = series.host
         w = steps.shape[0]
         args = SPEC_ARGS.get(mode, {})
 
