@@ -171,9 +171,9 @@ class Recolourer:
         finally:
             lut_tex.release()
             table_tex.release()
-        extent, voxel = _geometry((nx, ny, nz), spacing)
+        extent, voxel = volume_geometry((nx, ny, nz), spacing)
         vol.extent, vol.unit = extent, float(np.min(voxel))
-        vol.occupied = _corners(bounds, (nx, ny, nz), extent, voxel)
+        vol.occupied = occupied_corners(bounds, (nx, ny, nz), extent, voxel)
         bricks = np.minimum(peaks, 255).astype(np.uint8).reshape(gz, gy, gx)
         vol.bricks = brick_grid.texture(self.ctx, bricks, vol.bricks)
         return vol
@@ -196,14 +196,14 @@ class Recolourer:
         self._programs = {}
 
 
-def _geometry(dims, spacing) -> tuple[np.ndarray, np.ndarray]:
+def volume_geometry(dims, spacing) -> tuple[np.ndarray, np.ndarray]:
     """World extent (longest side 1) and voxel size, as `Raycaster.upload` lays them out."""
     physical = np.array(dims, dtype=np.float64) * np.array(spacing, dtype=np.float64)
     extent = physical / physical.max()
     return extent, extent / np.array(dims, dtype=np.float64)
 
 
-def _corners(bounds: np.ndarray, dims, extent, voxel) -> tuple[np.ndarray, np.ndarray]:
+def occupied_corners(bounds: np.ndarray, dims, extent, voxel) -> tuple[np.ndarray, np.ndarray]:
     """`chronocl.render.upload.Occupancy.corners` from the first and last occupied index per
     axis (x, y, z): grown by one voxel, kept inside the box; none: an empty box."""
     half = extent / 2

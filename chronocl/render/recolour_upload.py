@@ -88,12 +88,12 @@ def show(ctx, vol, sp: Sparse, held: np.ndarray | None, spacing) -> None:
     where it may differ from what the texture holds: `held` the bricks that may be coloured
     there (the `coloured` of the result it holds), None: unknown, the whole texture. Sets
     its world box, occupied box and brick grid. Call it on the thread owning `ctx`."""
-    from chronocl.render.recolour import _corners, _geometry
+    from chronocl.render.recolour import occupied_corners, volume_geometry
 
     nz, ny, nx, _ = sp.rgba.shape
     changed = np.ones_like(sp.coloured) if held is None else sp.coloured | held
     write_boxes(ctx, vol.texture, sp.rgba, upload_boxes(changed, (nx, ny, nz)))
-    extent, voxel = _geometry((nx, ny, nz), spacing)
+    extent, voxel = volume_geometry((nx, ny, nz), spacing)
     vol.extent, vol.unit = extent, float(np.min(voxel))
-    vol.occupied = _corners(sp.bounds, (nx, ny, nz), extent, voxel)
+    vol.occupied = occupied_corners(sp.bounds, (nx, ny, nz), extent, voxel)
     vol.bricks = brick_grid.texture(ctx, sp.bricks, vol.bricks)
