@@ -238,3 +238,23 @@ def test_a_window_over_the_budget_is_streamed_by_slabs(series):
         full = s.refine()
         assert s.stats["path"] == "streamed" and "budget" in s.stats["why_not_incremental"]
         np.testing.assert_array_equal(full.rgba, chronocl.integrate(series, "0:5", "additive").rgba)
+
+
+def test_modes_pooling_differently_share_level_0s_resident_steps(series):
+    """Level 0 is the same series whatever a mode's pooling: a switch from alpha (mean) to max
+    keeps reading from the same window manager; coarse levels pooled differently do not."""
+    managers: dict = {}
+    alpha = Session(series, mode="alpha", level=0, managers=managers, memory="256MB")
+    peak = Session(series, mode="max", level=0, managers=managers, memory="256MB")
+    coarse = [Session(series, mode=m, level=1, managers=managers) for m in ("alpha", "max")]
+    try:
+        alpha.set_window(0, 4)
+        reads = sum(alpha.manager.reads.values())
+        peak.set_window(0, 4)
+        assert peak.manager is alpha.manager and sum(peak.manager.reads.values()) == reads
+        assert coarse[0].manager is not coarse[1].manager
+    finally:
+        for s in (alpha, peak, *coarse):
+            s.close()
+        for m in managers.values():
+            m.close()

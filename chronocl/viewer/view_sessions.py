@@ -15,6 +15,7 @@ import threading
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.interactive.session import Session
+from chronocl.integration.interactive.settings import manager_key
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.recolouring import Recolouring
@@ -110,7 +111,7 @@ class Views:
 
     def manager(self, level: int, pool: str) -> WindowManager | None:
         """The window manager of `level` and `pool` the views share, if one was made."""
-        return self._managers.get((level, pool))
+        return self._managers.get(manager_key(level, pool))
 
     def full_resolution(self, views: range) -> None:
         """Bring views to full resolution (probes, saves and movies never use a coarse one)."""

@@ -42,7 +42,7 @@ from chronocl.engine.device_steps import DeviceWindow
 from chronocl.integration.inmemory import check_level, integrate_bricks, window_job
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
-from chronocl.integration.interactive.settings import Settings, settings
+from chronocl.integration.interactive.settings import Settings, manager_key, settings
 from chronocl.integration.interactive.slider import Slider
 from chronocl.integration.interactive.sliding import block_size
 from chronocl.integration.interactive.winners import Winners, of_window, recolours
@@ -120,7 +120,7 @@ class Session:
         managers = setup.managers
         self._owns_manager = manager is None and managers is None
         if manager is None and managers is not None:
-            key = (self.level, self.spec.integration.pool)
+            key = manager_key(self.level, self.spec.integration.pool)
             if key not in managers:
                 managers[key] = WindowManager(self.series, self.budget, prefetch=prefetch)
             manager = managers[key]

@@ -43,3 +43,9 @@ def settings(
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
     budget = interactive_memory() if memory is None else parse_memory(memory)
     return Settings(asked, eng, budget, prefetch, managers, display)
+
+
+def manager_key(level: int, pool: str) -> tuple[int, str]:
+    """The key of a level's window manager among shared `managers`: level 0 is one series
+    whatever the pooling (a mode pooling by max must not read the window again)."""
+    return (level, pool if level else "")
