@@ -13,8 +13,9 @@ JSON lines (../shared/BENCH.md) and a summary with
   faster of zarr's fastest plain read and chronocl's own decode of the chunks
   (`chronocl.data.chunk_reads`, which the integration reads with; `read_by` says which);
 - `cpu_bound_throughput_vs_read`: the best ratio the cores allow, read time / ((CPU seconds
-  of the read + kernels + output writes, each measured alone) / cores). The integration does
-  all of that work, so where the bound is below the target no pipeline can meet it here;
+  of the run's own brick reads + kernels + output writes, each measured alone) / cores). The
+  integration does all of that work, so where the bound is below the target no pipeline can
+  meet it here;
 - `parallel_bound_vs_read`: the best ratio with the stages overlapped: each stage (the
   pipeline's own brick reads with decompression, kernels, compress and write) runs one call
   at a time, so the run takes at least the longest stage alone, and at least their CPU
@@ -38,14 +39,11 @@ JSON lines (../shared/BENCH.md) and a summary with
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -54,6 +52,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import emit, env_record
+from ooc_child import run_child
 from ooc_stages import (
     breakdown_table,
     median_stages,
@@ -96,100 +95,6 @@ def generate(path: Path, steps: int, n: int, compressor: str, chunk_mb: float):
 
 def disk_bytes(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
-
-
-# -- the child: integrate under the budget, report RSS -----------------------------------------
-def _rss() -> int:
-    import psutil
-
-    return psutil.Process().memory_info().rss
-
-
-def _reset_peak() -> bool:
-    """Reset the kernel's RSS high-water mark (VmHWM); False where not allowed."""
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-        return True
-    except OSError:
-        return False
-
-
-def _hwm() -> int | None:
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
-
-
-def child(store: str, out: str, budget: int, mode: str, compressor: str) -> None:
-    import gc
-
-    import chronocl
-    from chronocl.engine import get_engine
-    from chronocl.integration.inmemory import engine_rows, prepare
-    from chronocl.integration.runs.plan import plan_slabs
-    from chronocl.integration.runs.streaming import integrate_to_store
-
-    series = open_series(store)
-    _, ny, nx = series.volume_shape
-    warm = np.random.default_rng(0).random((2, 2, ny, nx), dtype=np.float32)
-    chronocl.integrate(chronocl.TimeSeries.from_array(warm), None, mode)  # context, kernels
-    job = prepare(series, None, mode, None, {})
-    plan = plan_slabs(job, budget, "opencl", engine_rows(get_engine("opencl"), job))
-    del warm
-    gc.collect()
-    baseline = _rss()
-    sampled = [baseline]
-    stop = threading.Event()
-
-    def sample() -> None:  # a cross-check where VmHWM cannot be reset
-        while not stop.wait(0.002):
-            sampled.append(_rss())
-
-    hwm_ok = _reset_peak()
-    sampler = threading.Thread(target=sample, daemon=True)
-    sampler.start()
-    t0 = time.perf_counter()
-    integrate_to_store(
-        series, None, out, mode=mode, memory=budget, overwrite=True, compressor=compressor
-    )
-    seconds = time.perf_counter() - t0
-    stop.set()
-    sampler.join()
-    hwm = _hwm() if hwm_ok else None
-    peak = max(hwm or 0, max(sampled))
-    print(
-        json.dumps(
-            {
-                "seconds": seconds,
-                "baseline_rss": baseline,
-                "peak_rss": peak,
-                "peak_method": "VmHWM reset before the run" if hwm_ok else "sampled every 2 ms",
-                "sampled_peak_rss": max(sampled),
-                "slabs": len(plan.slabs),
-                "slab_rows": plan.slab_rows,
-                "read_ahead": plan.read_ahead,
-                "steps_per_read": plan.steps_per_read,
-                "estimated_peak": plan.peak_bytes,
-            }
-        )
-    )
-
-
-def run_child(*args: object) -> dict:
-    result = subprocess.run(
-        [sys.executable, __file__, "--child", *map(str, args)],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    if result.returncode != 0:
-        raise RuntimeError(result.stderr)
-    return json.loads(result.stdout.strip().splitlines()[-1])
 
 
 def read_all(store: Path, direct: bool = False) -> float:
@@ -253,13 +158,7 @@ def main() -> None:
         help="each stage's CPU and wall seconds (read+decompress, integrate, compress+write, "
         "finish), alone and in the pipeline, and the parallel bound they set",
     )
-    parser.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if args.child:
-        store, out, budget, mode, compressor = args.child
-        child(store, out, int(budget), mode, compressor)
-        return
-
     budget = parse_memory(args.budget)
     data_bytes = args.steps * args.size**3 * 4
     if data_bytes < 4 * budget or data_bytes < 2**30:
@@ -303,8 +202,8 @@ def main() -> None:
             "chronocl's own chunk decode, read_by) / median streamed integration time, all in "
             "this process, alternated, after a warm-up of each",
             "cpu_bound_throughput_vs_read": "the best throughput_vs_read the cores allow: read "
-            "time / (CPU seconds of the read + kernels + output writes, each measured alone) "
-            "/ cores",
+            "time / (CPU seconds of the run's own reads + kernels + output writes, each measured "
+            "alone) / cores",
             "parallel_bound_vs_read": "the best throughput_vs_read with the stages overlapped: "
             "read time / (max(the longest stage alone, CPU seconds of the pipeline's own reads + "
             "kernels + writes alone / cores) + finish)",
@@ -408,7 +307,9 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
                 **extra,
             }
         )
-    work = med(reader, 1) + alone["kernel_cpu_s"] + alone["write_cpu_s"]
+    # The CPU the run's own reads take (chronocl decodes the chunks itself), as the parallel
+    # bound counts them: the plain zarr read's CPU would overstate it.
+    work = alone["read_cpu_s"] + alone["kernel_cpu_s"] + alone["write_cpu_s"]
     bound = read_s / max(read_s, work / (os.cpu_count() or 1))
     emit({"bench": "out_of_core", "case": case, "impl": "stages-alone", **_round(alone)})
     pipeline = median_stages(inside)
