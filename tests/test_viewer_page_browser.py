@@ -414,6 +414,9 @@ def test_render_size_keeps_the_aspect_within_the_budget():
     assert budget.pixels() == 4000
     budget.record(1e6, 4000)  # very slow: the floor
     assert budget.pixels() == 100
+    sharp = frames.DrawBudget(target_ms=80, sharp_ms=150, cap=10**6)
+    sharp.record(1.0, 1000)  # 1 ms a 1000 pixels: 80 000 in 80 ms, 150 000 in 150
+    assert sharp.pixels() == 80_000 and sharp.pixels(sharp=True) == 150_000
 
 
 def test_a_frame_a_little_under_full_size_is_redrawn_too(server, monkeypatch):
@@ -437,7 +440,8 @@ def test_a_frame_a_little_under_full_size_is_redrawn_too(server, monkeypatch):
 
 
 def test_a_frame_over_the_draw_budget_is_reduced_then_redrawn_in_full(server, monkeypatch):
-    monkeypatch.setattr(worker_module, "DrawBudget", lambda: frames.DrawBudget(target_ms=1.0))
+    budget = frames.DrawBudget(target_ms=1.0, sharp_ms=1.0)  # every frame over its budget
+    monkeypatch.setattr(worker_module, "DrawBudget", lambda: budget)
     client = Client(server)
     try:
         client.open(0, size=(1024, 733))  # a frame drawn: the draw budget has a measurement

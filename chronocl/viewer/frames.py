@@ -24,6 +24,9 @@ JPEG_QUALITY = {"preview": 70, "full": 88}
 # drawn at the panels' full size.
 PIXEL_BUDGET = 768 * 768
 DRAW_TARGET_MS = 80.0  # about a 512^2 draw of 128^3 on llvmpipe, 2 cores
+# A full-resolution frame whose full-size draw fits this is drawn at full size at once, not
+# reduced and redrawn (view_sessions.TARGET_MS, the latency target of a frame).
+SHARP_DRAW_MS = 150.0
 MIN_PIXELS = 256 * 256  # never fewer, however slow the draws (a floor on sharpness)
 EMPTY_BELOW = 0.01  # a panel with less than this fraction of visible pixels gets a note
 
@@ -33,9 +36,13 @@ class DrawBudget:
     (milliseconds per pixel, a running estimate). Before the first draw: `cap`."""
 
     def __init__(
-        self, target_ms: float = DRAW_TARGET_MS, floor: int = MIN_PIXELS, cap: int = PIXEL_BUDGET
+        self,
+        target_ms: float = DRAW_TARGET_MS,
+        floor: int = MIN_PIXELS,
+        cap: int = PIXEL_BUDGET,
+        sharp_ms: float = SHARP_DRAW_MS,
     ) -> None:
-        self.target_ms, self.floor, self.cap = target_ms, floor, cap
+        self.target_ms, self.floor, self.cap, self.sharp_ms = target_ms, floor, cap, sharp_ms
         self.ms_per_pixel: float | None = None
 
     def record(self, ms: float, pixels: int) -> None:
@@ -45,11 +52,11 @@ class DrawBudget:
         old = self.ms_per_pixel
         self.ms_per_pixel = rate if old is None else 0.5 * old + 0.5 * rate
 
-    def pixels(self, target_ms: float | None = None) -> int:
-        """Pixels drawn in `target_ms` (default: the budget's own target)."""
+    def pixels(self, sharp: bool = False) -> int:
+        """Pixels drawn in the target (`sharp`: a full-resolution frame's, `sharp_ms`)."""
         if self.ms_per_pixel is None:
             return self.cap
-        target = self.target_ms if target_ms is None else target_ms
+        target = self.sharp_ms if sharp else self.target_ms
         return int(min(self.cap, max(self.floor, target / self.ms_per_pixel)))
 
 

@@ -53,7 +53,7 @@ from chronocl.viewer.session_file import checked_focus, loaded_state
 from chronocl.viewer.side_work import SideWork
 from chronocl.viewer.slots import upload
 from chronocl.viewer.tasks import Tasks
-from chronocl.viewer.view_sessions import TARGET_MS, Views
+from chronocl.viewer.view_sessions import Views
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
 MAX_TASKS = 8
@@ -311,8 +311,8 @@ class ClientWorker(Tasks):
         full_w, full_h = render_size(state.size, len(cvs), scale, PIXEL_BUDGET)
         w, h = full_w, full_h
         if not final:  # a sharp frame whose full-size draw fits the latency target: at once
-            target = TARGET_MS if not preview and self.views.sharp(len(cvs)) else None
-            w, h = render_size(state.size, len(cvs), scale, self._draw_budget.pixels(target))
+            sharp = not preview and self.views.sharp(len(cvs))
+            w, h = render_size(state.size, len(cvs), scale, self._draw_budget.pixels(sharp))
         # Any shrink is redrawn: a settled view is always the same frame (4 % smaller differed).
         reduced = not preview and (w, h) != (full_w, full_h)
         bg = parse_color(state.background)
