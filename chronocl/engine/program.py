@@ -42,11 +42,13 @@ def kernel_dir() -> Path:
     )
 
 
-def source(name: str, common: bool = True) -> str:
-    """kernels/opencl/NAME, after common.h unless `common` is false."""
+def source(name: str, common: bool | str = True) -> str:
+    """kernels/opencl/NAME, after common.h unless `common` is false (a file name: after that
+    header instead, e.g. the recolouring's recolour.h)."""
     folder = kernel_dir()
     text = (folder / name).read_text()
-    return (folder / "common.h").read_text() + "\n" + text if common else text
+    header = "common.h" if common is True else common
+    return (folder / header).read_text() + "\n" + text if header else text
 
 
 def build_options(defines: dict[str, object]) -> tuple[str, ...]:
@@ -58,10 +60,13 @@ def build_options(defines: dict[str, object]) -> tuple[str, ...]:
     )
 
 
-def build(dc, name: str, defines: dict[str, object], text: str | None = None, common: bool = True):
+def build(
+    dc, name: str, defines: dict[str, object], text: str | None = None, common: bool | str = True
+):
     """The built program for kernel file `name` with -D `defines` on device context `dc`.
 
-    `text` replaces the file's source; `common` prepends common.h to the file's source.
+    `text` replaces the file's source; `common` prepends common.h (or the header it names) to
+    the file's source.
     """
     options = build_options(defines)
     key = (dc.info.index, str(kernel_dir()), name, options, text, common)
@@ -135,7 +140,7 @@ def _build_log(program) -> str:
     return "\n".join(logs)
 
 
-def kernel(dc, name: str, function: str, defines: dict[str, object], common: bool = True):
+def kernel(dc, name: str, function: str, defines: dict[str, object], common: bool | str = True):
     """The cached kernel object `function` of kernel file `name` built with `defines`.
 
     Kernels carry their arguments, so callers set arguments and enqueue under the

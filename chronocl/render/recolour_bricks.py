@@ -31,7 +31,7 @@ from chronocl.core.memory import aligned_empty
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
-from chronocl.render.recolour_host import HostRecolour, index_type
+from chronocl.render.recolour_host import RECOLOUR_H, HostRecolour, index_type
 
 B = brick_grid.BRICK
 RUN_BRICKS = 64  # bricks a work-item recolours at most (a 512-voxel row)
@@ -96,7 +96,9 @@ class BrickRecolour(HostRecolour):
     def _program(self):
         from chronocl.engine.program import build
 
-        return build(self.dc, "recolour_bricks.cl", bricks_defines(self._k.dtype), common=False)
+        return build(
+            self.dc, "recolour_bricks.cl", bricks_defines(self._k.dtype), common=RECOLOUR_H
+        )
 
     def coloured(self, spec: IntegrationSpec) -> np.ndarray:
         """(Z, Y, X)/B bool: the bricks whose voxels may have opacity > 0 under `spec`."""

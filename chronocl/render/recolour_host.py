@@ -11,7 +11,8 @@ viewer does this for float32 textures (up to 32^3); RGBA8 ones are recoloured br
 (recolour_bricks.py, built on this class). The arithmetic is the GPU path's
 (kernels/glsl/recolour.comp) and the kernels' (`lut_lerp32`). On a CPU device the winners and
 the output are read and written where they lie (host pointers, nothing copied). The kernels
-are built through chronocl.engine.program (cached per device and options), without common.h.
+are built through chronocl.engine.program (cached per device and options), without common.h
+(recolour.cl after recolour.h).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ CL_TYPES = {  # numpy's name -> OpenCL's, for the raw values the gather reads
     "int32": "int",
 }
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "lavapipe")
+RECOLOUR_H = "recolour.h"  # a winner's colour, prepended to recolour.cl and recolour_bricks.cl
 
 
 def index_type(k_dtype) -> str:
@@ -206,7 +208,7 @@ class HostRecolour:
         from chronocl.engine.program import kernel
 
         defines = recolour_defines(self._k.dtype, rgba8)
-        return kernel(self.dc, "recolour.cl", "recolour", defines, common=False)
+        return kernel(self.dc, "recolour.cl", "recolour", defines, common=RECOLOUR_H)
 
     def recolour(self, spec: IntegrationSpec, fmt: str = "f1", reuse: bool = False) -> np.ndarray:
         """Premultiplied RGBA (Z, Y, X, 4) of the winners under `spec`: uint8 for "f1"

@@ -1,10 +1,9 @@
 /* Recolouring a window's winners on the OpenCL device of the host
- * (chronocl/render/recolour_host.py, HostRecolour): per voxel, the data TF's LUT at its value u
- * (lerped as lut_lerp32 does) times the time TF of its step k, premultiplied, into float4
- * or, with RGBA8, uchar4 rounded to nearest even: the GPU path's arithmetic
- * (kernels/glsl/recolour.comp).
- * Built alone (no common.h) with K_T (the step index type), OUT_T, RUN (voxels per work-item)
- * and RGBA8. */
+ * (chronocl/render/recolour_host.py, HostRecolour): per voxel its winner's colour
+ * (recolour.h), into float4 or, with RGBA8, uchar4 rounded to nearest even: the GPU path's
+ * arithmetic (kernels/glsl/recolour.comp).
+ * Built after recolour.h (no common.h) with K_T (the step index type), OUT_T, RUN (voxels per
+ * work-item) and RGBA8. */
 
 __kernel void recolour(__global const float *won_u, __global const K_T *won_k,
                        __global const float4 *lut, const int lut_size,
@@ -16,17 +15,7 @@ __kernel void recolour(__global const float *won_u, __global const K_T *won_k,
     size_t start = get_global_id(0) * RUN;
     size_t end = min(start + RUN, (size_t)n);
     for (size_t i = start; i < end; ++i) {
-        uint k = won_k[i];
-        float4 rgba = (float4)(0.0f);
-        if (k != none_k) {
-            float x = won_u[i] * (float)(lut_size - 1);
-            int i0 = min((int)x, lut_size - 2);
-            float f = x - (float)i0;
-            float4 d = lut[i0] * (1.0f - f) + lut[i0 + 1] * f;
-            float4 t = table[k];
-            float a = clamp(d.w * t.w, 0.0f, 1.0f);
-            rgba = (float4)(a * (d.xyz * t.xyz), a);
-        }
+        float4 rgba = recoloured(won_u, i, won_k[i], none_k, lut, lut_size, table);
 #ifdef RGBA8
         out[i] = convert_uchar4_sat_rte(rgba * 255.0f);
 #else

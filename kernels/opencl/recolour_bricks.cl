@@ -1,8 +1,8 @@
 /* Recolouring brick by brick on the OpenCL device of the host
  * (chronocl/render/recolour_bricks.py, BrickRecolour): per brick a summary of its winners,
- * then the bricks that may be coloured recoloured into RGBA8 in recolour.cl's arithmetic, with
- * their opacity peaks and occupied box. Built alone (no common.h) with K_T (the step index
- * type) and BRICK (the brick side, chronocl/render/brick_grid.py's). */
+ * then the bricks that may be coloured recoloured into RGBA8 in recolour.cl's arithmetic
+ * (recolour.h), with their opacity peaks and occupied box. Built after recolour.h (no common.h)
+ * with K_T (the step index type) and BRICK (the brick side, chronocl/render/brick_grid.py's). */
 
 #define B BRICK
 // The voxel range of brick `b` (x fastest), clamped to the volume.
@@ -64,17 +64,7 @@ __kernel void recolour(__global const float *won_u, __global const K_T *won_k,
             // the compiler vectorises it), then its bricks' opacities from the cache
             for (int x = x0; x < xe; ++x) {
                 size_t i = row + x;
-                uint k = won_k[i];
-                float4 rgba = (float4)(0.0f);
-                if (k != none_k) {
-                    float v = won_u[i] * (float)(lut_size - 1);
-                    int i0 = min((int)v, lut_size - 2);
-                    float f = v - (float)i0;
-                    float4 d = lut[i0] * (1.0f - f) + lut[i0 + 1] * f;
-                    float4 t = table[k];
-                    float a = clamp(d.w * t.w, 0.0f, 1.0f);
-                    rgba = (float4)(a * (d.xyz * t.xyz), a);
-                }
+                float4 rgba = recoloured(won_u, i, won_k[i], none_k, lut, lut_size, table);
                 // round to nearest even and clamp: convert_uchar4_sat_rte's result, twice
                 // as fast on PoCL
                 out[i] = convert_uchar4(clamp(rint(rgba * 255.0f), 0.0f, 255.0f));

@@ -36,6 +36,23 @@ __kernel void gather_block(__global const K_T *won_k, __global float *won_u,
 #endif
 }
 
+// Value j (0..7) of a chunk's eight step pointers at voxel i.
+inline float pick(const uint j, const size_t i, __global const V_T *a0, __global const V_T *a1,
+                  __global const V_T *a2, __global const V_T *a3, __global const V_T *a4,
+                  __global const V_T *a5, __global const V_T *a6, __global const V_T *a7)
+{
+    switch (j) {
+        case 0: return (float)a0[i];
+        case 1: return (float)a1[i];
+        case 2: return (float)a2[i];
+        case 3: return (float)a3[i];
+        case 4: return (float)a4[i];
+        case 5: return (float)a5[i];
+        case 6: return (float)a6[i];
+        default: return (float)a7[i];
+    }
+}
+
 __kernel void gather(__global const K_T *won_k, __global float *won_u,
                      const uint base, const uint count,
                      __global const V_T *p0, __global const V_T *p1, __global const V_T *p2,
@@ -46,28 +63,9 @@ __kernel void gather(__global const K_T *won_k, __global float *won_u,
     size_t i = get_global_id(0);
     uint k = won_k[i];
     if (k < base || k >= base + count) return;
-    float v, b = 0.0f;
-    switch (k - base) {
-        case 0: v = (float)p1[i]; break;
-        case 1: v = (float)p2[i]; break;
-        case 2: v = (float)p3[i]; break;
-        case 3: v = (float)p4[i]; break;
-        case 4: v = (float)p5[i]; break;
-        case 5: v = (float)p6[i]; break;
-        case 6: v = (float)p7[i]; break;
-        default: v = (float)p8[i]; break;
-    }
+    float v = pick(k - base, i, p1, p2, p3, p4, p5, p6, p7, p8);
 #ifdef CHANGE
-    switch (k - base) {
-        case 0: b = (float)p0[i]; break;
-        case 1: b = (float)p1[i]; break;
-        case 2: b = (float)p2[i]; break;
-        case 3: b = (float)p3[i]; break;
-        case 4: b = (float)p4[i]; break;
-        case 5: b = (float)p5[i]; break;
-        case 6: b = (float)p6[i]; break;
-        default: b = (float)p7[i]; break;
-    }
+    float b = pick(k - base, i, p0, p1, p2, p3, p4, p5, p6, p7);
     won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
 #else
     won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
