@@ -53,7 +53,6 @@ class Views:
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
         self.recolouring.ms = self.recolouring.upload_ms = 0.0
-        self.host_steps_why = None
         cvs = []
         for i in range(len(state.views)):
             slot = self.slots[i]
@@ -75,12 +74,14 @@ class Views:
             cvs.append(cv)
         for slot in self.slots[len(state.views) :]:
             slot.drop_session()
+        # A GPU session whose window does not fit the device: its steps go up every time.
+        whys = (s.session.stats.get("why_not_on_device") for s in self.slots[: len(cvs)])
+        self.host_steps_why = next((why for why in whys if why), None)
         return cvs, integrate_ms, incremental
 
     def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
         s = slot.session
         if s is not None and slot.cv is not None and s.asked == spec and s.selection == sel:
-            self.host_steps_why = (s.stats or {}).get("why_not_on_device") or self.host_steps_why
             return slot.cv, 0.0, False
         if s is None or (s.asked != spec and s.selection != sel):
             if s is not None:
@@ -101,8 +102,6 @@ class Views:
             cv = self.recolouring.view(slot, spec, sel) or s.show(sel, spec)
         slot.cv = cv
         stats = s.stats or {}
-        # A GPU session whose window does not fit the device: its steps go up every time.
-        self.host_steps_why = stats.get("why_not_on_device") or self.host_steps_why
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
 
     def sharp(self, n: int) -> bool:
