@@ -21,6 +21,7 @@ from chronocl.core.selection import Selection, parse_selection
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.pyramid import level_shapes
 from chronocl.data.series import TimeSeries
+from chronocl.data.window import WindowManager
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.modes.spec import IntegrationSpec
 
@@ -98,6 +99,7 @@ class Pool(Protocol):
     SessionPool`): the series and a fixed-level session per level and pooling."""
 
     series: TimeSeries
+    sessions: dict  # (level, pooling) -> the fixed-level sessions made so far
 
     def session(self, level: int, spec: IntegrationSpec) -> FixedLevel: ...
 
@@ -110,6 +112,7 @@ class FixedLevel(Protocol):
     """What an `AutoSession` uses of a fixed-level `Session`."""
 
     stats: dict
+    manager: WindowManager  # its resident steps and their read time
 
     def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume: ...
 
@@ -172,7 +175,7 @@ class AutoSession:
 
     def _missing(self, level: int, selection: Selection) -> int:
         """The steps of `selection` not resident at `level` (all, where it has no session)."""
-        held = getattr(self.pool, "sessions", {}).get((level, self.spec.integration.pool))
+        held = self.pool.sessions.get((level, self.spec.integration.pool))
         if held is None:
             return selection.width
         resident = set(held.manager.resident())
@@ -183,8 +186,7 @@ class AutoSession:
         t = time.perf_counter()
         cv = s.show(selection, spec)
         self.model.record_integrate(level, 1e3 * (time.perf_counter() - t), selection.width)
-        manager = getattr(s, "manager", None)
-        self.model.record_read(level, None if manager is None else manager.scrub.read_s)
+        self.model.record_read(level, s.manager.scrub.read_s)
         # The refine to come finds the window's full-resolution steps read, where the machine
         # has cores to spare: on 2 cores those reads doubled the longest scrub stall at normal
         # priority, and at the readers' lower one left the scrub stop as slow (docs/window.md).
