@@ -1,8 +1,14 @@
-"""Host arrays aligned for the device: 64-byte aligned, so 16-lane vector loads need no fix-up."""
+"""Host arrays aligned for the device: 64-byte aligned, so 16-lane vector loads need no fix-up.
+
+`recycled_empty` is for outputs made again and again at one size (a chronovolume per call of
+`chronocl.integrate`, per edit of a session): the memory of one that died is handed out again,
+already faulted in, instead of a fresh map whose every page faults on first write."""
 
 from __future__ import annotations
 
 import mmap
+import threading
+import weakref
 
 import numpy as np
 
@@ -30,6 +36,80 @@ def aligned_empty(shape: tuple[int, ...], dtype: object, align: int = ALIGN) -> 
     raw = np.empty(nbytes + align, dtype=np.uint8)
     offset = (-raw.ctypes.data) % align
     return raw[offset : offset + nbytes].view(dt).reshape(shape)
+
+
+SPARE_MAPS = 2  # maps of dead outputs kept for the next: a chronovolume's rgba and t_index
+SPARE_SECONDS = 30.0  # and for this long: memory nobody asks for again goes back
+
+
+class _Spares:
+    """The memory maps of `recycled_empty` arrays that died, most recent last: at most
+    `SPARE_MAPS`, for at most `SPARE_SECONDS`. What the caller held a moment ago, so keeping
+    it adds nothing to the peak."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.maps: list[mmap.mmap] = []
+        self._expiry: threading.Timer | None = None
+
+    def take(self, size: int) -> mmap.mmap | None:
+        with self.lock:
+            for i in range(len(self.maps) - 1, -1, -1):
+                if len(self.maps[i]) == size:
+                    return self.maps.pop(i)
+        return None
+
+    def give(self, mapped: mmap.mmap) -> None:
+        with self.lock:
+            self.maps.append(mapped)
+            del self.maps[:-SPARE_MAPS]
+            if self._expiry is not None:
+                self._expiry.cancel()
+            self._expiry = threading.Timer(SPARE_SECONDS, self.clear)
+            self._expiry.daemon = True
+            self._expiry.start()
+
+    def clear(self) -> None:
+        with self.lock:
+            self.maps.clear()
+
+
+spares = _Spares()
+
+
+class _Exported:
+    """The owner of a recycled array's memory: numpy's views keep it alive, and its death
+    gives the map back to `spares`."""
+
+    def __init__(self, mapped: mmap.mmap, nbytes: int) -> None:
+        self.keep = np.frombuffer(mapped, np.uint8, count=nbytes)
+        self.__array_interface__ = {
+            "shape": (nbytes,),
+            "typestr": "|u1",
+            "data": (self.keep.ctypes.data, False),
+            "version": 3,
+        }
+
+
+def recycled_empty(shape: tuple[int, ...], dtype: object) -> np.ndarray:
+    """`aligned_empty`, on the memory of an earlier array of the same size that died where there
+    is one (its old contents: the caller writes every element). Below `MAPPED_BYTES` a plain
+    `aligned_empty`. Writing a fresh 268 MB output costs 0.07 s of page faults here and
+    unmapping it 0.03 s, half of integrating 10 x 256^3 float32 steps."""
+    dt = np.dtype(dtype)
+    nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
+    if nbytes < MAPPED_BYTES:
+        return aligned_empty(shape, dt)
+    size = -(-nbytes // mmap.PAGESIZE) * mmap.PAGESIZE
+    mapped = spares.take(size)
+    if mapped is None:
+        try:
+            mapped = mmap.mmap(-1, size)
+        except OSError as exc:
+            raise MemoryError(f"cannot allocate {nbytes} bytes: {exc}") from None
+    owner = _Exported(mapped, nbytes)
+    weakref.finalize(owner, spares.give, mapped)
+    return np.asarray(owner).view(dt).reshape(shape)
 
 
 def is_aligned(a: np.ndarray, align: int = ALIGN) -> bool:

@@ -25,7 +25,7 @@ from chronocl import modes, reference
 from chronocl.core.enhance import Enhance
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.interrupt import checkpoint
-from chronocl.core.memory import aligned_empty
+from chronocl.core.memory import recycled_empty
 from chronocl.core.progress import track
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.core.tf import FITTED, GLOBAL, DataTF, TFSetting, TimeTF
@@ -348,8 +348,8 @@ def integrate_bricks(
     spec = job.spec
     rgba8 = display and getattr(eng, "writes_display", False) and nz * ny * nx > DISPLAY_VOXELS
     rgba8 = rgba8 and not spec.integration.finalize_is_global(spec)
-    rgba = aligned_empty((nz, ny, nx, 4), np.uint8 if rgba8 else np.float32)
-    t_index = aligned_empty((nz, ny, nx), np.int32) if job.spec.has_t_index else None
+    rgba = recycled_empty((nz, ny, nx, 4), np.uint8 if rgba8 else np.float32)
+    t_index = recycled_empty((nz, ny, nx), np.int32) if job.spec.has_t_index else None
 
     def out(s: Slab) -> Out:
         # z is the outermost axis, so a slab of the output is a contiguous view.

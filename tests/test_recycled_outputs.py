@@ -1,0 +1,126 @@
+"""Recycled output memory (`chronocl.core.memory.recycled_empty`): a chronovolume's arrays are
+made on the memory of earlier ones that died, old contents and all, so every path that fills
+them must write every element. Spare maps here hold garbage (NaN, -1), and what comes out
+must equal what fresh zeroed memory gives, bit for bit, and the numpy reference."""
+
+from __future__ import annotations
+
+import gc
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import chronocl
+from chronocl.core import memory
+from chronocl.core.memory import recycled_empty, spares
+from chronocl.data.bricks import ResidentBricks
+from chronocl.engine.opencl import OpenCLEngine
+from chronocl.integration.inmemory import integrate_bricks, window_job
+
+from .strategies import examples, specs, windows
+from .test_opencl import assert_same
+
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
+
+@pytest.fixture(autouse=True)
+def small_maps(monkeypatch):
+    """Every output is recycled, so the small volumes here are too."""
+    monkeypatch.setattr(memory, "MAPPED_BYTES", 1)
+    monkeypatch.setattr(memory, "SPARE_MAPS", 3)  # `poison`'s three sizes
+    spares.clear()
+    yield
+    spares.clear()
+
+
+def poison(shape) -> int:
+    """Put spare maps of every size the outputs of `shape` (Z, Y, X) may take, full of 0xFF
+    (NaN as float32, -1 as int32, 255 as uint8); returns how many are spare."""
+    spares.clear()
+    held = []  # all alive at once: one map each
+    for dims, dt in (((*shape, 4), np.float32), ((*shape, 4), np.uint8), (shape, np.int32)):
+        held.append(recycled_empty(dims, dt))
+        held[-1].view(np.uint8).reshape(-1)[:] = 0xFF
+    del held
+    gc.collect()
+    return len(spares.maps)
+
+
+@pytest.fixture
+def taken(monkeypatch) -> list[int]:
+    """The sizes of the spare maps handed out."""
+    sizes: list[int] = []
+    take = spares.take
+
+    def counted(size):
+        got = take(size)
+        if got is not None:
+            sizes.append(size)
+        return got
+
+    monkeypatch.setattr(spares, "take", counted)
+    return sizes
+
+
+def test_a_dead_array_gives_its_memory_to_the_next_of_its_size():
+    a = recycled_empty((64, 64, 4), np.float32)
+    a[...] = 7
+    address = a.ctypes.data
+    view = a[3:5]
+    del a
+    gc.collect()
+    assert not spares.maps  # a view keeps it alive
+    del view
+    gc.collect()
+    b = recycled_empty((64, 64, 4), np.float32)
+    assert b.ctypes.data == address and (b == 7).all() and b.flags.writeable
+    c = recycled_empty((64, 64, 4), np.float32)  # none spare: a fresh map, zeroed
+    assert c.ctypes.data != address and not c.any()
+    assert b.ctypes.data % memory.ALIGN == 0 and c.ctypes.data % memory.ALIGN == 0
+
+
+def test_spares_are_bounded_in_number_and_time(monkeypatch):
+    held = [recycled_empty((100 + i, 64), np.float32) for i in range(3 * memory.SPARE_MAPS)]
+    del held
+    gc.collect()
+    assert len(spares.maps) == memory.SPARE_MAPS
+    monkeypatch.setattr(memory, "SPARE_SECONDS", 0.05)
+    recycled_empty((100, 64), np.float32)  # dies at once: a spare again, for 0.05 s
+    for _ in range(200):
+        if not spares.maps:
+            break
+        time.sleep(0.05)
+    assert not spares.maps
+
+
+@settings(max_examples=examples(16), deadline=None)
+@given(st.data())
+def test_integrating_on_garbage_equals_integrating_on_zeros(taken, data):
+    u, sel = data.draw(windows())
+    spec = data.draw(specs(selection=sel))
+    display = data.draw(st.booleans())
+    slab = data.draw(st.integers(1, u.shape[1] + 1))
+    full = np.zeros((sel.n_steps, *u.shape[1:]), np.float32)
+    full[list(sel.steps)] = u
+    series = chronocl.TimeSeries.from_array(full)
+    job = window_job(series, sel, spec)
+    arrays = {s: series.host[s] for s in sel.steps}
+    engine = OpenCLEngine(host_ptr=data.draw(st.booleans()))
+
+    spares.clear()
+    clean = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab, display=display)
+    poison(u.shape[1:])
+    taken.clear()
+    dirty = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab, display=display)
+    assert taken  # made on garbage
+    np.testing.assert_array_equal(dirty.rgba, clean.rgba)
+    if clean.t_index is not None:
+        np.testing.assert_array_equal(dirty.t_index, clean.t_index)
+    poison(u.shape[1:])
+    taken.clear()
+    got = chronocl.integrate(series, sel, spec=spec, engine=engine, slab=slab)
+    assert taken
+    assert_same(got, chronocl.integrate(series, sel, spec=spec, engine="numpy"))
