@@ -28,6 +28,7 @@ from chronocl.core.interrupt import checkpoint
 from chronocl.core.memory import recycled_empty
 from chronocl.core.progress import track
 from chronocl.core.selection import Selection, parse_selection
+from chronocl.core.slab_sink import finished, listening
 from chronocl.core.tf import FITTED, GLOBAL, DataTF, TFSetting, TimeTF
 from chronocl.data.bricks import BrickSource, SeriesBricks, Slab, slabs
 from chronocl.data.chronovolume import Chronovolume
@@ -338,8 +339,10 @@ def integrate_bricks(
 
     With `display`, where the engine can (`writes_display`), the mode finishes each voxel on
     its own and the volume is larger than `DISPLAY_VOXELS`, its kernels write the display
-    format, premultiplied RGBA8 (a viewer's frame: a quarter of the bytes, nothing to convert);
-    else the chronovolume is float32 as always."""
+    format, premultiplied RGBA8 (a viewer's frame: a quarter of the bytes, nothing to convert),
+    and each slab is handed on as soon as it is written (`chronocl.core.slab_sink`: the viewer
+    writes it to its texture while the next slab integrates); else the chronovolume is float32
+    as always."""
     fit = engine_rows(eng, job)
     slab = fit if slab is None else min(slab, fit)
     nz, ny, nx = job.series.volume_shape
@@ -360,8 +363,11 @@ def integrate_bricks(
 
     final = True
     results = integrate_slabs(parts, job.selection.steps, bricks, integrate_one, out)
-    for _, _, last in track(results, len(parts), "integrating bricks", progress):
+    handed_on = rgba8 and listening()  # RGBA8 final per voxel: each slab is done when written
+    for s, _, last in track(results, len(parts), "integrating bricks", progress):
         final = last
+        if handed_on and last:
+            finished(rgba, s.z0, s.z1)
     if not final:
         rgba = reference.finalize(Partial(rgba, t_index), job.positions, job.spec)
     meta = job.metadata(engine_name(eng))

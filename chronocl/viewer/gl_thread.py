@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 
 _gl_executor: ThreadPoolExecutor | None = None
 _gl_raycaster = None
@@ -18,11 +18,17 @@ _gl_guard = threading.Lock()
 
 def on_gl(fn: Callable, *args):
     """fn(raycaster, *args) on the viewer's GL thread; returns its result (or raises)."""
+    return gl_submit(fn, *args).result()
+
+
+def gl_submit(fn: Callable, *args) -> Future:
+    """fn(raycaster, *args) queued on the viewer's GL thread, without waiting: the thread runs
+    what is queued in order, so a later `on_gl` runs after it."""
     global _gl_executor
     with _gl_guard:
         if _gl_executor is None:
             _gl_executor = ThreadPoolExecutor(1, thread_name_prefix="chronocl-viewer-gl")
-    return _gl_executor.submit(_on_gl, fn, args).result()
+    return _gl_executor.submit(_on_gl, fn, args)
 
 
 def _on_gl(fn: Callable, args: tuple):

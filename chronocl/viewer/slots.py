@@ -29,6 +29,7 @@ class ViewSlot:
     cv: Chronovolume | None = None
     volume: Volume | None = None
     uploaded: Chronovolume | None = None
+    written: Chronovolume | None = None  # whose RGBA `volume`'s texture holds (slab_upload)
     staging: np.ndarray | None = None  # the texture data's host buffer, reused frame to frame
     recolour: object | None = None  # the window's winners on the GPU (viewer/recolouring.py)
     # Textures of other shapes or formats, kept for reuse: frames alternate between a coarse
@@ -40,7 +41,7 @@ class ViewSlot:
         if self.volume is not None:
             self.volume.release()
             self.volume = None
-            self.uploaded = None
+            self.uploaded = self.written = None
         for vol in self.kept.values():
             vol.release()
         self.kept = {}
@@ -52,7 +53,7 @@ class ViewSlot:
         self._release_recolour()  # its winners are the old texture's
         if self.volume is not None:
             self.kept[(self.volume.texture.size, self.volume.texture.dtype)] = self.volume
-        self.volume = self.uploaded = None
+        self.volume = self.uploaded = self.written = None
         vol = self.kept.pop(key, None)
         while len(self.kept) > KEPT_TEXTURES:
             self.kept.pop(next(iter(self.kept))).release()
@@ -84,10 +85,9 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     frame, and finds the occupied box in the same pass. The whole texture is written each
     time: at 256^3 the RGBA8 write costs 12-16 ms, and finding the unchanged slabs means
     comparing with the previous frame's data, as many bytes as the write moves (a TF edit
-    or a window slide changes nearly every voxel anyway).
+    or a window slide changes nearly every voxel anyway). A refine's chronovolume whose slabs
+    were written as they integrated (`slot.written`) is not written again.
     """
-    import moderngl
-
     nz, ny, nx, _ = cv.rgba.shape
     if given_up is not None and given_up():  # before the occupancy pass, too
         raise SupersededError("newer input came before the refined frame was uploaded")
@@ -96,15 +96,16 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     data, occ = convert(cv.rgba, fmt, slot.staging)
     bricks = brick_grid.submit(data)  # the empty-space grid, beside the texture write
     vol = slot.volume
-    if vol is None or vol.texture.size != (nx, ny, nz) or vol.texture.dtype != fmt:
-        vol = slot.swap_volume(((nx, ny, nz), fmt))
-    if vol is not None:
-        _write(slot, vol, data, given_up)
-    else:
-        tex = rc.ctx.texture3d((nx, ny, nz), 4, data, dtype=fmt)
-        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-        vol = Volume(tex, np.zeros(3), 0.0, (np.zeros(3), np.zeros(3)))
+    # Written slab by slab while it integrated (`chronocl.viewer.slab_upload`): nothing to write
+    prewritten = slot.written is cv and vol is not None
+    slot.written = None
+    if not prewritten:
+        if vol is None or vol.texture.size != (nx, ny, nz) or vol.texture.dtype != fmt:
+            vol = slot.swap_volume(((nx, ny, nz), fmt))
+        if vol is not None:
+            _write(slot, vol, data, given_up)
+        else:
+            vol = new_volume(rc, (nx, ny, nz), fmt, data)
     if data is not cv.rgba:  # RGBA8 from the kernels is sent as it is: the staging stays
         slot.staging = data
     extent, voxel = geometry(cv)
@@ -113,6 +114,16 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     vol.bricks = brick_grid.texture(rc.ctx, bricks.result(), vol.bricks)
     slot.volume, slot.uploaded = vol, cv
     return vol
+
+
+def new_volume(rc, size: tuple[int, int, int], fmt: str, data: np.ndarray | None = None) -> Volume:
+    """A 3D texture of `size` (x, y, z) and format `fmt` as a volume (placed by `upload`)."""
+    import moderngl
+
+    tex = rc.ctx.texture3d(size, 4, data, dtype=fmt)
+    tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+    return Volume(tex, np.zeros(3), 0.0, (np.zeros(3), np.zeros(3)))
 
 
 def _write(slot: ViewSlot, vol: Volume, data: np.ndarray, given_up) -> None:

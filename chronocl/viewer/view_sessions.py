@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import threading
 
+from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.interactive.session import Session
@@ -19,6 +20,7 @@ from chronocl.integration.interactive.settings import manager_key
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.recolouring import Recolouring
+from chronocl.viewer.slab_upload import SlabUpload
 from chronocl.viewer.slots import ViewSlot
 from chronocl.viewer.view_state import ViewState
 
@@ -39,6 +41,7 @@ class Views:
         self._managers: dict[tuple[int, str], WindowManager] = {}
         self.recolouring = Recolouring(device)  # TF edits that only recolour (recolouring.py)
         self.host_steps_why: str | None = None  # the last frame's steps_on_host
+        self.slab_upload_ms = 0.0  # a refine's texture writes, overlapped with its integration
 
     def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed;
@@ -52,7 +55,7 @@ class Views:
         while len(self.slots) < len(state.views):
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
-        self.recolouring.ms = self.recolouring.upload_ms = 0.0
+        self.recolouring.ms = self.recolouring.upload_ms = self.slab_upload_ms = 0.0
         cvs = []
         for i in range(len(state.views)):
             slot = self.slots[i]
@@ -122,8 +125,13 @@ class Views:
         """The slot's chronovolume at full resolution if it was coarse; the ms it took. A
         refine recolours nothing: its frame must not repeat the last frame's recolour times."""
         self.recolouring.ms = self.recolouring.upload_ms = 0.0
-        with INTEGRATE_LOCK:
+        if slot is self.slots[0]:  # the refine's first view
+            self.slab_upload_ms = 0.0
+        writes = SlabUpload(slot)  # its texture written slab by slab as it integrates
+        with INTEGRATE_LOCK, slabs_to(writes.put):
             cv = slot.session.refine()  # type: ignore[union-attr]
+        writes.done(cv)
+        self.slab_upload_ms += writes.ms
         if cv is None:
             return 0.0
         slot.cv = cv

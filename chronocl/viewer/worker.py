@@ -366,8 +366,9 @@ class ClientWorker(Tasks):
                 "integrate_ms": round(integrate_ms, 2),
                 "recolour_ms": round(self.views.recolouring.ms, 2),  # a TF edit's, not integrated
                 "incremental": incremental,
-                # a recolour's texture write (llvmpipe) is made before the draw's uploads
+                # + a recolour's texture write; a refine's slabs are written within integrate_ms
                 "upload_ms": round(1e3 * (t_draw - t_up) + self.views.recolouring.upload_ms, 2),
+                "upload_overlapped_ms": round(self.views.slab_upload_ms, 2),
                 "render_ms": round(1e3 * (t_done - t_draw), 2),
                 "gl_wait_ms": round(1e3 * (t_up - t0), 2),
                 "encode_ms": round(1e3 * (t_enc - t_done), 2),

@@ -1,0 +1,71 @@
+"""A refine's texture written slab by slab while the next slab integrates.
+
+A sharp 512^3 frame on this machine spent 0.5 s integrating and then 0.28 s uploading. With
+`chronocl.core.slab_sink` the integration hands on each z-slab of its display (RGBA8)
+chronovolume as soon as it is final, and `SlabUpload` queues its texture write on the GL
+thread, which writes it while the engine integrates the next slab; the frame's `upload` then
+finds the texture written (`ViewSlot.written`) and only places it. Writes stay in the GL
+thread's queue order, so a refine given up half way is rewritten whole by the next frame's
+upload (the slot's `uploaded` is cleared at the first slab).
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import Future
+
+import numpy as np
+
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.render.raycaster import Volume
+from chronocl.viewer.gl_thread import gl_submit
+from chronocl.viewer.slots import ViewSlot, new_volume
+
+FORMAT = "f1"  # the display chronovolume's RGBA8, written as it is
+
+
+class SlabUpload:
+    """The slabs of one slot's refined chronovolume, written to its texture as they come."""
+
+    def __init__(self, slot: ViewSlot) -> None:
+        self.slot = slot
+        self.target: np.ndarray | None = None  # the RGBA whose slabs were written
+        self.volume: Volume | None = None
+        self.rows = 0
+        self.jobs: list[Future] = []
+        self.ms = 0.0  # the GL thread's time writing, overlapped with the integration
+
+    def put(self, rgba: np.ndarray, z0: int, z1: int) -> None:
+        """Queue the write of rows z0..z1 of `rgba` (a `chronocl.core.slab_sink` sink)."""
+        if self.target is not None and rgba is not self.target:
+            return  # another volume integrated under the same refine: uploaded as usual
+        self.target = rgba
+        self.rows += z1 - z0
+        self.jobs.append(gl_submit(self._write, rgba, z0, z1))
+
+    def _write(self, rc, rgba: np.ndarray, z0: int, z1: int) -> None:
+        """On the GL thread: the slot's texture of this shape takes rows z0..z1."""
+        t = time.perf_counter()
+        nz, ny, nx, _ = rgba.shape
+        slot = self.slot
+        if self.volume is None:
+            size = (nx, ny, nz)
+            vol = slot.volume
+            if vol is None or vol.texture.size != size or vol.texture.dtype != FORMAT:
+                vol = slot.swap_volume((size, FORMAT)) or new_volume(rc, size, FORMAT)
+            # Until the last slab it holds no chronovolume's picture: a frame drawn from it
+            # first uploads again.
+            slot.volume, slot.uploaded, slot.written = vol, None, None
+            self.volume = vol
+        self.volume.texture.write(rgba[z0:z1], viewport=(0, 0, z0, nx, ny, z1 - z0))
+        self.ms += 1e3 * (time.perf_counter() - t)
+
+    def done(self, cv: Chronovolume | None) -> None:
+        """Wait for the writes; the texture holds `cv` when every row of its RGBA was written
+        and no frame took the slot's texture meanwhile."""
+        for job in self.jobs:
+            job.result()
+        whole = self.target is not None and self.rows == self.target.shape[0]
+        slot = self.slot
+        if cv is not None and whole and cv.rgba is self.target and slot.volume is self.volume:
+            slot.written = cv
