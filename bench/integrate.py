@@ -3,11 +3,13 @@
 Cases are the paper's Table 1 workloads (10/20/30 steps of 128^3, 512x64x64, 128x128x64) of the
 built-in vortex data, float32 and uint8, every mode, the window resident in memory as one xytz
 brick, and end to end beside it: `chronocl.integrate` on the same steps as an in-memory series
-(`end_to_end_roofline_fraction`, what a user calling it gets) and a `Session` re-integrating its
-resident window after a transfer-function edit (`tf_edit_roofline_fraction`, every edit a new
-TF, so none is a cache hit); `end_to_end_vs_kernel` is the first over the kernel's own
-throughput on the prepared brick. Prints JSON lines (../shared/BENCH.md) and a summary with
-`roofline_fraction`,
+(`end_to_end_roofline_fraction`, what a user calling it again and again gets: its output on the
+memory of the one before, `chronocl.core.memory.recycled_empty`; `fresh_output_roofline_fraction`
+a first call, max only, whose output pages fault as they are written) and a `Session`
+re-integrating its resident window after a transfer-function edit (`tf_edit_roofline_fraction`,
+every edit a new TF, so none is a cache hit); `end_to_end_vs_kernel` is the first over the
+kernel's own throughput on the prepared brick. Prints JSON lines (../shared/BENCH.md) and a
+summary with `roofline_fraction`,
 `dense_tf_roofline_fraction` (every mode with a coloured data TF that has opacity everywhere,
 so no step can be skipped), `speedup_vs_numpy`, `max_vs_vtk`, `u8_vs_f32` and `transfer_overlap`
 (bench/transfer.py; null on CPU devices).
@@ -45,7 +47,8 @@ from transfer import transfer_overlap
 from vtk_peer import make_pipeline, run_max, vtk_available, vtk_version
 
 from chronocl import Session, TimeSeries, integrate, modes, reference
-from chronocl.core.memory import aligned_empty
+from chronocl.core.budget import available_bytes
+from chronocl.core.memory import aligned_empty, spares
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF
 from chronocl.data import synthetic
@@ -75,7 +78,9 @@ def make_brick(shape_xyz, steps: int, dtype: str) -> np.ndarray:
         brick[:, t] = vol
     if dtype == "uint8":
         quantised = aligned_empty(brick.shape, np.uint8)
-        quantised[...] = np.round(brick / brick.max() * 255)
+        scale = np.float32(255 / brick.max())
+        for z in range(nz):  # a slab at a time: whole-brick temporaries are 3 x 5.4 GB at 512^3
+            quantised[z] = np.round(brick[z] * scale)
         return quantised
     return brick
 
@@ -90,6 +95,9 @@ class Runner:
         self.ocl = OpenCLEngine()
         self.results: dict[tuple[str, str, str], float] = {}  # (case, impl, mode) -> Gvox/s
         self._series: tuple[np.ndarray, TimeSeries] | None = None  # end_to_end_fns' last
+        self._out: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # integrate_fn's, by shape
+        self.skipped: list[str] = []  # contenders left out for want of memory
+        self.room = {"session": True, "vtk": True}  # what `plan_memory` found room for
 
     def race(self, shape: tuple, contenders: dict, repeats: int | None = None) -> None:
         """Time contenders {(case, impl, mode): fn} round-robin on bricks of `shape`."""
@@ -120,9 +128,16 @@ class Runner:
         positions = spec.time_tf.positions_of(sel.steps, w)
         order = resolve_order(spec.order, sel)
         vr = (0.0, 255.0) if brick.dtype == np.uint8 else (float(brick.min()), float(brick.max()))
-        # The output is allocated once, as an interactive session re-integrating on every
-        # transfer-function edit keeps it (chronocl.integrate writes slabs into one volume).
-        out = (aligned_empty((nz, ny, nx, 4), np.float32), aligned_empty((nz, ny, nx), np.int32))
+        # The output is allocated once and shared by every contender of the shape (they run
+        # one after the other): one per contender held 32 of them, 86 GB at 10 x 512^3.
+        if (nz, ny, nx) not in self._out:
+            self._out = {
+                (nz, ny, nx): (
+                    aligned_empty((nz, ny, nx, 4), np.float32),
+                    aligned_empty((nz, ny, nx), np.int32),
+                )
+            }
+        out = self._out[(nz, ny, nx)]
 
         def run():
             partial, final = engine.accumulate(
@@ -135,12 +150,13 @@ class Runner:
 
     def end_to_end_fns(self, brick, mode) -> dict:
         """`chronocl.integrate` on the brick's steps as an in-memory (T, Z, Y, X) series, and a
-        resident `Session` re-integrating after a TF edit (two TFs taken in turn)."""
-        # One (T, Z, Y, X) copy of the brick for every mode (a copy per mode ran 10 x 256^3
-        # out of memory on 23 GB).
+        resident `Session` re-integrating after a TF edit (two TFs taken in turn) where its
+        copy of the window fits the memory available (else left out, named in `skipped`)."""
+        # The series is a (T, Z, Y, X) view of the brick, no copy: its steps lie as the window
+        # manager's slots lay them out, and a C-contiguous copy integrates as fast (10 x 256^3:
+        # 53-55 ms either way) but does not fit beside the rest at 10 x 512^3.
         if self._series is None or self._series[0] is not brick:
-            steps = np.ascontiguousarray(np.moveaxis(brick, 1, 0))
-            self._series = (brick, TimeSeries.from_array(steps))
+            self._series = (brick, TimeSeries.from_array(np.moveaxis(brick, 1, 0)))
         series = self._series[1]
         steps = series.host
         w = steps.shape[0]
@@ -149,14 +165,27 @@ class Runner:
         def call():
             integrate(series, f"0:{w}", mode, engine=self.ocl, **args)
 
-        session = Session(series, engine=self.ocl, mode=mode, memory=4 * steps.nbytes, **args)
-        session.set_window(0, w)
-        edits = itertools.cycle([DataTF(points=p) for p in EDIT_POINTS])
+        def fresh():  # a first call at this size: its output's pages fault as it is written
+            spares.clear()
+            integrate(series, f"0:{w}", mode, engine=self.ocl, **args)
 
-        def tf_edit():
-            session.set_spec(data_tf=next(edits))
+        fns = {("integrate-end-to-end", mode): call}
+        # Room for the session's slots (twice: a margin) and two outputs of 5 steps' bytes each
+        # (float32 RGBA and t_index)
+        if self.room["session"]:
+            session = Session(series, engine=self.ocl, mode=mode, memory=4 * steps.nbytes, **args)
+            session.set_window(0, w)
+            edits = itertools.cycle([DataTF(points=p) for p in EDIT_POINTS])
 
-        return {("integrate-end-to-end", mode): call, ("session-tf-edit", mode): tf_edit}
+            def tf_edit():
+                session.set_spec(data_tf=next(edits))
+
+            fns[("session-tf-edit", mode)] = tf_edit
+        else:
+            self.skipped.append(f"session-tf-edit/{mode}")
+        if mode == "max":
+            fns[("integrate-fresh-output", mode)] = fresh
+        return fns
 
     def roofline_fns(self, brick) -> dict:
         """The readers of `chronocl.engine.roofline.read_fns`: the OpenCL read kernel, numpy
@@ -173,11 +202,24 @@ class Runner:
         return LIMITS[limit], gvox
 
 
+def plan_memory(run: Runner, size: int, steps: int) -> None:
+    """Leave out the contenders that hold a copy of the window (a session's slots, VTK's
+    steps) where the memory free now cannot hold them beside the rest of the largest case:
+    float32 and uint8 bricks, the kernels' output, and `chronocl.integrate`'s two (one kept
+    spare) of 5 steps' bytes each (float32 RGBA, t_index)."""
+    brick = 4 * size**3 * steps
+    outputs = 3 * 5 * 4 * size**3
+    need = brick + brick // 4 + outputs
+    room = 0.8 * available_bytes()
+    run.room["session"] = need + brick + 2 * 5 * 4 * size**3 <= room
+    run.room["vtk"] = need + brick <= room
+
+
 def one_core_vs_vtk(size: int, steps: int, repeats: int) -> float | None:
     """chronocl's max over VTK's on one core: the main case raced in a child process pinned to
     one core, with PoCL on one thread and chronocl's host threads at one."""
-    if not vtk_available():
-        return None
+    if not vtk_available() or 2 * 4 * size**3 * steps > available_bytes():
+        return None  # the child's brick and VTK's copy of it would not fit beside this one
     env = {**os.environ, "POCL_MAX_PTHREAD_COUNT": "1", "CHRONOCL_THREADS": "1"}
     child = [sys.executable, __file__, "--one-core-child", str(size), "--steps", str(steps)]
     child += ["--repeats", str(repeats)]
@@ -238,6 +280,7 @@ def main() -> None:
 
     emit(env_record("integrate", {"vtk": vtk_version()}))
     run = Runner(args.repeats)
+    plan_memory(run, max(args.size, 128), args.steps if args.quick else max(args.steps, 30))
     main_case = case_name(main_label, args.steps, "float32")
     cases = [(main_label, args.steps)]
     if not args.quick:
@@ -263,7 +306,7 @@ def main() -> None:
                 contenders[(case, "opencl-dense-tf", mode)] = run.integrate_fn(
                     run.ocl, brick, mode, data_tf=DENSE_TF
                 )
-            if case == main_case and vtk_available():
+            if case == main_case and vtk_available() and run.room["vtk"]:
                 # VTK takes one (Z, Y, X) step at a time.
                 pipeline = make_pipeline(np.ascontiguousarray(np.moveaxis(brick, 1, 0)))
                 contenders[(case, "vtk-temporal-statistics", "max")] = lambda p=pipeline: run_max(p)
@@ -293,13 +336,16 @@ def main() -> None:
     )
 
     u8 = case_name(main_label, args.steps, "uint8")
+    del bricks, brick, contenders  # the one-core child builds its own
+    run._series, run._out = None, {}
+    one_core = one_core_vs_vtk(args.size, args.steps, min(args.repeats, 7))
     summary = {
         "roofline_fraction": {
             m: round(run.results[(main_case, "opencl", m)] / roof[main_case], 3) for m in MODES
         },
         "speedup_vs_numpy": {m: round(v, 1) for m, v in speedup.items()},
         "max_vs_vtk": None if max_vs_vtk is None else round(max_vs_vtk, 2),
-        "max_vs_vtk_one_core": one_core_vs_vtk(args.size, args.steps, min(args.repeats, 7)),
+        "max_vs_vtk_one_core": one_core,
         "vtk_note": "chronocl writes RGBA (4 float32) and t_index (int32) per voxel, VTK's "
         "TemporalStatistics one scalar; max_vs_vtk is chronocl on every core against VTK on "
         "one, max_vs_vtk_one_core both pinned to one core (PoCL one thread, CHRONOCL_THREADS=1)",
@@ -313,10 +359,18 @@ def main() -> None:
             m: round(run.results[(main_case, "integrate-end-to-end", m)] / roof[main_case], 3)
             for m in MODES
         },
+        # max's call with no spare output memory (the first at a size), and its own kernel's
+        "fresh_output_roofline_fraction": round(
+            run.results[(main_case, "integrate-fresh-output", "max")] / roof[main_case], 3
+        ),
         "tf_edit_roofline_fraction": {
             m: round(run.results[(main_case, "session-tf-edit", m)] / roof[main_case], 3)
             for m in MODES
+            if (main_case, "session-tf-edit", m) in run.results
         },
+        "skipped_for_memory": run.skipped
+        + ([] if run.room["vtk"] or not vtk_available() else ["vtk"])
+        + ([] if one_core is not None or not vtk_available() else ["vtk-one-core"]),
         "end_to_end_vs_kernel": {
             m: round(
                 run.results[(main_case, "integrate-end-to-end", m)]

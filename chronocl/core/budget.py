@@ -42,13 +42,16 @@ def interactive_memory() -> int:
     window of the sizes users bring (10 float32 steps of 512^3 are 5.4 GB) stays resident and
     an edit never reads it again, with room left for the chronovolumes and their textures.
     `--memory` / `memory=` still sets it."""
+    return max(parse_memory(DEFAULT_MEMORY), available_bytes() // 3)
+
+
+def available_bytes() -> int:
+    """The memory free now, within a container's limit."""
     import psutil
 
     free = int(psutil.virtual_memory().available)
     limit = _cgroup_room()
-    if limit is not None:
-        free = min(free, limit)
-    return max(parse_memory(DEFAULT_MEMORY), free // 3)
+    return free if limit is None else min(free, limit)
 
 
 def _cgroup_room() -> int | None:
