@@ -129,6 +129,13 @@ class DeviceSteps:
     def resident(self) -> list[int]:
         return list(self._slot)
 
+    def touch(self, steps: Sequence[int]) -> None:
+        """Mark the resident ones of `steps` used now, in their order (a window that slid: the
+        steps that left it give their slots up first, though a slide read them last)."""
+        for s in steps:
+            if int(s) in self._slot:
+                self._slot.move_to_end(int(s))
+
     def release(self) -> None:
         """Free the device buffer now (the slots are not used again)."""
         self.buffer.release()

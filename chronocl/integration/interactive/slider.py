@@ -223,6 +223,8 @@ class Slider:
         leaves.forget()
         self.selection = selection
         cv = self._chronovolume()
+        if leaves.device_bricks is not None:
+            leaves.device_bricks.slots.touch(selection.steps)
         leaves.arrays, leaves.device_bricks = {}, None  # the leaving steps' slots free
         return cv
 
