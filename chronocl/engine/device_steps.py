@@ -11,7 +11,8 @@ from: it uploads what is missing and hands the engine a `DeviceBrick`.
 Only engines that copy bricks use it (a GPU; a CPU device reads host memory in place, where a
 second copy would double the memory). The device budget is a share of the device's global
 memory (`DEVICE_SHARE`, or ``CHRONOCL_DEVICE_MEMORY``); a window that does not fit is streamed
-from the host as before, and the session says so.
+from the host as before, and the session says so. A session's sliding state, kept on the device
+too, holds its bytes from the same budget (`reserve`).
 """
 
 from __future__ import annotations

@@ -17,7 +17,8 @@ integrated depends on the time positions (docs/semantics.md, sliding windows):
   resident data only.
 
 The partial volumes that sliding holds are charged to the same memory budget
-as the resident steps; when both do not fit, the session re-integrates.
+as the resident steps; when both do not fit, the session re-integrates. On a GPU
+they stay on the device, held from its budget too (`Slider`, docs/window.md).
 
 A `Session` integrates one level of the series. ``Session(series, level="auto")`` gives an
 `AutoSession` instead (`chronocl.integration.interactive.levels`), which picks a level per
