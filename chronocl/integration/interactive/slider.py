@@ -153,19 +153,28 @@ class Slider:
         self.selection = selection
         self.value_range = value_range
         self.device = device
-        # An engine that copies bricks keeps the state on its device, within the device budget.
-        copies = getattr(engine, "dc", None) is not None and not engine.reads_in_place
-        voxels = int(np.prod(series.volume_shape))
-        need = state_bytes(self.mode, selection.width, voxels)
-        self.hold = reserve(engine.dc, need) if copies else None
-        self.dc = engine.dc if self.hold is not None else None
-        self.leaves = Leaves(series.n_steps, engine, spec, value_range, self.dc)
+        self.hold = None  # the device budget the state holds, from its first slide (`_place`)
+        self.dc = None  # the device context the state lives on (None: the host)
+        self.placed = False
+        self.leaves = Leaves(series.n_steps, engine, spec, value_range)
         self.inverts = self.leaves.inverts
         self.agg: SlidingAggregate[Partial] | None = None
         if not self.inverts or self.mode.state_bytes:
             self.agg = SlidingAggregate(self.leaves.for_aggregate, Combine(engine, spec))
             self.agg.reset(self._items(selection))
         self.acc = None  # inverting modes: fixed-point sums (Z, Y, X, C), host or device
+
+    def _place(self) -> None:
+        """Where the state lives, decided at the first slide (a window only edited holds no
+        device memory): an engine that copies bricks keeps it on its device where the device
+        budget has room for it."""
+        engine, self.placed = self.engine, True
+        if getattr(engine, "dc", None) is None or engine.reads_in_place:
+            return
+        voxels = int(np.prod(self.series.volume_shape))
+        self.hold = reserve(engine.dc, state_bytes(self.mode, self.selection.width, voxels))
+        if self.hold is not None:
+            self.dc = self.leaves.dc = engine.dc
 
     @property
     def held(self) -> int:
@@ -186,6 +195,8 @@ class Slider:
         """The chronovolume of `selection`, from the old window's state and `arrays` (the
         resident steps of both windows)."""
         engine, leaves = self.engine, self.leaves
+        if not self.placed:
+            self._place()
         leaves.arrays = arrays
         if self.dc is not None and self.device is not None:  # None: leaves from the host
             leaves.device_bricks = self.device.bricks(arrays, selection.width)
