@@ -83,28 +83,20 @@ class Leaves:
         arrays = [self.arrays[s] for s in steps]
         self.bricks.arrays = self.arrays
         positions = self.spec.time_tf.positions_of(list(steps), self.n_steps)
-        if self.dc is not None:
+        spec, value_range, dc = self.spec, self.value_range, self.dc
+        if dc is not None:  # from the steps on the device, into device arrays
             brick = (self.device_bricks or self.bricks).read(steps)
-            spec, value_range = self.spec, self.value_range
             partial = leaf(self.engine, brick, steps, positions, spec, value_range, self.inverts)
-            if self.mode.compares_values:
-                partial.value = leaf_value(self.dc, self.mode, brick, arrays, self.value_range)
-            if self.inverts:
-                self._full[step] = partial
-            return partial
-        brick = self.bricks.read(steps)
-        partial, _ = self.engine.accumulate(
-            brick,
-            slice(0, arrays[0].shape[0]),
-            steps,
-            positions,
-            np.arange(len(steps)),
-            self.spec,
-            self.value_range,
-            raw=self.inverts,
-        )
-        if self.mode.compares_values:
-            partial.value = self.mode.leaf_value(Values(np.stack(arrays), self.value_range))
+        else:
+            brick = self.bricks.read(steps)
+            nz, order = arrays[0].shape[0], np.arange(len(steps))
+            partial, _ = self.engine.accumulate(
+                brick, slice(0, nz), steps, positions, order, spec, value_range, raw=self.inverts
+            )
+        if self.mode.compares_values and dc is not None:
+            partial.value = leaf_value(dc, self.mode, brick, arrays, value_range)
+        elif self.mode.compares_values:
+            partial.value = self.mode.leaf_value(Values(np.stack(arrays), value_range))
         if self.inverts:
             self._full[step] = partial
         return partial
