@@ -79,9 +79,10 @@ def test_an_edit_uploads_no_step_and_a_slide_one(copying, tmp_path):
             ref = chronocl.integrate(series, session.window(), spec=session.spec, engine="numpy")
             assert_same(cv, ref)
             assert slots.uploads == 8
-        session.slide(1)  # incremental: the sliding state integrates the entering step only
-        assert session.stats["path"] == "incremental" and slots.uploads == 8
-        cv = session.set_spec(order="backward")  # the window again: one new step on the device
+        # incremental: the sliding state integrates the entering step alone, from its slot
+        session.slide(1)
+        assert session.stats["path"] == "incremental" and slots.uploads == 9
+        cv = session.set_spec(order="backward")  # the window again: every step on the device
         assert_same(cv, chronocl.integrate(series, session.window(), spec=session.spec))
         assert slots.uploads == 9
         session.slide(-1)

@@ -26,6 +26,7 @@ import pytest
 import chronocl
 from chronocl import modes
 from chronocl.engine import opencl, program
+from chronocl.engine.defines import HALF_DEFINES
 from chronocl.engine.opencl import DEVICE_TYPES, OpenCLEngine
 from chronocl.modes.base import KernelInput
 from chronocl.modes.spec import IntegrationSpec
@@ -211,6 +212,9 @@ def builds(full: bool) -> list[tuple[str, list[str], bool | str]]:
             _, defines, _, _ = mode.finish_kernel(acc, np.linspace(0, 1, 3), spec)
             sliding.append((f"{mode.kernel}.cl", defines))
             sliding.append(("sums.cl", {"CHANNELS": mode.sum_channels}))
+        if mode.compares_values:  # its leaves' values, from steps on the device (device_leaves)
+            sliding += [("leaves.cl", {"DATA_T": t}) for t in DEVICE_TYPES.values()]
+            sliding.append(("leaves.cl", dict(HALF_DEFINES)))
     sliding = [
         (f, {"SLIDING": True, **d}) for i, (f, d) in enumerate(sliding) if (f, d) not in sliding[:i]
     ]

@@ -2,7 +2,9 @@
 
 An engine integrates one xytz brick (rows, W, Y, X) into that slab's part of a chronovolume,
 combines the partials of adjacent runs of steps (for windows that slide by aggregation), and
-keeps the fixed-point sums of windows that slide by inversion (docs/semantics.md).
+keeps the fixed-point sums of windows that slide by inversion (docs/semantics.md). The OpenCL
+engine's combine, fixed_add and finish_sums also take device arrays (a sliding state kept on a
+GPU: `chronocl.engine.elementwise`).
 """
 
 from __future__ import annotations

@@ -11,7 +11,8 @@ from: it uploads what is missing and hands the engine a `DeviceBrick`.
 Only engines that copy bricks use it (a GPU; a CPU device reads host memory in place, where a
 second copy would double the memory). The device budget is a share of the device's global
 memory (`DEVICE_SHARE`, or ``CHRONOCL_DEVICE_MEMORY``); a window that does not fit is streamed
-from the host as before, and the session says so.
+from the host as before, and the session says so. A session's sliding state, kept on the device
+too, holds its bytes from the same budget (`reserve`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from chronocl.core.budget import human, parse_memory
+from chronocl.engine.device_arrays import on_device
 from chronocl.engine.device_formats import stored_dtype
 
 DEVICE_SHARE = 0.6  # of the device's global memory, for resident steps (the rest: outputs, tables)
@@ -55,6 +57,28 @@ def device_budget(global_mem: int) -> int:
     (e.g. "6GB"), else `DEVICE_SHARE` of the device's global memory."""
     given = os.environ.get("CHRONOCL_DEVICE_MEMORY")
     return parse_memory(given) if given else int(global_mem * DEVICE_SHARE)
+
+
+def reserve(dc, nbytes: int):
+    """Hold `nbytes` of the device budget of `dc` for something other than step slots (a
+    sliding window's partials and sums), or None where the budget has not that much left.
+    The hold is given back when the returned handle is called or collected."""
+    with _lock:
+        if device_budget(dc.info.global_mem) - _held.get(id(dc), 0) < nbytes:
+            return None
+        _held[id(dc)] = _held.get(id(dc), 0) + nbytes
+    return Hold(id(dc), nbytes)
+
+
+class Hold:
+    """Bytes of a device budget held until called (or collected): see `reserve`."""
+
+    def __init__(self, dc_id: int, nbytes: int) -> None:
+        self.nbytes = nbytes
+        self._give_back = weakref.finalize(self, _give_back, dc_id, nbytes)
+
+    def __call__(self) -> None:
+        self._give_back()
 
 
 @dataclass(frozen=True)
@@ -105,6 +129,13 @@ class DeviceSteps:
 
     def resident(self) -> list[int]:
         return list(self._slot)
+
+    def touch(self, steps: Sequence[int]) -> None:
+        """Mark the resident ones of `steps` used now, in their order (a window that slid: the
+        steps that left it give their slots up first, though a slide read them last)."""
+        for s in steps:
+            if int(s) in self._slot:
+                self._slot.move_to_end(int(s))
 
     def release(self) -> None:
         """Free the device buffer now (the slots are not used again)."""
@@ -169,15 +200,20 @@ class DeviceBricks:
         return self.slots.brick(self.arrays, steps, z0, self.slots.shape[0] if z1 is None else z1)
 
 
-def run_resident(dc, brick: DeviceBrick, outputs: list[np.ndarray], launch, chunk) -> None:
+def run_resident(dc, brick: DeviceBrick, outputs: list, launch, chunk) -> None:
     """Launch the kernels (`launch(queue, data, chunk, out_buffers)`, the engine's) on a
-    resident brick into device buffers, and read those back into `outputs`."""
+    resident brick into device buffers, and read those back into the host `outputs`; device
+    arrays among `outputs` (a sliding window's leaves) are written where they are."""
     import pyopencl as cl
 
-    bufs = [cl.Buffer(dc.context, cl.mem_flags.WRITE_ONLY, a.nbytes) for a in outputs]
+    def buffer(a):
+        return a.data if on_device(a) else cl.Buffer(dc.context, cl.mem_flags.WRITE_ONLY, a.nbytes)
+
+    bufs = [buffer(a) for a in outputs]
     launch(dc.queue, brick.buffer, chunk, bufs)
     for a, b in zip(outputs, bufs, strict=True):
-        cl.enqueue_copy(dc.queue, a, b, is_blocking=False)
+        if not on_device(a):
+            cl.enqueue_copy(dc.queue, a, b, is_blocking=False)
     dc.queue.finish()
 
 

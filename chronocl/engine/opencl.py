@@ -143,7 +143,8 @@ class OpenCLEngine:
         `out` = (rgba, t_index) receives the result when given (C-contiguous, float32
         (rows, Y, X, 4) and int32 (rows, Y, X)): a caller that integrates again and again,
         or slab by slab into one volume, avoids allocating and copying. A uint8 `rgba` gets
-        the display format (`chronocl.render.upload`'s "f1") of a final result.
+        the display format (`chronocl.render.upload`'s "f1") of a final result. Device arrays
+        (pyopencl's) as `out` of a resident brick are written there, not read back.
         Returns the partial result and whether it is final: a mode whose finish is global
         (additive normalised by the volume maximum) or a `raw` call is finished elsewhere.
         """

@@ -134,6 +134,11 @@ class ComparesValues(Protocol):
         """What `combine` compares, from the raw values of a leaf's steps (leaf_span, Z, Y, X)."""
         ...
 
+    def leaf_value_kernel(self, value_range: tuple[float, float]) -> tuple[str, list]:
+        """The kernel doing `leaf_value` on the device (kernels/opencl/leaves.cl, built
+        SLIDING) and its float32 scalars: (kernel, scalars)."""
+        ...
+
 
 def _hooks(protocol: type) -> tuple[str, ...]:
     return tuple(k for k, v in vars(protocol).items() if callable(v) and not k.startswith("_"))

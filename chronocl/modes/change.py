@@ -60,6 +60,9 @@ class Change(Mode):
         c = _values.clip(values.raw[-2:], *values.value_range)
         return np.abs(c[1] - c[0])
 
+    def leaf_value_kernel(self, value_range):
+        return "leaf_change", list(_values.clip_bounds(*value_range))
+
     def combine(self, front, back, spec):
         return MAX.combine(front, back, spec)
 

@@ -79,6 +79,9 @@ class Extreme(Mode, abstract=True):
     def leaf_value(self, values):
         return _values.normalize(values.raw[-1], *values.value_range)
 
+    def leaf_value_kernel(self, value_range):
+        return "leaf_u", list(_values.normalization(*value_range))
+
     def kernel_options(self, spec, positions, raw, given):
         # The kernel compares raw values where u orders them as it does (see raw_key_zones),
         # else t = (v - vmin) * scale unclamped; the zones beyond zlo and zhi tie in u.

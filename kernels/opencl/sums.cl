@@ -13,3 +13,22 @@ __kernel void fixed_add(__global const float4 *step, __global long *acc, const i
         acc[CHANNELS * i + j] += sign > 0 ? f : -f;
     }
 }
+
+/* The opacity of a raw partial alone: what an inverting mode that aggregates it (additive's
+ * largest opacity) slides, taken on the device. */
+__kernel void alpha_of(__global const float4 *step, __global float *alpha)
+{
+    const size_t i = get_global_id(0);
+    alpha[i] = step[i].w;
+}
+
+/* The largest of n sums, in two passes: work-item g keeps the largest of elements g, g + G, ...
+ * (G work-items), and the host takes the largest of those G (additive's normalisation). */
+__kernel void max_sums(__global const long *acc, const long n, __global long *out)
+{
+    const size_t g = get_global_id(0), stride = get_global_size(0);
+    long m = LONG_MIN;
+    for (size_t i = g; i < (size_t)n; i += stride)
+        m = max(m, acc[i]);
+    out[g] = m;
+}

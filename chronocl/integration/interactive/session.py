@@ -17,7 +17,8 @@ integrated depends on the time positions (docs/semantics.md, sliding windows):
   resident data only.
 
 The partial volumes that sliding holds are charged to the same memory budget
-as the resident steps; when both do not fit, the session re-integrates.
+as the resident steps; when both do not fit, the session re-integrates. On a GPU
+they stay on the device, held from its budget too (`Slider`, docs/window.md).
 
 A `Session` integrates one level of the series. ``Session(series, level="auto")`` gives an
 `AutoSession` instead (`chronocl.integration.interactive.levels`), which picks a level per
@@ -43,8 +44,7 @@ from chronocl.integration.inmemory import check_level, integrate_bricks, window_
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.integration.interactive.settings import Settings, manager_key, settings
-from chronocl.integration.interactive.slider import Slider
-from chronocl.integration.interactive.sliding import block_size
+from chronocl.integration.interactive.slider import Slider, state_bytes
 from chronocl.integration.interactive.winners import Winners, of_window, recolours
 from chronocl.modes.spec import IntegrationSpec
 
@@ -272,7 +272,7 @@ class Session:
             # sliding state starts from this window and is filled lazily on the next slide.
             if reason is None:
                 self._slider = Slider(
-                    self.series, self.engine, self.spec, selection, job.value_range
+                    self.series, self.engine, self.spec, selection, job.value_range, self._device
                 )
         self._cv = cv
         self._record(t, path, reason)
@@ -284,9 +284,7 @@ class Session:
         next spec change (when it fits beside the steps and the sliding state); and the bytes
         of the state sliding holds (2 stacks of ~2 sqrt(W) partials, work, sums)."""
         spec, mode = self.spec, self.spec.integration
-        voxels = int(np.prod(self.series.volume_shape))
-        partials = (4 * block_size(selection.width) + 4) * mode.state_bytes * voxels
-        state = partials + 8 * mode.sum_channels * voxels
+        state = state_bytes(mode, selection.width, int(np.prod(self.series.volume_shape)))
         keep = 2 * window + state <= self.budget
         reason = None
         if spec.time_tf.positions != "absolute":

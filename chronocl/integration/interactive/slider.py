@@ -7,6 +7,13 @@ The slider is built from what it needs (the series, the engine, the spec, the wi
 value range) and knows nothing of the session. Its aggregate gets two plain functions at
 construction: `Leaves.for_aggregate` (a step's partial, from the resident arrays) and
 `Combine` (the engine's combine in the spec's order).
+
+On an engine that copies bricks (a GPU) the state lives on the device between slides
+(docs/window.md): the sums are a device array the fixed_add kernel updates in place, the
+aggregate's partials device arrays the combine kernels make, and leaves are integrated from
+the steps the session keeps on the device (`DeviceWindow`); only the finished chronovolume is
+read back. Its bytes (`state_bytes`) are held from the device budget, and where they do not
+fit, the state stays on the host as on a CPU device (whose kernels read host memory in place).
 """
 
 from __future__ import annotations
@@ -19,8 +26,11 @@ from chronocl.data.bricks import ResidentBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine.base import Engine
+from chronocl.engine.device_arrays import to_host, zeros
+from chronocl.engine.device_leaves import alpha_of, leaf, leaf_value
+from chronocl.engine.device_steps import reserve
 from chronocl.integration.inmemory import chronovolume_metadata, engine_name
-from chronocl.integration.interactive.sliding import SlidingAggregate
+from chronocl.integration.interactive.sliding import SlidingAggregate, block_size
 from chronocl.modes.base import Partial, Values
 from chronocl.modes.spec import IntegrationSpec
 
@@ -45,9 +55,16 @@ class Leaves:
     """
 
     def __init__(
-        self, n_steps: int, engine: Engine, spec: IntegrationSpec, value_range: tuple
+        self,
+        n_steps: int,
+        engine: Engine,
+        spec: IntegrationSpec,
+        value_range: tuple,
+        dc: object | None = None,
     ) -> None:
         self.n_steps, self.engine, self.spec = n_steps, engine, spec
+        self.dc = dc  # the device context where the partials stay (None: on the host)
+        self.device_bricks = None  # the steps on that device, where the session keeps them
         self.mode = spec.integration
         self.value_range = value_range
         self.inverts = self.mode.slides == "invert"
@@ -65,20 +82,21 @@ class Leaves:
         steps = (*self.before.get(step, ()), step) if self.mode.leaf_span > 1 else (step,)
         arrays = [self.arrays[s] for s in steps]
         self.bricks.arrays = self.arrays
-        brick = self.bricks.read(steps)
         positions = self.spec.time_tf.positions_of(list(steps), self.n_steps)
-        partial, _ = self.engine.accumulate(
-            brick,
-            slice(0, arrays[0].shape[0]),
-            steps,
-            positions,
-            np.arange(len(steps)),
-            self.spec,
-            self.value_range,
-            raw=self.inverts,
-        )
-        if self.mode.compares_values:
-            partial.value = self.mode.leaf_value(Values(np.stack(arrays), self.value_range))
+        spec, value_range, dc = self.spec, self.value_range, self.dc
+        if dc is not None:  # from the steps on the device, into device arrays
+            brick = (self.device_bricks or self.bricks).read(steps)
+            partial = leaf(self.engine, brick, steps, positions, spec, value_range, self.inverts)
+        else:
+            brick = self.bricks.read(steps)
+            nz, order = arrays[0].shape[0], np.arange(len(steps))
+            partial, _ = self.engine.accumulate(
+                brick, slice(0, nz), steps, positions, order, spec, value_range, raw=self.inverts
+            )
+        if self.mode.compares_values and dc is not None:
+            partial.value = leaf_value(dc, self.mode, brick, arrays, value_range)
+        elif self.mode.compares_values:
+            partial.value = self.mode.leaf_value(Values(np.stack(arrays), value_range))
         if self.inverts:
             self._full[step] = partial
         return partial
@@ -87,6 +105,8 @@ class Leaves:
         """The leaf as the sliding aggregate holds it (inverting modes: its opacity only)."""
         full = self.full(step)
         self._full.pop(step, None)  # cached only for the push that follows a fixed_add
+        if self.inverts and self.dc is not None:
+            return Partial(alpha_of(self.dc, full.rgba), None)
         if self.inverts:  # only the aggregated opacity slides here
             alpha = aligned_empty(full.rgba.shape[:-1], np.float32)
             alpha[...] = full.rgba[..., 3]
@@ -116,18 +136,37 @@ class Slider:
         spec: IntegrationSpec,
         selection: Selection,
         value_range: tuple[float, float],
+        device: object | None = None,
     ) -> None:
+        """`device`: the session's `DeviceWindow`, whose steps on the device the leaves are
+        integrated from where the engine copies bricks."""
         self.series, self.engine, self.spec = series, engine, spec
         self.mode = spec.integration
         self.selection = selection
         self.value_range = value_range
+        self.device = device
+        self.hold = None  # the device budget the state holds, from its first slide (`_place`)
+        self.dc = None  # the device context the state lives on (None: the host)
+        self.placed = False
         self.leaves = Leaves(series.n_steps, engine, spec, value_range)
         self.inverts = self.leaves.inverts
         self.agg: SlidingAggregate[Partial] | None = None
         if not self.inverts or self.mode.state_bytes:
             self.agg = SlidingAggregate(self.leaves.for_aggregate, Combine(engine, spec))
             self.agg.reset(self._items(selection))
-        self.acc: np.ndarray | None = None  # inverting modes: fixed-point sums (Z, Y, X, C)
+        self.acc = None  # inverting modes: fixed-point sums (Z, Y, X, C), host or device
+
+    def _place(self) -> None:
+        """Where the state lives, decided at the first slide (a window only edited holds no
+        device memory): an engine that copies bricks keeps it on its device where the device
+        budget has room for it."""
+        engine, self.placed = self.engine, True
+        if getattr(engine, "dc", None) is None or engine.reads_in_place:
+            return
+        voxels = int(np.prod(self.series.volume_shape))
+        self.hold = reserve(engine.dc, state_bytes(self.mode, self.selection.width, voxels))
+        if self.hold is not None:
+            self.dc = self.leaves.dc = engine.dc
 
     @property
     def held(self) -> int:
@@ -148,7 +187,11 @@ class Slider:
         """The chronovolume of `selection`, from the old window's state and `arrays` (the
         resident steps of both windows)."""
         engine, leaves = self.engine, self.leaves
+        if not self.placed:
+            self._place()
         leaves.arrays = arrays
+        if self.dc is not None and self.device is not None:  # None: leaves from the host
+            leaves.device_bricks = self.device.bricks(arrays, selection.width)
         old_items = self._items(self.selection)
         # Leaves spanning several steps find their earlier steps in the window they are in.
         span = self.mode.leaf_span
@@ -158,7 +201,8 @@ class Slider:
             for i in range(span - 1, len(steps))
         }
         if self.inverts and self.acc is None:
-            self.acc = np.zeros((*self.series.volume_shape, self.mode.sum_channels), np.int64)
+            shape = (*self.series.volume_shape, self.mode.sum_channels)
+            self.acc = np.zeros(shape, np.int64) if self.dc is None else zeros(self.dc, shape, "i8")
             for s in old_items:
                 engine.fixed_add(self.acc, leaves.full(s).rgba, +1)
                 leaves.forget(s)
@@ -167,20 +211,24 @@ class Slider:
         entering = [s for s in new if s not in old_set]
         leaving = [s for s in old if s not in new_set]
         forward = selection.steps[0] > self.selection.steps[0]
+        if self.inverts:  # the leaving steps first: on a device they are still in their slots
+            for s in leaving:
+                engine.fixed_add(self.acc, leaves.full(s).rgba, -1)
+                leaves.forget(s)
         for s in entering if forward else entering[::-1]:
             if self.inverts:
                 engine.fixed_add(self.acc, leaves.full(s).rgba, +1)
             if self.agg is not None:
                 self.agg.push_back(s) if forward else self.agg.push_front(s)
-        for s in leaving if forward else leaving[::-1]:
-            if self.inverts:
-                engine.fixed_add(self.acc, leaves.full(s).rgba, -1)
+        for _ in leaving:
             if self.agg is not None:
                 self.agg.pop_front() if forward else self.agg.pop_back()
         leaves.forget()
         self.selection = selection
         cv = self._chronovolume()
-        leaves.arrays = {}  # the leaving steps' slots free for the next steps read
+        if leaves.device_bricks is not None:
+            leaves.device_bricks.slots.touch(selection.steps)
+        leaves.arrays, leaves.device_bricks = {}, None  # the leaving steps' slots free
         return cv
 
     def _chronovolume(self) -> Chronovolume:
@@ -196,6 +244,8 @@ class Slider:
         elif value is None:  # no leaf in the window (change over one step): nothing changed
             rgba = np.zeros((*shape, 4), np.float32)
             t_index = np.full(shape, -1, np.int32) if spec.has_t_index else None
+        elif self.dc is not None:  # read back: the one transfer of a slide on the device
+            rgba, t_index = to_host(self.dc, value.rgba), to_host(self.dc, value.t_index)
         else:
             rgba = np.asarray(value.rgba, dtype=np.float32)
             t_index = None if value.t_index is None else np.array(value.t_index, dtype=np.int32)
@@ -203,3 +253,10 @@ class Slider:
             series, selection, spec, self.value_range, engine_name(self.engine)
         )
         return Chronovolume(rgba, t_index, meta)
+
+
+def state_bytes(mode, width: int, voxels: int) -> int:
+    """Bytes of the state sliding a window of `width` steps over `voxels` voxels holds: 2
+    stacks of about 2 sqrt(W) partials, the work in hand, and the fixed-point sums."""
+    partials = (4 * block_size(width) + 4) * mode.state_bytes * voxels
+    return partials + 8 * mode.sum_channels * voxels
