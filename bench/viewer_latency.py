@@ -94,6 +94,7 @@ SPLIT = (
     "recolour_ms",
     "readback_ms",
     "upload_ms",
+    "upload_overlapped_ms",  # a refine's slabs written while it integrated: within integrate_ms
     "render_ms",
     "encode_ms",
     "server_ms",

@@ -102,3 +102,17 @@ def test_a_refine_given_up_half_way_is_written_whole_next_time(series, writes_co
     np.testing.assert_array_equal(data, cv.rgba)
     np.testing.assert_array_equal(a, b)
     on_gl(lambda rc: slot.release_gl())
+
+
+def test_slabs_are_written_where_the_integration_leaves_the_cores_free(monkeypatch):
+    from chronocl.engine.opencl import OpenCLEngine
+    from chronocl.viewer.slab_upload import pays
+
+    monkeypatch.delenv("CHRONOCL_SLAB_UPLOAD", raising=False)
+    assert pays(OpenCLEngine(host_ptr=False), None)  # copies to its device, as a GPU's does
+    assert not pays(OpenCLEngine(host_ptr=True), None)  # the host's cores: llvmpipe's too
+    assert not pays("numpy", None)  # writes no display format
+    monkeypatch.setenv("CHRONOCL_SLAB_UPLOAD", "1")
+    assert pays("numpy", None)
+    monkeypatch.setenv("CHRONOCL_SLAB_UPLOAD", "0")
+    assert not pays(OpenCLEngine(host_ptr=False), None)

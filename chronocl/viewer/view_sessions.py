@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+from contextlib import nullcontext
 
 from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
@@ -20,7 +21,7 @@ from chronocl.integration.interactive.settings import manager_key
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.recolouring import Recolouring
-from chronocl.viewer.slab_upload import SlabUpload
+from chronocl.viewer.slab_upload import SlabUpload, pays
 from chronocl.viewer.slots import ViewSlot
 from chronocl.viewer.view_state import ViewState
 
@@ -42,6 +43,7 @@ class Views:
         self.recolouring = Recolouring(device)  # TF edits that only recolour (recolouring.py)
         self.host_steps_why: str | None = None  # the last frame's steps_on_host
         self.slab_upload_ms = 0.0  # a refine's texture writes, overlapped with its integration
+        self._slabs: bool | None = None  # whether they pay (`slab_upload.pays`), once known
 
     def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed;
@@ -127,8 +129,10 @@ class Views:
         self.recolouring.ms = self.recolouring.upload_ms = 0.0
         if slot is self.slots[0]:  # the refine's first view
             self.slab_upload_ms = 0.0
+        if self._slabs is None:
+            self._slabs = pays(self.engine, self.device)
         writes = SlabUpload(slot)  # its texture written slab by slab as it integrates
-        with INTEGRATE_LOCK, slabs_to(writes.put):
+        with INTEGRATE_LOCK, slabs_to(writes.put) if self._slabs else nullcontext():
             cv = slot.session.refine()  # type: ignore[union-attr]
         writes.done(cv)
         self.slab_upload_ms += writes.ms
