@@ -18,6 +18,7 @@ from chronocl.core import memory
 from chronocl.core.memory import recycled_empty, spares
 from chronocl.data.bricks import ResidentBricks
 from chronocl.engine.opencl import OpenCLEngine
+from chronocl.integration import inmemory
 from chronocl.integration.inmemory import integrate_bricks, window_job
 
 from .strategies import examples, specs, windows
@@ -124,3 +125,32 @@ def test_integrating_on_garbage_equals_integrating_on_zeros(taken, data):
     got = chronocl.integrate(series, sel, spec=spec, engine=engine, slab=slab)
     assert taken
     assert_same(got, chronocl.integrate(series, sel, spec=spec, engine="numpy"))
+
+
+@settings(max_examples=examples(12), deadline=None)
+@given(st.data())
+def test_the_display_format_on_garbage_equals_it_on_zeros(taken, data):
+    """The kernels' RGBA8 (a viewer's frame) on garbage: the volumes above are all below
+    `DISPLAY_VOXELS`, so this lowers it to 0."""
+    u, sel = data.draw(windows(wide=True))
+    spec = data.draw(specs(selection=sel))
+    full = np.zeros((sel.n_steps, *u.shape[1:]), np.float32)
+    full[list(sel.steps)] = u
+    series = chronocl.TimeSeries.from_array(full)
+    job = window_job(series, sel, spec)
+    arrays = {s: series.host[s] for s in sel.steps}
+    engine = OpenCLEngine(host_ptr=data.draw(st.booleans()))
+    slab = data.draw(st.integers(1, u.shape[1] + 1))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(inmemory, "DISPLAY_VOXELS", 0)
+        spares.clear()
+        clean = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab, display=True)
+        poison(u.shape[1:])
+        taken.clear()
+        dirty = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab, display=True)
+    assert taken
+    if not spec.integration.finalize_is_global(spec):
+        assert dirty.rgba.dtype == np.uint8
+    np.testing.assert_array_equal(dirty.rgba, clean.rgba)
+    if clean.t_index is not None:
+        np.testing.assert_array_equal(dirty.t_index, clean.t_index)
