@@ -6,6 +6,9 @@ must equal what fresh zeroed memory gives, bit for bit, and the numpy reference.
 from __future__ import annotations
 
 import gc
+import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -154,3 +157,50 @@ def test_the_display_format_on_garbage_equals_it_on_zeros(taken, data):
     np.testing.assert_array_equal(dirty.rgba, clean.rgba)
     if clean.t_index is not None:
         np.testing.assert_array_equal(dirty.t_index, clean.t_index)
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # fork beside threads (3.12)
+def test_a_forked_child_never_writes_its_parents_memory():
+    """The maps are shared with a forked child (anonymous shared maps): a child must neither
+    recycle what the parent still uses (an array alive in the parent that died in the child)
+    nor a spare the parent hands out too."""
+    shape = (64, 64, 4)
+    live = recycled_empty(shape, np.float32)
+    live[...] = 1
+    dead = recycled_empty(shape, np.float32)
+    del dead
+    gc.collect()
+    assert len(spares.maps) == 1
+    go_r, go_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: the parent's live array dies here, then outputs are made
+        try:
+            os.read(go_r, 1)
+            del live
+            gc.collect()
+            for value in (2, 3):
+                recycled_empty(shape, np.float32)[...] = value
+        finally:
+            os._exit(0)
+    taken = recycled_empty(shape, np.float32)  # the parent's spare, handed out here
+    taken[...] = 5
+    os.write(go_w, b"x")
+    _, status = os.waitpid(pid, 0)
+    os.close(go_r)
+    os.close(go_w)
+    assert status == 0
+    assert (live == 1).all() and (taken == 5).all()
+
+
+def test_arrays_alive_at_exit_give_nothing_back():
+    """Nothing is made after exit begins: an array alive then (a script's result) is not made
+    spare (on Python 3.12 that started the expiry's timer thread at shutdown: a traceback)."""
+    script = (
+        "import numpy as np\n"
+        "from chronocl.core import memory\n"
+        "memory.spares.give = lambda mapped: print('given at exit')\n"
+        "kept = memory.recycled_empty((1, memory.MAPPED_BYTES), np.uint8)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0 and not done.stderr, done.stderr
+    assert "given" not in done.stdout
