@@ -204,3 +204,20 @@ def test_arrays_alive_at_exit_give_nothing_back():
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert done.returncode == 0 and not done.stderr, done.stderr
     assert "given" not in done.stdout
+
+
+def test_an_array_dying_while_the_spares_are_locked_does_not_deadlock():
+    """A collection may run inside `give` or `take` (the expiry timer's allocations) and call
+    the finalizer of a recycled array that died in a reference cycle, in the thread holding the
+    spares' lock: found by varying the collection threshold, it hung the thread for good. Here
+    the array dies inside the lock directly."""
+    script = (
+        "import numpy as np\n"
+        "from chronocl.core import memory\n"
+        "a = memory.recycled_empty((memory.MAPPED_BYTES,), np.uint8)\n"
+        "with memory.spares.lock:\n"
+        "    del a\n"
+        "assert len(memory.spares.maps) == 1\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=30)
+    assert done.returncode == 0, done.stderr

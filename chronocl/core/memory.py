@@ -49,7 +49,9 @@ class _Spares:
     it adds nothing to the peak."""
 
     def __init__(self) -> None:
-        self.lock = threading.Lock()
+        # Reentrant: a garbage collection run inside (any allocation may start one) calls the
+        # finalizers of recycled arrays that died in reference cycles, which give in this thread
+        self.lock = threading.RLock()
         self.maps: list[mmap.mmap] = []
         self._expiry: threading.Timer | None = None
 
@@ -77,7 +79,7 @@ class _Spares:
     def forget(self) -> None:
         """In a forked child: the maps (shared with the parent, as every anonymous map here is)
         are the parent's to hand out, and the lock may have been held by a thread not forked."""
-        self.lock, self.maps, self._expiry = threading.Lock(), [], None
+        self.lock, self.maps, self._expiry = threading.RLock(), [], None
 
 
 spares = _Spares()
