@@ -8,6 +8,9 @@ budget is sent from the host as before, and the session says why.
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -167,3 +170,18 @@ def test_slots_count_against_one_device_budget(copying, monkeypatch):
         with Session(series, mode="max", engine=copying, memory="64MB") as c:
             c.set_window(0, 4)  # the first's slots were given back
             assert c._device.slots is not None
+
+
+def test_a_hold_dying_while_the_budget_is_locked_does_not_deadlock():
+    """A garbage collection that any allocation under the budget's lock may start gives back
+    the holds and slots that died in reference cycles, in the thread holding the lock (as
+    `recycled_empty`'s spares do: tests/test_recycled_outputs.py)."""
+    script = (
+        "from chronocl.engine import device_steps as ds\n"
+        "hold = ds.Hold(-1, 10)\n"
+        "with ds._lock:\n"
+        "    del hold\n"
+        "assert ds._held[-1] == -10\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=30)
+    assert done.returncode == 0, done.stderr

@@ -6,6 +6,9 @@ must equal what fresh zeroed memory gives, bit for bit, and the numpy reference.
 from __future__ import annotations
 
 import gc
+import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -18,6 +21,7 @@ from chronocl.core import memory
 from chronocl.core.memory import recycled_empty, spares
 from chronocl.data.bricks import ResidentBricks
 from chronocl.engine.opencl import OpenCLEngine
+from chronocl.integration import inmemory
 from chronocl.integration.inmemory import integrate_bricks, window_job
 
 from .strategies import examples, specs, windows
@@ -124,3 +128,96 @@ def test_integrating_on_garbage_equals_integrating_on_zeros(taken, data):
     got = chronocl.integrate(series, sel, spec=spec, engine=engine, slab=slab)
     assert taken
     assert_same(got, chronocl.integrate(series, sel, spec=spec, engine="numpy"))
+
+
+@settings(max_examples=examples(12), deadline=None)
+@given(st.data())
+def test_the_display_format_on_garbage_equals_it_on_zeros(taken, data):
+    """The kernels' RGBA8 (a viewer's frame) on garbage: the volumes above are all below
+    `DISPLAY_VOXELS`, so this lowers it to 0."""
+    u, sel = data.draw(windows(wide=True))
+    spec = data.draw(specs(selection=sel))
+    full = np.zeros((sel.n_steps, *u.shape[1:]), np.float32)
+    full[list(sel.steps)] = u
+    series = chronocl.TimeSeries.from_array(full)
+    job = window_job(series, sel, spec)
+    arrays = {s: series.host[s] for s in sel.steps}
+    engine = OpenCLEngine(host_ptr=data.draw(st.booleans()))
+    slab = data.draw(st.integers(1, u.shape[1] + 1))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(inmemory, "DISPLAY_VOXELS", 0)
+        spares.clear()
+        clean = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab, display=True)
+        poison(u.shape[1:])
+        taken.clear()
+        dirty = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab, display=True)
+    assert taken
+    if not spec.integration.finalize_is_global(spec):
+        assert dirty.rgba.dtype == np.uint8
+    np.testing.assert_array_equal(dirty.rgba, clean.rgba)
+    if clean.t_index is not None:
+        np.testing.assert_array_equal(dirty.t_index, clean.t_index)
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # fork beside threads (3.12)
+def test_a_forked_child_never_writes_its_parents_memory():
+    """The maps are shared with a forked child (anonymous shared maps): a child must neither
+    recycle what the parent still uses (an array alive in the parent that died in the child)
+    nor a spare the parent hands out too."""
+    shape = (64, 64, 4)
+    live = recycled_empty(shape, np.float32)
+    live[...] = 1
+    dead = recycled_empty(shape, np.float32)
+    del dead
+    gc.collect()
+    assert len(spares.maps) == 1
+    go_r, go_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: the parent's live array dies here, then outputs are made
+        try:
+            os.read(go_r, 1)
+            del live
+            gc.collect()
+            for value in (2, 3):
+                recycled_empty(shape, np.float32)[...] = value
+        finally:
+            os._exit(0)
+    taken = recycled_empty(shape, np.float32)  # the parent's spare, handed out here
+    taken[...] = 5
+    os.write(go_w, b"x")
+    _, status = os.waitpid(pid, 0)
+    os.close(go_r)
+    os.close(go_w)
+    assert status == 0
+    assert (live == 1).all() and (taken == 5).all()
+
+
+def test_arrays_alive_at_exit_give_nothing_back():
+    """Nothing is made after exit begins: an array alive then (a script's result) is not made
+    spare (on Python 3.12 that started the expiry's timer thread at shutdown: a traceback)."""
+    script = (
+        "import numpy as np\n"
+        "from chronocl.core import memory\n"
+        "memory.spares.give = lambda mapped: print('given at exit')\n"
+        "kept = memory.recycled_empty((1, memory.MAPPED_BYTES), np.uint8)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0 and not done.stderr, done.stderr
+    assert "given" not in done.stdout
+
+
+def test_an_array_dying_while_the_spares_are_locked_does_not_deadlock():
+    """A collection may run inside `give` or `take` (the expiry timer's allocations) and call
+    the finalizer of a recycled array that died in a reference cycle, in the thread holding the
+    spares' lock: found by varying the collection threshold, it hung the thread for good. Here
+    the array dies inside the lock directly."""
+    script = (
+        "import numpy as np\n"
+        "from chronocl.core import memory\n"
+        "a = memory.recycled_empty((memory.MAPPED_BYTES,), np.uint8)\n"
+        "with memory.spares.lock:\n"
+        "    del a\n"
+        "assert len(memory.spares.maps) == 1\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=30)
+    assert done.returncode == 0, done.stderr

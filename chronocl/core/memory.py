@@ -7,6 +7,7 @@ already faulted in, instead of a fresh map whose every page faults on first writ
 from __future__ import annotations
 
 import mmap
+import os
 import threading
 import weakref
 
@@ -48,7 +49,9 @@ class _Spares:
     it adds nothing to the peak."""
 
     def __init__(self) -> None:
-        self.lock = threading.Lock()
+        # Reentrant: a garbage collection run inside (any allocation may start one) calls the
+        # finalizers of recycled arrays that died in reference cycles, which give in this thread
+        self.lock = threading.RLock()
         self.maps: list[mmap.mmap] = []
         self._expiry: threading.Timer | None = None
 
@@ -73,8 +76,21 @@ class _Spares:
         with self.lock:
             self.maps.clear()
 
+    def forget(self) -> None:
+        """In a forked child: the maps (shared with the parent, as every anonymous map here is)
+        are the parent's to hand out, and the lock may have been held by a thread not forked."""
+        self.lock, self.maps, self._expiry = threading.RLock(), [], None
+
 
 spares = _Spares()
+os.register_at_fork(after_in_child=spares.forget)
+
+
+def _give_back(mapped: mmap.mmap, pid: int) -> None:
+    """A recycled array died: its map is spare, unless it was made in another process before
+    a fork (the parent may still use it, or hand it out)."""
+    if os.getpid() == pid:
+        spares.give(mapped)
 
 
 class _Exported:
@@ -108,7 +124,8 @@ def recycled_empty(shape: tuple[int, ...], dtype: object) -> np.ndarray:
         except OSError as exc:
             raise MemoryError(f"cannot allocate {nbytes} bytes: {exc}") from None
     owner = _Exported(mapped, nbytes)
-    weakref.finalize(owner, spares.give, mapped)
+    # Not at exit: nothing is made again, and 3.12 cannot start the expiry timer's thread then
+    weakref.finalize(owner, _give_back, mapped, os.getpid()).atexit = False
     return np.asarray(owner).view(dt).reshape(shape)
 
 

@@ -37,7 +37,9 @@ SPARE_SLOTS = 2  # beyond the window: the steps a slide or a scrub back needs ne
 # Bytes of device slots held per device context, by every session of the process: the budget
 # is the device's, shared by the views and levels that each keep their window there.
 _held: dict[int, int] = {}
-_lock = threading.Lock()
+# Reentrant: holds and slots that die in reference cycles give back from within a garbage
+# collection, which any allocation under the lock may start in the thread holding it.
+_lock = threading.RLock()
 
 
 def _give_back(dc_id: int, nbytes: int) -> None:
@@ -63,8 +65,9 @@ def reserve(dc, nbytes: int):
     """Hold `nbytes` of the device budget of `dc` for something other than step slots (a
     sliding window's partials and sums), or None where the budget has not that much left.
     The hold is given back when the returned handle is called or collected."""
+    budget = device_budget(dc.info.global_mem)
     with _lock:
-        if device_budget(dc.info.global_mem) - _held.get(id(dc), 0) < nbytes:
+        if budget - _held.get(id(dc), 0) < nbytes:
             return None
         _held[id(dc)] = _held.get(id(dc), 0) + nbytes
     return Hold(id(dc), nbytes)

@@ -256,8 +256,10 @@ class Session:
         slider = self._slider
         path = "reintegrate"
         if reason is None and slider is not None and slider.can_move_to(selection):
+            # Neither holds until it completes: a slide failing half way (out of memory) is torn
+            self._cv, self._slider = None, None
             cv = slider.move_to(selection, {**leaving, **arrays})
-            path = "incremental"
+            self._slider, path = slider, "incremental"
         else:
             job = window_job(self.series, selection, self.spec)
             self._bricks.arrays = self._arrays  # its `keep` was decided above
