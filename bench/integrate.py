@@ -338,6 +338,7 @@ def main() -> None:
     u8 = case_name(main_label, args.steps, "uint8")
     del bricks, brick, contenders  # the one-core child builds its own
     run._series, run._out = None, {}
+    spares.clear()
     one_core = one_core_vs_vtk(args.size, args.steps, min(args.repeats, 7))
     summary = {
         "roofline_fraction": {

@@ -9,6 +9,7 @@ import gc
 import os
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -84,6 +85,13 @@ def test_a_dead_array_gives_its_memory_to_the_next_of_its_size():
     c = recycled_empty((64, 64, 4), np.float32)  # none spare: a fresh map, zeroed
     assert c.ctypes.data != address and not c.any()
     assert b.ctypes.data % memory.ALIGN == 0 and c.ctypes.data % memory.ALIGN == 0
+
+
+def test_arrays_dying_fast_start_one_timer_not_one_each():
+    before = threading.active_count()
+    for _ in range(50):  # a viewer sliding at 30 frames a second
+        recycled_empty((64, 64), np.float32)
+    assert spares.maps and threading.active_count() <= before + 1
 
 
 def test_spares_are_bounded_in_number_and_time(monkeypatch):

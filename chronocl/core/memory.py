@@ -9,6 +9,7 @@ from __future__ import annotations
 import mmap
 import os
 import threading
+import time
 import weakref
 
 import numpy as np
@@ -53,7 +54,9 @@ class _Spares:
         # finalizers of recycled arrays that died in reference cycles, which give in this thread
         self.lock = threading.RLock()
         self.maps: list[mmap.mmap] = []
-        self._expiry: threading.Timer | None = None
+        self._expiry: threading.Timer | None = None  # one at a time, however often they die
+        self._until = 0.0  # when the spares go back, SPARE_SECONDS after the last came
+        self._fires_at = 0.0  # when the pending timer looks at `_until`
 
     def take(self, size: int) -> mmap.mmap | None:
         with self.lock:
@@ -66,11 +69,27 @@ class _Spares:
         with self.lock:
             self.maps.append(mapped)
             del self.maps[:-SPARE_MAPS]
-            if self._expiry is not None:
-                self._expiry.cancel()
-            self._expiry = threading.Timer(SPARE_SECONDS, self.clear)
-            self._expiry.daemon = True
-            self._expiry.start()
+            self._until = time.monotonic() + SPARE_SECONDS
+            if self._expiry is None or self._until < self._fires_at:  # (a shorter SPARE_SECONDS)
+                if self._expiry is not None:
+                    self._expiry.cancel()
+                self._start_expiry(SPARE_SECONDS)
+
+    def _start_expiry(self, seconds: float) -> None:
+        self._fires_at = time.monotonic() + seconds
+        self._expiry = threading.Timer(seconds, self._expire)
+        self._expiry.daemon = True
+        self._expiry.start()
+
+    def _expire(self) -> None:
+        """The timer's end: clear, or wait on where a map given since moved the deadline."""
+        with self.lock:
+            left = self._until - time.monotonic()
+            if left > 0 and self.maps:
+                self._start_expiry(left)
+                return
+            self._expiry = None
+            self.maps.clear()
 
     def clear(self) -> None:
         with self.lock:
@@ -79,7 +98,7 @@ class _Spares:
     def forget(self) -> None:
         """In a forked child: the maps (shared with the parent, as every anonymous map here is)
         are the parent's to hand out, and the lock may have been held by a thread not forked."""
-        self.lock, self.maps, self._expiry = threading.RLock(), [], None
+        self.lock, self.maps, self._expiry, self._until = threading.RLock(), [], None, 0.0
 
 
 spares = _Spares()
