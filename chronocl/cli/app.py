@@ -8,6 +8,7 @@ never a traceback.
 from __future__ import annotations
 
 import errno
+import logging
 import os
 import sys
 import warnings
@@ -125,6 +126,10 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 def _fail(message: str, code: int) -> None:
     line = " ".join(message.splitlines())  # one line, whatever the message held
     err.print(f"chronocl: error: {line}", highlight=False, markup=False, soft_wrap=True)
+    # A remote store's reads given up with the command (its other chunk requests still pending
+    # in fsspec's event loop) are destroyed at exit, and asyncio would log each one after the
+    # error line (seen on Python 3.13 with a connection dropped mid-read).
+    logging.getLogger("asyncio").setLevel(logging.CRITICAL + 1)
     sys.exit(code)
 
 
