@@ -108,7 +108,7 @@ def test_spares_are_bounded_in_number_and_time(monkeypatch):
     assert not spares.maps
 
 
-@settings(max_examples=examples(16), deadline=None)
+@settings(max_examples=examples(8), deadline=None)
 @given(st.data())
 def test_integrating_on_garbage_equals_integrating_on_zeros(taken, data):
     u, sel = data.draw(windows())
@@ -138,7 +138,7 @@ def test_integrating_on_garbage_equals_integrating_on_zeros(taken, data):
     assert_same(got, chronocl.integrate(series, sel, spec=spec, engine="numpy"))
 
 
-@settings(max_examples=examples(12), deadline=None)
+@settings(max_examples=examples(6), deadline=None)
 @given(st.data())
 def test_the_display_format_on_garbage_equals_it_on_zeros(taken, data):
     """The kernels' RGBA8 (a viewer's frame) on garbage: the volumes above are all below
