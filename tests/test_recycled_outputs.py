@@ -108,6 +108,14 @@ def test_spares_are_bounded_in_number_and_time(monkeypatch):
     assert not spares.maps
 
 
+def window_of(u: np.ndarray, sel, spec):
+    """(series, job, resident arrays) of the drawn window `u` at the steps of `sel`."""
+    full = np.zeros((sel.n_steps, *u.shape[1:]), np.float32)
+    full[list(sel.steps)] = u
+    series = chronocl.TimeSeries.from_array(full)
+    return series, window_job(series, sel, spec), {s: series.host[s] for s in sel.steps}
+
+
 @settings(max_examples=examples(8), deadline=None)
 @given(st.data())
 def test_integrating_on_garbage_equals_integrating_on_zeros(taken, data):
@@ -115,11 +123,7 @@ def test_integrating_on_garbage_equals_integrating_on_zeros(taken, data):
     spec = data.draw(specs(selection=sel))
     display = data.draw(st.booleans())
     slab = data.draw(st.integers(1, u.shape[1] + 1))
-    full = np.zeros((sel.n_steps, *u.shape[1:]), np.float32)
-    full[list(sel.steps)] = u
-    series = chronocl.TimeSeries.from_array(full)
-    job = window_job(series, sel, spec)
-    arrays = {s: series.host[s] for s in sel.steps}
+    series, job, arrays = window_of(u, sel, spec)
     engine = OpenCLEngine(host_ptr=data.draw(st.booleans()))
 
     spares.clear()
@@ -145,11 +149,7 @@ def test_the_display_format_on_garbage_equals_it_on_zeros(taken, data):
     `DISPLAY_VOXELS`, so this lowers it to 0."""
     u, sel = data.draw(windows(wide=True))
     spec = data.draw(specs(selection=sel))
-    full = np.zeros((sel.n_steps, *u.shape[1:]), np.float32)
-    full[list(sel.steps)] = u
-    series = chronocl.TimeSeries.from_array(full)
-    job = window_job(series, sel, spec)
-    arrays = {s: series.host[s] for s in sel.steps}
+    _, job, arrays = window_of(u, sel, spec)
     engine = OpenCLEngine(host_ptr=data.draw(st.booleans()))
     slab = data.draw(st.integers(1, u.shape[1] + 1))
     with pytest.MonkeyPatch.context() as mp:
