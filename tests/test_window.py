@@ -19,7 +19,9 @@ from chronocl.core.errors import (
     StoreChangedError,
     SupersededError,
 )
+from chronocl.core.budget import resident_bytes
 from chronocl.data.series import TimeSeries, open_series
+from chronocl.data.slots import _warmer
 from chronocl.data.window import WindowManager
 
 
@@ -95,6 +97,23 @@ def test_prefetch_reads_ahead_in_the_scrub_direction(tmp_path) -> None:
         wm.get([2, 3, 4], direction=-1)
         wm.request([0, 1, 2, 3, 4]).result()
         assert all(wm.reads[s] == 1 for s in range(9))
+
+
+@pytest.mark.skipif(resident_bytes() is None, reason="reads /proc/self/statm")
+def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_ahead() -> None:
+    """A scrub's stop reads the steps the drag passed at once: the free slots they go to are
+    warm already (as many as the window is long, within the budget; not the whole budget)."""
+    shape, window = (16, 256, 256), 3
+    step = int(np.prod(shape)) * 4  # 4 MB: the 10-slot block is a memory map of its own
+    series = TimeSeries.from_array(np.ones((12, *shape), np.float32))
+    with WindowManager(series, 10 * step, prefetch=0) as wm:
+        before = resident_bytes()
+        wm.get(list(range(window)))
+        _warmer().submit(lambda: None).result()
+        grown = resident_bytes() - before
+        assert (2 * window - 0.5) * step <= grown <= (2 * window + 1.5) * step
+        got = wm.get(list(range(window, 2 * window)))  # the jump: into the warm slots
+        assert all((a == 1).all() for a in got) and wm.slots.own_arrays == 0
 
 
 def test_superseded_requests_are_cancelled_not_queued() -> None:

@@ -11,11 +11,12 @@ holds that view (a weak reference's callback): a step evicted while a session st
 is never overwritten. The lowest free slot is taken first, which keeps the steps close
 together. With every slot taken a step gets an array of its own: correct, only not in place.
 
-The next `WARM_SPARES` free slots are faulted in ahead on a background thread at a low priority
-(`chronocl.core.memory.prefault`), so the step read into one does not also pay for its fresh
-pages (0.2-0.3 s per 512 MB here, up to 2 s on a virtual machine whose host took freed memory
-back): the slot a slide or a read ahead takes next is warm. Only the spares, not the whole
-budget, so a large budget is not all resident at once.
+The next free slots (as many as the caller asks: the window manager asks for one window's length,
+what a jump of a whole window takes) are faulted in ahead on a background thread at a low
+priority (`chronocl.core.memory.prefault`), so the step read into one does not also pay for its
+fresh pages (0.2-0.3 s per 512 MB here, up to 2 s on a virtual machine whose host took freed
+memory back): the slots a slide, a scrub's stop or a read ahead take next are warm. Only those,
+not the whole budget, so a large budget is not all resident at once.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import numpy as np
 
 from chronocl.core.memory import aligned_empty, prefault
 
-WARM_SPARES = 2
+WARM_SPARES = 2  # free slots warmed ahead when the caller does not say
 WARM_NICE = 10  # the pre-faulting thread's nice value: it takes idle cores only
 COLLECT_EVERY_S = 5.0
 
@@ -51,8 +52,8 @@ class StepSlots:
         self._collected = -COLLECT_EVERY_S  # when `take` last ran the garbage collector
 
     def take(self, spares: int = WARM_SPARES) -> np.ndarray:
-        """A (Z, Y, X) array for one step: a free slot, else an array of its own. At most
-        `spares` of the next free slots are warmed (the caller's budget may hold fewer)."""
+        """A (Z, Y, X) array for one step: a free slot, else an array of its own. The next
+        `spares` free slots are warmed (the caller's budget may hold fewer)."""
         with self._lock:
             now = time.monotonic()
             if not self._free and now - self._collected > COLLECT_EVERY_S:
@@ -71,7 +72,7 @@ class StepSlots:
             i = heapq.heappop(self._free)
             view = self._block[:, i]
             self._warm.add(i)
-            spares = heapq.nsmallest(min(spares, WARM_SPARES), self._free)  # taken next
+            spares = heapq.nsmallest(max(0, spares), self._free)  # taken next
             cold = [self._block[:, j] for j in spares if j not in self._warm]
             self._warm.update(j for j in spares)
         weakref.finalize(view, self._give_back, i)

@@ -97,6 +97,7 @@ class WindowManager:
         self.prefetch = prefetch
         self.scrub = ScrubModel()  # the scrub's speed and a step's read time (prefetch=None)
         self._ahead: tuple[int, ...] = ()  # the steps the last request read ahead
+        self._span = 1  # the last request's distinct steps: free slots kept warm (`_start`)
         self.generation = 0
         self.reads: Counter[int] = Counter()  # completed reads per step (tests: never twice)
         self.cancelled = 0  # loads dropped before they finished
@@ -168,6 +169,7 @@ class WindowManager:
                 raise InvalidParameterError("this window manager is closed; make a new one")
             self.generation += 1
             self._wanted = set(steps)
+            self._span = max(1, distinct)
             for s in steps:
                 self._failed.pop(s, None)
             keep = self._wanted | set(ahead)
@@ -244,9 +246,11 @@ class WindowManager:
 
     def _start(self, step: int) -> None:
         """Reserve the step's memory and submit its read (locked)."""
-        # Slots warmed ahead stay within the budget: the steps held and under way, this one.
+        # Free slots warmed ahead: enough for a jump of a whole window (a scrub's stop reads
+        # the steps the drag passed at once, each into a slot never written when the budget
+        # has not been filled yet), within the budget: the steps held and under way, this one.
         room = self.capacity - len(self._cache) - len(self._loads) - 1
-        load = _Load(step, self.slots.take(spares=max(0, room)))
+        load = _Load(step, self.slots.take(spares=max(0, min(room, self._span))))
         self._loads[step] = load
         load.future = self._pool.submit(self._read, load)
 
