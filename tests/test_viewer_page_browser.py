@@ -417,6 +417,10 @@ def test_render_size_keeps_the_aspect_within_the_budget():
     sharp = frames.DrawBudget(target_ms=80, sharp_ms=150, cap=10**6)
     sharp.record(1.0, 1000)  # 1 ms a 1000 pixels: 80 000 in 80 ms, 150 000 in 150
     assert sharp.pixels() == 80_000 and sharp.pixels(sharp=True) == 150_000
+    # A sharp frame predicted a little over its target is drawn whole (no redraw to follow)
+    assert sharp.pixels(sharp=True, full=220_000) == 10**6  # 220 ms <= 1.5 x 150
+    assert sharp.pixels(sharp=True, full=230_000) == 150_000  # 230 ms: reduced
+    assert sharp.pixels(full=100_000) == 80_000  # a frame answering input: its own target
 
 
 def test_a_frame_a_little_under_full_size_is_redrawn_too(server, monkeypatch):

@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 import zarr
 
+from chronocl.core.budget import resident_bytes
 from chronocl.core.errors import (
     InvalidParameterError,
     InvalidSelectionError,
     StoreChangedError,
     SupersededError,
 )
-from chronocl.core.budget import resident_bytes
 from chronocl.data.series import TimeSeries, open_series
 from chronocl.data.slots import _warmer
 from chronocl.data.window import WindowManager

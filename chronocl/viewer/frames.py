@@ -27,6 +27,10 @@ DRAW_TARGET_MS = 80.0  # about a 512^2 draw of 128^3 on llvmpipe, 2 cores
 # A full-resolution frame whose full-size draw fits this is drawn at full size at once, not
 # reduced and redrawn (view_sessions.TARGET_MS, the latency target of a frame).
 SHARP_DRAW_MS = 150.0
+# ... and one predicted within this many times that, too: reduced, it would save at most a third
+# of a draw, and the redraw once input stops costs a whole one (a sharp frame at 930x640 on
+# llvmpipe draws in 130-170 ms: one in two was drawn twice, 150 ms more to the sharp frame).
+SHARP_OVERRUN = 1.5
 MIN_PIXELS = 256 * 256  # never fewer, however slow the draws (a floor on sharpness)
 EMPTY_BELOW = 0.01  # a panel with less than this fraction of visible pixels gets a note
 
@@ -52,9 +56,12 @@ class DrawBudget:
         old = self.ms_per_pixel
         self.ms_per_pixel = rate if old is None else 0.5 * old + 0.5 * rate
 
-    def pixels(self, sharp: bool = False) -> int:
-        """Pixels drawn in the target (`sharp`: a full-resolution frame's, `sharp_ms`)."""
+    def pixels(self, sharp: bool = False, full: int | None = None) -> int:
+        """Pixels drawn in the target (`sharp`: a full-resolution frame's, `sharp_ms`; one
+        whose `full` pixels are predicted within `SHARP_OVERRUN` times that: `cap`)."""
         if self.ms_per_pixel is None:
+            return self.cap
+        if sharp and full is not None and full * self.ms_per_pixel <= SHARP_OVERRUN * self.sharp_ms:
             return self.cap
         target = self.sharp_ms if sharp else self.target_ms
         return int(min(self.cap, max(self.floor, target / self.ms_per_pixel)))

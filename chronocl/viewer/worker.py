@@ -308,11 +308,11 @@ class ClientWorker(Tasks):
         state = self._framed(state, cvs)
         preview = state.quality == "preview"
         scale = PREVIEW_SCALE if preview else 1.0
-        full_w, full_h = render_size(state.size, len(cvs), scale, PIXEL_BUDGET)
-        w, h = full_w, full_h
+        w, h = full_w, full_h = render_size(state.size, len(cvs), scale, PIXEL_BUDGET)
         if not final:  # a sharp frame whose full-size draw fits the latency target: at once
             sharp = not preview and self.views.sharp(len(cvs))
-            w, h = render_size(state.size, len(cvs), scale, self._draw_budget.pixels(sharp))
+            budget = self._draw_budget.pixels(sharp, full_w * full_h * len(cvs))
+            w, h = render_size(state.size, len(cvs), scale, budget)
         # Any shrink is redrawn: a settled view is always the same frame (4 % smaller differed).
         reduced = not preview and (w, h) != (full_w, full_h)
         bg = parse_color(state.background)
