@@ -7,6 +7,7 @@ instead of sleeps, so every interleaving asserted here is forced, not hoped for.
 from __future__ import annotations
 
 import threading
+import time
 
 import dask.array as da
 import numpy as np
@@ -20,8 +21,9 @@ from chronocl.core.errors import (
     StoreChangedError,
     SupersededError,
 )
+from chronocl.data import window as window_module
 from chronocl.data.series import TimeSeries, open_series
-from chronocl.data.slots import _warmer
+from chronocl.data.slots import WARM_POLL_S, _warmer
 from chronocl.data.window import WindowManager
 
 
@@ -100,20 +102,35 @@ def test_prefetch_reads_ahead_in_the_scrub_direction(tmp_path) -> None:
 
 
 @pytest.mark.skipif(resident_bytes() is None, reason="reads /proc/self/statm")
-def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_ahead() -> None:
+def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause(monkeypatch):
     """A scrub's stop reads the steps the drag passed at once: the free slots they go to are
-    warm already (as many as the window is long, within the budget; not the whole budget)."""
+    warm already, as many as the window is long (within the budget; not the whole budget),
+    faulted in once reads have paused (not beside them), and not at all once it is closed."""
     shape, window = (16, 256, 256), 3
     step = int(np.prod(shape)) * 4  # 4 MB: the 10-slot block is a memory map of its own
     series = TimeSeries.from_array(np.ones((12, *shape), np.float32))
+
+    def grown_by(steps: int) -> bool:
+        grown = resident_bytes() - before
+        return (steps - 0.5) * step <= grown <= (steps + 1.5) * step
+
+    monkeypatch.setattr(window_module, "WARM_AFTER_S", 60.0)
     with WindowManager(series, 10 * step, prefetch=0) as wm:
         before = resident_bytes()
         wm.get(list(range(window)))
+        time.sleep(3 * WARM_POLL_S)
+        assert grown_by(window)  # reads only: they ran a moment ago
+        monkeypatch.setattr(window_module, "WARM_AFTER_S", 0.0)
         _warmer().submit(lambda: None).result()
-        grown = resident_bytes() - before
-        assert (2 * window - 0.5) * step <= grown <= (2 * window + 1.5) * step
+        assert grown_by(2 * window)
         got = wm.get(list(range(window, 2 * window)))  # the jump: into the warm slots
         assert all((a == 1).all() for a in got) and wm.slots.own_arrays == 0
+    monkeypatch.setattr(window_module, "WARM_AFTER_S", 60.0)
+    with WindowManager(series, 10 * step, prefetch=0) as wm:
+        before = resident_bytes()
+        wm.get(list(range(window)))
+    _warmer().submit(lambda: None).result()  # closed: its warm is given up, not waited on
+    assert grown_by(window)
 
 
 def test_superseded_requests_are_cancelled_not_queued() -> None:

@@ -12,11 +12,11 @@ is never overwritten. The lowest free slot is taken first, which keeps the steps
 together. With every slot taken a step gets an array of its own: correct, only not in place.
 
 The next free slots (as many as the caller asks: the window manager asks for one window's length,
-what a jump of a whole window takes) are faulted in ahead on a background thread at a low
-priority (`chronocl.core.memory.prefault`), so the step read into one does not also pay for its
-fresh pages (0.2-0.3 s per 512 MB here, up to 2 s on a virtual machine whose host took freed
-memory back): the slots a slide, a scrub's stop or a read ahead take next are warm. Only those,
-not the whole budget, so a large budget is not all resident at once.
+what a jump of a whole window takes, once its reads have paused) are faulted in ahead on a
+background thread at a low priority (`chronocl.core.memory.prefault`), so the step read into one
+does not also pay for its fresh pages (0.2-0.3 s per 512 MB here, up to 2 s on a virtual machine
+whose host took freed memory back): the slots a slide, a scrub's stop or a read ahead take next
+are warm. Only those, not the whole budget, so a large budget is not all resident at once.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import os
 import threading
 import time
 import weakref
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -35,6 +36,7 @@ from chronocl.core.memory import aligned_empty, prefault
 
 WARM_SPARES = 2  # free slots warmed ahead when the caller does not say
 WARM_NICE = 10  # the pre-faulting thread's nice value: it takes idle cores only
+WARM_POLL_S = 0.2  # how often a warm waiting for its caller's `ready` looks again
 COLLECT_EVERY_S = 5.0
 
 
@@ -72,13 +74,22 @@ class StepSlots:
             i = heapq.heappop(self._free)
             view = self._block[:, i]
             self._warm.add(i)
-            spares = heapq.nsmallest(max(0, spares), self._free)  # taken next
-            cold = [self._block[:, j] for j in spares if j not in self._warm]
-            self._warm.update(j for j in spares)
         weakref.finalize(view, self._give_back, i)
-        for slot in cold:
-            _warmer().submit(prefault, slot)
+        self.warm(spares)
         return view
+
+    def warm(self, count: int, ready: Callable[[], bool | None] | None = None) -> None:
+        """Fault in the next `count` free slots (those taken next) that were never written or
+        warmed, on the background thread; with `ready`, each once it returns true (polled:
+        the caller's own work first), none left once it returns None."""
+        with self._lock:
+            if self._block is None:
+                return
+            spares = heapq.nsmallest(max(0, count), self._free)
+            cold = [self._block[:, j] for j in spares if j not in self._warm]
+            self._warm.update(spares)
+        if cold:
+            _warmer().submit(_prefault_when, cold, ready)
 
     @property
     def free(self) -> int:
@@ -89,6 +100,15 @@ class StepSlots:
     def _give_back(self, i: int) -> None:
         with self._lock:
             heapq.heappush(self._free, i)
+
+
+def _prefault_when(slots: list[np.ndarray], ready) -> None:
+    for slot in slots:
+        while ready is not None and not (state := ready()):
+            if state is None:
+                return
+            time.sleep(WARM_POLL_S)
+        prefault(slot)
 
 
 _warmers: list[ThreadPoolExecutor] = []

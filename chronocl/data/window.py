@@ -65,6 +65,7 @@ class Request:
         return self.manager._wait(self, timeout)
 
 
+WARM_AFTER_S = 2.0  # reads paused this long: free slots are warmed (`_quiet`)
 READER_NICE = 10  # the readers' priority below the frames' (`_background`)
 
 
@@ -97,7 +98,8 @@ class WindowManager:
         self.prefetch = prefetch
         self.scrub = ScrubModel()  # the scrub's speed and a step's read time (prefetch=None)
         self._ahead: tuple[int, ...] = ()  # the steps the last request read ahead
-        self._span = 1  # the last request's distinct steps: free slots kept warm (`_start`)
+        self._span = 1  # the last request's distinct steps: free slots kept warm (`_read`)
+        self._read_at = 0.0  # when the last read ended (`_quiet`)
         self.generation = 0
         self.reads: Counter[int] = Counter()  # completed reads per step (tests: never twice)
         self.cancelled = 0  # loads dropped before they finished
@@ -246,13 +248,17 @@ class WindowManager:
 
     def _start(self, step: int) -> None:
         """Reserve the step's memory and submit its read (locked)."""
-        # Free slots warmed ahead: enough for a jump of a whole window (a scrub's stop reads
-        # the steps the drag passed at once, each into a slot never written when the budget
-        # has not been filled yet), within the budget: the steps held and under way, this one.
-        room = self.capacity - len(self._cache) - len(self._loads) - 1
-        load = _Load(step, self.slots.take(spares=max(0, min(room, self._span))))
+        load = _Load(step, self.slots.take(spares=0))  # warmed once the reads are done
         self._loads[step] = load
         load.future = self._pool.submit(self._read, load)
+
+    def _quiet(self) -> bool | None:
+        """Whether no read has run for `WARM_AFTER_S` (None: closed): slots are warmed then,
+        not beside the reads and the frame made of them, on the same cores."""
+        with self._lock:
+            if self._closed:
+                return None
+            return not self._loads and time.monotonic() - self._read_at >= WARM_AFTER_S
 
     def _cancel(self, load: _Load) -> None:
         """Drop a load nobody wants: not started -> never runs; running -> stops (locked)."""
@@ -291,6 +297,12 @@ class WindowManager:
             del self._loads[load.step]
             self._cache[load.step] = array
             self.reads[load.step] += 1
+            # Free slots warmed ahead, enough for a jump of a whole window (a scrub's stop reads
+            # the steps the drag passed at once, each into a slot never written while the budget
+            # was not yet filled), within the budget, once reads have paused (`_quiet`).
+            self._read_at = time.monotonic()
+            if not self._loads:
+                self.slots.warm(min(self.capacity - len(self._cache), self._span), self._quiet)
             self._lock.notify_all()
         self.scrub.record_read(time.perf_counter() - t0)
 
