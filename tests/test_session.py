@@ -113,6 +113,27 @@ def test_relative_positions_and_importance_order_reintegrate(engine: str) -> Non
         _check(cv, series, session.selection, session.spec, engine)
 
 
+@pytest.mark.parametrize("mode", ["alpha", "additive"])
+def test_a_window_cheaper_to_integrate_than_to_slide_is_integrated_on_a_slide(mode) -> None:
+    """`direct_below_ms` (the viewer's): a window whose integration from its steps took less
+    is integrated so again on a slide, not slid (no sliding state to fill at a scrub's start);
+    one that took longer slides as before. Both equal the reference."""
+    rng = np.random.default_rng(11)
+    series = _series(rng, 16, (3, 5, 19), levels=False)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    for below, path in ((1e9, "reintegrate"), (0.0, "incremental")):
+        with Session(series, mode=mode, time_tf=absolute, direct_below_ms=below) as s:
+            s.set_window(2, 9)
+            for k in (1, 1, -2, 3):
+                cv = s.slide(k)
+                assert s.stats["path"] == path
+                _check(cv, series, s.selection, s.spec, "opencl")
+            why = s.stats["why_not_incremental"]
+            assert (why is None) == (path == "incremental")
+            assert path == "incremental" or "less than sliding's set-up" in why
+            assert s.stats["held_partials"] == 0 or path == "incremental"
+
+
 def test_spec_changes_and_slides_read_each_step_once() -> None:
     rng = np.random.default_rng(5)
     series = _series(rng, 30, (4, 4, 16), levels=False)

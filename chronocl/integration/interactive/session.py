@@ -44,7 +44,7 @@ from chronocl.integration.inmemory import check_level, integrate_bricks, window_
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.integration.interactive.settings import Settings, manager_key, settings
-from chronocl.integration.interactive.slider import Slider, state_bytes
+from chronocl.integration.interactive.slider import Slider, slide_plan
 from chronocl.integration.interactive.winners import Winners, of_window, recolours
 from chronocl.modes.spec import IntegrationSpec
 
@@ -68,7 +68,10 @@ class Session:
     pooling) among sessions, and `manager` shares another session's resident steps
     (parallel views of one window) instead. With `display` (a viewer's), a window integrated
     from its steps comes back in the display format where the engine writes it: RGBA8
-    (`integrate_bricks`); slides and other engines still return float32.
+    (`integrate_bricks`); slides and other engines still return float32. A window whose last
+    integration from its steps took less than `direct_below_ms` (default 0: none) is integrated
+    so again on a slide, not slid (`slider.slide_plan`: the sliding state's first fill costs
+    more than such a window).
 
     `level` is a coarse level of the series (0: full resolution). ``level="auto"`` does not
     make a `Session`: ``Session(...)`` then returns an `AutoSession`
@@ -103,6 +106,8 @@ class Session:
         self.engine = setup.engine
         self.budget = setup.budget
         self.display = setup.display
+        self.direct_below_ms = setup.direct_below_ms
+        self._direct_ms: float | None = None  # the last window integrated from its steps
         self.selection: Selection | None = None
         self.stats: dict = {}
         self._arrays: dict[int, np.ndarray] = {}
@@ -240,7 +245,10 @@ class Session:
         window = selection.width * self.manager.step_bytes
         if window > self.budget:
             return self._stream(selection, window, t)
-        reason, keep, state = self._budget(selection, window)
+        voxels, direct = int(np.prod(self.series.volume_shape)), self._direct_ms
+        reason, keep, state = slide_plan(
+            self.spec, voxels, selection.width, window, self.budget, direct, self.direct_below_ms
+        )
         self._bricks.keep = keep
         if self._owns_manager:
             self.manager.budget = self.budget - (0 if reason else state) - keep * window
@@ -267,9 +275,11 @@ class Session:
             # Neither the last chronovolume nor the sliding state holds for this window until
             # the integration below completes (it may be given up: `chronocl.core.interrupt`).
             self._cv, self._slider = None, None
+            t_direct = time.perf_counter()
             cv = integrate_bricks(
                 job, self.engine, bricks, slab=self._slab_rows(), display=self.display
             )
+            self._direct_ms = 1e3 * (time.perf_counter() - t_direct)
             # Jumps and spec changes integrate directly (one pass over the window); the
             # sliding state starts from this window and is filled lazily on the next slide.
             if reason is None:
@@ -279,24 +289,6 @@ class Session:
         self._cv = cv
         self._record(t, path, reason)
         return cv
-
-    def _budget(self, selection: Selection, window: int) -> tuple[str | None, bool, int]:
-        """How the budget splits for `selection`, whose steps take `window` bytes: why it
-        cannot slide incrementally (None: it can); whether its stacked brick is kept for the
-        next spec change (when it fits beside the steps and the sliding state); and the bytes
-        of the state sliding holds (2 stacks of ~2 sqrt(W) partials, work, sums)."""
-        spec, mode = self.spec, self.spec.integration
-        state = state_bytes(mode, selection.width, int(np.prod(self.series.volume_shape)))
-        keep = 2 * window + state <= self.budget
-        reason = None
-        if spec.time_tf.positions != "absolute":
-            reason = "relative time positions recolour every step on a slide"
-        elif not isinstance(spec.order, str):
-            reason = "importance orders are not sliding windows"
-        elif window + state > self.budget:
-            need, budget = human(window + state), human(self.budget)
-            reason = f"window and sliding state need {need} > budget {budget}"
-        return reason, keep, state
 
     def _let_go(self, selection: Selection) -> None:
         """Drop the steps that leave a window integrated anew before the entering ones are
@@ -372,6 +364,7 @@ class SessionPool:
                 prefetch=o.prefetch,
                 managers=o.managers,
                 display=o.display,
+                direct_below_ms=o.direct_below_ms,
             )
         return self.sessions[key]
 

@@ -25,6 +25,7 @@ class Settings(NamedTuple):
     prefetch: int | None
     managers: Managers | None
     display: bool = False  # frames in the display format where the engine writes it
+    direct_below_ms: float = 0.0  # windows integrating faster than this do not slide
 
 
 def settings(
@@ -36,13 +37,14 @@ def settings(
     prefetch: int | None = None,
     managers: Managers | None = None,
     display: bool = False,
+    direct_below_ms: float = 0.0,
     **spec_args: object,
 ) -> Settings:
     """The keywords a `Session` takes at any level (`Session`'s docstring says what each is)."""
     asked = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
     budget = interactive_memory() if memory is None else parse_memory(memory)
-    return Settings(asked, eng, budget, prefetch, managers, display)
+    return Settings(asked, eng, budget, prefetch, managers, display, direct_below_ms)
 
 
 def manager_key(level: int, pool: str) -> tuple[int, str]:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from chronocl.core.budget import human
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection
 from chronocl.data.bricks import ResidentBricks
@@ -260,3 +261,35 @@ def state_bytes(mode, width: int, voxels: int) -> int:
     stacks of about 2 sqrt(W) partials, the work in hand, and the fixed-point sums."""
     partials = (4 * block_size(width) + 4) * mode.state_bytes * voxels
     return partials + 8 * mode.sum_channels * voxels
+
+
+def slide_plan(
+    spec: IntegrationSpec,
+    voxels: int,
+    width: int,
+    window: int,
+    budget: int,
+    direct_ms: float | None = None,
+    direct_below_ms: float = 0.0,
+) -> tuple[str | None, bool, int]:
+    """How a session's budget splits for a window of `width` steps over `voxels` voxels, whose
+    steps take `window` bytes: why it does not slide incrementally (None: it does); whether its
+    stacked brick is kept for the next spec change (when it fits beside the steps and the
+    sliding state); and the bytes of the state sliding holds (2 stacks of ~2 sqrt(W) partials,
+    work, sums). A window whose last direct integration took `direct_ms` < `direct_below_ms`
+    is integrated directly: the state's first fill integrates every step alone and combines
+    them (150-250 ms for 10 x 64^3 here), a stall at the start of every scrub, to save a few
+    milliseconds a slide."""
+    mode = spec.integration
+    state = state_bytes(mode, width, voxels)
+    keep = 2 * window + state <= budget
+    reason = None
+    if spec.time_tf.positions != "absolute":
+        reason = "relative time positions recolour every step on a slide"
+    elif not isinstance(spec.order, str):
+        reason = "importance orders are not sliding windows"
+    elif window + state > budget:
+        reason = f"window and sliding state need {human(window + state)} > budget {human(budget)}"
+    elif direct_ms is not None and direct_ms < direct_below_ms:
+        reason = f"integrating the window takes {direct_ms:.0f} ms: less than sliding's set-up"
+    return reason, keep, state
