@@ -17,7 +17,8 @@ so no step can be skipped), `speedup_vs_numpy`, `max_vs_vtk`, `u8_vs_f32` and `t
 The roofline is one bound, `chronocl.engine.roofline`: the memory read over the same bytes on
 every core (numpy's max in one thread per core, STREAM-like; on a GPU the slower of that and
 the copy to the device), so every fraction is <= 1 and one above 1 means the bound is wrong.
-The OpenCL read kernel is reported beside it (`read-opencl`), not used.
+The OpenCL read kernel (`read-opencl`) is that read too on a CPU device, and the bound is then
+the faster of the two; on a GPU it reads device memory and is reported only.
 `max_vs_vtk` is chronocl on every core against VTK's single-threaded TemporalStatistics;
 `max_vs_vtk_one_core` races both in a child pinned to one core (PoCL on one thread). chronocl
 writes RGBA and t_index per voxel where VTK writes one scalar.
