@@ -4,10 +4,14 @@ slide on from the half-updated state; the next request integrates the window ane
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
 import chronocl
+from chronocl.core.errors import SupersededError
+from chronocl.core.interrupt import interruptible
 from chronocl.core.tf import TimeTF
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.integration.interactive.session import Session
@@ -56,3 +60,32 @@ def test_a_slide_that_fails_half_way_is_not_shown_nor_slid_on(host_ptr, mode, ho
         assert_same(session.current(), _reference(session, series))
         for k in (1, -2):
             assert_same(session.slide(k), _reference(session, series))
+
+
+@pytest.mark.parametrize(
+    ("mode", "at"), [("alpha", 1), ("alpha", 6), ("additive", 4), ("max", 9), ("change", 3)]
+)
+def test_a_slide_given_up_for_newer_input_is_not_shown_nor_slid_on(mode, at):
+    """A refine's slide (inside `interruptible`) is given up between its leaves and combines
+    once newer input comes: the first slide after an edit fills the whole state (seconds at
+    users' sizes, where a key pressed meanwhile waited for all of it). Its progress is told
+    as "sliding" parts; the next request integrates the window anew and slides on from there."""
+    rng = np.random.default_rng(5)
+    series = chronocl.TimeSeries.from_array(rng.random((16, 3, 6, 21), dtype=np.float32))
+    rgb = TimeTF.preset("rgb", positions="absolute")
+    with Session(series, mode=mode, time_tf=rgb, memory="64MB") as session:
+        session.set_window(2, 12)
+        checks, told = itertools.count(1), []
+        with (
+            pytest.raises(SupersededError),
+            interruptible(lambda: next(checks) >= at, lambda *p: told.append(p)),
+        ):
+            session.slide(1)  # the first: fills the sliding state, leaf by leaf
+        # the entering step's read is the first checkpoint; the slide's pieces follow
+        sliding = [p for p in told if p[0] == "sliding"]
+        assert sliding == [("sliding", i, 20) for i in range(max(0, at - 2))]
+        assert_same(session.current(), _reference(session, series))
+        assert session.stats["path"] == "reintegrate"
+        for k in (1, 1, -3):
+            assert_same(session.slide(k), _reference(session, series))
+            assert session.stats["path"] == "incremental"

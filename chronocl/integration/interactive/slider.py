@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from chronocl.core.budget import human
+from chronocl.core.interrupt import checkpoint
 from chronocl.core.memory import aligned_empty
 from chronocl.core.selection import Selection
 from chronocl.data.bricks import ResidentBricks
@@ -39,10 +40,12 @@ from chronocl.modes.spec import IntegrationSpec
 class Combine:
     """`op(earlier, later)` of a sliding aggregate: the engine's combine, in the spec's order."""
 
-    def __init__(self, engine: Engine, spec: IntegrationSpec) -> None:
-        self.engine, self.spec = engine, spec
+    def __init__(self, engine: Engine, spec: IntegrationSpec, leaves: Leaves | None = None):
+        self.engine, self.spec, self.leaves = engine, spec, leaves
 
     def __call__(self, earlier: Partial, later: Partial) -> Partial:
+        if self.leaves is not None:
+            self.leaves.tick()
         if self.spec.order == "backward":
             return self.engine.combine(later, earlier, self.spec)
         return self.engine.combine(earlier, later, self.spec)
@@ -75,11 +78,20 @@ class Leaves:
         self.bricks = ResidentBricks({}, in_place=bool(getattr(engine, "reads_in_place", False)))
         self.before: dict[int, tuple[int, ...]] = {}  # leaf -> the earlier steps it spans
         self._full: dict[int, Partial] = {}
+        self.pieces, self.total = 0, 0  # a slide's leaves and combines so far, and about all
+
+    def tick(self) -> None:
+        """Between two pieces of a slide (a leaf, a combine): given up here once newer input
+        comes (`chronocl.core.interrupt`: a refine's slide, whose first fills the whole state;
+        the session then integrates the window anew), and the refine's progress told."""
+        checkpoint("sliding", min(self.pieces, self.total), self.total)
+        self.pieces += 1
 
     def full(self, step: int) -> Partial:
         """The leaf ending at `step` integrated alone: its partial (inverting modes: raw)."""
         if step in self._full:
             return self._full[step]
+        self.tick()
         steps = (*self.before.get(step, ()), step) if self.mode.leaf_span > 1 else (step,)
         arrays = [self.arrays[s] for s in steps]
         self.bricks.arrays = self.arrays
@@ -153,7 +165,8 @@ class Slider:
         self.inverts = self.leaves.inverts
         self.agg: SlidingAggregate[Partial] | None = None
         if not self.inverts or self.mode.state_bytes:
-            self.agg = SlidingAggregate(self.leaves.for_aggregate, Combine(engine, spec))
+            combine = Combine(engine, spec, self.leaves)
+            self.agg = SlidingAggregate(self.leaves.for_aggregate, combine)
             self.agg.reset(self._items(selection))
         self.acc = None  # inverting modes: fixed-point sums (Z, Y, X, C), host or device
 
@@ -191,6 +204,7 @@ class Slider:
         if not self.placed:
             self._place()
         leaves.arrays = arrays
+        leaves.pieces, leaves.total = 0, 2 * selection.width  # a first slide fills the state
         if self.dc is not None and self.device is not None:  # None: leaves from the host
             leaves.device_bricks = self.device.bricks(arrays, selection.width)
         old_items = self._items(self.selection)

@@ -354,7 +354,7 @@ export function showRefineProgress(msg) {
   viewer.refineProgress = msg;
   // The answer to `cancel`, or a note that left before it: cancelRefine said so already.
   if (msg.stage === 'cancelled' || document.body.dataset.refining !== 'yes') return;
-  const what = msg.stage === 'integrating' ? 'slabs' : 'steps';
+  const what = { integrating: 'slabs', sliding: 'parts' }[msg.stage] || 'steps';
   const of = msg.views > 1 ? ` (view ${msg.view + 1} of ${msg.views})` : '';
   setStatus(`refining to full resolution: ${msg.stage} ${msg.done}/${msg.total} ${what}${of} · Esc cancels`);
 }
