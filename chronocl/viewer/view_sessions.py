@@ -27,10 +27,13 @@ from chronocl.viewer.view_state import ViewState
 
 INTEGRATE_LOCK = threading.Lock()
 TARGET_MS = 150.0  # a coarse level is drawn first when full resolution would take longer
-# A window integrating from its steps faster than this is integrated so on a slide too: the
-# sliding state's first fill (every step alone, then combined) stalled the first key press of
-# a scrub 250-400 ms at 64^3, to save a few milliseconds a slide after it.
-DIRECT_BELOW_MS = 40.0
+# A window integrating from its steps faster than this is integrated so on a slide too, not
+# slid. On this 2-core PoCL machine (W = 4-12, 128^3-256^3) a window read where it lies took
+# 7-86 ms, a steady incremental slide 37-570 ms (its leaves and combines move 16-byte RGBA
+# partials, the window 4 bytes a voxel-step) and the state's first fill 0.1-4.4 s (a held key's
+# release waited 1.8 s for it at 256^3). Only a window that takes longer (very long windows
+# of large volumes) slides incrementally.
+DIRECT_BELOW_MS = 1000.0
 
 
 class Views:

@@ -70,8 +70,8 @@ class Session:
     from its steps comes back in the display format where the engine writes it: RGBA8
     (`integrate_bricks`); slides and other engines still return float32. A window whose last
     integration from its steps took less than `direct_below_ms` (default 0: none) is integrated
-    so again on a slide, not slid (`slider.slide_plan`: the sliding state's first fill costs
-    more than such a window).
+    so again on a slide, not slid (`slider.slide_plan`: where the window is read in place,
+    sliding costs more than such a window).
 
     `level` is a coarse level of the series (0: full resolution). ``level="auto"`` does not
     make a `Session`: ``Session(...)`` then returns an `AutoSession`

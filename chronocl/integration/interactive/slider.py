@@ -291,9 +291,9 @@ def slide_plan(
     stacked brick is kept for the next spec change (when it fits beside the steps and the
     sliding state); and the bytes of the state sliding holds (2 stacks of ~2 sqrt(W) partials,
     work, sums). A window whose last direct integration took `direct_ms` < `direct_below_ms`
-    is integrated directly: the state's first fill integrates every step alone and combines
-    them (150-250 ms for 10 x 64^3 here), a stall at the start of every scrub, to save a few
-    milliseconds a slide."""
+    is integrated directly: a slide integrates its entering steps alone and combines partials
+    of 16 bytes a voxel, and the state's first fill does so for every step (docs/window.md:
+    where the window is read in place, both cost more than integrating it again)."""
     mode = spec.integration
     state = state_bytes(mode, width, voxels)
     keep = 2 * window + state <= budget
@@ -305,5 +305,5 @@ def slide_plan(
     elif window + state > budget:
         reason = f"window and sliding state need {human(window + state)} > budget {human(budget)}"
     elif direct_ms is not None and direct_ms < direct_below_ms:
-        reason = f"integrating the window takes {direct_ms:.0f} ms: less than sliding's set-up"
+        reason = f"integrating the window takes {direct_ms:.0f} ms: cheaper than sliding it"
     return reason, keep, state
