@@ -6,8 +6,11 @@ instead of sleeps, so every interleaving asserted here is forced, not hoped for.
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import dask.array as da
 import numpy as np
@@ -131,6 +134,27 @@ def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause
         wm.get(list(range(window)))
     _warmer().submit(lambda: None).result()  # closed: its warm is given up, not waited on
     assert grown_by(window)
+
+
+UNCLOSED = """
+import sys, numpy as np
+from chronocl.data import window
+from chronocl.data.series import TimeSeries
+window.WARM_AFTER_S = 600.0
+wm = window.WindowManager(TimeSeries.from_array(np.ones((8, 4, 8, 8), np.float32)), 8 * 1024)
+wm.get([0, 1])
+print("read", flush=True)
+"""
+
+
+def test_a_manager_never_closed_does_not_hold_up_the_exit():
+    """The documented `Session(...)` with no `with` or close: its warm, waiting for the reads to
+    pause, does not hold the program's end (it did for WARM_AFTER_S, then faulted in slots)."""
+    root = Path(__file__).parents[1]
+    done = subprocess.run(
+        [sys.executable, "-c", UNCLOSED], cwd=root, capture_output=True, text=True, timeout=20
+    )
+    assert done.returncode == 0 and done.stdout == "read\n", done.stderr
 
 
 def test_superseded_requests_are_cancelled_not_queued() -> None:

@@ -24,11 +24,12 @@ from __future__ import annotations
 import gc
 import heapq
 import os
+import queue
 import threading
 import time
 import weakref
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future
 
 import numpy as np
 
@@ -111,17 +112,42 @@ def _prefault_when(slots: list[np.ndarray], ready) -> None:
         prefault(slot)
 
 
-_warmers: list[ThreadPoolExecutor] = []
+class _Warmer:
+    """The process's one pre-faulting thread, running what is submitted in turn. A daemon, not
+    a ThreadPoolExecutor's (joined at exit): a warm waiting for the reads of a manager nobody
+    closed (a `Session` used without `with`) to pause held the program's end that long, then
+    faulted in its slots for nothing."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        threading.Thread(target=self._run, name="chronocl-prefault", daemon=True).start()
+
+    def submit(self, fn: Callable, *args: object) -> Future:
+        future: Future = Future()
+        self._queue.put((future, fn, args))
+        return future
+
+    def _run(self) -> None:
+        _low()
+        while True:
+            future, fn, args = self._queue.get()
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                future.set_result(fn(*args))
+            except BaseException as exc:  # the caller's to see, if it looks
+                future.set_exception(exc)
+
+
+_warmers: list[_Warmer] = []
 _warmers_lock = threading.Lock()
 
 
-def _warmer() -> ThreadPoolExecutor:
+def _warmer() -> _Warmer:
     """The process's one pre-faulting thread (made when first needed)."""
     with _warmers_lock:
         if not _warmers:
-            _warmers.append(
-                ThreadPoolExecutor(1, thread_name_prefix="chronocl-prefault", initializer=_low)
-            )
+            _warmers.append(_Warmer())
         return _warmers[0]
 
 
