@@ -6,10 +6,12 @@ instead of sleeps, so every interleaving asserted here is forced, not hoped for.
 
 from __future__ import annotations
 
+import gc
 import subprocess
 import sys
 import threading
 import time
+import weakref
 from pathlib import Path
 
 import dask.array as da
@@ -104,6 +106,13 @@ def test_prefetch_reads_ahead_in_the_scrub_direction(tmp_path) -> None:
         assert all(wm.reads[s] == 1 for s in range(9))
 
 
+def warms_looked() -> None:
+    """Every warm queued has looked at its manager since (twice: one not ready then goes to the
+    back of the queue) and done what it could."""
+    for _ in range(2):
+        _warmer().submit(lambda: None).result(timeout=10)
+
+
 @pytest.mark.skipif(resident_bytes() is None, reason="reads /proc/self/statm")
 def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause(monkeypatch):
     """A scrub's stop reads the steps the drag passed at once: the free slots they go to are
@@ -124,7 +133,7 @@ def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause
         time.sleep(3 * WARM_POLL_S)
         assert grown_by(window)  # reads only: they ran a moment ago
         monkeypatch.setattr(window_module, "WARM_AFTER_S", 0.0)
-        _warmer().submit(lambda: None).result()
+        warms_looked()
         assert grown_by(2 * window)
         got = wm.get(list(range(window, 2 * window)))  # the jump: into the warm slots
         assert all((a == 1).all() for a in got) and wm.slots.own_arrays == 0
@@ -132,8 +141,36 @@ def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause
     with WindowManager(series, 10 * step, prefetch=0) as wm:
         before = resident_bytes()
         wm.get(list(range(window)))
-    _warmer().submit(lambda: None).result()  # closed: its warm is given up, not waited on
+    warms_looked()  # closed: its warm is given up, not waited on
     assert grown_by(window)
+
+
+def test_a_manager_reading_on_holds_up_neither_warms_nor_memory_of_others(monkeypatch):
+    """The process's one warming thread: a warm waiting for its manager's reads to pause (a
+    view playing on and on) lets the others' run, and a closed manager's memory, which its warm
+    held, goes at once; the thread idle holds nothing of the last warm it ran."""
+    series = TimeSeries.from_array(np.ones((8, 4, 64, 64), np.float32))
+    monkeypatch.setattr(window_module, "WARM_AFTER_S", 60.0)  # reads never pause that long
+    with WindowManager(series, "1MB", prefetch=0) as reading:
+        reading.get([0, 1])
+        for _ in range(2):
+            other = WindowManager(series, "1MB", prefetch=0)
+            other.get([0, 1])  # its warm is queued behind the reading one's
+            block = weakref.ref(other.slots._block)
+            other.close()
+            del other
+            warms_looked()
+            gc.collect()
+            assert block() is None
+    warms_looked()  # the reading one's too: closed, it gave up
+    held = np.ones(4)  # as the slots of the last warm run
+    gone = weakref.ref(held)
+    _warmer().submit(len, held)
+    del held
+    deadline = time.monotonic() + 10
+    while gone() is not None:  # the thread idle holds nothing of it
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
 
 
 UNCLOSED = """

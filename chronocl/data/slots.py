@@ -104,11 +104,17 @@ class StepSlots:
 
 
 def _prefault_when(slots: list[np.ndarray], ready) -> None:
-    for slot in slots:
-        while ready is not None and not (state := ready()):
-            if state is None:
-                return
+    """Fault in `slots` in turn, each once `ready` is true (None: none left). One not ready
+    goes behind the other warms: the one thread waiting on a manager whose reads go on (a view
+    playing on and on) held up every other manager's warm, and the memory of closed ones."""
+    for k, slot in enumerate(slots):
+        state = True if ready is None else ready()
+        if state is None:
+            return
+        if not state:
             time.sleep(WARM_POLL_S)
+            _warmer().submit(_prefault_when, slots[k:], ready)
+            return
         prefault(slot)
 
 
@@ -131,12 +137,12 @@ class _Warmer:
         _low()
         while True:
             future, fn, args = self._queue.get()
-            if not future.set_running_or_notify_cancel():
-                continue
-            try:
-                future.set_result(fn(*args))
-            except BaseException as exc:  # the caller's to see, if it looks
-                future.set_exception(exc)
+            if future.set_running_or_notify_cancel():
+                try:
+                    future.set_result(fn(*args))
+                except BaseException as exc:  # the caller's to see, if it looks
+                    future.set_exception(exc)
+            del future, fn, args  # idle, it holds no closed manager's slots
 
 
 _warmers: list[_Warmer] = []
