@@ -28,7 +28,7 @@ from chronocl.core.errors import (
 )
 from chronocl.data import window as window_module
 from chronocl.data.series import TimeSeries, open_series
-from chronocl.data.slots import WARM_POLL_S, _warmer
+from chronocl.data.slots import WARM_POLL_S, StepSlots, _warmer
 from chronocl.data.window import WindowManager
 
 
@@ -227,6 +227,22 @@ def test_read_errors_reach_the_waiting_request() -> None:
     gated.data = None  # every read now fails inside the store
     with WindowManager(series, "10MB", prefetch=0) as wm, pytest.raises(TypeError):
         wm.get([3])
+
+
+def test_a_warm_that_cannot_start_does_not_strand_the_waiting_request(monkeypatch) -> None:
+    """The step is resident before the free slots are warmed: a warm that fails (no thread to
+    start) leaves the request woken, not waiting on a notice that never comes."""
+
+    def fails(slots: StepSlots, count: int, ready: object = None) -> None:
+        if count:  # a step's own slot (`take`) warms none
+            raise RuntimeError("can't start new thread")
+
+    monkeypatch.setattr(StepSlots, "warm", fails)
+    series = TimeSeries.from_array(np.ones((4, 2, 8, 8), np.float32))
+    with WindowManager(series, "1MB", prefetch=0) as wm:
+        t0 = time.monotonic()
+        assert len(wm.request([0]).result(timeout=10)) == 1
+        assert time.monotonic() - t0 < 5  # woken by the read, not by the timeout
 
 
 def test_budget_below_one_step_names_the_minimum() -> None:

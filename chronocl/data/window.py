@@ -297,13 +297,13 @@ class WindowManager:
             del self._loads[load.step]
             self._cache[load.step] = array
             self.reads[load.step] += 1
+            self._read_at = time.monotonic()
+            self._lock.notify_all()  # first: a warm that fails must not strand the waiters
             # Free slots warmed ahead, enough for a jump of a whole window (a scrub's stop reads
             # the steps the drag passed at once, each into a slot never written while the budget
             # was not yet filled), within the budget, once reads have paused (`_quiet`).
-            self._read_at = time.monotonic()
             if not self._loads:
                 self.slots.warm(min(self.capacity - len(self._cache), self._span), self._quiet)
-            self._lock.notify_all()
         self.scrub.record_read(time.perf_counter() - t0)
 
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
