@@ -26,6 +26,7 @@ from chronocl.core.errors import (
     StoreChangedError,
     SupersededError,
 )
+from chronocl.data import slots as slots_module
 from chronocl.data import window as window_module
 from chronocl.data.series import TimeSeries, open_series
 from chronocl.data.slots import WARM_POLL_S, StepSlots, _warmer
@@ -171,6 +172,27 @@ def test_a_manager_reading_on_holds_up_neither_warms_nor_memory_of_others(monkey
     while gone() is not None:  # the thread idle holds nothing of it
         assert time.monotonic() < deadline
         time.sleep(0.01)
+
+
+def test_free_slots_are_warmed_once_every_managers_reads_have_paused(monkeypatch):
+    """A coarse level's manager whose reads paused does not warm its slots beside level 0's
+    reads (the refine's, on the same cores): the pause is the process's."""
+    faulted = []
+    monkeypatch.setattr(slots_module, "prefault", lambda slot: faulted.append(slot.shape))
+    monkeypatch.setattr(window_module, "WARM_AFTER_S", 0.0)
+    series, gated = gated_series()
+    coarse = TimeSeries.from_array(np.ones((8, 2, 8, 8), np.float32))
+    with WindowManager(series, "1MB", prefetch=0) as fine, WindowManager(coarse, "1MB") as wm:
+        gated.gate.clear()
+        reading = fine.request([0])
+        assert gated.entered.wait(10)
+        wm.get([0, 1])
+        warms_looked()
+        assert faulted == []  # level 0 still reads
+        gated.gate.set()
+        reading.result(timeout=10)
+        warms_looked()
+        assert (2, 8, 8) in faulted
 
 
 UNCLOSED = """
