@@ -6,8 +6,13 @@ instead of sleeps, so every interleaving asserted here is forced, not hoped for.
 
 from __future__ import annotations
 
+import gc
+import subprocess
+import sys
 import threading
 import time
+import weakref
+from pathlib import Path
 
 import dask.array as da
 import numpy as np
@@ -21,9 +26,10 @@ from chronocl.core.errors import (
     StoreChangedError,
     SupersededError,
 )
+from chronocl.data import slots as slots_module
 from chronocl.data import window as window_module
 from chronocl.data.series import TimeSeries, open_series
-from chronocl.data.slots import WARM_POLL_S, _warmer
+from chronocl.data.slots import WARM_POLL_S, StepSlots, _warmer
 from chronocl.data.window import WindowManager
 
 
@@ -101,6 +107,13 @@ def test_prefetch_reads_ahead_in_the_scrub_direction(tmp_path) -> None:
         assert all(wm.reads[s] == 1 for s in range(9))
 
 
+def warms_looked() -> None:
+    """Every warm queued has looked at its manager since (twice: one not ready then goes to the
+    back of the queue) and done what it could."""
+    for _ in range(2):
+        _warmer().submit(lambda: None).result(timeout=10)
+
+
 @pytest.mark.skipif(resident_bytes() is None, reason="reads /proc/self/statm")
 def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause(monkeypatch):
     """A scrub's stop reads the steps the drag passed at once: the free slots they go to are
@@ -121,7 +134,7 @@ def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause
         time.sleep(3 * WARM_POLL_S)
         assert grown_by(window)  # reads only: they ran a moment ago
         monkeypatch.setattr(window_module, "WARM_AFTER_S", 0.0)
-        _warmer().submit(lambda: None).result()
+        warms_looked()
         assert grown_by(2 * window)
         got = wm.get(list(range(window, 2 * window)))  # the jump: into the warm slots
         assert all((a == 1).all() for a in got) and wm.slots.own_arrays == 0
@@ -129,8 +142,78 @@ def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause
     with WindowManager(series, 10 * step, prefetch=0) as wm:
         before = resident_bytes()
         wm.get(list(range(window)))
-    _warmer().submit(lambda: None).result()  # closed: its warm is given up, not waited on
+    warms_looked()  # closed: its warm is given up, not waited on
     assert grown_by(window)
+
+
+def test_a_manager_reading_on_holds_up_neither_warms_nor_memory_of_others(monkeypatch):
+    """The process's one warming thread: a warm waiting for its manager's reads to pause (a
+    view playing on and on) lets the others' run, and a closed manager's memory, which its warm
+    held, goes at once; the thread idle holds nothing of the last warm it ran."""
+    series = TimeSeries.from_array(np.ones((8, 4, 64, 64), np.float32))
+    monkeypatch.setattr(window_module, "WARM_AFTER_S", 60.0)  # reads never pause that long
+    with WindowManager(series, "1MB", prefetch=0) as reading:
+        reading.get([0, 1])
+        for _ in range(2):
+            other = WindowManager(series, "1MB", prefetch=0)
+            other.get([0, 1])  # its warm is queued behind the reading one's
+            block = weakref.ref(other.slots._block)
+            other.close()
+            del other
+            warms_looked()
+            gc.collect()
+            assert block() is None
+    warms_looked()  # the reading one's too: closed, it gave up
+    held = np.ones(4)  # as the slots of the last warm run
+    gone = weakref.ref(held)
+    _warmer().submit(len, held)
+    del held
+    deadline = time.monotonic() + 10
+    while gone() is not None:  # the thread idle holds nothing of it
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+
+
+def test_free_slots_are_warmed_once_every_managers_reads_have_paused(monkeypatch):
+    """A coarse level's manager whose reads paused does not warm its slots beside level 0's
+    reads (the refine's, on the same cores): the pause is the process's."""
+    faulted = []
+    monkeypatch.setattr(slots_module, "prefault", lambda slot: faulted.append(slot.shape))
+    monkeypatch.setattr(window_module, "WARM_AFTER_S", 0.0)
+    series, gated = gated_series()
+    coarse = TimeSeries.from_array(np.ones((8, 2, 8, 8), np.float32))
+    with WindowManager(series, "1MB", prefetch=0) as fine, WindowManager(coarse, "1MB") as wm:
+        gated.gate.clear()
+        reading = fine.request([0])
+        assert gated.entered.wait(10)
+        wm.get([0, 1])
+        warms_looked()
+        assert faulted == []  # level 0 still reads
+        gated.gate.set()
+        reading.result(timeout=10)
+        warms_looked()
+        assert (2, 8, 8) in faulted
+
+
+UNCLOSED = """
+import sys, numpy as np
+from chronocl.data import window
+from chronocl.data.series import TimeSeries
+window.WARM_AFTER_S = 600.0
+wm = window.WindowManager(TimeSeries.from_array(np.ones((8, 4, 8, 8), np.float32)), 8 * 1024)
+wm.get([0, 1])
+print("read", flush=True)
+"""
+
+
+def test_a_manager_never_closed_does_not_hold_up_the_exit():
+    """The documented `Session(...)` with no `with` or close: its warm, waiting for the reads to
+    pause, does not hold the program's end (it did for WARM_AFTER_S, then faulted in slots)."""
+    root = Path(__file__).parents[1]
+    done = subprocess.run(
+        [sys.executable, "-c", UNCLOSED], cwd=root, capture_output=True, text=True, timeout=20
+    )
+    assert done.returncode == 0 and done.stdout == "read\n", done.stderr
 
 
 def test_superseded_requests_are_cancelled_not_queued() -> None:
@@ -166,6 +249,22 @@ def test_read_errors_reach_the_waiting_request() -> None:
     gated.data = None  # every read now fails inside the store
     with WindowManager(series, "10MB", prefetch=0) as wm, pytest.raises(TypeError):
         wm.get([3])
+
+
+def test_a_warm_that_cannot_start_does_not_strand_the_waiting_request(monkeypatch) -> None:
+    """The step is resident before the free slots are warmed: a warm that fails (no thread to
+    start) leaves the request woken, not waiting on a notice that never comes."""
+
+    def fails(slots: StepSlots, count: int, ready: object = None) -> None:
+        if count:  # a step's own slot (`take`) warms none
+            raise RuntimeError("can't start new thread")
+
+    monkeypatch.setattr(StepSlots, "warm", fails)
+    series = TimeSeries.from_array(np.ones((4, 2, 8, 8), np.float32))
+    with WindowManager(series, "1MB", prefetch=0) as wm:
+        t0 = time.monotonic()
+        assert len(wm.request([0]).result(timeout=10)) == 1
+        assert time.monotonic() - t0 < 5  # woken by the read, not by the timeout
 
 
 def test_budget_below_one_step_names_the_minimum() -> None:

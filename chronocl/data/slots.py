@@ -24,11 +24,12 @@ from __future__ import annotations
 import gc
 import heapq
 import os
+import queue
 import threading
 import time
 import weakref
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future
 
 import numpy as np
 
@@ -103,25 +104,56 @@ class StepSlots:
 
 
 def _prefault_when(slots: list[np.ndarray], ready) -> None:
-    for slot in slots:
-        while ready is not None and not (state := ready()):
-            if state is None:
-                return
+    """Fault in `slots` in turn, each once `ready` is true (None: none left). One not ready
+    goes behind the other warms: the one thread waiting on a manager whose reads go on (a view
+    playing on and on) held up every other manager's warm, and the memory of closed ones."""
+    for k, slot in enumerate(slots):
+        state = True if ready is None else ready()
+        if state is None:
+            return
+        if not state:
             time.sleep(WARM_POLL_S)
+            _warmer().submit(_prefault_when, slots[k:], ready)
+            return
         prefault(slot)
 
 
-_warmers: list[ThreadPoolExecutor] = []
+class _Warmer:
+    """The process's one pre-faulting thread, running what is submitted in turn. A daemon, not
+    a ThreadPoolExecutor's (joined at exit): a warm waiting for the reads of a manager nobody
+    closed (a `Session` used without `with`) to pause held the program's end that long, then
+    faulted in its slots for nothing."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        threading.Thread(target=self._run, name="chronocl-prefault", daemon=True).start()
+
+    def submit(self, fn: Callable, *args: object) -> Future:
+        future: Future = Future()
+        self._queue.put((future, fn, args))
+        return future
+
+    def _run(self) -> None:
+        _low()
+        while True:
+            future, fn, args = self._queue.get()
+            if future.set_running_or_notify_cancel():
+                try:
+                    future.set_result(fn(*args))
+                except BaseException as exc:  # the caller's to see, if it looks
+                    future.set_exception(exc)
+            del future, fn, args  # idle, it holds no closed manager's slots
+
+
+_warmers: list[_Warmer] = []
 _warmers_lock = threading.Lock()
 
 
-def _warmer() -> ThreadPoolExecutor:
+def _warmer() -> _Warmer:
     """The process's one pre-faulting thread (made when first needed)."""
     with _warmers_lock:
         if not _warmers:
-            _warmers.append(
-                ThreadPoolExecutor(1, thread_name_prefix="chronocl-prefault", initializer=_low)
-            )
+            _warmers.append(_Warmer())
         return _warmers[0]
 
 

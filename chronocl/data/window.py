@@ -22,6 +22,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+import weakref
 from collections import Counter, OrderedDict
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -66,6 +67,8 @@ class Request:
 
 
 WARM_AFTER_S = 2.0  # reads paused this long: free slots are warmed (`_quiet`)
+_managers: weakref.WeakSet[WindowManager] = weakref.WeakSet()  # whose reads `_quiet` looks at
+_managers_lock = threading.Lock()
 READER_NICE = 10  # the readers' priority below the frames' (`_background`)
 
 
@@ -115,6 +118,8 @@ class WindowManager:
         count = min(series.n_steps, self.capacity)
         self.slots = StepSlots(series.volume_shape, series.dtype, count)
         self._closed = False
+        with _managers_lock:
+            _managers.add(self)
 
     # -- public --------------------------------------------------------------------------
     @property
@@ -253,12 +258,20 @@ class WindowManager:
         load.future = self._pool.submit(self._read, load)
 
     def _quiet(self) -> bool | None:
-        """Whether no read has run for `WARM_AFTER_S` (None: closed): slots are warmed then,
-        not beside the reads and the frame made of them, on the same cores."""
+        """Whether no read of any manager has run for `WARM_AFTER_S` (None: this one closed):
+        slots are warmed then, not beside the reads and the frame made of them, on the same
+        cores (a coarse level's reads paused while level 0's, the refine's, went on)."""
         with self._lock:
             if self._closed:
                 return None
-            return not self._loads and time.monotonic() - self._read_at >= WARM_AFTER_S
+        with _managers_lock:
+            managers = list(_managers)
+        now = time.monotonic()
+        return all(m._idle(now) for m in managers)
+
+    def _idle(self, now: float) -> bool:
+        with self._lock:
+            return self._closed or (not self._loads and now - self._read_at >= WARM_AFTER_S)
 
     def _cancel(self, load: _Load) -> None:
         """Drop a load nobody wants: not started -> never runs; running -> stops (locked)."""
@@ -297,13 +310,13 @@ class WindowManager:
             del self._loads[load.step]
             self._cache[load.step] = array
             self.reads[load.step] += 1
+            self._read_at = time.monotonic()
+            self._lock.notify_all()  # first: a warm that fails must not strand the waiters
             # Free slots warmed ahead, enough for a jump of a whole window (a scrub's stop reads
             # the steps the drag passed at once, each into a slot never written while the budget
             # was not yet filled), within the budget, once reads have paused (`_quiet`).
-            self._read_at = time.monotonic()
             if not self._loads:
                 self.slots.warm(min(self.capacity - len(self._cache), self._span), self._quiet)
-            self._lock.notify_all()
         self.scrub.record_read(time.perf_counter() - t0)
 
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
