@@ -7,6 +7,7 @@ instead of sleeps, so every interleaving asserted here is forced, not hoped for.
 from __future__ import annotations
 
 import gc
+import os
 import subprocess
 import sys
 import threading
@@ -214,6 +215,34 @@ def test_a_manager_never_closed_does_not_hold_up_the_exit():
         [sys.executable, "-c", UNCLOSED], cwd=root, capture_output=True, text=True, timeout=20
     )
     assert done.returncode == 0 and done.stdout == "read\n", done.stderr
+
+
+FORKED = """
+import os, numpy as np
+from chronocl.data import window
+from chronocl.data.series import TimeSeries
+from chronocl.data.slots import _warmer
+window.WARM_AFTER_S = 600.0
+wm = window.WindowManager(TimeSeries.from_array(np.ones((8, 4, 8, 8), np.float32)), 8 * 1024)
+wm.get([0, 1])
+_warmer()
+pid = os.fork()
+if pid == 0:
+    _warmer().submit(lambda: None).result(timeout=15)
+    os._exit(0)
+print(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), flush=True)
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork")
+def test_a_forked_child_warms_on_a_thread_of_its_own():
+    """The warming thread does not come along into a forked child: it makes its own (the
+    parent's, left behind, would take nothing from the queue: a warm in the child never ran)."""
+    root = Path(__file__).parents[1]
+    done = subprocess.run(
+        [sys.executable, "-c", FORKED], cwd=root, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0 and done.stdout == "0\n", (done.stdout, done.stderr)
 
 
 def test_superseded_requests_are_cancelled_not_queued() -> None:

@@ -149,6 +149,16 @@ _warmers: list[_Warmer] = []
 _warmers_lock = threading.Lock()
 
 
+def _forget_warmer() -> None:
+    """In a forked child: no warming thread came along; it makes its own when it needs one."""
+    global _warmers_lock
+    _warmers.clear()
+    _warmers_lock = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_warmer)
+
+
 def _warmer() -> _Warmer:
     """The process's one pre-faulting thread (made when first needed)."""
     with _warmers_lock:
