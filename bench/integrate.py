@@ -167,8 +167,8 @@ class Runner:
             integrate(series, f"0:{w}", mode, engine=self.ocl, **args)
 
         def fresh():  # a first call at this size: its output's pages fault as it is written
-            spares.clear()
-            integrate(series, f"0:{w}", mode, engine=self.ocl, **args)
+            with spares.aside():  # and the other contenders' spares stay theirs
+                integrate(series, f"0:{w}", mode, engine=self.ocl, **args)
 
         fns = {("integrate-end-to-end", mode): call}
         # Room for the session's slots (twice: a margin) and two outputs of 5 steps' bytes each

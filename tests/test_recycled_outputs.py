@@ -87,6 +87,24 @@ def test_a_dead_array_gives_its_memory_to_the_next_of_its_size():
     assert b.ctypes.data % memory.ALIGN == 0 and c.ctypes.data % memory.ALIGN == 0
 
 
+def test_spares_put_aside_are_back_as_they_were_and_the_block_sees_fresh_memory():
+    """`spares.aside` (bench/integrate.py's first call at a size): the block's arrays are on
+    fresh maps, and the spares it found are the others' again after it."""
+    a = recycled_empty((64, 64, 4), np.float32)
+    a[...] = 3
+    address = a.ctypes.data
+    del a
+    gc.collect()
+    with spares.aside():
+        b = recycled_empty((64, 64, 4), np.float32)
+        assert b.ctypes.data != address and not b.any()
+        del b
+        gc.collect()
+    c = recycled_empty((64, 64, 4), np.float32)
+    assert c.ctypes.data == address and (c == 3).all()
+    assert not spares.maps  # the block's dead array was let go, not kept
+
+
 def test_arrays_dying_fast_start_one_timer_not_one_each():
     before = threading.active_count()
     for _ in range(50):  # a viewer sliding at 30 frames a second

@@ -11,6 +11,8 @@ import os
 import threading
 import time
 import weakref
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -94,6 +96,19 @@ class _Spares:
     def clear(self) -> None:
         with self.lock:
             self.maps.clear()
+
+    @contextmanager
+    def aside(self) -> Iterator[None]:
+        """The spares put aside while the block runs (it sees only fresh maps: a first call at a
+        size, as bench/integrate.py times it), then put back as they were; maps given back
+        meanwhile are let go, so the other callers' spares are as the block found them."""
+        with self.lock:
+            kept, self.maps = self.maps, []
+        try:
+            yield
+        finally:
+            with self.lock:
+                self.maps = kept
 
     def forget(self) -> None:
         """In a forked child: the maps (shared with the parent, as every anonymous map here is)
