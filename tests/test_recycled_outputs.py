@@ -35,7 +35,8 @@ pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWa
 def small_maps(monkeypatch):
     """Every output is recycled, so the small volumes here are too."""
     monkeypatch.setattr(memory, "MAPPED_BYTES", 1)
-    monkeypatch.setattr(memory, "SPARE_MAPS", 3)  # `poison`'s three sizes
+    monkeypatch.setattr(memory, "SPARE_MAPS", 3)
+    monkeypatch.setattr(memory, "SPARE_SIZES", 3, raising=False)  # `poison`'s three sizes
     spares.clear()
     yield
     spares.clear()
@@ -105,6 +106,23 @@ def test_spares_put_aside_are_back_as_they_were_and_the_block_sees_fresh_memory(
     assert not spares.maps  # the block's dead array was let go, not kept
 
 
+def test_a_caller_giving_back_before_it_takes_leaves_the_other_spares(monkeypatch):
+    """A session gives its last chronovolume back before it takes memory for the next. Kept
+    per size, that leaves the spares of another caller of the same sizes (`chronocl.integrate`'s
+    last rgba and t_index) where they were; with two maps in all, it pushed them out."""
+    import mmap
+
+    monkeypatch.setattr(memory, "SPARE_MAPS", 2)
+    monkeypatch.setattr(memory, "SPARE_SIZES", 2, raising=False)
+    rgba, t_index = 16 * mmap.PAGESIZE, 4 * mmap.PAGESIZE
+    for size in (rgba, t_index):  # chronocl.integrate's output died
+        spares.give(mmap.mmap(-1, size))
+    for size in (rgba, t_index):  # a session's last one dies, then it takes memory again
+        spares.give(mmap.mmap(-1, size))
+    assert spares.take(rgba) is not None and spares.take(t_index) is not None
+    assert spares.take(rgba) is not None and spares.take(t_index) is not None  # integrate's
+
+
 def test_arrays_dying_fast_start_one_timer_not_one_each():
     before = threading.active_count()
     for _ in range(50):  # a viewer sliding at 30 frames a second
@@ -113,10 +131,14 @@ def test_arrays_dying_fast_start_one_timer_not_one_each():
 
 
 def test_spares_are_bounded_in_number_and_time(monkeypatch):
-    held = [recycled_empty((100 + i, 64), np.float32) for i in range(3 * memory.SPARE_MAPS)]
+    held = [recycled_empty((100 + i, 64), np.float32) for i in range(3 * memory.SPARE_SIZES)]
     del held
     gc.collect()
-    assert len(spares.maps) == memory.SPARE_MAPS
+    assert len(spares.maps) == memory.SPARE_SIZES  # one of each of the last sizes
+    held = [recycled_empty((100, 64), np.float32) for _ in range(3 * memory.SPARE_MAPS)]
+    del held
+    gc.collect()
+    assert sum(len(m) == len(spares.maps[-1]) for m in spares.maps) == memory.SPARE_MAPS
     monkeypatch.setattr(memory, "SPARE_SECONDS", 0.05)
     recycled_empty((100, 64), np.float32)  # dies at once: a spare again, for 0.05 s
     for _ in range(200):

@@ -42,14 +42,18 @@ def aligned_empty(shape: tuple[int, ...], dtype: object, align: int = ALIGN) -> 
     return raw[offset : offset + nbytes].view(dt).reshape(shape)
 
 
-SPARE_MAPS = 2  # maps of dead outputs kept for the next: a chronovolume's rgba and t_index
+SPARE_MAPS = 2  # maps of dead outputs of one size kept for the next ones of that size
+SPARE_SIZES = 2  # sizes kept: a chronovolume's rgba and t_index (a viewer's two levels)
 SPARE_SECONDS = 30.0  # and for this long: memory nobody asks for again goes back
 
 
 class _Spares:
     """The memory maps of `recycled_empty` arrays that died, most recent last: at most
-    `SPARE_MAPS`, for at most `SPARE_SECONDS`. What the caller held a moment ago, so keeping
-    it adds nothing to the peak."""
+    `SPARE_MAPS` of a size, of the `SPARE_SIZES` sizes given back last, for at most
+    `SPARE_SECONDS`. What the caller held a moment ago, so keeping it adds nothing to the peak.
+    Counted per size: a session gives its last chronovolume back before it takes memory for the
+    next, and with two maps in all it pushed out the spares of every other caller (in
+    bench/integrate.py's race `chronocl.integrate` then wrote on fresh pages: 2x slower)."""
 
     def __init__(self) -> None:
         # Reentrant: a garbage collection run inside (any allocation may start one) calls the
@@ -70,7 +74,11 @@ class _Spares:
     def give(self, mapped: mmap.mmap) -> None:
         with self.lock:
             self.maps.append(mapped)
-            del self.maps[:-SPARE_MAPS]
+            size = len(mapped)
+            same = [m for m in self.maps if len(m) == size]
+            recent = list(dict.fromkeys(len(m) for m in reversed(self.maps)))[:SPARE_SIZES]
+            drop = {id(m) for m in same[:-SPARE_MAPS]}
+            self.maps = [m for m in self.maps if len(m) in recent and id(m) not in drop]
             self._until = time.monotonic() + SPARE_SECONDS
             if self._expiry is None or self._until < self._fires_at:  # (a shorter SPARE_SECONDS)
                 if self._expiry is not None:
