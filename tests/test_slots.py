@@ -163,9 +163,11 @@ def test_the_next_free_slots_are_faulted_in_ahead_and_keep_what_they_hold():
     step = 64 * 256 * 256 * 4
     first = slots.take()
     first[...] = 1.0
-    _warmer().submit(lambda: None).result()  # slots 1 and 2 warmed by the first take
+    slots.warm(2)  # slots 1 and 2, those taken next
+    _warmer().submit(lambda: None).result()
     before = resident_bytes()
-    second = slots.take()  # slot 1; now slot 3 is warmed
+    second = slots.take()  # slot 1
+    slots.warm(2)  # slots 2 (warm already) and 3
     _warmer().submit(lambda: None).result()
     grown = resident_bytes() - before
     assert 0.9 * step <= grown <= 1.5 * step  # slot 3's pages, not the whole block

@@ -35,7 +35,6 @@ import numpy as np
 
 from chronocl.core.memory import aligned_empty, prefault
 
-WARM_SPARES = 2  # free slots warmed ahead when the caller does not say
 WARM_NICE = 10  # the pre-faulting thread's nice value: it takes idle cores only
 WARM_POLL_S = 0.2  # how often a warm waiting for its caller's `ready` looks again
 COLLECT_EVERY_S = 5.0
@@ -54,9 +53,9 @@ class StepSlots:
         self._warm: set[int] = set()  # slots handed out or faulted in once
         self._collected = -COLLECT_EVERY_S  # when `take` last ran the garbage collector
 
-    def take(self, spares: int = WARM_SPARES) -> np.ndarray:
-        """A (Z, Y, X) array for one step: a free slot, else an array of its own. The next
-        `spares` free slots are warmed (the caller's budget may hold fewer)."""
+    def take(self) -> np.ndarray:
+        """A (Z, Y, X) array for one step: a free slot, else an array of its own (the next
+        free slots are warmed by `warm`, when the caller says)."""
         with self._lock:
             now = time.monotonic()
             if not self._free and now - self._collected > COLLECT_EVERY_S:
@@ -76,7 +75,6 @@ class StepSlots:
             view = self._block[:, i]
             self._warm.add(i)
         weakref.finalize(view, self._give_back, i)
-        self.warm(spares)
         return view
 
     def warm(self, count: int, ready: Callable[[], bool | None] | None = None) -> None:

@@ -253,7 +253,7 @@ class WindowManager:
 
     def _start(self, step: int) -> None:
         """Reserve the step's memory and submit its read (locked)."""
-        load = _Load(step, self.slots.take(spares=0))  # warmed once the reads are done
+        load = _Load(step, self.slots.take())  # free slots warmed once reads pause (`_read`)
         self._loads[step] = load
         load.future = self._pool.submit(self._read, load)
 

@@ -40,12 +40,11 @@ from chronocl.modes.spec import IntegrationSpec
 class Combine:
     """`op(earlier, later)` of a sliding aggregate: the engine's combine, in the spec's order."""
 
-    def __init__(self, engine: Engine, spec: IntegrationSpec, leaves: Leaves | None = None):
-        self.engine, self.spec, self.leaves = engine, spec, leaves
+    def __init__(self, engine: Engine, spec: IntegrationSpec, leaves: Leaves) -> None:
+        self.engine, self.spec, self.leaves = engine, spec, leaves  # `leaves` counts the pieces
 
     def __call__(self, earlier: Partial, later: Partial) -> Partial:
-        if self.leaves is not None:
-            self.leaves.tick()
+        self.leaves.tick()
         if self.spec.order == "backward":
             return self.engine.combine(later, earlier, self.spec)
         return self.engine.combine(earlier, later, self.spec)
