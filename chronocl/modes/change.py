@@ -26,6 +26,8 @@ class Change(Mode):
     summary = "largest change between consecutive steps, coloured by when it happened"
     kernel = "change"
     kernel_function = "integrate_change"
+    rows_kernel = "integrate_change_rows"
+    rows_state = 12  # the previous clipped value, the largest change and its step
     has_t_index = True
     state_bytes = 24
     leaf_span = 2

@@ -24,8 +24,10 @@ __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
     if (w < 2) { /* one step: nothing changed */
         STORE_RGBA(o, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));
         STORE_INT((intv)(-1), t_index + o);
+        STREAM_FENCE
         return;
     }
+    TIME_TABLE_LOAD
 #if defined(CHANGE_BYTES) && VEC == 16
     /* Walk the steps in time; clipped values, differences and the winning step stay in byte
      * lanes (the host checked that lo and hi clip bytes to whole numbers). */
@@ -74,4 +76,104 @@ __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
     WINNER_RGBA(delta, kk, r, g, b, ak)
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
     STORE_INT(STEP_AT(kk), t_index + o);
+    STREAM_FENCE
 }
+
+#if VEC == 16
+/* The rows kernel (CPU devices, common.h's ROWS_BODY): the same walks, the state of a vector
+ * between groups of steps in local memory, so the same bits. TIME_ORDER walks the steps in
+ * time (k = 2..w-1 after the first pair, whatever the order's direction: only TAKES tells
+ * them apart); any other order visits order[i], taking k >= 1. */
+#if TIME_ORDER
+#undef ORDER_AT
+#define ORDER_AT(i) (i)
+#define CHANGE_FROM 2
+#else
+#define CHANGE_FROM 0
+#endif
+#ifdef CHANGE_BYTES
+typedef struct {
+    uchar16 prev, best, kk;
+} Change;
+#define LO8 ((uchar16)((uchar)VCLAMP(lo, 0.0f, 255.0f)))
+#define HI8 ((uchar16)((uchar)VCLAMP(hi, 0.0f, 255.0f)))
+#define CHANGE_INIT(s)                                            \
+    {                                                             \
+        const uchar16 first_ = VCLAMP(RAW(0), LO8, HI8);          \
+        s.prev = VCLAMP(RAW(1), LO8, HI8);                        \
+        s.best = VMAX(s.prev, first_) - VMIN(s.prev, first_);     \
+        s.kk = (uchar16)(1);                                      \
+    }
+#define CHANGE_STEP(s, k)                                         \
+    {                                                             \
+        const uchar16 v_ = VCLAMP(RAW(k), LO8, HI8);              \
+        const uchar16 d_ = VMAX(v_, s.prev) - VMIN(v_, s.prev);   \
+        s.prev = v_;                                              \
+        const char16 take_ = d_ TAKES s.best;                     \
+        s.best = SELECT(s.best, d_, take_);                       \
+        s.kk = SELECT(s.kk, (uchar16)((uchar)(k)), take_);        \
+    }
+#define CHANGE_BEST(s) convert_float16(s.best)
+#define CHANGE_K(s) convert_int16(s.kk)
+#else
+typedef struct {
+    floatv prev, best;
+    intv kk;
+} Change;
+#if TIME_ORDER
+#define CHANGE_INIT(s)                                  \
+    s.prev = CLIPPED(RAW(1));                           \
+    s.best = VABS(s.prev - CLIPPED(RAW(0)));            \
+    s.kk = (intv)(1);
+#define CHANGE_STEP(s, k)                               \
+    {                                                   \
+        const floatv c_ = CLIPPED(RAW(k));              \
+        const floatv d_ = VABS(c_ - s.prev);            \
+        s.prev = c_;                                    \
+        const intv take_ = d_ TAKES s.best;             \
+        s.best = SELECT(s.best, d_, take_);             \
+        s.kk = SELECT(s.kk, (intv)(k), take_);          \
+    }
+#else
+#define CHANGE_INIT(s)  \
+    s.best = 0.0f;      \
+    s.kk = -1;
+#define CHANGE_STEP(s, k)                                                   \
+    if ((k) == 0) continue;                                                 \
+    {                                                                       \
+        const floatv d_ = VABS(CLIPPED(RAW(k)) - CLIPPED(RAW((k) - 1)));    \
+        const intv take_ = (s.kk < 0) | (d_ > s.best);                      \
+        s.best = SELECT(s.best, d_, take_);                                 \
+        s.kk = SELECT(s.kk, (intv)(k), take_);                              \
+    }
+#endif
+#define CHANGE_BEST(s) (s.best)
+#define CHANGE_K(s) (s.kk)
+#endif
+#define CHANGE_FINISH(s)                                       \
+    {                                                          \
+        const intv kk = CHANGE_K(s);                           \
+        const floatv delta = VMIN(CHANGE_BEST(s) * scale, 1.0f); \
+        WINNER_RGBA(delta, kk, r, g, b, ak)                    \
+        STORE_RGBA(o, ak * r, ak * g, ak * b, ak);             \
+        STORE_INT(STEP_AT(kk), t_index + o);                   \
+    }
+
+__kernel void integrate_change_rows(KERNEL_ARGS, const float lo, const float hi,
+                                    __global out_t *out, __global int *t_index,
+                                    ROWS_ARGS(Change))
+{
+    if (w < 2) { /* one step: nothing changed */
+        ROWS_PROLOGUE
+        FOR_BLOCK(v) {
+            BLOCK_VOXEL(v)
+            const size_t o = OUT_INDEX(z, y, x);
+            STORE_RGBA(o, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));
+            STORE_INT((intv)(-1), t_index + o);
+        }
+        STREAM_FENCE
+        return;
+    }
+    ROWS_BODY(Change, CHANGE_FROM, CHANGE_INIT, CHANGE_STEP, NEVER_DONE, CHANGE_FINISH)
+}
+#endif

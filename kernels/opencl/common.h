@@ -63,12 +63,32 @@
 #endif
 #define OUT_INDEX(z, y, x) (((size_t)(z) * ny + (y)) * nx + (x))
 
+/* Stores of whole aligned vectors of the output, which the kernel writes once and never reads:
+ * non-temporal where the compiler has them (PoCL), so a CPU writes the lines without reading
+ * them in first; alpha ran 1.2x faster, max 1.05x, at 10 x 256^3 float32 on an AVX2 EPYC. */
+#if defined(__has_builtin)
+#if __has_builtin(__builtin_nontemporal_store)
+#define STREAM_STORE(v, p) __builtin_nontemporal_store((v), (p))
+/* x86 orders non-temporal stores only at a fence: each work-item fences its own before it
+ * ends, so whoever reads the output after the kernel sees all of it. */
+#if __has_builtin(__builtin_ia32_sfence)
+#define STREAM_FENCE __builtin_ia32_sfence();
+#endif
+#endif
+#endif
+#ifndef STREAM_STORE
+#define STREAM_STORE(v, p) (*(p) = (v))
+#endif
+#ifndef STREAM_FENCE
+#define STREAM_FENCE
+#endif
+
 #if VEC == 16
 typedef float16 floatv;
 typedef int16 intv;
 #ifdef ALIGNED
 #define VLOAD(p) (*(const __global DATA_V *)(p))
-#define STORE_INT(v, p) (*(__global int16 *)(p) = (v))
+#define STORE_INT(v, p) STREAM_STORE((v), (__global int16 *)(p))
 #else
 #define VLOAD(p) vload16(0, (p))
 #define STORE_INT(v, p) vstore16((v), 0, (p))
@@ -113,6 +133,10 @@ inline int all_lanes(int16 m)
 #endif
 #endif
 #ifdef SHUFFLE_STORE
+/* Two vectors of 2, 4 or 8 lanes as one of twice as many. */
+#define CAT2(a, b) __builtin_shufflevector(a, b, 0, 1, 2, 3)
+#define CAT4(a, b) __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7)
+#define CAT8(a, b) __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
 /* Interleave four planar vectors into the RGBA of 16 voxels at dst with two rounds of lane
  * shuffles and four 64-byte stores, where the per-voxel float4 stores below build each float4
  * from four lanes (5 % faster max, 10 % additive). Clang's shuffle builtin, where the OpenCL
@@ -122,7 +146,7 @@ inline int all_lanes(int16 m)
 #define PAIRS_LO 0, 1, 16, 17, 2, 3, 18, 19, 4, 5, 20, 21, 6, 7, 22, 23
 #define PAIRS_HI 8, 9, 24, 25, 10, 11, 26, 27, 12, 13, 28, 29, 14, 15, 30, 31
 #ifdef ALIGNED
-#define STORE16(v, i, p) (((__global float16 *)(p))[i] = (v))
+#define STORE16(v, i, p) STREAM_STORE((v), ((__global float16 *)(p)) + (i))
 #else
 #define STORE16(v, i, p) vstore16((v), (i), (__global float *)(p))
 #endif
@@ -270,6 +294,25 @@ inline LutPos lut_pos_of(const floatv u)
 
 #ifdef QUANT
 #define LUT_CHANNEL(lut, c, p) GATHER((lut) + (c) * LUT_N, (p).i0)
+#elif VEC == 16 && defined(SHUFFLE_STORE) && !defined(__AVX512F__)
+/* Entries i and i + 1 of every lane in one 8-byte load each, split into the left and the
+ * right entries by shuffles: a quarter of the operations of two 16-lane gathers as AVX2 builds
+ * them (scalar loads and inserts), the same values, so the same bits. AVX-512 has gathers of
+ * its own (there, shuffled loads of the time colours ran slower than gathers: docs/engine.md). */
+#define LUT_PAIR(j) vload2(0, l + i.s##j)
+inline float16 lut_lerp(const __global float *l, const int16 i, const float16 f)
+{
+    const float16 lo = CAT8(CAT4(CAT2(LUT_PAIR(0), LUT_PAIR(1)), CAT2(LUT_PAIR(2), LUT_PAIR(3))),
+                            CAT4(CAT2(LUT_PAIR(4), LUT_PAIR(5)), CAT2(LUT_PAIR(6), LUT_PAIR(7))));
+    const float16 hi = CAT8(CAT4(CAT2(LUT_PAIR(8), LUT_PAIR(9)), CAT2(LUT_PAIR(a), LUT_PAIR(b))),
+                            CAT4(CAT2(LUT_PAIR(c), LUT_PAIR(d)), CAT2(LUT_PAIR(e), LUT_PAIR(f))));
+    const float16 left = __builtin_shufflevector(lo, hi, 0, 2, 4, 6, 8, 10, 12, 14, 16, 18,
+                                                 20, 22, 24, 26, 28, 30);
+    const float16 right = __builtin_shufflevector(lo, hi, 1, 3, 5, 7, 9, 11, 13, 15, 17, 19,
+                                                  21, 23, 25, 27, 29, 31);
+    return left * (1.0f - f) + right * f;
+}
+#define LUT_CHANNEL(lut, c, p) lut_lerp((lut) + (c) * LUT_N, (p).i0, (p).f)
 #else
 #define LUT_CHANNEL(lut, c, p)                                           \
     (GATHER((lut) + (c) * LUT_N, (p).i0) * (1.0f - (p).f) +              \
@@ -468,15 +511,29 @@ typedef struct {
 #define BLOCK_VOXEL(v)                           \
     const int y = y0 + (v) / nvec;               \
     const int x = x0 + VEC * ((v) % nvec);
-#define BLOCK_STEPS(T, from, STEP, DONE)                                 \
-    for (int i0 = (from); i0 < w; i0 += STEP_GROUP)                      \
+/* The groups of steps, the last of which finishes each vector right after its steps (FINISH
+ * writes voxel o): its arithmetic then overlaps the loads of the next vector's steps, where a
+ * pass of its own left memory idle (alpha, max, first_hit and count about 1.07x faster on an
+ * AVX2 EPYC; mixed on an AVX-512 one, docs/engine.md). A block with no step to run (from >= w)
+ * only finishes. */
+#define BLOCK_STEPS(T, from, STEP, DONE, FINISH)                         \
+    for (int i0 = (from);; i0 += STEP_GROUP) {                           \
+        const int last_ = i0 + STEP_GROUP >= w;                          \
         FOR_BLOCK(v) {                                                   \
             BLOCK_VOXEL(v)                                               \
             T s = st[v];                                                 \
-            if (DONE(s)) continue;                                       \
-            STEPS(s, i0, min(w, i0 + STEP_GROUP), STEP, DONE)            \
-            st[v] = s;                                                   \
-        }
+            if (i0 < w && !DONE(s)) {                                    \
+                STEPS(s, i0, min(w, i0 + STEP_GROUP), STEP, DONE)        \
+            }                                                            \
+            if (last_) {                                                 \
+                const size_t o = OUT_INDEX(z, y, x);                     \
+                FINISH(s)                                                \
+            } else {                                                     \
+                st[v] = s;                                               \
+            }                                                            \
+        }                                                                \
+        if (last_) break;                                                \
+    }
 
 /* The bodies of a mode's two kernels, from its state type T and macros: INIT(s) (from the
  * first step where `from` is 1), STEP(s, k), DONE(s) and FINISH(s) (which writes voxel o). */
@@ -486,7 +543,8 @@ typedef struct {
     T s;                                               \
     INIT(s)                                            \
     STEPS(s, from, w, STEP, DONE)                      \
-    FINISH(s)
+    FINISH(s)                                          \
+    STREAM_FENCE
 #define ROWS_BODY(T, from, INIT, STEP, DONE, FINISH) \
     ROWS_PROLOGUE                                    \
     TIME_TABLE_LOAD                                  \
@@ -494,13 +552,8 @@ typedef struct {
         BLOCK_VOXEL(v)                               \
         INIT(st[v])                                  \
     }                                                \
-    BLOCK_STEPS(T, from, STEP, DONE)                 \
-    FOR_BLOCK(v) {                                   \
-        BLOCK_VOXEL(v)                               \
-        const size_t o = OUT_INDEX(z, y, x);         \
-        const T s = st[v];                           \
-        FINISH(s)                                    \
-    }
+    BLOCK_STEPS(T, from, STEP, DONE, FINISH)        \
+    STREAM_FENCE
 
 /* Step k's colour r, g, b and opacity ak, inside a loop over the steps. With SKIP_EMPTY a step
  * whose lanes all map to zero data opacity is skipped (`continue`): every mode using this
@@ -550,27 +603,66 @@ typedef struct {
 
 /* The time TF and step of the winning step `win` (lanes of brick step indices): TIME_AT(c, win)
  * is channel c (0..3: r g b a) of tc[win], STEP_AT(win) is steps[win]. By default each is a
- * 16-lane gather. PERMUTE_TIME (a rows kernel on an AVX-512 CPU, with the host's TIME_TABLE:
- * at most 32 steps) keeps tc and steps as planar 32-entry tables in registers, loaded once per
- * block of rows, and looks a vector up with one two-table permute (vpermi2ps) where a gather
- * takes 16 loads: max ran 8-13 % faster. Portable OpenCL has no lane permute by variable
- * indices (PoCL's shuffle2 ran at 0.8 of the gathers' speed), hence the x86 builtin, and the
- * gathers wherever it is missing. Both give the same bits. The permute reads an index's low
- * 5 bits, so the host sets TIME_TABLE only for rows kernels of at most 32 steps, and only for
- * modes whose finish runs in VECTOR_BODY / ROWS_BODY (which load the tables). */
+ * 16-lane gather. PERMUTE_TIME (a rows kernel on an AVX-512 or AVX2 CPU, with the host's
+ * TIME_TABLE: at most 32 steps) keeps tc and steps as planar 32-entry tables in registers,
+ * loaded once per block of rows, and looks a vector up with one two-table permute (512:
+ * vpermi2ps; max ran 8-13 % faster) or a few one-table permutes and blends (256: vpermps)
+ * where a gather takes 16 loads. Portable OpenCL has no lane permute by variable indices
+ * (PoCL's shuffle2 ran at 0.8 of the gathers' speed), hence the x86 builtins, and the gathers
+ * wherever they are missing. All give the same bits. The permutes read an index's low 5 bits,
+ * so the host sets TIME_TABLE only for rows kernels of at most 32 steps, and only for modes
+ * whose kernels load the tables (TIME_TABLE_LOAD). */
 #if VEC == 16 && defined(TIME_TABLE) && defined(__AVX512F__) && defined(__has_builtin)
 #if __has_builtin(__builtin_ia32_vpermi2varps512)
-#define PERMUTE_TIME
+#define PERMUTE_TIME 512
 #endif
 #endif
-#ifdef PERMUTE_TIME
+#if VEC == 16 && defined(TIME_TABLE) && !defined(PERMUTE_TIME) && defined(__AVX2__) && \
+    defined(__has_builtin)
+#if __has_builtin(__builtin_ia32_permvarsf256) && __has_builtin(__builtin_shufflevector)
+#define PERMUTE_TIME 256
+#endif
+#endif
+#if PERMUTE_TIME == 512
 typedef float v16sf_ __attribute__((vector_size(64)));
 typedef int v16si_ __attribute__((vector_size(64)));
 /* Entry i (lanes, 0..31) of the 32 entries lo[0..15], hi[0..15]. */
-inline float16 lookup32(const float16 lo, const float16 hi, const int16 i)
+inline float16 lookup32(const float16 lo, const float16 hi, const int16 i, const int w)
 {
     return as_float16(__builtin_ia32_vpermi2varps512((v16sf_)lo, (v16si_)i, (v16sf_)hi));
 }
+#elif PERMUTE_TIME == 256
+/* AVX2 (no AVX-512): vpermps looks 8 lanes up in one 8-entry quarter of the table by an
+ * index's low 3 bits; bits 3 and 4 choose among the quarters, of which only those below w
+ * are permuted (w is the same for every work-item: the branches cost nothing). 3-7 vector
+ * operations per 8 lanes where a gather takes 8 loads, 8 inserts and the index extractions:
+ * max ran about 1.3x faster at 10 x 256^3 float32 on a 2-core AMD EPYC without AVX-512. */
+typedef float v8sf_ __attribute__((vector_size(32)));
+typedef int v8si_ __attribute__((vector_size(32)));
+#define LANES_LO 0, 1, 2, 3, 4, 5, 6, 7
+#define LANES_HI 8, 9, 10, 11, 12, 13, 14, 15
+inline float8 permute8(const float8 table, const int8 i)
+{
+    return as_float8(__builtin_ia32_permvarsf256((v8sf_)table, (v8si_)i));
+}
+inline float8 lookup32_8(const float16 lo, const float16 hi, const int8 i, const int w)
+{
+    const float8 q0 = permute8(__builtin_shufflevector(lo, lo, LANES_LO), i);
+    if (w <= 8) return q0;
+    const float8 a = SELECT(q0, permute8(__builtin_shufflevector(lo, lo, LANES_HI), i), (i & 8) != 0);
+    if (w <= 16) return a;
+    const float8 q2 = permute8(__builtin_shufflevector(hi, hi, LANES_LO), i);
+    const float8 b = SELECT(q2, permute8(__builtin_shufflevector(hi, hi, LANES_HI), i), (i & 8) != 0);
+    return SELECT(a, b, (i & 16) != 0);
+}
+/* Entry i (lanes, 0..31) of the 32 entries lo[0..15], hi[0..15]. */
+inline float16 lookup32(const float16 lo, const float16 hi, const int16 i, const int w)
+{
+    return __builtin_shufflevector(lookup32_8(lo, hi, i.lo, w), lookup32_8(lo, hi, i.hi, w),
+                                   LANES_LO, LANES_HI);
+}
+#endif
+#ifdef PERMUTE_TIME
 typedef struct {
     float16 t0lo, t0hi, t1lo, t1hi, t2lo, t2hi, t3lo, t3hi; /* channel c of tc[0..31] */
     float16 slo, shi;                                        /* steps[0..31], as bits */
@@ -591,24 +683,63 @@ inline TimeTable time_table(__global const float4 *tc, __global const int *steps
     return t;
 }
 #define TIME_TABLE_LOAD const TimeTable tt_ = time_table(tc, steps, w);
-#define TIME_AT(c, win) lookup32(tt_.t##c##lo, tt_.t##c##hi, (win))
-#define STEP_AT(win) as_int16(lookup32(tt_.slo, tt_.shi, (win)))
+#define TIME_AT(c, win) lookup32(tt_.t##c##lo, tt_.t##c##hi, (win), w)
+#define STEP_AT(win) as_int16(lookup32(tt_.slo, tt_.shi, (win), w))
 #else
 #define TIME_TABLE_LOAD
 #define TIME_AT(c, win) GATHER((const __global float *)tc, (win) * 4 + (c))
 #define STEP_AT(win) GATHER_INT(steps, (win))
 #endif
 
+/* All four channels of the winner's time TF: tr, tg, tb, ta. Without register tables (a
+ * per-vector kernel, or more than 32 steps) and without AVX-512, each lane's tc[win] is one
+ * 16-byte load and four lanes at a time are transposed by shuffles, where four gathers take
+ * 64 loads and 64 inserts. */
+#if VEC == 16 && !defined(PERMUTE_TIME) && defined(SHUFFLE_STORE) && !defined(__AVX512F__)
+typedef struct {
+    float16 r, g, b, a;
+} TimeRgba;
+#define LOW_PAIRS(a, b) __builtin_shufflevector(a, b, 0, 4, 1, 5)
+#define HIGH_PAIRS(a, b) __builtin_shufflevector(a, b, 2, 6, 3, 7)
+#define LOW_HALVES(a, b) __builtin_shufflevector(a, b, 0, 1, 4, 5)
+#define HIGH_HALVES(a, b) __builtin_shufflevector(a, b, 2, 3, 6, 7)
+/* Channels r, g, b, a of four float4 as four float4 (one lane each). */
+#define TRANSPOSE4(t0, t1, t2, t3, r, g, b, a)                           \
+    const float4 r = LOW_HALVES(LOW_PAIRS(t0, t1), LOW_PAIRS(t2, t3));   \
+    const float4 g = HIGH_HALVES(LOW_PAIRS(t0, t1), LOW_PAIRS(t2, t3));  \
+    const float4 b = LOW_HALVES(HIGH_PAIRS(t0, t1), HIGH_PAIRS(t2, t3)); \
+    const float4 a = HIGH_HALVES(HIGH_PAIRS(t0, t1), HIGH_PAIRS(t2, t3));
+#define CAT16(a, b, c, d) CAT8(CAT4(a, b), CAT4(c, d))
+inline TimeRgba time_rgba(__global const float4 *tc, const int16 i)
+{
+    TRANSPOSE4(tc[i.s0], tc[i.s1], tc[i.s2], tc[i.s3], r0, g0, b0, a0)
+    TRANSPOSE4(tc[i.s4], tc[i.s5], tc[i.s6], tc[i.s7], r1, g1, b1, a1)
+    TRANSPOSE4(tc[i.s8], tc[i.s9], tc[i.sa], tc[i.sb], r2, g2, b2, a2)
+    TRANSPOSE4(tc[i.sc], tc[i.sd], tc[i.se], tc[i.sf], r3, g3, b3, a3)
+    TimeRgba t;
+    t.r = CAT16(r0, r1, r2, r3);
+    t.g = CAT16(g0, g1, g2, g3);
+    t.b = CAT16(b0, b1, b2, b3);
+    t.a = CAT16(a0, a1, a2, a3);
+    return t;
+}
+#define TIME_RGBA(win, tr, tg, tb, ta)        \
+    const TimeRgba trgba_ = time_rgba(tc, (win)); \
+    const floatv tr = trgba_.r, tg = trgba_.g, tb = trgba_.b, ta = trgba_.a;
+#else
+#define TIME_RGBA(win, tr, tg, tb, ta) \
+    const floatv tr = TIME_AT(0, win), tg = TIME_AT(1, win), tb = TIME_AT(2, win), ta = TIME_AT(3, win);
+#endif
+
 /* The colour r, g, b and opacity ak of the step that won (max, min, change): the data TF at
  * `value`, the time TF of selection index `win` (lanes), and that step's enhancement. */
 #ifdef CONST_COLOR
-#define WINNER_COLOR(p, win, r, g, b) \
-    const floatv r = TIME_AT(0, win), g = TIME_AT(1, win), b = TIME_AT(2, win);
+#define WINNER_COLOR(p, r, g, b) const floatv r = tr_, g = tg_, b = tb_;
 #else
-#define WINNER_COLOR(p, win, r, g, b)                          \
-    const floatv r = LUT_CHANNEL(lut, 0, p) * TIME_AT(0, win); \
-    const floatv g = LUT_CHANNEL(lut, 1, p) * TIME_AT(1, win); \
-    const floatv b = LUT_CHANNEL(lut, 2, p) * TIME_AT(2, win);
+#define WINNER_COLOR(p, r, g, b)                       \
+    const floatv r = LUT_CHANNEL(lut, 0, p) * tr_;     \
+    const floatv g = LUT_CHANNEL(lut, 1, p) * tg_;     \
+    const floatv b = LUT_CHANNEL(lut, 2, p) * tb_;
 #endif
 #if ENHANCE
 #define WINNER_ENHANCE(win) \
@@ -617,8 +748,9 @@ inline TimeTable time_table(__global const float4 *tc, __global const int *steps
 #define WINNER_ENHANCE(win)
 #endif
 #define WINNER_RGBA_AT(p, win, r, g, b, ak)                             \
-    WINNER_COLOR(p, win, r, g, b)                                       \
-    floatv ak = VCLAMP(LUT_CHANNEL(lut, 3, p) * TIME_AT(3, win) WINNER_ENHANCE(win), 0.0f, 1.0f);
+    TIME_RGBA(win, tr_, tg_, tb_, ta_)                                  \
+    WINNER_COLOR(p, r, g, b)                                            \
+    floatv ak = VCLAMP(LUT_CHANNEL(lut, 3, p) * ta_ WINNER_ENHANCE(win), 0.0f, 1.0f);
 #define WINNER_RGBA(value, win, r, g, b, ak) \
     const LutPos p = lut_pos_of(value);      \
     WINNER_RGBA_AT(p, win, r, g, b, ak)
