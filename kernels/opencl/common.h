@@ -69,9 +69,10 @@
 #if defined(__has_builtin)
 #if __has_builtin(__builtin_nontemporal_store)
 #define STREAM_STORE(v, p) __builtin_nontemporal_store((v), (p))
-/* x86 orders non-temporal stores only at a fence: each work-item fences its own before it
- * ends, so whoever reads the output after the kernel sees all of it. */
-#if __has_builtin(__builtin_ia32_sfence)
+/* x86 orders non-temporal stores only at a fence: each work-item that made them (aligned
+ * 16-lane builds) fences them before it ends, so whoever reads the output after the kernel
+ * sees all of it. */
+#if __has_builtin(__builtin_ia32_sfence) && VEC == 16 && defined(ALIGNED)
 #define STREAM_FENCE __builtin_ia32_sfence();
 #endif
 #endif
@@ -294,11 +295,12 @@ inline LutPos lut_pos_of(const floatv u)
 
 #ifdef QUANT
 #define LUT_CHANNEL(lut, c, p) GATHER((lut) + (c) * LUT_N, (p).i0)
-#elif VEC == 16 && defined(SHUFFLE_STORE) && !defined(__AVX512F__)
+#elif VEC == 16 && defined(SHUFFLE_STORE) && defined(__AVX2__) && !defined(__AVX512F__)
 /* Entries i and i + 1 of every lane in one 8-byte load each, split into the left and the
  * right entries by shuffles: a quarter of the operations of two 16-lane gathers as AVX2 builds
- * them (scalar loads and inserts), the same values, so the same bits. AVX-512 has gathers of
- * its own (there, shuffled loads of the time colours ran slower than gathers: docs/engine.md). */
+ * them (scalar loads and inserts), the same values, so the same bits. Only where measured: on
+ * AVX2 CPUs; AVX-512 has gathers of its own (there, shuffled loads of the time colours ran
+ * slower than gathers: docs/engine.md). */
 #define LUT_PAIR(j) vload2(0, l + i.s##j)
 inline float16 lut_lerp(const __global float *l, const int16 i, const float16 f)
 {
@@ -692,10 +694,11 @@ inline TimeTable time_table(__global const float4 *tc, __global const int *steps
 #endif
 
 /* All four channels of the winner's time TF: tr, tg, tb, ta. Without register tables (a
- * per-vector kernel, or more than 32 steps) and without AVX-512, each lane's tc[win] is one
- * 16-byte load and four lanes at a time are transposed by shuffles, where four gathers take
- * 64 loads and 64 inserts. */
-#if VEC == 16 && !defined(PERMUTE_TIME) && defined(SHUFFLE_STORE) && !defined(__AVX512F__)
+ * per-vector kernel, or more than 32 steps), on AVX2 CPUs without AVX-512, each lane's tc[win]
+ * is one 16-byte load and four lanes at a time are transposed by shuffles, where four gathers
+ * take 64 loads and 64 inserts. */
+#if VEC == 16 && !defined(PERMUTE_TIME) && defined(SHUFFLE_STORE) && defined(__AVX2__) && \
+    !defined(__AVX512F__)
 typedef struct {
     float16 r, g, b, a;
 } TimeRgba;
