@@ -25,3 +25,29 @@ def test_the_memory_read_reads_every_byte_of_an_odd_brick():
     brick[29, 2, 6, 20] = 7.0  # in the last piece of z rows, the last row, the last voxel
     assert np.max(memory_read_fn(brick, threads=4)()) == 7.0
     assert set(read_fns(get_context(None), brick)) >= {"read-memory", "read-opencl"}
+
+
+def test_the_opencl_read_takes_a_brick_over_the_largest_allocation_in_chunks():
+    """A brick over the device's CL_DEVICE_MAX_MEM_ALLOC_SIZE (a 10 x 512^3 float32 brick is
+    5.4 GB) is read a few z rows at a time: every voxel's sum over its steps comes out."""
+    dc = get_context(None)
+
+    class SmallDevice:  # the device, with room for two z rows a buffer
+        def __init__(self, device, limit):
+            self._device, self.max_mem_alloc_size = device, limit
+
+        def __getattr__(self, name):
+            return getattr(self._device, name)
+
+    class Context:
+        def __init__(self, limit):
+            self.device = SmallDevice(dc.device, limit)
+
+        def __getattr__(self, name):
+            return getattr(dc, name)
+
+    rng = np.random.default_rng(3)
+    brick = padded(rng.random((7, 3, 5, 21), dtype=np.float32))
+    read = read_fns(Context(2 * brick[:1].nbytes), brick)["read-opencl"]
+    read()
+    np.testing.assert_allclose(read.sums, brick.sum(axis=1), rtol=1e-6)

@@ -91,15 +91,24 @@ def read_fns(dc: DeviceContext, brick: np.ndarray) -> dict[str, Callable[[], obj
     mf = cl.mem_flags
     local = (8, 2, 1) if (nx // VEC) % 8 == 0 and ny % 2 == 0 else None
 
+    # z rows one buffer may hold: a brick over the device's largest allocation is read in
+    # chunks of rows, as the engine reads it
+    rows = max(1, min(nz, dc.device.max_mem_alloc_size // max(1, brick[:1].nbytes)))
+
     def run_cl() -> None:
-        src = cl.Buffer(dc.context, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick)
-        dst = cl.Buffer(dc.context, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=out)
-        kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
-        cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // VEC, ny, nz), local)
-        mapped, _ = cl.enqueue_map_buffer(dc.queue, dst, cl.map_flags.READ, 0, out.shape, out.dtype)
-        mapped.base.release(dc.queue)
+        for a in range(0, nz, rows):
+            b = min(nz, a + rows)
+            src = cl.Buffer(dc.context, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick[a:b])
+            dst = cl.Buffer(dc.context, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=out[a:b])
+            kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
+            cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // VEC, ny, b - a), local)
+            mapped, _ = cl.enqueue_map_buffer(
+                dc.queue, dst, cl.map_flags.READ, 0, out[a:b].shape, out.dtype
+            )
+            mapped.base.release(dc.queue)
         dc.queue.finish()
 
+    run_cl.sums = out  # what the kernel wrote: each voxel's sum over the steps
     fns = {"read-memory": memory_read_fn(brick), "read-opencl": run_cl}
     if not dc.is_cpu:
         device_copy = cl.Buffer(dc.context, mf.READ_ONLY, brick.nbytes)
