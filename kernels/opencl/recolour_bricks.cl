@@ -65,9 +65,15 @@ __kernel void recolour(__global const float *won_u, __global const K_T *won_k,
             for (int x = x0; x < xe; ++x) {
                 size_t i = row + x;
                 float4 rgba = recoloured(won_u, i, won_k[i], none_k, lut, lut_size, table);
-                // round to nearest even and clamp: convert_uchar4_sat_rte's result, twice
-                // as fast on PoCL
-                out[i] = convert_uchar4(clamp(rint(rgba * 255.0f), 0.0f, 255.0f));
+                // convert_uchar4_sat_rte's result: clamped to 0..255, then rounded to nearest
+                // even by adding and taking away 2^23 (exact below it; separate statements,
+                // so no contraction), then truncated. PoCL's rte conversion ran at half the
+                // speed of rint(), and rint() (which also handles signs and magnitudes that
+                // cannot occur here) took 315 ms where this takes 219 (512^3 uint8, AVX2)
+                float4 y = clamp(rgba * 255.0f, 0.0f, 255.0f);
+                y = y + 8388608.0f;
+                y = y - 8388608.0f;
+                out[i] = convert_uchar4(y);
             }
             for (int p = p0; p < p1; ++p) {
                 int xs = x0 + (p - p0) * B, xb = min(xs + B, nx);
