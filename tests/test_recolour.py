@@ -162,6 +162,14 @@ def _same_by_bricks(rc, w, specs, first: np.ndarray, want: np.ndarray) -> None:
             held = sp.coloured
         data, _ = convert(want, "f1")
         np.testing.assert_allclose(sp.rgba, data, rtol=0, atol=1)
+        # to the bit: the host conversion (round half to even) of the float recolouring,
+        # whose arithmetic recolour.h shares
+        host = HostRecolour(w)
+        try:
+            exact, _ = convert(host.recolour(specs[-1], "f4"), "f1")
+        finally:
+            host.release()
+        np.testing.assert_array_equal(sp.rgba, exact)
         _same_picture(rc, vol, want, fmt="f1")
     finally:
         vol.release()
