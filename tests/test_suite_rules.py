@@ -97,3 +97,22 @@ def test_installed_versions_are_within_pyproject_ranges():
         if lowest and Requirement(f"{req.name}=={floor}").specifier.contains(have) is False:
             wrong.append(f"{req.name} {have} is not its lower bound {floor}")
     assert not wrong, wrong
+
+
+def test_device_buffers_are_made_in_one_place():
+    """Every OpenCL buffer of chronocl and its benches is made by chronocl.engine.buffers, which
+    keeps each within the device's largest allocation and alive until its work has finished
+    (issue 45: a buffer made elsewhere escaped both). Tests may make their own."""
+    made = re.compile(r"\b(?:cl|pyopencl)\.Buffer\s*\(|\bBuffer\(\s*(?:ctx|dc\.context|context)")
+    root = TESTS.parent
+    home = root / "chronocl" / "engine" / "buffers.py"
+    found = [
+        f"{path.relative_to(root)}:{n}: {line.strip()}"
+        for folder in ("chronocl", "bench")
+        for path in sorted((root / folder).rglob("*.py"))
+        if path != home
+        for n, line in enumerate(path.read_text().splitlines(), 1)
+        if made.search(line)
+    ]
+    assert not found, "\n".join(found)
+    assert made.search(home.read_text()), "the rule's pattern no longer finds the one place"

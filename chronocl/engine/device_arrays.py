@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from chronocl.core.memory import aligned_empty
+from chronocl.engine.buffers import check
 
 
 def on_device(a: object) -> bool:
@@ -29,6 +30,7 @@ def empty(dc, shape: tuple[int, ...], dtype: object, device: bool):
         return aligned_empty(shape, dtype)
     import pyopencl.array as cla
 
+    check(dc, int(np.prod(shape)) * np.dtype(dtype).itemsize, "a device array")
     return cla.empty(dc.queue, shape, np.dtype(dtype))
 
 
@@ -47,6 +49,7 @@ def upload(dc, a: np.ndarray):
     """A device copy of host array `a`."""
     import pyopencl.array as cla
 
+    check(dc, a.nbytes, "a device array")
     with dc.lock:
         return cla.to_device(dc.queue, np.ascontiguousarray(a))
 

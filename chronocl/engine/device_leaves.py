@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from chronocl.engine.buffers import DeviceWork
 from chronocl.engine.defines import DEVICE_TYPES, HALF_DEFINES
 from chronocl.engine.device_arrays import empty, upload
 from chronocl.engine.device_steps import DeviceBrick
@@ -50,11 +51,9 @@ def leaf_value(dc, mode, brick, arrays: list[np.ndarray], value_range: tuple):
     dt = np.dtype(brick.dtype)
     defines = HALF_DEFINES if dt == np.float16 else {"DATA_T": DEVICE_TYPES[dt.name]}
     kern = kernel(dc, "leaves.cl", function, {**defines, "SLIDING": True})
-    mf = cl.mem_flags
-    base = cl.Buffer(dc.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=brick.offsets)
     args = [np.int64(brick.zstride), np.int64(ny * nx), np.int32(w - 1)]
-    with dc.lock:
-        kern.set_args(brick.buffer, base, *args, out.data, *scalars)
+    with DeviceWork(dc) as work:
+        kern.set_args(brick.buffer, work.buffer(brick.offsets), *args, out.data, *scalars)
         cl.enqueue_nd_range_kernel(dc.queue, kern, (out.size,), None)
     return out
 
@@ -65,7 +64,7 @@ def alpha_of(dc, rgba):
 
     alpha = empty(dc, rgba.shape[:-1], np.float32, True)
     kern = kernel(dc, "sums.cl", "alpha_of", {"SLIDING": True, "CHANNELS": 1})
-    with dc.lock:
+    with DeviceWork(dc):
         kern.set_args(rgba.data, alpha.data)
         cl.enqueue_nd_range_kernel(dc.queue, kern, (alpha.size,), None)
     return alpha

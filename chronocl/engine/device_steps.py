@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from chronocl.core.budget import human, parse_memory
+from chronocl.engine.buffers import DeviceLimitError, DeviceWork, buffer, max_alloc
 from chronocl.engine.device_arrays import on_device
 from chronocl.engine.device_formats import stored_dtype
 
@@ -105,12 +106,10 @@ class DeviceSteps:
     (a `chronocl.engine.device.DeviceContext`)."""
 
     def __init__(self, dc, shape: tuple[int, int, int], dtype: np.dtype, count: int) -> None:
-        import pyopencl as cl
-
         self.dc, self.shape, self.dtype, self.count = dc, tuple(shape), np.dtype(dtype), count
         nz, ny, nx = self.shape
         self.nbytes = nz * count * ny * nx * self.dtype.itemsize
-        self.buffer = cl.Buffer(dc.context, cl.mem_flags.READ_ONLY, self.nbytes)
+        self.buffer = buffer(dc, nbytes=self.nbytes)
         with _lock:
             _held[id(dc)] = _held.get(id(dc), 0) + self.nbytes
         self._held = weakref.finalize(self, _give_back, id(dc), self.nbytes)
@@ -125,7 +124,7 @@ class DeviceSteps:
         """Slots for a window of `width` steps and `SPARE_SLOTS` more, where they fit the
         device budget and one buffer; None where the window alone does not."""
         step = int(np.prod(shape)) * np.dtype(dtype).itemsize
-        room = min(budget_left(dc), dc.info.max_alloc) // max(1, step)
+        room = min(budget_left(dc), max_alloc(dc)) // max(1, step)
         if room < width:
             return None
         return cls(dc, shape, dtype, min(room, width + SPARE_SLOTS))
@@ -181,12 +180,11 @@ class DeviceSteps:
             raise ValueError(f"step of {a.dtype} {a.shape}; slots of {self.dtype} {self.shape}")
         nz, ny, nx = self.shape
         row = ny * nx * self.dtype.itemsize
-        with self.dc.lock:
+        with DeviceWork(self.dc) as work:
             for z in range(nz):
-                src = np.ascontiguousarray(a[z])
+                src = work.hold(np.ascontiguousarray(a[z]))
                 at = (z * self.count + slot) * row
                 cl.enqueue_copy(self.dc.queue, self.buffer, src, dst_offset=at, is_blocking=False)
-            self.dc.queue.finish()
         self.uploads += 1
         self.uploaded_bytes += nz * row
 
@@ -203,21 +201,20 @@ class DeviceBricks:
         return self.slots.brick(self.arrays, steps, z0, self.slots.shape[0] if z1 is None else z1)
 
 
-def run_resident(dc, brick: DeviceBrick, outputs: list, launch, chunk) -> None:
-    """Launch the kernels (`launch(queue, data, chunk, out_buffers)`, the engine's) on a
-    resident brick into device buffers, and read those back into the host `outputs`; device
-    arrays among `outputs` (a sliding window's leaves) are written where they are."""
-    import pyopencl as cl
-
-    def buffer(a):
-        return a.data if on_device(a) else cl.Buffer(dc.context, cl.mem_flags.WRITE_ONLY, a.nbytes)
-
-    bufs = [buffer(a) for a in outputs]
-    launch(dc.queue, brick.buffer, chunk, bufs)
-    for a, b in zip(outputs, bufs, strict=True):
+def run_resident(work, brick: DeviceBrick, outputs: list, launch, chunk, z0: int) -> None:
+    """Launch the kernels (`launch(queue, data, chunk, out_buffers)`, the engine's) of brick
+    rows `chunk` of a resident brick into device buffers, and enqueue their read-back into
+    rows chunk.a - z0 .. chunk.b - z0 of the host `outputs` (`work`: the engine's
+    `chronocl.engine.buffers.DeviceWork`); device arrays among `outputs` (a sliding window's
+    leaves) are written where they are, whole."""
+    rows = [a if on_device(a) else a[chunk.a - z0 : chunk.b - z0] for a in outputs]
+    if any(on_device(a) for a in outputs) and chunk.b - chunk.a != outputs[0].shape[0]:
+        raise DeviceLimitError("a device output over the device's largest buffer")
+    bufs = [a.data if on_device(a) else work.buffer(a, access="w") for a in rows]
+    launch(work.queues[0], brick.buffer, chunk, bufs)
+    for a, b in zip(rows, bufs, strict=True):
         if not on_device(a):
-            cl.enqueue_copy(dc.queue, a, b, is_blocking=False)
-    dc.queue.finish()
+            work.read(a, b, in_place=False)
 
 
 class DeviceWindow:

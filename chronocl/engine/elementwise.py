@@ -3,8 +3,8 @@
 A window that slides by aggregation combines the partials of adjacent runs of steps
 (`combine`); one that slides by inversion keeps fixed-point sums (`fixed_add`) and finishes
 them (`finish_sums`). Each runs a mode's kernel built with SLIDING (kernels/opencl/MODE.cl)
-whose arguments are its inputs, outputs, then scalars. `read_back` makes host arrays hold
-what kernels wrote, for these and for `chronocl.engine.opencl`'s integrate kernels.
+whose arguments are its inputs, tables, outputs, then scalars; buffers and the wait for the
+kernels come from `chronocl.engine.buffers`.
 
 Every array may be a host (numpy) or a device array (`chronocl.engine.device_arrays`): device
 arrays are passed as their buffers, copied neither way, and partials combined from device
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from chronocl.engine.buffers import DeviceLimitError, DeviceWork, max_alloc, spans
 from chronocl.engine.device import DeviceContext
 from chronocl.engine.device_arrays import Reduced, empty, on_device
 from chronocl.engine.program import kernel
@@ -66,8 +67,9 @@ def finish_sums(
     sums = Reduced(dc, acc) if on_device(acc) else acc
     function, defines, extra, scalars = mode.finish_kernel(sums, positions, spec)
     out = empty(dc, (*acc.shape[:-1], 4), np.float32, False)
-    ins = [acc, *([alpha] if alpha is not None else []), *extra]
-    run(dc, host_ptr, mode.kernel, function, t_size(out.shape), defines, ins, [out], scalars)
+    ins = [acc, *([alpha] if alpha is not None else [])]
+    n = t_size(out.shape)
+    run(dc, host_ptr, mode.kernel, function, n, defines, ins, [out], scalars, tables=extra)
     return out
 
 
@@ -82,56 +84,45 @@ def run(
     outputs: list[np.ndarray],
     scalars: list = (),
     inout: bool = False,
+    tables: list[np.ndarray] = (),
 ) -> None:
     """Run a one-voxel-per-work-item kernel of kernels/opencl/FILE.cl over `n` voxels.
 
-    Kernel arguments are inputs, outputs, scalars; `inout` outputs are read too.
-    `host_ptr`: buffers wrap the host arrays (CPU devices) instead of copying. Device arrays
-    are their own buffers: nothing is copied to them, nor read back from them.
+    Kernel arguments are inputs, tables, outputs, scalars; inputs and outputs hold `n` voxels
+    (each (n, ...) or (Z, Y, X, ...)), tables are whole (count's LUT); `inout` outputs are read
+    too. `host_ptr`: buffers wrap the host arrays (CPU devices) instead of copying. Device
+    arrays are their own buffers: nothing is copied to them, nor read back from them. Host
+    arrays go in spans of voxels whose buffers each fit the device's largest.
     """
     import pyopencl as cl
 
-    ctx, mf = dc.context, cl.mem_flags
-    host = mf.USE_HOST_PTR if host_ptr else mf.COPY_HOST_PTR
-    flag = mf.READ_WRITE if inout else mf.WRITE_ONLY
-
-    def buffer(a: np.ndarray, output: bool):
-        if on_device(a):
-            return a.data
-        if not output:
-            return cl.Buffer(ctx, mf.READ_ONLY | host, hostbuf=np.ascontiguousarray(a))
-        if host_ptr or inout:
-            return cl.Buffer(ctx, flag | host, hostbuf=a)
-        return cl.Buffer(ctx, flag, a.nbytes)
-
-    ins = [buffer(a, False) for a in inputs]
-    outs = [buffer(a, True) for a in outputs]
-    back = [(a, b) for a, b in zip(outputs, outs, strict=True) if not on_device(a)]
+    voxels = [*inputs, *outputs]
+    item = max(a.nbytes // max(1, n) for a in voxels)
+    cuts = spans(n, item, max_alloc(dc))
+    if len(cuts) > 1 and any(on_device(a) for a in voxels):
+        raise DeviceLimitError("a device array over the device's largest buffer")
     kern = kernel(dc, f"{file}.cl", function, {**defines, "SLIDING": True})
-    with dc.lock:
-        kern.set_args(*ins, *outs, *scalars)
-        cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
-        if back:  # device outputs are used where they are: the in-order queue runs them first
-            read_back(dc, host_ptr, [a for a, _ in back], [b for _, b in back])
+    access = "rw" if inout else "w"
+    with DeviceWork(dc) as work:
+        held = [work.buffer(a) for a in tables]
+        for a, b in cuts:
 
+            def part(x: np.ndarray, a: int = a, b: int = b) -> np.ndarray:
+                return x if len(cuts) == 1 else x.reshape(n, -1)[a:b]
 
-def read_back(dc: DeviceContext, host_ptr: bool, outputs: list[np.ndarray], bufs: list) -> None:
-    """Make the host arrays hold the kernels' results, then wait (dc's lock is held)."""
-    import pyopencl as cl
-
-    queue = dc.queue
-    # Enqueued without waiting (the queue runs in order), then one wait for them all:
-    # each blocking call cost a round trip through the driver's threads (max 1.3 % faster).
-    for a, buf in zip(outputs, bufs, strict=True):
-        if host_ptr:
-            # Mapping synchronises the host array (no copy on CPU devices).
-            mapped, _ = cl.enqueue_map_buffer(
-                queue, buf, cl.map_flags.READ, 0, a.shape, a.dtype, is_blocking=False
-            )
-            mapped.base.release(queue)
-        else:
-            cl.enqueue_copy(queue, a, buf, is_blocking=False)
-    queue.finish()
+            ins = [
+                x.data if on_device(x) else work.buffer(part(x), in_place=host_ptr) for x in inputs
+            ]
+            outs = [
+                x.data if on_device(x) else work.buffer(part(x), access=access, in_place=host_ptr)
+                for x in outputs
+            ]
+            kern.set_args(*ins, *held, *outs, *scalars)
+            cl.enqueue_nd_range_kernel(dc.queue, kern, (b - a,), None)
+            # device outputs are used where they are: the in-order queue runs them first
+            for x, buf in zip(outputs, outs, strict=True):
+                if not on_device(x):
+                    work.read(part(x), buf, in_place=host_ptr)
 
 
 def t_size(rgba_shape: tuple) -> int:

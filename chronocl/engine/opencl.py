@@ -18,6 +18,7 @@ from chronocl.core import values
 from chronocl.core.memory import aligned_empty, is_aligned
 from chronocl.data.bricks import SlotBrick
 from chronocl.engine import elementwise
+from chronocl.engine.buffers import DeviceWork, buffer, max_alloc
 from chronocl.engine.defines import (
     DEVICE_TYPES,
     ENHANCE_CODES,
@@ -33,7 +34,7 @@ from chronocl.engine.in_place import aligned_part, slot_chunks
 from chronocl.engine.kernel_args import INTEGRATE, ROWS
 from chronocl.engine.program import kernel
 from chronocl.engine.tables import TableCache, Tables
-from chronocl.engine.transfer import Chunk, TransferStats, chunks_of, run_chunks
+from chronocl.engine.transfer import Chunk, TransferStats, chunks_of, fit, run_chunks
 from chronocl.modes.base import KernelInput, Partial
 from chronocl.modes.spec import IntegrationSpec
 
@@ -111,7 +112,7 @@ class OpenCLEngine:
     @property
     def max_brick_bytes(self) -> int:
         """Largest brick one buffer may hold on this device (or the limit given)."""
-        device = min(self.dc.info.max_alloc, self.dc.info.global_mem // 4)
+        device = min(max_alloc(self.dc), self.dc.info.global_mem // 4)
         return int(device if self._max_brick is None else min(device, self._max_brick))
 
     def luts(
@@ -200,7 +201,6 @@ class OpenCLEngine:
         if dt == np.float16:
             defines.update(HALF_DEFINES)
 
-        ctx, mf = self.dc.context, cl.mem_flags
         rgba, t_index = out if out is not None else (None, None)
         if rgba is None:
             rgba = aligned_empty((nz_out, ny, nx, 4), np.float32)
@@ -214,6 +214,21 @@ class OpenCLEngine:
             _check_out(t_index, (nz_out, ny, nx), np.int32)
         else:
             t_index = None
+        outputs = [rgba] + ([t_index] if t_index is not None else [])
+        # every buffer fits the device's largest (`chronocl.engine.buffers`): chunks of rows
+        limit = max_alloc(self.dc)
+        out_row = max(a[0].nbytes for a in outputs)
+        row_bytes = w * ny * nx * dt.itemsize
+        whole = [Chunk(z0, z1, 0, nzb)]
+        if resident:
+            chunks = fit(whole, nzb, halo, 0, out_row, limit)
+        elif self.host_ptr:  # slot spans are fitted by slot_chunks; a stacked brick here
+            chunks = fit(
+                parts if slots else whole, nzb, halo, 0 if slots else row_bytes, out_row, limit
+            )
+        else:
+            chunks = chunks_of(nzb, crop, halo, row_bytes, self.chunk_bytes)
+            chunks = fit(chunks, nzb, halo, row_bytes, out_row, limit)
         e = spec.enhance
         if resident:
             aligned = nx % VEC == 0 and brick.zstride % VEC == 0 and not (brick.offsets % VEC).any()
@@ -221,14 +236,14 @@ class OpenCLEngine:
             aligned = (
                 nx % VEC == 0
                 and brick.zstride % VEC == 0
-                and all(aligned_part(brick.rows(c.r0, c.r1), VEC) for c in parts)
+                and all(aligned_part(brick.rows(c.r0, c.r1), VEC) for c in chunks)
                 and is_aligned(rgba)
                 and (t_index is None or is_aligned(t_index))
             )
         elif self.host_ptr:
             aligned = (
                 nx % VEC == 0
-                and is_aligned(brick)
+                and all(is_aligned(brick[c.r0]) for c in chunks)
                 and is_aligned(rgba)
                 and (t_index is None or is_aligned(t_index))
             )
@@ -237,7 +252,7 @@ class OpenCLEngine:
         defines["ALIGNED"] = aligned
 
         def table(a: np.ndarray):
-            return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
+            return buffer(self.dc, a)  # a copy: the host array may go
 
         args = INTEGRATE.bind(
             data=None,  # the brick (or a chunk of it), per launch
@@ -261,7 +276,6 @@ class OpenCLEngine:
             view=[*e.view, 0.0],
         )
         extras = list(mode_args.values())  # the mode's own, by name (tests/test_kernel_args.py)
-        outputs = [rgba] + ([t_index] if t_index is not None else [])
 
         # Whole vectors of `vec` voxels along x, then the remaining columns one by one.
         n_vec = nx // vec
@@ -305,33 +319,32 @@ class OpenCLEngine:
                 )
             return events
 
-        with self.dc.lock:
+        with DeviceWork(self.dc) as work:
             if resident:
-                step_base = table(brick.offsets)
-                run_resident(self.dc, brick, outputs, launch, Chunk(z0, z1, 0, nzb))
+                for c in chunks:
+                    step_base = work.buffer(brick.offsets + c.r0 * brick.zstride)
+                    run_resident(work, brick, outputs, launch, c, z0)
                 self.last_transfer = None
             elif self.host_ptr:
-                flags = mf.WRITE_ONLY | mf.USE_HOST_PTR
-                # A stacked brick is one chunk; steps read in place, a chunk of rows per
-                # buffer where they span more than one holds.
-                done, held = [], []
-                for c in parts if slots else [Chunk(z0, z1, 0, nzb)]:
+                # A stacked brick is one chunk where it fits; steps read in place, a chunk of
+                # rows per buffer where they span more than one holds.
+                for c in chunks:
                     part = brick.rows(c.r0, c.r1) if slots else None
-                    host = brick if part is None else part.block
-                    data = cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=host)
+                    host = brick[c.r0 : c.r1] if part is None else part.block
+                    data = work.buffer(host, in_place=True)
                     if part is not None:
-                        step_base = table(part.offsets)
+                        step_base = work.buffer(part.offsets)
                     rows = [a[c.a - z0 : c.b - z0] for a in outputs]
-                    bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in rows]
-                    launch(self.dc.queue, data, Chunk(c.a, c.b, c.r0, c.r1), bufs)
-                    done, held = done + rows, held + bufs
-                elementwise.read_back(self.dc, self.host_ptr, done, held)
+                    bufs = [work.buffer(a, access="w", in_place=True) for a in rows]
+                    launch(self.dc.queue, data, c, bufs)
+                    for a, buf in zip(rows, bufs, strict=True):
+                        work.read(a, buf, in_place=True)
                 self.last_transfer = None
             else:
-                row_bytes = w * ny * nx * dt.itemsize
-                chunks = chunks_of(nzb, crop, halo, row_bytes, self.chunk_bytes)
+                streams = self.dc.streams()
+                work.queues += [streams.upload, streams.compute, streams.download]
                 self.last_transfer = run_chunks(
-                    self.dc.streams(), ctx, fmt, brick, chunks, z0, outputs, launch, self.overlap
+                    streams, self.dc, fmt, brick, chunks, z0, outputs, launch, self.overlap
                 )
         return Partial(rgba, t_index), final
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from chronocl.core.memory import aligned_empty
 from chronocl.core.timing import race
+from chronocl.engine.buffers import DeviceWork, buffer, max_alloc
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.program import kernel
 
@@ -88,34 +89,31 @@ def read_fns(dc: DeviceContext, brick: np.ndarray) -> dict[str, Callable[[], obj
     defines = {"DATA_T": dtype, "DATA_V": f"{dtype}{VEC}", "LUT_N": 256, "VEC": VEC}
     kern = kernel(dc, "read_roofline.cl", "read_sum", defines)
     out = np.empty((nz, ny, nx), dtype=np.float32)
-    mf = cl.mem_flags
     local = (8, 2, 1) if (nx // VEC) % 8 == 0 and ny % 2 == 0 else None
 
     # z rows one buffer may hold: a brick over the device's largest allocation is read in
     # chunks of rows, as the engine reads it
-    rows = max(1, min(nz, dc.device.max_mem_alloc_size // max(1, brick[:1].nbytes)))
+    rows = max(1, min(nz, max_alloc(dc) // max(1, brick[:1].nbytes)))
 
     def run_cl() -> None:
-        for a in range(0, nz, rows):
-            b = min(nz, a + rows)
-            src = cl.Buffer(dc.context, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=brick[a:b])
-            dst = cl.Buffer(dc.context, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=out[a:b])
-            kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
-            cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // VEC, ny, b - a), local)
-            mapped, _ = cl.enqueue_map_buffer(
-                dc.queue, dst, cl.map_flags.READ, 0, out[a:b].shape, out.dtype
-            )
-            mapped.base.release(dc.queue)
-        dc.queue.finish()
+        with DeviceWork(dc) as work:
+            for a in range(0, nz, rows):
+                b = min(nz, a + rows)
+                src = work.buffer(brick[a:b], in_place=True)
+                dst = work.buffer(out[a:b], access="w", in_place=True)
+                kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
+                cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // VEC, ny, b - a), local)
+                work.read(out[a:b], dst, in_place=True)
 
     run_cl.sums = out  # what the kernel wrote: each voxel's sum over the steps
     fns = {"read-memory": memory_read_fn(brick), "read-opencl": run_cl}
     if not dc.is_cpu:
-        device_copy = cl.Buffer(dc.context, mf.READ_ONLY, brick.nbytes)
+        device_copy = buffer(dc, nbytes=min(brick.nbytes, rows * brick[:1].nbytes))
 
         def copy() -> None:
-            cl.enqueue_copy(dc.queue, device_copy, brick)
-            dc.queue.finish()
+            with DeviceWork(dc):
+                for a in range(0, nz, rows):
+                    cl.enqueue_copy(dc.queue, device_copy, brick[a : a + rows], is_blocking=False)
 
         fns["copy-to-device"] = copy
     return fns

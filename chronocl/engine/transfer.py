@@ -116,6 +116,33 @@ def chunks_of(
     return out
 
 
+def fit(
+    chunks: Sequence[Chunk], nzb: int, halo: int, in_row: int, out_row: int, limit: int
+) -> list[Chunk]:
+    """`chunks` cut further where one's brick rows (`in_row` bytes each, halo included; 0:
+    spans the caller has fitted) or output rows (`out_row` bytes each) are over `limit` bytes,
+    the device's largest buffer (`chronocl.engine.buffers.max_alloc`). Chunks that fit stay."""
+    from chronocl.engine.buffers import DeviceLimitError
+
+    most = limit // out_row
+    if in_row:
+        most = min(most, limit // in_row - 2 * halo)
+    if most < 1:
+        raise DeviceLimitError(
+            f"one row of a brick ({max(in_row, out_row)} bytes) is over the device's largest "
+            f"buffer ({limit} bytes): use smaller steps, or a device with more memory"
+        )
+    out = []
+    for c in chunks:
+        if c.b - c.a <= most and (c.r1 - c.r0) * in_row <= limit:
+            out.append(c)
+            continue
+        for a in range(c.a, c.b, most):
+            b = min(a + most, c.b)
+            out.append(Chunk(a, b, max(0, a - halo), min(nzb, b + halo)))
+    return out
+
+
 @dataclass
 class Streams:
     """The queues of overlapped transfers on one device (upload, compute, read-back) and the
@@ -127,29 +154,30 @@ class Streams:
     profiling: bool
     buffers: dict = field(default_factory=dict)
 
-    def buffer(self, ctx, key: str, nbytes: int, flags: int):
+    def buffer(self, dc, key: str, nbytes: int, access: str):
         """A cached device buffer of at least `nbytes` (grown, never shrunk)."""
-        import pyopencl as cl
+        from chronocl.engine.buffers import buffer
 
         held = self.buffers.get(key)
         if held is None or held.size < nbytes:
             self.buffers.pop(key, None)
-            held = cl.Buffer(ctx, flags, max(1, nbytes))
+            held = buffer(dc, nbytes=nbytes, access=access)
             self.buffers[key] = held
         return held
 
-    def staging(self, ctx, key: str, nbytes: int) -> np.ndarray:
+    def staging(self, dc, key: str, nbytes: int) -> np.ndarray:
         """A pinned host buffer (ALLOC_HOST_PTR) of at least `nbytes`, mapped once and kept
         mapped: a byte array the host writes a chunk into before it is uploaded."""
         import pyopencl as cl
+
+        from chronocl.engine.buffers import buffer
 
         held = self.buffers.get(key)
         if held is None or held.nbytes < nbytes:
             self.buffers.pop(key, None)
             if held is not None:
                 held.base.release(self.upload)
-            mf = cl.mem_flags
-            buf = cl.Buffer(ctx, mf.READ_ONLY | mf.ALLOC_HOST_PTR, max(1, nbytes))
+            buf = buffer(dc, nbytes=nbytes, pinned=True)
             held, _ = cl.enqueue_map_buffer(
                 self.upload,
                 buf,
@@ -184,7 +212,7 @@ Launch = Callable[[object, object, Chunk, list, list], list]
 
 def run_chunks(
     streams: Streams,
-    context,
+    dc,
     fmt: DeviceFormat,
     brick: np.ndarray,
     chunks: Sequence[Chunk],
@@ -204,7 +232,6 @@ def run_chunks(
     """
     import pyopencl as cl
 
-    mf = cl.mem_flags
     up, comp, down = (
         (streams.upload, streams.compute, streams.download) if overlap else (streams.compute,) * 3
     )
@@ -213,13 +240,10 @@ def run_chunks(
     max_in = max(c.rows for c in chunks) * row_in
     max_out = max(c.b - c.a for c in chunks)
     slots = 2 if len(chunks) > 1 else 1
-    staging = [streams.staging(context, f"stage{k}", max_in) for k in range(slots)]
-    dev_in = [streams.buffer(context, f"in{k}", max_in, mf.READ_ONLY) for k in range(slots)]
+    staging = [streams.staging(dc, f"stage{k}", max_in) for k in range(slots)]
+    dev_in = [streams.buffer(dc, f"in{k}", max_in, "r") for k in range(slots)]
     dev_out = [
-        [
-            streams.buffer(context, f"out{k}.{i}", max_out * rb, mf.WRITE_ONLY)
-            for i, rb in enumerate(rows_out)
-        ]
+        [streams.buffer(dc, f"out{k}.{i}", max_out * rb, "w") for i, rb in enumerate(rows_out)]
         for k in range(slots)
     ]
     uploads: list = []

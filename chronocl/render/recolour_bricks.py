@@ -62,7 +62,13 @@ class BrickRecolour(HostRecolour):
     def __init__(self, w: Winners, device: str | None = None) -> None:
         import pyopencl as cl
 
+        from chronocl.engine.buffers import DeviceLimitError, DeviceWork, max_alloc
+
         super().__init__(w, device)
+        if len(self.parts) > 1 or w.u.size * 4 > max_alloc(self.dc):
+            self.release()  # its kernels index the whole volume: one buffer each, or none
+            raise DeviceLimitError("the winners are over the device's largest buffer")
+        _, _, self.u, self.k = self.parts[0]
         nz, ny, nx = w.u.shape
         self.dims = (nx, ny, nz)
         self.grid = brick_grid.grid_shape((nz, ny, nx))
@@ -74,17 +80,15 @@ class BrickRecolour(HostRecolour):
         none = np.zeros(self.grid, bool)
         self._held = [(aligned_zeros((*w.u.shape, 4)), none) for _ in range(2)]
         program = self._program()
-        mf, ctx = cl.mem_flags, self.dc.context
-        with self.dc.lock:
-            outs = [cl.Buffer(ctx, mf.WRITE_ONLY, a.nbytes) for a in self._summary()]
+        with DeviceWork(self.dc) as work:
+            outs = [work.buffer(a, access="w") for a in self._summary()]
             kern = cl.Kernel(program, "summarise")
             kern.set_args(
                 self.u, self.k, np.uint32(w.none), *self._shape_args(), *outs
             )  # fmt: skip
             cl.enqueue_nd_range_kernel(self.dc.queue, kern, (n,), None)
             for a, buf in zip(self._summary(), outs, strict=True):
-                cl.enqueue_copy(self.dc.queue, a, buf)
-            self.dc.queue.finish()
+                work.read(a, buf, in_place=False)
 
     def _summary(self) -> tuple[np.ndarray, ...]:
         return self.umin, self.umax, self.steps
@@ -129,6 +133,8 @@ class BrickRecolour(HostRecolour):
         in it; with the grid and occupied box of the result."""
         import pyopencl as cl
 
+        from chronocl.engine.buffers import DeviceWork
+
         w = self.w
         coloured = self.coloured(spec)
         out, before = self._held.pop(0)
@@ -139,31 +145,23 @@ class BrickRecolour(HostRecolour):
         box = np.zeros((max(len(todo), 1), 6), np.int32)
         lut = np.ascontiguousarray(spec.data_tf.lut, dtype=np.float32)
         table = step_table(spec, w.steps, w.n_steps)
-        mf, ctx, q = cl.mem_flags, self.dc.context, self.dc.queue
-        ro = mf.READ_ONLY | mf.COPY_HOST_PTR
+        q, cpu = self.dc.queue, self.dc.is_cpu
         program = self._program()
-        with self.dc.lock:
-            out_buf = cl.Buffer(ctx, mf.READ_WRITE | mf.USE_HOST_PTR, hostbuf=out)
+        with DeviceWork(self.dc) as work:
+            out_buf = work.buffer(out, access="rw", in_place=cpu)
             if len(todo):
                 kern = cl.Kernel(program, "recolour")
                 runs = _runs(todo, self.grid[2])
-                held = [cl.Buffer(ctx, ro, hostbuf=a) for a in (lut, table, todo, runs)]
-                held += [cl.Buffer(ctx, mf.WRITE_ONLY, a.nbytes) for a in (peaks, box)]
+                held = [work.buffer(a) for a in (lut, table, todo, runs)]
+                held += [work.buffer(a, access="w") for a in (peaks, box)]
                 kern.set_args(
                     self.u, self.k, held[0], np.int32(lut.shape[0]), held[1],
                     np.uint32(w.none), out_buf, *held[2:4], *self._shape_args(), *held[4:],
                 )  # fmt: skip
                 cl.enqueue_nd_range_kernel(q, kern, (len(runs) - 1,), None)
-                cl.enqueue_copy(q, peaks, held[4])
-                cl.enqueue_copy(q, box, held[5])
-            if self.dc.is_cpu:  # the host pointer holds the result once mapped back
-                mapped, _ = cl.enqueue_map_buffer(
-                    q, out_buf, cl.map_flags.READ, 0, out.shape, out.dtype
-                )
-                mapped.base.release(q)
-            else:
-                cl.enqueue_copy(q, out, out_buf)
-            q.finish()
+                work.read(peaks, held[4], in_place=False)
+                work.read(box, held[5], in_place=False)
+            work.read(out, out_buf, cpu)  # on a CPU the host pointer holds it, mapped
         # bricks not rewritten hold nothing: not coloured now, nor in the array before
         stats = np.zeros((*self.grid, 27), np.uint8)
         stats.reshape(-1, 27)[todo] = peaks[: len(todo)]

@@ -17,6 +17,8 @@ are built through chronocl.engine.program (cached per device and options), witho
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from chronocl.core.memory import ALIGN, aligned_empty, is_aligned
@@ -70,11 +72,13 @@ def gather(
 ) -> Winners:
     """`chronocl.integration.interactive.winners.winners` on the OpenCL device: each voxel reads
     its winning step's value alone (the numpy gather reads every step;
-    kernels/opencl/recolour_gather.cl), in place on a CPU device. Falls back to the numpy
+    kernels/opencl/recolour_gather.cl), in place on a CPU device, in slabs of z rows whose
+    buffers each fit the device's largest (`chronocl.engine.buffers`). Falls back to the numpy
     gather for data types the kernel does not take."""
     import pyopencl as cl
 
     from chronocl.core import values as _values
+    from chronocl.engine.buffers import DeviceWork, max_alloc
     from chronocl.engine.device import get_context
     from chronocl.engine.program import build
     from chronocl.integration.interactive.winners import winners
@@ -82,72 +86,87 @@ def gather(
     dtype = np.dtype(arrays[steps[0]].dtype)
     if dtype.name not in CL_TYPES or any(arrays[s].dtype != dtype for s in steps):
         return winners(t_index, arrays, steps, n_steps, value_range, spec)
-    block = _block(arrays, steps)
-    in_place = all(arrays[s].flags.c_contiguous and is_aligned(arrays[s]) for s in steps)
-    if block is None and not in_place:  # a copy would cost more than numpy's gather
-        return winners(t_index, arrays, steps, n_steps, value_range, spec)
     dc = get_context(device)
+    limit = max_alloc(dc)
+    nz, ny, nx = shape = t_index.shape
+    plane = ny * nx  # voxels of one z row
+    per_voxel = max(4, dtype.itemsize)  # t_index and u: 4 bytes a voxel; a step's value
+    block = _block(arrays, steps)
+    rows = limit // (plane * per_voxel)
+    if block is not None:
+        _, offs, (sz, sy, sx) = block
+        row = (ny - 1) * sy + (nx - 1) * sx + 1  # elements one z row of a step spans
+        fixed = ALIGN + (int(offs.max() - offs.min()) + row) * dtype.itemsize  # a slab of 1 row
+        rows = min(rows, 1 + (limit - fixed) // (sz * dtype.itemsize) if limit >= fixed else 0)
+        if rows < 1:
+            block = None  # a slab of one row would not fit in one buffer: step by step
+            rows = limit // (plane * per_voxel)
+    if rows < nz:  # slabs start aligned, as PoCL uses host memory in place (k: 1 byte a voxel)
+        rows -= rows % (ALIGN // math.gcd(plane, ALIGN))
+    in_place = all(arrays[s].flags.c_contiguous and is_aligned(arrays[s]) for s in steps)
+    if (block is None and not in_place) or rows < 1:  # a copy costs more than numpy's gather
+        return winners(t_index, arrays, steps, n_steps, value_range, spec)
     k_dtype = np.uint8 if len(steps) < 255 else np.uint16
     none = np.iinfo(k_dtype).max
     table = np.full(max(steps) + 2, none, dtype=k_dtype)
     table[np.asarray(steps) + 1] = np.arange(len(steps), dtype=k_dtype)
-    shape = t_index.shape
     u = aligned_empty(shape, np.float32)  # PoCL reads and writes aligned host memory in place
     u[...] = 0
     k = aligned_empty(shape, k_dtype)
-    ctx, mf = dc.context, cl.mem_flags
-    host = mf.USE_HOST_PTR if dc.is_cpu else mf.COPY_HOST_PTR
-
-    def buf(a: np.ndarray, flags) -> object:
-        return cl.Buffer(ctx, flags | host, hostbuf=aligned(a))
-
+    t_index = aligned(t_index.astype(np.int32, copy=False))
+    cpu = dc.is_cpu
     change = spec.mode == "change"
     program = build(dc, "recolour_gather.cl", gather_defines(k_dtype, dtype, change), common=False)
     lo, hi = _values.clip_bounds(*value_range)
     vmin, scale = _values.normalization(*value_range)
-    n = t_index.size
-    with dc.lock:
-        ti_buf, table_buf = (
-            buf(t_index.astype(np.int32, copy=False), mf.READ_ONLY),
-            buf(table, mf.READ_ONLY),
-        )
-        k_buf, u_buf = buf(k, mf.READ_WRITE), buf(u, mf.READ_WRITE)
-        index = cl.Kernel(program, "window_index")
-        index.set_args(ti_buf, table_buf, k_buf)
-        cl.enqueue_nd_range_kernel(dc.queue, index, (n,), None)
-        if block is not None:
-            owner, offs, strides = block
-            kern = cl.Kernel(program, "gather_block")
-            _, ny, nx = shape
-            held = [buf(owner, mf.READ_ONLY), buf(offs, mf.READ_ONLY)]  # alive until finish
-            kern.set_args(
-                k_buf, u_buf, *held,
-                *(np.int64(v) for v in (*strides, nx, ny)), np.uint32(none),
-                np.float32(lo if change else vmin), np.float32(hi), np.float32(scale),
-            )  # fmt: skip
-            cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
-        kern = cl.Kernel(program, "gather")
-        step_bufs = {} if block is not None else {s: buf(arrays[s], mf.READ_ONLY) for s in steps}
-        first = 1 if change else 0  # change: the window's first step starts no change
-        for base in range(first, len(steps) if block is None else 0, CHUNK):
-            count = min(CHUNK, len(steps) - base)
-            ptrs = [step_bufs[steps[max(base - 1, 0)]]]
-            ptrs += [step_bufs[steps[min(base + j, len(steps) - 1)]] for j in range(CHUNK)]
-            kern.set_args(
-                k_buf, u_buf, np.uint32(base), np.uint32(count), *ptrs,
-                np.float32(lo if change else vmin), np.float32(hi), np.float32(scale),
-            )  # fmt: skip
-            cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
-        for a, b in ((k, k_buf), (u, u_buf)):
-            if dc.is_cpu:
-                mapped, _ = cl.enqueue_map_buffer(
-                    dc.queue, b, cl.map_flags.READ, 0, a.shape, a.dtype
-                )
-                mapped.base.release(dc.queue)
+    values = (np.float32(lo if change else vmin), np.float32(hi), np.float32(scale))
+    first = 1 if change else 0  # change: the window's first step starts no change
+    # work that reads and writes host memory finishes before anything here can be freed
+    with DeviceWork(dc) as work:
+        table_buf = work.buffer(table)
+        for z0 in range(0, nz, max(1, rows)):
+            z1 = min(nz, z0 + rows)
+            n = (z1 - z0) * plane
+            k_buf = work.buffer(k[z0:z1], access="rw", in_place=cpu)
+            u_buf = work.buffer(u[z0:z1], access="rw", in_place=cpu)
+            index = cl.Kernel(program, "window_index")
+            index.set_args(work.buffer(t_index[z0:z1], in_place=cpu), table_buf, k_buf)
+            cl.enqueue_nd_range_kernel(dc.queue, index, (n,), None)
+            if block is not None:
+                data, offs_buf, strides = _slab(work, block, z0, z1, dtype.itemsize, row, cpu)
+                kern = cl.Kernel(program, "gather_block")
+                kern.set_args(
+                    k_buf, u_buf, data, offs_buf,
+                    *(np.int64(v) for v in (*strides, nx, ny)), np.uint32(none), *values,
+                )  # fmt: skip
+                cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
             else:
-                cl.enqueue_copy(dc.queue, a, b)
-        dc.queue.finish()
+                bufs = {s: work.buffer(arrays[s][z0:z1], in_place=cpu) for s in steps}
+                for base in range(first, len(steps), CHUNK):
+                    count = min(CHUNK, len(steps) - base)
+                    ptrs = [bufs[steps[max(base - 1, 0)]]]
+                    ptrs += [bufs[steps[min(base + j, len(steps) - 1)]] for j in range(CHUNK)]
+                    kern = cl.Kernel(program, "gather")
+                    kern.set_args(
+                        k_buf, u_buf, np.uint32(base), np.uint32(count), *ptrs, *values
+                    )  # fmt: skip
+                    cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
+            work.read(k[z0:z1], k_buf, cpu)
+            work.read(u[z0:z1], u_buf, cpu)
     return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
+
+
+def _slab(work, block: tuple, z0: int, z1: int, item: int, row: int, cpu: bool):
+    """The buffer of the part of the slot block that z rows z0..z1 of every step lie in (from
+    an aligned address; `row`: elements one z row of a step spans), each step's element
+    offset in it, and the element strides."""
+    base, offs, strides = block
+    sz = strides[0]
+    first = (int(offs.min()) + z0 * sz) * item  # bytes from the block's start
+    start = first - first % ALIGN
+    stop = (int(offs.max()) + (z1 - 1) * sz + row) * item
+    local = (offs + z0 * sz - start // item).astype(np.int64)
+    return work.buffer(base[start:stop], in_place=cpu), work.buffer(local), strides
 
 
 def aligned(a: np.ndarray) -> np.ndarray:
@@ -187,22 +206,23 @@ def _block(arrays: dict[int, np.ndarray], steps) -> tuple | None:
 
 
 class HostRecolour:
-    """A window's winners on the OpenCL device (`chronocl.engine.device.get_context`)."""
+    """A window's winners on the OpenCL device (`chronocl.engine.device.get_context`), in
+    spans of voxels whose buffers each fit the device's largest (`chronocl.engine.buffers`)."""
 
     def __init__(self, w: Winners, device: str | None = None) -> None:
-        import pyopencl as cl
-
+        from chronocl.engine.buffers import buffer, max_alloc, spans
         from chronocl.engine.device import get_context
 
         self.w = w
         self.dc = get_context(device)
-        flags = cl.mem_flags.READ_ONLY | (
-            cl.mem_flags.USE_HOST_PTR if self.dc.is_cpu else cl.mem_flags.COPY_HOST_PTR
-        )
         self._u, self._k = aligned(w.u), aligned(w.k)
         self._spare: list[np.ndarray] = []  # the last two results, with `reuse`
-        self.u = cl.Buffer(self.dc.context, flags, hostbuf=self._u)
-        self.k = cl.Buffer(self.dc.context, flags, hostbuf=self._k)
+        u, k, cpu = self._u.reshape(-1), self._k.reshape(-1), self.dc.is_cpu
+        # (first voxel, end, u, k) a span; float32 RGBA out, 16 bytes a voxel, decides the spans
+        self.parts = [
+            (a, b, buffer(self.dc, u[a:b], in_place=cpu), buffer(self.dc, k[a:b], in_place=cpu))
+            for a, b in spans(u.size, 16, max_alloc(self.dc), multiple=RUN)
+        ]
 
     def _kernel(self, rgba8: bool):
         from chronocl.engine.program import kernel
@@ -217,6 +237,8 @@ class HostRecolour:
         made): a fresh 512 MB array costs more in page faults than the kernel's work."""
         import pyopencl as cl
 
+        from chronocl.engine.buffers import DeviceWork
+
         w = self.w
         rgba8 = fmt == "f1"
         dtype = np.uint8 if rgba8 else np.float32
@@ -226,37 +248,25 @@ class HostRecolour:
         out = spare
         if reuse:
             self._spare.append(out)
-        ctx = self.dc.context
-        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
         lut = np.ascontiguousarray(spec.data_tf.lut, dtype=np.float32)
         table = step_table(spec, w.steps, w.n_steps)
-        with self.dc.lock:
-            lut_buf = cl.Buffer(ctx, ro, hostbuf=lut)
-            table_buf = cl.Buffer(ctx, ro, hostbuf=table)
-            if self.dc.is_cpu:
-                out_buf = cl.Buffer(
-                    ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out
-                )
-            else:
-                out_buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
+        flat, cpu = out.reshape(-1, 4), self.dc.is_cpu
+        with DeviceWork(self.dc) as work:
+            lut_buf, table_buf = work.buffer(lut), work.buffer(table)
             kern = self._kernel(rgba8)  # shared: its arguments are set under the device's lock
-            kern.set_args(
-                self.u, self.k, lut_buf, np.int32(lut.shape[0]), table_buf,
-                np.uint32(w.none), out_buf, np.uint64(w.u.size),
-            )  # fmt: skip
-            items = -(-w.u.size // RUN)
-            cl.enqueue_nd_range_kernel(self.dc.queue, kern, (items,), None)
-            if self.dc.is_cpu:  # the host pointer holds the result once mapped back
-                mapped, _ = cl.enqueue_map_buffer(
-                    self.dc.queue, out_buf, cl.map_flags.READ, 0, out.shape, out.dtype
-                )
-                mapped.base.release(self.dc.queue)
-            else:
-                cl.enqueue_copy(self.dc.queue, out, out_buf)
-            self.dc.queue.finish()
+            for a, b, u_buf, k_buf in self.parts:
+                out_buf = work.buffer(flat[a:b], access="w", in_place=cpu)
+                kern.set_args(
+                    u_buf, k_buf, lut_buf, np.int32(lut.shape[0]), table_buf,
+                    np.uint32(w.none), out_buf, np.uint64(b - a),
+                )  # fmt: skip
+                cl.enqueue_nd_range_kernel(self.dc.queue, kern, (-(-(b - a) // RUN),), None)
+                work.read(flat[a:b], out_buf, cpu)  # on a CPU the host pointer holds it, mapped
         return out
 
     def release(self) -> None:
-        self.u.release()
-        self.k.release()
+        for *_, u, k in self.parts:
+            u.release()
+            k.release()
+        self.parts = []
         self._spare = []

@@ -29,6 +29,7 @@ import numpy as np
 
 from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.engine.buffers import DeviceLimitError
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour import RecolourVolume, available, recolourer
@@ -127,7 +128,7 @@ class Recolouring:
         w = full.winners(functools.partial(gather, device=self.device))
         if w is None:
             return None
-        volume = on_gl(_upload, w) if on_gpu else BrickRecolour(w, self.device)
+        volume = on_gl(_upload, w) if on_gpu else on_host(w, self.device)
         slot.recolour = Prepared(weakref.ref(shown.t_index), volume)
         return slot.recolour
 
@@ -158,3 +159,12 @@ def _write(rc, vol, sp: Sparse, held, spacing) -> None:
 
 def _recolour(rc, rv: RecolourVolume, spec, spacing, fmt: str, volume):
     return recolourer(rc.ctx).recolour(rv, spec, spacing, fmt, volume=volume)
+
+
+def on_host(w, device: str | None) -> HostRecolour:
+    """The winners on the OpenCL device: brick by brick where the whole volume fits one
+    buffer (its kernels index all of it), else in spans (`HostRecolour`)."""
+    try:
+        return BrickRecolour(w, device)
+    except DeviceLimitError:
+        return HostRecolour(w, device)

@@ -1,0 +1,146 @@
+"""A child process of tests/test_device_faults.py: each kind of device work a frame does
+(integrate, gather, recolour whole or by bricks, the sliding kernels), with a failure
+injected at each of its device calls in turn (an enqueue, a map, a copy, a buffer made).
+
+Each failure must reach the caller as raised, and the next run must equal a run that never
+failed. A failure that freed host memory under enqueued work kills this process (a segfault
+in the kernel that writes it), which the test sees as its exit code. Prints one JSON line per
+kind of work: the device calls of one run, and the failures injected.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+import pyopencl as cl
+
+from chronocl.core.memory import aligned_empty
+from chronocl.core.tf import DataTF, TimeTF
+from chronocl.data.series import TimeSeries
+from chronocl.engine.opencl import OpenCLEngine
+from chronocl.integration.inmemory import integrate
+from chronocl.integration.interactive.winners import winners
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.render.recolour_bricks import BrickRecolour
+from chronocl.render.recolour_host import HostRecolour, gather
+from chronocl.viewer.recolouring import on_host
+
+ENQUEUES = ("enqueue_nd_range_kernel", "enqueue_copy", "enqueue_map_buffer")
+
+
+class Injected(RuntimeError):
+    """The failure injected."""
+
+
+class Faults:
+    """Counts pyopencl's enqueues and buffers made, and raises `Injected` at call `at`."""
+
+    def __init__(self) -> None:
+        self.calls, self.at = 0, None
+        self.saved = {name: getattr(cl, name) for name in (*ENQUEUES, "Buffer")}
+        faults = self
+
+        class Buffer(self.saved["Buffer"]):
+            def __init__(self, *args, **kwargs) -> None:
+                faults.tick("Buffer")
+                super().__init__(*args, **kwargs)
+
+        def wrap(name):
+            def call(*args, **kwargs):
+                faults.tick(name)
+                return self.saved[name](*args, **kwargs)
+
+            return call
+
+        for name in ENQUEUES:
+            setattr(cl, name, wrap(name))
+        cl.Buffer = Buffer
+
+    def tick(self, name: str) -> None:
+        self.calls += 1
+        if self.calls == self.at:
+            raise Injected(f"injected at device call {self.at} ({name})")
+
+
+def spec(mode: str, value_range=(0.0, 255.0)) -> IntegrationSpec:
+    return IntegrationSpec(mode=mode, data_tf=DataTF(value_range=value_range), time_tf=TimeTF())
+
+
+def works(size: int) -> dict:
+    """name -> a function doing that work on fresh outputs, returning the arrays it made."""
+    rng = np.random.default_rng(3)
+    nz = ny = nx = size
+    width, steps = 4, (1, 2, 3, 4)
+    # the window manager's slots: steps as views of one (Z, W, Y, X) block
+    block = aligned_empty((nz, width, ny, nx), np.uint8)
+    block[...] = rng.integers(0, 256, block.shape, dtype=np.uint8)
+    arrays = {s: block[:, i] for i, s in enumerate(steps)}
+    t_index = rng.choice(np.array([*steps, -1], np.int32), size=(nz, ny, nx))
+    vr = (0.0, 255.0)
+    won = winners(t_index, arrays, steps, 8, vr, spec("max"))
+    small = np.ascontiguousarray(block[: max(8, nz // 4)].transpose(1, 0, 2, 3)).astype(np.float32)
+    series = TimeSeries.from_array(small)
+    engine = OpenCLEngine()
+    acc = rng.integers(-(2**40), 2**40, (nz // 4, ny, nx, 4), dtype=np.int64)
+    step = rng.random((nz // 4, ny, nx, 4), dtype=np.float32)
+
+    def fixed_add():
+        out = acc.copy()
+        engine.fixed_add(out, step, 1)
+        return (out,)
+
+    def bricks():  # where the volume is over one buffer, in spans (the viewer's choice)
+        v = on_host(won, None)
+        return (
+            v.sparse(spec("max")).rgba if isinstance(v, BrickRecolour) else v.recolour(spec("max")),
+        )
+
+    def integrated(mode):
+        def run():
+            cv = integrate(series, "0:4", mode, engine=engine, data_tf=DataTF(value_range=vr))
+            return (cv.rgba, cv.t_index)
+
+        return run
+
+    return {
+        "gather": lambda: (lambda w: (w.u, w.k))(
+            gather(t_index, arrays, steps, 8, vr, spec("max"))
+        ),
+        "integrate_max": integrated("max"),
+        "integrate_alpha": integrated("alpha"),
+        "recolour": lambda: (HostRecolour(won).recolour(spec("max"), "f1"),),
+        "bricks": bricks,
+        "fixed_add": fixed_add,
+    }
+
+
+def main() -> None:
+    size = int(sys.argv[1])
+    only = sys.argv[2:]
+    faults = Faults()
+    for name, work in works(size).items():
+        if only and name not in only:
+            continue
+        faults.calls, faults.at = 0, None
+        want = [np.array(a, copy=True) for a in work() if a is not None]
+        calls = faults.calls
+        for at in range(1, calls + 1):
+            faults.calls, faults.at = 0, at
+            try:
+                work()
+            except Injected:
+                pass
+            else:
+                raise SystemExit(f"{name}: the failure at call {at} of {calls} was not raised")
+            faults.calls, faults.at = 0, None
+            got = [a for a in work() if a is not None]
+            for a, b in zip(got, want, strict=True):
+                if not np.array_equal(a, b):
+                    raise SystemExit(f"{name}: after a failure at call {at}, a wrong result")
+        print(json.dumps({"work": name, "calls": calls, "failures": calls}), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,131 @@
+"""Every path obeys the device's largest allocation, and its split results equal the whole ones.
+
+``CHRONOCL_MAX_ALLOC`` lowers the largest buffer (`chronocl.engine.buffers.max_alloc`) so
+that one step here (36 x 44 x 96 float32, 608 KB) is over it: every mode's integration (at full
+resolution and a coarse level, float32 and the display's RGBA8), a session's slides both ways
+(incrementally: the sliding kernels) and TF edits (recoloured where the mode allows), the
+gather of the winners, their recolouring and the probe then run in pieces. Each result equals
+the uncapped one bit for bit (issue 45: the users' case at the default budget wrapped a 6.5 GB
+block in one buffer, over PoCL's 4 GB).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from chronocl import modes
+from chronocl.core.tf import DataTF, TimeTF
+from chronocl.data.probe import probe
+from chronocl.data.series import TimeSeries, open_series
+from chronocl.engine import buffers
+from chronocl.integration.inmemory import integrate
+from chronocl.integration.interactive.session import Session
+from chronocl.integration.interactive.winners import RECOLOURED
+from chronocl.modes.spec import IntegrationSpec
+from chronocl.render.recolour_host import gather
+from chronocl.viewer.recolouring import on_host
+
+CAP = "128KB"  # one step is 608 KB; a brick row of 6 steps 101 KB, of RGBA float32 66 KB
+SHAPE = (36, 44, 96)  # coarse levels from 96 along x
+STEPS = 12
+VR = (-10.0, 30.0)
+
+
+@pytest.fixture(scope="module")
+def series(tmp_path_factory) -> TimeSeries:
+    rng = np.random.default_rng(17)
+    z, y, x = np.meshgrid(*[np.linspace(-1, 1, n) for n in SHAPE], indexing="ij")
+    steps = [
+        30 * np.exp(-((x - 0.1 * t + 0.5) ** 2 + y**2 + z**2) * 4) + rng.normal(0, 2, SHAPE) - 5
+        for t in range(STEPS)
+    ]
+    path = tmp_path_factory.mktemp("capped") / "series.zarr"
+    TimeSeries.from_array(np.stack(steps).astype(np.float32)).save(path)
+    series = open_series(path)
+    assert series.n_levels == 2
+    return series
+
+
+def _spec(mode: str, points=None) -> IntegrationSpec:
+    tf = DataTF(value_range=VR) if points is None else DataTF(points=points, value_range=VR)
+    return IntegrationSpec(mode=mode, data_tf=tf, time_tf=TimeTF(positions="absolute"))
+
+
+EDIT = ((0, 0.2, 0.4, 1, 0.0), (0.4, 1, 0.5, 0, 0.3), (1, 1, 1, 0.2, 0.9))
+
+
+def _run_all(series: TimeSeries, mode: str) -> dict[str, np.ndarray]:
+    """Every result of one mode the capped paths must reproduce, by name."""
+    out: dict[str, np.ndarray] = {}
+
+    def keep(name: str, cv) -> None:
+        out[f"{name}.rgba"] = np.array(cv.rgba, copy=True)
+        if cv.t_index is not None:
+            out[f"{name}.t_index"] = np.array(cv.t_index, copy=True)
+
+    spec = _spec(mode)
+    keep("integrate", integrate(series, "1:7", spec=spec, engine="opencl"))
+    keep("level1", integrate(series, "1:7", spec=spec, engine="opencl", level=1))
+    for display in (False, True):
+        options = {"display": display, "direct_below_ms": 0}  # slides always incremental
+        with Session(series, engine="opencl", spec=spec, memory="64MB", **options) as s:
+            s.set_window(2, 8)
+            for move in (+2, -3):
+                keep(f"slide{move:+d}.display{display}", s.slide(move))
+            keep(f"edit.display{display}", s.set_spec(_spec(mode, EDIT)))
+            if mode in RECOLOURED and not display:
+                fixed, reason = s.recolours(_spec(mode, EDIT))
+                w = s.winners(gather)
+                assert reason is None and w is not None, reason
+                out["winners.u"], out["winners.k"] = w.u.copy(), w.k.copy()
+                volume = on_host(w, None)
+                out["recolour.f1"] = volume.recolour(fixed, "f1").copy()
+                out["recolour.f4"] = volume.recolour(fixed, "f4").copy()
+                volume.release()
+    curve = probe(series, region=((3, 40), (2, 30), (5, 33)))
+    out["probe"] = np.stack([curve.values, curve.min, curve.max])
+    return out
+
+
+@pytest.mark.parametrize("mode", modes.names())
+def test_every_path_under_the_allocation_cap_equals_the_whole(series, mode, monkeypatch):
+    sizes: list[int] = []
+    checked = buffers.check
+
+    def check(dc, nbytes: int, what: str) -> None:
+        sizes.append(nbytes)
+        checked(dc, nbytes, what)
+
+    monkeypatch.setattr(buffers, "check", check)
+    monkeypatch.delenv(buffers.MAX_ALLOC_VAR, raising=False)
+    whole = _run_all(series, mode)
+    made = len(sizes)
+    assert max(sizes) > 128_000  # the whole paths make buffers over the cap
+    sizes.clear()
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, CAP)
+    split = _run_all(series, mode)
+    assert max(sizes) <= 128_000 and len(sizes) > made  # the same work, in more pieces
+    assert whole.keys() == split.keys()
+    for name, want in whole.items():
+        np.testing.assert_array_equal(split[name], want, err_msg=f"{mode} {name}")
+
+
+def _device():
+    from chronocl.engine.device import get_context
+
+    return get_context()
+
+
+def test_the_cap_is_below_one_step_and_splits_each_kind_of_buffer(series, monkeypatch):
+    """The cap of the test above is under one step and over one brick row, and what asks for
+    more than it is refused with a clear error instead of reaching the driver."""
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, CAP)
+    dc = _device()
+    limit = buffers.max_alloc(dc)
+    assert limit == 128_000
+    step = int(np.prod(SHAPE)) * 4
+    assert step > limit > SHAPE[1] * SHAPE[2] * 16
+    with pytest.raises(buffers.DeviceLimitError, match="largest buffer"):
+        buffers.buffer(dc, nbytes=limit + 1)
+    assert buffers.spans(20_000, 16, limit) == [(0, 7936), (7936, 15872), (15872, 20_000)]
