@@ -553,3 +553,45 @@ def test_a_tab_closed_mid_request_is_not_an_internal_error(server, caplog, monke
         if r.name.startswith("chronocl") and "internal error" in r.getMessage()
     ]
     assert not errors, errors
+
+
+def test_an_internal_error_names_what_failed_and_the_next_frame_is_right(
+    server, caplog, monkeypatch
+):
+    """A failure in a frame's device work (issue 45: a LogicError, then a segfault) is told to
+    the client in one line naming the exception, its message, the views and the sizes; the
+    server's log has its traceback; and the next frame equals a fresh client's."""
+    import logging
+
+    from chronocl.engine import buffers
+
+    caplog.set_level(logging.ERROR, logger="chronocl.viewer")
+    views = {"type": "update", "views": [{"mode": "max"}], "window": {"t0": 2, "t1": 6}}
+    fresh = Client(server)
+    fresh.open(0, size=(64, 64))
+    want = fresh.frame_for(fresh.send(views))
+    fresh.close()
+
+    entered = buffers.DeviceWork.__enter__
+    failed = []
+
+    def failing(self):
+        if not failed:
+            failed.append(True)
+            raise RuntimeError("clEnqueueNDRangeKernel failed: injected")
+        return entered(self)
+
+    c = Client(server)
+    c.open(0, size=(64, 64))
+    monkeypatch.setattr(buffers.DeviceWork, "__enter__", failing)
+    rid = c.send(views)
+    message = c.wait("error", rid)[1]["message"]
+    assert "RuntimeError: clEnqueueNDRangeKernel failed: injected" in message, message
+    assert "views max forward, window 2:6:1" in message and "frame 64x64" in message, message
+    logged = [r for r in caplog.records if "injected" in r.getMessage()]
+    assert logged and logged[0].exc_info is not None, "no traceback in the log"
+    rid = c.send(views)  # the same state again: drawn now
+    got = c.frame_for(rid)
+    c.close()
+    assert got[1]["views"] == want[1]["views"]
+    assert got[2] == want[2], "the frame after the error differs from a fresh client's"

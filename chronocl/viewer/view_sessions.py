@@ -13,6 +13,7 @@ import dataclasses
 import threading
 from contextlib import nullcontext
 
+from chronocl.core.errors import ChronoclError
 from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
@@ -80,7 +81,13 @@ class Views:
                 spec = dataclasses.replace(spec, enhance=old.enhance)
             with INTEGRATE_LOCK:
                 sel = state.selection(series.n_steps, i)  # its own window, or the shared one
-                cv, ms, inc = self._integrate(slot, series, spec, sel)
+                try:
+                    cv, ms, inc = self._integrate(slot, series, spec, sel)
+                except ChronoclError:  # given up (a newer request), or bad input: kept
+                    raise
+                except Exception:  # its session may say it holds what it failed to make
+                    slot.drop_session()
+                    raise
             integrate_ms += ms
             incremental = incremental or inc
             cvs.append(cv)

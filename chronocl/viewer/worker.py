@@ -237,9 +237,26 @@ class ClientWorker(Tasks):
                 what = (
                     f"on {task[0]}" if task is not None and pending is None else "making the frame"
                 )
-                text = error_text(exc, what)
+                text = error_text(exc, f"{what} ({self._what_is_shown(pending)})")
                 if not self._reply({"type": "error", "id": rid, "message": text}):
                     return
+
+    def _what_is_shown(self, pending) -> str:
+        """The views' modes and windows, the data set's size and the frame's, for an error's
+        line (never raising: it is called while an error is handled)."""
+        try:
+            state = pending[0] if pending is not None else self._shown or self.state
+            series = self.datasets[state.dataset].series
+            views = ", ".join(f"{mode} {order}" for mode, order in state.views)
+            t0, t1, stride = state.window
+            size = "x".join(map(str, series.volume_shape))
+            w, h = state.size
+            return (
+                f"views {views}, window {t0}:{t1}:{stride}, data {size} {series.dtype}, "
+                f"frame {w}x{h} {state.quality}"
+            )
+        except Exception as exc:
+            return f"views unknown: {type(exc).__name__}"
 
     def _draw(self, rc, cvs, state, size, bg, given_up=None) -> tuple[list, float, float, float]:
         """Upload what changed and draw every view (on the GL thread); `given_up` (a refine's)
