@@ -13,18 +13,21 @@ DEV := $(VENV)/.dev
 # with the newest version of every dependency.
 NEWEST := .venv-newest
 
+# Another apt-get holding the dpkg lock (an unattended upgrade) is waited for, not failed on.
+APT := apt-get -o DPkg::Lock::Timeout=300
+
 # Headless rendering needs EGL and Mesa (llvmpipe); OpenCL on the CPU needs a PoCL.
 system:
 	@if ! ldconfig -p | grep -q libEGL_mesa; then \
 		if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
-			apt-get update -qq && apt-get install -y -qq libegl1 libgl1-mesa-dri libegl-mesa0; \
+			$(APT) update -qq && $(APT) install -y -qq libegl1 libgl1-mesa-dri libegl-mesa0; \
 		else echo "warning: EGL/Mesa missing; install libegl1 libgl1-mesa-dri to render"; fi; \
 	fi
 	@# PyPI's PoCL (LLVM 14) builds no kernel on CPUs newer than its LLVM (AMD Zen 4 and later);
 	@# Debian's PoCL does, and is listed first, so it is the default CPU device (README).
 	@if ! dpkg-query -W -f '$${Status}' pocl-opencl-icd 2>/dev/null | grep -q 'ok installed'; then \
 		if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
-			apt-get update -qq && apt-get install -y -qq pocl-opencl-icd; \
+			$(APT) update -qq && $(APT) install -y -qq pocl-opencl-icd; \
 		else echo "warning: Debian's PoCL missing; PyPI's may fail on new CPUs: apt-get install pocl-opencl-icd"; fi; \
 	fi
 
@@ -53,7 +56,7 @@ test: lint
 	@if [ ! -x /usr/bin/chromium ]; then \
 		if command -v apt-get >/dev/null; then \
 			SUDO=$$([ "$$(id -u)" = 0 ] || echo sudo); \
-			$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq chromium; \
+			$$SUDO $(APT) update -qq && $$SUDO $(APT) install -y -qq chromium; \
 		else echo "warning: /usr/bin/chromium missing; the browser tests will be skipped"; fi; \
 	fi
 	$(BIN)/python -m pytest -q --durations=30
