@@ -128,4 +128,4 @@ def test_the_cap_is_below_one_step_and_splits_each_kind_of_buffer(series, monkey
     assert step > limit > SHAPE[1] * SHAPE[2] * 16
     with pytest.raises(buffers.DeviceLimitError, match="largest buffer"):
         buffers.buffer(dc, nbytes=limit + 1)
-    assert buffers.spans(20_000, 16, limit) == [(0, 7936), (7936, 15872), (15872, 20_000)]
+    assert buffers.spans(20_000, 16, limit) == [(0, 8000), (8000, 16000), (16000, 20_000)]
