@@ -428,3 +428,55 @@ def test_tf_pieces_scale_by_each_steps_time_factors():
     assert np.array_equal(flat[:s], table[0])
     np.testing.assert_allclose(rows[1, 3], 0.25 * np.concatenate([table[4, :1], table[8]]))
     np.testing.assert_allclose(rows[1, 1], 0.0)
+
+
+ISA_REPORT = (
+    "o[0] = 0;\n#ifdef ISA_AVX2\n o[0] += 1;\n#endif\n#ifdef ISA_AVX512\n o[0] += 2;\n#endif"
+)
+
+
+def _isa(engine, cpu_paths: str) -> int:
+    """The x86 paths common.h takes under `cpu_paths` (bit 0: AVX2, bit 1: AVX-512)."""
+    from chronocl.engine.defines import CPU_PATHS
+
+    defines = {"DATA_T": "float", "DATA_V": "float16", "VEC": 16, "LUT_N": 256}
+    return _compiler_reports(engine, ISA_REPORT, {**defines, "CPU_PATHS": CPU_PATHS[cpu_paths]})
+
+
+def test_cpu_paths_lower_the_x86_paths_a_build_takes():
+    """CPU_PATHS takes away AVX-512 ("avx2") or both ("generic") and never adds a path the
+    compiler's target lacks: asked of the compiler."""
+    engine = opencl.OpenCLEngine()
+    native = _isa(engine, "native")
+    assert _isa(engine, "avx2") == native & 1
+    assert _isa(engine, "generic") == 0
+    with pytest.raises(ValueError, match="cpu_paths"):
+        opencl.OpenCLEngine(cpu_paths="sse")
+
+
+@pytest.mark.parametrize("mode", ["alpha", "max", "first_hit", "change"])
+def test_every_x86_variant_the_cpu_runs_gives_the_same_bits(mode):
+    """The AVX-512, AVX2 and portable variants of common.h's x86 paths (register time tables,
+    LUT pairs, shuffled time colours: AVX2 without AVX-512 only) give the same bits: every
+    variant this CPU can run is built and compared with the native one, float32 data through
+    the rows kernels, with up to 32 steps (register tables) and more (loads), both orders."""
+    engine = opencl.OpenCLEngine(pieces=False)  # the TF looked up: the LUT pairs
+    native = _isa(engine, "native")
+    variants = [v for v in ("avx2", "generic") if _isa(engine, v) != native]
+    if engine.dc.is_cpu and native:  # an x86 CPU: there is a lower variant to compare
+        assert variants
+    rng = np.random.default_rng(7)
+    for w in (9, 40):
+        raw = (rng.random((w, 3, 5, 48)) * 120 - 10).astype(np.float32)
+        series = chronocl.TimeSeries.from_array(raw)
+        for order in ("forward", "backward"):
+            spec = IntegrationSpec(
+                mode=mode,
+                order=order,
+                data_tf=DataTF(points=ROW_TFS[1], value_range=(0, 100)),
+                time_tf=chronocl.TimeTF.preset("rgb"),
+            )
+            want = chronocl.integrate(series, None, spec=spec, engine=engine)
+            for cpu_paths in variants:
+                other = opencl.OpenCLEngine(pieces=False, cpu_paths=cpu_paths)
+                assert_same(chronocl.integrate(series, None, spec=spec, engine=other), want, 0)

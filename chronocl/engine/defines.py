@@ -12,6 +12,10 @@ DEVICE_TYPES = {"uint8": "uchar", "uint16": "ushort", "int16": "short", "float32
 HALF_DEFINES = {"DATA_T": "half", "HALF_DATA": True}
 ENHANCE_CODES = {"none": 0, "edge": 1, "silhouette": 2}
 VEC = 16  # voxels per work-item along x in the vectorised kernels
+# common.h's x86 paths a build may take (its CPU_PATHS): "native", those the CPU has; "avx2",
+# AVX2 as on a CPU without AVX-512; "generic", the portable gathers. All give the same bits,
+# and the suite builds and compares each variant the CPU it runs on can run.
+CPU_PATHS = {"native": None, "avx2": 1, "generic": 0}
 
 
 def order_defines(order, w: int) -> dict[str, bool]:

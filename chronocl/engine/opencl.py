@@ -20,6 +20,7 @@ from chronocl.data.bricks import SlotBrick
 from chronocl.engine import elementwise
 from chronocl.engine.buffers import DeviceWork, buffer, max_alloc
 from chronocl.engine.defines import (
+    CPU_PATHS,
     DEVICE_TYPES,
     ENHANCE_CODES,
     HALF_DEFINES,
@@ -47,7 +48,8 @@ class OpenCLEngine:
     the x remainder and gradient enhancement run one voxel per work-item.
     `host_ptr`, `early_exit`, `quantized`, `skip_empty` and `pieces` (the data TF evaluated
     as straight pieces, `tables.tf_segments`) switch the fast paths (default: host pointers on CPU
-    devices, the rest on); tests check each against the general path.
+    devices, the rest on), and `cpu_paths` lowers the x86 paths of the build
+    (`chronocl.engine.defines.CPU_PATHS`); tests check each against the general path.
 
     Without host pointers bricks are copied: `device_format` (auto, float32, uint8, uint16,
     float16; `chronocl.engine.device_formats`) is what they travel in, `overlap` uploads the next
@@ -73,6 +75,7 @@ class OpenCLEngine:
         device_format: str = "auto",
         overlap: bool = True,
         chunk_bytes: int | None = None,
+        cpu_paths: str = "native",
     ) -> None:
         self.dc: DeviceContext = get_context(device)
         self.host_ptr = self.dc.is_cpu if host_ptr is None else host_ptr
@@ -86,6 +89,9 @@ class OpenCLEngine:
         self.device_format = check_format_name(device_format)
         self.overlap = overlap
         self.chunk_bytes = chunk_bytes
+        if cpu_paths not in CPU_PATHS:
+            raise ValueError(f"cpu_paths must be one of {', '.join(CPU_PATHS)}")
+        self.cpu_paths = cpu_paths
         self.last_transfer: TransferStats | None = None
         self.last_in_place = False  # whether the last brick was read where its steps lie
         self._luts = TableCache()
@@ -195,6 +201,7 @@ class OpenCLEngine:
             "SKIP_EMPTY": self.skip_empty and cut > (0.0 if quant else float("-inf")),
             "RAW_PARTIAL": raw,
             "SLOTS": slots,
+            "CPU_PATHS": CPU_PATHS[self.cpu_paths],
             **order_defines(order, w),
             **mode_defines,
         }

@@ -133,6 +133,16 @@ inline int all_lanes(int16 m)
 #define SHUFFLE_STORE
 #endif
 #endif
+/* The x86 paths this build may take (ISA_AVX512, ISA_AVX2): those the compiler's target has,
+ * unless the host lowers them with CPU_PATHS (1: AVX2 as on a CPU without AVX-512; 0: neither,
+ * the portable gathers), so that every variant the CPU can run is built and compared with the
+ * others on whatever CPU runs the suite (chronocl/engine/defines.py CPU_PATHS). */
+#if defined(__AVX512F__) && (!defined(CPU_PATHS) || CPU_PATHS >= 2)
+#define ISA_AVX512
+#endif
+#if defined(__AVX2__) && (!defined(CPU_PATHS) || CPU_PATHS >= 1)
+#define ISA_AVX2
+#endif
 #ifdef SHUFFLE_STORE
 /* Two vectors of 2, 4 or 8 lanes as one of twice as many. */
 #define CAT2(a, b) __builtin_shufflevector(a, b, 0, 1, 2, 3)
@@ -295,7 +305,7 @@ inline LutPos lut_pos_of(const floatv u)
 
 #ifdef QUANT
 #define LUT_CHANNEL(lut, c, p) GATHER((lut) + (c) * LUT_N, (p).i0)
-#elif VEC == 16 && defined(SHUFFLE_STORE) && defined(__AVX2__) && !defined(__AVX512F__)
+#elif VEC == 16 && defined(SHUFFLE_STORE) && defined(ISA_AVX2) && !defined(ISA_AVX512)
 /* Entries i and i + 1 of every lane in one 8-byte load each, split into the left and the
  * right entries by shuffles: a quarter of the operations of two 16-lane gathers as AVX2 builds
  * them (scalar loads and inserts), the same values, so the same bits. Only where measured: on
@@ -614,12 +624,12 @@ typedef struct {
  * wherever they are missing. All give the same bits. The permutes read an index's low 5 bits,
  * so the host sets TIME_TABLE only for rows kernels of at most 32 steps, and only for modes
  * whose kernels load the tables (TIME_TABLE_LOAD). */
-#if VEC == 16 && defined(TIME_TABLE) && defined(__AVX512F__) && defined(__has_builtin)
+#if VEC == 16 && defined(TIME_TABLE) && defined(ISA_AVX512) && defined(__has_builtin)
 #if __has_builtin(__builtin_ia32_vpermi2varps512)
 #define PERMUTE_TIME 512
 #endif
 #endif
-#if VEC == 16 && defined(TIME_TABLE) && !defined(PERMUTE_TIME) && defined(__AVX2__) && \
+#if VEC == 16 && defined(TIME_TABLE) && !defined(PERMUTE_TIME) && defined(ISA_AVX2) && \
     defined(__has_builtin)
 #if __has_builtin(__builtin_ia32_permvarsf256) && __has_builtin(__builtin_shufflevector)
 #define PERMUTE_TIME 256
@@ -697,8 +707,8 @@ inline TimeTable time_table(__global const float4 *tc, __global const int *steps
  * per-vector kernel, or more than 32 steps), on AVX2 CPUs without AVX-512, each lane's tc[win]
  * is one 16-byte load and four lanes at a time are transposed by shuffles, where four gathers
  * take 64 loads and 64 inserts. */
-#if VEC == 16 && !defined(PERMUTE_TIME) && defined(SHUFFLE_STORE) && defined(__AVX2__) && \
-    !defined(__AVX512F__)
+#if VEC == 16 && !defined(PERMUTE_TIME) && defined(SHUFFLE_STORE) && defined(ISA_AVX2) && \
+    !defined(ISA_AVX512)
 typedef struct {
     float16 r, g, b, a;
 } TimeRgba;
