@@ -9,7 +9,9 @@ times:
   level 0 and not `reduced` (drawn smaller than the panel for the latency target);
 - data-TF edits (an opacity control point moved, the fitted range kept, as the page sends
   them; every edit a value no edit before it had, warm-up included: none is a cache hit): to
-  the first frame and to the sharp frame; then the same edits in max mode;
+  the first frame and to the sharp frame; then in every mode: the switch to it, the first edit
+  after the switch (where max/min/first_hit/change prepare their winners) and later edits,
+  each to its sharp frame;
 - scrub steps (the window slid by one step, each sent when the last one's frame came, at
   "preview" quality, as the page's timeline drag does): to the first frame, whether the
   session updated incrementally, and the longest stall (the largest gap between consecutive
@@ -36,7 +38,8 @@ and reuses them.
     python bench/viewer_latency.py --quick --users [--users-side 256] [--keep DIR]
 
 Summary keys (per size; under `users` for --users): `first_frame_ms`, `full_res_ms` (TF edit ->
-sharp frame), `max_full_res_ms`, `open_full_res_ms`, `open_first_frame_ms`,
+sharp frame), `max_full_res_ms`, `modes` (per mode `switch_ms`, `first_edit_ms`, `edit_ms`),
+`open_full_res_ms`, `open_first_frame_ms`,
 `scrub_first_frame_ms`, `scrub_incremental` ("k/n"), `scrub_stall_ms`, `scrub_stop_full_res_ms`,
 `refine_input_wait_ms` (longest; `refine_probes_in_refine` "k/n"), `first_frame_level`,
 `full_res_split_ms` (`full_split`), `integrate_gvoxel_steps_s` (the full-resolution integration
@@ -64,6 +67,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import emit, env_record
 from latency_client import WINDOW, Client, Edits, refine_probes, scrub, scrub_stops, sharp, tf_edits
 
+from chronocl import modes
 from chronocl.core.budget import resident_bytes
 from chronocl.data import synthetic
 from chronocl.data.series import open_series
@@ -254,13 +258,25 @@ def measure(path: Path, case: str, size, memory, edits: int, scrubs: int) -> dic
         r["stop"] = summarise("scrub_stop_full_resolution", stops, case)
         r["probes"] = refine_probes(c, edit)
         emit({"bench": BENCH, "case": case, "op": "refine_input", "probes": r["probes"]})
-        c.request({"type": "update", "views": [{"mode": "max", "order": "forward"}]}, full=True)
-        tf_edits(c, edit, 1)
-        _, max_edits, max_chains = tf_edits(c, edit, min(3, edits))
-        r["max"] = summarise("max_tf_edit_full_resolution", max_edits, case)
-        # a recolour's frames: the first (recolour, texture write, a draw within the draw
-        # budget) and the full-size redraw; the sharp frame's own split holds only the last
-        r["max"]["chain_split_ms"] = full_split(max_chains)
+        # Every mode (issue 45): the switch, the first edit after it (the recoloured modes
+        # prepare their winners there), then edits as before.
+        r["modes"] = {}
+        for mode in modes.names():
+            switch_ms, _ = c.request(
+                {"type": "update", "views": [{"mode": mode, "order": "forward"}]}, full=True
+            )
+            _, cold, _ = tf_edits(c, edit, 1)
+            _, warm, chains_m = tf_edits(c, edit, min(3, edits))
+            r[mode] = summarise(f"{mode}_tf_edit_full_resolution", warm, case)
+            # a recolour's frames: the first (recolour, texture write, a draw within the draw
+            # budget) and the full-size redraw; the sharp frame's own split holds only the last
+            r[mode]["chain_split_ms"] = full_split(chains_m)
+            r["modes"][mode] = {
+                "switch_ms": round(switch_ms, 1),
+                "first_edit_ms": round(cold[0][0], 1),
+                "edit_ms": r[mode]["median_ms"],
+            }
+        emit({"bench": BENCH, "case": case, "op": "every_mode", "modes": r["modes"]})
         r["open"] = summarise("open_full_resolution", [(opened["full_ms"], opened["header"])], case)
         r["open_first_ms"] = round(opened["first_ms"], 2)
         r["chains"] = chains
@@ -298,6 +314,7 @@ def record_case(summary: dict, key: str, r: dict, n: int, scrubs: int) -> None:
         ),
         "split_ms": {k: r[k]["split_ms"] for k in ("first", "full", "scrub", "stop", "max")},
         "max_chain_split_ms": r["max"]["chain_split_ms"],  # recolour and texture write too
+        "modes": r["modes"],  # per mode: switch, the first edit after it, later edits (ms)
         "drawn": {k: r[k]["drawn"] for k in ("first", "full", "scrub")},
         "rss_mb": r["rss_mb"],
     }
