@@ -183,7 +183,11 @@ def _same_on_host(w, spec, want: np.ndarray) -> None:
         for fmt in ("f1", "f4"):
             data, _ = convert(want, fmt)
             got = host.recolour(spec, fmt)
+            # within 1 of the integrated RGBA8: the recolouring's floats are not integration's
             np.testing.assert_allclose(got, data, rtol=0, atol=1 if fmt == "f1" else 1e-6)
+        # RGBA8 is its own float result rounded as the display conversion rounds, to the bit
+        rounded, _ = convert(host.recolour(spec, "f4"), "f1")
+        np.testing.assert_array_equal(host.recolour(spec, "f1"), rounded)
     finally:
         host.release()
 
