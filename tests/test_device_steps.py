@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -66,6 +67,24 @@ def test_windows_from_device_slots_equal_the_reference(copying, data):
         assert set(sel.steps) <= set(slots.resident())
 
 
+@contextmanager
+def host_copies():
+    """The bytes of every copy from a host array to a device buffer enqueued meanwhile."""
+    import pyopencl as cl
+
+    sent: list[int] = []
+    copy = cl.enqueue_copy
+
+    def counted(queue, dest, src, **kwargs):
+        if isinstance(dest, cl.MemoryObjectHolder) and isinstance(src, np.ndarray):
+            sent.append(src.nbytes)
+        return copy(queue, dest, src, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(cl, "enqueue_copy", counted)
+        yield sent
+
+
 def test_an_edit_uploads_no_step_and_a_slide_one(copying, tmp_path):
     rng = np.random.default_rng(4)
     path = tmp_path / "s.zarr"
@@ -78,10 +97,13 @@ def test_an_edit_uploads_no_step_and_a_slide_one(copying, tmp_path):
         assert slots is not None and slots.uploads == 8
         assert session.stats["why_not_on_device"] is None
         for change in ({"order": "backward"}, {"mode": "alpha"}, {"order": "forward"}):
-            cv = session.set_spec(**change)  # integrated again, from the device's slots
+            with host_copies() as sent:
+                cv = session.set_spec(**change)  # integrated again, from the device's slots
             ref = chronocl.integrate(series, session.window(), spec=session.spec, engine="numpy")
             assert_same(cv, ref)
             assert slots.uploads == 8
+            # nothing the size of a step went up another way (the window stacked and sent)
+            assert max(sent, default=0) < 6 * 5 * 19 * 4, sent
         # incremental: the sliding state integrates the entering step alone, from its slot
         session.slide(1)
         assert session.stats["path"] == "incremental" and slots.uploads == 9
