@@ -323,3 +323,24 @@ def test_the_viewer_shows_remote_stores(served, http, s3):
         env=env_without_aws(),
     )
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--anon" in bad.stderr
+
+
+def test_the_test_server_keeps_its_latency_and_bandwidth(served):
+    """bench/remote.py's figures rest on the server's limits: a file takes at least its bytes
+    over the rate plus the latency (a server that ignored either would pass the test above)."""
+    import time
+    import urllib.request
+
+    biggest = max(
+        (p for p in (served / "s.zarr").rglob("*") if p.is_file()), key=lambda p: p.stat().st_size
+    )
+    name = biggest.relative_to(served).as_posix()
+    size = biggest.stat().st_size
+    rate, latency = size / 0.2, 0.05  # 0.2 s of the link, 0.05 s before the first byte
+    with StoreServer(served, latency_s=latency, bytes_per_s=rate) as slow:
+        t = time.perf_counter()
+        with urllib.request.urlopen(slow.url(name), timeout=30) as r:
+            body = r.read()
+        took = time.perf_counter() - t
+    assert body == biggest.read_bytes()
+    assert took >= 0.9 * (size / rate + latency), (took, size / rate + latency)
