@@ -172,3 +172,23 @@ def test_the_state_is_held_from_the_device_budget(copying, monkeypatch):
                 assert (s._slider.dc is not None) == on_device
                 assert budget_left(copying.dc) == (0 if on_device else left)
         assert budget_left(copying.dc) == budget - others
+
+
+@pytest.mark.parametrize("mode", ["max", "mean", "additive"])
+def test_a_state_over_the_largest_device_buffer_slides_on_the_host(copying, mode, monkeypatch):
+    """Where one array of the sliding state (an RGBA partial, the fixed-point sums) is over the
+    device's largest buffer (`chronocl.engine.buffers.max_alloc`, lowered by CHRONOCL_MAX_ALLOC
+    to half an RGBA volume), the state stays on the host and slides still equal the reference
+    (issue 45: it went to the device and the first slide raised DeviceLimitError)."""
+    from chronocl.engine import buffers
+
+    shape = (6, 8, 32)
+    series = _series(np.random.default_rng(8), 10, shape, np.float32, False)
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(int(np.prod(shape)) * 16 // 2))
+    rgb = TimeTF.preset("rgb", positions="absolute")
+    with Session(
+        series, mode=mode, time_tf=rgb, engine=copying, memory="64MB", direct_below_ms=0
+    ) as session:
+        session.set_window(2, 6)
+        for move in (+2, -1):
+            _check(session, session.slide(move), series)

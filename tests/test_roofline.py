@@ -27,27 +27,43 @@ def test_the_memory_read_reads_every_byte_of_an_odd_brick():
     assert set(read_fns(get_context(None), brick)) >= {"read-memory", "read-opencl"}
 
 
-def test_the_opencl_read_takes_a_brick_over_the_largest_allocation_in_chunks():
-    """A brick over the device's CL_DEVICE_MAX_MEM_ALLOC_SIZE (a 10 x 512^3 float32 brick is
-    5.4 GB) is read a few z rows at a time: every voxel's sum over its steps comes out."""
+def test_the_opencl_read_takes_a_brick_over_the_largest_allocation_in_chunks(monkeypatch):
+    """A brick over the device's largest allocation (a 10 x 512^3 float32 brick is 5.4 GB) is
+    read a few z rows at a time (`chronocl.engine.buffers.max_alloc`, lowered here by
+    CHRONOCL_MAX_ALLOC to two z rows a buffer): every voxel's sum over its steps comes out."""
+    from chronocl.engine import buffers
+
     dc = get_context(None)
-
-    class SmallDevice:  # the device, with room for two z rows a buffer
-        def __init__(self, device, limit):
-            self._device, self.max_mem_alloc_size = device, limit
-
-        def __getattr__(self, name):
-            return getattr(self._device, name)
-
-    class Context:
-        def __init__(self, limit):
-            self.device = SmallDevice(dc.device, limit)
-
-        def __getattr__(self, name):
-            return getattr(dc, name)
-
     rng = np.random.default_rng(3)
     brick = padded(rng.random((7, 3, 5, 21), dtype=np.float32))
-    read = read_fns(Context(2 * brick[:1].nbytes), brick)["read-opencl"]
+    sizes: list[int] = []
+    checked = buffers.check
+
+    def check(dc, nbytes: int, what: str) -> None:
+        sizes.append(nbytes)
+        checked(dc, nbytes, what)
+
+    monkeypatch.setattr(buffers, "check", check)
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(2 * brick[:1].nbytes))
+    read = read_fns(dc, brick)["read-opencl"]
     read()
+    assert sizes and max(sizes) <= 2 * brick[:1].nbytes  # in chunks of two rows
     np.testing.assert_allclose(read.sums, brick.sum(axis=1), rtol=1e-6)
+
+
+def test_the_read_roofline_measures_without_deadlocking_on_the_device_lock():
+    """read_roofline held the device's lock around its readers, which take it themselves
+    (`DeviceWork`; a non-reentrant lock): it hung for ever. Run in a thread, with a limit."""
+    import threading
+
+    from chronocl.engine.roofline import read_roofline
+
+    brick = np.random.default_rng(4).random((4, 2, 8, 16), dtype=np.float32)
+    result: dict = {}
+    thread = threading.Thread(
+        target=lambda: result.update(read_roofline(brick, repeats=1)), daemon=True
+    )
+    thread.start()
+    thread.join(timeout=120)
+    assert not thread.is_alive(), "read_roofline deadlocked on the device's lock"
+    assert result["opencl_read_gb_s"] > 0

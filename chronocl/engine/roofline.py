@@ -144,8 +144,9 @@ def read_roofline(brick: np.ndarray, device: str | None = None, repeats: int = 3
         brick = brick.astype(np.float32)
     brick = padded(brick)
     dc = get_context(device)
-    with dc.lock:
-        times = race(read_fns(dc, brick), repeats)
+    # no lock here: each device reader holds the device's (non-reentrant) lock itself
+    # (`chronocl.engine.buffers.DeviceWork`); holding it around them deadlocked
+    times = race(read_fns(dc, brick), repeats)
     rates = {name: brick.nbytes / med / 1e9 for name, (med, _) in times.items()}
     limit, best = bound_of(rates)
     return {

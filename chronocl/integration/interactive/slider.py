@@ -28,6 +28,7 @@ from chronocl.data.bricks import ResidentBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.engine.base import Engine
+from chronocl.engine.buffers import max_alloc
 from chronocl.engine.device_arrays import to_host, zeros
 from chronocl.engine.device_leaves import alpha_of, leaf, leaf_value
 from chronocl.engine.device_steps import reserve
@@ -177,6 +178,10 @@ class Slider:
         if getattr(engine, "dc", None) is None or engine.reads_in_place:
             return
         voxels = int(np.prod(self.series.volume_shape))
+        # each of its arrays is one device buffer (a partial's RGBA, 16 bytes a voxel; the
+        # sums, 8 a channel): where one is over the device's largest, the state stays here
+        if voxels * max(16, 8 * self.mode.sum_channels) > max_alloc(engine.dc):
+            return
         self.hold = reserve(engine.dc, state_bytes(self.mode, self.selection.width, voxels))
         if self.hold is not None:
             self.dc = self.leaves.dc = engine.dc
