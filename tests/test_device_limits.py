@@ -129,3 +129,30 @@ def test_the_cap_is_below_one_step_and_splits_each_kind_of_buffer(series, monkey
     with pytest.raises(buffers.DeviceLimitError, match="largest buffer"):
         buffers.buffer(dc, nbytes=limit + 1)
     assert buffers.spans(20_000, 16, limit) == [(0, 8000), (8000, 16000), (16000, 20_000)]
+
+
+def test_brick_recolouring_takes_a_volume_whose_rgba8_fits_one_buffer(series, monkeypatch):
+    """A volume whose float32 RGBA is over the largest buffer but whose winners and RGBA8 are
+    not is still recoloured brick by brick (a review found it sent to the whole-volume spans),
+    and equals the whole recolouring; one whose RGBA8 is over it goes in spans."""
+    from chronocl.render.recolour_bricks import BrickRecolour
+    from chronocl.render.recolour_host import HostRecolour
+
+    steps = tuple(range(1, 7))
+    arrays = {s: np.ascontiguousarray(series.read([s])[0]) for s in steps}
+    rng = np.random.default_rng(2)
+    t_index = rng.choice(np.array([*steps, -1], np.int32), size=SHAPE)
+    spec = _spec("max", EDIT)
+    w = gather(t_index, arrays, steps, STEPS, VR, spec)
+    want = HostRecolour(w).recolour(spec, "f1")
+    voxels = int(np.prod(SHAPE))
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(voxels * 8))  # RGBA8 fits, float32 not
+    volume = on_host(w, None)
+    assert isinstance(volume, BrickRecolour) and len(volume.parts) > 1
+    np.testing.assert_array_equal(volume.sparse(spec).rgba, want)
+    volume.release()
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(voxels * 2))  # RGBA8 over it: spans
+    volume = on_host(w, None)
+    assert not isinstance(volume, BrickRecolour)
+    np.testing.assert_array_equal(volume.recolour(spec, "f1"), want)
+    volume.release()

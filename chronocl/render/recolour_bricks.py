@@ -62,13 +62,22 @@ class BrickRecolour(HostRecolour):
     def __init__(self, w: Winners, device: str | None = None) -> None:
         import pyopencl as cl
 
-        from chronocl.engine.buffers import DeviceLimitError, DeviceWork, max_alloc
+        from chronocl.engine.buffers import DeviceLimitError, DeviceWork, buffer, max_alloc
 
         super().__init__(w, device)
-        if len(self.parts) > 1 or w.u.size * 4 > max_alloc(self.dc):
-            self.release()  # its kernels index the whole volume: one buffer each, or none
+        self._own: list = []  # whole-volume u and k, where the spans are several
+        # its kernels index the whole volume: u (4 bytes a voxel) and the RGBA8 output each in
+        # one buffer, or none (the spans above are cut for float32 RGBA, 16 bytes a voxel)
+        if w.u.size * 4 > max_alloc(self.dc):
+            self.release()
             raise DeviceLimitError("the winners are over the device's largest buffer")
-        _, _, self.u, self.k = self.parts[0]
+        if len(self.parts) == 1:
+            _, _, self.u, self.k = self.parts[0]
+        else:
+            cpu = self.dc.is_cpu
+            self.u = buffer(self.dc, self._u, in_place=cpu)
+            self.k = buffer(self.dc, self._k, in_place=cpu)
+            self._own = [self.u, self.k]
         nz, ny, nx = w.u.shape
         self.dims = (nx, ny, nz)
         self.grid = brick_grid.grid_shape((nz, ny, nx))
@@ -175,6 +184,9 @@ class BrickRecolour(HostRecolour):
 
     def release(self) -> None:
         super().release()
+        for b in self._own:
+            b.release()
+        self._own = []
         self._held = []
 
 

@@ -13,7 +13,7 @@ import dataclasses
 import threading
 from contextlib import nullcontext
 
-from chronocl.core.errors import ChronoclError
+from chronocl.core.errors import SupersededError
 from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
@@ -83,7 +83,7 @@ class Views:
                 sel = state.selection(series.n_steps, i)  # its own window, or the shared one
                 try:
                     cv, ms, inc = self._integrate(slot, series, spec, sel)
-                except ChronoclError:  # given up (a newer request), or bad input: kept
+                except SupersededError:  # given up for a newer request: kept
                     raise
                 except Exception:  # its session may say it holds what it failed to make
                     slot.drop_session()
