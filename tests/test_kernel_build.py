@@ -26,7 +26,7 @@ import pytest
 import chronocl
 from chronocl import modes
 from chronocl.engine import opencl, program
-from chronocl.engine.defines import HALF_DEFINES
+from chronocl.engine.defines import CPU_PATHS, HALF_DEFINES
 from chronocl.engine.opencl import DEVICE_TYPES, OpenCLEngine
 from chronocl.modes.base import KernelInput
 from chronocl.modes.spec import IntegrationSpec
@@ -42,7 +42,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 INTEGRATION_KEYS = set(
     "DATA_T DATA_V VEC KEY_RAW IDX_T CHANGE_BYTES QUANT LUT_N CONST_COLOR TF_SEGS SEG_ALPHA "
     "ENHANCE EARLY_EXIT SKIP_EMPTY IS_MIN NORM_TIME RAW_PARTIAL TIME_ORDER ALIGNED "
-    "ORDER_FORWARD ORDER_BACKWARD TIME_TABLE SLOTS RGBA8".split()
+    "ORDER_FORWARD ORDER_BACKWARD TIME_TABLE SLOTS RGBA8 CPU_PATHS".split()
 )
 STEP_ORDERS = ("table", "forward", "backward")  # order[i], or the steps in turn / reversed
 BOOLS = (False, True)
@@ -167,14 +167,28 @@ def all_pairs(combinations: list[dict]) -> list[dict]:
 
 def with_slots(combinations: list[dict], full: bool) -> list[dict]:
     """SLOTS (the steps read where they lie) changes only how a voxel's address is computed,
-    RGBA8 (the display format written instead of float32) only how a result is stored: in the
-    full matrix every combination with and without each; otherwise the builds take the four
-    pairs of them in turn, so every form compiles beside every option (dimensions of their own
-    in the product doubled the all-pairs search for no build more)."""
+    RGBA8 (the display format written instead of float32) only how a result is stored, and
+    CPU_PATHS (common.h's x86 paths lowered: `chronocl.engine.defines.CPU_PATHS`) only which
+    of equal paths a build takes: in the full matrix every combination with each form;
+    otherwise the builds take the forms in turn, so every form compiles beside every option
+    (dimensions of their own in the product multiplied the all-pairs search for no build more)."""
+    paths = list(CPU_PATHS.values())
     if full:
-        return [{**c, "SLOTS": s, "RGBA8": r} for c in combinations for s in BOOLS for r in BOOLS]
+        return [
+            {**c, "SLOTS": s, "RGBA8": r, "CPU_PATHS": p}
+            for c in combinations
+            for s in BOOLS
+            for r in BOOLS
+            for p in paths
+        ]
     return [
-        {**c, "SLOTS": i % 2 == 1, "RGBA8": i // 2 % 2 == 1} for i, c in enumerate(combinations)
+        {
+            **c,
+            "SLOTS": i % 2 == 1,
+            "RGBA8": i // 2 % 2 == 1,
+            "CPU_PATHS": paths[i // 4 % len(paths)],
+        }
+        for i, c in enumerate(combinations)
     ]
 
 
@@ -292,7 +306,7 @@ def test_the_builds_cover_the_engines_options(monkeypatch):
     for name, defines in seen:
         assert set(defines) <= INTEGRATION_KEYS, name  # a mode passes only the options it has
         full = {**dict.fromkeys(INTEGRATION_KEYS, False), **defines}
-        del full["SLOTS"], full["RGBA8"]  # any combination builds with and without (`with_slots`)
+        del full["SLOTS"], full["RGBA8"], full["CPU_PATHS"]  # every form builds (`with_slots`)
         if 1 < full["TF_SEGS"] < 8:
             full["TF_SEGS"] = 3
         names = [m for m in modes.names() if f"{modes.get(m).kernel}.cl" == name]

@@ -184,7 +184,7 @@ def _compiler_reports(engine, body: str, defines: dict) -> int:
     out = np.full(1, -1, np.int32)
     buf = cl.Buffer(engine.dc.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
     with engine.dc.lock:
-        prg.report(engine.dc.queue, (1,), None, buf)
+        cl.Kernel(prg, "report")(engine.dc.queue, (1,), None, buf)
         cl.enqueue_copy(engine.dc.queue, out, buf)
     return int(out[0])
 
