@@ -31,6 +31,23 @@ settings.load_profile("default")
 
 
 @pytest.fixture
+def buffer_sizes(monkeypatch) -> list[int]:
+    """The bytes of every device buffer chronocl asks for meanwhile (`buffers.check`, which
+    every buffer passes: chronocl/engine/buffers.py), checked as usual."""
+    from chronocl.engine import buffers
+
+    sizes: list[int] = []
+    checked = buffers.check
+
+    def check(dc, nbytes: int, what: str) -> None:
+        sizes.append(nbytes)
+        checked(dc, nbytes, what)
+
+    monkeypatch.setattr(buffers, "check", check)
+    return sizes
+
+
+@pytest.fixture
 def drawn_text(monkeypatch) -> list[str]:
     """Every string the legend and caption code hands to Pillow's drawing (drawn as usual)."""
     from PIL import ImageDraw

@@ -89,15 +89,10 @@ def _run_all(series: TimeSeries, mode: str) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize("mode", modes.names())
-def test_every_path_under_the_allocation_cap_equals_the_whole(series, mode, monkeypatch):
-    sizes: list[int] = []
-    checked = buffers.check
-
-    def check(dc, nbytes: int, what: str) -> None:
-        sizes.append(nbytes)
-        checked(dc, nbytes, what)
-
-    monkeypatch.setattr(buffers, "check", check)
+def test_every_path_under_the_allocation_cap_equals_the_whole(
+    series, mode, monkeypatch, buffer_sizes
+):
+    sizes = buffer_sizes
     monkeypatch.delenv(buffers.MAX_ALLOC_VAR, raising=False)
     whole = _run_all(series, mode)
     made = len(sizes)
