@@ -92,15 +92,15 @@ def _run_all(series: TimeSeries, mode: str) -> dict[str, np.ndarray]:
 def test_every_path_under_the_allocation_cap_equals_the_whole(
     series, mode, monkeypatch, buffer_sizes
 ):
-    sizes = buffer_sizes
     monkeypatch.delenv(buffers.MAX_ALLOC_VAR, raising=False)
     whole = _run_all(series, mode)
-    made = len(sizes)
-    assert max(sizes) > 128_000  # the whole paths make buffers over the cap
-    sizes.clear()
+    made = len(buffer_sizes)
+    assert max(buffer_sizes) > 128_000  # the whole paths make buffers over the cap
+    buffer_sizes.clear()
     monkeypatch.setenv(buffers.MAX_ALLOC_VAR, CAP)
     split = _run_all(series, mode)
-    assert max(sizes) <= 128_000 and len(sizes) > made  # the same work, in more pieces
+    # the same work, in more pieces
+    assert max(buffer_sizes) <= 128_000 and len(buffer_sizes) > made
     assert whole.keys() == split.keys()
     for name, want in whole.items():
         np.testing.assert_array_equal(split[name], want, err_msg=f"{mode} {name}")

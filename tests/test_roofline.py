@@ -30,7 +30,6 @@ def test_the_memory_read_reads_every_byte_of_an_odd_brick():
 def test_the_opencl_read_takes_a_brick_over_the_largest_allocation_in_chunks(
     monkeypatch, buffer_sizes
 ):
-    sizes = buffer_sizes
     """A brick over the device's largest allocation (a 10 x 512^3 float32 brick is 5.4 GB) is
     read a few z rows at a time (`chronocl.engine.buffers.max_alloc`, lowered here by
     CHRONOCL_MAX_ALLOC to two z rows a buffer): every voxel's sum over its steps comes out."""
@@ -42,7 +41,7 @@ def test_the_opencl_read_takes_a_brick_over_the_largest_allocation_in_chunks(
     monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(2 * brick[:1].nbytes))
     read = read_fns(dc, brick)["read-opencl"]
     read()
-    assert sizes and max(sizes) <= 2 * brick[:1].nbytes  # in chunks of two rows
+    assert buffer_sizes and max(buffer_sizes) <= 2 * brick[:1].nbytes  # in chunks of two rows
     np.testing.assert_allclose(read.sums, brick.sum(axis=1), rtol=1e-6)
 
 
