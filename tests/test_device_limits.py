@@ -151,3 +151,32 @@ def test_brick_recolouring_takes_a_volume_whose_rgba8_fits_one_buffer(series, mo
     assert not isinstance(volume, BrickRecolour)
     np.testing.assert_array_equal(volume.recolour(spec, "f1"), want)
     volume.release()
+
+
+def test_the_gather_wraps_only_what_its_rows_span_of_a_slot_block():
+    """Issue 45's LogicError: the gather wrapped the window manager's slot block from the
+    window's first step to the block's end in one buffer (6.5-7.5 GB at the users' default
+    budget, by where that step's slot lay), and PoCL refused it ("create_buffer failed:
+    INVALID_BUFFER_SIZE") after window_index was enqueued. Here three small steps lie at the
+    start of a block larger than the device's memory (a memory map never touched): the
+    gather wraps only the bytes they span, and equals numpy's."""
+    from chronocl.core.memory import aligned_empty
+    from chronocl.engine.device import get_context
+    from chronocl.integration.interactive.winners import winners
+
+    dc = get_context()
+    try:
+        owner = aligned_empty((dc.info.global_mem + 2**30,), np.uint8)
+    except MemoryError:
+        pytest.skip("no address space for a block larger than the device's memory")
+    shape, steps = (2, 4, 64), (3, 4, 5)
+    block = owner[: 2 * 3 * 4 * 64].reshape(2, 3, 4, 64)  # (Z, S, Y, X), as the slots
+    rng = np.random.default_rng(8)
+    block[...] = rng.integers(0, 256, block.shape, dtype=np.uint8)
+    arrays = {s: block[:, i] for i, s in enumerate(steps)}
+    t_index = rng.choice(np.array([*steps, -1], np.int32), size=shape)
+    spec = _spec("max")
+    want = winners(t_index, arrays, steps, 8, (0.0, 255.0), spec)
+    got = gather(t_index, arrays, steps, 8, (0.0, 255.0), spec)
+    np.testing.assert_array_equal(got.k, want.k)
+    np.testing.assert_array_equal(got.u, want.u)
