@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Sequence
 
 import numpy as np
 
@@ -105,19 +104,17 @@ def buffer(
 
 class DeviceWork:
     """`with DeviceWork(dc) as work:` the device's lock held, buffers made through `work`
-    kept alive, and on the way out (however it goes) every queue waited for, so no host
-    memory the enqueued work reads or writes is freed under it. `queues` (default: the
-    device's queue) are those the work enqueues on."""
+    kept alive, and on the way out (however it goes) every queue in `queues` waited for (the
+    device's queue; a caller that enqueues on others adds them), so no host memory the
+    enqueued work reads or writes is freed under it."""
 
-    def __init__(self, dc, queues: Sequence | None = None, lock: bool = True) -> None:
+    def __init__(self, dc) -> None:
         self.dc = dc
-        self.queues = list(queues) if queues is not None else [dc.queue]
-        self._lock = lock
+        self.queues = [dc.queue]
         self.held: list = []
 
     def __enter__(self) -> DeviceWork:
-        if self._lock:
-            self.dc.lock.acquire()
+        self.dc.lock.acquire()
         return self
 
     def __exit__(self, kind, exc, tb) -> None:
@@ -125,8 +122,7 @@ class DeviceWork:
             self.finish(failing=exc is not None)
         finally:
             self.held = []
-            if self._lock:
-                self.dc.lock.release()
+            self.dc.lock.release()
 
     def finish(self, failing: bool = False) -> None:
         """Wait for every queue. While an error unwinds, a failed wait is logged, not raised
