@@ -27,8 +27,8 @@ def view(
     memory: Annotated[
         str | None,
         typer.Option(
-            help="Memory budget of each client's windows, e.g. 8GB "
-            "(default: a third of the memory free, at least 2GB)."
+            help="Memory limit of the viewer process, every client's steps and frames, "
+            "e.g. 8GB (default: half the memory free, at least 2GB)."
         ),
     ] = None,
     max_clients: Annotated[

@@ -45,6 +45,15 @@ def interactive_memory() -> int:
     return max(parse_memory(DEFAULT_MEMORY), available_bytes() // 3)
 
 
+def viewer_memory() -> int:
+    """The default memory limit of a viewer process: half the memory free now (within a
+    container's limit), at least DEFAULT_MEMORY. Unlike a Session's budget (its resident steps,
+    `interactive_memory`), it bounds everything the process holds, every client's steps and
+    frames (`chronocl.core.process_memory`): at 512^3 one view's frames held 1.4-4.5 GB beside
+    a 10-step window's 5.4 GB here, two views' 2.8-7 GB, so half keeps a third's room for steps."""
+    return max(parse_memory(DEFAULT_MEMORY), available_bytes() // 2)
+
+
 def available_bytes() -> int:
     """The memory free now, within a container's limit."""
     import psutil

@@ -19,6 +19,9 @@ import numpy as np
 ALIGN = 64
 MAPPED_BYTES = 16 * 2**20  # arrays this large get a memory map of their own (`aligned_empty`)
 MADV_POPULATE_WRITE = 23  # Linux 5.14: fault pages in writable without touching their data
+# `aligned_empty`'s maps are shared (Python's anonymous mmap): MADV_DONTNEED only unmaps their
+# pages, which keep their memory (and contents) until the map goes; MADV_REMOVE frees them.
+MADV_FREE_SHARED = getattr(mmap, "MADV_REMOVE", 9)
 
 
 def aligned_empty(shape: tuple[int, ...], dtype: object, align: int = ALIGN) -> np.ndarray:
@@ -175,20 +178,50 @@ def is_aligned(a: np.ndarray, align: int = ALIGN) -> bool:
     return a.ctypes.data % align == 0
 
 
-def prefault(a: np.ndarray) -> bool:
-    """Fault in the pages under `a` (a view of an `aligned_empty` memory map, rows of it
-    contiguous) without changing what they hold, so a later first write finds them mapped:
-    a fresh 512 MB takes 0.2-0.3 s to fault here, and up to 2 s on a virtual machine whose
-    host returns freed memory. False where the array is not mapped or the kernel cannot."""
+def _mapped_rows(a: np.ndarray) -> tuple[mmap.mmap, int, np.ndarray] | None:
+    """The memory map under `a` (a view of an `aligned_empty` map, rows of it contiguous), the
+    address where the map starts, and `a`'s rows; None where `a` is not mapped."""
     owner = a
     while isinstance(owner, np.ndarray):
         owner = owner.base
     if isinstance(owner, memoryview):  # np.frombuffer's view of the map
         owner = owner.obj
     if not isinstance(owner, mmap.mmap) or a.ndim < 1:
-        return False
+        return None
     start = np.frombuffer(owner, np.uint8).ctypes.data
     rows = a.reshape(a.shape[0], -1) if a.ndim > 1 else a.reshape(1, -1)
+    return owner, start, rows
+
+
+def discard(a: np.ndarray) -> bool:
+    """Hand the whole pages under `a` (as for `prefault`) back to the system: its contents are
+    lost (they read as zeros), its memory is no longer resident until written again. False
+    where the array is not mapped or the kernel cannot."""
+    found = _mapped_rows(a)
+    if found is None:
+        return False
+    owner, start, rows = found
+    try:
+        for row in rows:
+            lo = row.ctypes.data - start
+            first = -(-lo // mmap.PAGESIZE) * mmap.PAGESIZE
+            end = (lo + row.nbytes) // mmap.PAGESIZE * mmap.PAGESIZE
+            if end > first:
+                owner.madvise(MADV_FREE_SHARED, first, end - first)
+    except (OSError, ValueError, AttributeError):
+        return False
+    return True
+
+
+def prefault(a: np.ndarray) -> bool:
+    """Fault in the pages under `a` (a view of an `aligned_empty` memory map, rows of it
+    contiguous) without changing what they hold, so a later first write finds them mapped:
+    a fresh 512 MB takes 0.2-0.3 s to fault here, and up to 2 s on a virtual machine whose
+    host returns freed memory. False where the array is not mapped or the kernel cannot."""
+    found = _mapped_rows(a)
+    if found is None:
+        return False
+    owner, start, rows = found
     try:
         for row in rows:
             lo = row.ctypes.data - start

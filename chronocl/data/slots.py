@@ -33,7 +33,7 @@ from concurrent.futures import Future
 
 import numpy as np
 
-from chronocl.core.memory import aligned_empty, prefault
+from chronocl.core.memory import aligned_empty, discard, prefault
 
 WARM_NICE = 10  # the pre-faulting thread's nice value: it takes idle cores only
 WARM_POLL_S = 0.2  # how often a warm waiting for its caller's `ready` looks again
@@ -85,10 +85,10 @@ class StepSlots:
             if self._block is None:
                 return
             spares = heapq.nsmallest(max(0, count), self._free)
-            cold = [self._block[:, j] for j in spares if j not in self._warm]
+            cold = [j for j in spares if j not in self._warm]
             self._warm.update(spares)
         if cold:
-            _warmer().submit(_prefault_when, cold, ready)
+            _warmer().submit(_prefault_when, self, cold, ready)
 
     @property
     def free(self) -> int:
@@ -96,24 +96,62 @@ class StepSlots:
         with self._lock:
             return len(self._free)
 
+    @property
+    def slot_bytes(self) -> int:
+        return int(np.prod(self.shape)) * self.dtype.itemsize
+
+    @property
+    def resident_bytes(self) -> int:
+        """Bytes of the slots handed out or warmed (what the block may hold resident)."""
+        with self._lock:
+            return len(self._warm) * self.slot_bytes
+
+    def next_is_warm(self) -> bool:
+        """Whether the slot `take` hands out next was written or warmed before."""
+        with self._lock:
+            return bool(self._free) and self._free[0] in self._warm
+
+    def release(self, nbytes: int) -> int:
+        """Hand back the pages of free slots, the last to be taken first, until `nbytes` are
+        (a process limit wants them, `chronocl.core.process_memory`); the bytes released."""
+        released = 0
+        with self._lock:
+            if self._block is None:
+                return 0
+            for j in sorted((j for j in self._free if j in self._warm), reverse=True):
+                if released >= nbytes:
+                    break
+                self._warm.discard(j)
+                discard(self._block[:, j])
+                released += self.slot_bytes
+        return released
+
     def _give_back(self, i: int) -> None:
         with self._lock:
             heapq.heappush(self._free, i)
 
+    def _prefault(self, j: int) -> None:
+        """Fault slot `j` in, unless its pages were released since it was to be warmed."""
+        with self._lock:
+            if self._block is None or j not in self._warm:
+                return
+            slot = self._block[:, j]
+        prefault(slot)
 
-def _prefault_when(slots: list[np.ndarray], ready) -> None:
-    """Fault in `slots` in turn, each once `ready` is true (None: none left). One not ready
-    goes behind the other warms: the one thread waiting on a manager whose reads go on (a view
-    playing on and on) held up every other manager's warm, and the memory of closed ones."""
-    for k, slot in enumerate(slots):
+
+def _prefault_when(slots: StepSlots, which: list[int], ready) -> None:
+    """Fault in slots `which` in turn, each once `ready` is true (None: none left). One not
+    ready goes behind the other warms: the one thread waiting on a manager whose reads go on (a
+    view playing on and on) held up every other manager's warm, and the memory of closed ones."""
+    for k, j in enumerate(which):
         state = True if ready is None else ready()
         if state is None:
             return
         if not state:
             time.sleep(WARM_POLL_S)
-            _warmer().submit(_prefault_when, slots[k:], ready)
+            _warmer().submit(_prefault_when, slots, which[k:], ready)
             return
-        prefault(slot)
+        slots._prefault(j)
 
 
 class _Warmer:

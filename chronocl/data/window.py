@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from chronocl.core import process_memory
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, SupersededError
 from chronocl.core.interrupt import checkpoint, watched
@@ -120,6 +121,10 @@ class WindowManager:
         self._closed = False
         with _managers_lock:
             _managers.add(self)
+        # The process's limit, where a viewer set one: its other memory comes first.
+        self.limit = process_memory.current()
+        if self.limit is not None:
+            self.limit.register(self)
 
     # -- public --------------------------------------------------------------------------
     @property
@@ -136,6 +141,50 @@ class WindowManager:
     def resident(self) -> list[int]:
         with self._lock:
             return sorted(self._cache)
+
+    def held_bytes(self) -> int:
+        """Bytes of memory the steps may hold: every slot written or warmed (a process limit
+        counts them, `chronocl.core.process_memory`)."""
+        return self.slots.resident_bytes
+
+    def settled_bytes(self) -> int:
+        """`held_bytes` less the slots of steps being read (their pages fill as they are).
+        Without the lock: another manager's limit asks while holding its own."""
+        loading = len(self._loads)
+        return max(0, self.slots.resident_bytes - loading * self.step_bytes)
+
+    def shed(self, nbytes: int, ahead: bool = True, wait: bool = True) -> int:
+        """Give back about `nbytes` for a process limit: free slots' pages first, then steps
+        the window does not hold (least recently used first; those read ahead too, unless
+        not `ahead`). Without `wait`, nothing if another thread holds the lock. The bytes given
+        back (a dropped step still read by a session gives its slot back only once let go)."""
+        if not self._lock.acquire(blocking=wait):
+            return 0
+        try:
+            freed = self.slots.release(nbytes)
+            keep = self._wanted if ahead else self._wanted | set(self._ahead)
+            for step in [s for s in self._cache if s not in keep]:
+                if freed >= nbytes:
+                    break
+                del self._cache[step]
+                freed += self.slots.release(nbytes - freed)
+            if ahead:
+                for load in [ld for s, ld in self._loads.items() if s not in self._wanted]:
+                    if freed >= nbytes:
+                        break
+                    self._cancel(load)
+                    freed += self.slots.release(nbytes - freed)
+            return freed
+        finally:
+            self._lock.release()
+
+    def _fits(self, ahead: bool) -> bool:
+        """Whether one more step may be read under the process's limit, after dropping what
+        may be dropped (locked); always true without a limit."""
+        if self.limit is None:
+            return True
+        extra = 0 if self.slots.next_is_warm() else self.step_bytes
+        return self.limit.fit(extra, ahead=ahead, caller=self) <= 0
 
     def state(self) -> dict[str, list[int]]:
         """What is in memory now, from any thread: `resident` steps, steps `loading` (being
@@ -189,6 +238,7 @@ class WindowManager:
             for s in steps:
                 if s not in self._cache and s not in self._loads:
                     self._make_room(protect=self._wanted)
+                    self._fits(ahead=True)  # the window is read over the limit if it must be
                     self._start(s)
             self._ahead = tuple(ahead)
             for s in ahead:
@@ -197,6 +247,8 @@ class WindowManager:
                 # Read ahead only into a free slot: with every slot held (steps the session
                 # still reads), a step read ahead would lie apart from its window.
                 if not self._make_room(protect=keep) or not self.slots.free:
+                    break
+                if not self._fits(ahead=False):
                     break
                 self._start(s)
             return Request(self, self.generation, steps)
@@ -316,7 +368,10 @@ class WindowManager:
             # the steps the drag passed at once, each into a slot never written while the budget
             # was not yet filled), within the budget, once reads have paused (`_quiet`).
             if not self._loads:
-                self.slots.warm(min(self.capacity - len(self._cache), self._span), self._quiet)
+                count = min(self.capacity - len(self._cache), self._span)
+                if self.limit is not None:
+                    count = min(count, max(0, self.limit.room()) // self.step_bytes)
+                self.slots.warm(count, self._quiet)
         self.scrub.record_read(time.perf_counter() - t0)
 
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:

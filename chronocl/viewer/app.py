@@ -10,6 +10,9 @@ import json
 import os
 from importlib import resources
 
+from chronocl.core import process_memory
+from chronocl.core.budget import parse_memory
+from chronocl.core.process_memory import ProcessLimit
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import internal_error, log
 from chronocl.viewer.guard import TokenGuard
@@ -118,12 +121,16 @@ def make_app(
             await asyncio.sleep(HEAP_CHECK_S)
             await asyncio.to_thread(heap.check)
 
+    # One memory limit for the whole process, every client's steps and frames within it.
+    limit = None if memory is None else ProcessLimit(parse_memory(memory))
+
     @contextlib.asynccontextmanager
     async def lifespan(app):
         heap.freeze()
         keeper = asyncio.create_task(keep_heap())
         try:
-            yield
+            with process_memory.limited(limit):
+                yield
         finally:
             keeper.cancel()
             with contextlib.suppress(asyncio.CancelledError):

@@ -10,9 +10,12 @@ OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is sh
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 from contextlib import nullcontext
 
+from chronocl.core import process_memory
+from chronocl.core.budget import human
 from chronocl.core.errors import SupersededError
 from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
@@ -35,6 +38,12 @@ TARGET_MS = 150.0  # a coarse level is drawn first when full resolution would ta
 # release waited 1.8 s for it at 256^3). Only a window that takes longer (very long windows
 # of large volumes) slides incrementally.
 DIRECT_BELOW_MS = 1000.0
+# What a frame holds beside the steps, per full-resolution voxel of each view, until the first
+# one is measured (`chronocl.core.process_memory`): its RGBA8 chronovolume and texture (4 + 4
+# bytes) and a t_index (4). At 512^3 here an alpha view's first frame held 10.5 bytes a voxel
+# beside its steps (330 MB of it code and drivers), a max view after edits 19 (its winners,
+# 5, and recolouring's two RGBA8 outputs).
+FRAME_VOXEL_BYTES = 12
 
 
 class Views:
@@ -52,6 +61,7 @@ class Views:
         self.host_steps_why: str | None = None  # the last frame's steps_on_host
         self.slab_upload_ms = 0.0  # a refine's texture writes, overlapped with its integration
         self._slabs: bool | None = None  # whether they pay (`slab_upload.pays`), once known
+        self._over = False  # whether the last frame left the process over its memory limit
 
     def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed;
@@ -66,6 +76,11 @@ class Views:
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
         self.recolouring.ms = self.recolouring.upload_ms = self.slab_upload_ms = 0.0
+        limit = process_memory.current()
+        if limit is not None:  # steps read ahead or kept give way to the frame
+            voxels = math.prod(series.volume_shape) * len(state.views)
+            limit.floor = FRAME_VOXEL_BYTES * voxels
+            limit.fit()
         cvs = []
         for i in range(len(state.views)):
             slot = self.slots[i]
@@ -123,6 +138,24 @@ class Views:
         slot.cv = cv
         stats = s.stats or {}
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))
+
+    def frame_done(self) -> str | None:
+        """After a frame: its memory noted for the process's limit; a line for the log when the
+        windows shown and their frames alone went over it (once, until they fit again)."""
+        limit = process_memory.current()
+        if limit is None:
+            return None
+        limit.frame_done()
+        limit.fit()
+        was, over = self._over, limit.excess()
+        self._over = over > 0
+        if not self._over or was:
+            return None
+        return (
+            f"the windows shown and their frames hold {human(over)} more than the memory "
+            f"limit {human(limit.total)}, with nothing else left to let go (a shorter window, "
+            "fewer views or a larger --memory fit)"
+        )
 
     def sharp(self, n: int) -> bool:
         """Whether the first `n` views show full resolution (no coarser level to refine)."""

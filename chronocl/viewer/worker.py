@@ -30,7 +30,7 @@ from chronocl.render.framing import framed
 from chronocl.render.views import describe, parse_color
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset, find_dataset
-from chronocl.viewer.errors import error_text
+from chronocl.viewer.errors import error_text, log
 from chronocl.viewer.fit import fit_reply, fitted_default
 from chronocl.viewer.frames import (
     JPEG_QUALITY,
@@ -291,7 +291,14 @@ class ClientWorker(Tasks):
             self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
         finally:  # a recoloured view's RGBA, read after the frame went (probes, saves read it)
             self.views.recolouring.finish()
+        self._memory_after()
         self._histogram_after(state)
+
+    def _memory_after(self) -> None:
+        """The frame's memory noted for the process's limit; a line in the log when over it."""
+        over = self.views.frame_done()
+        if over:
+            log.warning("chronocl viewer: %s", over)
 
     def _refine(self) -> None:
         """The coarse or reduced frame shown, at full resolution and size; given up as soon as
@@ -315,6 +322,7 @@ class ClientWorker(Tasks):
             self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
         except SupersededError:
             return
+        self._memory_after()
 
     def _send_frame(
         self, state, rid, cvs, integrate_ms, incremental, t_start, final: bool = False

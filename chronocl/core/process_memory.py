@@ -1,0 +1,137 @@
+"""The process's memory limit (the viewer's `--memory`): resident steps give way to the rest.
+
+A viewer's memory goes to the steps its windows keep resident (`chronocl.data.window`) and to
+what its frames hold: chronovolumes, recolouring's winners and outputs, textures and their
+staging, device copies, the OpenCL and GL drivers' own memory, one set per view and client.
+Those are many, sized by the data, the views and the drivers. So instead of a ledger of
+estimates, the process's resident memory itself (what the kernel counts: every buffer) is kept
+under the limit, and the steps are what gives way:
+
+- before each frame and each step read, the memory of dead outputs kept for the next ones
+  (`chronocl.core.memory.spares`) is let go, then steps read ahead or kept from older windows
+  are dropped and the pages of free slots handed back, until the resident steps plus what the
+  frames need fit the limit (`fit`);
+- what the frames need is what the process holds beside its steps now or after any of the last
+  frames, whichever is more (before the first frame: `floor`, what the viewer expects one to
+  hold);
+- the steps of the windows being shown are never dropped: where they and the frames alone
+  exceed the limit, `excess` says by how much (the viewer logs it once).
+
+One limit per process (`limited`), shared by every client's window managers, which register
+with it when they are made (`register`). Without one (a script, `chronocl integrate`) each
+manager keeps to its own budget only, as before.
+"""
+
+from __future__ import annotations
+
+import threading
+import weakref
+from collections import deque
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Protocol
+
+from chronocl.core.budget import resident_bytes
+from chronocl.core.memory import spares
+
+RECENT_FRAMES = 8  # frames whose memory beside the steps is kept in mind (`need`)
+
+
+class Holder(Protocol):
+    """What holds steps that may give way (a `chronocl.data.window.WindowManager`)."""
+
+    def held_bytes(self) -> int: ...
+
+    def settled_bytes(self) -> int: ...
+
+    def shed(self, nbytes: int, ahead: bool, wait: bool) -> int: ...
+
+
+class ProcessLimit:
+    """`total` bytes for the whole process (see the module's docstring)."""
+
+    def __init__(self, total: int) -> None:
+        self.total = int(total)
+        self.floor = 0
+        self.over = 0  # bytes past the limit after the last fit, with nothing left to drop
+        self._after: deque[int] = deque(maxlen=RECENT_FRAMES)
+        self._holders: weakref.WeakSet = weakref.WeakSet()
+        self._lock = threading.Lock()
+
+    def register(self, holder: Holder) -> None:
+        with self._lock:
+            self._holders.add(holder)
+
+    def steps(self) -> int:
+        """Bytes the registered holders keep in steps (resident, loading, warm free slots)."""
+        return sum(h.held_bytes() for h in self._holders_now())
+
+    def beside(self) -> int:
+        """What the process holds now beside its steps: its resident memory less the steps
+        read and the slots warmed (a step being read is not subtracted: its pages fill as it
+        is read, and counting them held before they are would hide memory beside)."""
+        resident = resident_bytes()
+        if resident is None:
+            return 0
+        return max(0, resident - sum(h.settled_bytes() for h in self._holders_now()))
+
+    def need(self) -> int:
+        """What the frames are taken to need beside the steps."""
+        return max(self.beside(), max(self._after) if self._after else self.floor)
+
+    def room(self) -> int:
+        """Bytes more steps may take now without dropping any."""
+        return self.total - self.steps() - self.need()
+
+    def fit(self, extra: int = 0, *, ahead: bool = True, caller: Holder | None = None) -> int:
+        """Drop steps nobody shows until `extra` more bytes of steps fit beside the rest; steps
+        read ahead are dropped too unless `ahead` is false (a read ahead makes room only from
+        older steps). The caller's own holder is shed without waiting for its lock (it holds
+        it); the others only where their lock is free. Returns the bytes still over (0: fits)."""
+        over = extra - self.room()
+        if over > 0 and spares.maps:  # dead outputs' memory kept for the next: cheapest to lose
+            spares.clear()
+        for holder in self._holders_now(first=caller):
+            over = extra - self.room()
+            if over <= 0:
+                break
+            holder.shed(over, ahead, holder is caller)
+        else:
+            over = extra - self.room()
+        self.over = max(0, over)
+        return self.over
+
+    def excess(self) -> int:
+        """Bytes the process holds over the limit now (0: within it)."""
+        return max(0, (resident_bytes() or 0) - self.total)
+
+    def frame_done(self) -> None:
+        """Note what the process holds beside its steps after a frame (`need`)."""
+        self._after.append(self.beside())
+
+    def _holders_now(self, first: Holder | None = None) -> list[Holder]:
+        with self._lock:
+            holders = list(self._holders)
+        if first is not None and first in holders:
+            holders.remove(first)
+            holders.insert(0, first)
+        return holders
+
+
+_current: ProcessLimit | None = None
+
+
+def current() -> ProcessLimit | None:
+    """The process's limit, where one was set (`limited`)."""
+    return _current
+
+
+@contextmanager
+def limited(limit: ProcessLimit | None) -> Iterator[ProcessLimit | None]:
+    """`limit` is the process's while the block runs (a viewer's lifetime)."""
+    global _current
+    before, _current = _current, limit
+    try:
+        yield limit
+    finally:
+        _current = before

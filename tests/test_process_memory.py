@@ -1,0 +1,135 @@
+"""The process's memory limit (issue 45): steps read ahead or kept give way to the rest of the
+process, measured by its resident memory, and the windows shown are never dropped."""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+import pytest
+
+import chronocl
+from chronocl.core import process_memory
+from chronocl.core.budget import resident_bytes
+from chronocl.core.process_memory import ProcessLimit
+from chronocl.data.slots import StepSlots
+from chronocl.data.window import WindowManager
+
+SHAPE = (32, 256, 256)  # 8 MB a float32 step, rows of 256 KB: whole pages
+STEP = int(np.prod(SHAPE)) * 4
+
+pytestmark = pytest.mark.skipif(resident_bytes() is None, reason="needs /proc/self/statm")
+
+
+def test_released_slots_leave_the_resident_memory_and_are_warmed_again():
+    slots = StepSlots(SHAPE, np.float32, 4)
+    views = [slots.take() for _ in range(4)]
+    for i, v in enumerate(views):
+        v[...] = i + 1
+    del views, v
+    gc.collect()
+    assert slots.free == 4 and slots.resident_bytes == 4 * STEP
+    before = resident_bytes()
+    assert slots.release(2 * STEP) == 2 * STEP
+    dropped = before - resident_bytes()
+    assert dropped >= 1.9 * STEP, f"only {dropped} bytes left the resident memory"
+    assert slots.resident_bytes == 2 * STEP
+    assert slots.next_is_warm()  # the last to be taken went first: slot 0 is still warm
+    first, second, third = slots.take(), slots.take(), slots.take()
+    assert first[0, 0, 0] == 1 and second[0, 0, 0] == 2  # kept as they were
+    assert third[0, 0, 0] == 0  # handed back: its contents went with its pages
+    assert slots.resident_bytes == 3 * STEP
+
+
+def series_of(t: int) -> chronocl.TimeSeries:
+    data = np.stack([np.full(SHAPE, i, np.float32) for i in range(t)])
+    return chronocl.TimeSeries.from_array(data)
+
+
+def test_reads_ahead_stop_at_the_limit_and_older_steps_give_way_to_a_new_window():
+    series = series_of(12)
+    limit = ProcessLimit(resident_bytes() + int(4.5 * STEP))
+    with process_memory.limited(limit), WindowManager(series, 12 * STEP, prefetch=3) as wm:
+        got = wm.get([0, 1, 2], direction=1)
+        assert [int(a[0, 0, 0]) for a in got] == [0, 1, 2]
+        del got
+        wm.request([0, 1, 2], direction=1)  # reads ahead now that the window is in
+        wm.get([0, 1, 2])
+        assert wm.held_bytes() <= 4 * STEP, "read ahead past the process's limit"
+        got = wm.get([6, 7, 8])
+        assert [int(a[0, 0, 0]) for a in got] == [6, 7, 8]
+        del got
+        gc.collect()
+        limit.fit()
+        assert limit.over == 0
+        assert wm.held_bytes() <= 4 * STEP
+        assert set(wm.resident()) >= {6, 7, 8}
+
+
+def test_a_window_over_the_limit_is_read_whole_and_the_overrun_is_said():
+    series = series_of(8)
+    limit = ProcessLimit(resident_bytes() + 2 * STEP)
+    with process_memory.limited(limit), WindowManager(series, 8 * STEP, prefetch=2) as wm:
+        got = wm.get([1, 2, 3, 4], direction=1)
+        assert [int(a[0, 0, 0]) for a in got] == [1, 2, 3, 4]
+        assert limit.fit() > STEP
+        assert wm.resident() == [1, 2, 3, 4]  # nothing read ahead, the window kept
+
+
+def test_the_viewer_logs_once_when_its_windows_and_frames_alone_are_over():
+    from chronocl.viewer.datasets import Dataset
+    from chronocl.viewer.view_sessions import Views
+    from chronocl.viewer.view_state import default_state
+
+    series = series_of(6)
+    state = default_state(0, series)
+    plain = Views([Dataset("d", series)], "opencl", None, "1GB")
+    try:
+        (want,), _, _ = plain.chronovolumes(state)
+        want = want.rgba.copy()
+    finally:
+        plain.release()
+    with process_memory.limited(ProcessLimit(resident_bytes() + STEP)):
+        views = Views([Dataset("d", series)], "opencl", None, "1GB")
+        try:
+            (cv,), _, _ = views.chronovolumes(state)
+            np.testing.assert_array_equal(cv.rgba, want)
+            line = views.frame_done()
+            assert line and "more than the memory limit" in line
+            assert views.frame_done() is None  # once, until it fits again
+        finally:
+            views.release()
+
+
+def test_managers_sharing_a_limit_read_at_once_without_waiting_on_each_other():
+    """Each manager's read asks the others to give way while it holds its own lock: never a
+    wait on theirs (two threads doing so would wait on each other for ever)."""
+    import threading
+
+    series = series_of(10)
+    limit = ProcessLimit(resident_bytes() + 6 * STEP)
+    with process_memory.limited(limit):
+        managers = [WindowManager(series, 10 * STEP, prefetch=2) for _ in range(2)]
+    failures: list[BaseException] = []
+
+    def scrub(wm: WindowManager, seed: int) -> None:
+        rng = np.random.default_rng(seed)
+        try:
+            for _ in range(15):
+                t0 = int(rng.integers(0, 8))
+                got = wm.get([t0, t0 + 1], direction=int(rng.choice([-1, 1])))
+                assert [int(a[0, 0, 0]) for a in got] == [t0, t0 + 1]
+        except BaseException as exc:  # reported by the test's thread
+            failures.append(exc)
+
+    threads = [threading.Thread(target=scrub, args=(m, i)) for i, m in enumerate(managers)]
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(60)
+        assert not any(t.is_alive() for t in threads), "the managers waited on each other"
+        assert not failures, failures
+    finally:
+        for m in managers:
+            m.close()
