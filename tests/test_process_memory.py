@@ -41,6 +41,22 @@ def test_released_slots_leave_the_resident_memory_and_are_warmed_again():
     assert slots.resident_bytes == 3 * STEP
 
 
+def test_free_slots_read_through_the_block_are_released_too():
+    """A read spanning the block (a buffer over the rows of a window's slots spans the free
+    slots' rows between) makes never-written pages of its shared map resident: released."""
+    slots = StepSlots(SHAPE, np.float32, 4)
+    taken = slots.take()
+    taken[...] = 1
+    block = slots._block
+    before = resident_bytes()
+    assert float(block[:, 1:].sum()) == 0.0  # three slots never written, now resident
+    assert resident_bytes() - before >= 2.9 * STEP
+    before = resident_bytes()
+    assert slots.release(STEP) >= 2.9 * STEP  # nothing warm is free: the cold ones go
+    assert before - resident_bytes() >= 2.9 * STEP
+    assert float(taken[0, 0, 0]) == 1.0  # the slot taken kept
+
+
 def series_of(t: int) -> chronocl.TimeSeries:
     data = np.stack([np.full(SHAPE, i, np.float32) for i in range(t)])
     return chronocl.TimeSeries.from_array(data)

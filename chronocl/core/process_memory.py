@@ -86,8 +86,9 @@ class ProcessLimit:
     def fit(self, extra: int = 0, *, ahead: bool = True, caller: Holder | None = None) -> int:
         """Drop steps nobody shows until `extra` more bytes of steps fit beside the rest; steps
         read ahead are dropped too unless `ahead` is false (a read ahead makes room only from
-        older steps). The caller's own holder is shed without waiting for its lock (it holds
-        it); the others only where their lock is free. Returns the bytes still over (0: fits)."""
+        older steps). A holder's caller (which holds its own lock) sheds the others only where
+        their lock is free; a caller holding none (a frame) waits for each. Returns the bytes
+        still over (0: fits)."""
         over = extra - self.room()
         if over > 0 and spares.maps:  # dead outputs' memory kept for the next: cheapest to lose
             spares.clear()
@@ -95,7 +96,7 @@ class ProcessLimit:
             over = extra - self.room()
             if over <= 0:
                 break
-            holder.shed(over, ahead, holder is caller)
+            holder.shed(over, ahead, wait=caller is None or holder is caller)
         else:
             over = extra - self.room()
         self.over = max(0, over)

@@ -33,6 +33,7 @@ from concurrent.futures import Future
 
 import numpy as np
 
+from chronocl.core.budget import resident_bytes
 from chronocl.core.memory import aligned_empty, discard, prefault
 
 WARM_NICE = 10  # the pre-faulting thread's nice value: it takes idle cores only
@@ -113,17 +114,28 @@ class StepSlots:
 
     def release(self, nbytes: int) -> int:
         """Hand back the pages of free slots, the last to be taken first, until `nbytes` are
-        (a process limit wants them, `chronocl.core.process_memory`); the bytes released."""
+        (a process limit wants them, `chronocl.core.process_memory`); the bytes released.
+        Slots never written nor warmed go too where that is not enough: reading a page of the
+        block's shared map that was never written makes it resident (a buffer spanning the
+        slab of rows a window lies in spans the free slots' rows between), which only the
+        resident memory's drop tells."""
         released = 0
         with self._lock:
             if self._block is None:
                 return 0
             for j in sorted((j for j in self._free if j in self._warm), reverse=True):
                 if released >= nbytes:
-                    break
+                    return released
                 self._warm.discard(j)
                 discard(self._block[:, j])
                 released += self.slot_bytes
+            before = resident_bytes()
+            cold = sorted(j for j in self._free if j not in self._warm)
+            for j0, j1 in _runs(cold):
+                discard(self._block[:, j0:j1])
+            after = resident_bytes()
+        if before is not None and after is not None:
+            released += max(0, before - after)
         return released
 
     def _give_back(self, i: int) -> None:
@@ -137,6 +149,17 @@ class StepSlots:
                 return
             slot = self._block[:, j]
         prefault(slot)
+
+
+def _runs(indices: list[int]) -> list[tuple[int, int]]:
+    """Sorted `indices` as runs [j0, j1) of consecutive ones."""
+    runs: list[tuple[int, int]] = []
+    for j in indices:
+        if runs and runs[-1][1] == j:
+            runs[-1] = (runs[-1][0], j + 1)
+        else:
+            runs.append((j, j + 1))
+    return runs
 
 
 def _prefault_when(slots: StepSlots, which: list[int], ready) -> None:
