@@ -297,3 +297,41 @@ def aligned_copy(a: np.ndarray) -> np.ndarray:
     out = aligned_empty(a.shape, a.dtype)
     out[...] = a
     return out
+
+
+@pytest.mark.parametrize("mode", ["max", "change"])
+def test_brick_outputs_taken_over_by_the_next_window_recolour_it_right(mode) -> None:
+    """The viewer hands a window's brick-wise outputs (touched, with the bricks each may hold
+    coloured) to the next window's winners: every edit of the next equals the host's float
+    recolouring rounded, as with outputs of its own."""
+    rng = np.random.default_rng(5)
+    series = _series(rng, 12, (37, 29, 45))
+    vr = (-10.0, 30.0)
+    spec = _spec(mode, DataTF(), TimeTF(positions="absolute"), value_range=vr)
+    edits = [
+        _spec(mode, DataTF(points=pts), TimeTF.preset(c, positions="absolute"), value_range=vr)
+        for pts, c in [
+            (((0, 0.2, 0.4, 1, 0.0), (0.4, 1, 0.5, 0, 0.6), (1, 1, 1, 0.2, 0.9)), "warm-cool"),
+            (((0, 1, 0, 0, 0.0), (0.8, 0, 1, 0, 0.0), (1, 1, 1, 1, 1.0)), "rgb"),
+        ]
+    ]
+    with Session(series, engine="opencl", spec=spec, memory="256MB") as s:
+        s.set_window(0, 6)
+        first = BrickRecolour(s.winners(gather))
+        for edit in edits:
+            first.sparse(s.recolours(edit)[0])
+        held = first.take_held()
+        first.release()
+        s.set_window(5, 11)
+        w = s.winners(gather)
+        taken = BrickRecolour(w, held=held)
+        host = HostRecolour(w)
+        try:
+            assert all(a is b for (a, _), (b, _) in zip(taken._held, held, strict=True))
+            for edit in [*edits[::-1], spec]:
+                fixed = s.recolours(edit)[0]
+                exact, _ = convert(host.recolour(fixed, "f4"), "f1")
+                np.testing.assert_array_equal(taken.sparse(fixed).rgba, exact)
+        finally:
+            taken.release()
+            host.release()

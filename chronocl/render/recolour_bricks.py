@@ -59,7 +59,7 @@ class BrickRecolour(HostRecolour):
     """A window's winners on the OpenCL device with their brick summaries, recoloured into
     RGBA8 brick by brick (`sparse`); `recolour` (the whole volume, any format) as before."""
 
-    def __init__(self, w: Winners, device: str | None = None) -> None:
+    def __init__(self, w: Winners, device: str | None = None, held: list | None = None) -> None:
         import pyopencl as cl
 
         from chronocl.engine.buffers import DeviceLimitError, DeviceWork, buffer, max_alloc
@@ -85,9 +85,13 @@ class BrickRecolour(HostRecolour):
         self.umin, self.umax = np.empty(n, np.float32), np.empty(n, np.float32)
         self.steps = np.empty(n, np.uint64)
         # the two arrays written in turn, with the bricks that may be coloured in each: zeroed
-        # here, so that no edit pays for first touching their pages (512^3: 0.3-1 s)
-        none = np.zeros(self.grid, bool)
-        self._held = [(aligned_zeros((*w.u.shape, 4)), none) for _ in range(2)]
+        # here, so that no edit pays for first touching their pages (512^3: 0.5 s each), or
+        # those of the winners prepared before (`held`, a slot's last window: any shape alike)
+        if held and all(a.shape == (*w.u.shape, 4) and m.shape == self.grid for a, m in held):
+            self._held = list(held)
+        else:
+            none = np.zeros(self.grid, bool)
+            self._held = [(aligned_zeros((*w.u.shape, 4)), none) for _ in range(2)]
         program = self._program()
         with DeviceWork(self.dc) as work:
             outs = [work.buffer(a, access="w") for a in self._summary()]
@@ -181,6 +185,12 @@ class BrickRecolour(HostRecolour):
             bounds[3:] = box[: len(todo)][filled, 3:].max(axis=0)
         grid = grown_grid(stats)
         return Sparse(out, coloured, len(todo), grid, bounds)
+
+    def take_held(self) -> list:
+        """The two output arrays with their bricks that may be coloured, for the next winners
+        of the same shape (`held`); this one recolours no more."""
+        held, self._held = self._held, []
+        return held
 
     def release(self) -> None:
         super().release()
