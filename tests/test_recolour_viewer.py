@@ -4,6 +4,7 @@ edit shows (a WebSocket client of a real server; tests/viewer_helpers.py)."""
 from __future__ import annotations
 
 import io
+import time
 
 import numpy as np
 import pytest
@@ -11,6 +12,8 @@ import pytest
 pytest.importorskip("starlette")
 pytest.importorskip("websockets")
 
+from chronocl.core.errors import SupersededError
+from chronocl.core.interrupt import checkpoint
 from chronocl.viewer import recolouring
 
 from .viewer_helpers import Client, connected_client, make_stores, serving  # noqa: F401
@@ -134,3 +137,80 @@ def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
         assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
     finally:
         client.close()
+
+
+def _counting_gather(monkeypatch, hold_first: bool = False) -> list[str]:
+    """Spy on the viewer's gathers of winners (the real one runs): each call's outcome. With
+    `hold_first`, the first waits until new input has come (its checkpoints would give it up)."""
+    calls: list[str] = []
+    real = recolouring.gather
+
+    def input_came() -> bool:
+        try:
+            checkpoint("waiting for the test's input", 0, 1)
+        except SupersededError:
+            return True
+        return False
+
+    def spy(*args, **kwargs):
+        calls.append("started")
+        if hold_first and len(calls) == 1:
+            _until(input_came)
+        try:
+            w = real(*args, **kwargs)
+        except SupersededError:
+            calls[-1] = "given up"
+            raise
+        calls[-1] = "done"
+        return w
+
+    monkeypatch.setattr(recolouring, "gather", spy)
+    return calls
+
+
+def _until(predicate, seconds: float = 30.0) -> None:
+    deadline = time.monotonic() + seconds
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.02)
+
+
+@pytest.mark.parametrize("mode", ["max", "change"])
+def test_winners_are_gathered_at_idle_and_the_first_edit_only_recolours(
+    client, monkeypatch, mode
+) -> None:
+    """A sharp frame of a recolouring mode, then no input: the viewer gathers its winners, and
+    the first TF edit after the mode switch recolours without gathering again."""
+    calls = _counting_gather(monkeypatch)
+    ds, _ = client.open(0, size=(96, 96))
+    fitted = ds["state"]["data_tf"]["value_range"]
+    _sharp(client, {"views": [{"mode": mode}], "threshold": 0.0})
+    _until(lambda: calls == ["done"])
+    edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
+    header, _ = _sharp(client, edit)
+    t = header["timings"]
+    assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0
+    assert calls == ["done"], "the edit gathered the winners again"
+
+
+def test_an_idle_gather_is_given_up_by_new_input_and_the_edit_is_right(client, monkeypatch):
+    """Input while the winners are gathered at idle gives the gather up at its next slab; the
+    edit's frame recolours from a gather of its own and shows what integrating it shows."""
+    calls = _counting_gather(monkeypatch, hold_first=True)
+    ds, _ = client.open(0, size=(96, 96))
+    fitted = ds["state"]["data_tf"]["value_range"]
+    _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+    _until(lambda: calls == ["started"])  # the idle gather, held until the edit comes
+    edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
+    rid = client.send({"type": "update", **edit})
+    got = client.frame_for(rid)
+    while got[1]["refining"]:
+        got = client.wait("frame")
+    header, recoloured = got[1], got[2]
+    assert calls == ["given up", "done"], calls
+    t = header["timings"]
+    assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0
+    _sharp(client, {"window": {"t0": 0, "t1": 4}})
+    _, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
+    diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
+    assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())

@@ -31,6 +31,7 @@ from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine.buffers import DeviceLimitError
 from chronocl.integration.interactive.levels import AutoSession
+from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour import RecolourVolume, available, recolourer
 from chronocl.render.recolour_bricks import BrickRecolour, Sparse
@@ -107,6 +108,25 @@ class Recolouring:
         self.ms += 1e3 * (time.perf_counter() - t) - (self.upload_ms - uploaded)
         return cv
 
+    def prepare(self, slot: ViewSlot) -> bool:
+        """Gather the winners of the window the slot shows, where its mode recolours and they
+        are not ready, so that the first TF edit only recolours (the viewer calls it at idle,
+        given up by new input: `chronocl.core.interrupt`). Whether it prepared them."""
+        s, shown = slot.session, slot.cv
+        if not isinstance(s, AutoSession) or shown is None or shown.t_index is None:
+            return False
+        if s.shown_level != 0 or s.asked is None or slot.volume is None:
+            return False
+        if slot.uploaded is not shown or s.spec.mode not in RECOLOURED:
+            return False
+        prepared = slot.recolour
+        if isinstance(prepared, Prepared) and prepared.t_index() is shown.t_index:
+            return False
+        full = s.pool.sessions.get((0, s.spec.integration.pool))
+        if full is None or full.recolours(s.asked)[1] is not None or full.current() is not shown:
+            return False
+        return self._prepare(slot, full, shown) is not None
+
     def _show(self, slot: ViewSlot, prepared: Prepared, sp: Sparse, shown, cv) -> None:
         """Write what changed of `sp` into the slot's texture (all of it unless the texture
         holds the last one written)."""
@@ -122,13 +142,17 @@ class Recolouring:
     def _prepare(self, slot: ViewSlot, full, shown: Chronovolume) -> Prepared | None:
         """The window's winners where the recolouring runs: on the GPU where GL is one with
         compute shaders, else (llvmpipe) on the OpenCL device (render/recolour_bricks.py)."""
+        old = slot.recolour
+        held = None
+        if isinstance(old, Prepared) and isinstance(old.volume, BrickRecolour):
+            held = old.volume.take_held()  # its outputs' memory, already touched
         on_gpu = on_gl(_release_and_pick, slot)
         if on_gpu is None:
             return None
         w = full.winners(functools.partial(gather, device=self.device))
         if w is None:
             return None
-        volume = on_gl(_upload, w) if on_gpu else on_host(w, self.device)
+        volume = on_gl(_upload, w) if on_gpu else on_host(w, self.device, held)
         slot.recolour = Prepared(weakref.ref(shown.t_index), volume)
         return slot.recolour
 
@@ -161,10 +185,11 @@ def _recolour(rc, rv: RecolourVolume, spec, spacing, fmt: str, volume):
     return recolourer(rc.ctx).recolour(rv, spec, spacing, fmt, volume=volume)
 
 
-def on_host(w, device: str | None) -> HostRecolour:
+def on_host(w, device: str | None, held: list | None = None) -> HostRecolour:
     """The winners on the OpenCL device: brick by brick where the whole volume fits one
-    buffer (its kernels index all of it), else in spans (`HostRecolour`)."""
+    buffer (its kernels index all of it; `held`: the outputs of the last), else in spans
+    (`HostRecolour`)."""
     try:
-        return BrickRecolour(w, device)
+        return BrickRecolour(w, device, held)
     except DeviceLimitError:
         return HostRecolour(w, device)

@@ -26,6 +26,7 @@ from chronocl import modes
 from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.core.interrupt import interruptible
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.render.framing import framed
 from chronocl.render.views import describe, parse_color
 from chronocl.viewer.clip_outline import clip_outline
@@ -58,6 +59,9 @@ from chronocl.viewer.view_state import ViewState, default_state, describe_state,
 
 MAX_TASKS = 8
 REFINE_AFTER_S = 0.25  # after a drag's coarse frame; an edit's end refines at once
+# After a sharp frame of a mode that recolours, this long without input: its winners are
+# gathered, so that the first TF edit only recolours (new input gives the gather up).
+PREPARE_AFTER_S = 0.3
 
 
 class ClientWorker(Tasks):
@@ -87,6 +91,7 @@ class ClientWorker(Tasks):
         self._closed = False
         self.views = Views(datasets, engine, device, memory)
         self._refine_at: float | None = None  # when the coarse frame shown is to be refined
+        self._prepare_at: float | None = None  # when the sharp frame's winners are to be gathered
         self._cancelled = False  # the client cancelled the refine of the frame shown
         self._draw_budget = DrawBudget()  # pixels a frame answering input may draw
         self._last_rid: int | None = None
@@ -217,7 +222,8 @@ class ClientWorker(Tasks):
         while True:
             with self._cond:
                 while not self._closed and self._pending is None and not self._tasks:
-                    wait = None if self._refine_at is None else self._refine_at - time.monotonic()
+                    due = [t for t in (self._refine_at, self._prepare_at) if t is not None]
+                    wait = min(due) - time.monotonic() if due else None
                     if wait is not None and wait <= 0:
                         break
                     self._cond.wait(wait)
@@ -225,13 +231,16 @@ class ClientWorker(Tasks):
                     return
                 pending, self._pending = self._pending, None
                 task = None if pending is not None or not self._tasks else self._tasks.popleft()
+                refine = self._refine_at is not None and self._refine_at <= time.monotonic()
             try:
                 if pending is not None:
                     self._render(*pending)
                 elif task is not None:
                     self._do_task(*task)
-                else:
+                elif refine:
                     self._refine()
+                else:
+                    self._prepare()
             except Exception as exc:  # reported to the client; the worker keeps serving
                 rid = pending[1] if pending is not None else task[1].get("id") if task else None
                 what = (
@@ -324,6 +333,19 @@ class ClientWorker(Tasks):
             return
         self._memory_after()
 
+    def _prepare(self) -> None:
+        """The winners of the sharp frame shown gathered for its views' first TF edit, given up
+        as soon as new input comes (`Recolouring.prepare`)."""
+        self._prepare_at = None
+        try:
+            with interruptible(self._given_up):
+                for slot in self.views.slots[: len(self._shown.views) if self._shown else 0]:
+                    if self._given_up():
+                        return
+                    self.views.recolouring.prepare(slot)
+        except SupersededError:
+            return
+
     def _send_frame(
         self, state, rid, cvs, integrate_ms, incremental, t_start, final: bool = False
     ) -> None:
@@ -360,6 +382,8 @@ class ClientWorker(Tasks):
         refining = (level > 0 or reduced) and not self._cancelled
         wait = REFINE_AFTER_S if state.quality == "preview" else 0.0  # newer input gives it up
         self._refine_at = time.monotonic() + wait if refining else None
+        recolours = any(mode in RECOLOURED for mode, _ in state.views)
+        self._prepare_at = None if refining or not recolours else t_done + PREPARE_AFTER_S
         header = {
             "type": "frame",
             "id": rid,
