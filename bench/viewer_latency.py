@@ -38,7 +38,8 @@ and reuses them.
     python bench/viewer_latency.py --quick --users [--users-side 256] [--keep DIR]
 
 Summary keys (per size; under `users` for --users): `first_frame_ms`, `full_res_ms` (TF edit ->
-sharp frame), `max_full_res_ms`, `modes` (per mode `switch_ms`, `first_edit_ms`, `edit_ms`),
+sharp frame), `max_full_res_ms`, `modes` (per mode `switch_ms`, `first_edit_ms`, `edit_ms`; for
+max, min, first_hit and change `first_edit_after_look_ms`, the first edit LOOK_S after a switch),
 `open_full_res_ms`, `open_first_frame_ms`,
 `scrub_first_frame_ms`, `scrub_incremental` ("k/n"), `scrub_stall_ms`, `scrub_stop_full_res_ms`,
 `refine_input_wait_ms` (longest; `refine_probes_in_refine` "k/n"), `first_frame_level`,
@@ -71,10 +72,15 @@ from chronocl import modes
 from chronocl.core.budget import resident_bytes
 from chronocl.data import synthetic
 from chronocl.data.series import open_series
+from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.server import ViewerServer
 
 BENCH = "viewer_latency"
+# A user looks at a new mode's picture before editing its TF: this long, here. The viewer
+# gathers the winners of max, min, first_hit and change meanwhile (worker.PREPARE_AFTER_S);
+# `first_edit_ms` is the edit sent at once, which gives that gather up and makes its own.
+LOOK_S = 3.0
 USERS_PANEL = (930, 640)  # the view area of a 1400x900 page showing one view
 ABSOLUTE = {"color": "rgb", "positions": "absolute"}
 # Issue 32, "Targets" (here: 2 cores, llvmpipe; gpu_*: on a lent H100 or H200).
@@ -276,6 +282,13 @@ def measure(path: Path, case: str, size, memory, edits: int, scrubs: int) -> dic
                 "first_edit_ms": round(cold[0][0], 1),
                 "edit_ms": r[mode]["median_ms"],
             }
+            if mode in RECOLOURED:  # the first edit after LOOK_S on the switch's picture
+                for other in ("alpha", mode):
+                    msg = {"type": "update", "views": [{"mode": other, "order": "forward"}]}
+                    c.request(msg, full=True)
+                time.sleep(LOOK_S)
+                _, looked, _ = tf_edits(c, edit, 1)
+                r["modes"][mode]["first_edit_after_look_ms"] = round(looked[0][0], 1)
         emit({"bench": BENCH, "case": case, "op": "every_mode", "modes": r["modes"]})
         r["open"] = summarise("open_full_resolution", [(opened["full_ms"], opened["header"])], case)
         r["open_first_ms"] = round(opened["first_ms"], 2)
