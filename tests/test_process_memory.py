@@ -89,7 +89,31 @@ def test_a_window_over_the_limit_is_read_whole_and_the_overrun_is_said():
         got = wm.get([1, 2, 3, 4], direction=1)
         assert [int(a[0, 0, 0]) for a in got] == [1, 2, 3, 4]
         assert limit.fit() > STEP
-        assert wm.resident() == [1, 2, 3, 4]  # nothing read ahead, the window kept
+        state = wm.state()
+        assert state["resident"] == [1, 2, 3, 4] and not state["loading"]  # none read ahead
+        assert wm.held_bytes() == 4 * STEP
+
+
+def test_steps_another_view_still_integrates_are_not_dropped_for_nothing():
+    """Views with windows of their own share a manager: the steps of the window it was asked
+    for before are held by that view's session, so dropping them would free nothing and read
+    them again at its next frame; they stay."""
+    series = series_of(10)
+    limit = ProcessLimit(resident_bytes() + 5 * STEP)
+    with process_memory.limited(limit), WindowManager(series, 10 * STEP, prefetch=0) as wm:
+        first = wm.get([0, 1, 2])  # the first view's window, held as its session holds it
+        second = wm.get([6, 7, 8])
+        assert [int(a[0, 0, 0]) for a in second] == [6, 7, 8]
+        assert limit.fit() > 0  # over: six steps where five fit
+        assert wm.resident() == [0, 1, 2, 6, 7, 8]
+        again = wm.get([0, 1, 2])
+        assert all(a is b for a, b in zip(again, first, strict=True))
+        assert wm.reads[0] == 1  # never read twice
+        del first, again
+        gc.collect()
+        wm.request([6, 7, 8])  # the first view's window let go: it may give way now
+        assert limit.fit() == 0
+        assert 0 not in wm.resident() and {6, 7, 8} <= set(wm.resident())
 
 
 def test_the_viewer_logs_once_when_its_windows_and_frames_alone_are_over():

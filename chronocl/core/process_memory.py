@@ -119,20 +119,23 @@ class ProcessLimit:
         return holders
 
 
-_current: ProcessLimit | None = None
+_active: list[ProcessLimit] = []  # the limits set, the newest last
 
 
 def current() -> ProcessLimit | None:
-    """The process's limit, where one was set (`limited`)."""
-    return _current
+    """The process's limit, where one was set (`limited`): the newest still set."""
+    return _active[-1] if _active else None
 
 
 @contextmanager
 def limited(limit: ProcessLimit | None) -> Iterator[ProcessLimit | None]:
-    """`limit` is the process's while the block runs (a viewer's lifetime)."""
-    global _current
-    before, _current = _current, limit
+    """`limit` is the process's while the block runs (a viewer's lifetime; blocks of two
+    viewers may overlap in any order)."""
+    if limit is None:
+        yield None
+        return
+    _active.append(limit)
     try:
         yield limit
     finally:
-        _current = before
+        _active.remove(limit)

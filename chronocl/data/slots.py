@@ -127,8 +127,8 @@ class StepSlots:
                 if released >= nbytes:
                     return released
                 self._warm.discard(j)
-                discard(self._block[:, j])
-                released += self.slot_bytes
+                if discard(self._block[:, j]):
+                    released += self.slot_bytes
             before = resident_bytes()
             cold = sorted(j for j in self._free if j not in self._warm)
             for j0, j1 in _runs(cold):
@@ -149,6 +149,9 @@ class StepSlots:
                 return
             slot = self._block[:, j]
         prefault(slot)
+        with self._lock:  # released meanwhile (a process limit): its pages go again
+            if j not in self._warm and j in self._free:
+                discard(slot)
 
 
 def _runs(indices: list[int]) -> list[tuple[int, int]]:

@@ -20,6 +20,7 @@ A request names the steps of the current window:
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 import weakref
@@ -166,6 +167,8 @@ class WindowManager:
             for step in [s for s in self._cache if s not in keep]:
                 if freed >= nbytes:
                     break
+                if sys.getrefcount(self._cache[step]) > HELD_BY_CACHE_ONLY:
+                    continue  # another view's window: dropping it would free nothing
                 del self._cache[step]
                 freed += self.slots.release(nbytes - freed)
             if ahead:
@@ -408,6 +411,9 @@ class WindowManager:
 
 
 WATCHED_POLL_S = 0.05
+# sys.getrefcount of a cached step's array that only the cache holds: the dict's reference and
+# the call's argument. A session integrating the step (another view's window) holds one more.
+HELD_BY_CACHE_ONLY = 2
 
 
 def _round_up_mb(n: int) -> int:

@@ -129,41 +129,44 @@ def gather(
     vmin, scale = _values.normalization(*value_range)
     values = (np.float32(lo if change else vmin), np.float32(hi), np.float32(scale))
     first = 1 if change else 0  # change: the window's first step starts no change
-    # work that reads and writes host memory finishes before anything here can be freed
-    with DeviceWork(dc) as work:
-        table_buf = work.buffer(table)
-        for z0 in range(0, nz, max(1, rows)):
-            z1 = min(nz, z0 + rows)
-            n = (z1 - z0) * plane
-            k_buf = work.buffer(k[z0:z1], access="rw", in_place=cpu)
-            u_buf = work.buffer(u[z0:z1], access="rw", in_place=cpu)
-            index = cl.Kernel(program, "window_index")
-            index.set_args(work.buffer(t_index[z0:z1], in_place=cpu), table_buf, k_buf)
-            cl.enqueue_nd_range_kernel(dc.queue, index, (n,), None)
-            if block is not None:
-                data, offs_buf, strides = _slab(work, block, z0, z1, dtype.itemsize, row, cpu)
-                kern = cl.Kernel(program, "gather_block")
-                kern.set_args(
-                    k_buf, u_buf, data, offs_buf,
-                    *(np.int64(v) for v in (*strides, nx, ny)), np.uint32(none), *values,
-                )  # fmt: skip
-                cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
-            else:
-                bufs = {s: work.buffer(arrays[s][z0:z1], in_place=cpu) for s in steps}
-                for base in range(first, len(steps), CHUNK):
-                    count = min(CHUNK, len(steps) - base)
-                    ptrs = [bufs[steps[max(base - 1, 0)]]]
-                    ptrs += [bufs[steps[min(base + j, len(steps) - 1)]] for j in range(CHUNK)]
-                    kern = cl.Kernel(program, "gather")
+    slabs = [(z0, min(nz, z0 + rows)) for z0 in range(0, nz, max(1, rows))]
+    # A gather that may be given up holds the device's lock a slab at a time: other clients'
+    # frames run between its slabs, and its input is looked at after each.
+    groups = [[slab] for slab in slabs] if watched() else [slabs]
+    for group in groups:
+        # work that reads and writes host memory finishes before anything here can be freed
+        with DeviceWork(dc) as work:
+            table_buf = work.buffer(table)
+            for z0, z1 in group:
+                n = (z1 - z0) * plane
+                k_buf = work.buffer(k[z0:z1], access="rw", in_place=cpu)
+                u_buf = work.buffer(u[z0:z1], access="rw", in_place=cpu)
+                index = cl.Kernel(program, "window_index")
+                index.set_args(work.buffer(t_index[z0:z1], in_place=cpu), table_buf, k_buf)
+                cl.enqueue_nd_range_kernel(dc.queue, index, (n,), None)
+                if block is not None:
+                    data, offs_buf, strides = _slab(work, block, z0, z1, dtype.itemsize, row, cpu)
+                    kern = cl.Kernel(program, "gather_block")
                     kern.set_args(
-                        k_buf, u_buf, np.uint32(base), np.uint32(count), *ptrs, *values
+                        k_buf, u_buf, data, offs_buf,
+                        *(np.int64(v) for v in (*strides, nx, ny)), np.uint32(none), *values,
                     )  # fmt: skip
                     cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
-            work.read(k[z0:z1], k_buf, cpu)
-            work.read(u[z0:z1], u_buf, cpu)
-            if watched():
-                work.finish()
-                checkpoint("preparing the recolouring", z1, nz)
+                else:
+                    bufs = {s: work.buffer(arrays[s][z0:z1], in_place=cpu) for s in steps}
+                    for base in range(first, len(steps), CHUNK):
+                        count = min(CHUNK, len(steps) - base)
+                        ptrs = [bufs[steps[max(base - 1, 0)]]]
+                        ptrs += [bufs[steps[min(base + j, len(steps) - 1)]] for j in range(CHUNK)]
+                        kern = cl.Kernel(program, "gather")
+                        kern.set_args(
+                            k_buf, u_buf, np.uint32(base), np.uint32(count), *ptrs, *values
+                        )  # fmt: skip
+                        cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
+                work.read(k[z0:z1], k_buf, cpu)
+                work.read(u[z0:z1], u_buf, cpu)
+        if group[-1][1] < nz:
+            checkpoint("preparing the recolouring", group[-1][1], nz)
     return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
 
 

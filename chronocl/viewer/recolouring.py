@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from chronocl.core.interrupt import checkpoint
 from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine.buffers import DeviceLimitError
@@ -152,6 +153,7 @@ class Recolouring:
         w = full.winners(functools.partial(gather, device=self.device))
         if w is None:
             return None
+        checkpoint("preparing the recolouring", 1, 2)  # at idle: input that came meanwhile
         volume = on_gl(_upload, w) if on_gpu else on_host(w, self.device, held)
         slot.recolour = Prepared(weakref.ref(shown.t_index), volume)
         return slot.recolour

@@ -23,6 +23,7 @@ from collections import deque
 from collections.abc import Callable
 
 from chronocl import modes
+from chronocl.core import process_memory
 from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.core.interrupt import interruptible
 from chronocl.data.chronovolume import Chronovolume
@@ -337,6 +338,9 @@ class ClientWorker(Tasks):
         """The winners of the sharp frame shown gathered for its views' first TF edit, given up
         as soon as new input comes (`Recolouring.prepare`)."""
         self._prepare_at = None
+        limit = process_memory.current()
+        if limit is not None and limit.excess() > 0:
+            return  # over the memory limit already: the first edit prepares them
         try:
             with interruptible(self._given_up):
                 for slot in self.views.slots[: len(self._shown.views) if self._shown else 0]:
@@ -345,6 +349,10 @@ class ClientWorker(Tasks):
                     self.views.recolouring.prepare(slot)
         except SupersededError:
             return
+        except Exception as exc:  # work nobody asked for: logged, not sent to the page
+            error_text(exc, "gathering the winners at idle")
+            return
+        self._memory_after()
 
     def _send_frame(
         self, state, rid, cvs, integrate_ms, incremental, t_start, final: bool = False
