@@ -39,7 +39,7 @@ from latency_client import WINDOW, Client, Edits, sharp
 from viewer_latency import make_store
 
 from chronocl import modes
-from chronocl.core.budget import viewer_memory
+from chronocl.core.budget import interactive_memory
 
 BENCH = "users_soak"
 STEPS = 20
@@ -183,7 +183,7 @@ def main() -> None:
         root = args.keep or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)
         store, case = make_store(root, args.side, STEPS, "float32")
-        budget = viewer_memory()  # what the child computes, a moment later
+        budget = interactive_memory()  # what the child computes, a moment later
         server = Server(store, Path(tmp) / "server.log")
         soak, crashed, t0 = None, None, time.perf_counter()
         try:

@@ -26,7 +26,7 @@ import sys
 import threading
 from collections.abc import Sequence
 
-from chronocl.core.budget import human, parse_memory, viewer_memory
+from chronocl.core.budget import human, interactive_memory, parse_memory
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.viewer.app import MAX_CLIENTS, make_app
 from chronocl.viewer.datasets import Dataset, open_datasets
@@ -133,7 +133,7 @@ class ViewerServer:
             datasets = open_datasets(stores or [], storage_options)
         self.datasets = datasets
         # One limit for the process, taken from the memory free when the server starts.
-        memory = viewer_memory() if memory is None else memory
+        memory = interactive_memory() if memory is None else memory
         self.memory = parse_memory(memory)
         self.token = token or secrets.token_urlsafe(24)
         self.host = host
@@ -249,7 +249,7 @@ def serve(
     print(f"chronocl viewer: {server.url}", flush=True)
     print(
         f"memory limit {human(server.memory)}"
-        + (" (half the memory free; --memory sets it)" if memory is None else ""),
+        + (" (a third of the memory free; --memory sets it)" if memory is None else ""),
         file=sys.stderr,
         flush=True,
     )
