@@ -178,39 +178,39 @@ def is_aligned(a: np.ndarray, align: int = ALIGN) -> bool:
     return a.ctypes.data % align == 0
 
 
-def _mapped_rows(a: np.ndarray) -> tuple[mmap.mmap, int, np.ndarray] | None:
-    """The memory map under `a` (a view of an `aligned_empty` map, rows of it contiguous), the
-    address where the map starts, and `a`'s rows; None where `a` is not mapped."""
+def _advise_rows(a: np.ndarray, advice: int, inward: bool) -> bool:
+    """madvise(`advice`) over the pages under each row of `a` (a view of an `aligned_empty`
+    memory map, rows of it contiguous): the whole pages inside a row where `inward`, else every
+    page a row touches. False where `a` is not mapped or the kernel refuses (an older kernel,
+    no madvise, out of memory)."""
     owner = a
     while isinstance(owner, np.ndarray):
         owner = owner.base
     if isinstance(owner, memoryview):  # np.frombuffer's view of the map
         owner = owner.obj
     if not isinstance(owner, mmap.mmap) or a.ndim < 1:
-        return None
+        return False
     start = np.frombuffer(owner, np.uint8).ctypes.data
     rows = a.reshape(a.shape[0], -1) if a.ndim > 1 else a.reshape(1, -1)
-    return owner, start, rows
+    page = mmap.PAGESIZE
+    try:
+        for row in rows:
+            lo = row.ctypes.data - start
+            hi = lo + row.nbytes
+            first = -(-lo // page) * page if inward else lo - lo % page
+            end = hi // page * page if inward else hi  # madvise rounds a length up
+            if end > first:
+                owner.madvise(advice, first, end - first)
+    except (OSError, ValueError, AttributeError):
+        return False
+    return True
 
 
 def discard(a: np.ndarray) -> bool:
     """Hand the whole pages under `a` (as for `prefault`) back to the system: its contents are
     lost (they read as zeros), its memory is no longer resident until written again. False
     where the array is not mapped or the kernel cannot."""
-    found = _mapped_rows(a)
-    if found is None:
-        return False
-    owner, start, rows = found
-    try:
-        for row in rows:
-            lo = row.ctypes.data - start
-            first = -(-lo // mmap.PAGESIZE) * mmap.PAGESIZE
-            end = (lo + row.nbytes) // mmap.PAGESIZE * mmap.PAGESIZE
-            if end > first:
-                owner.madvise(MADV_FREE_SHARED, first, end - first)
-    except (OSError, ValueError, AttributeError):
-        return False
-    return True
+    return _advise_rows(a, MADV_FREE_SHARED, inward=True)
 
 
 def prefault(a: np.ndarray) -> bool:
@@ -218,15 +218,4 @@ def prefault(a: np.ndarray) -> bool:
     contiguous) without changing what they hold, so a later first write finds them mapped:
     a fresh 512 MB takes 0.2-0.3 s to fault here, and up to 2 s on a virtual machine whose
     host returns freed memory. False where the array is not mapped or the kernel cannot."""
-    found = _mapped_rows(a)
-    if found is None:
-        return False
-    owner, start, rows = found
-    try:
-        for row in rows:
-            lo = row.ctypes.data - start
-            first = lo - lo % mmap.PAGESIZE
-            owner.madvise(MADV_POPULATE_WRITE, first, lo + row.nbytes - first)
-    except (OSError, ValueError, AttributeError):  # an older kernel, no madvise, out of memory
-        return False
-    return True
+    return _advise_rows(a, MADV_POPULATE_WRITE, inward=False)
