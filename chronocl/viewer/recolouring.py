@@ -71,18 +71,12 @@ class Recolouring:
         edit integrates (a coarse window shown, another window, or an edit that may change
         the winners)."""
         s, shown = slot.session, slot.cv
-        if not isinstance(s, AutoSession) or shown is None or shown.t_index is None:
+        if not isinstance(s, AutoSession) or s.asked == spec:
             return None
-        if s.shown_level != 0 or s.selection != sel or s.asked == spec:
+        found = _recolourable(slot, spec, sel)
+        if found is None:
             return None
-        if slot.volume is None or slot.uploaded is not shown:
-            return None
-        full = s.pool.sessions.get((0, spec.integration.pool))
-        if full is None or full.selection != sel:
-            return None
-        new, reason = full.recolours(spec)  # a reason when it has integrated nothing
-        if reason is not None or full.current() is not shown:
-            return None
+        full, new = found
         t, uploaded = time.perf_counter(), self.upload_ms
         prepared = slot.recolour
         if not isinstance(prepared, Prepared) or prepared.t_index() is not shown.t_index:
@@ -114,19 +108,15 @@ class Recolouring:
         are not ready, so that the first TF edit only recolours (the viewer calls it at idle,
         given up by new input: `chronocl.core.interrupt`). Whether it prepared them."""
         s, shown = slot.session, slot.cv
-        if not isinstance(s, AutoSession) or shown is None or shown.t_index is None:
+        if not isinstance(s, AutoSession) or s.asked is None or shown is None:
             return False
-        if s.shown_level != 0 or s.asked is None or slot.volume is None:
-            return False
-        if slot.uploaded is not shown or s.spec.mode not in RECOLOURED:
+        if s.spec.mode not in RECOLOURED:
             return False
         prepared = slot.recolour
         if isinstance(prepared, Prepared) and prepared.t_index() is shown.t_index:
             return False
-        full = s.pool.sessions.get((0, s.spec.integration.pool))
-        if full is None or full.recolours(s.asked)[1] is not None or full.current() is not shown:
-            return False
-        return self._prepare(slot, full, shown) is not None
+        found = _recolourable(slot, s.asked, s.selection)
+        return found is not None and self._prepare(slot, found[0], shown) is not None
 
     def _show(self, slot: ViewSlot, prepared: Prepared, sp: Sparse, shown, cv) -> None:
         """Write what changed of `sp` into the slot's texture (all of it unless the texture
@@ -163,6 +153,25 @@ class Recolouring:
         unread, self._unread = self._unread, []
         if unread:
             on_gl(lambda rc: [vol.texture.read_into(cv.rgba) for cv, vol in unread])
+
+
+def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection):
+    """(the level-0 session, `spec` fixed for its window) where the slot shows window `sel`
+    integrated at full resolution, in its texture, and `spec` only recolours it; else None."""
+    s, shown = slot.session, slot.cv
+    if not isinstance(s, AutoSession) or shown is None or shown.t_index is None:
+        return None
+    if s.shown_level != 0 or s.selection != sel:
+        return None
+    if slot.volume is None or slot.uploaded is not shown:
+        return None
+    full = s.pool.sessions.get((0, spec.integration.pool))
+    if full is None or full.selection != sel:
+        return None
+    new, reason = full.recolours(spec)  # a reason when it has integrated nothing
+    if reason is not None or full.current() is not shown:
+        return None
+    return full, new
 
 
 def _release_and_pick(rc, slot: ViewSlot) -> bool | None:
