@@ -112,13 +112,13 @@ class StepSlots:
         with self._lock:
             return bool(self._free) and self._free[0] in self._warm
 
-    def release(self, nbytes: int) -> int:
+    def release(self, nbytes: int, cold: bool = True) -> int:
         """Hand back the pages of free slots, the last to be taken first, until `nbytes` are
         (a process limit wants them, `chronocl.core.process_memory`); the bytes released.
-        Slots never written nor warmed go too where that is not enough: reading a page of the
-        block's shared map that was never written makes it resident (a buffer spanning the
-        slab of rows a window lies in spans the free slots' rows between), which only the
-        resident memory's drop tells."""
+        With `cold`, slots never written nor warmed go too where that is not enough: reading a
+        page of the block's shared map that was never written makes it resident (a buffer
+        spanning the slab of rows a window lies in spans the free slots' rows between), which
+        only the resident memory's drop tells."""
         released = 0
         with self._lock:
             if self._block is None:
@@ -129,6 +129,8 @@ class StepSlots:
                 self._warm.discard(j)
                 if discard(self._block[:, j]):
                     released += self.slot_bytes
+            if not cold:
+                return released
             before = resident_bytes()
             cold = sorted(j for j in self._free if j not in self._warm)
             for j0, j1 in _runs(cold):

@@ -170,13 +170,13 @@ class WindowManager:
                 if sys.getrefcount(self._cache[step]) > HELD_BY_CACHE_ONLY:
                     continue  # another view's window: dropping it would free nothing
                 del self._cache[step]
-                freed += self.slots.release(nbytes - freed)
+                freed += self.slots.release(nbytes - freed, cold=False)  # its slot, now free
             if ahead:
                 for load in [ld for s, ld in self._loads.items() if s not in self._wanted]:
                     if freed >= nbytes:
                         break
                     self._cancel(load)
-                    freed += self.slots.release(nbytes - freed)
+                    freed += self.slots.release(nbytes - freed, cold=False)
             return freed
         finally:
             self._lock.release()
