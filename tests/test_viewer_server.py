@@ -373,6 +373,41 @@ def test_many_clients_scrubbing_get_frames_and_memory_stays_flat(server):
     assert growth < 120, f"RSS grew by {growth:.0f} MB after warm-up"
 
 
+def test_clients_share_the_resident_steps(server):
+    """A second tab on the window a first one shows, and a page reconnecting after both
+    closed, read no step again: every client's views use the server's window managers."""
+    from chronocl.data import window
+
+    def reads() -> int:
+        return sum(sum(m.reads.values()) for m in list(window._managers))
+
+    def settled() -> int:  # read-ahead finished
+        n, deadline = reads(), time.monotonic() + 30
+        while time.monotonic() < deadline:
+            time.sleep(0.5)
+            if reads() == n:
+                return n
+            n = reads()
+        raise AssertionError("the reads never settled")
+
+    def show(c: Client) -> None:
+        c.open(0, size=(64, 64))
+        c.frame_for(c.send({"type": "update", "window": {"t0": 3, "t1": 9, "stride": 1}}))
+
+    first = Client(server)
+    show(first)
+    before = settled()
+    second = Client(server)
+    show(second)
+    assert settled() == before
+    first.close()
+    second.close()
+    again = Client(server)
+    show(again)
+    assert settled() == before
+    again.close()
+
+
 def test_probe_ray_matches_a_known_block():
     """The CPU march finds the front face of an opaque block on the axis view."""
     from chronocl.data.chronovolume import Chronovolume

@@ -19,6 +19,7 @@ from chronocl.viewer.guard import TokenGuard
 from chronocl.viewer.heap import HEAP_CHECK_S, HeapKeeper
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.sockets import serve_socket
+from chronocl.viewer.view_sessions import SharedSteps
 
 MEDIA_TYPES = {
     ".html": "text/html; charset=utf-8",
@@ -106,7 +107,13 @@ def make_app(
         active += 1  # no await between the test and the count
         try:
             await serve_socket(
-                websocket, datasets, downloads, engine=engine, device=device, memory=memory
+                websocket,
+                datasets,
+                downloads,
+                engine=engine,
+                device=device,
+                memory=memory,
+                shared=shared,
             )
         except WebSocketDisconnect:
             pass
@@ -121,8 +128,10 @@ def make_app(
             await asyncio.sleep(HEAP_CHECK_S)
             await asyncio.to_thread(heap.check)
 
-    # One memory limit for the whole process, every client's steps and frames within it.
+    # One memory limit for the whole process, every client's steps and frames within it, and
+    # one set of resident steps that every client's views read.
     limit = None if memory is None else ProcessLimit(parse_memory(memory))
+    shared = SharedSteps()
 
     @contextlib.asynccontextmanager
     async def lifespan(app):
@@ -137,6 +146,7 @@ def make_app(
                 await keeper
             heap.unfreeze()
             downloads.close()
+            await asyncio.to_thread(shared.close)
 
     app = Starlette(
         routes=[

@@ -19,6 +19,7 @@ from chronocl.viewer.progress import refine_progress
 from chronocl.viewer.protocol import ProtocolError, choices, parse_message, request_id
 from chronocl.viewer.residency import report_steps
 from chronocl.viewer.saving import Downloads
+from chronocl.viewer.view_sessions import SharedSteps
 from chronocl.viewer.worker import ClientWorker
 
 SEND_TIMEOUT_S = 60.0
@@ -70,8 +71,10 @@ async def serve_socket(
     engine: str = "opencl",
     device: str | None = None,
     memory: str | int | None = None,
+    shared: SharedSteps | None = None,
 ) -> None:
-    """Serve one accepted-to-be Starlette WebSocket until the client goes."""
+    """Serve one accepted-to-be Starlette WebSocket until the client goes (`shared`: the
+    server's window managers, which every client's views use)."""
     from starlette.websockets import WebSocketDisconnect
 
     await websocket.accept()
@@ -108,7 +111,13 @@ async def serve_socket(
         return not gone.is_set()
 
     worker = ClientWorker(
-        datasets, send_from_thread, downloads, engine=engine, device=device, memory=memory
+        datasets,
+        send_from_thread,
+        downloads,
+        engine=engine,
+        device=device,
+        memory=memory,
+        shared=shared,
     )
     steps = None
     try:

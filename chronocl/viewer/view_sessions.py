@@ -1,8 +1,8 @@
 """The views of one client: a slot per panel (its integration session, chronovolume and texture)
 over one data set. The panels' sessions share the data set's resident steps (one window manager
-per level and pooling) and integrate only what changed: a slide of the window goes through
-`Session.show`, which updates incrementally; a camera change integrates nothing (silhouettes
-aside).
+per level and pooling; in a server, shared by every client: `SharedSteps`) and integrate only
+what changed: a slide of the window goes through `Session.show`, which updates incrementally;
+a camera change integrates nothing (silhouettes aside).
 
 OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared).
 """
@@ -46,16 +46,47 @@ DIRECT_BELOW_MS = 1000.0
 FRAME_VOXEL_BYTES = 12
 
 
+class SharedSteps:
+    """The window managers of a server's data sets, one per data set, level and pooling, shared
+    by every client: a second tab, or a page reconnecting while its old socket still holds its
+    window, reads no step twice and holds none twice. Steps nobody shows stay until the process's
+    memory limit needs their room (`chronocl.core.process_memory`); `close` frees them all."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._by_dataset: dict[int, dict[tuple[int, str], WindowManager]] = {}
+
+    def of(self, dataset: int) -> dict[tuple[int, str], WindowManager]:
+        """The managers of data set `dataset` (sessions add to it under INTEGRATE_LOCK)."""
+        with self._lock:
+            return self._by_dataset.setdefault(dataset, {})
+
+    def close(self) -> None:
+        with self._lock:
+            groups, self._by_dataset = list(self._by_dataset.values()), {}
+        for managers in groups:
+            for m in managers.values():
+                m.close()
+
+
 class Views:
-    """The panels' slots of one client, for the data set of the newest state."""
+    """The panels' slots of one client, for the data set of the newest state. Without `shared`
+    (a server's: `SharedSteps`) the views' window managers are their own, closed with them."""
 
     def __init__(
-        self, datasets: list[Dataset], engine: str, device: str | None, memory: str | int | None
+        self,
+        datasets: list[Dataset],
+        engine: str,
+        device: str | None,
+        memory: str | int | None,
+        shared: SharedSteps | None = None,
     ) -> None:
         self.datasets = datasets
         self.engine, self.device, self.memory = engine, device, memory
         self.slots: list[ViewSlot] = []
         self._dataset = -1
+        self._own = shared is None
+        self._shared = shared or SharedSteps()
         self._managers: dict[tuple[int, str], WindowManager] = {}
         self.recolouring = Recolouring(device)  # TF edits that only recolour (recolouring.py)
         self.host_steps_why: str | None = None  # the last frame's steps_on_host
@@ -72,6 +103,7 @@ class Views:
                 s.drop_session()
             self._close_managers()
             self._dataset = state.dataset
+            self._managers = self._shared.of(state.dataset)
         while len(self.slots) < len(state.views):
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
@@ -199,6 +231,7 @@ class Views:
         self._close_managers()
 
     def _close_managers(self) -> None:
-        managers, self._managers = self._managers, {}
-        for m in managers.values():
-            m.close()
+        """Let go of the data set's managers: closed where they are this client's own."""
+        self._managers = {}
+        if self._own:
+            self._shared.close()

@@ -55,7 +55,7 @@ from chronocl.viewer.session_file import checked_focus, loaded_state
 from chronocl.viewer.side_work import SideWork
 from chronocl.viewer.slots import upload
 from chronocl.viewer.tasks import Tasks
-from chronocl.viewer.view_sessions import Views
+from chronocl.viewer.view_sessions import SharedSteps, Views
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
 MAX_TASKS = 8
@@ -79,6 +79,7 @@ class ClientWorker(Tasks):
         engine: str = "opencl",
         device: str | None = None,
         memory: str | int | None = None,
+        shared: SharedSteps | None = None,
     ) -> None:
         self.datasets = datasets
         self.send = send
@@ -90,7 +91,7 @@ class ClientWorker(Tasks):
         self._tasks: deque[tuple[str, dict]] = deque()
         self.side = SideWork()  # histograms and fits, beside the frames
         self._closed = False
-        self.views = Views(datasets, engine, device, memory)
+        self.views = Views(datasets, engine, device, memory, shared)
         self._refine_at: float | None = None  # when the coarse frame shown is to be refined
         self._prepare_at: float | None = None  # when the sharp frame's winners are to be gathered
         self._cancelled = False  # the client cancelled the refine of the frame shown
