@@ -16,7 +16,9 @@ against the budget, and per kind of action the p50, p95 and max ms to the sharp 
     python bench/users_soak.py [--actions 500] [--side 512] [--seed 1] [--keep DIR]
 
 Summary keys: `actions`, `internal_errors` (target 0), `crashes` (target 0), `peak_rss_mb`,
-`budget_mb`, `peak_rss_over_budget` (target <= 1.1), `sharp_ms` per kind (p50, p95, max).
+`budget_mb`, `peak_rss_over_budget` (target <= 1.1), `sharp_ms` per kind (p50, p95, max),
+`peak_rise_mb` per kind (how far the peak rose during actions of that kind, in all: which
+actions set the peak) and `peak_after` (the action that set it, and its number).
 """
 
 from __future__ import annotations
@@ -186,11 +188,19 @@ def main() -> None:
         budget = interactive_memory()  # what the child computes, a moment later
         server = Server(store, Path(tmp) / "server.log")
         soak, crashed, t0 = None, None, time.perf_counter()
+        rises: dict[str, float] = dict.fromkeys(KINDS, 0.0)
+        peak_after = None
         try:
             soak = Soak(server, random.Random(args.seed))
             for k in range(args.actions):
                 kind = soak.rng.choice(KINDS)
+                before = vm_hwm_mb(server.proc.pid)
                 soak.act(kind)
+                if server.proc.poll() is None:
+                    rise = vm_hwm_mb(server.proc.pid) - before
+                    rises[kind] += rise
+                    if rise > 0:
+                        peak_after = f"{kind} (action {k})"
                 if server.proc.poll() is not None:
                     crashed = f"after action {k} ({kind}): exit {server.proc.returncode}"
                     break
@@ -218,6 +228,8 @@ def main() -> None:
             "budget_mb": round(budget / 2**20),
             "peak_rss_over_budget": peak and round(peak * 2**20 / budget, 3),
             "sharp_ms": {k: percentiles(v) for k, v in (soak.times.items() if soak else [])},
+            "peak_rise_mb": {k: round(v) for k, v in rises.items()},
+            "peak_after": peak_after,
             "seconds": round(time.perf_counter() - t0),
         }
         emit(env_record(BENCH))
