@@ -125,6 +125,26 @@ def test_steps_another_view_still_integrates_are_not_dropped_for_nothing():
         assert 0 not in wm.resident() and {6, 7, 8} <= set(wm.resident())
 
 
+def test_a_window_nobody_holds_any_more_gives_way():
+    """The last window asked for, once its arrays were handed out and let go (the client that
+    showed it gone, a coarse level no view shows now), is dropped when the process needs the
+    room; a window still held, or not yet handed out, is not."""
+    series = series_of(6)
+    limit = ProcessLimit(resident_bytes() + 2 * STEP)
+    with process_memory.limited(limit), WindowManager(series, 6 * STEP, prefetch=0) as wm:
+        held = wm.get([0, 1, 2])
+        assert limit.fit() > 0 and wm.resident() == [0, 1, 2]  # shown: kept
+        del held
+        gc.collect()
+        assert limit.fit() == 0
+        assert len(wm.resident()) <= 1
+        request = wm.request([3, 4, 5])  # asked for, not yet handed out: kept
+        request.result()
+        wm.request([3, 4, 5])
+        assert limit.fit() > 0 and wm.resident() == [3, 4, 5]
+        assert [int(a[0, 0, 0]) for a in request.result()] == [3, 4, 5]
+
+
 def test_the_viewer_logs_once_when_its_windows_and_frames_alone_are_over():
     from chronocl.viewer.datasets import Dataset
     from chronocl.viewer.view_sessions import Views

@@ -106,6 +106,7 @@ class WindowManager:
         self._span = 1  # the last request's distinct steps: free slots kept warm (`_read`)
         self._read_at = 0.0  # when the last read ended (`_quiet`)
         self.generation = 0
+        self._served = -1  # the generation whose window `result` last handed out
         self.reads: Counter[int] = Counter()  # completed reads per step (tests: never twice)
         self.cancelled = 0  # loads dropped before they finished
         self._cache: OrderedDict[int, np.ndarray] = OrderedDict()  # LRU order, newest last
@@ -157,14 +158,21 @@ class WindowManager:
     def shed(self, nbytes: int, ahead: bool = True, wait: bool = True) -> int:
         """Give back about `nbytes` for a process limit: free slots' pages first, then steps
         the window does not hold (least recently used first; those read ahead too, unless
-        not `ahead`). Without `wait`, nothing if another thread holds the lock. The bytes given
-        back (a dropped step still read by a session gives its slot back only once let go)."""
+        not `ahead`), then the window's own once it was handed out and nobody holds it. Steps
+        a session holds stay. Without `wait`, nothing if another thread holds the lock. The
+        bytes given back."""
         if not self._lock.acquire(blocking=wait):
             return 0
         try:
             freed = self.slots.release(nbytes)
             keep = self._wanted if ahead else self._wanted | set(self._ahead)
-            for step in [s for s in self._cache if s not in keep]:
+            steps = [s for s in self._cache if s not in keep]
+            if self._served == self.generation:
+                # The last window was handed out: a session showing it holds its arrays (kept
+                # below); one nobody holds any more (its client gone, a coarse level no view
+                # shows) goes last.
+                steps += [s for s in self._cache if s in self._wanted]
+            for step in steps:
                 if freed >= nbytes:
                     break
                 if sys.getrefcount(self._cache[step]) > HELD_BY_CACHE_ONLY:
@@ -391,6 +399,8 @@ class WindowManager:
                 if not missing:
                     for s in request.steps:
                         self._cache.move_to_end(s)
+                    if not request.superseded:
+                        self._served = request.generation
                     return [self._cache[s] for s in request.steps]
                 for s in missing:
                     if s in self._failed:
