@@ -145,6 +145,25 @@ def test_a_window_nobody_holds_any_more_gives_way():
         assert [int(a[0, 0, 0]) for a in request.result()] == [3, 4, 5]
 
 
+def test_the_floor_is_every_client_s_expectation_together():
+    """Before their first frames, two clients' views expect their frames to hold the sum of
+    both (one client's set no longer replaces the other's); a client gone expects nothing."""
+
+    class Owner:  # a client's views
+        pass
+
+    limit = ProcessLimit(10 * STEP)
+    first, second = Owner(), Owner()
+    limit.expect(first, 3 * STEP)
+    limit.expect(second, 2 * STEP)
+    assert limit.floor == 5 * STEP
+    limit.expect(first, 0)
+    assert limit.floor == 2 * STEP
+    del second
+    gc.collect()
+    assert limit.floor == 0
+
+
 def test_the_viewer_logs_once_when_its_windows_and_frames_alone_are_over():
     from chronocl.viewer.datasets import Dataset
     from chronocl.viewer.view_sessions import Views

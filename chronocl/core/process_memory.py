@@ -12,8 +12,8 @@ under the limit, and the steps are what gives way:
   are dropped and the pages of free slots handed back, until the resident steps plus what the
   frames need fit the limit (`fit`);
 - what the frames need is what the process holds beside its steps now or after any of the last
-  frames, whichever is more (before the first frame: `floor`, what the viewer expects one to
-  hold);
+  frames, whichever is more (before the first frame: `floor`, what the clients' views expect
+  theirs to hold, `expect`);
 - the steps of the windows being shown are never dropped: where they and the frames alone
   exceed the limit, `excess` says by how much (the viewer logs it once).
 
@@ -52,7 +52,7 @@ class ProcessLimit:
 
     def __init__(self, total: int) -> None:
         self.total = int(total)
-        self.floor = 0
+        self._expected: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # `expect`
         self.over = 0  # bytes past the limit after the last fit, with nothing left to drop
         self._after: deque[int] = deque(maxlen=RECENT_FRAMES)
         self._holders: weakref.WeakSet = weakref.WeakSet()
@@ -61,6 +61,17 @@ class ProcessLimit:
     def register(self, holder: Holder) -> None:
         with self._lock:
             self._holders.add(holder)
+
+    def expect(self, owner: object, nbytes: int) -> None:
+        """What `owner` (a client's views) expects its frames to hold before one is measured;
+        `floor` is the sum over the owners alive (0: none now)."""
+        with self._lock:
+            self._expected[owner] = int(nbytes)
+
+    @property
+    def floor(self) -> int:
+        with self._lock:
+            return sum(self._expected.values())
 
     def steps(self) -> int:
         """Bytes the registered holders keep in steps (resident, loading, warm free slots)."""

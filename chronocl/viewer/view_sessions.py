@@ -111,7 +111,7 @@ class Views:
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the frame
             voxels = math.prod(series.volume_shape) * len(state.views)
-            limit.floor = FRAME_VOXEL_BYTES * voxels
+            limit.expect(self, FRAME_VOXEL_BYTES * voxels)
             limit.fit()
         cvs = []
         for i in range(len(state.views)):
@@ -229,6 +229,9 @@ class Views:
         for s in slots:
             s.drop_session()
         self._close_managers()
+        limit = process_memory.current()
+        if limit is not None:
+            limit.expect(self, 0)
 
     def _close_managers(self) -> None:
         """Let go of the data set's managers: closed where they are this client's own."""
