@@ -164,6 +164,23 @@ def test_the_floor_is_every_client_s_expectation_together():
     assert limit.floor == 0
 
 
+def test_spare_outputs_go_only_where_that_brings_the_process_within_its_limit():
+    """Dead outputs kept for the next frame are let go when that makes the process fit; when
+    it cannot (over by more than they hold) they stay, for the next frame would only take as
+    much again, fresh."""
+    from chronocl.core.memory import recycled_empty
+
+    out = recycled_empty((STEP,), np.float32)  # 4 steps' bytes
+    out[...] = 1
+    del out
+    gc.collect()
+    assert spares.nbytes >= 4 * STEP
+    ProcessLimit(resident_bytes() - 8 * STEP).fit()
+    assert spares.nbytes >= 4 * STEP
+    ProcessLimit(resident_bytes() - 2 * STEP).fit()
+    assert spares.nbytes == 0
+
+
 def test_the_viewer_logs_once_when_its_windows_and_frames_alone_are_over():
     from chronocl.viewer.datasets import Dataset
     from chronocl.viewer.view_sessions import Views
