@@ -121,3 +121,18 @@ def test_device_buffers_are_made_in_one_place():
     ]
     assert not found, "\n".join(found)
     assert made.search(home.read_text()), "the rule's pattern no longer finds the one place"
+
+
+def test_no_bench_script_hides_a_module():
+    """A bench script puts bench/ first on sys.path (for common.py), for itself and the
+    processes it spawns: one named as a module they import hides it (bench/distributed.py hid
+    dask.distributed, so a LocalCluster's spawned workers failed to start after it ran)."""
+    import importlib.util
+    import sys
+
+    bench = str(TESTS.parent / "bench")
+    for script in sorted((TESTS.parent / "bench").glob("*.py")):
+        spec = importlib.util.find_spec(script.stem)
+        origin = spec and spec.origin and os.path.dirname(os.path.abspath(spec.origin))
+        assert spec is None or origin == bench, f"bench/{script.name} hides {spec.origin}"
+    assert bench not in sys.path  # what a test that loads a bench script must take out again

@@ -361,13 +361,14 @@ def test_bench_transfer_reports_null_on_cpu_and_figures_when_forced():
     from pathlib import Path
 
     path = Path(__file__).resolve().parent.parent / "bench" / "transfer.py"
+    kept = list(sys.path)  # the script puts bench/ first: taken out again after
     sys.path.insert(0, str(path.parent))
     try:
         spec = importlib.util.spec_from_file_location("chronocl_bench_transfer", path)
         bench = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(bench)
     finally:
-        sys.path.remove(str(path.parent))
+        sys.path[:] = kept
     assert bench.transfer_overlap() is None  # PoCL: a CPU device
     figures = bench.run(None, 16, 4, "max", 1, force=True)
     json.dumps(figures)

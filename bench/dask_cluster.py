@@ -9,8 +9,8 @@ of each. Prints JSON lines (../shared/BENCH.md) and a summary with
 - `scheduler_bytes_per_task`: what travels through the scheduler per slab task, measured as
   the pickled task arguments plus the pickled result (target: kilobytes).
 
-    python bench/distributed.py --quick        # 16 x 192^3, 2 repeats; < 2 minutes
-    python bench/distributed.py                # 16 x 256^3, 5 repeats
+    python bench/dask_cluster.py --quick        # 16 x 192^3, 2 repeats; < 2 minutes
+    python bench/dask_cluster.py                # 16 x 256^3, 5 repeats
 """
 
 from __future__ import annotations
