@@ -13,6 +13,11 @@ DEV := $(VENV)/.dev
 # with the newest version of every dependency.
 NEWEST := .venv-newest
 
+# The suite runs in this many processes (pytest-xdist), each test file in one of them (its
+# module fixtures, servers and browsers, made once): 2 halved the suite on this 2-core machine
+# (1 650 s to 1 030 s), whose OpenCL tests kept one core busy alone. 0: in this process.
+TEST_WORKERS ?= 2
+
 # Another apt-get holding the dpkg lock (an unattended upgrade) is waited for, not failed on.
 APT := apt-get -o DPkg::Lock::Timeout=300
 
@@ -59,7 +64,7 @@ test: lint
 			$$SUDO $(APT) update -qq && $$SUDO $(APT) install -y -qq chromium; \
 		else echo "warning: /usr/bin/chromium missing; the browser tests will be skipped"; fi; \
 	fi
-	$(BIN)/python -m pytest -q --durations=30
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
 
 # The whole suite on CPython 3.13 with the newest dependencies (pip upgrades every one, each run).
 test-newest:
