@@ -97,6 +97,27 @@ def test_budget_bounds_residency_and_evicts_least_recently_used(tmp_path) -> Non
         assert wm.reads[0] == 2  # evicted, so read again
 
 
+def test_windows_sessions_still_hold_are_not_evicted_for_another(tmp_path) -> None:
+    """Two clients share a manager, their windows together over its budget: the first's
+    steps, which its session still holds, stay (evicting them would free nothing, and its next
+    frame would read them again); the second's are read beside them."""
+    series = zarr_series(tmp_path)
+    truth = np.asarray(series.data)
+    step = 6 * 10 * 10 * 4
+    with WindowManager(series, 4 * step, prefetch=0) as wm:
+        first = wm.get([0, 1, 2])  # held, as the first client's session holds its window
+        second = wm.get([5, 6, 7])
+        for s, a in zip([5, 6, 7], second, strict=True):
+            np.testing.assert_array_equal(a, truth[s])
+        again = wm.get([0, 1, 2])
+        assert all(a is b for a, b in zip(again, first, strict=True))
+        assert wm.reads[0] == wm.reads[1] == wm.reads[2] == 1
+        del first, second, again
+        gc.collect()
+        wm.get([8])  # nobody holds the others now: evicted as usual, within the budget
+        assert wm.resident_bytes <= wm.budget
+
+
 def test_prefetch_reads_ahead_in_the_scrub_direction(tmp_path) -> None:
     series = zarr_series(tmp_path)
     with WindowManager(series, "10MB", prefetch=2) as wm:

@@ -175,7 +175,7 @@ class WindowManager:
             for step in steps:
                 if freed >= nbytes:
                     break
-                if sys.getrefcount(self._cache[step]) > HELD_BY_CACHE_ONLY:
+                if self._held(step):
                     continue  # another view's window: dropping it would free nothing
                 del self._cache[step]
                 freed += self.slots.release(nbytes - freed, cold=False)  # its slot, now free
@@ -302,9 +302,11 @@ class WindowManager:
         return [s for s in ahead if 0 <= s < self.series.n_steps]
 
     def _make_room(self, protect: set[int]) -> bool:
-        """Evict least recently used steps outside `protect` until one more step fits (locked)."""
+        """Evict least recently used steps outside `protect` until one more step fits (locked).
+        A step a session still holds (another view's or client's window) is not evicted: that
+        would free nothing, and its next frame would read it again."""
         while self.step_bytes * (len(self._cache) + len(self._loads) + 1) > self.budget:
-            victim = next((s for s in self._cache if s not in protect), None)
+            victim = next((s for s in self._cache if s not in protect and not self._held(s)), None)
             if victim is not None:
                 del self._cache[victim]
                 continue
@@ -313,6 +315,10 @@ class WindowManager:
                 return False
             self._cancel(load)
         return True
+
+    def _held(self, step: int) -> bool:
+        """Whether a session holds the cached step's array (locked)."""
+        return sys.getrefcount(self._cache[step]) > HELD_BY_CACHE_ONLY
 
     def _start(self, step: int) -> None:
         """Reserve the step's memory and submit its read (locked)."""
