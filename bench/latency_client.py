@@ -21,8 +21,13 @@ REFINE_AFTER_S = getattr(worker, "REFINE_AFTER_S", 0.25)
 
 
 def sharp(header: dict) -> bool:
-    """Full resolution: level 0, drawn at the panel's size."""
-    return header.get("level", 0) == 0 and not header.get("reduced", False)
+    """Full resolution at full quality: level 0, drawn at the panel's size, not a preview
+    (which is level 0 too, but half scale and JPEG 70)."""
+    return (
+        header.get("level", 0) == 0
+        and not header.get("reduced", False)
+        and header.get("quality", "full") == "full"
+    )
 
 
 class Client:

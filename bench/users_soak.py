@@ -148,17 +148,12 @@ class Soak:
         try:
             while True:
                 _, kind_got, h = self.c.next(timeout=WAIT_S)
-                if kind_got == "frame" and h["id"] == rid and sharp(h) and full_size(h):
+                if kind_got == "frame" and h["id"] == rid and sharp(h):
                     break
         except RuntimeError as exc:  # an error reply
             self.errors.append(f"{kind}: {exc}")
             return
         self.times[kind].append(1e3 * (time.perf_counter() - self.c.sent[rid]))
-
-
-def full_size(header: dict) -> bool:
-    """Whether every panel of a frame was drawn at full quality (not a reduced preview)."""
-    return header.get("quality", "full") == "full" and not header.get("reduced", False)
 
 
 def percentiles(ms: list[float]) -> dict:
