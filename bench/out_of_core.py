@@ -9,9 +9,11 @@ output) and runs the integration twice in a fresh child process that records its
 JSON lines (../shared/BENCH.md) and a summary with
 
 - `throughput_vs_read` = integration throughput / store read throughput of the same data
-  (median times); target >= 0.70. The read decodes every step into one reused buffer, the
-  faster of zarr's fastest plain read and chronocl's own decode of the chunks
-  (`chronocl.data.chunk_reads`, which the integration reads with; `read_by` says which);
+  (median times); target >= 0.70. The read decodes every step into reused buffers, the
+  fastest of zarr's fastest plain read, chronocl's own decode of the chunks one after another
+  and that decode on every host thread side by side, as the integration reads
+  (`chronocl.data.chunk_reads.read_steps`; `read_by` says which; before 2026-11-29 the bound
+  left the parallel read out, and overstated the ratio: 0.97 where it is about 0.56);
 - `cpu_bound_throughput_vs_read`: the best ratio the cores allow, read time / ((CPU seconds
   of the run's own brick reads + kernels + output writes, each measured alone) / cores). The
   integration does all of that work, so where the bound is below the target no pipeline can
@@ -63,6 +65,7 @@ from ooc_stages import (
 )
 
 from chronocl.core.budget import parse_memory
+from chronocl.data.chunk_reads import read_steps
 from chronocl.data.series import open_series, write_series
 from chronocl.data.writer import COMPRESSORS
 from chronocl.integration.runs import stages
@@ -97,9 +100,14 @@ def disk_bytes(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
-def read_all(store: Path, direct: bool = False) -> float:
+PARALLEL_STEPS = 4  # steps read side by side in the parallel read (its buffer: that many)
+
+
+def read_all(store: Path, direct: bool = False, parallel: bool = False) -> float:
     """Seconds to read every step of the store with plain zarr, whole steps into one buffer
-    (`direct`: through chronocl's own decode of the chunks, `chronocl.data.chunk_reads`).
+    (`direct`: through chronocl's own decode of the chunks, `chronocl.data.chunk_reads`, one
+    after another; `parallel`: that decode on every host thread, `PARALLEL_STEPS` steps at a
+    time, as the integration's reads run; NaN where the store's chunks do not allow it).
 
     Decoding into a buffer that is reused, as the integration does, is zarr's fastest plain
     read: `arr[t]` into a fresh array each step is up to 3x slower in a fresh process, which
@@ -111,6 +119,15 @@ def read_all(store: Path, direct: bool = False) -> float:
     arr = series._zarr
     buf = np.empty(arr.shape[1:], arr.dtype)
     out = default_buffer_prototype().nd_buffer.from_numpy_array(buf)
+    if parallel:
+        k = min(PARALLEL_STEPS, arr.shape[0])
+        brick = np.empty((arr.shape[1], k, *arr.shape[2:]), arr.dtype)
+        t0 = time.perf_counter()
+        for first in range(0, arr.shape[0], k):
+            steps = range(first, min(arr.shape[0], first + k))
+            if not read_steps(store, arr, steps, 0, arr.shape[1], brick[:, : len(steps)]):
+                return float("nan")
+        return time.perf_counter() - t0
     t0 = time.perf_counter()
     for t in range(arr.shape[0]):
         if direct:
@@ -198,9 +215,10 @@ def main() -> None:
         "cpu_count": os.cpu_count(),
         "memory_copy_gb_s": memory,
         "definitions": {
-            "throughput_vs_read": "median store read time (the faster of plain zarr and "
-            "chronocl's own chunk decode, read_by) / median streamed integration time, all in "
-            "this process, alternated, after a warm-up of each",
+            "throughput_vs_read": "median store read time (the fastest of plain zarr, "
+            "chronocl's own chunk decode and that decode on every host thread, read_by) / "
+            "median streamed integration time, all in this process, alternated, after a "
+            "warm-up of each",
             "cpu_bound_throughput_vs_read": "the best throughput_vs_read the cores allow: read "
             "time / (CPU seconds of the run's own reads + kernels + output writes, each measured "
             "alone) / cores",
@@ -258,12 +276,17 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
     def read_direct() -> None:
         read_all(store, direct=True)
 
-    runs: dict[str, list[tuple[float, float]]] = {"read": [], "read_direct": [], "integrate": []}
+    def read_parallel() -> None:
+        read_all(store, parallel=True)
+
+    readers = {"read": read, "read_direct": read_direct, "read_parallel": read_parallel}
+    runs: dict[str, list[tuple[float, float]]] = {name: [] for name in (*readers, "integrate")}
     inside: list[dict] = []  # each streamed run's own stage times
-    read(), read_direct(), integrate()  # warm-up: page cache, kernels, this process's heap
+    for warm in (*readers.values(), integrate):  # warm-up: page cache, kernels, this heap
+        warm()
     for _ in range(repeats):  # alternate, so machine noise hits all alike
-        runs["read"].append(timed(read))
-        runs["read_direct"].append(timed(read_direct))
+        for name, reader in readers.items():
+            runs[name].append(timed(reader))
         runs["integrate"].append(timed(integrate))
         inside.append(stages.last())
     alone = stages_alone(series, out, budget, args.mode, args.output_compressor)
@@ -272,12 +295,15 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
     def med(name: str, k: int) -> float:
         return statistics.median(r[k] for r in runs[name])
 
-    # The store read: the faster of zarr's plain read and chronocl's own decode of the chunks.
-    reader = min(("read", "read_direct"), key=lambda name: med(name, 0))
+    # The store read: the fastest of zarr's plain read and chronocl's own decode of the chunks,
+    # serial or parallel (a store the parallel decode cannot read times NaN: not chosen).
+    times = {name: med(name, 0) for name in readers}
+    reader = min((n for n in readers if times[n] == times[n]), key=times.__getitem__)
     read_s, int_s = med(reader, 0), med("integrate", 0)
     for impl, name, extra in (
         ("zarr-read", "read", {}),
         ("chronocl-read", "read_direct", {}),
+        ("chronocl-read-parallel", "read_parallel", {}),
         (
             "stream-opencl",
             "integrate",
@@ -293,6 +319,8 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
             },
         ),
     ):
+        if med(name, 0) != med(name, 0):  # NaN: a read the store's chunks do not allow
+            continue
         emit(
             {
                 "bench": "out_of_core",
@@ -346,7 +374,7 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
         "read_gb_s": round(data_bytes / read_s / 1e9, 3),
         "integrate_gb_s": round(data_bytes / int_s / 1e9, 3),
         "read_cpu_s": round(med(reader, 1), 3),
-        "read_by": {"read": "zarr", "read_direct": "chronocl"}[reader],
+        "read_by": {"read": "zarr", "read_direct": "chronocl", "read_parallel": "parallel"}[reader],
         "integrate_cpu_s": round(med("integrate", 1), 3),
         "kernel_cpu_s": round(alone["kernel_cpu_s"], 3),
         "write_cpu_s": round(alone["write_cpu_s"], 3),
