@@ -32,8 +32,8 @@ from out_of_core import generate
 
 from chronocl.core.budget import parse_memory
 
-# This file is named like the dask package: keep its folder off the path (and off the path
-# that spawned workers inherit) from here on.
+# The spawned workers inherit the path: bench/ stays off it from here on (a module of it
+# named like one they import would hide that; tests/test_suite_rules.py checks none is).
 HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != HERE]
 

@@ -65,7 +65,7 @@ from ooc_stages import (
 )
 
 from chronocl.core.budget import parse_memory
-from chronocl.data.chunk_reads import read_steps
+from chronocl.data.chunk_reads import DirectChunks, read_steps
 from chronocl.data.series import open_series, write_series
 from chronocl.data.writer import COMPRESSORS
 from chronocl.integration.runs import stages
@@ -107,7 +107,7 @@ def read_all(store: Path, direct: bool = False, parallel: bool = False) -> float
     """Seconds to read every step of the store with plain zarr, whole steps into one buffer
     (`direct`: through chronocl's own decode of the chunks, `chronocl.data.chunk_reads`, one
     after another; `parallel`: that decode on every host thread, `PARALLEL_STEPS` steps at a
-    time, as the integration's reads run; NaN where the store's chunks do not allow it).
+    time, as the integration's reads run, where the store's chunks allow it).
 
     Decoding into a buffer that is reused, as the integration does, is zarr's fastest plain
     read: `arr[t]` into a fresh array each step is up to 3x slower in a fresh process, which
@@ -126,7 +126,7 @@ def read_all(store: Path, direct: bool = False, parallel: bool = False) -> float
         for first in range(0, arr.shape[0], k):
             steps = range(first, min(arr.shape[0], first + k))
             if not read_steps(store, arr, steps, 0, arr.shape[1], brick[:, : len(steps)]):
-                return float("nan")
+                raise RuntimeError("the store's chunks cannot be decoded directly")
         return time.perf_counter() - t0
     t0 = time.perf_counter()
     for t in range(arr.shape[0]):
@@ -279,7 +279,9 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
     def read_parallel() -> None:
         read_all(store, parallel=True)
 
-    readers = {"read": read, "read_direct": read_direct, "read_parallel": read_parallel}
+    readers = {"read": read, "read_direct": read_direct}
+    if DirectChunks.of(series._zarr) is not None:  # else chronocl reads through zarr
+        readers["read_parallel"] = read_parallel
     runs: dict[str, list[tuple[float, float]]] = {name: [] for name in (*readers, "integrate")}
     inside: list[dict] = []  # each streamed run's own stage times
     for warm in (*readers.values(), integrate):  # warm-up: page cache, kernels, this heap
@@ -296,9 +298,8 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
         return statistics.median(r[k] for r in runs[name])
 
     # The store read: the fastest of zarr's plain read and chronocl's own decode of the chunks,
-    # serial or parallel (a store the parallel decode cannot read times NaN: not chosen).
-    times = {name: med(name, 0) for name in readers}
-    reader = min((n for n in readers if times[n] == times[n]), key=times.__getitem__)
+    # serial or parallel.
+    reader = min(readers, key=lambda name: med(name, 0))
     read_s, int_s = med(reader, 0), med("integrate", 0)
     for impl, name, extra in (
         ("zarr-read", "read", {}),
@@ -319,7 +320,7 @@ def measure(args, comp: str, budget: int, data_bytes: int, repeats: int, tmp: Pa
             },
         ),
     ):
-        if med(name, 0) != med(name, 0):  # NaN: a read the store's chunks do not allow
+        if name not in runs:  # the parallel decode, where the chunks do not allow it
             continue
         emit(
             {

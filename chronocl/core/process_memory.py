@@ -9,8 +9,10 @@ under the limit, and the steps are what gives way:
 
 - before each frame and each step read, steps read ahead or kept from older windows are
   dropped and the pages of free slots handed back, until the resident steps plus what the
-  frames need fit the limit (`fit`); the memory of dead outputs kept for the next frames
-  (`chronocl.core.memory.spares`) goes last, where that brings the process within it;
+  frames need fit the limit (`fit`). The memory of dead outputs kept for the next frames
+  (`chronocl.core.memory.spares`) counts as the frames': the next frame takes it again, so
+  dropping it would lower no peak and fault as much in afresh (about 1 s for 1 GB at 512^3);
+  what nobody takes goes back after `SPARE_SECONDS`;
 - what the frames need is what the process holds beside its steps now or after any of the last
   frames, whichever is more (before the first frame: `floor`, what the clients' views expect
   theirs to hold, `expect`);
@@ -32,7 +34,6 @@ from contextlib import contextmanager
 from typing import Protocol
 
 from chronocl.core.budget import resident_bytes
-from chronocl.core.memory import spares
 
 RECENT_FRAMES = 8  # frames whose memory beside the steps is kept in mind (`need`)
 
@@ -106,15 +107,6 @@ class ProcessLimit:
                 break
             holder.shed(over, ahead, wait=caller is None or holder is caller)
             over = extra - self.room()
-        if over > 0 and spares.maps:
-            # Dead outputs' memory kept for the next frames goes last, and only where that
-            # brings the process within its limit: the next frame takes as much again (fresh
-            # pages, about 1 s to fault in 1 GB at 512^3 in max), so dropping it each frame
-            # while over would cost time and lower no peak.
-            within = self.total - self.steps() - (self.beside() - spares.nbytes) >= extra
-            if within:
-                spares.clear()
-                over = extra - self.room()
         self.over = max(0, over)
         return self.over
 

@@ -169,8 +169,7 @@ class WindowManager:
             steps = [s for s in self._cache if s not in keep]
             if self._served == self.generation:
                 # The last window was handed out: a session showing it holds its arrays (kept
-                # below); one nobody holds any more (its client gone, a coarse level no view
-                # shows) goes last.
+                # below); one nobody holds any more (its client gone) goes last.
                 steps += [s for s in self._cache if s in self._wanted]
             for step in steps:
                 if freed >= nbytes:
@@ -272,6 +271,12 @@ class WindowManager:
         """Rows [z0, z1) of resident steps as an xytz brick (z1 - z0, W, Y, X)."""
         arrays = dict(zip(steps, self.get(steps), strict=True))
         return ResidentBricks(arrays, in_place=False).read(steps, z0, z1)
+
+    def let_go(self) -> None:
+        """Whoever asked for the last window is gone (a viewer's client left, or left the data
+        set): its steps may give way once nobody holds them, as a window handed out does."""
+        with self._lock:
+            self._served = self.generation
 
     def close(self) -> None:
         with self._lock:

@@ -1,5 +1,6 @@
-"""Which steps each view holds in memory, for the page's timeline: resident, being fetched, or
-not loaded.
+"""Which steps are in memory for each view's data set, for the page's timeline: resident,
+being fetched, or not loaded. The level-0 managers are the server's, shared by every client
+(`view_sessions.SharedSteps`): a step another tab holds shows as resident, as it is.
 
 While a socket is open, `report_steps` asks the full-resolution (level 0) window manager of
 each view's session for its `state()` every `POLL_S` seconds and, when it changed, sends

@@ -16,7 +16,7 @@ from contextlib import nullcontext
 
 from chronocl.core import process_memory
 from chronocl.core.budget import human
-from chronocl.core.errors import SupersededError
+from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
@@ -55,17 +55,22 @@ class SharedSteps:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._by_dataset: dict[int, dict[tuple[int, str], WindowManager]] = {}
+        self._closed = False
 
     def of(self, dataset: int) -> dict[tuple[int, str], WindowManager]:
         """The managers of data set `dataset` (sessions add to it under INTEGRATE_LOCK)."""
         with self._lock:
+            if self._closed:
+                raise InvalidParameterError("the viewer is stopping; its steps were let go")
             return self._by_dataset.setdefault(dataset, {})
 
     def close(self) -> None:
-        with self._lock:
-            groups, self._by_dataset = list(self._by_dataset.values()), {}
-        for managers in groups:
-            for m in managers.values():
+        """Close every manager; under INTEGRATE_LOCK, so that no session adds one meanwhile."""
+        with INTEGRATE_LOCK, self._lock:
+            self._closed = True
+            managers = [m for group in self._by_dataset.values() for m in group.values()]
+            self._by_dataset = {}
+            for m in managers:
                 m.close()
 
 
@@ -234,7 +239,13 @@ class Views:
             limit.expect(self, 0)
 
     def _close_managers(self) -> None:
-        """Let go of the data set's managers: closed where they are this client's own."""
-        self._managers = {}
+        """Let go of the data set's managers: closed where they are this client's own; shared,
+        the window this client asked for last may give way (`WindowManager.let_go`)."""
+        managers, self._managers = list(self._managers.values()), {}
         if self._own:
             self._shared.close()
+            self._shared = SharedSteps()
+            return
+        with INTEGRATE_LOCK:  # no other client is between its request and its result
+            for m in managers:
+                m.let_go()
