@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import statistics
 import sys
 
 from chronocl.core.timing import race  # noqa: F401  (the benchmarks import it from here)
@@ -56,3 +57,18 @@ def volume_args(doc: str):
     args = parser.parse_args()
     n = args.size or (128 if args.quick else 256)
     return args, (n, n, n), args.repeats or (3 if args.quick else 5)
+
+
+def percentiles(ms: list[float], digits: int = 1) -> dict:
+    """The count, p50, p95 and max of times in ms (the p95: the sample nearest 95 % up),
+    rounded to `digits` decimals."""
+    if not ms:
+        return {"n": 0}
+    ordered = sorted(ms)
+    p95 = ordered[min(len(ordered) - 1, round(0.95 * (len(ordered) - 1)))]
+    return {
+        "n": len(ms),
+        "p50": round(statistics.median(ordered), digits),
+        "p95": round(p95, digits),
+        "max": round(ordered[-1], digits),
+    }

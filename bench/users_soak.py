@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import random
 import re
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -36,7 +35,7 @@ from types import SimpleNamespace
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import emit, env_record
+from common import emit, env_record, percentiles
 from latency_client import WINDOW, Client, Edits, sharp
 from viewer_latency import make_store
 
@@ -156,19 +155,6 @@ class Soak:
         self.times[kind].append(1e3 * (time.perf_counter() - self.c.sent[rid]))
 
 
-def percentiles(ms: list[float]) -> dict:
-    if not ms:
-        return {"n": 0}
-    ordered = sorted(ms)
-    p95 = ordered[min(len(ordered) - 1, round(0.95 * (len(ordered) - 1)))]
-    return {
-        "n": len(ms),
-        "p50": round(statistics.median(ordered), 1),
-        "p95": round(p95, 1),
-        "max": round(ordered[-1], 1),
-    }
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--actions", type=int, default=500, help="random actions (500)")
@@ -191,14 +177,13 @@ def main() -> None:
                 kind = soak.rng.choice(KINDS)
                 before = vm_hwm_mb(server.proc.pid)
                 soak.act(kind)
-                if server.proc.poll() is None:
-                    rise = vm_hwm_mb(server.proc.pid) - before
-                    rises[kind] += rise
-                    if rise > 0:
-                        peak_after = f"{kind} (action {k})"
                 if server.proc.poll() is not None:
                     crashed = f"after action {k} ({kind}): exit {server.proc.returncode}"
                     break
+                rise = vm_hwm_mb(server.proc.pid) - before
+                rises[kind] += rise
+                if rise > 0:
+                    peak_after = f"{kind} (action {k})"
                 if k % 25 == 0:
                     print(
                         f"{k}/{args.actions} actions, {time.perf_counter() - t0:.0f} s",
