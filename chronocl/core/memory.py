@@ -104,11 +104,6 @@ class _Spares:
             self._expiry = None
             self.maps.clear()
 
-    @property
-    def nbytes(self) -> int:
-        with self.lock:
-            return sum(len(m) for m in self.maps)
-
     def clear(self) -> None:
         with self.lock:
             self.maps.clear()
