@@ -254,3 +254,78 @@ def test_managers_sharing_a_limit_read_at_once_without_waiting_on_each_other():
     finally:
         for m in managers:
             m.close()
+
+
+def _held_steps(wm: WindowManager) -> list[int]:
+    """The steps a session holds: all that is left once everything that may give way did."""
+    wm.shed(1 << 60)
+    return wm.resident()
+
+
+def test_a_mode_switch_leaves_the_window_to_the_new_pooling_s_session():
+    """Each pooling has its own level-0 session over one manager: the one a mode switch left
+    let go of its window, so that a jump's read did not find three windows held (the soak at
+    512^3 held 3 x 5 GB after switching between alpha, max and min)."""
+    from chronocl.integration.interactive.session import Session
+
+    managers: dict = {}
+    with Session(series_of(10), level="auto", managers=managers, memory=10 * STEP) as s:
+        s.set_window(0, 3)
+        s.refine()  # a coarse level first, then full resolution
+        for mode in ("max", "min", "alpha"):
+            s.set_spec(mode=mode)
+            s.refine()
+        s.set_window(6, 9)
+        s.refine()
+        assert _held_steps(managers[(0, "")]) == [6, 7, 8]
+        s.set_spec(mode="max")  # the window shown again by another pooling: read no more
+        s.refine()
+        assert _held_steps(managers[(0, "")]) == [6, 7, 8]
+        assert managers[(0, "")].reads.most_common(1)[0][1] == 1
+
+
+def test_a_slid_window_holds_only_its_own_steps():
+    """Incremental slides kept the first window's arrays in the session's bricks: slid five
+    times, the five steps that left stayed held and could not give way."""
+    from chronocl.core.time_tf import TimeTF
+    from chronocl.integration.inmemory import make_spec
+    from chronocl.integration.interactive.session import Session
+
+    spec = make_spec("alpha", time_tf=TimeTF.preset("warm-cool", positions="absolute"))
+    managers: dict = {}
+    with Session(series_of(10), managers=managers, memory="1GB", spec=spec) as s:
+        s.set_window(0, 4)
+        for _ in range(3):
+            s.slide(1)
+            assert s.stats["path"] == "incremental"
+        assert _held_steps(managers[(0, "")]) == [3, 4, 5, 6]
+
+
+def test_views_jumping_together_let_go_of_the_old_window_before_reading(monkeypatch):
+    """Two views of one window jump to steps it does not share: the second let go of the old
+    window before the first read the new one (else both windows were held at once)."""
+    from chronocl.viewer.datasets import Dataset
+    from chronocl.viewer.view_sessions import Views
+    from chronocl.viewer.view_state import default_state, merge
+
+    series = series_of(10)
+    held_at_reads: list[list[int]] = []
+    request = WindowManager.request
+
+    def noting(wm, steps, direction=0):
+        held_at_reads.append(_held_steps(wm))
+        return request(wm, steps, direction)
+
+    views = Views([Dataset("d", series)], "opencl", None, "1GB")
+    try:
+        state = merge(default_state(0, series), {"window": {"t0": 0, "t1": 3}}, 10)
+        state = merge(state, {"views": [{"mode": "alpha"}, {"mode": "max"}]}, 10)
+        views.chronovolumes(state)
+        views.full_resolution(range(2))  # coarse frames first; both views hold level 0's steps
+        monkeypatch.setattr(WindowManager, "request", noting)
+        views.chronovolumes(merge(state, {"window": {"t0": 6, "t1": 9}}, 10))
+        views.full_resolution(range(2))
+        assert len(held_at_reads) >= 4  # each view's coarse read and its refine's
+        assert all(not set(h) & {0, 1, 2} for h in held_at_reads), held_at_reads
+    finally:
+        views.release()

@@ -118,6 +118,10 @@ class Views:
             voxels = math.prod(series.volume_shape) * len(state.views)
             limit.expect(self, FRAME_VOXEL_BYTES * voxels)
             limit.fit()
+        with INTEGRATE_LOCK:  # a view jumping lets go first, not after another view's read
+            for i, slot in enumerate(self.slots[: len(state.views)]):
+                if slot.session is not None:
+                    slot.session.leaving(state.selection(series.n_steps, i))
         cvs = []
         for i in range(len(state.views)):
             slot = self.slots[i]

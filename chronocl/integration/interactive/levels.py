@@ -116,6 +116,8 @@ class FixedLevel(Protocol):
 
     def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume: ...
 
+    def leaving(self, selection: Selection) -> None: ...
+
 
 class AutoSession:
     """A session that draws each window at the finest level predicted to meet `target_ms`
@@ -201,6 +203,12 @@ class AutoSession:
             "refining": level > 0,
         }
         return cv
+
+    def leaving(self, selection: Selection) -> None:
+        """`selection` is shown next: each level lets go of a window sharing no step with it
+        (`Session.leaving`)."""
+        for s in self.pool.sessions.values():
+            s.leaving(selection)
 
     def refine(self) -> Chronovolume | None:
         """The full-resolution chronovolume of what was last shown coarse (None when the last

@@ -206,11 +206,28 @@ class Session:
         """The level of the last chronovolume returned (0: full resolution)."""
         return self.level
 
+    def leaving(self, selection: Selection) -> None:
+        """`selection` is shown next: where it shares no step with the window held, nothing of
+        that window helps, so it is let go now, before another view reads `selection` (two
+        views jumping together held the old window while the first read the new one)."""
+        if self.selection is not None and not set(self.selection.steps) & set(selection.steps):
+            self.set_aside()
+
+    def set_aside(self) -> None:
+        """Hold nothing of the window: another pooling's session of this level shows it now.
+        Its steps stay resident in the shared manager but may give way; its chronovolume,
+        sliding state and device copies go (shown again, the window integrates anew)."""
+        self._device.release()
+        self._hold({})
+        self._bricks.forget()
+        self._slider = None
+        self._cv = None
+
     def close(self) -> None:
         if self._owns_manager:
             self.manager.close()
         self._device.release()
-        self._arrays = {}
+        self._hold({})
         self._bricks.forget()
         self._slider = None
 
@@ -233,7 +250,7 @@ class Session:
         self._device.release()  # its steps are the other pooling's
         self._device = DeviceWindow(self.engine, self.series)
         self.manager = WindowManager(self.series, self.budget, prefetch=self._prefetch)
-        self._arrays = {}
+        self._hold({})
         self._bricks.forget()
         self.selection = None
 
@@ -259,7 +276,7 @@ class Session:
             zip(selection.steps, self.manager.get(selection.steps, direction), strict=True)
         )
         leaving = {s: a for s, a in self._arrays.items() if s not in arrays}
-        self._arrays = arrays
+        self._hold(arrays)
         self.selection = selection
         slider = self._slider
         path = "reintegrate"
@@ -270,7 +287,6 @@ class Session:
             self._slider, path = slider, "incremental"
         else:
             job = window_job(self.series, selection, self.spec)
-            self._bricks.arrays = self._arrays  # its `keep` was decided above
             bricks = self._device.bricks(self._arrays, selection.width) or self._bricks
             # Neither the last chronovolume nor the sliding state holds for this window until
             # the integration below completes (it may be given up: `chronocl.core.interrupt`).
@@ -295,17 +311,23 @@ class Session:
         read, so that their slots take them: held, they left entering steps arrays outside
         the slots' block, and each window holding one was stacked (5 GB copied at 512^3)."""
         wanted = set(selection.steps)
-        self._arrays = {s: a for s, a in self._arrays.items() if s in wanted}
-        self._bricks.arrays = self._arrays
+        self._hold({s: a for s, a in self._arrays.items() if s in wanted})
         self._bricks.forget()
         self._slider = None
+
+    def _hold(self, arrays: dict[int, np.ndarray]) -> None:
+        """The window's step arrays, for the session and its bricks alike: a step either one
+        still held could not give way in the shared manager (`WindowManager._held`)."""
+        self._arrays = arrays
+        self._bricks.arrays = arrays
 
     def _stream(self, selection: Selection, window: int, t: float) -> Chronovolume:
         """A window larger than the budget: integrated z-slab by z-slab from the store, each
         slab's brick a quarter of the budget at most (nothing resident, no sliding)."""
         job = window_job(self.series, selection, self.spec)
         rows = max(1, self.budget // (4 * max(1, job.row_bytes)))
-        self._arrays, self._slider, self.selection, self._cv = {}, None, selection, None
+        self._slider, self.selection, self._cv = None, selection, None
+        self._hold({})
         self._bricks.forget()
         self._cv = integrate_bricks(
             job, self.engine, SeriesBricks(self.series), slab=rows, display=self.display
@@ -351,6 +373,11 @@ class SessionPool:
     def session(self, level: int, spec: IntegrationSpec) -> Session:
         """The session of `level` for `spec`'s pooling."""
         key = (level, spec.integration.pool)
+        # Another pooling's session of the level held its window (the same steps at level 0)
+        # after a mode switch: a jump then read the new window beside it, over the limit.
+        for other, s in self.sessions.items():
+            if other != key and other[0] == level:
+                s.set_aside()
         if key not in self.sessions:
             o = self.setup
             # Coarse levels hold 1/8 of the voxels of the next finer one or less.

@@ -72,13 +72,23 @@ class Leaves:
         self.mode = spec.integration
         self.value_range = value_range
         self.inverts = self.mode.slides == "invert"
-        self.arrays: dict[int, np.ndarray] = {}  # step -> its resident (Z, Y, X) values
         # Read in place where the engine can and the steps lie in one block (the window
         # manager's slots), else stacked.
         self.bricks = ResidentBricks({}, in_place=bool(getattr(engine, "reads_in_place", False)))
         self.before: dict[int, tuple[int, ...]] = {}  # leaf -> the earlier steps it spans
         self._full: dict[int, Partial] = {}
         self.pieces, self.total = 0, 0  # a slide's leaves and combines so far, and about all
+
+    @property
+    def arrays(self) -> dict[int, np.ndarray]:
+        """step -> its resident (Z, Y, X) values, held by the bricks read from them alone: a
+        copy kept elsewhere held the leaving steps after a slide, and they could not give way
+        (`chronocl.data.window.WindowManager._held`)."""
+        return self.bricks.arrays
+
+    @arrays.setter
+    def arrays(self, arrays: dict[int, np.ndarray]) -> None:
+        self.bricks.arrays = arrays
 
     def tick(self) -> None:
         """Between two pieces of a slide (a leaf, a combine): given up here once newer input
@@ -94,7 +104,6 @@ class Leaves:
         self.tick()
         steps = (*self.before.get(step, ()), step) if self.mode.leaf_span > 1 else (step,)
         arrays = [self.arrays[s] for s in steps]
-        self.bricks.arrays = self.arrays
         positions = self.spec.time_tf.positions_of(list(steps), self.n_steps)
         spec, value_range, dc = self.spec, self.value_range, self.dc
         if dc is not None:  # from the steps on the device, into device arrays
