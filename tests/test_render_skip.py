@@ -107,11 +107,34 @@ def sparse_chronovolume(shape, seed: int, blobs: int = 4) -> chronocl.Chronovolu
     return chronocl.Chronovolume(rgba, None, {"spacing": spacing})
 
 
+def hollow_chronovolume(shape, seed: int) -> chronocl.Chronovolume:
+    """A translucent box of varied colour with an empty brick inside: voxels 7-16 along every
+    axis are empty, so the bricks of voxels 8-15 (grown by a voxel) are skipped, and every ray
+    through them lands on coloured samples (voxels 6 and 17 on), where a skip one sample late
+    changes the picture (random blobs only sometimes put colour there)."""
+    rng = np.random.default_rng(seed)
+    idx = np.indices(shape)
+    hole = np.all((idx >= 7) & (idx < 17), axis=0)
+    alpha = np.where(hole, 0, rng.uniform(0.02, 0.15, shape)).astype(np.float32)
+    rgb = rng.random((*shape, 3), dtype=np.float32) * alpha[..., None]
+    rgba = np.concatenate([rgb, alpha[..., None]], axis=-1)
+    spacing = dict(zip("xyz", rng.uniform(0.6, 1.4, 3).tolist(), strict=True))
+    return chronocl.Chronovolume(rgba, None, {"spacing": spacing})
+
+
 @pytest.mark.parametrize(
-    "shape,seed", [((19, 27, 35), 1), ((40, 9, 23), 2), ((33, 33, 17), 3), ((8, 16, 24), 4)]
+    "shape,seed,hollow",
+    [
+        ((19, 27, 35), 1, False),
+        ((40, 9, 23), 2, False),
+        ((33, 33, 17), 3, False),
+        ((8, 16, 24), 4, False),
+        ((25, 26, 24), 5, True),
+        ((24, 31, 27), 6, True),
+    ],
 )
-def test_skipping_draws_the_unskipped_picture(rc, shape, seed):
-    cv = sparse_chronovolume(shape, seed)
+def test_skipping_draws_the_unskipped_picture(rc, shape, seed, hollow):
+    cv = (hollow_chronovolume if hollow else sparse_chronovolume)(shape, seed)
     volumes = [rc.upload(cv), rc.upload(cv, "f1", nearest=True)]
     try:
         for vol in volumes:
