@@ -6,6 +6,8 @@ already faulted in, instead of a fresh map whose every page faults on first writ
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import mmap
 import os
 import threading
@@ -178,11 +180,27 @@ def is_aligned(a: np.ndarray, align: int = ALIGN) -> bool:
     return a.ctypes.data % align == 0
 
 
-def _advise_rows(a: np.ndarray, advice: int, inward: bool) -> bool:
+def _libc_madvise():
+    """libc's madvise through ctypes, which lets go of the GIL for the call (CPython's
+    `mmap.madvise` holds it: a 1 MB MADV_POPULATE_WRITE takes about 10 ms here, and every
+    other thread waited for each); None where there is none."""
+    try:
+        fn = ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True).madvise
+    except (OSError, AttributeError):
+        return None
+    fn.argtypes = (ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int)
+    fn.restype = ctypes.c_int
+    return fn
+
+
+_MADVISE = _libc_madvise()
+
+
+def _advise_rows(a: np.ndarray, advice: int, inward: bool, between=None) -> bool:
     """madvise(`advice`) over the pages under each row of `a` (a view of an `aligned_empty`
     memory map, rows of it contiguous): the whole pages inside a row where `inward`, else every
-    page a row touches. False where `a` is not mapped or the kernel refuses (an older kernel,
-    no madvise, out of memory)."""
+    page a row touches; `between()` is called before each row. False where `a` is not mapped
+    or the kernel refuses (an older kernel, no madvise, out of memory)."""
     owner = a
     while isinstance(owner, np.ndarray):
         owner = owner.base
@@ -195,12 +213,18 @@ def _advise_rows(a: np.ndarray, advice: int, inward: bool) -> bool:
     page = mmap.PAGESIZE
     try:
         for row in rows:
+            if between is not None:
+                between()
             lo = row.ctypes.data - start
             hi = lo + row.nbytes
             first = -(-lo // page) * page if inward else lo - lo % page
             end = hi // page * page if inward else hi  # madvise rounds a length up
-            if end > first:
+            if end <= first:
+                continue
+            if _MADVISE is None:
                 owner.madvise(advice, first, end - first)
+            elif _MADVISE(start + first, end - first, advice) != 0:
+                return False
     except (OSError, ValueError, AttributeError):
         return False
     return True
@@ -213,9 +237,11 @@ def discard(a: np.ndarray) -> bool:
     return _advise_rows(a, MADV_FREE_SHARED, inward=True)
 
 
-def prefault(a: np.ndarray) -> bool:
+def prefault(a: np.ndarray, between=None) -> bool:
     """Fault in the pages under `a` (a view of an `aligned_empty` memory map, rows of it
     contiguous) without changing what they hold, so a later first write finds them mapped:
     a fresh 512 MB takes 0.2-0.3 s to fault here, and up to 2 s on a virtual machine whose
-    host returns freed memory. False where the array is not mapped or the kernel cannot."""
-    return _advise_rows(a, MADV_POPULATE_WRITE, inward=False)
+    host returns freed memory. A row at a time, `between()` called before each (background
+    warms yield to frames there: `chronocl.core.foreground`). False where the array is not
+    mapped or the kernel cannot."""
+    return _advise_rows(a, MADV_POPULATE_WRITE, inward=False, between=between)

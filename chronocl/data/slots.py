@@ -33,6 +33,7 @@ from concurrent.futures import Future
 
 import numpy as np
 
+from chronocl.core import foreground
 from chronocl.core.budget import resident_bytes
 from chronocl.core.memory import aligned_empty, discard, prefault
 
@@ -150,7 +151,7 @@ class StepSlots:
             if self._block is None or j not in self._warm:
                 return
             slot = self._block[:, j]
-        prefault(slot)
+        prefault(slot, between=foreground.yield_to_frames)
         with self._lock:  # released meanwhile (a process limit): its pages go again
             if j not in self._warm and j in self._free:
                 discard(slot)

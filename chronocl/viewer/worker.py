@@ -23,7 +23,7 @@ from collections import deque
 from collections.abc import Callable
 
 from chronocl import modes
-from chronocl.core import process_memory
+from chronocl.core import foreground, process_memory
 from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.core.interrupt import interruptible
 from chronocl.data.chronovolume import Chronovolume
@@ -236,11 +236,13 @@ class ClientWorker(Tasks):
                 refine = self._refine_at is not None and self._refine_at <= time.monotonic()
             try:
                 if pending is not None:
-                    self._render(*pending)
+                    with foreground.working():  # memory warms pause meanwhile
+                        self._render(*pending)
                 elif task is not None:
                     self._do_task(*task)
                 elif refine:
-                    self._refine()
+                    with foreground.working():
+                        self._refine()
                 else:
                     self._prepare()
             except Exception as exc:  # reported to the client; the worker keeps serving
