@@ -2,14 +2,16 @@
 
 Each case generates the built-in vortex into a chronocl store with its coarse levels and serves
 it from a viewer server on a thread of this process. A WebSocket client (bench/latency_client.py)
-opens it as the page does (open, then the panel size), makes the time positions absolute and
-times:
+opens it as the page does (open, then the panel size; the page cache dropped first where this
+process may, else the summary says `page_cache: hot`), keeps the viewer's default time TF
+(relative positions) and times:
 
 - open -> the first full-resolution ("sharp") frame. A frame is sharp when its header says
   level 0 and not `reduced` (drawn smaller than the panel for the latency target);
 - data-TF edits (an opacity control point moved, the fitted range kept, as the page sends
-  them; every edit a value no edit before it had, warm-up included: none is a cache hit): to
-  the first frame and to the sharp frame; then in every mode: the switch to it, the first edit
+  them; every edit a value no edit before it had: none is a cache hit): the first COLD_EDITS
+  right after the open, with no warm-up ("cold"), then the others ("warm"), each to the first
+  frame and to the sharp frame; then in every mode: the switch to it, the first edit
   after the switch (where max/min/first_hit/change prepare their winners) and later edits,
   each to its sharp frame;
 - scrub steps (the window slid by one step, each sent when the last one's frame came, at
@@ -23,8 +25,10 @@ times:
 
 The sharp frames' split (integrate / read-back / upload / render / encode) comes from the frame
 headers; read-back is null while the server counts it inside integrate_ms. The direct baseline
-makes the same edits without server or socket on a resident `Session` holding the same window
-under the same memory budget: set_spec, upload (the viewer's), draw, JPEG, each timed.
+makes the same edits without server or socket on a resident level-0 `Session` holding the same
+window under the same memory budget, built with the viewer's options (RGBA8 output from the
+kernels, the viewer's direct-integration bound): set_spec, upload (the viewer's), draw, JPEG,
+each timed.
 
 Cases: by default 128^3, 256^3 (float32, 20 steps) and 512^3 (uint8, 12 steps), a 10-step
 window, a 512x512 panel, a 12GB budget, the direct baseline at 128^3. `--users` runs the users'
@@ -40,7 +44,10 @@ and reuses them.
 Summary keys (per size; under `users` for --users): `first_frame_ms`, `full_res_ms` (TF edit ->
 sharp frame), `max_full_res_ms`, `modes` (per mode `switch_ms`, `first_edit_ms`, `edit_ms`; for
 max, min, first_hit and change `first_edit_after_look_ms`, the first edit LOOK_S after a switch),
-`open_full_res_ms`, `open_first_frame_ms`,
+`open_full_res_ms`, `open_first_frame_ms`, `page_cache` ("dropped" or "hot" at the open),
+`cold_full_res_ms` / `warm_full_res_ms` (p50, p95, max of the sharp frames after the cold and
+the warm edits), `all_full_res_ms` (of all of them together), `cold_over_warm` (the p50s'
+ratio; target <= 1.5),
 `scrub_first_frame_ms`, `scrub_incremental` ("k/n"), `scrub_stall_ms`, `scrub_stop_full_res_ms`,
 `refine_input_wait_ms` (longest; `refine_probes_in_refine` "k/n"), `first_frame_level`,
 `full_res_split_ms` (`full_split`), `integrate_gvoxel_steps_s` (the full-resolution integration
@@ -65,7 +72,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import emit, env_record
+from common import emit, env_record, percentiles
 from latency_client import WINDOW, Client, Edits, refine_probes, scrub, scrub_stops, sharp, tf_edits
 
 from chronocl import modes
@@ -82,7 +89,7 @@ BENCH = "viewer_latency"
 # `first_edit_ms` is the edit sent at once, which gives that gather up and makes its own.
 LOOK_S = 3.0
 USERS_PANEL = (930, 640)  # the view area of a 1400x900 page showing one view
-ABSOLUTE = {"color": "rgb", "positions": "absolute"}
+COLD_EDITS = 3  # the edits right after an open, reported on their own as "cold"
 # Issue 32, "Targets" (here: 2 cores, llvmpipe; gpu_*: on a lent H100 or H200).
 TARGETS = {
     "first_frame_ms": 150,  # every size
@@ -168,16 +175,18 @@ def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, cas
     from chronocl.viewer.fit import fitted_default
     from chronocl.viewer.frames import JPEG_QUALITY, PIXEL_BUDGET, encode, render_size
     from chronocl.viewer.slots import ViewSlot, upload
+    from chronocl.viewer.view_sessions import DIRECT_BELOW_MS
     from chronocl.viewer.view_state import default_state, describe_state, merge
 
     series = open_series(path)
     n = series.n_steps
     state = fitted_default(series, default_state(0, series))
-    state = merge(state, {"size": list(size), "time_tf": ABSOLUTE}, n)
+    state = merge(state, {"size": list(size)}, n)
     edit = Edits(describe_state(state)["data_tf"])
     draw_size = render_size(state.size, 1, 1.0, PIXEL_BUDGET)
     rows = []
-    with gl_context(), Session(series, memory=memory, spec=state.spec(0)) as s:
+    options = {"display": True, "direct_below_ms": DIRECT_BELOW_MS}  # as the viewer's sessions
+    with gl_context(), Session(series, memory=memory, spec=state.spec(0), **options) as s:
         rc, slot = raycaster(), ViewSlot()
         s.show(state.selection(n))
         for k in range(repeats + 1):  # a warm-up first (the kernels are built by `show`)
@@ -207,6 +216,20 @@ def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, cas
     record = {"bench": BENCH, "case": case, "impl": "direct", "op": "tf_edit_full_resolution"}
     emit(record | {"median_ms": med["total_ms"], "repeats": len(rows), "split_ms": med})
     return med
+
+
+def drop_page_cache(path: Path) -> str:
+    """The page cache emptied before an open where this process may (root): "dropped"; else
+    "hot" (the store was read or written lately, and its reads come from memory)."""
+    import os
+
+    os.sync()
+    try:
+        with open("/proc/sys/vm/drop_caches", "w") as f:
+            f.write("1")
+    except OSError:
+        return "hot"
+    return "dropped"
 
 
 def make_store(root: Path, n: int, steps: int, dtype) -> tuple[Path, str]:
@@ -244,17 +267,17 @@ def make_store(root: Path, n: int, steps: int, dtype) -> tuple[Path, str]:
 
 def measure(path: Path, case: str, size, memory, edits: int, scrubs: int) -> dict:
     """Every timed action against a server on the store at `path`."""
+    r: dict = {"page_cache": drop_page_cache(path)}
     series = open_series(path)
     server = ViewerServer(datasets=[Dataset("vortex", series)], memory=memory)
     server.start()
-    r: dict = {}
     try:
         c = Client(server)
         opened = c.open(size)
-        c.request({"type": "update", "time_tf": ABSOLUTE}, full=True)
         edit = Edits(c.dataset["state"]["data_tf"])
-        tf_edits(c, edit, 2)  # warm-up: kernels built, textures allocated, the levels measured
+        _, cold, _ = tf_edits(c, edit, COLD_EDITS)  # no warm-up: kernels, textures, levels
         firsts, fulls, chains = tf_edits(c, edit, edits)
+        r["cold_ms"], r["warm_ms"] = [ms for ms, _ in cold], [ms for ms, _ in fulls]
         r["first"] = summarise("tf_edit_first_frame", firsts, case)
         r["full"] = summarise("tf_edit_full_resolution", fulls, case)
         got, r["stall"] = scrub(c, series.n_steps, scrubs)
@@ -311,6 +334,13 @@ def record_case(summary: dict, key: str, r: dict, n: int, scrubs: int) -> None:
         "max_full_res_ms": r["max"]["median_ms"],
         "open_full_res_ms": r["open"]["median_ms"],
         "open_first_frame_ms": r["open_first_ms"],
+        "page_cache": r["page_cache"],
+        "cold_full_res_ms": percentiles(r["cold_ms"]),
+        "warm_full_res_ms": percentiles(r["warm_ms"]),
+        "all_full_res_ms": percentiles(r["cold_ms"] + r["warm_ms"]),
+        "cold_over_warm": round(
+            statistics.median(r["cold_ms"]) / statistics.median(r["warm_ms"]), 2
+        ),
         "scrub_first_frame_ms": r["scrub"]["median_ms"],
         "scrub_incremental": f"{r['scrub']['incremental']}/{scrubs}",
         "scrub_stall_ms": r["stall"]["ms"],

@@ -113,15 +113,15 @@ class Views:
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
         self.recolouring.ms = self.recolouring.upload_ms = self.slab_upload_ms = 0.0
+        with INTEGRATE_LOCK:  # a view jumping lets go first, not after another view's read
+            for i, slot in enumerate(self.slots[: len(state.views)]):
+                if slot.session is not None:
+                    slot.session.leaving(state.selection(series.n_steps, i))
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the frame
             voxels = math.prod(series.volume_shape) * len(state.views)
             limit.expect(self, FRAME_VOXEL_BYTES * voxels)
             limit.fit()
-        with INTEGRATE_LOCK:  # a view jumping lets go first, not after another view's read
-            for i, slot in enumerate(self.slots[: len(state.views)]):
-                if slot.session is not None:
-                    slot.session.leaving(state.selection(series.n_steps, i))
         cvs = []
         for i in range(len(state.views)):
             slot = self.slots[i]
