@@ -24,8 +24,10 @@ actions set the peak) and `peak_after` (the action that set it, and its number).
 from __future__ import annotations
 
 import argparse
+import json
 import random
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -50,10 +52,11 @@ TIME_COLORS = ("rgb", "warm-cool", "lightness", "luminance")
 WAIT_S = 300.0  # the longest any one action may take before the soak says so and stops
 
 
-def vm_hwm_mb(pid: int) -> float:
-    """The peak resident memory of process `pid` so far, in MB (Linux's VmHWM)."""
+def vm_hwm_mb(pid: int, key: str = "VmHWM") -> float:
+    """The peak resident memory of process `pid` so far, in MB (Linux's VmHWM; `key` VmRSS:
+    the resident memory now)."""
     text = Path(f"/proc/{pid}/status").read_text()
-    return int(re.search(r"VmHWM:\s+(\d+) kB", text).group(1)) / 1024
+    return int(re.search(key + r":\s+(\d+) kB", text).group(1)) / 1024
 
 
 class Server:
@@ -161,6 +164,13 @@ def main() -> None:
     ap.add_argument("--side", type=int, default=512, help="the volume's side (512; 128: a dry run)")
     ap.add_argument("--seed", type=int, default=1, help="the actions' random seed")
     ap.add_argument("--keep", type=Path, default=None, help="keep the store in this folder")
+    ap.add_argument(
+        "--trace",
+        type=Path,
+        default=None,
+        help="a JSON line per action here (its kind, the views, resident and peak MB after it), "
+        "and the server's log beside it (.log)",
+    )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
@@ -171,6 +181,7 @@ def main() -> None:
         soak, crashed, t0 = None, None, time.perf_counter()
         rises: dict[str, float] = dict.fromkeys(KINDS, 0.0)
         peak_after = None
+        trace = None if args.trace is None else open(args.trace, "w")
         try:
             soak = Soak(server, random.Random(args.seed))
             for k in range(args.actions):
@@ -181,6 +192,12 @@ def main() -> None:
                     crashed = f"after action {k} ({kind}): exit {server.proc.returncode}"
                     break
                 rise = vm_hwm_mb(server.proc.pid) - before
+                if trace is not None:
+                    line = {"k": k, "kind": kind, "views": [v["mode"] for v in soak.views]}
+                    line["rss_mb"] = round(vm_hwm_mb(server.proc.pid, "VmRSS"))
+                    line["peak_mb"] = round(before + rise)
+                    trace.write(json.dumps(line) + "\n")
+                    trace.flush()
                 rises[kind] += rise
                 if rise > 0:
                     peak_after = f"{kind} (action {k})"
@@ -195,6 +212,9 @@ def main() -> None:
             peak = vm_hwm_mb(server.proc.pid) if server.proc.poll() is None else None
             logged = server.internal_errors()
             code = server.stop()
+            if trace is not None:
+                trace.close()
+                shutil.copyfile(server.log, args.trace.with_suffix(".log"))
         errors = (soak.errors if soak else []) + logged
         record = {
             "bench": BENCH,

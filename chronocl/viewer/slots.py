@@ -37,7 +37,7 @@ class ViewSlot:
     kept: dict = field(default_factory=dict)
 
     def release_gl(self) -> None:
-        self._release_recolour()
+        self.release_recolour()
         if self.volume is not None:
             self.volume.release()
             self.volume = None
@@ -50,7 +50,7 @@ class ViewSlot:
     def swap_volume(self, key: tuple) -> Volume | None:
         """Keep the current texture under its (size, format) and take the one kept for `key`
         (None: none kept); at most `KEPT_TEXTURES` stay besides the current one."""
-        self._release_recolour()  # its winners are the old texture's
+        self.release_recolour()  # its winners are the old texture's
         if self.volume is not None:
             self.kept[(self.volume.texture.size, self.volume.texture.dtype)] = self.volume
         self.volume = self.uploaded = self.written = None
@@ -59,10 +59,16 @@ class ViewSlot:
             self.kept.pop(next(iter(self.kept))).release()
         return vol
 
-    def _release_recolour(self) -> None:
+    def release_recolour(self) -> None:
+        """Free the winners and their outputs (on the GL thread where they are textures)."""
         if self.recolour is not None:
             self.recolour.release()  # type: ignore[attr-defined]
             self.recolour = None
+
+    def forget_frame(self) -> None:
+        """Let go of the chronovolume shown (another window comes: its integration takes the
+        memory); the texture stays, and is written again with the next one."""
+        self.cv = self.uploaded = self.written = None
 
     def drop_session(self) -> None:
         if self.session is not None:

@@ -113,10 +113,15 @@ class Views:
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
         self.recolouring.ms = self.recolouring.upload_ms = self.slab_upload_ms = 0.0
-        with INTEGRATE_LOCK:  # a view jumping lets go first, not after another view's read
+        with INTEGRATE_LOCK:  # views moving let go first, not after another view integrated
             for i, slot in enumerate(self.slots[: len(state.views)]):
                 if slot.session is not None:
-                    slot.session.leaving(state.selection(series.n_steps, i))
+                    sel = state.selection(series.n_steps, i)
+                    if slot.session.selection != sel:
+                        slot.forget_frame()
+                        if slot.recolour is not None:  # the old window's winners: stale
+                            on_gl(lambda rc, s=slot: s.release_recolour())
+                    slot.session.leaving(sel)
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the frame
             voxels = math.prod(series.volume_shape) * len(state.views)
@@ -209,8 +214,13 @@ class Views:
     def full_resolution(self, views: range) -> None:
         """Bring views to full resolution (probes, saves and movies never use a coarse one)."""
         for i in views:
-            if self.slots[i].session is not None:
-                self.refine_slot(self.slots[i])
+            slot = self.slots[i]
+            if slot.session is None:
+                continue
+            if slot.cv is None:  # the frame that moved its window failed: made again
+                with INTEGRATE_LOCK:
+                    slot.cv = slot.session.current()
+            self.refine_slot(slot)
 
     def refine_slot(self, slot: ViewSlot) -> float:
         """The slot's chronovolume at full resolution if it was coarse; the ms it took. A

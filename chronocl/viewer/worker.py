@@ -332,6 +332,8 @@ class ClientWorker(Tasks):
                         return  # newer input: the frame for it comes instead
                     integrate_ms += self.views.refine_slot(slot)
             cvs = [slot.cv for slot in self.views.slots[: len(state.views)]]
+            if any(cv is None for cv in cvs):  # a frame moving the window failed since
+                return
             self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
         except SupersededError:
             return

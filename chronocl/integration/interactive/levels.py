@@ -205,8 +205,10 @@ class AutoSession:
         return cv
 
     def leaving(self, selection: Selection) -> None:
-        """`selection` is shown next: each level lets go of a window sharing no step with it
-        (`Session.leaving`)."""
+        """`selection` is shown next: each level lets go of what no longer helps
+        (`Session.leaving`), and so does this session of its last chronovolume."""
+        if self.selection is not None and selection != self.selection:
+            self._cv = None
         for s in self.pool.sessions.values():
             s.leaving(selection)
 

@@ -207,11 +207,18 @@ class Session:
         return self.level
 
     def leaving(self, selection: Selection) -> None:
-        """`selection` is shown next: where it shares no step with the window held, nothing of
-        that window helps, so it is let go now, before another view reads `selection` (two
-        views jumping together held the old window while the first read the new one)."""
-        if self.selection is not None and not set(self.selection.steps) & set(selection.steps):
+        """`selection` is shown next: the chronovolume of another window is never shown again,
+        so it goes now, before any view integrates (the new one takes its memory); the steps
+        leaving go too unless the window slides incrementally (which reads them), before another
+        view reads `selection` (two views of one window jumping held the old window while the
+        first read the new one, and both old frames: 4 GB over the steady 8.8 at 512^3)."""
+        if self.selection is None or selection == self.selection:
+            return
+        self._cv = None
+        if not set(self.selection.steps) & set(selection.steps):
             self.set_aside()
+        elif not (self._slider is not None and self._slider.can_move_to(selection)):
+            self._let_go(selection)  # integrated anew: the steps leaving help no more
 
     def set_aside(self) -> None:
         """Hold nothing of the window: another pooling's session of this level shows it now.
