@@ -169,7 +169,7 @@ def main() -> None:
         type=Path,
         default=None,
         help="a JSON line per action here (its kind, the views, resident and peak MB after it), "
-        "and the server's log beside it (.log)",
+        "and the server's log beside it (NAME.server.log)",
     )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -177,11 +177,11 @@ def main() -> None:
         root.mkdir(parents=True, exist_ok=True)
         store, case = make_store(root, args.side, STEPS, "float32")
         budget = interactive_memory()  # what the child computes, a moment later
+        trace = None if args.trace is None else open(args.trace, "w")  # before the server
         server = Server(store, Path(tmp) / "server.log")
         soak, crashed, t0 = None, None, time.perf_counter()
         rises: dict[str, float] = dict.fromkeys(KINDS, 0.0)
         peak_after = None
-        trace = None if args.trace is None else open(args.trace, "w")
         try:
             soak = Soak(server, random.Random(args.seed))
             for k in range(args.actions):
@@ -214,7 +214,7 @@ def main() -> None:
             code = server.stop()
             if trace is not None:
                 trace.close()
-                shutil.copyfile(server.log, args.trace.with_suffix(".log"))
+                shutil.copyfile(server.log, args.trace.with_name(args.trace.name + ".server.log"))
         errors = (soak.errors if soak else []) + logged
         record = {
             "bench": BENCH,

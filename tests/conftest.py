@@ -72,15 +72,6 @@ def drawn_text(monkeypatch) -> list[str]:
     return texts
 
 
-# Run first: its cold builds of every kernel go into the run's shared PoCL cache when they
-# pass (test_kernel_build.share_kernel_cache), so later tests load them instead of building.
-FIRST = ("test_kernel_build.py",)
-
-
-def pytest_collection_modifyitems(config, items) -> None:
-    items.sort(key=lambda item: item.path.name not in FIRST)  # stable: the rest keep order
-
-
 # CI sets CHRONOCL_REQUIRE_BROWSER=1: a browser test that skips (no chromium, no playwright)
 # then fails the run instead of passing unseen (issue 45).
 _BROWSER_SKIPS: list[str] = []

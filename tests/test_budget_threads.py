@@ -108,7 +108,16 @@ def peak_growth(store, out, env: dict[str, str]) -> tuple[int, int]:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        env={**os.environ, **env},
+        # Cold kernel caches of its own. With the PoCL cache other OpenCL tests of the run
+        # filled, the child grew by 166-170 MB where it grows by 48 MB cold (its peak read
+        # exactly, VmHWM; the old 1 ms sampler missed it): that warm-cache growth is open
+        # (issue 46's closing note); the budget checked here is the cold one.
+        env={
+            **os.environ,
+            **env,
+            "XDG_CACHE_HOME": str(out.parent / "xdg"),
+            "POCL_CACHE_DIR": str(out.parent / "pocl"),
+        },
     )
     try:
         assert child.stdout.readline().strip() == "ready", child.stderr.read()
@@ -131,6 +140,17 @@ def peak_growth(store, out, env: dict[str, str]) -> tuple[int, int]:
     return int(growth), threads
 
 
+def _clears_refs() -> bool:
+    """Whether this kernel resets the peak resident size (some sandboxes refuse)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(not _clears_refs(), reason="/proc/self/clear_refs cannot reset VmHWM here")
 def test_sixteen_threads_stay_within_the_budget(big_store, tmp_path):
     growth, threads = peak_growth(big_store, tmp_path / "cv.zarr", SIXTEEN)
     assert threads >= 2 * FORCED  # PoCL's and chronocl's threads, at least, did run

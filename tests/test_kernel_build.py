@@ -19,7 +19,6 @@ import re
 import subprocess
 import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -345,26 +344,6 @@ def test_every_kernel_builds_without_warnings_on_a_cold_cache(tmp_path):
         said += json.loads(out)["said"]
         assert err == ""  # clang writes "N warnings generated." straight to fd 2
     assert not said, f"{len(said)} of {len(todo)} builds warned; the first: {said[0]}"
-    for i in range(n):  # the rest of the run builds on them (conftest runs this file first)
-        share_kernel_cache(tmp_path / str(i) / "pocl", Path(os.environ["POCL_CACHE_DIR"]))
-
-
-def share_kernel_cache(built: Path, shared: Path) -> None:
-    """Move the programs PoCL built into `built` into the run's shared cache, each program's
-    folder renamed into place whole (the run's other worker may be reading the cache), those
-    it holds already left as they are."""
-    kcache = built / "kcache"
-    if not kcache.is_dir():
-        return
-    for built_program in kcache.glob("*/*"):
-        to = shared / "kcache" / built_program.relative_to(kcache)
-        if to.exists():
-            continue
-        to.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            built_program.rename(to)  # tmp_path and the cache: both in /tmp
-        except OSError:  # another file system, or another process put it there first
-            continue
 
 
 def test_a_cli_run_on_a_cold_cache_prints_only_its_own_line(tmp_path):

@@ -199,8 +199,9 @@ _MADVISE = _libc_madvise()
 def _advise_rows(a: np.ndarray, advice: int, inward: bool, between=None) -> bool:
     """madvise(`advice`) over the pages under each row of `a` (a view of an `aligned_empty`
     memory map, rows of it contiguous): the whole pages inside a row where `inward`, else every
-    page a row touches; `between()` is called before each row. False where `a` is not mapped
-    or the kernel refuses (an older kernel, no madvise, out of memory)."""
+    page a row touches; `between()` is called before each row, and a false answer stops there.
+    False where `a` is not mapped, the kernel refuses (an older kernel, no madvise, out of
+    memory) or `between` stopped it."""
     owner = a
     while isinstance(owner, np.ndarray):
         owner = owner.base
@@ -213,8 +214,8 @@ def _advise_rows(a: np.ndarray, advice: int, inward: bool, between=None) -> bool
     page = mmap.PAGESIZE
     try:
         for row in rows:
-            if between is not None:
-                between()
+            if between is not None and not between():
+                return False
             lo = row.ctypes.data - start
             hi = lo + row.nbytes
             first = -(-lo // page) * page if inward else lo - lo % page
@@ -242,6 +243,6 @@ def prefault(a: np.ndarray, between=None) -> bool:
     contiguous) without changing what they hold, so a later first write finds them mapped:
     a fresh 512 MB takes 0.2-0.3 s to fault here, and up to 2 s on a virtual machine whose
     host returns freed memory. A row at a time, `between()` called before each (background
-    warms yield to frames there: `chronocl.core.foreground`). False where the array is not
-    mapped or the kernel cannot."""
+    warms yield to frames there: `chronocl.core.foreground`; false: stop). False where the
+    array is not mapped, the kernel cannot, or `between` stopped it."""
     return _advise_rows(a, MADV_POPULATE_WRITE, inward=False, between=between)

@@ -145,13 +145,21 @@ class StepSlots:
         with self._lock:
             heapq.heappush(self._free, i)
 
+    def _warming(self, j: int) -> bool:
+        """Between rows of slot `j`'s warm: wait while a frame is made; whether to go on (not
+        when frames went on for long, nor once a process limit released the slot)."""
+        if not foreground.yield_to_frames():
+            return False
+        with self._lock:
+            return self._block is not None and j in self._warm
+
     def _prefault(self, j: int) -> None:
         """Fault slot `j` in, unless its pages were released since it was to be warmed."""
         with self._lock:
             if self._block is None or j not in self._warm:
                 return
             slot = self._block[:, j]
-        prefault(slot, between=foreground.yield_to_frames)
+        prefault(slot, between=lambda: self._warming(j))
         with self._lock:  # released meanwhile (a process limit): its pages go again
             if j not in self._warm and j in self._free:
                 discard(slot)

@@ -23,7 +23,7 @@ from chronocl.data.window import WindowManager
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.settings import manager_key
 from chronocl.viewer.datasets import Dataset
-from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.gl_thread import gl_submit, on_gl
 from chronocl.viewer.recolouring import Recolouring
 from chronocl.viewer.slab_upload import SlabUpload, pays
 from chronocl.viewer.slots import ViewSlot
@@ -113,6 +113,8 @@ class Views:
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
         self.recolouring.ms = self.recolouring.upload_ms = self.slab_upload_ms = 0.0
+        for slot in self.slots[len(state.views) :]:  # views taken away hold nothing meanwhile
+            slot.drop_session()
         with INTEGRATE_LOCK:  # views moving let go first, not after another view integrated
             for i, slot in enumerate(self.slots[: len(state.views)]):
                 if slot.session is not None:
@@ -120,7 +122,7 @@ class Views:
                     if slot.session.selection != sel:
                         slot.forget_frame()
                         if slot.recolour is not None:  # the old window's winners: stale
-                            on_gl(lambda rc, s=slot: s.release_recolour())
+                            gl_submit(lambda rc, s=slot: s.release_recolour())  # GL runs in turn
                     slot.session.leaving(sel)
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the frame
@@ -135,7 +137,7 @@ class Views:
                 state.quality == "preview"
                 and spec.enhance.kind == "silhouette"
                 and slot.session is not None
-                and slot.cv is not None
+                and slot.session.selection is not None  # it showed one (its frame may be let go)
             ):
                 # Silhouettes follow the camera; while dragging keep the last ones.
                 old = slot.session.spec
@@ -152,8 +154,6 @@ class Views:
             integrate_ms += ms
             incremental = incremental or inc
             cvs.append(cv)
-        for slot in self.slots[len(state.views) :]:
-            slot.drop_session()
         # A GPU session whose window does not fit the device: its steps go up every time.
         whys = (s.session.stats.get("why_not_on_device") for s in self.slots[: len(cvs)])
         self.host_steps_why = next((why for why in whys if why), None)

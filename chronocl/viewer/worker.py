@@ -322,6 +322,8 @@ class ClientWorker(Tasks):
         state = self._shown
         if state is None:
             return
+        if any(slot.cv is None for slot in self.views.slots[: len(state.views)]):
+            return  # a frame moving the window failed since: nothing shown to refine
         t_start, integrate_ms = time.perf_counter(), 0.0
         progress = RefineProgress(self._note, len(state.views))
         try:
@@ -332,8 +334,6 @@ class ClientWorker(Tasks):
                         return  # newer input: the frame for it comes instead
                     integrate_ms += self.views.refine_slot(slot)
             cvs = [slot.cv for slot in self.views.slots[: len(state.views)]]
-            if any(cv is None for cv in cvs):  # a frame moving the window failed since
-                return
             self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
         except SupersededError:
             return

@@ -215,9 +215,7 @@ class Session:
         if self.selection is None or selection == self.selection:
             return
         self._cv = None
-        if not set(self.selection.steps) & set(selection.steps):
-            self.set_aside()
-        elif not (self._slider is not None and self._slider.can_move_to(selection)):
+        if not (self._slider is not None and self._slider.can_move_to(selection)):
             self._let_go(selection)  # integrated anew: the steps leaving help no more
 
     def set_aside(self) -> None:
