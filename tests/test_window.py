@@ -200,7 +200,9 @@ def test_free_slots_are_warmed_once_every_managers_reads_have_paused(monkeypatch
     """A coarse level's manager whose reads paused does not warm its slots beside level 0's
     reads (the refine's, on the same cores): the pause is the process's."""
     faulted = []
-    monkeypatch.setattr(slots_module, "prefault", lambda slot: faulted.append(slot.shape))
+    monkeypatch.setattr(
+        slots_module, "prefault", lambda slot, between=None: faulted.append(slot.shape)
+    )
     monkeypatch.setattr(window_module, "WARM_AFTER_S", 0.0)
     series, gated = gated_series()
     coarse = TimeSeries.from_array(np.ones((8, 2, 8, 8), np.float32))
