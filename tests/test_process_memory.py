@@ -19,6 +19,11 @@ from chronocl.data.window import WindowManager
 
 SHAPE = (32, 256, 256)  # 8 MB a float32 step, rows of 256 KB: whole pages
 STEP = int(np.prod(SHAPE)) * 4
+# A limit half a step above the process as it is: three steps held are 2.5 steps over it. With
+# two steps above, an earlier test's memory freed meanwhile (by the run's other threads, a
+# worker's garbage) lowered what lies beside the steps below the one-step margin: CI saw a
+# window "within" the limit once.
+HALF_STEP = STEP // 2
 
 pytestmark = pytest.mark.skipif(resident_bytes() is None, reason="needs /proc/self/statm")
 
@@ -94,7 +99,7 @@ def test_reads_ahead_stop_at_the_limit_and_older_steps_give_way_to_a_new_window(
 
 def test_a_window_over_the_limit_is_read_whole_and_the_overrun_is_said():
     series = series_of(8)
-    limit = ProcessLimit(resident_bytes() + 2 * STEP)
+    limit = ProcessLimit(resident_bytes() + HALF_STEP)
     with process_memory.limited(limit), WindowManager(series, 8 * STEP, prefetch=2) as wm:
         got = wm.get([1, 2, 3, 4], direction=1)
         assert [int(a[0, 0, 0]) for a in got] == [1, 2, 3, 4]
@@ -131,7 +136,7 @@ def test_a_window_nobody_holds_any_more_gives_way():
     showed it gone, a coarse level no view shows now), is dropped when the process needs the
     room; a window still held, or not yet handed out, is not."""
     series = series_of(6)
-    limit = ProcessLimit(resident_bytes() + 2 * STEP)
+    limit = ProcessLimit(resident_bytes() + HALF_STEP)
     with process_memory.limited(limit), WindowManager(series, 6 * STEP, prefetch=0) as wm:
         held = wm.get([0, 1, 2])
         assert limit.fit() > 0 and wm.resident() == [0, 1, 2]  # shown: kept
@@ -150,7 +155,7 @@ def test_a_window_its_asker_let_go_of_gives_way_before_it_was_handed_out():
     """A client that asked for a window (a coarse frame's read of level 0 for its refine) and
     left before taking it: once let go, the steps give way as a window handed out does."""
     series = series_of(6)
-    limit = ProcessLimit(resident_bytes() + 2 * STEP)
+    limit = ProcessLimit(resident_bytes() + HALF_STEP)
     with process_memory.limited(limit), WindowManager(series, 6 * STEP, prefetch=0) as wm:
         wm.request([0, 1, 2])
         while wm.state()["loading"]:
