@@ -170,13 +170,19 @@ def test_the_viewer_sends_each_views_resident_steps(tmp_path) -> None:
         client.open(0, size=(64, 64))
         rid = client.send({"type": "update", "views": [{"mode": "max"}, {"mode": "alpha"}]})
         client.frame_for(rid)
-        while True:  # messages while steps load first, then the whole window resident
-            _, msg = client.wait("steps", timeout=30)
-            views = msg["views"]
-            if len(views) == 2 and all(
+
+        def whole(views: list) -> bool:
+            return len(views) == 2 and all(
                 v and set(range(1, 11)) <= set(v["resident"]) for v in views
-            ):
-                break
+            )
+
+        # Messages while steps load first, then the whole window resident; that one may come
+        # before the frame (the steps were read for the first view's refine already).
+        seen = [m["views"] for m in client.steps]
+        while not (seen and whole(seen[-1])):
+            _, msg = client.wait("steps", timeout=30)
+            seen.append(msg["views"])
+        views = seen[-1]
         assert views[0] == views[1]  # one manager: the views share the data set's steps
         assert not set(views[0]["resident"]) & set(views[0]["loading"])
     finally:

@@ -124,6 +124,7 @@ class Client:
         url = f"ws://127.0.0.1:{server.port}/ws?token={server.token}"
         self.ws = self._stack.enter_context(connect(url, **kwargs))
         self.next_id = 1
+        self.steps: list[dict] = []  # every "steps" message, skipped by a wait or not
         self.info = self.recv_json()
         assert self.info["type"] == "info"
 
@@ -144,6 +145,8 @@ class Client:
             header, images = unpack_frame(m)
             return "frame", header, images
         d = json.loads(m)
+        if d["type"] == "steps":
+            self.steps.append(d)
         return d["type"], d
 
     def recv_json(self, timeout: float = 60.0) -> dict:
