@@ -17,13 +17,11 @@ from chronocl.core.process_memory import ProcessLimit
 from chronocl.data.slots import StepSlots
 from chronocl.data.window import WindowManager
 
-SHAPE = (32, 256, 256)  # 8 MB a float32 step, rows of 256 KB: whole pages
+# 32 MB a float32 step, rows of 512 KB (whole pages): the limits below stand whole steps from
+# what the process holds, and a test worker's other memory moved by more than the 8 MB steps
+# these tests had (CI saw three of them fail that way, each once)
+SHAPE = (64, 512, 256)
 STEP = int(np.prod(SHAPE)) * 4
-# A limit half a step above the process as it is: three steps held are 2.5 steps over it. With
-# two steps above, an earlier test's memory freed meanwhile (by the run's other threads, a
-# worker's garbage) lowered what lies beside the steps below the one-step margin: CI saw a
-# window "within" the limit once.
-HALF_STEP = STEP // 2
 
 pytestmark = pytest.mark.skipif(resident_bytes() is None, reason="needs /proc/self/statm")
 
@@ -99,7 +97,7 @@ def test_reads_ahead_stop_at_the_limit_and_older_steps_give_way_to_a_new_window(
 
 def test_a_window_over_the_limit_is_read_whole_and_the_overrun_is_said():
     series = series_of(8)
-    limit = ProcessLimit(resident_bytes() + HALF_STEP)
+    limit = ProcessLimit(resident_bytes() + 2 * STEP)
     with process_memory.limited(limit), WindowManager(series, 8 * STEP, prefetch=2) as wm:
         got = wm.get([1, 2, 3, 4], direction=1)
         assert [int(a[0, 0, 0]) for a in got] == [1, 2, 3, 4]
@@ -136,7 +134,7 @@ def test_a_window_nobody_holds_any_more_gives_way():
     showed it gone, a coarse level no view shows now), is dropped when the process needs the
     room; a window still held, or not yet handed out, is not."""
     series = series_of(6)
-    limit = ProcessLimit(resident_bytes() + HALF_STEP)
+    limit = ProcessLimit(resident_bytes() + 2 * STEP)
     with process_memory.limited(limit), WindowManager(series, 6 * STEP, prefetch=0) as wm:
         held = wm.get([0, 1, 2])
         assert limit.fit() > 0 and wm.resident() == [0, 1, 2]  # shown: kept
@@ -155,7 +153,7 @@ def test_a_window_its_asker_let_go_of_gives_way_before_it_was_handed_out():
     """A client that asked for a window (a coarse frame's read of level 0 for its refine) and
     left before taking it: once let go, the steps give way as a window handed out does."""
     series = series_of(6)
-    limit = ProcessLimit(resident_bytes() + HALF_STEP)
+    limit = ProcessLimit(resident_bytes() + 2 * STEP)
     with process_memory.limited(limit), WindowManager(series, 6 * STEP, prefetch=0) as wm:
         wm.request([0, 1, 2])
         while wm.state()["loading"]:
@@ -298,7 +296,10 @@ def test_a_slid_window_holds_only_its_own_steps():
 
     spec = make_spec("alpha", time_tf=TimeTF.preset("warm-cool", positions="absolute"))
     managers: dict = {}
-    with Session(series_of(10), managers=managers, memory="1GB", spec=spec) as s:
+    small = chronocl.TimeSeries.from_array(  # its sliding state: 16 bytes a voxel, 12 times
+        np.stack([np.full((16, 64, 64), i, np.float32) for i in range(10)])
+    )
+    with Session(small, managers=managers, memory="1GB", spec=spec) as s:
         s.set_window(0, 4)
         for _ in range(3):
             s.slide(1)
