@@ -231,10 +231,7 @@ class Session:
     def close(self) -> None:
         if self._owns_manager:
             self.manager.close()
-        self._device.release()
-        self._hold({})
-        self._bricks.forget()
-        self._slider = None
+        self.set_aside()
 
     def __enter__(self) -> Session:
         return self
