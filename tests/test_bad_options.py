@@ -7,12 +7,11 @@ before (no output, no hidden ``.NAME.partial*``, no probe file), and the input s
 file unchanged. Cases that could touch the store (outputs onto, inside or around it) work on
 their own copy.
 
-Start-up costs about 1.5 s of CPU per `python -m chronocl` (chronocl imports zarr, dask and
-xarray), too slow for a hundred cases on two cores. So the cases run grouped: two
-`python -m tests.test_bad_options` processes import chronocl once and fork one child per
-case, which runs `chronocl.cli.main()` (what `python -m chronocl` runs) in the case's
-folder with its own argv, stdout and stderr, and exits with the CLI's code. Each case's
-assertions are still its own test. CHRONOCL_CORPUS_SUBPROCESS=1 runs every case as its own
+Start-up costs about 2 s of CPU per `python -m chronocl` (chronocl imports zarr, dask and
+xarray), too slow for a hundred cases on two cores. So the cases run through the tests' CLI
+server (tests/cli_process.py), which imports chronocl once and forks one child per case: the
+real CLI in the case's folder with its own argv, stdout and stderr. Each case's assertions
+are still its own test. CHRONOCL_CLI_SUBPROCESS=1 runs every case as its own
 `python -m chronocl` instead; the cases that must succeed (paths with spaces and non-ASCII
 characters) always do.
 """
@@ -36,8 +35,8 @@ import pytest
 
 import chronocl
 
-GROUPS = 2  # batch processes at once, one per core
-ONE_PROCESS_PER_CASE = os.environ.get("CHRONOCL_CORPUS_SUBPROCESS") == "1"
+from . import cli_process
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -533,73 +532,13 @@ def _execute(run: Run) -> Run:
     return run
 
 
-def _execute_group(group: list[Run], scratch: Path) -> list[Run]:
-    """The cases of `group` in one `python -m tests.test_bad_options` (a fork per case)."""
-    specs = [
-        {
-            "argv": r.argv,
-            "cwd": str(r.folder),
-            "out": str(scratch / f"{r.case.id}.out"),
-            "err": str(scratch / f"{r.case.id}.err"),
-        }
-        for r in group
-    ]
-    spec_file = scratch / f"group-{group[0].case.id}.json"
-    spec_file.write_text(json.dumps(specs))
-    batch = subprocess.run(
-        [sys.executable, "-m", "tests.test_bad_options", str(spec_file)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=600,
-    )
-    assert batch.returncode == 0, batch.stderr
-    for run, spec in zip(group, json.loads(spec_file.read_text()), strict=True):
-        run.result = subprocess.CompletedProcess(
-            ["chronocl", *run.argv],
-            spec["rc"],
-            Path(spec["out"]).read_text(errors="replace"),
-            Path(spec["err"]).read_text(errors="replace"),
-        )
+def _execute_forked(runs: list[Run]) -> list[Run]:
+    """The cases one after another through the CLI server (a fork each)."""
+    for run in runs:
+        run.result = cli_process.run(run.argv, cwd=run.folder)
         run.folder_after = snapshot(run.folder)
         run.store_after = snapshot(run.store)
-    return group
-
-
-def _run_group(spec_file: str) -> None:
-    """Run each case of `spec_file` in a forked child, as `python -m chronocl` would; record
-    its exit code in the file."""
-    import traceback
-
-    import chronocl.cli  # the imports every case would pay, paid once
-
-    specs = json.loads(Path(spec_file).read_text())
-    for spec in specs:
-        pid = os.fork()
-        if pid == 0:  # the case
-            code = 1
-            try:
-                os.chdir(spec["cwd"])
-                for fd, name in ((1, "out"), (2, "err")):
-                    target = os.open(spec[name], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-                    os.dup2(target, fd)
-                    os.close(target)
-                sys.argv = ["chronocl", *spec["argv"]]
-                try:
-                    chronocl.cli.main()
-                    code = 0
-                except SystemExit as exc:
-                    code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
-                except BaseException:  # as the interpreter would: traceback, exit 1
-                    traceback.print_exc()
-                    code = 1
-            finally:
-                sys.stdout.flush()
-                sys.stderr.flush()
-                os._exit(code)
-        _, status = os.waitpid(pid, 0)
-        spec["rc"] = os.waitstatus_to_exitcode(status)
-    Path(spec_file).write_text(json.dumps(specs))
+    return runs
 
 
 @pytest.fixture(scope="module")
@@ -617,12 +556,10 @@ def runs(request, store, tmp_path_factory) -> dict[str, Run]:
         for c in CASES
         if c.id in wanted and not (c.read_only and READ_ONLY is None)
     ]
-    alone = [r for r in todo if r.case.ok or ONE_PROCESS_PER_CASE]
-    grouped = [r for r in todo if r not in alone]
-    groups = [grouped[i::GROUPS] for i in range(GROUPS) if grouped[i::GROUPS]]
-    scratch = tmp_path_factory.mktemp("streams")
-    with ThreadPoolExecutor(GROUPS) as pool:
-        done = [pool.submit(_execute_group, g, scratch) for g in groups]
+    alone = [r for r in todo if r.case.ok]
+    forked = [r for r in todo if r not in alone]
+    with ThreadPoolExecutor(2) as pool:  # the forks beside the processes of their own
+        done = [pool.submit(_execute_forked, forked)]
         done += [pool.submit(_execute, r) for r in alone]
         for future in done:
             future.result()
@@ -669,7 +606,3 @@ def test_awkward_but_valid_paths_succeed(case: Case, runs: dict[str, Run]):
     assert target.exists(), sorted(run.folder_after or {})
     assert not [k for k in run.folder_after or {} if ".partial" in k or "chronocl-probe" in k]
     assert run.store_after == run.store_before
-
-
-if __name__ == "__main__":
-    _run_group(sys.argv[1])

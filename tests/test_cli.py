@@ -12,15 +12,12 @@ import pytest
 import chronocl
 from chronocl import modes
 
+from . import cli_process
+
 
 def cli(*args: str, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "chronocl", *map(str, args)],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        timeout=120,
-    )
+    """`python -m chronocl *args`, its output captured (tests/cli_process.py)."""
+    return cli_process.run(list(args), cwd=cwd)
 
 
 def assert_one_line_error(result: subprocess.CompletedProcess, needle: str) -> None:
@@ -38,7 +35,9 @@ def test_help_has_examples():
 
     from chronocl.cli import app
 
-    result = cli("--help")
+    result = subprocess.run(
+        [sys.executable, "-m", "chronocl", "--help"], capture_output=True, text=True, timeout=120
+    )
     assert result.returncode == 0 and "Examples" in result.stdout
     for command in ("generate", "ingest", "info", "integrate"):
         sub = CliRunner().invoke(app, [command, "--help"])

@@ -32,6 +32,7 @@ from chronocl.data.timeseries import TimeSeries
 from chronocl.data.verify import verify
 
 from .strategies import examples
+from .test_cli import cli
 
 DTYPES = ("uint8", "uint16", "int16", "float32", "float64")
 SHAPE = (3, 130, 9, 70)  # T, Z, Y, X: levels (65, 5, 35) and (33, 3, 18), odd edges on the way
@@ -443,12 +444,6 @@ def _digest(path: Path) -> dict[str, str]:
         for f in files
         if f.is_file()
     }
-
-
-def cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "chronocl", *args], capture_output=True, text=True, timeout=120
-    )
 
 
 def test_pyramid_cli(tmp_path):
