@@ -23,6 +23,11 @@ from chronocl.engine.program import kernel
 from chronocl.modes.base import Partial
 from chronocl.modes.spec import IntegrationSpec
 
+# Work-items in a group of these kernels, whatever the volume: a driver compiles a kernel once
+# per group size (PoCL: a work-group function each), and left to choose it picks a divisor of
+# each volume's size; the suite's odd shapes made PoCL compile combine_extreme 31 times.
+ELEMENT_GROUP = 64
+
 
 def combine(
     dc: DeviceContext, host_ptr: bool, front: Partial, back: Partial, spec: IntegrationSpec
@@ -117,8 +122,9 @@ def run(
                 x.data if on_device(x) else work.buffer(part(x), access=access, in_place=host_ptr)
                 for x in outputs
             ]
-            kern.set_args(*ins, *held, *outs, *scalars)
-            cl.enqueue_nd_range_kernel(dc.queue, kern, (b - a,), None)
+            kern.set_args(*ins, *held, *outs, *scalars, np.uint64(b - a))
+            launch = -(-(b - a) // ELEMENT_GROUP) * ELEMENT_GROUP  # whole groups (common.h)
+            cl.enqueue_nd_range_kernel(dc.queue, kern, (launch,), (ELEMENT_GROUP,))
             # device outputs are used where they are: the in-order queue runs them first
             for x, buf in zip(outputs, outs, strict=True):
                 if not on_device(x):

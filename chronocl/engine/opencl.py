@@ -394,7 +394,7 @@ class OpenCLEngine:
         if self.local_size is not None:
             lx, ly, lz = self.local_size
         elif self.dc.is_cpu:
-            lx, ly, lz = min(8, count), min(2, ny), 1
+            lx, ly, lz = 8, 2, 1  # whatever the shape: PoCL compiles once per group size
         else:
             lx, ly, lz = min(64, _round_up(count, 32)), 1, 1
         return (_round_up(count, lx), _round_up(ny, ly), _round_up(nz, lz)), (lx, ly, lz)

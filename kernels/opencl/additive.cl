@@ -36,18 +36,18 @@ __kernel void integrate_additive_rows(KERNEL_ARGS, const float4 norm, __global o
  * (chronocl/modes/additive.py `combine` is the oracle). One voxel per work-item. */
 
 __kernel void combine_fmax(__global const float *front, __global const float *back,
-                           __global float *out)
+                           __global float *out, ELEMENT_ARGS)
 {
-    const size_t i = get_global_id(0);
+    ELEMENT(i);
     out[i] = fmax(front[i], back[i]);
 }
 
 /* The finished additive chronovolume: sums / norm per channel (0 where norm is 0), clamped
  * to the window's largest opacity `alpha`, as reference.finalize does. */
 __kernel void finish_additive(__global const long *acc, __global const float *alpha,
-                             __global float4 *out, const float4 norm)
+                             __global float4 *out, const float4 norm, ELEMENT_ARGS)
 {
-    const size_t i = get_global_id(0);
+    ELEMENT(i);
     const float a = alpha[i];
     const float r = convert_float(acc[3 * i]) / FIXED_ONE;
     const float g = convert_float(acc[3 * i + 1]) / FIXED_ONE;

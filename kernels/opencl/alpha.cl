@@ -34,9 +34,9 @@ __kernel void integrate_alpha_rows(KERNEL_ARGS, __global out_t *out, ROWS_ARGS(R
  * (chronocl/modes/alpha.py `combine` is the oracle). One voxel per work-item. */
 
 __kernel void combine_over(__global const float4 *front, __global const float4 *back,
-                           __global float4 *out)
+                           __global float4 *out, ELEMENT_ARGS)
 {
-    const size_t i = get_global_id(0);
+    ELEMENT(i);
     const float4 f = front[i];
     out[i] = f + (1.0f - f.w) * back[i];
 }

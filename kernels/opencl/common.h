@@ -52,7 +52,13 @@
 #define FIXED_ONE 1099511627776.0f /* 2^40 */
 
 /* SLIDING builds hold only a mode's combine / finish kernels: one voxel per work-item, none of
- * the integrate kernels' build options. */
+ * the integrate kernels' build options. They are launched over whole work-groups of one size
+ * (chronocl/engine/elementwise.py: a driver compiles a kernel once per work-group size, not
+ * once per volume), so each takes the voxel count `n_items` last and the items past it return. */
+#define ELEMENT_ARGS const ulong n_items
+#define ELEMENT(i)                      \
+    const size_t i = get_global_id(0); \
+    if (i >= n_items) return
 #ifndef SLIDING
 #ifdef SLOTS
 /* The steps are not stacked but read where they lie (chronocl.data.bricks.SlotBrick): brick

@@ -39,9 +39,9 @@ __kernel void integrate_count_rows(KERNEL_ARGS, const float threshold, __global 
 /* The window's occupancy from its fixed-point counts (1 long per voxel) through the planar
  * data LUT (LUT_N entries per channel), as reference: f = n / W, premultiplied TF(f). */
 __kernel void finish_count(__global const long *acc, __global const float *lut,
-                           __global float4 *out, const float w)
+                           __global float4 *out, const float w, ELEMENT_ARGS)
 {
-    const size_t i = get_global_id(0);
+    ELEMENT(i);
     const float f = (convert_float(acc[i]) / FIXED_ONE) / w;
     const float x = f * (float)(LUT_N - 1);
     const int i0 = min(convert_int(x), LUT_N - 2);

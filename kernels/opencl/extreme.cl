@@ -112,9 +112,10 @@ __kernel void integrate_extreme_rows(KERNEL_ARGS, const float zlo, const float z
 __kernel void combine_extreme(__global const float4 *front, __global const int *front_t,
                               __global const float *front_v, __global const float4 *back,
                               __global const int *back_t, __global const float *back_v,
-                              __global float4 *out, __global int *out_t, __global float *out_v)
+                              __global float4 *out, __global int *out_t, __global float *out_v,
+                              ELEMENT_ARGS)
 {
-    const size_t i = get_global_id(0);
+    ELEMENT(i);
     const float a = front_v[i], b = back_v[i];
 #ifdef IS_MIN
     const int beats = b < a;

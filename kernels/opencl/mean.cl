@@ -32,9 +32,10 @@ __kernel void integrate_mean_rows(KERNEL_ARGS, __global out_t *out, ROWS_ARGS(Rg
 #endif
 #else
 /* The window's average from its fixed-point sums (4 longs per voxel) and 1 / W. */
-__kernel void finish_mean(__global const long *acc, __global float4 *out, const float inv_w)
+__kernel void finish_mean(__global const long *acc, __global float4 *out, const float inv_w,
+                          ELEMENT_ARGS)
 {
-    const size_t i = get_global_id(0);
+    ELEMENT(i);
     out[i] = (float4)(convert_float(acc[4 * i]) / FIXED_ONE, convert_float(acc[4 * i + 1]) / FIXED_ONE,
                       convert_float(acc[4 * i + 2]) / FIXED_ONE,
                       convert_float(acc[4 * i + 3]) / FIXED_ONE) * inv_w;

@@ -3,9 +3,10 @@
  * number of leading RGBA channels summed. */
 
 /* acc (CHANNELS longs per voxel) += sign * fixed(the first CHANNELS channels of a raw partial). */
-__kernel void fixed_add(__global const float4 *step, __global long *acc, const int sign)
+__kernel void fixed_add(__global const float4 *step, __global long *acc, const int sign,
+                        ELEMENT_ARGS)
 {
-    const size_t i = get_global_id(0);
+    ELEMENT(i);
     const float4 s = step[i];
     const float c[4] = {s.x, s.y, s.z, s.w};
     for (int j = 0; j < CHANNELS; ++j) {
