@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from chronocl.core import process_memory
 from chronocl.core.interrupt import checkpoint
 from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
@@ -140,6 +141,9 @@ class Recolouring:
         on_gpu = on_gl(_release_and_pick, slot)
         if on_gpu is None:
             return None
+        limit = process_memory.current()
+        if limit is not None:  # steps read ahead or kept give way to the winners and outputs
+            limit.fit(_prepared_bytes(shown, on_gpu, held is not None))
         w = full.winners(functools.partial(gather, device=self.device))
         if w is None:
             return None
@@ -172,6 +176,17 @@ def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection):
     if reason is not None or full.current() is not shown:
         return None
     return full, new
+
+
+def _prepared_bytes(shown: Chronovolume, on_gpu: bool, outputs_held: bool) -> int:
+    """The host memory a window's recolouring takes beyond what it holds already: the winners
+    (a float32 value and a step index per voxel; on the GPU they leave the host once
+    uploaded, but are gathered there first) and, on the OpenCL device, its two RGBA8
+    outputs unless it takes over the last ones'."""
+    voxels = int(np.prod(shown.shape))
+    winners = voxels * (4 + 2)  # u, and k at its widest (uint16)
+    outputs = 0 if on_gpu or outputs_held else 2 * 4 * voxels
+    return winners + outputs
 
 
 def _release_and_pick(rc, slot: ViewSlot) -> bool | None:
