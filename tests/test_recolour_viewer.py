@@ -214,3 +214,37 @@ def test_an_idle_gather_is_given_up_by_new_input_and_the_edit_is_right(client, m
     _, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
     diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
     assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+
+
+def test_steps_give_way_to_the_winners_before_they_are_gathered(client, monkeypatch) -> None:
+    """Under a process memory limit (`--memory`), the window managers are asked for room for
+    the winners and the host outputs before the gather allocates them: the gather's memory is
+    not left to the next frame's `fit` to find over the limit."""
+    from chronocl.core import process_memory
+    from chronocl.core.budget import resident_bytes
+
+    events: list[tuple[str, int]] = []
+    real_fit = process_memory.ProcessLimit.fit
+
+    def fit(self, extra: int = 0, **kwargs):
+        events.append(("fit", extra))
+        return real_fit(self, extra, **kwargs)
+
+    calls = _counting_gather(monkeypatch)
+    real_gather = recolouring.gather
+
+    def gather(*args, **kwargs):
+        events.append(("gather", 0))
+        return real_gather(*args, **kwargs)
+
+    monkeypatch.setattr(process_memory.ProcessLimit, "fit", fit)
+    monkeypatch.setattr(recolouring, "gather", gather)
+    limit = process_memory.ProcessLimit((resident_bytes() or 0) + (1 << 30))
+    with process_memory.limited(limit):
+        client.open(0, size=(96, 96))
+        _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+        _until(lambda: calls == ["done"])
+    voxels = 32**3  # the vortex store's
+    first = events.index(("gather", 0))
+    asked = [extra for what, extra in events[:first] if what == "fit"]
+    assert asked and asked[-1] >= voxels * (4 + 1 + 2 * 4), events[: first + 1]
