@@ -31,6 +31,17 @@ def gl_submit(fn: Callable, *args) -> Future:
     return _gl_executor.submit(_on_gl, fn, args)
 
 
+def release_on_gl(fn: Callable, *args) -> None:
+    """fn(raycaster, *args) on the GL thread to free GL objects, waited for; nothing where that
+    thread takes no more work: the interpreter is exiting (a client's thread still releasing
+    its views then), and the context goes with the process, all it holds included."""
+    try:
+        done = gl_submit(fn, *args)
+    except RuntimeError:  # ThreadPoolExecutor.submit after the interpreter's shutdown began
+        return
+    done.result()
+
+
 def _on_gl(fn: Callable, args: tuple):
     global _gl_raycaster
     if _gl_raycaster is None:

@@ -23,7 +23,7 @@ from chronocl.data.window import WindowManager
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.settings import manager_key
 from chronocl.viewer.datasets import Dataset
-from chronocl.viewer.gl_thread import gl_submit, on_gl
+from chronocl.viewer.gl_thread import gl_submit, release_on_gl
 from chronocl.viewer.recolouring import Recolouring
 from chronocl.viewer.slab_upload import SlabUpload, pays
 from chronocl.viewer.slots import ViewSlot
@@ -244,7 +244,7 @@ class Views:
         """Free the textures (on the GL thread), the sessions and the window managers."""
         slots, self.slots = self.slots, []
         if any(s.volume is not None for s in slots):
-            on_gl(lambda rc: [s.release_gl() for s in slots])
+            release_on_gl(lambda rc: [s.release_gl() for s in slots])
         for s in slots:
             s.drop_session()
         self._close_managers()
