@@ -218,8 +218,9 @@ def test_an_idle_gather_is_given_up_by_new_input_and_the_edit_is_right(client, m
 
 def test_steps_give_way_to_the_winners_before_they_are_gathered(client, monkeypatch) -> None:
     """Under a process memory limit (`--memory`), the window managers are asked for room for
-    the winners and the host outputs before the gather allocates them: the gather's memory is
-    not left to the next frame's `fit` to find over the limit."""
+    the winners and the host outputs (llvmpipe here: recoloured on the OpenCL device, no
+    outputs of an earlier window to take over) before the gather allocates them: the gather's
+    memory is not left to the next frame's `fit` to find over the limit."""
     from chronocl.core import process_memory
     from chronocl.core.budget import resident_bytes
 
@@ -227,7 +228,8 @@ def test_steps_give_way_to_the_winners_before_they_are_gathered(client, monkeypa
     real_fit = process_memory.ProcessLimit.fit
 
     def fit(self, extra: int = 0, **kwargs):
-        events.append(("fit", extra))
+        if kwargs.get("caller") is None:  # not a manager's own, making room for its reads
+            events.append(("fit", extra))
         return real_fit(self, extra, **kwargs)
 
     calls = _counting_gather(monkeypatch)

@@ -107,6 +107,8 @@ def run(
     if len(cuts) > 1 and any(on_device(a) for a in voxels):
         raise DeviceLimitError("a device array over the device's largest buffer")
     kern = kernel(dc, f"{file}.cl", function, {**defines, "SLIDING": True})
+    info = cl.kernel_work_group_info.WORK_GROUP_SIZE  # a small device's may be less
+    group = min(ELEMENT_GROUP, int(kern.get_work_group_info(info, dc.device)))
     access = "rw" if inout else "w"
     with DeviceWork(dc) as work:
         held = [work.buffer(a) for a in tables]
@@ -123,8 +125,8 @@ def run(
                 for x in outputs
             ]
             kern.set_args(*ins, *held, *outs, *scalars, np.uint64(b - a))
-            launch = -(-(b - a) // ELEMENT_GROUP) * ELEMENT_GROUP  # whole groups (common.h)
-            cl.enqueue_nd_range_kernel(dc.queue, kern, (launch,), (ELEMENT_GROUP,))
+            launch = -(-(b - a) // group) * group  # whole groups (common.h's ELEMENT)
+            cl.enqueue_nd_range_kernel(dc.queue, kern, (launch,), (group,))
             # device outputs are used where they are: the in-order queue runs them first
             for x, buf in zip(outputs, outs, strict=True):
                 if not on_device(x):

@@ -87,7 +87,7 @@ class BrickRecolour(HostRecolour):
         # the two arrays written in turn, with the bricks that may be coloured in each: zeroed
         # here, so that no edit pays for first touching their pages (512^3: 0.5 s each), or
         # those of the winners prepared before (`held`, a slot's last window: any shape alike)
-        if held and all(a.shape == (*w.u.shape, 4) and m.shape == self.grid for a, m in held):
+        if takes_over(held, w.u.shape):
             self._held = list(held)
         else:
             none = np.zeros(self.grid, bool)
@@ -241,3 +241,10 @@ def _runs(todo: np.ndarray, gx: int) -> np.ndarray:
 def _part(shift: int, n: int) -> slice:
     """The indices i of an axis of n whose i - shift is inside it too."""
     return slice(max(shift, 0), n + min(shift, 0))
+
+
+def takes_over(held: list | None, shape: tuple) -> bool:
+    """Whether a `BrickRecolour` of winners of `shape` (Z, Y, X) writes into `held`, the
+    outputs of the last one (`take_held`), instead of two arrays of its own."""
+    grid = brick_grid.grid_shape(tuple(shape))
+    return bool(held) and all(a.shape == (*shape, 4) and m.shape == grid for a, m in held)

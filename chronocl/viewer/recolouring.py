@@ -36,7 +36,7 @@ from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour import RecolourVolume, available, recolourer
-from chronocl.render.recolour_bricks import BrickRecolour, Sparse
+from chronocl.render.recolour_bricks import BrickRecolour, Sparse, takes_over
 from chronocl.render.recolour_host import HostRecolour, gather, software_gl
 from chronocl.render.recolour_upload import show
 from chronocl.viewer.gl_thread import on_gl
@@ -143,7 +143,7 @@ class Recolouring:
             return None
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the winners and outputs
-            limit.fit(_prepared_bytes(shown, on_gpu, held is not None))
+            limit.fit(_prepared_bytes(shown, on_gpu, takes_over(held, shown.shape)))
         w = full.winners(functools.partial(gather, device=self.device))
         if w is None:
             return None
@@ -181,11 +181,11 @@ def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection):
 def _prepared_bytes(shown: Chronovolume, on_gpu: bool, outputs_held: bool) -> int:
     """The host memory a window's recolouring takes beyond what it holds already: the winners
     (a float32 value and a step index per voxel; on the GPU they leave the host once
-    uploaded, but are gathered there first) and, on the OpenCL device, its two RGBA8
-    outputs unless it takes over the last ones'."""
+    uploaded, but are gathered there first) and, on the OpenCL device, its two outputs
+    unless it takes over the last ones' (RGBA8; float32 where it recolours in spans)."""
     voxels = int(np.prod(shown.shape))
     winners = voxels * (4 + 2)  # u, and k at its widest (uint16)
-    outputs = 0 if on_gpu or outputs_held else 2 * 4 * voxels
+    outputs = 0 if on_gpu or outputs_held else 2 * 16 * voxels
     return winners + outputs
 
 
