@@ -143,7 +143,8 @@ class Recolouring:
             return None
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the winners and outputs
-            limit.fit(_prepared_bytes(shown, on_gpu, takes_over(held, shown.shape)))
+            rgba = 4 if slot.volume.texture.dtype == "f1" else 16  # the display format's bytes
+            limit.fit(_prepared_bytes(shown, on_gpu, takes_over(held, shown.shape), rgba))
         w = full.winners(functools.partial(gather, device=self.device))
         if w is None:
             return None
@@ -178,14 +179,14 @@ def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection):
     return full, new
 
 
-def _prepared_bytes(shown: Chronovolume, on_gpu: bool, outputs_held: bool) -> int:
+def _prepared_bytes(shown: Chronovolume, on_gpu: bool, outputs_held: bool, rgba: int) -> int:
     """The host memory a window's recolouring takes beyond what it holds already: the winners
     (a float32 value and a step index per voxel; on the GPU they leave the host once
-    uploaded, but are gathered there first) and, on the OpenCL device, its two outputs
-    unless it takes over the last ones' (RGBA8; float32 where it recolours in spans)."""
+    uploaded, but are gathered there first) and, on the OpenCL device, its two outputs of
+    `rgba` bytes a voxel (the texture's format) unless it takes over the last ones'."""
     voxels = int(np.prod(shown.shape))
     winners = voxels * (4 + 2)  # u, and k at its widest (uint16)
-    outputs = 0 if on_gpu or outputs_held else 2 * 16 * voxels
+    outputs = 0 if on_gpu or outputs_held else 2 * rgba * voxels
     return winners + outputs
 
 
