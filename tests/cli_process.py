@@ -38,14 +38,16 @@ IMPORT_TIME = (
 SET_BY_IMPORTS = {"PYOPENCL_HOME"}  # pyopencl's import sets it to where it lies
 
 
-def run(argv: list[str], cwd=None, timeout: float = 120) -> subprocess.CompletedProcess:
+def run(
+    argv: list[str], cwd=None, timeout: float = 120, own_process: bool = False
+) -> subprocess.CompletedProcess:
     """`python -m chronocl *argv` in `cwd`, its output captured as text, as `subprocess.run`
-    returns it (TimeoutExpired past `timeout`)."""
+    returns it (TimeoutExpired past `timeout`); `own_process`: in a fresh process always."""
     argv = [str(a) for a in argv]
     env = dict(os.environ)
     cwd = str(cwd or os.getcwd())
     server = None
-    if os.environ.get("CHRONOCL_CLI_SUBPROCESS") != "1" and os.path.isdir(cwd):
+    if not own_process and os.environ.get("CHRONOCL_CLI_SUBPROCESS") != "1" and os.path.isdir(cwd):
         server = _server()
     if server is None or server.differs(env):
         return subprocess.run(

@@ -23,7 +23,6 @@ import json
 import os
 import shutil
 import subprocess
-import sys
 import tempfile
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -520,13 +519,7 @@ def _prepare(case: Case, root: Path, shared: Path) -> Run:
 
 def _execute(run: Run) -> Run:
     """The case as its own `python -m chronocl`."""
-    run.result = subprocess.run(
-        [sys.executable, "-m", "chronocl", *run.argv],
-        capture_output=True,
-        text=True,
-        cwd=run.folder,
-        timeout=120,
-    )
+    run.result = cli_process.run(run.argv, cwd=run.folder, own_process=True)
     run.folder_after = snapshot(run.folder)
     run.store_after = snapshot(run.store)
     return run

@@ -35,9 +35,7 @@ def test_help_has_examples():
 
     from chronocl.cli import app
 
-    result = subprocess.run(
-        [sys.executable, "-m", "chronocl", "--help"], capture_output=True, text=True, timeout=120
-    )
+    result = cli_process.run(["--help"], own_process=True)
     assert result.returncode == 0 and "Examples" in result.stdout
     for command in ("generate", "ingest", "info", "integrate"):
         sub = CliRunner().invoke(app, [command, "--help"])
