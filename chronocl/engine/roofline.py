@@ -7,14 +7,19 @@ pieces read side by side (numpy releases the GIL in a reduction), like STREAM's 
 integration reads every byte at least once, so none can beat it, and a fraction above 1
 means the bound is wrong. Where the kernels run on a device apart from host memory (a GPU),
 their time includes copying the brick across, and the bound is the slower of the memory read
-and the host-to-device copy.
+and the host-to-device copy. That copy is timed as the engine uploads
+(`chronocl.engine.transfer.run_chunks`): chunks from pinned staging buffers, two in turn, on
+the upload queue; a pageable copy would set a bound the engine beats. An integration of a
+window already resident on the device (a `Session` after a TF edit) copies nothing: its bound
+(`bound_of(..., resident=True)`) is the device's own read, the read kernel's.
 
 The OpenCL read kernel (`kernels/opencl/read_roofline.cl`: every work-item reads its voxels
 of every step once and sums them, as the integration kernels read) is measured beside it. On a
 device that reads host memory (a CPU device) it is a memory read on every core too, and the
 bound is the faster of the two: inside bench/integrate.py's long race numpy's threads once read
 3-4 times slower than alone while the kernels did not, and fractions above 1 came out (a bound
-below a kernel's own read is no bound). On a GPU it reads device memory and is reported only.
+below a kernel's own read is no bound). On a GPU it reads device memory: the bound of resident
+windows only.
 """
 
 from __future__ import annotations
@@ -28,9 +33,10 @@ import numpy as np
 
 from chronocl.core.memory import aligned_empty
 from chronocl.core.timing import race
-from chronocl.engine.buffers import DeviceWork, buffer, max_alloc
+from chronocl.engine.buffers import DeviceWork, max_alloc
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.program import kernel
+from chronocl.engine.transfer import MAX_CHUNK, make_streams
 
 VEC = 16  # voxels along x per work-item of read_sum
 PIECES_PER_THREAD = 8
@@ -75,10 +81,13 @@ def memory_read_fn(brick: np.ndarray, threads: int | None = None) -> Callable[[]
     return run
 
 
-def read_fns(dc: DeviceContext, brick: np.ndarray) -> dict[str, Callable[[], object]]:
+def read_fns(
+    dc: DeviceContext, brick: np.ndarray, copy: bool | None = None, chunk_bytes: int = MAX_CHUNK
+) -> dict[str, Callable[[], object]]:
     """{'read-memory': numpy's read on every core, 'read-opencl': the read kernel on the device
-    of `dc`, and on a device apart from host memory 'copy-to-device': the brick copied to
-    it}; `bound_of` picks the bound from their rates.
+    of `dc`, and on a device apart from host memory (or with `copy`) 'copy-to-device': the
+    brick's bytes uploaded from pinned staging in chunks of `chunk_bytes`, as the engine
+    uploads}; `bound_of` picks the bound from their rates.
 
     The brick is (Z, W, Y, X) float32 or uint8 with X a multiple of VEC (`padded`).
     """
@@ -107,32 +116,61 @@ def read_fns(dc: DeviceContext, brick: np.ndarray) -> dict[str, Callable[[], obj
 
     run_cl.sums = out  # what the kernel wrote: each voxel's sum over the steps
     fns = {"read-memory": memory_read_fn(brick), "read-opencl": run_cl}
-    if not dc.is_cpu:
-        device_copy = buffer(dc, nbytes=min(brick.nbytes, rows * brick[:1].nbytes))
-
-        def copy() -> None:
-            with DeviceWork(dc):
-                for a in range(0, nz, rows):
-                    cl.enqueue_copy(dc.queue, device_copy, brick[a : a + rows], is_blocking=False)
-
-        fns["copy-to-device"] = copy
+    if copy if copy is not None else not dc.is_cpu:
+        fns["copy-to-device"] = pinned_copy_fn(dc, brick, min(chunk_bytes, max_alloc(dc)))
     return fns
 
 
-def bound_of(rates: dict[str, float]) -> tuple[str, float]:
+def pinned_copy_fn(dc: DeviceContext, brick: np.ndarray, chunk_bytes: int) -> Callable[[], None]:
+    """Upload `brick.nbytes` bytes to the device of `dc` as `run_chunks` does: chunks of
+    `chunk_bytes` from two pinned staging buffers in turn (each holding a chunk of the brick,
+    filled once: the host's copy into staging is the memory read's part of the bound) into two
+    device buffers, on an upload queue of their own. `fn.staged` and `fn.device` are the
+    staging and device buffers (tests read back what crossed)."""
+    import pyopencl as cl
+
+    data = brick.reshape(-1).view(np.uint8)
+    size = max(1, min(data.size, chunk_bytes))
+    streams = make_streams(dc.context, dc.device)
+    slots = 2 if data.size > size else 1
+    staged = [streams.staging(dc, f"stage{k}", size) for k in range(slots)]
+    device = [streams.buffer(dc, f"in{k}", size, "r") for k in range(slots)]
+    for k in range(slots):
+        part = data[k * size : (k + 1) * size]
+        staged[k][: part.size] = part
+
+    def copy() -> None:
+        with DeviceWork(dc) as work:
+            work.queues.append(streams.upload)
+            for j, a in enumerate(range(0, data.size, size)):
+                n = min(size, data.size - a)
+                cl.enqueue_copy(
+                    streams.upload, device[j % slots], staged[j % slots][:n], is_blocking=False
+                )
+
+    copy.staged, copy.device, copy.streams = staged, device, streams
+    return copy
+
+
+def bound_of(rates: dict[str, float], resident: bool = False) -> tuple[str, float]:
     """(what limits, GB/s) from read_fns' rates: the memory read on every core (where the device
     reads host memory, no copy to it measured: the faster of numpy's and the OpenCL read
-    kernel's), or the copy to the device where there is one and it is slower."""
+    kernel's), or the copy to the device where there is one and it is slower. With `resident`
+    (the window already on the device, nothing copied) on a device apart from host memory:
+    the device's own read, the read kernel's."""
     memory = rates["read-memory"]
     if "copy-to-device" not in rates:
         memory = max(memory, rates.get("read-opencl", 0.0))
+    elif resident:
+        return ("read-device", rates["read-opencl"])
     copy = rates.get("copy-to-device", np.inf)
     return ("copy-to-device", copy) if copy < memory else ("read-memory", memory)
 
 
 LIMITS = {
     "read-memory": "memory read on every core",
-    "copy-to-device": "copy from host to device",
+    "copy-to-device": "copy from host to device (pinned staging, as the engine uploads)",
+    "read-device": "device memory read (the window resident on the device)",
 }
 
 
