@@ -277,9 +277,10 @@ print(json.dumps({"device": dc.info.label, "said": said}))
 
 
 def cold_env(tmp_path) -> dict:
-    """The environment of a process with empty pyopencl and PoCL caches."""
+    """The environment of a process with empty pyopencl, PoCL and chronocl program caches."""
     env = {k: v for k, v in os.environ.items() if k != "CHRONOCL_VERBOSE"}
     env.update(
+        CHRONOCL_PROGRAM_CACHE=str(tmp_path / "programs"),
         XDG_CACHE_HOME=str(tmp_path / "xdg"),
         POCL_CACHE_DIR=str(tmp_path / "pocl"),
         PYOPENCL_NO_CACHE="1",
