@@ -11,8 +11,9 @@ only where the data TF has opacity on a LUT segment of [min, max] and the time T
 present (a sufficient test: the others are 0 for sure, as the kernel computes them).
 
 The recolour kernel then runs over the bricks that may be coloured now or were in the array
-it writes into (the one before last: a viewer shows one while the next is made), in the
-arithmetic of the full pass (kernels/opencl/recolour.cl, RGBA8 rounded to nearest even), and
+it writes into (its one output, written over at every edit: the viewer draws its frames from
+the texture and reads the array for probes and saves on the thread that recolours, so it
+changes only between frames), in the arithmetic of the full pass (kernels/opencl/recolour.cl, RGBA8 rounded to nearest even), and
 a second kernel reads back the occupied voxels' box and the brick grid (grown by one voxel, as
 brick_grid.py defines it) over the bricks next to a coloured one: both are then exactly what
 the viewer's upload finds in the whole array. The texture is written only over the bricks
@@ -84,14 +85,13 @@ class BrickRecolour(HostRecolour):
         n = int(np.prod(self.grid))
         self.umin, self.umax = np.empty(n, np.float32), np.empty(n, np.float32)
         self.steps = np.empty(n, np.uint64)
-        # the two arrays written in turn, with the bricks that may be coloured in each: zeroed
-        # here, so that no edit pays for first touching their pages (512^3: 0.5 s each), or
-        # those of the winners prepared before (`held`, a slot's last window: any shape alike)
+        # the output array, with the bricks that may be coloured in it: zeroed here, so that no
+        # edit pays for first touching its pages (512^3: 0.5 s), or that of the winners
+        # prepared before (`held`, a slot's last window: any shape alike)
         if takes_over(held, w.u.shape):
             self._held = list(held)
         else:
-            none = np.zeros(self.grid, bool)
-            self._held = [(aligned_zeros((*w.u.shape, 4)), none) for _ in range(2)]
+            self._held = [(aligned_zeros((*w.u.shape, 4)), np.zeros(self.grid, bool))]
         program = self._program()
         with DeviceWork(self.dc) as work:
             outs = [work.buffer(a, access="w") for a in self._summary()]
@@ -141,9 +141,9 @@ class BrickRecolour(HostRecolour):
         return (held & data & steps).reshape(self.grid)
 
     def sparse(self, spec: IntegrationSpec) -> Sparse:
-        """Premultiplied RGBA8 (Z, Y, X, 4) of the winners under `spec`, written into the
-        array before last (`HostRecolour.recolour`'s `reuse`) over the bricks coloured now or
-        in it; with the grid and occupied box of the result."""
+        """Premultiplied RGBA8 (Z, Y, X, 4) of the winners under `spec`, written over the last
+        one (its one output array: `HostRecolour.recolour`'s `reuse`) in the bricks coloured
+        now or in it; with the grid and occupied box of the result."""
         import pyopencl as cl
 
         from chronocl.engine.buffers import DeviceWork
@@ -187,8 +187,8 @@ class BrickRecolour(HostRecolour):
         return Sparse(out, coloured, len(todo), grid, bounds)
 
     def take_held(self) -> list:
-        """The two output arrays with their bricks that may be coloured, for the next winners
-        of the same shape (`held`); this one recolours no more."""
+        """The output array with its bricks that may be coloured, for the next winners of the
+        same shape (`held`); this one recolours no more."""
         held, self._held = self._held, []
         return held
 
@@ -245,6 +245,6 @@ def _part(shift: int, n: int) -> slice:
 
 def takes_over(held: list | None, shape: tuple) -> bool:
     """Whether a `BrickRecolour` of winners of `shape` (Z, Y, X) writes into `held`, the
-    outputs of the last one (`take_held`), instead of two arrays of its own."""
+    output of the last one (`take_held`), instead of an array of its own."""
     grid = brick_grid.grid_shape(tuple(shape))
     return bool(held) and all(a.shape == (*shape, 4) and m.shape == grid for a, m in held)

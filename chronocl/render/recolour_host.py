@@ -230,7 +230,7 @@ class HostRecolour:
         self.w = w
         self.dc = get_context(device)
         self._u, self._k = aligned(w.u), aligned(w.k)
-        self._spare: list[np.ndarray] = []  # the last two results, with `reuse`
+        self._spare: list[np.ndarray] = []  # the last result, with `reuse`
         u, k, cpu = self._u.reshape(-1), self._k.reshape(-1), self.dc.is_cpu
         # (first voxel, end, u, k) a span; float32 RGBA out, 16 bytes a voxel, decides the spans
         self.parts = [
@@ -247,8 +247,9 @@ class HostRecolour:
     def recolour(self, spec: IntegrationSpec, fmt: str = "f1", reuse: bool = False) -> np.ndarray:
         """Premultiplied RGBA (Z, Y, X, 4) of the winners under `spec`: uint8 for "f1"
         (RGBA8, rounded as the display conversion rounds), float32 for "f4". With `reuse`
-        the result is written into the one before last (a viewer shows one while the next is
-        made): a fresh 512 MB array costs more in page faults than the kernel's work."""
+        the result is written over the last one (the viewer has uploaded that into its
+        texture, and reads it on this thread only): a fresh 512 MB array costs more in page
+        faults than the kernel's work, and a second one more memory."""
         import pyopencl as cl
 
         from chronocl.engine.buffers import DeviceWork
@@ -256,7 +257,7 @@ class HostRecolour:
         w = self.w
         rgba8 = fmt == "f1"
         dtype = np.uint8 if rgba8 else np.float32
-        spare = self._spare.pop(0) if reuse and len(self._spare) == 2 else None
+        spare = self._spare.pop() if reuse and self._spare else None
         if spare is None or spare.dtype != dtype:
             spare = aligned_empty((*w.u.shape, 4), dtype)
         out = spare

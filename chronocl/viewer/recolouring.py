@@ -182,11 +182,11 @@ def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection):
 def _prepared_bytes(shown: Chronovolume, on_gpu: bool, outputs_held: bool, rgba: int) -> int:
     """The host memory a window's recolouring takes beyond what it holds already: the winners
     (a float32 value and a step index per voxel; on the GPU they leave the host once
-    uploaded, but are gathered there first) and, on the OpenCL device, its two outputs of
-    `rgba` bytes a voxel (the texture's format) unless it takes over the last ones'."""
+    uploaded, but are gathered there first) and, on the OpenCL device, its output of `rgba`
+    bytes a voxel (the texture's format) unless it takes over the last one's."""
     voxels = int(np.prod(shown.shape))
     winners = voxels * (4 + 2)  # u, and k at its widest (uint16)
-    outputs = 0 if on_gpu or outputs_held else 2 * rgba * voxels
+    outputs = 0 if on_gpu or outputs_held else rgba * voxels
     return winners + outputs
 
 
