@@ -374,6 +374,7 @@ def test_build_logs_are_captured_unless_verbose(monkeypatch, capsys, tmp_path):
     from chronocl.engine.device import get_context
 
     monkeypatch.delenv("CHRONOCL_VERBOSE", raising=False)
+    monkeypatch.setenv(program.CACHE_VAR, "off")  # built here, not loaded from an earlier run
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         program.build(get_context(), "quiet.cl", {"LUT_N": 7}, text=WARNS.format("quiet"))
