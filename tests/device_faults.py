@@ -1,6 +1,7 @@
 """A child process of tests/test_device_faults.py: each kind of device work a frame does
-(integrate, gather, recolour whole or by bricks, the sliding kernels), with a failure
-injected at each of its device calls in turn (an enqueue, a map, a copy, a buffer made).
+(integrate, gather, recolour whole or by bricks, one recolouring edited again and again, the
+sliding kernels), with a failure injected at each of its device calls in turn (an enqueue, a
+map, a copy, a buffer made).
 
 Each failure must reach the caller as raised, and the next run must equal a run that never
 failed. A failure that freed host memory under enqueued work kills this process (a segfault
@@ -97,6 +98,26 @@ def works(size: int) -> dict:
             v.sparse(spec("max")).rgba if isinstance(v, BrickRecolour) else v.recolour(spec("max")),
         )
 
+    # winners whose value rises along z, and three TFs each opaque on a band of it of its own:
+    # each edit colours other bricks, so a brick the failed edit left coloured where its mask
+    # says not is left wrong by the next
+    ramp = (np.arange(nz) * 255 // max(1, nz - 1)).astype(np.uint8)[:, None, None]
+    banded = winners(t_index, {s: np.broadcast_to(ramp, (nz, ny, nx)) for s in steps}, steps, 8,
+                     vr, spec("max"))  # fmt: skip
+    kept = on_host(banded, None)  # one recolouring edited again and again, as a viewer's slot
+
+    def band(lo: float, hi: float) -> IntegrationSpec:
+        pts = ((0, 1, 1, 1, 0), (lo, 1, 1, 1, 0), (lo + 0.01, 1, 0.5, 0, 1), (hi, 0, 0.5, 1, 1),
+               (hi + 0.01, 1, 1, 1, 0), (1, 1, 1, 1, 0))  # fmt: skip
+        return IntegrationSpec(mode="max", data_tf=DataTF(points=pts, value_range=vr))
+
+    bands = [band(0.05, 0.3), band(0.35, 0.6), band(0.65, 0.9)]
+
+    def bricks_edited():  # each edit's picture, as the viewer shows each
+        if isinstance(kept, BrickRecolour):
+            return tuple(np.array(kept.sparse(edit).rgba, copy=True) for edit in bands)
+        return tuple(np.array(kept.recolour(edit, "f1", reuse=True), copy=True) for edit in bands)
+
     def integrated(mode):
         def run():
             cv = integrate(series, "0:4", mode, engine=engine, data_tf=DataTF(value_range=vr))
@@ -112,6 +133,7 @@ def works(size: int) -> dict:
         "integrate_alpha": integrated("alpha"),
         "recolour": lambda: (HostRecolour(won).recolour(spec("max"), "f1"),),
         "bricks": bricks,
+        "bricks_edited": bricks_edited,
         "fixed_add": fixed_add,
     }
 

@@ -19,7 +19,10 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).parent.parent
-WORKS = {"gather", "integrate_max", "integrate_alpha", "recolour", "bricks", "fixed_add"}
+WORKS = {
+    "gather", "integrate_max", "integrate_alpha", "recolour", "bricks", "bricks_edited",
+    "fixed_add",
+}  # fmt: skip
 
 
 def _run(*args: str, **env: str) -> list[dict]:

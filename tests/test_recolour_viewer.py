@@ -139,6 +139,51 @@ def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
         client.close()
 
 
+def test_a_recolouring_that_fails_part_way_leaves_the_next_edit_right(rgba8_server, monkeypatch):
+    """RGBA8 on llvmpipe: an edit whose texture write fails after writing (the recolouring's
+    one output and the texture then hold its colours, the shown chronovolume does not) is
+    answered with an error, the viewer keeps serving, and the next edit shows what integrating
+    it shows: a failure drops the view's session (`view_sessions.Views`), so nothing of the torn
+    output or texture is taken as shown, and the next edit integrates. (Texels the failed edit
+    left in bricks the next one leaves empty would never be sampled: the next edit's brick
+    grid skips them, so the picture alone cannot tell.)"""
+    real = recolouring._write
+    failing = []
+
+    def write(rc, vol, sp, held, spacing):
+        real(rc, vol, sp, held, spacing)
+        if failing:
+            failing.clear()
+            raise RuntimeError("injected after the texture write")
+
+    monkeypatch.setattr(recolouring, "_write", write)
+    client = Client(rgba8_server)
+    try:
+        ds, _ = client.open(0, size=(96, 96))
+        fitted = ds["state"]["data_tf"]["value_range"]
+        _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+
+        def edit(x: float) -> dict:  # opacity from x on (below 0.1: everywhere)
+            points = [[0, 0.2, 0.5, 1, 0.3 * (x < 0.1)], [x, 1, 0.6, 0, 0], [1, 1, 1, 1, 0.9]]
+            return {"data_tf": {"points": points, "value_range": fitted}}
+
+        header, _ = _sharp(client, edit(0.75))  # few bricks coloured
+        assert header["timings"]["recolour_ms"] > 0
+        failing.append(True)
+        rid = client.send({"type": "update", **edit(0.01)})  # every brick, and it fails
+        errors: list = []
+        client.wait("error", rid, errors=errors)
+        header, recoloured = _sharp(client, edit(0.7))  # few again
+        assert header["timings"]["integrate_ms"] > 0  # nothing of the torn one is trusted
+        _sharp(client, {"window": {"t0": 0, "t1": 4}})
+        header, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
+        assert header["timings"]["integrate_ms"] > 0
+        diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
+        assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+    finally:
+        client.close()
+
+
 def _counting_gather(monkeypatch, hold_first: bool = False) -> list[str]:
     """Spy on the viewer's gathers of winners (the real one runs): each call's outcome. With
     `hold_first`, the first waits until new input has come (its checkpoints would give it up)."""

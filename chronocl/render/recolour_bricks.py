@@ -13,12 +13,13 @@ present (a sufficient test: the others are 0 for sure, as the kernel computes th
 The recolour kernel then runs over the bricks that may be coloured now or were in the array
 it writes into (its one output, written over at every edit: the viewer draws its frames from
 the texture and reads the array for probes and saves on the thread that recolours, so it
-changes only between frames), in the arithmetic of the full pass (kernels/opencl/recolour.cl, RGBA8 rounded to nearest even), and
-a second kernel reads back the occupied voxels' box and the brick grid (grown by one voxel, as
-brick_grid.py defines it) over the bricks next to a coloured one: both are then exactly what
-the viewer's upload finds in the whole array. The texture is written only over the bricks
-that may differ from what it holds (coloured before or now), a box of them per z-slab of
-bricks, straight from the array (GL's unpack row length: no copy).
+changes only between frames), in the arithmetic of the full pass (kernels/opencl/recolour.cl,
+RGBA8 rounded to nearest even), and a second kernel reads back the occupied voxels' box and
+the brick grid (grown by one voxel, as brick_grid.py defines it) over the bricks next to a
+coloured one: both are then exactly what the viewer's upload finds in the whole array. The
+texture is written only over the bricks that may differ from what it holds (coloured before
+or now), a box of them per z-slab of bricks, straight from the array (GL's unpack row
+length: no copy).
 """
 
 from __future__ import annotations
@@ -152,7 +153,9 @@ class BrickRecolour(HostRecolour):
         coloured = self.coloured(spec)
         out, before = self._held.pop(0)
         redo = (coloured | before).ravel()
-        self._held.append((out, coloured))
+        # until the kernel has run, any brick of either may hold colour (a failure part way
+        # leaves some of each): the next edit rewrites them all
+        self._held.append((out, coloured | before))
         todo = np.flatnonzero(redo).astype(np.int32)
         peaks = np.zeros((max(len(todo), 1), 27), np.uint8)
         box = np.zeros((max(len(todo), 1), 6), np.int32)
@@ -184,6 +187,7 @@ class BrickRecolour(HostRecolour):
             bounds[:3] = box[: len(todo)][filled, :3].min(axis=0)
             bounds[3:] = box[: len(todo)][filled, 3:].max(axis=0)
         grid = grown_grid(stats)
+        self._held[-1] = (out, coloured)
         return Sparse(out, coloured, len(todo), grid, bounds)
 
     def take_held(self) -> list:
