@@ -16,8 +16,10 @@ def test_the_bound_is_the_fastest_host_read_or_a_slower_copy_to_the_device():
     gpu = {"read-memory": 12.0, "read-opencl": 2000.0, "copy-to-device": 25.0}
     assert bound_of(gpu) == ("read-memory", 12.0)
     assert bound_of({**gpu, "copy-to-device": 6.0}) == ("copy-to-device", 6.0)
-    # A window resident on the GPU (a TF edit's re-integration) copies nothing: its read bounds
-    assert bound_of(gpu, resident=True) == ("read-device", 2000.0)
+    # A window resident on the GPU (a TF edit's re-integration) copies no step: the device's
+    # read of it bounds, where it was measured (the brick fits the device); else as above
+    assert bound_of({**gpu, "read-device": 900.0}, resident=True) == ("read-device", 900.0)
+    assert bound_of(gpu, resident=True) == ("read-memory", 12.0)
     assert bound_of({"read-memory": 8.0, "read-opencl": 11.0}, resident=True) == (
         "read-memory",
         11.0,
@@ -27,13 +29,17 @@ def test_the_bound_is_the_fastest_host_read_or_a_slower_copy_to_the_device():
 def test_the_copy_to_the_device_uploads_the_bricks_bytes_from_pinned_staging_in_chunks():
     """The GPU's copy bound is timed as the engine uploads (pinned staging, two buffers in
     turn, chunks of `chunk_bytes`), not as one pageable copy; forced here on the CPU device,
-    with chunks of a third of the brick: each device buffer holds the chunk staged for it."""
+    with chunks of a third of the brick: each device buffer holds the chunk staged for it.
+    The read of the brick resident on the device sums every voxel's steps."""
     import pyopencl as cl
 
     dc = get_context(None)
     brick = padded(np.random.default_rng(4).random((5, 3, 4, 19), dtype=np.float32))
     size = brick.nbytes // 3 + 1
-    copy = read_fns(dc, brick, copy=True, chunk_bytes=size)["copy-to-device"]
+    fns = read_fns(dc, brick, copy=True, chunk_bytes=size)
+    fns["read-device"]()
+    np.testing.assert_allclose(fns["read-device"].sums, brick.sum(axis=1), rtol=1e-6)
+    copy = fns["copy-to-device"]
     assert len(copy.staged) == len(copy.device) == 2
     copy()
     data = brick.reshape(-1).view(np.uint8)

@@ -10,16 +10,17 @@ their time includes copying the brick across, and the bound is the slower of the
 and the host-to-device copy. That copy is timed as the engine uploads
 (`chronocl.engine.transfer.run_chunks`): chunks from pinned staging buffers, two in turn, on
 the upload queue; a pageable copy would set a bound the engine beats. An integration of a
-window already resident on the device (a `Session` after a TF edit) copies nothing: its bound
-(`bound_of(..., resident=True)`) is the device's own read, the read kernel's.
+window already resident on the device (a `Session` after a TF edit) copies no step: its bound
+(`bound_of(..., resident=True)`) is `read-device`, the read kernel over the brick uploaded
+once beforehand, with its 4-byte sums per voxel read back (no integration returns less).
 
 The OpenCL read kernel (`kernels/opencl/read_roofline.cl`: every work-item reads its voxels
 of every step once and sums them, as the integration kernels read) is measured beside it. On a
 device that reads host memory (a CPU device) it is a memory read on every core too, and the
 bound is the faster of the two: inside bench/integrate.py's long race numpy's threads once read
 3-4 times slower than alone while the kernels did not, and fractions above 1 came out (a bound
-below a kernel's own read is no bound). On a GPU it reads device memory: the bound of resident
-windows only.
+below a kernel's own read is no bound). On a GPU its buffers wrap host memory, which the driver
+copies across first: there it is reported only.
 """
 
 from __future__ import annotations
@@ -33,8 +34,9 @@ import numpy as np
 
 from chronocl.core.memory import aligned_empty
 from chronocl.core.timing import race
-from chronocl.engine.buffers import DeviceWork, max_alloc
+from chronocl.engine.buffers import DeviceWork, buffer, max_alloc
 from chronocl.engine.device import DeviceContext, get_context
+from chronocl.engine.device_steps import device_budget
 from chronocl.engine.program import kernel
 from chronocl.engine.transfer import MAX_CHUNK, make_streams
 
@@ -87,7 +89,9 @@ def read_fns(
     """{'read-memory': numpy's read on every core, 'read-opencl': the read kernel on the device
     of `dc`, and on a device apart from host memory (or with `copy`) 'copy-to-device': the
     brick's bytes uploaded from pinned staging in chunks of `chunk_bytes`, as the engine
-    uploads}; `bound_of` picks the bound from their rates.
+    uploads, and where the brick fits the device's budget for resident steps 'read-device':
+    the read kernel over the brick uploaded once}; `bound_of` picks the bound from their
+    rates.
 
     The brick is (Z, W, Y, X) float32 or uint8 with X a multiple of VEC (`padded`).
     """
@@ -118,7 +122,33 @@ def read_fns(
     fns = {"read-memory": memory_read_fn(brick), "read-opencl": run_cl}
     if copy if copy is not None else not dc.is_cpu:
         fns["copy-to-device"] = pinned_copy_fn(dc, brick, min(chunk_bytes, max_alloc(dc)))
+        if brick.nbytes <= device_budget(dc.info.global_mem):
+            fns["read-device"] = resident_read_fn(dc, brick, rows, kern, local)
     return fns
+
+
+def resident_read_fn(dc: DeviceContext, brick: np.ndarray, rows: int, kern, local):
+    """The read kernel over `brick` already in device memory, as a session keeps its window
+    there (uploaded here, once, in buffers of `rows` z rows), its sums read back into
+    `fn.sums` (4 bytes a voxel: no integration returns less)."""
+    import pyopencl as cl
+
+    nz, w, ny, nx = brick.shape
+    out = np.empty((nz, ny, nx), dtype=np.float32)
+    parts = [
+        (a, min(nz, a + rows), buffer(dc, brick[a : a + rows])) for a in range(0, nz, rows)
+    ]  # copies on the device, made before any timing
+
+    def run() -> None:
+        with DeviceWork(dc) as work:
+            for a, b, src in parts:
+                dst = work.buffer(out[a:b], access="w", in_place=True)
+                kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
+                cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // VEC, ny, b - a), local)
+                work.read(out[a:b], dst, in_place=True)
+
+    run.sums = out
+    return run
 
 
 def pinned_copy_fn(dc: DeviceContext, brick: np.ndarray, chunk_bytes: int) -> Callable[[], None]:
@@ -156,13 +186,13 @@ def bound_of(rates: dict[str, float], resident: bool = False) -> tuple[str, floa
     """(what limits, GB/s) from read_fns' rates: the memory read on every core (where the device
     reads host memory, no copy to it measured: the faster of numpy's and the OpenCL read
     kernel's), or the copy to the device where there is one and it is slower. With `resident`
-    (the window already on the device, nothing copied) on a device apart from host memory:
-    the device's own read, the read kernel's."""
+    (the window already on the device, no step copied), where the device read was measured:
+    that read."""
+    if resident and "read-device" in rates:
+        return ("read-device", rates["read-device"])
     memory = rates["read-memory"]
     if "copy-to-device" not in rates:
         memory = max(memory, rates.get("read-opencl", 0.0))
-    elif resident:
-        return ("read-device", rates["read-opencl"])
     copy = rates.get("copy-to-device", np.inf)
     return ("copy-to-device", copy) if copy < memory else ("read-memory", memory)
 
@@ -170,7 +200,7 @@ def bound_of(rates: dict[str, float], resident: bool = False) -> tuple[str, floa
 LIMITS = {
     "read-memory": "memory read on every core",
     "copy-to-device": "copy from host to device (pinned staging, as the engine uploads)",
-    "read-device": "device memory read (the window resident on the device)",
+    "read-device": "device read of a window resident there (its sums read back)",
 }
 
 
@@ -193,6 +223,7 @@ def read_roofline(brick: np.ndarray, device: str | None = None, repeats: int = 3
         "memory_read_threads": os.cpu_count() or 1,
         "opencl_read_gb_s": rates["read-opencl"],
         "copy_to_device_gb_s": rates.get("copy-to-device"),
+        "device_read_gb_s": rates.get("read-device"),
         "limit": LIMITS[limit],
         "gb_s": best,
         "gvox_steps_s": best / brick.dtype.itemsize,
