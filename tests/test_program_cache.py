@@ -75,6 +75,23 @@ def test_the_key_holds_the_source_the_options_and_the_pocl_settings(cache, monke
     monkeypatch.delenv("POCL_CPU_TARGET")
     monkeypatch.setenv("POCL_CACHE_DIR", "/elsewhere")  # where PoCL caches changes no binary
     assert program.binary_path(dc, SOURCE, OPTIONS) == one
+    monkeypatch.setenv("PYOPENCL_BUILD_OPTIONS", "-cl-fast-relaxed-math")  # pyopencl adds it
+    assert program.binary_path(dc, SOURCE, OPTIONS) != one
+
+
+def test_a_binary_loads_as_quietly_as_it_built(cache):
+    """PoCL keeps a build's log with its binary and gives it again on loading it: pyopencl's
+    CompilerWarning is held back then too (the module's promise: builds are quiet)."""
+    import warnings
+
+    dc = get_context()
+    loud = '#warning "chronocl test: kept with the binary"\n' + SOURCE
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        program._compile(dc, "loud.cl", loud, OPTIONS)
+        assert program.binary_path(dc, loud, OPTIONS).is_file()
+        program._compile(dc, "loud.cl", loud, OPTIONS)
+    assert [str(w.message) for w in caught] == []
 
 
 @pytest.mark.parametrize("damage", ["flipped byte", "truncated", "refused by the driver"])

@@ -40,6 +40,9 @@ from chronocl.core.errors import KernelBuildError
 log = logging.getLogger("chronocl")
 
 CACHE_VAR = "CHRONOCL_PROGRAM_CACHE"  # a folder for built programs' binaries; "off": none
+# Environment variables (prefixes) that change what a driver builds: PoCL's settings (its CPU
+# target, ...), the options pyopencl adds to every build, other drivers' build options.
+BUILD_VARIABLES = ("POCL_", "PYOPENCL_", "AMD_OCL_", "RUSTICL_", "IGC_", "CUDA_")
 _MAGIC = b"chronocl-program 1\n"
 
 _lock = threading.Lock()
@@ -106,13 +109,15 @@ def cache_dir() -> Path | None:
     if value:
         return Path(value)
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    if not os.path.isabs(base):  # no home to keep it in
+        return None
     return Path(base) / "chronocl" / "programs"
 
 
 def binary_path(dc, src: str, options: tuple[str, ...]) -> Path | None:
     """The cache file of `src` built with `options` on `dc`'s device (None: no cache). The
     key holds everything a binary depends on: the source, the options, the device, its
-    driver and platform, and the PoCL settings of the environment (its CPU target, ...)."""
+    driver and platform, and the environment's `BUILD_VARIABLES`."""
     folder = cache_dir()
     if folder is None:
         return None
@@ -120,7 +125,9 @@ def binary_path(dc, src: str, options: tuple[str, ...]) -> Path | None:
     parts = [src, " ".join(options), d.name, d.vendor, d.version, d.driver_version]
     parts += [d.platform.name, d.platform.version]
     parts += sorted(
-        f"{k}={v}" for k, v in os.environ.items() if k.startswith("POCL_") and k != "POCL_CACHE_DIR"
+        f"{k}={v}"
+        for k, v in os.environ.items()
+        if k.startswith(BUILD_VARIABLES) and k not in ("POCL_CACHE_DIR", "PYOPENCL_CTX")
     )
     return folder / (hashlib.sha256("\0".join(parts).encode()).hexdigest() + ".bin")
 
@@ -138,11 +145,14 @@ def _load(dc, path: Path, options: tuple[str, ...]):
     if head != _MAGIC + hashlib.sha256(binary).hexdigest().encode():
         log.debug("chronocl: the cached program %s is damaged; building it again", path)
         return None
-    try:
-        return cl.Program(dc.context, [dc.device], [binary]).build(options=list(options))
-    except cl.Error as exc:
-        log.debug("chronocl: the driver refused the cached program %s (%s)", path, exc)
-        return None
+    # a driver may keep the build's log with the binary: quiet as a build (`_compile`)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        try:
+            return cl.Program(dc.context, [dc.device], [binary]).build(options=list(options))
+        except cl.Error as exc:
+            log.debug("chronocl: the driver refused the cached program %s (%s)", path, exc)
+            return None
 
 
 def _store(path: Path, program) -> None:
