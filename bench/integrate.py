@@ -7,8 +7,9 @@ brick, and end to end beside it: `chronocl.integrate` on the same steps as an in
 memory of the one before, `chronocl.core.memory.recycled_empty`; `fresh_output_roofline_fraction`
 a first call, max only, whose output pages fault as they are written) and a `Session`
 re-integrating its resident window after a transfer-function edit (`tf_edit_roofline_fraction`,
-every edit a new TF, so none is a cache hit; its bound `tf_edit_roofline_limit` is the device's
-own read on a GPU, where the window stays, and the memory read on a CPU device);
+every edit a new TF, so none is a cache hit; its bound per mode, `tf_edit_roofline_limit`, is
+the device's own read on a GPU where that mode's session kept the window on the device, else
+the copy to it, and the memory read on a CPU device);
 `end_to_end_vs_kernel` is the first over the kernel's own throughput on the prepared brick.
 Prints JSON lines (../shared/BENCH.md) and a summary with `roofline_fraction`,
 `dense_tf_roofline_fraction` (every mode with a coloured data TF that has opacity everywhere,
@@ -101,8 +102,8 @@ class Runner:
         self._out: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # integrate_fn's, by shape
         self.skipped: list[str] = []  # contenders left out for want of memory
         self.room = {"session": True, "vtk": True}  # what `plan_memory` found room for
-        self.off_device: set[tuple] = set()  # brick shapes whose TF-edit sessions' windows left
-        # the device (their steps went up at every edit)
+        self.off_device: set[tuple] = set()  # (brick shape, mode) whose TF-edit session's
+        # window left the device (its steps went up at every edit)
 
     def race(self, shape: tuple, contenders: dict, repeats: int | None = None) -> None:
         """Time contenders {(case, impl, mode): fn} round-robin on bricks of `shape`."""
@@ -185,7 +186,7 @@ class Runner:
             def tf_edit():
                 session.set_spec(data_tf=next(edits))
                 if session.stats.get("why_not_on_device"):
-                    self.off_device.add(brick.shape)
+                    self.off_device.add((brick.shape, mode))
 
             fns[("session-tf-edit", mode)] = tf_edit
         else:
@@ -326,8 +327,7 @@ def main() -> None:
             limits[case], roof[case] = run.roofline(case)
     # A TF edit re-integrates the session's window where it lies: on a GPU, in device memory
     # unless it did not fit there (its steps then go up every time, as any integration's)
-    resident = main_shape not in run.off_device
-    resident_limit, resident_roof = run.roofline(main_case, resident=resident)
+    edit_bound = {m: run.roofline(main_case, (main_shape, m) not in run.off_device) for m in MODES}
 
     # numpy reference, raced against OpenCL: the main case in full runs; with --quick the
     # smallest Table 1 workload (10 steps of 128x128x64), to stay under two minutes.
@@ -369,7 +369,7 @@ def main() -> None:
             for m in MODES
         },
         "roofline_gvox_s": round(roof[main_case], 3),
-        "tf_edit_roofline_gvox_s": round(resident_roof, 3),
+        "tf_edit_roofline_gvox_s": {m: round(b[1], 3) for m, b in edit_bound.items()},
         "roofline_limit": limits[main_case],
         "end_to_end_roofline_fraction": {
             m: round(run.results[(main_case, "integrate-end-to-end", m)] / roof[main_case], 3)
@@ -379,9 +379,9 @@ def main() -> None:
         "fresh_output_roofline_fraction": round(
             run.results[(main_case, "integrate-fresh-output", "max")] / roof[main_case], 3
         ),
-        "tf_edit_roofline_limit": resident_limit,
+        "tf_edit_roofline_limit": {m: b[0] for m, b in edit_bound.items()},
         "tf_edit_roofline_fraction": {
-            m: round(run.results[(main_case, "session-tf-edit", m)] / resident_roof, 3)
+            m: round(run.results[(main_case, "session-tf-edit", m)] / edit_bound[m][1], 3)
             for m in MODES
             if (main_case, "session-tf-edit", m) in run.results
         },

@@ -75,6 +75,10 @@ def test_the_key_holds_the_source_the_options_and_the_pocl_settings(cache, monke
     monkeypatch.delenv("POCL_CPU_TARGET")
     monkeypatch.setenv("POCL_CACHE_DIR", "/elsewhere")  # where PoCL caches changes no binary
     assert program.binary_path(dc, SOURCE, OPTIONS) == one
+    # pyopencl's own folder (PYOPENCL_HOME, set on import) is another in every virtual
+    # environment: CI's second interpreter must find the first's binaries
+    monkeypatch.setenv("PYOPENCL_HOME", "/another/venv/site-packages/pyopencl")
+    assert program.binary_path(dc, SOURCE, OPTIONS) == one
     monkeypatch.setenv("PYOPENCL_BUILD_OPTIONS", "-cl-fast-relaxed-math")  # pyopencl adds it
     assert program.binary_path(dc, SOURCE, OPTIONS) != one
 
@@ -133,3 +137,6 @@ def test_the_default_folder_is_the_users_cache(monkeypatch, tmp_path):
     monkeypatch.delenv(program.CACHE_VAR, raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     assert program.cache_dir() == tmp_path / "chronocl" / "programs"
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative")  # ignored, as the XDG spec says
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert program.cache_dir() == tmp_path / "home" / ".cache" / "chronocl" / "programs"

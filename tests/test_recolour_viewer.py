@@ -141,12 +141,11 @@ def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
 
 def test_a_recolouring_that_fails_part_way_leaves_the_next_edit_right(rgba8_server, monkeypatch):
     """RGBA8 on llvmpipe: an edit whose texture write fails after writing (the recolouring's
-    one output and the texture then hold its colours, the shown chronovolume does not) is
-    answered with an error, the viewer keeps serving, and the next edit shows what integrating
-    it shows: a failure drops the view's session (`view_sessions.Views`), so nothing of the torn
-    output or texture is taken as shown, and the next edit integrates. (Texels the failed edit
-    left in bricks the next one leaves empty would never be sampled: the next edit's brick
-    grid skips them, so the picture alone cannot tell.)"""
+    one output, which the shown chronovolume wraps, and the texture then hold its colours) is
+    answered with an error and the viewer keeps serving. The failure drops the view's session
+    (`view_sessions.Views`), so nothing torn is taken as shown: the next edit integrates, and
+    the one after recolours again, on the output the failed edit wrote (taken over with the
+    bricks it may hold), and shows what integrating it shows."""
     real = recolouring._write
     failing = []
 
@@ -173,8 +172,12 @@ def test_a_recolouring_that_fails_part_way_leaves_the_next_edit_right(rgba8_serv
         rid = client.send({"type": "update", **edit(0.01)})  # every brick, and it fails
         errors: list = []
         client.wait("error", rid, errors=errors)
-        header, recoloured = _sharp(client, edit(0.7))  # few again
+        assert "injected after the texture write" in errors[-1]["message"], errors
+        header, _ = _sharp(client, edit(0.7))
         assert header["timings"]["integrate_ms"] > 0  # nothing of the torn one is trusted
+        header, recoloured = _sharp(client, edit(0.65))  # few again, recoloured
+        t = header["timings"]
+        assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0
         _sharp(client, {"window": {"t0": 0, "t1": 4}})
         header, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
         assert header["timings"]["integrate_ms"] > 0

@@ -40,9 +40,11 @@ from chronocl.core.errors import KernelBuildError
 log = logging.getLogger("chronocl")
 
 CACHE_VAR = "CHRONOCL_PROGRAM_CACHE"  # a folder for built programs' binaries; "off": none
-# Environment variables (prefixes) that change what a driver builds: PoCL's settings (its CPU
-# target, ...), the options pyopencl adds to every build, other drivers' build options.
-BUILD_VARIABLES = ("POCL_", "PYOPENCL_", "AMD_OCL_", "RUSTICL_", "IGC_", "CUDA_")
+# Environment variables (names, or prefixes ending in _) that change what a driver builds:
+# PoCL's settings (its CPU target, ...), the options pyopencl adds to every build, other
+# drivers' build options. Not PYOPENCL_HOME: pyopencl sets it to its own folder, another in
+# every virtual environment, and keying on it would miss in each (CI's second interpreter).
+BUILD_VARIABLES = ("POCL_", "PYOPENCL_BUILD_OPTIONS", "AMD_OCL_BUILD_OPTIONS", "RUSTICL_", "IGC_")
 _MAGIC = b"chronocl-program 1\n"
 
 _lock = threading.Lock()
@@ -108,7 +110,9 @@ def cache_dir() -> Path | None:
         return None
     if value:
         return Path(value)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    base = os.environ.get("XDG_CACHE_HOME", "")
+    if not os.path.isabs(base):  # unset, or relative: ignored, as the XDG spec says
+        base = os.path.join(os.path.expanduser("~"), ".cache")
     if not os.path.isabs(base):  # no home to keep it in
         return None
     return Path(base) / "chronocl" / "programs"
@@ -127,7 +131,7 @@ def binary_path(dc, src: str, options: tuple[str, ...]) -> Path | None:
     parts += sorted(
         f"{k}={v}"
         for k, v in os.environ.items()
-        if k.startswith(BUILD_VARIABLES) and k not in ("POCL_CACHE_DIR", "PYOPENCL_CTX")
+        if k.startswith(BUILD_VARIABLES) and k != "POCL_CACHE_DIR"
     )
     return folder / (hashlib.sha256("\0".join(parts).encode()).hexdigest() + ".bin")
 

@@ -36,7 +36,7 @@ from chronocl.core.memory import aligned_empty
 from chronocl.core.timing import race
 from chronocl.engine.buffers import DeviceWork, buffer, max_alloc
 from chronocl.engine.device import DeviceContext, get_context
-from chronocl.engine.device_steps import device_budget
+from chronocl.engine.device_steps import reserve
 from chronocl.engine.program import kernel
 from chronocl.engine.transfer import MAX_CHUNK, make_streams
 
@@ -89,9 +89,9 @@ def read_fns(
     """{'read-memory': numpy's read on every core, 'read-opencl': the read kernel on the device
     of `dc`, and on a device apart from host memory (or with `copy`) 'copy-to-device': the
     brick's bytes uploaded from pinned staging in chunks of `chunk_bytes`, as the engine
-    uploads, and where the brick fits the device's budget for resident steps 'read-device':
-    the read kernel over the brick uploaded once}; `bound_of` picks the bound from their
-    rates.
+    uploads, and where the brick fits what is left of the device's budget for resident steps
+    (`device_steps.reserve`, held while the reader lives) 'read-device': the read kernel over
+    the brick uploaded once}; `bound_of` picks the bound from their rates.
 
     The brick is (Z, W, Y, X) float32 or uint8 with X a multiple of VEC (`padded`).
     """
@@ -122,8 +122,10 @@ def read_fns(
     fns = {"read-memory": memory_read_fn(brick), "read-opencl": run_cl}
     if copy if copy is not None else not dc.is_cpu:
         fns["copy-to-device"] = pinned_copy_fn(dc, brick, min(chunk_bytes, max_alloc(dc)))
-        if brick.nbytes <= device_budget(dc.info.global_mem):
+        hold = reserve(dc, brick.nbytes)  # counted against the sessions' steps on the device
+        if hold is not None:
             fns["read-device"] = resident_read_fn(dc, brick, rows, kern, local)
+            fns["read-device"].hold = hold  # given back when the reader goes
     return fns
 
 
