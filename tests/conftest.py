@@ -1,5 +1,5 @@
-"""Shared fixtures and hypothesis settings; cold private kernel caches for every run (its
-workers share them); the run's time budget."""
+"""Shared fixtures and hypothesis settings; a cold private kernel cache for every run (its
+workers share it); the run's time budget."""
 
 from __future__ import annotations
 
@@ -24,9 +24,6 @@ os.environ["XDG_CACHE_HOME"] = os.path.join(_CACHE, "xdg")
 os.environ["POCL_CACHE_DIR"] = os.environ.get("CHRONOCL_TEST_POCL_CACHE") or os.path.join(
     _CACHE, "pocl"
 )
-# chronocl's own binaries of built programs (`chronocl.engine.program.cache_dir`) beside
-# PoCL's, so that the second interpreter loads them too.
-os.environ["CHRONOCL_PROGRAM_CACHE"] = os.path.join(os.environ["POCL_CACHE_DIR"], "chronocl")
 os.makedirs(os.environ["XDG_CACHE_HOME"], exist_ok=True)
 os.makedirs(os.environ["POCL_CACHE_DIR"], exist_ok=True)
 

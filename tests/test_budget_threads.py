@@ -117,7 +117,6 @@ def peak_growth(store, out, env: dict[str, str]) -> tuple[int, int]:
             **env,
             "XDG_CACHE_HOME": str(out.parent / "xdg"),
             "POCL_CACHE_DIR": str(out.parent / "pocl"),
-            "CHRONOCL_PROGRAM_CACHE": str(out.parent / "programs"),
         },
     )
     try:

@@ -277,10 +277,9 @@ print(json.dumps({"device": dc.info.label, "said": said}))
 
 
 def cold_env(tmp_path) -> dict:
-    """The environment of a process with empty pyopencl, PoCL and chronocl program caches."""
+    """The environment of a process with empty pyopencl and PoCL caches."""
     env = {k: v for k, v in os.environ.items() if k != "CHRONOCL_VERBOSE"}
     env.update(
-        CHRONOCL_PROGRAM_CACHE=str(tmp_path / "programs"),
         XDG_CACHE_HOME=str(tmp_path / "xdg"),
         POCL_CACHE_DIR=str(tmp_path / "pocl"),
         PYOPENCL_NO_CACHE="1",
@@ -374,7 +373,6 @@ def test_build_logs_are_captured_unless_verbose(monkeypatch, capsys, tmp_path):
     from chronocl.engine.device import get_context
 
     monkeypatch.delenv("CHRONOCL_VERBOSE", raising=False)
-    monkeypatch.setenv(program.CACHE_VAR, "off")  # built here, not loaded from an earlier run
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         program.build(get_context(), "quiet.cl", {"LUT_N": 7}, text=WARNS.format("quiet"))
