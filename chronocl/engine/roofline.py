@@ -95,55 +95,44 @@ def read_fns(
 
     The brick is (Z, W, Y, X) float32 or uint8 with X a multiple of VEC (`padded`).
     """
-    import pyopencl as cl
-
-    nz, w, ny, nx = brick.shape
+    nz, _, ny, nx = brick.shape
     dtype = {"float32": "float", "uint8": "uchar"}[brick.dtype.name]
     defines = {"DATA_T": dtype, "DATA_V": f"{dtype}{VEC}", "LUT_N": 256, "VEC": VEC}
     kern = kernel(dc, "read_roofline.cl", "read_sum", defines)
-    out = np.empty((nz, ny, nx), dtype=np.float32)
     local = (8, 2, 1) if (nx // VEC) % 8 == 0 and ny % 2 == 0 else None
 
     # z rows one buffer may hold: a brick over the device's largest allocation is read in
     # chunks of rows, as the engine reads it
     rows = max(1, min(nz, max_alloc(dc) // max(1, brick[:1].nbytes)))
-
-    def run_cl() -> None:
-        with DeviceWork(dc) as work:
-            for a in range(0, nz, rows):
-                b = min(nz, a + rows)
-                src = work.buffer(brick[a:b], in_place=True)
-                dst = work.buffer(out[a:b], access="w", in_place=True)
-                kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
-                cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // VEC, ny, b - a), local)
-                work.read(out[a:b], dst, in_place=True)
-
-    run_cl.sums = out  # what the kernel wrote: each voxel's sum over the steps
-    fns = {"read-memory": memory_read_fn(brick), "read-opencl": run_cl}
+    fns = {
+        "read-memory": memory_read_fn(brick),
+        "read-opencl": kernel_read_fn(dc, brick, kern, local, rows),
+    }
     if copy if copy is not None else not dc.is_cpu:
         fns["copy-to-device"] = pinned_copy_fn(dc, brick, min(chunk_bytes, max_alloc(dc)))
         hold = reserve(dc, brick.nbytes)  # counted against the sessions' steps on the device
         if hold is not None:
-            fns["read-device"] = resident_read_fn(dc, brick, rows, kern, local)
+            fns["read-device"] = kernel_read_fn(dc, brick, kern, local, rows, resident=True)
             fns["read-device"].hold = hold  # given back when the reader goes
     return fns
 
 
-def resident_read_fn(dc: DeviceContext, brick: np.ndarray, rows: int, kern, local):
-    """The read kernel over `brick` already in device memory, as a session keeps its window
-    there (uploaded here, once, in buffers of `rows` z rows), its sums read back into
-    `fn.sums` (4 bytes a voxel: no integration returns less)."""
+def kernel_read_fn(dc: DeviceContext, brick: np.ndarray, kern, local, rows: int, resident=False):
+    """The read kernel over `brick` in buffers of `rows` z rows, each voxel's sum over the
+    steps read back into `fn.sums`: buffers wrapping the host's brick at each call or, with
+    `resident`, copies on the device uploaded once here, before any timing (as a session keeps
+    its window there; the 4 bytes a voxel read back are no more than any integration's)."""
     import pyopencl as cl
 
     nz, w, ny, nx = brick.shape
     out = np.empty((nz, ny, nx), dtype=np.float32)
-    parts = [
-        (a, min(nz, a + rows), buffer(dc, brick[a : a + rows])) for a in range(0, nz, rows)
-    ]  # copies on the device, made before any timing
+    cuts = [(a, min(nz, a + rows)) for a in range(0, nz, rows)]
+    uploaded = [buffer(dc, brick[a:b]) for a, b in cuts] if resident else None
 
     def run() -> None:
         with DeviceWork(dc) as work:
-            for a, b, src in parts:
+            for i, (a, b) in enumerate(cuts):
+                src = uploaded[i] if uploaded else work.buffer(brick[a:b], in_place=True)
                 dst = work.buffer(out[a:b], access="w", in_place=True)
                 kern.set_args(src, np.int32(nx), np.int32(ny), np.int32(w), dst)
                 cl.enqueue_nd_range_kernel(dc.queue, kern, (nx // VEC, ny, b - a), local)
