@@ -44,6 +44,22 @@ def _pixels(jpeg: bytes) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(jpeg)).convert("RGB")).astype(int)
 
 
+def _assert_as_integrated(client: Client, recoloured: list) -> None:
+    """The window (1:11) with the same TFs integrated, away and back (a recolour drops the
+    sliding state), shows what the recoloured frame `recoloured` showed."""
+    _sharp(client, {"window": {"t0": 0, "t1": 4}})
+    header, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
+    assert header["timings"]["integrate_ms"] > 0 and header["timings"]["recolour_ms"] == 0
+    diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
+    assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+
+
+def _opaque_from(x: float, value_range) -> dict:
+    """A max-mode edit with opacity from u = x on (and a little everywhere below x = 0.1)."""
+    points = [[0, 0.2, 0.5, 1, 0.3 * (x < 0.1)], [x, 1, 0.6, 0, 0], [1, 1, 1, 1, 0.9]]
+    return {"data_tf": {"points": points, "value_range": value_range}}
+
+
 @pytest.mark.parametrize(
     ("mode", "where"), [("max", "host"), ("first_hit", "host"), ("max", "gpu")]
 )
@@ -69,12 +85,7 @@ def test_tf_edit_recolours_without_integrating(client, monkeypatch, mode, where)
     t = header["timings"]
     assert header["level"] == 0 and not header["refining"]
     assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0 and not t["incremental"]
-    # the same window and TFs integrated: away and back (the recolour dropped the sliding state)
-    _sharp(client, {"window": {"t0": 0, "t1": 4}})
-    header, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
-    assert header["timings"]["integrate_ms"] > 0 and header["timings"]["recolour_ms"] == 0
-    diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
-    assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+    _assert_as_integrated(client, recoloured)
 
 
 def test_edit_that_changes_the_hits_integrates(client) -> None:
@@ -122,19 +133,12 @@ def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
         _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
         # opacity from x on: every brick coloured, then few (the others must be cleared)
         for x in (0.01, 0.75, 0.6):
-            points = [[0, 0.2, 0.5, 1, 0.3 * (x < 0.1)], [x, 1, 0.6, 0, 0], [1, 1, 1, 1, 0.9]]
-            edit = {"data_tf": {"points": points, "value_range": fitted}}
-            header, recoloured = _sharp(client, edit)
+            header, recoloured = _sharp(client, _opaque_from(x, fitted))
             t = header["timings"]
             assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0
             assert t["upload_ms"] > 0
         assert len(sparse) == 3 and min(sparse) < 0.5, sparse  # transparent bricks left out
-        # the same window and TFs integrated: away and back
-        _sharp(client, {"window": {"t0": 0, "t1": 4}})
-        header, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
-        assert header["timings"]["integrate_ms"] > 0
-        diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
-        assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+        _assert_as_integrated(client, recoloured)
     finally:
         client.close()
 
@@ -161,28 +165,20 @@ def test_a_recolouring_that_fails_part_way_leaves_the_next_edit_right(rgba8_serv
         ds, _ = client.open(0, size=(96, 96))
         fitted = ds["state"]["data_tf"]["value_range"]
         _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
-
-        def edit(x: float) -> dict:  # opacity from x on (below 0.1: everywhere)
-            points = [[0, 0.2, 0.5, 1, 0.3 * (x < 0.1)], [x, 1, 0.6, 0, 0], [1, 1, 1, 1, 0.9]]
-            return {"data_tf": {"points": points, "value_range": fitted}}
-
-        header, _ = _sharp(client, edit(0.75))  # few bricks coloured
+        header, _ = _sharp(client, _opaque_from(0.75, fitted))  # few bricks coloured
         assert header["timings"]["recolour_ms"] > 0
         failing.append(True)
-        rid = client.send({"type": "update", **edit(0.01)})  # every brick, and it fails
+        every = _opaque_from(0.01, fitted)  # every brick, and it fails
+        rid = client.send({"type": "update", **every})
         errors: list = []
         client.wait("error", rid, errors=errors)
         assert "injected after the texture write" in errors[-1]["message"], errors
-        header, _ = _sharp(client, edit(0.7))
+        header, _ = _sharp(client, _opaque_from(0.7, fitted))
         assert header["timings"]["integrate_ms"] > 0  # nothing of the torn one is trusted
-        header, recoloured = _sharp(client, edit(0.65))  # few again, recoloured
+        header, recoloured = _sharp(client, _opaque_from(0.65, fitted))  # few again, recoloured
         t = header["timings"]
         assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0
-        _sharp(client, {"window": {"t0": 0, "t1": 4}})
-        header, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
-        assert header["timings"]["integrate_ms"] > 0
-        diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
-        assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+        _assert_as_integrated(client, recoloured)
     finally:
         client.close()
 
@@ -258,10 +254,7 @@ def test_an_idle_gather_is_given_up_by_new_input_and_the_edit_is_right(client, m
     assert calls == ["given up", "done"], calls
     t = header["timings"]
     assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0
-    _sharp(client, {"window": {"t0": 0, "t1": 4}})
-    _, integrated = _sharp(client, {"window": {"t0": 1, "t1": 11}})
-    diff = np.abs(_pixels(recoloured[0]) - _pixels(integrated[0]))
-    assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 3, (diff.mean(), diff.max())
+    _assert_as_integrated(client, recoloured)
 
 
 def test_steps_give_way_to_the_winners_before_they_are_gathered(client, monkeypatch) -> None:
