@@ -151,11 +151,11 @@ class BrickRecolour(HostRecolour):
 
         w = self.w
         coloured = self.coloured(spec)
-        out, before = self._held.pop(0)
+        out, before = self._held[0]
         redo = (coloured | before).ravel()
         # until the kernel has run, any brick of either may hold colour (a failure part way
         # leaves some of each): the next edit rewrites them all
-        self._held.append((out, coloured | before))
+        self._held[0] = (out, coloured | before)
         todo = np.flatnonzero(redo).astype(np.int32)
         peaks = np.zeros((max(len(todo), 1), 27), np.uint8)
         box = np.zeros((max(len(todo), 1), 6), np.int32)
@@ -187,7 +187,7 @@ class BrickRecolour(HostRecolour):
             bounds[:3] = box[: len(todo)][filled, :3].min(axis=0)
             bounds[3:] = box[: len(todo)][filled, 3:].max(axis=0)
         grid = grown_grid(stats)
-        self._held[-1] = (out, coloured)
+        self._held[0] = (out, coloured)
         return Sparse(out, coloured, len(todo), grid, bounds)
 
     def take_held(self) -> list:
