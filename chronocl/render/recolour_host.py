@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from chronocl.core.interrupt import checkpoint, watched
-from chronocl.core.memory import ALIGN, aligned_empty, is_aligned
+from chronocl.core.memory import ALIGN, aligned_empty, is_aligned, recycled_empty
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 
@@ -118,9 +118,11 @@ def gather(
     none = np.iinfo(k_dtype).max
     table = np.full(max(steps) + 2, none, dtype=k_dtype)
     table[np.asarray(steps) + 1] = np.arange(len(steps), dtype=k_dtype)
-    u = aligned_empty(shape, np.float32)  # PoCL reads and writes aligned host memory in place
-    u[...] = 0
-    k = aligned_empty(shape, k_dtype)
+    # PoCL reads and writes aligned host memory in place; the kernels write every voxel, on
+    # the memory of winners that died where there is some (at 512^3 fresh pages and zeroing
+    # them cost 0.6 s of a 1.7 s gather here)
+    u = recycled_empty(shape, np.float32)
+    k = recycled_empty(shape, k_dtype)
     t_index = aligned(t_index.astype(np.int32, copy=False))
     cpu = dc.is_cpu
     change = spec.mode == "change"
@@ -141,18 +143,19 @@ def gather(
                 n = (z1 - z0) * plane
                 k_buf = work.buffer(k[z0:z1], access="rw", in_place=cpu)
                 u_buf = work.buffer(u[z0:z1], access="rw", in_place=cpu)
-                index = cl.Kernel(program, "window_index")
-                index.set_args(work.buffer(t_index[z0:z1], in_place=cpu), table_buf, k_buf)
-                cl.enqueue_nd_range_kernel(dc.queue, index, (n,), None)
+                index_args = (work.buffer(t_index[z0:z1], in_place=cpu), table_buf, k_buf, u_buf)
                 if block is not None:
                     data, offs_buf, strides = _slab(work, block, z0, z1, dtype.itemsize, row, cpu)
                     kern = cl.Kernel(program, "gather_block")
                     kern.set_args(
-                        k_buf, u_buf, data, offs_buf,
+                        *index_args, data, offs_buf,
                         *(np.int64(v) for v in (*strides, nx, ny)), np.uint32(none), *values,
                     )  # fmt: skip
                     cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
                 else:
+                    index = cl.Kernel(program, "window_index")
+                    index.set_args(*index_args)
+                    cl.enqueue_nd_range_kernel(dc.queue, index, (n,), None)
                     bufs = {s: work.buffer(arrays[s][z0:z1], in_place=cpu) for s in steps}
                     for base in range(first, len(steps), CHUNK):
                         count = min(CHUNK, len(steps) - base)

@@ -4,27 +4,35 @@
  * values' type) and, in change mode, CHANGE. */
 
 // The winners' step index (into the window; none: none_k) from t_index (the selected step, -1:
-// none) through `table` (step + 1 -> index), then their value u: the window's steps go in
-// chunks of up to 8 (p1..p8 the chunk's steps, p0 the step before the first, which change
-// reads), normalised as chronocl.core.values does (change: the clipped difference, scaled).
+// none) through `table` (step + 1 -> index), then their value u (0 where none): the window's
+// steps go in chunks of up to 8 (p1..p8 the chunk's steps, p0 the step before the first, which
+// change reads), normalised as chronocl.core.values does (change: the clipped difference,
+// scaled). Every voxel's k and u are written here: the host's arrays come uninitialised.
 __kernel void window_index(__global const int *t_index, __global const K_T *table,
-                           __global K_T *won_k)
+                           __global K_T *won_k, __global float *won_u)
 {
     size_t i = get_global_id(0);
     won_k[i] = table[t_index[i] + 1];
+    won_u[i] = 0.0f;
 }
 
 // The window's steps as views of one block (the window manager's slots: any strides, each
-// step at its element offset `offs[k]`): each voxel reads its winner where it lies.
-__kernel void gather_block(__global const K_T *won_k, __global float *won_u,
+// step at its element offset `offs[k]`): each voxel's k as window_index finds it, and its
+// value read where it lies, in one pass (t_index read once, k written once).
+__kernel void gather_block(__global const int *t_index, __global const K_T *table,
+                           __global K_T *won_k, __global float *won_u,
                            __global const V_T *block, __global const long *offs,
                            const long sz, const long sy, const long sx, const long nx,
                            const long ny, const uint none_k, const float lo, const float hi,
                            const float scale)
 {
     size_t i = get_global_id(0);
-    uint k = won_k[i];
-    if (k == none_k) return;
+    uint k = table[t_index[i] + 1];
+    won_k[i] = k;
+    if (k == none_k) {
+        won_u[i] = 0.0f;
+        return;
+    }
     long x = i % nx, y = (i / nx) % ny, z = i / (nx * ny);
     long at = z * sz + y * sy + x * sx;
     float v = (float)block[offs[k] + at];
