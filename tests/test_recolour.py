@@ -37,7 +37,7 @@ from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
 from chronocl.render.recolour import Recolourer, available
 from chronocl.render.recolour_bricks import BrickRecolour
-from chronocl.render.recolour_host import HostRecolour, gather
+from chronocl.render.recolour_host import HostRecolour, gather, shown_output
 from chronocl.render.recolour_upload import show
 from chronocl.render.upload import convert, display_format
 
@@ -297,6 +297,50 @@ def aligned_copy(a: np.ndarray) -> np.ndarray:
     out = aligned_empty(a.shape, a.dtype)
     out[...] = a
     return out
+
+
+@pytest.mark.parametrize("mode", ["max", "min", "change"])
+def test_recolouring_writes_into_the_rgba8_shown(mode) -> None:
+    """The viewer's first edit of a window recolours into the RGBA8 the window shows (no second
+    array): brick by brick, the bricks its spec may colour are rewritten with the first edit's,
+    so an edit that leaves them transparent clears them; every edit equals the host's float
+    recolouring rounded. The whole-volume path writes into it too."""
+    rng = np.random.default_rng(7)
+    ramp = np.linspace(0, 1, 45, dtype=np.float32)  # values, and their changes, grow along x
+    noise = rng.random((12, 37, 29, 45), dtype=np.float32)
+    swing = 0.5 + 0.5 * (np.arange(12) % 2)[:, None, None, None]  # min, max and change alike
+    data = -10 + 40 * ramp * swing * (0.8 + 0.2 * noise)
+    series = TimeSeries.from_array(data.astype(np.float32))
+    vr = (-10.0, 30.0)
+    spec = _spec(mode, DataTF(), TimeTF(positions="absolute"), value_range=vr)
+    high = ((0, 1, 1, 1, 0.0), (0.8, 1, 1, 1, 0.0), (1, 1, 1, 1, 1.0))  # opaque near 1 only
+    edits = [
+        _spec(mode, DataTF(points=pts), TimeTF.preset(c, positions="absolute"), value_range=vr)
+        for pts, c in [(high, "rgb"), (DataTF().points, "warm-cool")]
+    ]
+    with Session(series, engine="opencl", spec=spec, memory="256MB", display=True) as s:
+        cv = s.set_window(2, 9)
+        assert shown_output(cv.rgba, cv.shape)
+        w = s.winners(gather)
+        bricks = BrickRecolour(w, start=cv.rgba)
+        shown = aligned_copy(cv.rgba)
+        whole = HostRecolour(w, start=shown)
+        host = HostRecolour(w)
+        try:
+            before = bricks.held().copy()  # the bricks the shown spec may colour
+            for edit in [*edits, spec]:
+                fixed = s.recolours(edit)[0]
+                exact, _ = convert(host.recolour(fixed, "f4"), "f1")
+                sp = bricks.sparse(fixed)
+                assert sp.rgba is cv.rgba
+                np.testing.assert_array_equal(sp.rgba, exact)
+                if edit is edits[0]:  # it cleared bricks the shown spec coloured
+                    assert (before & ~sp.coloured).any()
+                assert whole.recolour(fixed, "f1", reuse=True) is shown
+                np.testing.assert_array_equal(shown, exact)
+        finally:
+            for r in (bricks, whole, host):
+                r.release()
 
 
 @pytest.mark.parametrize("mode", ["max", "change"])

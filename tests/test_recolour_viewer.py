@@ -143,6 +143,48 @@ def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
         client.close()
 
 
+def test_the_first_edit_recolours_into_the_frame_shown(rgba8_server, monkeypatch) -> None:
+    """RGBA8 on llvmpipe: the winners' first edit writes into the RGBA8 the integrated frame
+    holds (no second array) and into the texture only the bricks it or the frame may colour:
+    an edit that leaves bricks the frame coloured transparent clears them in the texture
+    too, and shows what integrating it shows."""
+    starts, outputs, texels = [], [], []
+    real_on_host, real_sparse = recolouring.on_host, recolouring.BrickRecolour.sparse
+    real_write = recolouring._write
+
+    def write(rc, vol, sp, held, spacing):
+        real_write(rc, vol, sp, held, spacing)
+        texels.append(np.frombuffer(vol.texture.read(), np.uint8).reshape(sp.rgba.shape))
+
+    def on_host(w, device, held=None, start=None):
+        starts.append(start)
+        return real_on_host(w, device, held, start)
+
+    def sparse(self, spec):
+        sp = real_sparse(self, spec)
+        outputs.append(sp)
+        return sp
+
+    monkeypatch.setattr(recolouring, "on_host", on_host)
+    monkeypatch.setattr(recolouring.BrickRecolour, "sparse", sparse)
+    monkeypatch.setattr(recolouring, "_write", write)
+    client = Client(rgba8_server)
+    try:
+        ds, _ = client.open(0, size=(96, 96))
+        fitted = ds["state"]["data_tf"]["value_range"]
+        _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+        header, recoloured = _sharp(client, _opaque_from(0.75, fitted))
+        t = header["timings"]
+        assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0
+        assert len(starts) == 1 and starts[0] is not None
+        assert len(outputs) == 1 and outputs[0].rgba is starts[0]
+        assert 0 < outputs[0].rewritten < outputs[0].coloured.size  # the bricks it may change
+        np.testing.assert_array_equal(texels[0], outputs[0].rgba)
+        _assert_as_integrated(client, recoloured)
+    finally:
+        client.close()
+
+
 def test_a_recolouring_that_fails_part_way_leaves_the_next_edit_right(rgba8_server, monkeypatch):
     """RGBA8 on llvmpipe: an edit whose texture write fails after writing (the recolouring's
     one output, which the shown chronovolume wraps, and the texture then hold its colours) is

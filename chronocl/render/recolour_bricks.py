@@ -33,7 +33,7 @@ from chronocl.core.memory import aligned_empty
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
-from chronocl.render.recolour_host import RECOLOUR_H, HostRecolour, index_type
+from chronocl.render.recolour_host import RECOLOUR_H, HostRecolour, index_type, shown_output
 
 B = brick_grid.BRICK
 RUN_BRICKS = 64  # bricks a work-item recolours at most (a 512-voxel row)
@@ -61,7 +61,12 @@ class BrickRecolour(HostRecolour):
     """A window's winners on the OpenCL device with their brick summaries, recoloured into
     RGBA8 brick by brick (`sparse`); `recolour` (the whole volume, any format) as before."""
 
-    def __init__(self, w: Winners, device: str | None = None, held: list | None = None) -> None:
+    def __init__(
+        self, w: Winners, device: str | None = None, held: list | None = None, start=None
+    ) -> None:
+        """`held`: the last window's output (`take_held`); `start`: the RGBA8 the window shows
+        (`shown_output`), taken first: its bricks that `w.spec` may colour are rewritten by
+        the first edit as those of an output coloured under it."""
         import pyopencl as cl
 
         from chronocl.engine.buffers import DeviceLimitError, DeviceWork, buffer, max_alloc
@@ -86,13 +91,6 @@ class BrickRecolour(HostRecolour):
         n = int(np.prod(self.grid))
         self.umin, self.umax = np.empty(n, np.float32), np.empty(n, np.float32)
         self.steps = np.empty(n, np.uint64)
-        # the output array, with the bricks that may be coloured in it: zeroed here, so that no
-        # edit pays for first touching its pages (512^3: 0.5 s), or that of the winners
-        # prepared before (`held`, a slot's last window: any shape alike)
-        if takes_over(held, w.u.shape):
-            self._held = list(held)
-        else:
-            self._held = [(aligned_zeros((*w.u.shape, 4)), np.zeros(self.grid, bool))]
         program = self._program()
         with DeviceWork(self.dc) as work:
             outs = [work.buffer(a, access="w") for a in self._summary()]
@@ -103,6 +101,16 @@ class BrickRecolour(HostRecolour):
             cl.enqueue_nd_range_kernel(self.dc.queue, kern, (n,), None)
             for a, buf in zip(self._summary(), outs, strict=True):
                 work.read(a, buf, in_place=False)
+        # the output array, with the bricks that may be coloured in it: the shown RGBA8,
+        # coloured under the winners' spec (its other bricks hold nothing); else the output of
+        # the winners prepared before (`held`, a slot's last window: any shape alike); else
+        # one zeroed here, so that no edit pays for first touching its pages (512^3: 0.5 s)
+        if shown_output(start, w.u.shape):
+            self._held = [(start, self.coloured(w.spec))]
+        elif takes_over(held, w.u.shape):
+            self._held = list(held)
+        else:
+            self._held = [(aligned_zeros((*w.u.shape, 4)), np.zeros(self.grid, bool))]
 
     def _summary(self) -> tuple[np.ndarray, ...]:
         return self.umin, self.umax, self.steps
@@ -189,6 +197,10 @@ class BrickRecolour(HostRecolour):
         grid = grown_grid(stats)
         self._held[0] = (out, coloured)
         return Sparse(out, coloured, len(todo), grid, bounds)
+
+    def held(self) -> np.ndarray | None:
+        """The bricks that may be coloured in the output (None: it is not held)."""
+        return self._held[0][1] if self._held else None
 
     def take_held(self) -> list:
         """The output array with its bricks that may be coloured, for the next winners of the

@@ -186,6 +186,23 @@ def _slab(work, block: tuple, z0: int, z1: int, item: int, row: int, cpu: bool):
     return work.buffer(base[start:stop], in_place=cpu), work.buffer(local), strides
 
 
+def shown_output(rgba, shape: tuple) -> bool:
+    """Whether `rgba`, the RGBA the window shows (integrated or recoloured under the winners'
+    spec), can be a recolouring's output for winners of `shape` (Z, Y, X): RGBA8 of that
+    shape where PoCL writes in place. The viewer's display integration writes RGBA8 (slides
+    and small volumes give float32): its first TF edit then recolours into the memory the
+    frame holds, instead of a second array (at 512^3, 512 MB a view, whose zeroing took
+    0.5 s of that edit)."""
+    return (
+        isinstance(rgba, np.ndarray)
+        and rgba.dtype == np.uint8
+        and rgba.shape == (*shape, 4)
+        and rgba.flags.c_contiguous
+        and rgba.flags.writeable
+        and is_aligned(rgba)
+    )
+
+
 def aligned(a: np.ndarray) -> np.ndarray:
     """`a` where PoCL can use it in place (C-contiguous, 64-byte aligned), else a copy."""
     if a.flags.c_contiguous and is_aligned(a):
@@ -226,7 +243,9 @@ class HostRecolour:
     """A window's winners on the OpenCL device (`chronocl.engine.device.get_context`), in
     spans of voxels whose buffers each fit the device's largest (`chronocl.engine.buffers`)."""
 
-    def __init__(self, w: Winners, device: str | None = None) -> None:
+    def __init__(self, w: Winners, device: str | None = None, start=None) -> None:
+        """`start`: the RGBA8 the window shows (`shown_output`), written over by the first
+        `recolour` with `reuse`: the edit takes no memory beside it."""
         from chronocl.engine.buffers import buffer, max_alloc, spans
         from chronocl.engine.device import get_context
 
@@ -234,6 +253,8 @@ class HostRecolour:
         self.dc = get_context(device)
         self._u, self._k = aligned(w.u), aligned(w.k)
         self._spare: list[np.ndarray] = []  # the last result, with `reuse`
+        if shown_output(start, w.u.shape):
+            self._spare.append(start)
         u, k, cpu = self._u.reshape(-1), self._k.reshape(-1), self.dc.is_cpu
         # (first voxel, end, u, k) a span; float32 RGBA out, 16 bytes a voxel, decides the spans
         self.parts = [

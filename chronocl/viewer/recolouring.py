@@ -37,7 +37,7 @@ from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour import RecolourVolume, available, recolourer
 from chronocl.render.recolour_bricks import BrickRecolour, Sparse, takes_over
-from chronocl.render.recolour_host import HostRecolour, gather, software_gl
+from chronocl.render.recolour_host import HostRecolour, gather, shown_output, software_gl
 from chronocl.render.recolour_upload import show
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.slots import ViewSlot
@@ -141,16 +141,25 @@ class Recolouring:
         on_gpu = on_gl(_release_and_pick, slot)
         if on_gpu is None:
             return None
+        # on the host, the first edit recolours into the RGBA8 shown (nothing else holds it:
+        # the texture has its own copy), else into the last window's output
+        start = None if on_gpu or not shown_output(shown.rgba, shown.shape) else shown.rgba
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the winners and outputs
             rgba = 4 if slot.volume.texture.dtype == "f1" else 16  # the display format's bytes
-            limit.fit(_prepared_bytes(shown, on_gpu, takes_over(held, shown.shape), rgba))
+            has_output = start is not None or takes_over(held, shown.shape)
+            limit.fit(_prepared_bytes(shown, on_gpu, has_output, rgba))
         w = full.winners(functools.partial(gather, device=self.device))
         if w is None:
             return None
         checkpoint("preparing the recolouring", 1, 2)  # at idle: input that came meanwhile
-        volume = on_gl(_upload, w) if on_gpu else on_host(w, self.device, held)
-        slot.recolour = Prepared(weakref.ref(shown.t_index), volume)
+        volume = on_gl(_upload, w) if on_gpu else on_host(w, self.device, held, start)
+        prepared = Prepared(weakref.ref(shown.t_index), volume)
+        if start is not None and isinstance(volume, BrickRecolour):
+            # the texture holds the shown RGBA: an edit writes only the bricks it changes
+            prepared.written, prepared.texture = weakref.ref(shown), slot.volume.texture
+            prepared.held = volume.held()
+        slot.recolour = prepared
         return slot.recolour
 
     def finish(self) -> None:
@@ -212,11 +221,11 @@ def _recolour(rc, rv: RecolourVolume, spec, spacing, fmt: str, volume):
     return recolourer(rc.ctx).recolour(rv, spec, spacing, fmt, volume=volume)
 
 
-def on_host(w, device: str | None, held: list | None = None) -> HostRecolour:
+def on_host(w, device: str | None, held: list | None = None, start=None) -> HostRecolour:
     """The winners on the OpenCL device: brick by brick where the whole volume fits one
     buffer (its kernels index all of it; `held`: the outputs of the last), else in spans
-    (`HostRecolour`)."""
+    (`HostRecolour`); `start`: the RGBA8 shown, the first edit's output."""
     try:
-        return BrickRecolour(w, device, held)
+        return BrickRecolour(w, device, held, start)
     except DeviceLimitError:
-        return HostRecolour(w, device)
+        return HostRecolour(w, device, start)
