@@ -149,14 +149,16 @@ def main() -> None:
     }
 
     host = HostRecolour(won)
+    shown = s.current()
     e = time.perf_counter()
-    bricks = BrickRecolour(won) if "bricks" in paths else None
+    # as the viewer: the first edit writes into the RGBA8 shown, which its texture holds
+    bricks = BrickRecolour(won, start=shown.rgba) if "bricks" in paths else None
     prepare["summarise_bricks_ms"] = round(1e3 * (time.perf_counter() - e), 1)
     emit({"path": "recolour", "prepare": prepare})
     own = ViewSlot()  # the bricks path's texture: it writes what changed since its last edit
     if bricks is not None:
-        upload(rc, own, s.current())
-    held = None
+        upload(rc, own, shown)
+    held = bricks.held() if bricks is not None else None
     rows: dict[str, list] = {p: [] for p in paths}
     rewritten: dict[int, float] = {}  # the bricks path's share of bricks recoloured per edit
     for i in range(edits):  # each edit three ways, in a rotating order (a shared machine)
