@@ -138,12 +138,15 @@ class Recolouring:
         held = None
         if isinstance(old, Prepared) and isinstance(old.volume, BrickRecolour):
             held = old.volume.take_held()  # its outputs' memory, already touched
+        del old  # its winners' memory goes back once released: the gather takes it again
         on_gpu = on_gl(_release_and_pick, slot)
         if on_gpu is None:
             return None
         # on the host, the first edit recolours into the RGBA8 shown (nothing else holds it:
         # the texture has its own copy), else into the last window's output
         start = None if on_gpu or not shown_output(shown.rgba, shown.shape) else shown.rgba
+        if start is not None:
+            held = None  # that output's memory goes back now: the gather below takes it
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the winners and outputs
             rgba = 4 if slot.volume.texture.dtype == "f1" else 16  # the display format's bytes
