@@ -99,9 +99,8 @@ def gather(
     block = _block(arrays, steps)
     rows = limit // (plane * per_voxel)
     if block is not None:
-        _, offs, (sz, sy, sx) = block
-        row = (ny - 1) * sy + (nx - 1) * sx + 1  # elements one z row of a step spans
-        fixed = ALIGN + (int(offs.max() - offs.min()) + row) * dtype.itemsize  # a slab of 1 row
+        _, offs, sz = block
+        fixed = ALIGN + (int(offs.max() - offs.min()) + plane) * dtype.itemsize  # 1 row's slab
         rows = min(rows, 1 + (limit - fixed) // (sz * dtype.itemsize) if limit >= fixed else 0)
         if rows < 1:
             block = None  # a slab of one row would not fit in one buffer: step by step
@@ -145,13 +144,12 @@ def gather(
                 u_buf = work.buffer(u[z0:z1], access="rw", in_place=cpu)
                 index_args = (work.buffer(t_index[z0:z1], in_place=cpu), table_buf, k_buf, u_buf)
                 if block is not None:
-                    data, offs_buf, strides = _slab(work, block, z0, z1, dtype.itemsize, row, cpu)
+                    data, offs_buf = _slab(work, block, z0, z1, dtype.itemsize, plane, cpu)
                     kern = cl.Kernel(program, "gather_block")
                     kern.set_args(
-                        *index_args, data, offs_buf,
-                        *(np.int64(v) for v in (*strides, nx, ny)), np.uint32(none), *values,
-                    )  # fmt: skip
-                    cl.enqueue_nd_range_kernel(dc.queue, kern, (n,), None)
+                        *index_args, data, offs_buf, np.int64(block[2]), np.uint32(none), *values
+                    )
+                    cl.enqueue_nd_range_kernel(dc.queue, kern, (plane, z1 - z0), None)
                 else:
                     index = cl.Kernel(program, "window_index")
                     index.set_args(*index_args)
@@ -173,17 +171,16 @@ def gather(
     return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
 
 
-def _slab(work, block: tuple, z0: int, z1: int, item: int, row: int, cpu: bool):
+def _slab(work, block: tuple, z0: int, z1: int, item: int, plane: int, cpu: bool):
     """The buffer of the part of the slot block that z rows z0..z1 of every step lie in (from
-    an aligned address; `row`: elements one z row of a step spans), each step's element
-    offset in it, and the element strides."""
-    base, offs, strides = block
-    sz = strides[0]
+    an aligned address; `plane`: elements one z row of a step spans) and each step's element
+    offset in it."""
+    base, offs, sz = block
     first = (int(offs.min()) + z0 * sz) * item  # bytes from the block's start
     start = first - first % ALIGN
-    stop = (int(offs.max()) + (z1 - 1) * sz + row) * item
+    stop = (int(offs.max()) + (z1 - 1) * sz + plane) * item
     local = (offs + z0 * sz - start // item).astype(np.int64)
-    return work.buffer(base[start:stop], in_place=cpu), work.buffer(local), strides
+    return work.buffer(base[start:stop], in_place=cpu), work.buffer(local)
 
 
 def shown_output(rgba, shape: tuple) -> bool:
@@ -214,8 +211,9 @@ def aligned(a: np.ndarray) -> np.ndarray:
 
 def _block(arrays: dict[int, np.ndarray], steps) -> tuple | None:
     """(a 64-byte aligned byte view of the block, element offset of each window step in it,
-    element strides z, y, x) where the steps are views of one C-contiguous block with the
-    same strides (the window manager's slots), else None."""
+    the element stride of their z rows) where the steps are views of one C-contiguous block
+    with the same strides, each z row of Y x X contiguous (the window manager's slots), else
+    None."""
     views = [arrays[s] for s in steps]
     owners = []
     for a in views:
@@ -225,7 +223,9 @@ def _block(arrays: dict[int, np.ndarray], steps) -> tuple | None:
     owner, item, strides = owners[0], views[0].dtype.itemsize, views[0].strides
     if any(o is not owner for o in owners) or not owner.flags.c_contiguous:
         return None
-    if any(v.strides != strides for v in views) or any(st % item or st < 0 for st in strides):
+    _, ny, nx = views[0].shape
+    rows = strides[2] == item and (ny == 1 or strides[1] == nx * item)
+    if not rows or any(v.strides != strides for v in views) or strides[0] % item or strides[0] < 0:
         return None
     first = min(v.ctypes.data for v in views)
     start = first - first % ALIGN  # the block from an aligned address: read in place
@@ -236,7 +236,7 @@ def _block(arrays: dict[int, np.ndarray], steps) -> tuple | None:
     if any(o % item for o in offsets):
         return None
     offs = np.array([o // item for o in offsets], dtype=np.int64)
-    return base, offs, tuple(st // item for st in strides)
+    return base, offs, strides[0] // item
 
 
 class HostRecolour:

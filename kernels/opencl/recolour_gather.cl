@@ -16,25 +16,24 @@ __kernel void window_index(__global const int *t_index, __global const K_T *tabl
     won_u[i] = 0.0f;
 }
 
-// The window's steps as views of one block (the window manager's slots: any strides, each
-// step at its element offset `offs[k]`): each voxel's k as window_index finds it, and its
-// value read where it lies, in one pass (t_index read once, k written once).
+// The window's steps as views of one block (the window manager's slots: each step's z rows
+// `sz` elements apart, a row's Y x X contiguous, each step at its element offset `offs[k]`):
+// per z row (global id 1) and voxel of the row (id 0), its k as window_index finds it and its
+// value read where it lies, in one pass (t_index read once, k written once, no division).
 __kernel void gather_block(__global const int *t_index, __global const K_T *table,
                            __global K_T *won_k, __global float *won_u,
-                           __global const V_T *block, __global const long *offs,
-                           const long sz, const long sy, const long sx, const long nx,
-                           const long ny, const uint none_k, const float lo, const float hi,
-                           const float scale)
+                           __global const V_T *block, __global const long *offs, const long sz,
+                           const uint none_k, const float lo, const float hi, const float scale)
 {
-    size_t i = get_global_id(0);
+    const size_t r = get_global_id(0), z = get_global_id(1);
+    const size_t i = z * get_global_size(0) + r;
     uint k = table[t_index[i] + 1];
     won_k[i] = k;
     if (k == none_k) {
         won_u[i] = 0.0f;
         return;
     }
-    long x = i % nx, y = (i / nx) % ny, z = i / (nx * ny);
-    long at = z * sz + y * sy + x * sx;
+    const long at = (long)z * sz + (long)r;
     float v = (float)block[offs[k] + at];
 #ifdef CHANGE
     float b = (float)block[offs[k - 1] + at];
