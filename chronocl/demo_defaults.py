@@ -46,7 +46,7 @@ def default_pictures(
 ) -> list[ModePicture]:
     """Write `out_png` (one panel per mode, default TFs) and `out_png` with suffix .json; return
     what each picture shows."""
-    selection = parse_selection(window, series.n_steps)
+    selection = parse_selection(window, series.n_steps, series.times)
     if camera is None:  # the default view: from the side of the first steps
         fitted = prepare(series, window).value_range
         camera = early_side(series, selection, fitted, Camera(30, 25, zoom=1.15))

@@ -154,6 +154,10 @@ CASES = [
     integrate("window-negative", ("--window", "-1:3"), "outside the series"),
     integrate("window-step-past-end", ("--window", "1,7"), "outside [0, 5)"),
     integrate("window-garbage", ("--window", "a:b"), "cannot read time window"),
+    integrate("window-same-ends", ("--window", "3:3"), "is empty: it ends where it starts"),
+    integrate("window-reversed", ("--window", "4:2"), "is reversed: write 2:4"),
+    integrate("window-of-times", ("--window", "1.0:3.0"), "write --window 1:3"),
+    integrate("window-of-no-times", ("--window", "7.5:9.5"), "no step's time lies in"),
     render("render-window-past-end", ("--window", "2:99"), "outside the series"),
     # ---------------------------------------------------------------- modes and orders
     integrate("mode-unknown", ("--mode", "sum"), "unknown mode 'sum'; choose one of"),

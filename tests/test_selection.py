@@ -64,7 +64,9 @@ def test_the_api_refuses_a_bare_pair_before_any_work():
     [
         ("0:11", "outside the series"),
         ("-1:3", "outside"),
-        ("5:5", "outside"),
+        ("5:5", "is empty: it ends where it starts; the end is exclusive, so write 5:6"),
+        ("7:2", "is reversed: write 2:7"),
+        ("2.0:4.5", "looks like times, but windows count steps (0 to 10)"),
         ("0:5:0", "stride must be at least 1"),
         ("3,3", "strictly increasing"),
         ("4,2", "strictly increasing"),
@@ -79,6 +81,18 @@ def test_bad_windows(window, needle):
         parse_selection(window, 10)
     assert needle in str(info.value)
     assert isinstance(info.value, ValueError)
+
+
+def test_a_window_of_times_names_its_steps():
+    """A window written in the series' time labels is refused, naming the steps they are."""
+    times = [0.25 * i for i in range(10)]
+    with pytest.raises(InvalidSelectionError) as info:
+        parse_selection("0.5:1.25", 10, times)
+    assert "the times in [0.5, 1.25) are steps 2 to 4 (0.5 to 1): write --window 2:5" in str(
+        info.value
+    )
+    with pytest.raises(InvalidSelectionError, match="no step's time lies in"):
+        parse_selection("3:4.5", 10, times)
 
 
 def test_orders():

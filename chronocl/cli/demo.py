@@ -50,7 +50,7 @@ def demo(
 
     series = open_series(data)
     window = window or f"0:{series.n_steps}"
-    parse_selection(window, series.n_steps)  # a bad window: one line before any work
+    parse_selection(window, series.n_steps, series.times)  # a bad window: one line before any work
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"defaults-{data.stem}.png"
     print_shown(default_pictures(series, window, path, engine=engine), path, Console(stderr=True))

@@ -101,7 +101,7 @@ def probe(
     if window is not None:
         from chronocl.core.selection import parse_selection
 
-        parse_selection(window, series.n_steps)
+        parse_selection(window, series.n_steps, series.times)
 
     if point is not None:
         curve = probe(series, *point, progress=True)

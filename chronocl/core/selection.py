@@ -55,6 +55,16 @@ class Selection:
         """Steps t0, t0+stride, ... below t1."""
         if stride < 1:
             raise InvalidSelectionError(f"stride must be at least 1, got {stride}")
+        if t0 == t1:
+            raise InvalidSelectionError(
+                f"window {t0}:{t1} is empty: it ends where it starts; the end is exclusive, "
+                f"so write {t0}:{t0 + 1} for step {t0} alone"
+            )
+        if t1 < t0:
+            raise InvalidSelectionError(
+                f"window {t0}:{t1} is reversed: write {t1}:{t0} (windows run forward; to "
+                "integrate the newest step first use --order backward / order='backward')"
+            )
         if not (0 <= t0 < t1 <= n_steps):
             raise InvalidSelectionError(
                 f"window {t0}:{t1} is outside the series' steps [0, {n_steps}); "
@@ -73,11 +83,13 @@ class Selection:
         return ",".join(map(str, s))
 
 
-def parse_selection(window: object, n_steps: int) -> Selection:
+def parse_selection(window: object, n_steps: int, times: Sequence | None = None) -> Selection:
     """Build a Selection from a string ('0:30', '0:30:2', '3,7,9'), slice, range or list of steps.
 
     A tuple of two or three numbers is refused: ``(0, 10)`` reads as the range 0..9 to a
-    Python user and as the steps 0 and 10 to a list; the error names both spellings.
+    Python user and as the steps 0 and 10 to a list; the error names both spellings. A window
+    of times ('2.0:20.0') is refused too, naming the steps whose `times` (the series' time
+    labels, where given) lie in it.
     """
     if isinstance(window, Selection):
         if window.n_steps != n_steps:
@@ -93,7 +105,7 @@ def parse_selection(window: object, n_steps: int) -> Selection:
         step = 1 if window.step is None else window.step
         return Selection.window(int(start), int(stop), int(step), n_steps)
     if isinstance(window, str):
-        return _parse_string(window.strip(), n_steps)
+        return _parse_string(window.strip(), n_steps, times)
     if isinstance(window, tuple) and len(window) in (2, 3):
         raise _ambiguous(window)
     if isinstance(window, Sequence):
@@ -127,7 +139,7 @@ def _ambiguous(window: tuple) -> InvalidSelectionError:
     )
 
 
-def _parse_string(text: str, n_steps: int) -> Selection:
+def _parse_string(text: str, n_steps: int, times: Sequence | None = None) -> Selection:
     try:
         if ":" in text:
             parts = [p.strip() for p in text.split(":")]
@@ -140,10 +152,36 @@ def _parse_string(text: str, n_steps: int) -> Selection:
         else:
             steps = tuple(int(p) for p in text.split(","))
     except ValueError:
-        raise InvalidSelectionError(
-            f"cannot read time window {text!r}; use 't0:t1[:stride]' (e.g. 0:30:3) "
-            "or a comma list of steps (e.g. 2,5,9)"
-        ) from None
+        raise _unreadable(text, n_steps, times) from None
     if steps is None:
         return Selection.window(t0, t1, stride, n_steps)
     return Selection(steps, n_steps)
+
+
+def _unreadable(text: str, n_steps: int, times: Sequence | None) -> InvalidSelectionError:
+    """The error for a window that is not one of steps; for one of two times ('2.0:20.0'), the
+    steps whose times lie in it, where the series' `times` are numbers."""
+    usage = "use 't0:t1[:stride]' (e.g. 0:30:3) or a comma list of steps (e.g. 2,5,9)"
+    parts = text.split(":")
+    try:
+        lo, hi = (float(p) for p in parts)
+        labels = [float(t) for t in times] if times is not None else None
+    except (TypeError, ValueError):
+        return InvalidSelectionError(f"cannot read time window {text!r}; {usage}")
+    if labels is None:
+        return InvalidSelectionError(
+            f"window {text!r} looks like times, but windows count steps (0 to {n_steps}); "
+            "`chronocl info STORE` lists each step's time"
+        )
+    inside = [i for i, t in enumerate(labels) if lo <= t < hi]
+    if not inside:
+        return InvalidSelectionError(
+            f"window {text!r} looks like times, but windows count steps, and no step's time "
+            f"lies in [{lo:g}, {hi:g}) (the times run {labels[0]:g} to {labels[-1]:g})"
+        )
+    a, b = inside[0], inside[-1]
+    return InvalidSelectionError(
+        f"window {text!r} looks like times, but windows count steps: the times in "
+        f"[{lo:g}, {hi:g}) are steps {a} to {b} ({labels[a]:g} to {labels[b]:g}): write "
+        f"--window {a}:{b + 1}"
+    )

@@ -139,7 +139,7 @@ def prepare(
         spec = make_spec(mode, **(spec_args or {}))  # type: ignore[arg-type]
     elif spec_args:
         raise InvalidParameterError("pass either spec= or the integration arguments, not both")
-    return window_job(series, parse_selection(window, series.n_steps), spec)
+    return window_job(series, parse_selection(window, series.n_steps, series.times), spec)
 
 
 def chronovolume_metadata(

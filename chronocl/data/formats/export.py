@@ -46,7 +46,7 @@ def export_series(
     kind = str(fmt).lower().lstrip(".")
     if kind not in EXPORTERS:
         raise UnknownNameError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
-    steps = parse_selection(window, series.n_steps).steps
+    steps = parse_selection(window, series.n_steps, series.times).steps
     z0, z1 = parse_slab(z, series.shape[1])
     target = check_output(out, overwrite)
     job = StepExport(
