@@ -97,7 +97,10 @@ DAMAGE = {
         "cannot be decoded",
     ),
     "empty chunk file": (lambda s: _chunk(s).write_bytes(b""), "cannot be decoded"),
-    "one flipped bit (checksum)": (_flip_byte, "cannot be decoded"),
+    "one flipped bit (checksum)": (
+        _flip_byte,
+        "cannot be decoded (its checksum does not match its bytes: they changed after it",
+    ),
     "garbled array metadata": (
         lambda s: (s / "data" / "zarr.json").write_text("{garbled"),
         "metadata file data/zarr.json cannot be read",

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import re
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -180,7 +181,7 @@ def _locate(path, arr, selection: Sequence[object], exc: Exception) -> StoreCorr
             )
             return damaged(
                 path,
-                f"chunk {key} ({_where(coords, arr.chunks)}) cannot be decoded ({_short(one)})",
+                f"chunk {key} ({_where(coords, arr.chunks)}) cannot be decoded ({_decoding(one)})",
             )
     return damaged(path, f"a read failed ({_short(exc)})")
 
@@ -195,9 +196,16 @@ def _chunk_indices(sel: object, n: int, chunk: int) -> Sequence[int]:
     return sorted({int(i) // chunk for i in sel})  # type: ignore[union-attr]
 
 
+def _decoding(exc: Exception) -> str:
+    """Why a chunk could not be decoded, in words (not the codec's checksum bytes)."""
+    if "checksum" in str(exc).lower():
+        return "its checksum does not match its bytes: they changed after it was written"
+    return _short(exc)
+
+
 def _short(exc: Exception) -> str:
     """An exception as one short line."""
-    text = " ".join(str(exc).split())
+    text = re.sub(r"""b(['"]).*?(?<!\\)\1""", "<bytes>", " ".join(str(exc).split()))
     if len(text) > 160:
         text = text[:157] + "..."
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
