@@ -259,7 +259,7 @@ def test_plot_axis_shows_the_time_labels():
     fig = probe(named, 0, 0, 0).figure(window="1:3")
     assert set(_tick_labels(fig)) <= {"spin-up", "t1", "t2", "t3", "end"}
     assert "spin-up" in _tick_labels(fig) and fig.axes[0].get_xlabel() == "time"
-    assert any("window 1:3" in t.get_text() for t in fig.axes[0].get_legend().get_texts())
+    assert any("window 1:3: t1 to t2" in t.get_text() for t in fig.axes[0].get_legend().get_texts())
 
     dated = TimeSeries.from_array(a, times=[f"2021-02-0{i + 1}" for i in range(5)])
     fig = probe(dated, region=":,:,:").figure()
@@ -268,11 +268,14 @@ def test_plot_axis_shows_the_time_labels():
     assert any("Feb" in t or "02" in t for t in _tick_labels(fig))
 
     numbers = TimeSeries.from_array(a, times=[0.0, 0.5, 2.0, 4.5, 8.0])
-    fig = probe(numbers, 1, 1, 1).figure()
+    fig = probe(numbers, 1, 1, 1).figure(window="1:4")
     np.testing.assert_array_equal(fig.axes[0].get_lines()[0].get_xdata(), [0, 0.5, 2, 4.5, 8])
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert "window 1:4: 0.5 to 4.5" in legend  # the axis's times, not only the steps
 
-    plain = probe(TimeSeries.from_array(a), 1, 1, 1).figure()
+    plain = probe(TimeSeries.from_array(a), 1, 1, 1).figure(window="1:3")
     assert plain.axes[0].get_xlabel() == "step"
+    assert "window 1:3" in [t.get_text() for t in plain.axes[0].get_legend().get_texts()]
 
 
 def test_curve_of_one_step_plots(tmp_path):

@@ -45,7 +45,7 @@ def figure(curve: Curve, window: object = None, title: str | None = None, time_l
     ax = fig.add_subplot()
     if chosen:
         text = window if isinstance(window, str) else Selection(chosen, len(x)).describe()
-        label = f"window {text}"
+        label = f"window {text}" + _span(x, xlabel, names, chosen, curve.time_unit)
         if len(x) == 1:
             ax.axvline(x[0], color="C1", alpha=0.5, linewidth=3, label=label)
         else:  # from half a step before the window's first step to half one after its last
@@ -80,6 +80,21 @@ def figure(curve: Curve, window: object = None, title: str | None = None, time_l
     ax.margins(x=0.02)
     ax.legend(loc="best", fontsize="small")
     return fig
+
+
+def _span(x: np.ndarray, xlabel: str, names, chosen, unit: str | None) -> str:
+    """The window's first and last time as the axis shows them (nothing on a 'step' axis):
+    the legend names the window in steps, as the user wrote it, and in the axis's units."""
+    if xlabel == "step":
+        return ""
+    a, b = chosen[0], chosen[-1]
+    if names is not None:
+        first, last = names[a], names[b]
+    elif np.issubdtype(x.dtype, np.datetime64):
+        first, last = (np.datetime_as_string(x[i], unit="auto") for i in (a, b))
+    else:
+        first, last = f"{x[a]:g}", f"{x[b]:g}" + (f" {unit}" if unit else "")
+    return f": {first}" if a == b else f": {first} to {last}"
 
 
 def time_axis(
