@@ -13,6 +13,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -153,6 +154,27 @@ def test_network_failures_are_retried_then_one_error(served, http):
     http.fail[CHUNK.format(4)] = 403
     with pytest.raises(RemoteAccessError, match="HTTP 403"):
         remote.read([4])
+
+
+def test_no_credentials_is_refused_at_once_naming_the_fix(s3, tmp_path, monkeypatch):
+    """No S3 credentials anywhere: one RemoteAccessError naming the ways to give them, without
+    the retries a network failure gets (CHRONOCL_REMOTE_RETRIES would make them slow)."""
+    for name in [k for k in os.environ if k.startswith("AWS_")]:
+        monkeypatch.delenv(name)
+    monkeypatch.setenv("AWS_EC2_METADATA_DISABLED", "true")  # no instance metadata to ask
+    monkeypatch.setenv("AWS_CONFIG_FILE", str(tmp_path / "none"))
+    monkeypatch.setenv("AWS_SHARED_CREDENTIALS_FILE", str(tmp_path / "none"))
+    monkeypatch.setenv("CHRONOCL_REMOTE_RETRIES", "2")
+    monkeypatch.setenv("CHRONOCL_REMOTE_BACKOFF_S", "5")
+    options = {"endpoint_url": s3.endpoint, "client_kwargs": {"region_name": "eu-west-1"}}
+    t0 = time.perf_counter()
+    with pytest.raises(RemoteAccessError) as info:
+        chronocl.open(s3.url, storage_options=options)
+    assert time.perf_counter() - t0 < 5  # retried, it would wait 5 + 10 s
+    text = str(info.value)
+    assert "no credentials were found" in text and "\n" not in text
+    for fix in ("AWS_ACCESS_KEY_ID", "AWS_PROFILE", "--anon", "--storage-option"):
+        assert fix in text
 
 
 def test_bad_urls_and_buckets(http, s3):

@@ -161,6 +161,9 @@ def remote_store(
     return store
 
 
+NO_CREDENTIALS = ("NoCredentialsError", "PartialCredentialsError", "CredentialRetrievalError")
+
+
 def classify(exc: BaseException) -> tuple[bool, str] | None:
     """(refused, status) of a remote read's failure; None for an error that is not the
     network's or the server's (a bug, which is raised as it is)."""
@@ -168,6 +171,8 @@ def classify(exc: BaseException) -> tuple[bool, str] | None:
     name = type(exc).__name__
     if isinstance(exc, PermissionError):
         return True, _short(exc)
+    if name in NO_CREDENTIALS:  # botocore's: nothing to retry, nothing the network can fix
+        return True, "no credentials were found"
     if isinstance(status, int):  # aiohttp's ClientResponseError
         message = getattr(exc, "message", "") or ""
         text = f"HTTP {status} {message}".strip()
@@ -187,8 +192,8 @@ def classify(exc: BaseException) -> tuple[bool, str] | None:
 def access_error(where: str, status: str) -> RemoteAccessError:
     """The one line for a store that refuses access."""
     fix = (
-        "check the credentials (AWS_ACCESS_KEY_ID/AWS_SECRET_ACCESS_KEY or AWS_PROFILE), or "
-        "pass --anon for a public bucket"
+        "set the credentials (AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, or AWS_PROFILE) or "
+        "pass them with --storage-option key=... secret=...; --anon reads a public bucket"
         if where.lower().startswith("s3://")
         else "check the URL and the credentials the server wants (--storage-option headers={...})"
     )
