@@ -242,11 +242,15 @@ def test_cli_reads_remote_stores_and_fails_in_one_line(served, http, s3, tmp_pat
     shutil.copytree(served / "s.zarr", tmp_path / "s.zarr")
     http.drop[CHUNK.format(4)] = 99
     integrate = ["integrate", "--engine", "numpy", "--mode", "max"]
+    down = "--storage-option=endpoint_url=http://127.0.0.1:9"  # nothing listens there
     bad = {
         "refused": [*integrate, "http://127.0.0.1:9/s.zarr", tmp_path / "o1.zarr"],
         "dropped": [*integrate, http.url("s.zarr"), tmp_path / "o2.zarr"],
         "truncated": [*integrate, http.url("t.zarr"), tmp_path / "o3.zarr"],
         "bucket": [*integrate, "s3://no-bucket/s.zarr", tmp_path / "o4.zarr", *s3_opts],
+        # an S3 endpoint that does not answer: the reads zarr started beside the failing one
+        # printed 37-109 lines of 'Exception ignored in: <coroutine ...>' after the error
+        "endpoint": [*integrate, s3.url, tmp_path / "o5.zarr", down, *s3_opts[1:]],
     }
     good = [
         [*integrate, s3.url, tmp_path / "s3.zarr", "--window", "0:4", *s3_opts],
@@ -258,6 +262,7 @@ def test_cli_reads_remote_stores_and_fails_in_one_line(served, http, s3, tmp_pat
         "dropped": "connection dropped mid-read",
         "truncated": "chunk data/c/2/0/0/0 (step 2) cannot be decoded",
         "bucket": "bucket 'no-bucket'",
+        "endpoint": "Could not connect to the endpoint URL",
     }
     for (name, args), result in zip(bad.items(), results, strict=False):
         assert result.returncode == 2, (name, result.stderr)
@@ -275,6 +280,25 @@ def test_cli_reads_remote_stores_and_fails_in_one_line(served, http, s3, tmp_pat
         chronocl.Chronovolume.load(tmp_path / "s3.zarr").rgba, expected.rgba
     )
     assert info.returncode == 0 and s3.public_url in info.stdout, info.stderr
+
+
+def test_a_script_whose_s3_endpoint_is_down_gets_its_error_alone():
+    """chronocl.open in a script: the exception, and no 'Exception ignored' from the reads
+    given up beside it when the interpreter exits."""
+    code = (
+        "import chronocl, sys\n"
+        "try:\n"
+        "    chronocl.open('s3://b/s.zarr', storage_options={'endpoint_url': "
+        "'http://127.0.0.1:9', 'key': 'k', 'secret': 's'})\n"
+        "except chronocl.ChronoclError as e:\n"
+        "    print(type(e).__name__, file=sys.stderr)\n"
+    )
+    env = {**env_without_aws(), "CHRONOCL_REMOTE_RETRIES": "1", "CHRONOCL_REMOTE_BACKOFF_S": "0"}
+    env["AWS_EC2_METADATA_DISABLED"] = "true"
+    run = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env
+    )
+    assert run.returncode == 0 and run.stderr.strip() == "RemoteStoreError", run.stderr
 
 
 def test_local_paths_need_no_remote_libraries():

@@ -25,8 +25,10 @@ they parse). An s3:// prefix with keys but no root metadata is a write that did 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
+import sys
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -161,6 +163,7 @@ def remote_store(
     return store
 
 
+SETTLE_S = 5.0  # at most this long for the reads given up to unwind (`settle`)
 NO_CREDENTIALS = ("NoCredentialsError", "PartialCredentialsError", "CredentialRetrievalError")
 
 
@@ -198,6 +201,29 @@ def access_error(where: str, status: str) -> RemoteAccessError:
         else "check the URL and the credentials the server wants (--storage-option headers={...})"
     )
     return RemoteAccessError(f"access to {where} was refused ({status}); {fix}")
+
+
+def settle(timeout: float = SETTLE_S) -> None:
+    """Cancel the remote reads still running and let them unwind on their own event loop.
+
+    zarr reads several keys at once; when one fails, the others go on (retrying), and at
+    exit the interpreter closes their loop under them: each then printed 'Exception ignored
+    in: <coroutine object RemoteStore.get>' with a traceback (aiobotocore resets a context
+    variable from another context), 37-109 lines after the error's one line. A command that
+    stops on an error calls this first. Nothing to do where no remote store was opened."""
+    sync = sys.modules.get("zarr.core.sync")
+    loop = None if sync is None else sync.loop[0]
+    if loop is None or loop.is_closed() or not loop.is_running():
+        return
+
+    async def cancel_the_rest() -> None:
+        others = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+        for task in others:
+            task.cancel()
+        await asyncio.gather(*others, return_exceptions=True)
+
+    with contextlib.suppress(Exception):  # a loop stopping meanwhile: nothing left to settle
+        asyncio.run_coroutine_threadsafe(cancel_the_rest(), loop).result(timeout)
 
 
 def missing_store(url: str, storage_options: Mapping[str, Any] | None) -> ChronoclError:
