@@ -7,6 +7,7 @@ work unless --overwrite.
 from __future__ import annotations
 
 import io
+import json
 import logging
 import signal
 import subprocess
@@ -135,6 +136,10 @@ def test_ingest_integrate_export_to_s3_equal_local(s3, npy, tmp_path, monkeypatc
     got = chronocl.Chronovolume.load(f"s3://{BUCKET}/m.zarr", storage_options=options)
     np.testing.assert_array_equal(got.rgba, want.rgba)
     np.testing.assert_array_equal(got.t_index, want.t_index)
+    (shown,) = cli_all(["info", f"s3://{BUCKET}/m.zarr", "--json", *s3.opts])
+    assert shown.returncode == 0, shown.stderr  # it said "has no array 'data'"
+    summary = json.loads(shown.stdout)
+    assert summary["shape (Z, Y, X)"] == list(want.shape) and summary["spec"]["mode"] == "max"
 
     fs = s3.filesystem()
     export_series(local, tmp_path / "e.npy", fmt="npy", z="2:9")

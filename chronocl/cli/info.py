@@ -16,8 +16,7 @@ def info(
         str,
         typer.Argument(
             metavar="STORE",
-            help="A chronocl series or chronovolume store (a series also at an http(s):// or "
-            "s3:// URL).",
+            help="A chronocl series or chronovolume store, local or at an http(s):// or s3:// URL.",
         ),
     ],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
@@ -36,10 +35,8 @@ def info(
     try:
         summary = open_series(store, storage_options=storage_options).describe()
     except StoreFormatError as as_series:
-        if not isinstance(store, Path):  # a URL: chronovolumes are read from local paths
-            raise
-        try:
-            cv = Chronovolume.load(store)
+        try:  # read whole, as everywhere: a damaged chunk is reported, never shown as zeros
+            cv = Chronovolume.load(store, storage_options)
         except StoreFormatError as as_cv:
             # Neither: say what each reading found, the series' first (what most stores are).
             raise StoreFormatError(
@@ -58,7 +55,7 @@ def info(
         print_summary(summary)
 
 
-def _reason(exc: Exception, store: Path) -> str:
+def _reason(exc: Exception, store: Path | str) -> str:
     """An error's message without the store's name it starts with."""
     text = str(exc)
     for prefix in (repr(str(store)), str(store)):
