@@ -25,6 +25,7 @@ they parse). An s3:// prefix with keys but no root metadata is a write that did 
 from __future__ import annotations
 
 import asyncio
+import atexit
 import contextlib
 import json
 import os
@@ -141,6 +142,7 @@ def remote_store(
         from zarr.storage import FsspecStore
 
         _classes["fsspec"] = type("RemoteFsspecStore", (RemoteStore, FsspecStore), {})
+        atexit.register(settle)  # before zarr's own clean-up (registered at its import)
     options = dict(storage_options or {})
     url = url.rstrip("/")
     try:
@@ -209,8 +211,10 @@ def settle(timeout: float = SETTLE_S) -> None:
     zarr reads several keys at once; when one fails, the others go on (retrying), and at
     exit the interpreter closes their loop under them: each then printed 'Exception ignored
     in: <coroutine object RemoteStore.get>' with a traceback (aiobotocore resets a context
-    variable from another context), 37-109 lines after the error's one line. A command that
-    stops on an error calls this first. Nothing to do where no remote store was opened."""
+    variable from another context), 37-109 lines after the error's one line. It runs at exit
+    (registered when the first remote store is opened), and a command that stops on an error
+    calls it first. It cancels every task on zarr's loop: only for a process that is ending.
+    Nothing to do where no remote store was opened."""
     sync = sys.modules.get("zarr.core.sync")
     loop = None if sync is None else sync.loop[0]
     if loop is None or loop.is_closed() or not loop.is_running():

@@ -14,9 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from chronocl.core.errors import ChronoclError
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
-from chronocl.data.remote_store import is_url, settle
+from chronocl.data.remote_store import is_url
 from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries, open_store
 from chronocl.data.writer import write_store
@@ -42,14 +41,10 @@ def open_series(
         from chronocl.data.remote import open_remote
 
         url = str(path)
-        try:
-            if is_omezarr(url, storage_options):
-                series = open_omezarr(url, storage_options=storage_options)
-            else:
-                series = open_remote(url, storage_options)
-        except ChronoclError:
-            settle()  # the reads it started beside the one that failed: no noise at exit
-            raise
+        if is_omezarr(url, storage_options):
+            series = open_omezarr(url, storage_options=storage_options)
+        else:
+            series = open_remote(url, storage_options)
         return series if variable is None else series.variable(variable)
     p = Path(path)
     series = open_omezarr(p) if is_omezarr(p) else open_store(p)
