@@ -99,7 +99,7 @@ DAMAGE = {
     "empty chunk file": (lambda s: _chunk(s).write_bytes(b""), "cannot be decoded"),
     "one flipped bit (checksum)": (
         _flip_byte,
-        "cannot be decoded (its checksum does not match its bytes: they changed after it",
+        "cannot be decoded (its checksum does not match its bytes: the file was damaged or cut",
     ),
     "garbled array metadata": (
         lambda s: (s / "data" / "zarr.json").write_text("{garbled"),

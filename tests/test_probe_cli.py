@@ -272,6 +272,9 @@ def test_plot_axis_shows_the_time_labels():
     np.testing.assert_array_equal(fig.axes[0].get_lines()[0].get_xdata(), [0, 0.5, 2, 4.5, 8])
     legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert "window 1:4: 0.5 to 4.5" in legend  # the axis's times, not only the steps
+    timed = TimeSeries.from_array(a, times=[0.0, 0.5, 2.0, 4.5, 8.0], time_unit="s")
+    fig = probe(timed, 1, 1, 1).figure(window="2")
+    assert "window 2: 2 s" in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
 
     plain = probe(TimeSeries.from_array(a), 1, 1, 1).figure(window="1:3")
     assert plain.axes[0].get_xlabel() == "step"

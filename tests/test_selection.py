@@ -66,6 +66,8 @@ def test_the_api_refuses_a_bare_pair_before_any_work():
         ("-1:3", "outside"),
         ("5:5", "is empty: it ends where it starts; the end is exclusive, so write 5:6"),
         ("7:2", "is reversed: write 2:7"),
+        ("0:-1", "outside the series"),
+        ("20:20", "outside the series"),
         ("2.0:4.5", "looks like times, but windows count steps (0 to 10)"),
         ("0:5:0", "stride must be at least 1"),
         ("3,3", "strictly increasing"),
@@ -93,6 +95,10 @@ def test_a_window_of_times_names_its_steps():
     )
     with pytest.raises(InvalidSelectionError, match="no step's time lies in"):
         parse_selection("3:4.5", 10, times)
+    # labels out of order (or not finite) name no steps: they would not be the times asked
+    for labels in ([3, 2, 1, 0, 5, 2.2, 6, 7, 8, 9], [*times[:9], float("nan")]):
+        with pytest.raises(InvalidSelectionError, match="chronocl info STORE"):
+            parse_selection("2.0:4.5", 10, labels)
 
 
 def test_orders():

@@ -128,11 +128,11 @@ def _fail(message: str, code: int) -> None:
 
     line = " ".join(message.splitlines())  # one line, whatever the message held
     err.print(f"chronocl: error: {line}", highlight=False, markup=False, soft_wrap=True)
-    settle()  # the remote reads given up unwind now, not in the interpreter's exit
     # A remote store's reads given up with the command (its other chunk requests still pending
-    # in fsspec's event loop) are destroyed at exit, and asyncio would log each one after the
+    # in zarr's event loop) are cancelled and unwound now; asyncio would log any left after the
     # error line (seen on Python 3.13 with a connection dropped mid-read).
     logging.getLogger("asyncio").setLevel(logging.CRITICAL + 1)
+    settle()
     sys.exit(code)
 
 

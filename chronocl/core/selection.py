@@ -7,6 +7,7 @@ inside [0, T): either a window ``[t0, t1)`` with a stride, or an explicit list.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -55,12 +56,13 @@ class Selection:
         """Steps t0, t0+stride, ... below t1."""
         if stride < 1:
             raise InvalidSelectionError(f"stride must be at least 1, got {stride}")
-        if t0 == t1:
+        inside = 0 <= min(t0, t1) and max(t0, t1) <= n_steps  # else: outside, below
+        if t0 == t1 and inside:
             raise InvalidSelectionError(
                 f"window {t0}:{t1} is empty: it ends where it starts; the end is exclusive, "
                 f"so write {t0}:{t0 + 1} for step {t0} alone"
             )
-        if t1 < t0:
+        if t1 < t0 and inside:
             raise InvalidSelectionError(
                 f"window {t0}:{t1} is reversed: write {t1}:{t0} (windows run forward; to "
                 "integrate the newest step first use --order backward / order='backward')"
@@ -168,7 +170,10 @@ def _unreadable(text: str, n_steps: int, times: Sequence | None) -> InvalidSelec
         labels = [float(t) for t in times] if times is not None else None
     except (TypeError, ValueError):
         return InvalidSelectionError(f"cannot read time window {text!r}; {usage}")
-    if labels is None:
+    increasing = labels is not None and all(
+        math.isfinite(a) and a < b for a, b in itertools.pairwise([*labels, math.inf])
+    )
+    if not increasing:  # no steps to name: labels missing, out of order or not finite
         return InvalidSelectionError(
             f"window {text!r} looks like times, but windows count steps (0 to {n_steps}); "
             "`chronocl info STORE` lists each step's time"

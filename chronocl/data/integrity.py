@@ -199,13 +199,13 @@ def _chunk_indices(sel: object, n: int, chunk: int) -> Sequence[int]:
 def _decoding(exc: Exception) -> str:
     """Why a chunk could not be decoded, in words (not the codec's checksum bytes)."""
     if "checksum" in str(exc).lower():
-        return "its checksum does not match its bytes: they changed after it was written"
+        return "its checksum does not match its bytes: the file was damaged or cut short"
     return _short(exc)
 
 
 def _short(exc: Exception) -> str:
     """An exception as one short line."""
-    text = re.sub(r"""b(['"]).*?(?<!\\)\1""", "<bytes>", " ".join(str(exc).split()))
+    text = re.sub(r"""(?<!\w)b(['"])(?:\\.|(?!\1).)*\1""", "<bytes>", " ".join(str(exc).split()))
     if len(text) > 160:
         text = text[:157] + "..."
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

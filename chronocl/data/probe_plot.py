@@ -93,8 +93,9 @@ def _span(x: np.ndarray, xlabel: str, names, chosen, unit: str | None) -> str:
     elif np.issubdtype(x.dtype, np.datetime64):
         first, last = (np.datetime_as_string(x[i], unit="auto") for i in (a, b))
     else:
-        first, last = f"{x[a]:g}", f"{x[b]:g}" + (f" {unit}" if unit else "")
-    return f": {first}" if a == b else f": {first} to {last}"
+        first, last = f"{x[a]:.6g}", f"{x[b]:.6g}"
+    text = f": {first}" if a == b else f": {first} to {last}"
+    return text + (f" {unit}" if unit and names is None and x.dtype.kind == "f" else "")
 
 
 def time_axis(

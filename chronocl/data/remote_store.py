@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import asyncio
 import atexit
-import contextlib
 import json
 import os
 import sys
@@ -176,8 +175,10 @@ def classify(exc: BaseException) -> tuple[bool, str] | None:
     name = type(exc).__name__
     if isinstance(exc, PermissionError):
         return True, _short(exc)
-    if name in NO_CREDENTIALS:  # botocore's: nothing to retry, nothing the network can fix
+    if name == "NoCredentialsError":  # botocore's: nothing to retry, nothing the network fixes
         return True, "no credentials were found"
+    if name in NO_CREDENTIALS:
+        return True, _short(exc)
     if isinstance(status, int):  # aiohttp's ClientResponseError
         message = getattr(exc, "message", "") or ""
         text = f"HTTP {status} {message}".strip()
@@ -197,8 +198,9 @@ def classify(exc: BaseException) -> tuple[bool, str] | None:
 def access_error(where: str, status: str) -> RemoteAccessError:
     """The one line for a store that refuses access."""
     fix = (
-        "set the credentials (AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, or AWS_PROFILE) or "
-        "pass them with --storage-option key=... secret=...; --anon reads a public bucket"
+        "check the credentials and what they may read (AWS_ACCESS_KEY_ID and "
+        "AWS_SECRET_ACCESS_KEY, or AWS_PROFILE; or --storage-option key=... secret=...); "
+        "--anon reads a public bucket"
         if where.lower().startswith("s3://")
         else "check the URL and the credentials the server wants (--storage-option headers={...})"
     )
@@ -226,8 +228,11 @@ def settle(timeout: float = SETTLE_S) -> None:
             task.cancel()
         await asyncio.gather(*others, return_exceptions=True)
 
-    with contextlib.suppress(Exception):  # a loop stopping meanwhile: nothing left to settle
-        asyncio.run_coroutine_threadsafe(cancel_the_rest(), loop).result(timeout)
+    done = asyncio.run_coroutine_threadsafe(cancel_the_rest(), loop)
+    try:
+        done.result(timeout)
+    except Exception:  # a loop stopping or stuck meanwhile: cancel nothing later instead
+        done.cancel()
 
 
 def missing_store(url: str, storage_options: Mapping[str, Any] | None) -> ChronoclError:

@@ -29,7 +29,11 @@ __kernel void gather_block(__global const int *t_index, __global const K_T *tabl
     const size_t i = z * get_global_size(0) + r;
     uint k = table[t_index[i] + 1];
     won_k[i] = k;
+#ifdef CHANGE
+    if (k == none_k || k == 0) {  // the window's first step starts no change (as `gather`)
+#else
     if (k == none_k) {
+#endif
         won_u[i] = 0.0f;
         return;
     }
