@@ -28,7 +28,8 @@ import asyncio
 import atexit
 import json
 import os
-import sys
+import threading
+import weakref
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -95,6 +96,10 @@ class RemoteStore(MissingChunks):
         self.url, self.storage_options = url, storage_options
 
     async def get(self, key, prototype=None, byte_range=None):
+        task = asyncio.current_task()
+        if task is not None:
+            with _reads_lock:
+                _reads.add(task)
         retries, backoff = retry_policy()
         for attempt in range(retries + 1):
             try:
@@ -165,6 +170,8 @@ def remote_store(
 
 
 SETTLE_S = 5.0  # at most this long for the reads given up to unwind (`settle`)
+_reads: weakref.WeakSet = weakref.WeakSet()  # the tasks that read a remote store (`settle`)
+_reads_lock = threading.Lock()
 NO_CREDENTIALS = ("NoCredentialsError", "PartialCredentialsError", "CredentialRetrievalError")
 
 
@@ -215,24 +222,26 @@ def settle(timeout: float = SETTLE_S) -> None:
     in: <coroutine object RemoteStore.get>' with a traceback (aiobotocore resets a context
     variable from another context), 37-109 lines after the error's one line. It runs at exit
     (registered when the first remote store is opened), and a command that stops on an error
-    calls it first. It cancels every task on zarr's loop: only for a process that is ending.
-    Nothing to do where no remote store was opened."""
-    sync = sys.modules.get("zarr.core.sync")
-    loop = None if sync is None else sync.loop[0]
-    if loop is None or loop.is_closed() or not loop.is_running():
-        return
+    calls it first. Only the tasks reading a remote store are cancelled (`_reads`)."""
+    with _reads_lock:
+        pending = [t for t in _reads if not t.done()]
+    by_loop: dict = {}
+    for task in pending:
+        by_loop.setdefault(task.get_loop(), []).append(task)
+    for loop, tasks in by_loop.items():
+        if loop.is_closed() or not loop.is_running():
+            continue
 
-    async def cancel_the_rest() -> None:
-        others = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
-        for task in others:
-            task.cancel()
-        await asyncio.gather(*others, return_exceptions=True)
+        async def cancel(tasks=tasks) -> None:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
 
-    done = asyncio.run_coroutine_threadsafe(cancel_the_rest(), loop)
-    try:
-        done.result(timeout)
-    except Exception:  # a loop stopping or stuck meanwhile: cancel nothing later instead
-        done.cancel()
+        done = asyncio.run_coroutine_threadsafe(cancel(), loop)
+        try:
+            done.result(timeout)
+        except Exception:  # a loop stopping or stuck meanwhile: cancel nothing later instead
+            done.cancel()
 
 
 def missing_store(url: str, storage_options: Mapping[str, Any] | None) -> ChronoclError:
