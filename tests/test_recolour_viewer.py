@@ -38,6 +38,14 @@ def _sharp(client: Client, msg: dict):
     return got[1], got[2]
 
 
+def _open_in(client: Client, mode: str):
+    """Open the data set at 96x96 and show `mode` at threshold 0, sharp: (the value range the
+    page fitted, which it sends with an edit; the mode's sharp frame header)."""
+    ds, _ = client.open(0, size=(96, 96))
+    header, _ = _sharp(client, {"views": [{"mode": mode}], "threshold": 0.0})
+    return ds["state"]["data_tf"]["value_range"], header
+
+
 def _pixels(jpeg: bytes) -> np.ndarray:
     from PIL import Image
 
@@ -71,9 +79,7 @@ def test_tf_edit_recolours_without_integrating(client, monkeypatch, mode, where)
     llvmpipe too when the viewer is told its GL is not a software one."""
     if where == "gpu":
         monkeypatch.setattr(recolouring, "software_gl", lambda ctx: False)
-    ds, _ = client.open(0, size=(96, 96))
-    fitted = ds["state"]["data_tf"]["value_range"]  # the page sends its range with an edit
-    header, _ = _sharp(client, {"views": [{"mode": mode}], "threshold": 0.0})
+    fitted, header = _open_in(client, mode)
     assert header["level"] == 0 and header["timings"]["recolour_ms"] == 0
     edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
     if mode == "first_hit":  # the same opacities (so the same hits), other colours
@@ -91,9 +97,7 @@ def test_tf_edit_recolours_without_integrating(client, monkeypatch, mode, where)
 def test_edit_that_changes_the_hits_integrates(client) -> None:
     """first_hit: an edit making low values transparent changes which step is hit first, so
     the frame integrates."""
-    ds, _ = client.open(0, size=(96, 96))
-    fitted = ds["state"]["data_tf"]["value_range"]
-    _sharp(client, {"views": [{"mode": "first_hit"}], "threshold": 0.0})
+    fitted, _ = _open_in(client, "first_hit")
     cut = {"points": [[0, 1, 1, 1, 0], [0.6, 1, 1, 1, 0], [1, 1, 1, 1, 1]], "value_range": fitted}
     header, _ = _sharp(client, {"data_tf": cut})
     assert header["timings"]["recolour_ms"] == 0 and header["timings"]["integrate_ms"] > 0
@@ -128,9 +132,7 @@ def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
     monkeypatch.setattr(recolour_bricks.BrickRecolour, "sparse", counted)
     client = Client(rgba8_server)
     try:
-        ds, _ = client.open(0, size=(96, 96))
-        fitted = ds["state"]["data_tf"]["value_range"]
-        _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+        fitted, _ = _open_in(client, "max")
         # opacity from x on: every brick coloured, then few (the others must be cleared)
         for x in (0.01, 0.75, 0.6):
             header, recoloured = _sharp(client, _opaque_from(x, fitted))
@@ -170,9 +172,7 @@ def test_the_first_edit_recolours_into_the_frame_shown(rgba8_server, monkeypatch
     monkeypatch.setattr(recolouring, "_write", write)
     client = Client(rgba8_server)
     try:
-        ds, _ = client.open(0, size=(96, 96))
-        fitted = ds["state"]["data_tf"]["value_range"]
-        _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+        fitted, _ = _open_in(client, "max")
         header, recoloured = _sharp(client, _opaque_from(0.75, fitted))
         t = header["timings"]
         assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0
@@ -204,9 +204,7 @@ def test_a_recolouring_that_fails_part_way_leaves_the_next_edit_right(rgba8_serv
     monkeypatch.setattr(recolouring, "_write", write)
     client = Client(rgba8_server)
     try:
-        ds, _ = client.open(0, size=(96, 96))
-        fitted = ds["state"]["data_tf"]["value_range"]
-        _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+        fitted, _ = _open_in(client, "max")
         header, _ = _sharp(client, _opaque_from(0.75, fitted))  # few bricks coloured
         assert header["timings"]["recolour_ms"] > 0
         failing.append(True)
@@ -268,9 +266,7 @@ def test_winners_are_gathered_at_idle_and_the_first_edit_only_recolours(
     """A sharp frame of a recolouring mode, then no input: the viewer gathers its winners, and
     the first TF edit after the mode switch recolours without gathering again."""
     calls = _counting_gather(monkeypatch)
-    ds, _ = client.open(0, size=(96, 96))
-    fitted = ds["state"]["data_tf"]["value_range"]
-    _sharp(client, {"views": [{"mode": mode}], "threshold": 0.0})
+    fitted, _ = _open_in(client, mode)
     _until(lambda: calls == ["done"])
     edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
     header, _ = _sharp(client, edit)
@@ -283,9 +279,7 @@ def test_an_idle_gather_is_given_up_by_new_input_and_the_edit_is_right(client, m
     """Input while the winners are gathered at idle gives the gather up at its next slab; the
     edit's frame recolours from a gather of its own and shows what integrating it shows."""
     calls = _counting_gather(monkeypatch, hold_first=True)
-    ds, _ = client.open(0, size=(96, 96))
-    fitted = ds["state"]["data_tf"]["value_range"]
-    _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+    fitted, _ = _open_in(client, "max")
     _until(lambda: calls == ["started"])  # the idle gather, held until the edit comes
     edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
     rid = client.send({"type": "update", **edit})
@@ -326,8 +320,7 @@ def test_steps_give_way_to_the_winners_before_they_are_gathered(client, monkeypa
     monkeypatch.setattr(recolouring, "gather", gather)
     limit = process_memory.ProcessLimit((resident_bytes() or 0) + (1 << 30))
     with process_memory.limited(limit):
-        client.open(0, size=(96, 96))
-        _sharp(client, {"views": [{"mode": "max"}], "threshold": 0.0})
+        _open_in(client, "max")
         _until(lambda: calls == ["done"])
     voxels = 32**3  # the vortex store's
     first = events.index(("gather", 0))
