@@ -6,14 +6,26 @@
 // The winners' step index (into the window; none: none_k) from t_index (the selected step, -1:
 // none) through `table` (step + 1 -> index), then their value u (0 where none): the window's
 // steps go in chunks of up to 8 (p1..p8 the chunk's steps, p0 the step before the first, which
-// change reads), normalised as chronocl.core.values does (change: the clipped difference,
-// scaled). Every voxel's k and u are written here: the host's arrays come uninitialised.
+// change reads; `winner_u`). Every voxel's k and u are written here: the host's arrays come
+// uninitialised.
 __kernel void window_index(__global const int *t_index, __global const K_T *table,
                            __global K_T *won_k, __global float *won_u)
 {
     size_t i = get_global_id(0);
     won_k[i] = table[t_index[i] + 1];
     won_u[i] = 0.0f;
+}
+
+// A winner's u from its value v (change: and b, the value of the step before it), normalised
+// as chronocl.core.values does (change: the clipped difference, scaled).
+inline float winner_u(const float v, const float b, const float lo, const float hi,
+                      const float scale)
+{
+#ifdef CHANGE
+    return min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
+#else
+    return clamp((v - lo) * scale, 0.0f, 1.0f);
+#endif
 }
 
 // The window's steps as views of one block (the window manager's slots: each step's z rows
@@ -38,12 +50,11 @@ __kernel void gather_block(__global const int *t_index, __global const K_T *tabl
         return;
     }
     const long at = (long)z * sz + (long)r;
-    float v = (float)block[offs[k] + at];
+    const float v = (float)block[offs[k] + at];
 #ifdef CHANGE
-    float b = (float)block[offs[k - 1] + at];
-    won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
+    won_u[i] = winner_u(v, (float)block[offs[k - 1] + at], lo, hi, scale);
 #else
-    won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
+    won_u[i] = winner_u(v, v, lo, hi, scale);
 #endif
 }
 
@@ -74,11 +85,10 @@ __kernel void gather(__global const K_T *won_k, __global float *won_u,
     size_t i = get_global_id(0);
     uint k = won_k[i];
     if (k < base || k >= base + count) return;
-    float v = pick(k - base, i, p1, p2, p3, p4, p5, p6, p7, p8);
+    const float v = pick(k - base, i, p1, p2, p3, p4, p5, p6, p7, p8);
 #ifdef CHANGE
-    float b = pick(k - base, i, p0, p1, p2, p3, p4, p5, p6, p7);
-    won_u[i] = min(fabs(clamp(v, lo, hi) - clamp(b, lo, hi)) * scale, 1.0f);
+    won_u[i] = winner_u(v, pick(k - base, i, p0, p1, p2, p3, p4, p5, p6, p7), lo, hi, scale);
 #else
-    won_u[i] = clamp((v - lo) * scale, 0.0f, 1.0f);
+    won_u[i] = winner_u(v, v, lo, hi, scale);
 #endif
 }
