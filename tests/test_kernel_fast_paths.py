@@ -66,8 +66,8 @@ def test_max_min_keys_equal_reference_and_general_path(data):
     shape = (w, data.draw(st.integers(1, 4)), data.draw(st.integers(1, 3)))
     shape += (data.draw(st.sampled_from([1, 16, 21, 32, 47])),)
     raw = raw_values(data, dtype, shape)
-    # None: the data's own range; the others clip values on one side or both, or (for
-    # 16-bit data) merge neighbouring integers by rounding, which rules raw keys out.
+    # None: the data's own range; the others clip values on one side or both (u ties there,
+    # the raw values do not), or (for 16-bit data) merge neighbouring integers by rounding.
     value_range = data.draw(st.sampled_from([None, (0, 100), (20.5, 60), (-5, 400), (-1e9, 1e9)]))
     order = data.draw(
         st.one_of(st.sampled_from(["forward", "backward"]), st.permutations(range(w)))
@@ -86,8 +86,8 @@ def test_max_min_keys_equal_reference_and_general_path(data):
     ref = chronocl.integrate(series, None, spec=spec, engine="numpy")
     fast = chronocl.integrate(series, None, spec=spec, engine="opencl", slab=slab)
     assert_same(ref, fast)
-    with pytest.MonkeyPatch.context() as mp:  # every dtype compares t = (v - vmin) * scale
-        mp.setattr(extreme, "raw_key_zones", lambda *a: None)
+    with pytest.MonkeyPatch.context() as mp:  # every dtype compares its values as float
+        mp.setattr(extreme, "raw_lanes", lambda *a: None)
         general = chronocl.integrate(series, None, spec=spec, engine="opencl", slab=slab)
     assert_same(general, fast, atol=0)
 
@@ -274,15 +274,13 @@ def test_row_blocks_where_they_apply():
     assert opencl.OpenCLEngine(row_blocks=False)._row_blocks(extreme.MAX, 16, 8, 9, 9) == 0
 
 
-def test_raw_keys_where_u_orders_integers():
-    zones = extreme.raw_key_zones
-    assert zones(np.uint8, (0, 255), 30) == (0.0, 255.0)
-    assert zones(np.uint8, (10, 40), 256) == (10.0, 40.0)
-    assert zones(np.uint8, (0, 255), 257) is None  # steps beyond byte lanes
-    assert zones(np.uint16, (-5, 70000), 300) == (-1.0, 65536.0)  # no value reaches 0 or 1
-    assert zones(np.int16, (-100, 100), 5) == (-100.0, 100.0)
-    assert zones(np.int16, (-1e9, 1e9), 5) is None  # rounding merges neighbours
-    assert zones(np.float32, (0, 1), 5) is None
+def test_integer_data_is_compared_in_its_own_lanes_where_the_steps_fit():
+    lanes = extreme.raw_lanes
+    assert lanes(np.uint8, 256) == "uchar"
+    assert lanes(np.uint8, 257) is None  # steps beyond byte lanes: compared as float
+    assert lanes(np.uint16, 300) == "ushort"
+    assert lanes(np.int16, 5) == "ushort"
+    assert lanes(np.float32, 5) is None
 
 
 def pieced_tfs():

@@ -61,7 +61,7 @@ class Partial:
 
     `rgba` is premultiplied RGBA (a mode that finalises globally keeps its raw sums there),
     `t_index` the selected step that supplied the voxel (-1: none) for modes that have one,
-    and `value` what `combine` needs beyond the colour (max/min: the winning value u).
+    and `value` what `combine` needs beyond the colour (max/min: the winning raw value).
     """
 
     rgba: np.ndarray
@@ -127,7 +127,7 @@ class FinishesSums(Protocol):
 
 @runtime_checkable
 class ComparesValues(Protocol):
-    """``compares_values``: `combine` compares a value per voxel (max/min: the winning u;
+    """``compares_values``: `combine` compares a value per voxel (max/min: the winning raw value;
     change: the largest change), kept in `Partial.value`."""
 
     def leaf_value(self, values: Values) -> np.ndarray:

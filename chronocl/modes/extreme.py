@@ -1,13 +1,13 @@
-"""max / min: the step holding the extreme value u supplies the voxel, coloured by its TF there.
+"""max / min: the step holding the extreme raw value supplies the voxel, coloured by its TF there.
 
-(a c, a) at that value and that step's time position; t_index = s_k*. Ties go to the step
-integrated first. Slides by aggregation: the back's winner replaces the front's only when
-strictly more extreme.
+k* = argmax (argmin) of the raw values v_k, ties to the step integrated first; (a c, a) at
+u = normalize(v_k*) and that step's time position; t_index = s_k*. Since u is monotone in v the
+picture is the extreme of u, and the winner does not depend on the data TF or its range:
+t_index answers "when did this voxel peak" (DESIGN.md). Slides by aggregation: the back's winner
+replaces the front's only when its raw value is strictly more extreme.
 """
 
 from __future__ import annotations
-
-import functools
 
 import numpy as np
 
@@ -29,27 +29,13 @@ def winners(best: np.ndarray, best_k: np.ndarray, steps, step_rgba) -> Partial:
     return Partial(rgba, t_index, best)
 
 
-@functools.lru_cache(maxsize=64)
-def _integer_zones(dtype: str, value_range: tuple[float, float]) -> tuple[float, float] | None:
-    info = np.iinfo(dtype)
-    v = np.arange(info.min, info.max + 1)
-    u = _values.normalize(v, *value_range)
-    zero, one = u <= 0, u >= 1
-    zlo = float(v[zero].max()) if zero.any() else float(info.min) - 1
-    zhi = float(v[one].min()) if one.any() else float(info.max) + 1
-    middle = u[(v > zlo) & (v < zhi)]
-    return (zlo, zhi) if bool(np.all(np.diff(middle) > 0)) else None
-
-
-def raw_key_zones(dtype, value_range, n_steps: int) -> tuple[float, float] | None:
-    """(zlo, zhi) when max/min may compare the raw values of integer data: u = 0 at or below
-    zlo, u = 1 at or above zhi and u strictly increasing on the values between (so raw order is
-    u's order there, ties included), and the steps fit the data's lanes (uchar: 256, 16-bit:
-    65536). None otherwise: float data, or a range whose rounding merges integer values."""
+def raw_lanes(dtype, n_steps: int) -> str | None:
+    """The narrow step lanes ("uchar" or "ushort") in which the kernel compares integer data in
+    its own lanes, where the window's steps fit them; None: compare as float (exact too)."""
     dtype = np.dtype(dtype)
     if dtype not in (np.uint8, np.uint16, np.int16) or n_steps > 2 ** (8 * dtype.itemsize):
         return None
-    return _integer_zones(dtype.name, (float(value_range[0]), float(value_range[1])))
+    return "uchar" if dtype == np.uint8 else "ushort"
 
 
 class Extreme(Mode, abstract=True):
@@ -60,6 +46,7 @@ class Extreme(Mode, abstract=True):
     has_t_index = True
     state_bytes = 24
     compares_values = True
+    reads_values = True
     lut_by_value = True  # built without QUANT: the LUT is interpolated at the winning u
     is_min = False
 
@@ -67,30 +54,30 @@ class Extreme(Mode, abstract=True):
         """Where value a beats value b (strictly)."""
         return a < b if self.is_min else a > b
 
-    def accumulate(self, u, steps, order, step_rgba, spec):
-        best = np.zeros(u.shape[1:], dtype=np.float32)
-        best_k = np.full(u.shape[1:], -1, dtype=np.int64)
+    def accumulate(self, u, steps, order, step_rgba, spec, values):
+        raw = np.asarray(values.raw, dtype=np.float32)
+        best = np.zeros(raw.shape[1:], dtype=np.float32)
+        best_k = np.full(raw.shape[1:], -1, dtype=np.int64)
         for k in order:
-            better = (best_k < 0) | self.better(u[k], best)
-            best = np.where(better, u[k], best)
+            better = (best_k < 0) | self.better(raw[k], best)
+            best = np.where(better, raw[k], best)
             best_k = np.where(better, k, best_k)
-        return winners(best, best_k, steps, step_rgba)
+        partial = winners(_values.normalize(best, *values.value_range), best_k, steps, step_rgba)
+        partial.value = best
+        return partial
 
     def leaf_value(self, values):
-        return _values.normalize(values.raw[-1], *values.value_range)
+        return np.asarray(values.raw[-1], dtype=np.float32)
 
     def leaf_value_kernel(self, value_range):
-        return "leaf_u", list(_values.normalization(*value_range))
+        return "leaf_raw", []
 
     def kernel_options(self, spec, positions, raw, given):
-        # The kernel compares raw values where u orders them as it does (see raw_key_zones),
-        # else t = (v - vmin) * scale unclamped; the zones beyond zlo and zhi tie in u.
-        zones = raw_key_zones(given.dtype, given.value_range, given.n_steps)
-        defines = {"IS_MIN": self.is_min, "KEY_RAW": zones is not None}
-        if zones is not None:
-            defines["IDX_T"] = "uchar" if given.dtype == np.uint8 else "ushort"
-        zlo, zhi = zones if zones is not None else (0.0, 1.0)
-        return defines, {"zlo": np.float32(zlo), "zhi": np.float32(zhi)}
+        lanes = raw_lanes(given.dtype, given.n_steps)
+        defines = {"IS_MIN": self.is_min, "KEY_RAW": lanes is not None}
+        if lanes is not None:
+            defines["IDX_T"] = lanes
+        return defines, {}
 
     def combine_kernel(self, spec):
         return "extreme", "combine_extreme", {"IS_MIN": self.is_min}
