@@ -16,7 +16,9 @@ import pytest
 from chronocl import Session, integrate, modes
 from chronocl.core.selection import parse_selection
 from chronocl.core.tf import DataTF
+from chronocl.core.values import normalize
 from chronocl.data import synthetic
+from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries, open_series
 from chronocl.data.simulations import simulate
 from chronocl.integration import fit_range
@@ -101,6 +103,23 @@ def test_min_shows_more_than_at_the_global_range(plume):
     )
     opaque = [int((cv.rgba[..., 3] > 0.05).sum()) for cv in (fitted, at_global)]
     assert opaque[0] > 2 * opaque[1], opaque
+
+
+@pytest.mark.parametrize("engine", ["numpy", "opencl"])
+@pytest.mark.parametrize("mode", ["max", "min"])
+def test_t_index_says_when_each_voxel_peaked_at_the_default_range(front, mode, engine):
+    """max/min's t_index is the step of the raw extreme on every voxel (issue 48), though the
+    window's fitted range clips many voxels to u = 0 or 1, where u ties across the steps."""
+    window = "4:14"
+    cv = integrate(front, window, mode, engine=engine)
+    raw = front.read(list(range(4, 14)))
+    pick = np.argmax if mode == "max" else np.argmin
+    extreme = pick(raw, axis=0)
+    assert np.array_equal(cv.t_index, 4 + extreme)  # numpy's ties: the first step, as ours
+    # the old rule, the extreme of the clipped u, differs here: on 44 % of the voxels in max
+    # (many clip to u = 1 at several steps), on 0.4 % in min
+    u = normalize(raw, *cv.metadata["value_range"])
+    assert (pick(u, axis=0) != extreme).mean() > (0.3 if mode == "max" else 0.002)
 
 
 @pytest.mark.parametrize("mode", ["alpha", "additive", "mean", "first_hit"])
@@ -192,6 +211,34 @@ def test_cli_render_looks_from_the_first_steps_unless_told(front, tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert chosen.read_bytes() != told.read_bytes()
+
+
+def test_cli_value_range_normalises_and_max_keeps_its_winners(front, tmp_path):
+    """--value-range window|series|LO,HI sets what normalises u and the summary says which;
+    max's t_index is the same at every range (issue 48)."""
+    store = front.save(tmp_path / "front.zarr").path
+    got = {}
+    for given, words in [
+        ("window", "fitted to the window"),
+        ("series", "the series'"),
+        ("0.1,0.2", "value range 0.1 to 0.2, given"),
+    ]:
+        out = tmp_path / f"{given}.zarr"
+        done = cli("integrate", store, out, "--mode", "max", "--window", "2:12")
+        if given != "window":
+            done = cli(
+                "integrate", store, out, "--mode", "max", "--window", "2:12", "--overwrite",
+                "--value-range", given,
+            )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        assert words in " ".join(done.stderr.split()), done.stderr
+        got[given] = Chronovolume.load(out)
+    assert tuple(got["series"].metadata["value_range"]) == (front.vmin, front.vmax)
+    assert tuple(got["0.1,0.2"].metadata["value_range"]) == (0.1, 0.2)
+    assert got["window"].metadata["value_range"] != got["series"].metadata["value_range"]
+    for cv in got.values():
+        assert np.array_equal(cv.t_index, got["window"].t_index)
+    assert not np.array_equal(got["0.1,0.2"].rgba, got["window"].rgba)
 
 
 def test_count_has_its_own_default_tf_and_threshold():

@@ -26,11 +26,13 @@ from chronocl.cli.options import (
     TfOpt,
     ThresholdOpt,
     TimeTfOpt,
+    ValueRangeOpt,
     WindowOpt,
     err,
     local_input,
     mode_choices,
     modes_help,
+    range_words,
     series_store,
     spec_args,
 )
@@ -52,6 +54,7 @@ def integrate(
     tf: TfOpt = None,
     time_tf: TimeTfOpt = None,
     colormap: ColormapOpt = None,
+    value_range: ValueRangeOpt = None,
     enhance: Annotated[str, typer.Option(help="none, edge or silhouette.")] = "none",
     threshold: ThresholdOpt = None,
     normalize: NormalizeOpt = "time",
@@ -114,7 +117,7 @@ def integrate(
     check_format_name(device_format)
     reading, out_options = split_storage_options(store, out_path, anon, storage_option)
     store, storage_options = series_store(store, *reading)
-    args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap)
+    args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap, value_range)
     if is_url(out_path):
         check_remote_output(out_path, overwrite, out_options, (store,))
     else:
@@ -154,7 +157,8 @@ def _run(series, window, out_path, mode, level, overwrite, args, memory, engine,
         progress=True,
         on_dashboard=lambda link: err.print(f"dask dashboard: {link}", highlight=False),
     )
-    return "streamed" if cv is None else f"steps {cv.steps}"
+    ranged = range_words([run.job])
+    return f"streamed, {ranged}" if cv is None else f"steps {cv.steps}, {ranged}"
 
 
 def _show_run_notes() -> None:

@@ -3,6 +3,7 @@ option values, and the listing of the registered modes for the help."""
 
 from __future__ import annotations
 
+import math
 import textwrap
 from dataclasses import replace
 from pathlib import Path
@@ -45,6 +46,15 @@ ThresholdOpt = Annotated[
     typer.Option(
         help="Opacity a step must exceed: first_hit's first hit, count's presence "
         "(default 0; count 0.25 under its own default TF)."
+    ),
+]
+ValueRangeOpt = Annotated[
+    str | None,
+    typer.Option(
+        metavar="window|series|LO,HI",
+        help="What normalises the values for the data TF: window (fitted to the window's own "
+        "values), series (the range recorded at ingest) or LO,HI (e.g. 0,2.5). Default: "
+        "window, or the TF file's value_range. max/min's t_index does not depend on it.",
     ),
 ]
 NormalizeOpt = Annotated[str, typer.Option(help="additive normalisation: time or max.")]
@@ -181,10 +191,13 @@ def parse_floats(text: str, n: int, what: str) -> tuple[float, ...]:
     return values
 
 
-def spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap=None) -> dict:
+def spec_args(
+    tf, time_tf, order, enhance, threshold, normalize, colormap=None, value_range=None
+) -> dict:
     """The integration options that integrate and render share, with the TF file loaded and
     coloured by `colormap` if one is given (the time colours, unless --time-tf or the file
-    gives them, then follow it: `chronocl.integration.inmemory.make_spec`)."""
+    gives them, then follow it: `chronocl.integration.inmemory.make_spec`), and --value-range
+    (`make_spec`'s `value_range`)."""
     from chronocl.core.tf import TFSetting
 
     setting = TFSetting.load(tf) if tf is not None else None
@@ -198,7 +211,38 @@ def spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap=None) 
         enhance=enhance,
         threshold=threshold,
         normalize=normalize,
+        value_range=None if value_range is None else parse_value_range(value_range),
     )
+
+
+def parse_value_range(text: str) -> str | tuple[float, float]:
+    """--value-range: "window", "series" (the data TF's "global") or two numbers LO,HI."""
+    from chronocl.core.tf import FITTED, GLOBAL  # "global" is the data TF's word for series
+
+    word = text.strip().lower()
+    if word in (FITTED, "series", GLOBAL):
+        return FITTED if word == FITTED else "series"
+    if "," not in text:
+        raise InvalidParameterError(
+            f"--value-range {text!r} is not window, series or LO,HI; e.g. --value-range 0,2.5"
+        )
+    lo, hi = parse_floats(text, 2, "--value-range LO,HI")
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise InvalidParameterError(
+            f"--value-range {text} must be two finite numbers LO < HI; e.g. --value-range 0,2.5"
+        )
+    return lo, hi
+
+
+def range_words(jobs) -> str:
+    """The value ranges jobs normalise by (one per mode where they differ) and where they came
+    from, for the summary line."""
+    text = {j.spec.mode: f"{j.value_range[0]:.4g} to {j.value_range[1]:.4g}" for j in jobs}
+    kind = jobs[0].spec.data_tf.range_kind
+    where = {"window": "fitted to the window", "global": "the series'"}.get(kind, "given")
+    if len(set(text.values())) == 1:
+        return f"value range {next(iter(text.values()))}, {where}"
+    return "value range " + ", ".join(f"{m} {r}" for m, r in text.items()) + f", {where}"
 
 
 def parse_order(order: str) -> str | list[int]:

@@ -27,6 +27,7 @@ from chronocl.cli.options import (
     ThresholdOpt,
     TimeLabelsOpt,
     TimeTfOpt,
+    ValueRangeOpt,
     WindowOpt,
     check_engine,
     err,
@@ -35,6 +36,7 @@ from chronocl.cli.options import (
     parse_floats,
     parse_shading,
     parse_sizes,
+    range_words,
     series_store,
     spec_args,
 )
@@ -74,6 +76,7 @@ def render(
     tf: TfOpt = None,
     time_tf: TimeTfOpt = None,
     colormap: ColormapOpt = None,
+    value_range: ValueRangeOpt = None,
     enhance: Annotated[
         str, typer.Option(help="none, edge or silhouette (follows the camera).")
     ] = "none",
@@ -231,7 +234,7 @@ def render(
     for path in saves:
         output_kind(path)
     store, storage_options = series_store(store, anon, storage_option)
-    args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap)
+    args = spec_args(tf, time_tf, order, enhance, threshold, normalize, colormap, value_range)
     outputs = [out_path, *([turntable] if turntable is not None else []), *saves]
     check_distinct(outputs)
     for path in outputs:
@@ -247,10 +250,12 @@ def render(
             f"note: {store} holds {', '.join(series.variables)}; drawing {series.variables[0]}"
         )
     picked = [series.variable(n) for n in names] or [series]
+    jobs = []
     for one in picked:
         check_level(one, level)
         for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
             job = prepare(one, window, m, None, args)
+            jobs.append(job)
     if azimuth is None and elevation is None:  # the default view: from the first steps' side
         camera = early_side(picked[0], job.selection, job.value_range, camera)
     if device_format != "auto":  # over the level's value range, which it quantises
@@ -288,8 +293,9 @@ def render(
         image = render_views(cvs, camera, panel, labels=captions, **rows, **views.draw_args)
     t1 = time.perf_counter()
     (views.draw(cvs, camera) if image is None else image).save(out_path, overwrite=overwrite)
+    ranges = range_words(jobs[: len(modes)])
     err.print(
-        f"wrote {out_path} ({', '.join(modes)}; integrate {t1 - t0:.2f} s, "
+        f"wrote {out_path} ({', '.join(modes)}; {ranges}; integrate {t1 - t0:.2f} s, "
         f"render {time.perf_counter() - t1:.2f} s)"
     )
     for cv, path in zip(cvs, saves, strict=False):

@@ -52,8 +52,11 @@ def make_spec(
     enhance: Enhance | str | None = None,
     threshold: float | None = None,
     normalize: str = "time",
+    value_range: tuple[float, float] | str | None = None,
 ) -> IntegrationSpec:
     """Build a validated IntegrationSpec; explicit data_tf / time_tf override those in `tf`.
+    `value_range` replaces the data TF's (the mode's own TF where none is given): "window"
+    (fitted to the window), "series" (the range recorded at ingest) or (lo, hi).
     With no time colours given (no time TF here or in `tf`, or only an opacity preset: hat,
     inverted-hat, constant) they follow the data TF: time as hue (rgb) for a grey or white
     one, as lightness for a coloured one such as a colour map (`TimeTF.for_data`)."""
@@ -61,6 +64,11 @@ def make_spec(
     # No data TF given (here or in `tf`): None, the mode's own, and with it its threshold
     # (IntegrationSpec resolves both).
     data_tf = data_tf or (setting.data_tf if tf else None)
+    if value_range is not None:
+        if data_tf is None and threshold is None:  # the mode's own TF keeps its threshold
+            threshold = modes.get(mode).default_threshold
+        vr = GLOBAL if value_range == "series" else value_range
+        data_tf = replace(data_tf or default_data_tf(mode), value_range=vr)
     if isinstance(time_tf, str):
         shape = time_tf in ("hat", "inverted-hat", "constant")  # an opacity: colours unchosen
         time_tf = TimeTF.preset(time_tf)
