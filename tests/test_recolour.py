@@ -236,6 +236,29 @@ def test_session_recolours_after_slides_both_ways(gl, mode) -> None:
             _same_on_host(w, fixed, want.rgba)
 
 
+@pytest.mark.parametrize("mode", ["max", "min"])
+def test_max_min_recolour_at_another_value_range(mode) -> None:
+    """max/min's winners are the raw extremes: an edit of the value range recolours, with u
+    gathered again at the new range, equal to integrating at it (issue 48); change refuses."""
+    series = _series(np.random.default_rng(5), 9, (21, 17, 19))
+    spec = _spec(mode, DataTF(), TimeTF(), value_range=(-10.0, 30.0))
+    with Session(series, engine="opencl", spec=spec, memory="256MB") as s:
+        s.set_window(1, 7)
+        for vr in [(0.0, 12.0), (-4.0, 5.0)]:  # each clips many voxels to u = 0 or 1
+            edit = _spec(mode, DataTF(), TimeTF.preset("warm-cool"), value_range=vr)
+            fixed, reason = s.recolours(edit)
+            assert reason is None, reason
+            w = s.winners(spec=fixed)
+            assert w.value_range == vr and w.steps == s.selection.steps
+            want = integrate(series, s.selection, spec=fixed, engine="opencl")
+            _same_on_host(w, fixed, want.rgba)
+            s.set_spec(edit)  # the next edit starts from this range
+            assert s.current().metadata["value_range"] == list(vr)
+    change = _spec("change", DataTF(), TimeTF(), value_range=(-10.0, 30.0))
+    steps, n = (1, 2, 3), 9
+    assert "value range" in why_not(change, change, (-10.0, 30.0), (0.0, 12.0), steps, n)
+
+
 def _recoloured_points(spec):
     return tuple((p[0], 1.0 - p[1], 0.5, p[3] * 0.5, p[4]) for p in spec.data_tf.points)
 
@@ -249,7 +272,7 @@ def test_why_not_names_what_integrates() -> None:
     assert "mode" in why_not(base, _spec("min", DataTF(), TimeTF()), UNIT, UNIT, steps, n)
     edge = dataclasses.replace(base, enhance=Enhance("edge", 0.5, 1.0, 1.0))
     assert "enhancement" in why_not(base, edge, UNIT, UNIT, steps, n)
-    assert "value range" in why_not(base, base, UNIT, (0.0, 2.0), steps, n)
+    assert why_not(base, base, UNIT, (0.0, 2.0), steps, n) is None  # max: the same winners
     backward = dataclasses.replace(base, order="backward")
     assert "order" in why_not(base, backward, UNIT, UNIT, steps, n)
     hit = _spec("first_hit", DataTF(), TimeTF())

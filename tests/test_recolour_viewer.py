@@ -145,6 +145,30 @@ def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
         client.close()
 
 
+@pytest.mark.parametrize("where", ["host", "gpu"])
+def test_a_value_range_edit_recolours_max(rgba8_server, monkeypatch, where) -> None:
+    """max's winners are the raw extremes, whatever the range: after a TF edit, edits of the
+    value range (narrower, then wider, each after another TF edit) integrate nothing, and the
+    picture equals integrating the window at that range (issue 48). On llvmpipe's OpenCL
+    device brick by brick ("host"), and through the GPU's compute pass ("gpu")."""
+    if where == "gpu":
+        monkeypatch.setattr(recolouring, "software_gl", lambda ctx: False)
+    client = Client(rgba8_server)
+    try:
+        (lo, hi), _ = _open_in(client, "max")
+        _sharp(client, _opaque_from(0.3, [lo, hi]))  # winners prepared at the fitted range
+        for vr in ([lo, lo + 0.4 * (hi - lo)], [lo - (hi - lo), hi]):
+            header, recoloured = _sharp(client, _opaque_from(0.3, vr))
+            t = header["timings"]
+            assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0
+            _sharp(client, _opaque_from(0.5, vr))
+            header, recoloured = _sharp(client, _opaque_from(0.3, vr))
+            assert header["timings"]["integrate_ms"] == 0
+        _assert_as_integrated(client, recoloured)
+    finally:
+        client.close()
+
+
 def test_the_first_edit_recolours_into_the_frame_shown(rgba8_server, monkeypatch) -> None:
     """RGBA8 on llvmpipe: the winners' first edit writes into the RGBA8 the integrated frame
     holds (no second array) and into the texture only the bricks it or the frame may colour:

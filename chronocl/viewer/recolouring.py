@@ -50,6 +50,7 @@ class Prepared:
 
     t_index: weakref.ref
     volume: RecolourVolume | BrickRecolour
+    value_range: tuple  # the range the winners' u were gathered at
     written: weakref.ref | None = None  # the chronovolume last written into `texture`
     texture: object | None = None
     held: np.ndarray | None = None  # the bricks that may be coloured in it
@@ -80,12 +81,17 @@ class Recolouring:
         full, new = found
         t, uploaded = time.perf_counter(), self.upload_ms
         prepared = slot.recolour
-        if not isinstance(prepared, Prepared) or prepared.t_index() is not shown.t_index:
-            prepared = self._prepare(slot, full, shown)
+        new_range = full.value_range_of(new)  # max/min: another range keeps the winners
+        if (
+            not isinstance(prepared, Prepared)
+            or prepared.t_index() is not shown.t_index
+            or prepared.value_range != new_range
+        ):
+            prepared = self._prepare(slot, full, shown, new)
             if prepared is None:
                 return None
         fmt = slot.volume.texture.dtype
-        meta = {**shown.metadata, "spec": new.to_dict()}
+        meta = {**shown.metadata, "spec": new.to_dict(), "value_range": list(new_range)}
         if isinstance(prepared.volume, BrickRecolour) and fmt == "f1":  # llvmpipe: by bricks
             sp = prepared.volume.sparse(new)
             cv = Chronovolume(sp.rgba, shown.t_index, meta)
@@ -117,7 +123,7 @@ class Recolouring:
         if isinstance(prepared, Prepared) and prepared.t_index() is shown.t_index:
             return False
         found = _recolourable(slot, s.asked, s.selection)
-        return found is not None and self._prepare(slot, found[0], shown) is not None
+        return found is not None and self._prepare(slot, found[0], shown, None) is not None
 
     def _show(self, slot: ViewSlot, prepared: Prepared, sp: Sparse, shown, cv) -> None:
         """Write what changed of `sp` into the slot's texture (all of it unless the texture
@@ -131,9 +137,12 @@ class Recolouring:
         prepared.held = sp.coloured
         slot.cv, slot.uploaded = cv, cv
 
-    def _prepare(self, slot: ViewSlot, full, shown: Chronovolume) -> Prepared | None:
+    def _prepare(self, slot: ViewSlot, full, shown: Chronovolume, spec) -> Prepared | None:
         """The window's winners where the recolouring runs: on the GPU where GL is one with
-        compute shaders, else (llvmpipe) on the OpenCL device (render/recolour_bricks.py)."""
+        compute shaders, else (llvmpipe) on the OpenCL device (render/recolour_bricks.py);
+        their u at `spec`'s value range (None: the one `shown` is coloured at)."""
+        own = tuple(map(float, shown.metadata["value_range"]))
+        at = own if spec is None else full.value_range_of(spec)
         old = slot.recolour
         held = None
         if isinstance(old, Prepared) and isinstance(old.volume, BrickRecolour):
@@ -143,8 +152,10 @@ class Recolouring:
         if on_gpu is None:
             return None
         # on the host, the first edit recolours into the RGBA8 shown (nothing else holds it:
-        # the texture has its own copy), else into the last window's output
-        start = None if on_gpu or not shown_output(shown.rgba, shown.shape) else shown.rgba
+        # the texture has its own copy), else into the last window's output; not where u is
+        # gathered at another range (the bricks coloured in the shown follow from its own u)
+        ours = at == own and not on_gpu
+        start = shown.rgba if ours and shown_output(shown.rgba, shown.shape) else None
         if start is not None:
             held = None  # that output's memory goes back now: the gather below takes it
         limit = process_memory.current()
@@ -152,12 +163,12 @@ class Recolouring:
             rgba = 4 if slot.volume.texture.dtype == "f1" else 16  # the display format's bytes
             has_output = start is not None or takes_over(held, shown.shape)
             limit.fit(_prepared_bytes(shown, on_gpu, has_output, rgba))
-        w = full.winners(functools.partial(gather, device=self.device))
+        w = full.winners(functools.partial(gather, device=self.device), spec)
         if w is None:
             return None
         checkpoint("preparing the recolouring", 1, 2)  # at idle: input that came meanwhile
         volume = on_gl(_upload, w) if on_gpu else on_host(w, self.device, held, start)
-        prepared = Prepared(weakref.ref(shown.t_index), volume)
+        prepared = Prepared(weakref.ref(shown.t_index), volume, at)
         if start is not None and isinstance(volume, BrickRecolour):
             # the texture holds the shown RGBA: an edit writes only the bricks it changes
             prepared.written, prepared.texture = weakref.ref(shown), slot.volume.texture

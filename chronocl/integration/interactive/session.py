@@ -168,11 +168,17 @@ class Session:
             return self._update(self.window())
         return self._cv
 
-    def winners(self, gather=None) -> Winners | None:
-        """The window's winners, to recolour a TF edit without integrating (`winners.of_window`)."""
+    def winners(self, gather=None, spec: IntegrationSpec | None = None) -> Winners | None:
+        """The window's winners, to recolour a TF edit without integrating (`winners.of_window`);
+        their u at the value range of `spec` (a fixed spec from `recolours`), else the shown's."""
+        vr = None if spec is None else self.value_range_of(spec)
         return of_window(
-            self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather
+            self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather, vr
         )
+
+    def value_range_of(self, spec: IntegrationSpec) -> tuple[float, float]:
+        """The value range `spec` normalises the window's values by."""
+        return tuple(map(float, window_job(self.series, self.window(), spec).value_range))
 
     def recolours(self, spec: IntegrationSpec) -> tuple[IntegrationSpec, str | None]:
         """`spec` fixed for the window, and None where it only recolours (else why not)."""
@@ -180,7 +186,7 @@ class Session:
         _, new = fixed(self.base, self.asked, self.spec, spec, sel)
         if self._cv is None:
             return new, "nothing is integrated yet"
-        new_range = window_job(self.series, sel, new).value_range
+        new_range = self.value_range_of(new)
         return new, recolours(self._cv, self.spec, new, new_range, self.base.n_steps)
 
     def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:

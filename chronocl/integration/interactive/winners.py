@@ -6,9 +6,12 @@ it and u* the value it won with (change: the change δ). Keep (u*, k*) per voxel
 the transfer functions only looks them up again (`chronocl.render.recolour`, on the GPU), as
 long as the edit cannot change who won:
 
-- max, min, change: the winner depends on the values only (and ties on the order), so any edit
-  of the data TF's colours and opacities, and of the time TF, recolours, as long as the value
-  range that normalises the values stays the same (clipping to another range makes new ties).
+- max, min: the winner is the raw extreme (ties: the order), so every edit of the transfer
+  functions recolours, the value range included: u* of every winner is then gathered again at
+  the new range (the steps that won stay).
+- change: the winner depends on the values clipped to the value range (and ties on the
+  order), so any edit of the data TF's colours and opacities, and of the time TF, recolours,
+  as long as the range stays the same (clipping to another range makes new ties).
 - first_hit: the winner is the first step whose opacity a_d(u)·a_t(p_k) exceeds the threshold,
   so the edit must keep, at every step, which values pass (`same_hits`).
 - Enhancement (edge: gradients of u; silhouette: also the view) multiplies each step's opacity
@@ -69,7 +72,9 @@ def why_not(
         return "enhancement depends on gradients (silhouettes on the view)"
     if new.order != old.order or new.threshold != old.threshold:
         return "the order or threshold changed"
-    if tuple(map(float, old_range)) != tuple(map(float, new_range)):
+    if old.mode not in ("max", "min") and tuple(map(float, old_range)) != tuple(
+        map(float, new_range)
+    ):  # max/min keep their winners, the raw extremes: their u is gathered again
         return "the value range changed: other values may win"
     if old.mode == "first_hit" and not same_hits(old, new, steps, n_steps):
         return "the edit changes which values pass the opacity threshold"
@@ -96,16 +101,19 @@ def of_window(
     n_steps: int,
     spec: IntegrationSpec,
     gather=None,
+    value_range: tuple[float, float] | None = None,
 ) -> Winners | None:
     """The winners of `cv` (the window `selection` integrated under `spec`) from the window's
     resident raw values `arrays` (step -> (Z, Y, X)), gathered by `gather` (`winners`'s
-    arguments; default `winners`, e.g. chronocl.render.recolour_host.gather); None where the
-    mode has none, nothing is integrated or a step of the window is not resident."""
+    arguments; default `winners`, e.g. chronocl.render.recolour_host.gather), their u at
+    `value_range` (default: the one `cv` was coloured at; max/min only may take another);
+    None where the mode has none, nothing is integrated or a step of the window is not
+    resident."""
     if cv is None or selection is None or cv.t_index is None or spec.mode not in RECOLOURED:
         return None
     if any(s not in arrays for s in selection.steps):
         return None
-    vr = tuple(cv.metadata["value_range"])
+    vr = tuple(value_range if value_range is not None else cv.metadata["value_range"])
     return (gather or winners)(cv.t_index, arrays, selection.steps, n_steps, vr, spec)
 
 
