@@ -129,6 +129,19 @@ def raw_steps(folder: str) -> Callable[[Path, Path], None]:
     return setup
 
 
+def smooth_raw(folder: str) -> Callable[[Path, Path], None]:
+    """Two float32 little-endian raw steps of a Gray-Scott front (NX NY NZ = 28 24 20)."""
+
+    def setup(d: Path, s: Path) -> None:
+        from chronocl.data.simulations import simulate
+
+        (d / folder).mkdir(parents=True, exist_ok=True)
+        for t, step in enumerate(simulate("gray-scott", (20, 24, 28), 4)[-2:]):
+            step.astype("<f4").tofile(d / folder / f"v{t}.raw")
+
+    return setup
+
+
 def link_to_store(name: str) -> Callable[[Path, Path], None]:
     def setup(d: Path, s: Path) -> None:
         (d / name).symlink_to(s)
@@ -432,6 +445,59 @@ CASES = [
         ("ingest", "{d}/raw/v0.raw", "-o", "{d}/o.zarr", "--format", "gif"),
         "unknown format 'gif'",
         raw_steps("raw"),
+    ),
+    Case(
+        "ingest-wrong-endian",
+        (
+            "ingest",
+            "{d}/raw/v*.raw",
+            "-o",
+            "{d}/o.zarr",
+            "--dims",
+            "28",
+            "24",
+            "20",
+            "--endian",
+            "big",
+        ),
+        "pass --endian little",
+        smooth_raw("raw"),
+    ),
+    Case(
+        "ingest-wrong-endian-nan-fill",
+        (
+            "ingest",
+            "{d}/raw/v*.raw",
+            "-o",
+            "{d}/o.zarr",
+            "--dims",
+            "28",
+            "24",
+            "20",
+            "--endian",
+            "big",
+            "--nan-fill",
+            "0",
+        ),
+        "pass --endian little",
+        smooth_raw("raw"),
+    ),
+    Case(
+        "ingest-wrong-dtype",
+        (
+            "ingest",
+            "{d}/raw/v*.raw",
+            "-o",
+            "{d}/o.zarr",
+            "--dims",
+            "28",
+            "24",
+            "40",
+            "--dtype",
+            "uint16",
+        ),
+        "pass --dtype float32 --dims 28 24 20",
+        smooth_raw("raw"),
     ),
     # ---------------------------------------------------------------- must succeed
     Case(

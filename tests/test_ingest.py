@@ -229,3 +229,90 @@ def test_the_dims_check_leaves_thin_volumes_alone():
     assert likelier_dims(smooth[:1].ravel(), (64, 48, 1)) is None
     assert likelier_dims(noise.ravel(), (64, 48, 1)) is None
     assert likelier_dims(smooth.ravel(), (64, 48, 2)) is None
+
+
+# ---------------------------------------------------------------- byte order and type
+def _field(name: str) -> np.ndarray:
+    """Steps (2, Z, Y, X) of a smooth field users bring, as float64 in its own units."""
+    from chronocl.data import synthetic
+    from chronocl.data.simulations import simulate
+
+    if name == "vortex":  # mostly empty space
+        return np.stack(list(synthetic.steps("vortex", 2, (40, 48, 56), 0))).astype(np.float64)
+    return simulate(name, (20, 24, 28), 6)[-2:].astype(np.float64)
+
+
+def _as(data: np.ndarray, dtype: str) -> np.ndarray:
+    if np.dtype(dtype).kind == "f":
+        return data.astype(dtype)
+    scaled = (data - data.min()) / (np.ptp(data) or 1) * 30000  # 16-bit values
+    return (scaled - (15000 if dtype == "int16" else 0)).astype(dtype)
+
+
+SOURCES = ["float32", "float64", "uint16", "int16"]
+# the mistakes a user makes with them: the other byte order, or another type whose byte
+# count matches once --dims is scaled (NZ doubled or halved) to the file's size
+MISTAKES = [
+    (src, wrong)
+    for src in SOURCES
+    for wrong in ["endian", *(d for d in SOURCES if np.dtype(d).itemsize != np.dtype(src).itemsize)]
+]
+
+
+@pytest.mark.parametrize("field", ["gray-scott", "plume", "vortex"])
+@pytest.mark.parametrize(("src", "wrong"), MISTAKES)
+def test_a_wrong_endian_or_dtype_is_refused_naming_the_right_one(tmp_path, field, src, wrong):
+    """Raw steps read with a wrong --endian or --dtype (the byte count matching) are refused
+    in one line naming the flags that read them, before anything is written; read right,
+    they ingest (issue 48)."""
+    data = _as(_field(field), src)
+    nz, ny, nx = data.shape[1:]
+    files = write_raw(tmp_path, data, src, ">")  # written big-endian
+    out = tmp_path / "o.zarr"
+    if wrong == "endian":
+        dtype, dims, fix = src, (nx, ny, nz), "pass --endian big"
+    else:
+        dtype = wrong
+        z = nz * np.dtype(src).itemsize // np.dtype(wrong).itemsize
+        dims, fix = (nx, ny, z), f"pass --dtype {src} --endian big --dims {nx} {ny} {nz}"
+    with pytest.raises(InvalidDataError) as info:
+        ingest_raw([str(f) for f in files], out, dims=dims, dtype=dtype, endian="little")
+    message = str(info.value)
+    assert message.endswith(fix) and "\n" not in message, message
+    assert not out.exists() and no_partial(tmp_path)
+    series = ingest_raw([str(f) for f in files], out, dims=(nx, ny, nz), dtype=src, endian="big")
+    np.testing.assert_array_equal(series.read(range(2)), data)
+
+
+def test_a_later_step_misread_is_refused_too(tmp_path):
+    """The first step all zeros (a plume before it starts) reads alike in every byte order;
+    the next step, misread, is refused before the store appears, and --nan-fill does not
+    let junk through."""
+    data = _as(_field("gray-scott"), "float32")
+    data[0] = 0
+    files = write_raw(tmp_path, data, "float32", ">")
+    out = tmp_path / "o.zarr"
+    for nan_fill in (None, 0.0):
+        with pytest.raises(InvalidDataError, match=r"step1\.raw reads as .* pass --endian big$"):
+            ingest_raw([str(f) for f in files], out, dims=(28, 24, 20), nan_fill=nan_fill)
+        assert not out.exists() and no_partial(tmp_path)
+
+
+@pytest.mark.parametrize("dtype", ["float32", "uint16", "uint8"])
+def test_noise_and_masked_data_are_read_as_given(tmp_path, dtype):
+    """Nothing reads white noise as smooth, so it ingests as given; NaN in float data (a land
+    mask) is NaN, not a misread: ingest asks for --nan-fill as before."""
+    rng = np.random.default_rng(3)
+    noise = (rng.random((2, 20, 24, 28)) * 200).astype(dtype)
+    files = write_raw(tmp_path, noise, dtype)
+    series = ingest_raw(
+        [str(f) for f in files], tmp_path / "n.zarr", dims=(28, 24, 20), dtype=dtype
+    )
+    np.testing.assert_array_equal(series.read(range(2)), noise)
+    if dtype == "float32":
+        masked = _as(_field("gray-scott"), "float32")
+        masked[:, :, :, :9] = np.nan  # a third of every step
+        (tmp_path / "m").mkdir()
+        files = write_raw(tmp_path / "m", masked, "float32")
+        with pytest.raises(InvalidDataError, match="NaN/infinite values; pass --nan-fill"):
+            ingest_raw([str(f) for f in files], tmp_path / "m.zarr", dims=(28, 24, 20))

@@ -29,13 +29,12 @@ from chronocl.core.errors import (
 )
 from chronocl.core.progress import track
 from chronocl.data.formats.contract import Exporter, Reader, StepExport, time_attrs
+from chronocl.data.formats.raw_reading import ENDIANS, Reading, likelier_reading
 from chronocl.data.inputs import expand_inputs
 from chronocl.data.metadata import SUPPORTED_DTYPES
 from chronocl.data.series import write_steps
 from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries
-
-ENDIANS = ("little", "big")
 
 
 def ingest_raw(
@@ -99,6 +98,9 @@ def raw_steps(
             f"needs {expected}; check --dims and --dtype"
         )
 
+    # A wrong type or byte order first: the check of the dims order below assumes the values.
+    given = Reading(dtype, endian, (nx, ny, nz))
+    check_reading(files[0], np.memmap(files[0], dtype=np.uint8, mode="r"), given)
     # The check reads the first file's first slabs only (enough for every order's neighbours).
     pair = max(a * b for a, b in itertools.combinations((nx, ny, nz), 2))
     head = np.fromfile(files[0], dtype=file_dtype, count=min(nx * ny * nz, 2 * pair + DIMS_SAMPLES))
@@ -114,6 +116,7 @@ def raw_steps(
     def steps() -> Iterator[np.ndarray]:
         for f in files:
             raw = np.fromfile(f, dtype=file_dtype, count=nx * ny * nz)
+            check_reading(f, raw.view(np.uint8), given)
             yield raw.reshape(nz, ny, nx).astype(np.dtype(dtype), copy=False)
 
     return Steps(
@@ -126,6 +129,20 @@ def raw_steps(
         attrs=time_attrs(time_unit),
         source=f"raw: {files[0].parent}/{files[0].name} .. {files[-1].name} ({len(files)} files)",
         labels=[f"{f.name} (step {t})" for t, f in enumerate(files)],
+    )
+
+
+def check_reading(path: Path, raw: np.ndarray, given: Reading) -> None:
+    """Refuse a step whose bytes clearly read as data in another type or byte order than the
+    given one (`raw_reading`), naming the flags that read it."""
+    found = likelier_reading(raw, given)
+    if found is None:
+        return
+    better, why = found
+    flags = better.flags(given)
+    raise InvalidDataError(
+        f"{path.name} reads as {why} with --dtype {given.dtype} --endian {given.endian} but as "
+        f"smooth data with {flags}; pass {flags}"
     )
 
 
