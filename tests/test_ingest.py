@@ -316,3 +316,54 @@ def test_noise_and_masked_data_are_read_as_given(tmp_path, dtype):
         files = write_raw(tmp_path / "m", masked, "float32")
         with pytest.raises(InvalidDataError, match="NaN/infinite values; pass --nan-fill"):
             ingest_raw([str(f) for f in files], tmp_path / "m.zarr", dims=(28, 24, 20))
+
+
+# ---------------------------------------------------------------- --meta
+def test_meta_gives_dims_spacing_type_order_and_times(tmp_path):
+    """A simulation's JSON gives what raw input needs (issue 48): ingest uses it where no flag
+    is given, says what it used and where, and the steps read back equal."""
+    from chronocl.data.simulations import simulate
+
+    from .test_cli import assert_one_line_error, cli
+
+    steps = simulate("gray-scott", (20, 24, 28), 4)
+    for t, step in enumerate(steps):
+        step.astype(">f4").tofile(tmp_path / f"gs_{t}.raw")
+    meta = tmp_path / "run.json"
+    meta.write_text(
+        '{"grid": {"nx": 28, "ny": 24, "nz": 20, "spacing": {"x": 0.5, "y": 0.5, "z": 2}},'
+        ' "output": {"dtype": ">f4", "dt": 0.25, "save_every": 2, "time_unit": "ms"}}'
+    )
+    glob = str(tmp_path / "gs_*.raw")
+    done = cli("ingest", glob, "-o", str(tmp_path / "a.zarr"), "--meta", str(meta))
+    assert done.returncode == 0, done.stderr
+    said = " ".join(done.stderr.split())
+    for line in (
+        "from --meta: dims 28 24 20 (", "run.json:grid.nx/ny/nz)",
+        "from --meta: spacing 0.5 0.5 2.0 (", "from --meta: dtype float32 (",
+        "from --meta: endian big (", "run.json:output.dtype)",
+        "times: 0.0 .. 1.5 ms, from",
+    ):  # fmt: skip
+        assert line in said, said
+    series = chronocl.open(tmp_path / "a.zarr")
+    np.testing.assert_array_equal(series.read(range(4)), steps)
+    assert series.spacing == (0.5, 0.5, 2.0) and list(series.times) == [0.0, 0.5, 1.0, 1.5]
+    # a flag wins over the file; the npy takes the spacing and times only
+    done = cli("ingest", glob, "-o", str(tmp_path / "b.zarr"), "--meta", str(meta),
+               "--spacing", "1", "1", "1")  # fmt: skip
+    assert done.returncode == 0 and "from --meta: spacing" not in done.stderr
+    assert chronocl.open(tmp_path / "b.zarr").spacing == (1.0, 1.0, 1.0)
+    np.save(tmp_path / "gs.npy", steps)
+    done = cli(
+        "ingest", str(tmp_path / "gs.npy"), "-o", str(tmp_path / "c.zarr"), "--meta", str(meta)
+    )
+    assert done.returncode == 0, done.stderr
+    assert "from --meta: spacing" in done.stderr and "from --meta: dims" not in done.stderr
+    # two sizes in one file: which one is meant is not guessed
+    meta.write_text('{"dims": [28, 24, 20], "grid": {"dims": [20, 24, 28]}}')
+    done = cli("ingest", glob, "-o", str(tmp_path / "d.zarr"), "--meta", str(meta))
+    assert_one_line_error(done, "gives two dims")
+    meta.write_text('{"dims": [28, 24, 20], "dtype": "complex64"}')
+    done = cli("ingest", glob, "-o", str(tmp_path / "d.zarr"), "--meta", str(meta))
+    assert_one_line_error(done, "not a type chronocl reads")
+    assert not (tmp_path / "d.zarr").exists()

@@ -39,9 +39,10 @@ def ingest(
         typer.Option(metavar="NX NY NZ", help="Raw: volume size, x fastest."),
     ] = None,
     dtype: Annotated[
-        str, typer.Option(help="Raw: float32, uint8, uint16, int16, float64.")
-    ] = "float32",
-    endian: Annotated[str, typer.Option(help="Raw: little or big.")] = "little",
+        str | None,
+        typer.Option(help="Raw: float32 (default), uint8, uint16, int16, float64."),
+    ] = None,
+    endian: Annotated[str | None, typer.Option(help="Raw: little (default) or big.")] = None,
     var: Annotated[str | None, typer.Option(help="NetCDF/HDF5: the variable.")] = None,
     variables: Annotated[
         list[str] | None,
@@ -100,6 +101,15 @@ def ingest(
             "output_interval, and t0) from which each step's time is counted; its time_unit too.",
         ),
     ] = None,
+    meta: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="META.json",
+            help="The JSON a simulation wrote beside its output: dims, spacing, dtype, byte "
+            "order and the steps' times (as --times-from-meta) where it gives them, for the "
+            "inputs that take them; a flag given as well wins. Ingest says what it used.",
+        ),
+    ] = None,
     time_unit: Annotated[
         str | None,
         typer.Option(
@@ -139,6 +149,8 @@ def ingest(
       chronocl ingest series.npy -o series.zarr --times 0,0.25,0.5,0.75 --time-unit s
 
       chronocl ingest 'smoke/*.raw' -o smoke.zarr --dims 64 96 56 --times-from-meta smoke/run.json
+
+      chronocl ingest 'smoke/*.raw' -o smoke.zarr --meta smoke/run.json
 
       chronocl ingest ocean.nc -o ocean.zarr --var temp --time-dim time
 
@@ -185,8 +197,8 @@ def ingest(
     if dims is not None:
         options["dims"] = dims
     for key, value, default in (
-        ("dtype", dtype, "float32"),
-        ("endian", endian, "little"),
+        ("dtype", dtype, None),
+        ("endian", endian, None),
         ("channel", channel, 0),
         ("level", level, 0),
     ):
@@ -211,6 +223,13 @@ def ingest(
         raise InvalidParameterError(
             "give --times or --times-from-meta, not both (--times FILE.json:KEY picks one list)"
         )
+    if meta is not None and times_from_meta is not None:
+        raise InvalidParameterError(
+            "give --meta or --times-from-meta, not both (--meta reads the times too)"
+        )
+    used: list[str] = []  # what --meta gave, for the summary
+    if meta is not None:
+        found = _from_meta(meta, inputs, fmt, magnitude, options, times, used)
     if times is not None:
         options["times"] = read_times(times)
     if times_from_meta is not None:
@@ -227,7 +246,8 @@ def ingest(
         options["time_unit"] = check_time_unit(time_unit)
     flags = {}
     if found is not None:  # a reader that takes no times refuses the option that gave them
-        flags = {"times": "--times-from-meta", "time_unit": "--times-from-meta"}
+        flag = "--meta" if meta is not None else "--times-from-meta"
+        flags = {"times": flag, "time_unit": flag}
         if time_unit is not None:
             flags["time_unit"] = "--time-unit"
     t0 = time.perf_counter()
@@ -235,9 +255,35 @@ def ingest(
     for note in series.meta.get("resampled", []):
         err.print(f"note: {note}")
     err.print(f"wrote {out_path} in {time.perf_counter() - t0:.1f} s")
+    for line in used:
+        err.print(f"from --meta: {line}", highlight=False, soft_wrap=True)
     if found is not None:
         unit = f" {series.time_unit}" if series.time_unit else ""
         err.print(f"times: {series.times[0]} .. {series.times[-1]}{unit}, from {found.found}")
     if len(series.variables) > 1:
         err.print(f"variables: {', '.join(series.variables)}")
     print_summary(series.describe())
+
+
+def _from_meta(meta: Path, inputs: list[str], fmt: str, magnitude, options: dict, times, used):
+    """Put what the metadata file gives into `options` where the reader takes it and no flag
+    gave it (each noted in `used`); its times (a `MetaTimes`) where none were given, else None."""
+    from chronocl.core.run_meta import read_run_meta
+    from chronocl.data.formats.registry import READERS
+    from chronocl.data.ingest import detect_format
+
+    run = read_run_meta(meta)
+    named = magnitude.split(",")[:1] if magnitude and not inputs else inputs
+    reader = READERS[fmt] if fmt in READERS else READERS[detect_format(named)] if named else None
+    for key, value in run.layout().items():
+        if key in options or reader is None or key not in reader.options:
+            continue
+        options[key] = value
+        shown = " ".join(map(str, value)) if isinstance(value, tuple) else value
+        used.append(f"{key} {shown} ({run.found[key]})")
+    if run.times is None or times is not None:
+        return None
+    options["times"] = run.times.times
+    if run.times.unit and "time_unit" not in options:
+        options["time_unit"] = run.times.unit_of()
+    return run.times

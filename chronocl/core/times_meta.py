@@ -86,23 +86,31 @@ def check_time_unit(unit: str) -> str:
     return text
 
 
-def times_from_meta(path: str | Path) -> MetaTimes:
-    """The steps' times a simulation's JSON metadata file gives (see the module docstring)."""
+def load_meta(path: str | Path, flag: str = "--times-from-meta"):
+    """The JSON a metadata file holds; one line naming the file where it is missing or not
+    JSON (`flag`: the option that named it)."""
     p = Path(path)
     if not p.is_file():
         raise InputNotFoundError(f"metadata file {str(p)!r} does not exist; check the path")
     try:
-        root = json.loads(p.read_text(encoding="utf-8"))
+        return json.loads(p.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InvalidParameterError(
-            f"metadata file {str(p)!r} is not JSON ({exc}); --times-from-meta reads JSON"
+            f"metadata file {str(p)!r} is not JSON ({exc}); {flag} reads JSON"
         ) from None
-    objects = list(_objects(root, ""))
+
+
+def times_from_meta(path: str | Path, required: bool = True, root=None) -> MetaTimes | None:
+    """The steps' times a simulation's JSON metadata file gives (see the module docstring);
+    None where it names none and they are not `required`. `root`: the file's JSON, loaded."""
+    p = Path(path)
+    root = load_meta(p) if root is None else root
+    objects = list(objects_in(root, ""))
     lists = [
         (f"{where}{key}", obj[key], obj)
         for where, obj in objects
         for key in LIST_KEYS
-        if _numbers(obj.get(key))
+        if numbers(obj.get(key))
     ]
     if len(lists) > 1:
         names = [f"{p}:{name}" for name, _, _ in lists]
@@ -119,7 +127,7 @@ def times_from_meta(path: str | Path) -> MetaTimes:
         (where, obj, key)
         for where, obj in objects
         for key in DT_KEYS
-        if _number(obj.get(key)) is not None
+        if finite(obj.get(key)) is not None
     ]
     if len(steps) > 1:
         names = ", ".join(f"{where}{key}" for where, _, key in steps)
@@ -127,6 +135,8 @@ def times_from_meta(path: str | Path) -> MetaTimes:
             f"{p} holds {len(steps)} time steps ({names}); name the list of times with "
             f"--times {p}:KEY, or give --times"
         )
+    if not steps and not required:
+        return None
     if not steps:
         raise InvalidParameterError(
             f"{p} names no times: no list under {', '.join(LIST_KEYS)} and no time step under "
@@ -135,11 +145,11 @@ def times_from_meta(path: str | Path) -> MetaTimes:
     where, obj, key = steps[0]
     interval = float(obj[key])
     found = f"{p}:{where}{key}"
-    every = [k for k in EVERY_KEYS if _number(obj.get(k)) is not None]
+    every = [k for k in EVERY_KEYS if finite(obj.get(k)) is not None]
     if every:
         interval *= float(obj[every[0]])
         found += f" × {where}{every[0]}"
-    start = [k for k in START_KEYS if _number(obj.get(k)) is not None]
+    start = [k for k in START_KEYS if finite(obj.get(k)) is not None]
     if interval <= 0:
         raise InvalidParameterError(
             f"{found} gives an output interval of {interval:g}; it must be > 0"
@@ -148,23 +158,23 @@ def times_from_meta(path: str | Path) -> MetaTimes:
     return MetaTimes(cadence, _unit(obj), found)
 
 
-def _objects(node: object, where: str):
+def objects_in(node: object, where: str):
     """(path prefix, object) for every JSON object in `node`, outermost first."""
     if isinstance(node, dict):
         yield where, node
         for key, value in node.items():
-            yield from _objects(value, f"{where}{key}.")
+            yield from objects_in(value, f"{where}{key}.")
 
 
-def _number(value: object) -> float | None:
+def finite(value: object) -> float | None:
     """`value` as a finite number, None when it is not one (booleans are not numbers)."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         return None
     return float(value)
 
 
-def _numbers(value: object) -> bool:
-    return isinstance(value, list) and bool(value) and all(_number(v) is not None for v in value)
+def numbers(value: object) -> bool:
+    return isinstance(value, list) and bool(value) and all(finite(v) is not None for v in value)
 
 
 def _unit(obj: dict) -> str | None:
