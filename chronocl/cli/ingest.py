@@ -268,9 +268,9 @@ def ingest(
 def _from_meta(meta: Path, inputs: list[str], fmt: str, magnitude, options: dict, times, used):
     """Put what the metadata file gives into `options` where the reader takes it and no flag
     gave it (each noted in `used`); its times (a `MetaTimes`) where none were given, else None."""
-    from chronocl.core.run_meta import read_run_meta
     from chronocl.data.formats.registry import READERS
     from chronocl.data.ingest import detect_format
+    from chronocl.data.run_meta import read_run_meta
 
     run = read_run_meta(meta)
     named = magnitude.split(",")[:1] if magnitude and not inputs else inputs

@@ -24,6 +24,7 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.times_meta import MetaTimes, finite, load_meta, objects_in, times_from_meta
+from chronocl.data.metadata import SUPPORTED_DTYPES
 
 DIMS_KEYS = ("dims", "dimensions", "grid_size", "resolution")
 SPACING_KEYS = ("spacing", "voxel_size", "grid_spacing")
@@ -126,8 +127,6 @@ def _spacing(value: object, where: str) -> tuple[float, float, float]:
 
 def _dtype(text: str, where: str) -> tuple[str, str | None]:
     """(the type, the byte order a numpy code such as '>f4' names, else None)."""
-    from chronocl.data.metadata import SUPPORTED_DTYPES
-
     word = DTYPE_WORDS.get(text.strip().lower(), text.strip())
     try:
         dt = np.dtype(word)
