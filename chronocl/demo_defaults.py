@@ -20,7 +20,7 @@ from chronocl.core.selection import parse_selection
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate, prepare
 from chronocl.render import Camera, render_views
-from chronocl.render.default_view import early_side
+from chronocl.render.default_view import series_early_side
 from chronocl.render.views import render
 from chronocl.render.visible_steps import StepsShown, steps_shown
 
@@ -49,7 +49,7 @@ def default_pictures(
     selection = parse_selection(window, series.n_steps, series.times)
     if camera is None:  # the default view: from the side of the first steps
         fitted = prepare(series, window).value_range
-        camera = early_side(series, selection, fitted, Camera(30, 25, zoom=1.15))
+        camera = series_early_side(series, selection, fitted, Camera(30, 25, zoom=1.15))
     width = selection.width
     results, cvs, labels = [], [], []
     for mode in modes.names():

@@ -24,7 +24,7 @@ from chronocl.data.simulations import simulate
 from chronocl.integration import fit_range
 from chronocl.integration.inmemory import prepare
 from chronocl.render import Camera, render
-from chronocl.render.default_view import early_side
+from chronocl.render.default_view import default_camera, series_early_side
 from chronocl.render.visible_steps import steps_shown
 
 from .test_cli import assert_one_line_error, cli
@@ -141,7 +141,7 @@ def test_the_default_view_looks_from_the_first_steps(front):
     selection = parse_selection("0:16:3", front.n_steps)
     fitted = prepare(front, "0:16:3").value_range
     base = Camera(30, 25, zoom=1.15)
-    camera = early_side(front, selection, fitted, base)
+    camera = series_early_side(front, selection, fitted, base)
     # The seed is in the (0, 0, 0) corner: the camera's eye lies on that side of the box.
     assert all(c < 0 for c in camera.eye_direction())
     for mode in ("alpha", "first_hit", "max", "change"):
@@ -151,12 +151,27 @@ def test_the_default_view_looks_from_the_first_steps(front):
         assert near.fraction >= away.fraction
 
 
+def test_python_and_the_cli_pick_the_same_default_view(front, tmp_path):
+    """`chronocl.render(cv)` without a camera looks from the first steps' side as the command
+    line does (issue 48), also for a chronovolume saved and loaded; `camera=` overrides."""
+    cv = integrate(front, "0:16:3", "first_hit", engine="numpy")
+    selection = parse_selection("0:16:3", front.n_steps)
+    cli_view = series_early_side(front, selection, cv.metadata["value_range"], Camera())
+    assert default_camera(cv) == cli_view != Camera()
+    assert all(c < 0 for c in cli_view.eye_direction())  # the seed's corner
+    shown = render(cv, size=(64, 64))
+    assert shown.array.tobytes() == render(cv, cli_view, size=(64, 64)).array.tobytes()
+    assert shown.array.tobytes() != render(cv, Camera(), size=(64, 64)).array.tobytes()
+    cv.save(tmp_path / "cv.zarr")
+    assert default_camera(Chronovolume.load(tmp_path / "cv.zarr")) == cli_view
+
+
 def test_a_plume_rising_is_seen_from_the_side(plume):
     # Its first steps lie below the last: looking up from below would read upside down.
     base = Camera(30, 20)
     for window in ("0:2", "0:10", "0:20"):
         selection = parse_selection(window, plume.n_steps)
-        assert early_side(plume, selection, (0.0, 1.0), base) == base
+        assert series_early_side(plume, selection, (0.0, 1.0), base) == base
 
 
 def test_a_session_fits_once_and_slides_at_that_range(plume):
@@ -266,7 +281,7 @@ def test_every_step_shows_in_counts_default_picture(request, series, window):
     white default's saturated blob did not (there half the steps of the front showed)."""
     data = request.getfixturevalue(series)
     selection = parse_selection(window, data.n_steps)
-    camera = early_side(data, selection, prepare(data, window).value_range, Camera(30, 25))
+    camera = series_early_side(data, selection, prepare(data, window).value_range, Camera(30, 25))
     shown = steps_shown(data, window, "count", picture(camera), engine="numpy")
     assert shown.fraction == 1.0, shown
     white = steps_shown(data, window, "count", picture(camera), engine="numpy", data_tf=DataTF())

@@ -198,7 +198,7 @@ def render(
     from chronocl.engine.device_formats import check_device_format, check_format_name
     from chronocl.integration.inmemory import at_level, check_level, prepare
     from chronocl.render import Camera
-    from chronocl.render.default_view import early_side
+    from chronocl.render.default_view import series_early_side
     from chronocl.render.raycaster import check_clip, check_size
     from chronocl.render.turntable import ModeViews, check_video
     from chronocl.render.views import describe, parse_color, render_views
@@ -257,7 +257,7 @@ def render(
             job = prepare(one, window, m, None, args)
             jobs.append(job)
     if azimuth is None and elevation is None:  # the default view: from the first steps' side
-        camera = early_side(picked[0], job.selection, job.value_range, camera)
+        camera = series_early_side(picked[0], job.selection, jobs[0].value_range, camera)
     if device_format != "auto":  # over the level's value range, which it quantises
         job = at_level(job, level)
         check_device_format(device_format, engine, job.series.dtype, job.value_range)

@@ -38,6 +38,7 @@ from chronocl.engine.base import Engine
 from chronocl.engine.device_formats import with_device_format
 from chronocl.integration.fit_range import window_range
 from chronocl.integration.visibility import warn_invisible
+from chronocl.integration.window_centres import window_centres
 from chronocl.modes.base import Partial
 from chronocl.modes.spec import IntegrationSpec, default_data_tf, resolve_order
 
@@ -322,15 +323,22 @@ def integrate(
     (default: as many as fit the engine's brick size). For outputs larger than memory
     see `chronocl.integration.runs.streaming.integrate_to_store`. `level` integrates a coarse
     level of the series (0: full resolution; docs/levels.md), pooled as the mode asks; the
-    chronovolume keeps the physical extent, so it renders in the same place.
+    chronovolume keeps the physical extent, so it renders in the same place. Its metadata
+    keeps where the window's first and last steps lie (``centres``), which `chronocl.render`
+    looks from by default, as the command line does.
     `device_format` is what bricks travel to the device in: auto (as stored), float32,
     float16, or uint8 / uint16 quantised over the value range (docs/engine.md).
     """
-    job = at_level(prepare(series, window, mode, spec, spec_args), level)
+    whole = prepare(series, window, mode, spec, spec_args)
+    job = at_level(whole, level)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
     eng = with_device_format(eng, device_format, job.series.dtype, job.value_range)
     cv = integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
     warn_invisible(job, cv)  # steps, or a whole picture, the transfer functions hide
+    # where the window's first and last steps lie: `chronocl.render` looks from the first
+    centres = window_centres(whole.series, whole.selection, whole.value_range)
+    if centres is not None:
+        cv.metadata["centres"] = centres
     return cv
 
 

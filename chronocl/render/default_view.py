@@ -17,7 +17,7 @@ import itertools
 import numpy as np
 
 from chronocl.core.selection import Selection
-from chronocl.integration.fit_range import sample_steps
+from chronocl.integration.window_centres import window_centres
 from chronocl.render.camera import Camera
 
 # Shifts of the centre of mass under this fraction of the box's half diagonal keep the view.
@@ -29,17 +29,13 @@ ELEVATIONS = range(-15, 61, 15)
 MIN_ALIGN = 0.5  # cosine between the best view and the shift under which the view stays
 
 
-def early_side(series, selection: Selection, value_range, camera: Camera) -> Camera:
-    """`camera` turned (azimuth and elevation) to look from the first selected step's side."""
-    steps = list(selection.steps)
-    if len(steps) < 2:
+def early_side(camera: Camera, centres: dict | None) -> Camera:
+    """`camera` turned (azimuth and elevation) to look from the side of the window's first
+    steps, given where they and its last steps lie (`window_centres`; None: kept)."""
+    if not centres:
         return camera
-    first, last = sample_steps(series, [steps[0], steps[-1]], "mean")
-    lo = float(value_range[0])
-    extent = np.array(series_extent_xyz(series), dtype=np.float64)
-    c0, c1 = (_centre(np.clip(v - lo, 0, None), extent) for v in (first, last))
-    if c0 is None or c1 is None:
-        return camera
+    c0, c1 = np.asarray(centres["first"], float), np.asarray(centres["last"], float)
+    extent = np.asarray(centres["extent"], dtype=np.float64)
     shift = c0 - c1
     if np.linalg.norm(shift) < MIN_SHIFT * 0.5 * np.linalg.norm(extent):
         return camera
@@ -55,22 +51,14 @@ def early_side(series, selection: Selection, value_range, camera: Camera) -> Cam
     return dataclasses.replace(camera, azimuth=float(best[0]), elevation=float(best[1]))
 
 
-def series_extent_xyz(series) -> tuple[float, float, float]:
-    """The series' box in world units, x first (voxels times spacing)."""
-    nz, ny, nx = series.volume_shape
-    dx, dy, dz = series.spacing
-    return nx * dx, ny * dy, nz * dz
+def series_early_side(series, selection: Selection, value_range, camera: Camera) -> Camera:
+    """`early_side` of a window of `series` (the command line's, before it integrates)."""
+    return early_side(camera, window_centres(series, selection, value_range))
 
 
-def _centre(weights: np.ndarray, extent: np.ndarray) -> np.ndarray | None:
-    """The weighted centre of a (z, y, x) sample in world (x, y, z), the box centred at 0."""
-    total = float(weights.sum())
-    if not total > 0:
-        return None
-    out = []
-    for axis, size in zip((2, 1, 0), extent, strict=True):
-        n = weights.shape[axis]
-        pos = ((np.arange(n) + 0.5) / n - 0.5) * size
-        profile = weights.sum(axis=tuple(a for a in range(3) if a != axis))
-        out.append(float(np.dot(profile, pos)) / total)
-    return np.array(out)
+def default_camera(chronovolume, camera: Camera | None = None) -> Camera:
+    """The view `render` takes without a camera: `camera` (default `Camera()`) turned by the
+    centres the chronovolume keeps (`chronocl.integrate` records them), as the command line
+    turns it."""
+    base = camera or Camera()
+    return early_side(base, chronovolume.metadata.get("centres"))

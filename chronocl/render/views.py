@@ -15,6 +15,7 @@ from chronocl.core.errors import InvalidParameterError
 from chronocl.core.time_labels import check_prefer, span_text
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera
+from chronocl.render.default_view import default_camera
 from chronocl.render.follow import following
 from chronocl.render.framing import framed
 from chronocl.render.image import Image
@@ -75,7 +76,10 @@ def render(
 ) -> Image:
     """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`).
 
-    The camera frames the visible region (`Camera(frame="box")`: the whole box); `time_labels`
+    Without a camera it looks from the side where the window's first steps lie, as the command
+    line does (`default_view.default_camera`: from the centres `chronocl.integrate` keeps in
+    the metadata; else `Camera()`). The camera frames the visible region
+    (`Camera(frame="box")`: the whole box); `time_labels`
     "labels" writes the store's time labels in the legend where it has them, "steps" the step
     numbers. A silhouette taken along another view is integrated again along the camera's
     where the store it came from can be opened, else a warning says so. `shading=True` (or a
@@ -127,7 +131,7 @@ def render_views(
     """
     if not chronovolumes:
         raise InvalidParameterError("nothing to render: give at least one chronovolume")
-    camera = camera or Camera()
+    camera = camera or default_camera(chronovolumes[0])
     check_prefer(time_labels)
     if volumes is None:  # uploaded volumes are drawn as they are
         chronovolumes = following(chronovolumes, camera)
