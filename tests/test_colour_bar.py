@@ -219,6 +219,31 @@ def test_change_has_its_bar_over_the_change_and_white_or_count_none(series, draw
     assert data_bar(counted) is None  # its own legend is the data TF over the fraction
 
 
+def test_counts_percentages_never_overlap_on_a_narrow_panel(series, monkeypatch):
+    """count's legend labels its fraction bar in quarters where they fit, else halves or the
+    ends: at 176 px (the README's panels) "0%25%50%75%100%" was drawn on top of itself."""
+    from PIL import ImageDraw
+
+    boxes: list[tuple[str, float, float]] = []
+    real = ImageDraw.ImageDraw.text
+
+    def text(self, xy, content, *args, **kwargs):
+        if content.endswith("%"):
+            w = self.textlength(content, font=kwargs.get("font"))
+            boxes.append((content, xy[0], xy[0] + w))
+        return real(self, xy, content, *args, **kwargs)
+
+    monkeypatch.setattr(ImageDraw.ImageDraw, "text", text)
+    cv = chronocl.integrate(series, "0:10", "count", engine="numpy")
+    for side, most in ((176, 3), (480, 5)):
+        boxes.clear()
+        render(cv, size=(side, side), legend=True)
+        labels = [b[0] for b in boxes]
+        assert labels[0] == "0%" and labels[-1] == "100%" and 2 <= len(labels) <= most
+        assert all(a[2] + 4 <= b[1] for a, b in itertools.pairwise(boxes)), boxes
+    assert len(labels) == 5  # the wide panel has room for the quarters
+
+
 def test_the_viewer_frame_carries_the_colour_bar(series):
     from chronocl.viewer.frames import colour_bar
 

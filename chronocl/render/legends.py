@@ -177,8 +177,14 @@ def _fraction_legend(draw, spec, box, font, text_rgb) -> None:
     for i in range(span):
         colour = tuple(round(c * 255) for c in shown[i])
         draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)
-    for f in (0.0, 0.25, 0.5, 0.75, 1.0):
+    # quarters where they fit 6 px apart, else halves, else the ends (a narrow panel)
+    for fractions in ((0.0, 0.25, 0.5, 0.75, 1.0), (0.0, 0.5, 1.0), (0.0, 1.0)):
+        widest = max(draw.textlength(f"{round(100 * f)}%", font=font) for f in fractions)
+        if widest + 6 <= (span - 1) / (len(fractions) - 1):
+            break
+    for f in fractions:
         x = x_start + f * (span - 1)
         label = f"{round(100 * f)}%"
+        w = draw.textlength(label, font=font)
         draw.line([(x, y0 + bar_h), (x, y0 + bar_h + 3)], fill=text_rgb)
-        draw.text((x - 4 * len(label), y0 + bar_h + 4), label, fill=text_rgb, font=font)
+        draw.text((x - w / 2, y0 + bar_h + 4), label, fill=text_rgb, font=font)
