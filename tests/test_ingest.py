@@ -300,15 +300,22 @@ def test_a_later_step_misread_is_refused_too(tmp_path):
 
 @pytest.mark.parametrize("dtype", ["float32", "uint16", "uint8"])
 def test_noise_and_masked_data_are_read_as_given(tmp_path, dtype):
-    """Nothing reads white noise as smooth, so it ingests as given; NaN in float data (a land
-    mask) is NaN, not a misread: ingest asks for --nan-fill as before."""
+    """Nothing reads white noise (uniform or Gaussian) or a regular pattern as clearly smooth
+    data, so they ingest as given; NaN in float data (a land mask) is NaN, not a misread:
+    ingest asks for --nan-fill as before."""
     rng = np.random.default_rng(3)
-    noise = (rng.random((2, 20, 24, 28)) * 200).astype(dtype)
-    files = write_raw(tmp_path, noise, dtype)
-    series = ingest_raw(
-        [str(f) for f in files], tmp_path / "n.zarr", dims=(28, 24, 20), dtype=dtype
-    )
-    np.testing.assert_array_equal(series.read(range(2)), noise)
+    noises = [(rng.random((2, 20, 24, 28)) * 200).astype(dtype)]
+    if dtype == "float32":  # zero-mean Gaussian, small and offset: by value, a float64
+        gauss = rng.standard_normal((2, 20, 24, 28))  # reading of it looks smooth
+        noises += [(gauss * k + b).astype(dtype) for k, b in ((1, 0), (1e-3, 0), (1, 3))]
+    if dtype == "uint16":  # a pattern alternating along x: constant when read as float32
+        noises.append(np.resize(np.array([5, 1005], dtype), (2, 20, 24, 28)))
+    for i, noise in enumerate(noises):
+        (tmp_path / str(i)).mkdir()
+        files = write_raw(tmp_path / str(i), noise, dtype)
+        out = tmp_path / f"n{i}.zarr"
+        series = ingest_raw([str(f) for f in files], out, dims=(28, 24, 20), dtype=dtype)
+        np.testing.assert_array_equal(series.read(range(2)), noise)
     if dtype == "float32":
         masked = _as(_field("gray-scott"), "float32")
         masked[:, :, :, :9] = np.nan  # a third of every step
@@ -367,3 +374,16 @@ def test_meta_gives_dims_spacing_type_order_and_times(tmp_path):
     done = cli("ingest", glob, "-o", str(tmp_path / "d.zarr"), "--meta", str(meta))
     assert_one_line_error(done, "not a type chronocl reads")
     assert not (tmp_path / "d.zarr").exists()
+    # a flag settles what the file leaves open (or gets wrong), as the errors say; keys that
+    # hold something else (a camera's resolution, a particle list's type) are passed over
+    meta.write_text(
+        '{"dims": [28, 24, 20], "grid": {"dims": [20, 24, 28]}, "dtype": "Float32",'
+        ' "byte_order": "big-endian", "camera": {"resolution": [1920, 1080]},'
+        ' "particles": {"dtype": "int64"}, "dt": 0.5, "time_unit": "not a unit at all"}'
+    )
+    done = cli("ingest", glob, "-o", str(tmp_path / "e.zarr"), "--meta", str(meta),
+               "--dims", "28", "24", "20", "--time-unit", "s")  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    series = chronocl.open(tmp_path / "e.zarr")
+    np.testing.assert_array_equal(series.read(range(4)), steps)
+    assert series.time_unit == "s" and list(series.times) == [0.0, 0.5, 1.0, 1.5]

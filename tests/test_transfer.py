@@ -341,14 +341,17 @@ def test_cli_refuses_nonsense_device_formats(stores, tmp_path, monkeypatch, args
 
 
 def test_cli_device_format_gives_the_api_result(stores, tmp_path):
-    from .test_cli import cli
+    from .test_cli import assert_one_line_error, cli
 
     out = tmp_path / "o.zarr"
     args = ["integrate", stores / "f.zarr", out, "--mode", "max", "--device-format", "uint8"]
-    result = cli(*args)
+    # max compares raw values: quantising over the fitted range would tie those beyond it
+    assert_one_line_error(cli(*args), "give --value-range series, or use float16 or auto")
+    assert not out.exists()
+    result = cli(*args, "--value-range", "series")
     assert result.returncode == 0, result.stderr
     series = chronocl.open_series(stores / "f.zarr")
-    api = chronocl.integrate(series, mode="max", device_format="uint8")
+    api = chronocl.integrate(series, mode="max", device_format="uint8", value_range="series")
     got = chronocl.Chronovolume.load(out)
     np.testing.assert_array_equal(got.rgba, api.rgba)
     np.testing.assert_array_equal(got.t_index, api.t_index)
@@ -396,9 +399,10 @@ def test_streamed_runs_send_the_same_device_format(stores, tmp_path, mode):
 
     series = chronocl.open_series(stores / "f.zarr")
     out = tmp_path / "s.zarr"
-    integrate_to_store(series, None, out, mode=mode, slab=1, device_format="uint16")
+    whole = {"value_range": "series"}  # max: quantising over a range that clips is refused
+    integrate_to_store(series, None, out, mode=mode, slab=1, device_format="uint16", **whole)
     got = chronocl.Chronovolume.load(out)
-    api = chronocl.integrate(series, mode=mode, device_format="uint16")
+    api = chronocl.integrate(series, mode=mode, device_format="uint16", **whole)
     np.testing.assert_allclose(got.rgba, api.rgba, atol=1e-6, rtol=0)
     if api.t_index is not None:
         np.testing.assert_array_equal(got.t_index, api.t_index)

@@ -229,7 +229,7 @@ def ingest(
         )
     used: list[str] = []  # what --meta gave, for the summary
     if meta is not None:
-        found = _from_meta(meta, inputs, fmt, magnitude, options, times, used)
+        found = _from_meta(meta, inputs, fmt, magnitude, options, times, time_unit, used)
     if times is not None:
         options["times"] = read_times(times)
     if times_from_meta is not None:
@@ -265,25 +265,29 @@ def ingest(
     print_summary(series.describe())
 
 
-def _from_meta(meta: Path, inputs: list[str], fmt: str, magnitude, options: dict, times, used):
+def _from_meta(meta: Path, inputs, fmt: str, magnitude, options: dict, times, time_unit, used):
     """Put what the metadata file gives into `options` where the reader takes it and no flag
-    gave it (each noted in `used`); its times (a `MetaTimes`) where none were given, else None."""
+    gave it (each noted in `used`); its times (a `MetaTimes`) where the reader takes times and
+    none were given, else None; their unit unless --time-unit gave one."""
     from chronocl.data.formats.registry import READERS
     from chronocl.data.ingest import detect_format
     from chronocl.data.run_meta import read_run_meta
 
-    run = read_run_meta(meta)
     named = magnitude.split(",")[:1] if magnitude and not inputs else inputs
     reader = READERS[fmt] if fmt in READERS else READERS[detect_format(named)] if named else None
+    takes = set(reader.options) if reader is not None else set()
+    given = {k for k in ("dims", "spacing", "dtype", "endian") if k in options or k not in takes}
+    given |= {"times"} if times is not None or "times" not in takes else set()
+    run = read_run_meta(meta, frozenset(given))
     for key, value in run.layout().items():
-        if key in options or reader is None or key not in reader.options:
-            continue
         options[key] = value
         shown = " ".join(map(str, value)) if isinstance(value, tuple) else value
         used.append(f"{key} {shown} ({run.found[key]})")
-    if run.times is None or times is not None:
+    if run.times is None:
+        if not used:
+            used.append(f"nothing: {meta} gives none of what this input takes from it")
         return None
     options["times"] = run.times.times
-    if run.times.unit and "time_unit" not in options:
+    if run.times.unit and time_unit is None:  # --time-unit overrides the file's
         options["time_unit"] = run.times.unit_of()
     return run.times

@@ -258,9 +258,17 @@ def render(
             jobs.append(job)
     if azimuth is None and elevation is None:  # the default view: from the first steps' side
         camera = series_early_side(picked[0], job.selection, jobs[0].value_range, camera)
-    if device_format != "auto":  # over the level's value range, which it quantises
-        job = at_level(job, level)
-        check_device_format(device_format, engine, job.series.dtype, job.value_range)
+    if device_format != "auto":  # over each level's value range, which it quantises
+        for job in jobs:
+            job = at_level(job, level)
+            check_device_format(
+                device_format,
+                engine,
+                job.series.dtype,
+                job.value_range,
+                job.spec.mode,
+                (job.series.vmin, job.series.vmax),
+            )
     views = ModeViews(
         picked[0],
         window,

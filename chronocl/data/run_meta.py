@@ -38,8 +38,8 @@ DTYPE_WORDS = {
     "double": "float64",
     "real64": "float64",
 }
-ENDIAN_WORDS = {"little": "little", "<": "little", "le": "little"}
-ENDIAN_WORDS.update({"big": "big", ">": "big", "be": "big"})
+ENDIAN_WORDS = {"little": "little", "little-endian": "little", "<": "little", "le": "little"}
+ENDIAN_WORDS.update({"big": "big", "big-endian": "big", ">": "big", "be": "big"})
 
 
 @dataclass(frozen=True)
@@ -60,45 +60,58 @@ class RunMeta:
         return {k: v for k, v in fields.items() if v is not None}
 
 
-def read_run_meta(path: str | Path) -> RunMeta:
-    """Every field `path` gives (see the module docstring), checked."""
+def read_run_meta(path: str | Path, given: frozenset[str] = frozenset()) -> RunMeta:
+    """Every field `path` gives (see the module docstring), checked, except those in `given`
+    (flags gave them: the file's are not read, so neither its doubts nor its errors matter;
+    "times" and "time_unit"). Under a key that holds something else (a camera's
+    "resolution", a particle list's "dtype") a value that is not the field is passed over
+    where another place gives the field; where none does, its error is the answer."""
     p = Path(path)
     root = load_meta(p, "--meta")
-    objects = list(objects_in(root, ""))
     found: dict[str, str] = {}
     picked: dict[str, object] = {}
+    errors: dict[str, InvalidParameterError] = {}
 
-    def note(name: str, value: object, where: str) -> None:
-        if name in picked and picked[name] != value:
+    def note(name: str, parse, value: object, where: str) -> None:
+        if name in given:
+            return
+        try:
+            parsed = parse(value, f"{p}:{where}")
+        except InvalidParameterError as exc:
+            errors.setdefault(name, exc)
+            return
+        if name == "dtype":
+            parsed, order = parsed
+            if order is not None:
+                note("endian", lambda v, w: v, order, where)
+        if name in picked and picked[name] != parsed:
             raise InvalidParameterError(
                 f"{p} gives two {name}: {found[name]} and {p}:{where}; give --{name} to choose"
             )
         if name not in picked:
-            picked[name], found[name] = value, f"{p}:{where}"
+            picked[name], found[name] = parsed, f"{p}:{where}"
 
-    for where, obj in objects:
+    for where, obj in objects_in(root, ""):
         for key in DIMS_KEYS:
             if key in obj:
-                note("dims", _dims(obj[key], f"{p}:{where}{key}"), f"{where}{key}")
+                note("dims", _dims, obj[key], f"{where}{key}")
         if all(k in obj for k in ("nx", "ny", "nz")):
-            value = _dims([obj["nx"], obj["ny"], obj["nz"]], f"{p}:{where}nx/ny/nz")
-            note("dims", value, f"{where}nx/ny/nz")
+            note("dims", _dims, [obj["nx"], obj["ny"], obj["nz"]], f"{where}nx/ny/nz")
         for key in SPACING_KEYS:
             if key in obj:
-                note("spacing", _spacing(obj[key], f"{p}:{where}{key}"), f"{where}{key}")
+                note("spacing", _spacing, obj[key], f"{where}{key}")
         if all(finite(obj.get(k)) is not None for k in ("dx", "dy", "dz")):
-            value = _spacing([obj["dx"], obj["dy"], obj["dz"]], f"{p}:{where}dx/dy/dz")
-            note("spacing", value, f"{where}dx/dy/dz")
+            note("spacing", _spacing, [obj["dx"], obj["dy"], obj["dz"]], f"{where}dx/dy/dz")
         for key in DTYPE_KEYS:
             if isinstance(obj.get(key), str):
-                dtype, endian = _dtype(obj[key], f"{p}:{where}{key}")
-                note("dtype", dtype, f"{where}{key}")
-                if endian is not None:
-                    note("endian", endian, f"{where}{key}")
+                note("dtype", _dtype, obj[key], f"{where}{key}")
         for key in ENDIAN_KEYS:
             if isinstance(obj.get(key), str):
-                note("endian", _endian(obj[key], f"{p}:{where}{key}"), f"{where}{key}")
-    times = times_from_meta(p, required=False, root=root)
+                note("endian", _endian, obj[key], f"{where}{key}")
+    for name, exc in errors.items():
+        if name not in picked:
+            raise exc
+    times = None if "times" in given else times_from_meta(p, required=False, root=root)
     if times is not None:
         found["times"] = times.found
     return RunMeta(times=times, found=found, **picked)  # type: ignore[arg-type]
@@ -128,6 +141,7 @@ def _spacing(value: object, where: str) -> tuple[float, float, float]:
 def _dtype(text: str, where: str) -> tuple[str, str | None]:
     """(the type, the byte order a numpy code such as '>f4' names, else None)."""
     word = DTYPE_WORDS.get(text.strip().lower(), text.strip())
+    word = word if word[:1] in "<>=|" else word.lower()  # Float32, FLOAT64
     try:
         dt = np.dtype(word)
     except TypeError:

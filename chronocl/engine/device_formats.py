@@ -127,8 +127,16 @@ def check_format_name(name: str) -> str:
     return name
 
 
-def resolve_format(name: str, dtype: np.dtype, value_range: tuple[float, float]) -> DeviceFormat:
-    """The device format `name` for data stored as `dtype`, normalised over `value_range`.
+def resolve_format(
+    name: str,
+    dtype: np.dtype,
+    value_range: tuple[float, float],
+    mode: str | None = None,
+    data_range: tuple[float, float] | None = None,
+) -> DeviceFormat:
+    """The device format `name` for data stored as `dtype`, normalised over `value_range`, for
+    integration `mode` on data whose values span `data_range` (max and min refuse a
+    quantising that clips them: `_no_clipped_extremes`).
 
     Refuses (one line, InvalidParameterError) a format that would not make the brick smaller
     than it is stored and is lossy or wider (uint16 or float16 for uint8 data, float16 or uint16
@@ -165,10 +173,33 @@ def resolve_format(name: str, dtype: np.dtype, value_range: tuple[float, float])
                 f"{lo:g}..{hi:g} (coarser than uint8); use uint16 or auto"
             )
         return fmt
+    _no_clipped_extremes(name, mode, (lo, hi), data_range)
     return DeviceFormat(name, src, target, (lo, hi), QUANT_MAX[name])
 
 
-def with_device_format(engine, name: str, dtype: np.dtype, value_range: tuple[float, float]):
+def _no_clipped_extremes(name: str, mode, value_range, data_range) -> None:
+    """max and min compare the raw values (their winner is the raw extreme, DESIGN.md);
+    quantising clips them to the value range, where the values beyond it would tie: refused
+    where the data reach beyond it (the data's range unknown, as in the engine: allowed)."""
+    if mode not in ("max", "min") or data_range is None:
+        return
+    (lo, hi), (vmin, vmax) = value_range, data_range
+    if vmin < lo or vmax > hi:
+        raise InvalidParameterError(
+            f"--device-format {name} clips the values to the value range {lo:g}..{hi:g}, where "
+            f"{mode}'s raw extremes would tie (the data span {vmin:g}..{vmax:g}); give "
+            "--value-range series, or use float16 or auto"
+        )
+
+
+def with_device_format(
+    engine,
+    name: str,
+    dtype: np.dtype,
+    value_range: tuple[float, float],
+    mode: str | None = None,
+    data_range: tuple[float, float] | None = None,
+):
     """`engine` set to send bricks in device format `name` (checked now, before any work).
 
     ``auto`` keeps the engine as it is (with any format it was made with); another format needs
@@ -183,12 +214,17 @@ def with_device_format(engine, name: str, dtype: np.dtype, value_range: tuple[fl
             f"--device-format {name} applies to the opencl engine; the {label} engine reads "
             "the data as stored (use --device-format auto)"
         )
-    resolve_format(name, dtype, value_range)
+    resolve_format(name, dtype, value_range, mode, data_range)
     return engine.with_options(device_format=name)
 
 
 def check_device_format(
-    name: str, engine: str, dtype: np.dtype, value_range: tuple[float, float]
+    name: str,
+    engine: str,
+    dtype: np.dtype,
+    value_range: tuple[float, float],
+    mode: str | None = None,
+    data_range: tuple[float, float] | None = None,
 ) -> DeviceFormat:
     """Check device format `name` for an engine by name and the data (before any work)."""
     check_format_name(name)
@@ -197,4 +233,4 @@ def check_device_format(
             f"--device-format {name} applies to the opencl engine; the {engine} engine reads "
             "the data as stored (use --device-format auto)"
         )
-    return resolve_format(name, dtype, value_range)
+    return resolve_format(name, dtype, value_range, mode, data_range)

@@ -157,7 +157,7 @@ class OpenCLEngine:
         """
         import pyopencl as cl
 
-        fmt = resolve_format(self.device_format, brick.dtype, value_range)
+        fmt = resolve_format(self.device_format, brick.dtype, value_range, spec.mode)
         value_range = fmt.device_range  # quantised data: (0, 255) or (0, 65535)
         dt = fmt.dtype
         resident = isinstance(brick, DeviceBrick)  # steps already on the device

@@ -332,7 +332,14 @@ def integrate(
     whole = prepare(series, window, mode, spec, spec_args)
     job = at_level(whole, level)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
-    eng = with_device_format(eng, device_format, job.series.dtype, job.value_range)
+    eng = with_device_format(
+        eng,
+        device_format,
+        job.series.dtype,
+        job.value_range,
+        job.spec.mode,
+        (job.series.vmin, job.series.vmax),
+    )
     cv = integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
     warn_invisible(job, cv)  # steps, or a whole picture, the transfer functions hide
     # where the window's first and last steps lie: `chronocl.render` looks from the first

@@ -10,8 +10,14 @@ percentile; zeros are left out so empty space, which reads as zeros in every typ
 helps nor hides a misread). Measured on the vortex, plume and Gray-Scott fields as float32,
 float64, uint16, int16 and uint8 (tests/test_ingest.py): read right 0.01-0.11; read in another
 type or byte order 0.3-0.9, or implausible, but a 16-bit step in the other byte order 0.16-0.34,
-3-12 times its right reading; a float64 step read as float32 0.16 or implausible; white noise
-0.32-0.43 however read (no reading is smooth: nothing is said).
+3-12 times its right reading; a float64 step read as float32 0.16 or implausible; uniform white
+noise 0.32-0.43 however read (no reading is smooth: nothing is said). Zero-mean Gaussian noise
+read as float64 pairs measures 0.06: a wide type maps the narrow values' magnitudes onto its
+exponents, which squeezes them, so a wider reading must be smooth by ranks too
+(`rank_roughness`). Over those fields in both byte orders, two sizes, as read and misread in
+every other type and order (tests/test_ingest.py and the review's Gaussian cases): no right
+reading refused, no wrong reading named, 884 of 1134 misreads named (the rest: 16-bit types
+that read the same values, float32 read as float64 pairs, noise, sparse fields read wider).
 """
 
 from __future__ import annotations
@@ -57,7 +63,8 @@ class Reading:
 
 def roughness(values: np.ndarray) -> float | None:
     """How rough the flat step `values` is (see the module docstring); None where it cannot be
-    data (NaN, infinite or beyond 1e30), NaN where there is nothing to judge."""
+    data (NaN, infinite or beyond 1e30), NaN where there is nothing to judge (too few non-zero
+    neighbours, or one value)."""
     n = values.size
     if n > SAMPLES * RUN:
         starts = np.linspace(0, n - RUN, SAMPLES).astype(np.int64)
@@ -77,8 +84,27 @@ def roughness(values: np.ndarray) -> float | None:
     lo, hi = np.percentile(flat[flat != 0], [1, 99])
     spread = hi - lo
     if spread <= 0:
-        return 0.0
+        return float("nan")  # one value (a constant, or a pattern read as pairs): no say
     return float(np.mean(np.minimum(steps, spread)) / spread)
+
+
+def rank_roughness(values: np.ndarray) -> float:
+    """`roughness` on the ranks of the non-zero values instead of the values: blind to a
+    monotone squeeze (a wide type reading the bits of a narrow one maps the narrow values'
+    magnitudes onto its exponents, and white noise read so looks smooth by value) but
+    rougher on sparse fields (their non-zero neighbours lie at the edges)."""
+    n = values.size
+    starts = np.linspace(0, max(0, n - RUN), SAMPLES).astype(np.int64) if n > SAMPLES * RUN else [0]
+    with np.errstate(all="ignore"):
+        parts = [np.asarray(values[s : s + RUN] if n > SAMPLES * RUN else values, np.float64)
+                 for s in starts]  # fmt: skip
+    flat = np.concatenate(parts)
+    order = np.sort(flat[flat != 0])
+    steps = [
+        np.abs(np.diff(np.searchsorted(order, p)))[(p[1:] != 0) & (p[:-1] != 0)] for p in parts
+    ]
+    pairs = np.concatenate(steps)
+    return float(np.mean(pairs) / order.size) if pairs.size >= MIN_PAIRS else float("nan")
 
 
 def readings(given: Reading, nbytes: int) -> list[Reading]:
@@ -121,6 +147,9 @@ def likelier_reading(raw: np.ndarray, given: Reading) -> tuple[Reading, str] | N
         why = "values NaN, infinite or beyond 1e30"
     elif r_given >= SMOOTH:  # not data-like: another reading that is, clearly smoother
         found = [c for c in scores if smooth(c, min(SMOOTH, r_given / CLEARLY))]
+        # a wider one by ranks too: white noise read in a wider type looks smooth by value
+        wider = {c for c in found if np.dtype(c.dtype).itemsize > width}
+        found = [c for c in found if c not in wider or rank_roughness(raw.view(c.numpy())) < SMOOTH]
         why = "rough values"
     else:  # smooth, but a reading as wide is several times smoother, or a narrower one smooth
         # (a wider type reads pairs of smooth values as smooth: never suggested here)

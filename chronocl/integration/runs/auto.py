@@ -179,7 +179,14 @@ def plan_run(
             f"this window needs more than --memory {memory or DEFAULT_MEMORY} in memory; "
             "write a .zarr OUT (streamed slab by slab) and convert it, or give a larger --memory"
         )
-    check_device_format(device_format, engine, job.series.dtype, job.value_range)
+    check_device_format(
+        device_format,
+        engine,
+        job.series.dtype,
+        job.value_range,
+        job.spec.mode,
+        (job.series.vmin, job.series.vmax),
+    )
     return Run(
         job,
         Path(out_path),

@@ -123,7 +123,14 @@ class SlabTask:
         """The slab's partial and whether it is final (into `out` if given)."""
         eng = get_engine(self.engine, self.device)
         job = self.job
-        eng = with_device_format(eng, self.device_format, job.series.dtype, job.value_range)
+        eng = with_device_format(
+            eng,
+            self.device_format,
+            job.series.dtype,
+            job.value_range,
+            job.spec.mode,
+            (job.series.vmin, job.series.vmax),
+        )
         return integrate_brick(job, eng, slab, brick, out)
 
     def write(self, slab: Slab, partial: Partial, final: bool, started: float) -> dict:
@@ -256,7 +263,14 @@ def integrate_to_store(
         raise InvalidParameterError(f"unknown engine {engine!r}; choose opencl or numpy")
     mode = str(spec_args.pop("mode", modes.DEFAULT))
     job = prepare(series, window, mode, spec, spec_args)
-    check_device_format(device_format, engine, job.series.dtype, job.value_range)
+    check_device_format(
+        device_format,
+        engine,
+        job.series.dtype,
+        job.value_range,
+        job.spec.mode,
+        (job.series.vmin, job.series.vmax),
+    )
     warn_invisible(job)  # steps the transfer functions hide: said before hours of streaming
     budget = parse_memory(memory)
     if client is None:
