@@ -189,6 +189,7 @@ CASES = [
     integrate("value-range-reversed-flag", ("--value-range", "2,1"), "LO < HI"),
     integrate("value-range-one-number", ("--value-range", "0,"), "2 comma-separated numbers"),
     render("render-value-range-nan", ("--value-range", "nan,1"), "two finite numbers"),
+    integrate("value-range-float32-same", ("--value-range", "1,1.00000001"), "distinct in float32"),
     integrate("engine-unknown", ("--engine", "cuda"), "unknown engine 'cuda'"),
     integrate("threshold-out-of-range", ("--threshold", "1.5"), "must lie in [0, 1)"),
     integrate("time-tf-unknown", ("--time-tf", "rainbow"), "unknown time TF preset"),

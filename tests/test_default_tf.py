@@ -164,6 +164,12 @@ def test_python_and_the_cli_pick_the_same_default_view(front, tmp_path):
     assert shown.array.tobytes() != render(cv, Camera(), size=(64, 64)).array.tobytes()
     cv.save(tmp_path / "cv.zarr")
     assert default_camera(Chronovolume.load(tmp_path / "cv.zarr")) == cli_view
+    # a run streamed slab by slab into a store keeps them too
+    from chronocl.integration.runs.streaming import integrate_to_store
+
+    store = front.save(tmp_path / "front.zarr")
+    integrate_to_store(store, "0:16:3", tmp_path / "s.zarr", mode="first_hit", slab=4)
+    assert default_camera(Chronovolume.load(tmp_path / "s.zarr")) == cli_view
 
 
 def test_a_plume_rising_is_seen_from_the_side(plume):
@@ -239,12 +245,8 @@ def test_cli_value_range_normalises_and_max_keeps_its_winners(front, tmp_path):
         ("0.1,0.2", "value range 0.1 to 0.2, given"),
     ]:
         out = tmp_path / f"{given}.zarr"
-        done = cli("integrate", store, out, "--mode", "max", "--window", "2:12")
-        if given != "window":
-            done = cli(
-                "integrate", store, out, "--mode", "max", "--window", "2:12", "--overwrite",
-                "--value-range", given,
-            )  # fmt: skip
+        flag = ("--value-range", given)
+        done = cli("integrate", store, out, "--mode", "max", "--window", "2:12", *flag)
         assert done.returncode == 0, done.stderr
         assert words in " ".join(done.stderr.split()), done.stderr
         got[given] = Chronovolume.load(out)

@@ -1,8 +1,7 @@
 """The kernels' comparison and colour fast paths equal the general path and the numpy reference.
 
-- max / min compare keys instead of u: raw values of integer data in the data's lanes, the
-  winning step in lanes as narrow (`extreme.raw_key_zones`), else t = (v - vmin) * scale
-  unclamped; values beyond the range tie in u and are settled after the loop.
+- max / min compare the raw values: integer data in the data's lanes, the winning step in
+  lanes as narrow where the steps fit (`extreme.raw_lanes`), else as float.
 - A data TF made of a few straight pieces is evaluated piece by piece instead of looked up
   (`tables.tf_segments`): colour and opacity in alpha, additive and mean; in first_hit and
   count (thresholds) the pieces' opacity decides only lanes farther than SEG_MARGIN from the

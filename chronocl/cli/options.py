@@ -217,6 +217,8 @@ def spec_args(
 
 def parse_value_range(text: str) -> str | tuple[float, float]:
     """--value-range: "window", "series" (the data TF's "global") or two numbers LO,HI."""
+    from numpy import float32
+
     from chronocl.core.tf import FITTED, GLOBAL  # "global" is the data TF's word for series
 
     word = text.strip().lower()
@@ -227,9 +229,10 @@ def parse_value_range(text: str) -> str | tuple[float, float]:
             f"--value-range {text!r} is not window, series or LO,HI; e.g. --value-range 0,2.5"
         )
     lo, hi = parse_floats(text, 2, "--value-range LO,HI")
-    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+    if not (math.isfinite(lo) and math.isfinite(hi) and float32(hi) > float32(lo)):
         raise InvalidParameterError(
-            f"--value-range {text} must be two finite numbers LO < HI; e.g. --value-range 0,2.5"
+            f"--value-range {text} must be two finite numbers LO < HI (distinct in float32); "
+            "e.g. --value-range 0,2.5"
         )
     return lo, hi
 

@@ -41,6 +41,7 @@ from chronocl.data.chronovolume import FORMAT
 from chronocl.data.writer import compressors
 from chronocl.integration.inmemory import Job
 from chronocl.integration.runs.plan import Plan
+from chronocl.integration.window_centres import window_centres
 from chronocl.modes.base import Partial
 from chronocl.modes.spec import IntegrationSpec
 
@@ -257,11 +258,13 @@ def commit(tmp: Path, target: Path, job: Job, engine: str, overwrite: bool) -> N
     group = zarr.open_group(store=str(tmp), mode="r+")
     if "rgba_raw" in group:
         del group["rgba_raw"]
+    centres = window_centres(job.series, job.selection, job.value_range)
     group.attrs["chronocl"] = {
         "format": FORMAT,
         "version": 1,
         "chunks": "complete",
         **job.metadata(engine),
+        **({"centres": centres} if centres is not None else {}),  # the default view's
     }
     check_output(target, overwrite)
     final = atomic.partial_path(target)
