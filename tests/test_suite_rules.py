@@ -123,6 +123,32 @@ def test_device_buffers_are_made_in_one_place():
     assert made.search(home.read_text()), "the rule's pattern no longer finds the one place"
 
 
+def test_environment_variables_are_read_in_one_place():
+    """chronocl reads the environment only through chronocl.core.env, whose list names and
+    documents every variable (issue 47: twelve were read in twelve modules)."""
+    read = re.compile(r"\bos\.environ\b|\bos\.getenv\b|\bgetenv\(")
+    root = TESTS.parent
+    home = root / "chronocl" / "core" / "env.py"
+    found = [
+        f"{path.relative_to(root)}:{n}: {line.strip()}"
+        for path in sorted((root / "chronocl").rglob("*.py"))
+        if path != home
+        for n, line in enumerate(path.read_text().splitlines(), 1)
+        if read.search(line)
+    ]
+    assert not found, "\n".join(found)
+    assert read.search(home.read_text()), "the rule's pattern no longer finds the one place"
+    from chronocl.core import env
+
+    named = set(
+        re.findall(
+            r"\b((?:CHRONOCL|POCL|PYOPENCL)_[A-Z_]+)\b",
+            "".join(p.read_text() for p in (root / "chronocl").rglob("*.py") if p != home),
+        )
+    ) - {"CHRONOCL_EXAMPLES"}
+    assert named <= set(env.VARIABLES), named - set(env.VARIABLES)
+
+
 def test_no_bench_script_hides_a_module():
     """A bench script puts bench/ first on sys.path (for common.py), for itself and the
     processes it spawns: one named as a module they import hides it (bench/distributed.py hid

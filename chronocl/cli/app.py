@@ -32,6 +32,7 @@ from chronocl.cli import (
     view,
 )
 from chronocl.cli.options import err
+from chronocl.core import env
 from chronocl.core.errors import ChronoclError, ChronoclWarning
 
 app = typer.Typer(
@@ -77,7 +78,7 @@ def _global_options(
 ) -> None:
     """Options before the command, e.g. chronocl --verbose render ..."""
     if verbose:
-        os.environ["CHRONOCL_VERBOSE"] = "1"
+        env.set_value("CHRONOCL_VERBOSE", "1")
 
 
 app.command()(generate.generate)

@@ -18,6 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from chronocl.core import env
 from chronocl.core.errors import InvalidParameterError
 
 MAX_THREADS = 8
@@ -34,7 +35,7 @@ MAX_FORCED = 256  # more is a typo
 
 def workers() -> int:
     """Threads in the pool: CHRONOCL_THREADS if set, else one per core, at most MAX_THREADS."""
-    forced = os.environ.get(THREADS_ENV, "").strip()
+    forced = env.get(THREADS_ENV)
     if forced:
         if not forced.isdigit() or not 1 <= int(forced) <= MAX_FORCED:
             raise InvalidParameterError(

@@ -13,7 +13,6 @@ they parse: ``anon=true``, ``requester_pays=true``, ``client_kwargs={"region_nam
 
 from __future__ import annotations
 
-import os
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -21,6 +20,7 @@ from typing import Any
 
 import zarr
 
+from chronocl.core import env
 from chronocl.core.errors import InvalidParameterError, StoreFormatError
 from chronocl.core.progress import track
 from chronocl.data.level_writer import LevelWriter
@@ -108,7 +108,7 @@ def add_remote_levels(
             "status": "levels already present (pass --force to rebuild them)",
         }
     chunk_bytes = int(arr.chunks[1]) * shape[2] * shape[3] * arr.dtype.itemsize
-    where = os.environ.get("CHRONOCL_TMPDIR") or None  # as `remote_write.remote_output`
+    where = env.get("CHRONOCL_TMPDIR") or None  # as `remote_write.remote_output`
     with tempfile.TemporaryDirectory(prefix="chronocl-upload-", dir=where) as staging:
         local = Path(staging) / LEVELS
         group = zarr.open_group(store=str(local), mode="w", zarr_format=3)

@@ -27,12 +27,12 @@ from __future__ import annotations
 import asyncio
 import atexit
 import json
-import os
 import threading
 import weakref
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from chronocl.core import env
 from chronocl.core.errors import (
     ChronoclError,
     InputNotFoundError,
@@ -56,8 +56,8 @@ def is_url(path: object) -> bool:
 def retry_policy() -> tuple[int, float]:
     """(retries after the first try, first backoff in seconds), from the environment."""
     try:
-        retries = int(os.environ.get("CHRONOCL_REMOTE_RETRIES", DEFAULT_RETRIES))
-        backoff = float(os.environ.get("CHRONOCL_REMOTE_BACKOFF_S", DEFAULT_BACKOFF_S))
+        retries = int(env.get("CHRONOCL_REMOTE_RETRIES") or DEFAULT_RETRIES)
+        backoff = float(env.get("CHRONOCL_REMOTE_BACKOFF_S") or DEFAULT_BACKOFF_S)
     except ValueError:
         raise InvalidParameterError(
             "CHRONOCL_REMOTE_RETRIES must be a whole number and CHRONOCL_REMOTE_BACKOFF_S a "

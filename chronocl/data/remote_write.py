@@ -31,6 +31,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from chronocl.core import env
 from chronocl.core.errors import (
     ChronoclError,
     InputNotFoundError,
@@ -130,7 +131,7 @@ def remote_output(
     succeeds (markers last), remove it and whatever was uploaded when it does not."""
     url = Url(url)
     check_remote_output(url, overwrite, storage_options)
-    where = os.environ.get("CHRONOCL_TMPDIR") or None
+    where = env.get("CHRONOCL_TMPDIR") or None
     staging = Path(tempfile.mkdtemp(prefix="chronocl-upload-", dir=where))
     try:
         local = staging / url.name

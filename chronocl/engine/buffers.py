@@ -18,10 +18,10 @@ promises through this module:
 from __future__ import annotations
 
 import logging
-import os
 
 import numpy as np
 
+from chronocl.core import env
 from chronocl.core.errors import ChronoclError
 
 log = logging.getLogger("chronocl.engine")
@@ -37,7 +37,7 @@ def max_alloc(dc) -> int:
     """The largest buffer `dc` (a `DeviceContext`) may hold: the device's own limit, lowered
     by ``CHRONOCL_MAX_ALLOC`` where it is set (read on every call, so a test may set it)."""
     device = int(dc.info.max_alloc)
-    given = os.environ.get(MAX_ALLOC_VAR)
+    given = env.get(MAX_ALLOC_VAR)
     if not given:
         return device
     from chronocl.core.budget import parse_memory

@@ -13,12 +13,12 @@ child once a context exists in the parent).
 
 from __future__ import annotations
 
-import os
 import re
 import threading
 from dataclasses import dataclass, field
 from functools import cache
 
+from chronocl.core import env
 from chronocl.core.errors import EngineUnavailableError
 
 NO_BUILD = (
@@ -103,7 +103,7 @@ def pick_device(spec: str | None) -> tuple[DeviceInfo, object]:
     if not devices:
         raise EngineUnavailableError(NO_PLATFORM)
     if not spec:
-        spec = os.environ.get("CHRONOCL_DEVICE") or os.environ.get("PYOPENCL_CTX") or ""
+        spec = env.get("CHRONOCL_DEVICE") or env.get("PYOPENCL_CTX")
     spec = spec.strip()
     if spec:
         parts = spec.split(":")

@@ -17,7 +17,6 @@ too, holds its bytes from the same budget (`reserve`).
 
 from __future__ import annotations
 
-import os
 import threading
 import weakref
 from collections import OrderedDict
@@ -26,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from chronocl.core import env
 from chronocl.core.budget import human, parse_memory
 from chronocl.engine.buffers import DeviceLimitError, DeviceWork, buffer, max_alloc
 from chronocl.engine.device_arrays import on_device
@@ -58,7 +58,7 @@ def budget_left(dc) -> int:
 def device_budget(global_mem: int) -> int:
     """Bytes of device memory resident steps may take: ``CHRONOCL_DEVICE_MEMORY`` when set
     (e.g. "6GB"), else `DEVICE_SHARE` of the device's global memory."""
-    given = os.environ.get("CHRONOCL_DEVICE_MEMORY")
+    given = env.get("CHRONOCL_DEVICE_MEMORY")
     return parse_memory(given) if given else int(global_mem * DEVICE_SHARE)
 
 

@@ -13,7 +13,6 @@ warnings on PoCL (tests/test_kernel_build.py), so clang has nothing to print eit
 
 from __future__ import annotations
 
-import os
 import sys
 import threading
 import warnings
@@ -21,6 +20,7 @@ from functools import cache
 from importlib import resources
 from pathlib import Path
 
+from chronocl.core import env
 from chronocl.core.errors import KernelBuildError
 
 _lock = threading.Lock()
@@ -81,7 +81,7 @@ def build(
 
 def verbose() -> bool:
     """Whether kernel build logs are shown (CHRONOCL_VERBOSE=1, set by the CLI's --verbose)."""
-    return os.environ.get("CHRONOCL_VERBOSE", "").strip().lower() in ("1", "true", "yes", "on")
+    return env.get("CHRONOCL_VERBOSE").lower() in ("1", "true", "yes", "on")
 
 
 def _compile(dc, name: str, src: str, options: tuple[str, ...]):

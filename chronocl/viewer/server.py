@@ -26,6 +26,7 @@ import sys
 import threading
 from collections.abc import Sequence
 
+from chronocl.core import env
 from chronocl.core.budget import human, interactive_memory, parse_memory
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.viewer.app import MAX_CLIENTS, make_app
@@ -113,8 +114,8 @@ class ViewerServer:
     ) -> None:
         import uvicorn
 
-        if token is None and os.environ.get(TOKEN_ENV):
-            token = os.environ[TOKEN_ENV]
+        if token is None and env.get(TOKEN_ENV):
+            token = env.get(TOKEN_ENV)
             if not re.fullmatch(r"[A-Za-z0-9_-]{8,}", token):
                 raise InvalidParameterError(
                     f"${TOKEN_ENV} must be at least 8 letters, digits, '_' or '-' "

@@ -18,12 +18,12 @@ writes slabs for engines that do not run on the host (`pays`), or as CHRONOCL_SL
 
 from __future__ import annotations
 
-import os
 import time
 from concurrent.futures import Future
 
 import numpy as np
 
+from chronocl.core import env
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
@@ -37,7 +37,7 @@ FORMAT = "f1"  # the display chronovolume's RGBA8, written as it is
 def pays(engine: str | Engine, device: str | None) -> bool:
     """Whether a refine's slabs are written as they integrate: for an engine that writes the
     display format and does not run on the host's cores, unless CHRONOCL_SLAB_UPLOAD says."""
-    forced = os.environ.get("CHRONOCL_SLAB_UPLOAD", "").strip()
+    forced = env.get("CHRONOCL_SLAB_UPLOAD")
     if forced in ("0", "1"):
         return forced == "1"
     eng = get_engine(engine, device) if isinstance(engine, str) else engine

@@ -18,7 +18,7 @@ from operator import itemgetter
 import numpy as np
 import zarr
 
-from chronocl.core import host_threads
+from chronocl.core import env, host_threads
 from chronocl.core.errors import InvalidParameterError
 from chronocl.data.bricks import Slab, slabs, stored_z_chunk
 from chronocl.data.timeseries import STEPS_PER_READ
@@ -54,8 +54,8 @@ def run_threads() -> int:
     POCL_MAX_PTHREAD_COUNT / POCL_CPU_MAX_CU_COUNT; a GPU's driver has fewer)."""
     cores = os.cpu_count() or 1
     zarr_threads = zarr.config.get("threading.max_workers") or min(32, cores + 4)
-    pocl = os.environ.get("POCL_MAX_PTHREAD_COUNT") or os.environ.get("POCL_CPU_MAX_CU_COUNT")
-    device = int(pocl) if pocl and pocl.strip().isdigit() else cores
+    pocl = env.get("POCL_MAX_PTHREAD_COUNT") or env.get("POCL_CPU_MAX_CU_COUNT")
+    device = int(pocl) if pocl.isdigit() else cores
     return host_threads.workers() + int(zarr_threads) + device
 
 
