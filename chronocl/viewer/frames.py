@@ -11,6 +11,7 @@ import io
 import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.integration.interactive.settings import TARGET_MS
 from chronocl.render.colorbar import data_bar
 
 COLOUR_BAR_SAMPLES = 64  # colours a colour bar sends (the page draws a gradient through them)
@@ -26,8 +27,8 @@ JPEG_QUALITY = {"preview": 70, "full": 88}
 PIXEL_BUDGET = 1024 * 768
 DRAW_TARGET_MS = 80.0  # about a 512^2 draw of 128^3 on llvmpipe, 2 cores
 # A full-resolution frame whose full-size draw fits this is drawn at full size at once, not
-# reduced and redrawn (view_sessions.TARGET_MS, the latency target of a frame).
-SHARP_DRAW_MS = 150.0
+# reduced and redrawn (the latency target of a frame).
+SHARP_DRAW_MS = TARGET_MS
 # ... and one predicted within this many times that, too: reduced, it would save at most a third
 # of a draw, and the redraw once input stops costs a whole one (a sharp frame at 930x640 on
 # llvmpipe draws in 130-170 ms: one in two was drawn twice, 150 ms more to the sharp frame).

@@ -21,7 +21,7 @@ from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.interactive.session import Session
-from chronocl.integration.interactive.settings import manager_key
+from chronocl.integration.interactive.settings import TARGET_MS, manager_key
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import gl_submit, release_on_gl
 from chronocl.viewer.recolouring import Recolouring
@@ -30,7 +30,6 @@ from chronocl.viewer.slots import ViewSlot
 from chronocl.viewer.view_state import ViewState
 
 INTEGRATE_LOCK = threading.Lock()
-TARGET_MS = 150.0  # a coarse level is drawn first when full resolution would take longer
 # A window integrating from its steps faster than this is integrated so on a slide too, not
 # slid. On this 2-core PoCL machine (W = 4-12, 128^3-256^3) a window read where it lies took
 # 7-86 ms, a steady incremental slide 37-570 ms (its leaves and combines move 16-byte RGBA

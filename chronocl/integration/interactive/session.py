@@ -43,7 +43,7 @@ from chronocl.engine.device_steps import DeviceWindow
 from chronocl.integration.inmemory import check_level, integrate_bricks, window_job
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
-from chronocl.integration.interactive.settings import Settings, manager_key, settings
+from chronocl.integration.interactive.settings import TARGET_MS, Settings, manager_key, settings
 from chronocl.integration.interactive.slider import Slider, slide_plan
 from chronocl.integration.interactive.winners import Winners, of_window, recolours
 from chronocl.modes.spec import IntegrationSpec
@@ -96,7 +96,7 @@ class Session:
         *,
         level: int = 0,
         manager: WindowManager | None = None,
-        target_ms: float = 150.0,
+        target_ms: float = TARGET_MS,
         **options: object,
     ) -> None:
         setup = settings(**options)  # type: ignore[arg-type]
@@ -416,7 +416,7 @@ class SessionPool:
 def auto_session(
     series: TimeSeries,
     *,
-    target_ms: float = 150.0,
+    target_ms: float = TARGET_MS,
     manager: WindowManager | None = None,
     **options: object,
 ) -> AutoSession:

@@ -14,6 +14,10 @@ from chronocl.integration.inmemory import make_spec
 from chronocl.modes.spec import IntegrationSpec
 
 Managers = dict[tuple[int, str], WindowManager]
+# The latency target of a frame: an interactive session shows a coarse level first where full
+# resolution would take longer, and the viewer draws a sharp frame whole where its draw fits it
+# (chronocl/viewer/frames.py); 150 ms reads as immediate (docs/display.md).
+TARGET_MS = 150.0
 
 
 class Settings(NamedTuple):
