@@ -185,3 +185,30 @@ def test_an_import_the_js_parser_does_not_read_fails(tmp_path, line):
     (tmp_path / "m.js").write_text("// a module\n" + line + "\n")
     with pytest.raises(ValueError, match=r"m\.js:2: an import form not read"):
         Scripts(tmp_path)
+
+
+def test_no_engine_capability_is_guessed():
+    """Every engine declares its capabilities (`chronocl.engine.base.Engine`: reads_in_place,
+    copies_to_device, writes_display, device_format); no caller guesses one with `getattr`
+    and a default of its own (issue 47: defaults of True here and False there)."""
+    import re
+    from pathlib import Path
+
+    from chronocl.engine.base import Engine
+    from chronocl.engine.numpy import NumpyEngine
+    from chronocl.engine.opencl import OpenCLEngine
+
+    names = ("reads_in_place", "copies_to_device", "writes_display", "device_format", "dc")
+    guess = re.compile(r"getattr\([^)]*[\"'](" + "|".join(names) + r")[\"']")
+    root = Path(__file__).resolve().parents[1] / "chronocl"
+    found = [
+        f"{p.relative_to(root.parent)}:{n}: {line.strip()}"
+        for p in sorted(root.rglob("*.py"))
+        for n, line in enumerate(p.read_text().splitlines(), 1)
+        if guess.search(line)
+    ]
+    assert not found, "\n".join(found)
+    declared = [n for n in Engine.__annotations__ if n != "name"]
+    assert set(declared) == set(names) - {"dc"}
+    for engine in (NumpyEngine(), OpenCLEngine()):
+        assert all(hasattr(engine, n) for n in declared), engine

@@ -21,7 +21,21 @@ __all__ = ["FIXED_ONE", "Engine"]
 
 
 class Engine(Protocol):
+    """What an engine does and declares. Its capabilities are attributes every engine sets (no
+    caller guesses them with `getattr`: tests/test_layers.py): where it reads a window's host
+    steps, whether its steps travel to a device, what its kernels write, and the format its
+    bricks travel in."""
+
     name: str
+    # reads a window's host slots where they lie (a `SlotBrick` unstacked): a CPU device's
+    # host pointers; else the brick is stacked (numpy) or copied (a GPU)
+    reads_in_place: bool
+    # its steps travel to a device (a GPU, or a CPU device without host pointers): they may be
+    # kept there (`chronocl.engine.device_steps.DeviceWindow`)
+    copies_to_device: bool
+    # a uint8 `out` of `accumulate` gets the display format, RGBA8 (kernels/opencl/common.h)
+    writes_display: bool
+    device_format: str  # what bricks travel in (`chronocl.engine.device_formats`)
 
     @property
     def max_brick_bytes(self) -> int:

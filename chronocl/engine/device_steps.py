@@ -224,7 +224,7 @@ class DeviceWindow:
     budget has left beside the other sessions' slots: `why` then says so)."""
 
     def __init__(self, engine, series) -> None:
-        copies = getattr(engine, "dc", None) is not None and not engine.host_ptr
+        copies = engine.copies_to_device
         as_stored = stored_dtype(series.dtype) == series.dtype
         keeps = copies and as_stored and engine.device_format == "auto"
         self.engine = engine if keeps else None

@@ -16,6 +16,10 @@ class NumpyEngine:
 
     name = "numpy"
     max_brick_bytes = 64 * 2**20
+    reads_in_place = False  # a SlotBrick is stacked
+    copies_to_device = False
+    writes_display = False
+    device_format = "auto"
 
     def accumulate(
         self,

@@ -116,6 +116,11 @@ class OpenCLEngine:
         return self.host_ptr
 
     @property
+    def copies_to_device(self) -> bool:
+        """Whether bricks travel to the device (a GPU, or a CPU device without host pointers)."""
+        return not self.host_ptr
+
+    @property
     def max_brick_bytes(self) -> int:
         """Largest brick one buffer may hold on this device (or the limit given)."""
         device = min(max_alloc(self.dc), self.dc.info.global_mem // 4)

@@ -372,7 +372,7 @@ def integrate_bricks(
     parts = slabs(nz, slab, job.halo)
 
     spec = job.spec
-    rgba8 = display and getattr(eng, "writes_display", False) and nz * ny * nx > DISPLAY_VOXELS
+    rgba8 = display and eng.writes_display and nz * ny * nx > DISPLAY_VOXELS
     rgba8 = rgba8 and not spec.integration.finalize_is_global(spec)
     rgba = recycled_empty((nz, ny, nx, 4), np.uint8 if rgba8 else np.float32)
     t_index = recycled_empty((nz, ny, nx), np.int32) if job.spec.has_t_index else None
@@ -394,7 +394,7 @@ def integrate_bricks(
     if not final:
         rgba = reference.finalize(Partial(rgba, t_index), job.positions, job.spec)
     meta = job.metadata(engine_name(eng))
-    fmt = getattr(eng, "device_format", "auto")
+    fmt = eng.device_format
     if fmt != "auto":  # a lossy format changes the result: say so where the result is kept
         meta["device_format"] = fmt
     return Chronovolume(rgba, t_index, meta)

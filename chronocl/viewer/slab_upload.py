@@ -41,8 +41,7 @@ def pays(engine: str | Engine, device: str | None) -> bool:
     if forced in ("0", "1"):
         return forced == "1"
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
-    on_host = getattr(eng, "reads_in_place", True)  # a CPU device reads host memory in place
-    return bool(getattr(eng, "writes_display", False)) and not on_host
+    return eng.writes_display and eng.copies_to_device
 
 
 class SlabUpload:

@@ -112,7 +112,7 @@ class Session:
         self.stats: dict = {}
         self._arrays: dict[int, np.ndarray] = {}
         # CPU devices read the window where the manager's slots hold it; others stack it.
-        in_place = bool(getattr(self.engine, "reads_in_place", False))
+        in_place = self.engine.reads_in_place
         self._bricks = ResidentBricks(self._arrays, in_place=in_place)
         self._slider: Slider | None = None
         self._cv: Chronovolume | None = None

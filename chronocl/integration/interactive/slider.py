@@ -74,7 +74,7 @@ class Leaves:
         self.inverts = self.mode.slides == "invert"
         # Read in place where the engine can and the steps lie in one block (the window
         # manager's slots), else stacked.
-        self.bricks = ResidentBricks({}, in_place=bool(getattr(engine, "reads_in_place", False)))
+        self.bricks = ResidentBricks({}, in_place=engine.reads_in_place)
         self.before: dict[int, tuple[int, ...]] = {}  # leaf -> the earlier steps it spans
         self._full: dict[int, Partial] = {}
         self.pieces, self.total = 0, 0  # a slide's leaves and combines so far, and about all
@@ -184,7 +184,7 @@ class Slider:
         device memory): an engine that copies bricks keeps it on its device where the device
         budget has room for it."""
         engine, self.placed = self.engine, True
-        if getattr(engine, "dc", None) is None or engine.reads_in_place:
+        if not engine.copies_to_device:
             return
         voxels = int(np.prod(self.series.volume_shape))
         # each of its arrays is one device buffer (a partial's RGBA, 16 bytes a voxel; the
