@@ -24,7 +24,7 @@ class Engine(Protocol):
     """What an engine does and declares. Its capabilities are attributes every engine sets (no
     caller guesses them with `getattr`: tests/test_layers.py): where it reads a window's host
     steps, whether its steps travel to a device, what its kernels write, and the format its
-    bricks travel in."""
+    bricks travel in; an engine of one's own sets them too."""
 
     name: str
     # reads a window's host slots where they lie (a `SlotBrick` unstacked): a CPU device's
