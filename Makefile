@@ -3,7 +3,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test test-newest lint format bench clean system
+.PHONY: demo test test-full test-newest lint format bench clean system
 
 # The runtime alone (a user's `pip install .`) for the demo; the dev extras (pytest, hypothesis,
 # ruff, vtk, playwright) for the tests. A venv with the dev extras has the runtime too.
@@ -65,6 +65,11 @@ test: lint
 		else echo "warning: /usr/bin/chromium missing; the browser tests will be skipped"; fi; \
 	fi
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
+
+# The suite with 500 examples in every property test (the default is 60, whose time CI keeps
+# within ten minutes): a deeper search, for a change to a kernel or a mode, or before a release.
+test-full: lint
+	CHRONOCL_EXAMPLES=500 $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
 
 # The whole suite on CPython 3.13 with the newest dependencies (pip upgrades every one, each run).
 test-newest:
