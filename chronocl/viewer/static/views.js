@@ -44,8 +44,12 @@ export function layoutViews() {
     p.mode.value = S.state.views[i].mode;
     p.mode.title = S.choices.modes.find((m) => m.name === p.mode.value)?.summary || '';
     p.order.textContent = S.state.views[i].order || S.choices.orders[0];
-    p.own.value = windowText(S.state.views[i].window);
-    p.own.classList.remove('bad');
+    // not under the user's typing: a relayout (a legend appearing) would undo a window half
+    // typed, and its Enter would then send nothing
+    if (document.activeElement !== p.own) {
+      p.own.value = windowText(S.state.views[i].window);
+      p.own.classList.remove('bad');
+    }
     p.el.classList.toggle('selected', i === S.selectedView && n > 1);
   });
   // Panels fill the view area in a grid (columns x rows): the squarest grid with room for n
