@@ -264,10 +264,7 @@ def render(
             check_device_format(
                 device_format,
                 engine,
-                job.series.dtype,
-                job.value_range,
-                job.spec.mode,
-                (job.series.vmin, job.series.vmax),
+                *job.format_input(),
             )
     views = ModeViews(
         picked[0],

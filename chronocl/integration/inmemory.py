@@ -129,6 +129,13 @@ class Job:
         _, ny, nx = self.series.volume_shape
         return self.selection.width * ny * nx * self.series.dtype.itemsize
 
+    def format_input(self) -> tuple:
+        """What a device format is checked against (`device_formats.resolve_format`'s
+        arguments after the name): the stored type, the value range, the mode and the data's
+        range (max/min refuse a quantising that clips it)."""
+        data = (self.series.vmin, self.series.vmax)
+        return self.series.dtype, self.value_range, self.spec.mode, data
+
     def metadata(self, engine: str) -> dict:
         """The chronovolume metadata of this integration."""
         return chronovolume_metadata(
@@ -335,10 +342,7 @@ def integrate(
     eng = with_device_format(
         eng,
         device_format,
-        job.series.dtype,
-        job.value_range,
-        job.spec.mode,
-        (job.series.vmin, job.series.vmax),
+        *job.format_input(),
     )
     cv = integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
     warn_invisible(job, cv)  # steps, or a whole picture, the transfer functions hide

@@ -182,10 +182,7 @@ def plan_run(
     check_device_format(
         device_format,
         engine,
-        job.series.dtype,
-        job.value_range,
-        job.spec.mode,
-        (job.series.vmin, job.series.vmax),
+        *job.format_input(),
     )
     return Run(
         job,

@@ -126,10 +126,7 @@ class SlabTask:
         eng = with_device_format(
             eng,
             self.device_format,
-            job.series.dtype,
-            job.value_range,
-            job.spec.mode,
-            (job.series.vmin, job.series.vmax),
+            *job.format_input(),
         )
         return integrate_brick(job, eng, slab, brick, out)
 
@@ -266,10 +263,7 @@ def integrate_to_store(
     check_device_format(
         device_format,
         engine,
-        job.series.dtype,
-        job.value_range,
-        job.spec.mode,
-        (job.series.vmin, job.series.vmax),
+        *job.format_input(),
     )
     warn_invisible(job)  # steps the transfer functions hide: said before hours of streaming
     budget = parse_memory(memory)
