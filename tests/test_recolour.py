@@ -459,3 +459,34 @@ def test_a_recoloured_frame_and_its_winners_come_back_whole(monkeypatch) -> None
             assert misses == []
     finally:
         spares.clear()
+
+
+def test_the_first_edits_kernels_are_warmed_once_per_data_type(monkeypatch) -> None:
+    """`warm_kernels` runs a first edit's kernels (both gathers, the brick summaries and
+    recolour) on one brick, once per device and data type; the viewer calls it after its first
+    frame (test_recolour_viewer.py checks that it does)."""
+    from chronocl.render import recolour_bricks
+
+    gathered, recoloured = [], []
+    real_gather, real_sparse = recolour_bricks.gather, BrickRecolour.sparse
+
+    def spy_gather(*args, **kwargs):
+        w = real_gather(*args, **kwargs)
+        gathered.append(w.spec.mode)
+        return w
+
+    def spy_sparse(self, spec):
+        sp = real_sparse(self, spec)
+        recoloured.append(sp.rgba.shape)
+        return sp
+
+    monkeypatch.setattr(recolour_bricks, "gather", spy_gather)
+    monkeypatch.setattr(BrickRecolour, "sparse", spy_sparse)
+    monkeypatch.setattr(recolour_bricks, "_warmed", set())
+    recolour_bricks.warm_kernels(np.uint16, None)
+    b = brick_grid.BRICK
+    assert gathered == ["max", "change"] and recoloured == [(b, b, b, 4)] * 2
+    recolour_bricks.warm_kernels(np.uint16, None)
+    assert len(gathered) == 2  # warm already
+    recolour_bricks.warm_kernels(np.float32, None)
+    assert len(gathered) == 4

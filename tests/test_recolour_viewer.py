@@ -299,6 +299,17 @@ def test_winners_are_gathered_at_idle_and_the_first_edit_only_recolours(
     assert calls == ["done"], "the edit gathered the winners again"
 
 
+def test_the_first_frame_warms_the_recolouring_kernels_on_the_side(client, monkeypatch):
+    """After its first frame (alpha), the viewer runs a first edit's kernels once on its side
+    thread (`warm_kernels`), so the first recolouring edit does not load them."""
+    from chronocl.render import recolour_bricks
+
+    warmed: set = set()
+    monkeypatch.setattr(recolour_bricks, "_warmed", warmed)
+    _open_in(client, "alpha")
+    _until(lambda: (None, "float32") in warmed)
+
+
 def test_an_idle_gather_is_given_up_by_new_input_and_the_edit_is_right(client, monkeypatch):
     """Input while the winners are gathered at idle gives the gather up at its next slab; the
     edit's frame recolours from a gather of its own and shows what integrating it shows."""

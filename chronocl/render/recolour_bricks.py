@@ -25,6 +25,7 @@ length: no copy).
 from __future__ import annotations
 
 import itertools
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +34,13 @@ from chronocl.core.memory import aligned_empty
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
-from chronocl.render.recolour_host import RECOLOUR_H, HostRecolour, index_type, shown_output
+from chronocl.render.recolour_host import (
+    RECOLOUR_H,
+    HostRecolour,
+    gather,
+    index_type,
+    shown_output,
+)
 
 B = brick_grid.BRICK
 RUN_BRICKS = 64  # bricks a work-item recolours at most (a 512-voxel row)
@@ -264,3 +271,34 @@ def takes_over(held: list | None, shape: tuple) -> bool:
     output of the last one (`take_held`), instead of an array of its own."""
     grid = brick_grid.grid_shape(tuple(shape))
     return bool(held) and all(a.shape == (*shape, 4) and m.shape == grid for a, m in held)
+
+
+_warmed: set = set()
+_warm_lock = threading.Lock()
+
+
+def warm_kernels(dtype, device: str | None) -> None:
+    """Run the OpenCL kernels of a first TF edit in max, min, first_hit and change (the
+    gathers, the brick summaries, the brick recolour) once per process, device and data type,
+    on a window of two steps of one brick: PoCL loads a kernel's code at its first run, about
+    40 ms a kernel here, which was 0.27 s of the first edit after a mode switch at 512^3. The
+    viewer calls it beside its first frame (`chronocl.viewer.worker`)."""
+    from chronocl.integration.inmemory import make_spec
+
+    key = (device, np.dtype(dtype).name)
+    with _warm_lock:
+        if key in _warmed:
+            return
+        _warmed.add(key)
+    block = aligned_empty((2, B, B, B), dtype)
+    block[...] = 0
+    t_index = aligned_empty((B, B, B), np.int32)
+    t_index[...] = 1
+    for mode in ("max", "change"):  # change's gather is a kernel of its own
+        spec = make_spec(mode)
+        w = gather(t_index, {0: block[0], 1: block[1]}, (0, 1), 2, (0.0, 1.0), spec, device)
+        volume = BrickRecolour(w, device)
+        try:
+            volume.sparse(spec)
+        finally:
+            volume.release()

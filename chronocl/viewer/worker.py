@@ -29,6 +29,7 @@ from chronocl.core.interrupt import interruptible
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.render.framing import framed
+from chronocl.render.recolour_bricks import warm_kernels
 from chronocl.render.views import describe, parse_color
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset, find_dataset
@@ -102,6 +103,7 @@ class ClientWorker(Tasks):
         # The histogram's range and (data set, window) last sent: another window queues one.
         self._hist_range, self._hist_window = [0.0, 1.0], None
         self._frame = 0
+        self._warmed: set = set()  # the data types whose recolouring kernels are loaded
         # The framed region: (generation, world box or None); a data set or camera reset adds one.
         self._focus_gen = 0
         self._focus: tuple[int, tuple | None] | None = None
@@ -306,6 +308,16 @@ class ClientWorker(Tasks):
             self.views.recolouring.finish()
         self._memory_after()
         self._histogram_after(state)
+        self._warm_after(state)
+
+    def _warm_after(self, state: ViewState) -> None:
+        """After the first frame of a data set: the kernels of a first recolouring TF edit
+        loaded on the side thread (`warm_kernels`), while the user looks at the picture."""
+        dtype = self.datasets[state.dataset].series.dtype
+        if dtype not in self._warmed:
+            self._warmed.add(dtype)
+            device = self.views.recolouring.device
+            self.side.submit(("warm", dtype), lambda: warm_kernels(dtype, device))
 
     def _memory_after(self) -> None:
         """The frame's memory noted for the process's limit; a line in the log when over it."""
