@@ -91,6 +91,7 @@ def test_tf_edit_recolours_without_integrating(client, monkeypatch, mode, where)
     t = header["timings"]
     assert header["level"] == 0 and not header["refining"]
     assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0 and not t["incremental"]
+    assert header["views"][0]["why_integrated"] is None
     _assert_as_integrated(client, recoloured)
 
 
@@ -101,6 +102,8 @@ def test_edit_that_changes_the_hits_integrates(client) -> None:
     cut = {"points": [[0, 1, 1, 1, 0], [0.6, 1, 1, 1, 0], [1, 1, 1, 1, 1]], "value_range": fitted}
     header, _ = _sharp(client, {"data_tf": cut})
     assert header["timings"]["recolour_ms"] == 0 and header["timings"]["integrate_ms"] > 0
+    why = header["views"][0]["why_integrated"]
+    assert why == "the edit changes which values pass the opacity threshold", why
 
 
 @pytest.fixture(scope="module")

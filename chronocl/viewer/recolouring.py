@@ -71,12 +71,15 @@ class Recolouring:
     def view(self, slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> Chronovolume | None:
         """The view's chronovolume for `spec` recoloured, its texture rewritten; None where the
         edit integrates (a coarse window shown, another window, or an edit that may change
-        the winners)."""
+        the winners), with the reason in `slot.why_not_recoloured` (None where it recoloured
+        or the mode never does)."""
+        slot.why_not_recoloured = None
         s, shown = slot.session, slot.cv
-        if not isinstance(s, AutoSession) or s.asked == spec:
+        if not isinstance(s, AutoSession) or s.asked == spec or spec.mode not in RECOLOURED:
             return None
         found = _recolourable(slot, spec, sel)
-        if found is None:
+        if isinstance(found, str):
+            slot.why_not_recoloured = found
             return None
         full, new = found
         t, uploaded = time.perf_counter(), self.upload_ms
@@ -89,6 +92,7 @@ class Recolouring:
         ):
             prepared = self._prepare(slot, full, shown, new)
             if prepared is None:
+                slot.why_not_recoloured = "no recolourer here (GL without compute shaders)"
                 return None
         fmt = slot.volume.texture.dtype
         meta = {**shown.metadata, "spec": new.to_dict(), "value_range": list(new_range)}
@@ -123,7 +127,7 @@ class Recolouring:
         if isinstance(prepared, Prepared) and prepared.t_index() is shown.t_index:
             return False
         found = _recolourable(slot, s.asked, s.selection)
-        return found is not None and self._prepare(slot, found[0], shown, None) is not None
+        return not isinstance(found, str) and self._prepare(slot, found[0], shown, None) is not None
 
     def _show(self, slot: ViewSlot, prepared: Prepared, sp: Sparse, shown, cv) -> None:
         """Write what changed of `sp` into the slot's texture (all of it unless the texture
@@ -183,22 +187,27 @@ class Recolouring:
             on_gl(lambda rc: [vol.texture.read_into(cv.rgba) for cv, vol in unread])
 
 
-def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection):
+def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> tuple | str:
     """(the level-0 session, `spec` fixed for its window) where the slot shows window `sel`
-    integrated at full resolution, in its texture, and `spec` only recolours it; else None."""
+    integrated at full resolution, in its texture, and `spec` only recolours it; else why not
+    (one line, for the frame's header)."""
     s, shown = slot.session, slot.cv
     if not isinstance(s, AutoSession) or shown is None or shown.t_index is None:
-        return None
-    if s.shown_level != 0 or s.selection != sel:
-        return None
+        return "no integrated window with a step per voxel is shown"
+    if s.selection != sel:
+        return "another window"
+    if s.shown_level != 0:
+        return "a coarse level is shown"
     if slot.volume is None or slot.uploaded is not shown:
-        return None
+        return "the texture holds another frame"
     full = s.pool.sessions.get((0, spec.integration.pool))
     if full is None or full.selection != sel:
-        return None
+        return "the window is not integrated at full resolution"
     new, reason = full.recolours(spec)  # a reason when it has integrated nothing
-    if reason is not None or full.current() is not shown:
-        return None
+    if reason is not None:
+        return reason
+    if full.current() is not shown:
+        return "the full-resolution window holds another frame"
     return full, new
 
 

@@ -32,6 +32,7 @@ class ViewSlot:
     written: Chronovolume | None = None  # whose RGBA `volume`'s texture holds (slab_upload)
     staging: np.ndarray | None = None  # the texture data's host buffer, reused frame to frame
     recolour: object | None = None  # the window's winners on the GPU (viewer/recolouring.py)
+    why_not_recoloured: str | None = None  # the last frame's edit integrated: why (one line)
     # Textures of other shapes or formats, kept for reuse: frames alternate between a coarse
     # level and full resolution, and allocating a 512^3 texture costs about a second here.
     kept: dict = field(default_factory=dict)

@@ -160,6 +160,7 @@ class Views:
 
     def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
         s = slot.session
+        slot.why_not_recoloured = None
         if s is not None and slot.cv is not None and s.asked == spec and s.selection == sel:
             return slot.cv, 0.0, False
         if s is None or (s.asked != spec and s.selection != sel):

@@ -422,8 +422,12 @@ class ClientWorker(Tasks):
                     "bytes": len(b),
                     "label": describe(cv),
                     "note": empty_note(mode, modes.get(mode).summary, visible_fraction(pixels, bg)),
+                    # a TF edit in a mode that recolours integrated instead: why (else null)
+                    "why_integrated": slot.why_not_recoloured,
                 }
-                for b, cv, pixels, (mode, _) in zip(images, cvs, panels, state.views, strict=True)
+                for b, cv, pixels, (mode, _), slot in zip(
+                    images, cvs, panels, state.views, self.views.slots[: len(cvs)], strict=True
+                )
             ],
             "probe": self._probe_mark(state, cvs),
             "clip_outline": clip_outline(cvs[0], state.panel_camera(), state.size, state.clip),

@@ -385,6 +385,8 @@ function showTimings(h) {
     ...(t.recolour_ms > 0 && !t.integrate_ms
       ? []
       : [`integrate ${t.integrate_ms.toFixed(1)} ms${t.incremental ? ' (incremental)' : ''}`]),
+    // an edit of a mode that recolours integrated instead: why
+    ...h.views.filter((x) => x.why_integrated).slice(0, 1).map((x) => `not recoloured: ${x.why_integrated}`),
     `upload ${t.upload_ms.toFixed(1)} ms`,
     // a GPU whose memory cannot hold the window: its steps travel for every integration
     ...(t.steps_on_host ? [`steps not on the GPU: ${t.steps_on_host}`] : []),
