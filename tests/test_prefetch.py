@@ -142,6 +142,66 @@ def test_a_turn_cancels_the_loads_ahead_in_the_old_direction(server) -> None:
         assert within_budget(wm)
 
 
+def test_two_panels_scrubbing_apart_never_cancel_each_others_loads(server) -> None:
+    """Two owners of one manager (a viewer's panels, each with its own window) scrub fast in
+    opposite directions while nothing arrives: a request cancels only its own owner's loads
+    (steps leaving its window, its old reads ahead), never the other's window or reads ahead,
+    each scrub reads ahead in its own direction, and both windows arrive within the budget."""
+
+    class Panel:  # an owner: what a session is to its manager
+        pass
+
+    left, right = Panel(), Panel()
+    clock = Clock()
+    with manager(server, clock, steps=24) as wm:
+        for start in range(3):  # measures a step's read time
+            clock.now += 0.01
+            wm.get(range(start, start + 4), direction=+1, owner=left)
+        clock.now += 10
+        cancelled: dict[str, list[int]] = {"left": [], "right": []}
+        theirs: list[int] = []  # steps cancelled that the other panel wanted or read ahead
+        asking = ["left"]
+        cancel = wm._cancel
+
+        def spy(load) -> None:
+            other = wm._owners.get(right if asking[0] == "left" else left)
+            if other is not None and load.step in other.wanted | set(other.ahead):
+                theirs.append(load.step)
+            cancelled[asking[0]].append(load.step)
+            cancel(load)
+
+        wm._cancel = spy
+
+        def ask(name, steps, direction):
+            asking[0] = name
+            return wm.request(steps, direction, owner=left if name == "left" else right)
+
+        server.gate.clear()
+        try:
+            for a, b in ((2, 30), (3, 29), (4, 28)):  # fast, apart, nothing arrives
+                clock.now += 0.01
+                forward = ask("left", range(a, a + 4), +1)
+                backward = ask("right", range(b, b + 4), -1)
+            state = wm.state()
+            ahead = state["ahead"]
+            assert {8, 9, 27} <= set(ahead), ahead  # each read ahead in its own direction
+            held = set(state["loading"]) | set(state["resident"])
+            assert set(ahead) | set(range(4, 8)) | set(range(28, 32)) <= held
+            assert not forward.superseded and not backward.superseded
+            assert within_budget(wm)
+            turned = ask("left", range(3, 7), -1)  # the left panel turns: its reads ahead go
+            assert forward.superseded and not backward.superseded
+            assert 27 in wm.state()["ahead"] and 8 not in wm.state()["loading"]
+        finally:
+            server.gate.set()
+        assert not theirs and 7 in cancelled["left"] and 33 in cancelled["right"], cancelled
+        assert [a[0, 0, 0] for a in turned.result(timeout=30)] == [
+            a[0, 0, 0] for a in wm.get(range(3, 7), owner=left)
+        ]
+        backward.result(timeout=30)
+        assert within_budget(wm)
+
+
 def test_the_model_forgets_a_stopped_scrub_and_a_turn() -> None:
     clock = Clock()
     model = ScrubModel(clock)

@@ -326,10 +326,10 @@ def test_views_jumping_together_let_go_of_the_old_window_before_reading(monkeypa
     frames_at_reads: list[int] = []
     request = WindowManager.request
 
-    def noting(wm, steps, direction=0):
+    def noting(wm, steps, direction=0, owner=None):
         held_at_reads.append(_held_steps(wm))
         frames_at_reads.append(sum(f() is not None for f in old_frames))
-        return request(wm, steps, direction)
+        return request(wm, steps, direction, owner)
 
     views = Views([Dataset("d", series)], "opencl", None, "1GB")
     try:

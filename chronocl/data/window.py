@@ -12,9 +12,14 @@ A request names the steps of the current window:
 - after a request, the next steps in the scrub direction are prefetched, as far
   as the budget allows without evicting the window: by default as many as the
   scrub's speed times a step's read time covers (`chronocl.data.scrub_model`);
-- a newer request supersedes older ones: loads nobody wants any more are
-  cancelled before they start, or stop at the next chunk row, and waiting on a
-  superseded request raises `SupersededError` instead of queueing behind it.
+- a newer request supersedes older ones of the same owner: loads nobody wants any
+  more are cancelled before they start, or stop at the next chunk row, and waiting
+  on a superseded request raises `SupersededError` instead of queueing behind it.
+
+A manager shared by several sessions (a viewer's panels and clients: `Session`'s `managers`)
+keeps each one's window apart: a request names its owner (the session), supersedes only that
+owner's earlier requests, and cancels only loads no owner wants (its window or read ahead);
+each owner's scrub has its own speed (`ScrubModel`). Requests without an owner share one.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ import threading
 import time
 import weakref
 from collections import Counter, OrderedDict
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -51,17 +56,32 @@ class _Load:
     abort: threading.Event = field(default_factory=threading.Event)
 
 
+@dataclass
+class _Owner:
+    """One owner's window: its steps, those read ahead of it, its newest request and its
+    scrub."""
+
+    scrub: ScrubModel
+    wanted: frozenset[int] = frozenset()
+    ahead: tuple[int, ...] = ()
+    generation: int = 0  # of its newest request
+    served: int = -1  # the generation whose window `result` last handed out
+
+
 class Request:
     """The steps of one window, loading; `result()` waits for them."""
 
-    def __init__(self, manager: WindowManager, generation: int, steps: tuple[int, ...]) -> None:
+    def __init__(
+        self, manager: WindowManager, owner: _Owner, generation: int, steps: tuple[int, ...]
+    ) -> None:
         self.manager = manager
+        self.owner = owner
         self.generation = generation
         self.steps = steps
 
     @property
     def superseded(self) -> bool:
-        return self.manager.generation != self.generation
+        return self.owner.generation != self.generation
 
     def result(self, timeout: float | None = None) -> list[np.ndarray]:
         """The steps' arrays in request order; SupersededError if a newer request came first."""
@@ -101,17 +121,16 @@ class WindowManager:
                 f"use --memory {_round_up_mb(self.step_bytes)}MB or more"
             )
         self.prefetch = prefetch
-        self.scrub = ScrubModel()  # the scrub's speed and a step's read time (prefetch=None)
-        self._ahead: tuple[int, ...] = ()  # the steps the last request read ahead
+        # Requests without an owner; the scrub's speed and a step's read time (prefetch=None)
+        self._anyone = _Owner(ScrubModel())
+        self._owners: weakref.WeakKeyDictionary[Hashable, _Owner] = weakref.WeakKeyDictionary()
         self._span = 1  # the last request's distinct steps: free slots kept warm (`_read`)
         self._read_at = 0.0  # when the last read ended (`_quiet`)
-        self.generation = 0
-        self._served = -1  # the generation whose window `result` last handed out
+        self.generation = 0  # of the newest request of any owner
         self.reads: Counter[int] = Counter()  # completed reads per step (tests: never twice)
         self.cancelled = 0  # loads dropped before they finished
         self._cache: OrderedDict[int, np.ndarray] = OrderedDict()  # LRU order, newest last
         self._loads: dict[int, _Load] = {}
-        self._wanted: set[int] = set()
         self._failed: dict[int, BaseException] = {}  # read errors, raised to whoever waits
         self._lock = threading.Condition()
         self._pool = ThreadPoolExecutor(
@@ -129,6 +148,11 @@ class WindowManager:
             self.limit.register(self)
 
     # -- public --------------------------------------------------------------------------
+    @property
+    def scrub(self) -> ScrubModel:
+        """The scrub model of requests without an owner (every read's time is in it)."""
+        return self._anyone.scrub
+
     @property
     def capacity(self) -> int:
         """How many steps fit the budget."""
@@ -165,12 +189,16 @@ class WindowManager:
             return 0
         try:
             freed = self.slots.release(nbytes)
-            keep = self._wanted if ahead else self._wanted | set(self._ahead)
+            wanted = self._wanted()
+            keep = wanted if ahead else wanted | self._read_ahead()
             steps = [s for s in self._cache if s not in keep]
-            if self._served == self.generation:
-                # The last window was handed out: a session showing it holds its arrays (kept
-                # below); one nobody holds any more (its client gone) goes last.
-                steps += [s for s in self._cache if s in self._wanted]
+            # Windows handed out: a session showing one holds its arrays (kept below); one
+            # nobody holds any more (its client gone) goes last. Not those still awaited.
+            awaited: set[int] = set()
+            for o in self._all_owners():
+                if o.served != o.generation:
+                    awaited |= o.wanted
+            steps += [s for s in self._cache if s in wanted and s not in awaited]
             for step in steps:
                 if freed >= nbytes:
                     break
@@ -179,7 +207,7 @@ class WindowManager:
                 del self._cache[step]
                 freed += self.slots.release(nbytes - freed, cold=False)  # its slot, now free
             if ahead:
-                for load in [ld for s, ld in self._loads.items() if s not in self._wanted]:
+                for load in [ld for s, ld in self._loads.items() if s not in wanted]:
                     if freed >= nbytes:
                         break
                     self._cancel(load)
@@ -201,17 +229,22 @@ class WindowManager:
         fetched) and those of them read `ahead` of the last request's window."""
         with self._lock:
             loading = sorted(self._loads)
+            ahead = self._read_ahead()
             return {
                 "resident": sorted(self._cache),
                 "loading": loading,
-                "ahead": [s for s in self._ahead if s in self._loads or s in self._cache],
+                "ahead": sorted(s for s in ahead if s in self._loads or s in self._cache),
             }
 
-    def request(self, steps: Sequence[int], direction: int = 0) -> Request:
-        """Start loading `steps` (and prefetching beyond them in `direction`: +1, -1 or 0).
+    def request(
+        self, steps: Sequence[int], direction: int = 0, owner: Hashable | None = None
+    ) -> Request:
+        """Start loading `steps` (and prefetching beyond them in `direction`: +1, -1 or 0)
+        for `owner` (a session sharing the manager; None: anyone without one).
 
-        Supersedes every earlier request. Raises InvalidParameterError when the steps
-        cannot all be resident at once under the budget.
+        Supersedes the owner's earlier requests; loads no owner wants any more are cancelled.
+        Raises InvalidParameterError when the steps cannot all be resident at once under the
+        budget.
         """
         steps = tuple(int(s) for s in steps)
         n = self.series.n_steps
@@ -227,18 +260,21 @@ class WindowManager:
                 f"{human(self.budget)}; use --memory {_round_up_mb(len(steps) * self.step_bytes)}"
                 "MB or more, or a shorter window (integrate streams windows of any size)"
             )
+        with self._lock:
+            who = self._owner(owner)
         if steps:
-            self.scrub.record_request(min(steps), direction)
-        ahead = self._prefetch_steps(steps, direction)
+            who.scrub.record_request(min(steps), direction)
+        ahead = self._prefetch_steps(steps, direction, who.scrub)
         with self._lock:
             if self._closed:
                 raise InvalidParameterError("this window manager is closed; make a new one")
             self.generation += 1
-            self._wanted = set(steps)
+            who.generation, who.wanted, who.ahead = self.generation, frozenset(steps), tuple(ahead)
             self._span = max(1, distinct)
             for s in steps:
                 self._failed.pop(s, None)
-            keep = self._wanted | set(ahead)
+            wanted = self._wanted()
+            keep = wanted | self._read_ahead()
             for step, load in list(self._loads.items()):
                 if step not in keep:
                     self._cancel(load)
@@ -247,10 +283,9 @@ class WindowManager:
                     self._cache.move_to_end(s)
             for s in steps:
                 if s not in self._cache and s not in self._loads:
-                    self._make_room(protect=self._wanted)
+                    self._make_room(protect=wanted)
                     self._fits(ahead=True)  # the window is read over the limit if it must be
                     self._start(s)
-            self._ahead = tuple(ahead)
             for s in ahead:
                 if s in self._cache or s in self._loads:
                     continue
@@ -261,22 +296,28 @@ class WindowManager:
                 if not self._fits(ahead=False):
                     break
                 self._start(s)
-            return Request(self, self.generation, steps)
+            return Request(self, who, self.generation, steps)
 
-    def get(self, steps: Sequence[int], direction: int = 0) -> list[np.ndarray]:
+    def get(
+        self, steps: Sequence[int], direction: int = 0, owner: Hashable | None = None
+    ) -> list[np.ndarray]:
         """Request `steps` and wait for them (the arrays must be treated as read-only)."""
-        return self.request(steps, direction).result()
+        return self.request(steps, direction, owner).result()
 
     def brick(self, steps: Sequence[int], z0: int = 0, z1: int | None = None) -> np.ndarray:
         """Rows [z0, z1) of resident steps as an xytz brick (z1 - z0, W, Y, X)."""
         arrays = dict(zip(steps, self.get(steps), strict=True))
         return ResidentBricks(arrays, in_place=False).read(steps, z0, z1)
 
-    def let_go(self) -> None:
-        """Whoever asked for the last window is gone (a viewer's client left, or left the data
-        set): its steps may give way once nobody holds them, as a window handed out does."""
+    def let_go(self, owner: Hashable | None = None) -> None:
+        """The owner that asked for its last window is gone (a viewer's panel or client left,
+        or left the data set): its window's steps give way once nobody holds them, and
+        nothing is read ahead for it any more."""
         with self._lock:
-            self._served = self.generation
+            if owner is None:
+                self._anyone.wanted, self._anyone.ahead = frozenset(), ()
+            else:
+                self._owners.pop(owner, None)
 
     def close(self) -> None:
         with self._lock:
@@ -293,13 +334,37 @@ class WindowManager:
         self.close()
 
     # -- internals (the lock is held where noted) ------------------------------------------
-    def _prefetch_steps(self, steps: tuple[int, ...], direction: int) -> list[int]:
+    def _owner(self, key: Hashable | None) -> _Owner:
+        """The owner of `key` (locked): made at its first request, its scrub's read time
+        that of the reads so far."""
+        if key is None:
+            return self._anyone
+        who = self._owners.get(key)
+        if who is None:
+            who = self._owners[key] = _Owner(ScrubModel(self.scrub.clock))
+            who.scrub.read_s = self.scrub.read_s
+        return who
+
+    def _all_owners(self) -> list[_Owner]:
+        return [self._anyone, *self._owners.values()]
+
+    def _wanted(self) -> set[int]:
+        """The steps of every owner's window (locked)."""
+        return set().union(*(o.wanted for o in self._all_owners()))
+
+    def _read_ahead(self) -> set[int]:
+        """The steps read ahead of every owner's window (locked)."""
+        return set().union(*(o.ahead for o in self._all_owners()))
+
+    def _prefetch_steps(
+        self, steps: tuple[int, ...], direction: int, scrub: ScrubModel
+    ) -> list[int]:
         if not direction or not steps:
             return []
         stride = abs(steps[-1] - steps[0]) // (len(steps) - 1) if len(steps) > 1 else 1
         stride = max(1, stride)
         if self.prefetch is None:  # time-aware, within the slots the window leaves free
-            count = min(self.scrub.ahead(stride), self.capacity - len(set(steps)))
+            count = min(scrub.ahead(stride), self.capacity - len(set(steps)))
         else:
             count = self.prefetch
         edge = max(steps) if direction > 0 else min(steps)
@@ -385,6 +450,7 @@ class WindowManager:
             self._cache[load.step] = array
             self.reads[load.step] += 1
             self._read_at = time.monotonic()
+            owners = self._all_owners()
             self._lock.notify_all()  # first: a warm that fails must not strand the waiters
             # Free slots warmed ahead, enough for a jump of a whole window (a scrub's stop reads
             # the steps the drag passed at once, each into a slot never written while the budget
@@ -394,7 +460,9 @@ class WindowManager:
                 if self.limit is not None:
                     count = min(count, max(0, self.limit.room()) // self.step_bytes)
                 self.slots.warm(count, self._quiet)
-        self.scrub.record_read(time.perf_counter() - t0)
+        took = time.perf_counter() - t0
+        for o in owners:  # a step's read time is the store's: every owner's scrub learns it
+            o.scrub.record_read(took)
 
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
         deadline = None if timeout is None else time.monotonic() + timeout
@@ -411,7 +479,7 @@ class WindowManager:
                     for s in request.steps:
                         self._cache.move_to_end(s)
                     if not request.superseded:
-                        self._served = request.generation
+                        request.owner.served = request.generation
                     return [self._cache[s] for s in request.steps]
                 for s in missing:
                     if s in self._failed:

@@ -254,12 +254,9 @@ class Views:
 
     def _close_managers(self) -> None:
         """Let go of the data set's managers: closed where they are this client's own; shared,
-        the window this client asked for last may give way (`WindowManager.let_go`)."""
-        managers, self._managers = list(self._managers.values()), {}
+        they stay, and the sessions closed before have let go of their windows in them
+        (`WindowManager.let_go`)."""
+        self._managers = {}
         if self._own:
             self._shared.close()
             self._shared = SharedSteps()
-            return
-        with INTEGRATE_LOCK:  # no other client is between its request and its result
-            for m in managers:
-                m.let_go()

@@ -198,7 +198,7 @@ class Session:
         """Start reading `selection`'s steps in the background where they fit the budget (an
         `AutoSession` shows the window at a coarse level meanwhile)."""
         if selection.width * self.manager.step_bytes <= self.manager.budget:
-            self.manager.request(selection.steps)
+            self.manager.request(selection.steps, owner=self)
 
     def refine(self) -> Chronovolume | None:
         """None: a fixed level is never refined (`AutoSession.refine` is)."""
@@ -228,6 +228,8 @@ class Session:
         """Hold nothing of the window: another pooling's session of this level shows it now.
         Its steps stay resident in the shared manager but may give way; its chronovolume,
         sliding state and device copies go (shown again, the window integrates anew)."""
+        if not self._owns_manager:  # its window gives way to the others' (`let_go`)
+            self.manager.let_go(self)
         self._device.release()
         self._hold({})
         self._bricks.forget()
@@ -281,7 +283,11 @@ class Session:
         if not (reason is None and self._slider and self._slider.can_move_to(selection)):
             self._let_go(selection)
         arrays = dict(
-            zip(selection.steps, self.manager.get(selection.steps, direction), strict=True)
+            zip(
+                selection.steps,
+                self.manager.get(selection.steps, direction, owner=self),
+                strict=True,
+            )
         )
         leaving = {s: a for s, a in self._arrays.items() if s not in arrays}
         self._hold(arrays)
