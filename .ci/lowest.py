@@ -1,7 +1,8 @@
-"""Prints a pip constraints file that pins every dependency in pyproject.toml (runtime and dev)
-to its lower bound, so the suite tests the oldest versions chronocl claims (.ci/run's first run).
+"""Prints a pip constraints file that pins every dependency in pyproject.toml (runtime, dev and
+every optional extra, such as events) to its lower bound, so the suite tests the oldest versions
+chronocl claims (.ci/run's first run).
 
-Usage: python3 .ci/lowest.py > lowest.txt; pip install -c lowest.txt -e '.[dev]'
+Usage: python3 .ci/lowest.py > lowest.txt; pip install -c lowest.txt -e '.[dev,events]'
 """
 
 import re
@@ -10,7 +11,8 @@ import tomllib
 from pathlib import Path
 
 project = tomllib.loads((Path(__file__).parent.parent / "pyproject.toml").read_text())["project"]
-requirements = [*project["dependencies"], *project["optional-dependencies"]["dev"]]
+extras = project["optional-dependencies"]
+requirements = [*project["dependencies"], *(r for name in sorted(extras) for r in extras[name])]
 for requirement in requirements:
     match = re.fullmatch(r"([A-Za-z0-9_.-]+)(\[[^\]]*\])?\s*(.*)", requirement)
     name, spec = match.group(1), match.group(3)

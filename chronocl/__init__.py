@@ -11,6 +11,8 @@ function, into one RGBA volume that can be raycast from any view.
     session = chronocl.Session(series, memory="2GB", mode="max", time_tf="rgb")
     cv = session.set_window(0, 16)
     cv = session.slide(+1)          # incremental with absolute time positions
+
+    graph = chronocl.events(series, "0:20", threshold=0.3)  # features, events, tracks
 """
 
 from chronocl.core.enhance import Enhance
@@ -21,6 +23,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.probe import TimeCurve, probe
 from chronocl.data.series import TimeSeries, open_series
 from chronocl.data.window import WindowManager
+from chronocl.events import EventGraph, events, load_events
 from chronocl.integration.inmemory import integrate, make_spec
 from chronocl.integration.interactive.session import Session
 from chronocl.modes.spec import IntegrationSpec
@@ -35,6 +38,7 @@ __all__ = [
     "Chronovolume",
     "DataTF",
     "Enhance",
+    "EventGraph",
     "IntegrationSpec",
     "Selection",
     "Session",
@@ -46,7 +50,9 @@ __all__ = [
     "TimeTF",
     "WindowManager",
     "__version__",
+    "events",
     "integrate",
+    "load_events",
     "make_spec",
     "open",
     "open_series",

@@ -32,6 +32,7 @@ CHRONOCL = Package(
         ("data", ("chronocl.data",)),
         ("engine", ("chronocl.engine",)),
         ("integration", ("chronocl.integration",)),
+        ("events", ("chronocl.events",)),
         ("render", ("chronocl.render",)),
         ("viewer", ("chronocl.viewer",)),
         ("report", ("chronocl.report",)),

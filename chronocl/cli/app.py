@@ -20,6 +20,7 @@ from chronocl.cli import (
     bench,
     demo,
     devices,
+    events,
     export,
     generate,
     info,
@@ -88,6 +89,7 @@ app.command(help=integrate.help_text())(integrate.integrate)
 app.command()(render.render)
 app.command()(export.export)
 app.command()(probe.probe)
+app.command()(events.events)
 app.command()(view.view)
 app.command()(verify.verify)
 app.command()(pyramid.pyramid)

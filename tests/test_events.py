@@ -1,0 +1,605 @@
+"""Events through time (`chronocl.events`, `chronocl events`) on series whose events are known
+by construction: blobs that merge, split, are born, die, leave through a face, move without
+an event; periodic faces joining a blob (checked against connected-components-3d's own
+periodic labelling and against a brute-force graph of the voxels for every connectivity);
+6 against 26 connectivity on a diagonal contact; a value threshold against a TF opacity
+threshold; global tracks bridging a step of weak overlap that local matching breaks; the JSON
+round trip; and the command: a store written by chronocl, its JSON and picture, and every
+refusal one line, exit 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import sys
+import threading
+import tomllib
+from importlib.metadata import version
+from pathlib import Path
+
+import cc3d
+import networkx as nx
+import numpy as np
+import pytest
+from packaging.requirements import Requirement
+from PIL import Image
+
+import chronocl
+from chronocl.core.errors import (
+    InvalidParameterError,
+    InvalidSelectionError,
+    InvalidTransferFunctionError,
+    UnknownNameError,
+)
+from chronocl.core.selection import Selection
+from chronocl.core.tf import DataTF, TFSetting, lut_lerp32
+from chronocl.core.values import normalize
+from chronocl.data.series import TimeSeries, open_series, write_series
+from chronocl.events import EventGraph, load_events
+from chronocl.events import run as events_run
+from chronocl.events.extra import MissingExtraError
+from chronocl.events.features import Mask, label, label_step, offsets
+from chronocl.events.tracking import overlaps
+
+from .bad_input import assert_rejected
+from .test_cli import cli
+
+SHAPE = (3, 8, 16)  # Z, Y, X: blobs lie in the middle z plane, away from the z faces
+
+
+def series(steps: int, shape=SHAPE) -> np.ndarray:
+    return np.zeros((steps, *shape), np.float32)
+
+
+def paint(a: np.ndarray, t: int, y: tuple[int, int], x: tuple[int, int], value=1.0) -> None:
+    """A blob at step t: the middle z plane, rows y0:y1, columns x0:x1."""
+    a[t, 1, y[0] : y[1], x[0] : x[1]] = value
+
+
+def kinds(graph: EventGraph) -> list[tuple]:
+    """(kind, step, sources, targets) of every event, in the graph's order."""
+    return [(e["kind"], e["step"], e["sources"], e["targets"]) for e in graph.events]
+
+
+def track_lists(graph: EventGraph) -> list[list[tuple[int, int]]]:
+    return [[tuple(n) for n in t["features"]] for t in graph.tracks]
+
+
+# -- events known by construction --------------------------------------------------------------
+def test_two_blobs_merge():
+    a = series(4)
+    paint(a, 0, (2, 5), (1, 4))
+    paint(a, 0, (2, 5), (10, 13))
+    paint(a, 1, (2, 5), (3, 6))
+    paint(a, 1, (2, 5), (8, 11))
+    paint(a, 2, (2, 5), (4, 11))  # overlaps both
+    paint(a, 3, (2, 5), (5, 12))
+    g = chronocl.events(a, threshold=0.5)
+    assert kinds(g) == [
+        ("continuation", 0, [1], [1]),
+        ("continuation", 0, [2], [2]),
+        ("merge", 1, [1, 2], [1]),
+        ("continuation", 2, [1], [1]),
+    ]
+    assert [len([f for f in g.features if f["step"] == s]) for s in range(4)] == [2, 2, 1, 1]
+    # one of the two tracks goes on through the merge, the other ends at it
+    ends = sorted((t["start"], t["end"]) for t in g.tracks)
+    assert ends == [(0, 1), (0, 3)]
+    assert g.counts() == {"continuation": 3, "merge": 1}
+
+
+def test_a_blob_splits():
+    a = series(3)
+    paint(a, 0, (2, 5), (4, 12))
+    paint(a, 1, (2, 5), (4, 12))
+    paint(a, 2, (2, 5), (3, 7))
+    paint(a, 2, (2, 5), (9, 13))
+    g = chronocl.events(a, threshold=0.5, tracks="local")
+    assert kinds(g) == [("continuation", 0, [1], [1]), ("split", 1, [1], [1, 2])]
+    assert len(g.tracks) == 2 and g.meta["tracks_method"] == "local"
+
+
+def test_birth_and_death():
+    a = series(4)
+    paint(a, 1, (2, 4), (2, 5))  # step 0 is empty: born at 1
+    paint(a, 2, (2, 4), (2, 5))
+    paint(a, 2, (5, 7), (9, 12))  # a second one, born at 2
+    paint(a, 3, (5, 7), (9, 12))  # the first dies at 3
+    g = chronocl.events(a, threshold=0.5)
+    assert kinds(g) == [
+        ("birth", 0, [], [1]),
+        ("continuation", 1, [1], [1]),
+        ("birth", 1, [], [2]),
+        ("death", 2, [1], []),
+        ("continuation", 2, [2], [1]),
+    ]
+    assert not any(e["at_boundary"] for e in g.events)
+    assert track_lists(g) == [[(1, 1), (2, 1)], [(2, 2), (3, 1)]]
+
+
+def test_a_moving_blob_is_one_continuation_and_one_track_by_both_methods():
+    a = series(6)
+    for t in range(6):
+        paint(a, t, (2, 5), (1 + t, 5 + t))
+    for method in ("global", "local"):
+        g = chronocl.events(a, threshold=0.5, tracks=method)
+        assert {e["kind"] for e in g.events} == {"continuation"} and len(g.events) == 5
+        assert track_lists(g) == [[(t, 1) for t in range(6)]]
+        xs = [f["centroid_zyx"][2] for f in g.features]
+        np.testing.assert_allclose(xs, [2.5 + t for t in range(6)])
+
+
+def test_a_blob_leaving_through_a_face_is_an_exit_and_one_coming_in_an_entry():
+    a = series(4)
+    paint(a, 0, (2, 5), (10, 14))
+    paint(a, 1, (2, 5), (12, 16))  # touches the x face
+    paint(a, 2, (2, 5), (0, 3))  # gone on the right; a new one comes in on the left
+    paint(a, 3, (2, 5), (1, 4))
+    g = chronocl.events(a, threshold=0.5)
+    assert kinds(g) == [
+        ("continuation", 0, [1], [1]),
+        ("exit", 1, [1], []),
+        ("entry", 1, [], [1]),
+        ("continuation", 2, [1], [1]),
+    ]
+    exit_, entry = g.events[1], g.events[2]
+    assert exit_["at_boundary"] and entry["at_boundary"]
+    assert [f["touches_boundary"] for f in g.features] == [False, True, True, False]
+    # with x periodic there is no face to leave through: a death and a birth (the two
+    # positions share no voxel)
+    wrapped = chronocl.events(a, threshold=0.5, periodic="x")
+    went = [e["kind"] for e in wrapped.events]
+    assert went == ["continuation", "death", "birth", "continuation"]
+    assert not any(f["touches_boundary"] for f in wrapped.features)
+
+
+def test_a_death_in_the_middle_is_no_exit():
+    a = series(2)
+    paint(a, 0, (3, 5), (6, 9))
+    g = chronocl.events(a, threshold=0.5)
+    assert kinds(g) == [("death", 0, [1], [])] and not g.events[0]["at_boundary"]
+
+
+# -- periodic boundaries -----------------------------------------------------------------------
+def test_periodic_faces_join_a_blob_and_measure_it_unwrapped():
+    a = series(1)
+    paint(a, 0, (2, 4), (0, 2), value=2.0)
+    paint(a, 0, (2, 4), (14, 16), value=2.0)
+    apart = chronocl.events(a, threshold=1.0).features
+    assert [f["size"] for f in apart] == [4, 4]
+    assert all(f["touches_boundary"] for f in apart)
+    (joined,) = chronocl.events(a, threshold=1.0, periodic="x").features
+    assert joined["size"] == 8 and joined["value_sum"] == 16.0
+    assert joined["wraps"] == "x" and not joined["touches_boundary"]
+    # x indices 14, 15, 16, 17 unwrapped: the centre 15.5, the box through the face
+    assert joined["centroid_zyx"] == [1.0, 2.5, 15.5]
+    assert joined["bbox_zyx"] == [[1, 2], [2, 4], [14, 18]]
+    # another axis periodic does not join them
+    assert len(chronocl.events(a, threshold=1.0, periodic="yz").features) == 2
+
+
+def test_a_ring_around_a_periodic_axis_has_the_whole_axis_as_its_box():
+    a = series(1)
+    paint(a, 0, (3, 4), (0, 16))
+    (ring,) = chronocl.events(a, threshold=0.5, periodic="x").features
+    assert ring["wraps"] == "x" and ring["bbox_zyx"][2] == [0, 16]
+    assert 0.0 <= ring["centroid_zyx"][2] < 16.0
+
+
+def test_periodic_corner_contact_needs_26_connectivity():
+    """Two voxels in opposite corners of the y-x square touch across both faces at once."""
+    shown = np.zeros((3, 4, 5), bool)
+    shown[1, 0, 0] = shown[1, 3, 4] = True
+    for connectivity, n in ((6, 2), (18, 1), (26, 1)):
+        labels, _ = label(shown, connectivity, (False, True, True))
+        assert labels.max() == n, connectivity
+    labels, wraps = label(shown, 26, (False, True, False))  # x does not wrap: apart
+    assert labels.max() == 2 and wraps == {}
+
+
+def _reference_labels(shown: np.ndarray, connectivity: int, periodic) -> np.ndarray:
+    """Components by brute force: a graph of every shown voxel and each of its neighbours
+    (`connectivity`, wrapping on the periodic axes), numbered by their first voxel."""
+    most = {6: 1, 18: 2, 26: 3}[connectivity]
+    steps = [d for d in itertools.product((-1, 0, 1), repeat=3) if 0 < sum(map(abs, d)) <= most]
+    g = nx.Graph()
+    voxels = [tuple(int(c) for c in v) for v in np.argwhere(shown)]
+    g.add_nodes_from(voxels)
+    for v in voxels:
+        for d in steps:
+            w = []
+            for axis, (c, s, n) in enumerate(zip(v, d, shown.shape, strict=True)):
+                c += s
+                if not 0 <= c < n:
+                    if not periodic[axis]:
+                        break
+                    c %= n
+                w.append(c)
+            else:
+                if shown[tuple(w)]:
+                    g.add_edge(v, tuple(w))
+    out = np.zeros(shown.shape, np.uint32)
+    for k, comp in enumerate(sorted(nx.connected_components(g), key=min), 1):
+        for v in comp:
+            out[v] = k
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_periodic_labels_equal_a_brute_force_graph(seed):
+    rng = np.random.default_rng(seed)
+    shape = tuple(int(n) for n in rng.integers(1, 6, size=3))
+    shown = rng.random(shape) < 0.3
+    for connectivity in (6, 18, 26):
+        for periodic in itertools.product((False, True), repeat=3):
+            labels, _ = label(shown, connectivity, periodic)
+            want = _reference_labels(shown, connectivity, periodic)
+            np.testing.assert_array_equal(labels, want, err_msg=f"{connectivity} {periodic}")
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_periodic_6_connectivity_equals_cc3d_own_periodic_labelling(seed):
+    rng = np.random.default_rng(100 + seed)
+    shown = rng.random((6, 7, 8)) < 0.35
+    labels, _ = label(shown, 6, (True, True, True))
+    theirs = cc3d.connected_components(shown, connectivity=6, periodic_boundary=True)
+    pairs = np.unique(np.stack([labels.ravel(), theirs.ravel()]), axis=1)
+    assert pairs.shape[1] == len(np.unique(labels)) == len(np.unique(theirs))  # one-to-one
+
+
+def test_half_the_neighbour_offsets():
+    assert [len(offsets(c)) for c in (6, 18, 26)] == [3, 9, 13]
+
+
+# -- connectivity, masks -----------------------------------------------------------------------
+def test_6_and_26_connectivity_on_a_diagonal_contact():
+    """Two blobs meeting at one corner are one feature at 26 connectivity, two at 6 and 18;
+    through time the 26-connected pair merges, the 6-connected one does not."""
+    a = np.zeros((2, 6, 6, 6), np.float32)
+    a[0, 1:3, 1:3, 1:3] = 1
+    a[1, 1:3, 1:3, 1:3] = 1
+    a[1, 3:5, 3:5, 3:5] = 1  # corner to corner with the first
+    a[0, 3:5, 3:5, 3:5] = 0
+    counts = {
+        c: len(chronocl.events(a[1:], threshold=0.5, connectivity=c).features) for c in (6, 18, 26)
+    }
+    assert counts == {6: 2, 18: 2, 26: 1}
+    assert [e["kind"] for e in chronocl.events(a, threshold=0.5, connectivity=6).events] == [
+        "continuation",
+        "birth",
+    ]
+    assert [e["kind"] for e in chronocl.events(a, threshold=0.5, connectivity=26).events] == [
+        "continuation"
+    ]
+
+
+def _two_levels() -> np.ndarray:
+    a = series(1)
+    paint(a, 0, (2, 4), (2, 5), value=0.2)
+    paint(a, 0, (2, 4), (10, 13), value=0.8)
+    a[0, 0, 0, 0] = 1.0  # the range's top
+    return a
+
+
+def test_a_value_threshold_and_a_tf_opacity_threshold_show_different_voxels():
+    a = _two_levels()
+    by_value = chronocl.events(a, threshold=0.5).features
+    assert [(f["size"], f["bbox_zyx"][2]) for f in by_value] == [(1, [0, 1]), (6, [10, 13])]
+    # a hat TF over [0, 1]: opaque around 0.2, clear from 0.5 up
+    hat = DataTF(
+        points=((0, 1, 1, 1, 0), (0.2, 1, 1, 1, 1), (0.5, 1, 1, 1, 0), (1, 1, 1, 1, 0)),
+        value_range=(0.0, 1.0),
+    )
+    g = chronocl.events(a, tf=hat, opacity=0.5)
+    assert [(f["size"], f["bbox_zyx"][2]) for f in g.features] == [(6, [2, 5])]
+    assert g.meta["mask"]["kind"] == "opacity" and g.meta["mask"]["value_range"] == [0.0, 1.0]
+    # the mask is the engines' own lookup of opacity at the normalised value
+    u = normalize(a[0], 0.0, 1.0)
+    want = lut_lerp32(hat.lut, u)[..., 3] > np.float32(0.5)
+    np.testing.assert_array_equal(Mask.of_tf(hat, (0.0, 1.0), 0.5)(a[0]), want)
+    # a TFSetting and a TF file give the same
+    assert chronocl.events(a, tf=TFSetting(data_tf=hat), opacity=0.5).features == g.features
+
+
+def test_a_tf_without_a_range_is_fitted_to_the_window_as_integrate_fits_it(tmp_path):
+    from chronocl import modes
+    from chronocl.integration.fit_range import window_range
+
+    rng = np.random.default_rng(3)
+    a = rng.random((3, *SHAPE)).astype(np.float32)
+    s = TimeSeries.from_array(a)
+    g = chronocl.events(s, "0:2", tf=DataTF(), opacity=0.3)
+    want = window_range(s, Selection((0, 1), 3), modes.get(modes.DEFAULT))
+    assert g.meta["mask"]["value_range"] == list(want)
+    TFSetting(data_tf=DataTF()).save(tmp_path / "tf.json")
+    assert chronocl.events(s, "0:2", tf=tmp_path / "tf.json", opacity=0.3).features == g.features
+
+
+def test_non_finite_values_are_never_shown():
+    """A series refuses NaN, but a step read from elsewhere may hold one: the masks skip it."""
+    a = series(1)[0]
+    a[1, 2:4, 2:5] = 1.0
+    a[1, 3, 3] = a[1, 6, 6] = np.nan
+    for mask in (Mask.of_threshold(0.5), Mask.of_tf(DataTF(), (0.0, 1.0), 0.0)):
+        (f,) = label_step(a, mask).features
+        assert f.size == 5 and f.value_sum == 5.0
+
+
+def test_world_coordinates_follow_the_spacing():
+    a = series(1)
+    paint(a, 0, (2, 4), (4, 8), value=3.0)
+    s = TimeSeries.from_array(a, spacing=(0.5, 2.0, 4.0))  # dx, dy, dz
+    (f,) = chronocl.events(s, threshold=1.0).features
+    assert f["centroid_zyx"] == [1.0, 2.5, 5.5]
+    assert f["world_xyz"] == [2.75, 5.0, 4.0]
+    assert f["value_sum"] == 24.0 and f["size"] == 8
+
+
+def test_label_step_numbers_features_by_their_first_voxel():
+    shown = np.zeros((2, 4, 4), np.float32)
+    shown[1, 0, 3] = 1  # first in raster order (z slowest)
+    shown[0, 3, 0] = 1
+    step = label_step(shown, Mask.of_threshold(0.5), step=7)
+    assert [(f.step, f.id, f.centroid_zyx) for f in step.features] == [
+        (7, 1, (0.0, 3.0, 0.0)),
+        (7, 2, (1.0, 0.0, 3.0)),
+    ]
+    assert step.labels[0, 3, 0] == 1 and step.labels[1, 0, 3] == 2
+
+
+def test_overlaps_count_shared_voxels():
+    a = np.array([[[1, 1, 0, 2, 2]]], np.uint32)
+    b = np.array([[[0, 3, 3, 3, 0]]], np.uint32)
+    assert overlaps(a, b) == {(1, 3): 1, (2, 3): 1}
+
+
+# -- tracks: global against local --------------------------------------------------------------
+def _weak_step() -> np.ndarray:
+    """A blob A moving right; at step 2 a rival S overlaps A's step 1 more than A's own next
+    position does (similarities 0.46 against 0.2), and dies at step 3 while A goes on."""
+    a = series(5)
+    paint(a, 0, (1, 5), (2, 8))
+    paint(a, 1, (1, 5), (4, 10))
+    paint(a, 2, (1, 3), (3, 10))  # S: 12 of A1's voxels, 14 in all
+    paint(a, 2, (4, 6), (4, 10))  # A2: 6 of A1's voxels (row 4)
+    paint(a, 3, (4, 6), (5, 11))
+    paint(a, 4, (4, 6), (6, 12))
+    return a
+
+
+def test_global_tracks_bridge_a_weak_overlap_that_local_matching_breaks():
+    a = _weak_step()
+    local = chronocl.events(a, threshold=0.5, tracks="local")
+    global_ = chronocl.events(a, threshold=0.5, tracks="global")
+    # the same events either way: A1 splits into S (id 1) and A2 (id 2); S dies
+    assert (
+        kinds(local)
+        == kinds(global_)
+        == [
+            ("continuation", 0, [1], [1]),
+            ("split", 1, [1], [1, 2]),
+            ("death", 2, [1], []),
+            ("continuation", 2, [2], [1]),
+            ("continuation", 3, [1], [1]),
+        ]
+    )
+    sim = {(tuple(e["source"]), tuple(e["target"])): e["similarity"] for e in local.edges}
+    assert sim[(1, 1), (2, 1)] == pytest.approx(12 / 26)
+    assert sim[(1, 1), (2, 2)] == pytest.approx(6 / 30)
+    # local follows the rival at the split and loses A; global keeps A whole
+    assert track_lists(local) == [[(0, 1), (1, 1), (2, 1)], [(2, 2), (3, 1), (4, 1)]]
+    assert track_lists(global_) == [[(0, 1), (1, 1), (2, 2), (3, 1), (4, 1)], [(2, 1)]]
+    by_track = {f["track"] for f in global_.features if f["step"] != 2 or f["id"] == 2}
+    assert by_track == {0}
+
+
+# -- the API's inputs --------------------------------------------------------------------------
+def test_windows_stores_and_arrays(tmp_path):
+    a = series(6)
+    for t in range(6):
+        paint(a, t, (2, 5), (1 + t, 5 + t))
+    path = tmp_path / "s.zarr"
+    write_series(path, iter(a), n_steps=6, volume_shape=SHAPE, dtype="float32")
+    from_path = chronocl.events(path, "0:6:2", threshold=0.5)
+    assert from_path.meta["steps"] == [0, 2, 4]
+    assert [(e["source"][0], e["target"][0]) for e in from_path.edges] == [(0, 2), (2, 4)]
+    opened = open_series(path)
+    for window in (slice(0, 6, 2), [0, 2, 4], Selection((0, 2, 4), 6), "0:6:2"):
+        assert chronocl.events(opened, window, threshold=0.5).features == from_path.features
+    assert chronocl.events(a, "0:6:2", threshold=0.5).features == from_path.features
+    assert from_path.meta["store"] == str(path.resolve())
+    with pytest.raises(InvalidSelectionError, match="ambiguous"):
+        chronocl.events(a, (0, 3), threshold=0.5)  # as every chronocl window: say 0:3 or [0, 3]
+
+
+def test_steps_are_read_once_each_through_the_series_and_a_few_at_a_time(monkeypatch):
+    a = series(12)
+    for t in range(12):
+        paint(a, t, (2, 5), (1 + t % 4, 5 + t % 4))
+    s = TimeSeries.from_array(a)
+    read, lock, held, most = [], threading.Lock(), [0], [0]
+    plain = TimeSeries.read_brick
+
+    def counted(self, steps, *args, **kwargs):
+        with lock:
+            read.extend(steps)
+            held[0] += 1
+            most[0] = max(most[0], held[0])
+        return plain(self, steps, *args, **kwargs)
+
+    original_label = events_run.label_step
+
+    def labelled(*args, **kwargs):
+        try:
+            return original_label(*args, **kwargs)
+        finally:
+            with lock:
+                held[0] -= 1
+
+    monkeypatch.setattr(TimeSeries, "read_brick", counted)
+    monkeypatch.setattr(events_run, "label_step", labelled)
+    g = chronocl.events(s, threshold=0.5)
+    assert sorted(read) == list(range(12)) and len(g.features) == 12
+    assert most[0] <= events_run.AHEAD
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "needle"),
+    [
+        ({}, InvalidParameterError, "threshold="),
+        ({"threshold": 0.5, "tf": DataTF()}, InvalidParameterError, "not both"),
+        ({"threshold": 0.5, "opacity": 0.2}, InvalidParameterError, "give tf="),
+        ({"tf": DataTF(), "opacity": -0.1}, InvalidParameterError, "outside [0, 1)"),
+        ({"tf": DataTF(), "opacity": 1.0}, InvalidParameterError, "outside [0, 1)"),
+        ({"threshold": float("nan")}, InvalidParameterError, "not finite"),
+        ({"threshold": "high"}, InvalidParameterError, "not a number"),
+        ({"threshold": 0.5, "connectivity": 8}, InvalidParameterError, "6 (faces)"),
+        ({"threshold": 0.5, "periodic": "xw"}, InvalidParameterError, "periodic"),
+        ({"threshold": 0.5, "tracks": "best"}, UnknownNameError, "global"),
+        ({"tf": 3}, InvalidTransferFunctionError, "not a transfer function"),
+    ],
+)
+def test_bad_arguments_are_one_line_each(kwargs, error, needle):
+    with pytest.raises(error) as info:
+        chronocl.events(series(2), **kwargs)
+    assert needle in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_events_extra_is_installed_within_its_range():
+    """As tests/test_suite_rules.py checks the runtime and dev dependencies: in CI's run on
+    the lower bounds (CHRONOCL_LOWEST=1) each library of the extra is at its lower bound."""
+    pyproject = Path(__file__).parent.parent / "pyproject.toml"
+    extra = tomllib.loads(pyproject.read_text())["project"]["optional-dependencies"]["events"]
+    lowest = os.environ.get("CHRONOCL_LOWEST") == "1"
+    for text in extra:
+        req = Requirement(text)
+        have = version(req.name)
+        assert have in req.specifier, f"{req.name} {have} is outside {req.specifier}"
+        floor = next(s.version for s in req.specifier if s.operator == ">=")
+        assert not lowest or have == floor, f"{req.name} {have} is not its lower bound {floor}"
+
+
+def test_a_missing_extra_names_the_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "cc3d", None)
+    with pytest.raises(MissingExtraError, match=r"pip install 'chronocl\[events\]'"):
+        chronocl.events(series(2), threshold=0.5)
+
+
+# -- the graph and its JSON --------------------------------------------------------------------
+def test_json_round_trip_graph_and_frames(tmp_path):
+    a = _weak_step()
+    g = chronocl.events(a, threshold=0.5)
+    path = g.save(tmp_path / "e.json")
+    back = load_events(path)
+    assert back == g and EventGraph.load(path) == g
+    assert json.loads(g.to_json())["format"] == "chronocl-events"
+    graph = back.graph
+    assert isinstance(graph, nx.DiGraph)
+    assert graph.number_of_nodes() == len(g.features) and graph.number_of_edges() == len(g.edges)
+    assert graph.nodes[2, 2]["track"] == 0 and graph.nodes[2, 2]["size"] == 12
+    assert graph.edges[(1, 1), (2, 2)]["overlap"] == 6
+    assert nx.is_directed_acyclic_graph(graph)
+    assert graph.graph["tracks_method"] == "global"
+    frames = g.to_pandas()
+    assert list(frames) == ["features", "edges", "events", "tracks"]
+    assert len(frames["features"]) == len(g.features) and "centroid_zyx" in frames["features"]
+    with pytest.raises(FileExistsError):
+        g.save(path)  # no overwrite unless asked
+    g.save(path, overwrite=True)
+    (tmp_path / "bad.json").write_text('{"format": "other"}')
+    with pytest.raises(chronocl.ChronoclError, match="not a chronocl events file"):
+        load_events(tmp_path / "bad.json")
+
+
+def test_the_picture_is_drawn(tmp_path):
+    g = chronocl.events(_weak_step(), threshold=0.5)
+    g.save_picture(tmp_path / "g.png")
+    image = np.asarray(Image.open(tmp_path / "g.png").convert("L"))
+    assert image.shape[0] >= 400 and image.shape[1] >= 600 and image.std() > 10
+    labels = [t.get_text() for t in g.figure().axes[0].texts]
+    assert "split" in labels and "death" in labels and "T0" in labels
+
+
+# -- the command -------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    path = tmp_path_factory.mktemp("events") / "in" / "s.zarr"
+    a = _weak_step()
+    times = [0.5 * t for t in range(len(a))]
+    write_series(path, iter(a), n_steps=len(a), volume_shape=SHAPE, dtype="float32", times=times)
+    return path
+
+
+def test_cli_writes_json_and_picture(store, tmp_path):
+    out = tmp_path / "events.json"
+    result = cli("events", store, "--window", "0:5", "--threshold", "0.5", "-o", out)
+    assert result.returncode == 0, result.stderr
+    assert "wrote" in result.stderr and "1 split" in result.stderr
+    written = load_events(out)
+    assert written == chronocl.events(store, "0:5", threshold=0.5)
+    assert written.meta["times"] == [0.0, 0.5, 1.0, 1.5, 2.0]
+    with Image.open(tmp_path / "events.png") as im:
+        assert im.format == "PNG" and im.width >= 600 and im.height >= 400
+    local = tmp_path / "local.json"
+    args = ["--threshold", "0.5", "-o", local, "--tracks", "local", "--picture", tmp_path / "p.png"]
+    assert cli("events", store, *args, "--connectivity", "6").returncode == 0
+    assert load_events(local).meta["tracks_method"] == "local"
+    assert (tmp_path / "p.png").exists() and not (tmp_path / "local.png").exists()
+
+
+def test_cli_help_has_examples():
+    from typer.testing import CliRunner
+
+    from chronocl.cli import app
+
+    text = CliRunner().invoke(app, ["events", "--help"]).output
+    assert "Examples" in text and "chronocl events vortex.zarr" in text
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["{missing}", "--threshold", "0.5"], "does not exist"),
+        (["{store}", "--threshold", "0.5", "--window", "4:2"], "reversed"),
+        (["{store}", "--tf", "{tf}", "--opacity", "-0.5"], "outside [0, 1)"),
+        (["{store}", "--threshold", "0.5", "--connectivity", "8"], "connectivity 8"),
+        (["{store}", "--threshold", "0.5", "--periodic", "w"], "periodic"),
+        (["{store}", "--threshold", "0.5", "--tracks", "nearest"], "unknown track method"),
+        (["{store}"], "say what a step shows"),
+        (["{store}", "--threshold", "0.5", "--tf", "{tf}"], "not both"),
+    ],
+)
+def test_cli_refuses_bad_input_in_one_line(store, tmp_path, args, needle):
+    tf = tmp_path / "tf.json"
+    TFSetting(data_tf=DataTF(value_range=(0.0, 1.0))).save(tf)
+    out = tmp_path / "out.json"
+    filled = [
+        a.format(store=store, missing=tmp_path / "nope.zarr", tf=tf) if "{" in a else a
+        for a in args
+    ]
+    assert_rejected(
+        ["events", *filled, "-o", out],
+        needle,
+        inputs=[store, tf],
+        outputs=[out, tmp_path / "out.png"],
+        folder=tmp_path,
+    )
+
+
+def test_cli_refuses_bad_outputs(store, tmp_path):
+    missing = tmp_path / "no-such-folder" / "e.json"
+    common = ["events", store, "--threshold", "0.5"]
+    assert_rejected([*common, "-o", missing], "does not exist", [store], [missing])
+    assert not missing.parent.exists()
+    assert_rejected([*common, "-o", tmp_path / "e.txt"], "must end in .json", [store])
+    assert_rejected(
+        [*common, "-o", tmp_path / "e.json", "--picture", tmp_path / "e.jpg"],
+        "must end in .png",
+        [store],
+        [tmp_path / "e.json"],
+    )
+    (tmp_path / "e.json").write_text("{}")
+    assert_rejected([*common, "-o", tmp_path / "e.json"], "already exists", [store])
+    assert (tmp_path / "e.json").read_text() == "{}"
