@@ -123,49 +123,6 @@ def test_a_caller_giving_back_before_it_takes_leaves_the_other_spares(monkeypatc
     assert spares.take(rgba) is not None and spares.take(t_index) is not None  # integrate's
 
 
-def test_a_fresh_map_is_faulted_in_over_the_host_threads_before_it_is_written(monkeypatch):
-    """A fresh map's pages are faulted in (madvise, a piece per host thread) before its writer
-    touches them: PoCL's threads faulting 640 MB by writing took 0.7 s, against 0.2 s so."""
-    import psutil
-
-    from chronocl.core import host_threads
-
-    pieces = []
-    real = memory.prefault
-    monkeypatch.setattr(
-        memory, "prefault", lambda a, between=None: pieces.append(a.nbytes) or real(a)
-    )
-    monkeypatch.setattr(host_threads, "workers", lambda: 3)
-    nbytes = 48 * 2**20
-    before = psutil.Process().memory_info().rss
-    a = recycled_empty((nbytes // 4,), np.float32)
-    grown = psutil.Process().memory_info().rss - before
-    assert sorted(pieces) == sorted(len(p) for p in np.array_split(np.empty(nbytes, bool), 3))
-    assert grown > 0.9 * nbytes, grown  # resident before any write
-    assert not a.any()  # fresh memory reads as zeros, as before
-    pieces.clear()
-    del a
-    gc.collect()
-    recycled_empty((nbytes // 4,), np.float32)  # the spare: faulted in already
-    assert not pieces
-
-
-def test_a_fresh_map_made_on_every_host_thread_at_once_does_not_wait_for_the_pool():
-    """A job of the host pool making a fresh map faults it in itself: waiting for the pool's
-    other threads, all busy with the same, would wait for ever."""
-    from chronocl.core import host_threads
-
-    n = host_threads.workers()
-    together = threading.Barrier(n)
-
-    def job(i):
-        together.wait(timeout=30)
-        return recycled_empty((2**20 + i * 4096,), np.uint8).nbytes
-
-    jobs = [host_threads.pool().submit(job, i) for i in range(n)]
-    assert [j.result(timeout=60) for j in jobs] == [2**20 + i * 4096 for i in range(n)]
-
-
 def test_arrays_dying_fast_start_one_timer_not_one_each():
     before = threading.active_count()
     for _ in range(50):  # a viewer sliding at 30 frames a second

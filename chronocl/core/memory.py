@@ -174,7 +174,6 @@ def recycled_empty(shape: tuple[int, ...], dtype: object) -> np.ndarray:
             mapped = mmap.mmap(-1, size)
         except OSError as exc:
             raise MemoryError(f"cannot allocate {nbytes} bytes: {exc}") from None
-        _populate(mapped)
     owner = _Exported(mapped, nbytes)
     # Not at exit: nothing is made again, and 3.12 cannot start the expiry timer's thread then
     weakref.finalize(owner, _give_back, mapped, os.getpid()).atexit = False
@@ -234,21 +233,6 @@ def _advise_rows(a: np.ndarray, advice: int, inward: bool, between=None) -> bool
     except (OSError, ValueError, AttributeError):
         return False
     return True
-
-
-def _populate(mapped: mmap.mmap) -> None:
-    """Fault a fresh map's pages in, in pieces over the host threads (one madvise each): its
-    writer (PoCL's threads or numpy) then finds them mapped. At 512^3 a recolouring's fresh u and
-    k (640 MB) took PoCL's two threads 0.7 s to fault by writing, against 0.2 s here (2 cores);
-    one thread takes 0.4 s."""
-    from chronocl.core import host_threads
-
-    flat = np.frombuffer(mapped, np.uint8)
-    if threading.current_thread().name.startswith(host_threads.THREAD_PREFIX):
-        prefault(flat)  # a job of the pool waiting on the pool could wait for ever
-        return
-    pieces = np.array_split(flat, host_threads.workers())
-    list(host_threads.pool().map(prefault, pieces))
 
 
 def discard(a: np.ndarray) -> bool:
