@@ -32,13 +32,15 @@ pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
 )
 
-# The colour of a timeline cell's bar, sampled in the page: resident steps are drawn solid.
+# The colour of a timeline cell's bar, sampled in the page (in the middle of the residency
+# bar, where the timeline says it drew it): resident steps are drawn solid.
 BAR_PIXEL = """(step) => {
   const c = document.getElementById('timeline');
   const r = c.getBoundingClientRect();
   const dpr = window.devicePixelRatio || 1;
+  const bar = window.viewer.timelineLayout.residency;
   const x = Math.round(((step + 0.5) / window.viewer.S.info.shape.t) * r.width * dpr);
-  const y = Math.round((r.height - 14 + 8 + 2) * dpr);
+  const y = Math.round((bar.y + bar.h / 2) * dpr);
   return Array.from(c.getContext('2d').getImageData(x, y, 1, 1).data);
 }"""
 

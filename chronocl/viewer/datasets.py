@@ -133,6 +133,8 @@ class Dataset:
                 if has_labels(steps, s.times, s.time_unit)
                 else None
             ),
+            # The times' unit ('s', 'h'; None: none given), for the timeline's tick labels.
+            "time_unit": s.time_unit,
         }
 
     def step_sample(self, step: int) -> np.ndarray:

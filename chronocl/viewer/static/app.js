@@ -48,10 +48,12 @@ function onInfo(msg) {
   fillControls(msg);
   fillSelect(
     $('dataset'),
-    // shape is the array's (T, Z, Y, X); the label reads x×y×z like --dims and info.
+    // shape is the array's (T, Z, Y, X); the label reads x×y×z like --dims and info (n³ for a
+    // cube), so name and shape fit the menu; the whole of both are its tooltip (datasetTitle).
     msg.datasets.map((d) => ({
       name: d.index,
-      label: `${d.name} (${d.shape.slice(1).reverse().join('×')}, ${d.shape[0]} steps)`,
+      label: `${d.name} (${dims(d.shape, true)}, ${d.shape[0]} steps)`,
+      summary: datasetTitle(d.name, d.shape),
     })),
   );
   const refit = forgetFits(); // asked on the socket that closed: a mode change's is asked again
@@ -62,6 +64,16 @@ function onInfo(msg) {
   // The page's own state follows a reopen (its data TF fitted as it was): no fit to replace.
   else if (again) send({ type: 'open', dataset: S.info.index, fit: false });
   else send({ type: 'open', dataset: 0 });
+}
+
+// A (T, Z, Y, X) shape's volume as x×y×z; `short`: a cube as n³.
+function dims(shape, short = false) {
+  const [z, y, x] = shape.slice(1);
+  return short && x === y && y === z ? `${x}³` : `${x}×${y}×${z}`;
+}
+
+function datasetTitle(name, shape, dtype) {
+  return `${name}: ${dims(shape)} voxels (x×y×z), ${shape[0]} steps${dtype ? `, ${dtype}` : ''}`;
 }
 
 function onDataset(msg) {
@@ -85,6 +97,8 @@ function onDataset(msg) {
   const refit = restore && restore.refit;
   restore = null;
   $('dataset').value = msg.index;
+  const { t, z, y, x } = msg.shape;
+  $('dataset').title = datasetTitle(msg.name, [t, z, y, x], msg.dtype);
   syncControls();
   syncShading();
   const size = layoutViews();

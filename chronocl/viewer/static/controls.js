@@ -69,11 +69,12 @@ function syncTimeControls() {
   for (const p of TIME_PARAMS) $(`t-${p}`).disabled = !used.has(p);
 }
 
-// A new view shows the first registered mode not shown yet.
+// A new view is a copy of the selected view (else the last): its mode and order, under the
+// transfer functions every view shares, so two windows of one mode compare at once (type a
+// window into the new view's header). It follows the timeline's window.
 function newView(views) {
-  const used = new Set(views.map((v) => v.mode));
-  const modes = S.choices.modes.map((m) => m.name);
-  return { mode: modes.find((m) => !used.has(m)) || modes[0], order: S.choices.orders[0] };
+  const from = views[S.selectedView] || views[views.length - 1];
+  return { mode: from.mode, order: from.order || S.choices.orders[0] };
 }
 
 const within = (v, [lo, hi]) => Number.isFinite(v) && v >= lo && v <= hi;

@@ -18,7 +18,7 @@
 
 import { send, update } from './connection.js';
 import { $, setStatus } from './state.js';
-import { dataTF, drawTF, handles, interp, setHandles, syncPointColor, toAxis } from './tf_editor.js';
+import { dataTF, drawTF, handles, interp, noteRange, setHandles, syncPointColor, toAxis } from './tf_editor.js';
 
 // The page's state (state.js: pageState), made by app.js and given to bindFit.
 let S;
@@ -68,6 +68,7 @@ export function refitMode() {
 // first view's refitted.
 export function modeChanged(view, views) {
   update({ views });
+  noteRange(); // the fit's note says whether the curve is still fitted to what is shown
   if (view === 0) refitMode();
 }
 

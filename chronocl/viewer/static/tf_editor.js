@@ -138,19 +138,32 @@ function sendTF(quality) {
   drawTF();
 }
 
-// The line under the editor: the range the curve spans (fitted, or the series').
-function noteRange() {
+// The line under the editor: the range the curve spans (fitted, or the series'), and what it
+// was fitted to; where that is no longer the selected view's mode and window (a mode changed
+// after the curve was edited by hand, so not fitted again; the window moved), it says so. Drawn
+// with the editor, and after each frame (views.js) and mode change (fit.js).
+export function noteRange() {
+  if (!S.state) return;
   const vr = S.state.data_tf.value_range;
   let text = "curve over the series' range";
   if (vr) {
     text = `curve over ${fmt(vr[0])} … ${fmt(vr[1])}`;
     const f = S.fits.findLast((q) => q.range[0] === vr[0] && q.range[1] === vr[1]);
     if (f) {
-      const [t0, t1, stride] = f.window;
-      text += ` (fitted to ${f.mode}, window ${t0}:${t1}${stride > 1 ? `:${stride}` : ''})`;
+      const span = ([t0, t1, stride]) => `window ${t0}:${t1}${stride > 1 ? `:${stride}` : ''}`;
+      const fitted = `${f.mode}, ${span(f.window)}`;
+      const n = S.state.views.length;
+      const i = Math.max(0, Math.min(S.selectedView, n - 1));
+      const v = S.state.views[i];
+      const w = v.window || S.state.window;
+      const now = `${v.mode}, ${span([w.t0, w.t1, w.stride || 1])}`;
+      const who = n > 1 ? `view ${i + 1}` : 'the view';
+      text += now === fitted ? ` (fitted to ${fitted})` : ` (fitted to ${fitted}; ${who} now shows ${now}: F fits the curve to it)`;
     }
   }
-  $('tf-range').textContent = text;
+  const el = $('tf-range');
+  el.textContent = text;
+  el.classList.toggle('stale', !!vr && text.includes(' now shows '));
 }
 
 // The selected point's colour, value and opacity into their fields.

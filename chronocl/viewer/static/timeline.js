@@ -1,11 +1,13 @@
 // The timeline under the views: per-step sparklines of the data, the window brush (drag to
 // select, move or resize it), stride, and play (speed in slides a second, loop or bounce).
-// Its keys (arrows, space, +, -, b) are in keys.js's table. A thin bar under the step ticks
+// Its keys (arrows, space, +, -, b) are in keys.js's table. A thin bar under the window's steps
 // shows which steps are in memory (the server's `steps` messages, residency.py): filled =
-// resident, hatched = being fetched, empty = not loaded.
+// resident, hatched = being fetched, empty = not loaded. Under it, in a row of their own, the
+// axis' ticks at nice steps or times (ticks.js), as many as fit apart.
 
 import { update } from './connection.js';
 import { $, canvasSize } from './state.js';
+import { axisOf, axisTicks } from './ticks.js';
 
 // The page's state (state.js: pageState), made by app.js and given to bindTimeline.
 let S;
@@ -13,21 +15,32 @@ let viewer;
 
 const tl = { drag: null };
 
+// The canvas from the top: a key row (the sparklines' key left, the residency key right), the
+// sparklines, the window's steps in their time colours, the residency bar, and the axis: tick
+// marks and labels in a row of their own that nothing else draws into (ticks.js places them).
+const KEY_H = 14; // the key row
+const AXIS_H = 13; // tick marks and labels
+const RES_H = 4; // the residency bar
+const CELL_H = 5; // the time-colour cells
 export function drawTimeline() {
   if (!S.info) return;
-  const [ctx, w, h] = canvasSize($('timeline'));
+  const c = $('timeline');
+  const [ctx, w, h] = canvasSize(c);
   const T = S.info.shape.t;
   const cell = w / T;
   const { t0, t1, stride } = S.state.window;
   ctx.clearRect(0, 0, w, h);
-  const top = 14;
-  const bottom = h - 14;
+  const axisTop = h - AXIS_H; // labels and marks below it, nothing else
+  const resY = axisTop - 1 - RES_H; // the residency bar (its frame half a px around)
+  const cellY = resY - 2 - CELL_H;
+  const top = KEY_H;
+  const bottom = cellY - 2; // the sparklines' foot
   const ph = bottom - top;
   const range = S.info.vmax - S.info.vmin || 1;
   const meanMax = Math.max(...S.info.step_mean.map((v) => v - S.info.vmin), 1e-12);
-  // The window.
+  // The window, over everything but the axis row.
   ctx.fillStyle = 'rgba(240,160,48,0.16)';
-  ctx.fillRect(t0 * cell, 0, (t1 - t0) * cell, h);
+  ctx.fillRect(t0 * cell, 0, (t1 - t0) * cell, axisTop);
   // Sparklines: mean (filled, own scale) and max (line, over the value range).
   ctx.beginPath();
   ctx.moveTo(0, bottom);
@@ -47,30 +60,66 @@ export function drawTimeline() {
   ctx.stroke();
   // Selected steps, coloured by their time colour.
   const colours = new Map(S.legend.map((l) => [l.step, l]));
+  const cells = [];
   for (let s = t0; s < t1; s += stride) {
     const l = colours.get(s);
     ctx.fillStyle = l ? `rgb(${l.rgb.map((c) => Math.round(c * 255)).join(',')})` : '#f0a030';
-    ctx.fillRect(s * cell + cell * 0.15, bottom + 2, Math.max(2, cell * 0.7), 5);
+    const box = { x: s * cell + cell * 0.15, y: cellY, w: Math.max(2, cell * 0.7), h: CELL_H };
+    ctx.fillRect(box.x, box.y, box.w, box.h);
+    cells.push(box);
   }
-  drawResidency(ctx, cell, bottom + 8, w);
-  // Brush edges.
+  drawResidency(ctx, cell, resY, w);
+  // Brush edges, down to the axis row.
   ctx.strokeStyle = '#f0a030';
   ctx.lineWidth = 2;
-  ctx.strokeRect(t0 * cell + 1, 1, (t1 - t0) * cell - 2, h - 2);
-  // Axis labels.
-  ctx.fillStyle = '#8b949e';
+  ctx.strokeRect(t0 * cell + 1, 1, (t1 - t0) * cell - 2, axisTop - 2);
+  // The axis: a mark and a label at each tick, in the row under the cells and the residency bar.
   ctx.font = '10px system-ui, sans-serif';
-  ctx.textBaseline = 'bottom';
-  const label = (s) => (S.info.time_labels ? S.info.time_labels[s] : String(s));
-  ctx.fillText(label(0), 3, h - 1);
-  ctx.textAlign = 'right';
-  ctx.fillText(label(T - 1), w - 3, h - 1);
+  const axis = axisOf(S.info);
+  const ticks = axisTicks(axis, w, (t) => ctx.measureText(t).width, (s) => (s + 0.5) * cell);
+  ctx.strokeStyle = 'rgba(139,148,158,0.8)';
+  ctx.lineWidth = 1;
+  ctx.beginPath();
+  for (const t of ticks) {
+    ctx.moveTo(Math.round(t.x) + 0.5, axisTop);
+    ctx.lineTo(Math.round(t.x) + 0.5, axisTop + 2);
+  }
+  ctx.stroke();
+  ctx.fillStyle = '#8b949e';
   ctx.textAlign = 'left';
+  ctx.textBaseline = 'alphabetic';
+  const base = h - 3;
+  const labels = ticks.map((t) => {
+    const m = ctx.measureText(t.text);
+    ctx.fillText(t.text, t.left, base);
+    return {
+      text: t.text, x: t.left, w: t.right - t.left,
+      y: base - m.actualBoundingBoxAscent, h: m.actualBoundingBoxAscent + m.actualBoundingBoxDescent,
+    };
+  });
   ctx.textBaseline = 'top';
   ctx.fillText('max ─  mean ▆', 3, 2);
+  // For scripted use (the tests): what is drawn where, in CSS px of the canvas.
+  c.dataset.ticks = ticks.map((t) => t.text).join('|');
+  viewer.timelineLayout = {
+    width: w, height: h, axis: axis.kind, axisTop, labels, cells,
+    residency: { x: 0, y: resY - 0.5, w, h: RES_H + 1 },
+  };
+  const label = (s) => (S.info.time_labels ? S.info.time_labels[s] : String(s));
   const last = t0 + Math.floor((t1 - 1 - t0) / stride) * stride;
-  const span = S.info.time_labels ? `${label(t0)} .. ${label(last)}, ` : '';
-  $('window-text').textContent = `${span}steps ${t0}:${t1}${stride > 1 ? ':' + stride : ''} (${Math.ceil((t1 - t0) / stride)} of ${T})`;
+  const span = S.info.time_labels ? `${spanText(label(t0), label(last))}, ` : '';
+  // (no break inside 'steps t0:t1' or '(n of T)' where the text wraps)
+  $('window-text').textContent = `${span}steps\u00a0${t0}:${t1}${stride > 1 ? ':' + stride : ''} (${Math.ceil((t1 - t0) / stride)}\u00a0of\u00a0${T})`;
+}
+
+// 'first .. last' of two time labels, the last without the date the two share
+// ('2024-01-01 06:00 .. 18:00'), as chronocl/core/time_labels.py's span_text.
+function spanText(first, last) {
+  if (first === last) return first;
+  const [dateA, timeA] = first.split(' ');
+  const [dateB, timeB] = last.split(' ');
+  const same = timeA && timeB && dateA === dateB && /^\d{4}-\d{2}-\d{2}$/.test(dateA);
+  return `${first} .. ${same ? timeB : last}`;
 }
 
 // Steps in memory over all views (each view's full-resolution window manager).

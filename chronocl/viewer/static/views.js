@@ -7,6 +7,7 @@ import { drawLegends } from './legend.js';
 import { drawTriads, turnedNormal } from './orientation.js';
 import { drawProbe } from './probe.js';
 import { $, clamp, setStatus } from './state.js';
+import { noteRange } from './tf_editor.js';
 import { drawTimeline } from './timeline.js';
 
 // The page's state (state.js: pageState), made by app.js and given to bindViews.
@@ -227,6 +228,7 @@ function probeAt(p, i, e, from) {
   const [x, y] = at(e.clientX, e.clientY);
   S.selectedView = i;
   panels.forEach((q, j) => q.el.classList.toggle('selected', j === i && panels.length > 1));
+  noteRange();
   if (from) {
     const [x2, y2] = at(from.x, from.y);
     showMark({ view: i, x: (x + x2) / 2, y: (y + y2) / 2 });
@@ -302,8 +304,7 @@ export function onFrame(buf) {
     p.img.dataset.url = url;
     if (old) URL.revokeObjectURL(old);
     showLabel(p, S.state.views[i], v.label);
-    p.note.textContent = v.note || '';
-    p.note.hidden = !v.note;
+    showNote(p, v.note);
   });
   // Where the probed voxel is in this frame (it moves with the camera; none before a probe).
   if (viewer.probe && viewer.probe.values) showMark(header.probe || null);
@@ -334,6 +335,18 @@ export function onFrame(buf) {
   drawTriads();
   drawTimeline();
   drawProbe();
+  noteRange(); // the window or a mode may have changed since the curve was fitted
+}
+
+// A (nearly) empty view's note, or none: a strip at the picture's foot (style.css) of as many
+// lines as about a fifth of the picture holds (two at least), the whole text in its tooltip.
+function showNote(p, note) {
+  p.note.textContent = note || '';
+  p.note.title = note || '';
+  p.note.hidden = !note;
+  if (!note) return;
+  const lines = Math.max(2, Math.floor((0.22 * p.pic.clientHeight - 8) / 15));
+  p.note.style.setProperty('--note-lines', String(lines));
 }
 
 // A panel's caption in its head band, beside the mode and order menus that say its first part:
