@@ -93,7 +93,7 @@ def test_each_modes_kernels_take_the_declared_arguments(name):
     ROWS_ARGS: the order the engine sets them in (`OpenCLEngine.accumulate`)."""
     mode = modes.get(name)
     text = c_source(f"{mode.kernel}.cl")
-    outputs = OUTPUTS[: 2 if mode.has_t_index else 1]
+    outputs = OUTPUTS[: 4 if mode.writes_winners else 2 if mode.has_t_index else 1]
     for function in (mode.kernel_function, mode.rows_kernel):
         if function is None:
             continue

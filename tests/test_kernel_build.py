@@ -42,7 +42,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 INTEGRATION_KEYS = set(
     "DATA_T DATA_V VEC KEY_RAW IDX_T CHANGE_BYTES QUANT LUT_N CONST_COLOR TF_SEGS SEG_ALPHA "
     "ENHANCE EARLY_EXIT SKIP_EMPTY IS_MIN NORM_TIME RAW_PARTIAL TIME_ORDER ALIGNED "
-    "ORDER_FORWARD ORDER_BACKWARD TIME_TABLE SLOTS RGBA8 CPU_PATHS".split()
+    "ORDER_FORWARD ORDER_BACKWARD TIME_TABLE SLOTS RGBA8 CPU_PATHS WINNERS".split()
 )
 STEP_ORDERS = ("table", "forward", "backward")  # order[i], or the steps in turn / reversed
 BOOLS = (False, True)
@@ -79,6 +79,7 @@ def integration_combinations(name: str):
     time_order = (0, 1, 2) if name == "change" else (False,)
     # a winner's time tables in registers: rows kernels (VEC 16) of the modes with t_index
     time_table = BOOLS if mode.has_t_index and mode.rows_kernel else (False,)
+    winners = BOOLS if mode.writes_winners else (False,)  # each voxel's winner written too
     # (CONST_COLOR, TF_SEGS, SEG_ALPHA) as the engine passes them: pieces of colour, opacity
     # or both; their opacity is the value (1) or, in the threshold modes, decides lanes (2).
     # TF_SEGS: one piece, some with a middle one, the most (2..7 compile as 3 does).
@@ -99,9 +100,10 @@ def integration_combinations(name: str):
         (256, 65536),
         STEP_ORDERS,
         time_table,
+        winners,
     ):
         (t, quant, raw), (enh, vec), (const, segs, pieces_alpha), early, skip, aligned = combo[:6]
-        norm_time, raw_partial, order, lut_n, steps, table = combo[6:]
+        norm_time, raw_partial, order, lut_n, steps, table, won = combo[6:]
         if table and vec != 16:
             continue
         if quant and (lut_n != 256 or mode.lut_by_value):  # one LUT entry per byte value
@@ -134,6 +136,7 @@ def integration_combinations(name: str):
             "ORDER_FORWARD": steps == "forward",
             "ORDER_BACKWARD": steps == "backward",
             "TIME_TABLE": table,
+            "WINNERS": won,
         }
 
 

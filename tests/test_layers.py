@@ -190,8 +190,8 @@ def test_an_import_the_js_parser_does_not_read_fails(tmp_path, line):
 
 def test_no_engine_capability_is_guessed():
     """Every engine declares its capabilities (`chronocl.engine.base.Engine`: reads_in_place,
-    copies_to_device, writes_display, device_format); no caller guesses one with `getattr`
-    and a default of its own (issue 47: defaults of True here and False there)."""
+    copies_to_device, writes_display, writes_winners, device_format); no caller guesses one
+    with `getattr` and a default of its own (issue 47: defaults of True here and False there)."""
     import re
     from pathlib import Path
 
@@ -199,7 +199,14 @@ def test_no_engine_capability_is_guessed():
     from chronocl.engine.numpy import NumpyEngine
     from chronocl.engine.opencl import OpenCLEngine
 
-    names = ("reads_in_place", "copies_to_device", "writes_display", "device_format", "dc")
+    names = (
+        "reads_in_place",
+        "copies_to_device",
+        "writes_display",
+        "writes_winners",
+        "device_format",
+        "dc",
+    )
     guess = re.compile(r"getattr\([^)]*[\"'](" + "|".join(names) + r")[\"']")
     root = Path(__file__).resolve().parents[1] / "chronocl"
     found = [

@@ -41,7 +41,8 @@ from chronocl.render.recolour_host import HostRecolour, gather, shown_output
 from chronocl.render.recolour_upload import show
 from chronocl.render.upload import convert, display_format
 
-from .strategies import data_tfs, examples, time_tfs
+from .strategies import data_tfs, examples, specs, time_tfs
+from .test_slots import slotted_windows
 
 UNIT = (0.0, 1.0)
 
@@ -490,3 +491,80 @@ def test_the_first_edits_kernels_are_warmed_once_per_data_type(monkeypatch) -> N
     assert len(gathered) == 2  # warm already
     recolour_bricks.warm_kernels(np.float32, None)
     assert len(gathered) == 4
+
+
+@settings(max_examples=examples(16), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.data())
+def test_the_kernels_winners_equal_the_gathered_ones(data) -> None:
+    """max, min and change write each voxel's winner (u and step index) as they integrate,
+    where asked (`integrate_bricks(winners=)`): bit for bit the winners gathered from the
+    integrated t_index, on odd shapes, windows, slab splits, in place in the window manager's
+    slots and stacked, the per-vector and the rows kernels, every x86 path, float32 and RGBA8
+    output, float and integer data (compared in their own lanes)."""
+    from chronocl.data.bricks import ResidentBricks
+    from chronocl.engine.opencl import OpenCLEngine
+    from chronocl.integration.inmemory import WinnersOut, integrate_bricks, window_job
+
+    series, sel, arrays = data.draw(slotted_windows())  # float32, uint8 or uint16 in slots
+    spec = data.draw(
+        specs(mode=data.draw(st.sampled_from(["max", "min", "change"])), selection=sel)
+    )
+    slab = data.draw(st.integers(1, series.volume_shape[0] + 1))
+    engine = OpenCLEngine(
+        host_ptr=data.draw(st.booleans()),  # in place, or copied
+        row_blocks=data.draw(st.booleans()),  # the rows kernel, or the per-vector one
+        cpu_paths=data.draw(st.sampled_from(["native", "avx2", "generic"])),
+    )
+    job = window_job(series, sel, spec)
+    won = WinnersOut()
+    display = data.draw(st.booleans())
+    cv = integrate_bricks(
+        job, engine, ResidentBricks(arrays), slab=slab, display=display, winners=won
+    )
+    assert won.u is not None and won.k is not None
+    steps = sel.steps
+    want = winners(cv.t_index, arrays, steps, series.n_steps, tuple(job.value_range), spec)
+    np.testing.assert_array_equal(won.k, want.k)
+    np.testing.assert_array_equal(won.u, want.u)
+    # what the kernels integrate without winners is the same picture
+    again = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab, display=display)
+    np.testing.assert_array_equal(again.rgba, cv.rgba)
+    np.testing.assert_array_equal(again.t_index, cv.t_index)
+
+
+def test_a_session_keeps_the_kernels_winners_until_its_window_changes(monkeypatch) -> None:
+    """A viewer's session (display) in max hands out the winners its integration wrote: no
+    gather; after a slide or a value range they are gathered again; the numpy engine gathers."""
+    from chronocl.integration.interactive import session as session_module
+
+    gathered = []
+    real = session_module.of_window
+
+    def spy(*args, **kwargs):
+        gathered.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(session_module, "of_window", spy)
+    rng = np.random.default_rng(3)
+    series = TimeSeries.from_array(rng.random((8, 5, 6, 21), dtype=np.float32))
+    s = Session(series, memory="64MB", mode="max", display=True, time_tf="rgb")
+    cv = s.set_window(1, 5)
+    w = s.winners()
+    assert not gathered and w is not None
+    want = winners(
+        cv.t_index,
+        {t: series.host[t] for t in range(1, 5)},
+        (1, 2, 3, 4),
+        8,
+        tuple(cv.metadata["value_range"]),
+        s.spec,
+    )
+    np.testing.assert_array_equal(w.u, want.u)
+    np.testing.assert_array_equal(w.k, want.k)
+    assert w.spec == s.spec
+    s.winners(spec=s.spec.with_value_range((0.2, 0.7)))  # u at another range: gathered
+    assert len(gathered) == 1
+    s.slide(1)
+    s.winners()
+    assert len(gathered) == 2 or s.stats["path"] != "incremental"
+    s.close()

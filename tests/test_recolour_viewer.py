@@ -252,7 +252,11 @@ def test_a_recolouring_that_fails_part_way_leaves_the_next_edit_right(rgba8_serv
 
 def _counting_gather(monkeypatch, hold_first: bool = False) -> list[str]:
     """Spy on the viewer's gathers of winners (the real one runs): each call's outcome. With
-    `hold_first`, the first waits until new input has come (its checkpoints would give it up)."""
+    `hold_first`, the first waits until new input has come (its checkpoints would give it up).
+    The kernels write no winners meanwhile (max and change then gather, as first_hit does)."""
+    from chronocl.engine.opencl import OpenCLEngine
+
+    monkeypatch.setattr(OpenCLEngine, "writes_winners", False)
     calls: list[str] = []
     real = recolouring.gather
 
@@ -328,6 +332,23 @@ def test_an_idle_gather_is_given_up_by_new_input_and_the_edit_is_right(client, m
     assert calls == ["given up", "done"], calls
     t = header["timings"]
     assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0
+    _assert_as_integrated(client, recoloured)
+
+
+@pytest.mark.parametrize("mode", ["max", "change"])
+def test_the_first_edit_after_a_switch_takes_the_winners_the_integration_wrote(
+    client, monkeypatch, mode
+) -> None:
+    """max and change: the kernels wrote each voxel's winner as they integrated the switch's
+    window, so neither the idle preparation nor the first edit gathers, and the edit shows what
+    integrating it shows."""
+    calls: list[str] = []
+    monkeypatch.setattr(recolouring, "gather", lambda *a, **k: calls.append("gathered"))
+    fitted, _ = _open_in(client, mode)
+    edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
+    header, recoloured = _sharp(client, edit)
+    t = header["timings"]
+    assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0 and not calls
     _assert_as_integrated(client, recoloured)
 
 

@@ -35,6 +35,8 @@ class Engine(Protocol):
     copies_to_device: bool
     # a uint8 `out` of `accumulate` gets the display format, RGBA8 (kernels/opencl/common.h)
     writes_display: bool
+    # `accumulate` takes winners' outputs (u, k) for a mode that `writes_winners`
+    writes_winners: bool
     device_format: str  # what bricks travel in (`chronocl.engine.device_formats`)
 
     @property

@@ -2,11 +2,12 @@
 
 Every integrate kernel of kernels/opencl/MODE.cl takes, in this order: KERNEL_ARGS (the
 macro in common.h, declared here as `INTEGRATE`), its mode's extras (the names and values
-`Mode.kernel_options` returns), its outputs (`OUTPUTS`: `out`, and `t_index` in the modes
-that have one), and in a `_rows` kernel `ROWS` (the macro ROWS_ARGS). As pyopencl's
-reduction.py does, the host parses the C text for the names and the scalars' dtypes; the
-host sets arguments by name, and tests/test_kernel_args.py checks every kernel's signature
-against these declarations name by name and type by type.
+`Mode.kernel_options` returns), its outputs (`OUTPUTS`: `out`, `t_index` in the modes that
+have one, and `won_u`, `won_k` in those that write winners: `Mode.writes_winners`), and in a
+`_rows` kernel `ROWS` (the macro ROWS_ARGS). As pyopencl's reduction.py does, the host parses
+the C text for the names and the scalars' dtypes; the host sets arguments by name, and
+tests/test_kernel_args.py checks every kernel's signature against these declarations name by
+name and type by type.
 """
 
 from __future__ import annotations
@@ -24,7 +25,10 @@ INTEGRATE_C = """
     const int ny, const int nzb, const int w, const int zcrop, const int nz_out,
     const float vmin, const float scale, const float cut, const float4 enh, const float4 view
 """
-OUTPUTS_C = "__global out_t *out, __global int *t_index"  # out_t: float4, or uchar4 (RGBA8)
+# out_t: float4, or uchar4 (RGBA8); a mode that `writes_winners` also takes won_u and won_k
+OUTPUTS_C = (
+    "__global out_t *out, __global int *t_index, __global float *won_u, __global uchar *won_k"
+)
 ROWS_C = "const int rows, const int nvec, __local T *st"  # ROWS_ARGS(T)
 
 # Host dtypes of the scalar C types (lanes: a float4 is four float32).

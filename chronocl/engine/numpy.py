@@ -19,6 +19,7 @@ class NumpyEngine:
     reads_in_place = False  # a SlotBrick is stacked
     copies_to_device = False
     writes_display = False
+    writes_winners = False  # the viewer gathers them (chronocl.integration.interactive.winners)
     device_format = "auto"
 
     def accumulate(

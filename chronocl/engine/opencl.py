@@ -59,6 +59,7 @@ class OpenCLEngine:
 
     name = "opencl"
     writes_display = True  # a uint8 `out` of `accumulate` gets RGBA8 (common.h)
+    writes_winners = True  # (u, k) outputs of max and min (common.h: WINNERS)
 
     def __init__(
         self,
@@ -146,7 +147,7 @@ class OpenCLEngine:
         order: np.ndarray,
         spec: IntegrationSpec,
         value_range: tuple[float, float],
-        out: tuple[np.ndarray, np.ndarray | None] | None = None,
+        out: tuple[np.ndarray | None, ...] | None = None,
         raw: bool = False,
     ) -> tuple[Partial, bool]:
         """Integrate brick rows `crop` of an xytz brick (rows, W, Y, X): an array, or a
@@ -155,7 +156,9 @@ class OpenCLEngine:
         `out` = (rgba, t_index) receives the result when given (C-contiguous, float32
         (rows, Y, X, 4) and int32 (rows, Y, X)): a caller that integrates again and again,
         or slab by slab into one volume, avoids allocating and copying. A uint8 `rgba` gets
-        the display format (`chronocl.render.upload`'s "f1") of a final result. Device arrays
+        the display format (`chronocl.render.upload`'s "f1") of a final result. A mode that
+        `writes_winners` takes two more, (u, k): float32 and uint8 (rows, Y, X), each voxel's
+        winning u and index into `steps` (a final result of fewer than 255 steps). Device arrays
         (pyopencl's) as `out` of a resident brick are written there, not read back.
         Returns the partial result and whether it is final: a mode whose finish is global
         (additive normalised by the volume maximum) or a `raw` call is finished elsewhere.
@@ -213,7 +216,9 @@ class OpenCLEngine:
         if dt == np.float16:
             defines.update(HALF_DEFINES)
 
-        rgba, t_index = out if out is not None else (None, None)
+        rgba, t_index, *won = out if out is not None else (None, None)
+        if won and (not mode.writes_winners or not final or w >= 255):
+            raise ValueError(f"{spec.mode} writes no winners here (a final result, W < 255)")
         if rgba is None:
             rgba = aligned_empty((nz_out, ny, nx, 4), np.float32)
         if t_index is None and spec.has_t_index:
@@ -227,6 +232,13 @@ class OpenCLEngine:
         else:
             t_index = None
         outputs = [rgba] + ([t_index] if t_index is not None else [])
+        if won:
+            u, k = won
+            _check_out(u, (nz_out, ny, nx), np.float32)
+            _check_out(k, (nz_out, ny, nx), np.uint8)
+            outputs += [u, k]
+        defines["WINNERS"] = bool(won)
+        unset = [None] * (2 if mode.writes_winners and not won else 0)  # null won_u, won_k
         # every buffer fits the device's largest (`chronocl.engine.buffers`): chunks of rows
         limit = max_alloc(self.dc)
         out_row = max(a[0].nbytes for a in outputs)
@@ -319,7 +331,7 @@ class OpenCLEngine:
             events = []
             for kern, x0, count, tail, blocks in built:
                 args.set(x0=x0)
-                kern.set_args(*args.values, *extras, *out_bufs, *tail)
+                kern.set_args(*args.values, *extras, *out_bufs, *unset, *tail)
                 if blocks is None:
                     global_size, local_size = self._launch_shape(count, ny, c.b - c.a)
                 else:  # a work-item per block of rows (in a group of its own: local scratch)

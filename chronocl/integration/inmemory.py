@@ -255,7 +255,20 @@ def engine_rows(eng: Engine, job: Job) -> int:
     return fit
 
 
-Out = tuple[np.ndarray, np.ndarray | None]
+Out = tuple[np.ndarray | None, ...]  # rgba, t_index (None: the mode has none), and u, k
+
+
+@dataclass
+class WinnersOut:
+    """Where `integrate_bricks` puts each voxel's winner when asked, for a mode that writes
+    them (`Mode.writes_winners`) on an engine that can: its u and its index into the window's
+    steps (as `chronocl.integration.interactive.winners.Winners` holds them); None where they
+    were not written."""
+
+    u: np.ndarray | None = None
+    k: np.ndarray | None = None
+
+
 # Above this many voxels the viewer's textures are RGBA8, below float32 (chronocl.render.upload's
 # COMPACT_VOXELS, which tests/test_display_output.py checks this equals): display frames follow.
 DISPLAY_VOXELS = 2**15
@@ -360,6 +373,7 @@ def integrate_bricks(
     slab: int | None = None,
     progress: bool = False,
     display: bool = False,
+    winners: WinnersOut | None = None,
 ) -> Chronovolume:
     """Integrate a prepared `job` with bricks from `bricks` (e.g. steps already resident:
     `chronocl.data.bricks.ResidentBricks`) into a Chronovolume, as `integrate` does.
@@ -369,7 +383,8 @@ def integrate_bricks(
     format, premultiplied RGBA8 (a viewer's frame: a quarter of the bytes, nothing to convert),
     and each slab is handed on as soon as it is written (`chronocl.core.slab_sink`: the viewer
     writes it to its texture while the next slab integrates); else the chronovolume is float32
-    as always."""
+    as always. With `winners`, a mode that writes them on an engine that can (a final result
+    of fewer than 255 steps) fills it with each voxel's winner as it integrates."""
     fit = engine_rows(eng, job)
     slab = fit if slab is None else min(slab, fit)
     nz, ny, nx = job.series.volume_shape
@@ -380,10 +395,20 @@ def integrate_bricks(
     rgba8 = rgba8 and not spec.integration.finalize_is_global(spec)
     rgba = recycled_empty((nz, ny, nx, 4), np.uint8 if rgba8 else np.float32)
     t_index = recycled_empty((nz, ny, nx), np.int32) if job.spec.has_t_index else None
+    outputs = [rgba, t_index]
+    won = (
+        winners is not None
+        and eng.writes_winners
+        and spec.integration.writes_winners
+        and not spec.integration.finalize_is_global(spec)
+        and job.selection.width < 255
+    )
+    if won:
+        outputs += [recycled_empty((nz, ny, nx), dt) for dt in (np.float32, np.uint8)]
 
     def out(s: Slab) -> Out:
         # z is the outermost axis, so a slab of the output is a contiguous view.
-        return rgba[s.z0 : s.z1], None if t_index is None else t_index[s.z0 : s.z1]
+        return tuple(None if a is None else a[s.z0 : s.z1] for a in outputs)
 
     def integrate_one(s: Slab, brick: np.ndarray, buffers: Out | None) -> tuple[Partial, bool]:
         return integrate_brick(job, eng, s, brick, buffers)
@@ -397,6 +422,8 @@ def integrate_bricks(
             finished(rgba, s.z0, s.z1)
     if not final:
         rgba = reference.finalize(Partial(rgba, t_index), job.positions, job.spec)
+    if won and final:
+        winners.u, winners.k = outputs[2], outputs[3]
     meta = job.metadata(engine_name(eng))
     fmt = eng.device_format
     if fmt != "auto":  # a lossy format changes the result: say so where the result is kept

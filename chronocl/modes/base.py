@@ -174,6 +174,9 @@ class Mode:
     kernel: ClassVar[str]  # stem of its file in kernels/opencl/
     kernel_function: ClassVar[str]  # the integrate kernel in that file
     has_t_index: ClassVar[bool] = False
+    # its kernels also write each voxel's winner (u and step index, where the host asks:
+    # WINNERS, common.h), which the viewer recolours a TF edit from without gathering them
+    writes_winners: ClassVar[bool] = False
     # how a sliding window keeps its state: "aggregate" partials (`Combines`), or "invert"
     # (add and subtract steps as fixed-point sums of `sum_channels` channels: `FinishesSums`)
     slides: ClassVar[str] = "aggregate"

@@ -29,6 +29,7 @@ class Change(Mode):
     rows_kernel = "integrate_change_rows"
     rows_state = 12  # the previous clipped value, the largest change and its step
     has_t_index = True
+    writes_winners = True
     state_bytes = 24
     leaf_span = 2
     compares_values = True

@@ -44,6 +44,7 @@ class Extreme(Mode, abstract=True):
     rows_kernel = "integrate_extreme_rows"
     rows_state = 8  # the key and the step, each in lanes of at most 4 bytes
     has_t_index = True
+    writes_winners = True
     state_bytes = 24
     compares_values = True
     reads_values = True

@@ -4,8 +4,9 @@ When a view's new spec differs from the one shown only where `winners.why_not` a
 transfer functions, for first_hit keeping which values pass its threshold) and the view
 shows its window at full resolution, its texture is recoloured on the GL thread
 (chronocl/render/recolour.py) instead of integrating: no step is read, nothing integrated,
-nothing uploaded but two small tables. The winners (value and step per voxel) are gathered
-from the level-0 session's resident steps and uploaded on the first such edit of a window,
+nothing uploaded but two small tables. The winners (value and step per voxel) are those the
+kernels wrote as they integrated the window (max, min, change: `Session.winners`), else gathered
+from the level-0 session's resident steps, and uploaded on the first such edit of a window,
 then kept in the slot for the next edits; any integration of the window makes them stale.
 
 Where GL renders on the GPU, the compute pass rewrites the view's texture; the frame's

@@ -41,7 +41,7 @@ DIRECT_BELOW_MS = 1000.0
 # one is measured (`chronocl.core.process_memory`): its RGBA8 chronovolume and texture (4 + 4
 # bytes) and a t_index (4). At 512^3 here an alpha view's first frame held 10.5 bytes a voxel
 # beside its steps (330 MB of it code and drivers), a max view after edits 19 (its winners,
-# 5, and recolouring's RGBA8 outputs, two then, one now).
+# 5, written with its integration now, and recolouring's RGBA8 outputs, two then, one now).
 FRAME_VOXEL_BYTES = 12
 
 

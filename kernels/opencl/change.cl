@@ -18,12 +18,14 @@
 #endif
 
 __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
-                               __global out_t *out, __global int *t_index)
+                               __global out_t *out, __global int *t_index,
+                               __global float *won_u, __global uchar *won_k)
 {
     VOXEL_PROLOGUE
     if (w < 2) { /* one step: nothing changed */
         STORE_RGBA(o, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));
         STORE_INT((intv)(-1), t_index + o);
+        STORE_WINNERS(o, (floatv)(0.0f), (intv)(NO_WINNER))
         STREAM_FENCE
         return;
     }
@@ -76,6 +78,7 @@ __kernel void integrate_change(KERNEL_ARGS, const float lo, const float hi,
     WINNER_RGBA(delta, kk, r, g, b, ak)
     STORE_RGBA(o, ak * r, ak * g, ak * b, ak);
     STORE_INT(STEP_AT(kk), t_index + o);
+    STORE_WINNERS(o, delta, kk)
     STREAM_FENCE
 }
 
@@ -157,10 +160,12 @@ typedef struct {
         WINNER_RGBA(delta, kk, r, g, b, ak)                    \
         STORE_RGBA(o, ak * r, ak * g, ak * b, ak);             \
         STORE_INT(STEP_AT(kk), t_index + o);                   \
+        STORE_WINNERS(o, delta, kk)                            \
     }
 
 __kernel void integrate_change_rows(KERNEL_ARGS, const float lo, const float hi,
                                     __global out_t *out, __global int *t_index,
+                                    __global float *won_u, __global uchar *won_k,
                                     ROWS_ARGS(Change))
 {
     if (w < 2) { /* one step: nothing changed */
@@ -170,6 +175,7 @@ __kernel void integrate_change_rows(KERNEL_ARGS, const float lo, const float hi,
             const size_t o = OUT_INDEX(z, y, x);
             STORE_RGBA(o, (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f), (floatv)(0.0f));
             STORE_INT((intv)(-1), t_index + o);
+            STORE_WINNERS(o, (floatv)(0.0f), (intv)(NO_WINNER))
         }
         STREAM_FENCE
         return;

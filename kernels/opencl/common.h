@@ -774,6 +774,26 @@ inline TimeRgba time_rgba(__global const float4 *tc, const int16 i)
     const LutPos p = lut_pos_of(value);      \
     WINNER_RGBA_AT(p, win, r, g, b, ak)
 
+/* A winning mode's winners (WINNERS: the host asked for them, its `won_u` and `won_k` outputs
+ * given): each voxel's u and its winner's index into the window's steps, as the viewer's
+ * recolouring takes them (chronocl/integration/interactive/winners.py), so that a first TF
+ * edit gathers nothing (NO_WINNER: a voxel no step won). Without WINNERS the outputs are
+ * null and nothing is stored. */
+#define NO_WINNER 255
+#ifdef WINNERS
+#if VEC == 16
+#define STORE_WINNERS(o, u, win)                    \
+    vstore16((u), 0, won_u + (o));                  \
+    vstore16(convert_uchar16(win), 0, won_k + (o));
+#else
+#define STORE_WINNERS(o, u, win) \
+    won_u[(o)] = (u);            \
+    won_k[(o)] = (uchar)(win);
+#endif
+#else
+#define STORE_WINNERS(o, u, win)
+#endif
+
 /* The LUT position of a step again, from the `x` LOCATE gave it (QUANT: the raw value), so
  * that a step's opacity and colour come out in the same bits as in the loop. */
 inline LutPos lut_pos_again(const floatv x)

@@ -58,15 +58,18 @@ typedef struct {
         WINNER_RGBA(u, win, r, g, b, ak)               \
         STORE_RGBA(o, ak * r, ak * g, ak * b, ak);     \
         STORE_INT(STEP_AT(win), t_index + o);          \
+        STORE_WINNERS(o, u, win)                       \
     }
 
-__kernel void integrate_extreme(KERNEL_ARGS, __global out_t *out, __global int *t_index)
+__kernel void integrate_extreme(KERNEL_ARGS, __global out_t *out, __global int *t_index,
+                                __global float *won_u, __global uchar *won_k)
 {
     VECTOR_BODY(Best, 1, BEST_INIT, BEST_STEP, NEVER_DONE, BEST_FINISH)
 }
 
 #if VEC == 16
 __kernel void integrate_extreme_rows(KERNEL_ARGS, __global out_t *out, __global int *t_index,
+                                     __global float *won_u, __global uchar *won_k,
                                      ROWS_ARGS(Best))
 {
     ROWS_BODY(Best, 1, BEST_INIT, BEST_STEP, NEVER_DONE, BEST_FINISH)

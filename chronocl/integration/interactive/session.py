@@ -27,6 +27,7 @@ frame from a `SessionPool` of these fixed-level sessions.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -40,7 +41,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.engine.device_steps import DeviceWindow
-from chronocl.integration.inmemory import check_level, integrate_bricks, window_job
+from chronocl.integration.inmemory import WinnersOut, check_level, integrate_bricks, window_job
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.integration.interactive.settings import TARGET_MS, Settings, manager_key, settings
@@ -116,6 +117,8 @@ class Session:
         self._bricks = ResidentBricks(self._arrays, in_place=in_place)
         self._slider: Slider | None = None
         self._cv: Chronovolume | None = None
+        # (t_index, winners) the kernels wrote with the window's integration (`winners`)
+        self._won: tuple[np.ndarray, Winners] | None = None
         self._prefetch = prefetch = setup.prefetch
         self.level = check_level(series, level)
         self.series = series.level(self.level, self.spec.integration.pool)
@@ -159,7 +162,7 @@ class Session:
                 self._repool(spec.integration.pool)
             self.spec = spec
             self._slider = None
-            self._cv = None
+            self._cv = self._won = None
         return self._update(selection)
 
     def current(self) -> Chronovolume:
@@ -169,9 +172,16 @@ class Session:
         return self._cv
 
     def winners(self, gather=None, spec: IntegrationSpec | None = None) -> Winners | None:
-        """The window's winners, to recolour a TF edit without integrating (`winners.of_window`);
-        their u at the value range of `spec` (a fixed spec from `recolours`), else the shown's."""
+        """The window's winners, to recolour a TF edit without integrating: those the kernels
+        wrote with the window's integration (a display session in max, min or change), else
+        gathered (`winners.of_window`); their u at the value range of `spec` (a fixed spec from
+        `recolours`), else the shown's."""
         vr = None if spec is None else self.value_range_of(spec)
+        cv, won = self._cv, self._won
+        if cv is not None and won is not None and won[0] is cv.t_index:
+            want = tuple(map(float, vr if vr is not None else cv.metadata["value_range"]))
+            if want == tuple(map(float, won[1].value_range)):  # the spec shown, as gathered
+                return dataclasses.replace(won[1], spec=self.spec)
         return of_window(
             self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather, vr
         )
@@ -220,7 +230,7 @@ class Session:
         first read the new one, and both old frames: 4 GB over the steady 8.8 at 512^3)."""
         if self.selection is None or selection == self.selection:
             return
-        self._cv = None
+        self._cv = self._won = None
         if not (self._slider is not None and self._slider.can_move_to(selection)):
             self._let_go(selection)  # integrated anew: the steps leaving help no more
 
@@ -234,7 +244,7 @@ class Session:
         self._hold({})
         self._bricks.forget()
         self._slider = None
-        self._cv = None
+        self._cv = self._won = None
 
     def close(self) -> None:
         if self._owns_manager:
@@ -296,7 +306,7 @@ class Session:
         path = "reintegrate"
         if reason is None and slider is not None and slider.can_move_to(selection):
             # Neither holds until it completes: a slide failing half way (out of memory) is torn
-            self._cv, self._slider = None, None
+            self._cv, self._slider, self._won = None, None, None
             cv = slider.move_to(selection, {**leaving, **arrays})
             self._slider, path = slider, "incremental"
         else:
@@ -304,12 +314,19 @@ class Session:
             bricks = self._device.bricks(self._arrays, selection.width) or self._bricks
             # Neither the last chronovolume nor the sliding state holds for this window until
             # the integration below completes (it may be given up: `chronocl.core.interrupt`).
-            self._cv, self._slider = None, None
+            self._cv, self._slider, self._won = None, None, None
             t_direct = time.perf_counter()
+            # a viewer's window in max or min: each voxel's winner too, as it integrates
+            won = WinnersOut() if self.display else None
             cv = integrate_bricks(
-                job, self.engine, bricks, slab=self._slab_rows(), display=self.display
+                job, self.engine, bricks, slab=self._slab_rows(), display=self.display, winners=won
             )
             self._direct_ms = 1e3 * (time.perf_counter() - t_direct)
+            if won is not None and won.u is not None:
+                w = Winners(
+                    won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
+                )
+                self._won = (cv.t_index, w)
             # Jumps and spec changes integrate directly (one pass over the window); the
             # sliding state starts from this window and is filled lazily on the next slide.
             if reason is None:
@@ -340,7 +357,7 @@ class Session:
         slab's brick a quarter of the budget at most (nothing resident, no sliding)."""
         job = window_job(self.series, selection, self.spec)
         rows = max(1, self.budget // (4 * max(1, job.row_bytes)))
-        self._slider, self.selection, self._cv = None, selection, None
+        self._slider, self.selection, self._cv, self._won = None, selection, None, None
         self._hold({})
         self._bricks.forget()
         self._cv = integrate_bricks(
