@@ -603,3 +603,38 @@ def test_cli_refuses_bad_outputs(store, tmp_path):
     (tmp_path / "e.json").write_text("{}")
     assert_rejected([*common, "-o", tmp_path / "e.json"], "already exists", [store])
     assert (tmp_path / "e.json").read_text() == "{}"
+
+
+@pytest.mark.parametrize("periodic", [False, "xyz"])
+def test_a_step_showing_every_voxel_is_one_feature(periodic):
+    """A threshold below every value (or a TF opaque everywhere) shows the whole volume: one
+    feature of every voxel, its box the volume's, in Python and from the command line."""
+    from chronocl.events.features import Mask, label_step, parse_periodic
+
+    values = np.full((4, 5, 6), 2.0, np.float32)
+    got = label_step(values, Mask.of_threshold(0.5), periodic=parse_periodic(periodic))
+    assert len(got.features) == 1
+    f = got.features[0]
+    assert f.size == values.size
+    graph = chronocl.events(np.stack([values, values]), threshold=0.5, periodic=periodic)
+    assert [e["kind"] for e in graph.events] == ["continuation"]
+
+
+def test_infinite_and_nan_values_are_never_shown():
+    from chronocl.events.features import Mask
+
+    values = np.array([[[np.inf, np.nan, 1.0, -np.inf]]], np.float32)
+    assert Mask.of_threshold(0.5)(values).tolist() == [[[False, False, True, False]]]
+    from chronocl.core.tf import DataTF
+
+    opaque = Mask.of_tf(DataTF(), (0.0, 2.0), 0.0)
+    assert not opaque(values)[0, 0, :2].any()
+
+
+def test_a_periodic_axis_of_two_voxels_wraps_nothing():
+    from chronocl.events.features import Mask, label_step
+
+    values = np.zeros((2, 3, 7), np.float32)
+    values[:, 1, 2:5] = 1.0
+    got = label_step(values, Mask.of_threshold(0.5), periodic=(True, True, True))
+    assert len(got.features) == 1 and "z" not in got.features[0].wraps

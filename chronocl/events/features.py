@@ -107,10 +107,10 @@ class Mask:
     def __call__(self, values: np.ndarray) -> np.ndarray:
         """The shown voxels of `values` (Z, Y, X) as a bool array."""
         if self.kind == "threshold":
-            return np.asarray(values >= self.threshold)  # NaN compares False
+            return (values >= self.threshold) & np.isfinite(values)  # NaN compares False
         assert self.data_tf is not None and self.value_range is not None
         u = normalize(values, *self.value_range)
-        finite = np.isfinite(u)
+        finite = np.isfinite(values)  # +inf normalises to 1: shown nowhere either
         u[~finite] = 0.0  # lut_lerp32 indexes by u: a NaN is looked up as 0, then dropped
         alpha = lut_lerp32(self.data_tf.lut[:, 3:4], u)[..., 0]
         return (alpha > np.float32(self.threshold)) & finite
@@ -197,7 +197,10 @@ def label_step(
     origin_xyz: Sequence[float] = (0.0, 0.0, 0.0),
 ) -> StepFeatures:
     """The features of one step's `values` (Z, Y, X) under `mask`."""
-    labels, wraps = label(mask(values), connectivity, periodic)
+    # an axis of one or two voxels has no face to wrap across (its voxels are neighbours
+    # already): nothing wraps there, though its faces are no boundary either
+    wrapping = tuple(p and n > 2 for p, n in zip(periodic, values.shape, strict=True))
+    labels, wraps = label(mask(values), connectivity, wrapping)  # type: ignore[arg-type]
     return StepFeatures(
         step, labels, measure(labels, values, step, periodic, wraps, spacing_xyz, origin_xyz)
     )
@@ -299,7 +302,8 @@ def measure(
     stats = extra.cc3d().statistics(labels)
     sizes = np.asarray(stats["voxel_counts"], np.int64)
     centroids = np.asarray(stats["centroids"], np.float64)
-    boxes = [[(s.start, s.stop) for s in box] for box in stats["bounding_boxes"]]
+    # entry 0 is the background's, None where every voxel is shown
+    boxes = [None] + [[(s.start, s.stop) for s in box] for box in stats["bounding_boxes"][1:]]
     shown = labels > 0  # summed over the features' voxels alone: no float64 copy of the step
     sums = np.bincount(labels[shown], weights=values[shown].astype(np.float64), minlength=n + 1)
     if wraps:
