@@ -164,7 +164,7 @@ def test_two_panels_scrubbing_apart_never_cancel_each_others_loads(server) -> No
         cancel = wm._cancel
 
         def spy(load) -> None:
-            other = wm._owners.get(right if asking[0] == "left" else left)
+            other = wm._owners.get(id(right if asking[0] == "left" else left))
             if other is not None and load.step in other.wanted | set(other.ahead):
                 theirs.append(load.step)
             cancelled[asking[0]].append(load.step)

@@ -347,3 +347,21 @@ def test_views_jumping_together_let_go_of_the_old_window_before_reading(monkeypa
         assert frames_at_reads == [0] * len(frames_at_reads)
     finally:
         views.release()
+
+
+def test_a_window_handed_out_and_let_go_by_its_views_gives_way_to_another_views_next():
+    """Two owners (views of one window) were handed the same window and dropped it (both
+    jumping): the next window of either takes their slots, within the budget, and no step
+    gets an array of its own outside the block (each window holding one was stacked)."""
+
+    class View:  # an owner, as a session is
+        pass
+
+    a, b = View(), View()
+    with WindowManager(series_of(10), 4 * STEP, prefetch=0) as wm:
+        for owner in (a, b):
+            held = wm.get([0, 1, 2], owner=owner)
+        del held  # both let the arrays go: nobody holds the old window
+        assert [int(x[0, 0, 0]) for x in wm.get([5, 6, 7], owner=a)] == [5, 6, 7]
+        assert len(wm.resident()) <= wm.capacity and wm.slots.own_arrays == 0
+        assert [int(x[0, 0, 0]) for x in wm.get([5, 6, 7], owner=b)] == [5, 6, 7]

@@ -30,7 +30,7 @@ import threading
 import time
 import weakref
 from collections import Counter, OrderedDict
-from collections.abc import Hashable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -123,7 +123,10 @@ class WindowManager:
         self.prefetch = prefetch
         # Requests without an owner; the scrub's speed and a step's read time (prefetch=None)
         self._anyone = _Owner(ScrubModel())
-        self._owners: weakref.WeakKeyDictionary[Hashable, _Owner] = weakref.WeakKeyDictionary()
+        # by id(owner): an owner's death (weakref.finalize) only notes its id in `_dead`, which
+        # the lock's holder purges (a collection may run in any thread, mid-iteration)
+        self._owners: dict[int, _Owner] = {}
+        self._dead: list[int] = []
         self._span = 1  # the last request's distinct steps: free slots kept warm (`_read`)
         self._read_at = 0.0  # when the last read ended (`_quiet`)
         self.generation = 0  # of the newest request of any owner
@@ -236,9 +239,7 @@ class WindowManager:
                 "ahead": sorted(s for s in ahead if s in self._loads or s in self._cache),
             }
 
-    def request(
-        self, steps: Sequence[int], direction: int = 0, owner: Hashable | None = None
-    ) -> Request:
+    def request(self, steps: Sequence[int], direction: int = 0, owner: object = None) -> Request:
         """Start loading `steps` (and prefetching beyond them in `direction`: +1, -1 or 0)
         for `owner` (a session sharing the manager; None: anyone without one).
 
@@ -281,9 +282,12 @@ class WindowManager:
             for s in steps:
                 if s in self._cache:
                     self._cache.move_to_end(s)
+            # the window, and those of other owners still waiting for theirs; the windows
+            # handed out give way where nobody holds their steps (`_held`)
+            protect = set(steps) | self._awaited()
             for s in steps:
                 if s not in self._cache and s not in self._loads:
-                    self._make_room(protect=wanted)
+                    self._make_room(protect=protect)
                     self._fits(ahead=True)  # the window is read over the limit if it must be
                     self._start(s)
             for s in ahead:
@@ -299,7 +303,7 @@ class WindowManager:
             return Request(self, who, self.generation, steps)
 
     def get(
-        self, steps: Sequence[int], direction: int = 0, owner: Hashable | None = None
+        self, steps: Sequence[int], direction: int = 0, owner: object = None
     ) -> list[np.ndarray]:
         """Request `steps` and wait for them (the arrays must be treated as read-only)."""
         return self.request(steps, direction, owner).result()
@@ -309,7 +313,7 @@ class WindowManager:
         arrays = dict(zip(steps, self.get(steps), strict=True))
         return ResidentBricks(arrays, in_place=False).read(steps, z0, z1)
 
-    def let_go(self, owner: Hashable | None = None) -> None:
+    def let_go(self, owner: object = None) -> None:
         """The owner that asked for its last window is gone (a viewer's panel or client left,
         or left the data set): its window's steps give way once nobody holds them, and
         nothing is read ahead for it any more."""
@@ -317,7 +321,7 @@ class WindowManager:
             if owner is None:
                 self._anyone.wanted, self._anyone.ahead = frozenset(), ()
             else:
-                self._owners.pop(owner, None)
+                self._owners.pop(id(owner), None)
 
     def close(self) -> None:
         with self._lock:
@@ -334,19 +338,31 @@ class WindowManager:
         self.close()
 
     # -- internals (the lock is held where noted) ------------------------------------------
-    def _owner(self, key: Hashable | None) -> _Owner:
-        """The owner of `key` (locked): made at its first request, its scrub's read time
-        that of the reads so far."""
+    def _owner(self, key: object) -> _Owner:
+        """The owner `key` (locked; weakly referenced): made at its first request, its scrub's
+        read time that of the reads so far."""
         if key is None:
             return self._anyone
-        who = self._owners.get(key)
+        self._purge()
+        who = self._owners.get(id(key))
         if who is None:
-            who = self._owners[key] = _Owner(ScrubModel(self.scrub.clock))
+            who = self._owners[id(key)] = _Owner(ScrubModel(self.scrub.clock))
             who.scrub.read_s = self.scrub.read_s
+            weakref.finalize(key, self._dead.append, id(key))
         return who
 
+    def _purge(self) -> None:
+        """Forget the owners that died (locked)."""
+        while self._dead:
+            self._owners.pop(self._dead.pop(), None)
+
     def _all_owners(self) -> list[_Owner]:
+        self._purge()
         return [self._anyone, *self._owners.values()]
+
+    def _awaited(self) -> set[int]:
+        """The steps of the windows requested and not yet handed out (locked)."""
+        return set().union(*(o.wanted for o in self._all_owners() if o.served != o.generation))
 
     def _wanted(self) -> set[int]:
         """The steps of every owner's window (locked)."""
