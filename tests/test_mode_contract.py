@@ -199,6 +199,7 @@ def test_the_complete_namespace_is_a_mode():
         ({"rows_kernel": "integrate_alpha_rows"}, "rows_state = 0; a rows kernel needs"),
         ({"rows_state": 16}, "sets rows_kernel = None with rows_state = 16"),
         ({"leaf_span": 0}, "sets leaf_span = 0"),
+        ({"writes_winners": True}, "sets writes_winners without has_t_index"),
     ],
 )
 def test_each_flag_out_of_its_choices_fails_at_class_definition(attrs, needle):

@@ -296,3 +296,5 @@ def check_mode(cls: type[Mode]) -> None:
         )
     if cls.leaf_span < 1:
         refuse(f"sets leaf_span = {cls.leaf_span}; a leaf integrates 1 or more steps")
+    if cls.writes_winners and not cls.has_t_index:
+        refuse("sets writes_winners without has_t_index; a winner is one step per voxel")

@@ -283,13 +283,17 @@ def warm_kernels(dtype, device: str | None) -> None:
     on a window of two steps of one brick: PoCL loads a kernel's code at its first run, about
     40 ms a kernel here, which was 0.27 s of the first edit after a mode switch at 512^3. The
     viewer calls it beside its first frame (`chronocl.viewer.worker`)."""
-    from chronocl.integration.inmemory import make_spec
-
     key = (device, np.dtype(dtype).name)
-    with _warm_lock:
+    with _warm_lock:  # one at a time: a second caller finds them warm
         if key in _warmed:
             return
+        _warm(dtype, device)
         _warmed.add(key)
+
+
+def _warm(dtype, device: str | None) -> None:
+    from chronocl.integration.inmemory import make_spec
+
     block = aligned_empty((2, B, B, B), dtype)
     block[...] = 0
     t_index = aligned_empty((B, B, B), np.int32)

@@ -92,8 +92,7 @@ class Recolouring:
             or prepared.value_range != new_range
         ):
             prepared = self._prepare(slot, full, shown, new)
-            if prepared is None:
-                slot.why_not_recoloured = "no recolourer here (GL without compute shaders)"
+            if prepared is None:  # why: `_prepare` said
                 return None
         fmt = slot.volume.texture.dtype
         meta = {**shown.metadata, "spec": new.to_dict(), "value_range": list(new_range)}
@@ -155,6 +154,7 @@ class Recolouring:
         del old  # its winners' memory goes back once released: the gather takes it again
         on_gpu = on_gl(_release_and_pick, slot)
         if on_gpu is None:
+            slot.why_not_recoloured = "no recolourer here (GL without compute shaders)"
             return None
         # on the host, the first edit recolours into the RGBA8 shown (nothing else holds it:
         # the texture has its own copy), else into the last window's output; not where u is
@@ -167,9 +167,11 @@ class Recolouring:
         if limit is not None:  # steps read ahead or kept give way to the winners and outputs
             rgba = 4 if slot.volume.texture.dtype == "f1" else 16  # the display format's bytes
             has_output = start is not None or takes_over(held, shown.shape)
-            limit.fit(_prepared_bytes(shown, on_gpu, has_output, rgba))
+            kept = full.has_winners(spec)  # the kernels wrote them: nothing to gather
+            limit.fit(_prepared_bytes(shown, on_gpu, has_output, rgba, kept))
         w = full.winners(functools.partial(gather, device=self.device), spec)
         if w is None:
+            slot.why_not_recoloured = "a step of the window is not in memory"
             return None
         checkpoint("preparing the recolouring", 1, 2)  # at idle: input that came meanwhile
         volume = on_gl(_upload, w) if on_gpu else on_host(w, self.device, held, start)
@@ -212,13 +214,16 @@ def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> tupl
     return full, new
 
 
-def _prepared_bytes(shown: Chronovolume, on_gpu: bool, outputs_held: bool, rgba: int) -> int:
+def _prepared_bytes(
+    shown: Chronovolume, on_gpu: bool, outputs_held: bool, rgba: int, kept: bool = False
+) -> int:
     """The host memory a window's recolouring takes beyond what it holds already: the winners
     (a float32 value and a step index per voxel; on the GPU they leave the host once
-    uploaded, but are gathered there first) and, on the OpenCL device, its output of `rgba`
-    bytes a voxel (the texture's format) unless it takes over the last one's."""
+    uploaded, but are gathered there first), unless `kept` (the kernels wrote them) and, on
+    the OpenCL device, its output of `rgba` bytes a voxel (the texture's format) unless it
+    takes over the last one's."""
     voxels = int(np.prod(shown.shape))
-    winners = voxels * (4 + 2)  # u, and k at its widest (uint16)
+    winners = 0 if kept else voxels * (4 + 2)  # u, and k at its widest (uint16)
     outputs = 0 if on_gpu or outputs_held else rgba * voxels
     return winners + outputs
 

@@ -180,7 +180,12 @@ class Views:
             )
             cv = s.set_window(sel)
         else:  # recoloured where a TF edit allows, else slid where the windows overlap
-            cv = self.recolouring.view(slot, spec, sel) or s.show(sel, spec)
+            cv = self.recolouring.view(slot, spec, sel)
+            if cv is None:
+                if s.asked != spec and slot.recolour is not None:
+                    # integrated anew: the old winners (and outputs) are stale; they go first
+                    gl_submit(lambda rc, slot=slot: slot.release_recolour())
+                cv = s.show(sel, spec)
         slot.cv = cv
         stats = s.stats or {}
         return cv, float(stats.get("integrate_ms", 0.0)), bool(stats.get("incremental", False))

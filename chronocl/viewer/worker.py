@@ -315,9 +315,9 @@ class ClientWorker(Tasks):
         loaded on the side thread (`warm_kernels`), while the user looks at the picture."""
         dtype = self.datasets[state.dataset].series.dtype
         if dtype not in self._warmed:
-            self._warmed.add(dtype)
             device = self.views.recolouring.device
-            self.side.submit(("warm", dtype), lambda: warm_kernels(dtype, device))
+            if self.side.submit(("warm", dtype), lambda: warm_kernels(dtype, device)):
+                self._warmed.add(dtype)
 
     def _memory_after(self) -> None:
         """The frame's memory noted for the process's limit; a line in the log when over it."""

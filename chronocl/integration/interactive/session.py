@@ -177,14 +177,28 @@ class Session:
         gathered (`winners.of_window`); their u at the value range of `spec` (a fixed spec from
         `recolours`), else the shown's."""
         vr = None if spec is None else self.value_range_of(spec)
-        cv, won = self._cv, self._won
-        if cv is not None and won is not None and won[0] is cv.t_index:
-            want = tuple(map(float, vr if vr is not None else cv.metadata["value_range"]))
-            if want == tuple(map(float, won[1].value_range)):  # the spec shown, as gathered
-                return dataclasses.replace(won[1], spec=self.spec)
+        kept = self._kept_winners(vr)
+        if kept is not None:
+            return kept
         return of_window(
             self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather, vr
         )
+
+    def has_winners(self, spec: IntegrationSpec | None = None) -> bool:
+        """Whether `winners(spec=spec)` hands out the kernels' winners (nothing to gather)."""
+        vr = None if spec is None else self.value_range_of(spec)
+        return self._kept_winners(vr) is not None
+
+    def _kept_winners(self, vr: tuple[float, float] | None) -> Winners | None:
+        """The winners the kernels wrote with the chronovolume shown, their u at `vr` (None:
+        the range it is coloured at), under the spec shown; else None."""
+        cv, won = self._cv, self._won
+        if cv is None or won is None or won[0] is not cv.t_index:
+            return None
+        want = tuple(map(float, vr if vr is not None else cv.metadata["value_range"]))
+        if want != tuple(map(float, won[1].value_range)):
+            return None
+        return dataclasses.replace(won[1], spec=self.spec)  # the spec shown, as gathered
 
     def value_range_of(self, spec: IntegrationSpec) -> tuple[float, float]:
         """The value range `spec` normalises the window's values by."""
@@ -316,8 +330,9 @@ class Session:
             # the integration below completes (it may be given up: `chronocl.core.interrupt`).
             self._cv, self._slider, self._won = None, None, None
             t_direct = time.perf_counter()
-            # a viewer's window in max or min: each voxel's winner too, as it integrates
-            won = WinnersOut() if self.display else None
+            # a viewer's full-resolution window in max, min or change: each voxel's winner too,
+            # as it integrates (its TF edits recolour level 0 alone)
+            won = WinnersOut() if self.display and self.level == 0 else None
             cv = integrate_bricks(
                 job, self.engine, bricks, slab=self._slab_rows(), display=self.display, winners=won
             )
