@@ -630,3 +630,42 @@ def test_an_internal_error_names_what_failed_and_the_next_frame_is_right(
     c.close()
     assert got[1]["views"] == want[1]["views"]
     assert got[2] == want[2], "the frame after the error differs from a fresh client's"
+
+
+def test_a_reloaded_page_s_first_frame_waits_for_the_old_socket_to_let_go(server, monkeypatch):
+    """A page reloaded: its old socket closes while that client is making a frame. The new
+    client's frame is made only once the old one let go of its views (both clients' frames at
+    once were a 1 GB rise of the peak at 512^3), and it still comes."""
+    from chronocl.viewer import view_sessions, worker
+
+    events: list[str] = []
+    started = threading.Event()
+    real_chronovolumes = view_sessions.Views.chronovolumes
+    real_release = view_sessions.Views.release
+
+    def slow_chronovolumes(self, state):
+        if not events:  # the old client's frame: slow, and closed under it
+            events.append("old frame")
+            started.set()
+            time.sleep(1.0)
+        else:
+            events.append("new frame")
+        return real_chronovolumes(self, state)
+
+    def release(self):
+        events.append("released")
+        return real_release(self)
+
+    monkeypatch.setattr(view_sessions.Views, "chronovolumes", slow_chronovolumes)
+    monkeypatch.setattr(view_sessions.Views, "release", release)
+    old = Client(server)
+    old.send({"type": "open", "dataset": 0})
+    assert started.wait(30)
+    old.close()  # the old page goes mid-frame
+    new = Client(server)
+    try:
+        new.open(0)
+        assert events.index("released") < events.index("new frame"), events
+        assert not worker._leaving
+    finally:
+        new.close()

@@ -41,6 +41,7 @@ from chronocl.viewer.frames import (
     PREVIEW_SCALE,
     DrawBudget,
     colour_bar,
+    count_bar,
     empty_note,
     encode,
     legend,
@@ -64,6 +65,11 @@ REFINE_AFTER_S = 0.25  # after a drag's coarse frame; an edit's end refines at o
 # After a sharp frame of a mode that recolours, this long without input: its winners are
 # gathered, so that the first TF edit only recolours (new input gives the gather up).
 PREPARE_AFTER_S = 0.3
+# A frame waits this long at most for clients that left to let go of their frames (a page
+# reloaded: the old socket's frames, 2 GB at 512^3 in max, and the new ones held at once).
+LEFT_WAIT_S = 30.0
+_leaving: set = set()  # workers closed whose views are not released yet
+_left = threading.Condition()
 
 
 class ClientWorker(Tasks):
@@ -104,6 +110,7 @@ class ClientWorker(Tasks):
         self._hist_range, self._hist_window = [0.0, 1.0], None
         self._frame = 0
         self._warmed: set = set()  # the data types whose recolouring kernels are loaded
+        self._released = False  # its views let go (the thread's end)
         # The framed region: (generation, world box or None); a data set or camera reset adds one.
         self._focus_gen = 0
         self._focus: tuple[int, tuple | None] | None = None
@@ -205,6 +212,9 @@ class ClientWorker(Tasks):
             return self._pending is not None or self._cancelled or self._closed
 
     def close(self) -> None:
+        with _left:
+            if not self._released:  # (a thread that ended on its own let go already)
+                _leaving.add(self)
         with self._cond:
             self._closed = True
             self._cond.notify()
@@ -221,6 +231,10 @@ class ClientWorker(Tasks):
                 self.views.release()
             except Exception as exc:
                 error_text(exc, "releasing a client's views")
+            with _left:
+                self._released = True
+                _leaving.discard(self)
+                _left.notify_all()
 
     def _loop(self) -> None:
         while True:
@@ -301,6 +315,8 @@ class ClientWorker(Tasks):
 
     def _render(self, state: ViewState, rid: int | None) -> None:
         t_start = time.perf_counter()
+        with _left:  # a client that left lets go of its frames before this one makes more
+            _left.wait_for(lambda: not _leaving - {self}, LEFT_WAIT_S)
         cvs, integrate_ms, incremental = self.views.chronovolumes(state)
         try:
             self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
@@ -434,6 +450,8 @@ class ClientWorker(Tasks):
             "legend": legend(cvs[0]),
             "legends": [legend(cv) for cv in cvs],  # a view with its own window has its own
             "colorbars": [colour_bar(cv) for cv in cvs],  # null where the data TF is white
+            # a count view's bar, drawn instead of its time legend (null where colour is time)
+            "countbars": [count_bar(cv) for cv in cvs],
             "focus": None if state.camera.focus is None else list(state.camera.focus),
             "level": level,
             "levels": levels,  # from the sessions: no store metadata read per frame
