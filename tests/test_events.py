@@ -638,3 +638,60 @@ def test_a_periodic_axis_of_two_voxels_wraps_nothing():
     values[:, 1, 2:5] = 1.0
     got = label_step(values, Mask.of_threshold(0.5), periodic=(True, True, True))
     assert len(got.features) == 1 and "z" not in got.features[0].wraps
+
+
+# -- markers in a render -----------------------------------------------------------------------
+def test_markers_sit_where_the_events_happened():
+    """A merge's marker is at the merged blob's centroid (fractions of the box), labelled with
+    its kind and step; continuations get none; `steps` keeps the events of a window."""
+    a = series(4)
+    paint(a, 0, (2, 5), (1, 4))
+    paint(a, 0, (2, 5), (10, 13))
+    paint(a, 1, (2, 5), (3, 6))
+    paint(a, 1, (2, 5), (8, 11))
+    paint(a, 2, (2, 5), (4, 11))  # the merge: rows 2..4, columns 4..10 of the middle plane
+    paint(a, 3, (2, 5), (5, 12))
+    g = chronocl.events(a, threshold=0.5)
+    ((where, label),) = g.markers()
+    assert label == "merge 2"
+    nz, ny, nx = SHAPE
+    np.testing.assert_allclose(where, ((7 + 0.5) / nx, (3 + 0.5) / ny, (1 + 0.5) / nz))
+    assert g.markers(range(2, 4)) == [] and g.markers(range(0, 3)) == g.markers()
+
+
+@pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")  # an empty volume
+def test_a_render_draws_each_marker_where_the_camera_sees_it():
+    """A marker at the box's centre is drawn at the middle of the panel, in its colour, and
+    nowhere else; one off the volume's side is left out when the camera does not see it."""
+    from chronocl.render import Camera
+    from chronocl.render.markers import MARKER_RGB
+
+    a = np.zeros((3, 9, 9, 9), np.float32)
+    cv = chronocl.integrate(chronocl.TimeSeries.from_array(a), "0:3", mode="max")
+    camera = Camera(0.0, 0.0, 1.0, frame="box")
+    plain = np.asarray(chronocl.render(cv, camera, (200, 160)).array)
+    marked = np.asarray(
+        chronocl.render(cv, camera, (200, 160), markers=[((0.5, 0.5, 0.5), "merge 3")]).array
+    )
+    changed = np.argwhere((plain != marked).any(axis=-1))
+    assert len(changed) > 20
+    (y0, x0), (y1, x1) = changed.min(axis=0), changed.max(axis=0)
+    assert y0 <= 80 <= y1 and x0 <= 100 <= x1  # around the middle, label to its right
+    assert (marked == MARKER_RGB).all(axis=-1).any()
+    behind = chronocl.render(cv, camera, (200, 160), markers=[((0.5, 0.5, 40.0), "far")])
+    np.testing.assert_array_equal(np.asarray(behind.array), plain)
+
+
+def test_cli_render_marks_the_window_s_events(store, tmp_path):
+    out = tmp_path / "events.json"
+    assert cli("events", store, "--threshold", "0.5", "-o", out, "--no-picture").returncode == 0
+    plain, marked = tmp_path / "plain.png", tmp_path / "marked.png"
+    base = ["render", store, "--mode", "max", "--window", "0:5", "--size", "160x120"]
+    assert cli(*base, "-o", plain).returncode == 0
+    result = cli(*base, "-o", marked, "--events", out)
+    assert result.returncode == 0, result.stderr
+    with Image.open(plain) as p, Image.open(marked) as m:
+        assert p.size == m.size and np.asarray(p).tolist() != np.asarray(m).tolist()
+    bad = cli(*base, "-o", tmp_path / "x.png", "--events", tmp_path / "missing.json")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x.png").exists()

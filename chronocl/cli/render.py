@@ -143,6 +143,13 @@ def render(
             metavar="A,B", help="Variables of the store side by side: a panel each (per mode)."
         ),
     ] = None,
+    events: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="EVENTS.json",
+            help="Mark the window's events (from `chronocl events`) where they happened.",
+        ),
+    ] = None,
     anon: AnonOpt = False,
     storage_option: StorageOpt = None,
 ) -> None:
@@ -157,6 +164,8 @@ def render(
       chronocl render vortex.zarr -o alpha.png --mode alpha --window 0:20:9
 
       chronocl render jet.zarr -o trio.png --mode alpha,additive,max --window 0:30:14
+
+      chronocl render vortex.zarr -o marked.png --mode max --events events.json
 
       chronocl render vortex.zarr -o cut.png --clip 1,0,0,0 --azimuth 60 --zoom 1.4
 
@@ -196,6 +205,7 @@ def render(
     from chronocl.data.formats.outputs import save_chronovolume as save_any
     from chronocl.data.series import open_series
     from chronocl.engine.device_formats import check_device_format, check_format_name
+    from chronocl.events import load_events
     from chronocl.integration.inmemory import at_level, check_level, prepare
     from chronocl.render import Camera
     from chronocl.render.default_view import series_early_side
@@ -239,6 +249,7 @@ def render(
     check_distinct(outputs)
     for path in outputs:
         check_target(path, overwrite, [local_input(store), tf])
+    graph = None if events is None else load_events(events)  # one line if it is not one
     series = open_series(store, storage_options=storage_options)
     names = [n.strip() for item in variables or [] for n in item.split(",") if n.strip()]
     if names and (turntable is not None or saves):
@@ -281,6 +292,7 @@ def render(
             axes=axes,
             shading=lighting,
             time_labels=time_labels,
+            markers=None if graph is None else graph.markers(job.selection.steps),
         ),
         level=level,
         device_format=device_format,

@@ -97,6 +97,37 @@ class EventGraph:
         write_png(png_bytes(self, title), path, overwrite)
         return Path(path)
 
+    def markers(self, steps=None) -> list[tuple[tuple[float, float, float], str]]:
+        """The events other than continuations as markers for a render (`chronocl.render`'s
+        `markers=`): where each happened, as (x, y, z) fractions of the volume's box, and a
+        label ("merge 12": the kind and the step it happened at). A birth, entry, merge, split
+        or merge-split is placed at its new features' centroid (size-weighted), a death or exit
+        at the last centroid of those that went. `steps`: only events both of whose steps are
+        among them (e.g. a rendered window's), else all."""
+        shape = self.meta.get("volume_shape_zyx")
+        if not shape:
+            return []
+        at = {(f["step"], f["id"]): f for f in self.features}
+        keep = None if steps is None else {int(s) for s in steps}
+        out = []
+        for e in self.events:
+            if e["kind"] == "continuation":
+                continue
+            if keep is not None and not {e["step"], e["next_step"]} <= keep:
+                continue
+            step, ids = (
+                (e["next_step"], e["targets"]) if e["targets"] else (e["step"], e["sources"])
+            )
+            feats = [at[step, i] for i in ids if (step, i) in at]
+            if not feats:
+                continue
+            sizes = np.array([f["size"] for f in feats], dtype=np.float64)
+            zyx = np.array([f["centroid_zyx"] for f in feats], dtype=np.float64)
+            centre = (sizes[:, None] * zyx).sum(axis=0) / sizes.sum()
+            fractions = (centre[::-1] + 0.5) / np.asarray(shape[::-1], dtype=np.float64)
+            out.append((tuple(float(v) for v in fractions), f"{e['kind']} {step}"))
+        return out
+
     def to_pandas(self) -> dict:
         """A pandas DataFrame per record list: features, edges, events, tracks."""
         import pandas as pd

@@ -178,3 +178,25 @@ def orthographic(width: float, height: float, near: float, far: float) -> np.nda
     m[0, 0], m[1, 1] = 2.0 / width, 2.0 / height
     m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
     return m
+
+
+def world_extent(shape_zyx: tuple[int, int, int], spacing_xyz) -> np.ndarray:
+    """A volume's world extent (x, y, z) as the raycaster lays it out: its longest side 1."""
+    nz, ny, nx = shape_zyx
+    dx, dy, dz = spacing_xyz
+    physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
+    return physical / physical.max()
+
+
+def to_panel(
+    camera: Camera, extent: np.ndarray, size: tuple[int, int], world: np.ndarray
+) -> np.ndarray | None:
+    """Where world points (k, 3) land on a panel of `size` seen with `camera`: (k, 2) x, y
+    fractions of the panel, top-left origin (beyond 0..1 off the panel); None when a point is
+    behind the camera."""
+    w, h = size
+    view, proj = camera.matrices(extent, w / h)
+    at = (proj @ view @ np.c_[world, np.ones(len(world))].T).T
+    if (at[:, 3] <= 1e-9).any():
+        return None
+    return np.c_[(at[:, 0] / at[:, 3] + 1) / 2, (1 - at[:, 1] / at[:, 3]) / 2]

@@ -1,6 +1,7 @@
 """Render chronovolumes: one view, or parallel views of several under one camera, labelled,
 with their legends (`chronocl.render.legends`) and laid out in a grid
-(`chronocl.render.panels`).
+(`chronocl.render.panels`); the title a saved picture carries names the data set and the windows
+shown (`title_text`).
 
 The camera frames what is visible (`chronocl.render.framing`) unless it frames the box, and a
 silhouette taken along another view is integrated again for the camera where the chronovolume's
@@ -20,6 +21,7 @@ from chronocl.render.follow import following
 from chronocl.render.framing import framed
 from chronocl.render.image import Image
 from chronocl.render.legends import step_texts
+from chronocl.render.markers import Marker, draw_markers
 from chronocl.render.panels import compose_panels
 from chronocl.render.raycaster import Raycaster, Volume, check_clip, check_size
 from chronocl.render.shading import Shading, as_shading
@@ -73,6 +75,7 @@ def render(
     legend: bool = False,
     shading: Shading | bool | None = None,
     time_labels: str = "labels",
+    markers: Sequence[Marker] | None = None,
 ) -> Image:
     """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`).
 
@@ -85,7 +88,9 @@ def render(
     where the store it came from can be opened, else a warning says so. `shading=True` (or a
     `Shading`) lights it from the camera by its opacity gradient; off by default (flat colour).
     `outline` draws the volume's box, `axes` the axis triad (x, y, z in red, green, blue) in
-    the bottom-right corner; both off by default here (the command line draws both)."""
+    the bottom-right corner; both off by default here (the command line draws both).
+    `markers` ((x, y, z) fractions of the box, label) are drawn as labelled rings, e.g. a
+    window's events: `chronocl.events(...).markers()`."""
     return render_views(
         [chronovolume],
         camera,
@@ -101,6 +106,7 @@ def render(
         legend=legend,
         shading=shading,
         time_labels=time_labels,
+        markers=markers,
     )
 
 
@@ -122,12 +128,13 @@ def render_views(
     volumes: Sequence[Volume] | None = None,
     shading: Shading | bool | None = None,
     time_labels: str = "labels",
+    markers: Sequence[Marker] | None = None,
 ) -> Image:
     """Parallel views: each chronovolume in its own panel of `size`, all under one camera.
 
     `volumes`, the chronovolumes already uploaded with `raycaster().upload` (and released by
     the caller), spare the upload when one set is rendered many times, e.g. a turntable.
-    `shading`, `outline` and `axes`: as in `render`.
+    `shading`, `outline`, `axes` and `markers` (in every panel): as in `render`.
     """
     if not chronovolumes:
         raise InvalidParameterError("nothing to render: give at least one chronovolume")
@@ -156,6 +163,7 @@ def render_views(
                 outline=outline,
                 shading=lighting,
             )
+            panel = draw_markers(panel, camera, cv, markers) if markers else panel
             panels.append(draw_triad(panel, camera) if axes else panel)
         finally:
             if volumes is None:
@@ -186,3 +194,25 @@ def describe(cv: Chronovolume, time_labels: str = "labels") -> str:
     if enhance != "none":
         extra = f", {enhance}"
     return f"{spec.get('mode', '?')}, {order}, {steps}{extra}"
+
+
+def window_text(cv: Chronovolume, time_labels: str = "labels") -> str:
+    """A chronovolume's window as its steps and, where the store has time labels, their span
+    with the unit: 'steps 0:16:3 (6 steps), 0 s .. 7.5 s', or 'steps 1:11 (10 steps)'."""
+    from chronocl.core.selection import Selection
+
+    sel = cv.metadata.get("selection", {})
+    steps = Selection(tuple(sel.get("steps", ())), sel.get("n_steps", 1)).describe()
+    n = len(cv.steps)
+    text = f"steps {steps} ({n} step{'s' if n != 1 else ''})"
+    texts = step_texts(cv, time_labels)
+    if texts != [str(s) for s in cv.steps]:
+        text += f", {span_text(texts)}"
+    return text
+
+
+def title_text(name: str, chronovolumes: Sequence[Chronovolume], time_labels="labels") -> str:
+    """A picture's title: the data set's name and the windows its views show, each once:
+    'vortex: steps 1:11 (10 steps), 0.1 s .. 1 s'."""
+    windows = dict.fromkeys(window_text(cv, time_labels) for cv in chronovolumes)
+    return f"{name}: {'; '.join(windows)}" if windows else name

@@ -8,9 +8,9 @@ import itertools
 import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.render.camera import Camera
+from chronocl.render.camera import Camera, to_panel
 from chronocl.render.raycaster import clip_plane
-from chronocl.viewer.slots import geometry, to_panel
+from chronocl.viewer.slots import geometry
 
 
 def plane_polygon(clip: tuple[float, float, float, float], extent: np.ndarray) -> np.ndarray:

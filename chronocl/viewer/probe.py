@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.render.camera import Camera
+from chronocl.render.camera import Camera, to_panel
 from chronocl.render.raycaster import clip_plane
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.protocol import PROBE_THRESHOLD
-from chronocl.viewer.slots import geometry, to_panel
+from chronocl.viewer.slots import geometry
 from chronocl.viewer.view_state import ViewState
 
 

@@ -13,7 +13,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.session import Session
 from chronocl.render import brick_grid
-from chronocl.render.camera import Camera
+from chronocl.render.camera import world_extent
 from chronocl.render.raycaster import Volume
 from chronocl.render.upload import convert, display_format
 
@@ -150,21 +150,5 @@ def _write(slot: ViewSlot, vol: Volume, data: np.ndarray, given_up) -> None:
 def geometry(cv: Chronovolume) -> tuple[np.ndarray, np.ndarray]:
     """World extent (x, y, z; longest side 1) and voxel size, as the raycaster lays them out."""
     nz, ny, nx = cv.shape
-    dx, dy, dz = cv.spacing
-    physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
-    extent = physical / physical.max()
+    extent = world_extent(cv.shape, cv.spacing)
     return extent, extent / np.array([nx, ny, nz])
-
-
-def to_panel(
-    camera: Camera, extent: np.ndarray, size: tuple[int, int], world: np.ndarray
-) -> np.ndarray | None:
-    """Where world points (k, 3) land on a panel of `size` seen with `camera`: (k, 2) x, y
-    fractions of the panel, top-left origin (beyond 0..1 off the panel); None when a point is
-    behind the camera."""
-    w, h = size
-    view, proj = camera.matrices(extent, w / h)
-    at = (proj @ view @ np.c_[world, np.ones(len(world))].T).T
-    if (at[:, 3] <= 1e-9).any():
-        return None
-    return np.c_[(at[:, 0] / at[:, 3] + 1) / 2, (1 - at[:, 1] / at[:, 3]) / 2]

@@ -1,0 +1,77 @@
+"""Markers in a rendered panel: a ring and a label at points of the volume, e.g. the events of
+a window (`chronocl.events`: merges, splits, births, deaths at their features' centroids), so
+that a picture says where in the chronovolume something happened.
+
+A marker is (x, y, z as fractions of the volume's box, voxel centres at (i + 0.5) / n;
+label): the same at every level of the series. It is projected with the panel's camera as the
+raycaster lays the volume out (`camera.world_extent`, `camera.to_panel`); markers behind the
+camera or off the panel are left out. Rings and labels have a dark rim, so they read on black
+and on white.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.render.camera import Camera, to_panel, world_extent
+
+Marker = tuple[Sequence[float], str]  # (x, y, z) fractions of the box, label
+RING_FRACTION = 0.018  # of the panel's shorter side: the ring's radius
+MIN_RING = 4  # pixels
+MARKER_RGB = (255, 230, 90)
+RIM = (0, 0, 0)
+
+
+def draw_markers(
+    panel: np.ndarray, camera: Camera, cv: Chronovolume, markers: Sequence[Marker]
+) -> np.ndarray:
+    """`panel` (H, W, 3 uint8, top-down) with `markers` drawn where `camera` sees them."""
+    from PIL import Image as PILImage
+    from PIL import ImageDraw
+
+    from chronocl.render.panels import label_font
+
+    if not markers:
+        return panel
+    h, w, _ = panel.shape
+    extent = world_extent(cv.shape, cv.spacing)
+    fractions = np.asarray([m[0] for m in markers], dtype=np.float64).reshape(-1, 3)
+    at = to_panel(camera, extent, (w, h), (fractions - 0.5) * extent)
+    if at is None:
+        return panel
+    image = PILImage.fromarray(panel)
+    draw = ImageDraw.Draw(image)
+    radius = max(MIN_RING, round(RING_FRACTION * min(w, h)))
+    font = label_font(max(10, radius * 2))
+    placed: list[tuple[float, float, float, float]] = []  # labels drawn: none overlaps
+    for (x, y), (_, label) in zip(at, markers, strict=True):
+        if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
+            continue
+        px, py = x * w, y * h
+        ring = (px - radius, py - radius, px + radius, py + radius)
+        draw.ellipse(ring, outline=RIM, width=4)
+        draw.ellipse(ring, outline=MARKER_RGB, width=2)
+        left, top, right, bottom = draw.textbbox((0, 0), label, font=font, stroke_width=2)
+        for shift in _shifts(bottom - top + 2):
+            at_x, at_y = px + radius + 2, py - radius + shift
+            box = (at_x + left, at_y + top, at_x + right, at_y + bottom)
+            if not any(_overlap(box, other) for other in placed):
+                break
+        placed.append(box)
+        draw.text((at_x, at_y), label, fill=MARKER_RGB, font=font, stroke_width=2, stroke_fill=RIM)
+    return np.asarray(image)
+
+
+def _shifts(line: float, most: int = 8):
+    """Vertical offsets to try for a label: in place, then a line lower, higher, two..."""
+    yield 0.0
+    for k in range(1, most + 1):
+        yield k * line
+        yield -k * line
+
+
+def _overlap(a, b) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
