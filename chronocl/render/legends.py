@@ -158,22 +158,32 @@ def _nice_ticks(draw, values, positions_x, where, font, text_rgb, most=None, uni
         draw.text((left, y0 + 4), text, fill=text_rgb, font=font)
 
 
+FRACTION_ENDS = ("no step", "every step")  # count's bar: what its two ends mean
+
+
+def fraction_ramp(data_tf, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Count's bar at `n` evenly spaced fractions of the steps, 0 .. 1: the data TF's colours
+    as the bar shows them (n, 3), and its opacity there (n,). The colours are weighted by the
+    opacity relative to the ramp's peak, so a translucent ramp (count's own) stays legible and
+    the bar is dark where it is transparent."""
+    rgba = lut_lookup(data_tf.lut, np.linspace(0.0, 1.0, n))
+    weight = rgba[:, 3] / max(float(rgba[:, 3].max()), 1e-6)
+    shown = np.clip(rgba[:, :3] * np.maximum(weight, 0.25)[:, None], 0, 1)
+    return shown, rgba[:, 3]
+
+
 def _fraction_legend(draw, spec, box, font, text_rgb) -> None:
     """A bar of the data TF over the fraction of steps, for modes that show one (count)."""
     x0, y0, width, height = box
     bar_h = max(8, height // 2)
     gap = 8
-    left, right = "no step", "every step"
+    left, right = FRACTION_ENDS
     x_start = x0 + int(draw.textlength(left, font=font)) + gap
     x_end = x0 + width - int(draw.textlength(right, font=font)) - gap
     draw.text((x0, y0 + 1), left, fill=text_rgb, font=font)
     draw.text((x_end + gap, y0 + 1), right, fill=text_rgb, font=font)
     span = max(1, x_end - x_start)
-    rgba = lut_lookup(spec.data_tf.lut, np.linspace(0.0, 1.0, span))
-    # Opacity relative to the ramp's peak: a translucent ramp (count's own) stays legible,
-    # and where it is transparent the bar is dark.
-    weight = rgba[:, 3] / max(float(rgba[:, 3].max()), 1e-6)
-    shown = np.clip(rgba[:, :3] * np.maximum(weight, 0.25)[:, None], 0, 1)
+    shown, _ = fraction_ramp(spec.data_tf, span)
     for i in range(span):
         colour = tuple(round(c * 255) for c in shown[i])
         draw.line([(x_start + i, y0), (x_start + i, y0 + bar_h)], fill=colour)

@@ -1,9 +1,12 @@
 """Panels laid out in a grid, each in a cell of its own: its caption wrapped in a band above the
-picture (never over it) and its own legends in a band below (`chronocl.render.legends`)."""
+picture (never over it) and its own legends in a band below (`chronocl.render.legends`); a
+title (the data set and window, as the viewer's Save PNG gives it) in a band over the grid.
+`compose` also returns where it put each part (`Layout`)."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -60,10 +63,32 @@ def wrap_text(draw, text: str, font, width: float, most: int = CAPTION_LINES) ->
     return lines
 
 
+Box = tuple[int, int, int, int]  # x, y, width, height in pixels
+
+
+@dataclass
+class Layout:
+    """Where `compose` put each part of its image: the title band (None: no title) and, per
+    panel, its caption band, its picture and its legend band (None: no legend)."""
+
+    title: Box | None = None
+    captions: list[Box] = field(default_factory=list)
+    pictures: list[Box] = field(default_factory=list)
+    legends: list[Box | None] = field(default_factory=list)
+
+
 def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels") -> np.ndarray:
+    """`compose`'s image without a title."""
+    return compose(panels, labels, legend_of, columns, bg, time_labels)[0]
+
+
+def compose(
+    panels, labels, legend_of, columns, bg, time_labels="labels", title: str | None = None
+) -> tuple[np.ndarray, Layout]:
     """The panels in a grid (`columns` per row, else `default_columns`), each in a cell of its
     own: its caption in a band above the picture, never over it, and, with `legend_of`, the
-    legend of its own chronovolume in a band below."""
+    legend of its own chronovolume in a band below; with a `title`, a band over the grid holds
+    it (wrapped). Returns the image and its `Layout`."""
     from PIL import Image as PILImage
     from PIL import ImageDraw
 
@@ -76,6 +101,8 @@ def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels")
     measure = ImageDraw.Draw(PILImage.new("RGB", (1, 1)))
     wrapped = [wrap_text(measure, t, font, w - 16) for t in labels or []]
     cap_h = caption_height(font, max(map(len, wrapped))) if wrapped else 0
+    titled = wrap_text(measure, title, font, cols * w - 16) if title else []
+    title_h = caption_height(font, len(titled)) if titled else 0
     bars = [data_bar(cv) for cv in legend_of] if legend_of else []
     # A data colour bar sits beside the time legend where the band is wide enough for both
     # to show several ticks, else under it (the band twice as tall).
@@ -84,17 +111,24 @@ def compose_panels(panels, labels, legend_of, columns, bg, time_labels="labels")
     if any(bars) and not beside:
         legend_h *= 2
     cell_h = cap_h + h + legend_h
-    canvas = PILImage.new("RGB", (cols * w, rows * cell_h), tuple(round(c * 255) for c in bg))
+    size = (cols * w, title_h + rows * cell_h)
+    canvas = PILImage.new("RGB", size, tuple(round(c * 255) for c in bg))
     draw = ImageDraw.Draw(canvas)
+    layout = Layout(title=(0, 0, size[0], title_h) if titled else None)
+    if titled:
+        draw.text((8, 6), "\n".join(titled), fill=text_rgb, font=font, spacing=3)
     for i, panel in enumerate(panels):
         r, c = divmod(i, cols)
-        x, y = c * w, r * cell_h
+        x, y = c * w, title_h + r * cell_h
         canvas.paste(PILImage.fromarray(panel), (x, y + cap_h))
+        layout.captions.append((x, y, w, cap_h))
+        layout.pictures.append((x, y + cap_h, w, h))
         if i < len(wrapped):
             text = "\n".join(wrapped[i])
             draw.text((x + 8, y + 6), text, fill=text_rgb, font=font, spacing=3)
+        layout.legends.append((x, y + cap_h + h, w, legend_h) if legend_of else None)
         if legend_of:
             k = i if i < len(legend_of) else 0
             box = (x + 8, y + cap_h + h + 4, w - 16, legend_h - 8)
             legend_band(draw, legend_of[k], bars[k], box, beside, font, text_rgb, time_labels)
-    return np.asarray(canvas)
+    return np.asarray(canvas), layout

@@ -1,8 +1,9 @@
 """What a frame is made of besides the draws: the size the panels are drawn at (the page's
 panel size in device pixels, within a pixel budget that follows the latency target), JPEG
 encoding of the panels, the preview scale and qualities, the legend of the window's time
-colours that the page's timeline shows, the data colour bar of a coloured data TF, and the
-note a panel gets when almost nothing in it is visible."""
+colours that the page's timeline shows, the data colour bar of a coloured data TF, the count
+bar that stands for the time legend in a mode whose colour tells the fraction of steps (count),
+and the note a panel gets when almost nothing in it is visible."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.settings import TARGET_MS
 from chronocl.render.colorbar import data_bar
+from chronocl.render.legends import FRACTION_ENDS, fraction_ramp
 
 COLOUR_BAR_SAMPLES = 64  # colours a colour bar sends (the page draws a gradient through them)
 PREVIEW_SCALE = 0.5
@@ -135,4 +137,24 @@ def colour_bar(cv: Chronovolume) -> dict | None:
         "title": bar.title,
         "range": [bar.lo, bar.hi],
         "colors": ["#{:02x}{:02x}{:02x}".format(*c) for c in rgb.tolist()],
+    }
+
+
+def count_bar(cv: Chronovolume) -> dict | None:
+    """The legend of a view whose mode colours by the fraction of steps (`Mode.legend` is
+    "fraction": count), for the page to draw instead of the time legend, as the saved PNG
+    does (`chronocl.render.legends`): the data TF's colours as the bar shows them and its
+    opacity at COLOUR_BAR_SAMPLES fractions from 0 to 1, what the ends mean and the window's
+    number of steps; None where colour tells time."""
+    spec = cv.spec
+    if spec.integration.legend != "fraction":
+        return None
+    shown, alpha = fraction_ramp(spec.data_tf, COLOUR_BAR_SAMPLES)
+    rgb = np.clip(np.round(shown * 255), 0, 255).astype(int)
+    return {
+        "kind": "fraction",
+        "steps": len(cv.steps),
+        "ends": list(FRACTION_ENDS),
+        "colors": ["#{:02x}{:02x}{:02x}".format(*c) for c in rgb.tolist()],
+        "alpha": [round(float(a), 3) for a in alpha],
     }

@@ -1,5 +1,6 @@
 """Movies from the viewer: an orbit of the camera or a play-through of the window over the
-series, drawn as the page shows them (every view, labelled) and written as MP4 or GIF.
+series, drawn as the page shows them (every view, annotated as Save PNG annotates it: title,
+captions, legends) and written as MP4 or GIF.
 
 The worker supplies `frame(state)`, the composed image of a view state at full resolution;
 this module decides the states and writes the video (chronocl.render.video).

@@ -14,7 +14,9 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
                                                          x2, y2: a box between two rays' voxels
     histogram  {"range": [lo, hi]}                       normalised values u in the window
     fit        {"view"[, "mode"]}                       the TF's range fitted to a view's window
-    save       {"what": "image" | "chronovolume", "view"}
+    save       {"what": "image" | "chronovolume", "view"} the image's download also gives its
+                                                         `layout` (title, captions, pictures,
+                                                         legends: [x, y, w, h] in pixels)
                {"what": "movie", "movie": orbit | play,   a video download, a `progress`
                 "format": mp4 | gif, "frames", "fps"}     message after every frame
                {"what": "session"}                       the state as a session file

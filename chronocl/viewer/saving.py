@@ -1,5 +1,8 @@
-"""Save actions: the shown views as one labelled PNG, or one view's chronovolume as a zipped
-zarr store, each kept in `Downloads` under a random key for the page to fetch."""
+"""Save actions: the shown views as one annotated PNG (as `chronocl render` draws them: each
+panel captioned with its mode and window over its time legend or count bar and data colour bar,
+and a title naming the data set and the window, also kept in the PNG's text), or one view's
+chronovolume as a zipped zarr store, each kept in `Downloads` under a random key for the page
+to fetch."""
 
 from __future__ import annotations
 
@@ -19,8 +22,8 @@ from chronocl.data.series import TimeSeries
 from chronocl.engine.base import Engine
 from chronocl.integration.inmemory import Job, integrate_bricks
 from chronocl.render.image import Image
-from chronocl.render.panels import compose_panels
-from chronocl.render.views import describe
+from chronocl.render.panels import Layout, compose
+from chronocl.render.views import describe, title_text
 
 
 class Downloads:
@@ -68,10 +71,13 @@ def compose_image(
     cvs: list[Chronovolume],
     background: tuple,
     columns: int | None = None,
-):
+    name: str | None = None,
+) -> tuple[np.ndarray, Layout]:
     """The panels in a grid of `columns` per row (as the page lays them out), each captioned
-    with its chronovolume and over its own legend."""
-    return compose_panels(panels, [describe(cv) for cv in cvs], cvs, columns, background)
+    with its chronovolume and over its own legend, under a title naming the data set `name`
+    and the windows shown (none without a name); the image and where its parts lie."""
+    title = None if name is None else title_text(name, cvs)
+    return compose(panels, [describe(cv) for cv in cvs], cvs, columns, background, title=title)
 
 
 def save_image(
@@ -79,12 +85,17 @@ def save_image(
     panels: list[np.ndarray],
     cvs: list[Chronovolume],
     background: tuple,
-    name: str,
+    filename: str,
     columns: int | None = None,
-) -> str:
-    """`compose_image` as a PNG download."""
-    image = Image(compose_image(panels, cvs, background, columns))
-    return downloads.add(image.png_bytes(), name, "image/png")
+    name: str | None = None,
+) -> tuple[str, Layout]:
+    """`compose_image` as a PNG download, its title and captions also as the PNG's Title and
+    Description text; the download's key and the layout."""
+    array, layout = compose_image(panels, cvs, background, columns, name)
+    text = {"Description": "\n".join(describe(cv) for cv in cvs), "Software": "chronocl"}
+    if name is not None:
+        text["Title"] = title_text(name, cvs)
+    return downloads.add(Image(array, text).png_bytes(), filename, "image/png"), layout
 
 
 def full_precision(

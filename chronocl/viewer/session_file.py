@@ -193,8 +193,9 @@ def render_session(
 ) -> Image:
     """The views of `state` drawn as the viewer's Save PNG draws them: the same chronovolumes,
     camera (as the panels are drawn, framing its focus, else the visible region), size, clip,
-    lighting, background and outline, each panel labelled, the time-colour legend below;
-    `axes` adds the axis triad to each panel (`chronocl render --state --axes`).
+    lighting, background and outline, each panel labelled, its legends below (Save PNG's
+    title band over them, naming the data set and window, is not drawn here); `axes` adds
+    the axis triad to each panel (`chronocl render --state --axes`).
     `spec_changes` replace fields of every view's IntegrationSpec (e.g. a time_tf given on the
     command line)."""
     from chronocl.integration.inmemory import integrate

@@ -7,6 +7,7 @@ each file holds one concern; it uses the worker's views, shown state and reply c
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Callable, Hashable
 
@@ -143,14 +144,16 @@ class Tasks:
             bg = parse_color(state.background)
             panels, *_ = on_gl(self._draw, cvs, state, state.size, bg)
             name = f"{ds.name}-{sel}.png"
-            key = save_image(
+            key, layout = save_image(
                 self.downloads,
                 panels,
                 cvs,  # type: ignore[arg-type]
                 bg,
                 name,
                 _columns(msg, len(cvs)),
+                ds.name,
             )
+            extra = {"layout": dataclasses.asdict(layout)}
         else:
             cv = self.views.slots[view].cv
             assert cv is not None
@@ -161,8 +164,15 @@ class Tasks:
             budget = interactive_memory() if self.views.memory is None else self.views.memory
             cv = full_precision(cv, ds.series, eng, parse_memory(budget))
             key = save_chronovolume(self.downloads, cv, name)
+            extra = {}
         self._reply(
-            {"type": "download", "id": msg.get("id"), "url": f"/download/{key}", "filename": name}
+            {
+                "type": "download",
+                "id": msg.get("id"),
+                "url": f"/download/{key}",
+                "filename": name,
+                **extra,
+            }
         )
 
     def _movie(self, msg: dict, state: ViewState, ds: Dataset, sel: str) -> None:
@@ -177,7 +187,8 @@ class Tasks:
             self.views.full_resolution(range(len(shown.views)))
             cvs = [s.cv for s in self.views.slots[: len(shown.views)]]
             panels, *_ = on_gl(self._draw, cvs, shown, shown.size, bg)
-            return compose_image(panels, cvs, bg, _columns(msg, len(cvs)))  # type: ignore[arg-type]
+            columns = _columns(msg, len(cvs))
+            return compose_image(panels, cvs, bg, columns, ds.name)[0]  # type: ignore[arg-type]
 
         def progress(done: int, total: int) -> None:
             self._reply(

@@ -4,7 +4,11 @@
 // frame's `legends` (S.legends: per view, its window's step, rgb, a). Beside it, where the
 // data TF is coloured (a colour map), the data colour bar: the data TF's colours over the value
 // range the view used, with ticks in data units (each frame's `colorbars`, from
-// chronocl/render/colorbar.py). `L` or **legend** in the header shows or hides both.
+// chronocl/render/colorbar.py). A view whose mode colours by the fraction of the window's steps
+// (count: `Mode.legend` "fraction") gets its count bar there instead of the time legend, whose
+// step colours mean nothing in it: the data TF's colours and opacity from no step to every step
+// (each frame's `countbars`, from chronocl/viewer/frames.py), as the saved PNG draws it.
+// `L` or **legend** in the header shows or hides them.
 
 import { $ } from './state.js';
 
@@ -120,6 +124,8 @@ function draw(canvas, items) {
   ctx.fillStyle = '#9aa3ad';
   ctx.fillText('α', x0 - 1, Y(0.5));
   canvas.dataset.steps = items.map((it) => it.step).join(',');
+  canvas.dataset.kind = 'time';
+  delete canvas.dataset.bar;
 }
 
 // A canvas sized to its CSS box in device pixels, cleared, with the legends' dark backdrop.
@@ -196,10 +202,76 @@ function drawColourBar(canvas, bar) {
   canvas.dataset.bar = `${x0},${x1},${(y + bottom) / 2}`;
 }
 
-// Every view's legend and colour bar, for the frame shown.
+// The count bar `bar` ({steps, ends: [none, all], colors, alpha}): what a count view's colour
+// and opacity mean. The ends' names over the bar, the steps' number between them, the colours
+// (weighted by opacity, as the saved PNG's) under the opacity curve α, and ticks at fractions
+// of the steps that fit: quarters, halves or the ends.
+function drawCountBar(canvas, bar) {
+  canvas.hidden = !legendOn.shown;
+  if (canvas.hidden) return;
+  const [ctx, w] = backdrop(canvas);
+  const x0 = PAD;
+  const x1 = w - PAD;
+  const barY = TOP + CURVE_H + 3;
+  const n = bar.colors.length;
+  const X = (f) => x0 + f * (x1 - x0);
+  const grad = ctx.createLinearGradient(x0, 0, x1, 0);
+  bar.colors.forEach((c, k) => grad.addColorStop(k / Math.max(1, n - 1), c));
+  ctx.fillStyle = grad;
+  ctx.fillRect(x0, barY, x1 - x0, BAR_H);
+  const Y = (a) => TOP + 11 + (1 - a) * (CURVE_H - 13);
+  ctx.beginPath();
+  bar.alpha.forEach((a, k) => {
+    const f = k / Math.max(1, bar.alpha.length - 1);
+    if (k) ctx.lineTo(X(f), Y(a));
+    else ctx.moveTo(X(f), Y(a));
+  });
+  ctx.strokeStyle = '#f0a030';
+  ctx.lineWidth = 1.4;
+  ctx.stroke();
+  ctx.font = '10px system-ui, sans-serif';
+  ctx.textBaseline = 'top';
+  ctx.fillStyle = '#9aa3ad';
+  ctx.textAlign = 'left';
+  ctx.fillText(bar.ends[0], x0, TOP - 2);
+  ctx.textAlign = 'right';
+  ctx.fillText(bar.ends[1], x1, TOP - 2);
+  ctx.textAlign = 'center';
+  ctx.fillText(`of ${bar.steps} step${bar.steps === 1 ? '' : 's'}`, (x0 + x1) / 2, TOP - 2);
+  ctx.textAlign = 'right';
+  ctx.textBaseline = 'middle';
+  ctx.fillText('α', x0 - 1, Y(0.5));
+  let fractions = [0, 1];
+  for (const fs of [[0, 0.25, 0.5, 0.75, 1], [0, 0.5, 1]]) {
+    if (ctx.measureText('100%').width + 6 <= (x1 - x0) / (fs.length - 1)) {
+      fractions = fs;
+      break;
+    }
+  }
+  ctx.fillStyle = '#e6e6e6';
+  ctx.textBaseline = 'top';
+  ctx.textAlign = 'center';
+  const ticks = fractions.map((f) => `${Math.round(100 * f)}%`);
+  fractions.forEach((f, k) => {
+    const tw = ctx.measureText(ticks[k]).width;
+    const x = Math.max(x0 + tw / 2 - PAD / 2, Math.min(x1 - tw / 2 + PAD / 2, X(f)));
+    ctx.fillText(ticks[k], x, barY + BAR_H + 2);
+  });
+  // For scripted use (the tests): what the legend shows, its ticks and where the bar lies.
+  canvas.dataset.kind = 'fraction';
+  canvas.dataset.ticks = ticks.join(',');
+  canvas.dataset.steps = '';
+  canvas.dataset.bar = `${x0},${x1},${barY + BAR_H / 2}`;
+}
+
+// Every view's legend (its time legend, or a count view's count bar) and data colour bar, for
+// the frame shown.
 export function drawLegends() {
   document.querySelectorAll('#views .view').forEach((view, i) => {
-    draw(view.querySelector('canvas.legend'), (S.legends && S.legends[i]) || S.legend || []);
+    const legend = view.querySelector('canvas.legend');
+    const count = S.countbars && S.countbars[i];
+    if (count) drawCountBar(legend, count);
+    else draw(legend, (S.legends && S.legends[i]) || S.legend || []);
     const bar = view.querySelector('canvas.colorbar');
     if (bar) drawColourBar(bar, S.colorbars ? S.colorbars[i] : null);
   });

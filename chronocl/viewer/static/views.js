@@ -314,6 +314,7 @@ export function onFrame(buf) {
   S.legend = header.legend || [];
   S.legends = header.legends || null; // each view's, where views have their own windows
   S.colorbars = header.colorbars || null; // each view's data colour bar, null where TF is white
+  S.countbars = header.countbars || null; // a count view's bar, in place of its time legend
   S.focus = header.focus || null;
   drawLegends();
   const now = performance.now();
