@@ -2,9 +2,9 @@
 private names borrowed or reached into from another module (the rules: tests/layer_rules.py).
 
 Layers, lowest first (docs/architecture.md): core <- modes <- data <- engine <- integration
-<- render <- viewer <- report <- the command line (cli, demo, the package's face). Each rule runs on
-chronocl and on a known-bad fixture package, which it must reject at the named lines (a
-broken parser would otherwise pass everything).
+<- events <- render <- viewer <- report <- the command line (cli, demo, the package's face).
+Each rule runs on chronocl and on a known-bad fixture package, which it must reject at the
+named lines (a broken parser would otherwise pass everything).
 """
 
 from __future__ import annotations

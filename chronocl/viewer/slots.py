@@ -31,7 +31,8 @@ class ViewSlot:
     uploaded: Chronovolume | None = None
     written: Chronovolume | None = None  # whose RGBA `volume`'s texture holds (slab_upload)
     staging: np.ndarray | None = None  # the texture data's host buffer, reused frame to frame
-    recolour: object | None = None  # the window's winners on the GPU (viewer/recolouring.py)
+    # the window's winners where it recolours: GPU textures, or on the OpenCL device (llvmpipe)
+    recolour: object | None = None  # (viewer/recolouring.py `Prepared`)
     why_not_recoloured: str | None = None  # the last frame's edit integrated: why (one line)
     # Textures of other shapes or formats, kept for reuse: frames alternate between a coarse
     # level and full resolution, and allocating a 512^3 texture costs about a second here.

@@ -1,7 +1,8 @@
 """The views of one client: a slot per panel (its integration session, chronovolume and texture)
 over one data set. The panels' sessions share the data set's resident steps (one window manager
 per level and pooling; in a server, shared by every client: `SharedSteps`) and integrate only
-what changed: a slide of the window goes through `Session.show`, which updates incrementally;
+what changed: a slide of the window goes through `Session.show`, which integrates the new
+window from resident steps (incrementally only past `DIRECT_BELOW_MS`: `slider.slide_plan`);
 a camera change integrates nothing (silhouettes aside).
 
 OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared).

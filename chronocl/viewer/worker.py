@@ -6,7 +6,8 @@ thread that makes frames from it. Updates are merged into the desired state at o
 "latest pending request" slot filled; the worker always renders the newest state, so input
 that arrives while a frame is being made replaces older pending input instead of queueing
 behind it. The views' sessions and textures (`view_sessions.Views`) integrate only what
-changed, so a camera change only re-renders and a window slide updates incrementally.
+changed, so a camera change only re-renders and a window slide integrates only the new
+window (from steps already resident; incrementally where that pays: `Session`).
 Probe and save requests (`tasks.Tasks`) wait in a short queue behind the newest frame;
 histogram and fit requests run on the client's side thread (`side_work.SideWork`), so they
 never delay a frame. The camera frames the visible region found at a data set's first frame
