@@ -669,3 +669,28 @@ def test_a_reloaded_page_s_first_frame_waits_for_the_old_socket_to_let_go(server
         assert not worker._leaving
     finally:
         new.close()
+
+
+def test_a_client_that_left_and_stays_busy_stalls_the_others_once(server, monkeypatch):
+    """A client that left but is still busy (a long movie) holds its frames: the others' frames
+    wait for it only until LEFT_WAIT_S after it left, then come, and every later frame at once."""
+    from chronocl.viewer import worker
+
+    monkeypatch.setattr(worker, "LEFT_WAIT_S", 1.0)
+    busy = object()  # a worker closed whose thread has not let go (never will, here)
+    with worker._left:
+        worker._leaving[busy] = time.monotonic()
+    c = Client(server)
+    try:
+        t = time.monotonic()
+        c.open(0)
+        first = time.monotonic() - t
+        t = time.monotonic()
+        rid = c.send({"type": "update", "views": [{"mode": "max"}]})
+        c.frame_for(rid)
+        second = time.monotonic() - t
+        assert 0.5 <= first < 20 and second < 0.9, (first, second)
+    finally:
+        with worker._left:
+            worker._leaving.pop(busy, None)
+        c.close()

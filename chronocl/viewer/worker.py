@@ -66,10 +66,11 @@ REFINE_AFTER_S = 0.25  # after a drag's coarse frame; an edit's end refines at o
 # After a sharp frame of a mode that recolours, this long without input: its winners are
 # gathered, so that the first TF edit only recolours (new input gives the gather up).
 PREPARE_AFTER_S = 0.3
-# A frame waits this long at most for clients that left to let go of their frames (a page
-# reloaded: the old socket's frames, 2 GB at 512^3 in max, and the new ones held at once).
+# A frame waits for a client that left to let go of its frames (a page reloaded: the old
+# socket's frames, 2 GB at 512^3 in max, and the new ones held at once) until this long after
+# it left, at most: one still busy (a movie) stalls the others' frames once, not each.
 LEFT_WAIT_S = 30.0
-_leaving: set = set()  # workers closed whose views are not released yet
+_leaving: dict = {}  # workers closed whose views are not released yet: when they left
 _left = threading.Condition()
 
 
@@ -213,12 +214,13 @@ class ClientWorker(Tasks):
             return self._pending is not None or self._cancelled or self._closed
 
     def close(self) -> None:
-        with _left:
-            if not self._released:  # (a thread that ended on its own let go already)
-                _leaving.add(self)
         with self._cond:
             self._closed = True
             self._cond.notify()
+        with _left:
+            if not self._released:  # (a thread that ended on its own let go already)
+                _leaving.setdefault(self, time.monotonic())
+            _left.notify_all()  # its own frame waiting on others is not wanted any more
         self.side.close()
 
     # -- the thread ----------------------------------------------------------------------
@@ -234,7 +236,7 @@ class ClientWorker(Tasks):
                 error_text(exc, "releasing a client's views")
             with _left:
                 self._released = True
-                _leaving.discard(self)
+                _leaving.pop(self, None)
                 _left.notify_all()
 
     def _loop(self) -> None:
@@ -317,7 +319,10 @@ class ClientWorker(Tasks):
     def _render(self, state: ViewState, rid: int | None) -> None:
         t_start = time.perf_counter()
         with _left:  # a client that left lets go of its frames before this one makes more
-            _left.wait_for(lambda: not _leaving - {self}, LEFT_WAIT_S)
+            while not self._closed and (wait := self._left_wait()) > 0:
+                _left.wait(wait)
+        if self._closed:
+            return  # nobody will see it
         cvs, integrate_ms, incremental = self.views.chronovolumes(state)
         try:
             self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
@@ -335,6 +340,12 @@ class ClientWorker(Tasks):
             device = self.views.recolouring.device
             if self.side.submit(("warm", dtype), lambda: warm_kernels(dtype, device)):
                 self._warmed.add(dtype)
+
+    def _left_wait(self) -> float:
+        """Seconds this frame may still wait for the clients that left (`_left` held)."""
+        now = time.monotonic()
+        ends = [t + LEFT_WAIT_S - now for w, t in _leaving.items() if w is not self]
+        return max(ends, default=0.0)
 
     def _memory_after(self) -> None:
         """The frame's memory noted for the process's limit; a line in the log when over it."""
