@@ -680,6 +680,10 @@ def test_a_render_draws_each_marker_where_the_camera_sees_it():
     assert (marked == MARKER_RGB).all(axis=-1).any()
     behind = chronocl.render(cv, camera, (200, 160), markers=[((0.5, 0.5, 40.0), "far")])
     np.testing.assert_array_equal(np.asarray(behind.array), plain)
+    both = [((0.5, 0.5, 40.0), "far"), ((0.5, 0.5, 0.5), "merge 3")]  # one behind: the other
+    np.testing.assert_array_equal(
+        np.asarray(chronocl.render(cv, camera, (200, 160), markers=both).array), marked
+    )
 
 
 def test_cli_render_marks_the_window_s_events(store, tmp_path):
@@ -692,6 +696,18 @@ def test_cli_render_marks_the_window_s_events(store, tmp_path):
     assert result.returncode == 0, result.stderr
     with Image.open(plain) as p, Image.open(marked) as m:
         assert p.size == m.size and np.asarray(p).tolist() != np.asarray(m).tolist()
-    bad = cli(*base, "-o", tmp_path / "x.png", "--events", tmp_path / "missing.json")
-    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
-    assert not (tmp_path / "x.png").exists()
+    broken = json.loads(out.read_text())
+    for e in broken["events"]:
+        e.pop("step")
+    (tmp_path / "broken.json").write_text(json.dumps(broken))
+    other = json.loads(out.read_text())
+    other["meta"]["volume_shape_zyx"] = [9, 9, 9]
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    for events, needle in (
+        ("missing.json", "does not exist"),
+        ("broken.json", "not an events file"),
+        ("other.json", "9x9x9 volume"),
+    ):
+        bad = cli(*base, "-o", tmp_path / "x.png", "--events", tmp_path / events)
+        assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+        assert needle in bad.stderr and not (tmp_path / "x.png").exists()

@@ -203,3 +203,5 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
         render_state(tmp_path / "old.json", {})
     with pytest.raises(ChronoclError, match="--turntable does not combine with --state"):
         render_state(path, {"turntable": tmp_path / "t.gif"})
+    with pytest.raises(ChronoclError, match="--events does not combine with --state"):
+        render_state(path, {"events": tmp_path / "e.json"})

@@ -251,6 +251,8 @@ def render(
         check_target(path, overwrite, [local_input(store), tf])
     graph = None if events is None else load_events(events)  # one line if it is not one
     series = open_series(store, storage_options=storage_options)
+    if graph is not None:
+        check_events(graph, events, series)
     names = [n.strip() for item in variables or [] for n in item.split(",") if n.strip()]
     if names and (turntable is not None or saves):
         raise InvalidParameterError(
@@ -333,3 +335,24 @@ def chronovolume_paths(path: Path | None, modes: list[str]) -> list[Path]:
     suffix = ".ome.zarr" if name.lower().endswith(".ome.zarr") else path.suffix
     stem = name[: len(name) - len(suffix)] if suffix else name
     return [path.with_name(f"{stem}-{m}{suffix}") for m in modes]
+
+
+def check_events(graph, path: Path, series) -> None:
+    """One line, before any work, where the events file cannot mark this store's pictures: its
+    records are not an events file's, or its features lie in a volume of another shape."""
+    from chronocl.core.errors import InvalidDataError
+
+    try:
+        graph.markers()
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise InvalidDataError(
+            f"{str(path)!r} is not an events file chronocl can read ({type(exc).__name__}: "
+            f"{exc}); write it with chronocl events"
+        ) from None
+    shape = graph.meta.get("volume_shape_zyx")
+    if shape is not None and list(shape) != list(series.volume_shape):
+        raise InvalidParameterError(
+            f"{str(path)!r} holds events of a {'x'.join(map(str, shape[::-1]))} volume, the "
+            f"store's is {'x'.join(map(str, series.volume_shape[::-1]))}; give the events "
+            "chronocl events found in this store"
+        )

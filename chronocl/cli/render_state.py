@@ -20,6 +20,7 @@ NOT_WITH_STATE = (
     "device_format",
     "frames",
     "variables",
+    "events",
 )
 
 

@@ -102,18 +102,18 @@ class EventGraph:
         `markers=`): where each happened, as (x, y, z) fractions of the volume's box, and a
         label ("merge 12": the kind and the step it happened at). A birth, entry, merge, split
         or merge-split is placed at its new features' centroid (size-weighted), a death or exit
-        at the last centroid of those that went. `steps`: only events both of whose steps are
-        among them (e.g. a rendered window's), else all."""
+        at the last centroid of those that went. `steps`: only events within their span (e.g.
+        a rendered window's, any stride), else all."""
         shape = self.meta.get("volume_shape_zyx")
         if not shape:
             return []
         at = {(f["step"], f["id"]): f for f in self.features}
-        keep = None if steps is None else {int(s) for s in steps}
+        span = None if steps is None else (min(steps), max(steps))
         out = []
         for e in self.events:
             if e["kind"] == "continuation":
                 continue
-            if keep is not None and not {e["step"], e["next_step"]} <= keep:
+            if span is not None and not span[0] <= e["step"] < e["next_step"] <= span[1]:
                 continue
             step, ids = (
                 (e["next_step"], e["targets"]) if e["targets"] else (e["step"], e["sources"])

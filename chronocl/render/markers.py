@@ -39,15 +39,17 @@ def draw_markers(
     h, w, _ = panel.shape
     extent = world_extent(cv.shape, cv.spacing)
     fractions = np.asarray([m[0] for m in markers], dtype=np.float64).reshape(-1, 3)
-    at = to_panel(camera, extent, (w, h), (fractions - 0.5) * extent)
-    if at is None:
-        return panel
+    world = (fractions - 0.5) * extent
+    at = [to_panel(camera, extent, (w, h), p[None]) for p in world]  # None: behind the camera
     image = PILImage.fromarray(panel)
     draw = ImageDraw.Draw(image)
     radius = max(MIN_RING, round(RING_FRACTION * min(w, h)))
     font = label_font(max(10, radius * 2))
     placed: list[tuple[float, float, float, float]] = []  # labels drawn: none overlaps
-    for (x, y), (_, label) in zip(at, markers, strict=True):
+    for point, (_, label) in zip(at, markers, strict=True):
+        if point is None:
+            continue
+        x, y = point[0]
         if not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
             continue
         px, py = x * w, y * h
