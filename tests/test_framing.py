@@ -13,7 +13,8 @@ import chronocl
 from chronocl import Camera, render
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.render.framing import framed, visible_box, world_extent
+from chronocl.render.camera import world_extent
+from chronocl.render.framing import framed, visible_box
 
 SIZE = (96, 96)
 
@@ -68,7 +69,7 @@ def test_the_visible_region_fills_the_image_the_box_does_not(plume_cv):
 @pytest.mark.parametrize("projection", ["perspective", "orthographic"])
 def test_the_camera_orbits_about_the_visible_centre(plume_cv, projection):
     box = visible_box(plume_cv)
-    extent = world_extent(plume_cv.shape, plume_cv.spacing_zyx)
+    extent = world_extent(plume_cv.shape, plume_cv.spacing)
     assert box is not None and (box[3:] - box[:3] < 0.5 * extent).all()  # small, off-centre
     centre = np.append((box[:3] + box[3:]) / 2, 1.0)
     for azimuth, elevation in ((0, 0), (75, 30), (200, -40), (330, 85)):

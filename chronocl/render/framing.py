@@ -17,18 +17,10 @@ from dataclasses import replace
 import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.render.camera import Camera
+from chronocl.render.camera import Camera, world_extent
 
 VISIBLE_ALPHA = 0.02  # a voxel more opaque than this counts as visible
 SAMPLE_VOXELS = 2**21  # larger volumes are sampled with a stride (128^3 voxels read at most)
-
-
-def world_extent(shape: Sequence[int], spacing_zyx: Sequence[float]) -> np.ndarray:
-    """World size (x, y, z) of a (Z, Y, X) volume with spacing (dz, dy, dx): longest side 1."""
-    nz, ny, nx = shape
-    dz, dy, dx = spacing_zyx
-    physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
-    return physical / physical.max()
 
 
 def visible_box(cv: Chronovolume, threshold: float = VISIBLE_ALPHA) -> np.ndarray | None:
@@ -49,7 +41,7 @@ def visible_box(cv: Chronovolume, threshold: float = VISIBLE_ALPHA) -> np.ndarra
         idx = np.flatnonzero(seen.any(axis=others))
         lo.append(max(int(idx[0]) * stride - (stride - 1), 0))
         hi.append(min(int(idx[-1]) * stride + stride, n))
-    extent = world_extent(alpha.shape, cv.spacing_zyx)
+    extent = world_extent(alpha.shape, cv.spacing)
     voxel = extent / np.array(alpha.shape[::-1], dtype=np.float64)
     return np.concatenate([-extent / 2 + np.array(lo) * voxel, -extent / 2 + np.array(hi) * voxel])
 
@@ -72,7 +64,7 @@ def framed(camera: Camera, chronovolumes: Sequence[Chronovolume]) -> Camera:
     box = union_box(chronovolumes)
     if box is None:
         return camera
-    half = world_extent(chronovolumes[0].shape, chronovolumes[0].spacing_zyx) / 2
+    half = world_extent(chronovolumes[0].shape, chronovolumes[0].spacing) / 2
     if np.allclose(box[:3], -half) and np.allclose(box[3:], half):
         return camera  # the whole box: exactly the box's framing
     return replace(camera, focus=tuple(float(v) for v in box))

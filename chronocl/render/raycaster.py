@@ -20,7 +20,7 @@ import numpy as np
 from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render import brick_grid
-from chronocl.render.camera import Camera
+from chronocl.render.camera import Camera, world_extent
 from chronocl.render.gl import gl_context, program
 from chronocl.render.shading import OFF, Shading
 from chronocl.render.upload import FORMATS, convert, occupancy
@@ -96,9 +96,7 @@ class Raycaster:
             )
         )
         tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-        dx, dy, dz = cv.spacing
-        physical = np.array([nx * dx, ny * dy, nz * dz], dtype=np.float64)
-        extent = physical / physical.max()
+        extent = world_extent((nz, ny, nx), cv.spacing)
         voxel = extent / np.array([nx, ny, nz])
         unit = float(np.min(voxel))
         bricks = brick_grid.texture(self.ctx, brick_grid.from_rgba(data))

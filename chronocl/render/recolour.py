@@ -23,6 +23,7 @@ import numpy as np
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
+from chronocl.render.camera import world_extent
 from chronocl.render.gl import shader_source
 from chronocl.render.raycaster import Volume
 from chronocl.render.upload import display_format
@@ -198,8 +199,7 @@ class Recolourer:
 
 def volume_geometry(dims, spacing) -> tuple[np.ndarray, np.ndarray]:
     """World extent (longest side 1) and voxel size, as `Raycaster.upload` lays them out."""
-    physical = np.array(dims, dtype=np.float64) * np.array(spacing, dtype=np.float64)
-    extent = physical / physical.max()
+    extent = world_extent(tuple(dims)[::-1], spacing)
     return extent, extent / np.array(dims, dtype=np.float64)
 
 
