@@ -150,6 +150,18 @@ def render(
             help="Mark the window's events (from `chronocl events`) where they happened.",
         ),
     ] = None,
+    colour: Annotated[
+        str,
+        typer.Option(
+            "--colour",
+            "--color",
+            metavar="tf|track|track-time",
+            help="What colours the voxels: tf (the transfer functions, as the mode applies "
+            "them), track (each voxel the colour of the --events track that reached it, one "
+            "colour per track) or track-time (that track's time colour where it first shows); "
+            "track colours need a winner mode (first_hit, max, min, change).",
+        ),
+    ] = "tf",
     anon: AnonOpt = False,
     storage_option: StorageOpt = None,
 ) -> None:
@@ -166,6 +178,8 @@ def render(
       chronocl render jet.zarr -o trio.png --mode alpha,additive,max --window 0:30:14
 
       chronocl render vortex.zarr -o marked.png --mode max --events events.json
+
+      chronocl render vortex.zarr -o tracks.png --mode max --events events.json --colour track
 
       chronocl render vortex.zarr -o cut.png --clip 1,0,0,0 --azimuth 60 --zoom 1.4
 
@@ -220,6 +234,7 @@ def render(
     if len(set(modes)) < len(modes):
         twice = next(m for m in modes if modes.count(m) > 1)
         raise InvalidParameterError(f"--mode {twice} is given twice; name each mode once")
+    track_by = check_track_colour(colour, modes, events, variables, level)
     check_engine(engine)
     check_format_name(device_format)
     camera = Camera(
@@ -271,6 +286,12 @@ def render(
             jobs.append(job)
     if azimuth is None and elevation is None:  # the default view: from the first steps' side
         camera = series_early_side(picked[0], job.selection, jobs[0].value_range, camera)
+    tracks = None
+    if track_by is not None:  # the events cover the window: checked before any step is read
+        from chronocl.events.colour import TrackColour, check_steps
+
+        check_steps(graph, jobs[0].selection.steps, series.volume_shape)
+        tracks = TrackColour(graph, series, track_by)
     if device_format != "auto":  # over each level's value range, which it quantises
         for job in jobs:
             job = at_level(job, level)
@@ -298,10 +319,13 @@ def render(
         ),
         level=level,
         device_format=device_format,
+        tracks=tracks,
     )
 
     t0 = time.perf_counter()
     cvs = [cv for one in picked for cv in replace(views, series=one).integrate(camera)]
+    if tracks is not None:
+        note_untracked(cvs)
     image = None
     if names:  # one panel per variable and mode, one camera, each captioned with its variable
         captions = [
@@ -323,6 +347,53 @@ def render(
     if turntable is not None:
         views.turntable(cvs, camera, turntable, frames, overwrite=overwrite, progress=True)
         err.print(f"wrote {turntable} ({frames} frames)")
+
+
+def check_track_colour(colour, modes, events, variables, level) -> str | None:
+    """The track colouring --colour asks for ("id", "time"; None: the TFs'), or one line where
+    it cannot be: a mode without a winning step per voxel, no --events, several variables or a
+    coarse level (the events label the series' own steps)."""
+    from chronocl.events.colour import check_mode, parse_colouring
+
+    by = parse_colouring(colour)
+    if by is None:
+        return None
+    for m in modes:
+        check_mode(m)
+    if events is None:
+        raise InvalidParameterError(
+            f"--colour {colour} colours by the tracks of --events EVENTS.json; find them with "
+            "chronocl events STORE --window ... -o EVENTS.json"
+        )
+    if variables:
+        raise InvalidParameterError(
+            f"--colour {colour} draws the tracks of one variable; leave out --variables"
+        )
+    if level != 0:
+        raise InvalidParameterError(
+            f"--colour {colour} labels the series' own steps (level 0), as chronocl events "
+            "did; leave out --level"
+        )
+    return by
+
+
+UNTRACKED_NOTE = 0.25  # of a panel's opacity left transparent by --colour track: say so
+
+
+def note_untracked(cvs) -> None:
+    """A note for each track-coloured panel that lost much of its opacity: voxels outside every
+    feature at their winning step are transparent (`chronocl.events.colour`)."""
+    from chronocl.events.colour import META_KEY
+
+    for cv in cvs:
+        share = cv.metadata.get(META_KEY, {}).get("untracked_opacity", 0.0)
+        if share > UNTRACKED_NOTE:
+            mode = cv.metadata.get("spec", {}).get("mode", "?")
+            err.print(
+                f"note: {mode}: {share:.0%} of its opacity lies in no feature at the voxel's "
+                "winning step (under the events' threshold) and is left transparent; events "
+                "found at a lower threshold, or with this render's TF and threshold, keep more"
+            )
 
 
 def chronovolume_paths(path: Path | None, modes: list[str]) -> list[Path]:

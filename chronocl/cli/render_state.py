@@ -21,6 +21,7 @@ NOT_WITH_STATE = (
     "frames",
     "variables",
     "events",
+    "colour",
 )
 
 

@@ -52,7 +52,6 @@ def mask_text(mask: dict) -> str:
 
 def figure(graph: Drawn, title: str | None = None):
     """The picture as a matplotlib Figure (the module's docstring)."""
-    from matplotlib import colormaps
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
@@ -70,11 +69,12 @@ def figure(graph: Drawn, title: str | None = None):
         for f in sorted(fs, key=lambda f: (f["track"], f["id"])):
             box[step, f["id"]] = (y, f["size"])
             y += f["size"] + gap
-    # tab10's ten hues, then tab20's lighter ten: neighbouring tracks never share a hue
-    palette = [*colormaps["tab10"].colors, *colormaps["tab20"].colors[1::2]]
+    # tab10's ten hues, then tab20's lighter ten: neighbouring tracks never share a hue; a
+    # track has the colour a track-coloured render gives it (chronocl.events.palette)
+    from chronocl.events.palette import track_rgb
 
     def colour(track: int):
-        return palette[track % len(palette)]
+        return track_rgb(track)
 
     width = min(16.0, max(7.0, 0.5 * len(steps) + 4.0))
     fig = Figure(figsize=(width, 6.0), dpi=100, layout="constrained")

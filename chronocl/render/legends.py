@@ -29,7 +29,11 @@ TIME_SHARE = 0.55  # of a shared band's width, the time legend's
 
 def legend_band(draw, cv, bar, box, beside, font, text_rgb, time_labels="labels") -> None:
     """The band under a panel: the time legend of `cv`, and its data colour bar `bar` (None:
-    none) beside it or under it."""
+    none) beside it or under it; a chronovolume coloured by track shows its tracks instead
+    (`track_legend`)."""
+    if TRACK_KEY in cv.metadata:
+        track_legend(draw, cv, box, beside, font, text_rgb, time_labels)
+        return
     if bar is None:
         time_legend(draw, cv, box, font, text_rgb, time_labels)
         return
@@ -38,6 +42,74 @@ def legend_band(draw, cv, bar, box, beside, font, text_rgb, time_labels="labels"
     # Under the time legend, the colour bar starts where the time bar does.
     title_w = 0 if beside else draw.textlength("oldest", font=font)
     draw_colour_bar(draw, bar, bar_box, font, text_rgb, title_w)
+
+
+TRACK_KEY = "track_colour"  # chronocl.events.colour.META_KEY: a chronovolume coloured by track
+
+
+def two_part_legend(cv: Chronovolume, bar) -> bool:
+    """Whether the legend of `cv` has two parts (time and colour bar, or tracks and time)."""
+    tracks = cv.metadata.get(TRACK_KEY)
+    return tracks.get("by") == "time" if tracks else bar is not None
+
+
+def track_legend(draw, cv, box, beside, font, text_rgb, time_labels="labels") -> None:
+    """The tracks a chronovolume coloured by track shows: a swatch of each one's colour with its
+    id ("tracks"), and, coloured by the time a track first shows, the time legend beside or
+    under them, which says when each colour is."""
+    tracks = cv.metadata[TRACK_KEY]
+    if tracks.get("by") == "time":
+        time_box, box = split_legend(box, beside)
+        time_legend(draw, cv, time_box, font, text_rgb, time_labels)
+    track_swatches(draw, tracks.get("tracks", []), box, font, text_rgb)
+
+
+def track_swatches(draw, tracks: list[dict], box, font, text_rgb) -> list[int]:
+    """A swatch and the id of each track of `tracks` (records with id, rgb, voxels), in id
+    order, on as many lines as `box` holds; where they do not all fit, those with the most
+    voxels, and "+N more". Returns the ids drawn."""
+    x0, y0, width, height = box
+    title = "tracks" if tracks else "no tracks"
+    draw.text((x0, y0 + 1), title, fill=text_rgb, font=font)
+    top, bottom = font.getbbox("Ag")[1::2]
+    line = int(bottom - top) + 6
+    side = max(6, line - 6)
+    start = x0 + int(draw.textlength("tracks", font=font)) + 10
+    lines = max(1, (height + 4) // line)
+
+    def widths(ids: list[int]) -> list[float]:
+        return [side + 4 + draw.textlength(str(k), font=font) + 10 for k in ids]
+
+    def fits(ids: list[int], more: int) -> bool:
+        tail = draw.textlength(f"+{more} more", font=font) if more else 0
+        used, row = 0.0, 0
+        for w in [*widths(ids), tail]:
+            if used and start + used + w > x0 + width:
+                row, used = row + 1, 0.0
+            used += w
+        return row < lines
+
+    by_size = sorted(tracks, key=lambda t: (-t.get("voxels", 0), t["id"]))
+    n = len(by_size)
+    while n > 0 and not fits(sorted(t["id"] for t in by_size[:n]), len(tracks) - n):
+        n -= 1
+    shown = sorted(by_size[:n], key=lambda t: t["id"])
+    x, y = start, y0
+    for t in shown:
+        label = str(t["id"])
+        w = side + 4 + draw.textlength(label, font=font) + 10
+        if x > start and x + w > x0 + width:
+            x, y = start, y + line
+        colour = tuple(round(min(max(c, 0.0), 1.0) * 255) for c in t["rgb"])
+        draw.rectangle((x, y + 2, x + side, y + 2 + side), fill=colour, outline=text_rgb)
+        draw.text((x + side + 4, y + 1), label, fill=text_rgb, font=font)
+        x += w
+    if n < len(tracks):
+        more = f"+{len(tracks) - n} more"
+        if x > start and x + draw.textlength(more, font=font) > x0 + width:
+            x, y = start, y + line
+        draw.text((x, y + 1), more, fill=text_rgb, font=font)
+    return [t["id"] for t in shown]
 
 
 def split_legend(box, beside: bool):

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from chronocl.render.colorbar import data_bar
-from chronocl.render.legends import BESIDE_MIN_DIGITS, legend_band
+from chronocl.render.legends import BESIDE_MIN_DIGITS, TRACK_KEY, legend_band, two_part_legend
 
 
 def label_font(size: int):
@@ -103,12 +103,14 @@ def compose(
     cap_h = caption_height(font, max(map(len, wrapped))) if wrapped else 0
     titled = wrap_text(measure, title, font, cols * w - 16) if title else []
     title_h = caption_height(font, len(titled)) if titled else 0
-    bars = [data_bar(cv) for cv in legend_of] if legend_of else []
+    # a chronovolume coloured by track shows its tracks, not its data TF's colours
+    bars = [None if TRACK_KEY in cv.metadata else data_bar(cv) for cv in legend_of or []]
     # A data colour bar sits beside the time legend where the band is wide enough for both
     # to show several ticks, else under it (the band twice as tall).
     beside = w - 16 >= measure.textlength("0" * BESIDE_MIN_DIGITS, font=font)
     legend_h = max(36, h // 8) if legend_of else 0
-    if any(bars) and not beside:
+    two = [two_part_legend(cv, bar) for cv, bar in zip(legend_of or [], bars, strict=True)]
+    if any(two) and not beside:
         legend_h *= 2
     cell_h = cap_h + h + legend_h
     size = (cols * w, title_h + rows * cell_h)

@@ -71,6 +71,8 @@ class ModeViews:
     draw_args: Mapping[str, object] = field(default_factory=dict)
     level: int = 0  # a coarse level of the series (docs/levels.md)
     device_format: str = "auto"  # what bricks travel to the device in (engine.device_formats)
+    # a `chronocl.events.colour.TrackColour`: each integrated chronovolume coloured by track
+    tracks: object = None
 
     @property
     def follows_camera(self) -> bool:
@@ -80,7 +82,8 @@ class ModeViews:
         return kind == "silhouette"
 
     def integrate(self, camera: Camera) -> list[Chronovolume]:
-        """The chronovolumes of every mode, a silhouette taken along `camera`'s view."""
+        """The chronovolumes of every mode, a silhouette taken along `camera`'s view (coloured
+        by track with `tracks`)."""
         args = dict(
             self.spec_args, engine=self.engine, device=self.device, device_format=self.device_format
         )
@@ -92,9 +95,8 @@ class ModeViews:
                 if isinstance(enhance, Enhance)
                 else Enhance(str(enhance), view=view)
             )
-        return [
-            integrate(self.series, self.window, m, level=self.level, **args) for m in self.modes
-        ]
+        cvs = [integrate(self.series, self.window, m, level=self.level, **args) for m in self.modes]
+        return cvs if self.tracks is None else self.tracks.apply(cvs)  # type: ignore[attr-defined]
 
     def draw(self, chronovolumes: Sequence[Chronovolume], camera: Camera, volumes=None) -> Image:
         """The parallel views of `chronovolumes` (`volumes`: them uploaded, if they are)."""

@@ -76,6 +76,8 @@ def render(
     shading: Shading | bool | None = None,
     time_labels: str = "labels",
     markers: Sequence[Marker] | None = None,
+    colour: str = "tf",
+    events: object = None,
 ) -> Image:
     """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`).
 
@@ -90,7 +92,11 @@ def render(
     `outline` draws the volume's box, `axes` the axis triad (x, y, z in red, green, blue) in
     the bottom-right corner; both off by default here (the command line draws both).
     `markers` ((x, y, z) fractions of the box, label) are drawn as labelled rings, e.g. a
-    window's events: `chronocl.events(...).markers()`."""
+    window's events: `chronocl.events(...).markers()`. `colour="track"` colours each voxel by
+    the track of `events` (an EventGraph of the window) that reached it, "track-time" by when
+    that track first shows, through the time TF, with a legend of the tracks: a winner mode
+    only (first_hit, max, min, change; `chronocl.events.colour`), its steps read again from
+    the store the chronovolume names; the default "tf" keeps the mode's colours."""
     return render_views(
         [chronovolume],
         camera,
@@ -107,6 +113,8 @@ def render(
         shading=shading,
         time_labels=time_labels,
         markers=markers,
+        colour=colour,
+        events=events,
     )
 
 
@@ -129,19 +137,25 @@ def render_views(
     shading: Shading | bool | None = None,
     time_labels: str = "labels",
     markers: Sequence[Marker] | None = None,
+    colour: str = "tf",
+    events: object = None,
 ) -> Image:
     """Parallel views: each chronovolume in its own panel of `size`, all under one camera.
 
     `volumes`, the chronovolumes already uploaded with `raycaster().upload` (and released by
     the caller), spare the upload when one set is rendered many times, e.g. a turntable.
-    `shading`, `outline`, `axes` and `markers` (in every panel): as in `render`.
+    `shading`, `outline`, `axes`, `markers` (in every panel) and `colour` with `events`: as
+    in `render` (uploaded `volumes` are drawn as they are: colour them before the upload).
     """
     if not chronovolumes:
         raise InvalidParameterError("nothing to render: give at least one chronovolume")
+    tracks = _track_colour(colour, events, chronovolumes, volumes)
     camera = camera or default_camera(chronovolumes[0])
     check_prefer(time_labels)
     if volumes is None:  # uploaded volumes are drawn as they are
         chronovolumes = following(chronovolumes, camera)
+        if tracks is not None:
+            chronovolumes = tracks.apply(chronovolumes)
     camera = framed(camera, chronovolumes)
     w, h = check_size(size)
     bg = parse_color(background)
@@ -176,6 +190,31 @@ def render_views(
     return Image(compose_panels(panels, labels, legend_of, columns, bg, time_labels))
 
 
+def _track_colour(colour, events, chronovolumes, volumes):
+    """The track colouring `colour` asks for (None: the mode's own colours), every chronovolume
+    checked for it before any work (`chronocl.events.colour`)."""
+    from chronocl.events.colour import TrackColour, is_track_coloured, parse_colouring
+
+    by = parse_colouring(colour)
+    if by is None:
+        if events is not None:
+            raise InvalidParameterError(
+                "events= colours the voxels by track with colour='track' (or 'track-time'); "
+                "to mark the events, give markers=graph.markers() instead"
+            )
+        return None
+    if volumes is not None:
+        raise InvalidParameterError(
+            "uploaded volumes are drawn as they are: colour the chronovolumes by track before "
+            "uploading them (chronocl.events.colour.track_colour)"
+        )
+    tracks = TrackColour(events, by=by)
+    for cv in chronovolumes:
+        if not is_track_coloured(cv):
+            tracks.check(cv)
+    return tracks
+
+
 def describe(cv: Chronovolume, time_labels: str = "labels") -> str:
     """Panel label: mode, order and window, e.g. 'alpha, forward, steps 0:20:9', or with
     time labels 'alpha, forward, 2024-01-01 06:00 .. 18:00 (3 steps)'."""
@@ -193,6 +232,9 @@ def describe(cv: Chronovolume, time_labels: str = "labels") -> str:
     enhance = spec.get("enhance", {}).get("kind", "none")
     if enhance != "none":
         extra = f", {enhance}"
+    tracks = cv.metadata.get("track_colour")
+    if tracks:
+        extra += ", tracks by " + ("time first shown" if tracks.get("by") == "time" else "id")
     return f"{spec.get('mode', '?')}, {order}, {steps}{extra}"
 
 
