@@ -6,8 +6,9 @@ BIN := $(VENV)/bin
 .PHONY: demo test test-full test-newest lint format bench clean system
 
 # The runtime alone (a user's `pip install .`) for the demo; the dev extras (pytest, hypothesis,
-# ruff, vtk, playwright) and the optional `events` extra (feature tracking, whose tests need it)
-# for the tests. A venv with the dev extras has the runtime too.
+# ruff, vtk, playwright, jupyterlab) and the optional `events` (feature tracking) and `notebook`
+# (the notebook widget) extras, whose tests need them, for the tests. A venv with the dev extras
+# has the runtime too.
 RUNTIME := $(VENV)/.runtime
 DEV := $(VENV)/.dev
 # The second interpreter: CPython 3.13 built from Debian's source package (.ci/newest-python)
@@ -47,7 +48,7 @@ $(RUNTIME): pyproject.toml | system
 $(DEV): pyproject.toml | system
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[dev,events]' $(if $(CONSTRAINTS),-c $(CONSTRAINTS))
+	$(BIN)/python -m pip install -q -e '.[dev,events,notebook]' $(if $(CONSTRAINTS),-c $(CONSTRAINTS))
 	touch $(RUNTIME) $(DEV)
 
 demo: $(RUNTIME)
@@ -78,7 +79,7 @@ test-newest:
 	if ! grep -qx "home = $$(dirname "$$py")" $(NEWEST)/pyvenv.cfg 2>/dev/null; then \
 		"$$py" -m venv --clear $(NEWEST); fi && \
 	$(NEWEST)/bin/python -m pip install -q --upgrade pip && \
-	$(NEWEST)/bin/python -m pip install -q --upgrade --upgrade-strategy eager -e '.[dev,events]' && \
+	$(NEWEST)/bin/python -m pip install -q --upgrade --upgrade-strategy eager -e '.[dev,events,notebook]' && \
 	touch $(NEWEST)/.runtime $(NEWEST)/.dev
 	@$(NEWEST)/bin/python -c 'import sys; from importlib.metadata import version as v; \
 		print("Python", sys.version.split()[0], "with", ", ".join(f"{p} {v(p)}" for p in \

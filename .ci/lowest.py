@@ -1,8 +1,8 @@
 """Prints a pip constraints file that pins every dependency in pyproject.toml (runtime, dev and
-every optional extra, such as events) to its lower bound, so the suite tests the oldest versions
-chronocl claims (.ci/run's first run).
+every optional extra, such as events and notebook) to its lower bound, so the suite tests the
+oldest versions chronocl claims (.ci/run's first run).
 
-Usage: python3 .ci/lowest.py > lowest.txt; pip install -c lowest.txt -e '.[dev,events]'
+Usage: python3 .ci/lowest.py > lowest.txt; pip install -c lowest.txt -e '.[dev,events,notebook]'
 """
 
 import re

@@ -13,6 +13,8 @@ function, into one RGBA volume that can be raycast from any view.
     cv = session.slide(+1)          # incremental with absolute time positions
 
     graph = chronocl.events(series, "0:20", threshold=0.3)  # features, events, tracks
+
+    w = chronocl.show(series)       # the viewer in a notebook cell (the `notebook` extra)
 """
 
 from chronocl.core.enhance import Enhance
@@ -27,6 +29,7 @@ from chronocl.events import EventGraph, events, load_events
 from chronocl.integration.inmemory import integrate, make_spec
 from chronocl.integration.interactive.session import Session
 from chronocl.modes.spec import IntegrationSpec
+from chronocl.notebook import show
 from chronocl.render import Camera, render, render_views
 
 open = open_series
@@ -59,4 +62,5 @@ __all__ = [
     "probe",
     "render",
     "render_views",
+    "show",
 ]

@@ -2,7 +2,8 @@
 private names borrowed or reached into from another module (the rules: tests/layer_rules.py).
 
 Layers, lowest first (docs/architecture.md): core <- modes <- data <- engine <- integration
-<- events <- render <- viewer <- report <- the command line (cli, demo, the package's face).
+<- events <- render <- viewer <- notebook <- report <- the command line (cli, demo, the
+package's face).
 Each rule runs on chronocl and on a known-bad fixture package, which it must reject at the
 named lines (a broken parser would otherwise pass everything).
 """
@@ -35,6 +36,7 @@ CHRONOCL = Package(
         ("events", ("chronocl.events",)),
         ("render", ("chronocl.render",)),
         ("viewer", ("chronocl.viewer",)),
+        ("notebook", ("chronocl.notebook",)),
         ("report", ("chronocl.report",)),
         (
             "cli",

@@ -4,6 +4,9 @@ Each message is validated (`protocol.parse_message`) and handed to the client's
 `ClientWorker`; an immediate reply (`dataset`) is sent at once, frames and task replies come
 from the worker's thread through `send_from_thread`. Errors in a message are answered and
 the socket stays up; nothing sent to a client carries a traceback.
+
+`info_message`, `handle`, `error_reply` and `answer` are the socket's protocol without the
+socket: a notebook widget (chronocl.notebook) serves its comm with them.
 """
 
 from __future__ import annotations
@@ -61,6 +64,27 @@ def handle(worker: ClientWorker, msg: dict) -> dict | None:
         return {**refine_progress("cancelled", 0, 0, 0, 0), "id": msg.get("id")}
     worker.task(kind, msg)
     return None
+
+
+def error_reply(exc: Exception, text: object) -> dict:
+    """The `error` answer to the client message `text` that raised `exc`: a ChronoclError's
+    own text; anything else is a bug, logged in one line and answered without a traceback."""
+    if isinstance(exc, ChronoclError):
+        message = str(exc)
+    else:
+        message = internal_error(exc, "on a message")
+        log.error("chronocl viewer: %s", message)
+        log.debug("chronocl viewer: message failed", exc_info=exc)
+    return {"type": "error", "id": request_id(text), "message": message}
+
+
+def answer(worker: ClientWorker, text: object) -> dict | None:
+    """One client message (JSON text) validated and applied; its immediate reply, or the
+    `error` reply when it is bad or fails (None: nothing to answer at once)."""
+    try:
+        return handle(worker, parse_message(text))
+    except Exception as exc:
+        return error_reply(exc, text)
 
 
 async def serve_socket(
@@ -136,17 +160,10 @@ async def serve_socket(
                     reply = await asyncio.to_thread(handle, worker, msg)
                 else:
                     reply = handle(worker, msg)
-                if reply is not None:
-                    await deliver(json.dumps(reply))
-            except ChronoclError as exc:
-                await deliver(
-                    json.dumps({"type": "error", "id": request_id(text), "message": str(exc)})
-                )
-            except Exception as exc:  # a bug: answered and logged in one line, no traceback
-                log.error("chronocl viewer: %s", internal_error(exc, "on a message"))
-                log.debug("chronocl viewer: message failed", exc_info=True)
-                err = {"type": "error", "id": request_id(text)}
-                await deliver(json.dumps(err | {"message": internal_error(exc, "on a message")}))
+            except Exception as exc:  # answered; a bug also logged in one line, no traceback
+                reply = error_reply(exc, text)
+            if reply is not None:
+                await deliver(json.dumps(reply))
     finally:
         gone.set()
         if steps is not None:

@@ -1,8 +1,9 @@
-// chronocl viewer page: sends state changes over a WebSocket, shows the frames the server
-// renders. Plain ES modules, no build step, no dependencies. This module routes the server's
-// text messages and wires the parts together:
+// chronocl viewer page: sends state changes to the server, shows the frames it renders. Plain
+// ES modules, no build step, no dependencies. This module routes the server's text messages
+// and wires the parts together (`start`: main.js starts the page on its WebSocket, a notebook
+// widget starts it in its cell output on its comm, chronocl/notebook/widget.js):
 //   state.js       what the page shows (S, window.viewer: made here, given to each bind) and helpers
-//   connection.js  the socket: send, coalesced updates
+//   connection.js  the transport (WebSocket or widget comm): send, coalesced updates
 //   views.js       the view panels, orbit/zoom/probe input, incoming frames
 //   timeline.js    the window brush, play (speed, loop/bounce)
 //   orientation.js the axes triads, camera reset, standard views
@@ -16,10 +17,10 @@
 //   controls.js    the other controls, filled from the server's choices
 //   shading.js     the lighting toggle and strengths
 
-import { connect, frameArrived, send, update } from './connection.js';
+import { connect, disconnect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
 import { bindFit, fitFailed, forgetFits, onFit, refitMode } from './fit.js';
-import { bindKeys } from './keys.js';
+import { bindKeys, unbindKeys } from './keys.js';
 import { bindLegend, drawLegends } from './legend.js';
 import { bindOrientation, drawTriads } from './orientation.js';
 import { bindProbe, clearProbe, drawProbe, onProbe } from './probe.js';
@@ -31,9 +32,10 @@ import { bindTimeFollow } from './time_follow.js';
 import { bindTimeline, drawTimeline, onSteps } from './timeline.js';
 import { bindViews, fillSelect, layoutViews, onFrame, showMark, showRefineProgress } from './views.js';
 
-// The page's state, given to every module that reads or changes it.
-const page = pageState();
-const { S, viewer } = page;
+// The page's state, given to every module that reads or changes it (made by `start`).
+let page;
+let S;
+let viewer;
 
 // After a reconnect: the state the page had, sent back once the data set is open again.
 let restore = null;
@@ -116,10 +118,29 @@ function onDownload(msg) {
   const a = document.createElement('a');
   a.href = msg.url;
   a.download = msg.filename;
-  document.body.appendChild(a);
+  page.shell.appendChild(a);
   a.click();
   a.remove();
   setStatus(`saved ${msg.filename}`);
+}
+
+// State set by the server's side (a notebook's code: w.mode = 'max'), already applied there: the
+// page shows it (its controls, the timeline, the TF editor, the panels) without sending it
+// back; a new number of views lays the panels out again and sends their size.
+function onState(msg) {
+  if (!S.state) return;
+  const fields = msg.state;
+  const views = fields.views && fields.views.length !== S.state.views.length;
+  Object.assign(S.state, fields);
+  S.selectedView = Math.min(S.selectedView, S.state.views.length - 1);
+  S.selectedPoint = Math.min(S.selectedPoint, S.state.data_tf.points.length - 1);
+  if (views) update({ size: layoutViews(), views: S.state.views });
+  else layoutViews();
+  syncControls();
+  syncShading();
+  drawTriads();
+  drawTimeline();
+  drawTF();
 }
 
 function onText(msg) {
@@ -153,6 +174,9 @@ function onText(msg) {
     case 'steps':
       onSteps(msg);
       break;
+    case 'state':
+      onState(msg);
+      break;
     case 'error':
       movieProgress(null);
       if (msg.id !== null && msg.id >= viewer.sent) frameArrived(); // no frame will come
@@ -185,30 +209,52 @@ function relayout() {
     drawLegends();
   }, 150);
 }
-window.addEventListener('resize', relayout);
-new ResizeObserver(relayout).observe($('views'));
-bindViews(page, relayout);
-bindProbe(page);
-$('side-toggle').addEventListener('click', () => {
-  const hidden = document.body.classList.toggle('side-hidden');
-  $('side-toggle').textContent = hidden ? 'panel ◂' : 'panel ▸';
-  $('side-toggle').setAttribute('aria-expanded', String(!hidden));
-});
 
-bindTimeline(page);
-bindTF(page);
-bindFit(page);
-bindControls(page);
-bindShading(page);
-bindOrientation(page);
-bindKeys(page);
-bindSession(page);
-bindLegend(page);
-bindTimeFollow(page);
-connect(page, {
-  onText,
-  onFrame: (buf) => {
-    onFrame(buf);
-    noteFocus();
-  },
-});
+// Starts the viewer: `host` says where it lives (state.js: pageState; the page's defaults are
+// the document's), `transport` what it talks over (connection.js). Returns the viewer
+// (state.js: what the tests read) and `stop`, which stops it (a notebook widget's view
+// removed): the transport closed, listeners and timers gone.
+export function start(host, transport) {
+  page = pageState(host);
+  ({ S, viewer } = page);
+  const observer = new ResizeObserver(relayout);
+  window.addEventListener('resize', relayout);
+  observer.observe($('views'));
+  bindViews(page, relayout);
+  bindProbe(page);
+  $('side-toggle').addEventListener('click', () => {
+    const hidden = page.shell.classList.toggle('side-hidden');
+    $('side-toggle').textContent = hidden ? 'panel ◂' : 'panel ▸';
+    $('side-toggle').setAttribute('aria-expanded', String(!hidden));
+  });
+
+  bindTimeline(page);
+  bindTF(page);
+  bindFit(page);
+  bindControls(page);
+  bindShading(page);
+  bindOrientation(page);
+  bindKeys(page);
+  bindSession(page);
+  bindLegend(page);
+  bindTimeFollow(page);
+  connect(
+    page,
+    {
+      onText,
+      onFrame: (buf) => {
+        onFrame(buf);
+        noteFocus();
+      },
+    },
+    transport,
+  );
+  const stop = () => {
+    disconnect();
+    unbindKeys();
+    observer.disconnect();
+    window.removeEventListener('resize', relayout);
+    clearTimeout(resizeTimer);
+  };
+  return { viewer, stop };
+}

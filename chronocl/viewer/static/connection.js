@@ -1,76 +1,154 @@
-// The WebSocket to the server, opened again after it closes (backoff, status shown). The server
-// renders the newest state only, so the page may send freely; it still coalesces input to one
-// update message per animation frame. While a frame
-// is awaited for longer than BUSY_AFTER_MS (a large window's steps are read, a mode's first use
-// builds its kernels) the #busy indicator says so, with the time waited.
+// The connection to the server, through a transport: the page's WebSocket (`socketTransport`,
+// opened again after it closes: backoff, status shown) or a notebook widget's comm
+// (`modelTransport`: an anywidget model, frames as binary buffers). The server renders the
+// newest state only, so the page may send freely; it still coalesces input to one update
+// message per animation frame. While a frame is awaited for longer than BUSY_AFTER_MS (a large
+// window's steps are read, a mode's first use builds its kernels) the #busy indicator says so,
+// with the time waited.
+//
+// A transport is { open(callbacks), send(text), isOpen(), retries, close() }: `open` starts it
+// and calls callbacks.onOpen(), callbacks.onMessage(text or ArrayBuffer) for each message from
+// the server (a binary one is a frame) and callbacks.onClose() when it ends; `retries`: it is
+// opened again after it closed.
 
 import { $, setStatus } from './state.js';
 
 // The page's state (state.js: pageState), made by app.js and given to connect.
 let S;
 let viewer;
+let shell;
 
 const BUSY_AFTER_MS = 400;
 let waitingSince = null; // when the oldest update not yet answered by a frame was sent
 let busyTimer = 0;
 
-const params = new URLSearchParams(location.search);
-const token = params.get('token') || '';
-if (token) history.replaceState(null, '', location.pathname + location.hash); // the cookie keeps us in
-
-let ws = null;
+let transport = null;
 let nextId = 1;
 export const sentAt = new Map(); // request id -> when it was sent (for round trips)
 
-// Opens the socket; text messages go to onText(parsed JSON), binary frames to onFrame. When it
-// closes (the server stopped or restarted, the network dropped) it is opened again after a
-// growing pause (RETRY_MS, then its last value over and over), the wait shown in the status
+// The page's socket, /ws on the page's host with the address's token (dropped from the
+// address bar: the cookie keeps us in).
+export function socketTransport() {
+  const params = new URLSearchParams(location.search);
+  const token = params.get('token') || '';
+  if (token) history.replaceState(null, '', location.pathname + location.hash);
+  let ws = null;
+  return {
+    retries: true,
+    open({ onOpen, onMessage, onClose }) {
+      const proto = location.protocol === 'https:' ? 'wss:' : 'ws:';
+      const q = token ? `?token=${encodeURIComponent(token)}` : '';
+      ws = new WebSocket(`${proto}//${location.host}/ws${q}`);
+      ws.binaryType = 'arraybuffer';
+      ws.onopen = onOpen;
+      ws.onmessage = (e) => onMessage(e.data);
+      ws.onclose = onClose;
+    },
+    send: (text) => ws.send(text),
+    isOpen: () => !!ws && ws.readyState === WebSocket.OPEN,
+    close: () => ws && ws.close(),
+  };
+}
+
+// A buffer of a comm message (a DataView, or an ArrayBuffer) as an ArrayBuffer of its bytes.
+const arrayBuffer = (b) =>
+  b instanceof ArrayBuffer ? b : b.buffer.slice(b.byteOffset, b.byteOffset + b.byteLength);
+
+// A notebook widget's comm (chronocl/notebook): an anywidget model's custom messages. The
+// page's messages go as {text}; the kernel's come as {text}, {frame: 1} with the frame as a
+// buffer, or {download} with the file as a buffer (shown to the page as a download message
+// whose url is the file's blob URL). {type: 'hello'} asks the kernel for its `info` message.
+export function modelTransport(model) {
+  let handler = null;
+  const urls = [];
+  return {
+    retries: false,
+    open({ onOpen, onMessage }) {
+      handler = (msg, buffers) => {
+        if (!msg || typeof msg !== 'object') return;
+        if (msg.frame && buffers && buffers.length) onMessage(arrayBuffer(buffers[0]));
+        else if (typeof msg.text === 'string') onMessage(msg.text);
+        else if (msg.download && buffers && buffers.length) {
+          const d = JSON.parse(msg.download);
+          const url = URL.createObjectURL(new Blob([arrayBuffer(buffers[0])], { type: d.media_type }));
+          urls.push(url);
+          if (urls.length > 16) URL.revokeObjectURL(urls.shift());
+          onMessage(JSON.stringify({ ...d, url }));
+        }
+      };
+      model.on('msg:custom', handler);
+      onOpen();
+      model.send({ type: 'hello' });
+    },
+    send: (text) => model.send({ text }),
+    isOpen: () => handler !== null,
+    close() {
+      if (handler) model.off('msg:custom', handler);
+      handler = null;
+      for (const url of urls.splice(0)) URL.revokeObjectURL(url);
+    },
+  };
+}
+
+// Opens the transport; text messages go to onText(parsed JSON), binary frames to onFrame. When a
+// socket closes (the server stopped or restarted, the network dropped) it is opened again after
+// a growing pause (RETRY_MS, then its last value over and over), the wait shown in the status
 // line; the page then sends its state back (app.js), so the view returns as it was.
 const RETRY_MS = [500, 1000, 2000, 4000, 8000];
 let handlers = null;
 let attempt = 0;
 let retryTimer = 0;
+let stopped = false;
 
-export function connect(page, h) {
-  ({ S, viewer } = page);
+export function connect(page, h, t) {
+  ({ S, viewer, shell } = page);
   handlers = h;
+  transport = t;
   open();
 }
 
-function open() {
-  const proto = location.protocol === 'https:' ? 'wss:' : 'ws:';
-  const q = token ? `?token=${encodeURIComponent(token)}` : '';
-  ws = new WebSocket(`${proto}//${location.host}/ws${q}`);
-  ws.binaryType = 'arraybuffer';
-  ws.onopen = () => {
-    attempt = 0;
-    viewer.connects += 1;
-    document.body.dataset.connection = 'open';
-    if (viewer.connects > 1) setStatus('reconnected: restoring the view…');
-  };
-  ws.onmessage = (e) =>
-    typeof e.data === 'string' ? handlers.onText(JSON.parse(e.data)) : handlers.onFrame(e.data);
-  ws.onclose = () => {
-    frameArrived(); // nothing more will come on this socket
-    viewer.sent = 0; // request ids start again on the next socket's frames
-    const wait = RETRY_MS[Math.min(attempt, RETRY_MS.length - 1)];
-    attempt += 1;
-    const hint = attempt > RETRY_MS.length ? ' (restarted with another token? open the URL it printed)' : '';
-    setStatus(`disconnected: server unreachable; reconnecting in ${(wait / 1000).toFixed(1)} s (attempt ${attempt})${hint}`, true);
-    document.body.dataset.connection = 'retrying';
-    clearTimeout(retryTimer);
-    retryTimer = setTimeout(open, wait);
-  };
+// The connection closed for good and its timers stopped (a notebook widget's view removed).
+export function disconnect() {
+  stopped = true;
+  clearTimeout(retryTimer);
+  clearTimeout(settleTimer);
+  clearInterval(busyTimer);
+  if (transport) transport.close();
 }
 
-export const connected = () => !!ws && ws.readyState === WebSocket.OPEN;
+function open() {
+  transport.open({
+    onOpen: () => {
+      attempt = 0;
+      viewer.connects += 1;
+      shell.dataset.connection = 'open';
+      if (viewer.connects > 1) setStatus('reconnected: restoring the view…');
+    },
+    onMessage: (data) =>
+      typeof data === 'string' ? handlers.onText(JSON.parse(data)) : handlers.onFrame(data),
+    onClose: () => {
+      frameArrived(); // nothing more will come on this socket
+      viewer.sent = 0; // request ids start again on the next socket's frames
+      if (stopped || !transport.retries) return;
+      const wait = RETRY_MS[Math.min(attempt, RETRY_MS.length - 1)];
+      attempt += 1;
+      const hint = attempt > RETRY_MS.length ? ' (restarted with another token? open the URL it printed)' : '';
+      setStatus(`disconnected: server unreachable; reconnecting in ${(wait / 1000).toFixed(1)} s (attempt ${attempt})${hint}`, true);
+      shell.dataset.connection = 'retrying';
+      clearTimeout(retryTimer);
+      retryTimer = setTimeout(open, wait);
+    },
+  });
+}
+
+export const connected = () => !!transport && transport.isOpen();
 
 export function send(msg) {
-  if (!ws || ws.readyState !== WebSocket.OPEN) return 0;
+  if (!connected()) return 0;
   msg.id = nextId++;
   sentAt.set(msg.id, performance.now());
   if (sentAt.size > 200) sentAt.delete(sentAt.keys().next().value);
-  ws.send(JSON.stringify(msg));
+  transport.send(JSON.stringify(msg));
   return msg.id;
 }
 

@@ -14,6 +14,7 @@ import { cancelRefine } from './views.js';
 // The page's state (state.js: pageState), made by app.js and given to bindKeys.
 let S;
 let viewer;
+let listening = null; // [target, handler] of the keydown listener, for unbindKeys
 
 // keys: KeyboardEvent.key values; label: how the list shows them.
 export const SHORTCUTS = [
@@ -83,7 +84,7 @@ export function bindKeys(page) {
   const byKey = new Map();
   const byCtrlKey = new Map();
   for (const s of SHORTCUTS) for (const k of s.keys) (s.ctrl ? byCtrlKey : byKey).set(k, s);
-  document.addEventListener('keydown', (e) => {
+  const onKey = (e) => {
     if (e.altKey) return;
     const ctrl = e.ctrlKey || e.metaKey;
     // Menus and checkboxes have no undo of their own: Ctrl+Z there is the page's.
@@ -93,7 +94,16 @@ export function bindKeys(page) {
     if (!s || (!S.info && !s.always && s.keys[0] !== '?')) return;
     s.run();
     e.preventDefault();
-  });
+  };
+  // The page's keys: the document's; a notebook widget's: its own element's (page.keys).
+  page.keys.addEventListener('keydown', onKey);
+  listening = [page.keys, onKey];
   $('help-toggle').addEventListener('click', () => showHelp($('help').hidden));
   $('help-close').addEventListener('click', () => showHelp(false));
+}
+
+// The keys let go (a notebook widget removed from its cell).
+export function unbindKeys() {
+  if (listening) listening[0].removeEventListener('keydown', listening[1]);
+  listening = null;
 }

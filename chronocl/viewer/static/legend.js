@@ -267,7 +267,7 @@ function drawCountBar(canvas, bar) {
 // Every view's legend (its time legend, or a count view's count bar) and data colour bar, for
 // the frame shown.
 export function drawLegends() {
-  document.querySelectorAll('#views .view').forEach((view, i) => {
+  $('views').querySelectorAll('.view').forEach((view, i) => {
     const legend = view.querySelector('canvas.legend');
     const count = S.countbars && S.countbars[i];
     if (count) drawCountBar(legend, count);
@@ -287,7 +287,7 @@ export function bindLegend(page) {
   ({ S, viewer } = page);
   // Where step k's colour cell is in a legend canvas (CSS px), for scripted use (the tests).
   viewer.legendCell = (k) => {
-    const c = document.querySelector('#views .view canvas.legend');
+    const c = $('views').querySelector('.view canvas.legend');
     const cell = (c.clientWidth - 2 * PAD) / S.legend.length;
     return { x: PAD + (k + 0.5) * cell, y: TOP + CURVE_H + 3 + BAR_H / 2 };
   };

@@ -174,7 +174,7 @@ function drawTriad(canvas, cam) {
 // camera. Found in the page, so that this module needs nothing from views.js, which needs it.
 export function drawTriads() {
   if (!S.state) return;
-  for (const c of document.querySelectorAll('#views .view .triad')) drawTriad(c, S.state.camera);
+  for (const c of $('views').querySelectorAll('.view .triad')) drawTriad(c, S.state.camera);
 }
 
 export function bindOrientation(page) {

@@ -32,6 +32,7 @@ const FIELDS = ['window', 'views', 'camera', 'data_tf', 'time_tf', 'enhance', 't
 const undoList = [];
 const redoList = [];
 let committed = null; // JSON text of the committed session
+let useFragment = true; // the address's #state= carries the state (not in a notebook widget)
 let applying = false;
 
 // The page's state as a session object.
@@ -134,12 +135,14 @@ const fromBase64Url = (code) => {
 };
 
 function writeFragment(text) {
+  if (!useFragment) return;
   history.replaceState(null, '', `${location.pathname}${location.search}#state=${toBase64Url(text)}`);
 }
 
 // The session the page was opened with (#state=...), or null; a fragment that does not
 // decode is reported and ignored.
 export function fragmentSession() {
+  if (!useFragment) return null;
   const m = /^#state=([A-Za-z0-9_-]+)$/.exec(location.hash);
   if (!m) return null;
   try {
@@ -161,6 +164,7 @@ export function loadSession(session) {
 
 export function bindSession(page) {
   ({ S, viewer } = page);
+  useFragment = page.fragment;
   viewer.history = { undo: 0, redo: 0, commits: 0 };
   onEdited(edited);
   $('undo').addEventListener('click', undo);

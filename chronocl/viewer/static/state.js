@@ -1,11 +1,21 @@
 // What the page shows (made by pageState) and the small helpers every part of it uses.
-// `viewer` (window.viewer) is also read by the tests and the benchmarks.
+// `viewer` (window.viewer on the page) is also read by the tests and the benchmarks.
+//
+// The viewer's elements are looked up (`$`) in its root: the document for the page, a shadow
+// root for each notebook widget (chronocl/notebook: every widget loads its own instance of
+// these modules, so each has its own root and state).
 
-export const $ = (id) => document.getElementById(id);
+let root = document;
+export const $ = (id) => root.getElementById(id);
 
-// The page's state (S) and window.viewer, made once by app.js and given to each module's bind
-// function (no module imports them).
-export function pageState() {
+// The page's state (S) and viewer, made once by app.js and given to each module's bind
+// function (no module imports them). `host` says where the viewer lives: `root` (whose
+// getElementById finds its elements), `shell` (the element holding the whole viewer, whose
+// classes and data attributes the style sheet reads), `keys` (where its shortcuts listen),
+// `fragment` (whether the address's #state= carries the state) and `global` (whether the
+// viewer is also window.viewer). The page's defaults are the document's.
+export function pageState(host = {}) {
+  root = host.root || document;
   const S = {
     choices: null, // the server's `info` message: modes, orders, presets, defaults, bounds
     info: null, // the data set: shape, stats
@@ -21,13 +31,15 @@ export function pageState() {
     initialCamera: null, // the data set's opening camera (camera reset returns to it)
     columns: 1, // panels per row on screen (layoutViews); saved images and movies use it too
   };
-  const viewer = (window.viewer = {
+  const viewer = {
     frames: 0, full: 0, sent: 0, last: null, errors: [], probe: null, downloads: [], S,
     levels: [],  // the level of each frame received, latest last (at most 50)
     playLog: [],  // {at, t0} for each slide play made, latest last (at most 200)
     connects: 0,  // sockets opened (1 + reconnects)
-  });
-  return { S, viewer };
+  };
+  if (host.global !== false) window.viewer = viewer;
+  const shell = host.shell || document.body;
+  return { S, viewer, shell, keys: host.keys || document, fragment: host.fragment !== false };
 }
 
 // A canvas sized to its box in device pixels; returns its context (in CSS pixels) and size.

@@ -13,6 +13,7 @@ import { drawTimeline } from './timeline.js';
 // The page's state (state.js: pageState), made by app.js and given to bindViews.
 let S;
 let viewer;
+let shell; // the element holding the viewer (state.js: pageState)
 
 const GAP = 6; // between panels and around them (the #views padding), CSS px
 const panels = [];
@@ -47,7 +48,7 @@ export function layoutViews() {
     p.order.textContent = S.state.views[i].order || S.choices.orders[0];
     // not under the user's typing: a relayout (a legend appearing) would undo a window half
     // typed, and its Enter would then send nothing
-    if (document.activeElement !== p.own) {
+    if (p.own.getRootNode().activeElement !== p.own) {
       p.own.value = windowText(S.state.views[i].window);
       p.own.classList.remove('bad');
     }
@@ -87,7 +88,7 @@ export function layoutViews() {
 // legend or axes shown or hidden; app.js: a new layout and render size).
 let pictureObserver = null;
 export function bindViews(page, cb) {
-  ({ S, viewer } = page);
+  ({ S, viewer, shell } = page);
   pictureObserver = new ResizeObserver(cb);
   for (const p of panels) pictureObserver.observe(p.pic);
 }
@@ -326,11 +327,11 @@ export function onFrame(buf) {
     timings: header.timings, roundTripMs: t0 === undefined ? null : now - t0,
     level: header.level || 0, refining: !!header.refining,
   };
-  document.body.dataset.frames = viewer.frames;
+  shell.dataset.frames = viewer.frames;
   viewer.levels.push(header.level || 0);
   if (viewer.levels.length > 50) viewer.levels.shift();
-  document.body.dataset.level = header.level || 0;
-  document.body.dataset.refining = header.refining ? 'yes' : 'no';
+  shell.dataset.level = header.level || 0;
+  shell.dataset.refining = header.refining ? 'yes' : 'no';
   if (header.id === null || header.id >= viewer.sent) frameArrived();
   showTimings(header);
   drawTriads();
@@ -371,7 +372,7 @@ function showLabel(p, view, label) {
 export function showRefineProgress(msg) {
   viewer.refineProgress = msg;
   // The answer to `cancel`, or a note that left before it: cancelRefine said so already.
-  if (msg.stage === 'cancelled' || document.body.dataset.refining !== 'yes') return;
+  if (msg.stage === 'cancelled' || shell.dataset.refining !== 'yes') return;
   const what = { integrating: 'slabs', sliding: 'parts' }[msg.stage] || 'steps';
   const of = msg.views > 1 ? ` (view ${msg.view + 1} of ${msg.views})` : '';
   setStatus(`refining to full resolution: ${msg.stage} ${msg.done}/${msg.total} ${what}${of} · Esc cancels`);
@@ -379,9 +380,9 @@ export function showRefineProgress(msg) {
 
 // Stop refining the frame shown (Esc): the server keeps the coarse frame until the next input.
 export function cancelRefine() {
-  if (document.body.dataset.refining !== 'yes') return;
+  if (shell.dataset.refining !== 'yes') return;
   send({ type: 'cancel' });
-  document.body.dataset.refining = 'cancelled';
+  shell.dataset.refining = 'cancelled';
   setStatus('refine cancelled: the coarse frame stays until the next change');
 }
 

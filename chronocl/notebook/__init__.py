@@ -1,0 +1,61 @@
+"""The viewer in a notebook: `show(data)` returns a widget (anywidget) with the browser
+viewer's controls in the cell output, rendered in the kernel's process and streamed over the
+widget's comm (docs/notebook.md). Needs the `notebook` extra: pip install 'chronocl[notebook]'.
+
+    import chronocl
+    w = chronocl.show("vortex.zarr")
+    w.mode = "max"               # the picture follows; so do w.window, w.data_tf, ...
+    w.observe(print, "window")   # the page's edits come back
+    w.screenshot()               # a PNG of the views shown
+"""
+
+from __future__ import annotations
+
+from chronocl.core.errors import InvalidParameterError
+
+
+def show(
+    data: object,
+    *,
+    name: str | None = None,
+    window: tuple | None = None,
+    mode: str | None = None,
+    engine: str = "opencl",
+    device: str | None = None,
+    memory: str | int | None = None,
+    height: int = 620,
+    storage_options: dict | None = None,
+    **array_options,
+):
+    """The viewer of `data` in the notebook: a TimeSeries, a store's path or URL (read in place
+    with `storage_options`), or a numpy, dask or xarray array (T, Z, Y, X; `array_options`:
+    spacing, times, time_unit, resample, as `TimeSeries.from_array` takes them). `name`
+    names the data set; `window` ((t0, t1[, stride])) and `mode` are set before the first
+    picture's page shows it; `height` is the widget's height in CSS pixels. The widget's
+    attributes (window, mode, views, data_tf, time_tf, camera) follow the page and set it.
+    Raises ChronoclError subclasses: the extra missing, bad data, no OpenGL in the kernel."""
+    try:
+        import anywidget  # noqa: F401
+    except ImportError:
+        raise InvalidParameterError(
+            "chronocl.show needs the notebook extra: pip install 'chronocl[notebook]'"
+        ) from None
+    from chronocl.notebook.data import as_dataset
+    from chronocl.notebook.widget import ChronoclWidget
+
+    if isinstance(height, bool) or not isinstance(height, int) or not 200 <= height <= 4000:
+        raise InvalidParameterError(f"height {height!r} must be an integer of 200..4000 pixels")
+    dataset = as_dataset(data, name, storage_options, **array_options)
+    widget = ChronoclWidget(dataset, engine=engine, device=device, memory=memory, height=height)
+    try:
+        if window is not None:
+            widget.window = window
+        if mode is not None:
+            widget.mode = mode
+    except Exception:
+        widget.close()
+        raise
+    return widget
+
+
+__all__ = ["show"]

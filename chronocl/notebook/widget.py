@@ -1,0 +1,348 @@
+"""`ChronoclWidget`: the browser viewer in a notebook cell, on the widget's comm (anywidget).
+
+The kernel's process renders, with the viewer's own `ClientWorker`: the page's messages
+arrive as custom comm messages {"text": JSON} and are answered as the viewer's socket answers
+them (`viewer.sockets.answer`: validated by `protocol.parse_message`, applied by `handle`);
+frames go back as binary buffers ({"frame": 1} and the packed frame), text messages as
+{"text": JSON}, downloads as {"download": JSON} and the file. No port is opened.
+
+The synced attributes (`window`, `mode`, `views`, `data_tf`, `time_tf`, `camera`:
+chronocl/notebook/state.py) are the worker's state: setting one sends the update to the
+worker (validated as the page's are; a bad value raises and changes nothing) and tells the
+page, which shows it; the page's own edits come back into them. `observe` sees both.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import threading
+import time
+import zipfile
+from pathlib import Path
+
+import anywidget
+import traitlets
+
+from chronocl.core.errors import ChronoclError, InvalidParameterError, RendererUnavailableError
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.notebook import state as synced
+from chronocl.notebook.bundle import esm
+from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.protocol import parse_message, unpack_frame
+from chronocl.viewer.residency import POLL_S, residency
+from chronocl.viewer.saving import Downloads
+from chronocl.viewer.session_file import session_of
+from chronocl.viewer.sockets import answer, info_message
+from chronocl.viewer.view_state import default_state, describe_state
+from chronocl.viewer.worker import ClientWorker
+
+REQUEST_TIMEOUT_S = 120.0
+# The ids of the kernel's own requests (attributes set, screenshots, chronovolumes): above any
+# the page uses, so that the page takes a frame answering one as the answer to its own.
+OWN_IDS = 2**52
+FRAMED = ("update", "open", "load")  # the requests a frame answers
+
+
+class WidgetClosedError(ChronoclError, RuntimeError):
+    """The widget was closed: its worker and resources are gone."""
+
+
+def check_gl() -> None:
+    """RendererUnavailableError, saying what to do, where this process cannot make the OpenGL
+    context the viewer draws with (no EGL, no GL driver)."""
+    try:
+        on_gl(lambda rc: None)
+    except RendererUnavailableError as exc:
+        raise RendererUnavailableError(
+            f"chronocl.show draws in the kernel's process, which has no OpenGL context: {exc}. "
+            "Still pictures need it too; run the kernel where EGL works (a headless Linux with "
+            "libegl1 and Mesa does)."
+        ) from None
+
+
+class ChronoclWidget(anywidget.AnyWidget):
+    """The viewer of one data set in a notebook cell (`chronocl.show` makes it)."""
+
+    _esm = esm()
+    height = traitlets.Int(620, help="the widget's height on the page, CSS pixels").tag(sync=True)
+    window = traitlets.Tuple(help="(t0, t1, stride): the window of steps, t1 exclusive")
+    mode = traitlets.Unicode(help="the first view's integration mode")
+    views = traitlets.List(help="the views side by side: {'mode', 'order', 'window'} each")
+    data_tf = traitlets.Dict(help="the data transfer function: points and value range")
+    time_tf = traitlets.Dict(help="the time transfer function")
+    camera = traitlets.Dict(help="azimuth, elevation, zoom, fov, projection, up")
+    _closed = True  # until its worker runs (a widget that failed to start has nothing to free)
+
+    def __init__(
+        self,
+        dataset: Dataset,
+        *,
+        engine: str = "opencl",
+        device: str | None = None,
+        memory: str | int | None = None,
+        height: int = 620,
+    ) -> None:
+        check_gl()
+        self._syncing = True  # the attributes' first values are the worker's
+        super().__init__(height=height)
+        self._datasets = [dataset]
+        self._downloads = Downloads()
+        self._cond = threading.Condition()
+        self._requests: dict[int, dict | None] = {}
+        self._next_own = OWN_IDS
+        self._newest_id: int | None = None  # the newest request a frame answers
+        self._frames = 0
+        self.last_frame: dict | None = None  # the newest frame's header (and its digest)
+        self._closed = False
+        self._worker = ClientWorker(
+            self._datasets, self._deliver, self._downloads, engine=engine, device=device,
+            memory=memory,
+        )  # fmt: skip
+        opened = self._worker.open(0, None)
+        self._fitted = opened.get("fitted")
+        self._opened_tf = opened["state"]["data_tf"]
+        self._pull(tell_page=False)
+        self.on_msg(self._on_msg)
+        self._steps = threading.Thread(target=self._report_steps, daemon=True)
+        self._steps.start()
+
+    # -- the page's messages (the kernel's thread) ------------------------------------------
+    def _on_msg(self, _widget, content, _buffers) -> None:
+        if self._closed or not isinstance(content, dict):
+            return
+        if content.get("type") == "hello":  # a view was rendered: it starts as a socket does
+            self.send({"text": json.dumps(info_message(self._datasets))})
+            return
+        if "text" not in content:
+            return  # not the viewer's (anywidget's own messages)
+        reply = self._answer(content["text"])
+        if reply is not None:
+            self.send({"text": json.dumps(reply)})
+        if reply is None or reply.get("type") == "dataset":
+            self._pull(tell_page=False)  # the page's edit, into the attributes
+
+    def _answer(self, text: object) -> dict | None:
+        """The page's message answered as the socket answers it; an `open` (a view shown, or
+        shown again) gets the state the widget has, not a new default, and makes no frame:
+        the page's next update (its panels' size) does."""
+        try:
+            msg = parse_message(text)
+        except ChronoclError:
+            return answer(self._worker, text)  # the error reply, as the socket's
+        rid = msg.get("id")
+        if msg["type"] in FRAMED:
+            self._newest_id = rid
+        if msg["type"] != "open":
+            return answer(self._worker, text)
+        ds = self._datasets[0]
+        opening = default_state(0, ds.series)
+        reply = {"type": "dataset", "id": rid, **ds.info(0)}
+        reply |= {"state": self._described(), "opening_camera": describe_state(opening)["camera"]}
+        if self._fitted is not None and self.data_tf == self._opened_tf:
+            reply["fitted"] = self._fitted  # the page's fit note, as a data set opens
+        return reply
+
+    # -- the worker's messages (its threads) ------------------------------------------------
+    def _deliver(self, data: str | bytes, wait: bool = True) -> bool:
+        """The worker's `send`: a frame as a buffer; a download or error that answers the
+        kernel's own request to it; anything else to the page."""
+        if self._closed:
+            return False
+        if isinstance(data, bytes):
+            header, images = unpack_frame(data)
+            digest = hashlib.blake2b(b"".join(images), digest_size=8).hexdigest()
+            with self._cond:
+                self._frames += 1
+                self.last_frame = header | {"digest": digest, "received_at": time.time()}
+                self._cond.notify_all()
+            self.send({"frame": 1}, buffers=[data])
+            return True
+        if data.startswith(('{"type": "download"', '{"type": "error"')):
+            reply = json.loads(data)
+            with self._cond:
+                if reply.get("id") in self._requests:
+                    self._requests[reply["id"]] = reply
+                    self._cond.notify_all()
+                    return True
+            if reply["type"] == "download":
+                self._send_download(reply)
+                return True
+        self.send({"text": data})
+        return True
+
+    def _send_download(self, reply: dict) -> None:
+        key = reply.pop("url").rsplit("/", 1)[-1]
+        found = self._downloads.get(key)
+        if found is None:
+            return
+        path, filename, media_type = found
+        head = reply | {"filename": filename, "media_type": media_type}
+        self.send({"download": json.dumps(head)}, buffers=[path.read_bytes()])
+
+    def _report_steps(self) -> None:
+        """The timeline's resident steps (`viewer.residency`), as the socket reports them."""
+        last = None
+        while not self._closed:
+            try:
+                now = residency(self._worker.views)
+            except Exception:  # the views changing under the poll: the next one reads them
+                now = last
+            if now != last and any(v is not None for v in now or []):
+                self.send({"text": json.dumps({"type": "steps", "views": now})})
+                last = now
+            time.sleep(POLL_S)
+
+    # -- the synced attributes ---------------------------------------------------------------
+    def _described(self) -> dict:
+        return describe_state(self._worker.state)
+
+    def _pull(self, tell_page: bool) -> None:
+        """The attributes set from the worker's state (observers called for those that
+        changed); `tell_page`: the page is sent the state too."""
+        described = self._described()
+        self._syncing = True
+        try:
+            with self.hold_trait_notifications():
+                for name, value in synced.from_state(described).items():
+                    setattr(self, name, value)
+        finally:
+            self._syncing = False
+        if tell_page:
+            fields = {k: described[k] for k in ("window", "views", "camera", "data_tf", "time_tf")}
+            self.send({"text": json.dumps({"type": "state", "state": fields})})
+
+    def _set(self, name: str, value: object) -> object:
+        """Apply `name = value` to the worker (as the page's update would be) and tell the
+        page; returns the value the attribute then has."""
+        self._check_open()
+        fields = synced.to_fields(name, value, self._described())
+        text = json.dumps({"type": "update", "id": self._own_id(), **fields})
+        parse_message(text)  # ProtocolError naming the field, before anything changes
+        reply = answer(self._worker, text)
+        if reply is not None and reply.get("type") == "error":
+            raise InvalidParameterError(reply["message"])
+        self._newest_id = json.loads(text)["id"]
+        self._pull(tell_page=True)
+        return getattr(self, name)
+
+    @traitlets.validate(*synced.SYNCED)
+    def _validate(self, proposal):
+        if self._syncing:
+            return proposal["value"]
+        return self._set(proposal["trait"].name, proposal["value"])
+
+    # -- pictures, chronovolumes, sessions ---------------------------------------------------
+    def _check_open(self) -> None:
+        if self._closed:
+            raise WidgetClosedError("this widget was closed; chronocl.show(...) makes a new one")
+
+    def _own_id(self) -> int:
+        with self._cond:
+            self._next_own += 1
+            return self._next_own
+
+    def wait_frame(self, after: int = 0, timeout: float = REQUEST_TIMEOUT_S) -> dict:
+        """The header of the settled frame (full quality and resolution) answering the newest
+        request (an attribute set, or the page's edit), once more than `after` frames were
+        made (`frames`), waited for."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                last = self.last_frame
+                if (
+                    self._frames > after
+                    and last is not None
+                    and last["id"] == self._newest_id
+                    and last["quality"] == "full"
+                    and not last["refining"]
+                ):
+                    return last
+                left = end - time.monotonic()
+                if left <= 0 or self._closed:
+                    raise InvalidParameterError(f"no settled frame came in {timeout:.0f} s")
+                self._cond.wait(min(left, 0.5))
+
+    @property
+    def frames(self) -> int:
+        """Frames made so far."""
+        return self._frames
+
+    def _request(self, msg: dict) -> dict:
+        """A request of the kernel's own to the worker (as the page's save requests), its
+        reply waited for; ChronoclError with the worker's message where it failed."""
+        self._check_open()
+        rid = self._own_id()
+        with self._cond:
+            self._requests[rid] = None
+        try:
+            self._worker.task(msg["type"], msg | {"id": rid})
+            end = time.monotonic() + REQUEST_TIMEOUT_S
+            with self._cond:
+                while self._requests[rid] is None:
+                    left = end - time.monotonic()
+                    if left <= 0 or self._closed:
+                        raise InvalidParameterError(f"{msg['type']} got no answer")
+                    self._cond.wait(min(left, 0.5))
+                reply = self._requests[rid]
+        finally:
+            with self._cond:
+                self._requests.pop(rid, None)
+        if reply["type"] == "error":
+            raise InvalidParameterError(reply["message"])
+        return reply
+
+    def _download(self, msg: dict) -> tuple[bytes, str]:
+        self.wait_frame()  # a save draws the views shown
+        reply = self._request(msg)
+        found = self._downloads.get(reply["url"].rsplit("/", 1)[-1])
+        if found is None:
+            raise InvalidParameterError("the saved file is gone; save it again")
+        path, filename, _ = found
+        return path.read_bytes(), filename
+
+    def screenshot(self, *, columns: int | None = None):
+        """The views shown, at full resolution, captioned and titled as the page's Save PNG
+        draws them: an IPython Image of the PNG (its bytes: `.data`)."""
+        from IPython.display import Image
+
+        msg = {"type": "save", "what": "image"}
+        if columns is not None:
+            msg["columns"] = columns
+        data, _ = self._download(msg)
+        return Image(data=data, format="png")
+
+    def chronovolume(self, view: int = 0) -> Chronovolume:
+        """The chronovolume of `view` as shown, integrated again at full resolution and
+        precision (as the page's Save chronovolume writes it), in memory."""
+        data, _ = self._download({"type": "save", "what": "chronovolume", "view": view})
+        folder = Path(self._downloads.dir) / f"cv-{self._own_id()}"
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            zf.extractall(folder)
+        return Chronovolume.load(folder)
+
+    def snapshot(self) -> dict:
+        """The state as the session file `chronocl view --session` and
+        `chronocl render --state` read (the page's Save session)."""
+        self._check_open()
+        ds = self._datasets[0]
+        state = self._worker.state
+        return session_of(state, ds.name, ds.series, ds.path, self._worker.shown_focus())
+
+    # -- the end -----------------------------------------------------------------------------
+    def close(self) -> None:
+        """Free the worker (its thread, GL textures, OpenCL buffers and steps) and the comm."""
+        if not self._closed:
+            self._closed = True
+            with self._cond:
+                self._cond.notify_all()
+            self._worker.close()
+            self._worker.thread.join(timeout=30)
+            self._downloads.close()
+        super().close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed

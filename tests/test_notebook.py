@@ -1,0 +1,267 @@
+"""The notebook widget's synced state, driving the real worker (OpenCL, EGL): each attribute set
+from code changes the worker's state and the picture; each changed by the page's own message
+(as the comm delivers it: `Widget._handle_msg`) shows in the attribute and its observers. Then
+what `show` accepts, the kernel's requests (screenshot, chronovolume, snapshot), bad values,
+closing, the front end's bundle, and a process without OpenGL."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("anywidget")
+
+import chronocl
+from chronocl.core.errors import ChronoclError, RendererUnavailableError
+from chronocl.data import synthetic
+from chronocl.notebook import bundle
+from chronocl.viewer.session_file import check_session
+
+STEPS, SHAPE = 12, (24, 24, 24)
+
+
+def vortex() -> np.ndarray:
+    return np.stack(list(synthetic.steps("vortex", STEPS, SHAPE)))
+
+
+@pytest.fixture(scope="module")
+def widget():
+    w = chronocl.show(vortex(), name="vortex")
+    w.wait_frame()
+    yield w
+    w.close()
+
+
+def from_page(w, msg: dict) -> None:
+    """A message from the page, as the widget's comm hands it over."""
+    content = {"text": json.dumps(msg)}
+    w._handle_msg({"content": {"data": {"method": "custom", "content": content}}, "buffers": []})
+
+
+def changes(w, name: str) -> list:
+    seen: list = []
+    w.observe(lambda change: seen.append(change["new"]), names=name)
+    return seen
+
+
+def new_picture(w, before: dict) -> dict:
+    """The settled frame answering the newest request: its picture differs from `before`'s."""
+    frame = w.wait_frame()
+    assert frame["seq"] > before["seq"] and frame["digest"] != before["digest"]
+    return frame
+
+
+# -- from code -------------------------------------------------------------------------------
+
+
+def test_setting_window_moves_the_worker_window_and_the_picture(widget):
+    before, seen = widget.wait_frame(), changes(widget, "window")
+    widget.window = (2, 6)
+    assert widget.window == (2, 6, 1) and seen == [(2, 6, 1)]
+    frame = new_picture(widget, before)
+    assert "steps 2:6" in frame["views"][0]["label"]
+    assert widget.snapshot()["window"] == {"t0": 2, "t1": 6, "stride": 1}
+
+
+def test_setting_mode_sets_the_first_view_and_the_picture(widget):
+    before, seen = widget.wait_frame(), changes(widget, "mode")
+    views_seen = changes(widget, "views")
+    widget.mode = "max" if widget.mode != "max" else "alpha"
+    frame = new_picture(widget, before)
+    assert frame["views"][0]["label"].startswith(widget.mode)
+    assert seen == [widget.mode] and views_seen[-1][0]["mode"] == widget.mode
+
+
+def test_setting_views_shows_them_side_by_side(widget):
+    before = widget.wait_frame()
+    widget.views = ["max", {"mode": "mean", "order": "backward"}]
+    assert [(v["mode"], v["order"]) for v in widget.views] == [
+        ("max", "forward"),
+        ("mean", "backward"),
+    ]
+    assert widget.mode == "max"
+    frame = new_picture(widget, before)
+    assert [v["label"].split(",")[0] for v in frame["views"]] == ["max", "mean"]
+    widget.views = ["alpha"]
+    assert len(widget.wait_frame()["views"]) == 1
+
+
+def test_setting_data_tf_recolours_the_picture(widget):
+    before = widget.wait_frame()
+    points = [[0.0, 1.0, 1.0, 1.0, 0.0], [0.3, 1.0, 0.2, 0.0, 0.6], [1.0, 1.0, 1.0, 0.0, 1.0]]
+    widget.data_tf = {"points": points, "value_range": [0.0, 1.0]}
+    assert widget.data_tf == {"points": points, "value_range": [0.0, 1.0]}
+    new_picture(widget, before)
+    assert widget.snapshot()["data_tf"]["points"] == points
+
+
+def test_setting_part_of_time_tf_keeps_the_rest(widget):
+    before, alpha = widget.wait_frame(), widget.time_tf["alpha"]
+    widget.time_tf = {"color": "lightness"}
+    assert widget.time_tf["color"] == "lightness" and widget.time_tf["alpha"] == alpha
+    new_picture(widget, before)
+    assert widget.snapshot()["time_tf"]["color"] == "lightness"
+
+
+def test_setting_camera_turns_the_picture(widget):
+    before = widget.wait_frame()
+    widget.camera = {"azimuth": widget.camera["azimuth"] + 60, "elevation": 10}
+    assert widget.camera["elevation"] == 10 and widget.camera["projection"] == "perspective"
+    new_picture(widget, before)
+    assert widget.snapshot()["camera"]["elevation"] == 10
+
+
+def test_a_bad_value_raises_and_changes_nothing(widget):
+    window, mode, seen = widget.window, widget.mode, changes(widget, "mode")
+    with pytest.raises(ChronoclError, match="choose one of"):
+        widget.mode = "no-such-mode"
+    with pytest.raises(ChronoclError, match="window"):
+        widget.window = (5,)
+    with pytest.raises(ChronoclError):
+        widget.window = (0, 10_000)
+    with pytest.raises(ChronoclError, match="zoom"):
+        widget.camera = {"zoom": 1e9}
+    assert (widget.window, widget.mode, seen) == (window, mode, [])
+
+
+# -- from the page ---------------------------------------------------------------------------
+
+
+def test_the_page_window_comes_back(widget):
+    seen = changes(widget, "window")
+    from_page(widget, {"type": "update", "id": 7, "window": {"t0": 3, "t1": 9, "stride": 2}})
+    assert widget.window == (3, 9, 2) and seen == [(3, 9, 2)]
+    assert "steps 3:8:2" in widget.wait_frame()["views"][0]["label"]  # its last step + 1
+
+
+def test_the_page_mode_comes_back(widget):
+    seen = changes(widget, "mode")
+    views = [dict(widget.views[0], mode="min")]
+    from_page(widget, {"type": "update", "id": 8, "views": views})
+    assert widget.mode == "min" and seen == ["min"]
+
+
+def test_the_page_views_come_back(widget):
+    seen = changes(widget, "views")
+    from_page(widget, {"type": "update", "id": 9, "views": [{"mode": "max"}, {"mode": "count"}]})
+    assert [v["mode"] for v in widget.views] == ["max", "count"] and len(seen) == 1
+    from_page(widget, {"type": "update", "id": 10, "views": [{"mode": "alpha"}]})
+    assert widget.mode == "alpha"
+
+
+def test_the_page_data_tf_comes_back(widget):
+    seen = changes(widget, "data_tf")
+    points = [[0.0, 0.0, 0.0, 1.0, 0.0], [1.0, 1.0, 0.0, 0.0, 0.8]]
+    from_page(widget, {"type": "update", "id": 11, "data_tf": {"points": points}})
+    assert widget.data_tf == {"points": points} and seen == [{"points": points}]
+
+
+def test_the_page_time_tf_comes_back(widget):
+    seen = changes(widget, "time_tf")
+    from_page(widget, {"type": "update", "id": 12, "time_tf": {"color": "rgb", "width": 0.3}})
+    assert widget.time_tf["width"] == 0.3 and seen[-1]["color"] == "rgb"
+
+
+def test_the_page_camera_comes_back(widget):
+    seen = changes(widget, "camera")
+    from_page(widget, {"type": "update", "id": 13, "camera": {"azimuth": 123.0, "zoom": 2.0}})
+    assert (widget.camera["azimuth"], widget.camera["zoom"]) == (123.0, 2.0) and len(seen) == 1
+
+
+def test_a_bad_page_message_changes_nothing(widget):
+    window = widget.window
+    from_page(widget, {"type": "update", "id": 14, "window": {"t0": 5, "t1": 2}})
+    from_page(widget, {"type": "nonsense"})
+    assert widget.window == window
+
+
+# -- the kernel's requests -------------------------------------------------------------------
+
+
+def test_screenshot_chronovolume_and_snapshot(widget):
+    widget.views = ["max"]
+    widget.window = (0, 8, 1)
+    image = widget.screenshot()
+    assert image.data[:8] == b"\x89PNG\r\n\x1a\n" and image.format == "png"
+    cv = widget.chronovolume()
+    assert cv.spec.mode == "max" and cv.steps == tuple(range(8)) and cv.rgba.dtype == np.float32
+    session = check_session(widget.snapshot())
+    assert session["dataset"]["name"] == "vortex" and session["views"][0]["mode"] == "max"
+
+
+def test_show_opens_a_store_and_a_labelled_array(tmp_path):
+    xarray = pytest.importorskip("xarray")
+    store = chronocl.TimeSeries.from_array(vortex()[:4], source="vortex").save(tmp_path / "v.zarr")
+    w = chronocl.show(str(store.path), window=(0, 3), mode="max")
+    try:
+        assert w.window == (0, 3, 1) and w.mode == "max"
+        assert w.snapshot()["dataset"]["name"] == "v"
+        assert "max" in w.wait_frame()["views"][0]["label"]
+    finally:
+        w.close()
+    da = xarray.DataArray(vortex()[:4], dims=("time", "z", "y", "x"))
+    w = chronocl.show(da)
+    try:
+        assert w.snapshot()["dataset"]["shape"] == [4, *SHAPE]
+    finally:
+        w.close()
+
+
+def test_show_refuses_what_it_cannot_show():
+    with pytest.raises(ChronoclError, match="cannot show a dict"):
+        chronocl.show({"a": 1})
+    with pytest.raises(ChronoclError, match="height"):
+        chronocl.show(vortex(), height=5)
+    with pytest.raises(ChronoclError):
+        chronocl.show(np.zeros((4, 4)))
+
+
+def test_close_ends_the_worker_and_refuses_more():
+    w = chronocl.show(vortex()[:3])
+    w.wait_frame()
+    thread = w._worker.thread
+    w.close()
+    assert w.closed and not thread.is_alive()
+    with pytest.raises(ChronoclError, match="closed"):
+        w.mode = "max"
+    with pytest.raises(ChronoclError, match="closed"):
+        w.snapshot()
+
+
+# -- the front end and a process without OpenGL ----------------------------------------------
+
+
+def test_the_bundle_ships_every_viewer_module_after_its_imports():
+    b = bundle.bundle()
+    order = b["order"]
+    assert order[-1] == "app.js" and "main.js" not in order  # the page's start is not shipped
+    static = {p.name for p in bundle._static().iterdir() if p.name.endswith(".js")}
+    assert set(order) == static - {"main.js"}
+    for i, name in enumerate(order):
+        assert set(bundle.IMPORT.findall(b["modules"][name])) <= set(order[:i]), name
+    assert 'id="views"' in b["markup"] and "<script" not in b["markup"]
+    esm = bundle.esm()
+    assert "/* BUNDLE */ null" not in esm and "export default { render }" in esm
+
+
+def test_a_kernel_without_opengl_is_told_why():
+    """A process whose EGL finds no driver: show raises one clear error, nothing else."""
+    code = (
+        "import numpy as np, chronocl\n"
+        "try:\n"
+        "    chronocl.show(np.zeros((3, 8, 8, 8), np.float32))\n"
+        "except chronocl.ChronoclError as exc:\n"
+        "    print(type(exc).__name__ + ': ' + str(exc))\n"
+    )
+    env = os.environ | {"__EGL_VENDOR_LIBRARY_FILENAMES": os.devnull}
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert out.stdout.startswith(RendererUnavailableError.__name__), out.stdout + out.stderr
+    assert "no OpenGL context" in out.stdout and "libegl1" in out.stdout
+    assert out.stderr == ""
