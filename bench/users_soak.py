@@ -13,7 +13,7 @@ Measured: internal errors (error replies and the server's log lines that say "in
 error"), crashes (the server gone: its exit code), the server's peak RSS (the kernel's VmHWM)
 against the budget, and per kind of action the p50, p95 and max ms to the sharp frame.
 
-    python bench/users_soak.py [--actions 500] [--side 512] [--seed 1] [--keep DIR]
+    python bench/users_soak.py [--actions 500] [--side 512] [--seed 1] [--keep DIR] [--memory 8GB]
 
 Summary keys: `actions`, `internal_errors` (target 0), `crashes` (target 0), `peak_rss_mb`,
 `budget_mb`, `peak_rss_over_budget` (target <= 1.1), `sharp_ms` per kind (p50, p95, max),
@@ -42,7 +42,7 @@ from latency_client import WINDOW, Client, Edits, sharp
 from viewer_latency import make_store
 
 from chronocl import modes
-from chronocl.core.budget import interactive_memory
+from chronocl.core.budget import interactive_memory, parse_memory
 
 BENCH = "users_soak"
 STEPS = 20
@@ -62,10 +62,11 @@ def vm_hwm_mb(pid: int, key: str = "VmHWM") -> float:
 class Server:
     """`chronocl view STORE --no-browser` in a child process, its stderr in a file."""
 
-    def __init__(self, store: Path, log: Path) -> None:
+    def __init__(self, store: Path, log: Path, memory: str | None = None) -> None:
         self.log = log
         self._err = open(log, "w")  # closed in stop()
         cmd = [sys.executable, "-m", "chronocl", "view", str(store), "--no-browser"]
+        cmd += ["--memory", memory] if memory else []
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._err, text=True)
         line = self.proc.stdout.readline()
         m = re.search(r"http://127\.0\.0\.1:(\d+)/\?token=([\w-]+)", line)
@@ -165,6 +166,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1, help="the actions' random seed")
     ap.add_argument("--keep", type=Path, default=None, help="keep the store in this folder")
     ap.add_argument(
+        "--memory",
+        default=None,
+        help="the server's --memory (default: none, the viewer's default limit)",
+    )
+    ap.add_argument(
         "--trace",
         type=Path,
         default=None,
@@ -176,9 +182,10 @@ def main() -> None:
         root = args.keep or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)
         store, case = make_store(root, args.side, STEPS, "float32")
-        budget = interactive_memory()  # what the child computes, a moment later
+        # what the child computes, a moment later
+        budget = interactive_memory() if args.memory is None else parse_memory(args.memory)
         trace = None if args.trace is None else open(args.trace, "w")  # before the server
-        server = Server(store, Path(tmp) / "server.log")
+        server = Server(store, Path(tmp) / "server.log", args.memory)
         soak, crashed, t0 = None, None, time.perf_counter()
         rises: dict[str, float] = dict.fromkeys(KINDS, 0.0)
         peak_after = None

@@ -365,3 +365,62 @@ def test_a_window_handed_out_and_let_go_by_its_views_gives_way_to_another_views_
         assert [int(x[0, 0, 0]) for x in wm.get([5, 6, 7], owner=a)] == [5, 6, 7]
         assert len(wm.resident()) <= wm.capacity and wm.slots.own_arrays == 0
         assert [int(x[0, 0, 0]) for x in wm.get([5, 6, 7], owner=b)] == [5, 6, 7]
+
+
+def _level0(slot):
+    """The full-resolution session of a view's `AutoSession` (its pooling's)."""
+    return slot.session.pool.sessions[(0, slot.session.spec.integration.pool)]
+
+
+@pytest.mark.parametrize("mode", ["alpha", "max"])
+def test_a_window_that_does_not_fit_beside_the_views_frames_streams_and_equals_it(mode):
+    """Under a limit that leaves the window's steps less room than they take beside what the
+    views' frames are expected to hold (`ProcessLimit.window_room`), a view's window streams
+    from the store slab by slab, holding none of its steps, and shows what it shows resident;
+    max keeps the winners its kernels wrote, so that a TF edit still recolours."""
+    from chronocl.viewer.datasets import Dataset
+    from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
+    from chronocl.viewer.view_state import default_state, merge
+
+    series = series_of(6)
+    state = merge(default_state(0, series), {"window": {"t0": 1, "t1": 5}}, 6)
+    state = merge(state, {"views": [{"mode": mode}]}, 6)
+    frames = FRAME_VOXEL_BYTES * int(np.prod(SHAPE))
+    got = {}
+    for name, total in (
+        ("resident", 10 * (1 << 30)),
+        ("streamed", process_memory.PROCESS_BYTES + frames + int(1.5 * STEP)),
+    ):
+        spares.clear()
+        gc.collect()
+        with process_memory.limited(ProcessLimit(total)):
+            views = Views([Dataset("d", series)], "opencl", None, "10GB")
+            try:
+                views.chronovolumes(state)
+                views.full_resolution(range(1))
+                full = _level0(views.slots[0])
+                assert (full.stats["path"] == "streamed") == (name == "streamed"), full.stats
+                if name == "streamed":
+                    why = full.stats["why_not_incremental"]
+                    assert "the memory limit" in why and "beside the views' frames" in why
+                    assert not full._arrays  # none of the window's steps held
+                assert full.has_winners() == (mode == "max")
+                assert (views.streamed() is not None) == (name == "streamed")  # in the header
+                got[name] = views.slots[0].cv.rgba.copy()
+            finally:
+                views.release()
+    np.testing.assert_array_equal(got["streamed"], got["resident"])
+
+
+def test_the_window_room_is_the_limit_less_every_client_s_frames_and_the_process():
+    class Client:
+        pass
+
+    limit = ProcessLimit(10 * STEP + process_memory.PROCESS_BYTES)
+    a, b = Client(), Client()
+    limit.expect(a, 3 * STEP)
+    limit.expect(b, 2 * STEP)
+    assert limit.window_room() == 5 * STEP
+    del a  # a client gone: its frames free the room
+    gc.collect()
+    assert limit.window_room() == 8 * STEP

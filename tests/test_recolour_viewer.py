@@ -385,3 +385,27 @@ def test_steps_give_way_to_the_winners_before_they_are_gathered(client, monkeypa
     first = events.index(("gather", 0))
     asked = [extra for what, extra in events[:first] if what == "fit"]
     assert asked and asked[-1] >= voxels * (4 + 1 + 2 * 4), events[: first + 1]
+
+
+def test_a_window_streamed_under_the_memory_limit_still_recolours_its_tf_edits(tmp_path):
+    """A `--memory` that leaves the window's steps no room beside the views' frames: the
+    window streams from the store (the frame says why), and max's TF edit still recolours
+    with the winners its streamed integration wrote, showing what integrating shows."""
+    from chronocl.core.process_memory import PROCESS_BYTES
+    from chronocl.viewer.server import ViewerServer
+
+    server = ViewerServer(make_stores(tmp_path), memory=PROCESS_BYTES + (1 << 20))
+    server.start()
+    client = Client(server)
+    try:
+        fitted, header = _open_in(client, "max")
+        assert "the memory limit" in header["timings"]["streamed"], header["timings"]
+        edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
+        header, recoloured = _sharp(client, edit)
+        t = header["timings"]
+        assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0, t
+        assert t["streamed"]
+        _assert_as_integrated(client, recoloured)
+    finally:
+        client.close()
+        server.stop()

@@ -28,7 +28,7 @@ def view(
         str | None,
         typer.Option(
             help="Memory limit of the viewer process, every client's steps and frames, "
-            "e.g. 8GB (default: a third of the memory free, at least 2GB)."
+            "e.g. 8GB (default: half the memory free, at least 2GB)."
         ),
     ] = None,
     max_clients: Annotated[

@@ -39,13 +39,13 @@ def parse_memory(value: str | int | float | None, default: str = DEFAULT_MEMORY)
 def interactive_memory() -> int:
     """The default budget of an interactive session (`Session`'s resident steps) and the
     default memory limit of a viewer process (everything it holds, every client's steps and
-    frames: `chronocl.core.process_memory`): a third of the memory free now (within a
-    container's limit), at least DEFAULT_MEMORY. A window of the sizes users bring (10 float32
-    steps of 512^3 are 5.4 GB) stays resident. In a viewer at 512^3 one view's frames held
-    1.4-4.5 GB beside it here, two views' 2.8-7 GB: with half the memory free as its default
-    (11 GB) the 500-action soak peaked at 16.8 GB, so the default stays a third and the
-    viewer logs when its windows and frames alone go over. `--memory` / `memory=` set it."""
-    return max(parse_memory(DEFAULT_MEMORY), available_bytes() // 3)
+    frames: `chronocl.core.process_memory`): half the memory free now (within a container's
+    limit), at least DEFAULT_MEMORY. A window of the sizes users bring (10 float32 steps of
+    512^3 are 5.4 GB) stays resident beside two views' frames (2.7 GB each at their peak);
+    past that the limit streams the window rather than going over. It was a third while the
+    frames' memory was not counted against the limit (a soak then peaked at 1.3x it); now
+    that it is, a third would stream the users' case. `--memory` / `memory=` set it."""
+    return max(parse_memory(DEFAULT_MEMORY), available_bytes() // 2)
 
 
 def available_bytes() -> int:

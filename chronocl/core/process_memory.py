@@ -16,8 +16,12 @@ under the limit, and the steps are what gives way:
 - what the frames need is what the process holds beside its steps now or after any of the last
   frames, whichever is more (before the first frame: `floor`, what the clients' views expect
   theirs to hold, `expect`);
-- the steps of the windows being shown are never dropped: where they and the frames alone
-  exceed the limit, `excess` says by how much (the viewer logs it once).
+- the steps of the windows being shown are never dropped. So a window is kept resident only
+  where its steps fit beside what the views' frames are expected to hold (`expect`) and the
+  process's own memory (`PROCESS_BYTES`): `window_room`, which a session under a limit reads
+  before it integrates; a larger window streams from the store slab by slab instead
+  (`chronocl.integration.interactive.session`). Where frames still exceed the limit, `excess`
+  says by how much (the viewer logs it once).
 
 One limit per process (`limited`), shared by every client's window managers, which register
 with it when they are made (`register`). Without one (a script, `chronocl integrate`) each
@@ -36,6 +40,10 @@ from typing import Protocol
 from chronocl.core.budget import resident_bytes
 
 RECENT_FRAMES = 8  # frames whose memory beside the steps is kept in mind (`need`)
+# The viewer's own memory beside steps and frames (Python, the libraries, the OpenCL and GL
+# drivers): 383 MiB fitted at 512^3 on the 2-core PoCL/llvmpipe machine (2026-11-30: the
+# resident memory less the steps with one view and with two, the second view's share taken off).
+PROCESS_BYTES = 400 * 2**20
 
 
 class Holder(Protocol):
@@ -90,6 +98,11 @@ class ProcessLimit:
     def need(self) -> int:
         """What the frames are taken to need beside the steps."""
         return max(self.beside(), max(self._after) if self._after else self.floor)
+
+    def window_room(self) -> int:
+        """Bytes the windows shown may keep resident: the limit less what every client's views
+        expect their frames to hold at their peak (`expect`) and the process's own."""
+        return self.total - self.floor - PROCESS_BYTES
 
     def room(self) -> int:
         """Bytes more steps may take now without dropping any."""

@@ -250,7 +250,7 @@ def serve(
     print(f"chronocl viewer: {server.url}", flush=True)
     print(
         f"memory limit {human(server.memory)}"
-        + (" (a third of the memory free; --memory sets it)" if memory is None else ""),
+        + (" (half the memory free; --memory sets it)" if memory is None else ""),
         file=sys.stderr,
         flush=True,
     )

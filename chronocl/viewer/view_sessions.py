@@ -38,12 +38,14 @@ INTEGRATE_LOCK = threading.Lock()
 # release waited 1.8 s for it at 256^3). Only a window that takes longer (very long windows
 # of large volumes) slides incrementally.
 DIRECT_BELOW_MS = 1000.0
-# What a frame holds beside the steps, per full-resolution voxel of each view, until the first
-# one is measured (`chronocl.core.process_memory`): its RGBA8 chronovolume and texture (4 + 4
-# bytes) and a t_index (4). At 512^3 here an alpha view's first frame held 10.5 bytes a voxel
-# beside its steps (330 MB of it code and drivers), a max view after edits 19 (its winners,
-# 5, written with its integration now, and recolouring's RGBA8 outputs, two then, one now).
-FRAME_VOXEL_BYTES = 12
+# What a view's frames hold at their peak beside the steps, per full-resolution voxel: the
+# process's memory limit keeps a window's steps resident only where they fit beside this for
+# every view (`ProcessLimit.window_room`; larger windows stream). At 512^3 on the 2-core
+# PoCL/llvmpipe machine (2026-11-30) an alpha view held 8 bytes a voxel steadily (its RGBA8
+# chronovolume and texture) and 20 at the peak of a TF edit (the new chronovolume written
+# while the old one and the texture's staging are alive); a max view 17 steadily (and its
+# t_index, u and step index) and 21 at the peak of its switch; a second max view 17.
+FRAME_VOXEL_BYTES = 20
 
 
 class SharedSteps:
@@ -208,6 +210,15 @@ class Views:
             f"limit {human(limit.total)}, with nothing else left to let go (a shorter window, "
             "fewer views or a larger --memory fit)"
         )
+
+    def streamed(self) -> str | None:
+        """Why a view's window streams from the store instead of staying resident (its
+        session's one line: the memory limit leaves its steps too little room), else None."""
+        for slot in self.slots:
+            why = slot.session.stats.get("streamed") if slot.session is not None else None
+            if why:
+                return why
+        return None
 
     def sharp(self, n: int) -> bool:
         """Whether the first `n` views show full resolution (no coarser level to refine)."""

@@ -482,6 +482,7 @@ class ClientWorker(Tasks):
                 "encode_ms": round(1e3 * (t_enc - t_done), 2),
                 "server_ms": round(1e3 * (t_enc - t_start), 2),
                 "steps_on_host": self.views.host_steps_why,  # None: on the device, or a CPU's
+                "streamed": self.views.streamed(),  # None: the window is resident
             },
             "sent_at": time.time(),
         }

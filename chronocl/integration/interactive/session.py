@@ -32,6 +32,7 @@ import time
 
 import numpy as np
 
+from chronocl.core import process_memory
 from chronocl.core.budget import human
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.interrupt import watched
@@ -62,7 +63,7 @@ class Session:
         cv = s.set_spec(mode="alpha")  # re-integrated from resident steps
 
     Keywords (`settings` reads those every level shares): `memory` is the budget for resident
-    steps plus sliding state (default: a third of the memory free, at least 2 GB); `engine` (a
+    steps plus sliding state (default: half the memory free, at least 2 GB); `engine` (a
     name, with `device`, or an `Engine`); `spec`, or the fields of one (`mode`, `time_tf`,
     ... as `make_spec` takes them); `prefetch`, the steps read ahead in the scrub direction;
     `managers` (a dict the caller owns and closes) shares one window manager per (level,
@@ -221,7 +222,8 @@ class Session:
     def read_ahead(self, selection: Selection) -> None:
         """Start reading `selection`'s steps in the background where they fit the budget (an
         `AutoSession` shows the window at a coarse level meanwhile)."""
-        if selection.width * self.manager.step_bytes <= self.manager.budget:
+        window = selection.width * self.manager.step_bytes
+        if window <= self.manager.budget and window <= self._window_budget()[0]:
             self.manager.request(selection.steps, owner=self)
 
     def refine(self) -> Chronovolume | None:
@@ -294,8 +296,9 @@ class Session:
         if old is not None and selection == old and self._cv is not None:
             return self._cv
         window = selection.width * self.manager.step_bytes
-        if window > self.budget:
-            return self._stream(selection, window, t)
+        budget, why = self._window_budget()
+        if window > budget:
+            return self._stream(selection, window, t, why)
         voxels, direct = int(np.prod(self.series.volume_shape)), self._direct_ms
         reason, keep, state = slide_plan(
             self.spec, voxels, selection.width, window, self.budget, direct, self.direct_below_ms
@@ -367,19 +370,48 @@ class Session:
         self._arrays = arrays
         self._bricks.arrays = arrays
 
-    def _stream(self, selection: Selection, window: int, t: float) -> Chronovolume:
-        """A window larger than the budget: integrated z-slab by z-slab from the store, each
-        slab's brick a quarter of the budget at most (nothing resident, no sliding)."""
+    def _window_budget(self) -> tuple[int, str]:
+        """The bytes the window's steps may keep resident, and what sets it: the session's
+        budget, or under a process's memory limit (a viewer's) what the limit leaves beside
+        the views' frames (`ProcessLimit.window_room`), if less."""
+        limit = process_memory.current()
+        if limit is None or limit.window_room() >= self.budget:
+            return self.budget, f"budget {human(self.budget)}"
+        room = max(0, limit.window_room())
+        return room, (
+            f"{human(room)} that the memory limit {human(limit.total)} leaves beside the "
+            "views' frames"
+        )
+
+    def _stream(self, selection: Selection, window: int, t: float, why: str) -> Chronovolume:
+        """A window larger than its budget (`_window_budget`): integrated z-slab by z-slab
+        from the store, each slab's brick a quarter of that budget at most (nothing resident,
+        no sliding); a display session at full resolution keeps its winners as it would
+        resident, so that its TF edits recolour without streaming the window again."""
         job = window_job(self.series, selection, self.spec)
-        rows = max(1, self.budget // (4 * max(1, job.row_bytes)))
+        budget = max(self._window_budget()[0], job.row_bytes)
+        rows = max(1, budget // (4 * max(1, job.row_bytes)))
         self._slider, self.selection, self._cv, self._won = None, selection, None, None
         self._hold({})
         self._bricks.forget()
-        self._cv = integrate_bricks(
-            job, self.engine, SeriesBricks(self.series), slab=rows, display=self.display
+        won = WinnersOut() if self.display and self.level == 0 else None
+        cv = integrate_bricks(
+            job,
+            self.engine,
+            SeriesBricks(self.series),
+            slab=rows,
+            display=self.display,
+            winners=won,
         )
-        why = f"the window needs {human(window)} > budget {human(self.budget)}: streamed by z-slabs"
-        self._record(t, "streamed", why)
+        if won is not None and won.u is not None:
+            w = Winners(
+                won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
+            )
+            self._won = (cv.t_index, w)
+        self._cv = cv
+        self._record(
+            t, "streamed", f"the window needs {human(window)} > {why}: streamed by z-slabs"
+        )
         return self._cv
 
     def _slab_rows(self) -> int | None:
@@ -403,6 +435,9 @@ class Session:
             "held_partials": 0 if self._slider is None else self._slider.held,
             "device_steps": None if self._device.slots is None else self._device.slots.resident(),
             "why_not_on_device": self._device.why,
+            # why the window is read from the store slab by slab, not resident (None: it is);
+            # kept by a recolouring's stats (`AutoSession.adopt`): the window still streams
+            "streamed": reason if path == "streamed" else None,
         }
 
 

@@ -405,6 +405,8 @@ function showTimings(h) {
     `upload ${t.upload_ms.toFixed(1)} ms`,
     // a GPU whose memory cannot hold the window: its steps travel for every integration
     ...(t.steps_on_host ? [`steps not on the GPU: ${t.steps_on_host}`] : []),
+    // the memory limit leaves the window's steps too little room: read from the store each time
+    ...(t.streamed ? [`${t.streamed} (a larger --memory keeps the window in memory)`] : []),
     `render ${t.render_ms.toFixed(1)} ms`,
     `encode ${t.encode_ms.toFixed(1)} ms`,
     `${h.views.length}× ${v.width}×${v.height}${h.reduced ? ' (reduced for speed, sharpening…)' : ''} ${h.format} ${kb.toFixed(0)} KB (${h.quality})`,
