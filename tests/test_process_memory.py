@@ -424,3 +424,51 @@ def test_the_window_room_is_the_limit_less_every_client_s_frames_and_the_process
     del a  # a client gone: its frames free the room
     gc.collect()
     assert limit.window_room() == 8 * STEP
+
+
+def test_a_second_view_that_leaves_the_window_no_room_lets_its_steps_go_before_streaming(
+    monkeypatch,
+):
+    """One view keeps its window resident; a second view's frames leave the steps too little
+    room, so both views stream from then on, and every view lets go of the steps before the
+    first streams (else the window stayed held beside the streaming: twice over at the peak)."""
+    from chronocl.integration.interactive.session import Session
+    from chronocl.viewer.datasets import Dataset
+    from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
+    from chronocl.viewer.view_state import default_state, merge
+
+    series = series_of(6)
+    one = merge(default_state(0, series), {"window": {"t0": 1, "t1": 5}}, 6)
+    two = merge(one, {"views": [{"mode": "alpha"}, {"mode": "max"}]}, 6)
+    frame = FRAME_VOXEL_BYTES * int(np.prod(SHAPE))
+    limit = ProcessLimit(process_memory.PROCESS_BYTES + frame + 5 * STEP)  # 4-step window
+    held_at_streams: list[int] = []
+    stream = Session._stream
+
+    def noting(self, *args, **kwargs):
+        held_at_streams.append(sum(len(s._arrays) for s in sessions()))
+        return stream(self, *args, **kwargs)
+
+    with process_memory.limited(limit):
+        views = Views([Dataset("d", series)], "opencl", None, "10GB")
+
+        def sessions():
+            return [s for v in views.slots for s in v.session.pool.sessions.values()]
+
+        try:
+            views.chronovolumes(one)
+            views.full_resolution(range(1))
+            assert _level0(views.slots[0]).stats["path"] != "streamed"
+            monkeypatch.setattr(Session, "_stream", noting)
+            views.chronovolumes(two)
+            views.full_resolution(range(2))
+            # the first view's frame stands (nothing of it changed), its steps let go
+            assert _level0(views.slots[1]).stats["path"] == "streamed"
+            assert not _level0(views.slots[0])._arrays
+            assert held_at_streams and set(held_at_streams) == {0}, held_at_streams
+            views.chronovolumes(merge(two, {"views": [{"mode": "mean"}, {"mode": "max"}]}, 6))
+            views.full_resolution(range(2))
+            assert _level0(views.slots[0]).stats["path"] == "streamed"  # integrated: streams
+            assert views.streamed() and "the memory limit" in views.streamed()
+        finally:
+            views.release()

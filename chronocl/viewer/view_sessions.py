@@ -130,6 +130,14 @@ class Views:
         if limit is not None:  # steps read ahead or kept give way to the frame
             voxels = math.prod(series.volume_shape) * len(state.views)
             limit.expect(self, FRAME_VOXEL_BYTES * voxels)
+            step = math.prod(series.volume_shape) * series.dtype.itemsize
+            room = limit.window_room()
+            for i, slot in enumerate(self.slots[: len(state.views)]):
+                if (
+                    slot.session is not None
+                    and step * state.selection(series.n_steps, i).width > room
+                ):
+                    slot.session.let_go_steps()  # it streams: its steps give way first
             limit.fit()
         cvs = []
         for i in range(len(state.views)):

@@ -118,6 +118,8 @@ class FixedLevel(Protocol):
 
     def leaving(self, selection: Selection) -> None: ...
 
+    def let_go_steps(self) -> None: ...
+
 
 class AutoSession:
     """A session that draws each window at the finest level predicted to meet `target_ms`
@@ -211,6 +213,11 @@ class AutoSession:
             self._cv = None
         for s in self.pool.sessions.values():
             s.leaving(selection)
+
+    def let_go_steps(self) -> None:
+        """Every level's session holds none of its window's steps (`Session.let_go_steps`)."""
+        for s in self.pool.sessions.values():
+            s.let_go_steps()
 
     def refine(self) -> Chronovolume | None:
         """The full-resolution chronovolume of what was last shown coarse (None when the last

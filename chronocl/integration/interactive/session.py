@@ -250,6 +250,17 @@ class Session:
         if not (self._slider is not None and self._slider.can_move_to(selection)):
             self._let_go(selection)  # integrated anew: the steps leaving help no more
 
+    def let_go_steps(self) -> None:
+        """Hold none of the window's steps: the window streams from now on (a process's limit
+        leaves them too little room beside the views' frames, `_window_budget`), so that the
+        steps give way before any view streams it, not after (each view held them meanwhile:
+        the window twice over at the peak). The chronovolume and winners shown stay."""
+        if not self._owns_manager:
+            self.manager.let_go(self)
+        self._hold({})
+        self._bricks.forget()
+        self._slider = None
+
     def set_aside(self) -> None:
         """Hold nothing of the window: another pooling's session of this level shows it now.
         Its steps stay resident in the shared manager but may give way; its chronovolume,
