@@ -28,6 +28,7 @@ import json
 import random
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -178,6 +179,8 @@ def main() -> None:
         "and the server's log beside it (NAME.server.log)",
     )
     args = ap.parse_args()
+    # A soak stopped (SIGTERM) stops its server too: the `finally` below runs
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)

@@ -16,6 +16,7 @@ from chronocl.core.memory import spares
 from chronocl.core.process_memory import ProcessLimit
 from chronocl.data.slots import StepSlots
 from chronocl.data.window import WindowManager
+from chronocl.viewer.view_sessions import SharedSteps
 
 # 32 MB a float32 step, rows of 512 KB (whole pages): the limits below stand whole steps from
 # what the process holds, and a test worker's other memory moved by more than the 8 MB steps
@@ -430,8 +431,9 @@ def test_a_second_view_that_leaves_the_window_no_room_lets_its_steps_go_before_s
     monkeypatch,
 ):
     """One view keeps its window resident; a second view's frames leave the steps too little
-    room, so both views stream from then on, and every view lets go of the steps before the
-    first streams (else the window stayed held beside the streaming: twice over at the peak)."""
+    room, so both views stream from then on, and every view lets go of the steps, and the
+    manager drops them, before the first streams (else the window stayed resident beside the
+    streaming: twice over at the peak)."""
     from chronocl.integration.interactive.session import Session
     from chronocl.viewer.datasets import Dataset
     from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
@@ -446,7 +448,11 @@ def test_a_second_view_that_leaves_the_window_no_room_lets_its_steps_go_before_s
     stream = Session._stream
 
     def noting(self, *args, **kwargs):
-        held_at_streams.append(sum(len(s._arrays) for s in sessions()))
+        # full resolution's steps, held by a session or left in the manager (coarse levels'
+        # windows are small and stay)
+        full = [s for s in sessions() if s.level == 0]
+        held_at_streams.append(sum(len(s._arrays) for s in full))
+        held_at_streams.append(len(views.manager(0, "").resident()))
         return stream(self, *args, **kwargs)
 
     with process_memory.limited(limit):
@@ -472,3 +478,44 @@ def test_a_second_view_that_leaves_the_window_no_room_lets_its_steps_go_before_s
             assert views.streamed() and "the memory limit" in views.streamed()
         finally:
             views.release()
+
+
+def test_the_windows_shown_count_each_step_once_over_every_client():
+    class Client:
+        pass
+
+    limit = ProcessLimit(1 << 40)
+    a, b, c = Client(), Client(), Client()
+    limit.resident(a, 0, set(range(0, 10)), STEP)
+    limit.resident(b, 1, set(range(0, 4)), 2 * STEP)  # another data set
+    assert limit.windows_bytes(c, 0, set(range(5, 12)), STEP) == (12 + 8) * STEP
+    limit.resident(a, 0, set(), STEP)  # a streams now: its steps count no more
+    assert limit.windows_bytes(c, 0, set(range(5, 12)), STEP) == (7 + 8) * STEP
+
+
+def test_a_second_client_whose_window_does_not_fit_beside_the_first_s_streams():
+    """Two clients on windows of their own, each fitting the room alone but not together: the
+    first keeps its window resident, the second streams (each deciding alone, both stayed)."""
+    from chronocl.viewer.datasets import Dataset
+    from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
+    from chronocl.viewer.view_state import default_state, merge
+
+    series = series_of(10)
+    frame = FRAME_VOXEL_BYTES * int(np.prod(SHAPE))
+    limit = ProcessLimit(process_memory.PROCESS_BYTES + 2 * frame + 6 * STEP)
+    with process_memory.limited(limit):
+        shared = SharedSteps()
+        first = Views([Dataset("d", series)], "opencl", None, "10GB", shared)
+        second = Views([Dataset("d", series)], "opencl", None, "10GB", shared)
+        try:
+            for views, (t0, t1) in ((first, (0, 4)), (second, (6, 10))):
+                state = merge(default_state(0, series), {"window": {"t0": t0, "t1": t1}}, 10)
+                views.chronovolumes(state)
+                views.full_resolution(range(1))
+            assert _level0(first.slots[0]).stats["path"] != "streamed"
+            assert _level0(second.slots[0]).stats["path"] == "streamed"
+            assert "the windows shown need" in second.streamed()
+        finally:
+            first.release()
+            second.release()
+            shared.close()

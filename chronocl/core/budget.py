@@ -41,8 +41,8 @@ def interactive_memory() -> int:
     default memory limit of a viewer process (everything it holds, every client's steps and
     frames: `chronocl.core.process_memory`): half the memory free now (within a container's
     limit), at least DEFAULT_MEMORY. A window of the sizes users bring (10 float32 steps of
-    512^3 are 5.4 GB) stays resident beside two views' frames (2.7 GB each at their peak);
-    past that the limit streams the window rather than going over. It was a third while the
+    512^3 are 5.4 GB) stays resident beside two views' frames (2.3 GB each) where 21 GB are
+    free; past that the limit streams the window rather than going over. It was a third while the
     frames' memory was not counted against the limit (a soak then peaked at 1.3x it); now
     that it is, a third would stream the users' case. `--memory` / `memory=` set it."""
     return max(parse_memory(DEFAULT_MEMORY), available_bytes() // 2)

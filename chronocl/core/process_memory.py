@@ -18,8 +18,9 @@ under the limit, and the steps are what gives way:
   theirs to hold, `expect`);
 - the steps of the windows being shown are never dropped. So a window is kept resident only
   where its steps fit beside what the views' frames are expected to hold (`expect`) and the
-  process's own memory (`PROCESS_BYTES`): `window_room`, which a session under a limit reads
-  before it integrates; a larger window streams from the store slab by slab instead
+  process's own memory (`PROCESS_BYTES`): `window_room`, against which a viewer weighs the
+  steps of every window shown that stays resident (`windows_bytes`, each step once) before a
+  frame; where they do not fit, its views' windows stream from the store slab by slab instead
   (`chronocl.integration.interactive.session`). Where frames still exceed the limit, `excess`
   says by how much (the viewer logs it once).
 
@@ -62,6 +63,7 @@ class ProcessLimit:
     def __init__(self, total: int) -> None:
         self.total = int(total)
         self._expected: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # `expect`
+        self._windows: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # `resident`
         self.over = 0  # bytes past the limit after the last fit, with nothing left to drop
         self._after: deque[int] = deque(maxlen=RECENT_FRAMES)
         self._holders: weakref.WeakSet = weakref.WeakSet()
@@ -103,6 +105,26 @@ class ProcessLimit:
         """Bytes the windows shown may keep resident: the limit less what every client's views
         expect their frames to hold at their peak (`expect`) and the process's own."""
         return self.total - self.floor - PROCESS_BYTES
+
+    def windows_bytes(self, owner: object, key: object, steps: set[int], step_bytes: int) -> int:
+        """The bytes of every resident window shown (`resident`) were `owner`'s `steps` of
+        data set `key` resident too: the steps several owners share count once."""
+        with self._lock:
+            others = [w for o, w in self._windows.items() if o is not owner]
+        by_key: dict[object, tuple[set[int], int]] = {key: (set(steps), step_bytes)}
+        for k, st, nbytes in others:
+            held = by_key.setdefault(k, (set(), nbytes))[0]
+            held |= st
+        return sum(len(st) * nbytes for st, nbytes in by_key.values())
+
+    def resident(self, owner: object, key: object, steps: set[int], step_bytes: int) -> None:
+        """`owner` keeps the window `steps` of data set `key` resident (empty: it streams, or
+        shows nothing): `windows_bytes` counts it."""
+        with self._lock:
+            if steps:
+                self._windows[owner] = (key, frozenset(steps), int(step_bytes))
+            else:
+                self._windows.pop(owner, None)
 
     def room(self) -> int:
         """Bytes more steps may take now without dropping any."""

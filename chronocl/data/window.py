@@ -219,6 +219,18 @@ class WindowManager:
         finally:
             self._lock.release()
 
+    def drop(self, steps) -> int:
+        """Let resident `steps` go now where no owner's window or read ahead wants them and
+        no session holds them (a window that streams from now on); the bytes given back."""
+        freed = 0
+        with self._lock:
+            keep = self._wanted() | self._read_ahead()
+            for step in steps:
+                if step in self._cache and step not in keep and not self._held(step):
+                    del self._cache[step]
+                    freed += self.slots.release(self.step_bytes, cold=False)
+        return freed
+
     def _fits(self, ahead: bool) -> bool:
         """Whether one more step may be read under the process's limit, after dropping what
         may be dropped (locked); always true without a limit."""

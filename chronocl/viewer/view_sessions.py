@@ -38,14 +38,16 @@ INTEGRATE_LOCK = threading.Lock()
 # release waited 1.8 s for it at 256^3). Only a window that takes longer (very long windows
 # of large volumes) slides incrementally.
 DIRECT_BELOW_MS = 1000.0
-# What a view's frames hold at their peak beside the steps, per full-resolution voxel: the
-# process's memory limit keeps a window's steps resident only where they fit beside this for
-# every view (`ProcessLimit.window_room`; larger windows stream). At 512^3 on the 2-core
-# PoCL/llvmpipe machine (2026-11-30) an alpha view held 8 bytes a voxel steadily (its RGBA8
-# chronovolume and texture) and 20 at the peak of a TF edit (the new chronovolume written
-# while the old one and the texture's staging are alive); a max view 17 steadily (and its
-# t_index, u and step index) and 21 at the peak of its switch; a second max view 17.
-FRAME_VOXEL_BYTES = 20
+# What a view's frames hold beside the steps, per full-resolution voxel: the process's memory
+# limit keeps the windows' steps resident only where they fit beside this for every view
+# (`ProcessLimit.window_room`; else they stream). At 512^3 on the 2-core PoCL/llvmpipe
+# machine (2026-11-30) a max view held 17 bytes a voxel steadily (its RGBA8 chronovolume and
+# texture, t_index, u and step index) and 21 at the peak of its switch, a second max view 17,
+# an alpha view 8 steadily and 20 at the peak of a TF edit (the new chronovolume written while
+# the old one and the texture's staging are alive). The steady 17 is counted: one view's
+# transient at a time (up to 1.5 GB at 512^3) lies within the 10% over the limit the soak's
+# target allows (counting 20 streamed two views of the users' window at an 11 GB limit).
+FRAME_VOXEL_BYTES = 17
 
 
 class SharedSteps:
@@ -100,6 +102,7 @@ class Views:
         self.slab_upload_ms = 0.0  # a refine's texture writes, overlapped with its integration
         self._slabs: bool | None = None  # whether they pay (`slab_upload.pays`), once known
         self._over = False  # whether the last frame left the process over its memory limit
+        self._streaming: tuple[str, int] | None = None  # the views' windows stream: why
 
     def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed;
@@ -130,14 +133,10 @@ class Views:
         if limit is not None:  # steps read ahead or kept give way to the frame
             voxels = math.prod(series.volume_shape) * len(state.views)
             limit.expect(self, FRAME_VOXEL_BYTES * voxels)
-            step = math.prod(series.volume_shape) * series.dtype.itemsize
-            room = limit.window_room()
-            for i, slot in enumerate(self.slots[: len(state.views)]):
-                if (
-                    slot.session is not None
-                    and step * state.selection(series.n_steps, i).width > room
-                ):
-                    slot.session.let_go_steps()  # it streams: its steps give way first
+            self._streaming = self._stream_or_not(limit, series, state)
+            for slot in self.slots[: len(state.views)]:
+                if slot.session is not None:
+                    slot.session.stream(self._streaming)
             limit.fit()
         cvs = []
         for i in range(len(state.views)):
@@ -169,6 +168,27 @@ class Views:
         self.host_steps_why = next((why for why in whys if why), None)
         return cvs, integrate_ms, incremental
 
+    def _stream_or_not(self, limit, series, state: ViewState) -> tuple[str, int] | None:
+        """Whether this client's views stream their windows (why, and the bytes a slab may
+        take) or keep them resident: decided once per frame for every view, so that no view
+        streams a window another keeps resident. They stream where the steps of every window
+        shown (this client's views' and the other clients' resident ones, each step once) do
+        not fit what the limit leaves beside every view's frames (`ProcessLimit.window_room`)."""
+        n = series.n_steps
+        steps = set().union(*(state.selection(n, i).steps for i in range(len(state.views))))
+        step = math.prod(series.volume_shape) * series.dtype.itemsize
+        need = limit.windows_bytes(self, state.dataset, steps, step)
+        room = limit.window_room()
+        fits = need <= room
+        limit.resident(self, state.dataset, steps if fits else set(), step)
+        if fits:
+            return None
+        return (
+            f"the windows shown need {human(need)} > the {human(max(room, 0))} that the memory "
+            f"limit {human(limit.total)} leaves beside the views' frames",
+            max(room, 0),
+        )
+
     def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
         s = slot.session
         slot.why_not_recoloured = None
@@ -189,6 +209,7 @@ class Views:
                 display=True,  # full-resolution frames as RGBA8 from the kernels
                 direct_below_ms=DIRECT_BELOW_MS,
             )
+            s.stream(self._streaming)
             cv = s.set_window(sel)
         else:  # recoloured where a TF edit allows, else slid where the windows overlap
             cv = self.recolouring.view(slot, spec, sel)
@@ -276,6 +297,7 @@ class Views:
         limit = process_memory.current()
         if limit is not None:
             limit.expect(self, 0)
+            limit.resident(self, None, set(), 0)
 
     def _close_managers(self) -> None:
         """Let go of the data set's managers: closed where they are this client's own; shared,

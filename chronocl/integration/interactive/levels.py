@@ -113,12 +113,13 @@ class FixedLevel(Protocol):
 
     stats: dict
     manager: WindowManager  # its resident steps and their read time
+    streaming: tuple[str, int] | None
 
     def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume: ...
 
     def leaving(self, selection: Selection) -> None: ...
 
-    def let_go_steps(self) -> None: ...
+    def stream(self, why: tuple[str, int] | None) -> None: ...
 
 
 class AutoSession:
@@ -144,6 +145,7 @@ class AutoSession:
         self.why = ""
         self._last: tuple[Selection, IntegrationSpec] | None = None
         self._cv: Chronovolume | None = None
+        self._streaming: tuple[str, int] | None = None  # full resolution's (`stream`)
 
     @property
     def shown_level(self) -> int:
@@ -180,13 +182,15 @@ class AutoSession:
     def _missing(self, level: int, selection: Selection) -> int:
         """The steps of `selection` not resident at `level` (all, where it has no session)."""
         held = self.pool.sessions.get((level, self.spec.integration.pool))
-        if held is None:
+        if held is None or (level == 0 and self._streaming is not None):
             return selection.width
         resident = set(held.manager.resident())
         return sum(1 for t in selection.steps if t not in resident)
 
     def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
         s = self.pool.session(level, spec)
+        if level == 0 and s.streaming != self._streaming:  # a session made since `stream`
+            s.stream(self._streaming)
         t = time.perf_counter()
         cv = s.show(selection, spec)
         self.model.record_integrate(level, 1e3 * (time.perf_counter() - t), selection.width)
@@ -214,10 +218,13 @@ class AutoSession:
         for s in self.pool.sessions.values():
             s.leaving(selection)
 
-    def let_go_steps(self) -> None:
-        """Every level's session holds none of its window's steps (`Session.let_go_steps`)."""
-        for s in self.pool.sessions.values():
-            s.let_go_steps()
+    def stream(self, why: tuple[str, int] | None) -> None:
+        """Full resolution streams its window from now on (`Session.stream`), or not (None);
+        the coarse levels' windows are small and stay resident."""
+        self._streaming = why
+        for (level, _), s in self.pool.sessions.items():
+            if level == 0:
+                s.stream(why)
 
     def refine(self) -> Chronovolume | None:
         """The full-resolution chronovolume of what was last shown coarse (None when the last

@@ -32,7 +32,6 @@ import time
 
 import numpy as np
 
-from chronocl.core import process_memory
 from chronocl.core.budget import human
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.interrupt import watched
@@ -51,6 +50,10 @@ from chronocl.integration.interactive.winners import Winners, of_window, recolou
 from chronocl.modes.spec import IntegrationSpec
 
 REFINE_SLABS = 8  # slabs of a window integrated where it may be given up (`Session._slab_rows`)
+# A streamed window's slabs are at least 1/STREAM_SLABS of the volume: with slabs of one row
+# (a limit leaving no room) each chunk of the store was decoded once a row, 96^3 x 8 steps
+# streamed in 4.1 s against 1.55 s in slabs of 6 rows and 1.0 s resident (2026-11-30).
+STREAM_SLABS = 8
 
 
 class Session:
@@ -120,6 +123,7 @@ class Session:
         self._cv: Chronovolume | None = None
         # (t_index, winners) the kernels wrote with the window's integration (`winners`)
         self._won: tuple[np.ndarray, Winners] | None = None
+        self.streaming: tuple[str, int] | None = None  # (why, slab bytes): `stream`
         self._prefetch = prefetch = setup.prefetch
         self.level = check_level(series, level)
         self.series = series.level(self.level, self.spec.integration.pool)
@@ -223,7 +227,7 @@ class Session:
         """Start reading `selection`'s steps in the background where they fit the budget (an
         `AutoSession` shows the window at a coarse level meanwhile)."""
         window = selection.width * self.manager.step_bytes
-        if window <= self.manager.budget and window <= self._window_budget()[0]:
+        if window <= self.manager.budget and self.streaming is None:
             self.manager.request(selection.steps, owner=self)
 
     def refine(self) -> Chronovolume | None:
@@ -250,16 +254,23 @@ class Session:
         if not (self._slider is not None and self._slider.can_move_to(selection)):
             self._let_go(selection)  # integrated anew: the steps leaving help no more
 
-    def let_go_steps(self) -> None:
-        """Hold none of the window's steps: the window streams from now on (a process's limit
-        leaves them too little room beside the views' frames, `_window_budget`), so that the
-        steps give way before any view streams it, not after (each view held them meanwhile:
-        the window twice over at the peak). The chronovolume and winners shown stay."""
+    def stream(self, why: tuple[str, int] | None) -> None:
+        """From now on the window streams from the store (`why`: the reason, and the bytes its
+        slabs may take), or stays resident again (None): a viewer's decision for every view
+        at once, before a frame (`chronocl.viewer.view_sessions`). Streaming, it holds none of
+        the window's steps, and those nobody else wants give way now, before any view
+        streams it (held meanwhile, the window was there twice over at the peak); the
+        chronovolume and winners shown stay."""
+        self.streaming = why
+        if why is None:
+            return
+        steps = self._arrays.keys()
         if not self._owns_manager:
             self.manager.let_go(self)
         self._hold({})
         self._bricks.forget()
         self._slider = None
+        self.manager.drop(steps)
 
     def set_aside(self) -> None:
         """Hold nothing of the window: another pooling's session of this level shows it now.
@@ -307,9 +318,11 @@ class Session:
         if old is not None and selection == old and self._cv is not None:
             return self._cv
         window = selection.width * self.manager.step_bytes
-        budget, why = self._window_budget()
-        if window > budget:
-            return self._stream(selection, window, t, why)
+        if self.streaming is not None:  # a viewer's memory limit: the steps have no room
+            return self._stream(selection, t, *self.streaming)
+        if window > self.budget:
+            why = f"the window needs {human(window)} > budget {human(self.budget)}"
+            return self._stream(selection, t, why, self.budget)
         voxels, direct = int(np.prod(self.series.volume_shape)), self._direct_ms
         reason, keep, state = slide_plan(
             self.spec, voxels, selection.width, window, self.budget, direct, self.direct_below_ms
@@ -381,27 +394,17 @@ class Session:
         self._arrays = arrays
         self._bricks.arrays = arrays
 
-    def _window_budget(self) -> tuple[int, str]:
-        """The bytes the window's steps may keep resident, and what sets it: the session's
-        budget, or under a process's memory limit (a viewer's) what the limit leaves beside
-        the views' frames (`ProcessLimit.window_room`), if less."""
-        limit = process_memory.current()
-        if limit is None or limit.window_room() >= self.budget:
-            return self.budget, f"budget {human(self.budget)}"
-        room = max(0, limit.window_room())
-        return room, (
-            f"{human(room)} that the memory limit {human(limit.total)} leaves beside the "
-            "views' frames"
-        )
-
-    def _stream(self, selection: Selection, window: int, t: float, why: str) -> Chronovolume:
-        """A window larger than its budget (`_window_budget`): integrated z-slab by z-slab
-        from the store, each slab's brick a quarter of that budget at most (nothing resident,
-        no sliding); a display session at full resolution keeps its winners as it would
-        resident, so that its TF edits recolour without streaming the window again."""
+    def _stream(self, selection: Selection, t: float, why: str, room: int) -> Chronovolume:
+        """A window whose steps have no room to stay resident (`why`): integrated z-slab by
+        z-slab from the store, each slab's brick a quarter of `room` at most but at least
+        1/STREAM_SLABS of the volume (slabs of a row or two decoded every chunk once a row),
+        nothing resident, no sliding; a display session at full resolution keeps its winners
+        as it would resident, so that its TF edits recolour without streaming the window again
+        (unless the value range changes)."""
         job = window_job(self.series, selection, self.spec)
-        budget = max(self._window_budget()[0], job.row_bytes)
-        rows = max(1, budget // (4 * max(1, job.row_bytes)))
+        rows = max(
+            room // (4 * max(1, job.row_bytes)), -(-self.series.volume_shape[0] // STREAM_SLABS)
+        )
         self._slider, self.selection, self._cv, self._won = None, selection, None, None
         self._hold({})
         self._bricks.forget()
@@ -410,7 +413,7 @@ class Session:
             job,
             self.engine,
             SeriesBricks(self.series),
-            slab=rows,
+            slab=max(1, rows),
             display=self.display,
             winners=won,
         )
@@ -420,9 +423,7 @@ class Session:
             )
             self._won = (cv.t_index, w)
         self._cv = cv
-        self._record(
-            t, "streamed", f"the window needs {human(window)} > {why}: streamed by z-slabs"
-        )
+        self._record(t, "streamed", f"{why}: streamed by z-slabs")
         return self._cv
 
     def _slab_rows(self) -> int | None:
