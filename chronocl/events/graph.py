@@ -104,6 +104,14 @@ class EventGraph:
         or merge-split is placed at its new features' centroid (size-weighted), a death or exit
         at the last centroid of those that went. `steps`: only events within their span (e.g.
         a rendered window's, any stride), else all."""
+        return [
+            (fractions, f"{e['kind']} {e['next_step'] if e['targets'] else e['step']}")
+            for e, fractions in self.places(steps)
+        ]
+
+    def places(self, steps=None) -> list[tuple[dict, tuple[float, float, float]]]:
+        """Each event other than a continuation with where it happened, (x, y, z) fractions
+        of the volume's box (as `markers` places it); `steps` as for `markers`."""
         shape = self.meta.get("volume_shape_zyx")
         if not shape:
             return []
@@ -125,7 +133,7 @@ class EventGraph:
             zyx = np.array([f["centroid_zyx"] for f in feats], dtype=np.float64)
             centre = (sizes[:, None] * zyx).sum(axis=0) / sizes.sum()
             fractions = (centre[::-1] + 0.5) / np.asarray(shape[::-1], dtype=np.float64)
-            out.append((tuple(float(v) for v in fractions), f"{e['kind']} {step}"))
+            out.append((e, tuple(float(v) for v in fractions)))
         return out
 
     def to_pandas(self) -> dict:

@@ -6,7 +6,9 @@ through the series' normal read path and labelled on a few threads at once (at m
 `AHEAD` steps in flight, each read, masked and labelled on its own thread), while this thread
 takes them in order and matches each with the step before it: besides the steps in flight,
 only the labels of the previous step are held, never the window. The events and tracks are
-found once every step is matched (`chronocl.events.tracking`).
+found once every step is matched (`chronocl.events.tracking`). Between steps `find` passes a
+`chronocl.core.interrupt.checkpoint`: inside `interruptible` (the viewer's events panel) it is
+given up there once unwanted and reports how far it got; elsewhere it does nothing.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 from chronocl import modes
 from chronocl.core.errors import InvalidParameterError, InvalidTransferFunctionError
 from chronocl.core.host_threads import workers
+from chronocl.core.interrupt import checkpoint
 from chronocl.core.progress import track
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.core.tf import GLOBAL, DataTF, TFSetting
@@ -210,7 +213,8 @@ def find(job: EventsJob, progress: bool = False) -> EventGraph:
             for _ in range(AHEAD):
                 submit()
             before: StepFeatures | None = None
-            for _ in track(range(len(steps)), len(steps), "labelling steps", progress):
+            for k in track(range(len(steps)), len(steps), "labelling steps", progress):
+                checkpoint("labelling steps", k, len(steps))  # a viewer's find: given up here
                 now = queue.popleft().result()
                 submit()
                 features += now.features

@@ -6,12 +6,15 @@ A marker is (x, y, z as fractions of the volume's box, voxel centres at (i + 0.5
 label): the same at every level of the series. It is projected with the panel's camera as the
 raycaster lays the volume out (`camera.world_extent`, `camera.to_panel`); markers behind the
 camera or off the panel are left out. Rings and labels have a dark rim, so they read on black
-and on white.
+and on white. `draw_path` draws a line through points of the box instead, a dot at each and a
+label at its start: a feature's track through a window (the viewer's events panel highlights the
+track chosen).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import pairwise
 
 import numpy as np
 
@@ -22,6 +25,7 @@ Marker = tuple[Sequence[float], str]  # (x, y, z) fractions of the box, label
 RING_FRACTION = 0.018  # of the panel's shorter side: the ring's radius
 MIN_RING = 4  # pixels
 MARKER_RGB = (255, 230, 90)
+PATH_RGB = (90, 220, 255)  # a track's path: apart from the markers' yellow
 RIM = (0, 0, 0)
 
 
@@ -64,6 +68,47 @@ def draw_markers(
                 break
         placed.append(box)
         draw.text((at_x, at_y), label, fill=MARKER_RGB, font=font, stroke_width=2, stroke_fill=RIM)
+    return np.asarray(image)
+
+
+def draw_path(
+    panel: np.ndarray,
+    camera: Camera,
+    cv: Chronovolume,
+    points: Sequence[Sequence[float]],
+    label: str,
+    rgb: tuple[int, int, int] = PATH_RGB,
+) -> np.ndarray:
+    """`panel` with a line through `points` ((x, y, z) fractions of the box, in order), a dot
+    at each and `label` beside the first, where `camera` sees them; a stretch with an end
+    behind the camera is left out."""
+    from PIL import Image as PILImage
+    from PIL import ImageDraw
+
+    from chronocl.render.panels import label_font
+
+    if not len(points):
+        return panel
+    h, w, _ = panel.shape
+    extent = world_extent(cv.shape, cv.spacing)
+    world = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - 0.5) * extent
+    at = [to_panel(camera, extent, (w, h), p[None]) for p in world]
+    xy = [None if a is None else (a[0][0] * w, a[0][1] * h) for a in at]
+    image = PILImage.fromarray(panel)
+    draw = ImageDraw.Draw(image)
+    dot = max(3, round(RING_FRACTION * min(w, h) / 2))
+    for colour, width in ((RIM, 6), (rgb, 3)):
+        for a, b in pairwise(xy):
+            if a is not None and b is not None:
+                draw.line((a, b), fill=colour, width=width)
+    for p in xy:
+        if p is not None:
+            draw.ellipse((p[0] - dot, p[1] - dot, p[0] + dot, p[1] + dot), fill=rgb, outline=RIM)
+    start = next((p for p in xy if p is not None), None)  # (an event's label marks the end)
+    if start is not None:
+        font = label_font(max(10, dot * 4))
+        at_x, at_y = start[0] + 2 * dot + 2, start[1] + dot
+        draw.text((at_x, at_y), label, fill=rgb, font=font, stroke_width=2, stroke_fill=RIM)
     return np.asarray(image)
 
 

@@ -22,16 +22,26 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
                {"what": "session"}                       the state as a session file
     load       {"session": a session file's object}     apply a saved session as one step
     cancel     {}                                       stop refining the frame shown
+    events     {"action": "find", "view"[, "by":        the features, events and tracks of the
+                "opacity" | "value", "opacity" | "value", view's window (`events_panel`), found
+                "connectivity", "show"]}                  beside the frames: `progress` after a
+                                                         second, then an `events` reply (given
+                                                         up when the window changes); show:
+                                                         their markers drawn once found
+               {"action": "markers", "show": bool}       draw the found events in the frames
+               {"action": "track", "track": id | null}   draw that track's path in them too
+               {"action": "clear"}                       forget them (no markers)
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
 (numbers must be finite; data values must fit float32, ranges need lo < hi) raise
 `ProtocolError` naming the field; so do messages nested deeper than `MAX_DEPTH`, refused
 before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
 Server -> client: JSON text messages (info, dataset, histogram, fit, probe, progress, download,
-error, steps: `residency`) and binary frames (`pack_frame`: a 4-byte big-endian header length,
-a JSON header, then the images' bytes back to back). `info`, sent first on every socket, lists
-the data sets and `choices()`: the registered modes and every other menu, default and bound
-the page offers, so the page copies nothing from here. The schema primitives are in `schema`.
+events, error, steps: `residency`) and binary frames (`pack_frame`: a 4-byte big-endian header
+length, a JSON header, then the images' bytes back to back). `info`, sent first on every socket,
+lists the data sets and `choices()`: the registered modes and every other menu, default and
+bound the page offers (and whether feature tracking is installed), so the page copies nothing
+from here. The schema primitives are in `schema`.
 """
 
 from __future__ import annotations
@@ -199,6 +209,12 @@ SESSION = Obj(
 )
 
 UNIT_RANGE, NEEDS_RANGE = Range(Num(0.0, 1.0)), frozenset({"range"})  # histogram
+# The events panel (chronocl/viewer/events_panel.py): what a step shows (the data TF's opacity
+# above `opacity`, or values at least `value`) and how its voxels connect.
+EVENT_ACTIONS = ("find", "markers", "track", "clear")
+EVENT_BY = ("opacity", "value")
+CONNECTIVITIES = (6, 18, 26)
+EVENT_OPACITY = Num(0.0, 0.99)
 MESSAGES: dict[str, Obj] = {
     "open": Obj(
         {"type": Enum(("open",)), "id": ID, "dataset": Name(), "fit": Bool()},
@@ -245,7 +261,50 @@ MESSAGES: dict[str, Obj] = {
     ),
     "load": Obj({"type": Enum(("load",)), "id": ID, "session": SESSION}, frozenset({"session"})),
     "cancel": Obj({"type": Enum(("cancel",)), "id": ID}),
+    "events": Obj(
+        {
+            "type": Enum(("events",)),
+            "id": ID,
+            "action": Enum(EVENT_ACTIONS),
+            "view": Int(0, MAX_VIEWS - 1),
+            "by": Enum(EVENT_BY),
+            "opacity": EVENT_OPACITY,
+            "value": Num(-FLOAT32_MAX, FLOAT32_MAX),
+            "connectivity": Int(6, 26),
+            "show": Bool(),
+            "track": Nullable(Int(0, 2**31)),
+        },
+        frozenset({"action"}),
+    ),
 }
+
+
+def _check_events(msg: dict) -> dict:
+    """An `events` message's fields that must go together (after its schema)."""
+    action = msg["action"]
+    takes = {"find": set(), "markers": {"show"}, "track": {"track"}, "clear": set()}[action]
+    if action != "find":
+        extra = sorted(set(msg) - {"type", "id", "action"} - takes)
+        if extra:
+            raise ProtocolError(f"events.{extra[0]} does not go with {action}")
+        missing = sorted(takes - set(msg))
+        if missing:
+            raise ProtocolError(f"events.{missing[0]} is missing: {action} needs it")
+        return msg
+    if "track" in msg:
+        raise ProtocolError("events.track does not go with find; choose a track with track")
+    if msg.get("connectivity", 26) not in CONNECTIVITIES:
+        raise ProtocolError(
+            f"events.connectivity is {msg['connectivity']}; choose 6, 18 or 26 (voxels sharing "
+            "a face, an edge or a corner)"
+        )
+    by = msg.get("by", "opacity")
+    if by == "value" and "value" not in msg:
+        raise ProtocolError("events.value is missing: by value needs the value a voxel reaches")
+    other = "value" if by == "opacity" else "opacity"
+    if other in msg:
+        raise ProtocolError(f"events.{other} does not go with by {by}; send {by} instead")
+    return msg
 
 
 def _menu(names: tuple[str, ...]) -> list[dict]:
@@ -299,6 +358,7 @@ def choices() -> dict:
             "shading": _ranges(SHADING),
             "threshold": [THRESHOLD.lo, THRESHOLD.hi],
         },
+        "events": events_choices(),
         "limits": {
             "max_views": MAX_VIEWS,
             "max_message_bytes": MAX_MESSAGE_BYTES,
@@ -307,6 +367,23 @@ def choices() -> dict:
             "max_panel": MAX_PANEL,
             "probe_threshold": PROBE_THRESHOLD,
         },
+    }
+
+
+def events_choices() -> dict:
+    """Whether feature tracking is installed (the ``events`` extra; looked up, not imported),
+    the line that installs it, and the panel's choices and default."""
+    from importlib.util import find_spec
+
+    from chronocl.events.extra import INSTALL, PACKAGES
+
+    return {
+        "available": all(find_spec(module) is not None for module in PACKAGES),
+        "install": INSTALL,
+        "by": list(EVENT_BY),
+        "connectivity": list(CONNECTIVITIES),
+        "opacity": 0.1,
+        "opacity_range": [EVENT_OPACITY.lo, EVENT_OPACITY.hi],
     }
 
 
@@ -381,7 +458,8 @@ def parse_message(text: object) -> dict:
         raise ProtocolError(
             f"unknown message type {show(kind)}; choose one of {', '.join(MESSAGES)}"
         )
-    return MESSAGES[kind].check(msg, kind)
+    checked = MESSAGES[kind].check(msg, kind)
+    return _check_events(checked) if kind == "events" else checked
 
 
 def pack_frame(header: dict, images: list[bytes]) -> bytes:

@@ -1,8 +1,9 @@
 """The requests a client's render worker answers beside its frames: probe and saves (image,
 chronovolume, session, movie) between frames, on the worker's thread (they use its views);
-histogram and fit on the client's side thread (`chronocl.viewer.side_work`), so that they never
-delay a frame. `Tasks` is a part of `ClientWorker` (chronocl.viewer.worker), kept here so that
-each file holds one concern; it uses the worker's views, shown state and reply channel.
+histogram, fit and events (`chronocl.viewer.events_panel`) on the client's side thread
+(`chronocl.viewer.side_work`), so that they never delay a frame. `Tasks` is a part of
+`ClientWorker` (chronocl.viewer.worker), kept here so that each file holds one concern; it uses
+the worker's views, shown state and reply channel.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from chronocl.engine import get_engine
 from chronocl.render.views import parse_color
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import error_text
+from chronocl.viewer.events_panel import EventTasks
 from chronocl.viewer.fit import fit_reply
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.movie import movie_states, render_movie
@@ -27,8 +29,9 @@ from chronocl.viewer.session_file import save_session
 from chronocl.viewer.view_state import ViewState
 
 
-class Tasks:
-    """Histogram, fit, probe and save requests (the methods `ClientWorker` answers them with)."""
+class Tasks(EventTasks):
+    """Histogram, fit, probe and save requests (the methods `ClientWorker` answers them with);
+    events (`EventTasks`, chronocl.viewer.events_panel)."""
 
     def _reply(self, obj: dict) -> bool:
         return self.send(json.dumps(obj))
@@ -52,12 +55,15 @@ class Tasks:
             raise InvalidParameterError("too many requests are waiting; wait for their replies")
 
     def _beside_frames(self, kind: str, msg: dict) -> bool:
-        """Send a histogram or fit request to the side thread; False for other kinds."""
+        """Send a histogram, fit or events request to the side thread (an events message that
+        only shows or hides markers: a frame); False for other kinds."""
         if kind == "histogram":
             self._request_histogram(msg.get("id"), list(msg["range"]))
         elif kind == "fit":
             self._request_fit(msg)
-        return kind in ("histogram", "fit")
+        elif kind == "events":
+            self._events_message(msg)
+        return kind in ("histogram", "fit", "events")
 
     def _histogram_after(self, state: ViewState) -> None:
         """After a full-quality frame of another window than the histogram's: its histogram
@@ -127,6 +133,9 @@ class Tasks:
         cv = self.views.slots[view].cv
         assert cv is not None
         reply = probe_reply(msg, view, state, cv, self.datasets[state.dataset])
+        track = self._probed_track(reply, state.dataset)  # a feature of the events found
+        if track is not None:
+            reply["track"] = track
         where = reply.pop("where", None)
         self._probed = None if where is None else (view, where)
         self._reply(reply)

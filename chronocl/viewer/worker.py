@@ -314,6 +314,7 @@ class ClientWorker(Tasks):
         ]
         for slot in self.views.slots[len(cvs) :]:
             slot.release_gl()
+        panels = self._marked(panels, cvs, state)  # the events panel's markers, if shown
         return panels, t_up, t_draw, time.perf_counter()
 
     def _render(self, state: ViewState, rid: int | None) -> None:

@@ -11,6 +11,8 @@
 //   tf_editor.js   the data transfer function editor
 //   fit.js         Fit to window: the data TF's range fitted as the command line fits it
 //   probe.js       the v(t) plot of a probed voxel
+//   plot.js        the small plot over the series' steps (the probe's, the events panel's)
+//   events.js      the events panel: Find events, the events and tracks, markers
 //   legend.js      the time legend and the data colour bar drawn in each view
 //   time_follow.js time colours that follow a colour-map preset (lightness under its hue)
 //   session.js     undo / redo, the URL fragment (#state=), Save / Load session
@@ -19,6 +21,9 @@
 
 import { connect, disconnect, frameArrived, send, update } from './connection.js';
 import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
+import {
+  bindEvents, clearEvents, drawTrack, eventsFailed, eventsProbed, eventsProgress, fillEvents, onEvents,
+} from './events.js';
 import { bindFit, fitFailed, forgetFits, onFit, refitMode } from './fit.js';
 import { bindKeys, unbindKeys } from './keys.js';
 import { bindLegend, drawLegends } from './legend.js';
@@ -48,6 +53,7 @@ function onInfo(msg) {
   S.choices = msg;
   fillColormaps();
   fillControls(msg);
+  fillEvents(msg);
   fillSelect(
     $('dataset'),
     // shape is the array's (T, Z, Y, X); the label reads x×y×z like --dims and info (n³ for a
@@ -110,6 +116,7 @@ function onDataset(msg) {
   drawTimeline();
   drawTF();
   clearProbe(); // the old voxel's curve does not belong on the new series' axis
+  if (!restored) clearEvents(); // (a reopen after a reconnect keeps the page's list)
   showMark(null);
 }
 
@@ -162,14 +169,19 @@ function onText(msg) {
       break;
     case 'probe':
       onProbe(msg);
+      eventsProbed(msg);
       showMark(msg.values && msg.mark ? { view: msg.view, x: msg.mark[0], y: msg.mark[1] } : null);
       break;
     case 'progress':
       if (msg.what === 'refine') showRefineProgress(msg);
+      else if (msg.what === 'events') eventsProgress(msg);
       else movieProgress(msg);
       break;
     case 'download':
       onDownload(msg);
+      break;
+    case 'events':
+      onEvents(msg);
       break;
     case 'steps':
       onSteps(msg);
@@ -182,6 +194,7 @@ function onText(msg) {
       if (msg.id !== null && msg.id >= viewer.sent) frameArrived(); // no frame will come
       viewer.errors.push(msg);
       fitFailed(msg.id);
+      eventsFailed(msg.id);
       setStatus(`error: ${msg.message}`, true);
       if (urlLoad !== null && msg.id === urlLoad) {
         urlLoad = null; // the URL's session does not fit: the default view instead
@@ -206,6 +219,7 @@ function relayout() {
     drawTimeline();
     drawTF();
     drawProbe();
+    drawTrack();
     drawLegends();
   }, 150);
 }
@@ -222,6 +236,7 @@ export function start(host, transport) {
   observer.observe($('views'));
   bindViews(page, relayout);
   bindProbe(page);
+  bindEvents(page);
   $('side-toggle').addEventListener('click', () => {
     const hidden = page.shell.classList.toggle('side-hidden');
     $('side-toggle').textContent = hidden ? 'panel ◂' : 'panel ▸';

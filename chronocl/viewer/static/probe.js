@@ -2,9 +2,10 @@
 // the box a shift-drag spanned with its min-max band, the window's steps marked on it; and
 // its CSV export (the server's, the same columns as `chronocl probe -o curve.csv`). The window
 // drawn is the page's current one (it follows play and the brush); switching data sets clears
-// the plot.
+// the plot. The plot itself is plot.js's (the events panel draws its tracks with it too).
 
-import { $, canvasSize, fmt } from './state.js';
+import { drawTimePlot, windowSteps } from './plot.js';
+import { $ } from './state.js';
 
 // The page's state (state.js: pageState), made by app.js and given to bindProbe.
 let S;
@@ -60,57 +61,16 @@ export function exportProbe() {
 
 export function drawProbe() {
   const c = $('probe');
-  const [ctx, w, h] = canvasSize(c);
-  ctx.clearRect(0, 0, w, h);
   const msg = viewer.probe;
-  if (!S.info || !msg || !msg.values) return;
+  if (!S.info || !msg || !msg.values) {
+    drawTimePlot(c, {}); // cleared
+    return;
+  }
   const T = msg.values.length;
-  const p = { l: 40, r: 6, t: 8, b: 16 };
-  const vmin = S.info.vmin;
-  const vmax = S.info.vmax > vmin ? S.info.vmax : vmin + 1;
-  const X = (s) => p.l + (T > 1 ? s / (T - 1) : 0.5) * (w - p.l - p.r);
-  const Y = (v) => h - p.b - ((v - vmin) / (vmax - vmin)) * (h - p.t - p.b);
-  const { t0, t1, stride } = S.state.window;
-  const win = [];
-  for (let s = t0; s < Math.min(t1, T); s += stride) win.push(s);
-  if (!win.length) return;
-  ctx.fillStyle = 'rgba(240,160,48,0.16)';
-  ctx.fillRect(X(win[0]) - 2, p.t, X(win[win.length - 1]) - X(win[0]) + 4, h - p.t - p.b);
-  ctx.strokeStyle = '#343941';
-  ctx.lineWidth = 1;
-  ctx.strokeRect(p.l, p.t, w - p.l - p.r, h - p.t - p.b);
-  if (msg.min && msg.max) {
-    ctx.beginPath();
-    msg.max.forEach((v, s) => (s === 0 ? ctx.moveTo(X(s), Y(v)) : ctx.lineTo(X(s), Y(v))));
-    for (let s = T - 1; s >= 0; s--) ctx.lineTo(X(s), Y(msg.min[s]));
-    ctx.closePath();
-    ctx.fillStyle = 'rgba(127,184,255,0.22)';
-    ctx.fill();
-  }
-  ctx.beginPath();
-  msg.values.forEach((v, s) => (s === 0 ? ctx.moveTo(X(s), Y(v)) : ctx.lineTo(X(s), Y(v))));
-  ctx.strokeStyle = '#7fb8ff';
-  ctx.lineWidth = 1.6;
-  ctx.stroke();
-  ctx.fillStyle = '#f0a030';
-  for (const s of win) {
-    ctx.beginPath();
-    ctx.arc(X(s), Y(msg.values[s]), 2.6, 0, 2 * Math.PI);
-    ctx.fill();
-  }
-  ctx.fillStyle = '#8b949e';
-  ctx.font = '10px system-ui, sans-serif';
-  ctx.textAlign = 'right';
-  ctx.textBaseline = 'middle';
-  ctx.fillText(String(fmt(vmax)), p.l - 3, p.t + 3);
-  ctx.fillText(String(fmt(vmin)), p.l - 3, h - p.b - 2);
-  ctx.textBaseline = 'bottom';
-  ctx.textAlign = 'left';
-  const labels = S.info.time_labels;
-  ctx.fillText(labels ? labels[0] : 't = 0', p.l, h);
-  ctx.textAlign = 'right';
-  ctx.fillText(labels ? labels[T - 1] : String(T - 1), w - p.r, h);
-  c.dataset.drawn = String(Number(c.dataset.drawn || 0) + 1);
+  drawTimePlot(c, {
+    T, lo: S.info.vmin, hi: S.info.vmax, values: msg.values, min: msg.min, max: msg.max,
+    steps: windowSteps(S.state.window, T), labels: S.info.time_labels,
+  });
 }
 
 export function bindProbe(page) {
