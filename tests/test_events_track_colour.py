@@ -494,3 +494,221 @@ def test_the_command_notes_a_panel_that_lost_much_of_its_opacity(capsys):
     note_untracked([cv("max", 0.1), cv("first_hit", 0.61)])
     lines = capsys.readouterr().err
     assert "first_hit: 61% of its opacity" in lines and "max" not in lines
+
+
+# -- data without a store: series= ------------------------------------------------------------
+def _thick_merge() -> np.ndarray:
+    """The merge thickened through z, as `merge_store` holds it."""
+    thick = np.repeat(merging().values[:, 1:2], 8, axis=1)
+    thick[:, [0, -1]] = 0
+    return thick
+
+
+def test_an_in_memory_series_is_coloured_by_track_with_series(merge_store):
+    """An array's chronovolume and events name no store: with series= the render colours by
+    track, the same picture as the store's; render_views too, over two modes."""
+    from chronocl.render import Camera
+
+    values = _thick_merge()
+    s = TimeSeries.from_array(values)
+    g = chronocl.events(s, threshold=THRESHOLD)
+    cv = chronocl.integrate(s, "0:5", mode="max")
+    assert cv.metadata.get("store") is None and g.meta.get("store") is None
+    camera = Camera(0.0, 0.0, 1.0, projection="orthographic", frame="box")
+    image = chronocl.render(cv, camera, (480, 240), colour="track", events=g, series=s, legend=True)
+    pixels = np.asarray(image.array)[..., :3]
+    for colour in TRACK_PALETTE[:2]:
+        assert _near(pixels[:240], colour).sum() > 100
+        assert (pixels[240:] == colour).all(axis=-1).sum() >= 16  # its legend swatch
+    stored = chronocl.integrate(chronocl.open(merge_store), "0:5", mode="max")
+    g_stored = chronocl.events(merge_store, threshold=THRESHOLD)
+    same = chronocl.render(stored, camera, (480, 240), colour="track", events=g_stored, legend=True)
+    np.testing.assert_array_equal(np.asarray(image.array), np.asarray(same.array))
+    # the same series as an array (T, Z, Y, X); and parallel views of two modes
+    first = chronocl.integrate(s, "0:5", mode="first_hit")
+    views = chronocl.render_views(
+        [cv, first], camera, (160, 80), colour="track", events=g, series=values
+    )
+    assert views.array.shape[1] >= 320
+    lit = np.asarray(views.array)[..., :3]
+    assert _near(lit, TRACK_PALETTE[0]).sum() > 50 and _near(lit, TRACK_PALETTE[1]).sum() > 20
+
+
+def _no_work(monkeypatch):
+    """Every read of a step, every re-integration along the camera and every draw fail the
+    test: a refusal must come before any of them."""
+    from chronocl.render import views
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("work started before the checks")
+
+    monkeypatch.setattr(TimeSeries, "read_brick", refuse)
+    monkeypatch.setattr(views, "following", refuse)
+    monkeypatch.setattr(views, "raycaster", refuse)
+    monkeypatch.setattr(views, "default_camera", refuse)
+
+
+def test_without_series_data_with_no_store_is_refused_in_one_line_before_any_work(monkeypatch):
+    s = merging().series()
+    g = chronocl.events(s, threshold=THRESHOLD)
+    cv = chronocl.integrate(s, "0:5", mode="max")
+    _no_work(monkeypatch)
+    for call in (
+        lambda: chronocl.render(cv, colour="track", events=g),
+        lambda: chronocl.render_views([cv, cv], colour="track-time", events=g),
+        lambda: track_colour(cv, g),
+    ):
+        with pytest.raises(ChronoclError, match=r"give series=") as caught:
+            call()
+        assert "\n" not in str(caught.value)
+        assert "name a store" in str(caught.value)
+    # series= of other data, of another kind, or without colour="track": refused as early
+    for series, needle in (
+        (np.zeros((5, 3, 10, 20), np.float32), "20x10x3 volumes, the chronovolume is 24x10x3"),
+        (np.zeros((3, *SHAPE), np.float32), "has 3 steps"),
+        (np.zeros(SHAPE, np.float32), r"must be \(T, Z, Y, X\)"),
+        (42, "not int"),
+    ):
+        with pytest.raises(InvalidParameterError, match=needle) as caught:
+            chronocl.render(cv, colour="track", events=g, series=series)
+        assert "\n" not in str(caught.value)
+    with pytest.raises(InvalidParameterError, match="give it with colour='track'"):
+        chronocl.render(cv, series=s)
+
+
+# -- the legend of many tracks ----------------------------------------------------------------
+class _Measured:
+    """An ImageDraw that counts (and, `cached`, remembers) its label measurements."""
+
+    def __init__(self, draw, cached: bool = False) -> None:
+        self.draw, self.cached, self.measured, self.known = draw, cached, 0, {}
+
+    def textlength(self, text, font=None):
+        if self.cached and text in self.known:
+            return self.known[text]
+        self.measured += 1
+        self.known[text] = self.draw.textlength(text, font=font)
+        return self.known[text]
+
+    def __getattr__(self, name):
+        return getattr(self.draw, name)
+
+
+def _reference_swatches(draw, tracks, box, font, text_rgb) -> list[int]:
+    """The legend as first written: every count of tracks from all of them down laid out in
+    full until one fits (quadratic; here with its measurements remembered)."""
+    x0, y0, width, height = box
+    title = "tracks" if tracks else "no tracks"
+    draw.text((x0, y0 + 1), title, fill=text_rgb, font=font)
+    top, bottom = font.getbbox("Ag")[1::2]
+    line = int(bottom - top) + 6
+    side = max(6, line - 6)
+    start = x0 + int(draw.textlength("tracks", font=font)) + 10
+    lines = max(1, (height + 4) // line)
+
+    def widths(ids):
+        return [side + 4 + draw.textlength(str(k), font=font) + 10 for k in ids]
+
+    def fits(ids, more):
+        tail = draw.textlength(f"+{more} more", font=font) if more else 0
+        used, row = 0.0, 0
+        for w in [*widths(ids), tail]:
+            if used and start + used + w > x0 + width:
+                row, used = row + 1, 0.0
+            used += w
+        return row < lines
+
+    by_size = sorted(tracks, key=lambda t: (-t.get("voxels", 0), t["id"]))
+    n = len(by_size)
+    while n > 0 and not fits(sorted(t["id"] for t in by_size[:n]), len(tracks) - n):
+        n -= 1
+    shown = sorted(by_size[:n], key=lambda t: t["id"])
+    x, y = start, y0
+    for t in shown:
+        label = str(t["id"])
+        w = side + 4 + draw.textlength(label, font=font) + 10
+        if x > start and x + w > x0 + width:
+            x, y = start, y + line
+        colour = tuple(round(min(max(c, 0.0), 1.0) * 255) for c in t["rgb"])
+        draw.rectangle((x, y + 2, x + side, y + 2 + side), fill=colour, outline=text_rgb)
+        draw.text((x + side + 4, y + 1), label, fill=text_rgb, font=font)
+        x += w
+    if n < len(tracks):
+        more = f"+{len(tracks) - n} more"
+        if x > start and x + draw.textlength(more, font=font) > x0 + width:
+            x, y = start, y + line
+        draw.text((x, y + 1), more, fill=text_rgb, font=font)
+    return [t["id"] for t in shown]
+
+
+def _many_tracks(n: int, seed: int = 0) -> list[dict]:
+    """`n` tracks, ids with gaps (1 to 4 digits), sizes with ties, in no order."""
+    rng = np.random.default_rng(seed)
+    ids = np.sort(rng.choice(max(3 * n, 10), n, replace=False))
+    voxels = rng.integers(1, max(2, n // 3), n)
+    tracks = [
+        {"id": int(k), "rgb": list(track_rgb(int(k))), "voxels": int(v)}
+        for k, v in zip(ids, voxels, strict=True)
+    ]
+    rng.shuffle(tracks)
+    return tracks
+
+
+def _both(tracks, box, size=(0, 0)):
+    """The legend drawn by `track_swatches` and by the reference: ids, pixels, measurements."""
+    from PIL import ImageDraw
+
+    from chronocl.render.legends import track_swatches
+    from chronocl.render.panels import label_font
+
+    font = label_font(12)
+    w, h = size if size != (0, 0) else (box[0] + box[2] + 20, box[1] + box[3] + 20)
+    got, want = Image.new("RGB", (w, h)), Image.new("RGB", (w, h))
+    counted = _Measured(ImageDraw.Draw(got))
+    ids = track_swatches(counted, tracks, box, font, (255,) * 3)
+    ref = _reference_swatches(
+        _Measured(ImageDraw.Draw(want), cached=True), tracks, box, font, (255,) * 3
+    )
+    return ids, ref, np.asarray(got), np.asarray(want), counted.measured
+
+
+@pytest.mark.parametrize("n", [0, 1, 9, 10, 11, 40, 99, 100, 101, 150])
+def test_the_legend_lays_out_as_the_straightforward_search_does(n):
+    """For track counts about the digits' edges ("+9 more", "+10 more") and boxes from one
+    line a swatch wide to many lines: the same tracks, the same pixels, as the reference."""
+    tracks = _many_tracks(n, seed=n)
+    boxes = [(0, 0, 220, 24), (0, 0, 2000, 24), (0, 0, 90, 60), (0, 0, 30, 24), (5, 3, 300, 80)]
+    boxes += [(0, 0, w, 40) for w in range(60, 700, 37)]
+    for box in boxes:
+        ids, ref, got, want, _ = _both(tracks, box)
+        assert ids == ref, box
+        np.testing.assert_array_equal(got, want, err_msg=str(box))
+
+
+def test_a_legend_of_2000_tracks_measures_each_label_once():
+    """2000 tracks: as the reference in boxes where all or most fit (the reference's search is
+    short there); and in a small box, where the first search laid out every count from 2000
+    down (17 s a panel), the labels are measured once each: O(n) measurements, not one per
+    track per count tried."""
+    tracks = _many_tracks(2000, seed=7)
+    counts = []
+    for box in ((0, 0, 1800, 1400), (0, 0, 1800, 1080), (0, 0, 1800, 1000)):
+        ids, ref, got, want, measured = _both(tracks, box)
+        assert ids == ref, box
+        np.testing.assert_array_equal(got, want)
+        assert measured <= 2000 + 40
+        counts.append(len(ids))
+    assert counts[0] == 2000 and 1500 < counts[2] < counts[1] < 2000  # all; "+34 more"; ...
+    from PIL import ImageDraw
+
+    from chronocl.render.legends import track_swatches
+    from chronocl.render.panels import label_font
+
+    for n in (250, 500, 1000, 2000):
+        counted = _Measured(ImageDraw.Draw(Image.new("RGB", (240, 40))))
+        ids = track_swatches(
+            counted, _many_tracks(n, n), (0, 0, 220, 24), label_font(12), (255,) * 3
+        )
+        assert 0 < len(ids) < 20
+        # each distinct label once, the title, and a "+N more" per count tried (log n)
+        assert counted.measured <= n + 2 + 4 * int(np.log2(n) + 1), (n, counted.measured)

@@ -32,9 +32,11 @@ winning step (its value there under the events' threshold: e.g. the faint halo o
 transparent: the picture shows the features the event graph tracks and nothing else.
 
 The labels are not kept in the events file: each winning step is read again through the
-series' read path and labelled again (only the steps some voxel won at, a few at once on
-threads, as `chronocl.events` labels them, and each dropped once its voxels are looked up),
-with `chronocl.events.features.label_step`, which numbers a step's features as `chronocl.events`
+read path of the series given (else of the store the chronovolume or the events name; data
+given as an array, an xarray or a URL name none, so the series must be given) and labelled
+again (only the steps some voxel won at, a few at once on threads, as `chronocl.events`
+labels them, and each dropped once its voxels are looked up), with
+`chronocl.events.features.label_step`, which numbers a step's features as `chronocl.events`
 numbered them; the features found must match the graph's (their sizes), else the events were
 found in other data and the colouring is refused.
 """
@@ -42,6 +44,7 @@ found in other data and the colouring is refused.
 from __future__ import annotations
 
 import itertools
+import os
 from collections import deque
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -135,7 +138,9 @@ def check_steps(graph: EventGraph, steps: Sequence[int], shape_zyx: Sequence[int
         )
 
 
-def check(chronovolume: Chronovolume, graph: object, by: object = "id") -> EventGraph:
+def check(
+    chronovolume: Chronovolume, graph: object, by: object = "id", series: object = None
+) -> EventGraph:
     """Every reason `track_colour` would refuse, checked without reading a step."""
     check_by(by)
     check_mode(chronovolume.metadata.get("spec", {}).get("mode"))
@@ -146,7 +151,64 @@ def check(chronovolume: Chronovolume, graph: object, by: object = "id") -> Event
         )
     graph = check_graph(graph)
     check_steps(graph, chronovolume.steps, chronovolume.shape)
+    check_series(chronovolume, graph, series)
     return graph
+
+
+# no series given, and no store named to read the steps again from
+NO_SERIES = (
+    "colouring by track reads the winning steps again, and neither the chronovolume nor the "
+    "events name a store to read them from (data given as an array, an xarray or a URL do "
+    "not): give series= (the TimeSeries they came from, e.g. chronocl.open(...) or "
+    "TimeSeries.from_array(...))"
+)
+
+
+def named_store(chronovolume: Chronovolume, graph: EventGraph) -> str | None:
+    """The local store the chronovolume or the events came from (None: neither names one)."""
+    for where in (chronovolume.metadata.get("store"), graph.meta.get("store")):
+        if where:
+            return str(where)
+    return None
+
+
+def check_series(chronovolume: Chronovolume, graph: EventGraph, series: object) -> None:
+    """One line where the steps cannot be read again: no `series` given and no store named
+    (`NO_SERIES`), a series of another kind than a TimeSeries, a store's path or an array
+    (T, Z, Y, X), or one whose volume or steps are not the chronovolume's. Nothing is read
+    (a store's path is opened when the steps are)."""
+    if series is None:
+        if named_store(chronovolume, graph) is None:
+            raise InvalidParameterError(NO_SERIES)
+        return
+    if isinstance(series, str | os.PathLike):
+        return
+    if isinstance(series, TimeSeries):
+        shape, n_steps = tuple(series.volume_shape), series.n_steps
+    elif isinstance(series, np.ndarray) or hasattr(series, "__array__"):
+        shape4 = tuple(np.shape(series))
+        if len(shape4) != 4:
+            raise InvalidParameterError(
+                f"series= as an array must be (T, Z, Y, X); got shape {shape4}"
+            )
+        shape, n_steps = shape4[1:], shape4[0]
+    else:
+        raise InvalidParameterError(
+            f"series= is the series the steps are read again from: a TimeSeries, a store's "
+            f"path or an array (T, Z, Y, X), not {type(series).__name__}"
+        )
+    if list(shape) != list(chronovolume.shape):
+        raise InvalidParameterError(
+            f"series= has {'x'.join(map(str, shape[::-1]))} volumes, the chronovolume is "
+            f"{'x'.join(map(str, list(chronovolume.shape)[::-1]))}: give the series it came "
+            "from (at level 0)"
+        )
+    beyond = [s for s in chronovolume.steps if s >= n_steps]
+    if beyond:
+        raise InvalidParameterError(
+            f"series= has {n_steps} steps, the chronovolume shows step {beyond[-1]}: give the "
+            "series it came from"
+        )
 
 
 def mask_of(graph: EventGraph) -> Mask:
@@ -168,13 +230,10 @@ def _series(chronovolume: Chronovolume, graph: EventGraph, series: object) -> Ti
 
     if series is not None:
         return as_series(series)
-    for where in (chronovolume.metadata.get("store"), graph.meta.get("store")):
-        if where:
-            return as_series(str(where))
-    raise InvalidParameterError(
-        "the steps must be labelled again to colour by track, and neither the chronovolume nor "
-        "the events name their store; give series= (the series they came from)"
-    )
+    where = named_store(chronovolume, graph)
+    if where is None:
+        raise InvalidParameterError(NO_SERIES)
+    return as_series(where)
 
 
 def track_volumes(
@@ -333,7 +392,7 @@ class TrackColour:
         check_by(self.by)
 
     def check(self, chronovolume: Chronovolume) -> None:
-        check(chronovolume, self.events, self.by)
+        check(chronovolume, self.events, self.by, self.series)
 
     def apply(self, chronovolumes: Sequence[Chronovolume]) -> list[Chronovolume]:
         todo = [cv for cv in chronovolumes if not is_track_coloured(cv)]

@@ -67,7 +67,11 @@ def track_legend(draw, cv, box, beside, font, text_rgb, time_labels="labels") ->
 def track_swatches(draw, tracks: list[dict], box, font, text_rgb) -> list[int]:
     """A swatch and the id of each track of `tracks` (records with id, rgb, voxels), in id
     order, on as many lines as `box` holds; where they do not all fit, those with the most
-    voxels, and "+N more". Returns the ids drawn."""
+    voxels, and "+N more". Returns the ids drawn.
+
+    How many fit is found without laying out every count (`swatch_count`): each label is
+    measured once, so a legend of thousands of tracks (a turntable draws it every frame) costs
+    about as much as measuring them."""
     x0, y0, width, height = box
     title = "tracks" if tracks else "no tracks"
     draw.text((x0, y0 + 1), title, fill=text_rgb, font=font)
@@ -77,27 +81,28 @@ def track_swatches(draw, tracks: list[dict], box, font, text_rgb) -> list[int]:
     start = x0 + int(draw.textlength("tracks", font=font)) + 10
     lines = max(1, (height + 4) // line)
 
-    def widths(ids: list[int]) -> list[float]:
-        return [side + 4 + draw.textlength(str(k), font=font) + 10 for k in ids]
+    texts: dict[str, float] = {}  # every text measured once
 
-    def fits(ids: list[int], more: int) -> bool:
-        tail = draw.textlength(f"+{more} more", font=font) if more else 0
-        used, row = 0.0, 0
-        for w in [*widths(ids), tail]:
-            if used and start + used + w > x0 + width:
-                row, used = row + 1, 0.0
-            used += w
-        return row < lines
+    def measure(text: str) -> float:
+        if text not in texts:
+            texts[text] = draw.textlength(text, font=font)
+        return texts[text]
 
-    by_size = sorted(tracks, key=lambda t: (-t.get("voxels", 0), t["id"]))
-    n = len(by_size)
-    while n > 0 and not fits(sorted(t["id"] for t in by_size[:n]), len(tracks) - n):
-        n -= 1
-    shown = sorted(by_size[:n], key=lambda t: t["id"])
+    by_size = sorted(
+        range(len(tracks)), key=lambda i: (-tracks[i].get("voxels", 0), tracks[i]["id"])
+    )
+    rank = [0] * len(tracks)  # of each track, its place by size: the first n are shown
+    for place, i in enumerate(by_size):
+        rank[i] = place
+    # in id order (ties: by size), each track's place by size and the width of its swatch
+    order = sorted(range(len(tracks)), key=lambda i: (tracks[i]["id"], rank[i]))
+    items = [(rank[i], side + 4 + measure(str(tracks[i]["id"])) + 10) for i in order]
+    n = swatch_count(items, lambda more: measure(f"+{more} more"), start, x0 + width, lines)
+    shown = [tracks[i] for i in order if rank[i] < n]
     x, y = start, y0
     for t in shown:
         label = str(t["id"])
-        w = side + 4 + draw.textlength(label, font=font) + 10
+        w = side + 4 + measure(label) + 10
         if x > start and x + w > x0 + width:
             x, y = start, y + line
         colour = tuple(round(min(max(c, 0.0), 1.0) * 255) for c in t["rgb"])
@@ -106,10 +111,54 @@ def track_swatches(draw, tracks: list[dict], box, font, text_rgb) -> list[int]:
         x += w
     if n < len(tracks):
         more = f"+{len(tracks) - n} more"
-        if x > start and x + draw.textlength(more, font=font) > x0 + width:
+        if x > start and x + measure(more) > x0 + width:
             x, y = start, y + line
         draw.text((x, y + 1), more, fill=text_rgb, font=font)
     return [t["id"] for t in shown]
+
+
+def swatch_count(items, tail_width, start: float, end: float, lines: int) -> int:
+    """How many of the tracks fit the legend: the largest n such that the n largest, in id
+    order, then "+N more" (N the rest; nothing where n is all of them), fill at most `lines`
+    lines from x = `start` to `end`, a line broken before an item that would pass its end (an
+    item wider than a line takes one of its own). `items`: (place by size, width) in id order;
+    `tail_width(N)`: the width of "+N more".
+
+    The n largest fit in as few lines as the n + 1 largest or fewer, the last no fuller where
+    as many (greedy line breaking of a subsequence), so for one tail width whether they fit
+    falls from true to false once as n grows: for each count of digits of N (the tail's
+    width, where a font's digits share one width as Pillow's default font's do), from the
+    fewest (n largest) on, a binary search on n. O(len(items) log len(items)) additions, and
+    O(log) tail widths measured."""
+    total = len(items)
+
+    def fits(n: int) -> bool:
+        more = total - n
+        tail = tail_width(more) if more else 0
+        used, row = 0.0, 0
+        for place, w in items:
+            if place >= n:
+                continue
+            if used and start + used + w > end:
+                row, used = row + 1, 0.0
+            used += w
+        if used and start + used + tail > end:
+            row += 1
+        return row < lines
+
+    if fits(total):
+        return total
+    digits = 1
+    while 10 ** (digits - 1) <= total:  # N = total - n of `digits` digits: n in [lo, hi]
+        hi = total - 10 ** (digits - 1)
+        lo = max(0, total - (10**digits - 1))
+        if fits(lo):  # the largest n in [lo, hi] that fits
+            while lo < hi:
+                mid = (lo + hi + 1) // 2
+                lo, hi = (mid, hi) if fits(mid) else (lo, mid - 1)
+            return lo
+        digits += 1
+    return 0
 
 
 def split_legend(box, beside: bool):

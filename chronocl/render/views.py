@@ -78,6 +78,7 @@ def render(
     markers: Sequence[Marker] | None = None,
     colour: str = "tf",
     events: object = None,
+    series: object = None,
 ) -> Image:
     """One view of a chronovolume as an Image (displays inline in Jupyter, `.save(path)`).
 
@@ -95,8 +96,10 @@ def render(
     window's events: `chronocl.events(...).markers()`. `colour="track"` colours each voxel by
     the track of `events` (an EventGraph of the window) that reached it, "track-time" by when
     that track first shows, through the time TF, with a legend of the tracks: a winner mode
-    only (first_hit, max, min, change; `chronocl.events.colour`), its steps read again from
-    the store the chronovolume names; the default "tf" keeps the mode's colours."""
+    only (first_hit, max, min, change; `chronocl.events.colour`), its winning steps read again
+    from `series` (the TimeSeries the chronovolume came from; default: the store the
+    chronovolume or the events name; data given as an array, an xarray or a URL name none, so
+    give series=); the default "tf" keeps the mode's colours."""
     return render_views(
         [chronovolume],
         camera,
@@ -115,6 +118,7 @@ def render(
         markers=markers,
         colour=colour,
         events=events,
+        series=series,
     )
 
 
@@ -139,17 +143,19 @@ def render_views(
     markers: Sequence[Marker] | None = None,
     colour: str = "tf",
     events: object = None,
+    series: object = None,
 ) -> Image:
     """Parallel views: each chronovolume in its own panel of `size`, all under one camera.
 
     `volumes`, the chronovolumes already uploaded with `raycaster().upload` (and released by
     the caller), spare the upload when one set is rendered many times, e.g. a turntable.
-    `shading`, `outline`, `axes`, `markers` (in every panel) and `colour` with `events`: as
-    in `render` (uploaded `volumes` are drawn as they are: colour them before the upload).
+    `shading`, `outline`, `axes`, `markers` (in every panel) and `colour` with `events` and
+    `series`: as in `render` (uploaded `volumes` are drawn as they are: colour them before the
+    upload).
     """
     if not chronovolumes:
         raise InvalidParameterError("nothing to render: give at least one chronovolume")
-    tracks = _track_colour(colour, events, chronovolumes, volumes)
+    tracks = _track_colour(colour, events, series, chronovolumes, volumes)
     camera = camera or default_camera(chronovolumes[0])
     check_prefer(time_labels)
     if volumes is None:  # uploaded volumes are drawn as they are
@@ -190,9 +196,10 @@ def render_views(
     return Image(compose_panels(panels, labels, legend_of, columns, bg, time_labels))
 
 
-def _track_colour(colour, events, chronovolumes, volumes):
+def _track_colour(colour, events, series, chronovolumes, volumes):
     """The track colouring `colour` asks for (None: the mode's own colours), every chronovolume
-    checked for it before any work (`chronocl.events.colour`)."""
+    checked for it, and a series to read its steps again from found, before any work
+    (`chronocl.events.colour`)."""
     from chronocl.events.colour import TrackColour, is_track_coloured, parse_colouring
 
     by = parse_colouring(colour)
@@ -202,13 +209,18 @@ def _track_colour(colour, events, chronovolumes, volumes):
                 "events= colours the voxels by track with colour='track' (or 'track-time'); "
                 "to mark the events, give markers=graph.markers() instead"
             )
+        if series is not None:
+            raise InvalidParameterError(
+                "series= is where colour='track' (or 'track-time') reads the winning steps "
+                "again; give it with colour='track' and events=, or leave it out"
+            )
         return None
     if volumes is not None:
         raise InvalidParameterError(
             "uploaded volumes are drawn as they are: colour the chronovolumes by track before "
             "uploading them (chronocl.events.colour.track_colour)"
         )
-    tracks = TrackColour(events, by=by)
+    tracks = TrackColour(events, series, by)
     for cv in chronovolumes:
         if not is_track_coloured(cv):
             tracks.check(cv)
