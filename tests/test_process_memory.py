@@ -484,13 +484,38 @@ def test_the_windows_shown_count_each_step_once_over_every_client():
     class Client:
         pass
 
-    limit = ProcessLimit(1 << 40)
+    limit = ProcessLimit(process_memory.PROCESS_BYTES + 25 * STEP)
     a, b, c = Client(), Client(), Client()
-    limit.resident(a, 0, set(range(0, 10)), STEP)
-    limit.resident(b, 1, set(range(0, 4)), 2 * STEP)  # another data set
-    assert limit.windows_bytes(c, 0, set(range(5, 12)), STEP) == (12 + 8) * STEP
+    assert limit.resident(a, 0, set(range(0, 10)), STEP) == (True, 10 * STEP, 25 * STEP)
+    assert limit.resident(b, 1, set(range(0, 4)), 2 * STEP)[0]  # another data set
+    assert limit.resident(c, 0, set(range(5, 12)), STEP) == (True, (12 + 8) * STEP, 25 * STEP)
     limit.resident(a, 0, set(), STEP)  # a streams now: its steps count no more
-    assert limit.windows_bytes(c, 0, set(range(5, 12)), STEP) == (7 + 8) * STEP
+    assert limit.resident(c, 0, set(range(5, 12)), STEP)[1] == (7 + 8) * STEP
+    limit.expect(a, 12 * STEP)  # a's frames leave c's window (with b's) no room
+    assert limit.resident(c, 0, set(range(5, 12)), STEP) == (False, 15 * STEP, 13 * STEP)
+    assert limit.resident(b, 1, set(range(0, 4)), 2 * STEP)[0]  # c's counts no more
+
+
+def test_a_session_that_starts_streaming_leaves_none_of_its_steps_resident():
+    """`Session.stream`: the window's steps it held are dropped from a shared manager at
+    once (not left for the next `fit`, which sheds only while the process is over)."""
+    from chronocl.integration.interactive.session import Session
+
+    managers: dict = {}
+    with Session(series_of(6), mode="alpha", memory="10GB", managers=managers) as s:
+        s.set_window(1, 5)
+        assert s.manager.resident() == [1, 2, 3, 4]
+        s.stream(("no room", 0))
+        assert s.manager.resident() == []
+        assert s.set_window(1, 5) is not None  # the chronovolume shown stays
+        s.set_window(2, 6)
+        assert s.stats["path"] == "streamed" and "no room" in s.stats["streamed"]
+        assert s.manager.resident() == []
+        s.stream(None)  # room again: resident from the next window
+        s.set_window(0, 4)
+        assert s.manager.resident() == [0, 1, 2, 3]
+        for m in managers.values():
+            m.close()
 
 
 def test_a_second_client_whose_window_does_not_fit_beside_the_first_s_streams():
@@ -519,3 +544,30 @@ def test_a_second_client_whose_window_does_not_fit_beside_the_first_s_streams():
             first.release()
             second.release()
             shared.close()
+
+
+def test_a_streaming_view_reads_no_full_resolution_window_ahead(monkeypatch):
+    """On a machine with cores to spare a coarse frame reads the full-resolution window
+    ahead for the refine; a view whose window streams must not (it was read whole beside the
+    stream)."""
+    from chronocl.core import host_threads
+    from chronocl.viewer.datasets import Dataset
+    from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
+    from chronocl.viewer.view_state import default_state, merge
+
+    monkeypatch.setattr(host_threads, "workers", lambda: 16)
+    series = series_of(6)
+    state = merge(default_state(0, series), {"window": {"t0": 1, "t1": 5}}, 6)
+    frame = FRAME_VOXEL_BYTES * int(np.prod(SHAPE))
+    with process_memory.limited(ProcessLimit(process_memory.PROCESS_BYTES + frame + STEP)):
+        views = Views([Dataset("d", series)], "opencl", None, "10GB")
+        try:
+            views.chronovolumes(state)
+            assert views.slots[0].session.shown_level > 0  # a coarse frame first
+            full = views.manager(0, "")
+            assert full is None or (full.resident() == [] and not full.state()["loading"])
+            views.full_resolution(range(1))
+            assert _level0(views.slots[0]).stats["path"] == "streamed"
+            assert views.manager(0, "").resident() == []
+        finally:
+            views.release()

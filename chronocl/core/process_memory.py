@@ -19,7 +19,7 @@ under the limit, and the steps are what gives way:
 - the steps of the windows being shown are never dropped. So a window is kept resident only
   where its steps fit beside what the views' frames are expected to hold (`expect`) and the
   process's own memory (`PROCESS_BYTES`): `window_room`, against which a viewer weighs the
-  steps of every window shown that stays resident (`windows_bytes`, each step once) before a
+  steps of every window shown that stays resident (`resident`, each step once) before a
   frame; where they do not fit, its views' windows stream from the store slab by slab instead
   (`chronocl.integration.interactive.session`). Where frames still exceed the limit, `excess`
   says by how much (the viewer logs it once).
@@ -106,25 +106,27 @@ class ProcessLimit:
         expect their frames to hold at their peak (`expect`) and the process's own."""
         return self.total - self.floor - PROCESS_BYTES
 
-    def windows_bytes(self, owner: object, key: object, steps: set[int], step_bytes: int) -> int:
-        """The bytes of every resident window shown (`resident`) were `owner`'s `steps` of
-        data set `key` resident too: the steps several owners share count once."""
+    def resident(
+        self, owner: object, key: object, steps: set[int], step_bytes: int
+    ) -> tuple[bool, int, int]:
+        """Whether `owner`'s window `steps` of data set `key` may stay resident: the steps of
+        every window shown that stays resident, the other owners' and this one, each step
+        once, fit `window_room`. Decided and noted at once (two clients deciding together
+        both counted the other's old window): where it fits, later decisions count it. With
+        the bytes all those windows need, and the room."""
         with self._lock:
-            others = [w for o, w in self._windows.items() if o is not owner]
-        by_key: dict[object, tuple[set[int], int]] = {key: (set(steps), step_bytes)}
-        for k, st, nbytes in others:
-            held = by_key.setdefault(k, (set(), nbytes))[0]
-            held |= st
-        return sum(len(st) * nbytes for st, nbytes in by_key.values())
-
-    def resident(self, owner: object, key: object, steps: set[int], step_bytes: int) -> None:
-        """`owner` keeps the window `steps` of data set `key` resident (empty: it streams, or
-        shows nothing): `windows_bytes` counts it."""
-        with self._lock:
-            if steps:
+            by_key: dict[object, tuple[set[int], int]] = {key: (set(steps), int(step_bytes))}
+            for o, (k, st, nbytes) in self._windows.items():
+                if o is not owner:
+                    by_key.setdefault(k, (set(), nbytes))[0].update(st)
+            need = sum(len(st) * nbytes for st, nbytes in by_key.values())
+            room = self.total - sum(self._expected.values()) - PROCESS_BYTES
+            fits = need <= room
+            if fits and steps:
                 self._windows[owner] = (key, frozenset(steps), int(step_bytes))
             else:
                 self._windows.pop(owner, None)
+            return fits, need, room
 
     def room(self) -> int:
         """Bytes more steps may take now without dropping any."""

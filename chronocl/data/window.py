@@ -334,6 +334,10 @@ class WindowManager:
                 self._anyone.wanted, self._anyone.ahead = frozenset(), ()
             else:
                 self._owners.pop(id(owner), None)
+            keep = self._wanted() | self._read_ahead()
+            for step, load in list(self._loads.items()):  # loads nobody wants any more
+                if step not in keep:
+                    self._cancel(load)
 
     def close(self) -> None:
         with self._lock:

@@ -177,10 +177,7 @@ class Views:
         n = series.n_steps
         steps = set().union(*(state.selection(n, i).steps for i in range(len(state.views))))
         step = math.prod(series.volume_shape) * series.dtype.itemsize
-        need = limit.windows_bytes(self, state.dataset, steps, step)
-        room = limit.window_room()
-        fits = need <= room
-        limit.resident(self, state.dataset, steps if fits else set(), step)
+        fits, need, room = limit.resident(self, state.dataset, steps, step)
         if fits:
             return None
         return (
@@ -297,7 +294,7 @@ class Views:
         limit = process_memory.current()
         if limit is not None:
             limit.expect(self, 0)
-            limit.resident(self, None, set(), 0)
+            limit.resident(self, None, set(), 0)  # nothing shown: no window of its counts
 
     def _close_managers(self) -> None:
         """Let go of the data set's managers: closed where they are this client's own; shared,

@@ -198,7 +198,7 @@ class AutoSession:
         # The refine to come finds the window's full-resolution steps read, where the machine
         # has cores to spare: on 2 cores those reads doubled the longest scrub stall at normal
         # priority, and at the readers' lower one left the scrub stop as slow (docs/window.md).
-        if level > 0 and host_threads.workers() >= READ_AHEAD_CORES:
+        if level > 0 and self._streaming is None and host_threads.workers() >= READ_AHEAD_CORES:
             self.pool.read_ahead(selection, spec)
         self.shown, self._last, self._cv = level, (selection, spec), cv
         self.stats = {

@@ -264,7 +264,7 @@ class Session:
         self.streaming = why
         if why is None:
             return
-        steps = self._arrays.keys()
+        steps = list(self._arrays)  # not a view of the dict: that held every array alive
         if not self._owns_manager:
             self.manager.let_go(self)
         self._hold({})
