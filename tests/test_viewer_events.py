@@ -89,6 +89,21 @@ def find(client: Client, **fields) -> tuple[int, dict]:
     return rid, reply
 
 
+def shown(client: Client) -> int:
+    """An update's frame received (every frame before it with it): its id."""
+    rid = client.send({"type": "update"})
+    client.frame_for(rid)
+    return rid
+
+
+def redrawn(client: Client, newest: int):
+    """The next frame, an events message's redraw: it answers `newest`, the newest update
+    (a notebook widget waits for its updates' ids only), never the events message's id."""
+    got = client._until(lambda g: g[0] == "frame", "no redraw", 60, None, errors_fail=True)
+    assert got[1]["id"] == newest
+    return got
+
+
 def test_a_find_lists_the_merge_with_where_it_happened_and_the_tracks(client):
     client.open(0, size=(160, 128))
     _, got = find(client)
@@ -128,31 +143,32 @@ def test_markers_are_drawn_in_the_frame_and_the_saved_png_when_shown(server, cli
     _, _, images = client.frame_for(rid)
     before = yellow(jpeg(images[0]))
     find(client)
-    rid = client.send({"type": "events", "action": "markers", "show": True})
-    _, _, images = client.frame_for(rid)
-    shown = jpeg(images[0])
-    assert yellow(shown) > before + 15  # the ring and its label "merge 5"
+    client.send({"type": "events", "action": "markers", "show": True})
+    _, _, images = redrawn(client, rid)
+    marked = jpeg(images[0])
+    assert yellow(marked) > before + 15  # the ring and its label "merge 5"
     # Near the middle of the panel: the merge is at the middle of the volume.
-    ys, xs = np.nonzero(np.abs(shown.astype(int) - MARKER_RGB).max(axis=-1) < 40)
-    h, w = shown.shape[:2]
+    ys, xs = np.nonzero(np.abs(marked.astype(int) - MARKER_RGB).max(axis=-1) < 40)
+    h, w = marked.shape[:2]
     assert abs(np.median(xs) - w / 2) < w / 3 and abs(np.median(ys) - h / 2) < h / 3
     # Save PNG draws them too.
-    rid = client.send({"type": "save", "what": "image"})
-    _, dl = client.wait("download", rid, timeout=120)
+    sid = client.send({"type": "save", "what": "image"})
+    _, dl = client.wait("download", sid, timeout=120)
     token = {"X-Chronocl-Token": server.token}
     req = urllib.request.Request(server.base + dl["url"], headers=token)
     with urllib.request.urlopen(req, timeout=30) as r:
         png = r.read()
     assert yellow(jpeg(png)) > 15
     # Hidden again, or the events cleared: the frame is as before.
-    rid = client.send({"type": "events", "action": "markers", "show": False})
-    _, _, images = client.frame_for(rid)
+    client.send({"type": "events", "action": "markers", "show": False})
+    _, _, images = redrawn(client, rid)
     assert yellow(jpeg(images[0])) <= before + 5
     client.send({"type": "events", "action": "markers", "show": True})
-    rid = client.send({"type": "events", "action": "clear"})
-    _, cleared = client.wait("events", rid)
+    redrawn(client, rid)
+    cid = client.send({"type": "events", "action": "clear"})
+    _, cleared = client.wait("events", cid)
     assert cleared["cleared"] is True
-    _, _, images = client.frame_for(rid)
+    _, _, images = redrawn(client, rid)
     assert yellow(jpeg(images[0])) <= before + 5
     # A window that holds none of the events draws none (the markers of the panel's window).
     client.send({"type": "events", "action": "markers", "show": True})
@@ -167,10 +183,11 @@ def test_a_track_chosen_is_drawn_as_a_path_through_its_centroids(client):
     rid = client.send({"type": "update", "camera": {"azimuth": 0, "elevation": 0}})
     _, _, images = client.frame_for(rid)
     assert cyan(jpeg(images[0])) == 0
-    _, got = find(client, show=True)
+    fid, got = find(client, show=True)
+    rid = shown(client)
     moving = got["tracks"][1]  # the blob that ends in the merge: it moves 3 voxels a step
-    rid = client.send({"type": "events", "action": "track", "track": moving["id"]})
-    _, _, images = client.frame_for(rid)
+    client.send({"type": "events", "action": "track", "track": moving["id"], "find": fid})
+    _, _, images = redrawn(client, rid)
     path = jpeg(images[0])
     assert cyan(path) > 40
     # Seen from the front (azimuth 0: x right), the path runs across: from the right, where
@@ -179,12 +196,13 @@ def test_a_track_chosen_is_drawn_as_a_path_through_its_centroids(client):
     assert xs.max() - xs.min() > 25 and ys.max() - ys.min() < xs.max() - xs.min()
     assert xs.max() > path.shape[1] * 0.6
     # No track (null), or the markers hidden: no path.
-    rid = client.send({"type": "events", "action": "track", "track": None})
-    _, _, images = client.frame_for(rid)
+    client.send({"type": "events", "action": "track", "track": None})
+    _, _, images = redrawn(client, rid)
     assert cyan(jpeg(images[0])) < 5
     client.send({"type": "events", "action": "track", "track": moving["id"]})
-    rid = client.send({"type": "events", "action": "markers", "show": False})
-    _, _, images = client.frame_for(rid)
+    redrawn(client, rid)
+    client.send({"type": "events", "action": "markers", "show": False})
+    _, _, images = redrawn(client, rid)
     assert cyan(jpeg(images[0])) < 5
 
 
@@ -193,11 +211,11 @@ def test_a_probe_on_a_feature_names_its_track(client):
     rid = client.send({"type": "probe", "x": 0.5, "y": 0.5})
     _, before = client.wait("probe", rid)
     assert before["voxel"] is not None and "track" not in before  # no events found yet
-    _, got = find(client)
+    fid, got = find(client)
     rid = client.send({"type": "probe", "x": 0.5, "y": 0.5})
     _, probed = client.wait("probe", rid)
     # The middle of the volume: the merged blob, the last step of the window it lies in.
-    assert probed["track"] == {"track": got["tracks"][0]["id"], "step": 7, "id": 1}
+    assert probed["track"] == {"track": got["tracks"][0]["id"], "step": 7, "id": 1, "find": fid}
     # A ray through empty space meets no feature: no track.
     rid = client.send({"type": "probe", "x": 0.02, "y": 0.02})
     _, empty = client.wait("probe", rid)
@@ -289,6 +307,8 @@ def test_without_the_events_extra_the_panel_names_the_install_and_the_viewer_wor
         ({"action": "track", "track": -1}, "events.track"),
         ({"action": "dance"}, "events.action"),
         ({"action": "find", "track": 3}, "events.track does not go with find"),
+        ({"action": "find", "find": 3}, "events.find does not go with find"),
+        ({"action": "markers", "show": True, "find": 3}, "events.find does not go with markers"),
         ({"action": "find", "colour": 3}, "unknown field 'colour'"),
         ({}, "missing the field 'action'"),
     ],
@@ -317,9 +337,9 @@ def test_the_focus_box_stays_within_the_protocols_bounds():
     assert focus_box(np.array([0.1, 0.2, 0.3]), 0.1) == pytest.approx([0, 0.1, 0.2, 0.2, 0.3, 0.4])
 
 
-def test_a_redraw_never_answers_for_an_older_request_than_the_one_waiting():
-    """The markers' frame answers the request that asked for it, or the newer one already
-    waiting (a find ends after the user moved on: the page waits for its newest request)."""
+def test_a_redraw_answers_the_newest_framed_request():
+    """The markers' frame answers the request waiting, else the one last shown: never the
+    events message's id, never an older request's than the one waiting."""
     import threading
 
     from chronocl.viewer.events_panel import EventTasks
@@ -328,6 +348,7 @@ def test_a_redraw_never_answers_for_an_older_request_than_the_one_waiting():
         def __init__(self) -> None:
             self._cond = threading.Condition()
             self._pending = None
+            self._last_rid = 5
             self.asked: list = []
 
         def update(self, msg: dict) -> None:
@@ -336,14 +357,117 @@ def test_a_redraw_never_answers_for_an_older_request_than_the_one_waiting():
                 self._pending = ("state", msg["id"])
 
     w = Worker()
-    w._redraw(5)
-    assert w.asked == [5]
+    w._redraw()
+    assert w.asked == [5]  # the one last shown
     w._pending = ("state", 9)  # newer input waits: the redraw answers it
-    w._redraw(7)
+    w._redraw()
     assert w.asked[-1] == 9
-    w._pending = ("state", 3)  # an older one waits: the redraw's own request
-    w._redraw(7)
-    assert w.asked[-1] == 7
-    w._pending = None
-    w._redraw(None)
+    w._pending, w._last_rid = None, None  # nothing shown yet
+    w._redraw()
     assert w.asked[-1] is None
+
+
+def test_a_step_of_too_many_features_is_refused_in_one_line(client, monkeypatch):
+    from chronocl.viewer import events_panel
+
+    monkeypatch.setattr(events_panel, "MAX_FEATURES_PER_STEP", 1)  # the blobs' steps hold 2
+    client.open(0, size=(128, 128))
+    rid = client.send({"type": "events", "action": "find"})
+    errors: list = []
+    client.wait("error", rid, timeout=60, errors=errors)
+    text = errors[0]["message"]
+    assert text.startswith("2 features in step 0: raise the threshold") and "\n" not in text
+    monkeypatch.setattr(events_panel, "MAX_FEATURES_PER_STEP", 2)
+    _, got = find(client)  # at the cap: found
+    assert [e["kind"] for e in got["events"]] == ["merge"]
+
+
+def test_markers_are_placed_once_for_a_panels_steps_and_at_most_max_events(client, monkeypatch):
+    from chronocl.events.graph import EventGraph
+    from chronocl.viewer.events_panel import MAX_EVENTS
+
+    calls: list = []
+    real = EventGraph.markers
+
+    def counted(self, steps=None, limit=None):
+        calls.append((tuple(steps) if steps is not None else None, limit))
+        return real(self, steps) if limit is None else real(self, steps, limit)
+
+    monkeypatch.setattr(EventGraph, "markers", counted)
+    client.open(0, size=(128, 128))
+    find(client, show=True)
+    for azimuth in (10, 20, 30):
+        client.frame_for(client.send({"type": "update", "camera": {"azimuth": azimuth}}))
+    assert calls == [(tuple(range(8)), MAX_EVENTS)]  # the first frame's, kept
+    graph = events_run.events(merging_blobs(), threshold=0.5)
+    assert len(graph.markers()) == 1 and graph.markers(limit=0) == []
+
+
+def test_a_frame_after_an_events_message_carries_the_newest_updates_id(client):
+    client.open(0, size=(128, 128))
+    rid = shown(client)
+    fid, _ = find(client, show=True)  # the find's redraw
+    later = shown(client)
+    assert later > fid > rid
+    mid = client.send({"type": "events", "action": "markers", "show": False})
+    _, header, _ = redrawn(client, later)
+    assert header["id"] != mid
+    client.send({"type": "events", "action": "markers", "show": True})
+    redrawn(client, later)
+
+
+def test_a_find_whose_window_changed_while_tracking_is_not_kept(client, monkeypatch):
+    import threading
+
+    tracking = threading.Event()
+    real = events_run.tracks_of
+
+    def slow(*args, **kwargs):  # after the last labelling checkpoint
+        tracking.set()
+        time.sleep(1.0)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(events_run, "tracks_of", slow)
+    client.open(0, size=(256, 192))
+    rid = client.send({"type": "events", "action": "find", "show": True})
+    assert tracking.wait(30)
+    client.send({"type": "update", "window": {"t0": 1, "t1": 7}})
+    _, got = client.wait("events", rid, timeout=30)
+    assert got["cancelled"] == "the window changed; find again"
+    # Nothing kept: a probe names no track.
+    pid = client.send({"type": "probe", "x": 0.5, "y": 0.5})
+    _, probed = client.wait("probe", pid)
+    assert probed["voxel"] is not None and "track" not in probed
+
+
+def test_a_track_chosen_in_an_older_finds_list_is_ignored(client):
+    client.open(0, size=(256, 192))
+    client.frame_for(client.send({"type": "update", "camera": {"azimuth": 0, "elevation": 0}}))
+    old, _ = find(client, show=True)
+    new, got = find(client, show=True, connectivity=6)
+    shown(client)
+    moving = got["tracks"][1]
+    client.send({"type": "events", "action": "track", "track": moving["id"], "find": old})
+    rid = client.send({"type": "update"})
+    _, _, images = client.frame_for(rid)
+    assert cyan(jpeg(images[0])) < 5  # not highlighted
+    client.send({"type": "events", "action": "track", "track": moving["id"], "find": new})
+    _, _, images = redrawn(client, rid)
+    assert cyan(jpeg(images[0])) > 40
+
+
+def test_a_histogram_is_answered_while_a_find_runs(client, slow_labels):
+    client.open(0, size=(128, 128))
+    rid = client.send({"type": "events", "action": "find"})
+    time.sleep(0.3)
+    t0 = time.monotonic()
+    hid = client.send({"type": "histogram", "range": [0.0, 1.0]})
+    order = []
+    while len(order) < 2:
+        kind, msg = client.recv(60)[:2]
+        if kind == "histogram" and msg.get("id") == hid:
+            order.append(("histogram", time.monotonic() - t0))
+        elif kind == "events" and msg.get("id") == rid:
+            order.append(("events", time.monotonic() - t0))
+    assert order[0][0] == "histogram" and order[0][1] < 1.0, order
+    assert order[1][0] == "events"

@@ -227,3 +227,88 @@ def test_without_the_events_extra_the_panel_says_how_to_install_it(
         assert p.settle(before)["digest"] != before["digest"]
     finally:
         p.close()
+
+
+def test_space_on_a_focused_row_chooses_it_and_does_not_play(browser, server):  # noqa: F811
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        page.click("#events-find")
+        page.wait_for_function("() => window.viewer.events && window.viewer.events.found")
+        found = p.eval("() => window.viewer.events.found")
+        born = next(t for t in found["tracks"] if t["start"] == 10)
+        page.focus(f'#events-tracks li[data-track="{born["id"]}"]')
+        page.keyboard.press(" ")
+        page.wait_for_function(f"() => window.viewer.events.highlighted === {born['id']}")
+        assert p.eval("() => !!window.viewer.S.playing") is False
+        page.focus("#events-list li[data-index='0']")
+        page.keyboard.press("Enter")
+        page.wait_for_function("() => window.viewer.events.event === 0")
+        page.focus("#events-list li[data-index='1']")
+        page.keyboard.press(" ")
+        page.wait_for_function("() => window.viewer.events.event === 1")
+        assert p.eval("() => !!window.viewer.S.playing") is False
+        # Space elsewhere still plays and pauses.
+        page.evaluate("() => document.activeElement && document.activeElement.blur()")
+        page.keyboard.press(" ")
+        assert p.eval("() => !!window.viewer.S.playing") is True
+        page.keyboard.press(" ")
+        assert p.eval("() => !!window.viewer.S.playing") is False
+    finally:
+        p.close()
+
+
+def test_a_reconnect_clears_the_events_list_and_a_find_under_way(
+    browser,  # noqa: F811
+    tmp_path,
+    monkeypatch,
+):
+    import time
+
+    from chronocl.events import run as events_run
+    from chronocl.viewer.server import ViewerServer
+
+    path = tmp_path / "blobs.zarr"
+    TimeSeries.from_array(series(), source="blobs").save(path)
+    first = ViewerServer([path])
+    first.start()
+    second = None
+    p = Page(browser, first, 1400, 900)
+    try:
+        page = p.page
+        page.click("#events-find")
+        page.wait_for_function("() => window.viewer.events && window.viewer.events.found")
+        assert page.locator("#events-list li[data-index]").count() == 3
+        label = events_run.label_step
+
+        def slow(*args, **kwargs):
+            time.sleep(2.0)
+            return label(*args, **kwargs)
+
+        monkeypatch.setattr(events_run, "label_step", slow)
+        page.click("#events-find")  # under way when the server stops
+        page.wait_for_function("() => window.viewer.events && window.viewer.events.finding")
+        assert page.inner_text("#events-text").startswith("finding events")
+        first.stop()
+        page.wait_for_function(
+            "() => document.body.dataset.connection === 'retrying'", timeout=20_000
+        )
+        monkeypatch.setattr(events_run, "label_step", label)
+        second = ViewerServer([path], port=first.port, token=first.token)
+        second.start()
+        page.wait_for_function("() => window.viewer.connects === 2", timeout=30_000)
+        p.settle({"seq": 0})
+        assert p.eval("() => window.viewer.events") is None
+        assert page.locator("#events-list li").count() == 0
+        assert page.locator("#events-tracks li").count() == 0
+        assert not page.inner_text("#events-text").startswith("finding")
+        # A find on the new socket works as before.
+        page.click("#events-find")
+        page.wait_for_function("() => window.viewer.events && window.viewer.events.found")
+        assert page.locator("#events-list li[data-index]").count() == 3
+        p.problems.clear()  # the refused reconnects are logged by the browser, not errors
+    finally:
+        p.close()
+        first.stop()
+        if second is not None:
+            second.stop()

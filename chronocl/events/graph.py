@@ -97,21 +97,25 @@ class EventGraph:
         write_png(png_bytes(self, title), path, overwrite)
         return Path(path)
 
-    def markers(self, steps=None) -> list[tuple[tuple[float, float, float], str]]:
+    def markers(
+        self, steps=None, limit: int | None = None
+    ) -> list[tuple[tuple[float, float, float], str]]:
         """The events other than continuations as markers for a render (`chronocl.render`'s
         `markers=`): where each happened, as (x, y, z) fractions of the volume's box, and a
         label ("merge 12": the kind and the step it happened at). A birth, entry, merge, split
         or merge-split is placed at its new features' centroid (size-weighted), a death or exit
         at the last centroid of those that went. `steps`: only events within their span (e.g.
-        a rendered window's, any stride), else all."""
+        a rendered window's, any stride), else all; `limit`: at most that many (the first)."""
         return [
             (fractions, f"{e['kind']} {e['next_step'] if e['targets'] else e['step']}")
-            for e, fractions in self.places(steps)
+            for e, fractions in self.places(steps, limit)
         ]
 
-    def places(self, steps=None) -> list[tuple[dict, tuple[float, float, float]]]:
+    def places(
+        self, steps=None, limit: int | None = None
+    ) -> list[tuple[dict, tuple[float, float, float]]]:
         """Each event other than a continuation with where it happened, (x, y, z) fractions
-        of the volume's box (as `markers` places it); `steps` as for `markers`."""
+        of the volume's box (as `markers` places it); `steps` and `limit` as for `markers`."""
         shape = self.meta.get("volume_shape_zyx")
         if not shape:
             return []
@@ -119,6 +123,8 @@ class EventGraph:
         span = None if steps is None else (min(steps), max(steps))
         out = []
         for e in self.events:
+            if limit is not None and len(out) >= limit:
+                break
             if e["kind"] == "continuation":
                 continue
             if span is not None and not span[0] <= e["step"] < e["next_step"] <= span[1]:

@@ -183,8 +183,10 @@ def _value_range(series: TimeSeries, selection: Selection, data_tf: DataTF) -> t
     return window_range(series, selection, modes.get(modes.DEFAULT))
 
 
-def find(job: EventsJob, progress: bool = False) -> EventGraph:
-    """Label, match and track the steps of a prepared job (the module's docstring)."""
+def find(job: EventsJob, progress: bool = False, max_features: int | None = None) -> EventGraph:
+    """Label, match and track the steps of a prepared job (the module's docstring).
+    `max_features`: a step of more features than this is refused as it is labelled
+    (InvalidParameterError, before any matching or tracking of it)."""
     series, steps = job.series, job.selection.steps
     spacing = tuple(float(s) for s in series.spacing)
 
@@ -216,6 +218,11 @@ def find(job: EventsJob, progress: bool = False) -> EventGraph:
             for k in track(range(len(steps)), len(steps), "labelling steps", progress):
                 checkpoint("labelling steps", k, len(steps))  # a viewer's find: given up here
                 now = queue.popleft().result()
+                if max_features is not None and len(now.features) > max_features:
+                    raise InvalidParameterError(
+                        f"{len(now.features)} features in step {now.step}: raise the threshold "
+                        f"or the opacity, or narrow the window (at most {max_features} a step)"
+                    )
                 submit()
                 features += now.features
                 if before is not None:

@@ -4,20 +4,28 @@ and tracks (`chronocl.events`), found beside the frames and drawn in them.
 `EventTasks` is a part of `ClientWorker` (through `tasks.Tasks`), as the other requests are; it
 answers the `events` message:
 
-- `find` runs on the client's side thread (`side_work`), never on the frame thread: the steps of
+- `find` runs on a thread of its own (one find at a time), never on the frame thread nor on the
+  side thread (`side_work`: a long find would hold histograms and fits back): the steps of
   the view's window at full resolution, a step showing where the data TF's opacity exceeds
   `opacity` (as `chronocl.events(..., tf=...)`) or the values reach `value`. After a second it
   sends `progress` messages ({"what": "events", "done", "total"}); it is given up (at the next
-  step, `chronocl.core.interrupt`) once the window or the data set changes, or a newer find
-  waits, and then answers {"type": "events", "cancelled": why}. Its answer is `events_reply`:
+  step, `chronocl.core.interrupt`, and once more before its result is kept) once the window or
+  the data set changes, or a newer find comes, and then answers {"type": "events", "cancelled":
+  why}. A step of more than MAX_FEATURES_PER_STEP features is refused as it is labelled (an
+  error reply in one line). Its answer is `events_reply`:
   the events other than continuations with where they happened (a voxel centroid and the world
   box a camera frames to look at it: the update message's `focus`) and the tracks with their
   size, mean value and centroid at each step. Without the ``events`` extra the answer is
   {"type": "events", "missing": "pip install 'chronocl[events]'"}; nothing else changes.
 - `markers` shows or hides the found events in every panel (`render.markers`: labelled rings at
   their centroids, those within the panel's window), in the frames, saved PNGs and movies alike:
-  `marked` is called on the panels as drawn. `track` highlights a track there as well: a line
-  through its centroids at the panel's steps (`render.markers.draw_path`), shown with them.
+  `marked` is called on the panels as drawn (at most MAX_EVENTS markers a panel, kept per
+  panel's steps: a frame draws them without working them out again). `track` highlights a
+  track there as well: a line through its centroids at the panel's steps
+  (`render.markers.draw_path`), shown with them; it names the find (`find`: its id) whose list
+  it was chosen in, and is ignored when another find's events are kept now.
+  The frame these redraw answers the newest framed request (the one waiting, else the one last
+  shown): a frame's id is always an update's, which a notebook widget waits for.
 - `clear` forgets the events found.
 
 A probe (a click on a view) that meets a voxel of a feature of the events found also answers
@@ -26,6 +34,7 @@ with that feature's track (`picked_feature`), which the page plots and highlight
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -35,9 +44,16 @@ from chronocl.core.interrupt import interruptible
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import world_extent
 from chronocl.render.markers import draw_markers, draw_path
+from chronocl.viewer.errors import error_text
 
 PROGRESS_AFTER_S = 1.0  # a find that takes longer says how far it got
 MAX_EVENTS = 400  # events listed (besides continuations); more: the first ones, and the count
+# Features a step may hold: past it a find is refused as that step is labelled. Such a step is
+# noise under the threshold, not events, and what follows grows with the features: 6 steps of
+# 96^3 noise gave 449,756 features, 91 s and ~1 GB to track, and 28.8 s to place the markers
+# of a panel's frame.
+MAX_FEATURES_PER_STEP = 10_000
+MAX_CACHED = 32  # the markers and paths kept per find (a panel's steps each)
 MAX_TRACKS = 400  # tracks sent, the longest first
 MIN_FOCUS_HALF = 0.1  # the smallest half side of the box a click on an event frames (world)
 FOCUS_MARGIN = 1.5  # the box frames the event's features with this much room
@@ -46,10 +62,13 @@ FOCUS_MARGIN = 1.5  # the box frames the event's features with this much room
 class EventTasks:
     """The `events` message (the module's docstring); a part of `ClientWorker`."""
 
-    # (data set, EventGraph, Mask) of the last find; whether its markers are drawn (under _cond).
+    # (data set, EventGraph, Mask, the find's id, {markers and paths drawn}) of the last find;
+    # whether its markers are drawn (under _cond).
     _events_found: tuple | None = None
     _events_markers: bool = False
     _events_track: int | None = None  # the track highlighted
+    _events_gen = 0  # finds asked (the newest runs; an older one gives up)
+    _events_lock: threading.Lock | None = None  # one find at a time (made with the first)
 
     def _events_message(self, msg: dict) -> None:
         """Answer an `events` message (called on the server's event loop: nothing here waits)."""
@@ -62,6 +81,9 @@ class EventTasks:
             if action == "markers":
                 self._events_markers = msg["show"]
             elif action == "track":
+                found = self._events_found
+                if found is not None and msg.get("find", found[3]) != found[3]:
+                    return  # chosen in an older find's list: not a track of these events
                 self._events_track = msg["track"]
             else:
                 self._events_found, self._events_track = None, None
@@ -69,16 +91,15 @@ class EventTasks:
         if action == "clear":  # (on the server's event loop: a reply not waited for)
             self._note({"type": "events", "id": rid, "cleared": True})
         if redraw or action != "clear":  # the same state drawn again, with or without them
-            self._redraw(rid)
+            self._redraw()
 
-    def _redraw(self, rid: int | None) -> None:
-        """The state drawn again (its markers changed), the frame answering `rid` or the
-        newer request of a frame waiting already (a client's ids grow: a find's redraw, asked
-        after the user moved on, never answers in place of the newer input)."""
+    def _redraw(self) -> None:
+        """The state drawn again (its markers changed), the frame answering the newest framed
+        request: the one waiting, else the one last shown. Never the events message's own id
+        (a notebook widget waits for frames of its updates' ids only), never an older
+        request's than the one waiting."""
         with self._cond:  # (re-entrant: update takes it too)
-            waiting = None if self._pending is None else self._pending[1]
-            if rid is None or (waiting is not None and waiting > rid):
-                rid = waiting
+            rid = self._last_rid if self._pending is None else self._pending[1]
             self.update({"id": rid})
 
     def _request_events(self, msg: dict) -> None:
@@ -96,9 +117,35 @@ class EventTasks:
             missing = {"missing": extra.INSTALL, "message": str(exc)}
             self._note({"type": "events", "id": rid, **missing})  # (not waited for: the loop's)
             return
-        self._beside("events", rid, "finding events", lambda: self._find_events(rid, view, msg))
+        with self._cond:
+            self._events_gen += 1
+            gen = self._events_gen
+            if self._events_lock is None:
+                self._events_lock = threading.Lock()
+        threading.Thread(
+            target=self._find_thread,
+            args=(gen, rid, view, msg),
+            name="chronocl-events",
+            daemon=True,
+        ).start()
 
-    def _find_events(self, rid: int | None, view: int, msg: dict) -> None:
+    def _find_thread(self, gen: int, rid: int | None, view: int, msg: dict) -> None:
+        """A find on its own thread, once the older one running has given up."""
+        assert self._events_lock is not None
+        try:
+            with self._events_lock:
+                if self._events_gen != gen or self._closed:
+                    why = "a newer find replaced it; find again"
+                    self._reply({"type": "events", "id": rid, "cancelled": why})
+                    return
+                self._find_events(gen, rid, view, msg)
+        except Exception as exc:
+            if self._closed:  # (the client gone: no one to tell)
+                return
+            message = error_text(exc, "on finding events")
+            self._reply({"type": "error", "id": rid, "message": message})
+
+    def _find_events(self, gen: int, rid: int | None, view: int, msg: dict) -> None:
         from chronocl.events.run import find, prepare
 
         with self._cond:
@@ -115,8 +162,10 @@ class EventTasks:
                 why.append("the data set changed")
             elif (now.own_window(view) or now.window) != window:
                 why.append("the window changed")
-            elif self.side.waiting("events"):
+            elif self._events_gen != gen:
                 why.append("a newer find replaced it")
+            elif self._closed:
+                why.append("the viewer closed")
             return bool(why)
 
         started = time.monotonic()
@@ -138,16 +187,19 @@ class EventTasks:
                 job = prepare(
                     ds.series, selection, connectivity=msg.get("connectivity", 26), **mask
                 )
-                graph = find(job)
+                graph = find(job, max_features=MAX_FEATURES_PER_STEP)
         except SupersededError:
-            reason = why[0] if why else "it was given up"
-            self._reply({"type": "events", "id": rid, "cancelled": f"{reason}; find again"})
+            why.append("it was given up")
+        with self._cond:  # (tracking has no checkpoint: the window may have moved meanwhile)
+            if not why and not given_up():
+                self._events_found = (state.dataset, graph, job.mask, rid, {})
+                self._events_track = None
+            redraw = self._events_markers and not why
+        if why:
+            self._reply({"type": "events", "id": rid, "cancelled": f"{why[0]}; find again"})
             return
-        with self._cond:
-            self._events_found, self._events_track = (state.dataset, graph, job.mask), None
-            redraw = self._events_markers
         if redraw:  # before the reply: what the page asks on hearing of it is newer
-            self._redraw(rid)
+            self._redraw()
         reply = events_reply(graph, ds.series.volume_shape, ds.series.spacing)
         self._reply(
             {
@@ -170,7 +222,8 @@ class EventTasks:
         if found is None or found[0] != dataset or not reply.get("voxel") or not reply["values"]:
             return None
         v = reply["voxel"]
-        return picked_feature(found[1], found[2], (v["x"], v["y"], v["z"]), reply["values"])
+        picked = picked_feature(found[1], found[2], (v["x"], v["y"], v["z"]), reply["values"])
+        return None if picked is None else {**picked, "find": found[3]}
 
     def _marked(self, panels: list, cvs: list[Chronovolume], state) -> list:
         """`panels` as drawn, with the found events' markers where they are shown (each panel
@@ -179,19 +232,31 @@ class EventTasks:
             found, show, track = self._events_found, self._events_markers, self._events_track
         if not show or found is None or found[0] != state.dataset:
             return panels
-        graph, camera = found[1], state.panel_camera()
+        graph, cache, camera = found[1], found[4], state.panel_camera()
         out = []
         for panel, cv in zip(panels, cvs, strict=False):
             if cv is None:
                 out.append(panel)
                 continue
+            steps = tuple(int(s) for s in cv.steps)
             if track is not None:
-                path = track_path(graph, track, cv.steps)
+                path = _cached(cache, ("path", track, steps), track_path, graph, track, steps)
                 if path:
                     panel = draw_path(panel, camera, cv, path, f"track {track}")
-            markers = graph.markers(cv.steps)
+            markers = _cached(cache, ("markers", steps), graph.markers, steps, MAX_EVENTS)
             out.append(draw_markers(panel, camera, cv, markers) if markers else panel)
         return out + panels[len(out) :]
+
+
+def _cached(cache: dict, key: tuple, make, *args):
+    """`cache[key]`, made once (the cache of a find's markers and paths, at most MAX_CACHED;
+    dict operations are atomic: the frame thread and the saves' draw alike)."""
+    got = cache.get(key)
+    if got is None:
+        if len(cache) >= MAX_CACHED:
+            cache.clear()
+        got = cache[key] = make(*args)
+    return got
 
 
 def picked_feature(graph, mask, voxel_xyz, values) -> dict | None:

@@ -29,7 +29,8 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
                                                          up when the window changes); show:
                                                          their markers drawn once found
                {"action": "markers", "show": bool}       draw the found events in the frames
-               {"action": "track", "track": id | null}   draw that track's path in them too
+               {"action": "track", "track": id | null   draw that track's path in them too
+                [, "find": the find's id]}               (ignored: another find's list)
                {"action": "clear"}                       forget them (no markers)
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
@@ -273,6 +274,7 @@ MESSAGES: dict[str, Obj] = {
             "connectivity": Int(6, 26),
             "show": Bool(),
             "track": Nullable(Int(0, 2**31)),
+            "find": ID,  # track: the id of the find whose list it was chosen in
         },
         frozenset({"action"}),
     ),
@@ -284,15 +286,17 @@ def _check_events(msg: dict) -> dict:
     action = msg["action"]
     takes = {"find": set(), "markers": {"show"}, "track": {"track"}, "clear": set()}[action]
     if action != "find":
-        extra = sorted(set(msg) - {"type", "id", "action"} - takes)
+        optional = {"find"} if action == "track" else set()
+        extra = sorted(set(msg) - {"type", "id", "action"} - takes - optional)
         if extra:
             raise ProtocolError(f"events.{extra[0]} does not go with {action}")
         missing = sorted(takes - set(msg))
         if missing:
             raise ProtocolError(f"events.{missing[0]} is missing: {action} needs it")
         return msg
-    if "track" in msg:
-        raise ProtocolError("events.track does not go with find; choose a track with track")
+    if "track" in msg or "find" in msg:
+        field = "track" if "track" in msg else "find"
+        raise ProtocolError(f"events.{field} does not go with find; choose a track with track")
     if msg.get("connectivity", 26) not in CONNECTIVITIES:
         raise ProtocolError(
             f"events.connectivity is {msg['connectivity']}; choose 6, 18 or 26 (voxels sharing "

@@ -1,7 +1,8 @@
 """The requests a client's render worker answers beside its frames: probe and saves (image,
 chronovolume, session, movie) between frames, on the worker's thread (they use its views);
-histogram, fit and events (`chronocl.viewer.events_panel`) on the client's side thread
-(`chronocl.viewer.side_work`), so that they never delay a frame. `Tasks` is a part of
+histogram and fit on the client's side thread (`chronocl.viewer.side_work`), events' finds
+(`chronocl.viewer.events_panel`) on a thread of their own (a long find never holds a histogram
+back), so that they never delay a frame. `Tasks` is a part of
 `ClientWorker` (chronocl.viewer.worker), kept here so that each file holds one concern; it uses
 the worker's views, shown state and reply channel.
 """
@@ -55,8 +56,9 @@ class Tasks(EventTasks):
             raise InvalidParameterError("too many requests are waiting; wait for their replies")
 
     def _beside_frames(self, kind: str, msg: dict) -> bool:
-        """Send a histogram, fit or events request to the side thread (an events message that
-        only shows or hides markers: a frame); False for other kinds."""
+        """Send a histogram or fit request to the side thread, an events message to
+        `EventTasks` (a find: its own thread; one that only shows or hides markers: a frame);
+        False for other kinds."""
         if kind == "histogram":
             self._request_histogram(msg.get("id"), list(msg["range"]))
         elif kind == "fit":

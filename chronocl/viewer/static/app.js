@@ -53,6 +53,7 @@ function onInfo(msg) {
   S.choices = msg;
   fillColormaps();
   fillControls(msg);
+  clearEvents(false); // a new socket's worker has no events found, nor a find running
   fillEvents(msg);
   fillSelect(
     $('dataset'),
@@ -116,7 +117,7 @@ function onDataset(msg) {
   drawTimeline();
   drawTF();
   clearProbe(); // the old voxel's curve does not belong on the new series' axis
-  if (!restored) clearEvents(); // (a reopen after a reconnect keeps the page's list)
+  if (!restored) clearEvents(); // (a reconnect's list is cleared on its info: onInfo)
   showMark(null);
 }
 

@@ -106,6 +106,7 @@ export function onEvents(msg) {
 // A probe's answer: a click on a feature of the events found plots and highlights its track.
 export function eventsProbed(msg) {
   if (!msg.track || !viewer.events || !viewer.events.found) return;
+  if (msg.track.find !== undefined && msg.track.find !== viewer.events.found.id) return; // another find's
   selectTrack(msg.track.track, true);
   const t = $('events-track-text');
   t.textContent = `picked in the view (step ${msg.track.step}): ${t.textContent}`;
@@ -124,10 +125,11 @@ export function eventsProgress(msg) {
   text(`finding events: ${msg.stage} ${msg.done + 1}/${msg.total}…`);
 }
 
-// A new data set: the events found belong to the old one.
-export function clearEvents() {
+// A new data set: the events found belong to the old one. `tell`: the server forgets them too;
+// false on a (re)connect, whose new socket's worker has none (nor the find running on the old).
+export function clearEvents(tell = true) {
   if (!viewer) return;
-  if (viewer.events && viewer.events.found) send({ type: 'events', action: 'clear' }); // (no markers)
+  if (tell && viewer.events && viewer.events.found) send({ type: 'events', action: 'clear' }); // (no markers)
   viewer.events = null;
   $('events-list').replaceChildren();
   $('events-tracks').replaceChildren();
@@ -184,7 +186,7 @@ function selectTrack(id, highlight = false) {
   viewer.events.track = id;
   if (highlight) {
     viewer.events.highlighted = id;
-    send({ type: 'events', action: 'track', track: id });
+    send({ type: 'events', action: 'track', track: id, find: viewer.events.found.id });
   }
   for (const li of $('events-tracks').children) li.classList.toggle('selected', Number(li.dataset.track) === id);
   drawTrack();
@@ -248,6 +250,7 @@ function goTo(i) {
 function onListKey(e, act) {
   if (e.key !== 'Enter' && e.key !== ' ') return;
   e.preventDefault();
+  e.stopPropagation(); // the row's key, not the page's (Space there is not play / pause)
   act(e);
 }
 

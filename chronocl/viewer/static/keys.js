@@ -85,7 +85,7 @@ export function bindKeys(page) {
   const byCtrlKey = new Map();
   for (const s of SHORTCUTS) for (const k of s.keys) (s.ctrl ? byCtrlKey : byKey).set(k, s);
   const onKey = (e) => {
-    if (e.altKey) return;
+    if (e.altKey || e.defaultPrevented) return; // (a key a control took: a list row's Space)
     const ctrl = e.ctrlKey || e.metaKey;
     // Menus and checkboxes have no undo of their own: Ctrl+Z there is the page's.
     const field = ctrl ? TEXT_FIELDS : 'input, select, textarea';
