@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -265,3 +266,181 @@ def test_a_kernel_without_opengl_is_told_why():
     assert out.stdout.startswith(RendererUnavailableError.__name__), out.stdout + out.stderr
     assert "no OpenGL context" in out.stdout and "libegl1" in out.stdout
     assert out.stderr == ""
+
+
+# -- a Chronovolume, the probe ---------------------------------------------------------------
+
+
+def test_show_names_what_to_pass_for_a_chronovolume(tmp_path):
+    series = chronocl.TimeSeries.from_array(vortex()[:8], source="vortex")
+    store = series.save(tmp_path / "v.zarr")
+    cv = chronocl.integrate(store, window="2:8:2", mode="max")
+    with pytest.raises(ChronoclError) as got:
+        chronocl.show(cv)
+    where = str((tmp_path / "v.zarr").resolve())
+    assert f"chronocl.show({where!r}, window=(2, 7, 2), mode='max')" in str(got.value)
+    assert "chronocl.render(cv)" in str(got.value) and "\n" not in str(got.value)
+
+
+def sent_to_page(w, monkeypatch) -> list[dict]:
+    """The text messages the widget sends its page from now on."""
+    sent: list[dict] = []
+    send = w.send
+
+    def record(content, buffers=None):
+        if "text" in content:
+            sent.append(json.loads(content["text"]))
+        return send(content, buffers)
+
+    monkeypatch.setattr(w, "send", record)
+    return sent
+
+
+def test_probe_gives_what_the_page_probe_shows(widget, monkeypatch):
+    widget.views = ["alpha"]
+    widget.window = (2, 9, 1)
+    widget.wait_frame()
+    sent = sent_to_page(widget, monkeypatch)
+    from_page(widget, {"type": "probe", "id": 40, "view": 0, "x": 0.5, "y": 0.5})
+    end = time.monotonic() + 60
+    while not any(m.get("type") == "probe" for m in sent) and time.monotonic() < end:
+        time.sleep(0.05)
+    page = next(m for m in sent if m.get("type") == "probe")
+    assert page["voxel"] is not None, "the centre ray met nothing"
+    v = page["voxel"]
+    mine = widget.probe((v["x"], v["y"], v["z"]))
+    for key in ("voxel", "box", "values", "min", "max", "window", "csv"):
+        assert mine[key] == page[key], key
+    assert mine["mark"] == pytest.approx(page["mark"], abs=1e-4)
+    assert mine["window"] == list(range(2, 9)) and len(mine["values"]) == STEPS
+    series = chronocl.TimeSeries.from_array(vortex())
+    assert mine["values"] == pytest.approx(chronocl.probe(series, v["x"], v["y"], v["z"]).values)
+
+
+def test_probe_takes_a_world_point_and_a_box(widget):
+    sp = widget._datasets[0].series.spacing  # (1, 1, 1) here: world x is index + fraction
+    at = widget.probe((3.7 * sp[0], 10.2 * sp[1], 0.0), world=True)
+    assert at["voxel"] == {"x": 3, "y": 10, "z": 0}
+    assert at["world"] == pytest.approx([3.5, 10.5, 0.5])
+    assert at["values"] == widget.probe((3, 10, 0))["values"]
+    box = widget.probe(box=((4, 8), (4, 8), (10, 12)))
+    assert box["voxel"] is None and box["box"] == {"x": [4, 8], "y": [4, 8], "z": [10, 12]}
+    assert len(box["min"]) == len(box["max"]) == STEPS
+    assert all(
+        lo <= m <= hi for lo, m, hi in zip(box["min"], box["values"], box["max"], strict=True)
+    )
+    with pytest.raises(ChronoclError, match="outside"):
+        widget.probe((0, 0, SHAPE[0]))
+    with pytest.raises(ChronoclError, match="outside the box"):
+        widget.probe((0.0, 0.0, 24.5), world=True)
+    with pytest.raises(ChronoclError, match="view 3"):
+        widget.probe((1, 1, 1), view=3)
+    with pytest.raises(ChronoclError, match="not both"):
+        widget.probe((1, 1, 1), box=((0, 1), (0, 1), (0, 1)))
+
+
+# -- the first picture, the kernel's shares, the front end closing --------------------------
+
+
+def test_no_frame_is_made_before_one_is_wanted():
+    w = chronocl.show(vortex()[:6], window=(0, 4), mode="max")
+    try:
+        time.sleep(1.0)
+        assert w.frames == 0 and w.window == (0, 4, 1) and w.mode == "max"
+        frame = w.wait_frame()  # the kernel wants one (a screenshot would): it is made
+        assert (
+            frame["views"][0]["label"].startswith("max")
+            and "steps 0:4" in frame["views"][0]["label"]
+        )
+    finally:
+        w.close()
+
+
+def test_the_page_first_request_makes_the_first_frame():
+    w = chronocl.show(vortex()[:6])
+    try:
+        # Meanwhile the worker integrates the state's chronovolume, ready for the first frame.
+        slots = w._worker.views.slots
+        end = time.monotonic() + 60
+        while not (slots and slots[0].cv is not None) and time.monotonic() < end:
+            time.sleep(0.02)
+        from_page(w, {"type": "open", "id": 1, "dataset": 0})
+        time.sleep(0.3)
+        assert w.frames == 0  # the open is answered with the state, not a frame
+        from_page(w, {"type": "update", "id": 2, "size": [320, 240]})
+        frame = w.wait_frame()
+        assert frame["id"] == 2 and w.frames >= 1
+        assert frame["timings"]["integrate_ms"] == 0.0  # it drew what was integrated ahead
+    finally:
+        w.close()
+
+
+def test_widgets_of_one_store_share_its_steps_and_the_kernel_one_limit(tmp_path):
+    from chronocl.core import process_memory
+    from chronocl.notebook.kernel import KERNEL
+
+    path = chronocl.TimeSeries.from_array(vortex()[:6]).save(tmp_path / "v.zarr").path
+    before = process_memory.current()
+    a = chronocl.show(str(path), memory="3GB")
+    b = chronocl.show(path, name="again")
+    c = chronocl.show(vortex()[:6])
+    try:
+        sa, sb, sc = (w._datasets[0].series for w in (a, b, c))
+        assert sa is sb and sc is not sa
+        assert a._shared is b._shared is KERNEL.held_steps(sa) and c._shared is not a._shared
+        assert a._worker.views._shared is a._shared  # the worker's views read the shared steps
+        limit = process_memory.current()
+        assert limit is KERNEL.limit and limit is not before and limit.total == 3 * 10**9
+        assert b._worker.memory == c._worker.memory == "3GB"  # one budget for all
+        for w in (a, b):
+            w.window = (0, 4)
+            w.wait_frame()
+        managers = a._shared.of(0)
+        assert managers and all(m in limit._holders for m in managers.values())
+        a.close()
+        assert not a._shared._closed and process_memory.current() is limit  # b shows it still
+        b.close()
+        assert a._shared._closed and KERNEL.held_steps(sa) is None  # its steps let go
+        assert process_memory.current() is limit  # c is open: the kernel's limit stays
+    finally:
+        for w in (a, b, c):
+            w.close()
+    # The kernel's limit goes with its last widget (the module's `widget` may be open still).
+    assert process_memory.current() is (before if KERNEL.widgets() == 0 else limit)
+
+
+def test_the_kernel_limit_and_steps_go_with_their_last_widget():
+    from chronocl.core import process_memory
+    from chronocl.notebook.kernel import Kernel
+
+    kernel, before = Kernel(), process_memory.current()
+    s1 = chronocl.TimeSeries.from_array(vortex()[:3])
+    s2 = chronocl.TimeSeries.from_array(vortex()[:3])
+    steps_a, memory = kernel.join(1, s1, memory="2GB")
+    limit = process_memory.current()
+    assert memory == "2GB" and limit is kernel.limit and limit.total == 2 * 10**9
+    steps_b, memory = kernel.join(2, s1)
+    assert steps_b is steps_a and memory == "2GB"  # one series: one set of steps
+    steps_c, _ = kernel.join(3, s2, memory="1GB")
+    assert steps_c is not steps_a and limit.total == 10**9  # the newest memory is the kernel's
+    with pytest.raises(ChronoclError):
+        kernel.join(4, s2, memory="lots")  # a bad one changes nothing
+    assert limit.total == 10**9 and kernel.widgets() == 3
+    kernel.leave(1, s1)
+    assert not steps_a._closed
+    kernel.leave(2, s1)
+    assert steps_a._closed and process_memory.current() is limit
+    kernel.leave(3, s2)
+    assert steps_c._closed and process_memory.current() is before and kernel.limit is None
+
+
+def test_the_front_end_closing_the_comm_frees_the_worker():
+    w = chronocl.show(vortex()[:4])
+    w.wait_frame()
+    thread, series = w._worker.thread, w._datasets[0].series
+    comm = w.comm
+    comm.handle_close({"content": {"comm_id": comm.comm_id, "data": {}}})  # as the kernel does
+    assert w.closed and not thread.is_alive() and w.comm is None
+    from chronocl.notebook.kernel import KERNEL
+
+    assert KERNEL.held_steps(series) is None

@@ -52,6 +52,11 @@ CELLS = [
     "thread = w._worker.thread\nw.close()\nthread.join(30)\n"
     "print('CLOSED=' + json.dumps({'closed': w.closed, 'alive': thread.is_alive(), "
     "'second': w2.mode}))",
+    # 5: a series' summary (its HTML repr, with its picture)
+    "chronocl.TimeSeries.from_array(data, times=list(range(12)), time_unit='s')",
+    # 6: after the front end closed the second widget's model
+    "thread2 = w2._worker.thread\nthread2.join(30)\n"
+    "print('FRONT_CLOSED=' + json.dumps({'closed': w2.closed, 'alive': thread2.is_alive()}))",
 ]
 # The first widget's viewer (widget.js puts it on the element that holds the shadow root).
 VIEWER = "(document.querySelector('.chronocl-widget') || {}).viewer"
@@ -172,7 +177,7 @@ def notebook(browser, lab):
           const app = window.jupyterapp, nb = app && app.shell.currentWidget;
           const k = nb && nb.sessionContext && nb.sessionContext.session
             && nb.sessionContext.session.kernel;
-          return !!k && k.status === 'idle' && nb.content && nb.content.widgets.length === 5;
+          return !!k && k.status === 'idle' && nb.content && nb.content.widgets.length === 7;
         }""",
         timeout=60_000,
     )
@@ -306,5 +311,31 @@ def test_show_in_jupyterlab_is_driven_from_code_and_by_hand(notebook, lab):
     # Closed from code: the render thread ends; the second widget goes on.
     run_cell(page, 4)
     assert cell_output(page, 4, "CLOSED") == {"closed": True, "alive": False, "second": "alpha"}
+
+    # A series displays its summary: what it is, and its picture.
+    run_cell(page, 5)
+    page.wait_for_function(
+        "() => { const img = document.querySelector('.chronocl-repr img');"
+        " return !!img && img.complete && img.naturalWidth > 0; }",
+        timeout=30_000,
+    )
+    summary = page.locator(".chronocl-repr").inner_text()
+    assert "32×32×32 (x, y, z) × 12 steps" in summary and "0 .. 11 s" in summary
+
+    # The front end closes the second widget's model (as closing it from JavaScript does): the
+    # kernel frees its worker.
+    closed = page.evaluate(
+        """async () => {
+          const wm = document.querySelector('.chronocl-widget').widgetManager;
+          for (const p of Object.values(wm._models)) {
+            const m = await p;
+            if (m.get('height') === 420) { m.close(); return true; }
+          }
+          return false;
+        }"""
+    )
+    assert closed
+    run_cell(page, 6)
+    assert cell_output(page, 6, "FRONT_CLOSED") == {"closed": True, "alive": False}
     assert problems == []
     print(f"\nnotebook widget: first picture {first_ms:.0f} ms after the cell was run")

@@ -51,12 +51,17 @@ def test_the_example_runs_top_to_bottom(tmp_path):
     assert window["data"]["text/plain"] == "(6, 12, 1)"
     (label,) = by_source['w.mode = "max"']
     assert label["data"]["text/plain"].startswith("'max, forward, steps 6:12")
-    (curve,) = by_source["curve = chronocl.probe(series, 24, 24, 24)"]
+    (curve,) = by_source[
+        "p = w.probe((24, 24, 24))  # voxel x, y, z; world=True for physical coordinates"
+    ]
     assert len(json.loads(curve["data"]["text/plain"].replace("'", '"'))) == 12
     (png,) = by_source["w.screenshot()"]
     assert base64.b64decode(png["data"]["image/png"])[:8] == b"\x89PNG\r\n\x1a\n"
     (cv,) = by_source["cv = w.chronovolume()"]
     assert "mode=max" in cv["data"]["text/plain"]
+    assert "Chronovolume" in cv["data"]["text/html"] and "data:image/png" in cv["data"]["text/html"]
+    (summary,) = by_source["import json"]  # the series' summary, as a notebook shows it
+    assert "48×48×48 (x, y, z) × 12 steps" in summary["data"]["text/html"]
     session = json.loads((tmp_path / "vortex-session.json").read_text())
     assert session["chronocl_session"] == 1 and session["views"][0]["mode"] == "max"
     assert took < 60, f"the example took {took:.0f} s"

@@ -54,6 +54,12 @@ class Chronovolume:
         parts.append("with t_index" if self.t_index is not None else "no t_index")
         return f"Chronovolume({', '.join(parts)})"
 
+    def _repr_html_(self) -> str:
+        """A notebook's summary with a small picture (`chronocl.data.repr_html`)."""
+        from chronocl.data.repr_html import chronovolume_html
+
+        return chronovolume_html(self)
+
     @property
     def shape(self) -> tuple[int, int, int]:
         """(Z, Y, X): the arrays' shape (`dims` is the same, x first)."""

@@ -7,9 +7,15 @@ widget's comm (docs/notebook.md). Needs the `notebook` extra: pip install 'chron
     w.mode = "max"               # the picture follows; so do w.window, w.data_tf, ...
     w.observe(print, "window")   # the page's edits come back
     w.screenshot()               # a PNG of the views shown
+    w.probe((x, y, z))           # v(t) there, as the page's probe plots it
+
+Several widgets in one kernel share its memory limit and a series' resident steps
+(`chronocl.notebook.kernel`).
 """
 
 from __future__ import annotations
+
+import os
 
 from chronocl.core.errors import InvalidParameterError
 
@@ -33,20 +39,26 @@ def show(
     names the data set; `window` ((t0, t1[, stride])) and `mode` are set before the first
     picture's page shows it; `height` is the widget's height in CSS pixels. The widget's
     attributes (window, mode, views, data_tf, time_tf, camera) follow the page and set it.
-    Raises ChronoclError subclasses: the extra missing, bad data, no OpenGL in the kernel."""
+    `memory` is the kernel's memory limit for every widget's steps and frames (the newest
+    given; docs/notebook.md). Nothing is drawn until a page shows the widget or the kernel
+    asks for a picture. Raises ChronoclError subclasses: the extra missing, bad data (a
+    Chronovolume: the call that shows the series it came from), no OpenGL in the kernel."""
     try:
         import anywidget  # noqa: F401
     except ImportError:
         raise InvalidParameterError(
             "chronocl.show needs the notebook extra: pip install 'chronocl[notebook]'"
         ) from None
-    from chronocl.notebook.data import as_dataset
+    from chronocl.notebook.data import as_dataset, store_key
     from chronocl.notebook.widget import ChronoclWidget
 
     if isinstance(height, bool) or not isinstance(height, int) or not 200 <= height <= 4000:
         raise InvalidParameterError(f"height {height!r} must be an integer of 200..4000 pixels")
     dataset = as_dataset(data, name, storage_options, **array_options)
-    widget = ChronoclWidget(dataset, engine=engine, device=device, memory=memory, height=height)
+    store = store_key(data, storage_options) if isinstance(data, str | os.PathLike) else None
+    widget = ChronoclWidget(
+        dataset, engine=engine, device=device, memory=memory, height=height, store=store
+    )
     try:
         if window is not None:
             widget.window = window

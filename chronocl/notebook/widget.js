@@ -56,6 +56,7 @@ async function render({ model, el }) {
     connection.modelTransport(model),
   );
   host.viewer = viewer; // for scripted use (the tests), as window.viewer is the page's
+  host.widgetManager = model.widget_manager; // (the tests close the model through it)
   return () => {
     model.off('change:height', height);
     stop();

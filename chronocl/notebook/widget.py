@@ -14,23 +14,29 @@ page, which shows it; the page's own edits come back into them. `observe` sees b
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import io
 import json
 import threading
 import time
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import anywidget
+import numpy as np
 import traitlets
 
 from chronocl.core.errors import ChronoclError, InvalidParameterError, RendererUnavailableError
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.probe import check_point
 from chronocl.notebook import state as synced
 from chronocl.notebook.bundle import esm
+from chronocl.notebook.kernel import KERNEL
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import on_gl
+from chronocl.viewer.probe import project
 from chronocl.viewer.protocol import parse_message, unpack_frame
 from chronocl.viewer.residency import POLL_S, residency
 from chronocl.viewer.saving import Downloads
@@ -48,6 +54,29 @@ FRAMED = ("update", "open", "load")  # the requests a frame answers
 
 class WidgetClosedError(ChronoclError, RuntimeError):
     """The widget was closed: its worker and resources are gone."""
+
+
+def _voxel_of(point: object, series, world: bool) -> tuple[int, int, int]:
+    """`point` (x, y, z) as voxel indices of `series`, checked inside it: as given, or from
+    physical coordinates from the box's corner (`world`)."""
+    if isinstance(point, str) or not isinstance(point, Sequence) or len(point) != 3:
+        raise InvalidParameterError(f"a probe point is (x, y, z), x first, not {point!r}")
+    if not world:
+        return check_point(point, series.volume_shape)
+    try:
+        p = np.array([float(v) for v in point])
+    except (TypeError, ValueError):
+        raise InvalidParameterError(
+            f"a world point is three numbers (x, y, z), not {point!r}"
+        ) from None
+    spacing = np.array(series.spacing, dtype=np.float64)
+    extent = spacing * np.array(series.dims)
+    if not (np.isfinite(p).all() and (p >= 0).all() and (p < extent).all()):
+        raise InvalidParameterError(
+            f"world point {tuple(p.tolist())} is outside the box from (0, 0, 0) to "
+            f"{tuple(extent.tolist())} (x, y, z, from its corner)"
+        )
+    return tuple(int(v) for v in np.floor(p / spacing))  # type: ignore[return-value]
 
 
 def check_gl() -> None:
@@ -84,6 +113,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         device: str | None = None,
         memory: str | int | None = None,
         height: int = 620,
+        store: tuple | None = None,
     ) -> None:
         check_gl()
         self._syncing = True  # the attributes' first values are the worker's
@@ -96,16 +126,32 @@ class ChronoclWidget(anywidget.AnyWidget):
         self._newest_id: int | None = None  # the newest request a frame answers
         self._frames = 0
         self.last_frame: dict | None = None  # the newest frame's header (and its digest)
+        # No frame until one is wanted: a page's first request (its panels' size), or the
+        # kernel's (`wait_frame`, a screenshot); a frame of the default size made before the
+        # page comes only delays the page's own.
+        self._drawing = False
+        self._shared, memory = KERNEL.join(id(self), dataset.series, store, memory)
+        try:
+            self._worker = ClientWorker(
+                self._datasets, self._deliver, self._downloads, engine=engine, device=device,
+                memory=memory, shared=self._shared,
+            )  # fmt: skip
+        except Exception:
+            KERNEL.leave(id(self), dataset.series)
+            raise
         self._closed = False
-        self._worker = ClientWorker(
-            self._datasets, self._deliver, self._downloads, engine=engine, device=device,
-            memory=memory,
-        )  # fmt: skip
-        opened = self._worker.open(0, None)
+        try:
+            opened = self._worker.open(0, None, frame=False)
+        except Exception:  # (the data set's sample unreadable): nothing left running
+            self.close()
+            raise
         self._fitted = opened.get("fitted")
         self._opened_tf = opened["state"]["data_tf"]
         self._pull(tell_page=False)
         self.on_msg(self._on_msg)
+        # The front end closed the model (its notebook closed, the widget closed from
+        # JavaScript): the worker goes as with `close()`.
+        self.comm.on_close(lambda _msg: self._front_end_closed())
         self._steps = threading.Thread(target=self._report_steps, daemon=True)
         self._steps.start()
 
@@ -118,6 +164,7 @@ class ChronoclWidget(anywidget.AnyWidget):
             return
         if "text" not in content:
             return  # not the viewer's (anywidget's own messages)
+        self._drawing = True  # the page's requests are answered with frames from now on
         reply = self._answer(content["text"])
         if reply is not None:
             self.send({"text": json.dumps(reply)})
@@ -220,11 +267,14 @@ class ChronoclWidget(anywidget.AnyWidget):
         self._check_open()
         fields = synced.to_fields(name, value, self._described())
         text = json.dumps({"type": "update", "id": self._own_id(), **fields})
-        parse_message(text)  # ProtocolError naming the field, before anything changes
-        reply = answer(self._worker, text)
-        if reply is not None and reply.get("type") == "error":
-            raise InvalidParameterError(reply["message"])
-        self._newest_id = json.loads(text)["id"]
+        msg = parse_message(text)  # ProtocolError naming the field, before anything changes
+        if self._drawing:
+            reply = answer(self._worker, text)
+            if reply is not None and reply.get("type") == "error":
+                raise InvalidParameterError(reply["message"])
+        else:  # nothing shows it yet: the first frame wanted will
+            self._worker.update(msg, frame=False)
+        self._newest_id = msg["id"]
         self._pull(tell_page=True)
         return getattr(self, name)
 
@@ -247,7 +297,14 @@ class ChronoclWidget(anywidget.AnyWidget):
     def wait_frame(self, after: int = 0, timeout: float = REQUEST_TIMEOUT_S) -> dict:
         """The header of the settled frame (full quality and resolution) answering the newest
         request (an attribute set, or the page's edit), once more than `after` frames were
-        made (`frames`), waited for."""
+        made (`frames`), waited for. Where no frame was wanted yet (no page has shown the
+        widget), one is made for the state now."""
+        self._check_open()
+        if not self._drawing:
+            self._drawing = True
+            rid = self._own_id()
+            self._worker.update({"type": "update", "id": rid})
+            self._newest_id = rid
         end = time.monotonic() + timeout
         with self._cond:
             while True:
@@ -331,9 +388,93 @@ class ChronoclWidget(anywidget.AnyWidget):
         state = self._worker.state
         return session_of(state, ds.name, ds.series, ds.path, self._worker.shown_focus())
 
+    def probe(
+        self, point: object = None, *, box: object = None, world: bool = False, view: int = 0
+    ) -> dict:
+        """v(t) at a point over every step of the series, as the page's probe plots it (its
+        reply, the same fields): `point` is (x, y, z), x first, voxel indices of the full
+        resolution series, or with `world` physical coordinates from the box's corner (voxel
+        i spans [i*dx, (i+1)*dx) along x; `spacing` is the series'); or `box` (x, y and z
+        ranges, or 'x0:x1,y0:y1,z0:z1', as `chronocl.probe` takes them): the mean, min and max
+        over it per step. `view` gives the window whose steps are marked (`window`, and the
+        CSV's in_window column). Keys: view, voxel ({x, y, z} or None), box ({x: [x0, x1],
+        ...} or None), world (the voxel's or box's centre, physical x, y, z), values (one per
+        step), min, max (a box's, else None), window (its steps), times, csv, mark (where the
+        centre is on the view's panel in the last frame, (x, y) fractions; None: off it or no
+        frame yet). It reads the point's steps (one small read per run of steps); the page's
+        own probe panel is left as it is."""
+        self._check_open()
+        ds = self._datasets[0]
+        series = ds.series
+        state = self._worker.state
+        if isinstance(view, bool) or not isinstance(view, int) or not 0 <= view < len(state.views):
+            raise InvalidParameterError(
+                f"view {view!r} is not shown; views 0..{len(state.views) - 1}"
+            )
+        if (point is None) == (box is None):
+            raise InvalidParameterError("give a point (x, y, z) or a box, not both or neither")
+        if box is not None:
+            if world:
+                raise InvalidParameterError("a box is in voxel indices; world= is for a point")
+            curve = ds.curve(box=box)
+            lo = np.array([r[0] for r in curve.box], dtype=np.float64)
+            hi = np.array([r[1] for r in curve.box], dtype=np.float64)
+            voxel, boxed = (
+                None,
+                {a: [int(a0), int(a1)] for a, a0, a1 in zip("xyz", lo, hi, strict=True)},
+            )
+        else:
+            index = _voxel_of(point, series, world)
+            curve = ds.curve(index)
+            lo = np.array(index, dtype=np.float64)
+            hi = lo + 1
+            voxel, boxed = dict(zip("xyz", index, strict=True)), None
+        dims = np.array(series.dims, dtype=np.float64)
+        fractions = tuple(float(v) for v in (lo + hi) / 2 / dims)
+        window = list(state.selection(series.n_steps, view).steps)
+        return {
+            "view": view,
+            "voxel": voxel,
+            "box": boxed,
+            "world": [
+                float(f * n * d) for f, n, d in zip(fractions, dims, series.spacing, strict=True)
+            ],
+            "values": [float(v) for v in curve.values],
+            "min": None if curve.min is None else [float(v) for v in curve.min],
+            "max": None if curve.max is None else [float(v) for v in curve.max],
+            "window": window,
+            "times": list(series.times),
+            "csv": curve.csv_text(window),
+            "mark": self._mark(view, fractions),
+        }
+
+    def _mark(self, view: int, fractions: tuple) -> tuple[float, float] | None:
+        """Where the box fractions `fractions` are on `view`'s panel as the frames show it (the
+        last frame's chronovolume; the state's camera framing the region the frames frame)."""
+        state = self._worker.state
+        slots = self._worker.views.slots
+        focus = self._worker.shown_focus()  # the region the frames frame (None: no frame yet)
+        if focus is None or view >= len(state.views) or view >= len(slots):
+            return None
+        cv = slots[view].cv
+        if cv is None:
+            return None
+        shown = dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=focus))
+        return project(cv, shown.panel_camera(), shown.size, fractions)
+
     # -- the end -----------------------------------------------------------------------------
     def close(self) -> None:
-        """Free the worker (its thread, GL textures, OpenCL buffers and steps) and the comm."""
+        """Free the worker (its thread, GL textures, OpenCL buffers, and the steps no other
+        widget shows) and the comm (its views on the page go)."""
+        self._free()
+        super().close()
+
+    def _front_end_closed(self) -> None:
+        """The front end closed the comm: free the worker; the comm is closed already."""
+        self._free()
+        super().close()  # (forgets the comm; sends nothing more: it is closed)
+
+    def _free(self) -> None:
         if not self._closed:
             self._closed = True
             with self._cond:
@@ -341,7 +482,7 @@ class ChronoclWidget(anywidget.AnyWidget):
             self._worker.close()
             self._worker.thread.join(timeout=30)
             self._downloads.close()
-        super().close()
+            KERNEL.leave(id(self), self._datasets[0].series)
 
     @property
     def closed(self) -> bool:

@@ -113,6 +113,9 @@ class ClientWorker(Tasks):
         self._frame = 0
         self._warmed: set = set()  # the data types whose recolouring kernels are loaded
         self._released = False  # its views let go (the thread's end)
+        # A state to integrate before its first frame is asked for (`open`/`update` with
+        # `frame` false): its chronovolumes are ready when the client's first request comes.
+        self._warm: ViewState | None = None
         # The framed region: (generation, world box or None); a data set or camera reset adds one.
         self._focus_gen = 0
         self._focus: tuple[int, tuple | None] | None = None
@@ -120,11 +123,12 @@ class ClientWorker(Tasks):
         self.thread.start()
 
     # -- called from the server's event loop ----------------------------------------------
-    def open(self, ref: int | str, rid: int | None, fit: bool = True) -> dict:
+    def open(self, ref: int | str, rid: int | None, fit: bool = True, frame: bool = True) -> dict:
         """The data set's default state, its data TF fitted to the first window and view's
         mode (reads a sample of the window: the socket calls it off its event loop). Not
         fitted where `fit` is false: a page opened again after a reconnect sends the state it
-        had next, its own fitted range with it."""
+        had next, its own fitted range with it. No frame is made where `frame` is false (a
+        notebook widget opens before any page shows it: the first request's frame does)."""
         i = find_dataset(self.datasets, ref)
         series = self.datasets[i].series
         state = default_state(i, series)
@@ -134,7 +138,10 @@ class ClientWorker(Tasks):
             self.state = state
             self._probed = None
             self._focus_gen += 1
-            self._pending = (self.state, rid)
+            if frame:
+                self._pending = (self.state, rid)
+            else:
+                self._warm = self.state
             self._cancelled = False
             self._hist_range, self._hist_window = [0.0, 1.0], None  # sent after its frame
             self._cond.notify()
@@ -177,7 +184,9 @@ class ClientWorker(Tasks):
             known = self._focus
             return None if known is None or known[0] != self._focus_gen else known[1]
 
-    def update(self, msg: dict) -> None:
+    def update(self, msg: dict, frame: bool = True) -> None:
+        """Merge a validated update into the state; its frame is made next, or with `frame`
+        false not now (a frame already waiting shows it; else the next request's does)."""
         with self._cond:
             n = self.datasets[self.state.dataset].series.n_steps
             state = merge(self.state, msg, n)
@@ -187,7 +196,12 @@ class ClientWorker(Tasks):
                 self._focus_gen += 1
             if "focus" in msg:
                 self._set_focus(focus)
-            self._pending = (self.state, msg.get("id"))
+            if frame:
+                self._pending = (self.state, msg.get("id"))
+            elif self._pending is not None:
+                self._pending = (self.state, self._pending[1])
+            elif self._shown is None:
+                self._warm = self.state
             self._cancelled = False
             self._cond.notify()
 
@@ -242,7 +256,12 @@ class ClientWorker(Tasks):
     def _loop(self) -> None:
         while True:
             with self._cond:
-                while not self._closed and self._pending is None and not self._tasks:
+                while (
+                    not self._closed
+                    and self._pending is None
+                    and not self._tasks
+                    and self._warm is None
+                ):
                     due = [t for t in (self._refine_at, self._prepare_at) if t is not None]
                     wait = min(due) - time.monotonic() if due else None
                     if wait is not None and wait <= 0:
@@ -252,6 +271,7 @@ class ClientWorker(Tasks):
                     return
                 pending, self._pending = self._pending, None
                 task = None if pending is not None or not self._tasks else self._tasks.popleft()
+                warm, self._warm = (self._warm, None) if task is None else (None, self._warm)
                 refine = self._refine_at is not None and self._refine_at <= time.monotonic()
             try:
                 if pending is not None:
@@ -259,6 +279,8 @@ class ClientWorker(Tasks):
                         self._render(*pending)
                 elif task is not None:
                     self._do_task(*task)
+                elif warm is not None:
+                    self._warm_first(warm)
                 elif refine:
                     with foreground.working():
                         self._refine()
@@ -272,6 +294,17 @@ class ClientWorker(Tasks):
                 text = error_text(exc, f"{what} ({self._what_is_shown(pending)})")
                 if not self._reply({"type": "error", "id": rid, "message": text}):
                     return
+
+    def _warm_first(self, state: ViewState) -> None:
+        """The chronovolumes of `state` integrated before any frame is asked for (a notebook
+        widget's, while its page loads); a failure is the first frame's to report."""
+        if self._shown is not None:
+            return
+        try:
+            with foreground.working():
+                self.views.chronovolumes(state)
+        except Exception as exc:
+            error_text(exc, "integrating ahead of the first frame")
 
     def _what_is_shown(self, pending) -> str:
         """The views' modes and windows, the data set's size and the frame's, for an error's
