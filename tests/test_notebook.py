@@ -220,6 +220,22 @@ def test_show_refuses_what_it_cannot_show():
         chronocl.show(vortex(), height=5)
     with pytest.raises(ChronoclError):
         chronocl.show(np.zeros((4, 4)))
+    # the viewer's options, checked as `chronocl view` checks them, before any data is read
+    with pytest.raises(ChronoclError, match="unknown engine 'nope'"):
+        chronocl.show(vortex(), engine="nope")
+    with pytest.raises(ChronoclError, match="banana"):
+        chronocl.show(vortex(), memory="banana")
+
+
+def test_numpy_numbers_set_attributes_as_plain_ones(widget):
+    widget.window = (np.int64(2), np.int64(6))
+    assert widget.window[:2] == (2, 6) or list(widget.window[:2]) == [2, 6]
+    tf = dict(widget.data_tf)
+    lo, hi = np.float32(0.0), np.float32(0.5)
+    widget.data_tf = {**tf, "value_range": [lo, hi]}
+    assert widget.data_tf["value_range"] == [0.0, 0.5]
+    with pytest.raises(ChronoclError, match="not plain data"):
+        widget.camera = {"zoom": object()}
 
 
 def test_close_ends_the_worker_and_refuses_more():

@@ -51,9 +51,13 @@ def show(
         ) from None
     from chronocl.notebook.data import as_dataset, store_key
     from chronocl.notebook.widget import ChronoclWidget
+    from chronocl.viewer.server import check_options
 
     if isinstance(height, bool) or not isinstance(height, int) or not 200 <= height <= 4000:
         raise InvalidParameterError(f"height {height!r} must be an integer of 200..4000 pixels")
+    # as `chronocl view` checks them, before any data is read (a bad engine made a widget
+    # whose frames never came, the cause never said)
+    check_options(engine=engine, device=device, memory=memory)
     dataset = as_dataset(data, name, storage_options, **array_options)
     store = store_key(data, storage_options) if isinstance(data, str | os.PathLike) else None
     widget = ChronoclWidget(

@@ -79,6 +79,13 @@ def _voxel_of(point: object, series, world: bool) -> tuple[int, int, int]:
     return tuple(int(v) for v in np.floor(p / spacing))  # type: ignore[return-value]
 
 
+def _plain(value: object) -> object:
+    """A numpy scalar or array as the Python numbers it holds (`json.dumps`'s `default`)."""
+    if isinstance(value, np.generic | np.ndarray):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not a number, a list or a dict")
+
+
 def check_gl() -> None:
     """RendererUnavailableError, saying what to do, where this process cannot make the OpenGL
     context the viewer draws with (no EGL, no GL driver)."""
@@ -266,7 +273,10 @@ class ChronoclWidget(anywidget.AnyWidget):
         page; returns the value the attribute then has."""
         self._check_open()
         fields = synced.to_fields(name, value, self._described())
-        text = json.dumps({"type": "update", "id": self._own_id(), **fields})
+        try:  # numpy scalars and arrays as the numbers they hold
+            text = json.dumps({"type": "update", "id": self._own_id(), **fields}, default=_plain)
+        except (TypeError, ValueError) as exc:
+            raise InvalidParameterError(f"{name} = {value!r} is not plain data: {exc}") from None
         msg = parse_message(text)  # ProtocolError naming the field, before anything changes
         if self._drawing:
             reply = answer(self._worker, text)
