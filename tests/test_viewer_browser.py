@@ -4,6 +4,7 @@ orbit, mode, window brush and TF edits; the probe plots; without the token nothi
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -70,7 +71,12 @@ def test_page_loads_with_the_token_and_shows_a_frame(page):
     size = page.evaluate("() => document.querySelector('.view img').naturalWidth")
     assert size >= 64
     assert "token" not in page.url  # dropped from the address bar; the cookie keeps access
-    assert "integrate" in page.inner_text("#status")
+    # the status line says what the frame took; the stages' times are in its tooltip
+    status = page.inner_text("#status")
+    assert re.search(r"(integrated|recoloured|drawn) in \d+ ms", status), status
+    assert "upload" not in status and "encode" not in status
+    tooltip = page.get_attribute("#status", "title")
+    assert re.search(r"render [\d.]+ ms .* encode [\d.]+ ms", tooltip), tooltip
     # The mode menu is the server's registry, with each mode's summary as its tooltip.
     menu = page.eval_on_selector_all(
         ".view select.mode option", "os => os.map(o => [o.value, o.title])"

@@ -386,6 +386,9 @@ export function cancelRefine() {
   setStatus('refine cancelled: the coarse frame stays until the next change');
 }
 
+// The status line: what the frame shows and what it took (recoloured or integrated, and why
+// not recoloured, streamed or off the GPU where so), and the round trip; the stages' times and
+// the frame's sizes are in its tooltip (the whole line was a wall of milliseconds).
 function showTimings(h) {
   const t = h.timings;
   const v = h.views[0];
@@ -395,22 +398,30 @@ function showTimings(h) {
   const level = h.level ? `level ${h.level} (${shape}) · refining…` : `full resolution (${shape})`;
   const parts = [
     level,
-    // a TF edit that only recoloured (max, min, first_hit, change) integrated nothing
-    ...(t.recolour_ms > 0 ? [`recolour ${t.recolour_ms.toFixed(1)} ms`] : []),
-    ...(t.recolour_ms > 0 && !t.integrate_ms
-      ? []
-      : [`integrate ${t.integrate_ms.toFixed(1)} ms${t.incremental ? ' (incremental)' : ''}`]),
+    // a TF edit that only recoloured (max, min, first_hit, change) integrated nothing; a
+    // camera move or a refine's last frame neither: only drawn again
+    ...(t.recolour_ms > 0 ? [`recoloured in ${t.recolour_ms.toFixed(0)} ms`] : []),
+    ...(t.integrate_ms > 0
+      ? [`integrated in ${t.integrate_ms.toFixed(0)} ms${t.incremental ? ' (incremental)' : ''}`]
+      : []),
+    ...(t.integrate_ms > 0 || t.recolour_ms > 0 ? [] : [`drawn in ${t.render_ms.toFixed(0)} ms`]),
     // an edit of a mode that recolours integrated instead: why
     ...h.views.filter((x) => x.why_integrated).slice(0, 1).map((x) => `not recoloured: ${x.why_integrated}`),
-    `upload ${t.upload_ms.toFixed(1)} ms`,
     // a GPU whose memory cannot hold the window: its steps travel for every integration
     ...(t.steps_on_host ? [`steps not on the GPU: ${t.steps_on_host}`] : []),
     // the memory limit leaves the window's steps too little room: read from the store each time
     ...(t.streamed ? [`${t.streamed} (a larger --memory keeps the window in memory)`] : []),
-    `render ${t.render_ms.toFixed(1)} ms`,
-    `encode ${t.encode_ms.toFixed(1)} ms`,
-    `${h.views.length}× ${v.width}×${v.height}${h.reduced ? ' (reduced for speed, sharpening…)' : ''} ${h.format} ${kb.toFixed(0)} KB (${h.quality})`,
+    ...(h.reduced ? ['reduced for speed, sharpening…'] : []),
   ];
   if (rt !== null) parts.push(`round trip ${rt.toFixed(0)} ms`);
   setStatus(parts.join(' · '));
+  $('status').title = [
+    `integrate ${t.integrate_ms.toFixed(1)} ms`,
+    `recolour ${t.recolour_ms.toFixed(1)} ms`,
+    `upload ${t.upload_ms.toFixed(1)} ms`,
+    `render ${t.render_ms.toFixed(1)} ms`,
+    `encode ${t.encode_ms.toFixed(1)} ms`,
+    `server ${t.server_ms.toFixed(1)} ms`,
+    `${h.views.length}× ${v.width}×${v.height} ${h.format} ${kb.toFixed(0)} KB (${h.quality})`,
+  ].join(' · ');
 }
