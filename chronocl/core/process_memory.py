@@ -14,8 +14,8 @@ under the limit, and the steps are what gives way:
   dropping it would lower no peak and fault as much in afresh (about 1 s for 1 GB at 512^3);
   what nobody takes goes back after `SPARE_SECONDS`;
 - what the frames need is what the process holds beside its steps now or after any of the last
-  frames, whichever is more (before the first frame: `floor`, what the clients' views expect
-  theirs to hold, `expect`);
+  frames, whichever is more, and at least what the clients' views now expect theirs to hold
+  (`floor`, `expect`) with the process's own (`PROCESS_BYTES`);
 - the steps of the windows being shown are never dropped. So a window is kept resident only
   where its steps fit beside what the views' frames are expected to hold (`expect`) and the
   process's own memory (`PROCESS_BYTES`): `window_room`, against which a viewer weighs the
@@ -98,8 +98,12 @@ class ProcessLimit:
         return max(0, resident - sum(h.settled_bytes() for h in self._holders_now()))
 
     def need(self) -> int:
-        """What the frames are taken to need beside the steps."""
-        return max(self.beside(), max(self._after) if self._after else self.floor)
+        """What the frames are taken to need beside the steps: what was measured, and never
+        less than what the views now shown expect with the process's own (a view added, or a
+        mode holding more, gets its room before its frame, not after: the soak's second
+        view peaked 15% over the limit when only earlier frames were counted)."""
+        measured = max(self.beside(), max(self._after) if self._after else 0)
+        return max(measured, self.floor + PROCESS_BYTES)
 
     def window_room(self) -> int:
         """Bytes the windows shown may keep resident: the limit less what every client's views
