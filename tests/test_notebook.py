@@ -406,7 +406,8 @@ def test_widgets_of_one_store_share_its_steps_and_the_kernel_one_limit(tmp_path)
         assert a._shared is b._shared is KERNEL.held_steps(sa) and c._shared is not a._shared
         assert a._worker.views._shared is a._shared  # the worker's views read the shared steps
         limit = process_memory.current()
-        assert limit is KERNEL.limit and limit is not before and limit.total == 3 * 10**9
+        # the kernel's (made by the first widget, here or the module's), its total a's
+        assert limit is KERNEL.limit and limit.total == 3 * 10**9
         assert b._worker.memory == c._worker.memory == "3GB"  # one budget for all
         for w in (a, b):
             w.window = (0, 4)
@@ -460,3 +461,65 @@ def test_the_front_end_closing_the_comm_frees_the_worker():
     from chronocl.notebook.kernel import KERNEL
 
     assert KERNEL.held_steps(series) is None
+
+
+def test_show_integrates_only_the_window_and_mode_asked_for(monkeypatch):
+    """`show(window=, mode=)` warms the state asked for, not the default one first (the page's
+    first frame waited behind an integration nobody wanted)."""
+    from chronocl.viewer.view_sessions import Views
+
+    integrated: list = []
+    real = Views.chronovolumes
+
+    def noting(self, state):
+        integrated.append((tuple(state.window), state.views[0][0]))
+        return real(self, state)
+
+    monkeypatch.setattr(Views, "chronovolumes", noting)
+    w = chronocl.show(vortex()[:6], window=(1, 5), mode="max")
+    try:
+        slots = w._worker.views.slots
+        end = time.monotonic() + 60
+        while not (slots and slots[0].cv is not None) and time.monotonic() < end:
+            time.sleep(0.02)
+        assert integrated == [((1, 5, 1), "max")], integrated
+    finally:
+        w.close()
+
+
+def test_the_first_widget_makes_the_default_limit_as_chronocl_view_does():
+    from chronocl.core import process_memory
+    from chronocl.core.budget import interactive_memory
+    from chronocl.notebook.kernel import Kernel
+
+    kernel, before = Kernel(), process_memory.current()
+    series = chronocl.TimeSeries.from_array(vortex()[:3])
+    _, memory = kernel.join(1, series)  # no memory given
+    limit = process_memory.current()
+    assert limit is kernel.limit and limit is not before
+    assert abs(limit.total - interactive_memory()) < 2**30 and memory == limit.total
+    kernel.leave(1, series)
+    assert process_memory.current() is before
+
+
+def test_a_rewritten_store_shown_again_is_opened_afresh(tmp_path):
+    """A re-run cell (the old widget still open) on a store rewritten meanwhile shows the new
+    data, not the old widget's series (whose every frame then failed)."""
+    from chronocl.notebook.kernel import KERNEL
+
+    path = tmp_path / "v.zarr"
+    chronocl.TimeSeries.from_array(vortex()[:4]).save(path)
+    a = chronocl.show(str(path))
+    try:
+        same = chronocl.show(str(path))
+        assert same._datasets[0].series is a._datasets[0].series  # unchanged: shared
+        same.close()
+        chronocl.TimeSeries.from_array(vortex()[:6]).save(path, overwrite=True)
+        b = chronocl.show(str(path))
+        try:
+            assert b._datasets[0].series.n_steps == 6
+            assert KERNEL.held_steps(a._datasets[0].series) is not None  # a's stays its own
+        finally:
+            b.close()
+    finally:
+        a.close()

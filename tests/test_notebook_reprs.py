@@ -165,3 +165,23 @@ def test_render_result_displays_as_png():
     png = image._repr_png_()
     assert png.startswith(b"\x89PNG")
     assert PILImage.open(io.BytesIO(png)).size == (64, 48)
+
+
+def test_a_series_whose_picture_cannot_be_read_still_shows_its_summary(tmp_path):
+    """A damaged chunk (or a store out of reach) costs the picture, not the summary: a repr
+    that raises makes the notebook print a traceback instead."""
+    series = write(tmp_path / "v.zarr", levels=False)
+
+    def boom(block):
+        raise chronocl.core.errors.StoreCorruptError("chunk 3.0.0.0 is damaged")
+
+    series.data = series.data.map_blocks(boom, dtype=series.data.dtype)
+    html = series._repr_html_()
+    assert "no picture: chunk 3.0.0.0 is damaged" in html and "<table>" in html
+    assert "<img" not in html
+
+
+def test_a_repr_that_cannot_be_made_falls_back_to_the_plain_one():
+    cv = Chronovolume(np.zeros((2, 3, 4, 4), np.float32))
+    cv.metadata["selection"] = {"steps": [5, 1], "n_steps": 3}  # not a selection chronocl wrote
+    assert cv._repr_html_() is None

@@ -54,11 +54,11 @@ class Chronovolume:
         parts.append("with t_index" if self.t_index is not None else "no t_index")
         return f"Chronovolume({', '.join(parts)})"
 
-    def _repr_html_(self) -> str:
+    def _repr_html_(self) -> str | None:
         """A notebook's summary with a small picture (`chronocl.data.repr_html`)."""
-        from chronocl.data.repr_html import chronovolume_html
+        from chronocl.data.repr_html import chronovolume_html, safe
 
-        return chronovolume_html(self)
+        return safe(chronovolume_html, self)
 
     @property
     def shape(self) -> tuple[int, int, int]:

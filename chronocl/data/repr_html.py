@@ -122,9 +122,26 @@ def series_html(series) -> str:
     for key in ("variable", "quantity"):
         if key in series.meta:
             rows.append((key, str(series.meta[key])))
-    image, caption = series_picture(series)
+    image, caption = _picture(series_picture, series)
     title = f"TimeSeries {series.source or ''}".strip()
     return _summary(title, rows, image, caption)
+
+
+def _picture(make, obj) -> tuple[np.ndarray | None, str]:
+    """`make(obj)`, or no picture with one line saying why (a damaged chunk, a store out of
+    reach): a repr never raises (a notebook then shows a traceback, not the summary)."""
+    try:
+        return make(obj)
+    except Exception as exc:
+        return None, f"no picture: {exc}".splitlines()[0]
+
+
+def safe(summary, obj) -> str | None:
+    """`summary(obj)`, or None (the plain repr shows) where even the table cannot be made."""
+    try:
+        return summary(obj)
+    except Exception:
+        return None
 
 
 def chronovolume_html(cv) -> str:
@@ -153,21 +170,30 @@ def chronovolume_html(cv) -> str:
     rows.append(("t_index", "yes" if cv.t_index is not None else "no"))
     rows.append(("from", str(meta.get("store") or meta.get("dataset") or "?")))
     rows.append(("stored", "in memory (.save(path) writes it)"))
-    image, caption = chronovolume_picture(cv)
+    image, caption = _picture(chronovolume_picture, cv)
     return _summary("Chronovolume", rows, image, caption)
 
 
-def _summary(title: str, rows: list[tuple[str, str]], image: np.ndarray, caption: str) -> str:
-    h, w = image.shape[:2]
-    scale = SHOWN_PX / max(h, w)
-    size = f'width="{round(w * scale)}" height="{round(h * scale)}"'
+def _summary(
+    title: str, rows: list[tuple[str, str]], image: np.ndarray | None, caption: str
+) -> str:
     body = "".join(f"<tr><th>{k}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
+    if image is None:
+        figure = (
+            f'<figure style="margin:0"><figcaption>{html.escape(caption)}</figcaption></figure>'
+        )
+    else:
+        h, w = image.shape[:2]
+        scale = SHOWN_PX / max(h, w)
+        size = f'width="{round(w * scale)}" height="{round(h * scale)}"'
+        figure = (
+            f'<figure style="margin:0"><img src="{png_data_url(image)}" {size} '
+            f'alt="{html.escape(caption)}"><figcaption>{html.escape(caption)}</figcaption>'
+            "</figure>"
+        )
     return (
         f'{STYLE}<div class="chronocl-repr"><div><b>{html.escape(title)}</b>'
-        f"<table>{body}</table></div>"
-        f'<figure style="margin:0"><img src="{png_data_url(image)}" {size} '
-        f'alt="{html.escape(caption)}"><figcaption>{html.escape(caption)}</figcaption>'
-        "</figure></div>"
+        f"<table>{body}</table></div>{figure}</div>"
     )
 
 

@@ -348,11 +348,11 @@ class TimeSeries:
         write_store(path, steps.read(), **steps.written(), overwrite=overwrite, progress=progress)
         return open_store(path)
 
-    def _repr_html_(self) -> str:
+    def _repr_html_(self) -> str | None:
         """A notebook's summary with a small picture, read cheaply (`chronocl.data.repr_html`)."""
-        from chronocl.data.repr_html import series_html
+        from chronocl.data.repr_html import safe, series_html
 
-        return series_html(self)
+        return safe(series_html, self)
 
     def describe(self) -> dict:
         """A summary for `chronocl info` and the demo."""

@@ -71,6 +71,7 @@ def show(
     except Exception:
         widget.close()
         raise
+    widget.warm()  # its window integrated while the page loads, the one asked for
     return widget
 
 

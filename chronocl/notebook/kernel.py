@@ -2,10 +2,10 @@
 (chronocl/viewer/app.py):
 
 - one memory limit for the kernel's process (`chronocl.core.process_memory.ProcessLimit`): every
-  widget's resident steps and frames within it, steps nobody shows giving way first. It is made
-  by the first `show(..., memory=...)` and held while any widget is open; a later `memory`
-  replaces its total (the newest given is the kernel's). Without one, as without `--memory`,
-  each widget's windows keep to their own budget;
+  widget's resident steps and frames within it, steps nobody shows giving way first. The first
+  widget makes it (its `memory`, else half the memory free, as `chronocl view`'s default) and
+  it is held while any widget is open; a later `memory` replaces its total (the newest given is
+  the kernel's; the windows of widgets made before keep the budget they were made with);
 - one set of resident steps per series (`chronocl.viewer.view_sessions.SharedSteps`): widgets
   showing the same store (its path or URL, with the same storage options) or the same
   `TimeSeries` read no step twice and hold none twice. The steps go when the last widget
@@ -22,7 +22,8 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 
 from chronocl.core import process_memory
-from chronocl.core.budget import parse_memory
+from chronocl.core.budget import interactive_memory, parse_memory
+from chronocl.core.errors import ChronoclError
 from chronocl.core.process_memory import ProcessLimit
 from chronocl.data.series import TimeSeries
 from chronocl.viewer.view_sessions import SharedSteps
@@ -49,11 +50,17 @@ class Kernel:
         self._limited: ExitStack | None = None
 
     def find_store(self, store: tuple) -> TimeSeries | None:
-        """The series of a store (where, options) an open widget shows, if any."""
+        """The series of a store (where, options) an open widget shows, if any, and if the
+        store did not change since (rewritten, a re-run cell shows it opened afresh: the old
+        series failed every frame with 'open it again')."""
         with self._lock:
-            for shown in self._shown.values():
-                if shown.store == store:
-                    return shown.series
+            found = [shown.series for shown in self._shown.values() if shown.store == store]
+        for series in found:
+            try:
+                series.check_unchanged()
+            except ChronoclError:
+                continue
+            return series
         return None
 
     def join(
@@ -67,13 +74,15 @@ class Kernel:
         is to keep (the kernel's, set or replaced by `memory` where given)."""
         total = None if memory is None else parse_memory(memory)  # a bad one: nothing changed
         with self._lock:
-            if total is not None:
-                if self.limit is None:
-                    self.limit = ProcessLimit(total)
-                    self._limited = ExitStack()
-                    self._limited.enter_context(process_memory.limited(self.limit))
-                else:
-                    self.limit.total = total
+            if self.limit is None:  # the first widget: the default limit, as `chronocl view`'s
+                if total is None:
+                    total = interactive_memory()
+                self.limit = ProcessLimit(total)
+                self._limited = ExitStack()
+                self._limited.enter_context(process_memory.limited(self.limit))
+                self.memory = total if memory is None else memory
+            elif total is not None:
+                self.limit.total = total
                 self.memory = memory
             shown = self._shown.get(id(series))
             if shown is None:

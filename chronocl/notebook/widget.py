@@ -295,6 +295,12 @@ class ChronoclWidget(anywidget.AnyWidget):
         return self._set(proposal["trait"].name, proposal["value"])
 
     # -- pictures, chronovolumes, sessions ---------------------------------------------------
+    def warm(self) -> None:
+        """Integrate the widget's window now, while its page loads (`ClientWorker.warm`): the
+        page's first frame then only draws."""
+        self._check_open()
+        self._worker.warm()
+
     def _check_open(self) -> None:
         if self._closed:
             raise WidgetClosedError("this widget was closed; chronocl.show(...) makes a new one")

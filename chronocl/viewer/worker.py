@@ -140,8 +140,6 @@ class ClientWorker(Tasks):
             self._focus_gen += 1
             if frame:
                 self._pending = (self.state, rid)
-            else:
-                self._warm = self.state
             self._cancelled = False
             self._hist_range, self._hist_window = [0.0, 1.0], None  # sent after its frame
             self._cond.notify()
@@ -184,6 +182,15 @@ class ClientWorker(Tasks):
             known = self._focus
             return None if known is None or known[0] != self._focus_gen else known[1]
 
+    def warm(self) -> None:
+        """Integrate the state now, without drawing, where no frame was shown or asked for yet
+        (a notebook widget's, once `show` set its window and mode: its page's first frame
+        then only draws; warmed earlier, the default window was integrated for nothing)."""
+        with self._cond:
+            if self._shown is None and self._pending is None:
+                self._warm = self.state
+                self._cond.notify()
+
     def update(self, msg: dict, frame: bool = True) -> None:
         """Merge a validated update into the state; its frame is made next, or with `frame`
         false not now (a frame already waiting shows it; else the next request's does)."""
@@ -200,8 +207,6 @@ class ClientWorker(Tasks):
                 self._pending = (self.state, msg.get("id"))
             elif self._pending is not None:
                 self._pending = (self.state, self._pending[1])
-            elif self._shown is None:
-                self._warm = self.state
             self._cancelled = False
             self._cond.notify()
 
