@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import time
 
 import pytest
 
@@ -167,15 +168,19 @@ def test_find_events_list_click_a_merge_and_see_its_markers(browser, server, tmp
         rows.nth(0).click()
         p.settle(before)
 
-        # Markers unchecked: the same view without them.
-        before = p.last()
+        # Markers unchecked: the same view without them. Waited for by their pixels: a frame
+        # of the click before (its refine) may come after `before`, and the redraw answers the
+        # newest update's id, not the events message's, so no one frame marks the change.
+        def yellow_until(holds, what: str) -> None:
+            end = time.monotonic() + 30
+            while not holds(count := p.eval(YELLOW, list(MARKER_RGB))):
+                assert time.monotonic() < end, f"{what}: {count} yellow pixels"
+                time.sleep(0.1)
+
         page.uncheck("#events-markers")
-        p.settle(before)
-        assert p.eval(YELLOW, list(MARKER_RGB)) < with_markers / 3
-        before = p.last()
+        yellow_until(lambda n: n < with_markers / 3, "markers still drawn")
         page.check("#events-markers")
-        p.settle(before)
-        assert p.eval(YELLOW, list(MARKER_RGB)) > with_markers * 0.8
+        yellow_until(lambda n: n > with_markers * 0.8, "markers not drawn again")
 
         # The merge's track is highlighted since the click: a path through its centroids.
         assert p.eval("() => window.viewer.events.highlighted") == found["events"][0]["tracks"][0]
