@@ -13,7 +13,7 @@ import chronocl
 from chronocl.core import process_memory
 from chronocl.core.budget import resident_bytes
 from chronocl.core.memory import spares
-from chronocl.core.process_memory import ProcessLimit
+from chronocl.core.process_memory import ProcessLimit, Streaming
 from chronocl.data.slots import StepSlots
 from chronocl.data.window import WindowManager
 from chronocl.viewer.view_sessions import SharedSteps
@@ -391,6 +391,8 @@ def test_a_window_that_does_not_fit_beside_the_views_frames_streams_and_equals_i
     for name, total in (
         ("resident", 10 * (1 << 30)),
         ("streamed", process_memory.PROCESS_BYTES + frames + int(1.5 * STEP)),
+        # two of the four steps fit beside two slabs of an eighth of the window each
+        ("partly", process_memory.PROCESS_BYTES + frames + int(3.5 * STEP)),
     ):
         spares.clear()
         gc.collect()
@@ -400,17 +402,22 @@ def test_a_window_that_does_not_fit_beside_the_views_frames_streams_and_equals_i
                 views.chronovolumes(state)
                 views.full_resolution(range(1))
                 full = _level0(views.slots[0])
-                assert (full.stats["path"] == "streamed") == (name == "streamed"), full.stats
-                if name == "streamed":
+                assert (full.stats["path"] == "streamed") == (name != "resident"), full.stats
+                if name != "resident":
                     why = full.stats["why_not_incremental"]
                     assert "the memory limit" in why and "beside the views' frames" in why
-                    assert not full._arrays  # none of the window's steps held
+                    if name == "streamed":
+                        assert not full._arrays  # none of the window's steps held
+                    else:  # the window's last two held, the first two streamed
+                        assert sorted(full._arrays) == [3, 4]
+                        assert "2 of 4 steps resident" in why
                 assert full.has_winners() == (mode == "max")
-                assert (views.streamed() is not None) == (name == "streamed")  # in the header
+                assert (views.streamed() is not None) == (name != "resident")  # in the header
                 got[name] = views.slots[0].cv.rgba.copy()
             finally:
                 views.release()
     np.testing.assert_array_equal(got["streamed"], got["resident"])
+    np.testing.assert_array_equal(got["partly"], got["resident"])
 
 
 def test_the_window_room_is_the_limit_less_every_client_s_frames_and_the_process():
@@ -486,14 +493,21 @@ def test_the_windows_shown_count_each_step_once_over_every_client():
 
     limit = ProcessLimit(process_memory.PROCESS_BYTES + 25 * STEP)
     a, b, c = Client(), Client(), Client()
-    assert limit.resident(a, 0, set(range(0, 10)), STEP) == (True, 10 * STEP, 25 * STEP)
+    assert limit.resident(a, 0, set(range(0, 10)), STEP)[:3] == (True, 10 * STEP, 25 * STEP)
     assert limit.resident(b, 1, set(range(0, 4)), 2 * STEP)[0]  # another data set
-    assert limit.resident(c, 0, set(range(5, 12)), STEP) == (True, (12 + 8) * STEP, 25 * STEP)
+    assert limit.resident(c, 0, set(range(5, 12)), STEP)[:3] == (True, (12 + 8) * STEP, 25 * STEP)
     limit.resident(a, 0, set(), STEP)  # a streams now: its steps count no more
     assert limit.resident(c, 0, set(range(5, 12)), STEP)[1] == (7 + 8) * STEP
     limit.expect(a, 12 * STEP)  # a's frames leave c's window (with b's) no room
-    assert limit.resident(c, 0, set(range(5, 12)), STEP) == (False, 15 * STEP, 13 * STEP)
-    assert limit.resident(b, 1, set(range(0, 4)), 2 * STEP)[0]  # c's counts no more
+    # c's window no longer fits: the last 5 of its 7 steps stay, beside b's 8 steps' bytes
+    assert limit.resident(c, 0, set(range(5, 12)), STEP) == (
+        False,
+        15 * STEP,
+        13 * STEP,
+        frozenset(range(7, 12)),
+    )
+    assert limit.resident(b, 1, set(range(0, 4)), 2 * STEP)[0]  # c's kept ones count
+    assert not limit.resident(b, 1, set(range(0, 5)), 2 * STEP).fits  # one more: no room
 
 
 def test_a_session_that_starts_streaming_leaves_none_of_its_steps_resident():
@@ -505,7 +519,7 @@ def test_a_session_that_starts_streaming_leaves_none_of_its_steps_resident():
     with Session(series_of(6), mode="alpha", memory="10GB", managers=managers) as s:
         s.set_window(1, 5)
         assert s.manager.resident() == [1, 2, 3, 4]
-        s.stream(("no room", 0))
+        s.stream(Streaming("no room", 0))
         assert s.manager.resident() == []
         assert s.set_window(1, 5) is not None  # the chronovolume shown stays
         s.set_window(2, 6)
@@ -571,3 +585,70 @@ def test_a_streaming_view_reads_no_full_resolution_window_ahead(monkeypatch):
             assert views.manager(0, "").resident() == []
         finally:
             views.release()
+
+
+def test_a_window_that_does_not_fit_keeps_the_steps_that_do_and_streams_the_rest():
+    """`ProcessLimit.resident`: where a window does not fit, the steps another window keeps
+    stay (they cost nothing more), then its last steps as far as the room beside the slabs
+    (`reserve`) allows; they count in later decisions."""
+
+    class Client:
+        pass
+
+    limit = ProcessLimit(process_memory.PROCESS_BYTES + 10 * STEP)
+    a, b = Client(), Client()
+    assert limit.resident(a, 0, {0, 1, 2, 3}, STEP).fits
+    got = limit.resident(b, 0, set(range(2, 12)), STEP, reserve=STEP)
+    # 4 steps a keeps, 8 more of b's: 12 > 10; beside a's and a slab 5 more fit
+    assert got == (False, 12 * STEP, 10 * STEP, frozenset({2, 3, 7, 8, 9, 10, 11}))
+    assert limit.resident(a, 0, {0, 1, 2, 3}, STEP).need == 9 * STEP  # b's kept ones count
+    nothing = limit.resident(b, 0, set(range(20, 40)), STEP, reserve=10 * STEP)
+    assert not nothing.fits and nothing.keep == frozenset()
+
+
+@pytest.mark.parametrize("mode", ["alpha", "max"])
+def test_a_session_streaming_part_of_its_window_keeps_those_steps_and_reads_only_the_rest(
+    tmp_path, mode
+):
+    """`Session.stream` with steps to keep: they stay resident (the others are dropped), each
+    frame copies them and reads only the others from the store, and the chronovolume equals
+    the window's resident integration bit for bit (winners too)."""
+    from chronocl.data.series import write_series
+    from chronocl.integration.interactive.session import Session
+
+    rng = np.random.default_rng(7)
+    shape = (21, 19, 17)  # odd: slabs of uneven rows
+    data = rng.random((8, *shape), dtype=np.float32)
+    series = write_series(tmp_path / "s.zarr", data, n_steps=8, volume_shape=shape, dtype="f4")
+    managers: dict = {}
+    with Session(series, mode=mode, memory="10GB", managers=managers, display=True) as s:
+        whole = s.set_window(1, 5)
+        whole = (whole.rgba.copy(), None if whole.t_index is None else whole.t_index.copy())
+        s.stream(Streaming("no room", 0, frozenset({3, 4, 5})))  # slabs of 1/8 the volume
+        assert s.manager.resident() == [3, 4]  # kept; 1 and 2 dropped
+        reads: list[list[int]] = []
+        read = type(series).read_brick
+
+        def counting(self, steps, *args, **kwargs):
+            reads.append([int(t) for t in steps])
+            return read(self, steps, *args, **kwargs)
+
+        type(series).read_brick = counting
+        try:
+            s.set_window(2, 6)
+            assert s.stats["path"] == "streamed"
+            assert "3 of 4 steps resident" in s.stats["streamed"]
+            assert s.manager.resident() == [3, 4, 5]
+            assert {t for r in reads for t in r} == {2}  # only the step not kept streams
+            reads.clear()
+            again = s.set_window(1, 5)  # back: 1 and 2 stream, 3 and 4 are copied
+        finally:
+            type(series).read_brick = read
+        assert {t for r in reads for t in r} == {1, 2}
+        np.testing.assert_array_equal(again.rgba, whole[0])
+        assert (again.t_index is None) == (whole[1] is None) == (mode == "alpha")
+        if whole[1] is not None:
+            np.testing.assert_array_equal(again.t_index, whole[1])
+        assert s.has_winners() == (mode == "max")
+        for m in managers.values():
+            m.close()

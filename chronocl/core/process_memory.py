@@ -20,8 +20,8 @@ under the limit, and the steps are what gives way:
   where its steps fit beside what the views' frames are expected to hold (`expect`) and the
   process's own memory (`PROCESS_BYTES`): `window_room`, against which a viewer weighs the
   steps of every window shown that stays resident (`resident`, each step once) before a
-  frame; where they do not fit, its views' windows stream from the store slab by slab instead
-  (`chronocl.integration.interactive.session`). Where frames still exceed the limit, `excess`
+  frame; where they do not fit, the steps that still fit stay and the rest of its views'
+  windows stream from the store slab by slab (`chronocl.integration.interactive.session`). Where frames still exceed the limit, `excess`
   says by how much (the viewer logs it once).
 
 One limit per process (`limited`), shared by every client's window managers, which register
@@ -36,7 +36,7 @@ import weakref
 from collections import deque
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 from chronocl.core.budget import resident_bytes
 
@@ -45,6 +45,25 @@ RECENT_FRAMES = 8  # frames whose memory beside the steps is kept in mind (`need
 # drivers): 383 MiB fitted at 512^3 on the 2-core PoCL/llvmpipe machine (2026-11-30: the
 # resident memory less the steps with one view and with two, the second view's share taken off).
 PROCESS_BYTES = 400 * 2**20
+
+
+class Residency(NamedTuple):
+    """A window's decision (`ProcessLimit.resident`): whether it all stays resident, the bytes
+    every window shown needs, the room they have, and the window's steps that stay."""
+
+    fits: bool
+    need: int
+    room: int
+    keep: frozenset[int]
+
+
+class Streaming(NamedTuple):
+    """A window that does not all stay resident: why, the bytes its streamed slabs may take,
+    and its steps that stay resident (the rest are read from the store slab by slab)."""
+
+    why: str
+    room: int
+    keep: frozenset[int] = frozenset()
 
 
 class Holder(Protocol):
@@ -111,26 +130,39 @@ class ProcessLimit:
         return self.total - self.floor - PROCESS_BYTES
 
     def resident(
-        self, owner: object, key: object, steps: set[int], step_bytes: int
-    ) -> tuple[bool, int, int]:
+        self, owner: object, key: object, steps: set[int], step_bytes: int, reserve: int = 0
+    ) -> Residency:
         """Whether `owner`'s window `steps` of data set `key` may stay resident: the steps of
         every window shown that stays resident, the other owners' and this one, each step
         once, fit `window_room`. Decided and noted at once (two clients deciding together
-        both counted the other's old window): where it fits, later decisions count it. With
-        the bytes all those windows need, and the room."""
+        both counted the other's old window): where it fits, later decisions count it. Where
+        it does not, the steps that still fit beside the others' and `reserve` (what the
+        streamed slabs take) stay: those the others keep, then the window's last (a window
+        slides forward more often than back); the rest stream, and later decisions count the
+        kept ones."""
         with self._lock:
-            by_key: dict[object, tuple[set[int], int]] = {key: (set(steps), int(step_bytes))}
+            others: dict[object, tuple[set[int], int]] = {}
             for o, (k, st, nbytes) in self._windows.items():
                 if o is not owner:
-                    by_key.setdefault(k, (set(), nbytes))[0].update(st)
-            need = sum(len(st) * nbytes for st, nbytes in by_key.values())
+                    others.setdefault(k, (set(), nbytes))[0].update(st)
+            theirs = others.get(key, (set(), 0))[0]
+            before = sum(len(st) * nbytes for st, nbytes in others.values())
+            own = sorted(set(steps) - theirs)
+            need = before + len(own) * int(step_bytes)
             room = self.total - sum(self._expected.values()) - PROCESS_BYTES
             fits = need <= room
-            if fits and steps:
-                self._windows[owner] = (key, frozenset(steps), int(step_bytes))
+            if fits:
+                keep = frozenset(steps)
+            else:
+                more = max(0, room - before - reserve) // max(1, int(step_bytes))
+                keep = frozenset(set(steps) & theirs) | frozenset(
+                    own[len(own) - more :] if more else ()
+                )
+            if keep:
+                self._windows[owner] = (key, keep, int(step_bytes))
             else:
                 self._windows.pop(owner, None)
-            return fits, need, room
+            return Residency(fits, need, room, keep)
 
     def room(self) -> int:
         """Bytes more steps may take now without dropping any."""

@@ -6,7 +6,8 @@ rows of the window's W steps in xytz order: (r1 - r0, W, Y, X).
 
 A `BrickSource` gives bricks: `read(steps, z0, z1)`. Every integration path takes one:
 `SeriesBricks` reads a `TimeSeries` (decoding a store straight into reused buffers), and
-`ResidentBricks` serves whole steps already in memory (the window manager's, a session's).
+`ResidentBricks` serves whole steps already in memory (the window manager's, a session's), and
+`PartlyResidentBricks` a window of which only some steps are (the rest read from the series).
 
 Steps already in memory are not stacked where they lie in one block of memory (an in-memory
 series' array, the window manager's slots): a `SlotBrick` names them where they are, and an
@@ -221,6 +222,32 @@ class SeriesBricks:
 
 
 _held = threading.local()  # SeriesBricks.per_thread: a worker may run one task per thread
+
+
+class PartlyResidentBricks:
+    """Bricks of a window some of whose steps are resident ({step: (Z, Y, X) array}): their
+    rows copied, the other steps' read from the series into the same brick (a window that
+    only partly fits the memory limit: `chronocl.integration.interactive.session`)."""
+
+    def __init__(self, series: TimeSeries, arrays: Mapping[int, np.ndarray]) -> None:
+        self.series = series
+        self.arrays = arrays
+
+    def read(self, steps: Sequence[int], z0: int, z1: int) -> np.ndarray:
+        steps = [int(s) for s in steps]
+        out = aligned_empty(brick_shape(self.series, z1 - z0, len(steps)), self.series.dtype)
+        i = 0
+        while i < len(steps):  # each run of steps not resident in one read
+            j = i
+            while j < len(steps) and steps[j] not in self.arrays:
+                j += 1
+            if j > i:
+                self.series.read_brick(steps[i:j], z0, z1, out=out[:, i:j])
+            i = j + 1
+        copy_all(
+            [(out[:, i], self.arrays[s][z0:z1]) for i, s in enumerate(steps) if s in self.arrays]
+        )
+        return out
 
 
 def brick_shape(series: TimeSeries, rows: int, width: int) -> tuple[int, int, int, int]:

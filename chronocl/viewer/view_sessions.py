@@ -18,10 +18,11 @@ from contextlib import nullcontext
 from chronocl.core import process_memory
 from chronocl.core.budget import human
 from chronocl.core.errors import InvalidParameterError, SupersededError
+from chronocl.core.process_memory import Streaming
 from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
-from chronocl.integration.interactive.session import Session
+from chronocl.integration.interactive.session import STREAM_SLABS, Session
 from chronocl.integration.interactive.settings import TARGET_MS, manager_key
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import gl_submit, release_on_gl
@@ -102,7 +103,7 @@ class Views:
         self.slab_upload_ms = 0.0  # a refine's texture writes, overlapped with its integration
         self._slabs: bool | None = None  # whether they pay (`slab_upload.pays`), once known
         self._over = False  # whether the last frame left the process over its memory limit
-        self._streaming: tuple[str, int] | None = None  # the views' windows stream: why
+        self._streaming: Streaming | None = None  # the views' windows stream: why
 
     def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed;
@@ -168,23 +169,27 @@ class Views:
         self.host_steps_why = next((why for why in whys if why), None)
         return cvs, integrate_ms, incremental
 
-    def _stream_or_not(self, limit, series, state: ViewState) -> tuple[str, int] | None:
-        """Whether this client's views stream their windows (why, and the bytes a slab may
-        take) or keep them resident: decided once per frame for every view, so that no view
-        streams a window another keeps resident. They stream where the steps of every window
-        shown (this client's views' and the other clients' resident ones, each step once) do
-        not fit what the limit leaves beside every view's frames (`ProcessLimit.window_room`)."""
+    def _stream_or_not(self, limit, series, state: ViewState) -> Streaming | None:
+        """Whether this client's views keep their windows resident (None) or stream them
+        (why, the bytes a slab may take, and the steps that stay resident): decided once per
+        frame for every view, so that no view streams a step another keeps resident. They
+        stream where the steps of every window shown (this client's views' and the other
+        clients' resident ones, each step once) do not fit what the limit leaves beside every
+        view's frames (`ProcessLimit.window_room`); the steps that fit beside the slabs stay."""
         n = series.n_steps
-        steps = set().union(*(state.selection(n, i).steps for i in range(len(state.views))))
+        windows = [state.selection(n, i).steps for i in range(len(state.views))]
+        steps = set().union(*windows)
         step = math.prod(series.volume_shape) * series.dtype.itemsize
-        fits, need, room = limit.resident(self, state.dataset, steps, step)
+        # two slabs of the widest window at once: one integrated while the next is read
+        slabs = 2 * max(map(len, windows), default=0) * -(-step // STREAM_SLABS)
+        fits, need, room, keep = limit.resident(self, state.dataset, steps, step, slabs)
         if fits:
             return None
-        return (
+        why = (
             f"the windows shown need {human(need)} > the {human(max(room, 0))} that the memory "
-            f"limit {human(limit.total)} leaves beside the views' frames",
-            max(room, 0),
+            f"limit {human(limit.total)} leaves beside the views' frames"
         )
+        return Streaming(why, max(room - (need - len(steps - keep) * step), slabs), keep)
 
     def _integrate(self, slot: ViewSlot, series, spec, sel) -> tuple[Chronovolume, float, bool]:
         s = slot.session

@@ -17,6 +17,7 @@ from typing import Protocol
 
 from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.process_memory import Streaming
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.pyramid import level_shapes
@@ -113,13 +114,13 @@ class FixedLevel(Protocol):
 
     stats: dict
     manager: WindowManager  # its resident steps and their read time
-    streaming: tuple[str, int] | None
+    streaming: Streaming | None
 
     def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume: ...
 
     def leaving(self, selection: Selection) -> None: ...
 
-    def stream(self, why: tuple[str, int] | None) -> None: ...
+    def stream(self, why: Streaming | None) -> None: ...
 
 
 class AutoSession:
@@ -145,7 +146,7 @@ class AutoSession:
         self.why = ""
         self._last: tuple[Selection, IntegrationSpec] | None = None
         self._cv: Chronovolume | None = None
-        self._streaming: tuple[str, int] | None = None  # full resolution's (`stream`)
+        self._streaming: Streaming | None = None  # full resolution's (`stream`)
 
     @property
     def shown_level(self) -> int:
@@ -182,9 +183,11 @@ class AutoSession:
     def _missing(self, level: int, selection: Selection) -> int:
         """The steps of `selection` not resident at `level` (all, where it has no session)."""
         held = self.pool.sessions.get((level, self.spec.integration.pool))
-        if held is None or (level == 0 and self._streaming is not None):
+        if held is None:
             return selection.width
         resident = set(held.manager.resident())
+        if level == 0 and self._streaming is not None:  # the steps not kept are read again
+            resident &= self._streaming.keep
         return sum(1 for t in selection.steps if t not in resident)
 
     def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
@@ -218,7 +221,7 @@ class AutoSession:
         for s in self.pool.sessions.values():
             s.leaving(selection)
 
-    def stream(self, why: tuple[str, int] | None) -> None:
+    def stream(self, why: Streaming | None) -> None:
         """Full resolution streams its window from now on (`Session.stream`), or not (None);
         the coarse levels' windows are small and stay resident."""
         self._streaming = why

@@ -35,8 +35,9 @@ import numpy as np
 from chronocl.core.budget import human
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.interrupt import watched
+from chronocl.core.process_memory import Streaming
 from chronocl.core.selection import Selection, parse_selection
-from chronocl.data.bricks import ResidentBricks, SeriesBricks
+from chronocl.data.bricks import PartlyResidentBricks, ResidentBricks, SeriesBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
@@ -123,7 +124,7 @@ class Session:
         self._cv: Chronovolume | None = None
         # (t_index, winners) the kernels wrote with the window's integration (`winners`)
         self._won: tuple[np.ndarray, Winners] | None = None
-        self.streaming: tuple[str, int] | None = None  # (why, slab bytes): `stream`
+        self.streaming: Streaming | None = None  # `stream`
         self._prefetch = prefetch = setup.prefetch
         self.level = check_level(series, level)
         self.series = series.level(self.level, self.spec.integration.pool)
@@ -254,23 +255,26 @@ class Session:
         if not (self._slider is not None and self._slider.can_move_to(selection)):
             self._let_go(selection)  # integrated anew: the steps leaving help no more
 
-    def stream(self, why: tuple[str, int] | None) -> None:
-        """From now on the window streams from the store (`why`: the reason, and the bytes its
-        slabs may take), or stays resident again (None): a viewer's decision for every view
-        at once, before a frame (`chronocl.viewer.view_sessions`). Streaming, it holds none of
-        the window's steps, and those nobody else wants give way now, before any view
-        streams it (held meanwhile, the window was there twice over at the peak); the
-        chronovolume and winners shown stay."""
+    def stream(self, why: Streaming | None) -> None:
+        """From now on the window streams from the store (`why`: the reason, the bytes its
+        slabs may take and the steps that stay resident), or stays resident again (None): a
+        viewer's decision for every view at once, before a frame
+        (`chronocl.viewer.view_sessions`). Streaming, it holds only the steps kept, and the
+        others nobody else wants give way now, before any view streams them (held meanwhile,
+        the window was there twice over at the peak); the chronovolume and winners shown
+        stay."""
         self.streaming = why
         if why is None:
             return
-        steps = list(self._arrays)  # not a view of the dict: that held every array alive
+        held = self._arrays
+        leaving = [s for s in held if s not in why.keep]
         if not self._owns_manager:
             self.manager.let_go(self)
-        self._hold({})
+        self._hold({s: a for s, a in held.items() if s in why.keep})
+        del held
         self._bricks.forget()
         self._slider = None
-        self.manager.drop(steps)
+        self.manager.drop(leaving)
 
     def set_aside(self) -> None:
         """Hold nothing of the window: another pooling's session of this level shows it now.
@@ -319,10 +323,10 @@ class Session:
             return self._cv
         window = selection.width * self.manager.step_bytes
         if self.streaming is not None:  # a viewer's memory limit: the steps have no room
-            return self._stream(selection, t, *self.streaming)
+            return self._stream(selection, t, self.streaming)
         if window > self.budget:
             why = f"the window needs {human(window)} > budget {human(self.budget)}"
-            return self._stream(selection, t, why, self.budget)
+            return self._stream(selection, t, Streaming(why, self.budget))
         voxels, direct = int(np.prod(self.series.volume_shape)), self._direct_ms
         reason, keep, state = slide_plan(
             self.spec, voxels, selection.width, window, self.budget, direct, self.direct_below_ms
@@ -394,25 +398,31 @@ class Session:
         self._arrays = arrays
         self._bricks.arrays = arrays
 
-    def _stream(self, selection: Selection, t: float, why: str, room: int) -> Chronovolume:
-        """A window whose steps have no room to stay resident (`why`): integrated z-slab by
-        z-slab from the store, each slab's brick a quarter of `room` at most but at least
-        1/STREAM_SLABS of the volume (slabs of a row or two decoded every chunk once a row),
-        nothing resident, no sliding; a display session at full resolution keeps its winners
-        as it would resident, so that its TF edits recolour without streaming the window again
-        (unless the value range changes)."""
+    def _stream(self, selection: Selection, t: float, streaming: Streaming) -> Chronovolume:
+        """A window whose steps have no room to stay resident (`streaming`: why, the bytes its
+        slabs may take and the steps kept resident): integrated z-slab by z-slab, the steps
+        kept copied from memory and the rest read from the store, each slab's brick a quarter
+        of the room at most but at least 1/STREAM_SLABS of the volume (slabs of a row or two
+        decoded every chunk once a row), no sliding; a display session at full resolution keeps
+        its winners as it would resident, so that its TF edits recolour without streaming the
+        window again (unless the value range changes)."""
+        why, room, keep = streaming
         job = window_job(self.series, selection, self.spec)
         rows = max(
             room // (4 * max(1, job.row_bytes)), -(-self.series.volume_shape[0] // STREAM_SLABS)
         )
         self._slider, self.selection, self._cv, self._won = None, selection, None, None
-        self._hold({})
         self._bricks.forget()
+        kept = [s for s in selection.steps if s in keep]
+        arrays = self.manager.get(kept, owner=self) if kept else []
+        self._hold(dict(zip(kept, arrays, strict=True)))
+        del arrays
+        bricks = PartlyResidentBricks(self.series, self._arrays) if kept else None
         won = WinnersOut() if self.display and self.level == 0 else None
         cv = integrate_bricks(
             job,
             self.engine,
-            SeriesBricks(self.series),
+            bricks or SeriesBricks(self.series),
             slab=max(1, rows),
             display=self.display,
             winners=won,
@@ -423,7 +433,8 @@ class Session:
             )
             self._won = (cv.t_index, w)
         self._cv = cv
-        self._record(t, "streamed", f"{why}: streamed by z-slabs")
+        some = f"{len(kept)} of {selection.width} steps resident, the rest " if kept else ""
+        self._record(t, "streamed", f"{why}: {some}streamed by z-slabs")
         return self._cv
 
     def _slab_rows(self) -> int | None:
