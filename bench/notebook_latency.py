@@ -2,9 +2,9 @@
 
 The built-in vortex is written as a chronocl store with its coarse levels (256^3 float32 x 20
 steps by default). A JupyterLab server on loopback runs a notebook in headless Chromium
-(Playwright), as tests/test_notebook_browser.py does; a viewer server (`ViewerServer`, in this
-process) serves the same store to a second Chromium page, its view panel sized as the
-widget's. Timed:
+(Playwright), started and driven as tests/test_notebook_browser.py does it (tests/jupyter_lab.py,
+which both import); a viewer server (`ViewerServer`, in this process) serves the same store to
+a second Chromium page, its view panel sized as the widget's. Timed:
 
 - the widget's first picture: from the cell `w = chronocl.show(store, window=(0, 10)); w`
   being run (the page's clock as JupyterLab is told to run it) to the first frame in the
@@ -34,12 +34,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
-import os
-import re
-import secrets
-import socket
-import subprocess
 import sys
 import tempfile
 import time
@@ -49,11 +43,20 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # for tests.jupyter_lab
 
 from common import emit, env_record, percentiles
 
 from chronocl.data import synthetic
 from chronocl.data.writer import write_store
+from tests.jupyter_lab import (
+    cell_output,
+    jupyter_lab,
+    open_notebook,
+    run_cell,
+    wait_kernel_idle,
+    write_notebook,
+)
 
 BENCH = "notebook_latency"
 CHROMIUM = "/usr/bin/chromium"
@@ -83,109 +86,20 @@ def store(root: Path, n: int, steps: int) -> Path:
     return path
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def notebook(path: Path, data: Path, window: int) -> None:
-    import nbformat
-
-    nb = nbformat.v4.new_notebook()
-    nb.cells = [
-        nbformat.v4.new_code_cell(
-            "import json, time\nt = time.perf_counter()\nimport chronocl\n"
-            "print('IMPORT=' + json.dumps({'s': time.perf_counter() - t}))"
-        ),
-        nbformat.v4.new_code_cell(
-            f"t = time.perf_counter()\n"
-            f"w = chronocl.show({str(data)!r}, window=(0, {window}), height={HEIGHT})\n"
-            "show_s = time.perf_counter() - t\nw"
-        ),
-        nbformat.v4.new_code_cell("print('SHOW=' + json.dumps({'s': show_s}))\nw.close()"),
-        nbformat.v4.new_code_cell(
-            f"w = chronocl.show({str(data)!r}, window=(0, {window}), height={HEIGHT})\nw"
-        ),
-        nbformat.v4.new_code_cell("w.close()"),
+def notebook(path: Path, data: Path, window: int) -> int:
+    """The bench's notebook written to `path`; its number of cells."""
+    cells = [
+        "import json, time\nt = time.perf_counter()\nimport chronocl\n"
+        "print('IMPORT=' + json.dumps({'s': time.perf_counter() - t}))",
+        f"t = time.perf_counter()\n"
+        f"w = chronocl.show({str(data)!r}, window=(0, {window}), height={HEIGHT})\n"
+        "show_s = time.perf_counter() - t\nw",
+        "print('SHOW=' + json.dumps({'s': show_s}))\nw.close()",
+        f"w = chronocl.show({str(data)!r}, window=(0, {window}), height={HEIGHT})\nw",
+        "w.close()",
     ]
-    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3"}
-    nbformat.write(nb, path)
-
-
-def jupyterlab(stack: ExitStack, root: Path) -> str:
-    """A JupyterLab server on loopback in its own folders; the notebook's URL."""
-    home = Path(stack.enter_context(tempfile.TemporaryDirectory()))
-    (home / "config" / "labconfig").mkdir(parents=True)
-    (home / "config" / "labconfig" / "page_config.json").write_text(
-        json.dumps({"disabledExtensions": {"@jupyterlab/apputils-extension:announcements": True}})
-    )
-    token, port = secrets.token_hex(16), free_port()
-    env = os.environ | {
-        "JUPYTER_CONFIG_DIR": str(home / "config"),
-        "JUPYTER_RUNTIME_DIR": str(home / "runtime"),
-        "JUPYTERLAB_SETTINGS_DIR": str(home / "settings"),
-        "JUPYTERLAB_WORKSPACES_DIR": str(home / "workspaces"),
-        "JUPYTER_PLATFORM_DIRS": "1",
-    }
-    log = stack.enter_context(open(home / "lab.log", "w"))
-    proc = subprocess.Popen(
-        [
-            sys.executable, "-m", "jupyterlab", "--no-browser", "--ip=127.0.0.1",
-            f"--port={port}", f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}",
-            "--LabApp.expose_app_in_browser=True", "--allow-root",
-            "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
-        ],
-        env=env, stdout=log, stderr=subprocess.STDOUT, cwd=root,
-    )  # fmt: skip
-
-    def stop() -> None:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-    stack.callback(stop)
-    end = time.monotonic() + 60
-    while True:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=1).close()
-            break
-        except OSError:
-            if proc.poll() is not None or time.monotonic() > end:
-                raise RuntimeError((home / "lab.log").read_text()[-2000:]) from None
-            time.sleep(0.2)
-    return f"http://127.0.0.1:{port}/lab/tree/bench.ipynb?token={token}"
-
-
-def run_cell(page, index: int) -> float:
-    return page.evaluate(
-        """async (i) => {
-          const app = window.jupyterapp, nb = app.shell.currentWidget;
-          nb.content.activeCellIndex = i;
-          const t = performance.now();
-          app.commands.execute('notebook:run-cell');
-          return t;
-        }""",
-        index,
-    )
-
-
-def cell_json(page, index: int, key: str) -> dict:
-    end = time.monotonic() + 120
-    while time.monotonic() < end:
-        text = page.evaluate(
-            "(i) => window.jupyterapp.shell.currentWidget.content.widgets[i].node.innerText", index
-        )
-        found = re.search(rf"{key}=(\{{.*\}})", text)
-        if found:
-            return json.loads(found.group(1))
-        if "Traceback" in text:
-            raise RuntimeError(text)
-        time.sleep(0.05)
-    raise RuntimeError(f"cell {index} printed no {key}=")
+    write_notebook(path, cells)
+    return len(cells)
 
 
 def sharp(page, viewer: str, seq: int) -> dict:
@@ -238,8 +152,9 @@ def main() -> None:
     with ExitStack() as stack:
         root = Path(stack.enter_context(tempfile.TemporaryDirectory()))
         data = store(args.keep or root, n, steps)
-        notebook(root / "bench.ipynb", data, args.window)
-        url = jupyterlab(stack, root)
+        cells = notebook(root / "bench.ipynb", data, args.window)
+        home = Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        server = stack.enter_context(jupyter_lab(root, home))
         p = stack.enter_context(sync_playwright())
         browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=BROWSER_ARGS)
         stack.callback(browser.close)
@@ -247,22 +162,11 @@ def main() -> None:
         # The notebook: import, then the widget's first picture, then TF edits by hand.
         lab = browser.new_context(viewport=dict(zip(("width", "height"), VIEWPORT, strict=True)))
         page = lab.new_page()
-        page.goto(url)
-        page.wait_for_function(
-            """() => { const app = window.jupyterapp, nb = app && app.shell.currentWidget;
-              const k = nb && nb.sessionContext && nb.sessionContext.session
-                && nb.sessionContext.session.kernel;
-              return !!k && k.status === 'idle' && nb.content
-                && nb.content.widgets.length === 5; }""",
-            timeout=120_000,
-        )
-        run_cell(page, 0)
-        imported = cell_json(page, 0, "IMPORT")
-        page.wait_for_function(
-            "() => window.jupyterapp.shell.currentWidget.sessionContext.session.kernel.status"
-            " === 'idle'"
-        )
-        started = run_cell(page, 1)
+        open_notebook(page, server, "bench.ipynb", cells, timeout_s=120)
+        run_cell(page, 0, wait=False)
+        imported = cell_output(page, 0, "IMPORT", timeout_s=120)
+        wait_kernel_idle(page)
+        started = run_cell(page, 1, wait=False)
         page.wait_for_function(
             "() => !!document.querySelector('.chronocl-widget')", timeout=120_000, polling="raf"
         )
@@ -284,11 +188,11 @@ def main() -> None:
             f"widget: first {first_ms:.0f} ms, sharp {sharp_ms:.0f}, edits {widget_ms}",
             file=sys.stderr,
         )
-        run_cell(page, 2)
-        shown = cell_json(page, 2, "SHOW")
+        run_cell(page, 2, wait=False)
+        shown = cell_output(page, 2, "SHOW", timeout_s=120)
         page.wait_for_function("() => !document.querySelector('.chronocl-widget')")
         # A second widget in the same kernel: the imports, GL context and kernels warm.
-        started = run_cell(page, 3)
+        started = run_cell(page, 3, wait=False)
         page.wait_for_function(
             "() => { const h = document.querySelector('.chronocl-widget');"
             " return !!h && !!h.viewer && h.viewer.frames >= 1; }",
@@ -298,7 +202,7 @@ def main() -> None:
         again_ms = page.evaluate("(t) => performance.now() - t", started)
         sharp(page, WIDGET, -1)
         again_sharp_ms = page.evaluate("(t) => performance.now() - t", started)
-        run_cell(page, 4)
+        run_cell(page, 4, wait=False)
 
         # The browser viewer on the same store, its panel the widget's size.
         server = ViewerServer([data])

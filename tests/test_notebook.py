@@ -21,6 +21,7 @@ import chronocl
 from chronocl.core.errors import ChronoclError, RendererUnavailableError
 from chronocl.data import synthetic
 from chronocl.notebook import bundle
+from chronocl.notebook.widget import FrameFailedError
 from chronocl.viewer.session_file import check_session
 
 STEPS, SHAPE = 12, (24, 24, 24)
@@ -179,6 +180,8 @@ def test_a_bad_page_message_changes_nothing(widget):
     from_page(widget, {"type": "update", "id": 14, "window": {"t0": 5, "t1": 2}})
     from_page(widget, {"type": "nonsense"})
     assert widget.window == window
+    # the refused update is answered by no frame: the kernel waits for the one before it
+    assert widget.wait_frame(timeout=60)["id"] != 14
 
 
 # -- the kernel's requests -------------------------------------------------------------------
@@ -193,6 +196,36 @@ def test_screenshot_chronovolume_and_snapshot(widget):
     assert cv.spec.mode == "max" and cv.steps == tuple(range(8)) and cv.rgba.dtype == np.float32
     session = check_session(widget.snapshot())
     assert session["dataset"]["name"] == "vortex" and session["views"][0]["mode"] == "max"
+
+
+def test_a_failed_frame_raises_at_once_naming_the_error(tmp_path):
+    """The worker fails to make the frame waited for (its store rewritten underneath: a real
+    read error, which the page is told of): wait_frame and screenshot raise at once with the
+    worker's error in one line, for a request from code as for one from the page."""
+    path = tmp_path / "v.zarr"
+    chronocl.TimeSeries.from_array(vortex()[:8]).save(path)
+    w = chronocl.show(str(path), window=(0, 2))
+    try:
+        w.wait_frame()
+        chronocl.TimeSeries.from_array(vortex()[:3]).save(path, overwrite=True)
+        started = time.monotonic()
+        w.window = (0, 8)  # reads steps no frame read before
+        with pytest.raises(FrameFailedError, match="changed underneath") as got:
+            w.wait_frame(timeout=90)
+        assert "\n" not in str(got.value) and str(path) in str(got.value)
+        with pytest.raises(FrameFailedError, match="changed underneath"):
+            w.screenshot()
+        from_page(w, {"type": "update", "id": 60, "window": {"t0": 1, "t1": 7, "stride": 1}})
+        with pytest.raises(FrameFailedError, match="changed underneath"):
+            w.wait_frame(timeout=90)
+        assert time.monotonic() - started < 60  # not the timeout: at once
+        # The store as it was, and the page shown again (its requests numbered afresh): the
+        # same id's frame is made and waited for; the old failure is not raised.
+        chronocl.TimeSeries.from_array(vortex()[:8]).save(path, overwrite=True)
+        from_page(w, {"type": "update", "id": 60, "window": {"t0": 2, "t1": 7, "stride": 1}})
+        assert w.wait_frame(timeout=90)["id"] == 60
+    finally:
+        w.close()
 
 
 def test_show_opens_a_store_and_a_labelled_array(tmp_path):

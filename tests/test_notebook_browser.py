@@ -4,18 +4,13 @@ run in its kernel. The picture appears and is not blank; `w.mode = "max"` from a
 it; what is done by hand in the widget (its mode menu, a window brushed on its timeline) is
 read back through the kernel; its keys are its own (not the notebook's) and its Save PNG
 downloads over the comm; a second widget on the page keeps its own state; closing the widget
-ends its render thread."""
+ends its render thread. The viewer's Events panel, through the widget's comm, lists a series'
+events, and a click on one moves the window, which `w.window` reads back. The server and the
+cells are run with tests/jupyter_lab.py (which bench/notebook_latency.py uses too)."""
 
 from __future__ import annotations
 
-import json
 import os
-import re
-import secrets
-import socket
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -23,15 +18,21 @@ import pytest
 playwright_api = pytest.importorskip("playwright.sync_api")
 pytest.importorskip("anywidget")
 pytest.importorskip("jupyterlab")
-nbformat = pytest.importorskip("nbformat")
+pytest.importorskip("nbformat")
 
+from .jupyter_lab import (  # noqa: E402
+    cell_output,
+    jupyter_lab,
+    open_notebook,
+    run_cell,
+    write_notebook,
+)
 from .viewer_helpers import CHROMIUM, launch_browser  # noqa: E402
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
 )
 
-START_TIMEOUT_S = 60
 CELLS = [
     # 0: the widget on a small generated series
     "import json\n"
@@ -58,6 +59,14 @@ CELLS = [
     "thread2 = w2._worker.thread\nthread2.join(30)\n"
     "print('FRONT_CLOSED=' + json.dumps({'closed': w2.closed, 'alive': thread2.is_alive()}))",
 ]
+# The events notebook: a widget on a series with a merge, a birth and a death
+# (tests/test_viewer_events_browser.py's, written to the lab's root as blobs.zarr).
+EVENT_CELLS = [
+    "import json\nimport chronocl\nw = chronocl.show('blobs.zarr', name='blobs', height=700)\nw",
+    "w.window = (8, 18)",  # the window slid away from the merge, from code
+    "print('WINDOW=' + json.dumps({'window': w.window}))",
+    "w.close()",
+]
 # The first widget's viewer (widget.js puts it on the element that holds the shadow root).
 VIEWER = "(document.querySelector('.chronocl-widget') || {}).viewer"
 SECOND = "(document.querySelectorAll('.chronocl-widget')[1] || {}).viewer"
@@ -78,6 +87,12 @@ SETTLED = f"""([seq]) => {{
   const v = {VIEWER}, l = v && v.last;
   return !!l && l.seq > seq && l.quality === 'full' && !l.refining;
 }}"""
+# A settled frame after frame `seq` answering the page's newest request (not the kernel's: its
+# ids are above any the page uses).
+ANSWERED = f"""([seq]) => {{
+  const v = {VIEWER}, l = v && v.last;
+  return !!l && l.seq > seq && l.id === v.sent && l.quality === 'full' && !l.refining;
+}}"""
 # A settled frame after frame `seq` whose first view's caption starts with `mode`.
 SHOWS_MODE = f"""([seq, mode]) => {{
   const v = {VIEWER}, l = v && v.last;
@@ -87,76 +102,15 @@ SHOWS_MODE = f"""([seq, mode]) => {{
 }}"""
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def write_notebook(path: Path) -> None:
-    nb = nbformat.v4.new_notebook()
-    nb.cells = [nbformat.v4.new_code_cell(src) for src in CELLS]
-    nb.metadata["kernelspec"] = {
-        "name": "python3",
-        "display_name": "Python 3",
-        "language": "python",
-    }
-    nbformat.write(nb, path)
-
-
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory):
-    """A JupyterLab server on 127.0.0.1 (its own config, data and runtime folders), its base URL
-    and token; stopped after."""
+    """A JupyterLab server on 127.0.0.1 (its own config, data and runtime folders) serving a
+    temporary root with the test's notebook; stopped after."""
     root = tmp_path_factory.mktemp("lab-root")
-    home = tmp_path_factory.mktemp("lab-home")
-    write_notebook(root / "widget.ipynb")
-    # No announcements toast over the notebook.
-    (home / "config" / "labconfig").mkdir(parents=True)
-    (home / "config" / "labconfig" / "page_config.json").write_text(
-        json.dumps({"disabledExtensions": {"@jupyterlab/apputils-extension:announcements": True}})
-    )
-    token, port = secrets.token_hex(16), free_port()
-    env = os.environ | {
-        "JUPYTER_CONFIG_DIR": str(home / "config"),
-        "JUPYTER_RUNTIME_DIR": str(home / "runtime"),
-        "JUPYTERLAB_SETTINGS_DIR": str(home / "settings"),
-        "JUPYTERLAB_WORKSPACES_DIR": str(home / "workspaces"),
-        "JUPYTER_PLATFORM_DIRS": "1",
-    }
-    log = open(home / "lab.log", "w")
-    proc = subprocess.Popen(
-        [
-            sys.executable, "-m", "jupyterlab", "--no-browser", "--ip=127.0.0.1",
-            f"--port={port}", f"--IdentityProvider.token={token}",
-            f"--ServerApp.root_dir={root}", "--LabApp.expose_app_in_browser=True",
-            "--ServerApp.open_browser=False", "--allow-root", "--LabApp.check_for_updates_class="
-            "jupyterlab.NeverCheckForUpdate",
-        ],
-        env=env, stdout=log, stderr=subprocess.STDOUT, cwd=root,
-    )  # fmt: skip
-    base = f"http://127.0.0.1:{port}"
-    try:
-        end = time.monotonic() + START_TIMEOUT_S
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                if proc.poll() is not None or time.monotonic() > end:
-                    raise RuntimeError(
-                        f"JupyterLab did not start: {(home / 'lab.log').read_text()[-2000:]}"
-                    ) from None
-                time.sleep(0.2)
-        yield {"base": base, "token": token, "root": root, "log": home / "lab.log"}
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        log.close()
+    write_notebook(root / "widget.ipynb", CELLS)
+    write_notebook(root / "events.ipynb", EVENT_CELLS)
+    with jupyter_lab(root, tmp_path_factory.mktemp("lab-home")) as server:
+        yield server
 
 
 @pytest.fixture(scope="module")
@@ -171,49 +125,9 @@ def notebook(browser, lab):
     page = context.new_page()
     problems: list[str] = []
     page.on("pageerror", lambda e: problems.append(str(e)))
-    page.goto(f"{lab['base']}/lab/tree/widget.ipynb?token={lab['token']}")
-    page.wait_for_function(
-        """() => {
-          const app = window.jupyterapp, nb = app && app.shell.currentWidget;
-          const k = nb && nb.sessionContext && nb.sessionContext.session
-            && nb.sessionContext.session.kernel;
-          return !!k && k.status === 'idle' && nb.content && nb.content.widgets.length === 7;
-        }""",
-        timeout=60_000,
-    )
+    open_notebook(page, lab, "widget.ipynb", len(CELLS))
     yield page, problems
     context.close()
-
-
-def run_cell(page, index: int) -> float:
-    """Run cell `index` (as Shift+Enter does); returns the page's clock when it was started."""
-    return page.evaluate(
-        """async (i) => {
-          const app = window.jupyterapp, nb = app.shell.currentWidget;
-          nb.content.activeCellIndex = i;
-          const t = performance.now();
-          await app.commands.execute('notebook:run-cell');
-          return t;
-        }""",
-        index,
-    )
-
-
-def cell_output(page, index: int, key: str, timeout_s: float = 60) -> dict:
-    """The JSON a cell printed after `key=`, waited for."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        text = page.evaluate(
-            "(i) => window.jupyterapp.shell.currentWidget.content.widgets[i].node.innerText",
-            index,
-        )
-        found = re.search(rf"{key}=(\{{.*\}})", text)
-        if found:
-            return json.loads(found.group(1))
-        if "Traceback" in text or "Error" in text:
-            raise AssertionError(f"cell {index} failed:\n{text}")
-        time.sleep(0.2)
-    raise AssertionError(f"cell {index} printed no {key}= in {timeout_s} s")
 
 
 def last(page) -> dict:
@@ -339,3 +253,60 @@ def test_show_in_jupyterlab_is_driven_from_code_and_by_hand(notebook, lab):
     assert cell_output(page, 6, "FRONT_CLOSED") == {"closed": True, "alive": False}
     assert problems == []
     print(f"\nnotebook widget: first picture {first_ms:.0f} ms after the cell was run")
+
+
+def test_events_found_in_the_widget_and_one_clicked_moves_its_window(browser, lab):
+    """The viewer's Events panel in the widget, through its comm: Find events lists the
+    window's merge, birth and death; the window moved from code, a click on the merge moves it
+    back to the merge and frames it, and the kernel's `w.window` follows."""
+    pytest.importorskip("cc3d")
+    from chronocl.data.series import TimeSeries
+
+    from .test_viewer_events_browser import series
+
+    TimeSeries.from_array(series(), source="blobs").save(lab["root"] / "blobs.zarr")
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = context.new_page()
+    problems: list[str] = []
+    page.on("pageerror", lambda e: problems.append(str(e)))
+    try:
+        open_notebook(page, lab, "events.ipynb", len(EVENT_CELLS))
+        run_cell(page, 0)
+        page.wait_for_function(
+            f"() => {{ const v = {VIEWER}; return !!v && v.full >= 1; }}", timeout=60_000
+        )
+        settle(page, None)
+        assert page.evaluate(f"() => {VIEWER}.S.state.window") == {"t0": 5, "t1": 15, "stride": 1}
+
+        page.locator(".chronocl-widget #events-find").click()
+        page.wait_for_function(
+            f"() => {{ const v = {VIEWER}; return !!v.events && !!v.events.found; }}",
+            timeout=60_000,
+        )
+        found = page.evaluate(f"() => {VIEWER}.events.found")
+        assert found["window"] == [5, 15, 1]
+        kinds = [(e["kind"], e["step"], e["next_step"]) for e in found["events"]]
+        assert kinds == [("merge", 6, 7), ("birth", 9, 10), ("death", 13, 14)]
+        rows = page.locator(".chronocl-widget #events-list li[data-index]")
+        assert rows.count() == 3
+        assert rows.nth(0).inner_text().split("\n")[0].endswith("merge")
+        assert "6→7" in rows.nth(0).inner_text()
+
+        # The window slid away from the merge from code; the page shows it.
+        run_cell(page, 1)
+        page.wait_for_function(f"() => {VIEWER}.S.state.window.t0 === 8", timeout=30_000)
+        before = last(page)
+        # A click on the merge: the window holds its steps, the camera turns about it.
+        rows.nth(0).click()
+        page.wait_for_function(f"() => {VIEWER}.S.state.window.t0 === 2", timeout=30_000)
+        page.wait_for_function(ANSWERED, arg=[before["seq"]], timeout=60_000)
+        assert page.evaluate(f"() => {VIEWER}.S.state.window") == {"t0": 2, "t1": 12, "stride": 1}
+        focus = page.evaluate(f"() => {VIEWER}.S.focus")
+        assert focus == pytest.approx(found["events"][0]["focus"], abs=1e-6)
+        assert "selected" in rows.nth(0).get_attribute("class")
+        run_cell(page, 2)
+        assert cell_output(page, 2, "WINDOW") == {"window": [2, 12, 1]}
+        run_cell(page, 3)
+        assert problems == []
+    finally:
+        context.close()

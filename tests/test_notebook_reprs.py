@@ -185,3 +185,20 @@ def test_a_repr_that_cannot_be_made_falls_back_to_the_plain_one():
     cv = Chronovolume(np.zeros((2, 3, 4, 4), np.float32))
     cv.metadata["selection"] = {"steps": [5, 1], "n_steps": 3}  # not a selection chronocl wrote
     assert cv._repr_html_() is None
+    assert "steps [5, 1] (not a selection of 3 steps)" in repr(cv)  # which never raises
+
+
+def test_the_repr_and_the_summary_read_a_chronovolume_alike():
+    """`Chronovolume.described` is what both say: its mode, steps and shape."""
+    meta = {"spec": {"mode": "mean"}, "selection": {"steps": [1, 3, 5]}}  # no n_steps
+    cv = Chronovolume(np.zeros((4, 5, 6, 4), np.float32), None, meta)
+    assert cv.described() == ("mean", "1:6:2 (3 of 6)", "6×5×4 (x, y, z)")
+    assert repr(cv) == "Chronovolume(6×5×4 (x, y, z), mode=mean, steps 1:6:2 (3 of 6), no t_index)"
+    html = cv._repr_html_()
+    for row in ("shape</th><td>6×5×4 (x, y, z), RGBA float32", "mode</th><td>mean",
+                "steps</th><td>1:6:2 (3 of 6)"):  # fmt: skip
+        assert row in html, row
+    bare = Chronovolume(np.zeros((2, 3, 4, 4), np.float32))
+    assert bare.described() == ("?", None, "4×3×2 (x, y, z)")
+    assert repr(bare) == "Chronovolume(4×3×2 (x, y, z), mode=?, no t_index)"
+    assert "steps</th>" not in bare._repr_html_()

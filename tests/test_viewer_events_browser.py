@@ -50,8 +50,9 @@ def server(tmp_path_factory):
     yield from serving([path])
 
 
-# The pixels of the markers' colour in the first view's picture (decoded first).
-YELLOW = """async ([r, g, b]) => {
+# The pixels of colour `rgb` (within 40 a channel) in the first view's picture, decoded first:
+# all of it, or (`r` given) the square within `r` pixels either way of its middle.
+COLOURED = """async ([rgb, r]) => {
   const img = document.querySelector('.view img');
   await img.decode();
   const c = document.createElement('canvas');
@@ -59,26 +60,9 @@ YELLOW = """async ([r, g, b]) => {
   c.height = img.naturalHeight;
   const ctx = c.getContext('2d');
   ctx.drawImage(img, 0, 0);
-  const px = ctx.getImageData(0, 0, c.width, c.height).data;
-  let n = 0;
-  for (let k = 0; k < px.length; k += 4) {
-    const d = Math.max(Math.abs(px[k] - r), Math.abs(px[k + 1] - g), Math.abs(px[k + 2] - b));
-    if (d < 40) n++;
-  }
-  return n;
-}"""
-
-# The pixels of the markers' colour within `r` pixels (either way) of the picture's middle.
-YELLOW_MIDDLE = """async ([rgb, r]) => {
-  const img = document.querySelector('.view img');
-  await img.decode();
-  const c = document.createElement('canvas');
-  c.width = img.naturalWidth;
-  c.height = img.naturalHeight;
-  const ctx = c.getContext('2d');
-  ctx.drawImage(img, 0, 0);
-  const x0 = Math.round(c.width / 2 - r), y0 = Math.round(c.height / 2 - r);
-  const px = ctx.getImageData(x0, y0, 2 * r, 2 * r).data;
+  const [x0, y0, w, h] = r === null ? [0, 0, c.width, c.height]
+    : [Math.round(c.width / 2 - r), Math.round(c.height / 2 - r), 2 * r, 2 * r];
+  const px = ctx.getImageData(x0, y0, w, h).data;
   let n = 0;
   for (let k = 0; k < px.length; k += 4) {
     const d = Math.max(...[0, 1, 2].map((i) => Math.abs(px[k + i] - rgb[i])));
@@ -86,6 +70,13 @@ YELLOW_MIDDLE = """async ([rgb, r]) => {
   }
   return n;
 }"""
+
+
+def coloured(p, rgb, middle: int | None = None) -> int:
+    """The pixels of colour `rgb` in the first view's picture (`middle`: within that many pixels
+    of its middle)."""
+    return p.eval(COLOURED, [list(rgb), middle])
+
 
 # Non-background pixels of a canvas (a plot drawn).
 INKED = """(id) => {
@@ -103,7 +94,7 @@ def test_find_events_list_click_a_merge_and_see_its_markers(browser, server, tmp
     try:
         page = p.page
         assert p.eval("() => window.viewer.S.state.window") == {"t0": 5, "t1": 15, "stride": 1}
-        plain = p.eval(YELLOW, list(MARKER_RGB))
+        plain = coloured(p, MARKER_RGB)
         before = p.last()
         page.click("#events-find")
         page.wait_for_function("() => window.viewer.events && window.viewer.events.found")
@@ -117,7 +108,7 @@ def test_find_events_list_click_a_merge_and_see_its_markers(browser, server, tmp
         assert "6→7" in rows.nth(0).inner_text() and "192" in rows.nth(0).inner_text()
         # The markers (checked by default) are drawn once found: a frame with yellow rings.
         marked = p.settle(before)
-        assert p.eval(YELLOW, list(MARKER_RGB)) > plain + 30
+        assert coloured(p, MARKER_RGB) > plain + 30
         # The longest track is plotted: its size and value curves are drawn.
         assert p.eval("() => window.viewer.events.track") == found["tracks"][0]["id"]
         assert p.eval(INKED, "events-size") > 200 and p.eval(INKED, "events-value") > 200
@@ -141,7 +132,7 @@ def test_find_events_list_click_a_merge_and_see_its_markers(browser, server, tmp
         focus = p.eval("() => window.viewer.S.focus")
         assert focus == pytest.approx(found["events"][0]["focus"], abs=1e-6)
         assert "selected" in rows.nth(0).get_attribute("class")
-        with_markers = p.eval(YELLOW, list(MARKER_RGB))
+        with_markers = coloured(p, MARKER_RGB)
         assert with_markers > 30
         page.locator(".view").first.screenshot(path=os.path.join(shots, "events-frame.png"))
         page.screenshot(path=os.path.join(shots, "events-page.png"))
@@ -149,13 +140,13 @@ def test_find_events_list_click_a_merge_and_see_its_markers(browser, server, tmp
         # The camera turns about the merge's centroid: its ring is at the picture's middle. The
         # birth (off the middle of the volume), clicked: its steps are in the window, which
         # stays; its ring comes to the middle.
-        assert p.eval(YELLOW_MIDDLE, [list(MARKER_RGB), 16]) > 15
+        assert coloured(p, MARKER_RGB, 16) > 15
         before = p.last()
         rows.nth(1).click()
         p.settle(before)
         assert p.eval("() => window.viewer.S.state.window") == window
         assert p.eval("() => window.viewer.S.focus") == pytest.approx(found["events"][1]["focus"])
-        assert p.eval(YELLOW_MIDDLE, [list(MARKER_RGB), 16]) > 15
+        assert coloured(p, MARKER_RGB, 16) > 15
         page.locator(".view").first.screenshot(path=os.path.join(shots, "events-birth.png"))
         # A click on the born blob (the middle of the picture now) picks its track.
         page.click(f'#events-tracks li[data-track="{found["tracks"][0]["id"]}"]')
@@ -173,7 +164,7 @@ def test_find_events_list_click_a_merge_and_see_its_markers(browser, server, tmp
         # newest update's id, not the events message's, so no one frame marks the change.
         def yellow_until(holds, what: str) -> None:
             end = time.monotonic() + 30
-            while not holds(count := p.eval(YELLOW, list(MARKER_RGB))):
+            while not holds(count := coloured(p, MARKER_RGB)):
                 assert time.monotonic() < end, f"{what}: {count} yellow pixels"
                 time.sleep(0.1)
 
@@ -184,7 +175,7 @@ def test_find_events_list_click_a_merge_and_see_its_markers(browser, server, tmp
 
         # The merge's track is highlighted since the click: a path through its centroids.
         assert p.eval("() => window.viewer.events.highlighted") == found["events"][0]["tracks"][0]
-        assert p.eval(YELLOW, list(PATH_RGB)) > 30
+        assert coloured(p, PATH_RGB) > 30
 
         # A track chosen in the list is plotted and highlighted (the blob born at step 10).
         born = next(t for t in found["tracks"] if t["start"] == 10)
@@ -196,7 +187,7 @@ def test_find_events_list_click_a_merge_and_see_its_markers(browser, server, tmp
         assert p.eval("() => window.viewer.events.track") == born["id"]
         text = page.inner_text("#events-track-text")
         assert text.startswith(f"track {born['id']}: steps 10–13")
-        assert p.eval(YELLOW, list(PATH_RGB)) > 15
+        assert coloured(p, PATH_RGB) > 15
         page.screenshot(path=os.path.join(shots, "events-track.png"))
     finally:
         p.close()

@@ -18,7 +18,7 @@ import numpy as np
 import zarr
 
 from chronocl.core.atomic import atomic_directory
-from chronocl.core.errors import StoreFormatError
+from chronocl.core.errors import InvalidSelectionError, StoreFormatError
 from chronocl.core.selection import Selection
 from chronocl.data.integrity import checked_read
 from chronocl.data.remote_store import is_url
@@ -38,17 +38,35 @@ class Chronovolume:
     t_index: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
 
-    def __repr__(self) -> str:
-        """One line: shape, mode, steps and where it came from (not the arrays' values)."""
+    def described(self, strict: bool = True) -> tuple[str, str | None, str]:
+        """What its reprs (this one and the HTML summary) say of it, read from its metadata:
+        the mode ('?' where none is named), the steps integrated ('0:10:3 (4 of 12)'; None
+        where none are named) and the shape ('6×5×4 (x, y, z)', x first). Steps that are no
+        selection (not written by chronocl) raise, or, not `strict`, are shown as they are."""
         meta = self.metadata
         spec = meta.get("spec") or {}
         sel = meta.get("selection") or {}
         steps = sel.get("steps") or []
-        z, y, x = self.shape
-        parts = [f"{x}×{y}×{z} (x, y, z)", f"mode={spec.get('mode', '?')}"]
+        shown = None
         if steps:
-            shown = Selection(tuple(steps), int(sel.get("n_steps", max(steps) + 1))).describe()
-            parts.append(f"steps {shown} ({len(steps)} of {sel.get('n_steps', '?')})")
+            try:
+                n = int(sel.get("n_steps", max(steps) + 1))
+                shown = f"{Selection(tuple(steps), n).describe()} ({len(steps)} of {n})"
+            except (InvalidSelectionError, TypeError, ValueError):
+                if strict:
+                    raise
+                shown = f"{steps!r} (not a selection of {sel.get('n_steps', '?')} steps)"
+        z, y, x = self.shape
+        return str(spec.get("mode", "?")), shown, f"{x}×{y}×{z} (x, y, z)"
+
+    def __repr__(self) -> str:
+        """One line: shape, mode, steps and where it came from (not the arrays' values); steps
+        that are no selection are shown as they are (the HTML summary falls back to it)."""
+        meta = self.metadata
+        mode, steps, shape = self.described(strict=False)
+        parts = [shape, f"mode={mode}"]
+        if steps:
+            parts.append(f"steps {steps}")
         if meta.get("dataset"):
             parts.append(f"from {meta['dataset']!r}")
         parts.append("with t_index" if self.t_index is not None else "no t_index")

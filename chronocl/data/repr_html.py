@@ -146,20 +146,11 @@ def safe(summary, obj) -> str | None:
 
 def chronovolume_html(cv) -> str:
     """The HTML summary of `cv` (its `_repr_html_`)."""
-    from chronocl.core.selection import Selection
-
     meta = cv.metadata
-    spec = meta.get("spec") or {}
-    sel = meta.get("selection") or {}
-    steps = sel.get("steps") or []
-    z, y, x = cv.shape
-    rows = [
-        ("shape", f"{x}×{y}×{z} (x, y, z), RGBA {cv.rgba.dtype}"),
-        ("mode", str(spec.get("mode", "?"))),
-    ]
+    mode, steps, shape = cv.described()
+    rows = [("shape", f"{shape}, RGBA {cv.rgba.dtype}"), ("mode", mode)]
     if steps:
-        n = int(sel.get("n_steps", max(steps) + 1))
-        rows.append(("steps", f"{Selection(tuple(steps), n).describe()} ({len(steps)} of {n})"))
+        rows.append(("steps", steps))
     labels = meta.get("time_labels")
     if isinstance(labels, list) and labels:
         unit = meta.get("time_unit")

@@ -50,10 +50,15 @@ REQUEST_TIMEOUT_S = 120.0
 # the page uses, so that the page takes a frame answering one as the answer to its own.
 OWN_IDS = 2**52
 FRAMED = ("update", "open", "load")  # the requests a frame answers
+FAILURES_KEPT = 32  # the frame failures remembered, by request id (the newest kept)
 
 
 class WidgetClosedError(ChronoclError, RuntimeError):
     """The widget was closed: its worker and resources are gone."""
+
+
+class FrameFailedError(ChronoclError, RuntimeError):
+    """The frame a widget waited for failed: the worker's error (what the page shows)."""
 
 
 def _voxel_of(point: object, series, world: bool) -> tuple[int, int, int]:
@@ -77,6 +82,11 @@ def _voxel_of(point: object, series, world: bool) -> tuple[int, int, int]:
             f"{tuple(extent.tolist())} (x, y, z, from its corner)"
         )
     return tuple(int(v) for v in np.floor(p / spacing))  # type: ignore[return-value]
+
+
+def _settled(header: dict) -> bool:
+    """A frame's header: it is the settled one (full quality and resolution, not refining)."""
+    return header["quality"] == "full" and not header["refining"]
 
 
 def _plain(value: object) -> object:
@@ -131,6 +141,8 @@ class ChronoclWidget(anywidget.AnyWidget):
         self._requests: dict[int, dict | None] = {}
         self._next_own = OWN_IDS
         self._newest_id: int | None = None  # the newest request a frame answers
+        # The worker's errors making frames, by the request they answer (its one line each).
+        self._failed: dict[int, str] = {}
         self._frames = 0
         self.last_frame: dict | None = None  # the newest frame's header (and its digest)
         # No frame until one is wanted: a page's first request (its panels' size), or the
@@ -186,11 +198,16 @@ class ChronoclWidget(anywidget.AnyWidget):
             msg = parse_message(text)
         except ChronoclError:
             return answer(self._worker, text)  # the error reply, as the socket's
-        rid = msg.get("id")
+        rid, newest = msg.get("id"), self._newest_id
         if msg["type"] in FRAMED:
             self._newest_id = rid
+            with self._cond:  # (a page shown again numbers its requests from 1 again)
+                self._failed.pop(rid, None)
         if msg["type"] != "open":
-            return answer(self._worker, text)
+            reply = answer(self._worker, text)
+            if reply is not None and reply.get("type") == "error":
+                self._newest_id = newest  # refused: nothing changed, no frame answers it
+            return reply
         ds = self._datasets[0]
         opening = default_state(0, ds.series)
         reply = {"type": "dataset", "id": rid, **ds.info(0)}
@@ -221,11 +238,28 @@ class ChronoclWidget(anywidget.AnyWidget):
                     self._requests[reply["id"]] = reply
                     self._cond.notify_all()
                     return True
+                if reply["type"] == "error":
+                    self._note_failure(reply)
             if reply["type"] == "download":
                 self._send_download(reply)
                 return True
         self.send({"text": data})
         return True
+
+    def _note_failure(self, reply: dict) -> None:
+        """A worker's error (under `_cond`), kept for `wait_frame` where it ends a frame: the
+        request's it answers, or (no id) the refine's of the frame shown, where that frame
+        answers the newest request and is not settled yet."""
+        rid = reply.get("id")
+        if rid is None:
+            last = self.last_frame
+            if last is None or last["id"] != self._newest_id or _settled(last):
+                return
+            rid = last["id"]
+        self._failed[rid] = " ".join(str(reply.get("message", "")).split())
+        while len(self._failed) > FAILURES_KEPT:
+            del self._failed[next(iter(self._failed))]
+        self._cond.notify_all()
 
     def _send_download(self, reply: dict) -> None:
         key = reply.pop("url").rsplit("/", 1)[-1]
@@ -314,7 +348,8 @@ class ChronoclWidget(anywidget.AnyWidget):
         """The header of the settled frame (full quality and resolution) answering the newest
         request (an attribute set, or the page's edit), once more than `after` frames were
         made (`frames`), waited for. Where no frame was wanted yet (no page has shown the
-        widget), one is made for the state now."""
+        widget), one is made for the state now. FrameFailedError at once where the worker
+        failed to make it (the error the page shows, in one line)."""
         self._check_open()
         if not self._drawing:
             self._drawing = True
@@ -329,10 +364,12 @@ class ChronoclWidget(anywidget.AnyWidget):
                     self._frames > after
                     and last is not None
                     and last["id"] == self._newest_id
-                    and last["quality"] == "full"
-                    and not last["refining"]
+                    and _settled(last)
                 ):
                     return last
+                failed = self._failed.get(self._newest_id)
+                if failed is not None:
+                    raise FrameFailedError(f"the frame failed: {failed}")
                 left = end - time.monotonic()
                 if left <= 0 or self._closed:
                     raise InvalidParameterError(f"no settled frame came in {timeout:.0f} s")
