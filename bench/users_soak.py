@@ -1,8 +1,8 @@
 """The users' case soak (issue 45): one client making hundreds of random actions against
 `chronocl view` on the vortex at 512^3 float32 x 20 steps with the default memory budget.
 
-The server is the CLI in a child process (`chronocl view STORE --no-browser`, no --memory: a
-third of the memory free), its stderr kept; the client is bench/latency_client.py's. Each
+The server is the CLI in a child process (`chronocl view STORE --no-browser`, no --memory:
+half the memory free), its stderr kept; the client is bench/latency_client.py's. Each
 action is drawn at random (seeded) from: a mode change (any of the 8 modes), a data-TF edit, a
 time-TF edit, a one-step slide, a jump of the window, a second view added or taken away, a drag
 (slides at preview quality, coarse levels, then let go) and a reconnect (a new socket, the page
