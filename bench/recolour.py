@@ -8,13 +8,12 @@ and time-TF edits (each a value no edit before it had):
 - before (what a TF edit costs without recolouring): `Session.set_spec` integrates the window
   (the viewer's display format, RGBA8 from the kernels), the viewer's `upload` writes it into
   the texture, the raycaster draws it;
-- after: `Session.recolours` says the edit only recolours, `Recolourer.recolour` rewrites the
+- after: `Session.recolours` says the edit only recolours, `GLRecolourer.apply` rewrites the
   texture from the winners (kernels/glsl/recolour.comp), the raycaster draws it ("gl", the GPU
-  path); or `BrickRecolour.sparse` writes RGBA8 on the OpenCL device over the bricks the edit
-  may colour or the array held, and `recolour_upload.show` writes what changed into a texture
+  path); or `BrickRecolourer.apply` writes RGBA8 on the OpenCL device over the bricks the edit
+  may colour or the array held, and `recolour.texture.show` writes what changed into a texture
   of its own ("bricks", the viewer's path on llvmpipe; `bricks_recoloured` the share of
-  bricks); or `HostRecolour.recolour` writes every voxel and the viewer's `upload` sends it
-  all ("host", the path before). Preparing the winners (gathered by numpy and by OpenCL, the
+  bricks). Preparing the winners (gathered by numpy and by OpenCL, the
   GL upload, the brick summaries) is timed on its own: it happens once per integrated window,
   at its first edit.
 
@@ -46,15 +45,14 @@ from common import emit, env_record
 
 from chronocl.core.tf import DataTF, TimeTF
 from chronocl.data import synthetic
-from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.integration.interactive.session import Session
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
-from chronocl.render.recolour import Recolourer
-from chronocl.render.recolour_bricks import BrickRecolour
-from chronocl.render.recolour_host import HostRecolour, gather
-from chronocl.render.recolour_upload import show
+from chronocl.render.recolour.bricks import BrickRecolourer
+from chronocl.render.recolour.gather import gather
+from chronocl.render.recolour.gl import GLRecolourer
+from chronocl.render.recolour.texture import show
 from chronocl.viewer.slots import ViewSlot, upload
 
 TIME_COLOURS = ("warm-cool", "rgb", "lightness", "white")
@@ -106,8 +104,8 @@ def main() -> None:
     ap.add_argument("--keep", type=Path, default=None)
     ap.add_argument(
         "--paths",
-        default="integrate,bricks,host,gl",
-        help="which of integrate, bricks, host, gl to time (gl: the winners in GL textures too)",
+        default="integrate,bricks,gl",
+        help="which of integrate, bricks, gl to time (gl: the winners in GL textures too)",
     )
     args = ap.parse_args()
     edits = 2 if args.quick else args.edits
@@ -118,7 +116,7 @@ def main() -> None:
     series = series_of(args.side, args.steps, args.keep)
     generated_s = time.perf_counter() - t
     rc = Raycaster()
-    rec = Recolourer(rc.ctx)
+    rec = GLRecolourer(rc.ctx)
     camera = Camera(30, 20, zoom=1.2)
     t0 = (args.steps - args.window) // 2
     s = Session(series, engine="opencl", mode="max", memory="12GB", display=True)
@@ -138,9 +136,9 @@ def main() -> None:
     won = s.winners(gather)  # the OpenCL one (each voxel reads its winner), as the viewer does
     c = time.perf_counter()
     paths = tuple(args.paths.split(","))
-    if "integrate" not in paths or not set(paths) <= {"integrate", "bricks", "host", "gl"}:
-        raise SystemExit("--paths: integrate (the reference) and any of bricks, host, gl")
-    rv = rec.upload(won) if "gl" in paths else None
+    if "integrate" not in paths or not set(paths) <= {"integrate", "bricks", "gl"}:
+        raise SystemExit("--paths: integrate (the reference) and any of bricks, gl")
+    rv = rec.prepare(won) if "gl" in paths else None
     d = time.perf_counter()
     prepare = {
         "gather_numpy_ms": round(1e3 * (b - a), 1),
@@ -148,17 +146,17 @@ def main() -> None:
         "upload_winners_ms": round(1e3 * (d - c), 1),
     }
 
-    host = HostRecolour(won)
     shown = s.current()
     e = time.perf_counter()
     # as the viewer: the first edit writes into the RGBA8 shown, which its texture holds
-    bricks = BrickRecolour(won, start=shown.rgba) if "bricks" in paths else None
+    brick_recolourer = BrickRecolourer()
+    bricks = brick_recolourer.prepare(won, start=shown.rgba) if "bricks" in paths else None
     prepare["summarise_bricks_ms"] = round(1e3 * (time.perf_counter() - e), 1)
     emit({"path": "recolour", "prepare": prepare})
     own = ViewSlot()  # the bricks path's texture: it writes what changed since its last edit
     if bricks is not None:
         upload(rc, own, shown)
-    held = bricks.held() if bricks is not None else None
+    held = bricks.output[1] if bricks is not None else None
     rows: dict[str, list] = {p: [] for p in paths}
     rewritten: dict[int, float] = {}  # the bricks path's share of bricks recoloured per edit
     for i in range(edits):  # each edit three ways, in a rotating order (a shared machine)
@@ -171,26 +169,21 @@ def main() -> None:
                 cv = s.set_spec(spec)
                 b = time.perf_counter()
                 vol = upload(rc, slot, cv)
-            elif path == "host":  # PoCL writes RGBA8, the viewer's upload sends it
-                new, reason = s.recolours(spec)
-                assert reason is None, reason
-                rgba = host.recolour(new, "f1", reuse=True)
-                b = time.perf_counter()
-                vol = upload(rc, slot, Chronovolume(rgba, None, cv.metadata))
             elif path == "bricks":  # PoCL recolours the bricks that may be coloured
                 new, reason = s.recolours(spec)
                 assert reason is None, reason
-                sp = bricks.sparse(new)
+                changed = brick_recolourer.apply(bricks, new, own.volume)
                 b = time.perf_counter()
                 vol = own.volume
-                show(rc.ctx, vol, sp, held, series.spacing)
-                held = sp.coloured
-                rewritten[i] = sp.rewritten / sp.coloured.size
+                show(rc.ctx, changed, series.spacing, held)
+                held = changed.coloured
+                rewritten[i] = changed.rewritten / changed.coloured.size
             else:  # the compute pass rewrites the texture: nothing uploaded
                 new, reason = s.recolours(spec)
                 assert reason is None, reason
-                fmt = slot.volume.texture.dtype
-                vol = rec.recolour(rv, new, series.spacing, fmt=fmt, volume=slot.volume)
+                changed = rec.apply(rv, new, slot.volume)
+                show(rc.ctx, changed, series.spacing)
+                vol = changed.volume
                 b = time.perf_counter()
             c = time.perf_counter()
             pictures[path] = rc.draw(vol, camera, (w, h))
@@ -222,7 +215,6 @@ def main() -> None:
     emit({"summary": summary})
     if rv is not None:
         rv.release()
-    host.release()
     if bricks is not None:
         bricks.release()
     s.close()

@@ -1,7 +1,7 @@
 """A child process of tests/test_device_faults.py: each kind of device work a frame does
-(integrate, gather, recolour whole or by bricks, one recolouring edited again and again, the
-sliding kernels), with a failure injected at each of its device calls in turn (an enqueue, a
-map, a copy, a buffer made).
+(integrate, gather, recolour by bricks where the winners fit one buffer, one recolouring
+edited again and again, the sliding kernels), with a failure injected at each of its device
+calls in turn (an enqueue, a map, a copy, a buffer made).
 
 Each failure must reach the caller as raised, and the next run must equal a run that never
 failed. A failure that freed host memory under enqueued work kills this process (a segfault
@@ -24,8 +24,8 @@ from chronocl.engine.opencl import OpenCLEngine
 from chronocl.integration.inmemory import integrate
 from chronocl.integration.interactive.winners import winners
 from chronocl.modes.spec import IntegrationSpec
-from chronocl.render.recolour_bricks import BrickRecolour
-from chronocl.render.recolour_host import HostRecolour, gather
+from chronocl.render.recolour.bricks import BrickRecolourer
+from chronocl.render.recolour.gather import gather
 from chronocl.viewer.recolouring import on_host
 
 ENQUEUES = ("enqueue_nd_range_kernel", "enqueue_copy", "enqueue_map_buffer")
@@ -92,11 +92,12 @@ def works(size: int) -> dict:
         engine.fixed_add(out, step, 1)
         return (out,)
 
-    def bricks():  # where the volume is over one buffer, in spans (the viewer's choice)
-        v = on_host(won, None)
-        return (
-            v.sparse(spec("max")).rgba if isinstance(v, BrickRecolour) else v.recolour(spec("max")),
-        )
+    def bricks():  # prepared and recoloured, as the viewer's first edit of a window
+        prepared = on_host(won, None)
+        try:
+            return (BrickRecolourer().apply(prepared, spec("max")).rgba,)
+        finally:
+            prepared.release()
 
     # winners whose value rises along z, and three TFs each opaque on a band of it of its own:
     # each edit colours other bricks, so a brick the failed edit left coloured where its mask
@@ -116,10 +117,8 @@ def works(size: int) -> dict:
         kept.append(on_host(winners(t_index, arrays, steps, 8, vr, spec("max")), None))
 
     def bricks_edited():  # each edit's picture, as the viewer shows each
-        v = kept[0]
-        if isinstance(v, BrickRecolour):
-            return tuple(np.array(v.sparse(edit).rgba, copy=True) for edit in bands)
-        return tuple(np.array(v.recolour(edit, "f1", reuse=True), copy=True) for edit in bands)
+        bricks = BrickRecolourer()
+        return tuple(np.array(bricks.apply(kept[0], edit).rgba, copy=True) for edit in bands)
 
     def integrated(mode):
         def run():
@@ -129,17 +128,22 @@ def works(size: int) -> dict:
         return run
 
     bricks_edited.setup = make_kept
-    return {
+    work = {
         "gather": lambda: (lambda w: (w.u, w.k))(
             gather(t_index, arrays, steps, 8, vr, spec("max"))
         ),
         "integrate_max": integrated("max"),
         "integrate_alpha": integrated("alpha"),
-        "recolour": lambda: (HostRecolour(won).recolour(spec("max"), "f1"),),
         "bricks": bricks,
         "bricks_edited": bricks_edited,
         "fixed_add": fixed_add,
     }
+    fits = on_host(won, None)  # the winners in one buffer: else no brick-wise recolouring
+    if fits is None:
+        del work["bricks"], work["bricks_edited"]
+    else:
+        fits.release()
+    return work
 
 
 def main() -> None:

@@ -19,10 +19,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).parent.parent
-WORKS = {
-    "gather", "integrate_max", "integrate_alpha", "recolour", "bricks", "bricks_edited",
-    "fixed_add",
-}  # fmt: skip
+WORKS = {"gather", "integrate_max", "integrate_alpha", "bricks", "bricks_edited", "fixed_add"}
+BRICKS = {"bricks", "bricks_edited"}  # not where the winners are over one buffer (capped)
 
 
 def _run(*args: str, **env: str) -> list[dict]:
@@ -52,4 +50,4 @@ def test_a_failure_at_any_device_call_of_the_gather_frees_nothing_in_use():
 def test_a_failure_at_any_device_call_of_a_frame_leaves_the_next_result_right(cap):
     """Each kind of work, in one buffer per array and (capped) in many, every call failed."""
     rows = _run("48", **({"CHRONOCL_MAX_ALLOC": cap} if cap else {}))
-    _check(rows, WORKS)
+    _check(rows, WORKS - BRICKS if cap else WORKS)

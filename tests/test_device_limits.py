@@ -4,8 +4,9 @@
 that one step here (36 x 44 x 96 float32, 608 KB) is over it: every mode's integration (at full
 resolution and a coarse level, float32 and the display's RGBA8), a session's slides both ways
 (incrementally: the sliding kernels) and TF edits (recoloured where the mode allows), the
-gather of the winners, their recolouring and the probe then run in pieces. Each result equals
-the uncapped one bit for bit (issue 45: the users' case at the default budget wrapped a 6.5 GB
+gather of the winners and the probe then run in pieces (the brick-wise recolouring takes the
+winners in one buffer, or the edit integrates). Each result equals the
+uncapped one bit for bit (issue 45: the users' case at the default budget wrapped a 6.5 GB
 block in one buffer, over PoCL's 4 GB).
 """
 
@@ -23,7 +24,8 @@ from chronocl.integration.inmemory import integrate
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
-from chronocl.render.recolour_host import gather
+from chronocl.render.recolour.bricks import BrickRecolourer
+from chronocl.render.recolour.gather import gather
 from chronocl.viewer.recolouring import on_host
 
 CAP = "128KB"  # one step is 608 KB; a brick row of 6 steps 101 KB, of RGBA float32 66 KB
@@ -68,21 +70,17 @@ def _run_all(series: TimeSeries, mode: str) -> dict[str, np.ndarray]:
     keep("integrate", integrate(series, "1:7", spec=spec, engine="opencl"))
     keep("level1", integrate(series, "1:7", spec=spec, engine="opencl", level=1))
     for display in (False, True):
-        options = {"display": display, "direct_below_ms": 0}  # slides always incremental
+        options = {"display": display}  # no slide costs: slides always incremental
         with Session(series, engine="opencl", spec=spec, memory="64MB", **options) as s:
             s.set_window(2, 8)
             for move in (+2, -3):
                 keep(f"slide{move:+d}.display{display}", s.slide(move))
             keep(f"edit.display{display}", s.set_spec(_spec(mode, EDIT)))
             if mode in RECOLOURED and not display:
-                fixed, reason = s.recolours(_spec(mode, EDIT))
+                _, reason = s.recolours(_spec(mode, EDIT))
                 w = s.winners(gather)
                 assert reason is None and w is not None, reason
                 out["winners.u"], out["winners.k"] = w.u.copy(), w.k.copy()
-                volume = on_host(w, None)
-                out["recolour.f1"] = volume.recolour(fixed, "f1").copy()
-                out["recolour.f4"] = volume.recolour(fixed, "f4").copy()
-                volume.release()
     curve = probe(series, region=((3, 40), (2, 30), (5, 33)))
     out["probe"] = np.stack([curve.values, curve.min, curve.max])
     return out
@@ -129,28 +127,25 @@ def test_the_cap_is_below_one_step_and_splits_each_kind_of_buffer(series, monkey
 def test_brick_recolouring_takes_a_volume_whose_rgba8_fits_one_buffer(series, monkeypatch):
     """A volume whose float32 RGBA is over the largest buffer but whose winners and RGBA8 are
     not is still recoloured brick by brick (a review found it sent to the whole-volume spans),
-    and equals the whole recolouring; one whose RGBA8 is over it goes in spans."""
-    from chronocl.render.recolour_bricks import BrickRecolour
-    from chronocl.render.recolour_host import HostRecolour
-
+    and equals the uncapped recolouring; one whose RGBA8 is over it is not prepared there (the
+    viewer integrates the edit, and says why)."""
     steps = tuple(range(1, 7))
     arrays = {s: np.ascontiguousarray(series.read([s])[0]) for s in steps}
     rng = np.random.default_rng(2)
     t_index = rng.choice(np.array([*steps, -1], np.int32), size=SHAPE)
     spec = _spec("max", EDIT)
     w = gather(t_index, arrays, steps, STEPS, VR, spec)
-    want = HostRecolour(w).recolour(spec, "f1")
+    bricks = BrickRecolourer()
+    prepared = on_host(w, None)
+    want = bricks.apply(prepared, spec).rgba.copy()
+    prepared.release()
     voxels = int(np.prod(SHAPE))
     monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(voxels * 8))  # RGBA8 fits, float32 not
-    volume = on_host(w, None)
-    assert isinstance(volume, BrickRecolour) and len(volume.parts) > 1
-    np.testing.assert_array_equal(volume.sparse(spec).rgba, want)
-    volume.release()
-    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(voxels * 2))  # RGBA8 over it: spans
-    volume = on_host(w, None)
-    assert not isinstance(volume, BrickRecolour)
-    np.testing.assert_array_equal(volume.recolour(spec, "f1"), want)
-    volume.release()
+    prepared = on_host(w, None)
+    np.testing.assert_array_equal(bricks.apply(prepared, spec).rgba, want)
+    prepared.release()
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(voxels * 2))  # RGBA8 over it
+    assert on_host(w, None) is None
 
 
 def test_the_gather_wraps_only_what_its_rows_span_of_a_slot_block():

@@ -2,7 +2,7 @@
 engine uses, on a cold cache, and a CLI run prints nothing of the compiler's.
 
 The options are those of OpenCLEngine.accumulate / _elementwise and bench/integrate.py, and
-every one of the host recolouring's (chronocl/render/recolour_host.py, recolour_bricks.py).
+every one of the host recolouring's (chronocl/render/recolour/gather.py, bricks.py).
 Options a file never mentions cannot change its preprocessed source, so they are held
 fixed; of the rest, a set of combinations holding every pair of values (all-pairs) is
 built, in the test process with pyopencl's CompilerWarning an error.
@@ -30,13 +30,8 @@ from chronocl.engine.defines import CPU_PATHS, HALF_DEFINES
 from chronocl.engine.opencl import DEVICE_TYPES, OpenCLEngine
 from chronocl.modes.base import KernelInput
 from chronocl.modes.spec import IntegrationSpec
-from chronocl.render.recolour_bricks import bricks_defines
-from chronocl.render.recolour_host import (
-    CL_TYPES,
-    RECOLOUR_H,
-    gather_defines,
-    recolour_defines,
-)
+from chronocl.render.recolour.bricks import RECOLOUR_H, bricks_defines
+from chronocl.render.recolour.gather import CL_TYPES, gather_defines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 INTEGRATION_KEYS = set(
@@ -239,7 +234,6 @@ def builds(full: bool) -> list[tuple[str, list[str], bool | str]]:
     out.append(("probe.cl", [], False))  # the device check (chronocl.engine.device)
     for k in (np.uint8, np.uint16):  # the host recolouring's, after recolour.h or alone
         host = [("recolour_bricks.cl", bricks_defines(k), RECOLOUR_H)]
-        host += [("recolour.cl", recolour_defines(k, rgba8), RECOLOUR_H) for rgba8 in BOOLS]
         host += [
             ("recolour_gather.cl", gather_defines(k, t, c), False) for t in CL_TYPES for c in BOOLS
         ]

@@ -1,10 +1,10 @@
 """Recolouring max, min, first_hit and change equals integrating the edited TF.
 
 The winners (value and step per voxel) of a window integrated under one spec, recoloured under
-another on the GPU (chronocl/render/recolour.py) or the OpenCL device (recolour_host.py),
-give the display texture, its occupied box and brick grid, and the picture that integrating
-the other spec gives (the render tests' tolerance), including after slides both ways;
-`why_not` lets through only edits that cannot change who won.
+another on the GPU (chronocl/render/recolour/gl.py) or the OpenCL device brick by brick
+(recolour/bricks.py), give the display texture, its occupied box and brick grid, and the
+picture that integrating the other spec gives (the render tests' tolerance), including after
+slides both ways; `why_not` lets through only edits that cannot change who won.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from chronocl.integration.inmemory import integrate
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.winners import (
     RECOLOURED,
+    Winners,
     recoloured,
     same_hits,
     why_not,
@@ -35,10 +36,10 @@ from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
-from chronocl.render.recolour import Recolourer, available
-from chronocl.render.recolour_bricks import BrickRecolour
-from chronocl.render.recolour_host import HostRecolour, gather, shown_output
-from chronocl.render.recolour_upload import show
+from chronocl.render.recolour.bricks import BrickRecolourer, shown_output
+from chronocl.render.recolour.gather import gather
+from chronocl.render.recolour.gl import GLRecolourer, available
+from chronocl.render.recolour.texture import show
 from chronocl.render.upload import convert, display_format
 
 from .strategies import data_tfs, examples, specs, time_tfs
@@ -52,7 +53,7 @@ def gl():
     rc = Raycaster()
     if not available(rc.ctx):
         pytest.skip("this OpenGL has no compute shaders (4.3)")
-    rec = Recolourer(rc.ctx)
+    rec = GLRecolourer(rc.ctx)
     yield rc, rec
     rec.release()
 
@@ -137,60 +138,63 @@ def test_recolour_equals_integrating_the_edit(gl, data) -> None:
     np.testing.assert_array_equal(want_t, t_index)  # the winners did not change
     w = winners(t_index, dict(zip(steps, raw, strict=True)), steps, n_steps, UNIT, old)
     np.testing.assert_allclose(recoloured(w, new), want, rtol=0, atol=1e-6)
-    rv = rec.upload(w)
+    prepared = rec.prepare(w)
     try:
-        vol = rec.recolour(rv, new, (1.0, 1.0, 1.0))
-        _same_picture(rc, vol, want)
+        _same_picture(rc, _on_gpu(rc, rec, prepared, new, (1.0, 1.0, 1.0)), want)
     finally:
-        rv.release()
+        prepared.release()
     _same_on_host(w, new, want)
     mid = _spec(mode, data.draw(data_tfs()), data.draw(time_tfs()), order, threshold)
     if why_not(old, mid, UNIT, UNIT, steps, n_steps) is None:
         _same_by_bricks(rc, w, [old, mid, new], run(old)[0], want)
 
 
+def _on_gpu(rc, rec, prepared, spec, spacing, into=None):
+    """The GPU's recolouring of `prepared` under `spec`, shown in `into` (None: its own)."""
+    changed = rec.apply(prepared, spec, into)
+    show(rc.ctx, changed, spacing)
+    return changed.volume
+
+
+def _whole(w, spec) -> np.ndarray:
+    """The brick-wise recolouring of `w` under `spec` into an output of its own (zeroed: every
+    brick it may colour written), a copy: the whole recolouring."""
+    bricks = BrickRecolourer()
+    prepared = bricks.prepare(w)
+    try:
+        return bricks.apply(prepared, spec).rgba.copy()
+    finally:
+        prepared.release()
+
+
 def _same_by_bricks(rc, w, specs, first: np.ndarray, want: np.ndarray) -> None:
-    """llvmpipe's brick-wise recolouring (recolour_bricks.py): edits in turn into one RGBA8
+    """llvmpipe's brick-wise recolouring (recolour/bricks.py): edits in turn into one RGBA8
     texture holding the integrated `first`, each writing what changed since the one before
     (the last writes into the first's array again); the last equals the integrated `want`."""
-    bricks = BrickRecolour(w)
+    bricks = BrickRecolourer()
+    prepared = bricks.prepare(w)
     vol = rc.upload(Chronovolume(first, None, {}), dtype="f1")
     try:
         held = None
         for spec in specs:
-            sp = bricks.sparse(spec)
-            show(rc.ctx, vol, sp, held, (1.0, 1.0, 1.0))
-            held = sp.coloured
+            changed = bricks.apply(prepared, spec, vol)
+            show(rc.ctx, changed, (1.0, 1.0, 1.0), held)
+            held = changed.coloured
         data, _ = convert(want, "f1")
-        np.testing.assert_allclose(sp.rgba, data, rtol=0, atol=1)
-        # to the bit: the host conversion (round half to even) of the float recolouring,
-        # whose arithmetic recolour.h shares
-        host = HostRecolour(w)
-        try:
-            exact, _ = convert(host.recolour(specs[-1], "f4"), "f1")
-        finally:
-            host.release()
-        np.testing.assert_array_equal(sp.rgba, exact)
+        np.testing.assert_allclose(changed.rgba, data, rtol=0, atol=1)
+        # to the bit: the whole recolouring of the last spec (no brick left over)
+        np.testing.assert_array_equal(changed.rgba, _whole(w, specs[-1]))
         _same_picture(rc, vol, want, fmt="f1")
     finally:
         vol.release()
-        bricks.release()
+        prepared.release()
 
 
 def _same_on_host(w, spec, want: np.ndarray) -> None:
-    """The OpenCL recolouring (llvmpipe's path) gives the display texture's data too."""
-    host = HostRecolour(w)
-    try:
-        for fmt in ("f1", "f4"):
-            data, _ = convert(want, fmt)
-            got = host.recolour(spec, fmt)
-            # within 1 of the integrated RGBA8: the recolouring's floats are not integration's
-            np.testing.assert_allclose(got, data, rtol=0, atol=1 if fmt == "f1" else 1e-6)
-        # RGBA8 is its own float result rounded as the display conversion rounds, to the bit
-        rounded, _ = convert(host.recolour(spec, "f4"), "f1")
-        np.testing.assert_array_equal(host.recolour(spec, "f1"), rounded)
-    finally:
-        host.release()
+    """The OpenCL recolouring (llvmpipe's path) gives the display texture's data too: within 1
+    of the integrated RGBA8 (the recolouring's floats are not integration's)."""
+    data, _ = convert(want, "f1")
+    np.testing.assert_allclose(_whole(w, spec), data, rtol=0, atol=1)
 
 
 def _series(rng, n_steps: int, shape) -> TimeSeries:
@@ -229,11 +233,11 @@ def test_session_recolours_after_slides_both_ways(gl, mode) -> None:
             w = s.winners()
             assert w is not None and w.steps == s.selection.steps
             want = integrate(series, s.selection, spec=fixed, engine="opencl")
-            rv = rec.upload(w)
+            prepared = rec.prepare(w)
             try:
-                _same_picture(rc, rec.recolour(rv, fixed, series.spacing), want.rgba)
+                _same_picture(rc, _on_gpu(rc, rec, prepared, fixed, series.spacing), want.rgba)
             finally:
-                rv.release()
+                prepared.release()
             _same_on_host(w, fixed, want.rgba)
 
 
@@ -293,14 +297,14 @@ def test_opencl_gather_equals_the_numpy_one(mode, dtype, monkeypatch) -> None:
     it takes, windows over one and three chunks of steps, steps apart or in one block, values
     beyond the range clipped. Its arrays come with garbage in them (the memory of dead ones):
     the kernels write every voxel, those no step won included."""
-    from chronocl.render import recolour_host
+    from chronocl.render.recolour import gather as gather_module  # the module
 
     def dirty(shape, dtype):
         out = aligned_empty(shape, dtype)
         out.view(np.uint8)[...] = 0xFF  # NaN as float32
         return out
 
-    monkeypatch.setattr(recolour_host, "recycled_empty", dirty)
+    monkeypatch.setattr(gather_module, "recycled_empty", dirty)
     rng = np.random.default_rng(5)
     for width in (1, 3, 9, 17):
         shape = (7, 9, 11)
@@ -336,8 +340,8 @@ def aligned_copy(a: np.ndarray) -> np.ndarray:
 def test_recolouring_writes_into_the_rgba8_shown(mode) -> None:
     """The viewer's first edit of a window recolours into the RGBA8 the window shows (no second
     array): brick by brick, the bricks its spec may colour are rewritten with the first edit's,
-    so an edit that leaves them transparent clears them; every edit equals the host's float
-    recolouring rounded. The whole-volume path writes into it too."""
+    so an edit that leaves them transparent clears them; every edit equals the whole
+    recolouring."""
     rng = np.random.default_rng(7)
     ramp = np.linspace(0, 1, 45, dtype=np.float32)  # values, and their changes, grow along x
     noise = rng.random((12, 37, 29, 45), dtype=np.float32)
@@ -362,32 +366,26 @@ def test_recolouring_writes_into_the_rgba8_shown(mode) -> None:
         cv = s.set_window(2, 9)
         assert shown_output(cv.rgba, cv.shape)
         w = s.winners(gather)
-        bricks = BrickRecolour(w, start=cv.rgba)
-        shown = aligned_copy(cv.rgba)
-        whole = HostRecolour(w, start=shown)
-        host = HostRecolour(w)
+        bricks = BrickRecolourer()
+        prepared = bricks.prepare(w, start=cv.rgba)
         try:
-            before = bricks.held().copy()  # the bricks the shown spec may colour
+            before = prepared.output[1].copy()  # the bricks the shown spec may colour
             for edit in [*edits, spec]:
                 fixed = s.recolours(edit)[0]
-                exact, _ = convert(host.recolour(fixed, "f4"), "f1")
-                sp = bricks.sparse(fixed)
-                assert sp.rgba is cv.rgba
-                np.testing.assert_array_equal(sp.rgba, exact)
+                changed = bricks.apply(prepared, fixed)
+                assert changed.rgba is cv.rgba
+                np.testing.assert_array_equal(changed.rgba, _whole(w, fixed))
                 if edit is edits[0] and mode != "first_hit":  # it cleared bricks shown
-                    assert (before & ~sp.coloured).any()
-                assert whole.recolour(fixed, "f1", reuse=True) is shown
-                np.testing.assert_array_equal(shown, exact)
+                    assert (before & ~changed.coloured).any()
         finally:
-            for r in (bricks, whole, host):
-                r.release()
+            prepared.release()
 
 
 @pytest.mark.parametrize("mode", ["max", "change"])
 def test_brick_outputs_taken_over_by_the_next_window_recolour_it_right(mode) -> None:
     """The viewer hands a window's brick-wise outputs (touched, with the bricks each may hold
-    coloured) to the next window's winners: every edit of the next equals the host's float
-    recolouring rounded, as with outputs of its own."""
+    coloured) to the next window's winners: every edit of the next equals the whole
+    recolouring, as with outputs of its own."""
     rng = np.random.default_rng(5)
     series = _series(rng, 12, (37, 29, 45))
     vr = (-10.0, 30.0)
@@ -401,24 +399,22 @@ def test_brick_outputs_taken_over_by_the_next_window_recolour_it_right(mode) -> 
     ]
     with Session(series, engine="opencl", spec=spec, memory="256MB") as s:
         s.set_window(0, 6)
-        first = BrickRecolour(s.winners(gather))
+        bricks = BrickRecolourer()
+        first = bricks.prepare(s.winners(gather))
         for edit in edits:
-            first.sparse(s.recolours(edit)[0])
+            bricks.apply(first, s.recolours(edit)[0])
         held = first.take_held()
         first.release()
         s.set_window(5, 11)
         w = s.winners(gather)
-        taken = BrickRecolour(w, held=held)
-        host = HostRecolour(w)
+        taken = bricks.prepare(w, held=held)
         try:
-            assert all(a is b for (a, _), (b, _) in zip(taken._held, held, strict=True))
+            assert taken.output[0] is held[0]
             for edit in [*edits[::-1], spec]:
                 fixed = s.recolours(edit)[0]
-                exact, _ = convert(host.recolour(fixed, "f4"), "f1")
-                np.testing.assert_array_equal(taken.sparse(fixed).rgba, exact)
+                np.testing.assert_array_equal(bricks.apply(taken, fixed).rgba, _whole(w, fixed))
         finally:
             taken.release()
-            host.release()
 
 
 def test_a_recoloured_frame_and_its_winners_come_back_whole(monkeypatch) -> None:
@@ -466,20 +462,20 @@ def test_the_first_edits_kernels_are_warmed_once_per_data_type(monkeypatch) -> N
     """`warm_kernels` runs a first edit's kernels (both gathers, the brick summaries and
     recolour) on one brick, once per device and data type; the viewer calls it after its first
     frame (test_recolour_viewer.py checks that it does)."""
-    from chronocl.render import recolour_bricks
+    from chronocl.render.recolour import bricks as recolour_bricks
 
     gathered, recoloured = [], []
-    real_gather, real_sparse = recolour_bricks.gather, BrickRecolour.sparse
+    real_gather, real_apply = recolour_bricks.gather, BrickRecolourer.apply
 
     def spy_gather(*args, **kwargs):
         w = real_gather(*args, **kwargs)
         gathered.append(w.spec.mode)
         return w
 
-    def spy_sparse(self, spec):
-        sp = real_sparse(self, spec)
-        recoloured.append(sp.rgba.shape)
-        return sp
+    def spy_apply(self, prepared, spec, into=None):
+        changed = real_apply(self, prepared, spec, into)
+        recoloured.append(changed.rgba.shape)
+        return changed
 
     def no_numpy(*args, **kwargs):
         raise AssertionError("warmed numpy's gather, not the OpenCL kernels")
@@ -488,7 +484,7 @@ def test_the_first_edits_kernels_are_warmed_once_per_data_type(monkeypatch) -> N
 
     monkeypatch.setattr(winners_module, "winners", no_numpy)
     monkeypatch.setattr(recolour_bricks, "gather", spy_gather)
-    monkeypatch.setattr(BrickRecolour, "sparse", spy_sparse)
+    monkeypatch.setattr(BrickRecolourer, "apply", spy_apply)
     monkeypatch.setattr(recolour_bricks, "_warmed", set())
     recolour_bricks.warm_kernels(np.uint16, None)
     b = brick_grid.BRICK
@@ -584,3 +580,76 @@ def test_a_session_keeps_the_kernels_winners_until_its_window_changes(monkeypatc
     np.testing.assert_array_equal(w.u, want.u)
     np.testing.assert_array_equal(w.k, want.k)
     s.close()
+
+
+def test_the_bricks_rgba8_rounds_as_the_display_conversion() -> None:
+    """The brick kernel's RGBA8 (its 2^23 rounding) is round(v * 255) half to even, clamped,
+    as the display conversion rounds (and the integrate kernels' convert_uchar4_sat_rte), to
+    the bit, ties included: winners on LUT entries (x = u * 256 exact, the lerp exact) and a
+    time TF of 1, so each channel is a LUT entry times its opacity in one float32 product."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(3)
+    n = 257
+    lut = rng.random((n, 4), dtype=np.float32)
+    lut[::2, 3] = 1.0  # opaque: the colours themselves, many of them ties
+    lut[1::4, :3] = ((2 * rng.integers(0, 255, (len(lut[1::4]), 3)) + 1) / 510).astype(np.float32)
+    lut[: n // 2 : 3, :3] = np.float32(0.5 / 255)  # a tie at 0.5: rounds to 0
+    u = (rng.integers(0, n, (16, 16, 24)) / np.float32(n - 1)).astype(np.float32)
+    steps = (0, 1, 2)
+    k = rng.integers(0, 4, u.shape).astype(np.uint8)
+    k[k == 3] = 255  # no winner
+    time_tf = SimpleNamespace(
+        positions_of=lambda steps, n_steps: np.zeros(len(steps)),
+        evaluate=lambda pos: (np.ones((len(pos), 3)), np.ones(len(pos))),
+    )
+    spec = SimpleNamespace(data_tf=SimpleNamespace(lut=lut), time_tf=time_tf)
+    w = Winners(u, k, steps, 3, UNIT, _spec("max", DataTF(), TimeTF()))
+    d = lut[np.rint(u * (n - 1)).astype(int)]
+    want = np.zeros((*u.shape, 4), np.float32)
+    want[..., :3] = d[..., 3:] * d[..., :3]
+    want[..., 3] = d[..., 3]
+    want[k == 255] = 0
+    exact, _ = convert(want, "f1")
+    assert (np.modf(want * np.float32(255))[0] == 0.5).any()  # ties on the way
+    np.testing.assert_array_equal(_whole(w, spec), exact)
+
+
+def test_the_two_rgba8_roundings_give_the_same_bytes() -> None:
+    """recolour.h's `rgba8` (a clamp and 2^23, the brick kernel's) equals common.h's TO_RGBA8
+    (convert_uchar4_sat_rte, the integrate kernels') on the OpenCL device for every float32
+    from -1 to 2 at a stride, every tie k + 0.5 and its neighbours, and the specials (NaN,
+    infinities, -0, huge): one rule in two spellings, kept for speed (see recolour.h)."""
+    import pyopencl as cl
+
+    from chronocl.engine.device import get_context
+    from chronocl.engine.program import build, source
+
+    two = int(np.array(2.0, np.float32).view(np.int32))
+    floats = np.arange(0, two, 61, dtype=np.int32).view(np.float32)  # 0 to 2
+    floats = np.concatenate([floats, -floats[floats <= 1][::7]])  # and -1 to -0
+    ties = (np.arange(256, dtype=np.float32) + np.float32(0.5)) / np.float32(255)
+    near = [np.nextafter(ties, np.float32(d)) for d in (-1, 1)]
+    special = np.array([np.nan, -np.nan, np.inf, -np.inf, -0.0, 3e38, -3e38, 1e-45], np.float32)
+    values = np.concatenate([floats, ties, *near, special]).astype(np.float32)
+    values = np.resize(values, (-(-values.size // 4), 4))
+    kernel = """
+__kernel void both(__global const float4 *v, __global uchar4 *sat, __global uchar4 *ours)
+{
+    size_t i = get_global_id(0);
+    sat[i] = convert_uchar4_sat_rte(v[i] * 255.0f);
+    ours[i] = rgba8(v[i]);
+}
+"""
+    dc = get_context()
+    program = build(dc, "rgba8_check", {}, text=source("recolour.h", common=False) + kernel)
+    sat, ours = (np.empty(values.shape, np.uint8) for _ in range(2))
+    mf = cl.mem_flags
+    v_buf = cl.Buffer(dc.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=values)
+    bufs = [cl.Buffer(dc.context, mf.WRITE_ONLY, sat.nbytes) for _ in range(2)]
+    cl.Kernel(program, "both")(dc.queue, (len(values),), None, v_buf, *bufs)
+    for out, buf in zip((sat, ours), bufs, strict=True):
+        cl.enqueue_copy(dc.queue, out, buf)
+    dc.queue.finish()
+    np.testing.assert_array_equal(ours, sat)
+    assert len(values) > 10**6

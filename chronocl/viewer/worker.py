@@ -30,7 +30,7 @@ from chronocl.core.interrupt import interruptible
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.render.framing import framed
-from chronocl.render.recolour_bricks import warm_kernels
+from chronocl.render.recolour.bricks import warm_kernels
 from chronocl.render.views import describe, parse_color
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset, find_dataset

@@ -1,6 +1,6 @@
 #version 430
 // Recolour a chronovolume of max, min, first_hit or change without integrating again
-// (chronocl/render/recolour.py): each voxel keeps the value u that won it and the index k of
+// (chronocl/render/recolour/gl.py): each voxel keeps the value u that won it and the index k of
 // the winning step; its premultiplied RGBA is the data TF at u (a LUT, linear between
 // entries, as the OpenCL kernels evaluate it) times the time TF of step k (one texel per
 // window step), written into the texture the raycaster samples. The same pass finds the

@@ -1,8 +1,8 @@
 /* Recolouring brick by brick on the OpenCL device of the host
- * (chronocl/render/recolour_bricks.py, BrickRecolour): per brick a summary of its winners,
- * then the bricks that may be coloured recoloured into RGBA8 in recolour.cl's arithmetic
- * (recolour.h), with their opacity peaks and occupied box. Built after recolour.h (no common.h)
- * with K_T (the step index type) and BRICK (the brick side, chronocl/render/brick_grid.py's). */
+ * (chronocl/render/recolour/bricks.py, BrickRecolourer): per brick a summary of its winners,
+ * then the bricks that may be coloured recoloured into RGBA8 (a winner's colour: recolour.h),
+ * with their opacity peaks and occupied box. Built after recolour.h (no common.h) with K_T
+ * (the step index type) and BRICK (the brick side, chronocl/render/brick_grid.py's). */
 
 #define B BRICK
 // The voxel range of brick `b` (x fastest), clamped to the volume.
@@ -64,16 +64,7 @@ __kernel void recolour(__global const float *won_u, __global const K_T *won_k,
             // the compiler vectorises it), then its bricks' opacities from the cache
             for (int x = x0; x < xe; ++x) {
                 size_t i = row + x;
-                float4 rgba = recoloured(won_u, i, won_k[i], none_k, lut, lut_size, table);
-                // convert_uchar4_sat_rte's result: clamped to 0..255, then rounded to nearest
-                // even by adding and taking away 2^23 (exact below it; separate statements,
-                // so no contraction), then truncated. PoCL's rte conversion ran at half the
-                // speed of rint(), and rint() (which also handles signs and magnitudes that
-                // cannot occur here) took 315 ms where this takes 219 (512^3 uint8, AVX2)
-                float4 y = clamp(rgba * 255.0f, 0.0f, 255.0f);
-                y = y + 8388608.0f;
-                y = y - 8388608.0f;
-                out[i] = convert_uchar4(y);
+                out[i] = rgba8(recoloured(won_u, i, won_k[i], none_k, lut, lut_size, table));
             }
             for (int p = p0; p < p1; ++p) {
                 int xs = x0 + (p - p0) * B, xb = min(xs + B, nx);

@@ -3,8 +3,8 @@
 In the modes whose voxel is one step's colour at one value (max, min, first_hit, change:
 docs/semantics.md) a voxel's RGBA is TF(u*, p_k*) premultiplied, where k* is the step that won
 it and u* the value it won with (change: the change δ). Keep (u*, k*) per voxel and an edit of
-the transfer functions only looks them up again (`chronocl.render.recolour`, on the GPU), as
-long as the edit cannot change who won:
+the transfer functions only looks them up again (`chronocl.render.recolour`), as long as the
+edit cannot change who won:
 
 - max, min: the winner is the raw extreme (ties: the order), so every edit of the transfer
   functions recolours, the value range included: u* of every winner is then gathered again at
@@ -105,7 +105,7 @@ def of_window(
 ) -> Winners | None:
     """The winners of `cv` (the window `selection` integrated under `spec`) from the window's
     resident raw values `arrays` (step -> (Z, Y, X)), gathered by `gather` (`winners`'s
-    arguments; default `winners`, e.g. chronocl.render.recolour_host.gather), their u at
+    arguments; default `winners`, e.g. chronocl.render.recolour.gather.gather), their u at
     `value_range` (default: the one `cv` was coloured at; max/min only may take another);
     None where the mode has none, nothing is integrated or a step of the window is not
     resident."""
@@ -161,12 +161,9 @@ def winners(
     """The winners of an integrated window: its t_index (the selected step of each voxel, -1:
     none) and the window's raw resident values (step -> (Z, Y, X)); gathered on the host
     threads, slab by slab."""
-    dtype = np.uint8 if len(steps) < 255 else np.uint16
-    none = np.iinfo(dtype).max
-    table = np.full(max(steps) + 2, none, dtype=dtype)  # t_index -1 reads the last entry
-    table[list(steps)] = np.arange(len(steps), dtype=dtype)
+    table = index_table(steps)
     u = aligned_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
-    k = aligned_empty(t_index.shape, dtype)
+    k = aligned_empty(t_index.shape, table.dtype)
     nz = t_index.shape[0]
     cuts = np.linspace(0, nz, min(nz, 4 * host_threads.workers()) + 1).astype(int)
     args = (t_index, arrays, steps, value_range, spec.mode, table, u, k)
@@ -180,10 +177,20 @@ def winners(
     return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
 
 
+def index_table(steps: tuple[int, ...]) -> np.ndarray:
+    """Each voxel's winner index from its t_index t (the selected step, -1: none): `table[t + 1]`,
+    the window's place of step t (uint8, uint16 from 255 steps), or `none` (the dtype's largest)
+    where t is -1 or no step of the window. Both gathers read it so (numpy's `winners`,
+    chronocl.render.recolour.gather on the OpenCL device)."""
+    dtype = np.uint8 if len(steps) < 255 else np.uint16
+    table = np.full(max(steps) + 2, np.iinfo(dtype).max, dtype=dtype)
+    table[np.asarray(steps) + 1] = np.arange(len(steps), dtype=dtype)
+    return table
+
+
 def _gather(t_index, arrays, steps, value_range, mode, table, u, k, z0: int, z1: int) -> None:
-    ti = t_index[z0:z1]
     kk = k[z0:z1]
-    np.take(table, ti, out=kk)
+    np.take(table, np.add(t_index[z0:z1], 1, dtype=np.intp), out=kk)  # take's own index type
     raw = u[z0:z1]
     raw[...] = 0
     if mode == "change":

@@ -1,18 +1,10 @@
-"""Recolouring on the OpenCL device of the host: a TF edit of max, min, first_hit or change
-without integrating, where the GL renderer is a software one (llvmpipe).
+"""The winners of a window gathered on the OpenCL device (kernels/opencl/recolour_gather.cl).
 
-llvmpipe runs compute shaders far slower than PoCL runs the same arithmetic (2 cores: about
-15 M voxels/s against several hundred; bench/recolour.py), and its textures live in host memory
-anyway, so there the recolouring runs as an OpenCL kernel (kernels/opencl/recolour.cl) over
-the winners (value and step per voxel, `chronocl.integration.interactive.winners.Winners`)
-into premultiplied RGBA8 or float32, the display format, and goes up as an integrated
-chronovolume does (the viewer's `upload`, which finds its occupancy and brick grid). The
-viewer does this for float32 textures (up to 32^3); RGBA8 ones are recoloured brick by brick
-(recolour_bricks.py, built on this class). The arithmetic is the GPU path's
-(kernels/glsl/recolour.comp) and the kernels' (`lut_lerp32`). On a CPU device the winners and
-the output are read and written where they lie (host pointers, nothing copied). The kernels
-are built through chronocl.engine.program (cached per device and options), without common.h
-(recolour.cl after recolour.h).
+Each voxel's step index comes from the chronovolume's t_index through the one index table
+(`winners.index_table`: `table[t_index + 1]`), and its value is read from that step alone
+(numpy's gather, `winners.winners`, reads every step, and stays the fallback for data types
+the kernels do not take). On a CPU device the steps and the winners are read and written where
+they lie (host pointers, nothing copied); the kernels are built without common.h.
 """
 
 from __future__ import annotations
@@ -23,10 +15,9 @@ import numpy as np
 
 from chronocl.core.interrupt import checkpoint, watched
 from chronocl.core.memory import ALIGN, aligned_empty, is_aligned, recycled_empty
-from chronocl.integration.interactive.winners import Winners, step_table
+from chronocl.integration.interactive.winners import Winners, index_table
 from chronocl.modes.spec import IntegrationSpec
 
-RUN = 1024  # voxels per work-item of the recolour kernel
 CHUNK = 8  # steps per gather pass (the kernel's p1..p8)
 # A gather that may be given up (the viewer prepares winners at idle) runs in this many slabs,
 # each waited for: new input waits for one slab at most (512^3, 10 steps: 1.2-1.4 s in all
@@ -40,8 +31,6 @@ CL_TYPES = {  # numpy's name -> OpenCL's, for the raw values the gather reads
     "int16": "short",
     "int32": "int",
 }
-SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "lavapipe")
-RECOLOUR_H = "recolour.h"  # a winner's colour, prepended to recolour.cl and recolour_bricks.cl
 
 
 def index_type(k_dtype) -> str:
@@ -49,21 +38,9 @@ def index_type(k_dtype) -> str:
     return "uchar" if np.dtype(k_dtype) == np.uint8 else "ushort"
 
 
-def recolour_defines(k_dtype, rgba8: bool) -> dict[str, object]:
-    """The -D options of kernels/opencl/recolour.cl: RGBA8 (uchar4) or float4 out."""
-    out_t = "uchar4" if rgba8 else "float4"
-    return {"K_T": index_type(k_dtype), "OUT_T": out_t, "RUN": RUN, "RGBA8": rgba8}
-
-
 def gather_defines(k_dtype, dtype, change: bool) -> dict[str, object]:
     """The -D options of kernels/opencl/recolour_gather.cl for raw values of `dtype`."""
     return {"K_T": index_type(k_dtype), "V_T": CL_TYPES[np.dtype(dtype).name], "CHANGE": change}
-
-
-def software_gl(ctx) -> bool:
-    """Whether the GL context renders on the CPU (Mesa's llvmpipe and kin)."""
-    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
-    return any(name in renderer for name in SOFTWARE_GL)
 
 
 def gather(
@@ -86,7 +63,7 @@ def gather(
     from chronocl.engine.buffers import DeviceWork, max_alloc
     from chronocl.engine.device import get_context
     from chronocl.engine.program import build
-    from chronocl.integration.interactive.winners import winners
+    from chronocl.integration.interactive.winners import winners  # looked up when called
 
     dtype = np.dtype(arrays[steps[0]].dtype)
     if dtype.name not in CL_TYPES or any(arrays[s].dtype != dtype for s in steps):
@@ -113,10 +90,8 @@ def gather(
     in_place = all(arrays[s].flags.c_contiguous and is_aligned(arrays[s]) for s in steps)
     if (block is None and not in_place) or rows < 1:  # a copy costs more than numpy's gather
         return winners(t_index, arrays, steps, n_steps, value_range, spec)
-    k_dtype = np.uint8 if len(steps) < 255 else np.uint16
-    none = np.iinfo(k_dtype).max
-    table = np.full(max(steps) + 2, none, dtype=k_dtype)
-    table[np.asarray(steps) + 1] = np.arange(len(steps), dtype=k_dtype)
+    table = index_table(steps)
+    k_dtype, none = table.dtype, int(np.iinfo(table.dtype).max)
     # PoCL reads and writes aligned host memory in place; the kernels write every voxel, on
     # the memory of winners that died where there is some (at 512^3 fresh pages and zeroing
     # them cost 0.6 s of a 1.7 s gather here)
@@ -183,23 +158,6 @@ def _slab(work, block: tuple, z0: int, z1: int, item: int, plane: int, cpu: bool
     return work.buffer(base[start:stop], in_place=cpu), work.buffer(local)
 
 
-def shown_output(rgba, shape: tuple) -> bool:
-    """Whether `rgba`, the RGBA the window shows (integrated or recoloured under the winners'
-    spec), can be a recolouring's output for winners of `shape` (Z, Y, X): RGBA8 of that
-    shape where PoCL writes in place. The viewer's display integration writes RGBA8 (slides
-    and small volumes give float32): its first TF edit then recolours into the memory the
-    frame holds, instead of a second array (at 512^3, 512 MB a view, whose zeroing took
-    0.5 s of that edit)."""
-    return (
-        isinstance(rgba, np.ndarray)
-        and rgba.dtype == np.uint8
-        and rgba.shape == (*shape, 4)
-        and rgba.flags.c_contiguous
-        and rgba.flags.writeable
-        and is_aligned(rgba)
-    )
-
-
 def aligned(a: np.ndarray) -> np.ndarray:
     """`a` where PoCL can use it in place (C-contiguous, 64-byte aligned), else a copy."""
     if a.flags.c_contiguous and is_aligned(a):
@@ -237,75 +195,3 @@ def _block(arrays: dict[int, np.ndarray], steps) -> tuple | None:
         return None
     offs = np.array([o // item for o in offsets], dtype=np.int64)
     return base, offs, strides[0] // item
-
-
-class HostRecolour:
-    """A window's winners on the OpenCL device (`chronocl.engine.device.get_context`), in
-    spans of voxels whose buffers each fit the device's largest (`chronocl.engine.buffers`)."""
-
-    def __init__(self, w: Winners, device: str | None = None, start=None) -> None:
-        """`start`: the RGBA8 the window shows (`shown_output`), written over by the first
-        `recolour` with `reuse`: the edit takes no memory beside it."""
-        from chronocl.engine.buffers import buffer, max_alloc, spans
-        from chronocl.engine.device import get_context
-
-        self.w = w
-        self.dc = get_context(device)
-        self._u, self._k = aligned(w.u), aligned(w.k)
-        self._spare: list[np.ndarray] = []  # the last result, with `reuse`
-        if shown_output(start, w.u.shape):
-            self._spare.append(start)
-        u, k, cpu = self._u.reshape(-1), self._k.reshape(-1), self.dc.is_cpu
-        # (first voxel, end, u, k) a span; float32 RGBA out, 16 bytes a voxel, decides the spans
-        self.parts = [
-            (a, b, buffer(self.dc, u[a:b], in_place=cpu), buffer(self.dc, k[a:b], in_place=cpu))
-            for a, b in spans(u.size, 16, max_alloc(self.dc), multiple=RUN)
-        ]
-
-    def _kernel(self, rgba8: bool):
-        from chronocl.engine.program import kernel
-
-        defines = recolour_defines(self._k.dtype, rgba8)
-        return kernel(self.dc, "recolour.cl", "recolour", defines, common=RECOLOUR_H)
-
-    def recolour(self, spec: IntegrationSpec, fmt: str = "f1", reuse: bool = False) -> np.ndarray:
-        """Premultiplied RGBA (Z, Y, X, 4) of the winners under `spec`: uint8 for "f1"
-        (RGBA8, rounded as the display conversion rounds), float32 for "f4". With `reuse`
-        the result is written over the last one (the viewer has uploaded that into its
-        texture, and reads it on this thread only): a fresh 512 MB array costs more in page
-        faults than the kernel's work, and a second one more memory."""
-        import pyopencl as cl
-
-        from chronocl.engine.buffers import DeviceWork
-
-        w = self.w
-        rgba8 = fmt == "f1"
-        dtype = np.uint8 if rgba8 else np.float32
-        spare = self._spare.pop() if reuse and self._spare else None
-        if spare is None or spare.dtype != dtype:
-            spare = aligned_empty((*w.u.shape, 4), dtype)
-        out = spare
-        if reuse:
-            self._spare.append(out)
-        lut = np.ascontiguousarray(spec.data_tf.lut, dtype=np.float32)
-        table = step_table(spec, w.steps, w.n_steps)
-        flat, cpu = out.reshape(-1, 4), self.dc.is_cpu
-        with DeviceWork(self.dc) as work:
-            lut_buf, table_buf = work.buffer(lut), work.buffer(table)
-            kern = self._kernel(rgba8)  # shared: its arguments are set under the device's lock
-            for a, b, u_buf, k_buf in self.parts:
-                out_buf = work.buffer(flat[a:b], access="w", in_place=cpu)
-                kern.set_args(
-                    u_buf, k_buf, lut_buf, np.int32(lut.shape[0]), table_buf,
-                    np.uint32(w.none), out_buf, np.uint64(b - a),
-                )  # fmt: skip
-                cl.enqueue_nd_range_kernel(self.dc.queue, kern, (-(-(b - a) // RUN),), None)
-                work.read(flat[a:b], out_buf, cpu)  # on a CPU the host pointer holds it, mapped
-        return out
-
-    def release(self) -> None:
-        for *_, u, k in self.parts:
-            u.release()
-            k.release()
-        self.parts = []
-        self._spare = []

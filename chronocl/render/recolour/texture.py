@@ -1,10 +1,11 @@
-"""Writing a brick-wise recolour (chronocl/render/recolour_bricks.py) into its texture.
+"""What a recolouring changed, put into its display texture (`show`, on the GL thread).
 
-Only the bricks that may differ from what the texture holds go up: per z-slab of bricks, the
-box of those bricks, read in place from the RGBA8 array (GL's unpack row length and image
-height; moderngl writes only contiguous boxes, so glTexSubImage3D and glPixelStorei are
-called through eglGetProcAddress). A 512^3 texture is 512 MB; a TF edit of the vortex
-changes a fifth of its bricks.
+Both recolourers give their occupied box and brick grid, which become the `Volume`'s; the
+brick-wise one's RGBA8 lies on the host, and only the bricks that may differ from what the
+texture holds go up: per z-slab of bricks, the box of those bricks, read in place from the
+array (GL's unpack row length and image height; moderngl writes only contiguous boxes, so
+glTexSubImage3D and glPixelStorei are called through eglGetProcAddress). A 512^3 texture is
+512 MB; a TF edit of the vortex changes a fifth of its bricks.
 """
 
 from __future__ import annotations
@@ -15,7 +16,9 @@ from functools import cache
 import numpy as np
 
 from chronocl.render import brick_grid
-from chronocl.render.recolour_bricks import B, Sparse
+from chronocl.render.recolour import Changed, occupied_corners, volume_geometry
+
+B = brick_grid.BRICK
 
 
 def upload_boxes(changed: np.ndarray, dims: tuple[int, int, int]) -> list[tuple[int, ...]]:
@@ -83,17 +86,16 @@ def write_boxes(ctx, texture, rgba: np.ndarray, boxes) -> None:
         store(GL_UNPACK_IMAGE_HEIGHT, 0)
 
 
-def show(ctx, vol, sp: Sparse, held: np.ndarray | None, spacing) -> None:
-    """Write `sp` into the RGBA8 `vol` (a `chronocl.render.raycaster.Volume` of its size)
-    where it may differ from what the texture holds: `held` the bricks that may be coloured
-    there (the `coloured` of the result it holds), None: unknown, the whole texture. Sets
-    its world box, occupied box and brick grid. Call it on the thread owning `ctx`."""
-    from chronocl.render.recolour import occupied_corners, volume_geometry
-
-    nz, ny, nx, _ = sp.rgba.shape
-    changed = np.ones_like(sp.coloured) if held is None else sp.coloured | held
-    write_boxes(ctx, vol.texture, sp.rgba, upload_boxes(changed, (nx, ny, nz)))
-    extent, voxel = volume_geometry((nx, ny, nz), spacing)
+def show(ctx, changed: Changed, spacing, held: np.ndarray | None = None) -> None:
+    """Put `changed` into its `Volume`: the host RGBA8's bricks that may differ from what the
+    texture holds (`held`: the bricks that may be coloured there, the `coloured` of the result
+    it holds; None: unknown, the whole texture), its world box, occupied box and brick grid."""
+    vol = changed.volume
+    dims = tuple(vol.texture.size)  # x, y, z
+    if changed.rgba is not None:
+        redo = np.ones_like(changed.coloured) if held is None else changed.coloured | held
+        write_boxes(ctx, vol.texture, changed.rgba, upload_boxes(redo, dims))
+    extent, voxel = volume_geometry(dims, spacing)
     vol.extent, vol.unit = extent, float(np.min(voxel))
-    vol.occupied = occupied_corners(sp.bounds, (nx, ny, nz), extent, voxel)
-    vol.bricks = brick_grid.texture(ctx, sp.bricks, vol.bricks)
+    vol.occupied = occupied_corners(changed.bounds, dims, extent, voxel)
+    vol.bricks = brick_grid.texture(ctx, changed.bricks, vol.bricks)
