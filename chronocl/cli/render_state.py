@@ -1,7 +1,9 @@
 """`chronocl render --state SESSION.json`: draw what the viewer showed when the session was
 saved (same data set, window, views, camera, transfer functions, clip, box outline, size), as
-the viewer's Save PNG draws it. Options given on the command line override the session's
-fields; the axis triad is drawn only when --axes is given (the Save PNG has none)."""
+the viewer's Save PNG draws it: each view with its own window, camera and TFs where it had them.
+Options given on the command line override the session's fields (a camera option every view's
+camera, a TF option every view's TF); the axis triad is drawn only when --axes is given (the
+Save PNG has none)."""
 
 from __future__ import annotations
 
@@ -74,8 +76,12 @@ def render_state(state_path: Path, options: dict) -> None:
     if "shading" in options or "shading_params" in options:
         lit = parse_shading(options.get("shading", False), options.get("shading_params"))
         replace["shading"] = lit
-    if "frame" in options:
+    if "frame" in options:  # the shared camera and each view's own
         replace["camera"] = dataclasses.replace(state.camera, frame=options["frame"])
+        replace["view_cameras"] = tuple(
+            None if c is None else dataclasses.replace(c, frame=options["frame"])
+            for c in state.view_cameras
+        )
     state = dataclasses.replace(state, **replace)
     time_labels = options.get("time_labels", "labels")
     check_prefer(time_labels)
@@ -145,10 +151,14 @@ def _session_fields(session: dict, options: dict) -> dict:
         from chronocl.render.camera import Camera
 
         Camera(up=options["up"])  # an unknown axis is named as on the command line
-    for key in ("azimuth", "elevation", "zoom", "projection", "up"):
-        if key in options:
-            camera[key] = options[key]
-    fields["camera"] = camera
+    given_camera = {
+        k: options[k] for k in ("azimuth", "elevation", "zoom", "projection", "up") if k in options
+    }
+    fields["camera"] = camera | given_camera
+    if given_camera:  # a view's own camera takes them too
+        for v in views:
+            if v.get("camera") is not None:
+                v["camera"] = dict(v["camera"]) | given_camera
     if "enhance" in options:
         fields["enhance"] = {"kind": options["enhance"]}
     if "threshold" in options:

@@ -181,7 +181,8 @@ class EventTasks:
         if msg.get("by", "opacity") == "value":
             mask: dict = {"threshold": msg["value"]}
         else:
-            mask = {"tf": state.data_tf, "opacity": msg.get("opacity", 0.1)}
+            # the view's data TF: its own where it has one
+            mask = {"tf": state.data_tf_of(view), "opacity": msg.get("opacity", 0.1)}
         try:
             with interruptible(given_up, progress):
                 job = prepare(
@@ -232,9 +233,10 @@ class EventTasks:
             found, show, track = self._events_found, self._events_markers, self._events_track
         if not show or found is None or found[0] != state.dataset:
             return panels
-        graph, cache, camera = found[1], found[4], state.panel_camera()
+        graph, cache = found[1], found[4]
         out = []
-        for panel, cv in zip(panels, cvs, strict=False):
+        for i, (panel, cv) in enumerate(zip(panels, cvs, strict=False)):
+            camera = state.panel_camera(i)  # its own camera where it has one
             if cv is None:
                 out.append(panel)
                 continue

@@ -24,14 +24,21 @@ from chronocl.viewer.view_state import ViewState
 def movie_states(state: ViewState, kind: str, frames: int, n_steps: int) -> list[ViewState]:
     """The view states of a movie's frames.
 
-    orbit: `frames` cameras a full turn apart in azimuth, the window as shown. play: the
+    orbit: `frames` cameras a full turn apart in azimuth (each view's own camera turning as
+    the shared one), the window as shown. play: the
     window, keeping its length and stride, slid one stride at a time from the series' first
     step until it reaches the last (at most MAX_MOVIE_FRAMES positions), the camera as shown.
     """
     state = dataclasses.replace(state, quality="full")
     if kind == "orbit":
         return [
-            dataclasses.replace(state, camera=state.camera.orbited(360.0 * i / frames))
+            dataclasses.replace(
+                state,
+                camera=state.camera.orbited(360.0 * i / frames),
+                view_cameras=tuple(
+                    None if c is None else c.orbited(360.0 * i / frames) for c in state.view_cameras
+                ),
+            )
             for i in range(frames)
         ]
     if kind != "play":

@@ -137,7 +137,7 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     rectangle meet (a grid of up to BOX_RAYS x BOX_RAYS rays), so a box drawn around a feature
     from empty space probes the feature; only a rectangle whose rays all miss is refused.
     """
-    camera = state.panel_camera()
+    camera = state.panel_camera(view)  # its own camera where it has one
     box_drag = "x2" in msg and "y2" in msg
     rays = _rectangle_rays(msg, state.size) if box_drag else [(msg["x"], msg["y"])]
     hits = [probe_ray(cv, camera, state.size, x, y, state.clip) for x, y in rays]

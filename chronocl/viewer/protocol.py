@@ -76,7 +76,7 @@ from chronocl.viewer.schema import (
 )
 
 MAX_MESSAGE_BYTES = 64 * 1024
-MAX_DEPTH = 8  # the deepest message (update.data_tf.points[i][j]) nests 4 containers
+MAX_DEPTH = 8  # the deepest message (update.views[i].data_tf.points[i][j]) nests 6 containers
 MAX_VIEWS = 4
 MAX_TF_POINTS = 64
 MIN_PANEL, MAX_PANEL = 64, 1024
@@ -125,9 +125,7 @@ WINDOW = Obj(
     {"t0": Int(0, 10**7), "t1": Int(1, 10**7), "stride": Int(1, 10**7)},
     frozenset({"t0", "t1"}),
 )
-# A view's own window (null: it follows the shared one), to compare two periods side by side.
 MODE = Enum(modes.names())
-VIEW = Obj({"mode": MODE, "order": Enum(ORDERS), "window": Nullable(WINDOW)}, frozenset({"mode"}))
 DATA_TF = Obj(
     {
         "points": List(List(Num(0.0, 1.0), 5, 5), 1, MAX_TF_POINTS),
@@ -147,6 +145,21 @@ TIME_TF = Obj(
         "floor": Num(0.0, 1.0),
         "positions": Enum(tf.TIME_POSITIONS),
     }
+)
+# A view: its mode and order, and its own window, camera, data TF and time TF, each null (or
+# left out) where the view follows the shared one (linked): two periods, two viewpoints or two
+# colourings side by side. An own camera or time TF given in part takes the rest from the
+# shared one; an own data TF is whole, as the shared one.
+VIEW = Obj(
+    {
+        "mode": MODE,
+        "order": Enum(ORDERS),
+        "window": Nullable(WINDOW),
+        "camera": Nullable(CAMERA),
+        "data_tf": Nullable(DATA_TF),
+        "time_tf": Nullable(TIME_TF),
+    },
+    frozenset({"mode"}),
 )
 ENHANCE = Obj(
     {
@@ -177,8 +190,8 @@ ID = Int(0, 2**53)
 SIZE = List(Int(MIN_PANEL, MAX_PANEL), 2, 2)
 
 # A saved session (the viewer's Save session, the URL fragment, `chronocl render --state`):
-# the state fields of an update message plus the data set and the format's version. Camera,
-# enhancement and lighting are shared by the views, as in the viewer.
+# the state fields of an update message plus the data set and the format's version. Enhancement
+# and lighting are shared by the views; a view's own window, camera and TFs are in `views`.
 SESSION_VERSION = 1
 SESSION_KEY = "chronocl_session"
 # What a frame depends on, as the update message and a session file both give it.

@@ -9,8 +9,11 @@ draws it. Its fields are the state fields of the protocol's update message (chec
     {"chronocl_session": 1,
      "dataset": {"name": "vortex", "path": "/data/vortex.zarr", "shape": [30, 96, 96, 96]},
      "window": {"t0": 10, "t1": 20, "stride": 1},
-     "views": [{"mode": "alpha", "order": "forward", "window": null},
-               {"mode": "alpha", "order": "forward", "window": {"t0": 40, "t1": 50}}],
+     "views": [{"mode": "alpha", "order": "forward", "window": null, "camera": null,
+                "data_tf": null, "time_tf": null},
+               {"mode": "alpha", "order": "forward", "window": {"t0": 40, "t1": 50},
+                "camera": {"azimuth": 120, "elevation": -10, "zoom": 1.5, ...},
+                "data_tf": null, "time_tf": {"alpha": "hat", ...}}],
      "camera": {"azimuth": 30, "elevation": 20, "zoom": 1.2, "fov": 30,
                 "projection": "perspective", "up": "y"},
      "data_tf": {"points": [[0, 1, 1, 1, 0], [1, 1, 1, 1, 0.9]]},
@@ -19,9 +22,10 @@ draws it. Its fields are the state fields of the protocol's update message (chec
      "size": [512, 512], "background": "black", "outline": false,
      "shading": {"enabled": false, ...}, "focus": [-0.3, -0.4, -0.5, 0.3, 0.4, 0.5]}
 
-A view's `window` is its own (to compare two periods side by side); null follows the shared
-`window`. Camera, enhancement and lighting are shared by the views (the viewer draws its views under
-one camera). `focus` is the world box the camera framed (the viewer frames the visible region
+A view's `window`, `camera`, `data_tf` and `time_tf` are its own (to compare two periods, two
+viewpoints or two colourings side by side); null (or left out) follows the shared one (linked).
+An own camera frames the shared camera's focus. Enhancement and lighting are shared by the
+views. `focus` is the world box the camera framed (the viewer frames the visible region
 of a data set's first frame, or of the frame after a camera reset, and keeps it while the
 window moves); null frames the visible region of the session's own chronovolumes.
 """
@@ -209,13 +213,13 @@ def render_session(
     rc = raycaster()
     bg = parse_color(state.background)
     panels = []
-    for cv in cvs:
+    for i, cv in enumerate(cvs):
         volume = rc.upload(cv)
         try:
             panels.append(
                 rc.draw(
                     volume,
-                    state.panel_camera(),
+                    state.panel_camera(i),  # its own camera where it has one
                     state.size,
                     background=bg,
                     clip=state.clip,
@@ -225,7 +229,7 @@ def render_session(
                 )
             )
             if axes:
-                panels[-1] = draw_triad(panels[-1], state.panel_camera())
+                panels[-1] = draw_triad(panels[-1], state.panel_camera(i))
         finally:
             volume.release()
     labels = [describe(cv) for cv in cvs]

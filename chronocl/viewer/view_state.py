@@ -38,6 +38,12 @@ class ViewState:
     # Each view's own window (t0, t1, stride), or None where it follows `window` (linked);
     # as long as `views` or shorter (views past its end are linked).
     view_windows: tuple[tuple[int, int, int] | None, ...] = ()
+    # Each view's own camera, data TF and time TF, or None where it follows the shared one
+    # (linked), as `view_windows`: two viewpoints or two colourings side by side. An own
+    # camera frames what the shared one frames (its `focus` is the shared camera's).
+    view_cameras: tuple[Camera | None, ...] = ()
+    view_data_tfs: tuple[DataTF | None, ...] = ()
+    view_time_tfs: tuple[dict | None, ...] = ()
     data_tf: DataTF = field(default_factory=lambda: DataTF(value_range=VIEWER_RANGE))
     time_tf: dict = field(
         default_factory=lambda: {
@@ -70,21 +76,36 @@ class ViewState:
 
     def own_window(self, view: int | None) -> tuple[int, int, int] | None:
         """`view`'s own window, None where it is linked to the shared one."""
-        if view is None or view >= len(self.view_windows):
-            return None
-        return self.view_windows[view]
+        return _own(self.view_windows, view)
 
-    def panel_camera(self) -> Camera:
-        """The camera as the panels are drawn: on a panel taller than wide the camera's field
-        of view spans the panel's width instead of its height (zoom scaled by w / h), so the
-        box fits across a tall panel as it fits down a wide one."""
+    def camera_of(self, view: int | None = None) -> Camera:
+        """The camera `view` is drawn with: its own (framing the shared camera's focus), else
+        the shared one."""
+        own = _own(self.view_cameras, view)
+        return self.camera if own is None else dataclasses.replace(own, focus=self.camera.focus)
+
+    def data_tf_of(self, view: int | None = None) -> DataTF:
+        """`view`'s own data TF, else the shared one."""
+        own = _own(self.view_data_tfs, view)
+        return self.data_tf if own is None else own
+
+    def time_tf_of(self, view: int | None = None) -> dict:
+        """`view`'s own time TF (the page's fields), else the shared one."""
+        own = _own(self.view_time_tfs, view)
+        return self.time_tf if own is None else own
+
+    def panel_camera(self, view: int | None = None) -> Camera:
+        """`view`'s camera (none: the shared one) as the panels are drawn: on a panel taller
+        than wide the camera's field of view spans the panel's width instead of its height
+        (zoom scaled by w / h), so the box fits across a tall panel as it fits down a wide one."""
+        camera = self.camera_of(view)
         w, h = self.size
         if w >= h:
-            return self.camera
-        return dataclasses.replace(self.camera, zoom=self.camera.zoom * w / h)
+            return camera
+        return dataclasses.replace(camera, zoom=camera.zoom * w / h)
 
-    def time_tf_object(self) -> TimeTF:
-        t = self.time_tf
+    def time_tf_object(self, view: int | None = None) -> TimeTF:
+        t = self.time_tf_of(view)
         color = (
             TimeColor("luminance", focus=t["focus"], falloff=t["falloff"])
             if t["color"] == "luminance"
@@ -103,12 +124,12 @@ class ViewState:
         e = self.enhance
         kwargs = {k: e[k] for k in ("k0", "k1", "k2") if e.get(k) is not None}
         if e["kind"] == "silhouette":
-            kwargs["view"] = view_dir or self.camera.view_direction()
+            kwargs["view"] = view_dir or self.camera_of(view).view_direction()
         return IntegrationSpec(
             mode=mode,
             order=order,
-            data_tf=self.data_tf,
-            time_tf=self.time_tf_object(),
+            data_tf=self.data_tf_of(view),
+            time_tf=self.time_tf_object(view),
             enhance=Enhance(e["kind"], **kwargs),
             threshold=self.threshold,
         )
@@ -128,32 +149,22 @@ def merge(state: ViewState, msg: dict, n_steps: int) -> ViewState:
     if "camera" in msg:
         cam = dataclasses.asdict(state.camera) | msg["camera"]
         changes["camera"] = Camera(**cam)
-    if "views" in msg:
-        changes["views"] = tuple((v["mode"], v.get("order", ORDERS[0])) for v in msg["views"])
-        own = []
-        for i, v in enumerate(msg["views"]):
-            w = v.get("window")
-            if w is not None:
-                w = (w["t0"], w["t1"], w.get("stride", 1))
-                try:
-                    Selection.window(*w, n_steps)
-                except ChronoclError as exc:
-                    raise type(exc)(f"view {i + 1}'s own window: {exc}") from None
-            own.append(w)
-        changes["view_windows"] = tuple(own)
     if "window" in msg:
         w = msg["window"]
         window = (w["t0"], w["t1"], w.get("stride", 1))
         Selection.window(*window, n_steps)  # validates
         changes["window"] = window
     if "data_tf" in msg:
-        d = msg["data_tf"]
-        vr = d.get("value_range")
-        changes["data_tf"] = DataTF(
-            points=d["points"], value_range=tuple(vr) if vr else VIEWER_RANGE
-        )
+        changes["data_tf"] = _data_tf(msg["data_tf"])
     if "time_tf" in msg:
         changes["time_tf"] = state.time_tf | msg["time_tf"]
+    if "views" in msg:  # after the shared camera and TFs: an own one given in part takes theirs
+        changes |= _views(
+            msg["views"],
+            changes.get("camera", state.camera),
+            changes.get("time_tf", state.time_tf),
+            n_steps,
+        )
     if "enhance" in msg:
         e = msg["enhance"]
         kind = e.get("kind", state.enhance["kind"])
@@ -178,27 +189,63 @@ def merge(state: ViewState, msg: dict, n_steps: int) -> ViewState:
         changes["shading"] = Shading.from_dict(state.shading.to_dict() | msg["shading"])
     new = dataclasses.replace(state, **changes)
     new.time_tf_object()  # validates
+    for view in range(len(new.view_time_tfs)):
+        new.time_tf_object(view)  # each view's own
     if "enhance" in msg:
         new.spec(0)  # validates the enhancement parameters
     return new
 
 
+def _views(views: list[dict], camera: Camera, time_tf: dict, n_steps: int) -> dict:
+    """The `views` of an update: modes and orders, and each view's own window, camera, data TF
+    and time TF (None where it is linked); an own camera or time TF given in part takes the
+    rest from the shared `camera` or `time_tf`."""
+    windows, cameras, data_tfs, time_tfs = [], [], [], []
+    for i, v in enumerate(views):
+        w = v.get("window")
+        if w is not None:
+            w = (w["t0"], w["t1"], w.get("stride", 1))
+            try:
+                Selection.window(*w, n_steps)
+            except ChronoclError as exc:
+                raise type(exc)(f"view {i + 1}'s own window: {exc}") from None
+        windows.append(w)
+        c = v.get("camera")
+        own = None if c is None else dataclasses.asdict(camera) | c | {"focus": None}
+        cameras.append(None if own is None else Camera(**own))  # (it frames the shared focus)
+        d = v.get("data_tf")
+        data_tfs.append(None if d is None else _data_tf(d))
+        t = v.get("time_tf")
+        time_tfs.append(None if t is None else time_tf | t)
+    return {
+        "views": tuple((v["mode"], v.get("order", ORDERS[0])) for v in views),
+        "view_windows": tuple(windows),
+        "view_cameras": tuple(cameras),
+        "view_data_tfs": tuple(data_tfs),
+        "view_time_tfs": tuple(time_tfs),
+    }
+
+
+def _data_tf(d: dict) -> DataTF:
+    vr = d.get("value_range")
+    return DataTF(points=d["points"], value_range=tuple(vr) if vr else VIEWER_RANGE)
+
+
 def describe_state(state: ViewState) -> dict:
     """The state in the protocol's terms (the page starts from it)."""
-    cam = state.camera
     e = state.enhance
     spec = state.spec(0)
     return {
-        "camera": {
-            "azimuth": cam.azimuth,
-            "elevation": cam.elevation,
-            "zoom": cam.zoom,
-            "fov": cam.fov,
-            "projection": cam.projection,
-            "up": cam.up,
-        },
+        "camera": _camera_dict(state.camera),
         "views": [
-            {"mode": m, "order": o, "window": _window_dict(state.own_window(i))}
+            {
+                "mode": m,
+                "order": o,
+                "window": _window_dict(state.own_window(i)),
+                "camera": _maybe(_camera_dict, _own(state.view_cameras, i)),
+                "data_tf": _maybe(_data_tf_dict, _own(state.view_data_tfs, i)),
+                "time_tf": _maybe(dict, _own(state.view_time_tfs, i)),
+            }
             for i, (m, o) in enumerate(state.views)
         ],
         "window": dict(zip(("t0", "t1", "stride"), state.window, strict=True)),
@@ -218,6 +265,26 @@ def describe_state(state: ViewState) -> dict:
         "background": state.background,
         "outline": state.outline,
         "shading": state.shading.to_dict(),
+    }
+
+
+def _own(items: tuple, view: int | None):
+    """`items[view]`: a view's own window, camera or TF; None where it has none (linked)."""
+    return None if view is None or view >= len(items) else items[view]
+
+
+def _maybe(describe, value):
+    return None if value is None else describe(value)
+
+
+def _camera_dict(cam: Camera) -> dict:
+    return {
+        "azimuth": cam.azimuth,
+        "elevation": cam.elevation,
+        "zoom": cam.zoom,
+        "fov": cam.fov,
+        "projection": cam.projection,
+        "up": cam.up,
     }
 
 

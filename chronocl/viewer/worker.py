@@ -339,7 +339,7 @@ class ClientWorker(Tasks):
         panels = [
             rc.draw(
                 slot.volume,
-                state.panel_camera(),
+                state.panel_camera(i),  # its own camera where it has one
                 size,
                 background=bg,
                 clip=state.clip,
@@ -348,7 +348,7 @@ class ClientWorker(Tasks):
                 shading=state.shading,
                 stop=given_up,
             )
-            for slot in self.views.slots[: len(cvs)]
+            for i, slot in enumerate(self.views.slots[: len(cvs)])
         ]
         for slot in self.views.slots[len(cvs) :]:
             slot.release_gl()
@@ -497,7 +497,12 @@ class ClientWorker(Tasks):
                 )
             ],
             "probe": self._probe_mark(state, cvs),
-            "clip_outline": clip_outline(cvs[0], state.panel_camera(), state.size, state.clip),
+            "clip_outline": clip_outline(cvs[0], state.panel_camera(0), state.size, state.clip),
+            # each view's, under its own camera (the same where the cameras are linked)
+            "clip_outlines": [
+                clip_outline(cv, state.panel_camera(i), state.size, state.clip)
+                for i, cv in enumerate(cvs)
+            ],
             "legend": legend(cvs[0]),
             "legends": [legend(cv) for cv in cvs],  # a view with its own window has its own
             "colorbars": [colour_bar(cv) for cv in cvs],  # null where the data TF is white
@@ -544,5 +549,5 @@ class ClientWorker(Tasks):
         if self._probed is None or self._probed[0] >= len(cvs):
             return None
         view, where = self._probed
-        at = project(cvs[view], state.panel_camera(), state.size, where)
+        at = project(cvs[view], state.panel_camera(view), state.size, where)
         return None if at is None else {"view": view, "x": at[0], "y": at[1]}

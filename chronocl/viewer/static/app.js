@@ -19,7 +19,7 @@
 //   controls.js    the other controls, filled from the server's choices
 //   shading.js     the lighting toggle and strengths
 
-import { connect, disconnect, frameArrived, send, update } from './connection.js';
+import { connect, disconnect, frameArrived, send, shown, update } from './connection.js';
 import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
 import {
   bindEvents, clearEvents, drawTrack, eventsFailed, eventsProbed, eventsProgress, fillEvents, onEvents,
@@ -92,14 +92,14 @@ function onDataset(msg) {
   S.info = msg;
   S.state = msg.state;
   S.zoom = [0, 1];
-  S.selectedPoint = Math.min(1, S.state.data_tf.points.length - 1);
+  S.selectedPoint = Math.min(1, shown('data_tf').points.length - 1);
   S.initialCamera = { ...(msg.opening_camera || msg.state.camera) };
   if (!restore) S.fits = msg.fitted ? [msg.fitted] : []; // a data set opens fitted to its window
   if (restore) {
     // Every field the server describes, as the page had it before the socket closed.
     for (const k of Object.keys(msg.state)) if (k in restore.state) S.state[k] = restore.state[k];
     S.zoom = restore.zoom;
-    S.selectedPoint = Math.min(restore.point, S.state.data_tf.points.length - 1);
+    S.selectedPoint = Math.min(restore.point, shown('data_tf').points.length - 1);
     if (restore.camera) S.initialCamera = restore.camera;
   }
   const restored = restore ? { ...S.state } : null;
@@ -141,7 +141,7 @@ function onState(msg) {
   const views = fields.views && fields.views.length !== S.state.views.length;
   Object.assign(S.state, fields);
   S.selectedView = Math.min(S.selectedView, S.state.views.length - 1);
-  S.selectedPoint = Math.min(S.selectedPoint, S.state.data_tf.points.length - 1);
+  S.selectedPoint = Math.min(S.selectedPoint, shown('data_tf').points.length - 1);
   if (views) update({ size: layoutViews(), views: S.state.views });
   else layoutViews();
   syncControls();
@@ -235,7 +235,14 @@ export function start(host, transport) {
   const observer = new ResizeObserver(relayout);
   window.addEventListener('resize', relayout);
   observer.observe($('views'));
-  bindViews(page, relayout);
+  // A view selected (a click on its picture, a link toggled): the editors show what it is
+  // drawn with, its own camera and TFs where it has them.
+  bindViews(page, relayout, () => {
+    S.selectedPoint = Math.min(S.selectedPoint, shown('data_tf').points.length - 1);
+    syncControls();
+    drawTF();
+    drawTriads();
+  });
   bindProbe(page);
   bindEvents(page);
   $('side-toggle').addEventListener('click', () => {

@@ -161,12 +161,42 @@ export function onEdited(fn) {
 }
 let pending = null;
 let pendingQuality = 'full';
-export function update(fields, quality = 'full', merge = false) {
+// `view`: the view whose camera, data TF or time TF the fields edit (default: the selected
+// one); where it has its own (unlinked) they go to its own copy, in `views`, else to the shared.
+export function update(fields, quality = 'full', merge = false, view = S.selectedView) {
+  fields = routed(fields, view);
   pending = Object.assign(pending || {}, fields);
   pendingQuality = quality;
   Object.assign(S.state, fields);
   if (edited) edited(quality, merge);
   requestAnimationFrame(flush);
+}
+
+// What a view may have of its own instead of the shared one (null in its entry: linked).
+export const LINKABLE = ['camera', 'data_tf', 'time_tf'];
+
+// The camera, data TF or time TF (`key`) view `i` (default: the selected one) is drawn with: its
+// own where it is unlinked, else the shared one. The editors and drags read and edit this one.
+export function shown(key, i = S.selectedView) {
+  const v = S.state.views[i];
+  return (v && v[key]) || S.state[key];
+}
+
+// `fields` with a camera, data TF or time TF for `view` moved into its entry of `views` where
+// the view has its own of it (the other views as they are). Fields that give `views` give the
+// whole state (undo, a session, a reconnect): their camera and TFs are the shared ones.
+function routed(fields, view) {
+  const v = S.state && S.state.views[view];
+  const own = LINKABLE.filter((k) => k in fields && v && v[k]);
+  if (!own.length || 'views' in fields) return fields;
+  const out = { ...fields };
+  const views = S.state.views.map((x) => ({ ...x }));
+  for (const k of own) {
+    views[view][k] = out[k];
+    delete out[k];
+  }
+  out.views = views;
+  return out;
 }
 
 function flush() {

@@ -2,7 +2,7 @@
 // enhancement, threshold, slicing plane, save. Their menus, defaults and bounds come from the
 // server's `info` message (`fillControls`), so nothing here copies a list from the server.
 
-import { send, update } from './connection.js';
+import { LINKABLE, send, shown, update } from './connection.js';
 import { $ } from './state.js';
 import { syncPointColor } from './tf_editor.js';
 import { fillSelect, layoutViews } from './views.js';
@@ -38,14 +38,22 @@ export function fillControls(c) {
 export function syncControls() {
   const st = S.state;
   $('nviews').value = st.views.length;
-  $('projection').value = st.camera.projection;
-  $('up').value = st.camera.up;
+  const camera = shown('camera'); // the selected view's (its own where it has one)
+  $('projection').value = camera.projection;
+  $('up').value = camera.up;
   $('background').value = st.background;
   $('outline').checked = st.outline;
-  $('time-color').value = st.time_tf.color;
-  $('time-alpha').value = st.time_tf.alpha;
-  for (const p of TIME_PARAMS) $(`t-${p}`).value = st.time_tf[p];
-  $('positions').value = st.time_tf.positions;
+  const t = shown('time_tf'); // the selected view's (its own where it has one)
+  $('time-color').value = t.color;
+  $('time-alpha').value = t.alpha;
+  for (const p of TIME_PARAMS) $(`t-${p}`).value = t[p];
+  $('positions').value = t.positions;
+  // whose TF the editors edit: the selected view's own, where it has one
+  for (const k of ['time_tf', 'data_tf']) {
+    const own = !!(st.views[S.selectedView] || {})[k];
+    $(`own-${k}`).hidden = !own;
+    $(`own-${k}`).textContent = own ? `· view ${S.selectedView + 1}'s own` : '';
+  }
   $('enhance').value = st.enhance.kind;
   $('k0').value = st.enhance.k0;
   $('k1').value = st.enhance.k1;
@@ -64,17 +72,20 @@ export function syncControls() {
 
 // Only the sliders the chosen opacity shape reads are enabled.
 function syncTimeControls() {
-  const shape = S.choices.time_alphas.find((a) => a.name === S.state.time_tf.alpha);
+  const shape = S.choices.time_alphas.find((a) => a.name === shown('time_tf').alpha);
   const used = new Set(shape ? shape.params : []);
   for (const p of TIME_PARAMS) $(`t-${p}`).disabled = !used.has(p);
 }
 
-// A new view is a copy of the selected view (else the last): its mode and order, under the
-// transfer functions every view shares, so two windows of one mode compare at once (type a
-// window into the new view's header). It follows the timeline's window.
+// A new view is a copy of the selected view (else the last): its mode and order, and its
+// camera, data TF and time TF (a copy of its own where it has one, else linked, as it is), so
+// two windows of one mode compare at once (type a window into the new view's header). It
+// follows the timeline's window.
 function newView(views) {
   const from = views[S.selectedView] || views[views.length - 1];
-  return { mode: from.mode, order: from.order || S.choices.orders[0] };
+  const view = { mode: from.mode, order: from.order || S.choices.orders[0] };
+  for (const k of LINKABLE) view[k] = from[k] ? JSON.parse(JSON.stringify(from[k])) : null;
+  return view;
 }
 
 const within = (v, [lo, hi]) => Number.isFinite(v) && v >= lo && v <= hi;
@@ -92,7 +103,7 @@ export function bindControls(page) {
     update({ views, size });
   });
   $('projection').addEventListener('change', () =>
-    update({ camera: { ...S.state.camera, projection: $('projection').value } }));
+    update({ camera: { ...shown('camera'), projection: $('projection').value } }));
   $('background').addEventListener('change', () => update({ background: $('background').value }));
   $('outline').addEventListener('change', () => update({ outline: $('outline').checked }));
 
@@ -103,7 +114,7 @@ export function bindControls(page) {
       positions: $('positions').value,
     };
     for (const p of TIME_PARAMS) t[p] = Number($(`t-${p}`).value);
-    update({ time_tf: Object.assign({}, S.state.time_tf, t) }, quality);
+    update({ time_tf: Object.assign({}, shown('time_tf'), t) }, quality);
     syncTimeControls();
   };
   for (const id of ['time-color', 'time-alpha', 'positions']) $(id).addEventListener('change', () => timeTF('full'));

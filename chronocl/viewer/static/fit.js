@@ -16,7 +16,7 @@
 // "series range" spreads the curve over the series' whole range as it is drawn, so points can
 // go beyond the fitted range.
 
-import { send, update } from './connection.js';
+import { send, shown, update } from './connection.js';
 import { $, setStatus } from './state.js';
 import { dataTF, drawTF, handles, interp, noteRange, setHandles, syncPointColor, toAxis } from './tf_editor.js';
 
@@ -61,7 +61,7 @@ export const fitToWindow = () => requestFit(S.selectedView, null, false);
 // The default curve fitted again to the first view's mode (after a mode change; after a
 // reconnect that lost the reply, once the page's state is restored).
 export function refitMode() {
-  if (isDefaultCurve(S.state.data_tf.points)) requestFit(0, S.state.views[0].mode, true);
+  if (isDefaultCurve(shown('data_tf', 0).points)) requestFit(0, S.state.views[0].mode, true);
 }
 
 // A change of a view's mode (`views`: every view, the new mode in): sent at once, then the
@@ -76,14 +76,16 @@ export function onFit(msg) {
   const w = waits.get(msg.id);
   if (!w) return;
   waits.delete(msg.id);
-  if (w.auto && !(S.state.views[0].mode === msg.mode && isDefaultCurve(S.state.data_tf.points))) {
+  if (w.auto && !(S.state.views[0].mode === msg.mode && isDefaultCurve(shown('data_tf', 0).points))) {
     return; // the mode changed again (its own fit follows) or the curve was edited
   }
   S.fits.push({ range: msg.range, window: msg.window, mode: msg.mode });
   if (S.fits.length > 50) S.fits.shift();
   // A refit with no edit since its mode change: in that change's undo step.
   const merge = w.auto && viewer.history.commits === w.commits;
-  update({ data_tf: dataTF(S.state.data_tf.points, msg.range) }, 'full', merge);
+  // the fitted view's data TF: its own where it has one, else the shared one
+  const fitted = { data_tf: dataTF(shown('data_tf', msg.view).points, msg.range) };
+  update(fitted, 'full', merge, msg.view);
   syncPointColor();
   drawTF();
   if (!w.auto) setStatus(`data TF fitted to view ${msg.view + 1} (${msg.mode}, window ${msg.window.slice(0, 2).join(':')})`);
@@ -98,17 +100,17 @@ export function fitFailed(id) {
 // handle, the map then spanning the series' range) at its place on the axis, and flat ends at
 // the series' ends (a range a session gave beyond the series' is cut there).
 export function spreadToSeries() {
-  if (!S.state || !S.state.data_tf.value_range) return;
-  const pts = S.state.data_tf.points;
+  if (!S.state || !shown('data_tf').value_range) return;
+  const pts = shown('data_tf').points;
   const { map, idx } = handles(pts);
   const own = map ? idx.map((i) => [pts[i][0], pts[i][4]]) : pts.map((p) => p.slice());
   const moved = own.map((q) => [toAxis(q[0]), ...q.slice(1)]);
   const at = (g) => [g, ...moved[0].slice(1).map((_, j) => interp(moved, g, j + 1))];
   const spread = [at(0), ...moved.filter((q) => q[0] > 1e-9 && q[0] < 1 - 1e-9), at(1)];
   if (!setHandles(spread, map, 0)) return;
-  S.state.data_tf.value_range = null;
+  shown('data_tf').value_range = null;
   syncPointColor();
-  update({ data_tf: dataTF(S.state.data_tf.points, null) }, 'full');
+  update({ data_tf: dataTF(shown('data_tf').points, null) }, 'full');
   drawTF();
 }
 

@@ -8,7 +8,7 @@
 // y up, z towards the viewer at azimuth = elevation = 0; with up z, x right, z up, y away;
 // with up x, y right, x up, z away. The up menu picks that axis; azimuth turns around it.
 
-import { update } from './connection.js';
+import { shown, update } from './connection.js';
 import { $ } from './state.js';
 
 // The page's state (state.js: pageState), made by app.js and given to bindOrientation.
@@ -50,7 +50,7 @@ export const triad = { shown: true };
 
 function setCamera(fields) {
   if (!S.state) return;
-  update({ camera: { ...S.state.camera, ...fields } }, 'full');
+  update({ camera: { ...shown('camera'), ...fields } }, 'full');
   drawTriads();
 }
 
@@ -58,7 +58,7 @@ function setCamera(fields) {
 export function resetCamera() {
   if (!S.initialCamera) return;
   const { azimuth, elevation, zoom, fov } = S.initialCamera;
-  update({ camera: { ...S.state.camera, azimuth, elevation, zoom, fov }, refocus: true }, 'full');
+  update({ camera: { ...shown('camera'), azimuth, elevation, zoom, fov }, refocus: true }, 'full');
   delete S.state.refocus; // a request, not part of the view
   drawTriads();
 }
@@ -67,7 +67,7 @@ export function resetCamera() {
 export function standardView(name) {
   const v = STANDARD_VIEWS[name];
   if (!v || !S.initialCamera || !S.state) return;
-  setCamera({ ...viewAngles(v.eye, S.state.camera.up), zoom: S.initialCamera.zoom });
+  setCamera({ ...viewAngles(v.eye, shown('camera').up), zoom: S.initialCamera.zoom });
 }
 
 // The data axis drawn upwards (the up menu): the angles are kept, so the view turns.
@@ -174,7 +174,8 @@ function drawTriad(canvas, cam) {
 // camera. Found in the page, so that this module needs nothing from views.js, which needs it.
 export function drawTriads() {
   if (!S.state) return;
-  for (const c of $('views').querySelectorAll('.view .triad')) drawTriad(c, S.state.camera);
+  // each view's under its camera (its own where it has one)
+  $('views').querySelectorAll('.view .triad').forEach((c, i) => drawTriad(c, shown('camera', i)));
 }
 
 export function bindOrientation(page) {

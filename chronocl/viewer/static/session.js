@@ -13,7 +13,7 @@
 // region of a data set's first frame and of the frame after a camera reset); frames report it
 // (S.focus), and the committed state takes it when it changes (`noteFocus`).
 
-import { onEdited, send, update } from './connection.js';
+import { onEdited, send, shown, update } from './connection.js';
 import { syncControls } from './controls.js';
 import { drawTriads } from './orientation.js';
 import { $, setStatus } from './state.js';
@@ -84,7 +84,7 @@ function restore(text) {
   try {
     Object.assign(S.state, fields);
     S.selectedView = Math.min(S.selectedView, S.state.views.length - 1);
-    S.selectedPoint = Math.min(S.selectedPoint, S.state.data_tf.points.length - 1);
+    S.selectedPoint = Math.min(S.selectedPoint, shown('data_tf').points.length - 1);
     update(Object.assign(fields, { size: layoutViews() }), 'full');
     delete S.state.focus; // a request, not part of the page's state
   } finally {

@@ -15,7 +15,7 @@
 // window (fit.js) has its own range, inside the series': u = 0 and u = 1 of the curve land on
 // its lo and hi (`toAxis`), the curve is flat beyond them, and points stay between them.
 
-import { send, update } from './connection.js';
+import { send, shown, update } from './connection.js';
 import { $, canvasSize, fmt } from './state.js';
 import { followDataTF } from './time_follow.js';
 
@@ -41,7 +41,7 @@ const series = () => (S.info ? [S.info.vmin, S.info.vmax] : [0, 1]);
 const dataValue = (g) => series()[0] + g * (series()[1] - series()[0]);
 const pointValue = (u) => tfRange()[0] + u * (tfRange()[1] - tfRange()[0]);
 // The TF's value range: a fitted TF's [lo, hi], else the series'.
-const tfRange = () => S.state.data_tf.value_range || series();
+const tfRange = () => shown('data_tf').value_range || series();
 // A point's u on the axis, and back.
 export const toAxis = (u) => (pointValue(u) - series()[0]) / (series()[1] - series()[0] || 1);
 const fromAxis = (g) => (dataValue(g) - tfRange()[0]) / (tfRange()[1] - tfRange()[0] || 1);
@@ -49,7 +49,7 @@ const fromAxis = (g) => (dataValue(g) - tfRange()[0]) / (tfRange()[1] - tfRange(
 export function drawTF() {
   if (!S.state) return;
   const { ctx, w, h, X, Y, PX } = tfGeom();
-  const pts = S.state.data_tf.points;
+  const pts = shown('data_tf').points;
   const { map, idx } = handles(pts);
   followMap(map, idx);
   ctx.clearRect(0, 0, w, h);
@@ -77,7 +77,7 @@ export function drawTF() {
   ctx.beginPath();
   ctx.rect(pad.l, 0, w - pad.l - pad.r, h - pad.b + 1);
   ctx.clip();
-  if (S.state.data_tf.value_range) {
+  if (shown('data_tf').value_range) {
     // A fitted range: its ends, where the curve's first and last points sit.
     ctx.setLineDash([3, 3]);
     ctx.strokeStyle = 'rgba(240,160,48,0.55)';
@@ -127,7 +127,7 @@ export function drawTF() {
 }
 
 // The data TF as the server gets it: its points, and its range where it has its own.
-export function dataTF(points = S.state.data_tf.points, valueRange = S.state.data_tf.value_range) {
+export function dataTF(points = shown('data_tf').points, valueRange = shown('data_tf').value_range) {
   const d = { points: points.map((p) => p.slice()) };
   if (valueRange) d.value_range = valueRange.slice();
   return d;
@@ -144,7 +144,7 @@ function sendTF(quality) {
 // with the editor, and after each frame (views.js) and mode change (fit.js).
 export function noteRange() {
   if (!S.state) return;
-  const vr = S.state.data_tf.value_range;
+  const vr = shown('data_tf').value_range;
   let text = "curve over the series' range";
   if (vr) {
     text = `curve over ${fmt(vr[0])} … ${fmt(vr[1])}`;
@@ -168,7 +168,7 @@ export function noteRange() {
 
 // The selected point's colour, value and opacity into their fields.
 export function syncPointColor() {
-  const p = S.state.data_tf.points[S.selectedPoint];
+  const p = shown('data_tf').points[S.selectedPoint];
   if (!p) return;
   const hex = (v) => Math.round(v * 255).toString(16).padStart(2, '0');
   $('point-color').value = `#${hex(p[1])}${hex(p[2])}${hex(p[3])}`;
@@ -251,7 +251,7 @@ function handlePairs(pts) {
 // points kept, where the map would need more points than the server takes.
 export function setHandles(hs, map, sel) {
   if (!map) {
-    S.state.data_tf.points = hs;
+    shown('data_tf').points = hs;
     S.selectedPoint = sel;
     return true;
   }
@@ -261,7 +261,7 @@ export function setHandles(hs, map, sel) {
     $('tf-hover').textContent = `colour map ${map} needs ${pts.length} points; remove some (at most ${most})`;
     return false;
   }
-  S.state.data_tf.points = pts;
+  shown('data_tf').points = pts;
   const u = hs[sel][0];
   S.selectedPoint = pts.findIndex((p) => Math.abs(p[0] - u) <= 1e-9);
   return true;
@@ -277,7 +277,7 @@ function followMap(map, idx) {
     ? `the colours follow colour map ${map}; choose "none" there to colour the points one by one`
     : "the selected point's colour";
   if (!idx.includes(S.selectedPoint)) {
-    const pts = S.state.data_tf.points;
+    const pts = shown('data_tf').points;
     const u = pts[Math.min(S.selectedPoint, pts.length - 1)][0];
     S.selectedPoint = idx.reduce((b, i) => (Math.abs(pts[i][0] - u) < Math.abs(pts[b][0] - u) ? i : b), idx[0]);
     syncPointColor();
@@ -291,7 +291,7 @@ function showHover(u) {
     out.innerHTML = '&nbsp;';
     return;
   }
-  const pts = S.state.data_tf.points;
+  const pts = shown('data_tf').points;
   let text = `value ${fmt(dataValue(u))} · opacity ${fmt(interp(pts, fromAxis(u), 4))}`;
   const hist = S.histogram;
   if (hist && u >= hist.range[0] && u <= hist.range[1]) {
@@ -329,12 +329,12 @@ export function noteHistogram() {
 export function bindTF(page) {
   ({ S, viewer } = page);
   // The indices of the points the editor shows as handles, for scripted use (the browser tests).
-  viewer.tfHandles = () => handles(S.state.data_tf.points).idx;
+  viewer.tfHandles = () => handles(shown('data_tf').points).idx;
   // Page coordinates of a TF point's handle, for scripted use (the browser tests).
   viewer.tfPointAt = (i) => {
     const g = tfGeom();
     const r = $('tf').getBoundingClientRect();
-    const p = S.state.data_tf.points[i];
+    const p = shown('data_tf').points[i];
     return { x: r.left + g.PX(p[0]), y: r.top + g.Y(p[4]) };
   };
   const c = $('tf');
@@ -347,7 +347,7 @@ export function bindTF(page) {
     if (!S.state || e.button !== 0) return;
     const g = tfGeom();
     const [x, y] = at(e);
-    const pts = S.state.data_tf.points;
+    const pts = shown('data_tf').points;
     // Under a map the drag edits the [u, a] handles; without one, the points themselves.
     const { map, idx, hs } = handlePairs(pts);
     const own = map ? hs : pts.map((p) => p.slice());
@@ -402,7 +402,7 @@ export function bindTF(page) {
   // A typed value or opacity for the selected point (only the field typed in: the other
   // shows a rounded number).
   const typed = (field) => () => {
-    const pts = S.state.data_tf.points;
+    const pts = shown('data_tf').points;
     const { map, hs, at: k } = handlePairs(pts);
     const own = map ? hs : pts.map((p) => p.slice());
     const A = map ? 1 : 4; // where a handle keeps its opacity
@@ -428,7 +428,7 @@ export function bindTF(page) {
   const maps = $('tf-colormap');
   maps.addEventListener('change', () => {
     if (!S.state) return;
-    const pts = S.state.data_tf.points;
+    const pts = shown('data_tf').points;
     const { map, idx, hs, at: k } = handlePairs(pts);
     if (maps.value === (map || '')) return;
     const sel = Math.max(0, k);
@@ -440,12 +440,12 @@ export function bindTF(page) {
       return;
     }
     syncPointColor();
-    followDataTF(S.state.data_tf.points); // time as lightness under a map's hue, unless time colours were chosen
+    followDataTF(shown('data_tf').points); // time as lightness under a map's hue, unless time colours were chosen
     sendTF('full');
   });
   $('hist-log').addEventListener('change', drawTF);
   const remove = () => {
-    const pts = S.state.data_tf.points;
+    const pts = shown('data_tf').points;
     const { map, hs, at: k } = handlePairs(pts);
     const own = map ? hs : pts.map((p) => p.slice());
     if (own.length <= 2 || k < 0) return;
@@ -457,8 +457,8 @@ export function bindTF(page) {
   c.addEventListener('dblclick', remove);
   $('tf-delete').addEventListener('click', remove);
   $('point-color').addEventListener('input', () => {
-    if (mapOf(S.state.data_tf.points)) return; // the colours follow a map (the field is off)
-    const p = S.state.data_tf.points[S.selectedPoint];
+    if (mapOf(shown('data_tf').points)) return; // the colours follow a map (the field is off)
+    const p = shown('data_tf').points[S.selectedPoint];
     const hex = $('point-color').value;
     [1, 2, 3].forEach((j, k) => (p[j] = parseInt(hex.slice(1 + 2 * k, 3 + 2 * k), 16) / 255));
     sendTF('full');

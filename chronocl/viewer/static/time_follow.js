@@ -5,7 +5,7 @@
 // map's hue), or back to `rgb` for a map without hue (grey), unless the time colours were
 // chosen in this page (the time colour menu) or are another preset than those two.
 
-import { update } from './connection.js';
+import { shown, update } from './connection.js';
 import { $ } from './state.js';
 
 // The page's state (state.js: pageState), made by app.js and given to bindTimeFollow.
@@ -21,11 +21,11 @@ export const hasHue = (points) =>
 // TF's own update: its change travels in the same message and is one undo step with it (its
 // 'preview' quality is replaced by that update's).
 export function followDataTF(points) {
-  const now = S.state.time_tf.color;
+  const now = shown('time_tf').color;
   if (chosen.byUser || !['rgb', 'lightness'].includes(now)) return;
   const color = hasHue(points) ? 'lightness' : 'rgb';
   if (color === now) return;
-  update({ time_tf: { ...S.state.time_tf, color } }, 'preview');
+  update({ time_tf: { ...shown('time_tf'), color } }, 'preview');
   $('time-color').value = color;
 }
 

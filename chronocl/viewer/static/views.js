@@ -1,7 +1,12 @@
-// The view panels: their grid, each panel's mode menu and order button, orbit and zoom by
-// pointer, the probe click and its marker, and the frames the server sends into them.
+// The view panels: their grid, each panel's mode menu and order button, its links (its
+// camera, data TF and time TF: the shared ones, or its own), orbit and zoom by pointer, the
+// probe click and its marker, and the frames the server sends into them.
+//
+// A link toggled off gives the view its own copy of the shared one (unlinked) and selects the
+// view: the TF editors, the time TF controls and the camera's buttons then edit its copy, and a
+// drag on its picture turns its own camera; toggled on again, the copy is dropped (linked).
 
-import { frameArrived, send, sentAt, settleLater, update } from './connection.js';
+import { LINKABLE, frameArrived, send, sentAt, settleLater, shown, update } from './connection.js';
 import { modeChanged } from './fit.js';
 import { drawLegends } from './legend.js';
 import { drawTriads, turnedNormal } from './orientation.js';
@@ -14,6 +19,10 @@ import { drawTimeline } from './timeline.js';
 let S;
 let viewer;
 let shell; // the element holding the viewer (state.js: pageState)
+let onSelect = () => {}; // a view selected: the side panel's editors show what it is drawn with
+
+// Each link's toggle: its label, and what it links.
+const LINKS = { camera: ['cam', 'camera'], data_tf: ['TF', 'data TF'], time_tf: ['time', 'time TF'] };
 
 const GAP = 6; // between panels and around them (the #views padding), CSS px
 const panels = [];
@@ -53,6 +62,7 @@ export function layoutViews() {
       p.own.classList.remove('bad');
     }
     p.el.classList.toggle('selected', i === S.selectedView && n > 1);
+    showLinks(p, S.state.views[i]);
   });
   // Panels fill the view area in a grid (columns x rows): the squarest grid with room for n
   // (2x2 for four views) unless another gives pictures with a clearly (25 %) longer short
@@ -84,11 +94,13 @@ export function layoutViews() {
   return [Math.max(minPanel, Math.round(w * fit)), Math.max(minPanel, Math.round(h * fit))];
 }
 
-// The page's state, and `cb` for pictures that change size (the window, the side panel, the
-// legend or axes shown or hidden; app.js: a new layout and render size).
+// The page's state, `cb` for pictures that change size (the window, the side panel, the
+// legend or axes shown or hidden; app.js: a new layout and render size), and `selected` for a
+// view selected (app.js: the editors drawn again for it).
 let pictureObserver = null;
-export function bindViews(page, cb) {
+export function bindViews(page, cb, selected = () => {}) {
   ({ S, viewer, shell } = page);
+  onSelect = selected;
   pictureObserver = new ResizeObserver(cb);
   for (const p of panels) pictureObserver.observe(p.pic);
 }
@@ -106,6 +118,9 @@ function makePanel(i) {
     '<input class="own-window" placeholder="linked" size="8" spellcheck="false" ' +
     'title="This view\'s own window t0:t1[:stride], to compare two periods side by side; ' +
     'empty: the timeline\'s window">' +
+    '<span class="links">' +
+    LINKABLE.map((k) => `<button class="link" data-link="${k}">${LINKS[k][0]}</button>`).join('') +
+    '</span>' +
     '<div class="view-label"></div></div>' +
     '<div class="view-pic"><img alt="view" draggable="false">' +
     '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon/></svg>' +
@@ -123,6 +138,7 @@ function makePanel(i) {
     mode: el.querySelector('.mode'),
     order: el.querySelector('.order'),
     own: el.querySelector('.own-window'),
+    links: el.querySelector('.links'),
     label: el.querySelector('.view-label'),
     note: el.querySelector('.view-note'),
     mark: el.querySelector('.probe-mark'),
@@ -155,8 +171,50 @@ function makePanel(i) {
     views[i].window = window;
     update({ views });
   });
+  for (const b of p.links.querySelectorAll('.link')) {
+    b.addEventListener('click', () => toggleLink(i, b.dataset.link));
+  }
   bindOrbit(p, i);
   return p;
+}
+
+// A view's links as its toggles show them: pressed (orange) where it has its own. They show
+// where there are views to set apart, or where a view has its own.
+function showLinks(p, view) {
+  for (const b of p.links.querySelectorAll('.link')) {
+    const key = b.dataset.link;
+    const own = !!view[key];
+    const what = LINKS[key][1];
+    b.classList.toggle('own', own);
+    b.setAttribute('aria-pressed', String(own));
+    b.title = own
+      ? `this view's own ${what} (selected, the editors edit it); click: linked to the shared ${what} again`
+      : `linked: the shared ${what}; click: this view's own ${what}, to set it apart`;
+  }
+  p.links.hidden = S.state.views.length < 2 && !LINKABLE.some((k) => view[k]);
+}
+
+// View `i` linked to the shared `key` again (its own dropped), or given its own copy of it
+// (and selected, so that the editors edit that copy).
+export function toggleLink(i, key) {
+  const views = S.state.views.map((v) => ({ ...v }));
+  const own = !views[i][key];
+  views[i][key] = own ? JSON.parse(JSON.stringify(S.state[key])) : null;
+  update({ views });
+  if (own) selectView(i);
+  else {
+    layoutViews();
+    onSelect();
+  }
+  setStatus(own ? `view ${i + 1} has its own ${LINKS[key][1]}` : `view ${i + 1} follows the shared ${LINKS[key][1]} again`);
+}
+
+// View `i` selected: the probe, the fit and the editors are its.
+export function selectView(i) {
+  S.selectedView = i;
+  panels.forEach((q, j) => q.el.classList.toggle('selected', j === i && panels.length > 1));
+  layoutViews();
+  onSelect();
 }
 
 function bindOrbit(p, i) {
@@ -165,7 +223,7 @@ function bindOrbit(p, i) {
   p.img.addEventListener('pointerdown', (e) => {
     if (!S.state) return;
     p.img.setPointerCapture(e.pointerId);
-    start = { x: e.clientX, y: e.clientY, cam: { ...S.state.camera }, moved: false, box: e.shiftKey };
+    start = { x: e.clientX, y: e.clientY, cam: { ...shown('camera', i) }, moved: false, box: e.shiftKey };
     if (S.state.clip && $('clip-drag').checked && !e.shiftKey) start.clip = { ...S.state.clip };
   });
   p.img.addEventListener('pointermove', (e) => {
@@ -179,14 +237,15 @@ function bindOrbit(p, i) {
       return;
     }
     if (start.clip) {
-      const normal = turnedNormal(start.clip.normal, S.state.camera, dx, dy);
+      const normal = turnedNormal(start.clip.normal, shown('camera', i), dx, dy);
       update({ clip: { normal, offset: start.clip.offset } }, 'preview');
       return;
     }
-    const cam = { ...S.state.camera };
+    // this panel's camera: its own where it has one, else the shared one (every linked view's)
+    const cam = { ...shown('camera', i) };
     cam.azimuth = start.cam.azimuth - dx * 0.5;
     cam.elevation = clamp(start.cam.elevation + dy * 0.5, ranges().elevation);
-    update({ camera: cam }, 'preview');
+    update({ camera: cam }, 'preview', false, i);
     drawTriads();
   });
   const end = (e) => {
@@ -200,7 +259,7 @@ function bindOrbit(p, i) {
       $('clip-axis').value = 'custom';
       update({ clip: { ...S.state.clip } }, 'full');
     }
-    else if (moved) update({ camera: { ...S.state.camera } }, 'full');
+    else if (moved) update({ camera: { ...shown('camera', i) } }, 'full', false, i);
     else if (e.type === 'pointerup') probeAt(p, i, e);
   };
   p.img.addEventListener('pointerup', end);
@@ -209,9 +268,9 @@ function bindOrbit(p, i) {
     'wheel',
     (e) => {
       e.preventDefault();
-      const cam = { ...S.state.camera };
+      const cam = { ...shown('camera', i) };
       cam.zoom = clamp(cam.zoom * Math.exp(-e.deltaY * 0.0015), ranges().zoom);
-      update({ camera: cam }, 'preview');
+      update({ camera: cam }, 'preview', false, i);
       settleLater();
     },
     { passive: false },
@@ -227,8 +286,7 @@ function probeAt(p, i, e, from) {
     clamp((cy - r.top) / r.height, [0, 1]),
   ];
   const [x, y] = at(e.clientX, e.clientY);
-  S.selectedView = i;
-  panels.forEach((q, j) => q.el.classList.toggle('selected', j === i && panels.length > 1));
+  if (S.selectedView !== i) selectView(i);
   noteRange();
   if (from) {
     const [x2, y2] = at(from.x, from.y);
@@ -309,9 +367,12 @@ export function onFrame(buf) {
   });
   // Where the probed voxel is in this frame (it moves with the camera; none before a probe).
   if (viewer.probe && viewer.probe.values) showMark(header.probe || null);
-  // The clip plane's cut through the box, the same on every panel (one camera, one box).
-  const cut = (header.clip_outline || []).map(([x, y]) => `${x},${y}`).join(' ');
-  for (const p of panels) p.outline.setAttribute('points', cut);
+  // The clip plane's cut through the box on each panel, under its camera.
+  const cut = (c) => (c || []).map(([x, y]) => `${x},${y}`).join(' ');
+  panels.forEach((p, i) => {
+    const outlines = header.clip_outlines;
+    p.outline.setAttribute('points', cut(outlines ? outlines[i] : header.clip_outline));
+  });
   S.legend = header.legend || [];
   S.legends = header.legends || null; // each view's, where views have their own windows
   S.colorbars = header.colorbars || null; // each view's data colour bar, null where TF is white
