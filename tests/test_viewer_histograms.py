@@ -136,3 +136,41 @@ def test_side_work_runs_in_order_and_a_newer_job_of_a_key_replaces_the_waiting_o
     assert ran == ["blocker", "fit", "new histogram"]
     side.close()
     assert side.waiting("histogram") and not side.submit("x", lambda: None)
+
+
+@pytest.mark.parametrize("value_range", [None, (0.2, 0.7)])
+def test_a_change_histogram_counts_the_changes_between_consecutive_steps(value_range):
+    """Issue 49: a change mode's data TF maps δ = |Δ| between consecutive steps (values
+    clipped to the TF's value range and scaled to it, modes/change.py), so its histogram
+    counts those, each sampled step from the step before it in the window (at the stride);
+    the window's first step changes from nothing."""
+    data = _steps((32, 32, 32), 12)
+    series = chronocl.TimeSeries.from_array(data)
+    ds = Dataset("v", series)
+    lo_v, hi_v = (series.vmin, series.vmax) if value_range is None else value_range
+    window = list(range(1, 11, 2))  # 1:11:2
+    hist = ds.histogram(0.0, 0.5, window, 2, of="change", value_range=value_range)
+    assert hist["of"] == "change" and hist["steps"] == [3, 5, 7, 9]  # 1 has no step before
+    want = np.zeros(HIST_BINS, np.int64)
+    for t in hist["steps"]:
+        # the same voxels as the sample: u over the series' range, then the TF's range
+        w = [
+            np.clip(
+                (
+                    series.vmin
+                    + ds.step_sample(s).astype(np.float64) * (series.vmax - series.vmin)
+                    - lo_v
+                )
+                / (hi_v - lo_v),
+                0,
+                1,
+            )
+            for s in (t - 2, t)
+        ]
+        want += np.histogram(np.abs(w[1] - w[0]), bins=HIST_BINS, range=(0.0, 0.5))[0]
+    assert hist["counts"] == want.tolist() and sum(want) > 0
+    # a constant series changes nowhere: every count in the first bin
+    flat = Dataset("f", chronocl.TimeSeries.from_array(np.ones((3, 8, 8, 8), np.float32)))
+    counts = flat.histogram(0.0, 1.0, [0, 1, 2], of="change")["counts"]
+    assert counts[0] == 2 * flat.step_sample(0).size and sum(counts[1:]) == 0
+    assert ds.histogram(0.0, 1.0, [4], of="change")["steps"] == []  # one step: no change

@@ -1,5 +1,6 @@
 """The data sets a viewer serves: each series named for the client, with its statistics, the
-histogram of the values in a window, and v(t) at a voxel or over a box for the probe.
+histogram of the values in a window (or of the changes between its consecutive steps, for a
+change mode), and v(t) at a voxel or over a box for the probe.
 
 A window's histogram never reads full-resolution steps: it is the sum of small per-step
 counts, each counted once per (step, range) from a small sample of that step (`step_sample`):
@@ -171,6 +172,34 @@ class Dataset:
                 self._counts.popitem(last=False)
         return got
 
+    def change_counts(
+        self, before: int, step: int, lo: float, hi: float, value_range: tuple[float, float]
+    ) -> np.ndarray:
+        """HIST_BINS counts over [lo, hi] of the changes δ from step `before` to `step` in
+        their samples (the same voxels), as the change mode compares them: each value clipped
+        to `value_range` and scaled to it, δ = |w(step) - w(before)| (cached per pair and
+        ranges)."""
+        key = (int(before), int(step), float(lo), float(hi), *map(float, value_range))
+        with self._lock:
+            got = self._counts.get(key)
+            if got is not None:
+                self._counts.move_to_end(key)
+                return got
+        s, (vlo, vhi) = self.series, value_range
+        span = max(float(vhi) - float(vlo), 1e-30)
+
+        def w(t: int) -> np.ndarray:  # the sample's u (series range) as the TF's range sees it
+            v = float(s.vmin) + self.step_sample(t).astype(np.float64) * (s.vmax - s.vmin)
+            return np.clip((v - vlo) / span, 0.0, 1.0)
+
+        got = np.histogram(np.abs(w(step) - w(before)), bins=HIST_BINS, range=(lo, hi))[0]
+        got = got.astype(np.int64)
+        with self._lock:
+            self._counts[key] = got
+            while len(self._counts) > HIST_CACHE_COUNTS:
+                self._counts.popitem(last=False)
+        return got
+
     def histogram(
         self,
         lo: float = 0.0,
@@ -178,20 +207,33 @@ class Dataset:
         steps: Sequence[int] | None = None,
         stride: int = 1,
         given_up: Callable[[], bool] | None = None,
+        of: str = "value",
+        value_range: Sequence[float] | None = None,
     ) -> dict | None:
-        """Counts of u in HIST_BINS bins over [lo, hi] in the window of `steps` (None: the
-        whole series): the sum of the per-step counts (`step_counts`) of the steps
-        `sample_steps` picks, which are in "steps". None where `given_up()` turned true
-        between two steps (a newer request replaces this one; the steps counted stay cached)."""
+        """Counts in HIST_BINS bins over [lo, hi] in the window of `steps` (None: the whole
+        series) of u, or (`of` "change") of the changes δ between its consecutive steps scaled
+        to `value_range` (None: the series'), which a change mode's data TF maps: the sum of
+        the per-step counts (`step_counts`, `change_counts`) of the steps `sample_steps`
+        picks (each with the step before it in the window, for changes), which are in
+        "steps". None where `given_up()` turned true between two steps (a newer request
+        replaces this one; the steps counted stay cached)."""
         if not hi > lo:
             raise InvalidParameterError(f"histogram range [{lo}, {hi}] must have lo < hi")
-        chosen = sample_steps(range(self.series.n_steps) if steps is None else steps, stride)
+        window = sorted(int(t) for t in (range(self.series.n_steps) if steps is None else steps))
+        chosen = sample_steps(window, stride)
+        vr = (self.series.vmin, self.series.vmax) if value_range is None else value_range
+        before = dict(zip(window[1:], window[:-1], strict=True))
+        if of == "change":
+            chosen = [t for t in chosen if t in before]  # the first step changes from nothing
         counts = np.zeros(HIST_BINS, np.int64)
         for step in chosen:
             if given_up is not None and given_up():
                 return None
-            counts += self.step_counts(step, lo, hi)
-        return {"range": [lo, hi], "counts": counts.tolist(), "steps": chosen}
+            if of == "change":
+                counts += self.change_counts(before[step], step, lo, hi, tuple(vr))
+            else:
+                counts += self.step_counts(step, lo, hi)
+        return {"range": [lo, hi], "counts": counts.tolist(), "steps": chosen, "of": of}
 
     def curve(self, voxel: tuple[int, int, int] | None = None, box: object = None) -> TimeCurve:
         """v(t) at `voxel` (x, y, z), or the mean/min/max over `box` ((x0, x1), (y0, y1),

@@ -13,6 +13,7 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
                                                          x2, y2: a box between two rays' voxels
     histogram  {"range": [lo, hi]}                       normalised values u in the window
+               (+ "of": "change", "value_range": [lo, hi]: the changes between its steps)
     fit        {"view"[, "mode"]}                       the TF's range fitted to a view's window
     save       {"what": "image" | "chronovolume", "view"} the image's download also gives its
                                                          `layout` (title, captions, pictures,
@@ -257,7 +258,18 @@ MESSAGES: dict[str, Obj] = {
         },
         frozenset({"x", "y"}),
     ),
-    "histogram": Obj({"type": Enum(("histogram",)), "id": ID, "range": UNIT_RANGE}, NEEDS_RANGE),
+    # `of`: the values (default), or the changes between consecutive steps (a mode whose data
+    # TF maps them: `Mode.data_axis`), scaled to `value_range` (the TF's; none: the series')
+    "histogram": Obj(
+        {
+            "type": Enum(("histogram",)),
+            "id": ID,
+            "range": UNIT_RANGE,
+            "of": Enum(("value", "change")),
+            "value_range": Nullable(Range(Num(-FLOAT32_MAX, FLOAT32_MAX))),
+        },
+        NEEDS_RANGE,
+    ),
     "fit": Obj({"type": Enum(("fit",)), "id": ID, "view": Int(0, MAX_VIEWS - 1), "mode": MODE}),
     "save": Obj(
         {
@@ -348,7 +360,12 @@ def choices() -> dict:
     """
     return {
         "modes": [
-            {"name": n, "summary": modes.get(n).summary, "has_t_index": modes.get(n).has_t_index}
+            {
+                "name": n,
+                "summary": modes.get(n).summary,
+                "has_t_index": modes.get(n).has_t_index,
+                "data_axis": modes.get(n).data_axis,  # what its data TF maps: value or change
+            }
             for n in modes.names()
         ],
         "orders": list(ORDERS),

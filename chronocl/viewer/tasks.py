@@ -34,6 +34,10 @@ class Tasks(EventTasks):
     """Histogram, fit, probe and save requests (the methods `ClientWorker` answers them with);
     events (`EventTasks`, chronocl.viewer.events_panel)."""
 
+    # what the page's last histogram request counted (`Dataset.histogram`'s `of` and
+    # `value_range`), counted again after a frame of another window
+    _hist_of: tuple[str, list | None] = ("value", None)
+
     def _reply(self, obj: dict) -> bool:
         return self.send(json.dumps(obj))
 
@@ -60,6 +64,7 @@ class Tasks(EventTasks):
         `EventTasks` (a find: its own thread; one that only shows or hides markers: a frame);
         False for other kinds."""
         if kind == "histogram":
+            self._hist_of = (msg.get("of", "value"), msg.get("value_range"))
             self._request_histogram(msg.get("id"), list(msg["range"]))
         elif kind == "fit":
             self._request_fit(msg)
@@ -81,22 +86,38 @@ class Tasks(EventTasks):
         request replaces one still waiting (its `id` then gets no answer of its own)."""
         self._hist_range = list(value_range)
         lo, hi = value_range
-        self._beside("histogram", rid, "histogram", lambda: self._histogram(rid, lo, hi))
+        of = self._hist_of
+        self._beside("histogram", rid, "histogram", lambda: self._histogram(rid, lo, hi, *of))
 
-    def _histogram(self, rid: int | None, lo: float, hi: float) -> None:
+    def _histogram(
+        self, rid: int | None, lo: float, hi: float, of: str, value_range: list | None
+    ) -> None:
         with self._cond:
             state = self.state
         ds = self.datasets[state.dataset]
         steps = state.selection(ds.series.n_steps).steps
         hist = ds.histogram(
-            lo, hi, steps, state.window[2], given_up=lambda: self.side.waiting("histogram")
+            lo,
+            hi,
+            steps,
+            state.window[2],
+            given_up=lambda: self.side.waiting("histogram"),
+            of=of,
+            value_range=value_range,
         )
         if hist is None:
             return  # a newer request waits: it answers instead
         self._hist_window = (state.dataset, *state.window)
         window = list(state.window)
         self._reply(
-            {"type": "histogram", "id": rid, **hist, "window": window, "dataset": state.dataset}
+            {
+                "type": "histogram",
+                "id": rid,
+                **hist,
+                "value_range": value_range,  # a change histogram's (None: the series')
+                "window": window,
+                "dataset": state.dataset,
+            }
         )
 
     def _request_fit(self, msg: dict) -> None:

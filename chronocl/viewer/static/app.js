@@ -32,7 +32,7 @@ import { bindProbe, clearProbe, drawProbe, onProbe } from './probe.js';
 import { bindSession, fragmentSession, loadSession, noteFocus, resetHistory } from './session.js';
 import { bindShading, syncShading } from './shading.js';
 import { $, pageState, setStatus } from './state.js';
-import { bindTF, drawTF, fillColormaps, noteHistogram } from './tf_editor.js';
+import { bindTF, drawTF, fillColormaps, noteHistogram, tookHistogram } from './tf_editor.js';
 import { bindTimeFollow } from './time_follow.js';
 import { bindTimeline, drawTimeline, onSteps } from './timeline.js';
 import { bindViews, fillSelect, layoutViews, onFrame, showMark, showRefineProgress } from './views.js';
@@ -161,7 +161,7 @@ function onText(msg) {
       break;
     case 'histogram':
       if (S.info && msg.dataset !== S.info.index) break; // counted for the data set left
-      S.histogram = msg;
+      tookHistogram(msg);
       noteHistogram();
       drawTF();
       break;

@@ -18,7 +18,7 @@
 
 import { send, shown, update } from './connection.js';
 import { $, setStatus } from './state.js';
-import { dataTF, drawTF, handles, interp, noteRange, setHandles, syncPointColor, toAxis } from './tf_editor.js';
+import { dataTF, drawTF, handles, interp, noteRange, setHandles, syncPointColor, toSeries } from './tf_editor.js';
 
 // The page's state (state.js: pageState), made by app.js and given to bindFit.
 let S;
@@ -104,7 +104,7 @@ export function spreadToSeries() {
   const pts = shown('data_tf').points;
   const { map, idx } = handles(pts);
   const own = map ? idx.map((i) => [pts[i][0], pts[i][4]]) : pts.map((p) => p.slice());
-  const moved = own.map((q) => [toAxis(q[0]), ...q.slice(1)]);
+  const moved = own.map((q) => [toSeries(q[0]), ...q.slice(1)]);
   const at = (g) => [g, ...moved[0].slice(1).map((_, j) => interp(moved, g, j + 1))];
   const spread = [at(0), ...moved.filter((q) => q[0] > 1e-9 && q[0] < 1 - 1e-9), at(1)];
   if (!setHandles(spread, map, 0)) return;

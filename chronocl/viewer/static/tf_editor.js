@@ -36,15 +36,29 @@ function tfGeom() {
   return { ctx, w, h, X, U, Y, A, PX: (u) => X(toAxis(u)), PU: (x) => fromAxis(U(x)) };
 }
 const rgbCss = (p, a = 1) => `rgba(${Math.round(p[1] * 255)},${Math.round(p[2] * 255)},${Math.round(p[3] * 255)},${a})`;
-const series = () => (S.info ? [S.info.vmin, S.info.vmax] : [0, 1]);
+// A change mode's data TF maps δ = |Δ| between consecutive steps, scaled to the TF's value
+// range (modes/change.py): its axis is the change, from 0 to that range's span, and its
+// histogram counts the window's changes (`Dataset.histogram`, of "change").
+const values = () => shown('data_tf').value_range || (S.info ? [S.info.vmin, S.info.vmax] : [0, 1]);
+const changes = () => S.choices?.modes.find((m) => m.name === shown('mode'))?.data_axis === 'change';
+const series = () => {
+  if (changes()) return [0, values()[1] - values()[0]];
+  return S.info ? [S.info.vmin, S.info.vmax] : [0, 1];
+};
 // The data value at axis u, and at a point's u.
 const dataValue = (g) => series()[0] + g * (series()[1] - series()[0]);
 const pointValue = (u) => tfRange()[0] + u * (tfRange()[1] - tfRange()[0]);
 // The TF's value range: a fitted TF's [lo, hi], else the series'.
-const tfRange = () => shown('data_tf').value_range || series();
+const tfRange = () => (changes() ? series() : shown('data_tf').value_range || series());
 // A point's u on the axis, and back.
-export const toAxis = (u) => (pointValue(u) - series()[0]) / (series()[1] - series()[0] || 1);
+const toAxis = (u) => (pointValue(u) - series()[0]) / (series()[1] - series()[0] || 1);
 const fromAxis = (g) => (dataValue(g) - tfRange()[0]) / (tfRange()[1] - tfRange()[0] || 1);
+// A point's u as the same curve over the series' range has it (a fitted curve spread over the
+// series, fit.js): its value's place in the series, or a change's place in the series' span.
+export function toSeries(u) {
+  if (!changes() || !S.info) return toAxis(u);
+  return (u * (values()[1] - values()[0])) / (S.info.vmax - S.info.vmin || 1);
+}
 
 export function drawTF() {
   if (!S.state) return;
@@ -54,7 +68,8 @@ export function drawTF() {
   followMap(map, idx);
   ctx.clearRect(0, 0, w, h);
   const hist = S.histogram;
-  if (hist && hist.range[0] === S.zoom[0] && hist.range[1] === S.zoom[1]) {
+  if (hist && hist.key !== histKey(...S.zoom)) askHistogram(...S.zoom); // another zoom or mode's
+  if (hist && hist.key === histKey(...S.zoom)) {
     const n = hist.counts.length;
     const scale = $('hist-log').checked ? Math.log1p : (c) => c;
     const top = scale(Math.max(...hist.counts, 1));
@@ -292,7 +307,8 @@ function showHover(u) {
     return;
   }
   const pts = shown('data_tf').points;
-  let text = `value ${fmt(dataValue(u))} · opacity ${fmt(interp(pts, fromAxis(u), 4))}`;
+  const what = changes() ? '|Δ|' : 'value';
+  let text = `${what} ${fmt(dataValue(u))} · opacity ${fmt(interp(pts, fromAxis(u), 4))}`;
   const hist = S.histogram;
   if (hist && u >= hist.range[0] && u <= hist.range[1]) {
     const n = hist.counts.length;
@@ -323,6 +339,11 @@ export function noteHistogram() {
   let which = `step ${s[0]}`;
   if (s.length > 1 && s.length >= n) which = `the ${n} steps of ${win}`;
   else if (s.length > 1) which = `${s.length} of the ${n} steps of ${win} (${s.join(', ')})`;
+  if (hist.of === 'change') {
+    const pairs = s.length === 1 ? `step ${s[0]} from the step before` : `${which}, each from the step before`;
+    $('hist-note').textContent = `histogram of |Δ|: ${pairs}; opacity up, change across`;
+    return;
+  }
   $('hist-note').textContent = `histogram of ${which}; opacity up, value across`;
 }
 
@@ -480,9 +501,10 @@ export function bindTF(page) {
   );
   $('tf-reset-zoom').addEventListener('click', () => setZoom(0, 1));
   const fromInputs = () => {
-    const span = S.info.vmax - S.info.vmin || 1;
-    const lo = (parseFloat($('zoom-lo').value) - S.info.vmin) / span;
-    const hi = (parseFloat($('zoom-hi').value) - S.info.vmin) / span;
+    const [v0, v1] = series();
+    const span = v1 - v0 || 1;
+    const lo = (parseFloat($('zoom-lo').value) - v0) / span;
+    const hi = (parseFloat($('zoom-hi').value) - v0) / span;
     if (Number.isFinite(lo) && Number.isFinite(hi) && hi - lo > 1e-4) setZoom(Math.max(0, lo), Math.min(1, hi));
     else drawTF();
   };
@@ -491,9 +513,35 @@ export function bindTF(page) {
 }
 
 let histTimer = 0;
+let histAsked = null;
 function setZoom(lo, hi) {
   S.zoom = [lo, hi];
+  histAsked = null; // asked again, counted anew
   drawTF();
+  askHistogram(lo, hi);
+}
+
+// What a histogram over axis [lo, hi] counts for the selected view: the values, or a change
+// mode's changes at the TF's value range. A histogram counted for another (a mode switched to
+// or from change, a TF fitted anew) is asked for again when the editor is drawn.
+function histKey(lo, hi) {
+  return changes() ? `change ${lo} ${hi} ${values().join(' ')}` : `value ${lo} ${hi}`;
+}
+
+function askHistogram(lo, hi) {
+  const key = histKey(lo, hi);
+  if (key === histAsked) return;
+  histAsked = key;
+  const msg = { type: 'histogram', range: [lo, hi] };
+  if (changes()) Object.assign(msg, { of: 'change', value_range: shown('data_tf').value_range || null });
   clearTimeout(histTimer);
-  histTimer = setTimeout(() => send({ type: 'histogram', range: [lo, hi] }), 120);
+  histTimer = setTimeout(() => send(msg), 120);
+}
+
+// A histogram message, kept with what it counted (as `histKey` names it).
+export function tookHistogram(msg) {
+  const [lo, hi] = msg.range;
+  const vr = msg.value_range || (S.info ? [S.info.vmin, S.info.vmax] : [0, 1]);
+  const key = msg.of === 'change' ? `change ${lo} ${hi} ${vr.join(' ')}` : `value ${lo} ${hi}`;
+  S.histogram = { ...msg, key };
 }
