@@ -7,10 +7,12 @@ each view's session for its `state()` every `POLL_S` seconds and, when it change
 
     {"type": "steps", "views": [{"resident": [steps], "loading": [steps]} or null, ...]}
 
-(null: the view has no session yet). Level 0 is what a refine needs: a coarse frame asks it
-for the window in the background (`Session.read_ahead`), and a scrub at full resolution reads
-ahead in it (`chronocl.data.window`). The poll runs on the event loop and takes each manager's
-lock for a moment, never the render thread's: steps being fetched show while a frame is drawn.
+(null: the view has no session yet), for the views of the last frame: the managers the render
+thread published after it (`Views.shown_managers`). Level 0 is what a refine needs: a coarse
+frame asks it for the window in the background (`Session.read_ahead`), and a scrub at full
+resolution reads ahead in it (`chronocl.data.window`). The poll runs on the event loop and takes
+each manager's lock for a moment, never the render thread's: steps being fetched show while a
+frame is drawn.
 """
 
 from __future__ import annotations
@@ -24,12 +26,12 @@ POLL_S = 0.2
 
 
 def residency(views) -> list[dict | None]:
-    """Per view of `views` (`chronocl.viewer.view_sessions.Views`): its level-0 manager's
-    resident and loading steps, or None."""
+    """Per view shown in the last frame of `views` (`chronocl.viewer.view_sessions.Views`):
+    its level-0 manager's resident and loading steps, or None (no session). It reads what the
+    render thread published after that frame (`Views.shown_managers`), never the slots and
+    sessions the render thread may be replacing meanwhile."""
     out: list[dict | None] = []
-    for slot in list(views.slots):
-        session = slot.session
-        manager = None if session is None else views.manager(0, session.spec.integration.pool)
+    for manager in views.shown_managers:
         if manager is None:
             out.append(None)
             continue

@@ -104,6 +104,10 @@ class Views:
         self._slabs: bool | None = None  # whether they pay (`slab_upload.pays`), once known
         self._over = False  # whether the last frame left the process over its memory limit
         self._streaming: Streaming | None = None  # the views' windows stream: why
+        # Each view's full-resolution window manager as of the last frame (None: no session),
+        # replaced whole by the render thread after each frame: the event loop's residency
+        # poll reads it, never the slots and sessions the render thread is replacing.
+        self.shown_managers: tuple[WindowManager | None, ...] = ()
 
     def chronovolumes(self, state: ViewState) -> tuple[list[Chronovolume], float, bool]:
         """The views' chronovolumes for `state`, integrating only where something changed;
@@ -167,6 +171,10 @@ class Views:
         # A GPU session whose window does not fit the device: its steps go up every time.
         whys = (s.session.stats.get("why_not_on_device") for s in self.slots[: len(cvs)])
         self.host_steps_why = next((why for why in whys if why), None)
+        self.shown_managers = tuple(  # published whole: the timeline reads it (`residency`)
+            None if s.session is None else self.manager(0, s.session.spec.integration.pool)
+            for s in self.slots[: len(cvs)]
+        )
         return cvs, integrate_ms, incremental
 
     def _stream_or_not(self, limit, series, state: ViewState) -> Streaming | None:
@@ -291,6 +299,7 @@ class Views:
     def release(self) -> None:
         """Free the textures (on the GL thread), the sessions and the window managers."""
         slots, self.slots = self.slots, []
+        self.shown_managers = ()
         if any(s.volume is not None for s in slots):
             release_on_gl(lambda rc: [s.release_gl() for s in slots])
         for s in slots:
