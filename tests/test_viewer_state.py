@@ -181,8 +181,12 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
     assert result.exit_code == 0, result.output
     from PIL import Image
 
-    figure = np.asarray(Image.open(tmp_path / "vortex-session.png").convert("RGB"))
+    png = Image.open(tmp_path / "vortex-session.png")
+    figure = np.asarray(png.convert("RGB"))
     w, h = EDITS["size"]
+    # Save PNG's title band, naming the data set and the window, also as the PNG's Title
+    assert png.text["Title"] == "vortex: steps 2:9:2 (4 steps)", png.text  # 2:10:2 as shown
+    assert "Description" in png.text
     # The captions' band: above the picture and the legend band, which holds the time legend
     # and under it the data colour bar (the session's data TF is coloured; a narrow panel).
     cap = figure.shape[0] - h - 2 * max(36, h // 8)

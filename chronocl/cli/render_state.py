@@ -102,6 +102,7 @@ def render_state(state_path: Path, options: dict) -> None:
         device=options.get("device"),
         time_labels=time_labels,
         axes=bool(options.get("axes", False)),
+        name=session["dataset"]["name"],
         **{k: v for k, v in spec.items() if v is not None},
     )
     image.save(out, overwrite=overwrite)

@@ -21,8 +21,8 @@ under the limit, and the steps are what gives way:
   process's own memory (`PROCESS_BYTES`): `window_room`, against which a viewer weighs the
   steps of every window shown that stays resident (`resident`, each step once) before a
   frame; where they do not fit, the steps that still fit stay and the rest of its views'
-  windows stream from the store slab by slab (`chronocl.integration.interactive.session`). Where frames still exceed the limit, `excess`
-  says by how much (the viewer logs it once).
+  windows stream from the store slab by slab (`chronocl.integration.interactive.session`).
+  Where frames still exceed the limit, `excess` says by how much (the viewer logs it once).
 
 One limit per process (`limited`), shared by every client's window managers, which register
 with it when they are made (`register`). Without one (a script, `chronocl integrate`) each

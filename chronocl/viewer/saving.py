@@ -72,12 +72,32 @@ def compose_image(
     background: tuple,
     columns: int | None = None,
     name: str | None = None,
+    time_labels: str = "labels",
 ) -> tuple[np.ndarray, Layout]:
     """The panels in a grid of `columns` per row (as the page lays them out), each captioned
     with its chronovolume and over its own legend, under a title naming the data set `name`
     and the windows shown (none without a name); the image and where its parts lie."""
-    title = None if name is None else title_text(name, cvs)
-    return compose(panels, [describe(cv) for cv in cvs], cvs, columns, background, title=title)
+    title = None if name is None else title_text(name, cvs, time_labels)
+    return compose(
+        panels, [describe(cv) for cv in cvs], cvs, columns, background, time_labels, title=title
+    )
+
+
+def picture(
+    panels: list[np.ndarray],
+    cvs: list[Chronovolume],
+    background: tuple,
+    columns: int | None = None,
+    name: str | None = None,
+    time_labels: str = "labels",
+) -> tuple[Image, Layout]:
+    """`compose_image` as an `Image` whose PNG also holds its title and captions as Title and
+    Description text (the viewer's Save PNG and `chronocl render --state`)."""
+    array, layout = compose_image(panels, cvs, background, columns, name, time_labels)
+    text = {"Description": "\n".join(describe(cv) for cv in cvs), "Software": "chronocl"}
+    if name is not None:
+        text["Title"] = title_text(name, cvs, time_labels)
+    return Image(array, text), layout
 
 
 def save_image(
@@ -89,13 +109,9 @@ def save_image(
     columns: int | None = None,
     name: str | None = None,
 ) -> tuple[str, Layout]:
-    """`compose_image` as a PNG download, its title and captions also as the PNG's Title and
-    Description text; the download's key and the layout."""
-    array, layout = compose_image(panels, cvs, background, columns, name)
-    text = {"Description": "\n".join(describe(cv) for cv in cvs), "Software": "chronocl"}
-    if name is not None:
-        text["Title"] = title_text(name, cvs)
-    return downloads.add(Image(array, text).png_bytes(), filename, "image/png"), layout
+    """`picture` as a PNG download; the download's key and the layout."""
+    image, layout = picture(panels, cvs, background, columns, name)
+    return downloads.add(image.png_bytes(), filename, "image/png"), layout
 
 
 def full_precision(

@@ -42,12 +42,11 @@ from chronocl.core.errors import InputNotFoundError, InvalidParameterError, Inva
 from chronocl.data.series import TimeSeries
 from chronocl.render.framing import framed
 from chronocl.render.image import Image
-from chronocl.render.panels import compose_panels
 from chronocl.render.triad import draw_triad
-from chronocl.render.views import describe, parse_color, raycaster
+from chronocl.render.views import parse_color, raycaster
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.protocol import SESSION, SESSION_KEY, SESSION_VERSION, decode_json
-from chronocl.viewer.saving import Downloads
+from chronocl.viewer.saving import Downloads, picture
 from chronocl.viewer.schema import ProtocolError
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
@@ -193,13 +192,15 @@ def render_session(
     device: str | None = None,
     time_labels: str = "labels",
     axes: bool = False,
+    name: str | None = None,
     **spec_changes: object,
 ) -> Image:
     """The views of `state` drawn as the viewer's Save PNG draws them: the same chronovolumes,
     camera (as the panels are drawn, framing its focus, else the visible region), size, clip,
-    lighting, background and outline, each panel labelled, its legends below (Save PNG's
-    title band over them, naming the data set and window, is not drawn here); `axes` adds
-    the axis triad to each panel (`chronocl render --state --axes`).
+    lighting, background and outline, each panel labelled, its legends below, and with the
+    data set's `name` Save PNG's title band over them, naming it and the windows (also the
+    PNG's Title text); `axes` adds the axis triad to each panel (`chronocl render --state
+    --axes`).
     `spec_changes` replace fields of every view's IntegrationSpec (e.g. a time_tf given on the
     command line)."""
     from chronocl.integration.inmemory import integrate
@@ -232,5 +233,4 @@ def render_session(
                 panels[-1] = draw_triad(panels[-1], state.panel_camera(i))
         finally:
             volume.release()
-    labels = [describe(cv) for cv in cvs]
-    return Image(compose_panels(panels, labels, cvs, None, bg, time_labels=time_labels))
+    return picture(panels, cvs, bg, None, name, time_labels)[0]
