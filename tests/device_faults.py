@@ -1,12 +1,14 @@
 """A child process of tests/test_device_faults.py: each kind of device work a frame does
-(integrate, gather, recolour by bricks where the winners fit one buffer, one recolouring
-edited again and again, the sliding kernels), with a failure injected at each of its device
-calls in turn (an enqueue, a map, a copy, a buffer made).
+(integrate, gather, recolour by bricks (in z-spans of rows of bricks where the winners are
+over one buffer), one recolouring edited again and again, the sliding kernels), with a
+failure injected at each of its device calls in turn (an enqueue, a map, a copy, a buffer
+made).
 
 Each failure must reach the caller as raised, and the next run must equal a run that never
 failed. A failure that freed host memory under enqueued work kills this process (a segfault
 in the kernel that writes it), which the test sees as its exit code. Prints one JSON line per
-kind of work: the device calls of one run, and the failures injected.
+kind of work: the device calls of one run, the failures injected, and for the brick
+recolouring the spans it ran in.
 """
 
 from __future__ import annotations
@@ -138,11 +140,10 @@ def works(size: int) -> dict:
         "bricks_edited": bricks_edited,
         "fixed_add": fixed_add,
     }
-    fits = on_host(won, None)  # the winners in one buffer: else no brick-wise recolouring
-    if fits is None:
-        del work["bricks"], work["bricks_edited"]
-    else:
-        fits.release()
+    prepared = on_host(won, None)  # in z-spans of rows of bricks where over one buffer
+    assert prepared is not None, "a row of bricks over the device's largest buffer"
+    bricks.spans = bricks_edited.spans = len(prepared.spans)
+    prepared.release()
     return work
 
 
@@ -171,7 +172,10 @@ def main() -> None:
             for a, b in zip(got, want, strict=True):
                 if not np.array_equal(a, b):
                     raise SystemExit(f"{name}: after a failure at call {at}, a wrong result")
-        print(json.dumps({"work": name, "calls": calls, "failures": calls}), flush=True)
+        row = {"work": name, "calls": calls, "failures": calls}
+        if hasattr(work, "spans"):  # the brick recolouring's z-spans (several: capped)
+            row["spans"] = work.spans
+        print(json.dumps(row), flush=True)
 
 
 if __name__ == "__main__":

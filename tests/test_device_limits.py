@@ -4,10 +4,10 @@
 that one step here (36 x 44 x 96 float32, 608 KB) is over it: every mode's integration (at full
 resolution and a coarse level, float32 and the display's RGBA8), a session's slides both ways
 (incrementally: the sliding kernels) and TF edits (recoloured where the mode allows), the
-gather of the winners and the probe then run in pieces (the brick-wise recolouring takes the
-winners in one buffer, or the edit integrates). Each result equals the
-uncapped one bit for bit (issue 45: the users' case at the default budget wrapped a 6.5 GB
-block in one buffer, over PoCL's 4 GB).
+gather of the winners, the brick-wise recolouring (in z-spans of rows of bricks) and the probe
+then run in pieces. Each result equals the uncapped one bit for bit (issue 45: the users' case
+at the default budget wrapped a 6.5 GB block in one buffer, over PoCL's 4 GB; at 1024^3 the
+winners' u alone is 4 GB).
 """
 
 from __future__ import annotations
@@ -124,28 +124,92 @@ def test_the_cap_is_below_one_step_and_splits_each_kind_of_buffer(series, monkey
     assert buffers.spans(20_000, 16, limit) == [(0, 8000), (8000, 16000), (16000, 20_000)]
 
 
-def test_brick_recolouring_takes_a_volume_whose_rgba8_fits_one_buffer(series, monkeypatch):
-    """A volume whose float32 RGBA is over the largest buffer but whose winners and RGBA8 are
-    not is still recoloured brick by brick (a review found it sent to the whole-volume spans),
-    and equals the uncapped recolouring; one whose RGBA8 is over it is not prepared there (the
-    viewer integrates the edit, and says why)."""
+ODD = (37, 21, 29)  # no side a multiple of the 8^3 bricks: 5 rows of bricks, the last short
+ROW = 8 * ODD[1] * ODD[2] * 4  # bytes of u of one row of bricks (19 488)
+# opaque on a band of u (0.8 to 0.9) alone: few bricks coloured
+BAND = ((0, 1, 1, 1, 0), (0.8, 1, 1, 1, 0), (0.81, 1, 0.2, 0, 1), (0.9, 0, 0.5, 1, 1),
+        (0.91, 1, 1, 1, 0), (1, 1, 1, 1, 0))  # fmt: skip
+SPANS = {  # cap -> rows of bricks of each span: boundaries at z = 8, 16, 24, 32; 16, 32; 32
+    ROW: [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5)],
+    2 * ROW + 100: [(0, 2), (2, 4), (4, 5)],
+    int(np.prod(ODD)) * 4 - 1: [(0, 4), (4, 5)],
+    int(np.prod(ODD)) * 4: [(0, 5)],  # u fits (its float32 RGBA would not): one span
+}
+
+
+def _odd_winners(mode: str):
+    """Winners of `ODD` that are empty (u 0) but for a blob across z = 16 and single voxels
+    on the faces of rows of bricks either side of z = 8, 16, 24 and 32 (where the spans of
+    one and two rows of bricks start), whose values differ from step to step (change)."""
+    from chronocl.integration.interactive.winners import winners
+
     steps = tuple(range(1, 7))
-    arrays = {s: np.ascontiguousarray(series.read([s])[0]) for s in steps}
-    rng = np.random.default_rng(2)
-    t_index = rng.choice(np.array([*steps, -1], np.int32), size=SHAPE)
-    spec = _spec("max", EDIT)
-    w = gather(t_index, arrays, steps, STEPS, VR, spec)
+    rng = np.random.default_rng(11)
+    z, y, x = np.meshgrid(*[np.arange(n) for n in ODD], indexing="ij")
+    blob = (z - 16) ** 2 + (y - 10) ** 2 + (x - 14) ** 2 <= 9
+    arrays = {}
+    for s in steps:
+        a = np.full(ODD, VR[0], np.float32)
+        a[blob] = rng.uniform(*VR, int(blob.sum()))
+        for zi in (7, 8, 15, 23, 24, 31, 32, 36):
+            a[zi, (3 * zi) % ODD[1], (5 * zi) % ODD[2]] = rng.uniform(*VR)
+        arrays[s] = a
+    t_index = rng.choice(np.array([*steps, -1], np.int32), size=ODD)
+    return winners(t_index, arrays, steps, STEPS, VR, _spec(mode))
+
+
+def _recoloured(w, mode: str) -> list[tuple]:
+    """Each edit's output, box, grid, bricks coloured and rewritten, and the spans it ran in:
+    EDIT (opaque wherever u > 0: the blob and the single voxels), BAND (a few bricks), EDIT and
+    BAND again (the bricks either coloured rewritten, the others cleared)."""
     bricks = BrickRecolourer()
     prepared = on_host(w, None)
-    want = bricks.apply(prepared, spec).rgba.copy()
-    prepared.release()
-    voxels = int(np.prod(SHAPE))
-    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(voxels * 8))  # RGBA8 fits, float32 not
-    prepared = on_host(w, None)
-    np.testing.assert_array_equal(bricks.apply(prepared, spec).rgba, want)
-    prepared.release()
-    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(voxels * 2))  # RGBA8 over it
+    got = []
+    try:
+        for points in (EDIT, BAND, EDIT, BAND):
+            c = bricks.apply(prepared, _spec(mode, points))
+            arrays = (c.rgba.copy(), c.bounds.copy(), c.bricks.copy(), c.coloured.copy())
+            got.append((*arrays, c.rewritten, len(prepared.spans)))
+    finally:
+        prepared.release()
+    return got
+
+
+@pytest.mark.parametrize("mode", ["max", "min", "change"])
+def test_brick_recolouring_of_winners_over_one_buffer_runs_in_spans(mode, monkeypatch):
+    """Winners over the device's largest buffer (at 1024^3 u alone is 4 GB, over PoCL's 2-4
+    GB on a CPU) are held in z-spans of whole rows of bricks, each span's buffers under it,
+    and recoloured span by span: every edit's RGBA8, occupied box, brick grid (a brick grown
+    by its neighbours across a span boundary) and bricks coloured equal the uncapped ones
+    bit for bit, on a shape whose spans end mid-volume. Only a row of bricks over the
+    largest buffer is not prepared there (the viewer integrates the edit, and says why)."""
+    from chronocl.render import brick_grid
+    from chronocl.render.recolour.bricks import span_rows
+
+    w = _odd_winners(mode)
+    monkeypatch.delenv(buffers.MAX_ALLOC_VAR, raising=False)
+    whole = _recoloured(w, mode)
+    assert [g[5] for g in whole] == [1] * 4
+    band = whole[1]
+    assert 0 < band[3].sum() < band[3].size / 2 and band[1][2] > 0  # few bricks, a box inside
+    for cap, rows in SPANS.items():
+        assert span_rows(ODD, cap) == rows
+        monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(cap))
+        split = _recoloured(w, mode)
+        for i, (got, want) in enumerate(zip(split, whole, strict=True)):
+            assert got[5] == len(rows), (cap, got[5])
+            names = ("rgba", "box", "grid", "coloured", "rewritten")
+            for name, a, b in zip(names, got, want, strict=False):
+                np.testing.assert_array_equal(a, b, err_msg=f"{mode} cap {cap} edit {i} {name}")
+            np.testing.assert_array_equal(got[2], brick_grid.from_rgba(got[0]))
+    # spans start 64-byte aligned (PoCL's in place) where that leaves a row of bricks a span:
+    # a row of (80, 3, 5) is 120 voxels (k: 120 bytes), so 8 rows, or any where fewer fit
+    assert span_rows((80, 3, 5), 9 * 480) == [(0, 8), (8, 10)]
+    assert span_rows((80, 3, 5), 3 * 480) == [(0, 3), (3, 6), (6, 9), (9, 10)]
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(ROW - 1))  # a row of bricks over it
     assert on_host(w, None) is None
+    with pytest.raises(buffers.DeviceLimitError, match="a row of 8 z planes"):
+        BrickRecolourer().prepare(w)
 
 
 def test_the_gather_wraps_only_what_its_rows_span_of_a_slot_block():

@@ -129,7 +129,8 @@ def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
 
     def counted(self, prepared, spec, into=None):
         changed = real(self, prepared, spec, into)
-        sparse.append(changed.rewritten / changed.coloured.size)
+        if into is not None:  # a view's, not `warm_kernels`' (the first frame's, on the side)
+            sparse.append(changed.rewritten / changed.coloured.size)
         return changed
 
     monkeypatch.setattr(BrickRecolourer, "apply", counted)
@@ -192,7 +193,8 @@ def test_the_first_edit_recolours_into_the_frame_shown(rgba8_server, monkeypatch
 
     def apply(self, prepared, spec, into=None):
         changed = real_apply(self, prepared, spec, into)
-        outputs.append(changed)
+        if into is not None:  # a view's, not `warm_kernels`'
+            outputs.append(changed)
         return changed
 
     monkeypatch.setattr(recolouring, "on_host", on_host)
@@ -208,6 +210,38 @@ def test_the_first_edit_recolours_into_the_frame_shown(rgba8_server, monkeypatch
         assert len(outputs) == 1 and outputs[0].rgba is starts[0]
         assert 0 < outputs[0].rewritten < outputs[0].coloured.size  # the bricks it may change
         np.testing.assert_array_equal(texels[0], outputs[0].rgba)
+        _assert_as_integrated(client, recoloured)
+    finally:
+        client.close()
+
+
+def test_winners_over_the_devices_largest_buffer_recolour_in_spans(rgba8_server, monkeypatch):
+    """RGBA8 on llvmpipe under an allocation cap the winners are over (at 1024^3 u alone is
+    4 GB, over PoCL's 2-4 GB on a CPU; here `CHRONOCL_MAX_ALLOC` under the 44 x 36 x 40
+    vortex's 253 KB of u, over two rows of its bricks): the brick recolouring holds them in
+    z-spans of rows of bricks, so max-mode edits still recolour (the frame says so, nothing
+    integrated) and show what integrating them shows."""
+    from chronocl.engine import buffers
+
+    spans: list[int] = []
+    real = recolouring.on_host
+
+    def on_host(w, device, held=None, start=None):
+        prepared = real(w, device, held, start)
+        spans.append(None if prepared is None else len(prepared.spans))
+        return prepared
+
+    monkeypatch.setattr(recolouring, "on_host", on_host)
+    monkeypatch.setenv(buffers.MAX_ALLOC_VAR, "100KB")  # u 253 KB, a row of bricks 46 KB
+    client = Client(rgba8_server)
+    try:
+        fitted, _ = _open_in(client, "max")
+        for x in (0.01, 0.75):  # every brick coloured, then few
+            header, recoloured = _sharp(client, _opaque_from(x, fitted))
+            t = header["timings"]
+            assert header["level"] == 0 and t["integrate_ms"] == 0 and t["recolour_ms"] > 0, t
+            assert header["views"][0]["why_integrated"] is None
+        assert spans and all(n == 3 for n in spans), spans
         _assert_as_integrated(client, recoloured)
     finally:
         client.close()

@@ -172,8 +172,10 @@ class Recolouring:
             prepared = Prepared(ref, *on_gl(_prepare_on_gpu, w), at)
         else:
             bricks = on_host(w, self.device, held, start)
-            if bricks is None:  # its kernels index the whole volume; llvmpipe's pass: slower
-                slot.why_not_recoloured = "the winners are over the OpenCL device's largest buffer"
+            if bricks is None:  # its spans are rows of bricks; llvmpipe's pass: slower
+                slot.why_not_recoloured = (
+                    "a row of bricks of the winners is over the OpenCL device's largest buffer"
+                )
                 return None
             prepared = Prepared(ref, BrickRecolourer(self.device), bricks, at)
             if start is not None:  # the texture holds the shown RGBA: an edit writes what changes
@@ -227,9 +229,9 @@ def _prepared_bytes(shown: Chronovolume, on_gpu: bool, outputs_held: bool, kept:
 
 
 def on_host(w, device: str | None, held: tuple | None = None, start=None):
-    """The winners prepared on the OpenCL device brick by brick (`held`: the outputs of the
-    last; `start`: the RGBA8 shown, the first edit's output); None where they are over its
-    largest buffer."""
+    """The winners prepared on the OpenCL device brick by brick, in z-spans of rows of bricks
+    under its largest buffer (`held`: the outputs of the last; `start`: the RGBA8 shown, the
+    first edit's output); None where one row of bricks (8 z planes) is over that buffer."""
     try:
         return BrickRecolourer(device).prepare(w, held, start)
     except DeviceLimitError:

@@ -2,7 +2,10 @@
  * (chronocl/render/recolour/bricks.py, BrickRecolourer): per brick a summary of its winners,
  * then the bricks that may be coloured recoloured into RGBA8 (a winner's colour: recolour.h),
  * with their opacity peaks and occupied box. Built after recolour.h (no common.h) with K_T
- * (the step index type) and BRICK (the brick side, chronocl/render/brick_grid.py's). */
+ * (the step index type) and BRICK (the brick side, chronocl/render/brick_grid.py's). Each run
+ * is over one z-span of whole rows of bricks as a volume of its own (nz its planes, brick
+ * indices and box z from its first): a brick reads only its own voxels, so the host puts the
+ * spans' results together as the whole volume's. */
 
 #define B BRICK
 // The voxel range of brick `b` (x fastest), clamped to the volume.

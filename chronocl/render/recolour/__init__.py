@@ -9,7 +9,8 @@ time TF of the winning step). One protocol, `Recolourer`, two implementations:
 - `gl.GLRecolourer`: a compute pass writes the display texture on the GPU (any format).
 - `bricks.BrickRecolourer`: the OpenCL device of the host writes RGBA8 brick by brick, only
   the bricks the new or the last TFs may colour (llvmpipe: its compute shaders run far slower
-  than PoCL's kernels, and its textures are host memory anyway).
+  than PoCL's kernels, and its textures are host memory anyway), in z-spans of rows of bricks
+  where the winners are over the device's largest buffer.
 
 `texture.show` then puts what changed into the display `Volume` (the bricks' boxes of host
 RGBA8, and either's box and grid); `gather.gather` gathers winners on the OpenCL device.

@@ -17,16 +17,25 @@ brick grid (grown by one voxel, as brick_grid.py defines it) over the bricks nex
 coloured one: both are then exactly what the viewer's upload finds in the whole array.
 `texture.show` writes only the bricks that may differ from what the texture holds. The
 winners and the output are used in place on a CPU device (host pointers, nothing copied).
+
+The device holds the winners in z-spans of whole rows of bricks, each span's u, k and output
+a buffer of its own under the device's largest (`chronocl.engine.buffers.max_alloc`; one span
+where the volume fits: at 1024^3 u alone is 4 GB, over PoCL's 2-4 GB on a CPU). Each kernel
+runs per span on the span as a volume of its own: a brick's summary, colours, peaks and box
+read only its own voxels, so the summaries and colours are the whole volume's, the box is
+moved by the span's first z, and the grid grows the peaks of every span's bricks together
+(`grown_grid`): a brick's neighbours across a span boundary lend their faces as within one.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 import threading
 
 import numpy as np
 
-from chronocl.core.memory import aligned_empty, is_aligned
+from chronocl.core.memory import ALIGN, aligned_empty, is_aligned
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
@@ -62,13 +71,51 @@ def shown_output(rgba, shape: tuple) -> bool:
     )
 
 
-class BrickWinners:
-    """A window's winners on the OpenCL device with their brick summaries, and the one RGBA8
-    output they are recoloured into, with the bricks that may be coloured in it."""
+class Span:
+    """One z-span of whole rows of bricks: rows [g0, g1) of the grid, voxels z [z0, z1), its
+    winners' u and k on the device (reading the host's in place on a CPU)."""
 
-    def __init__(self, w: Winners, buffers: tuple, arrays: tuple) -> None:
-        """`buffers`: u and k on the device, reading `arrays` (u and k) in place on a CPU."""
-        self.w, (self.u, self.k), self.arrays = w, buffers, arrays
+    def __init__(self, g0: int, g1: int, z0: int, z1: int, u, k) -> None:
+        self.g0, self.g1, self.z0, self.z1, self.u, self.k = g0, g1, z0, z1, u, k
+
+    def release(self) -> None:
+        self.u.release()
+        self.k.release()
+
+
+def span_rows(shape: tuple, limit: int) -> list[tuple[int, int]]:
+    """Rows of bricks [g0, g1) of each span of winners of `shape` (Z, Y, X): u (4 bytes a
+    voxel, the largest of u, k and the RGBA8 output) of a span under `limit` bytes, cut where
+    the spans' k (1 byte a voxel) start 64-byte aligned where that leaves a row of bricks a
+    span (PoCL then uses the host's memory in place). One span where the whole fits; raises
+    DeviceLimitError where one row of bricks does not."""
+    from chronocl.engine.buffers import DeviceLimitError
+
+    nz, ny, nx = shape
+    gz = brick_grid.grid_shape(tuple(shape))[0]
+    if nz * ny * nx * 4 <= limit:
+        return [(0, gz)]
+    row = B * ny * nx  # voxels of a full row of bricks
+    rows = limit // (row * 4)
+    if rows < 1:
+        raise DeviceLimitError(
+            f"a row of {B} z planes of the winners ({row * 4} bytes of u) is over the OpenCL "
+            f"device's largest buffer ({limit} bytes)"
+        )
+    aligned_rows = ALIGN // math.gcd(row, ALIGN)
+    if rows >= aligned_rows:
+        rows -= rows % aligned_rows
+    return [(g, min(gz, g + rows)) for g in range(0, gz, rows)]
+
+
+class BrickWinners:
+    """A window's winners on the OpenCL device, in z-spans of rows of bricks (`Span`), with
+    their brick summaries, and the one RGBA8 output they are recoloured into, with the bricks
+    that may be coloured in it."""
+
+    def __init__(self, w: Winners, spans: list[Span], arrays: tuple) -> None:
+        """`spans`: u and k on the device, reading `arrays` (u and k) in place on a CPU."""
+        self.w, self.spans, self.arrays = w, spans, arrays
         nz, ny, nx = w.u.shape
         self.dims = (nx, ny, nz)
         self.grid = brick_grid.grid_shape((nz, ny, nx))
@@ -91,9 +138,16 @@ class BrickWinners:
         else:
             self.output = (aligned_zeros((*shape, 4)), np.zeros(self.grid, bool))
 
-    def shape_args(self) -> list:
+    def shape_args(self, span: Span) -> list:
+        """The kernels' volume: the span's z planes, as a volume of their own."""
         _, gy, gx = self.grid
-        return [np.int32(v) for v in (*self.dims, gx, gy)]
+        nx, ny, _ = self.dims
+        return [np.int32(v) for v in (nx, ny, span.z1 - span.z0, gx, gy)]
+
+    def bricks_of(self, span: Span) -> tuple[int, int]:
+        """The grid's flat brick indices [a, b) of `span`."""
+        _, gy, gx = self.grid
+        return span.g0 * gy * gx, span.g1 * gy * gx
 
     def coloured(self, spec: IntegrationSpec) -> np.ndarray:
         """(Z, Y, X)/B bool: the bricks whose voxels may have opacity > 0 under `spec`."""
@@ -125,8 +179,9 @@ class BrickWinners:
         return held
 
     def release(self) -> None:
-        self.u.release()
-        self.k.release()
+        for span in self.spans:
+            span.release()
+        self.spans = []
         self.output = None
 
 
@@ -146,33 +201,48 @@ class BrickRecolourer:
         return build(self.dc, "recolour_bricks.cl", bricks_defines(k_dtype), common=RECOLOUR_H)
 
     def prepare(self, winners: Winners, held: tuple | None = None, start=None) -> BrickWinners:
-        """The winners on the device, each brick summarised, with their output
-        (`BrickWinners.take_output`). Raises DeviceLimitError where they are over the device's
-        largest buffer (its kernels index the whole volume)."""
+        """The winners on the device in z-spans of rows of bricks, each span's buffers under
+        its largest (`span_rows`), each brick summarised, with their output
+        (`BrickWinners.take_output`). Raises DeviceLimitError only where one row of bricks is
+        over the device's largest buffer."""
         import pyopencl as cl
 
-        from chronocl.engine.buffers import DeviceLimitError, DeviceWork, buffer, max_alloc
+        from chronocl.engine.buffers import DeviceWork, buffer, max_alloc
 
         w, dc = winners, self.dc
-        if w.u.size * 4 > max_alloc(dc):  # u, and the RGBA8 output, in one buffer each
-            raise DeviceLimitError("the winners are over the device's largest buffer")
+        rows = span_rows(w.u.shape, max_alloc(dc))
         arrays = (aligned(w.u), aligned(w.k))
-        u = buffer(dc, arrays[0], in_place=dc.is_cpu)
+        nz = w.u.shape[0]
+        spans: list[Span] = []
         try:
-            k = buffer(dc, arrays[1], in_place=dc.is_cpu)
+            for g0, g1 in rows:
+                z0, z1 = g0 * B, min(nz, g1 * B)
+                u = buffer(dc, arrays[0][z0:z1], in_place=dc.is_cpu)
+                try:
+                    k = buffer(dc, arrays[1][z0:z1], in_place=dc.is_cpu)
+                except BaseException:
+                    u.release()
+                    raise
+                spans.append(Span(g0, g1, z0, z1, u, k))
         except BaseException:
-            u.release()
+            for span in spans:
+                span.release()
             raise
-        prepared = BrickWinners(w, (u, k), arrays)
-        summary = (prepared.umin, prepared.umax, prepared.steps)
+        prepared = BrickWinners(w, spans, arrays)
         try:
-            with DeviceWork(dc) as work:
-                outs = [work.buffer(a, access="w") for a in summary]
-                kern = cl.Kernel(self._program(w.k.dtype), "summarise")
-                kern.set_args(u, k, np.uint32(w.none), *prepared.shape_args(), *outs)
-                cl.enqueue_nd_range_kernel(dc.queue, kern, (prepared.umin.size,), None)
-                for a, buf in zip(summary, outs, strict=True):
-                    work.read(a, buf, in_place=False)
+            program = self._program(w.k.dtype)
+            for span in spans:
+                lo, hi = prepared.bricks_of(span)
+                summary = (prepared.umin[lo:hi], prepared.umax[lo:hi], prepared.steps[lo:hi])
+                with DeviceWork(dc) as work:
+                    outs = [work.buffer(a, access="w") for a in summary]
+                    kern = cl.Kernel(program, "summarise")
+                    kern.set_args(
+                        span.u, span.k, np.uint32(w.none), *prepared.shape_args(span), *outs
+                    )  # fmt: skip
+                    cl.enqueue_nd_range_kernel(dc.queue, kern, (hi - lo,), None)
+                    for a, buf in zip(summary, outs, strict=True):
+                        work.read(a, buf, in_place=False)
         except BaseException:
             prepared.release()
             raise
@@ -185,10 +255,6 @@ class BrickRecolourer:
         """Premultiplied RGBA8 (Z, Y, X, 4) of the winners under `spec`, written over their
         one output in the bricks coloured now or in it, with the grid and occupied box of the
         result; to be shown in `into` (`texture.show`)."""
-        import pyopencl as cl
-
-        from chronocl.engine.buffers import DeviceWork
-
         p, w = prepared, prepared.w
         coloured = p.coloured(spec)
         out, before = p.output
@@ -200,22 +266,17 @@ class BrickRecolourer:
         box = np.zeros((max(len(todo), 1), 6), np.int32)
         lut = np.ascontiguousarray(spec.data_tf.lut, dtype=np.float32)
         table = step_table(spec, w.steps, w.n_steps)
-        cpu = self.dc.is_cpu
-        with DeviceWork(self.dc) as work:
-            out_buf = work.buffer(out, access="rw", in_place=cpu)
-            if len(todo):
-                kern = cl.Kernel(self._program(w.k.dtype), "recolour")
-                runs = _runs(todo, p.grid[2])
-                ins = [work.buffer(a) for a in (lut, table, todo, runs)]
-                outs = [work.buffer(a, access="w") for a in (peaks, box)]
-                kern.set_args(
-                    p.u, p.k, ins[0], np.int32(lut.shape[0]), ins[1], np.uint32(w.none),
-                    out_buf, *ins[2:], *p.shape_args(), *outs,
-                )  # fmt: skip
-                cl.enqueue_nd_range_kernel(self.dc.queue, kern, (len(runs) - 1,), None)
-                work.read(peaks, outs[0], in_place=False)
-                work.read(box, outs[1], in_place=False)
-            work.read(out, out_buf, cpu)  # on a CPU the host pointer holds it, mapped
+        program = self._program(w.k.dtype) if len(todo) else None
+        for span in p.spans:
+            lo, hi = p.bricks_of(span)
+            at = np.searchsorted(todo, [lo, hi])
+            if at[0] == at[1]:
+                continue  # none of its bricks coloured, now or before
+            self._recolour_span(
+                p, span, program, lut, table, todo[at[0] : at[1]] - lo,
+                peaks[at[0] : at[1]], box[at[0] : at[1]],
+            )  # fmt: skip
+            box[at[0] : at[1], 2::3][box[at[0] : at[1], 3] >= 0] += span.z0  # the span's z
         # bricks not rewritten hold nothing: not coloured now, nor in the array before
         stats = np.zeros((*p.grid, 27), np.uint8)
         stats.reshape(-1, 27)[todo] = peaks[: len(todo)]
@@ -226,6 +287,30 @@ class BrickRecolourer:
             bounds[3:] = box[: len(todo)][filled, 3:].max(axis=0)
         p.output = (out, coloured)
         return Changed(into, bounds, grown_grid(stats), out, coloured, len(todo))
+
+    def _recolour_span(self, p: BrickWinners, span: Span, program, lut, table, todo, peaks, box):
+        """Recolour the bricks `todo` of `span` (some; indices in the span's grid) into its z
+        planes of the output, their peaks and box (z in the span) into `peaks` and `box`."""
+        import pyopencl as cl
+
+        from chronocl.engine.buffers import DeviceWork
+
+        out = p.output[0][span.z0 : span.z1]
+        cpu, w = self.dc.is_cpu, p.w
+        with DeviceWork(self.dc) as work:
+            out_buf = work.buffer(out, access="rw", in_place=cpu)
+            kern = cl.Kernel(program, "recolour")
+            runs = _runs(todo, p.grid[2])
+            ins = [work.buffer(a) for a in (lut, table, todo, runs)]
+            outs = [work.buffer(a, access="w") for a in (peaks, box)]
+            kern.set_args(
+                span.u, span.k, ins[0], np.int32(lut.shape[0]), ins[1], np.uint32(w.none),
+                out_buf, *ins[2:], *p.shape_args(span), *outs,
+            )  # fmt: skip
+            cl.enqueue_nd_range_kernel(self.dc.queue, kern, (len(runs) - 1,), None)
+            work.read(peaks, outs[0], in_place=False)
+            work.read(box, outs[1], in_place=False)
+            work.read(out, out_buf, cpu)  # on a CPU the host pointer holds it, mapped
 
 
 def aligned_zeros(shape) -> np.ndarray:
