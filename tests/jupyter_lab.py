@@ -1,11 +1,13 @@
-"""A JupyterLab server on loopback and its notebook driven in Chromium (Playwright): what the
-notebook widget's browser tests (tests/test_notebook_browser.py) and its latency bench
+"""A Jupyter server on loopback, JupyterLab 4's or Notebook 7's, and its notebook driven in
+Chromium (Playwright): what the notebook widget's browser tests (tests/test_notebook_browser.py
+in JupyterLab, tests/test_notebook7_browser.py in Notebook 7) and its latency bench
 (bench/notebook_latency.py, which imports it as `tests.jupyter_lab`) share.
 
 The server runs in its own config, data and runtime folders (a random port, a token, the
-announcements toast off); a cell is run as Shift+Enter runs it (JupyterLab's
-`notebook:run-cell` on the page's `window.jupyterapp`, which `--LabApp.expose_app_in_browser`
-gives); what a cell printed after `KEY=` is read back as JSON.
+announcements toast off); a cell is run as Shift+Enter runs it (the `notebook:run-cell`
+command on the page's `window.jupyterapp`, which `expose_app_in_browser` gives: Notebook 7's
+application is built of JupyterLab's components, so the same shell, notebook panel and command
+serve both); what a cell printed after `KEY=` is read back as JSON.
 """
 
 from __future__ import annotations
@@ -55,11 +57,31 @@ def write_notebook(path: Path, cells: list[str]) -> None:
     nbformat.write(nb, path)
 
 
+# The front ends: how each is started (after the options both take) and a notebook's page.
+FRONT_ENDS = {
+    "lab": {
+        "name": "JupyterLab",
+        "argv": [
+            "-m", "jupyterlab", "--LabApp.expose_app_in_browser=True",
+            "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
+        ],
+        "notebook_url": "/lab/tree/{name}",
+    },
+    "notebook": {  # Notebook 7 (`jupyter notebook`), not JupyterLab
+        "name": "Notebook 7",
+        "argv": ["-m", "notebook", "--JupyterNotebookApp.expose_app_in_browser=True"],
+        "notebook_url": "/notebooks/{name}",
+    },
+}  # fmt: skip
+
+
 @contextmanager
-def jupyter_lab(root: Path, home: Path) -> Iterator[dict]:
-    """A JupyterLab server on 127.0.0.1 serving `root`, its config, runtime, settings and log
-    under `home`; yields {"base": its URL, "token", "root", "log": the log's path}; stopped
-    after. RuntimeError with the log's end where it does not start in START_TIMEOUT_S."""
+def jupyter_server(root: Path, home: Path, front_end: str = "lab") -> Iterator[dict]:
+    """A Jupyter server of `front_end` ("lab": JupyterLab, "notebook": Notebook 7) on 127.0.0.1
+    serving `root`, its config, runtime, settings and log under `home`; yields {"base": its
+    URL, "token", "root", "log": the log's path, "front_end"}; stopped after. RuntimeError
+    with the log's end where it does not start in START_TIMEOUT_S."""
+    spec = FRONT_ENDS[front_end]
     (home / "config" / "labconfig").mkdir(parents=True, exist_ok=True)
     (home / "config" / "labconfig" / "page_config.json").write_text(
         json.dumps({"disabledExtensions": {"@jupyterlab/apputils-extension:announcements": True}})
@@ -72,15 +94,13 @@ def jupyter_lab(root: Path, home: Path) -> Iterator[dict]:
         "JUPYTERLAB_WORKSPACES_DIR": str(home / "workspaces"),
         "JUPYTER_PLATFORM_DIRS": "1",
     }
-    log_path = home / "lab.log"
+    log_path = home / f"{front_end}.log"
     with open(log_path, "w") as log:
         proc = subprocess.Popen(
             [
-                sys.executable, "-m", "jupyterlab", "--no-browser", "--ip=127.0.0.1",
+                sys.executable, *spec["argv"], "--no-browser", "--ip=127.0.0.1",
                 f"--port={port}", f"--IdentityProvider.token={token}",
-                f"--ServerApp.root_dir={root}", "--LabApp.expose_app_in_browser=True",
-                "--ServerApp.open_browser=False", "--allow-root",
-                "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
+                f"--ServerApp.root_dir={root}", "--ServerApp.open_browser=False", "--allow-root",
             ],
             env=env, stdout=log, stderr=subprocess.STDOUT, cwd=root,
         )  # fmt: skip
@@ -93,7 +113,7 @@ def jupyter_lab(root: Path, home: Path) -> Iterator[dict]:
                 except OSError:
                     if proc.poll() is not None or time.monotonic() > end:
                         raise RuntimeError(
-                            f"JupyterLab did not start: {log_path.read_text()[-2000:]}"
+                            f"{spec['name']} did not start: {log_path.read_text()[-2000:]}"
                         ) from None
                     time.sleep(0.2)
             yield {
@@ -101,6 +121,7 @@ def jupyter_lab(root: Path, home: Path) -> Iterator[dict]:
                 "token": token,
                 "root": root,
                 "log": log_path,
+                "front_end": front_end,
             }
         finally:
             proc.terminate()
@@ -111,10 +132,16 @@ def jupyter_lab(root: Path, home: Path) -> Iterator[dict]:
                 proc.wait()
 
 
-def open_notebook(page, lab: dict, name: str, cells: int, timeout_s: float = 60) -> None:
-    """Notebook `name` (under the server's root) opened on `page`, waited for until its kernel
-    is idle and its `cells` cells are shown."""
-    page.goto(f"{lab['base']}/lab/tree/{name}?token={lab['token']}")
+def jupyter_lab(root: Path, home: Path):
+    """A JupyterLab server (`jupyter_server(root, home, "lab")`)."""
+    return jupyter_server(root, home, "lab")
+
+
+def open_notebook(page, server: dict, name: str, cells: int, timeout_s: float = 60) -> None:
+    """Notebook `name` (under the server's root) opened on `page` in the server's front end,
+    waited for until its kernel is idle and its `cells` cells are shown."""
+    path = FRONT_ENDS[server.get("front_end", "lab")]["notebook_url"].format(name=name)
+    page.goto(f"{server['base']}{path}?token={server['token']}")
     page.wait_for_function(NOTEBOOK_READY, arg=cells, timeout=timeout_s * 1000)
 
 

@@ -2,7 +2,9 @@
 from code changes the worker's state and the picture; each changed by the page's own message
 (as the comm delivers it: `Widget._handle_msg`) shows in the attribute and its observers. Then
 what `show` accepts, the kernel's requests (screenshot, chronovolume, snapshot), bad values,
-closing, the front end's bundle, and a process without OpenGL."""
+closing, the front end's bundle, and a process without OpenGL. Then remote stores (a real HTTP
+server and moto's S3 on loopback: the same frames as the local copy; a bad URL in one line),
+and views set apart (a view's own camera and TFs in `w.views`)."""
 
 from __future__ import annotations
 
@@ -556,3 +558,193 @@ def test_a_rewritten_store_shown_again_is_opened_afresh(tmp_path):
             b.close()
     finally:
         a.close()
+
+
+# -- remote stores: HTTP and S3 (moto) on loopback (tests/remote_servers.py) ------------------
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory):
+    """A folder holding v.zarr, the vortex as a chronocl store."""
+    root = tmp_path_factory.mktemp("served")
+    chronocl.TimeSeries.from_array(vortex(), source="vortex").save(root / "v.zarr")
+    return root
+
+
+def scrubbed(where, **options) -> tuple[list[str], bytes, dict]:
+    """`where` shown, its window scrubbed from code (0:6, then 3:9, then 5:12 by 2): the
+    settled frames' digests, the last one's screenshot (PNG bytes) and the snapshot."""
+    w = chronocl.show(where, window=(0, 6), **options)
+    try:
+        digests = [w.wait_frame()["digest"]]
+        for window in ((3, 9), (5, 12, 2)):
+            w.window = window
+            frame = w.wait_frame()
+            assert frame["views"][0]["label"].endswith(
+                f"steps {window[0]}:{window[1]}" + (f":{window[2]}" if len(window) > 2 else "")
+            ), frame["views"][0]["label"]
+            digests.append(frame["digest"])
+        return digests, w.screenshot().data, w.snapshot()
+    finally:
+        w.close()
+
+
+def test_show_opens_a_store_over_http_as_its_local_copy(served):
+    """`show(URL)`: the store read in place over HTTP (a real server on loopback) gives the same
+    frames while scrubbing and the same screenshot, bit for bit, as its local copy."""
+    from .remote_servers import StoreServer
+
+    local = scrubbed(str(served / "v.zarr"))
+    with StoreServer(served) as http:
+        remote = scrubbed(http.url("v.zarr"))
+        assert http.chunk_requests()  # its steps came over HTTP
+        assert remote[2]["dataset"]["path"] == http.url("v.zarr")
+    assert len(set(local[0])) == 3  # each window its own picture
+    assert remote[0] == local[0] and remote[1] == local[1]
+    assert remote[1][:8] == b"\x89PNG\r\n\x1a\n"
+    assert remote[2]["dataset"]["name"] == local[2]["dataset"]["name"] == "v"
+
+
+def test_show_opens_an_s3_store_with_storage_options(served):
+    """`show("s3://...", storage_options=...)` on moto's S3 server: the same frames and
+    screenshot as the local copy; a URL's scheme in capitals is read as the same store."""
+    pytest.importorskip("s3fs")
+    pytest.importorskip("moto.server")
+    import logging
+
+    from .remote_servers import S3Server
+
+    logging.getLogger("werkzeug").setLevel(logging.ERROR)
+    local = scrubbed(str(served / "v.zarr"))
+    with S3Server() as s3:
+        url = s3.put(served / "v.zarr", "chronocl-notebook", "runs/v.zarr")
+        remote = scrubbed(url, storage_options=s3.storage_options())
+        assert remote[0] == local[0] and remote[1] == local[1]
+        assert remote[2]["dataset"]["path"] == url
+        w = chronocl.show("S3" + url[2:], storage_options=s3.storage_options())
+        try:
+            assert w.snapshot()["dataset"]["path"] == url
+        finally:
+            w.close()
+        with pytest.raises(
+            ChronoclError, match=r"bucket 'no-such-bucket' .* does not exist"
+        ) as got:
+            chronocl.show("s3://no-such-bucket/v.zarr", storage_options=s3.storage_options())
+        assert "\n" not in str(got.value)
+
+
+def test_a_bad_url_is_one_line_before_any_work(served, monkeypatch):
+    """A URL `show` cannot read is one ChronoclError line: another scheme, no host or bucket, a
+    bad port, or storage options for a path or an array before anything is opened; a store
+    missing, unreachable or refused before any worker is made."""
+    import chronocl.notebook.data as nb_data
+    import chronocl.notebook.widget as nb_widget
+
+    from .remote_servers import StoreServer
+
+    monkeypatch.setenv("CHRONOCL_REMOTE_RETRIES", "1")
+    monkeypatch.setenv("CHRONOCL_REMOTE_BACKOFF_S", "0.01")
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("work was started for a bad URL")
+
+    monkeypatch.setattr(nb_widget, "ClientWorker", no_work)
+
+    def one_line(data, match: str, **options) -> None:
+        with pytest.raises(ChronoclError, match=match) as got:
+            chronocl.show(data, **options)
+        assert "\n" not in str(got.value), str(got.value)
+
+    with monkeypatch.context() as nothing_opened:
+        nothing_opened.setattr(nb_data, "open_datasets", no_work)
+        one_line("ftp://127.0.0.1/v.zarr", r"cannot read a ftp:// store .* http://, https://")
+        one_line("gs://bucket/v.zarr", r"cannot read a gs:// store")
+        one_line("http://", r"'http://' names no host")
+        one_line("https:///v.zarr", r"names no host")
+        one_line("s3://", r"'s3://' names no bucket")
+        one_line("http://127.0.0.1:port/v.zarr", r"has a bad port")
+        one_line(
+            str(served / "v.zarr"),
+            r"apply to a store's .* not to the local path",
+            storage_options={"anon": True},
+        )
+        one_line(vortex(), r"not to a ndarray", storage_options={"anon": True})
+        one_line("s3://bucket/v.zarr", r"storage_options must be a dict", storage_options="anon")
+    with StoreServer(served) as http:
+        one_line(http.url("nothing.zarr"), r"no zarr store at http://127\.0\.0\.1")
+        assert http.requests  # it looked
+    one_line("http://127.0.0.1:9/v.zarr", r"cannot connect")  # the discard port: no one there
+
+
+# -- views set apart: each view's own camera, data TF and time TF ----------------------------
+
+
+def panels_of(w, monkeypatch):
+    """A function giving the panels' pictures (each view's JPEG bytes) of the settled frame
+    answering the newest request, as the page is sent them."""
+    from chronocl.viewer.protocol import unpack_frame
+
+    sent: dict[int, list[bytes]] = {}
+    send = w.send
+
+    def record(content, buffers=None):
+        if content.get("frame"):
+            header, images = unpack_frame(buffers[0])
+            sent[header["seq"]] = images
+        return send(content, buffers)
+
+    monkeypatch.setattr(w, "send", record)
+    return lambda: sent[w.wait_frame()["seq"]]
+
+
+def test_a_view_with_its_own_camera_shows_its_own_picture(widget, monkeypatch):
+    """`w.views` carries each view's links: a view given its own camera (in part: the rest the
+    shared one's) draws its own picture beside the linked one; the shared camera and the mode
+    set from code leave it as it is; relinked (`camera: None`), the two panels are equal. An
+    own data TF and the page's own edit of a view's links read back the same way."""
+    panels = panels_of(widget, monkeypatch)
+    widget.camera = {"azimuth": 30, "elevation": 20}
+    widget.views = [{"mode": "max"}, {"mode": "max", "camera": {"azimuth": 90}}]
+    first, second = widget.views
+    assert first["camera"] is None and first["data_tf"] is None and first["time_tf"] is None
+    assert second["camera"]["azimuth"] == 90
+    assert second["camera"]["elevation"] == widget.camera["elevation"] == 20  # the shared one's
+    assert second["data_tf"] is None and second["time_tf"] is None
+    a, b = panels()
+    assert a != b
+    assert widget.snapshot()["views"][1]["camera"]["azimuth"] == 90
+
+    widget.camera = {"azimuth": 45}  # the shared camera turns the linked view only
+    widget.mode = "mean"
+    assert widget.views[1]["camera"]["azimuth"] == 90 and widget.views[1]["mode"] == "max"
+    widget.mode = "max"
+    widget.camera = {"azimuth": 90}  # the shared one where the own one is: the same picture
+    a, b = panels()
+    assert a == b
+
+    relinked = [dict(v) for v in widget.views]
+    relinked[1]["camera"] = None
+    widget.camera = {"azimuth": 30}
+    widget.views = relinked
+    assert widget.views[1]["camera"] is None
+    a, b = panels()
+    assert a == b
+
+    # an own data TF: its own colours
+    points = [[0.0, 1.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.0, 0.0, 1.0]]
+    own_tf = {"points": points, "value_range": [0.0, 1.0]}
+    widget.views = [{"mode": "max"}, {"mode": "max", "data_tf": own_tf}]
+    assert widget.views[1]["data_tf"]["points"] == points and widget.views[0]["data_tf"] is None
+    a, b = panels()
+    assert a != b
+
+    # the page unlinks the second view's time TF (its header's `time` toggle): it comes back
+    seen = changes(widget, "views")
+    views = [dict(v) for v in widget.views]
+    views[1]["time_tf"] = {"color": "lightness"}
+    from_page(widget, {"type": "update", "id": 90, "views": views})
+    assert widget.views[1]["time_tf"]["color"] == "lightness"
+    assert widget.views[0]["time_tf"] is None and seen and seen[-1] == widget.views
+    widget.views = ["alpha"]
+    linked = {"window": None, "camera": None, "data_tf": None, "time_tf": None}
+    assert widget.views == [{"mode": "alpha", "order": "forward", **linked}]

@@ -33,23 +33,27 @@ def show(
     storage_options: dict | None = None,
     **array_options,
 ):
-    """The viewer of `data` in the notebook: a TimeSeries, a store's path or URL (read in place
-    with `storage_options`), or a numpy, dask or xarray array (T, Z, Y, X; `array_options`:
-    spacing, times, time_unit, resample, as `TimeSeries.from_array` takes them). `name`
-    names the data set; `window` ((t0, t1[, stride])) and `mode` are set before the first
-    picture's page shows it; `height` is the widget's height in CSS pixels. The widget's
-    attributes (window, mode, views, data_tf, time_tf, camera) follow the page and set it.
-    `memory` is the kernel's memory limit for every widget's steps and frames (the newest
-    given; docs/notebook.md). Nothing is drawn until a page shows the widget or the kernel
-    asks for a picture. Raises ChronoclError subclasses: the extra missing, bad data (a
-    Chronovolume: the call that shows the series it came from), no OpenGL in the kernel."""
+    """The viewer of `data` in the notebook: a TimeSeries, a store's path or URL (http://,
+    https:// or s3://, read in place with `storage_options` as `chronocl.open` takes them:
+    s3fs's `anon`, `endpoint_url`, `key`, `secret`; HTTP's client arguments), or a numpy, dask
+    or xarray array (T, Z, Y, X; `array_options`: spacing, times, time_unit, resample, as
+    `TimeSeries.from_array` takes them). `name` names the data set; `window` ((t0, t1[,
+    stride])) and `mode` are set before the first picture's page shows it; `height` is the
+    widget's height in CSS pixels. The widget's attributes (window, mode, views, data_tf,
+    time_tf, camera) follow the page and set it. `memory` is the kernel's memory limit for
+    every widget's steps and frames (the newest given; docs/notebook.md). Nothing is drawn
+    until a page shows the widget or the kernel asks for a picture. Raises ChronoclError
+    subclasses, in one line: the extra missing; bad data (a Chronovolume: the call that shows
+    the series it came from; a URL of another scheme or without a host, or storage options
+    for anything but a URL, checked before anything is opened; a store missing, unreachable
+    or refused, as `chronocl.open` says it); no OpenGL in the kernel."""
     try:
         import anywidget  # noqa: F401
     except ImportError:
         raise InvalidParameterError(
             "chronocl.show needs the notebook extra: pip install 'chronocl[notebook]'"
         ) from None
-    from chronocl.notebook.data import as_dataset, store_key
+    from chronocl.notebook.data import as_dataset, check_store, store_key
     from chronocl.notebook.widget import ChronoclWidget
     from chronocl.viewer.server import check_options
 
@@ -58,6 +62,8 @@ def show(
     # as `chronocl view` checks them, before any data is read (a bad engine made a widget
     # whose frames never came, the cause never said)
     check_options(engine=engine, device=device, memory=memory)
+    data = check_store(data, storage_options)  # a URL it cannot read: one line, nothing opened
+    storage_options = None if storage_options is None else dict(storage_options)
     dataset = as_dataset(data, name, storage_options, **array_options)
     store = store_key(data, storage_options) if isinstance(data, str | os.PathLike) else None
     widget = ChronoclWidget(

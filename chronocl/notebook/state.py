@@ -4,7 +4,9 @@ state the worker holds (`view_state.describe_state`), whoever changed it: code o
 
     window   (t0, t1, stride)      set (t0, t1) or (t0, t1, stride); t1 exclusive
     mode     the first view's mode (set: that view's mode; the others keep theirs)
-    views    [{"mode", "order", "window"}, ...]; set a list of dicts or of mode names
+    views    [{"mode", "order", "window", "camera", "data_tf", "time_tf"}, ...]: each view's own
+             window, camera and TFs, None where it follows the shared one (linked); set a list
+             of dicts (an own camera or time TF in part: the rest the shared one's) or of modes
     data_tf  {"points": [[u, r, g, b, a], ...], "value_range": [lo, hi]} (no range: the series')
     time_tf  {"color", "alpha", ...}; set any subset, the rest kept
     camera   {"azimuth", "elevation", "zoom", "fov", "projection", "up"}; set any subset
@@ -65,7 +67,8 @@ def _window(value: object, stride: int) -> dict:
 def _views(value: object) -> list[dict]:
     if not isinstance(value, Sequence) or isinstance(value, str) or not value:
         raise InvalidParameterError(
-            f"views must be a list of modes or of {{'mode', 'order', 'window'}}, not {value!r}"
+            "views must be a list of modes or of {'mode', 'order', 'window', 'camera', "
+            f"'data_tf', 'time_tf'}}, not {value!r}"
         )
     views = []
     for v in value:

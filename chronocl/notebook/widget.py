@@ -116,7 +116,10 @@ class ChronoclWidget(anywidget.AnyWidget):
     height = traitlets.Int(620, help="the widget's height on the page, CSS pixels").tag(sync=True)
     window = traitlets.Tuple(help="(t0, t1, stride): the window of steps, t1 exclusive")
     mode = traitlets.Unicode(help="the first view's integration mode")
-    views = traitlets.List(help="the views side by side: {'mode', 'order', 'window'} each")
+    views = traitlets.List(
+        help="the views side by side: {'mode', 'order', 'window', 'camera', 'data_tf', "
+        "'time_tf'} each (a view's own, None where linked to the shared one)"
+    )
     data_tf = traitlets.Dict(help="the data transfer function: points and value range")
     time_tf = traitlets.Dict(help="the time transfer function")
     camera = traitlets.Dict(help="azimuth, elevation, zoom, fov, projection, up")
