@@ -375,6 +375,16 @@ API = {
         ),
         InvalidParameterError,
     ),
+    "open a URL without a host": (lambda: chronocl.open("http://"), InvalidParameterError),
+    "open an s3 URL without a bucket": (lambda: chronocl.open("s3://"), InvalidParameterError),
+    "open a URL of another scheme": (
+        lambda: chronocl.open("ftp://h/x.zarr"),
+        InvalidParameterError,
+    ),
+    "open a URL with a bad port": (
+        lambda: chronocl.open("http://h:x/s.zarr"),
+        InvalidParameterError,
+    ),
 }
 
 
@@ -417,3 +427,22 @@ def test_repr_of_a_chronovolume_is_one_line():
     assert repr(cv) == (
         "Chronovolume(6×5×4 (x, y, z), mode=max, steps 0:10:3 (4 of 12), from 'demo', with t_index)"
     )
+
+
+@pytest.mark.parametrize(
+    ("url", "needle"),
+    [
+        ("http://", "'http://' names no host"),
+        ("s3://", "'s3://' names no bucket"),
+        ("ftp://h/x.zarr", "cannot read a ftp:// store"),
+        ("gs://b/x.zarr", "cannot read a gs:// store"),
+        ("http://h:x/s.zarr", "has a bad port"),
+    ],
+)
+def test_a_url_chronocl_cannot_read_is_one_line_from_the_cli(tmp_path, url, needle):
+    """A store's URL is checked before anything is opened (`remote_store.check_url`): `info
+    http://` died in a traceback (an AttributeError), `ftp://...` said the store did not exist
+    as a local path."""
+    from .bad_input import assert_rejected
+
+    assert_rejected(["info", url], needle, inputs=[], folder=tmp_path)

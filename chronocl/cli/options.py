@@ -129,8 +129,9 @@ def series_store(
     ...)`): a URL as it is, a local path checked to exist (options refused for it)."""
     from chronocl.core.paths import check_input
     from chronocl.data.remote import is_url, parse_storage_options, storage_options_for
+    from chronocl.data.remote_store import check_url
 
-    text = str(text)
+    text = str(check_url(str(text)))  # a URL it cannot read: one line, before anything
     options = storage_options_for(text, parse_storage_options(storage_option, anon))
     if is_url(text):
         return text, options

@@ -27,10 +27,12 @@ from __future__ import annotations
 import asyncio
 import atexit
 import json
+import re
 import threading
 import weakref
 from collections.abc import Iterable, Mapping
 from typing import Any
+from urllib.parse import urlsplit
 
 from chronocl.core import env
 from chronocl.core.errors import (
@@ -51,6 +53,36 @@ DEFAULT_BACKOFF_S = 0.2
 def is_url(path: object) -> bool:
     """True for a store named by an http(s):// or s3:// URL (never for a local path)."""
     return isinstance(path, str) and path.lower().startswith(SCHEMES)
+
+
+# A URL's scheme: two letters at least (`C://data` is a Windows drive, a path).
+URL_SCHEME = re.compile(r"([A-Za-z][A-Za-z0-9+.-]+)://")
+
+
+def check_url(path: object) -> object:
+    """`path` as a store is opened: a URL checked and its scheme in lower case (http://,
+    https://, s3://), anything else as it is; InvalidParameterError in one line, before
+    anything is opened, for another scheme, a bad port, or no host or bucket."""
+    text = path if isinstance(path, str) else None
+    found = None if text is None else URL_SCHEME.match(text)
+    if found is None:
+        return path
+    scheme = found[1].lower()
+    if scheme + "://" not in SCHEMES:
+        raise InvalidParameterError(
+            f"cannot read a {scheme}:// store ({text!r}); chronocl reads a local path or an "
+            "http://, https:// or s3:// URL"
+        )
+    url = scheme + text[len(found[1]) :]
+    parts = urlsplit(url)
+    try:
+        parts.port  # noqa: B018 (a port that is not a number raises)
+    except ValueError:
+        raise InvalidParameterError(f"{text!r} has a bad port; check the URL") from None
+    if not parts.hostname:
+        what = "bucket" if scheme == "s3" else "host"
+        raise InvalidParameterError(f"{text!r} names no {what}; check the URL")
+    return url
 
 
 def retry_policy() -> tuple[int, float]:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
-from chronocl.data.remote_store import is_url
+from chronocl.data.remote_store import check_url, is_url
 from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries, open_store
 from chronocl.data.writer import write_store
@@ -37,6 +37,7 @@ def open_series(
     `path` may be an http(s):// or s3:// URL, read in place (`chronocl.data.remote`);
     `storage_options` then go to fsspec (``anon=True`` for a public bucket, ``endpoint_url``).
     """
+    path = check_url(path)  # a URL it cannot read: one line, nothing opened
     if is_url(path):
         from chronocl.data.remote import open_remote
 
