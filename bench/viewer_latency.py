@@ -27,8 +27,8 @@ The sharp frames' split (integrate / read-back / upload / render / encode) comes
 headers; read-back is null while the server counts it inside integrate_ms. The direct baseline
 makes the same edits without server or socket on a resident level-0 `Session` holding the same
 window under the same memory budget, built with the viewer's options (RGBA8 output from the
-kernels, the viewer's direct-integration bound): set_spec, upload (the viewer's), draw, JPEG,
-each timed.
+kernels, the viewer's measured choice of sliding or integrating): set_spec, upload (the
+viewer's), draw, JPEG, each timed.
 
 Cases: by default 128^3, 256^3 (float32, 20 steps) and 512^3 (uint8, 12 steps), a 10-step
 window, a 512x512 panel, a 12GB budget, the direct baseline at 128^3. `--users` runs the users'
@@ -169,13 +169,13 @@ def full_split(chains: list[list[dict]]) -> dict:
 def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, case: str) -> dict:
     """The same edits without the server: a resident level-0 `Session` over the same window and
     budget, set_spec per edit, then the viewer's upload, a draw at the server's size, JPEG."""
+    from chronocl.integration.interactive.costs import SlideCosts
     from chronocl.integration.interactive.session import Session
     from chronocl.render.gl import gl_context
     from chronocl.render.views import raycaster
     from chronocl.viewer.fit import fitted_default
     from chronocl.viewer.frames import JPEG_QUALITY, PIXEL_BUDGET, encode, render_size
     from chronocl.viewer.slots import ViewSlot, upload
-    from chronocl.viewer.view_sessions import DIRECT_BELOW_MS
     from chronocl.viewer.view_state import default_state, describe_state, merge
 
     series = open_series(path)
@@ -185,7 +185,7 @@ def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, cas
     edit = Edits(describe_state(state)["data_tf"])
     draw_size = render_size(state.size, 1, 1.0, PIXEL_BUDGET)
     rows = []
-    options = {"display": True, "direct_below_ms": DIRECT_BELOW_MS}  # as the viewer's sessions
+    options = {"display": True, "slide_costs": SlideCosts()}  # as the viewer's sessions
     with gl_context(), Session(series, memory=memory, spec=state.spec(0), **options) as s:
         rc, slot = raycaster(), ViewSlot()
         s.show(state.selection(n))

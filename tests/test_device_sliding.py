@@ -186,9 +186,7 @@ def test_a_state_over_the_largest_device_buffer_slides_on_the_host(copying, mode
     series = _series(np.random.default_rng(8), 10, shape, np.float32, False)
     monkeypatch.setenv(buffers.MAX_ALLOC_VAR, str(int(np.prod(shape)) * 16 // 2))
     rgb = TimeTF.preset("rgb", positions="absolute")
-    with Session(
-        series, mode=mode, time_tf=rgb, engine=copying, memory="64MB", direct_below_ms=0
-    ) as session:
+    with Session(series, mode=mode, time_tf=rgb, engine=copying, memory="64MB") as session:
         session.set_window(2, 6)
         for move in (+2, -1):
             _check(session, session.slide(move), series)

@@ -13,7 +13,6 @@ from chronocl import modes
 from chronocl.core.errors import ChronoclError, InvalidParameterError
 from chronocl.core.tf import TimeTF
 from chronocl.data import synthetic
-from chronocl.integration.interactive import levels
 from chronocl.integration.interactive.levels import LatencyModel
 from chronocl.integration.interactive.session import Session
 from chronocl.modes.spec import IntegrationSpec
@@ -81,12 +80,12 @@ def test_auto_scrubs_incrementally_at_the_level_it_picked(series):
         np.testing.assert_array_equal(cvs[-1].rgba, ref.rgba)
 
 
-def test_a_coarse_frame_reads_its_full_resolution_steps_ahead(series, monkeypatch):
+def test_a_coarse_frame_reads_its_full_resolution_steps_ahead(series):
     """While a coarse level shows a window, level 0's manager reads its steps in the
-    background (where the machine has cores to spare: here forced): the refine after a scrub
-    finds them resident and reads nothing more."""
-    monkeypatch.setattr(levels, "READ_AHEAD_CORES", 1)
+    background (where the coarse frames leave a core idle: here a machine of many cores):
+    the refine after a scrub finds them resident and reads nothing more."""
     with Session(series, mode="max", level="auto", target_ms=1e-3, memory="1GB") as s:
+        s.ahead.cores = 1000
         s.set_window(0, 4)
         for _ in range(3):
             s.slide(+1)

@@ -21,6 +21,7 @@ from chronocl.core.errors import InvalidSelectionError
 from chronocl.core.tf import TimeTF
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate, make_spec
+from chronocl.integration.interactive.costs import SlideCosts
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.sliding import SlidingAggregate
 
@@ -113,16 +114,37 @@ def test_relative_positions_and_importance_order_reintegrate(engine: str) -> Non
         _check(cv, series, session.selection, session.spec, engine)
 
 
+class _Rates(SlideCosts):
+    """Slide costs at fixed rates (ms per voxel-step integrated, per voxel of a slide and per
+    voxel-step of a fill): the session's own timings are not learnt, so the choice does not
+    depend on the machine."""
+
+    def __init__(self, direct: float, slide: float) -> None:
+        super().__init__()
+        self.direct, self.slide, self.fill = {0: direct}, {0: slide}, {0: slide}
+        self.fed: list[str] = []
+
+    def record_direct(self, level, ms, voxels, steps) -> None:
+        self.fed.append("direct")
+
+    def record_slide(self, level, ms, voxels, steps=1, fill=0) -> None:
+        assert steps > 0
+        self.fed.append("fill" if fill else "slide")
+
+
 @pytest.mark.parametrize("mode", ["alpha", "additive"])
 def test_a_window_cheaper_to_integrate_than_to_slide_is_integrated_on_a_slide(mode) -> None:
-    """`direct_below_ms` (the viewer's): a window whose integration from its steps took less
-    is integrated so again on a slide, not slid (no sliding state to fill, no partials to
-    combine); one that took longer slides as before. Both equal the reference."""
+    """`slide_costs` (the viewer's): where the measured rates predict integrating the window
+    cheaper than sliding it, a slide integrates it (no sliding state to fill, no partials to
+    combine), and says why; where sliding is cheaper it slides. Both equal the reference, and
+    the session feeds the rates what it timed."""
     rng = np.random.default_rng(11)
     series = _series(rng, 16, (3, 5, 19), levels=False)
     absolute = TimeTF.preset("rgb", positions="absolute")
-    for below, path in ((1e9, "reintegrate"), (0.0, "incremental")):
-        with Session(series, mode=mode, time_tf=absolute, direct_below_ms=below) as s:
+    # a 7-step window: 7 voxel-steps integrated against a slide (and its fill's share)
+    for slide, path in ((100.0, "reintegrate"), (0.01, "incremental")):
+        rates = _Rates(1.0, slide)
+        with Session(series, mode=mode, time_tf=absolute, slide_costs=rates) as s:
             s.set_window(2, 9)
             for k in (1, 1, -2, 3):
                 cv = s.slide(k)
@@ -130,8 +152,10 @@ def test_a_window_cheaper_to_integrate_than_to_slide_is_integrated_on_a_slide(mo
                 _check(cv, series, s.selection, s.spec, "opencl")
             why = s.stats["why_not_incremental"]
             assert (why is None) == (path == "incremental")
-            assert path == "incremental" or "cheaper than sliding it" in why
+            assert path == "incremental" or "cheaper to integrate" in why
             assert s.stats["held_partials"] == 0 or path == "incremental"
+        fed = {"reintegrate": {"direct"}, "incremental": {"direct", "fill", "slide"}}[path]
+        assert rates.fed[0] == "direct" and set(rates.fed) == fed
 
 
 def test_spec_changes_and_slides_read_each_step_once() -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from chronocl.core.memory import aligned_empty
+from chronocl.core.memory import recycled_empty
 from chronocl.engine.buffers import check
 
 
@@ -25,9 +25,11 @@ def on_device(a: object) -> bool:
 
 
 def empty(dc, shape: tuple[int, ...], dtype: object, device: bool):
-    """An uninitialised array on the device of `dc` (`device`) or on the host (aligned)."""
+    """An uninitialised array on the device of `dc` (`device`) or on the host (aligned, on the
+    memory of a dead one of its size where there is one: a slide's combines make and drop a
+    partial each, whose fresh pages were a third of a combine at 128^3-256^3 here)."""
     if not device:
-        return aligned_empty(shape, dtype)
+        return recycled_empty(shape, dtype)
     import pyopencl.array as cla
 
     check(dc, int(np.prod(shape)) * np.dtype(dtype).itemsize, "a device array")
@@ -58,7 +60,7 @@ def to_host(dc, a):
     """Host array `a` as it is, or device array `a` read back into a new aligned host array."""
     if a is None or not on_device(a):
         return a
-    out = aligned_empty(a.shape, a.dtype)
+    out = recycled_empty(a.shape, a.dtype)
     with dc.lock:
         a.get(queue=dc.queue, ary=out)
     return out

@@ -2,7 +2,8 @@
 over one data set. The panels' sessions share the data set's resident steps (one window manager
 per level and pooling; in a server, shared by every client: `SharedSteps`) and integrate only
 what changed: a slide of the window goes through `Session.show`, which integrates the new
-window from resident steps (incrementally only past `DIRECT_BELOW_MS`: `slider.slide_plan`);
+window from resident steps (incrementally where the rates measured on this machine predict a
+slide cheaper than integrating the window again: `Views.slide_costs`, `costs.SlideCosts`);
 a camera change integrates nothing (silhouettes aside).
 
 OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared).
@@ -22,6 +23,7 @@ from chronocl.core.process_memory import Streaming
 from chronocl.core.slab_sink import slabs_to
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
+from chronocl.integration.interactive.costs import SlideCosts
 from chronocl.integration.interactive.session import STREAM_SLABS, Session
 from chronocl.integration.interactive.settings import TARGET_MS, manager_key
 from chronocl.viewer.datasets import Dataset
@@ -32,13 +34,6 @@ from chronocl.viewer.slots import ViewSlot
 from chronocl.viewer.view_state import ViewState
 
 INTEGRATE_LOCK = threading.Lock()
-# A window integrating from its steps faster than this is integrated so on a slide too, not
-# slid. On this 2-core PoCL machine (W = 4-12, 128^3-256^3) a window read where it lies took
-# 7-86 ms, a steady incremental slide 37-570 ms (its leaves and combines move 16-byte RGBA
-# partials, the window 4 bytes a voxel-step) and the state's first fill 0.1-4.4 s (a held key's
-# release waited 1.8 s for it at 256^3). Only a window that takes longer (very long windows
-# of large volumes) slides incrementally.
-DIRECT_BELOW_MS = 1000.0
 # What a view's frames hold beside the steps, per full-resolution voxel: the process's memory
 # limit keeps the windows' steps resident only where they fit beside this for every view
 # (`ProcessLimit.window_room`; else they stream). At 512^3 on the 2-core PoCL/llvmpipe
@@ -99,7 +94,13 @@ class Views:
         self._shared = shared or SharedSteps()
         self._managers: dict[tuple[int, str], WindowManager] = {}
         self.recolouring = Recolouring(device)  # TF edits that only recolour (recolouring.py)
+        # slide or integrate a window again: the rates the views' sessions measure, shared
+        self.slide_costs = SlideCosts()
         self.host_steps_why: str | None = None  # the last frame's steps_on_host
+        # the last frame's views integrated their windows again where they could not slide
+        # them, and why (its timings.why_not_incremental); a refine's views slid
+        self.why_not_incremental: str | None = None
+        self.refine_incremental = False
         self.slab_upload_ms = 0.0  # a refine's texture writes, overlapped with its integration
         self._slabs: bool | None = None  # whether they pay (`slab_upload.pays`), once known
         self._over = False  # whether the last frame left the process over its memory limit
@@ -171,6 +172,7 @@ class Views:
         # A GPU session whose window does not fit the device: its steps go up every time.
         whys = (s.session.stats.get("why_not_on_device") for s in self.slots[: len(cvs)])
         self.host_steps_why = next((why for why in whys if why), None)
+        self.why_not_incremental = self._why_integrated(self.slots[: len(cvs)])
         self.shown_managers = tuple(  # published whole: the timeline reads it (`residency`)
             None if s.session is None else self.manager(0, s.session.spec.integration.pool)
             for s in self.slots[: len(cvs)]
@@ -217,7 +219,7 @@ class Views:
                 target_ms=TARGET_MS,
                 managers=self._managers,
                 display=True,  # full-resolution frames as RGBA8 from the kernels
-                direct_below_ms=DIRECT_BELOW_MS,
+                slide_costs=self.slide_costs,
             )
             s.stream(self._streaming)
             cv = s.set_window(sel)
@@ -284,6 +286,7 @@ class Views:
         self.recolouring.ms = self.recolouring.upload_ms = 0.0
         if slot is self.slots[0]:  # the refine's first view
             self.slab_upload_ms = 0.0
+            self.refine_incremental, self.why_not_incremental = False, None
         if self._slabs is None:
             self._slabs = pays(self.engine, self.device)
         writes = SlabUpload(slot)  # its texture written slab by slab as it integrates
@@ -294,7 +297,21 @@ class Views:
         if cv is None:
             return 0.0
         slot.cv = cv
-        return float(slot.session.stats.get("integrate_ms", 0.0))  # type: ignore[union-attr]
+        stats = slot.session.stats  # type: ignore[union-attr]
+        self.refine_incremental = self.refine_incremental or bool(stats.get("incremental"))
+        self.why_not_incremental = self.why_not_incremental or self._why_integrated([slot])
+        return float(stats.get("integrate_ms", 0.0))
+
+    @staticmethod
+    def _why_integrated(slots: list[ViewSlot]) -> str | None:
+        """Why the first of `slots` whose window was integrated again did not slide it (a
+        slide predicted dearer than integrating, on this machine's rates: `costs.SlideCosts`;
+        relative time positions; the memory budget), else None."""
+        for s in slots:
+            stats = s.session.stats if s.session is not None else {}
+            if stats.get("path") == "reintegrate" and stats.get("why_not_incremental"):
+                return stats["why_not_incremental"]
+        return None
 
     def release(self) -> None:
         """Free the textures (on the GL thread), the sessions and the window managers."""

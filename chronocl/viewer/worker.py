@@ -413,7 +413,10 @@ class ClientWorker(Tasks):
                         return  # newer input: the frame for it comes instead
                     integrate_ms += self.views.refine_slot(slot)
             cvs = [slot.cv for slot in self.views.slots[: len(state.views)]]
-            self._send_frame(state, self._last_rid, cvs, integrate_ms, False, t_start, final=True)
+            incremental = self.views.refine_incremental  # its views' level 0 slid
+            self._send_frame(
+                state, self._last_rid, cvs, integrate_ms, incremental, t_start, final=True
+            )
         except SupersededError:
             return
         self._memory_after()
@@ -518,6 +521,7 @@ class ClientWorker(Tasks):
                 "integrate_ms": round(integrate_ms, 2),
                 "recolour_ms": round(self.views.recolouring.ms, 2),  # a TF edit's, not integrated
                 "incremental": incremental,
+                "why_not_incremental": self.views.why_not_incremental,  # integrated again: why
                 # + a recolour's texture write; a refine's slabs are written within integrate_ms
                 "upload_ms": round(1e3 * (t_draw - t_up) + self.views.recolouring.upload_ms, 2),
                 "upload_overlapped_ms": round(self.views.slab_upload_ms, 2),

@@ -15,7 +15,6 @@ import time
 from collections.abc import Callable
 from typing import Protocol
 
-from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.process_memory import Streaming
 from chronocl.core.selection import Selection, parse_selection
@@ -23,6 +22,7 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.pyramid import level_shapes
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
+from chronocl.integration.interactive.costs import ReadAhead
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.modes.spec import IntegrationSpec
 
@@ -92,9 +92,6 @@ class LatencyModel:
         return coarsest, f"no level predicted within {self.target_ms:g} ms: the coarsest"
 
 
-READ_AHEAD_CORES = 4  # host threads from which coarse frames read level 0's steps ahead
-
-
 class Pool(Protocol):
     """What an `AutoSession` needs of its pool (`chronocl.integration.interactive.session.
     SessionPool`): the series and a fixed-level session per level and pooling."""
@@ -147,6 +144,9 @@ class AutoSession:
         self._last: tuple[Selection, IntegrationSpec] | None = None
         self._cv: Chronovolume | None = None
         self._streaming: Streaming | None = None  # full resolution's (`stream`)
+        self.ahead = ReadAhead()  # whether coarse frames read full resolution's steps ahead
+        self.why_not_read_ahead: str | None = None
+        self._reading_ahead = False
 
     @property
     def shown_level(self) -> int:
@@ -194,15 +194,13 @@ class AutoSession:
         s = self.pool.session(level, spec)
         if level == 0 and s.streaming != self._streaming:  # a session made since `stream`
             s.stream(self._streaming)
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         cv = s.show(selection, spec)
-        self.model.record_integrate(level, 1e3 * (time.perf_counter() - t), selection.width)
+        wall = time.perf_counter() - t
+        self.model.record_integrate(level, 1e3 * wall, selection.width)
         self.model.record_read(level, s.manager.scrub.read_s)
-        # The refine to come finds the window's full-resolution steps read, where the machine
-        # has cores to spare: on 2 cores those reads doubled the longest scrub stall at normal
-        # priority, and at the readers' lower one left the scrub stop as slow (docs/window.md).
-        if level > 0 and self._streaming is None and host_threads.workers() >= READ_AHEAD_CORES:
-            self.pool.read_ahead(selection, spec)
+        if level > 0:
+            self._read_ahead(selection, spec, wall, time.process_time() - cpu)
         self.shown, self._last, self._cv = level, (selection, spec), cv
         self.stats = {
             **s.stats,
@@ -210,8 +208,27 @@ class AutoSession:
             "levels": len(self.model.voxels),
             "why_level": self.why,
             "refining": level > 0,
+            "why_not_read_ahead": self.why_not_read_ahead if level > 0 else None,
         }
         return cv
+
+    def _read_ahead(
+        self, selection: Selection, spec: IntegrationSpec, wall_s: float, cpu_s: float
+    ) -> None:
+        """The refine to come finds the window's full-resolution steps read, where that pays
+        (`costs.ReadAhead`: the coarse frames leave a core idle, and reading the steps at the
+        stop would take longer than the target). On 2 PoCL cores the reads took the cores the
+        coarse frames needed (docs/window.md): their integration keeps both busy there."""
+        if not self._reading_ahead:  # the readers' CPU time would count as the frame's
+            self.ahead.record_frame(wall_s, cpu_s)
+        finest = min(self.model.reads, default=None)  # ms per voxel of a step's read
+        read = None if finest is None else self.model.reads[finest] * self.model.voxels[0]
+        missing = self._missing(0, selection)
+        why = "full resolution streams its window" if self._streaming is not None else None
+        why = why or self.ahead.why_not(missing, read, self.model.target_ms)
+        self.why_not_read_ahead, self._reading_ahead = why, why is None
+        if why is None:
+            self.pool.read_ahead(selection, spec)
 
     def leaving(self, selection: Selection) -> None:
         """`selection` is shown next: each level lets go of what no longer helps

@@ -43,6 +43,7 @@ from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.engine.device_steps import DeviceWindow
 from chronocl.integration.inmemory import WinnersOut, check_level, integrate_bricks, window_job
+from chronocl.integration.interactive.costs import Move
 from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.integration.interactive.settings import TARGET_MS, Settings, manager_key, settings
@@ -74,10 +75,10 @@ class Session:
     pooling) among sessions, and `manager` shares another session's resident steps
     (parallel views of one window) instead. With `display` (a viewer's), a window integrated
     from its steps comes back in the display format where the engine writes it: RGBA8
-    (`integrate_bricks`); slides and other engines still return float32. A window whose last
-    integration from its steps took less than `direct_below_ms` (default 0: none) is integrated
-    so again on a slide, not slid (`slider.slide_plan`: where the window is read in place,
-    sliding costs more than such a window).
+    (`integrate_bricks`); slides and other engines still return float32. With `slide_costs`
+    (a viewer's `costs.SlideCosts`, fed the times of this session's integrations and slides) a
+    window slides only where a slide is predicted cheaper than integrating it again
+    (`slider.slide_plan`); without (the default), every window that can slide does.
 
     `level` is a coarse level of the series (0: full resolution). ``level="auto"`` does not
     make a `Session`: ``Session(...)`` then returns an `AutoSession`
@@ -112,8 +113,7 @@ class Session:
         self.engine = setup.engine
         self.budget = setup.budget
         self.display = setup.display
-        self.direct_below_ms = setup.direct_below_ms
-        self._direct_ms: float | None = None  # the last window integrated from its steps
+        self.costs = setup.slide_costs  # measured rates: slide or integrate (None: slide)
         self.selection: Selection | None = None
         self.stats: dict = {}
         self._arrays: dict[int, np.ndarray] = {}
@@ -327,10 +327,16 @@ class Session:
         if window > self.budget:
             why = f"the window needs {human(window)} > budget {human(self.budget)}"
             return self._stream(selection, t, Streaming(why, self.budget))
-        voxels, direct = int(np.prod(self.series.volume_shape)), self._direct_ms
-        reason, keep, state = slide_plan(
-            self.spec, voxels, selection.width, window, self.budget, direct, self.direct_below_ms
-        )
+        # the move as a slide is costed: the steps entering where the state can slide (else a
+        # one-step slide's, which decides whether the window integrated now keeps a state), the
+        # steps sent to the device for every integration, the state's fill paid already
+        voxels, move = int(np.prod(self.series.volume_shape)), Move(self.level)
+        move = move._replace(travels=self._device.why is not None)
+        if old is not None and self._slider is not None and self._slider.can_move_to(selection):
+            entering = len(set(selection.steps) - set(old.steps))
+            move = move._replace(shift=entering, filled=self._slider.placed)
+        width, budget, costs = selection.width, self.budget, self.costs
+        reason, keep, state = slide_plan(self.spec, voxels, width, window, budget, costs, move)
         self._bricks.keep = keep
         if self._owns_manager:
             self.manager.budget = self.budget - (0 if reason else state) - keep * window
@@ -352,8 +358,12 @@ class Session:
         if reason is None and slider is not None and slider.can_move_to(selection):
             # Neither holds until it completes: a slide failing half way (out of memory) is torn
             self._cv, self._slider, self._won = None, None, None
+            t_slide, fill = time.perf_counter(), 0 if slider.placed else selection.width
             cv = slider.move_to(selection, {**leaving, **arrays})
             self._slider, path = slider, "incremental"
+            if self.costs is not None:  # the first slide of a state fills it
+                ms = 1e3 * (time.perf_counter() - t_slide)
+                self.costs.record_slide(self.level, ms, voxels, move.shift, fill)
         else:
             job = window_job(self.series, selection, self.spec)
             bricks = self._device.bricks(self._arrays, selection.width) or self._bricks
@@ -367,7 +377,9 @@ class Session:
             cv = integrate_bricks(
                 job, self.engine, bricks, slab=self._slab_rows(), display=self.display, winners=won
             )
-            self._direct_ms = 1e3 * (time.perf_counter() - t_direct)
+            if self.costs is not None:
+                ms = 1e3 * (time.perf_counter() - t_direct)
+                self.costs.record_direct(self.level, ms, voxels, selection.width)
             if won is not None and won.u is not None:
                 w = Winners(
                     won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
@@ -495,7 +507,7 @@ class SessionPool:
                 prefetch=o.prefetch,
                 managers=o.managers,
                 display=o.display,
-                direct_below_ms=o.direct_below_ms,
+                slide_costs=o.slide_costs,
             )
         return self.sessions[key]
 

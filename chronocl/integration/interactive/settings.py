@@ -11,6 +11,7 @@ from chronocl.data.window import WindowManager
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
 from chronocl.integration.inmemory import make_spec
+from chronocl.integration.interactive.costs import SlideCosts
 from chronocl.modes.spec import IntegrationSpec
 
 Managers = dict[tuple[int, str], WindowManager]
@@ -29,7 +30,7 @@ class Settings(NamedTuple):
     prefetch: int | None
     managers: Managers | None
     display: bool = False  # frames in the display format where the engine writes it
-    direct_below_ms: float = 0.0  # windows integrating faster than this do not slide
+    slide_costs: SlideCosts | None = None  # slide only where measured cheaper (None: always)
 
 
 def settings(
@@ -41,14 +42,14 @@ def settings(
     prefetch: int | None = None,
     managers: Managers | None = None,
     display: bool = False,
-    direct_below_ms: float = 0.0,
+    slide_costs: SlideCosts | None = None,
     **spec_args: object,
 ) -> Settings:
     """The keywords a `Session` takes at any level (`Session`'s docstring says what each is)."""
     asked = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
     budget = interactive_memory() if memory is None else parse_memory(memory)
-    return Settings(asked, eng, budget, prefetch, managers, display, direct_below_ms)
+    return Settings(asked, eng, budget, prefetch, managers, display, slide_costs)
 
 
 def manager_key(level: int, pool: str) -> tuple[int, str]:

@@ -22,7 +22,7 @@ import numpy as np
 
 from chronocl.core.budget import human
 from chronocl.core.interrupt import checkpoint
-from chronocl.core.memory import aligned_empty
+from chronocl.core.memory import recycled_empty
 from chronocl.core.selection import Selection
 from chronocl.data.bricks import ResidentBricks
 from chronocl.data.chronovolume import Chronovolume
@@ -33,6 +33,7 @@ from chronocl.engine.device_arrays import to_host, zeros
 from chronocl.engine.device_leaves import alpha_of, leaf, leaf_value
 from chronocl.engine.device_steps import reserve
 from chronocl.integration.inmemory import chronovolume_metadata, engine_name
+from chronocl.integration.interactive.costs import Move, SlideCosts
 from chronocl.integration.interactive.sliding import SlidingAggregate, block_size
 from chronocl.modes.base import Partial, Values
 from chronocl.modes.spec import IntegrationSpec
@@ -130,7 +131,7 @@ class Leaves:
         if self.inverts and self.dc is not None:
             return Partial(alpha_of(self.dc, full.rgba), None)
         if self.inverts:  # only the aggregated opacity slides here
-            alpha = aligned_empty(full.rgba.shape[:-1], np.float32)
+            alpha = recycled_empty(full.rgba.shape[:-1], np.float32)
             alpha[...] = full.rgba[..., 3]
             return Partial(alpha, None)
         return full
@@ -284,9 +285,14 @@ class Slider:
 
 
 def state_bytes(mode, width: int, voxels: int) -> int:
-    """Bytes of the state sliding a window of `width` steps over `voxels` voxels holds: 2
-    stacks of about 2 sqrt(W) partials, the work in hand, and the fixed-point sums."""
-    partials = (4 * block_size(width) + 4) * mode.state_bytes * voxels
+    """Bytes of the state sliding a window of `width` steps over `voxels` voxels holds: the
+    partials its stacks keep (each stack of n steps every B-th level and the B below its top,
+    n / B + B + 1; both, at most ceil(W / B) + 2 B + 2, and never more than W: counted over
+    random walks both ways in tests/test_costs.py), 4 in hand (a leaf, the level under it,
+    their combine, the window's value), and the fixed-point sums."""
+    b = block_size(width)
+    held = min(width, -(-width // b) + 2 * b + 2) if mode.combines() else 0
+    partials = (held + 4) * mode.state_bytes * voxels
     return partials + 8 * mode.sum_channels * voxels
 
 
@@ -296,17 +302,17 @@ def slide_plan(
     width: int,
     window: int,
     budget: int,
-    direct_ms: float | None = None,
-    direct_below_ms: float = 0.0,
+    costs: SlideCosts | None = None,
+    move: Move | None = None,
 ) -> tuple[str | None, bool, int]:
     """How a session's budget splits for a window of `width` steps over `voxels` voxels, whose
     steps take `window` bytes: why it does not slide incrementally (None: it does); whether its
     stacked brick is kept for the next spec change (when it fits beside the steps and the
-    sliding state); and the bytes of the state sliding holds (2 stacks of ~2 sqrt(W) partials,
-    work, sums). A window whose last direct integration took `direct_ms` < `direct_below_ms`
-    is integrated directly: a slide integrates its entering steps alone and combines partials
-    of 16 bytes a voxel, and the state's first fill does so for every step (docs/window.md:
-    where the window is read in place, both cost more than integrating it again)."""
+    sliding state); and the bytes of the state sliding holds (`state_bytes`). With `costs`
+    (a viewer's: the rates measured on this machine, `costs.SlideCosts`), a `move` (`costs.Move`:
+    its level, the steps entering, ...) whose slide is predicted to cost more than integrating
+    the window again is integrated instead; where the window is read in place, sliding pays only
+    for long windows (docs/window.md). Without `costs`, every window that can slide does."""
     mode = spec.integration
     state = state_bytes(mode, width, voxels)
     keep = 2 * window + state <= budget
@@ -317,6 +323,7 @@ def slide_plan(
         reason = "importance orders are not sliding windows"
     elif window + state > budget:
         reason = f"window and sliding state need {human(window + state)} > budget {human(budget)}"
-    elif direct_ms is not None and direct_ms < direct_below_ms:
-        reason = f"integrating the window takes {direct_ms:.0f} ms: cheaper than sliding it"
+    elif costs is not None:
+        inverts = mode.slides == "invert" and not mode.combines()
+        reason = costs.why_not(voxels, width, (move or Move())._replace(inverts=inverts))
     return reason, keep, state

@@ -1,0 +1,186 @@
+"""Two choices of an interactive session made from rates measured on the machine at hand:
+whether a window slides incrementally or is integrated again (`SlideCosts`), and whether a
+coarse frame reads full resolution's steps ahead (`ReadAhead`). Both are pure: fed numbers,
+they answer; the sessions feed them what they timed (`Session._update`, `AutoSession._at`).
+
+**Slide or integrate.** A one-step slide costs about the same whatever the window's width (a
+few leaves, one step integrated alone into a partial volume, and combines of two partials; the
+splits of the stacks amortised: docs/window.md); integrating the window from its resident steps
+costs its width in voxel-steps; and a sliding state is filled once, by its first slide, at about
+a leaf and a combine per step. With, per level,
+
+    d = ms per voxel-step of an integration from resident steps    (`record_direct`)
+    s = ms per voxel of a steady one-step slide                     (`record_slide`)
+    f = ms per voxel-step of a state's fill                         (`record_slide(fill=W)`)
+
+a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * V * k`, plus, where
+the state is still to be filled, the fill's `f * V * W` shared by the W slides a state is taken
+to serve (a scrub across its window): `f * V`. Integrating is predicted at `d * V * W`, and the
+cheaper is taken, so sliding pays from a width of about `(s + f) / d` on, which each machine and
+engine finds for itself; a state already filled keeps sliding while `s * k < d * W`. Until measured,
+s and f are guessed in voxel-steps of integration (SLIDE_STEPS, FILL_STEPS, from this machine);
+where the window's steps travel to the device for every integration (a GPU whose memory holds
+not the window), d is mostly that transfer, which a slide pays only for its entering steps and a
+fill once per step: both are then guessed at d. The first slide measures f, the next ones s.
+
+Rates are per level (a coarse level's voxels cost more each: fixed overheads): d and f running
+averages (SMOOTHING), s the mean of the last SLIDE_MEMORY slides (so that the splits of the
+stacks, a slide in tens dearer than the others, count at their share).
+
+**Read ahead or not.** While a coarse level shows a window (a scrub), its full-resolution steps
+can be read in the background so that the refine at the stop finds them. The reads take host
+cores; they pay where the coarse frames leave a core idle for them, and where reading the
+window at the stop would cost more than the latency target. `ReadAhead` measures the cores a
+coarse frame's integration keeps busy (the process's CPU time over the wall time: all of them
+on a CPU device, a fraction of one where a GPU integrates) and a full-resolution step's read
+time, and reads ahead where `cores - busy >= 1` and `missing * read > target`. On the 2-core
+PoCL machine where this was measured, reading ahead beside the coarse frames took the cores
+they needed (the longest stall 195 -> 1 535 ms) and the stop was no faster at a lower priority
+(docs/window.md): busy there is about 2 of 2 cores.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+SMOOTHING = 0.5  # weight of the newest measurement in the running rates (not s: SLIDE_MEMORY)
+# Slides averaged for s: longer than the splits' period (3/4 W slides) at the widths scrubbed.
+SLIDE_MEMORY = 64
+# Pieces (leaves + combines) of a one-step slide through a `SlidingAggregate`, the splits of its
+# stacks amortised: counted over 200 slides at W = 10 and 50 (5.5 and 6.7; tests/test_costs.py
+# counts them); an inverting mode without an aggregated part integrates the entering and the
+# leaving step alone: 2. Only their ratio scales the guess for such a mode.
+SLIDE_PIECES = 7.0
+INVERT_PIECES = 2.0
+# Guesses until measured, in voxel-steps of an integration from resident steps: a steady one-step
+# slide, and a fill per window step. Measured on 2 PoCL cores, recycled partials (2026-11-30,
+# alpha and max, bench/slide_window.py and a forced `Session`): a slide 12-33 at 128^3 W = 50,
+# 17-22 at 256^3 W = 50, 20 through the viewer (before partials were recycled, 30-70); a fill
+# 12 (128^3 alpha), 36 (128^3 max), 15-20 (256^3 alpha) per step.
+SLIDE_STEPS = 20.0
+FILL_STEPS = 20.0
+
+
+class Move(NamedTuple):
+    """A move of a session's window, as its slide is costed: at `level`, `shift` steps entering,
+    the window's steps sent to the device for every integration (`travels`), the sliding state
+    filled already (`filled`: its fill is paid), a mode sliding by sums alone (`inverts`)."""
+
+    level: int = 0
+    shift: int = 1
+    travels: bool = False
+    filled: bool = False
+    inverts: bool = False
+
+
+ONE_STEP = Move()
+
+
+class SlideCosts:
+    """Measured rates of integrating a window, sliding it and filling its sliding state, per
+    level; `why_not` says whether a slide is predicted cheaper (None) or why not. Shared by the
+    sessions of a viewer's views: one machine, one engine."""
+
+    def __init__(self) -> None:
+        self.direct: dict[int, float] = {}  # level -> ms per voxel-step, integrated
+        self.slide: dict[int, float] = {}  # level -> ms per voxel of a steady one-step slide
+        self.fill: dict[int, float] = {}  # level -> ms per voxel-step of a state's fill
+        self._slides: dict[int, int] = {}  # level -> slides averaged so far (to SLIDE_MEMORY)
+
+    def record_direct(self, level: int, ms: float, voxels: int, steps: int) -> None:
+        """A window of `steps` steps over `voxels` voxels integrated from its steps in `ms`."""
+        _blend(self.direct, level, ms / max(1, voxels * steps))
+
+    def record_slide(
+        self, level: int, ms: float, voxels: int, steps: int = 1, fill: int = 0
+    ) -> None:
+        """A slide of `steps` entering steps that took `ms` over `voxels` voxels; `fill`: the
+        width of the window whose state this slide filled (0: a steady slide)."""
+        if fill:
+            _blend(self.fill, level, ms / max(1, voxels * fill))
+            return
+        n = self._slides[level] = min(SLIDE_MEMORY, self._slides.get(level, 0) + 1)
+        value, old = ms / max(1, voxels * steps), self.slide.get(level)
+        self.slide[level] = value if old is None else old + (value - old) / n
+
+    def predict(self, voxels: int, width: int, move: Move = ONE_STEP) -> tuple | None:
+        """(ms integrating, ms sliding, whether sliding is measured) for `move` of a window of
+        `width` over `voxels` voxels (None: nothing integrated at its level yet)."""
+        d = self.direct.get(move.level)
+        if d is None:
+            return None
+        shift = max(1, abs(move.shift))
+        pieces = INVERT_PIECES if move.inverts else SLIDE_PIECES
+        guess = d if move.travels else SLIDE_STEPS * d * pieces / SLIDE_PIECES
+        steady = self.slide.get(move.level, guess) * voxels * shift
+        fill = 0.0
+        if not move.filled:  # its share over a scrub across the window: W slides
+            fill = self.fill.get(move.level, d if move.travels else FILL_STEPS * d) * voxels
+        measured = move.level in self.slide and (move.filled or move.level in self.fill)
+        return d * voxels * width, steady + fill, measured
+
+    def why_not(self, voxels: int, width: int, move: Move = ONE_STEP) -> str | None:
+        """None where sliding is predicted to pay (or nothing is measured yet), else why not."""
+        got = self.predict(voxels, width, move)
+        if got is None:
+            return None
+        direct, slide, measured = got
+        if slide < direct:
+            return None
+        how = "measured" if measured else "not measured yet; guessed"
+        fill = "" if move.filled else ", its state's fill included"
+        return (
+            f"integrating the window is predicted at {direct:.0f} ms, sliding it at {slide:.0f} "
+            f"ms ({how}{fill}): cheaper to integrate"
+        )
+
+
+def _blend(table: dict[int, float], key: int, value: float) -> None:
+    old = table.get(key)
+    table[key] = value if old is None else (1 - SMOOTHING) * old + SMOOTHING * value
+
+
+# A reader thread decodes one step at a time: reading ahead needs a core the frames leave idle.
+READER_CORES = 1.0
+
+
+@dataclass
+class ReadAhead:
+    """Whether coarse frames read full resolution's steps ahead (`reads`), from the cores their
+    integration keeps busy (`record_frame`) and a full-resolution step's read time."""
+
+    cores: int = field(default_factory=lambda: cores_here())
+    busy: float | None = None  # running average of the cores a coarse frame kept busy
+
+    def record_frame(self, wall_s: float, cpu_s: float) -> None:
+        """A coarse frame's integration took `wall_s`, and the process `cpu_s` of CPU time."""
+        if wall_s > 0:
+            self.busy = _smoothed(self.busy, min(float(self.cores), cpu_s / wall_s))
+
+    def why_not(self, missing: int, read_ms: float | None, target_ms: float) -> str | None:
+        """None where reading `missing` full-resolution steps ahead pays (each read in
+        `read_ms`, the latency target `target_ms`), else why not."""
+        if missing <= 0:
+            return "every step of the window is resident"
+        if self.busy is None or read_ms is None:
+            return "nothing measured yet"
+        if missing * read_ms <= target_ms:
+            return f"reading the {missing} steps at the stop takes {missing * read_ms:.0f} ms"
+        idle = self.cores - self.busy
+        if idle < READER_CORES:
+            return f"the coarse frames keep {self.busy:.1f} of {self.cores} cores busy"
+        return None
+
+
+def cores_here() -> int:
+    """The cores this process may run on (its affinity where the system says, else all)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _smoothed(old: float | None, new: float) -> float:
+    return new if old is None else (1 - SMOOTHING) * old + SMOOTHING * new

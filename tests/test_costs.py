@@ -1,0 +1,286 @@
+"""Choices made from measured rates (`chronocl.integration.interactive.costs`): whether a window
+slides or is integrated again, and whether coarse frames read full resolution's steps ahead.
+The decisions are pure (fed numbers here); a viewer's session on small data slides a long
+window incrementally where its rates say so (its stats say which path each frame took) and
+the slid chronovolume equals integrating the window from scratch."""
+
+from __future__ import annotations
+
+import random
+
+import numpy as np
+import pytest
+
+import chronocl
+from chronocl.core.tf import TimeTF
+from chronocl.integration.inmemory import make_spec
+from chronocl.integration.interactive import costs
+from chronocl.integration.interactive.costs import (
+    FILL_STEPS,
+    INVERT_PIECES,
+    SLIDE_MEMORY,
+    SLIDE_PIECES,
+    SLIDE_STEPS,
+    Move,
+    ReadAhead,
+    SlideCosts,
+)
+from chronocl.integration.interactive.slider import slide_plan, state_bytes
+from chronocl.integration.interactive.sliding import SlidingAggregate, block_size
+from chronocl.modes import get as get_mode
+
+pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
+
+V = 1_000_000  # voxels
+
+
+# -- slide or integrate ---------------------------------------------------------------------
+
+
+def test_nothing_measured_slides_as_a_library_session_does():
+    assert SlideCosts().why_not(V, 50) is None
+
+
+def _measured(d: float, s: float, f: float) -> SlideCosts:
+    """Rates in ms per voxel-step integrated (d), per voxel of a steady slide (s) and per
+    voxel-step of a fill (f), as the sessions feed them."""
+    c = SlideCosts()
+    c.record_direct(0, ms=d * V * 10, voxels=V, steps=10)
+    c.record_slide(0, ms=f * V * 30, voxels=V, fill=30)
+    c.record_slide(0, ms=s * V, voxels=V)
+    return c
+
+
+def test_measured_rates_set_the_width_from_which_a_slide_pays():
+    """A filled state slides while s < d W; a state to fill pays its fill's share too, f per
+    voxel (a state serves a scrub across its window), so it starts from (s + f) / d on,
+    whatever the voxels."""
+    c = _measured(d=1e-6, s=20e-6, f=30e-6)  # W* = 20 filled, 50 to fill
+    for voxels in (V, 8 * V):
+        assert c.why_not(voxels, 21, Move(filled=True)) is None
+        why = c.why_not(voxels, 19, Move(filled=True))
+        assert why and "cheaper to integrate" in why and "(measured)" in why
+        assert c.why_not(voxels, 51) is None
+        why = c.why_not(voxels, 49)
+        assert why and "(measured, its state's fill included)" in why
+    direct, slide, measured = c.predict(V, 60)
+    assert measured and direct == pytest.approx(60.0) and slide == pytest.approx(50.0)
+    # a slide of several steps costs as many times a steady one
+    assert c.why_not(V, 50, Move(shift=3, filled=True)) is not None
+
+
+def test_a_gpu_and_a_cpu_find_their_own_threshold():
+    """The same decision code, two machines: one whose integration is cheap per voxel-step
+    beside its slides (a window read in place) integrates a 30-step window; one where every
+    integration pays for the whole window's transfer slides a 10-step one."""
+    cpu = _measured(d=7e-6, s=200e-6, f=140e-6)  # slides pay from 49 steps
+    gpu = _measured(d=15e-6, s=20e-6, f=15e-6)  # the steps sent up every time: from 3
+    assert cpu.why_not(V, 10) and cpu.why_not(V, 30) and cpu.why_not(V, 50) is None
+    assert gpu.why_not(V, 10) is None and gpu.why_not(V, 2)
+
+
+def test_unmeasured_slides_and_fills_are_guessed_from_the_integration():
+    """Before a slide is timed, it is guessed at SLIDE_STEPS voxel-steps and a fill at
+    FILL_STEPS a step; where the steps travel for every integration, both at one voxel-step
+    (the transfer, which a slide pays for its entering step alone); a mode sliding by sums
+    alone at its fewer pieces. The first slide measures the fill, the next ones a slide."""
+    c = SlideCosts()
+    c.record_direct(0, ms=1.0, voxels=V, steps=1)
+    width = int(SLIDE_STEPS + FILL_STEPS)
+    assert c.why_not(V, width + 1) is None
+    assert "not measured yet" in c.why_not(V, width - 1)
+    assert c.why_not(V, int(SLIDE_STEPS) + 1, Move(filled=True)) is None
+    assert c.why_not(V, 3, Move(travels=True)) is None and c.why_not(V, 2, Move(travels=True))
+    inverting = SLIDE_STEPS * INVERT_PIECES / SLIDE_PIECES + FILL_STEPS
+    assert c.why_not(V, int(inverting) + 1, Move(inverts=True)) is None
+    # the fill measured dear: a state is not started where it was guessed to pay
+    c.record_slide(0, ms=100 * FILL_STEPS * 1e-6 * V * 20, voxels=V, fill=20)
+    assert c.why_not(V, width + 1) is not None
+    assert c.why_not(V, width + 1, Move(filled=True)) is None  # a filled one slides on
+
+
+def test_steady_slides_are_averaged_over_the_splits_period():
+    """s is the mean of the last SLIDE_MEMORY slides: a split of the stacks (tens of pieces
+    at once) counts at its share, not as the new rate."""
+    c = _measured(d=1e-6, s=10e-6, f=10e-6)
+    for _ in range(20):
+        c.record_slide(0, ms=10e-6 * V, voxels=V)
+    c.record_slide(0, ms=400e-6 * V, voxels=V)  # a split
+    assert c.slide[0] < 40e-6
+    assert c.why_not(V, 40, Move(filled=True)) is None  # one split does not drop the state
+    slower = SlideCosts()
+    for k in range(3 * SLIDE_MEMORY):  # a machine getting slower is followed
+        slower.record_slide(0, ms=(1 if k < SLIDE_MEMORY else 100) * V * 1e-6, voxels=V)
+    assert slower.slide[0] > 50e-6
+
+
+def test_rates_are_per_level_and_follow_the_machine():
+    c = SlideCosts()
+    c.record_direct(2, ms=1.0, voxels=1000, steps=10)
+    assert c.predict(V, 10) is None and c.why_not(V, 10) is None
+    c.record_direct(0, ms=10.0, voxels=V, steps=10)
+    c.record_direct(0, ms=30.0, voxels=V, steps=10)  # busier: the running rate moves
+    assert c.direct[0] == pytest.approx(2e-6)
+
+
+def test_slide_plan_asks_the_costs_only_where_a_slide_is_possible():
+    spec = make_spec("alpha", time_tf=TimeTF.preset("rgb", positions="absolute"))
+    c = _measured(d=1e-6, s=1e-3, f=1e-3)
+    reason, _, _ = slide_plan(spec, V, 10, 10 * 4 * V, 2**40, c)
+    assert reason and "cheaper to integrate" in reason
+    assert slide_plan(spec, V, 10, 10 * 4 * V, 2**40)[0] is None  # no costs: it slides
+    relative = make_spec("alpha", time_tf=TimeTF.preset("rgb"))
+    assert "relative" in slide_plan(relative, V, 10, 10 * 4 * V, 2**40, c)[0]
+    mean = make_spec("mean", time_tf=TimeTF.preset("rgb", positions="absolute"))
+    cheap = _measured(d=1e-6, s=1e-9, f=1e-9)
+    assert slide_plan(mean, V, 10, 10 * 4 * V, 2**40, cheap, Move(level=0))[0] is None
+
+
+def test_slide_pieces_and_the_states_bound_are_what_the_aggregate_does():
+    """SLIDE_PIECES is the count of a steady one-step slide's leaves and combines (splits
+    amortised); `state_bytes` bounds the partials the stacks hold over random walks both ways
+    (plus 4 in hand)."""
+    rng = random.Random(1)
+    for width in (1, 2, 5, 10, 16, 50, 64):
+        agg = SlidingAggregate(lambda s: s, lambda a, b: a + b)
+        lo = 1000
+        agg.reset(range(lo, lo + width))
+        agg.value()
+        worst = agg.held
+        for _ in range(300):
+            if rng.random() < 0.5:
+                agg.push_back(lo + width)
+                agg.pop_front()
+                lo += 1
+            else:
+                agg.push_front(lo - 1)
+                agg.pop_back()
+                lo -= 1
+            if rng.random() < 0.3:
+                agg.value()
+            worst = max(worst, agg.held)
+        before = agg.leaves + agg.combines
+        for _ in range(200):  # steady forward
+            agg.push_back(lo + width)
+            agg.pop_front()
+            lo += 1
+            agg.value()
+            worst = max(worst, agg.held)
+        pieces = (agg.leaves + agg.combines - before) / 200
+        if width >= 10:
+            assert abs(pieces - SLIDE_PIECES) <= 1.6, (width, pieces)
+        alpha = get_mode("alpha")
+        bound = state_bytes(alpha, width, 1) // alpha.state_bytes - 4
+        assert worst <= bound, (width, worst, bound)
+        b = block_size(width)
+        assert bound <= 4 * b + 4  # never more than it counted before
+
+
+# -- read ahead or not ----------------------------------------------------------------------
+
+
+def test_read_ahead_where_the_frames_leave_a_core_idle():
+    two = ReadAhead(cores=2)
+    assert two.why_not(10, 200.0, 150.0) == "nothing measured yet"
+    two.record_frame(wall_s=0.1, cpu_s=0.19)  # a CPU device: both cores busy
+    assert "1.9 of 2 cores" in two.why_not(10, 200.0, 150.0)
+    gpu = ReadAhead(cores=2)
+    gpu.record_frame(wall_s=0.1, cpu_s=0.03)  # a GPU integrates: the host mostly idle
+    assert gpu.why_not(10, 200.0, 150.0) is None
+    many = ReadAhead(cores=16)
+    many.record_frame(wall_s=0.1, cpu_s=0.8)  # 8 of 16 busy
+    assert many.why_not(10, 200.0, 150.0) is None
+
+
+def test_no_read_ahead_where_reading_at_the_stop_is_cheap_or_nothing_is_missing():
+    r = ReadAhead(cores=16)
+    r.record_frame(wall_s=0.1, cpu_s=0.1)
+    assert "takes 100 ms" in r.why_not(10, 10.0, 150.0)
+    assert r.why_not(0, 200.0, 150.0) == "every step of the window is resident"
+    assert r.why_not(1, None, 150.0) == "nothing measured yet"
+
+
+def test_read_ahead_counts_the_cores_this_process_may_use():
+    assert 1 <= costs.cores_here() <= (__import__("os").cpu_count() or 1)
+    assert ReadAhead().cores == costs.cores_here()
+
+
+# -- a viewer's session ---------------------------------------------------------------------
+
+
+class _Fixed(SlideCosts):
+    """A viewer's slide costs at fixed rates (a machine where a long window slides: the
+    rates measured on this one would decide otherwise at this small size); what the sessions
+    time is still fed to it, and kept."""
+
+    def __init__(self, direct: float, slide: float) -> None:
+        super().__init__()
+        self.rates = direct, slide
+        self.fed: list[tuple[str, int]] = []
+        self._reset()
+
+    def _reset(self) -> None:
+        self.direct = {lv: self.rates[0] for lv in range(4)}
+        self.slide = {lv: self.rates[1] for lv in range(4)}
+        self.fill = {lv: self.rates[1] for lv in range(4)}
+
+    def record_direct(self, level, ms, voxels, steps) -> None:
+        self.fed.append(("direct", level))
+        self._reset()
+
+    def record_slide(self, level, ms, voxels, steps=1, fill=0) -> None:
+        self.fed.append(("fill" if fill else "slide", level))
+        self._reset()
+
+
+@pytest.mark.parametrize("mode", ["alpha", "max", "additive"])
+def test_a_viewers_long_window_slides_incrementally_and_equals_the_direct_integration(mode):
+    """Views (the viewer's sessions) over a small series: a 40-step window where sliding is
+    cheaper slides incrementally at full resolution (the session's stats say so, and the
+    frame's `incremental`), and each slid chronovolume equals integrating its window from
+    scratch (1e-5 and t_index exactly, as docs/semantics.md invariant 6 promises); where
+    integrating is cheaper, the same slides integrate and say why."""
+    from chronocl.viewer.datasets import Dataset
+    from chronocl.viewer.view_sessions import Views
+    from chronocl.viewer.view_state import default_state, merge
+
+    rng = np.random.default_rng(4)
+    data = rng.random((48, 6, 7, 9), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    absolute = {"positions": "absolute"}
+    n = series.n_steps
+    for slide, path in ((1e-9, "incremental"), (1.0, "reintegrate")):
+        views = Views([Dataset("d", series)], "opencl", None, "1GB")
+        views.slide_costs = rates = _Fixed(direct=1e-3, slide=slide)
+        try:
+            state = default_state(0, series)
+            time_tf = {**state.time_tf, **absolute}
+            state = merge(state, {"views": [{"mode": mode, "order": "forward"}]}, n)
+            state = merge(state, {"time_tf": time_tf, "window": {"t0": 0, "t1": 40}}, n)
+            views.chronovolumes(state)
+            views.full_resolution(range(1))  # the window at level 0 (the refine)
+            for t0 in (1, 2, 3, 2):
+                state = merge(state, {"window": {"t0": t0, "t1": t0 + 40}}, n)
+                _, _, incremental = views.chronovolumes(state)
+                views.full_resolution(range(1))
+                slot = views.slots[0]
+                full = slot.session.pool.sessions[(0, slot.session.spec.integration.pool)]
+                assert slot.session.shown_level == 0
+                assert full.stats["path"] == path, full.stats
+                assert (full.stats["why_not_incremental"] is None) == (path == "incremental")
+                if slot.session.stats["level"] == 0 and path == "incremental":
+                    assert incremental  # the frame's timings say so where level 0 answered
+                ref = chronocl.integrate(series, f"{t0}:{t0 + 40}", spec=full.spec)
+                got = slot.cv
+                assert got.steps == ref.steps
+                rgba = got.rgba if got.rgba.dtype == np.float32 else got.rgba / 255.0
+                tol = 1e-5 if got.rgba.dtype == np.float32 else 0.5 / 255 + 1e-6
+                np.testing.assert_allclose(rgba, ref.rgba, rtol=0, atol=tol)
+                if ref.t_index is not None:
+                    np.testing.assert_array_equal(got.t_index, ref.t_index)
+            if path == "reintegrate":
+                assert "cheaper to integrate" in full.stats["why_not_incremental"]
+            assert {("fill", 0), ("slide", 0)} <= set(rates.fed) or path == "reintegrate"
+            assert ("direct", 0) in rates.fed
+        finally:
+            views.release()
