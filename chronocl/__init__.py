@@ -14,6 +14,7 @@ function, into one RGBA volume that can be raycast from any view.
 
     graph = chronocl.events(series, "0:20", threshold=0.3)  # features, events, tracks
 
+    image = chronocl.render_slice(cv, "z=40")  # a plane: colours and the winning step
     w = chronocl.show(series)       # the viewer in a notebook cell (the `notebook` extra)
 """
 
@@ -31,6 +32,7 @@ from chronocl.integration.interactive.session import Session
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.notebook import show
 from chronocl.render import Camera, render, render_views
+from chronocl.render.slices import render_slice, slice_value
 
 open = open_series
 
@@ -61,6 +63,8 @@ __all__ = [
     "open_series",
     "probe",
     "render",
+    "render_slice",
     "render_views",
     "show",
+    "slice_value",
 ]

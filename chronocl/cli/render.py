@@ -162,6 +162,16 @@ def render(
             "track colours need a winner mode (first_hit, max, min, change).",
         ),
     ] = "tf",
+    slice_at: Annotated[
+        str | None,
+        typer.Option(
+            "--slice",
+            metavar="x=N|y=N|z=N",
+            help="Draw the plane of voxels at index N across x, y or z instead of a 3D view: "
+            "its colours and, for modes with a winning step (first_hit, max, min, change), "
+            "the map of that step with its time legend, side by side (the camera is unused).",
+        ),
+    ] = None,
     anon: AnonOpt = False,
     storage_option: StorageOpt = None,
 ) -> None:
@@ -203,8 +213,12 @@ def render(
 
       chronocl render era5.zarr -o t.png --window 0:24:6 --time-labels steps
 
+      chronocl render vortex.zarr -o s.png --window 0:10 --mode max --slice z=40
+
       chronocl render --state vortex-session.json -o figure.png --size 1024x1024
     """
+    if state is not None and slice_at is not None:  # a session's views, not a slice (yet)
+        raise InvalidParameterError("--slice does not combine with --state; leave it out")
     if state is not None:
         from chronocl.cli.render_state import given, render_state
 
@@ -255,6 +269,7 @@ def render(
     elif not 2 <= frames <= 3600:
         raise InvalidParameterError(f"turntable frames is {frames}; use 2 to 3600")
     Enhance(enhance)  # an unknown kind fails here
+    check_slice_options(slice_at, modes, variables, turntable)
     saves = chronovolume_paths(save_chronovolume, modes)
     for path in saves:
         output_kind(path)
@@ -281,6 +296,12 @@ def render(
     jobs = []
     for one in picked:
         check_level(one, level)
+    if slice_at is not None:  # inside the volume at the level drawn, before any work
+        from chronocl.render.slices import parse_slice
+
+        at = picked[0].level(level) if level else picked[0]
+        slice_at = str(parse_slice(slice_at, at.volume_shape))
+    for one in picked:
         for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
             job = prepare(one, window, m, None, args)
             jobs.append(job)
@@ -327,7 +348,13 @@ def render(
     if tracks is not None:
         note_untracked(cvs)
     image = None
-    if names:  # one panel per variable and mode, one camera, each captioned with its variable
+    if slice_at is not None:
+        from chronocl.render.slices import render_slice
+
+        image = render_slice(
+            cvs[0], slice_at, panel, background=background, time_labels=time_labels
+        )
+    elif names:  # one panel per variable and mode, one camera, each captioned with its variable
         captions = [
             f"{n}: {describe(cv)}"
             for n, cv in zip([n for n in names for _ in modes], cvs, strict=True)
@@ -347,6 +374,24 @@ def render(
     if turntable is not None:
         views.turntable(cvs, camera, turntable, frames, overwrite=overwrite, progress=True)
         err.print(f"wrote {turntable} ({frames} frames)")
+
+
+def check_slice_options(slice_at, modes, variables, turntable) -> None:
+    """One line, before any work, where --slice cannot draw what the other options ask for: it
+    draws one mode of one variable as one picture."""
+    if slice_at is None:
+        return
+    from chronocl.render.slices import parse_slice
+
+    parse_slice(slice_at)  # its form; its index once the volume's shape is known
+    if len(modes) > 1:
+        raise InvalidParameterError(
+            f"--slice draws one mode; give one --mode (not {','.join(modes)})"
+        )
+    if variables:
+        raise InvalidParameterError("--slice draws one variable; leave out --variables")
+    if turntable is not None:
+        raise InvalidParameterError("--slice draws a picture, not a turn; leave out --turntable")
 
 
 def check_track_colour(colour, modes, events, variables, level) -> str | None:

@@ -15,6 +15,8 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     histogram  {"range": [lo, hi]}                       normalised values u in the window
                (+ "of": "change", "value_range": [lo, hi]: the changes between its steps)
     fit        {"view"[, "mode"]}                       the TF's range fitted to a view's window
+    slice      {"slice", "view"[, "u", "v"]}             a plane of a view ("z=40") as a PNG, and
+                                                         the winner at (u, v) of its voxel grid
     save       {"what": "image" | "chronovolume", "view"} the image's download also gives its
                                                          `layout` (title, captions, pictures,
                                                          legends: [x, y, w, h] in pixels)
@@ -257,6 +259,18 @@ MESSAGES: dict[str, Obj] = {
             "y2": Num(0.0, 1.0),
         },
         frozenset({"x", "y"}),
+    ),
+    # one plane of a view's chronovolume ("z=40"), and the read-out at (u, v) of its voxel grid
+    "slice": Obj(
+        {
+            "type": Enum(("slice",)),
+            "id": ID,
+            "view": Int(0, MAX_VIEWS - 1),
+            "slice": Text(40),
+            "u": Num(0.0, 1.0),
+            "v": Num(0.0, 1.0),
+        },
+        frozenset({"slice"}),
     ),
     # `of`: the values (default), or the changes between consecutive steps (a mode whose data
     # TF maps them: `Mode.data_axis`), scaled to `value_range` (the TF's; none: the series')

@@ -27,6 +27,7 @@ from chronocl.viewer.probe import probe_reply
 from chronocl.viewer.protocol import MOVIE_FORMATS
 from chronocl.viewer.saving import compose_image, full_precision, save_chronovolume, save_image
 from chronocl.viewer.session_file import save_session
+from chronocl.viewer.slicing import slice_reply
 from chronocl.viewer.view_state import ViewState
 
 
@@ -140,6 +141,11 @@ class Tasks(EventTasks):
             )
         elif kind == "probe":
             self._probe(msg)
+        elif kind == "slice":
+            state, view = self._shown_view(msg)
+            self.views.full_resolution(range(view, view + 1))
+            cv = self.views.slots[view].cv
+            self._reply(slice_reply(msg, view, state, cv, self.datasets[state.dataset]))
         elif kind == "save":
             self._save(msg)
 
