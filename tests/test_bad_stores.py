@@ -385,6 +385,14 @@ API = {
         lambda: chronocl.open("http://h:x/s.zarr"),
         InvalidParameterError,
     ),
+    "open a URL with an unclosed IPv6 bracket": (
+        lambda: chronocl.open("http://[::1/x.zarr"),
+        InvalidParameterError,
+    ),
+    "storage options for a local path": (
+        lambda: chronocl.open("/nonexistent/x.zarr", storage_options={"anon": True}),
+        InvalidParameterError,
+    ),
 }
 
 
@@ -436,7 +444,7 @@ def test_repr_of_a_chronovolume_is_one_line():
         ("s3://", "'s3://' names no bucket"),
         ("ftp://h/x.zarr", "cannot read a ftp:// store"),
         ("gs://b/x.zarr", "cannot read a gs:// store"),
-        ("http://h:x/s.zarr", "has a bad port"),
+        ("http://h:x/s.zarr", "is not a URL (Port could not be cast"),
     ],
 )
 def test_a_url_chronocl_cannot_read_is_one_line_from_the_cli(tmp_path, url, needle):

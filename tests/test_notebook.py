@@ -662,7 +662,7 @@ def test_a_bad_url_is_one_line_before_any_work(served, monkeypatch):
         one_line("http://", r"'http://' names no host")
         one_line("https:///v.zarr", r"names no host")
         one_line("s3://", r"'s3://' names no bucket")
-        one_line("http://127.0.0.1:port/v.zarr", r"has a bad port")
+        one_line("http://127.0.0.1:port/v.zarr", r"is not a URL \(Port could not be cast")
         one_line(
             str(served / "v.zarr"),
             r"apply to a store's .* not to the local path",

@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import atexit
 import json
+import os
 import re
 import threading
 import weakref
@@ -74,15 +75,36 @@ def check_url(path: object) -> object:
             "http://, https:// or s3:// URL"
         )
     url = scheme + text[len(found[1]) :]
-    parts = urlsplit(url)
     try:
+        parts = urlsplit(url)  # (an unclosed IPv6 bracket raises)
         parts.port  # noqa: B018 (a port that is not a number raises)
-    except ValueError:
-        raise InvalidParameterError(f"{text!r} has a bad port; check the URL") from None
+    except ValueError as exc:
+        raise InvalidParameterError(f"{text!r} is not a URL ({exc}); check it") from None
     if not parts.hostname:
         what = "bucket" if scheme == "s3" else "host"
         raise InvalidParameterError(f"{text!r} names no {what}; check the URL")
     return url
+
+
+def check_storage_options(path: object, storage_options: object) -> None:
+    """Storage options apply to a store's URL only: InvalidParameterError in one line for
+    options that are not a dict, or given with a local path or an array (they were ignored)."""
+    if storage_options is None:
+        return
+    if not isinstance(storage_options, Mapping):
+        raise InvalidParameterError(
+            f"storage_options must be a dict (as chronocl.open takes them), not "
+            f"{type(storage_options).__name__}"
+        )
+    if storage_options and not is_url(path):
+        what = (
+            f"the local path {str(path)!r}"
+            if isinstance(path, str | os.PathLike)
+            else (f"a {type(path).__name__}")
+        )
+        raise InvalidParameterError(
+            f"storage_options apply to a store's http(s):// or s3:// URL, not to {what}"
+        )
 
 
 def retry_policy() -> tuple[int, float]:

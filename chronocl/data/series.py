@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from chronocl.data.formats.omezarr import is_omezarr, open_omezarr
-from chronocl.data.remote_store import check_url, is_url
+from chronocl.data.remote_store import check_storage_options, check_url, is_url
 from chronocl.data.steps import Steps
 from chronocl.data.timeseries import TimeSeries, open_store
 from chronocl.data.writer import write_store
@@ -38,6 +38,7 @@ def open_series(
     `storage_options` then go to fsspec (``anon=True`` for a public bucket, ``endpoint_url``).
     """
     path = check_url(path)  # a URL it cannot read: one line, nothing opened
+    check_storage_options(path, storage_options)  # (given for a local path, they were ignored)
     if is_url(path):
         from chronocl.data.remote import open_remote
 

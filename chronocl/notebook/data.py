@@ -6,41 +6,25 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
 from pathlib import Path
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.data.remote_store import check_url, is_url
+from chronocl.data.remote_store import check_storage_options, check_url, is_url
 from chronocl.data.series import TimeSeries
 from chronocl.notebook.kernel import KERNEL
 from chronocl.viewer.datasets import Dataset, open_datasets
 
 
 def check_store(data: object, storage_options: object) -> object:
-    """`data` as `show` opens it, checked before anything is opened: a store's URL with its
-    scheme in lower case (http://, https://, s3://), a path as it is; InvalidParameterError in
-    one line for another scheme, a URL without a host or bucket, storage options that are not
-    a dict, or storage options for anything but a URL."""
-    if storage_options is not None and not isinstance(storage_options, Mapping):
-        raise InvalidParameterError(
-            f"storage_options must be a dict (as chronocl.open takes them), not "
-            f"{type(storage_options).__name__}"
-        )
-    if not isinstance(data, str | os.PathLike):
-        if storage_options:
-            raise InvalidParameterError(
-                "storage_options apply to a store's http(s):// or s3:// URL, not to a "
-                f"{type(data).__name__}"
-            )
-        return data
-    checked = check_url(data)  # (`chronocl.open` checks it too; before the widget is made)
-    if storage_options and not is_url(checked):
-        raise InvalidParameterError(
-            "storage_options apply to a store's http(s):// or s3:// URL, not to the local "
-            f"path {os.fspath(data)!r}"
-        )
-    return checked
+    """`data` as `show` opens it, checked before anything is opened (as `chronocl.open` checks
+    it, but before the widget is made): a store's URL with its scheme in lower case (http://,
+    https://, s3://), anything else as it is; InvalidParameterError in one line for another
+    scheme, a URL without a host or bucket, storage options that are not a dict, or storage
+    options for anything but a URL."""
+    checked = check_url(os.fspath(data) if isinstance(data, os.PathLike) else data)
+    check_storage_options(checked, storage_options)
+    return data if isinstance(data, os.PathLike) else checked
 
 
 def as_dataset(

@@ -516,7 +516,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         if cv is None:
             return None
         shown = dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=focus))
-        return project(cv, shown.panel_camera(), shown.size, fractions)
+        return project(cv, shown.panel_camera(view), shown.size, fractions)  # its own camera
 
     # -- the end -----------------------------------------------------------------------------
     def close(self) -> None:
