@@ -263,6 +263,18 @@ def test_histogram_switch_dataset_and_downloads(server, client):
     _, msg = client.wait("histogram")
     assert msg["steps"] == [3, 4, 5] and msg["range"] == [0.25, 0.75] and msg["id"] is None
 
+    # A view with its own window: the histogram asked for it counts its window, not the
+    # shared one, and so does the one a frame of another window brings.
+    views = [{"mode": "alpha"}, {"mode": "change", "window": {"t0": 7, "t1": 10}}]
+    client.send({"type": "update", "views": views})
+    rid = client.send({"type": "histogram", "range": [0, 1], "view": 1, "of": "change"})
+    _, msg = client.wait("histogram", rid)
+    assert msg["window"] == [7, 10, 1] and msg["steps"] == [8, 9] and msg["view"] == 1
+    views[1]["window"] = {"t0": 6, "t1": 9}
+    client.send({"type": "update", "views": views, "window": {"t0": 2, "t1": 5}})
+    _, msg = client.wait("histogram")
+    assert msg["window"] == [6, 9, 1] and msg["of"] == "change" and msg["id"] is None
+
     ds, _ = client.open("jet")
     assert ds["name"] == "jet" and ds["shape"] == {"t": 10, "z": 24, "y": 24, "x": 32}
 

@@ -13,7 +13,8 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
     probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
                                                          x2, y2: a box between two rays' voxels
     histogram  {"range": [lo, hi]}                       normalised values u in the window
-               (+ "of": "change", "value_range": [lo, hi]: the changes between its steps)
+               (+ "view": the view's own window; "of": "change", "value_range": [lo, hi]:
+               the changes between its steps)
     fit        {"view"[, "mode"]}                       the TF's range fitted to a view's window
     slice      {"slice", "view"[, "u", "v"]}             a plane of a view ("z=40") as a PNG, and
                                                          the winner at (u, v) of its voxel grid
@@ -281,6 +282,7 @@ MESSAGES: dict[str, Obj] = {
             "range": UNIT_RANGE,
             "of": Enum(("value", "change")),
             "value_range": Nullable(Range(Num(-FLOAT32_MAX, FLOAT32_MAX))),
+            "view": Int(0, MAX_VIEWS - 1),  # whose window it counts (default 0)
         },
         NEEDS_RANGE,
     ),

@@ -15,6 +15,7 @@ from collections.abc import Callable, Hashable
 
 from chronocl.core.budget import interactive_memory, parse_memory
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.selection import Selection
 from chronocl.engine import get_engine
 from chronocl.render.views import parse_color
 from chronocl.viewer.datasets import Dataset
@@ -36,8 +37,9 @@ class Tasks(EventTasks):
     events (`EventTasks`, chronocl.viewer.events_panel)."""
 
     # what the page's last histogram request counted (`Dataset.histogram`'s `of` and
-    # `value_range`), counted again after a frame of another window
-    _hist_of: tuple[str, list | None] = ("value", None)
+    # `value_range`, and the view whose window: its own or the shared one), counted again
+    # after a frame of another window
+    _hist_of: tuple[str, list | None, int] = ("value", None, 0)
 
     def _reply(self, obj: dict) -> bool:
         return self.send(json.dumps(obj))
@@ -65,7 +67,7 @@ class Tasks(EventTasks):
         `EventTasks` (a find: its own thread; one that only shows or hides markers: a frame);
         False for other kinds."""
         if kind == "histogram":
-            self._hist_of = (msg.get("of", "value"), msg.get("value_range"))
+            self._hist_of = (msg.get("of", "value"), msg.get("value_range"), msg.get("view", 0))
             self._request_histogram(msg.get("id"), list(msg["range"]))
         elif kind == "fit":
             self._request_fit(msg)
@@ -76,7 +78,7 @@ class Tasks(EventTasks):
     def _histogram_after(self, state: ViewState) -> None:
         """After a full-quality frame of another window than the histogram's: its histogram
         (unless one waits: it counts the window wanted when it runs)."""
-        window = (state.dataset, *state.window)
+        window = (state.dataset, *self._hist_view_window(state))
         if state.quality == "full" and window != self._hist_window:
             self._hist_window = window
             if not self.side.waiting("histogram"):
@@ -90,32 +92,39 @@ class Tasks(EventTasks):
         of = self._hist_of
         self._beside("histogram", rid, "histogram", lambda: self._histogram(rid, lo, hi, *of))
 
+    def _hist_view_window(self, state: ViewState) -> tuple[int, int, int]:
+        """The window the histogram counts: its view's own, else the shared one."""
+        view = self._hist_of[2]
+        return state.own_window(view if view < len(state.views) else None) or state.window
+
     def _histogram(
-        self, rid: int | None, lo: float, hi: float, of: str, value_range: list | None
+        self, rid: int | None, lo: float, hi: float, of: str, value_range: list | None, view: int
     ) -> None:
         with self._cond:
             state = self.state
         ds = self.datasets[state.dataset]
-        steps = state.selection(ds.series.n_steps).steps
+        t0, t1, stride = self._hist_view_window(state)
+        steps = Selection.window(t0, t1, stride, ds.series.n_steps).steps
         hist = ds.histogram(
             lo,
             hi,
             steps,
-            state.window[2],
+            stride,
             given_up=lambda: self.side.waiting("histogram"),
             of=of,
             value_range=value_range,
         )
         if hist is None:
             return  # a newer request waits: it answers instead
-        self._hist_window = (state.dataset, *state.window)
-        window = list(state.window)
+        self._hist_window = (state.dataset, t0, t1, stride)
+        window = [t0, t1, stride]
         self._reply(
             {
                 "type": "histogram",
                 "id": rid,
                 **hist,
                 "value_range": value_range,  # a change histogram's (None: the series')
+                "view": view,  # whose window: its own, else the shared one
                 "window": window,
                 "dataset": state.dataset,
             }

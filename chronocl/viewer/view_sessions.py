@@ -144,7 +144,7 @@ class Views:
                 if slot.session is not None:
                     slot.session.stream(self._streaming)
             limit.fit()
-        cvs = []
+        cvs, integrated = [], []
         for i in range(len(state.views)):
             slot = self.slots[i]
             spec = state.spec(i)
@@ -169,10 +169,12 @@ class Views:
             integrate_ms += ms
             incremental = incremental or inc
             cvs.append(cv)
+            if ms > 0:  # integrated for this frame (not its last chronovolume shown again)
+                integrated.append(slot)
         # A GPU session whose window does not fit the device: its steps go up every time.
         whys = (s.session.stats.get("why_not_on_device") for s in self.slots[: len(cvs)])
         self.host_steps_why = next((why for why in whys if why), None)
-        self.why_not_incremental = self._why_integrated(self.slots[: len(cvs)])
+        self.why_not_incremental = self._why_integrated(integrated)  # (a session's stats stay)
         self.shown_managers = tuple(  # published whole: the timeline reads it (`residency`)
             None if s.session is None else self.manager(0, s.session.spec.integration.pool)
             for s in self.slots[: len(cvs)]

@@ -524,15 +524,15 @@ function setZoom(lo, hi) {
 // What a histogram over axis [lo, hi] counts for the selected view: the values, or a change
 // mode's changes at the TF's value range. A histogram counted for another (a mode switched to
 // or from change, a TF fitted anew) is asked for again when the editor is drawn.
-function histKey(lo, hi) {
-  return changes() ? `change ${lo} ${hi} ${values().join(' ')}` : `value ${lo} ${hi}`;
+function histKey(lo, hi, view = S.selectedView) {
+  return changes() ? `${view} change ${lo} ${hi} ${values().join(' ')}` : `${view} value ${lo} ${hi}`;
 }
 
 function askHistogram(lo, hi) {
   const key = histKey(lo, hi);
   if (key === histAsked) return;
   histAsked = key;
-  const msg = { type: 'histogram', range: [lo, hi] };
+  const msg = { type: 'histogram', range: [lo, hi], view: S.selectedView }; // its window
   if (changes()) Object.assign(msg, { of: 'change', value_range: shown('data_tf').value_range || null });
   clearTimeout(histTimer);
   histTimer = setTimeout(() => send(msg), 120);
@@ -542,6 +542,7 @@ function askHistogram(lo, hi) {
 export function tookHistogram(msg) {
   const [lo, hi] = msg.range;
   const vr = msg.value_range || (S.info ? [S.info.vmin, S.info.vmax] : [0, 1]);
-  const key = msg.of === 'change' ? `change ${lo} ${hi} ${vr.join(' ')}` : `value ${lo} ${hi}`;
+  const v = msg.view || 0;
+  const key = msg.of === 'change' ? `${v} change ${lo} ${hi} ${vr.join(' ')}` : `${v} value ${lo} ${hi}`;
   S.histogram = { ...msg, key };
 }
