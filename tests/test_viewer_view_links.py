@@ -158,6 +158,32 @@ def test_render_state_options_apply_to_every_views_camera(series):
     assert session["views"][1]["camera"]["azimuth"] == 160.0  # the session as it was
 
 
+def test_render_state_colormap_recolours_each_views_own_curve(stores, series, tmp_path):
+    """`chronocl render --state --colormap`: each view's own data TF is recoloured (its own
+    opacity kept), not replaced by the shared curve recoloured; the picture equals the
+    session's views drawn with those TFs, bit for bit."""
+    from PIL import Image
+
+    from chronocl.cli.render_state import _following, render_state
+    from chronocl.viewer.session_file import render_session, write_session
+
+    state = merge(default_state(0, series), UNLINKED, series.n_steps)
+    path = tmp_path / "links.json"
+    path.write_bytes(write_session(session_of(state, "vortex", series, stores[0])))
+    out = tmp_path / "cli.png"
+    render_state(path, {"colormap": "viridis", "out_path": out})
+    own = state.view_data_tfs[1].with_colormap("viridis")
+    assert own.points != state.data_tf.with_colormap("viridis").points  # two curves
+    recoloured = [state.data_tf_of(i).with_colormap("viridis") for i in range(2)]
+    changes = []
+    for i, data_tf in enumerate(recoloured):
+        time_tf = _following(state.time_tf_object(i), data_tf)  # as the command line's
+        changes.append({"data_tf": data_tf, **({} if time_tf is None else {"time_tf": time_tf})})
+    want = render_session(state, series, name="vortex", changes=changes)
+    got = np.asarray(Image.open(out).convert("RGB"))
+    assert np.array_equal(got, np.asarray(want.to_pil().convert("RGB")))
+
+
 # ------------------------------------------------------------------ the server and the target
 def _pixels(data: bytes) -> np.ndarray:
     from PIL import Image

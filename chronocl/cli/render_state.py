@@ -2,8 +2,8 @@
 saved (same data set, window, views, camera, transfer functions, clip, box outline, size), as
 the viewer's Save PNG draws it: each view with its own window, camera and TFs where it had them.
 Options given on the command line override the session's fields (a camera option every view's
-camera, a TF option every view's TF); the axis triad is drawn only when --axes is given (the
-Save PNG has none)."""
+camera, a TF option every view's TF; --colormap recolours each view's own curve, its opacity
+kept); the axis triad is drawn only when --axes is given (the Save PNG has none)."""
 
 from __future__ import annotations
 
@@ -86,14 +86,17 @@ def render_state(state_path: Path, options: dict) -> None:
     time_labels = options.get("time_labels", "labels")
     check_prefer(time_labels)
     setting = TFSetting.load(options["tf"]) if "tf" in options else None
-    time_tf = TimeTF.preset(options["time_tf"]) if "time_tf" in options else None
-    data_tf = setting.data_tf if setting else None
-    if "colormap" in options:
-        data_tf = (data_tf or state.data_tf).with_colormap(options["colormap"])
-    time_tf = time_tf or (setting.time_tf if setting else None)
-    if time_tf is None and data_tf is not None:
-        time_tf = _following(state.time_tf_object(), data_tf)
-    spec = {"data_tf": data_tf, "time_tf": time_tf, "normalize": options.get("normalize")}
+    changes = []
+    for view in range(len(state.views)):  # each view's own TFs where it has them
+        time_tf = TimeTF.preset(options["time_tf"]) if "time_tf" in options else None
+        data_tf = setting.data_tf if setting else None
+        if "colormap" in options:  # the view's curve recoloured, its opacity kept
+            data_tf = (data_tf or state.data_tf_of(view)).with_colormap(options["colormap"])
+        time_tf = time_tf or (setting.time_tf if setting else None)
+        if time_tf is None and data_tf is not None:
+            time_tf = _following(state.time_tf_object(view), data_tf)
+        spec = {"data_tf": data_tf, "time_tf": time_tf, "normalize": options.get("normalize")}
+        changes.append({k: v for k, v in spec.items() if v is not None})
     t0 = time.perf_counter()
     image = render_session(
         state,
@@ -103,7 +106,7 @@ def render_state(state_path: Path, options: dict) -> None:
         time_labels=time_labels,
         axes=bool(options.get("axes", False)),
         name=session["dataset"]["name"],
-        **{k: v for k, v in spec.items() if v is not None},
+        changes=changes,
     )
     image.save(out, overwrite=overwrite)
     modes = ", ".join(m for m, _ in state.views)

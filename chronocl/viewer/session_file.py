@@ -193,7 +193,7 @@ def render_session(
     time_labels: str = "labels",
     axes: bool = False,
     name: str | None = None,
-    **spec_changes: object,
+    changes: Sequence[dict] = (),
 ) -> Image:
     """The views of `state` drawn as the viewer's Save PNG draws them: the same chronovolumes,
     camera (as the panels are drawn, framing its focus, else the visible region), size, clip,
@@ -201,11 +201,14 @@ def render_session(
     data set's `name` Save PNG's title band over them, naming it and the windows (also the
     PNG's Title text); `axes` adds the axis triad to each panel (`chronocl render --state
     --axes`).
-    `spec_changes` replace fields of every view's IntegrationSpec (e.g. a time_tf given on the
-    command line)."""
+    `changes[i]` replaces fields of view i's IntegrationSpec (e.g. a time TF given on the
+    command line, a colour map given to its own data TF)."""
     from chronocl.integration.inmemory import integrate
 
-    specs = [dataclasses.replace(state.spec(i), **spec_changes) for i in range(len(state.views))]
+    specs = [
+        dataclasses.replace(state.spec(i), **(changes[i] if i < len(changes) else {}))
+        for i in range(len(state.views))
+    ]
     cvs = [
         integrate(series, state.selection(series.n_steps, i), spec=s, engine=engine, device=device)
         for i, s in enumerate(specs)
