@@ -314,6 +314,11 @@ def test_a_real_server_answers_a_slice_request_with_the_winner_under_the_point(t
         step = int(cv.t_index[z, y, x])
         assert got["step"] == step >= 0
         assert got["value"] == pytest.approx(float(series.read_region(step, z, y, x)))
+        # a pointer moving over the picture: the read-out alone, no picture drawn
+        msg = {"type": "slice", "view": 0, "slice": "z=16", "u": 0.3, "v": 0.6, "picture": False}
+        rid = client.send(msg)
+        _, alone = client.wait("slice", rid)
+        assert "png" not in alone and alone["readout"] == got
         rid = client.send({"type": "slice", "view": 0, "slice": "q=4"})
         _, error = client.wait("error", rid)
         assert "\n" not in error["message"] and "q=4" in error["message"]

@@ -104,6 +104,12 @@ def _plane(volume: np.ndarray, sl: Slice) -> np.ndarray:
     return plane[::-1]
 
 
+def grid_shape(sl: Slice, shape_zyx: tuple[int, int, int]) -> tuple[int, int]:
+    """(rows, cols) of the slice's voxel grid in a volume of `shape_zyx` (as `_plane` gives)."""
+    nz, ny, nx = shape_zyx
+    return {"z": (ny, nx), "y": (nz, nx), "x": (nz, ny)}[sl.axis]
+
+
 def slice_voxel(sl: Slice, shape_zyx: tuple[int, int, int], col: int, row: int):
     """The voxel (x, y, z) at column `col`, row `row` (0: top) of the slice's voxel grid."""
     nz, ny, nx = shape_zyx

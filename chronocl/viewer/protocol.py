@@ -270,6 +270,7 @@ MESSAGES: dict[str, Obj] = {
             "slice": Text(40),
             "u": Num(0.0, 1.0),
             "v": Num(0.0, 1.0),
+            "picture": Bool(),  # false: the read-out at (u, v) alone (a pointer moving)
         },
         frozenset({"slice"}),
     ),

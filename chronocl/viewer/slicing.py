@@ -5,13 +5,15 @@ point of the slice.
 A `slice` request names the view, the slice ("z=40") and optionally a point (`u`, `v` in
 [0, 1] of the slice's voxel grid, across from the left and down from the top, as a page's
 pointer over the grid `box` gives them). The reply carries the picture as a PNG data URL, its
-`layout` and `box` (in pixels of the picture), the grid's rows and columns, and at the point
+`layout` (in pixels of the picture) and `box` (where the grid lies in each of the layout's
+`pictures`, in pixels from that picture's corner), the grid's rows and columns, and at the point
 the voxel, its position in data units, the step that won there, its time and the series' raw
 value at that voxel and step.
 
 The render thread answers it between frames (`tasks._do_task`), from the view's chronovolume
-at full resolution, as it answers a probe. The page has no slice panel yet: a script or the
-notebook's comm sends the request.
+at full resolution, as it answers a probe. The page's slice panel (`static/slice.js`) sends it;
+`t_index` in the reply says whether the view's mode keeps a winning step at all, `outline`
+where the plane cuts the volume's box on the view's panel (`clip_outline`, as the clip plane's).
 """
 
 from __future__ import annotations
@@ -21,29 +23,54 @@ import dataclasses
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.render.slices import slice_picture, slice_value, slice_voxel
+from chronocl.render.slices import (
+    Slice,
+    grid_shape,
+    parse_slice,
+    slice_picture,
+    slice_value,
+    slice_voxel,
+)
+from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.view_state import ViewState
+
+
+def slice_clip(sl: Slice, cv: Chronovolume) -> tuple[float, float, float, float]:
+    """The slice's plane as a clip plane (nx, ny, nz, offset): through its voxels' centres."""
+    n = dict(zip("xyz", cv.shape[::-1], strict=True))[sl.axis]
+    normal = tuple(1.0 if a == sl.axis else 0.0 for a in "xyz")
+    return (*normal, (2 * sl.index + 1) / n - 1)  # type: ignore[return-value]
 
 
 def slice_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Dataset) -> dict:
     """The `slice` reply to `msg` for the shown `view` of `state` (its chronovolume `cv`, of
     data set `ds`): the slice picture at the view's size and background, where its grid lies,
-    and with a point (`u`, `v`) the read-out there (None without one)."""
-    pic = slice_picture(cv, msg.get("slice"), state.size, state.background, name=ds.name)
-    rows, cols = pic.grid
+    and with a point (`u`, `v`) the read-out there (None without one). With `picture` false
+    (a pointer moving over the picture the page has) only the read-out: no picture is drawn."""
+    sl = parse_slice(msg.get("slice"), cv.shape)
     reply = {
         "type": "slice",
         "id": msg.get("id"),
         "view": view,
-        "slice": str(pic.slice),
-        "png": "data:image/png;base64," + base64.b64encode(pic.image.png_bytes()).decode(),
-        "size": list(pic.image.size),
-        "layout": dataclasses.asdict(pic.layout),
-        "box": list(pic.box),
-        "grid": {"rows": rows, "cols": cols, "across": pic.slice.across, "up": pic.slice.up},
+        "slice": str(sl),
+        "t_index": cv.t_index is not None,  # the mode keeps the step that won each voxel
         "readout": None,
     }
+    if msg.get("picture", True):
+        pic = slice_picture(cv, sl, state.size, state.background, name=ds.name)
+        rows, cols = pic.grid
+        reply |= {
+            "png": "data:image/png;base64," + base64.b64encode(pic.image.png_bytes()).decode(),
+            "size": list(pic.image.size),
+            "layout": dataclasses.asdict(pic.layout),
+            "box": list(pic.box),
+            "grid": {"rows": rows, "cols": cols, "across": sl.across, "up": sl.up},
+            # the plane's outline on the view's panel under its camera now, as the clip plane's
+            "outline": clip_outline(cv, state.panel_camera(view), state.size, slice_clip(sl, cv)),
+        }
+    else:
+        rows, cols = grid_shape(sl, cv.shape)
     if "u" not in msg and "v" not in msg:
         return reply
     u, v = msg.get("u"), msg.get("v")
@@ -53,7 +80,7 @@ def slice_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
         raise InvalidParameterError(f"slice point u={u!r}, v={v!r} must be two numbers in [0, 1]")
     col = min(cols - 1, int(u * cols))  # type: ignore[operator]
     row = min(rows - 1, int(v * rows))  # type: ignore[operator]
-    x, y, z = slice_voxel(pic.slice, cv.shape, col, row)
+    x, y, z = slice_voxel(sl, cv.shape, col, row)
     got = slice_value(cv, ds.series, x, y, z)
     reply["readout"] = {
         "voxel": {"x": x, "y": y, "z": z},

@@ -12,6 +12,7 @@
 //   fit.js         Fit to window: the data TF's range fitted as the command line fits it
 //   probe.js       the v(t) plot of a probed voxel
 //   plot.js        the small plot over the series' steps (the probe's, the events panel's)
+//   slice.js       the slice panel: a plane of the selected view, the read-out under the pointer
 //   events.js      the events panel: Find events, the events and tracks, markers
 //   legend.js      the time legend and the data colour bar drawn in each view
 //   time_follow.js time colours that follow a colour-map preset (lightness under its hue)
@@ -31,6 +32,7 @@ import { bindOrientation, drawTriads } from './orientation.js';
 import { bindProbe, clearProbe, drawProbe, onProbe } from './probe.js';
 import { bindSession, fragmentSession, loadSession, noteFocus, resetHistory } from './session.js';
 import { bindShading, syncShading } from './shading.js';
+import { bindSlice, onSlice, sliceFailed, sliceFrame } from './slice.js';
 import { $, pageState, setStatus } from './state.js';
 import { bindTF, drawTF, fillColormaps, noteHistogram, tookHistogram } from './tf_editor.js';
 import { bindTimeFollow } from './time_follow.js';
@@ -168,6 +170,9 @@ function onText(msg) {
     case 'fit':
       onFit(msg);
       break;
+    case 'slice':
+      onSlice(msg);
+      break;
     case 'probe':
       onProbe(msg);
       eventsProbed(msg);
@@ -196,6 +201,7 @@ function onText(msg) {
       viewer.errors.push(msg);
       fitFailed(msg.id);
       eventsFailed(msg.id);
+      sliceFailed(msg);
       setStatus(`error: ${msg.message}`, true);
       if (urlLoad !== null && msg.id === urlLoad) {
         urlLoad = null; // the URL's session does not fit: the default view instead
@@ -242,8 +248,10 @@ export function start(host, transport) {
     syncControls();
     drawTF();
     drawTriads();
+    sliceFrame();
   });
   bindProbe(page);
+  bindSlice(page);
   bindEvents(page);
   $('side-toggle').addEventListener('click', () => {
     const hidden = page.shell.classList.toggle('side-hidden');
@@ -268,6 +276,7 @@ export function start(host, transport) {
       onFrame: (buf) => {
         onFrame(buf);
         noteFocus();
+        sliceFrame();
       },
     },
     transport,

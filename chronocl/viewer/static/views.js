@@ -123,7 +123,8 @@ function makePanel(i) {
     '</span>' +
     '<div class="view-label"></div></div>' +
     '<div class="view-pic"><img alt="view" draggable="false">' +
-    '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon/></svg>' +
+    '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon class="clip-cut"/>' +
+    '<polygon class="slice-cut"/></svg>' +
     '<div class="probe-mark"></div><div class="probe-band"></div>' +
     '<div class="view-note" hidden></div></div>' +
     '<div class="view-foot"><canvas class="legend"></canvas><canvas class="colorbar" hidden></canvas>' +
@@ -143,7 +144,8 @@ function makePanel(i) {
     note: el.querySelector('.view-note'),
     mark: el.querySelector('.probe-mark'),
     band: el.querySelector('.probe-band'),
-    outline: el.querySelector('.clip-outline polygon'),
+    outline: el.querySelector('.clip-outline .clip-cut'),
+    sliceCut: el.querySelector('.clip-outline .slice-cut'),
     triad: el.querySelector('.triad'),
   };
   if (pictureObserver) pictureObserver.observe(p.pic);
@@ -333,6 +335,15 @@ export function showMark(at) {
       q.mark.style.left = `${at.x * 100}%`;
       q.mark.style.top = `${at.y * 100}%`;
     }
+  });
+}
+
+// The slice panel's plane where it cuts the volume's box on view `view`'s panel (points:
+// [x, y] fractions of the panel, slice.js), or on none.
+export function showSliceOutline(view, points) {
+  panels.forEach((q, j) => {
+    const on = view === j && !!points;
+    q.sliceCut.setAttribute('points', on ? points.map(([x, y]) => `${x},${y}`).join(' ') : '');
   });
 }
 

@@ -1,0 +1,216 @@
+// The slice panel: one plane (x, y or z at an index) of the selected view's chronovolume, as
+// `chronocl render --slice` draws it (the server's `slice` reply: chronocl/viewer/slicing.py),
+// scaled to the panel's width; and the read-out under the pointer over its voxel grid (the
+// reply's `box`, in each of its pictures: the colours and the step map): the voxel, its
+// position in data units, the step that won it, its time and the series' value there. The
+// picture is asked for while the panel is open: when the axis or index changes (debounced)
+// and after a full frame of a changed view (its window, mode, TFs, camera, the view
+// selected), so it follows what the view shows.
+// The picture can also be shown larger over the views (#slice-big), read out the same way.
+// The plane's outline is drawn on the view's panel (the reply's `outline`, under the camera
+// the view had when it was asked for; hidden while the camera moves, asked again after).
+// A click does not pin a probe: the probe takes a ray through a view's panel, not a voxel.
+
+import { send, shown } from './connection.js';
+import { $ } from './state.js';
+import { showSliceOutline } from './views.js';
+
+// The page's state (state.js: pageState), made by app.js and given to bindSlice.
+let S;
+let viewer;
+
+const ASK_MS = 120; // the picture asked this long after the last axis or index change
+const HOVER_MS = 80; // at most one read-out asked in this time
+let askTimer = 0;
+let hoverTimer = 0;
+let hoverAt = 0;
+let hoverNext = null;
+let asked = null; // what the last picture was asked for (sliceKey)
+let pictureId = 0; // the id of the newest picture asked for
+let hoverId = 0; // the id of the newest read-out asked for
+
+const HINT = 'move the pointer over the slice: the voxel, its step, time and value';
+
+// Pictures are asked for while the panel is open or the slice is shown over the views.
+const open = () => $('slice-panel').open || !$('slice-big').hidden;
+
+// The volume's voxels along `axis`, from the data set's shape {t, z, y, x}.
+const extent = (axis) => (S.info ? S.info.shape[axis] : 1);
+
+// The slice chosen, as the protocol names it ("z=16").
+const spec = () => `${$('slice-axis').value}=${$('slice-index').value}`;
+
+// The slider over the chosen axis's voxels (its index kept where it still fits).
+function syncSlider(middle = false) {
+  const n = extent($('slice-axis').value);
+  const el = $('slice-index');
+  el.max = String(n - 1);
+  if (middle || +el.value > n - 1) el.value = String(Math.floor((n - 1) / 2));
+  $('slice-at').textContent = `${el.value} / ${n - 1}`;
+}
+
+// What the picture shows: the slice, and what the selected view is drawn from and with.
+function sliceKey() {
+  if (!S.info || !S.state) return null;
+  const i = S.selectedView;
+  return JSON.stringify([
+    S.info.index, spec(), i, S.state.views[i], S.state.window, shown('data_tf'), shown('time_tf'),
+    S.state.enhance, S.state.threshold, S.state.background, S.state.size, shown('camera'),
+  ]);
+}
+
+function ask(delay = ASK_MS) {
+  clearTimeout(askTimer);
+  askTimer = setTimeout(() => {
+    const key = sliceKey();
+    if (!open() || key === null) return;
+    asked = key;
+    pictureId = send({ type: 'slice', view: S.selectedView, slice: spec() }) || pictureId;
+  }, delay);
+}
+
+// After each frame (app.js): a full, settled frame of a view changed since the picture was
+// asked for asks again; the slider follows the data set's shape.
+export function sliceFrame() {
+  if (!open() || !S.info) return;
+  syncSlider();
+  const key = sliceKey();
+  if (!viewer.slice || key !== asked) showSliceOutline(null); // stale: the camera or view moved
+  const last = viewer.last;
+  if (last && (last.quality !== 'full' || last.refining)) return;
+  if (key !== asked) ask(0);
+}
+
+// The read-out at (u, v) of the grid: asked at most every HOVER_MS, the last point kept.
+function askReadout(u, v) {
+  hoverNext = { u, v };
+  const wait = hoverAt + HOVER_MS - performance.now();
+  clearTimeout(hoverTimer);
+  const go = () => {
+    if (!hoverNext || !S.state) return;
+    hoverAt = performance.now();
+    const msg = { type: 'slice', view: S.selectedView, slice: spec(), picture: false, ...hoverNext };
+    hoverNext = null;
+    hoverId = send(msg) || hoverId;
+  };
+  if (wait <= 0) go();
+  else hoverTimer = setTimeout(go, wait);
+}
+
+// The pointer's (u, v) in [0, 1] of the voxel grid (across from the left, down from the top),
+// or null off it. The reply's `box` is where the grid lies in each of its pictures (the
+// colours, and the step map where the mode keeps one: `layout.pictures`, in the picture's
+// pixels), so either one reads out.
+function gridPoint(e, img) {
+  const msg = viewer.slice;
+  if (!msg || !img.naturalWidth) return null;
+  const r = img.getBoundingClientRect();
+  const px = ((e.clientX - r.left) * img.naturalWidth) / r.width;
+  const py = ((e.clientY - r.top) * img.naturalHeight) / r.height;
+  const [bx, by, bw, bh] = msg.box;
+  for (const [x0, y0] of msg.layout.pictures) {
+    const u = (px - x0 - bx) / bw;
+    const v = (py - y0 - by) / bh;
+    if (u >= 0 && u <= 1 && v >= 0 && v <= 1) return { u, v };
+  }
+  return null;
+}
+
+function readoutText(msg) {
+  const r = msg.readout;
+  const p = r.position;
+  const where = `x=${r.voxel.x} y=${r.voxel.y} z=${r.voxel.z} (${[p.x, p.y, p.z].map((q) => +q.toPrecision(6)).join(', ')})`;
+  if (msg.t_index === false) return `${where}: this view's mode keeps no winning step (no t_index)`;
+  return r.text;
+}
+
+// A `slice` reply: the picture (an older one than the newest asked for is dropped) and, with
+// a point, its read-out.
+export function onSlice(msg) {
+  if (msg.id !== null && msg.id < pictureId) return;
+  if (!msg.png) {
+    // a read-out alone (the pointer over the picture shown): the picture stays
+    if (msg.readout && msg.id >= hoverId && viewer.slice && msg.slice === viewer.slice.slice) {
+      viewer.sliceReadout = msg.readout;
+      viewer.sliceReadoutId = msg.id;
+      $('slice-readout').textContent = readoutText(msg);
+      $('slice-big-readout').textContent = readoutText(msg);
+    }
+    return;
+  }
+  viewer.slice = msg;
+  for (const id of ['slice-pic', 'slice-big-pic']) {
+    const img = $(id);
+    if (img.getAttribute('src') !== msg.png) img.src = msg.png;
+    img.dataset.id = msg.id;
+  }
+  $('slice-pic').hidden = false;
+  showSliceOutline(sliceKey() === asked ? msg.view : null, msg.outline);
+  const g = msg.grid;
+  const what = `${msg.slice} of view ${msg.view + 1}: ${g.across} across, ${g.up} up (${g.cols}×${g.rows} voxels)`;
+  $('slice-note').textContent = what;
+  $('slice-note').classList.remove('error');
+  $('slice-big-title').textContent = `Slice ${what}`;
+  if (msg.readout && msg.id >= hoverId) {
+    viewer.sliceReadout = msg.readout;
+    viewer.sliceReadoutId = msg.id;
+    $('slice-readout').textContent = readoutText(msg);
+    $('slice-big-readout').textContent = readoutText(msg);
+  }
+}
+
+// An error answering a slice request: said under the picture.
+export function sliceFailed(msg) {
+  if (msg.id === null || (msg.id !== pictureId && msg.id !== hoverId)) return;
+  $('slice-note').textContent = msg.message;
+  $('slice-note').classList.add('error');
+}
+
+export function bindSlice(page) {
+  ({ S, viewer } = page);
+  viewer.slice = null;
+  viewer.sliceReadout = null;
+  viewer.sliceReadoutId = -1; // the request its read-out answers
+  const moved = () => {
+    viewer.sliceReadout = null;
+    $('slice-readout').textContent = HINT;
+    $('slice-big-readout').textContent = HINT;
+    ask();
+  };
+  $('slice-axis').addEventListener('change', () => {
+    syncSlider(true);
+    moved();
+  });
+  $('slice-index').addEventListener('input', () => {
+    syncSlider();
+    moved();
+  });
+  $('slice-panel').addEventListener('toggle', () => {
+    if (!open()) showSliceOutline(null);
+    if (!open() || !S.info) return;
+    syncSlider();
+    asked = null;
+    ask(0);
+  });
+  for (const id of ['slice-pic', 'slice-big-pic']) {
+    const img = $(id);
+    img.addEventListener('pointermove', (e) => {
+      const at = gridPoint(e, img);
+      img.classList.toggle('on-grid', !!at);
+      if (at) askReadout(at.u, at.v);
+    });
+    img.addEventListener('pointerleave', () => {
+      hoverNext = null;
+      clearTimeout(hoverTimer);
+    });
+  }
+  const large = (show) => {
+    $('slice-big').hidden = !show;
+    $('slice-large').setAttribute('aria-expanded', String(show));
+  };
+  $('slice-large').addEventListener('click', () => large($('slice-big').hidden));
+  $('slice-big-close').addEventListener('click', () => {
+    large(false);
+    if (!open()) showSliceOutline(null);
+  });
+}

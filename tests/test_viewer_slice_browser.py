@@ -1,0 +1,183 @@
+"""The slice panel in Chromium (issue 49, slices through time; `static/slice.js`): opened, a
+z index chosen, it shows the `slice` reply's picture (its natural size the reply's size, scaled
+to the panel's width); the pointer over the voxel grid reads out the voxel, the step that won
+it (a max view: the t_index `chronocl.integrate` gives there) and the series' value, over the
+colours and over the step map alike, in the panel and shown larger over the views; the plane's
+outline is drawn on the view's panel and follows the index; an alpha view, which keeps no
+t_index, says so; folding the panel takes the outline away; no page errors.
+
+Screenshots go to $CHRONOCL_SCREENSHOTS (else the test's temporary folder).
+"""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("playwright.sync_api")
+
+import chronocl
+from chronocl.data.series import open_series
+
+from .test_viewer_count_legend_browser import choose
+from .test_viewer_page_browser import Page, browser, shots_dir  # noqa: F401
+from .viewer_helpers import CHROMIUM, make_stores, serving
+
+pytestmark = pytest.mark.skipif(
+    not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
+)
+
+
+@pytest.fixture(scope="module")
+def stores(tmp_path_factory):
+    return make_stores(tmp_path_factory.mktemp("viewer-slice"))
+
+
+@pytest.fixture(scope="module")
+def server(stores):
+    yield from serving(stores)
+
+
+# The slice reply shown, without its picture's bytes, and the picture element's sizes.
+SHOWN = """(id) => {
+  const s = window.viewer.slice, img = document.getElementById(id || 'slice-pic');
+  if (!s) return null;
+  const r = img.getBoundingClientRect();
+  const side = document.getElementById('slice-panel').getBoundingClientRect();
+  return {id: s.id, slice: s.slice, size: s.size, box: s.box, grid: s.grid, t_index: s.t_index,
+          pictures: s.layout.pictures,
+          natural: [img.naturalWidth, img.naturalHeight], shown: [r.x, r.y, r.width, r.height],
+          panel: [side.x, side.width], complete: img.complete && img.getAttribute('src') === s.png};
+}"""
+
+
+# The slice plane's outline drawn on the first view's panel: [x, y] fractions of the panel.
+CUT = """() => {
+  const pts = document.querySelector('#views .view .slice-cut').getAttribute('points') || '';
+  return pts.split(' ').filter(Boolean).map((xy) => xy.split(',').map(Number));
+}"""
+
+
+def wait_slice(p: Page, spec: str, after: int = 0) -> dict:
+    p.page.wait_for_function(
+        """([spec, after]) => {
+          const s = window.viewer.slice, img = document.getElementById('slice-pic');
+          return !!s && s.slice === spec && s.id > after && img.complete && img.naturalWidth > 0
+            && img.getAttribute('src') === s.png; }""",
+        arg=[spec, after],
+        timeout=60_000,
+    )
+    return p.eval(SHOWN)
+
+
+def hover(p: Page, shown: dict, u: float, v: float, after: int = 0, panel: int = 0) -> dict:
+    """The pointer at (u, v) of the voxel grid in the reply's picture `panel` (0: the colours,
+    1: the step map; the grid's `box` is in each of the layout's pictures); returns the
+    read-out that answers it."""
+    x, y, w, _ = shown["shown"]
+    scale = w / shown["natural"][0]
+    bx, by, bw, bh = shown["box"]
+    px, py = shown["pictures"][panel][:2]
+    p.page.mouse.move(x + (px + bx + u * bw) * scale, y + (py + by + v * bh) * scale)
+    p.page.wait_for_function(
+        "(after) => window.viewer.sliceReadout && window.viewer.sliceReadoutId > after",
+        arg=after,
+        timeout=60_000,
+    )
+    return p.eval(
+        "() => ({id: window.viewer.sliceReadoutId, readout: window.viewer.sliceReadout,"
+        " text: document.getElementById('slice-readout').textContent})"
+    )
+
+
+def test_the_slice_panel_shows_the_plane_and_reads_the_winning_step(
+    browser,  # noqa: F811
+    server,
+    stores,
+    tmp_path,
+):
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        choose(p, "#views .view select.mode", "max")
+        page.locator("#slice-panel summary").click()
+        page.locator("#slice-axis").select_option("z")
+        first = wait_slice(p, "z=15")  # the middle of 32 voxels, asked as the panel opens
+        # An index picked on the slider (a range input: set, then its input event).
+        page.eval_on_selector(
+            "#slice-index", "(el) => { el.value = '20'; el.dispatchEvent(new Event('input')); }"
+        )
+        shown = wait_slice(p, "z=20", first["id"])
+        assert page.locator("#slice-at").text_content() == "20 / 31"
+        assert shown["natural"] == shown["size"]  # the reply's picture, as drawn
+        assert shown["grid"] == {"rows": 32, "cols": 32, "across": "x", "up": "y"}
+        assert shown["t_index"] is True
+        # Scaled to the panel's width, its aspect kept.
+        _, _, w, h = shown["shown"]
+        assert abs(w - (shown["panel"][1] - 2)) <= 2, (shown["shown"], shown["panel"])
+        assert abs(h / w - shown["size"][1] / shown["size"][0]) < 0.02
+
+        # The plane's outline on the view's panel: where z=20 cuts the box (four corners),
+        # the reply's `outline`; another index moves it.
+        cut = p.eval(CUT)
+        assert len(cut) == 4 and p.eval("() => window.viewer.slice.outline") == cut
+        page.eval_on_selector(
+            "#slice-index", "(el) => { el.value = '4'; el.dispatchEvent(new Event('input')); }"
+        )
+        low = wait_slice(p, "z=4", shown["id"])
+        p.page.wait_for_function(f"() => ({CUT})().length === 4")
+        assert p.eval(CUT) != cut
+        page.eval_on_selector(
+            "#slice-index", "(el) => { el.value = '20'; el.dispatchEvent(new Event('input')); }"
+        )
+        shown = wait_slice(p, "z=20", low["id"])
+        p.page.wait_for_function(f"() => ({CUT})().length === 4")
+
+        state = p.eval("() => window.viewer.S.state")
+        t0, t1, stride = (state["window"][k] for k in ("t0", "t1", "stride"))
+        series = open_series(stores[0])
+        cv = chronocl.integrate(series, f"{t0}:{t1}:{stride}", mode="max")
+        # The pointer at voxel centres (a voxel is ~3 CSS pixels of the panel's picture): column
+        # 9, row 12 from the top (y = 31 - 12).
+        got = hover(p, shown, 9.5 / 32, 12.5 / 32, shown["id"])
+        read = got["readout"]
+        vx, vy, vz = (read["voxel"][a] for a in "xyz")
+        assert (vx, vy, vz) == (9, 19, 20)
+        step = int(cv.t_index[vz, vy, vx])
+        assert read["step"] == step >= 0
+        assert read["value"] == pytest.approx(float(series.read_region(step, vz, vy, vx)))
+        assert got["text"] == read["text"] and f"step {step}" in got["text"]
+        assert got["text"].startswith(f"x={vx} y={vy} z={vz} (")
+        # The same voxel from the step map beside the colours.
+        beside = hover(p, shown, 9.5 / 32, 12.5 / 32, got["id"], panel=1)
+        assert len(shown["pictures"]) == 2 and beside["readout"] == read
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-slice-panel.png"))
+
+        # Larger over the views: the same picture, read out the same way.
+        page.locator("#slice-large").click()
+        big = p.eval(SHOWN, "slice-big-pic")
+        assert big["natural"] == shown["size"] and big["shown"][2] > 2 * shown["shown"][2]
+        assert abs(big["shown"][3] / big["shown"][2] - shown["size"][1] / shown["size"][0]) < 0.02
+        got = hover(p, big, 25.5 / 32, 3.5 / 32, beside["id"])
+        vx, vy = 25, 31 - 3
+        assert got["readout"]["voxel"] == {"x": vx, "y": vy, "z": 20}
+        assert got["readout"]["step"] == int(cv.t_index[20, vy, vx])
+        assert page.locator("#slice-big-readout").text_content() == got["text"]
+        page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-slice-large.png"))
+        page.locator("#slice-big-close").click()
+        assert page.locator("#slice-big").is_hidden()
+
+        # An alpha view keeps no step: the panel follows the mode (after its frame) and says so.
+        choose(p, "#views .view select.mode", "alpha")
+        again = wait_slice(p, "z=20", got["id"])
+        assert again["t_index"] is False
+        got = hover(p, again, 0.5, 0.5, again["id"])
+        assert got["readout"]["step"] is None
+        assert "no winning step" in got["text"] and "no t_index" in got["text"]
+        # The panel folded: no outline left on the view.
+        page.locator("#slice-panel summary").click()
+        p.page.wait_for_function(f"() => ({CUT})().length === 0")  # (toggle fires after)
+    finally:
+        p.close()  # asserts no page errors
