@@ -108,6 +108,25 @@ def test_the_readout_is_the_t_index_and_the_series_value_at_that_voxel(case):
         assert got.value == values.min()
 
 
+def test_the_step_map_takes_a_slice_spec_and_converts_only_its_plane(max_cv):
+    """`step_map` parses its slice as every function here does (it passed the text on, and
+    a winner mode raised AttributeError), and a picture converts only its plane to float."""
+    import tracemalloc
+
+    from chronocl.render.slices import slice_colours
+
+    got = step_map(max_cv, "z=1")
+    assert got is not None and got.shape[2] == 3
+    big = chronocl.Chronovolume(
+        rgba=np.zeros((96, 96, 96, 4), np.uint8), t_index=None, metadata=max_cv.metadata
+    )
+    tracemalloc.start()
+    slice_colours(big, "z=3")
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < big.rgba.nbytes  # a plane's worth, not the volume as float32 (4x its bytes)
+
+
 def test_a_mode_without_t_index_reads_no_step():
     data = np.random.default_rng(1).random((3, 4, 5, 6), dtype=np.float32)
     series = _series(data, (1.0, 2.0, 3.0))

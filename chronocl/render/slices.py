@@ -127,10 +127,19 @@ def composite(rgba: np.ndarray, background) -> np.ndarray:
     return np.round(np.clip(rgb, 0.0, 1.0) * 255).astype(np.uint8)
 
 
+def _plane_rgba(cv: Chronovolume, sl: Slice) -> np.ndarray:
+    """The slice's RGBA as float32 (a display chronovolume's RGBA8 / 255, as `float_rgba`),
+    the plane taken first: converting the whole volume took 2 GiB and 0.1 s a picture at 512^3."""
+    plane = _plane(cv.rgba, sl)
+    if plane.dtype == np.uint8:
+        return plane.astype(np.float32) / np.float32(255)
+    return np.asarray(plane, dtype=np.float32)
+
+
 def slice_colours(cv: Chronovolume, sl: object, background: object = "black") -> np.ndarray:
     """The slice's colours, one pixel per voxel (rows, cols, 3) uint8, over `background`."""
     sl = parse_slice(sl, cv.shape)
-    return composite(_plane(cv.float_rgba(), sl), background)
+    return composite(_plane_rgba(cv, sl), background)
 
 
 def slice_steps(cv: Chronovolume, sl: object) -> np.ndarray | None:
@@ -161,13 +170,14 @@ def step_map(cv: Chronovolume, sl: object, background: object = "black") -> np.n
     where no step won or where the winner is transparent (in max and min, empty space is won
     by the window's first step, a tie, and drew a block of its colour around the data); None
     for a mode without a t_index."""
+    sl = parse_slice(sl, cv.shape)
     won = slice_steps(cv, sl)
     if won is None:
         return None
     bg = tuple(round(c * 255) for c in parse_color(background))
     out = np.empty((*won.shape, 3), dtype=np.uint8)
     out[...] = bg
-    seen = _plane(cv.float_rgba()[..., 3], sl) > 0
+    seen = _plane(cv.rgba[..., 3], sl) > 0
     for step, colour in step_colours(cv).items():
         out[(won == step) & seen] = colour
     return out

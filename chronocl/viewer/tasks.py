@@ -92,9 +92,10 @@ class Tasks(EventTasks):
         of = self._hist_of
         self._beside("histogram", rid, "histogram", lambda: self._histogram(rid, lo, hi, *of))
 
-    def _hist_view_window(self, state: ViewState) -> tuple[int, int, int]:
-        """The window the histogram counts: its view's own, else the shared one."""
-        view = self._hist_of[2]
+    def _hist_view_window(self, state: ViewState, view: int | None = None) -> tuple[int, int, int]:
+        """The window a histogram counts: its view's own (default: the last request's view),
+        else the shared one."""
+        view = self._hist_of[2] if view is None else view
         return state.own_window(view if view < len(state.views) else None) or state.window
 
     def _histogram(
@@ -103,7 +104,7 @@ class Tasks(EventTasks):
         with self._cond:
             state = self.state
         ds = self.datasets[state.dataset]
-        t0, t1, stride = self._hist_view_window(state)
+        t0, t1, stride = self._hist_view_window(state, view)
         steps = Selection.window(t0, t1, stride, ds.series.n_steps).steps
         hist = ds.histogram(
             lo,

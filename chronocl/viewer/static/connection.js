@@ -169,7 +169,7 @@ export function update(fields, quality = 'full', merge = false, view = S.selecte
   pendingQuality = quality;
   Object.assign(S.state, fields);
   if (edited) edited(quality, merge);
-  requestAnimationFrame(flush);
+  requestAnimationFrame(flushUpdates);
 }
 
 // What a view may have of its own instead of the shared one (null in its entry: linked).
@@ -199,7 +199,9 @@ function routed(fields, view) {
   return out;
 }
 
-function flush() {
+// Send the pending update now (it goes once per animation frame): a request the render thread
+// answers from the state it drew (slice.js) must not overtake the update before it.
+export function flushUpdates() {
   if (!pending) return;
   const msg = Object.assign({ type: 'update', quality: pendingQuality }, pending);
   pending = null;

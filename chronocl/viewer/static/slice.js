@@ -11,7 +11,7 @@
 // the view had when it was asked for; hidden while the camera moves, asked again after).
 // A click does not pin a probe: the probe takes a ray through a view's panel, not a voxel.
 
-import { send, shown } from './connection.js';
+import { flushUpdates, send, shown } from './connection.js';
 import { $ } from './state.js';
 import { showSliceOutline } from './views.js';
 
@@ -28,6 +28,14 @@ let hoverNext = null;
 let asked = null; // what the last picture was asked for (sliceKey)
 let pictureId = 0; // the id of the newest picture asked for
 let hoverId = 0; // the id of the newest read-out asked for
+// One picture and one read-out in flight at a time (the render thread answers them between
+// frames, and holds at most 8 requests): the next is asked when the last one's answer comes.
+// (an answer lost with its socket frees them after BUSY_MS)
+const BUSY_MS = 10_000;
+let pictureBusy = 0; // when the picture in flight was asked for (0: none)
+let hoverBusy = 0;
+const busy = (since) => since > 0 && performance.now() - since < BUSY_MS;
+let shownKey = null; // what the picture shown was asked for
 
 const HINT = 'move the pointer over the slice: the voxel, its step, time and value';
 
@@ -63,9 +71,12 @@ function ask(delay = ASK_MS) {
   clearTimeout(askTimer);
   askTimer = setTimeout(() => {
     const key = sliceKey();
-    if (!open() || key === null) return;
+    if (!open() || key === null || busy(pictureBusy)) return; // (asked again when it answers)
     asked = key;
-    pictureId = send({ type: 'slice', view: S.selectedView, slice: spec() }) || pictureId;
+    flushUpdates(); // the server draws it first, then answers from what it drew
+    const id = send({ type: 'slice', view: S.selectedView, slice: spec() });
+    pictureBusy = id ? performance.now() : 0;
+    pictureId = id || pictureId;
   }, delay);
 }
 
@@ -87,11 +98,13 @@ function askReadout(u, v) {
   const wait = hoverAt + HOVER_MS - performance.now();
   clearTimeout(hoverTimer);
   const go = () => {
-    if (!hoverNext || !S.state) return;
+    if (!hoverNext || !S.state || busy(hoverBusy)) return; // (the answer sends the point kept)
     hoverAt = performance.now();
     const msg = { type: 'slice', view: S.selectedView, slice: spec(), picture: false, ...hoverNext };
     hoverNext = null;
-    hoverId = send(msg) || hoverId;
+    const id = send(msg);
+    hoverBusy = id ? performance.now() : 0;
+    hoverId = id || hoverId;
   };
   if (wait <= 0) go();
   else hoverTimer = setTimeout(go, wait);
@@ -124,9 +137,23 @@ function readoutText(msg) {
   return r.text;
 }
 
+// The picture or read-out in flight answered: the next one asked for goes now (a picture where
+// the view changed meanwhile, the read-out at the last point the pointer reached).
+function answered(picture) {
+  if (picture) {
+    pictureBusy = 0;
+    if (open() && sliceKey() !== asked) ask(0);
+  } else {
+    hoverBusy = 0;
+    if (hoverNext) askReadout(hoverNext.u, hoverNext.v);
+  }
+}
+
 // A `slice` reply: the picture (an older one than the newest asked for is dropped) and, with
 // a point, its read-out.
 export function onSlice(msg) {
+  if (msg.id === hoverId) answered(false);
+  if (msg.id === pictureId) answered(true);
   if (msg.id !== null && msg.id < pictureId) return;
   if (!msg.png) {
     // a read-out alone (the pointer over the picture shown): the picture stays
@@ -139,6 +166,15 @@ export function onSlice(msg) {
     return;
   }
   viewer.slice = msg;
+  if (asked !== shownKey) {
+    // another picture (the view or the slice changed): the read-out of the last one goes
+    shownKey = asked;
+    if (!msg.readout) {
+      viewer.sliceReadout = null;
+      $('slice-readout').textContent = HINT;
+      $('slice-big-readout').textContent = HINT;
+    }
+  }
   for (const id of ['slice-pic', 'slice-big-pic']) {
     const img = $(id);
     if (img.getAttribute('src') !== msg.png) img.src = msg.png;
@@ -162,6 +198,7 @@ export function onSlice(msg) {
 // An error answering a slice request: said under the picture.
 export function sliceFailed(msg) {
   if (msg.id === null || (msg.id !== pictureId && msg.id !== hoverId)) return;
+  answered(msg.id === pictureId);
   $('slice-note').textContent = msg.message;
   $('slice-note').classList.add('error');
 }
