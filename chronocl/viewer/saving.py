@@ -66,23 +66,6 @@ def zip_store(store: Path, archive: Path) -> None:
                 zf.write(path, path.relative_to(store).as_posix())
 
 
-def compose_image(
-    panels: list[np.ndarray],
-    cvs: list[Chronovolume],
-    background: tuple,
-    columns: int | None = None,
-    name: str | None = None,
-    time_labels: str = "labels",
-) -> tuple[np.ndarray, Layout]:
-    """The panels in a grid of `columns` per row (as the page lays them out), each captioned
-    with its chronovolume and over its own legend, under a title naming the data set `name`
-    and the windows shown (none without a name); the image and where its parts lie."""
-    title = None if name is None else title_text(name, cvs, time_labels)
-    return compose(
-        panels, [describe(cv) for cv in cvs], cvs, columns, background, time_labels, title=title
-    )
-
-
 def picture(
     panels: list[np.ndarray],
     cvs: list[Chronovolume],
@@ -91,12 +74,17 @@ def picture(
     name: str | None = None,
     time_labels: str = "labels",
 ) -> tuple[Image, Layout]:
-    """`compose_image` as an `Image` whose PNG also holds its title and captions as Title and
-    Description text (the viewer's Save PNG and `chronocl render --state`)."""
-    array, layout = compose_image(panels, cvs, background, columns, name, time_labels)
-    text = {"Description": "\n".join(describe(cv) for cv in cvs), "Software": "chronocl"}
-    if name is not None:
-        text["Title"] = title_text(name, cvs, time_labels)
+    """The panels in a grid of `columns` per row (as the page lays them out), each captioned
+    with its chronovolume and over its own legend, under a title naming the data set `name`
+    and the windows shown (none without a name): an `Image` whose PNG also holds the title and
+    captions as Title and Description text (the viewer's Save PNG and movie frames, `chronocl
+    render --state`), and where its parts lie."""
+    captions = [describe(cv) for cv in cvs]
+    title = None if name is None else title_text(name, cvs, time_labels)
+    array, layout = compose(panels, captions, cvs, columns, background, time_labels, title=title)
+    text = {"Description": "\n".join(captions), "Software": "chronocl"}
+    if title is not None:
+        text["Title"] = title
     return Image(array, text), layout
 
 

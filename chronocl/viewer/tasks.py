@@ -26,7 +26,7 @@ from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.movie import movie_states, render_movie
 from chronocl.viewer.probe import probe_reply
 from chronocl.viewer.protocol import MOVIE_FORMATS
-from chronocl.viewer.saving import compose_image, full_precision, save_chronovolume, save_image
+from chronocl.viewer.saving import full_precision, picture, save_chronovolume, save_image
 from chronocl.viewer.session_file import save_session
 from chronocl.viewer.slicing import slice_reply
 from chronocl.viewer.view_state import ViewState
@@ -236,7 +236,7 @@ class Tasks(EventTasks):
             cvs = [s.cv for s in self.views.slots[: len(shown.views)]]
             panels, *_ = on_gl(self._draw, cvs, shown, shown.size, bg)
             columns = _columns(msg, len(cvs))
-            return compose_image(panels, cvs, bg, columns, ds.name)[0]  # type: ignore[arg-type]
+            return picture(panels, cvs, bg, columns, ds.name)[0].array  # type: ignore[arg-type]
 
         def progress(done: int, total: int) -> None:
             self._reply(
