@@ -66,6 +66,11 @@ HEIGHT = 600  # the widget's height (issue 50: a cell output of about 900 x 600)
 COLD_EDITS = 2
 TARGETS = {"first_picture_ms": 1000, "ratio_tf_sharp_p50": 1.2}
 WIDGET = "document.querySelector('.chronocl-widget').viewer"
+# A widget's page holds its first frame.
+FIRST_FRAME = (
+    "() => { const h = document.querySelector('.chronocl-widget');"
+    " return !!h && !!h.viewer && h.viewer.frames >= 1; }"
+)
 PAGE = "window.viewer"
 # A sharp frame after frame `seq`, answering the newest request.
 SHARP = """([seq]) => {
@@ -171,12 +176,7 @@ def main() -> None:
             "() => !!document.querySelector('.chronocl-widget')", timeout=120_000, polling="raf"
         )
         view_ms = page.evaluate("(t) => performance.now() - t", started)
-        page.wait_for_function(
-            "() => { const h = document.querySelector('.chronocl-widget');"
-            " return !!h && !!h.viewer && h.viewer.frames >= 1; }",
-            timeout=120_000,
-            polling="raf",
-        )
+        page.wait_for_function(FIRST_FRAME, timeout=120_000, polling="raf")
         first_ms = page.evaluate("(t) => performance.now() - t", started)
         first = page.evaluate(f"() => {WIDGET}.last")
         last = sharp(page, WIDGET, -1)
@@ -193,12 +193,7 @@ def main() -> None:
         page.wait_for_function("() => !document.querySelector('.chronocl-widget')")
         # A second widget in the same kernel: the imports, GL context and kernels warm.
         started = run_cell(page, 3, wait=False)
-        page.wait_for_function(
-            "() => { const h = document.querySelector('.chronocl-widget');"
-            " return !!h && !!h.viewer && h.viewer.frames >= 1; }",
-            timeout=120_000,
-            polling="raf",
-        )
+        page.wait_for_function(FIRST_FRAME, timeout=120_000, polling="raf")
         again_ms = page.evaluate("(t) => performance.now() - t", started)
         sharp(page, WIDGET, -1)
         again_sharp_ms = page.evaluate("(t) => performance.now() - t", started)

@@ -23,6 +23,7 @@ from .jupyter_lab import (
     run_cell,
     write_notebook,
 )
+from .test_notebook_browser import CELLS as LAB_CELLS
 from .test_notebook_browser import LIT_SHARE, SHOWS_MODE, VIEWER, last, settle
 from .viewer_helpers import CHROMIUM, launch_browser
 
@@ -31,14 +32,7 @@ pytestmark = pytest.mark.skipif(
 )
 
 CELLS = [
-    "import json\n"
-    "import numpy as np\n"
-    "import chronocl\n"
-    "from chronocl.data import synthetic\n"
-    "data = np.stack(list(synthetic.steps('vortex', 12, (32, 32, 32))))\n"
-    "w = chronocl.show(data, name='vortex', height=520)\n"
-    "w",
-    "w.mode = 'max'",
+    *LAB_CELLS[:2],  # the JupyterLab test's widget and its mode set from code
     "thread = w._worker.thread\nw.close()\nthread.join(30)\n"
     "print('CLOSED=' + json.dumps({'mode': w.mode, 'closed': w.closed, "
     "'alive': thread.is_alive()}))",
