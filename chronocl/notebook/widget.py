@@ -228,11 +228,12 @@ class ChronoclWidget(anywidget.AnyWidget):
         if isinstance(data, bytes):
             header, images = unpack_frame(data)
             digest = hashlib.blake2b(b"".join(images), digest_size=8).hexdigest()
+            # sent before it is announced: whoever waited for it finds it sent to the page
+            self.send({"frame": 1}, buffers=[data])
             with self._cond:
                 self._frames += 1
                 self.last_frame = header | {"digest": digest, "received_at": time.time()}
                 self._cond.notify_all()
-            self.send({"frame": 1}, buffers=[data])
             return True
         if data.startswith(('{"type": "download"', '{"type": "error"')):
             reply = json.loads(data)
