@@ -90,8 +90,8 @@ def test_tf_edit_recolours_without_integrating(client, monkeypatch, mode, where)
     header, recoloured = _sharp(client, edit)
     t = header["timings"]
     assert header["level"] == 0 and not header["refining"]
+    assert header["views"][0]["why_integrated"] is None  # (where it integrated: why)
     assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0 and not t["incremental"]
-    assert header["views"][0]["why_integrated"] is None
     _assert_as_integrated(client, recoloured)
 
 

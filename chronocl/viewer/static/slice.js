@@ -25,6 +25,7 @@ let askTimer = 0;
 let hoverTimer = 0;
 let hoverAt = 0;
 let hoverNext = null;
+let hoverLast = null; // where the pointer rests on the grid: read out again for a new picture
 let asked = null; // what the last picture was asked for (sliceKey)
 let pictureId = 0; // the id of the newest picture asked for
 let hoverId = 0; // the id of the newest read-out asked for
@@ -95,6 +96,7 @@ export function sliceFrame() {
 // The read-out at (u, v) of the grid: asked at most every HOVER_MS, the last point kept.
 function askReadout(u, v) {
   hoverNext = { u, v };
+  hoverLast = hoverNext;
   const wait = hoverAt + HOVER_MS - performance.now();
   clearTimeout(hoverTimer);
   const go = () => {
@@ -154,7 +156,6 @@ function answered(picture) {
 export function onSlice(msg) {
   if (msg.id === hoverId) answered(false);
   if (msg.id === pictureId) answered(true);
-  if (msg.id !== null && msg.id < pictureId) return;
   if (!msg.png) {
     // a read-out alone (the pointer over the picture shown): the picture stays
     if (msg.readout && msg.id >= hoverId && viewer.slice && msg.slice === viewer.slice.slice) {
@@ -165,6 +166,7 @@ export function onSlice(msg) {
     }
     return;
   }
+  if (msg.id !== null && msg.id < pictureId) return; // a newer picture was asked for
   viewer.slice = msg;
   if (asked !== shownKey) {
     // another picture (the view or the slice changed): the read-out of the last one goes
@@ -173,6 +175,7 @@ export function onSlice(msg) {
       viewer.sliceReadout = null;
       $('slice-readout').textContent = HINT;
       $('slice-big-readout').textContent = HINT;
+      if (hoverLast) askReadout(hoverLast.u, hoverLast.v); // the pointer still rests there
     }
   }
   for (const id of ['slice-pic', 'slice-big-pic']) {
@@ -237,7 +240,7 @@ export function bindSlice(page) {
       if (at) askReadout(at.u, at.v);
     });
     img.addEventListener('pointerleave', () => {
-      hoverNext = null;
+      hoverNext = hoverLast = null;
       clearTimeout(hoverTimer);
     });
   }
