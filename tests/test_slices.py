@@ -341,6 +341,16 @@ def test_a_real_server_answers_a_slice_request_with_the_winner_under_the_point(t
         rid = client.send({"type": "slice", "view": 0, "slice": "q=4"})
         _, error = client.wait("error", rid)
         assert "\n" not in error["message"] and "q=4" in error["message"]
+        # a probe pinned at the same point of the slice: v(t) at the voxel the read-out named
+        rid = client.send({"type": "probe", "view": 0, "slice": "z=16", "u": 0.3, "v": 0.6})
+        _, probe = client.wait("probe", rid)
+        assert probe["voxel"] == got["voxel"] and probe["pinned"] == "slice"
+        curve = [float(series.read_region(t, z, y, x)) for t in range(series.n_steps)]
+        assert probe["values"] == pytest.approx(curve) and probe["window"] == list(range(2, 9))
+        for bad, needle in (({}, "a view's pixel"), ({"slice": "z=99", "u": 0, "v": 0}, "z=99")):
+            rid = client.send({"type": "probe", "view": 0, **bad})
+            _, error = client.wait("error", rid)
+            assert "\n" not in error["message"] and needle in error["message"], error
         client.close()
     finally:
         server.stop()

@@ -153,6 +153,20 @@ def test_the_slice_panel_shows_the_plane_and_reads_the_winning_step(
         # The same voxel from the step map beside the colours.
         beside = hover(p, shown, 9.5 / 32, 12.5 / 32, got["id"], panel=1)
         assert len(shown["pictures"]) == 2 and beside["readout"] == read
+        # A click there pins the probe: v(t) at that voxel over every step, marked on the view.
+        page.mouse.down()
+        page.mouse.up()
+        p.page.wait_for_function("() => window.viewer.probe && window.viewer.probe.pinned")
+        probe = p.eval("() => window.viewer.probe")
+        assert probe["voxel"] == {"x": vx, "y": vy, "z": vz} and probe["view"] == 0
+        curve = [float(series.read_region(t, vz, vy, vx)) for t in range(series.n_steps)]
+        assert probe["values"] == pytest.approx(curve)
+        text = page.locator("#probe-text").text_content()
+        assert text == f"voxel x={vx} y={vy} z={vz} (pinned on the slice) · view 1"
+        p.page.wait_for_function(  # the mark on the view, where the voxel projects
+            "() => { const m = document.querySelector('#views .view .probe-mark');"
+            " return m && getComputedStyle(m).display !== 'none'; }"
+        )
         page.screenshot(path=os.path.join(shots_dir(tmp_path), "viewer-slice-panel.png"))
 
         # Larger over the views: the same picture, read out the same way.

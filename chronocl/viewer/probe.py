@@ -13,8 +13,11 @@ import numpy as np
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera, to_panel
 from chronocl.render.raycaster import clip_plane
+from chronocl.render.slices import parse_slice
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.protocol import PROBE_THRESHOLD
+from chronocl.viewer.schema import ProtocolError
+from chronocl.viewer.slicing import point_voxel
 from chronocl.viewer.slots import geometry
 from chronocl.viewer.view_state import ViewState
 
@@ -138,6 +141,10 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     from empty space probes the feature; only a rectangle whose rays all miss is refused.
     """
     camera = state.panel_camera(view)  # its own camera where it has one
+    if "slice" in msg:
+        return _pinned_reply(msg, view, state, cv, ds, camera)
+    if "x" not in msg or "y" not in msg:
+        raise ProtocolError("probe needs a view's pixel (x, y), or a slice and its point (u, v)")
     box_drag = "x2" in msg and "y2" in msg
     rays = _rectangle_rays(msg, state.size) if box_drag else [(msg["x"], msg["y"])]
     hits = [probe_ray(cv, camera, state.size, x, y, state.clip) for x, y in rays]
@@ -171,3 +178,35 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     reply["mark"] = project(cv, camera, state.size, box_fractions(cv, centre))
     reply["where"] = box_fractions(cv, centre)
     return reply
+
+
+def _pinned_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Dataset, camera):
+    """The `probe` reply pinned on a slice: v(t) at the voxel under (`u`, `v`) of the slice's
+    grid (the one its read-out names), and where it lies on the view (`x`, `y`: None where
+    off the picture)."""
+    voxel = point_voxel(msg, parse_slice(msg["slice"], cv.shape), cv.shape)
+    where = box_fractions(cv, voxel)
+    mark = project(cv, camera, state.size, where)
+    curve = ds.curve(voxel)
+    window = list(state.selection(ds.series.n_steps, view).steps)
+    x, y = mark if mark is not None else (None, None)
+    return {
+        "type": "probe",
+        "id": msg.get("id"),
+        "view": view,
+        "x": x,
+        "y": y,
+        "reached": True,
+        "opacity": None,
+        "threshold": PROBE_THRESHOLD,
+        "window": window,
+        "voxel": dict(zip("xyz", voxel, strict=True)),
+        "box": None,
+        "values": [float(t) for t in curve.values],
+        "min": None,
+        "max": None,
+        "csv": curve.csv_text(window),
+        "mark": mark,
+        "where": where,
+        "pinned": "slice",
+    }

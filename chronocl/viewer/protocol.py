@@ -258,8 +258,11 @@ MESSAGES: dict[str, Obj] = {
             "y": Num(0.0, 1.0),
             "x2": Num(0.0, 1.0),
             "y2": Num(0.0, 1.0),
+            # or pinned on a slice ("z=40") at (u, v) of its voxel grid, as a read-out is
+            "slice": Text(40),
+            "u": Num(0.0, 1.0),
+            "v": Num(0.0, 1.0),
         },
-        frozenset({"x", "y"}),
     ),
     # one plane of a view's chronovolume ("z=40"), and the read-out at (u, v) of its voxel grid
     "slice": Obj(

@@ -43,6 +43,20 @@ def slice_clip(sl: Slice, cv: Chronovolume) -> tuple[float, float, float, float]
     return (*normal, (2 * sl.index + 1) / n - 1)  # type: ignore[return-value]
 
 
+def point_voxel(msg: dict, sl: Slice, shape) -> tuple[int, int, int]:
+    """The voxel (x, y, z) under the point (`u`, `v`) of `msg` on slice `sl`'s voxel grid (a
+    read-out's, or a probe pinned on the slice)."""
+    u, v = msg.get("u"), msg.get("v")
+    if not all(isinstance(f, int | float) and not isinstance(f, bool) for f in (u, v)) or not (
+        0 <= u <= 1 and 0 <= v <= 1  # type: ignore[operator]
+    ):
+        raise InvalidParameterError(f"slice point u={u!r}, v={v!r} must be two numbers in [0, 1]")
+    rows, cols = grid_shape(sl, shape)
+    col = min(cols - 1, int(u * cols))  # type: ignore[operator]
+    row = min(rows - 1, int(v * rows))  # type: ignore[operator]
+    return slice_voxel(sl, shape, col, row)
+
+
 def slice_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Dataset) -> dict:
     """The `slice` reply to `msg` for the shown `view` of `state` (its chronovolume `cv`, of
     data set `ds`): the slice picture at the view's size and background, where its grid lies,
@@ -69,18 +83,9 @@ def slice_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
             # the plane's outline on the view's panel under its camera now, as the clip plane's
             "outline": clip_outline(cv, state.panel_camera(view), state.size, slice_clip(sl, cv)),
         }
-    else:
-        rows, cols = grid_shape(sl, cv.shape)
     if "u" not in msg and "v" not in msg:
         return reply
-    u, v = msg.get("u"), msg.get("v")
-    if not all(isinstance(f, int | float) and not isinstance(f, bool) for f in (u, v)) or not (
-        0 <= u <= 1 and 0 <= v <= 1  # type: ignore[operator]
-    ):
-        raise InvalidParameterError(f"slice point u={u!r}, v={v!r} must be two numbers in [0, 1]")
-    col = min(cols - 1, int(u * cols))  # type: ignore[operator]
-    row = min(rows - 1, int(v * rows))  # type: ignore[operator]
-    x, y, z = slice_voxel(sl, cv.shape, col, row)
+    x, y, z = point_voxel(msg, sl, cv.shape)
     got = slice_value(cv, ds.series, x, y, z)
     reply["readout"] = {
         "voxel": {"x": x, "y": y, "z": z},

@@ -40,7 +40,8 @@ export function onProbe(msg) {
     return;
   }
   const v = msg.voxel;
-  txt.textContent = `voxel x=${v.x} y=${v.y} z=${v.z} (${how}) · view ${msg.view + 1}`;
+  const found = msg.pinned ? `pinned on the slice` : how;
+  txt.textContent = `voxel x=${v.x} y=${v.y} z=${v.z} (${found}) · view ${msg.view + 1}`;
 }
 
 // The probed curve as a CSV file, named for the data set and what was probed.

@@ -38,7 +38,7 @@ let hoverBusy = 0;
 const busy = (since) => since > 0 && performance.now() - since < BUSY_MS;
 let shownKey = null; // what the picture shown was asked for
 
-const HINT = 'move the pointer over the slice: the voxel, its step, time and value';
+const HINT = 'move the pointer over the slice: the voxel, its step, time and value; click: probe v(t) there';
 
 // Pictures are asked for while the panel is open or the slice is shown over the views.
 const open = () => $('slice-panel').open || !$('slice-big').hidden;
@@ -238,6 +238,13 @@ export function bindSlice(page) {
       const at = gridPoint(e, img);
       img.classList.toggle('on-grid', !!at);
       if (at) askReadout(at.u, at.v);
+    });
+    // A click pins the probe there: v(t) at that voxel in the probe panel, marked on the view.
+    img.addEventListener('click', (e) => {
+      const at = gridPoint(e, img);
+      if (at && viewer.slice) {
+        send({ type: 'probe', view: viewer.slice.view, slice: viewer.slice.slice, ...at });
+      }
     });
     img.addEventListener('pointerleave', () => {
       hoverNext = hoverLast = null;
