@@ -5,6 +5,11 @@ in-memory series' steps lie in its own array: an OpenCL engine on a CPU device r
 place through a `SlotBrick` (kernels' SLOTS build), in chunks of rows where a brick spans
 more than one buffer may hold. Each of these equals the numpy reference, on odd shapes, odd
 windows, strides, orders and slabs, and a session's slides both ways over slots equal it too.
+
+Tests of in-place reads ask for host pointers (`host_ptr=True`, valid on any OpenCL device), so
+they read in place on a GPU too, where the default copies bricks to the device; a session on
+that default keeps its window's steps on the device instead, and sends it only the steps
+entering (`chronocl.engine.device_steps`).
 """
 
 from __future__ import annotations
@@ -37,7 +42,8 @@ pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWa
 
 
 class Counting(OpenCLEngine):
-    """The OpenCL engine, counting the bricks it read where their steps lie."""
+    """The OpenCL engine, counting the bricks it read where their steps lie (only with host
+    pointers: a CPU device's default, or `host_ptr=True`)."""
 
     def __init__(self, **options) -> None:
         super().__init__(**options)
@@ -86,7 +92,7 @@ def test_steps_in_slots_integrate_in_place_as_the_reference(data):
     row = series.volume_shape[1] * series.volume_shape[2] * series.dtype.itemsize
     # Room for `limit` rows of the window with a gradient's halo rows (3 rows each at least).
     most = None if limit is None else limit * row * 3 * max(20, len(sel.steps))
-    engine = Counting(max_brick_bytes=most)
+    engine = Counting(host_ptr=True, max_brick_bytes=most)
     job = window_job(series, sel, spec)
     got = integrate_bricks(job, engine, ResidentBricks(arrays), slab=slab)
     ref = chronocl.integrate(series, sel, spec=spec, engine="numpy")
@@ -98,7 +104,7 @@ def test_steps_in_slots_integrate_in_place_as_the_reference(data):
 def test_an_in_memory_series_integrates_in_place_as_the_reference(data):
     series, sel, _ = data.draw(slotted_windows())
     spec = data.draw(specs(selection=sel))
-    engine = Counting()
+    engine = Counting(host_ptr=True)
     slab = data.draw(st.integers(1, series.volume_shape[0] + 1))
     got = chronocl.integrate(series, sel, spec=spec, engine=engine, slab=slab)
     assert_same(got, chronocl.integrate(series, sel, spec=spec, engine="numpy"))
@@ -113,7 +119,7 @@ def test_a_session_over_slots_slides_both_ways_as_the_reference(mode, tmp_path):
     path = tmp_path / "s.zarr"
     chronocl.TimeSeries.from_array(rng.random((16, 7, 9, 37), dtype=np.float32)).save(path)
     series = chronocl.open(path)
-    engine = Counting()
+    engine = Counting(host_ptr=True)
     with Session(series, mode=mode, engine=engine, memory="64MB") as session:
         session.set_window(3, 11)
         for k in (1, 1, 3, -1, -4, 2, -2):
@@ -200,7 +206,7 @@ def test_a_brick_wider_than_one_buffer_goes_in_chunks_of_rows(enhance):
     held = [slots.take() for _ in range(8)]
     held[0][...], held[7][...] = data[0], data[1]
     row = 4 * 32 * 4
-    engine = Counting(max_brick_bytes=40 * row)
+    engine = Counting(host_ptr=True, max_brick_bytes=40 * row)
     sel = Selection((0, 1), 2)
     brick = ResidentBricks({0: held[0], 1: held[7]}).read([0, 1])
     halo = 1 if enhance != "none" else 0
@@ -256,21 +262,31 @@ def test_a_long_scrub_keeps_every_window_in_one_block():
         assert s.manager.slots.own_arrays == 0
 
 
-def test_a_window_integrated_anew_takes_the_slots_of_the_steps_that_left():
+@pytest.mark.parametrize("host_ptr", [True, False], ids=["in-place", "copying"])
+def test_a_window_integrated_anew_takes_the_slots_of_the_steps_that_left(host_ptr):
     """A budget of one step more than the window, windows jumping by 3 and integrated anew
     (relative time positions cannot slide): the session lets go of the leaving steps before
-    the entering ones are read, so they take their slots and every window stays in place."""
+    the entering ones are read, so they take their slots and every window stays in place.
+    Read in place (host pointers), each window is integrated where its steps lie; copied (a
+    GPU's default), the steps stay in the device's slots and each window sends only the 3
+    entering."""
     rng = np.random.default_rng(5)
     data = rng.random((30, 4, 8, 32), dtype=np.float32)
     series = chronocl.TimeSeries.from_array(data)
     step = data[0].nbytes
-    engine = Counting()
+    engine = Counting(host_ptr=host_ptr)
     with Session(series, mode="max", engine=engine, memory=11 * step, prefetch=0) as s:
         s.set_window(0, 10)
         for t0 in range(3, 19, 3):
             before = engine.in_place
+            slots = s._device.slots
+            sent = None if slots is None else slots.uploads
             cv = s.set_window(t0, t0 + 10)
-            assert engine.in_place > before  # read where the steps lie
+            if host_ptr:
+                assert engine.in_place > before and slots is None  # read where the steps lie
+            else:
+                assert engine.in_place == 0 and s.stats["why_not_on_device"] is None
+                assert s._device.slots is slots and slots.uploads - sent == 3
             assert_same(cv, chronocl.integrate(series, s.window(), spec=s.spec))
         assert s.stats["why_not_incremental"] is not None
         assert s.manager.slots.own_arrays == 0

@@ -13,6 +13,8 @@ VARIABLES = {
     "CHRONOCL_DEVICE": "the OpenCL device (an index 0:1 or a name part), as --device",
     "PYOPENCL_CTX": "pyopencl's own device choice, read after CHRONOCL_DEVICE",
     "CHRONOCL_DEVICE_MEMORY": "device memory resident steps may take (e.g. 6GB)",
+    "CHRONOCL_DEVICE_KIND": "gpu: a CPU device taken as a GPU (bricks copied to it and kept "
+    "there, GPU launch shapes): the suite's GPU paths on PoCL",
     "CHRONOCL_MAX_ALLOC": "a lower largest device buffer (e.g. 1MB: the suite's large paths)",
     "CHRONOCL_THREADS": "host threads (default: one per core)",
     "CHRONOCL_VERBOSE": "kernel build logs shown (set by the CLI's --verbose)",

@@ -41,7 +41,7 @@ from chronocl.data.bricks import PartlyResidentBricks, ResidentBricks, SeriesBri
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
-from chronocl.engine.device_steps import DeviceWindow
+from chronocl.engine.device_steps import DeviceBricks, DeviceWindow
 from chronocl.integration.inmemory import WinnersOut, check_level, integrate_bricks, window_job
 from chronocl.integration.interactive.costs import Move
 from chronocl.integration.interactive.levels import AutoSession
@@ -374,8 +374,9 @@ class Session:
             # a viewer's full-resolution window in max, min or change: each voxel's winner too,
             # as it integrates (its TF edits recolour level 0 alone)
             won = WinnersOut() if self.display and self.level == 0 else None
+            slab = self._slab_rows(bricks)
             cv = integrate_bricks(
-                job, self.engine, bricks, slab=self._slab_rows(), display=self.display, winners=won
+                job, self.engine, bricks, slab=slab, display=self.display, winners=won
             )
             if self.costs is not None:
                 ms = 1e3 * (time.perf_counter() - t_direct)
@@ -449,11 +450,15 @@ class Session:
         self._record(t, "streamed", f"{why}: {some}streamed by z-slabs")
         return self._cv
 
-    def _slab_rows(self) -> int | None:
-        """Rows per slab: work that may be given up (a viewer's refine) integrates a window
-        read in place in REFINE_SLABS slabs, so newer input stops it within one slab's time
-        (slabs in place cost no copy); otherwise as many rows as the engine takes at once."""
-        if not (watched() and self._bricks.in_place):
+    def _slab_rows(self, bricks: object) -> int | None:
+        """Rows per slab of a window integrated from `bricks`: work that may be given up (a
+        viewer's refine) integrates a window read in place on the host, or from its steps kept
+        on the device (`DeviceBricks`), in REFINE_SLABS slabs, so newer input stops it within
+        one slab's time and each finished slab is handed on (`chronocl.core.slab_sink`) while
+        the next integrates; such slabs cost no copy. Otherwise (and for a window stacked, which
+        a kept brick serves whole again) as many rows as the engine takes at once."""
+        free = isinstance(bricks, DeviceBricks) or (bricks is self._bricks and bricks.in_place)
+        if not (watched() and free):
             return None
         return -(-self.series.volume_shape[0] // REFINE_SLABS)
 
