@@ -20,6 +20,8 @@ import pytest
 from chronocl.cli.app import main
 from chronocl.core.errors import OutputExistsError
 from chronocl.data.series import write_series
+from chronocl.engine.device import get_context
+from chronocl.engine.roofline import LIMITS
 from chronocl.report.scaling_report import FIGURES, SCHEMA, check_report_target
 
 pytest.importorskip("distributed")
@@ -77,11 +79,22 @@ def test_report_json_schema(report):
     roof = data["roofline"]
     assert roof["store_read_gb_s"] > 0 and roof["window"] == 3
     r = roof["devices"][device]
-    # One bound: the memory read on every core (no GPU copy here), numpy's or the OpenCL read
-    # kernel's on this CPU device, whichever was faster (both read the host's memory).
     assert r["memory_read_gb_s"] > 0 and r["opencl_read_gb_s"] > 0
-    assert r["gb_s"] == max(r["memory_read_gb_s"], r["opencl_read_gb_s"])
-    assert r["limit"] == "memory read on every core" and r["copy_to_device_gb_s"] is None
+    memory = r["memory_read_gb_s"]
+    if get_context(device).is_cpu:
+        # One bound: the memory read on every core (no copy to a device), numpy's or the OpenCL
+        # read kernel's on this CPU device, whichever was faster (both read the host's memory).
+        assert r["copy_to_device_gb_s"] is None
+        assert r["gb_s"] == max(memory, r["opencl_read_gb_s"])
+        assert r["limit"] == LIMITS["read-memory"]
+    else:
+        # A device apart from host memory (a GPU): the bound is the slower of the memory read
+        # and the copy to the device; the OpenCL read (its buffers copied across by the driver
+        # first) is reported only.
+        copy = r["copy_to_device_gb_s"]
+        assert copy is not None and copy > 0
+        assert r["gb_s"] == min(memory, copy)
+        assert r["limit"] == LIMITS["copy-to-device" if copy < memory else "read-memory"]
     assert r["memory_read_threads"] == data["machine"]["cpu_count"]
     s = data["summary"]
     assert s["strong_speedup"][device]["1"] == 1.0 and s["strong_speedup"][device]["2"] > 0
