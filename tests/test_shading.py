@@ -67,17 +67,36 @@ def renderer() -> str:
     return f"{info['GL_RENDERER']} | {info['GL_VERSION']}"
 
 
+# Another renderer than the goldens' (llvmpipe, which filters textures in float) weights its
+# trilinear samples in fixed point (NVIDIA: 8 fractional bits): where a ray crosses a sharp
+# edge a sample moves by a fraction of its neighbours' difference, and compositing carries it
+# on, so sparse speckles differ (H200: max 16/255 and 2 % of values beyond 3, but a mean of
+# 0.25 and a 99th percentile of 5). What a wrong picture does is far beyond these bounds (on
+# llvmpipe: shading on, mean 5.7 and 99th percentile 86; the camera turned 0.5 degrees, 3.2
+# and 166); sampling changes as small as the filtering's own are caught by the exact check on
+# llvmpipe (CI) and by the comparison within the run on every renderer.
+FILTERING_MEAN = 0.5
+FILTERING_P99 = 8
+
+
 @pytest.mark.parametrize(
     "shading", [{}, {"shading": False}, {"shading": Shading(enabled=False, ambient=1.0)}]
 )
 def test_shading_off_is_bit_identical_to_the_unshaded_renderer(vortex, shading, tmp_path):
-    """Exact on the renderer the goldens were recorded on (before shading existed; the
-    renderer named in unshaded_vortex_renderer.txt), within test_render's golden tolerance on
-    another; `CHRONOCL_UPDATE_GOLDEN=1` records them again after a deliberate change."""
+    """Shading off is the unshaded renderer bit for bit: the same pixels as a render given no
+    shading at all, in this run on this renderer; and those are the goldens recorded before
+    shading existed: exactly on the renderer they were recorded on (named in
+    unshaded_vortex_renderer.txt), within texture filtering's differences on another.
+    `CHRONOCL_UPDATE_GOLDEN=1` records them again after a deliberate change."""
     from PIL import Image as PILImage
 
     recorded_on = GOLDEN / "unshaded_vortex_renderer.txt"
     views = unshaded_views(vortex, **shading)
+    plain = unshaded_views(vortex)  # no shading argument
+    for name, got in views.items():
+        if not np.array_equal(got, plain[name]):
+            why = f"shading off {name} is not the unshaded render on {renderer()}"
+            fail_with_diff(got, plain[name], name, tmp_path, why)
     if os.environ.get("CHRONOCL_UPDATE_GOLDEN") and not shading:
         for name, got in views.items():
             PILImage.fromarray(got).save(GOLDEN / f"{name}.png")
@@ -86,9 +105,15 @@ def test_shading_off_is_bit_identical_to_the_unshaded_renderer(vortex, shading, 
     for name, got in views.items():
         expected = np.asarray(PILImage.open(GOLDEN / f"{name}.png").convert("RGB"))
         diff = np.abs(got.astype(int) - expected.astype(int))
-        if diff.max() > (0 if exact else 8) or (diff > 3).mean() > 0.01:
-            why = "bit-identical" if exact else "within 8/255"
-            fail_with_diff(got, expected, name, tmp_path, f"unshaded {name} is not {why}")
+        if exact and diff.max() > 0:
+            fail_with_diff(got, expected, name, tmp_path, f"unshaded {name} is not bit-identical")
+        mean, p99 = diff.mean(), np.percentile(diff, 99)
+        if not exact and (mean > FILTERING_MEAN or p99 > FILTERING_P99):
+            why = (
+                f"unshaded {name} differs beyond texture filtering on {renderer()} (mean "
+                f"{mean:.2f} > {FILTERING_MEAN} or 99th percentile {p99:g} > {FILTERING_P99})"
+            )
+            fail_with_diff(got, expected, name, tmp_path, why)
 
 
 def ball(n: int = 32, spacing_z: float = 1.0) -> chronocl.Chronovolume:
