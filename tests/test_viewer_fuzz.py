@@ -365,13 +365,21 @@ def test_foreign_origin_is_refused(server):
     ok.close()
 
 
+def ws_as(server, host: str):
+    """A WebSocket to the server with the token, sent with `host` as its one Host header and a
+    matching Origin, as a browser sends it after DNS rebinding: the URL names `host`, the socket
+    goes to 127.0.0.1. (A Host in additional_headers would be a second one, beside the URL's.)"""
+    url = f"ws://{host}/ws?token={server.token}"
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=30)
+    return connect(url, sock=sock, origin=f"http://{host}")
+
+
 def test_foreign_host_is_refused_even_with_the_token_and_a_matching_origin(server):
     """DNS rebinding: evil.example resolves to 127.0.0.1; the page's Host and Origin agree."""
-    url = f"ws://127.0.0.1:{server.port}/ws?token={server.token}"
     p = server.port
     for host in (f"evil.example:{p}", "evil.example", f"127.0.0.1:{p + 1}", f"10.0.0.1:{p}"):
         with pytest.raises(InvalidStatus) as exc:
-            connect(url, additional_headers={"Host": host}, origin=f"http://{host}")
+            ws_as(server, host)
         assert exc.value.response.status_code == 403
         assert b"Host" in exc.value.response.body
         status, body = get(server.url, {"Host": host})
@@ -379,7 +387,22 @@ def test_foreign_host_is_refused_even_with_the_token_and_a_matching_origin(serve
     # The names of the loopback address are this server.
     for host in (f"localhost:{p}", f"[::1]:{p}", f"127.0.0.1:{p}"):
         assert get(server.url, {"Host": host})[0] == 200
-        Client(server, additional_headers={"Host": host}, origin=f"http://{host}").close()
+        with ws_as(server, host) as ws:
+            assert json.loads(ws.recv(timeout=60))["type"] == "info"
+    # Two Host headers (the URL's, then another), either one ours: no browser sends them. h11
+    # refuses them itself (RFC 9112: 400) before any of our code runs; httptools passes both
+    # on, and the guard refuses them (it once read the last one alone).
+    foreign, ours = f"evil.example:{p}", f"127.0.0.1:{p}"
+    for first, second in ((ours, foreign), (foreign, ours)):
+        url = f"ws://{first}/ws?token={server.token}"
+        sock = socket.create_connection(("127.0.0.1", p), timeout=30)
+        with pytest.raises(InvalidStatus) as exc:
+            connect(url, sock=sock, additional_headers={"Host": second}, origin=f"http://{second}")
+        response = exc.value.response
+        if response.status_code == 400:  # uvicorn's own refusal (h11), before the guard
+            assert bytes(response.body) == b"Invalid HTTP request received."
+        else:  # the guard's
+            assert response.status_code == 403 and b"Host" in response.body
     # No Host at all.
     conn = http.client.HTTPConnection("127.0.0.1", p, timeout=30)
     conn.putrequest("GET", f"/?token={server.token}", skip_host=True)

@@ -105,7 +105,8 @@ class TokenGuard:
             await self.app(scope, receive, send)
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
-        if not self.host_ok(scope, headers):
+        hosts = sum(k.lower() == b"host" for k, _ in scope["headers"])
+        if hosts > 1 or not self.host_ok(scope, headers):  # two: which one names us? (RFC 9112)
             await self._refuse(
                 scope, send, "the Host header does not name this server (DNS rebinding?)"
             )
