@@ -67,6 +67,9 @@ def test_parallel_views_turntable_and_saved_chronovolumes(tmp_path, vortex):
 def test_mp4_turntable_with_odd_sizes(tmp_path, vortex):
     import imageio.v3 as iio
 
+    # a declared dependency (test_suite_rules fails where it is missing); without it the
+    # turntable is refused in one line (test_a_movie_without_imageio_ffmpeg_is_one_line)
+    pytest.importorskip("imageio_ffmpeg")
     result = cli(
         "render",
         vortex,
@@ -82,6 +85,39 @@ def test_mp4_turntable_with_odd_sizes(tmp_path, vortex):
     assert result.returncode == 0, result.stderr
     frames = iio.imread(tmp_path / "t.mp4", index=None)
     assert frames.shape[0] == 3 and frames.shape[1] % 2 == 0 and frames.shape[2] % 2 == 0
+
+
+@pytest.mark.parametrize("install", ["missing", "broken"])
+def test_a_movie_without_imageio_ffmpeg_is_one_line(tmp_path, vortex, monkeypatch, install):
+    """No imageio-ffmpeg (or one that finds no ffmpeg): one line naming the install, exit 2,
+    before any work (no picture written), not imageio's fallback on another plugin."""
+    import contextlib
+    import io
+    import sys
+    import warnings
+
+    from chronocl.cli.app import main
+
+    if install == "missing":
+        monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # import raises ImportError
+    else:
+        ffmpeg = pytest.importorskip("imageio_ffmpeg")
+
+        def no_exe():
+            raise RuntimeError("No ffmpeg exe could be found. Install ffmpeg on your system.")
+
+        monkeypatch.setattr(ffmpeg, "get_ffmpeg_exe", no_exe)
+    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)  # main() sets it
+    args = ["render", vortex, "-o", tmp_path / "t.png", "--turntable", tmp_path / "t.mp4"]
+    monkeypatch.setattr(sys, "argv", ["chronocl", *map(str, args)])
+    stderr = io.StringIO()
+    with contextlib.redirect_stderr(stderr), pytest.raises(SystemExit) as exit_:
+        main()
+    assert exit_.value.code == 2
+    lines = [line for line in stderr.getvalue().splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("chronocl: error:"), lines
+    assert "imageio-ffmpeg" in lines[0] and "pip install imageio-ffmpeg" in lines[0], lines[0]
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_silhouette_follows_the_camera(tmp_path, vortex):
@@ -153,3 +189,22 @@ def test_demo_writes_the_gallery(tmp_path):
     for shown in report["modes"].values():
         assert 0 <= shown["fraction_shown"] <= 1
         assert len(shown["shown"]) + len(shown["hidden"]) == 8  # window 0:24:3
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".webm", ".mkv", ".gif"])
+def test_every_video_suffix_holds_every_frame_at_its_size(tmp_path, suffix):
+    """Each format written holds the frames given, at their size padded even (a WebM asked
+    for H.264 was once an empty file, and WebM/MKV frames were resized to 16-pixel blocks)."""
+    import imageio.v3 as iio
+
+    from chronocl.render.video import write_video
+
+    if suffix != ".gif":
+        pytest.importorskip("imageio_ffmpeg")
+    frames = [np.full((31, 33, 3), 40 * i, np.uint8) for i in range(5)]
+    path = write_video(frames, tmp_path / f"m{suffix}", fps=10)
+    plugin = "pillow" if suffix == ".gif" else "FFMPEG"
+    read = list(iio.imiter(path, plugin=plugin))
+    assert len(read) == 5
+    assert read[0].shape[:2] == ((31, 33) if suffix == ".gif" else (32, 34))
+    assert [int(f[..., :3].mean()) for f in read] == pytest.approx([40 * i for i in range(5)], abs=3)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
-from chronocl.render.video import write_video
+from chronocl.render.video import check_video_writer, write_video
 from chronocl.viewer.protocol import MAX_MOVIE_FRAMES, MOVIE_FORMATS, MOVIES
 from chronocl.viewer.view_state import ViewState
 
@@ -69,6 +69,7 @@ def render_movie(
         raise InvalidParameterError(
             f"unknown movie format {fmt!r}; choose one of {', '.join(MOVIE_FORMATS)}"
         )
+    check_video_writer(f".{fmt}")  # a missing imageio-ffmpeg: one line, before any frame
     images = []
     for i, state in enumerate(states):
         image = frame(state)
