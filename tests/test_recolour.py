@@ -615,15 +615,16 @@ def test_the_bricks_rgba8_rounds_as_the_display_conversion() -> None:
     np.testing.assert_array_equal(_whole(w, spec), exact)
 
 
-def test_the_two_rgba8_roundings_give_the_same_bytes() -> None:
-    """recolour.h's `rgba8` (a clamp and 2^23, the brick kernel's) equals common.h's TO_RGBA8
-    (convert_uchar4_sat_rte, the integrate kernels') on the OpenCL device for every float32
-    from -1 to 2 at a stride, every tie k + 0.5 and its neighbours, and the specials (NaN,
-    infinities, -0, huge): one rule in two spellings, kept for speed (see recolour.h)."""
+def test_the_rgba8_rule_gives_the_bytes_of_the_saturating_rte_conversion() -> None:
+    """rgba8.h, the one rule by which every kernel writes RGBA8 (a clamp and 2^23: the
+    integrate kernels' store, four lanes and sixteen, and the brick recolouring's), equals
+    convert_uchar4_sat_rte (round to nearest even, saturated: the host's conversion) on the
+    OpenCL device for every float32 from -1 to 2 at a stride, every tie k + 0.5 and its
+    neighbours, and the specials (NaN, infinities, -0, huge)."""
     import pyopencl as cl
 
     from chronocl.engine.device import get_context
-    from chronocl.engine.program import build, source
+    from chronocl.engine.program import RGBA8_H, build, source
 
     two = int(np.array(2.0, np.float32).view(np.int32))
     floats = np.arange(0, two, 61, dtype=np.int32).view(np.float32)  # 0 to 2
@@ -632,24 +633,30 @@ def test_the_two_rgba8_roundings_give_the_same_bytes() -> None:
     near = [np.nextafter(ties, np.float32(d)) for d in (-1, 1)]
     special = np.array([np.nan, -np.nan, np.inf, -np.inf, -0.0, 3e38, -3e38, 1e-45], np.float32)
     values = np.concatenate([floats, ties, *near, special]).astype(np.float32)
-    values = np.resize(values, (-(-values.size // 4), 4))
+    values = np.resize(values, (-(-values.size // 16), 16))
     kernel = """
-__kernel void both(__global const float4 *v, __global uchar4 *sat, __global uchar4 *ours)
+__kernel void check(__global const float16 *v, __global uchar16 *sat, __global uchar4 *four,
+                  __global uchar16 *sixteen)
 {
     size_t i = get_global_id(0);
-    sat[i] = convert_uchar4_sat_rte(v[i] * 255.0f);
-    ours[i] = rgba8(v[i]);
+    sat[i] = convert_uchar16_sat_rte(v[i] * 255.0f);
+    for (int j = 0; j < 4; ++j)
+        four[4 * i + j] = rgba8(vload4(j, (__global const float *)(v + i)));
+    sixteen[i] = bytes16(v[i]);
 }
 """
     dc = get_context()
-    program = build(dc, "rgba8_check", {}, text=source("recolour.h", common=False) + kernel)
-    sat, ours = (np.empty(values.shape, np.uint8) for _ in range(2))
+    text = source("recolour.h", common=False) + source(RGBA8_H, common=False) + kernel
+    program = build(dc, "rgba8_check", {"RGBA8": True, "VEC": 16}, text=text)
+    got = [np.empty(values.shape, np.uint8) for _ in range(3)]
     mf = cl.mem_flags
     v_buf = cl.Buffer(dc.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=values)
-    bufs = [cl.Buffer(dc.context, mf.WRITE_ONLY, sat.nbytes) for _ in range(2)]
-    cl.Kernel(program, "both")(dc.queue, (len(values),), None, v_buf, *bufs)
-    for out, buf in zip((sat, ours), bufs, strict=True):
+    bufs = [cl.Buffer(dc.context, mf.WRITE_ONLY, values.size) for _ in range(3)]
+    cl.Kernel(program, "check")(dc.queue, (len(values),), None, v_buf, *bufs)
+    for out, buf in zip(got, bufs, strict=True):
         cl.enqueue_copy(dc.queue, out, buf)
     dc.queue.finish()
-    np.testing.assert_array_equal(ours, sat)
-    assert len(values) > 10**6
+    sat, four, sixteen = got
+    np.testing.assert_array_equal(four, sat)
+    np.testing.assert_array_equal(sixteen, sat)
+    assert values.size > 4 * 10**6

@@ -23,6 +23,8 @@ from pathlib import Path
 from chronocl.core import env
 from chronocl.core.errors import KernelBuildError
 
+RGBA8_H = "rgba8.h"  # after every header: the one rule by which kernels write RGBA8
+
 _lock = threading.Lock()
 _programs: dict[tuple, object] = {}
 _kernels: dict[tuple, object] = {}
@@ -44,11 +46,14 @@ def kernel_dir() -> Path:
 
 def source(name: str, common: bool | str = True) -> str:
     """kernels/opencl/NAME, after common.h unless `common` is false (a file name: after that
-    header instead, e.g. the recolouring's recolour.h)."""
+    header instead, e.g. the recolouring's recolour.h); rgba8.h follows the header, the one
+    rule by which every kernel writes RGBA8."""
     folder = kernel_dir()
     text = (folder / name).read_text()
     header = "common.h" if common is True else common
-    return (folder / header).read_text() + "\n" + text if header else text
+    if not header:
+        return text
+    return "\n".join((folder / f).read_text() for f in (header, RGBA8_H)) + "\n" + text
 
 
 def build_options(defines: dict[str, object]) -> tuple[str, ...]:

@@ -231,22 +231,21 @@ typedef int intv;
  * a blend where its select() builtin is several times slower. */
 #define SELECT(a, b, c) ((c) ? (b) : (a))
 
-/* RGBA8: integrate kernels write the display format itself (chronocl/render/upload.py's "f1":
- * round(v * 255) to nearest even, clamped to 0..255, the host conversion's rule), a quarter of
- * float32's bytes and nothing left to convert on the host. Only a final result is written so:
- * partials and the combine / finish kernels stay float32. */
+/* RGBA8: integrate kernels write the display format itself (rgba8.h's rule, the recolouring's
+ * too), a quarter of float32's bytes and nothing left to convert on the host. Only a final
+ * result is written so: partials and the combine / finish kernels stay float32. */
 #ifdef RGBA8
 typedef uchar4 out_t;
 #undef STORE_RGBA
-#define TO_RGBA8(v) convert_uchar4_sat_rte((v) * 255.0f)
+#define TO_RGBA8(v) rgba8(v)
 #if VEC == 16
 #define ST8(o, j, n) out[(o) + n] = (uchar4)(r8_.s##j, g8_.s##j, b8_.s##j, a8_.s##j)
 #define STORE_RGBA(o, R_, G_, B_, A_)                                                    \
     do {                                                                                  \
-        const uchar16 r8_ = convert_uchar16_sat_rte((R_) * 255.0f);                      \
-        const uchar16 g8_ = convert_uchar16_sat_rte((G_) * 255.0f);                      \
-        const uchar16 b8_ = convert_uchar16_sat_rte((B_) * 255.0f);                      \
-        const uchar16 a8_ = convert_uchar16_sat_rte((A_) * 255.0f);                      \
+        const uchar16 r8_ = bytes16(R_);                                             \
+        const uchar16 g8_ = bytes16(G_);                                             \
+        const uchar16 b8_ = bytes16(B_);                                             \
+        const uchar16 a8_ = bytes16(A_);                                             \
         ST8(o, 0, 0); ST8(o, 1, 1); ST8(o, 2, 2); ST8(o, 3, 3);                           \
         ST8(o, 4, 4); ST8(o, 5, 5); ST8(o, 6, 6); ST8(o, 7, 7);                           \
         ST8(o, 8, 8); ST8(o, 9, 9); ST8(o, a, 10); ST8(o, b, 11);                         \
