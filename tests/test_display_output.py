@@ -119,8 +119,9 @@ def test_a_display_chronovolume_saves_as_float32(tmp_path):
 def test_small_volumes_stay_float32_as_the_viewer_shows_them(monkeypatch):
     """Below the viewer's RGBA8 size its textures are float32: display frames stay float32 so a
     panel's format does not flip between integrated and slid frames."""
-    assert DISPLAY_VOXELS == upload.COMPACT_VOXELS
     monkeypatch.setattr(inmemory, "DISPLAY_VOXELS", DISPLAY_VOXELS)  # the module's fixture: 0
+    assert upload.display_format(DISPLAY_VOXELS) == "f4"  # one size rule: the textures'
+    assert upload.display_format(DISPLAY_VOXELS + 1) == "f1"
     rng = np.random.default_rng(2)
     series = chronocl.TimeSeries.from_array(rng.random((4, 8, 8, 8), dtype=np.float32))
     job = window_job(series, Selection((0, 1, 2), 4), chronocl.make_spec("max"))

@@ -207,4 +207,6 @@ def test_every_video_suffix_holds_every_frame_at_its_size(tmp_path, suffix):
     read = list(iio.imiter(path, plugin=plugin))
     assert len(read) == 5
     assert read[0].shape[:2] == ((31, 33) if suffix == ".gif" else (32, 34))
-    assert [int(f[..., :3].mean()) for f in read] == pytest.approx([40 * i for i in range(5)], abs=3)
+    assert [int(f[..., :3].mean()) for f in read] == pytest.approx(
+        [40 * i for i in range(5)], abs=3
+    )

@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 import chronocl
 from chronocl.core.errors import InvalidParameterError, RendererUnavailableError
 from chronocl.data import synthetic
+from chronocl.integration import inmemory
 from chronocl.render import Camera
-from chronocl.render import upload as texture_upload
 from chronocl.render.raycaster import Raycaster, occupied_box
 from chronocl.render.upload import FORMATS, convert, occupancy
 from chronocl.viewer.slots import ViewSlot, geometry, upload
@@ -154,12 +154,12 @@ def test_rgba8_image_difference_is_invisible(rc, demo):
 
 def upload_as(rc, slot: ViewSlot, cv, fmt: str):
     """The viewer's upload with the format forced (the size rule would pick f4 here)."""
-    saved = texture_upload.COMPACT_VOXELS
-    texture_upload.COMPACT_VOXELS = 0 if fmt == "f1" else 2**40
+    saved = inmemory.DISPLAY_VOXELS
+    inmemory.DISPLAY_VOXELS = 0 if fmt == "f1" else 2**40
     try:
         vol = upload(rc, slot, cv)
     finally:
-        texture_upload.COMPACT_VOXELS = saved
+        inmemory.DISPLAY_VOXELS = saved
     assert vol.texture.dtype == fmt
     return vol
 
@@ -249,7 +249,7 @@ def test_a_refines_upload_is_given_up_between_slabs_and_written_again(rc, monkey
         asked.append(1)
         return len(asked) > 2  # newer input after two slabs
 
-    monkeypatch.setattr(texture_upload, "COMPACT_VOXELS", 0)  # RGBA8, as upload_as(..., "f1")
+    monkeypatch.setattr(inmemory, "DISPLAY_VOXELS", 0)  # RGBA8, as upload_as(..., "f1")
     with pytest.raises(SupersededError):
         upload(rc, slot, second, given_up)
     assert slot.uploaded is None and slot.volume is not None and len(asked) == 3

@@ -269,8 +269,8 @@ class WinnersOut:
     k: np.ndarray | None = None
 
 
-# Above this many voxels the viewer's textures are RGBA8, below float32 (chronocl.render.upload's
-# COMPACT_VOXELS, which tests/test_display_output.py checks this equals): display frames follow.
+# Above this many voxels (32^3) display frames are RGBA8, below float32, and the viewer's
+# textures follow (chronocl.render.upload.display_format; measured there, docs/display.md).
 DISPLAY_VOXELS = 2**15
 OutFor = Callable[[Slab], Out]
 Integrate = Callable[[Slab, np.ndarray, Out | None], tuple[Partial, bool]]

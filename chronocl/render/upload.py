@@ -19,17 +19,18 @@ import numpy as np
 
 from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
+from chronocl.integration import inmemory
 
 FORMATS: dict[str, type] = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
 BLOCK_VALUES = 2**16  # floats per block (256 KB): a block and its scratch stay in L2
 SERIAL_VOXELS = 2**15
 LITTLE_ENDIAN = sys.byteorder == "little"  # below this, one task on the calling thread
-COMPACT_VOXELS = 2**15  # above this (32^3), the viewer sends RGBA8: docs/display.md
 _scratch = threading.local()
 
 
 def display_format(voxels: int) -> str:
-    """The viewer's texture format for a volume of `voxels`: RGBA8 above `COMPACT_VOXELS`,
+    """The viewer's texture format for a volume of `voxels`: RGBA8 above `DISPLAY_VOXELS`
+    (`chronocl.integration.inmemory`'s: the display integration writes the same format),
     float32 (exact, nothing to convert) below, where every format costs about a millisecond.
 
     Measured with bench/upload.py (docs/display.md; 2 cores, llvmpipe, 512^2): llvmpipe
@@ -38,7 +39,7 @@ def display_format(voxels: int) -> str:
     float32's occupancy-only pass and its write a quarter; half floats lose on both
     (numpy's float16 cast is 8x slower than the RGBA8 rounding). The image stays within
     3/255 on 99.9 % of pixels (PSNR >= 56 dB)."""
-    return "f4" if voxels <= COMPACT_VOXELS else "f1"
+    return "f4" if voxels <= inmemory.DISPLAY_VOXELS else "f1"
 
 
 @dataclass
