@@ -24,7 +24,7 @@ from chronocl.core.errors import ChronoclError, RendererUnavailableError
 from chronocl.data import synthetic
 from chronocl.notebook import bundle
 from chronocl.notebook.widget import FrameFailedError
-from chronocl.viewer.session_file import check_session
+from chronocl.viewer.snapshot import check_snapshot
 
 STEPS, SHAPE = 12, (24, 24, 24)
 
@@ -196,8 +196,8 @@ def test_screenshot_chronovolume_and_snapshot(widget):
     assert image.data[:8] == b"\x89PNG\r\n\x1a\n" and image.format == "png"
     cv = widget.chronovolume()
     assert cv.spec.mode == "max" and cv.steps == tuple(range(8)) and cv.rgba.dtype == np.float32
-    session = check_session(widget.snapshot())
-    assert session["dataset"]["name"] == "vortex" and session["views"][0]["mode"] == "max"
+    snapshot = check_snapshot(widget.snapshot())
+    assert snapshot["dataset"]["name"] == "vortex" and snapshot["views"][0]["mode"] == "max"
 
 
 def test_a_failed_frame_raises_at_once_naming_the_error(tmp_path):

@@ -199,7 +199,7 @@ def test_viewer_state_session_and_render_state_keep_up(stores, tmp_path, monkeyp
 
     from chronocl.data.series import open_series
     from chronocl.viewer.protocol import ProtocolError, choices, parse_message
-    from chronocl.viewer.session_file import check_session, session_of, session_state
+    from chronocl.viewer.snapshot import check_snapshot, snapshot_of, snapshot_state
     from chronocl.viewer.view_state import default_state, describe_state, merge
 
     store, _ = stores
@@ -211,12 +211,12 @@ def test_viewer_state_session_and_render_state_keep_up(stores, tmp_path, monkeyp
     assert state.camera.up == "z" and state.camera.azimuth == base.camera.azimuth
     with pytest.raises(ProtocolError, match=r"update\.camera\.up"):
         parse_message(json.dumps({"type": "update", "camera": {"up": "w"}}))
-    session = session_of(state, "b", series, str(store))
-    assert session["camera"]["up"] == "z"
-    assert session_state(check_session(json.loads(json.dumps(session))), series).camera.up == "z"
+    snapshot = snapshot_of(state, "b", series, str(store))
+    assert snapshot["camera"]["up"] == "z"
+    assert snapshot_state(check_snapshot(json.loads(json.dumps(snapshot))), series).camera.up == "z"
 
     path = tmp_path / "s.json"
-    path.write_text(json.dumps(session))
+    path.write_text(json.dumps(snapshot))
     pictures = {}
     for name, flags in {"z": (), "y": ("--up", "y"), "z-axes": ("--axes",)}.items():
         out = tmp_path / f"{name}.png"

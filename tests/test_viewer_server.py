@@ -542,7 +542,7 @@ def test_clip_plane_polygon_and_outline():
 def test_a_view_may_have_its_own_window(client):
     """Two periods side by side: a view with its own window integrates that window (its label,
     its probe's window), the other follows the shared one; a session keeps both."""
-    from chronocl.viewer.session_file import apply_session, session_of
+    from chronocl.viewer.snapshot import apply_snapshot, snapshot_of
     from chronocl.viewer.view_state import ViewState
 
     client.open(0, size=(64, 64))
@@ -564,10 +564,12 @@ def test_a_view_may_have_its_own_window(client):
     assert "view 2's own window" in client.wait("error", rid)[1]["message"]
     # A session file holds each view's window; applied, it gives the same windows back.
     state = ViewState(views=(("alpha", "forward"),) * 2, window=(5, 9, 1))
-    state = apply_session(state, {"views": [{"mode": "alpha"}, {"mode": "max", "window": own}]}, 12)
-    saved = session_of(state, "vortex", _Series())  # only the series' shape is written
+    state = apply_snapshot(
+        state, {"views": [{"mode": "alpha"}, {"mode": "max", "window": own}]}, 12
+    )
+    saved = snapshot_of(state, "vortex", _Series())  # only the series' shape is written
     assert saved["views"][1]["window"] == own and saved["views"][0]["window"] is None
-    again = apply_session(ViewState(), {k: saved[k] for k in ("views", "window")}, 12)
+    again = apply_snapshot(ViewState(), {k: saved[k] for k in ("views", "window")}, 12)
     assert again.view_windows == (None, (0, 4, 1)) and again.selection(12, 1).steps == (0, 1, 2, 3)
 
 

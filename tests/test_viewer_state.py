@@ -1,6 +1,6 @@
-"""Saved viewer sessions: the session file's schema (round trip, bad files refused in one
-line), the server saving and loading one over the socket, and `chronocl render --state`
-drawing the viewer's frame."""
+"""Snapshots, the saved viewer state (chronocl/viewer/snapshot.py; a "session file" to users):
+the schema (round trip, bad files refused in one line), the server saving and loading one over
+the socket, and `chronocl render --state` drawing the viewer's frame."""
 
 from __future__ import annotations
 
@@ -13,12 +13,12 @@ import pytest
 from chronocl.cli.render_state import render_state
 from chronocl.core.errors import ChronoclError
 from chronocl.data.series import open_series
-from chronocl.viewer.session_file import (
-    SessionFileError,
-    check_session,
-    read_session,
-    session_of,
-    session_state,
+from chronocl.viewer.snapshot import (
+    SnapshotFileError,
+    check_snapshot,
+    read_snapshot,
+    snapshot_of,
+    snapshot_state,
 )
 from chronocl.viewer.view_state import default_state, describe_state, merge
 
@@ -62,19 +62,19 @@ def edited(stores):
 def test_session_round_trip(stores, edited):
     series, state = edited
     focus = [-0.3, -0.4, -0.25, 0.3, 0.2, 0.5]
-    session = session_of(state, "vortex", series, str(stores[0]), focus)
-    assert session["chronocl_session"] == 1 and session["shading"]["enabled"] is True
-    text = json.dumps(session)
-    again = check_session(json.loads(text))
-    back = session_state(again, series)
+    snapshot = snapshot_of(state, "vortex", series, str(stores[0]), focus)
+    assert snapshot["chronocl_session"] == 1 and snapshot["shading"]["enabled"] is True
+    text = json.dumps(snapshot)
+    again = check_snapshot(json.loads(text))
+    back = snapshot_state(again, series)
     assert describe_state(back) == describe_state(state)
     assert [back.spec(i) for i in range(2)] == [state.spec(i) for i in range(2)]
     assert back.camera.focus == tuple(focus) and back.shading == state.shading
     # Every field the viewer describes is kept, and a session with only the required fields
     # takes the viewer's defaults for the rest.
-    required = {k: session[k] for k in ("chronocl_session", "dataset", "window", "views")}
-    required |= {k: session[k] for k in ("camera", "data_tf", "time_tf")}
-    partial = session_state(check_session(required), series)
+    required = {k: snapshot[k] for k in ("chronocl_session", "dataset", "window", "views")}
+    required |= {k: snapshot[k] for k in ("camera", "data_tf", "time_tf")}
+    partial = snapshot_state(check_snapshot(required), series)
     assert partial.camera.azimuth == state.camera.azimuth and partial.camera.focus is None
     assert partial.size == default_state(0, series).size
     assert partial.shading == default_state(0, series).shading
@@ -96,24 +96,24 @@ def test_session_round_trip(stores, edited):
 )
 def test_bad_sessions_are_refused_in_one_line(edited, change, needle):
     series, state = edited
-    session = session_of(state, "vortex", series)
-    with pytest.raises(SessionFileError, match=needle) as info:
-        check_session(change(session))
+    snapshot = snapshot_of(state, "vortex", series)
+    with pytest.raises(SnapshotFileError, match=needle) as info:
+        check_snapshot(change(snapshot))
     assert isinstance(info.value, ChronoclError) and isinstance(info.value, ValueError)
     assert "\n" not in str(info.value)
 
 
-def test_bad_session_files(tmp_path, edited):
+def test_bad_snapshot_files(tmp_path, edited):
     series, state = edited
     (tmp_path / "a.json").write_text("{not json")
-    with pytest.raises(SessionFileError, match=r"a\.json is not valid JSON"):
-        read_session(tmp_path / "a.json")
+    with pytest.raises(SnapshotFileError, match=r"a\.json is not valid JSON"):
+        read_snapshot(tmp_path / "a.json")
     with pytest.raises(ChronoclError, match="not found"):
-        read_session(tmp_path / "none.json")
+        read_snapshot(tmp_path / "none.json")
     # A window beyond the series it is applied to: nothing applied, one line.
-    session = session_of(state, "vortex", series) | {"window": {"t0": 5, "t1": 40}}
-    with pytest.raises(SessionFileError, match="does not fit its data set"):
-        session_state(check_session(session), series)
+    snapshot = snapshot_of(state, "vortex", series) | {"window": {"t0": 5, "t1": 40}}
+    with pytest.raises(SnapshotFileError, match="does not fit its data set"):
+        snapshot_state(check_snapshot(snapshot), series)
 
 
 def _frame_pixels(jpeg: bytes) -> np.ndarray:
@@ -145,15 +145,15 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
         assert dl["filename"] == "vortex-session.json"
         status, body, _ = get(server.base + dl["url"], {"X-Chronocl-Token": server.token})
         assert status == 200
-        session = json.loads(body)
-        assert session["dataset"]["path"] == str(stores[0].resolve())
-        assert session["window"] == EDITS["window"] and session["size"] == EDITS["size"]
-        assert len(session["focus"]) == 6  # the box the views framed
+        snapshot = json.loads(body)
+        assert snapshot["dataset"]["path"] == str(stores[0].resolve())
+        assert snapshot["window"] == EDITS["window"] and snapshot["size"] == EDITS["size"]
+        assert len(snapshot["focus"]) == 6  # the box the views framed
         client.close()
 
         fresh = Client(server)
         fresh.open("jet")  # another data set shown: the load opens the session's
-        rid = fresh.send({"type": "load", "session": session})
+        rid = fresh.send({"type": "load", "session": snapshot})
         _, ds = fresh.wait("dataset", rid)
         assert ds["name"] == "vortex" and ds["state"]["camera"]["azimuth"] == 75.0
         assert ds["opening_camera"]["azimuth"] == 30.0
@@ -162,7 +162,7 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
         for a, b in zip(images, loaded, strict=True):
             assert np.abs(_frame_pixels(a) - _frame_pixels(b)).mean() < 1.0
         # A session that does not fit is answered with one error and changes nothing.
-        bad = session | {"window": {"t0": 0, "t1": 99}}
+        bad = snapshot | {"window": {"t0": 0, "t1": 99}}
         rid = fresh.send({"type": "load", "session": bad})
         _, error = fresh.wait("error", rid)
         assert "does not fit" in error["message"]
@@ -202,8 +202,8 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
     args = ["render", "--state", str(path), "-o", str(tmp_path / "big.png"), "--size", "96x64"]
     assert CliRunner().invoke(app, [*args, "--mode", "max"]).exit_code == 0
     assert Image.open(tmp_path / "big.png").size[0] == 96
-    (tmp_path / "old.json").write_text(json.dumps(session | {"chronocl_session": 0}))
-    with pytest.raises(SessionFileError, match=r"old\.json: session\.chronocl_session is 0"):
+    (tmp_path / "old.json").write_text(json.dumps(snapshot | {"chronocl_session": 0}))
+    with pytest.raises(SnapshotFileError, match=r"old\.json: session\.chronocl_session is 0"):
         render_state(tmp_path / "old.json", {})
     with pytest.raises(ChronoclError, match="--turntable does not combine with --state"):
         render_state(path, {"turntable": tmp_path / "t.gif"})

@@ -18,7 +18,7 @@ from chronocl.data.series import open_series
 from chronocl.viewer.movie import movie_states
 from chronocl.viewer.protocol import MAX_DEPTH, parse_message
 from chronocl.viewer.schema import ProtocolError
-from chronocl.viewer.session_file import check_session, session_of, session_state
+from chronocl.viewer.snapshot import check_snapshot, snapshot_of, snapshot_state
 from chronocl.viewer.view_state import default_state, describe_state, merge
 
 from .viewer_helpers import Client, full_size_frames, make_stores, start_server  # noqa: F401
@@ -130,32 +130,32 @@ def test_an_own_tf_that_does_not_fit_changes_nothing(series):
     assert MAX_DEPTH >= 6
 
 
-def test_session_file_keeps_the_links(stores, series):
+def test_snapshot_keeps_the_links(stores, series):
     state = merge(default_state(0, series), UNLINKED, series.n_steps)
-    session = check_session(json.loads(json.dumps(session_of(state, "vortex", series))))
-    assert session["views"][0]["camera"] is None
-    assert session["views"][1]["camera"]["azimuth"] == 160.0
-    back = session_state(session, series)
+    snapshot = check_snapshot(json.loads(json.dumps(snapshot_of(state, "vortex", series))))
+    assert snapshot["views"][0]["camera"] is None
+    assert snapshot["views"][1]["camera"]["azimuth"] == 160.0
+    back = snapshot_state(snapshot, series)
     assert describe_state(back) == describe_state(state)
     assert back.view_cameras[1] == state.view_cameras[1]
     assert [back.spec(i) for i in range(2)] == [state.spec(i) for i in range(2)]
     # A session saved before views had links (no such fields) loads with every view linked.
-    old = dict(session, views=[{"mode": "alpha", "order": "forward", "window": None}] * 2)
-    linked = session_state(check_session(old), series)
+    old = dict(snapshot, views=[{"mode": "alpha", "order": "forward", "window": None}] * 2)
+    linked = snapshot_state(check_snapshot(old), series)
     assert linked.view_cameras == (None, None) and linked.spec(0) == linked.spec(1)
 
 
 def test_render_state_options_apply_to_every_views_camera(series):
-    from chronocl.cli.render_state import _session_fields
+    from chronocl.cli.render_state import _snapshot_fields
 
     state = merge(default_state(0, series), UNLINKED, series.n_steps)
-    session = session_of(state, "vortex", series)
-    fields = _session_fields(session, {"azimuth": 10.0, "zoom": 2.0})
+    snapshot = snapshot_of(state, "vortex", series)
+    fields = _snapshot_fields(snapshot, {"azimuth": 10.0, "zoom": 2.0})
     assert fields["camera"]["azimuth"] == 10.0 and fields["views"][0]["camera"] is None
     assert fields["views"][1]["camera"]["azimuth"] == 10.0
     assert fields["views"][1]["camera"]["projection"] == "orthographic"  # the rest its own
     assert fields["views"][1]["time_tf"]["alpha"] == "hat"  # its TFs kept
-    assert session["views"][1]["camera"]["azimuth"] == 160.0  # the session as it was
+    assert snapshot["views"][1]["camera"]["azimuth"] == 160.0  # the session as it was
 
 
 def test_render_state_colormap_recolours_each_views_own_curve(stores, series, tmp_path):
@@ -165,11 +165,11 @@ def test_render_state_colormap_recolours_each_views_own_curve(stores, series, tm
     from PIL import Image
 
     from chronocl.cli.render_state import _following, render_state
-    from chronocl.viewer.session_file import render_session, write_session
+    from chronocl.viewer.snapshot import render_snapshot, write_snapshot
 
     state = merge(default_state(0, series), UNLINKED, series.n_steps)
     path = tmp_path / "links.json"
-    path.write_bytes(write_session(session_of(state, "vortex", series, stores[0])))
+    path.write_bytes(write_snapshot(snapshot_of(state, "vortex", series, stores[0])))
     out = tmp_path / "cli.png"
     render_state(path, {"colormap": "viridis", "out_path": out})
     own = state.view_data_tfs[1].with_colormap("viridis")
@@ -179,7 +179,7 @@ def test_render_state_colormap_recolours_each_views_own_curve(stores, series, tm
     for i, data_tf in enumerate(recoloured):
         time_tf = _following(state.time_tf_object(i), data_tf)  # as the command line's
         changes.append({"data_tf": data_tf, **({} if time_tf is None else {"time_tf": time_tf})})
-    want = render_session(state, series, name="vortex", changes=changes)
+    want = render_snapshot(state, series, name="vortex", changes=changes)
     got = np.asarray(Image.open(out).convert("RGB"))
     assert np.array_equal(got, np.asarray(want.to_pil().convert("RGB")))
 
@@ -228,25 +228,25 @@ def test_unlinked_views_saved_and_restored_bit_for_bit(stores, tmp_path, full_si
         assert len(header["clip_outlines"]) == 2
         png = _download(server, client, {"type": "save", "what": "image"})
         body = _download(server, client, {"type": "save", "what": "session"})
-        session = json.loads(body)
-        assert session["views"][0]["camera"] is None
-        assert session["views"][1]["camera"]["azimuth"] == 160.0
-        assert session["views"][1]["time_tf"]["alpha"] == "hat"
+        snapshot = json.loads(body)
+        assert snapshot["views"][0]["camera"] is None
+        assert snapshot["views"][1]["camera"]["azimuth"] == 160.0
+        assert snapshot["views"][1]["time_tf"]["alpha"] == "hat"
         client.close()
 
         fresh = Client(server)
         fresh.open("jet")  # another data set shown: the load opens the session's
-        rid = fresh.send({"type": "load", "session": session})
+        rid = fresh.send({"type": "load", "session": snapshot})
         _, ds = fresh.wait("dataset", rid)
         assert (
             ds["state"]["views"]
-            == describe_state(session_state(session, open_series(stores[0])))["views"]
+            == describe_state(snapshot_state(snapshot, open_series(stores[0])))["views"]
         )
         _, restored = _settled(fresh, rid)
         assert restored == images  # the same JPEG bytes, view by view
         assert _download(server, fresh, {"type": "save", "what": "image"}) == png
         again = json.loads(_download(server, fresh, {"type": "save", "what": "session"}))
-        assert again == session
+        assert again == snapshot
         fresh.close()
     finally:
         server.stop()

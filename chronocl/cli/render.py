@@ -217,7 +217,7 @@ def render(
 
       chronocl render --state vortex-session.json -o figure.png --size 1024x1024
     """
-    if state is not None and slice_at is not None:  # a session's views, not a slice (yet)
+    if state is not None and slice_at is not None:  # a snapshot's views, not a slice (yet)
         raise InvalidParameterError("--slice does not combine with --state; leave it out")
     if state is not None:
         from chronocl.cli.render_state import given, render_state

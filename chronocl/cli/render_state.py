@@ -1,7 +1,8 @@
-"""`chronocl render --state SESSION.json`: draw what the viewer showed when the session was
-saved (same data set, window, views, camera, transfer functions, clip, box outline, size), as
-the viewer's Save PNG draws it: each view with its own window, camera and TFs where it had them.
-Options given on the command line override the session's fields (a camera option every view's
+"""`chronocl render --state SESSION.json`: draw what the viewer showed when its state was
+saved as a snapshot (Save session; chronocl/viewer/snapshot.py): the same data set, window,
+views, camera, transfer functions, clip, box outline and size, as the viewer's Save PNG draws
+it: each view with its own window, camera and TFs where it had them.
+Options given on the command line override the snapshot's fields (a camera option every view's
 camera, a TF option every view's TF; --colormap recolours each view's own curve, its opacity
 kept); the axis triad is drawn only when --axes is given (the Save PNG has none)."""
 
@@ -14,7 +15,7 @@ from pathlib import Path
 from chronocl.cli.options import err, parse_floats, parse_order, parse_shading, parse_sizes
 from chronocl.core.errors import InvalidParameterError
 
-# Options that do not apply to a session's render (its integration and draw are the viewer's).
+# Options that do not apply to a snapshot's render (its integration and draw are the viewer's).
 NOT_WITH_STATE = (
     "turntable",
     "save_chronovolume",
@@ -39,32 +40,33 @@ def given(ctx, params: dict) -> dict:
 
 
 def render_state(state_path: Path, options: dict) -> None:
-    """Render the session in `state_path`; `options` are those given on the command line."""
+    """Render the snapshot (session file) in `state_path`; `options` are those given on the
+    command line."""
     from chronocl.core.paths import check_target
     from chronocl.core.tf import TFSetting, TimeTF
     from chronocl.core.time_labels import check_prefer
     from chronocl.data.series import open_series
     from chronocl.render.raycaster import check_clip, check_size
     from chronocl.render.views import parse_color
-    from chronocl.viewer.session_file import (
+    from chronocl.viewer.snapshot import (
         dataset_path,
-        read_session,
-        render_session,
-        session_state,
+        read_snapshot,
+        render_snapshot,
+        snapshot_state,
     )
 
     for name in NOT_WITH_STATE:
         if name in options:
             flag = "--" + name.replace("_", "-")
             raise InvalidParameterError(f"{flag} does not combine with --state; leave it out")
-    session = read_session(state_path)
-    store = options.get("store") or dataset_path(session, state_path.name)
+    snapshot = read_snapshot(state_path)
+    store = options.get("store") or dataset_path(snapshot, state_path.name)
     out = options.get("out_path") or state_path.with_suffix(".png")
     overwrite = bool(options.get("overwrite", False))
     check_target(out, overwrite, [store, state_path])
-    fields = _session_fields(session, options)
+    fields = _snapshot_fields(snapshot, options)
     series = open_series(store)
-    state = session_state(session | fields, series)
+    state = snapshot_state(snapshot | fields, series)
     replace: dict = {}
     if "size" in options:
         replace["size"] = check_size(parse_sizes(options["size"], 2, "WxH", "512x512"))
@@ -98,14 +100,14 @@ def render_state(state_path: Path, options: dict) -> None:
         spec = {"data_tf": data_tf, "time_tf": time_tf, "normalize": options.get("normalize")}
         changes.append({k: v for k, v in spec.items() if v is not None})
     t0 = time.perf_counter()
-    image = render_session(
+    image = render_snapshot(
         state,
         series,
         engine=options.get("engine", "opencl"),
         device=options.get("device"),
         time_labels=time_labels,
         axes=bool(options.get("axes", False)),
-        name=session["dataset"]["name"],
+        name=snapshot["dataset"]["name"],
         changes=changes,
     )
     image.save(out, overwrite=overwrite)
@@ -114,9 +116,9 @@ def render_state(state_path: Path, options: dict) -> None:
 
 
 def _following(time_tf, data_tf):
-    """The session's time TF with its colours following a new data TF as where none is chosen
+    """The snapshot's time TF with its colours following a new data TF as where none is chosen
     (`TimeTF.for_data`: lightness under a colour map, rgb under grey), if they are one of
-    those two; None where the session chose others (kept)."""
+    those two; None where the snapshot chose others (kept)."""
     from chronocl.core.tf import TimeTF
 
     if time_tf.color.preset not in ("rgb", "lightness"):
@@ -124,10 +126,10 @@ def _following(time_tf, data_tf):
     return dataclasses.replace(time_tf, color=TimeTF.for_data(data_tf.points).color)
 
 
-def _session_fields(session: dict, options: dict) -> dict:
-    """The session fields that command-line options replace (in the session's terms)."""
+def _snapshot_fields(snapshot: dict, options: dict) -> dict:
+    """The snapshot fields that command-line options replace (in the snapshot's terms)."""
     fields: dict = {}
-    views = [dict(v) for v in session["views"]]
+    views = [dict(v) for v in snapshot["views"]]
     if "mode" in options:
         names = [m.strip() for item in options["mode"] for m in item.split(",") if m.strip()]
         order = views[0].get("order", "forward")
@@ -150,7 +152,7 @@ def _session_fields(session: dict, options: dict) -> dict:
                 f"with --state, --window is t0:t1[:stride], e.g. 0:10:2; got {options['window']!r}"
             )
         fields["window"] = {"t0": t0, "t1": t1, "stride": rest[0] if rest else 1}
-    camera = dict(session["camera"])
+    camera = dict(snapshot["camera"])
     if "up" in options:
         from chronocl.render.camera import Camera
 

@@ -40,7 +40,7 @@ from chronocl.viewer.probe import project
 from chronocl.viewer.protocol import parse_message, unpack_frame
 from chronocl.viewer.residency import POLL_S, residency
 from chronocl.viewer.saving import Downloads
-from chronocl.viewer.session_file import session_of
+from chronocl.viewer.snapshot import snapshot_of
 from chronocl.viewer.sockets import answer, info_message
 from chronocl.viewer.view_state import default_state, describe_state
 from chronocl.viewer.worker import ClientWorker
@@ -438,12 +438,12 @@ class ChronoclWidget(anywidget.AnyWidget):
         return Chronovolume.load(folder)
 
     def snapshot(self) -> dict:
-        """The state as the session file `chronocl view --session` and
-        `chronocl render --state` read (the page's Save session)."""
+        """The state as a snapshot: the session file the page's Save session writes, which
+        its Load session and `chronocl render --state` read."""
         self._check_open()
         ds = self._datasets[0]
         state = self._worker.state
-        return session_of(state, ds.name, ds.series, ds.path, self._worker.shown_focus())
+        return snapshot_of(state, ds.name, ds.series, ds.path, self._worker.shown_focus())
 
     def probe(
         self, point: object = None, *, box: object = None, world: bool = False, view: int = 0

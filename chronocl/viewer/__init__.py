@@ -10,7 +10,7 @@ back. The modules, outermost first:
 - `sockets` (one client's socket: the `info` message, the protocol loop), `protocol` (message
   schemas and the choices the page is sent; primitives in `schema`);
 - `worker` (the per-client render thread), `view_state` (the desired state and its merging),
-  `session_file` (a saved session: the state as a versioned JSON file, `render --state`),
+  `snapshot` (the saved state: a versioned JSON file, Save session, `render --state`),
   `slots` (a panel's session and texture), `frames` (encoding, legend), `probe`, `saving`
   (downloads), `datasets`, `gl_thread`, `errors`.
 """

@@ -23,8 +23,8 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
                                                          legends: [x, y, w, h] in pixels)
                {"what": "movie", "movie": orbit | play,   a video download, a `progress`
                 "format": mp4 | gif, "frames", "fps"}     message after every frame
-               {"what": "session"}                       the state as a session file
-    load       {"session": a session file's object}     apply a saved session as one step
+               {"what": "session"}                       the state as a snapshot file
+    load       {"session": a snapshot's object}         apply a snapshot as one step
     cancel     {}                                       stop refining the frame shown
     events     {"action": "find", "view"[, "by":        the features, events and tracks of the
                 "opacity" | "value", "opacity" | "value", view's window (`events_panel`), found
@@ -193,12 +193,14 @@ FOCUS = List(Num(-1.0, 1.0), 6, 6)
 ID = Int(0, 2**53)
 SIZE = List(Int(MIN_PANEL, MAX_PANEL), 2, 2)
 
-# A saved session (the viewer's Save session, the URL fragment, `chronocl render --state`):
-# the state fields of an update message plus the data set and the format's version. Enhancement
-# and lighting are shared by the views; a view's own window, camera and TFs are in `views`.
+# A snapshot: the saved viewer state (the viewer's Save session, the URL fragment, `chronocl
+# render --state`; viewer/snapshot.py): the state fields of an update message plus the data set
+# and the format's version. Enhancement and lighting are shared by the views; a view's own
+# window, camera and TFs are in `views`.
+# The file format keeps its name ("session"), so files saved before still load.
 SESSION_VERSION = 1
 SESSION_KEY = "chronocl_session"
-# What a frame depends on, as the update message and a session file both give it.
+# What a frame depends on, as the update message and a snapshot both give it.
 VIEW_FIELDS = {
     "window": WINDOW,
     "views": List(VIEW, 1, MAX_VIEWS),
@@ -212,7 +214,7 @@ VIEW_FIELDS = {
     "background": Enum(BACKGROUNDS),
     "outline": Bool(),
 }
-SESSION = Obj(
+SNAPSHOT = Obj(
     {
         SESSION_KEY: Version(SESSION_VERSION, "session files of"),
         "dataset": Obj(
@@ -246,7 +248,7 @@ MESSAGES: dict[str, Obj] = {
             "quality": Enum(("preview", "full")),
             "shading": SHADING,
             "refocus": Bool(),  # frame the visible region again (the camera reset)
-            "focus": FOCUS,  # frame this world box (a saved session's, an undone state's)
+            "focus": FOCUS,  # frame this world box (a snapshot's, an undone state's)
         }
     ),
     "probe": Obj(
@@ -305,7 +307,7 @@ MESSAGES: dict[str, Obj] = {
         },
         frozenset({"what"}),
     ),
-    "load": Obj({"type": Enum(("load",)), "id": ID, "session": SESSION}, frozenset({"session"})),
+    "load": Obj({"type": Enum(("load",)), "id": ID, "session": SNAPSHOT}, frozenset({"session"})),
     "cancel": Obj({"type": Enum(("cancel",)), "id": ID}),
     "events": Obj(
         {

@@ -27,8 +27,8 @@ from chronocl.viewer.movie import movie_states, render_movie
 from chronocl.viewer.probe import probe_reply
 from chronocl.viewer.protocol import MOVIE_FORMATS
 from chronocl.viewer.saving import full_precision, picture, save_chronovolume, save_image
-from chronocl.viewer.session_file import save_session
 from chronocl.viewer.slicing import slice_reply
+from chronocl.viewer.snapshot import save_snapshot
 from chronocl.viewer.view_state import ViewState
 
 
@@ -145,7 +145,7 @@ class Tasks(EventTasks):
         rid = msg.get("id")
         ds = self.datasets[self.state.dataset]
         if kind == "save" and msg["what"] == "session":
-            key, name = save_session(self.downloads, self.state, ds, self.shown_focus())
+            key, name = save_snapshot(self.downloads, self.state, ds, self.shown_focus())
             self._reply(
                 {"type": "download", "id": rid, "url": f"/download/{key}", "filename": name}
             )

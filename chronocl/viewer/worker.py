@@ -54,9 +54,9 @@ from chronocl.viewer.probe import project
 from chronocl.viewer.progress import RefineProgress
 from chronocl.viewer.protocol import pack_frame
 from chronocl.viewer.saving import Downloads
-from chronocl.viewer.session_file import checked_focus, loaded_state
 from chronocl.viewer.side_work import SideWork
 from chronocl.viewer.slots import upload
+from chronocl.viewer.snapshot import checked_focus, loaded_state
 from chronocl.viewer.tasks import Tasks
 from chronocl.viewer.view_sessions import SharedSteps, Views
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
@@ -155,13 +155,13 @@ class ClientWorker(Tasks):
             "opening_camera": opening,
         }
 
-    def load(self, session: dict, rid: int | None) -> dict:
-        """Apply a validated saved session as one step (nothing applied when it does not
+    def load(self, snapshot: dict, rid: int | None) -> dict:
+        """Apply a validated snapshot (a saved state) as one step (nothing applied when it does not
         fit), framing its `focus` (none: the visible region of its first frame); the reply is
         `open`'s."""
         with self._cond:
-            i, state = loaded_state(self.datasets, self.state, session)
-            focus = checked_focus(state, session.get("focus"))
+            i, state = loaded_state(self.datasets, self.state, snapshot)
+            focus = checked_focus(state, snapshot.get("focus"))
             self.state = state
             self._set_focus(focus)
             self._probed = None

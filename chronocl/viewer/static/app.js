@@ -16,7 +16,8 @@
 //   events.js      the events panel: Find events, the events and tracks, markers
 //   legend.js      the time legend and the data colour bar drawn in each view
 //   time_follow.js time colours that follow a colour-map preset (lightness under its hue)
-//   session.js     undo / redo, the URL fragment (#state=), Save / Load session
+//   history.js     the undo history: undo / redo of every edit
+//   snapshot.js    the saved state (a snapshot): the URL fragment (#state=), Save / Load session
 //   controls.js    the other controls, filled from the server's choices
 //   shading.js     the lighting toggle and strengths
 
@@ -26,13 +27,14 @@ import {
   bindEvents, clearEvents, drawTrack, eventsFailed, eventsProbed, eventsProgress, fillEvents, onEvents,
 } from './events.js';
 import { bindFit, fitFailed, forgetFits, onFit, refitMode } from './fit.js';
+import { bindHistory, noteFocus, resetHistory } from './history.js';
 import { bindKeys, unbindKeys } from './keys.js';
 import { bindLegend, drawLegends } from './legend.js';
 import { bindOrientation, drawTriads } from './orientation.js';
 import { bindProbe, clearProbe, drawProbe, onProbe } from './probe.js';
-import { bindSession, fragmentSession, loadSession, noteFocus, resetHistory } from './session.js';
 import { bindShading, syncShading } from './shading.js';
 import { bindSlice, onSlice, sliceFailed, sliceFrame } from './slice.js';
+import { bindSnapshot, fragmentSnapshot, loadSnapshot } from './snapshot.js';
 import { $, pageState, setStatus } from './state.js';
 import { bindTF, drawTF, fillColormaps, noteHistogram, tookHistogram } from './tf_editor.js';
 import { bindTimeFollow } from './time_follow.js';
@@ -46,7 +48,7 @@ let viewer;
 
 // After a reconnect: the state the page had, sent back once the data set is open again.
 let restore = null;
-// The id of the load of the session the URL carried (#state=), until the server answers it.
+// The id of the load of the snapshot the URL carried (#state=), until the server answers it.
 let urlLoad = null;
 
 // The first message on every socket: the data sets, and the modes, menus, defaults and bounds
@@ -70,8 +72,8 @@ function onInfo(msg) {
   const refit = forgetFits(); // asked on the socket that closed: a mode change's is asked again
   const again = S.info && S.state && msg.datasets.some((d) => d.index === S.info.index);
   restore = again ? { state: S.state, zoom: S.zoom, point: S.selectedPoint, camera: S.initialCamera, refit } : null;
-  const fromUrl = S.info ? null : fragmentSession();
-  if (fromUrl) urlLoad = loadSession(fromUrl);
+  const fromUrl = S.info ? null : fragmentSnapshot();
+  if (fromUrl) urlLoad = loadSnapshot(fromUrl);
   // The page's own state follows a reopen (its data TF fitted as it was): no fit to replace.
   else if (again) send({ type: 'open', dataset: S.info.index, fit: false });
   else send({ type: 'open', dataset: 0 });
@@ -204,7 +206,7 @@ function onText(msg) {
       sliceFailed(msg);
       setStatus(`error: ${msg.message}`, true);
       if (urlLoad !== null && msg.id === urlLoad) {
-        urlLoad = null; // the URL's session does not fit: the default view instead
+        urlLoad = null; // the URL's snapshot does not fit: the default view instead
         send({ type: 'open', dataset: 0 });
       }
       break;
@@ -266,7 +268,8 @@ export function start(host, transport) {
   bindShading(page);
   bindOrientation(page);
   bindKeys(page);
-  bindSession(page);
+  bindHistory(page);
+  bindSnapshot(page);
   bindLegend(page);
   bindTimeFollow(page);
   connect(

@@ -153,7 +153,7 @@ export function send(msg) {
 }
 
 // Updates are merged into S.state at once and sent once per animation frame; each is told to
-// the function given to `onEdited` (session.js: undo history, URL fragment), with `merge`: the
+// the function given to `onEdited` (history.js: undo history, URL fragment), with `merge`: the
 // update completes the last edit (a mode change's refit, fit.js) rather than being one itself.
 let edited = null;
 export function onEdited(fn) {
@@ -184,7 +184,7 @@ export function shown(key, i = S.selectedView) {
 
 // `fields` with a camera, data TF or time TF for `view` moved into its entry of `views` where
 // the view has its own of it (the other views as they are). Fields that give `views` give the
-// whole state (undo, a session, a reconnect): their camera and TFs are the shared ones.
+// whole state (undo, a snapshot, a reconnect): their camera and TFs are the shared ones.
 function routed(fields, view) {
   const v = S.state && S.state.views[view];
   const own = LINKABLE.filter((k) => k in fields && v && v[k]);

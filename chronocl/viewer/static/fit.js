@@ -98,7 +98,7 @@ export function fitFailed(id) {
 
 // The curve over the series' range, drawn where it was: each point (under a colour map, each
 // handle, the map then spanning the series' range) at its place on the axis, and flat ends at
-// the series' ends (a range a session gave beyond the series' is cut there).
+// the series' ends (a range a snapshot gave beyond the series' is cut there).
 export function spreadToSeries() {
   if (!S.state || !shown('data_tf').value_range) return;
   const pts = shown('data_tf').points;

@@ -4,9 +4,9 @@
 // Alt is held; entries marked `ctrl` need Ctrl (or Meta), the others act without it.
 
 import { fitToWindow } from './fit.js';
+import { redo, undo } from './history.js';
 import { toggleLegend } from './legend.js';
 import { resetCamera, standardView, toggleTriad } from './orientation.js';
-import { redo, undo } from './session.js';
 import { $ } from './state.js';
 import { play, scalePlaySpeed, setPlayMode, slide, togglePlaying } from './timeline.js';
 import { cancelRefine } from './views.js';

@@ -26,7 +26,7 @@ export function pageState(host = {}) {
     selectedPoint: 1,
     selectedView: 0,
     legend: [],
-    focus: null, // the world box the last frame framed (session.js keeps it with the state)
+    focus: null, // the world box the last frame framed (history.js keeps it with the state)
     playing: false,
     initialCamera: null, // the data set's opening camera (camera reset returns to it)
     columns: 1, // panels per row on screen (layoutViews); saved images and movies use it too

@@ -7,7 +7,7 @@
 // A colour map enters the points the server gets as one point per stop (33), so the colours
 // follow the map; the editor shows as handles only the opacity curve's own points, and an edit
 // of a handle recomputes the stops' opacities from the handles (`mapped`). Which points are
-// handles is read off the points themselves (`handles`), so undo, sessions and the page's
+// handles is read off the points themselves (`handles`), so undo, snapshots and the page's
 // address need nothing more than the points.
 //
 // Two scales: the curve's points are over u in [0, 1] of the TF's value range, and the axis

@@ -1,10 +1,13 @@
-"""A viewer session kept as a file: one versioned JSON object holding everything a frame
-depends on, so a view found interactively becomes a reproducible figure.
+"""A snapshot: the viewer's state saved as one versioned JSON object holding everything a
+frame depends on, so a view found interactively becomes a reproducible figure. (Not the
+integration `Session`, nor the page's undo history: static/history.js.)
 
-The viewer's Save session writes it, Load session and the page's URL fragment
-(`#state=...`, the same object) apply it as one step, and `chronocl render --state FILE`
-draws it. Its fields are the state fields of the protocol's update message (checked by
-`protocol.SESSION`) plus the format's version and the data set:
+Users see it as a "session file": the viewer's Save session writes it, Load session and the
+page's URL fragment (`#state=...`, the same object) apply it as one step, and `chronocl
+render --state FILE` draws it; the file format keeps that name (its `chronocl_session` key,
+`SESSION_VERSION`, `NAME-session.json`), so files saved before read the same. Its fields are
+the state fields of the protocol's update message (checked by `protocol.SNAPSHOT`) plus the
+format's version and the data set:
 
     {"chronocl_session": 1,
      "dataset": {"name": "vortex", "path": "/data/vortex.zarr", "shape": [30, 96, 96, 96]},
@@ -27,7 +30,7 @@ viewpoints or two colourings side by side); null (or left out) follows the share
 An own camera frames the shared camera's focus. Enhancement and lighting are shared by the
 views. `focus` is the world box the camera framed (the viewer frames the visible region
 of a data set's first frame, or of the frame after a camera reset, and keeps it while the
-window moves); null frames the visible region of the session's own chronovolumes.
+window moves); null frames the visible region of the snapshot's own chronovolumes.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ from chronocl.render.image import Image
 from chronocl.render.triad import draw_triad
 from chronocl.render.views import parse_color, raycaster
 from chronocl.viewer.datasets import Dataset, find_dataset
-from chronocl.viewer.protocol import SESSION, SESSION_KEY, SESSION_VERSION, decode_json
+from chronocl.viewer.protocol import SESSION_KEY, SESSION_VERSION, SNAPSHOT, decode_json
 from chronocl.viewer.saving import Downloads, picture
 from chronocl.viewer.schema import ProtocolError
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
@@ -68,18 +71,18 @@ STATE_FIELDS = (
 )
 
 
-class SessionFileError(InvalidParameterError):
-    """A session file that cannot be read, is not a session, or is of another version."""
+class SnapshotFileError(InvalidParameterError):
+    """A snapshot (session) file that cannot be read, is not one, or is of another version."""
 
 
-def session_of(
+def snapshot_of(
     state: ViewState,
     name: str,
     series: TimeSeries,
     path: str | None = None,
     focus: Sequence[float] | None = None,
 ) -> dict:
-    """The session file's object for `state` on the data set `name` (stored at `path`), its
+    """The snapshot's object for `state` on the data set `name` (stored at `path`), its
     views framing the world box `focus` (None: their visible region)."""
     described = describe_state(state)  # a fitted data TF with its value range
     dataset = {"name": name, "shape": list(series.shape)}
@@ -93,60 +96,62 @@ def session_of(
     }
 
 
-def check_session(obj: object, where: str = "session") -> dict:
-    """The validated session object; raises SessionFileError naming the first bad field."""
+def check_snapshot(obj: object, where: str = "session") -> dict:
+    """The validated snapshot object; raises SnapshotFileError naming the first bad field."""
     if not isinstance(obj, dict) or SESSION_KEY not in obj:
-        raise SessionFileError(
+        raise SnapshotFileError(
             f"{where} is not a chronocl session (no {SESSION_KEY!r} field); "
             "save one with the viewer's Save session button"
         )
     try:
-        return SESSION.check(obj, "session")
+        return SNAPSHOT.check(obj, "session")  # "session": the name its errors give
     except ProtocolError as exc:
-        raise SessionFileError(f"{where}: {exc}") from None
+        raise SnapshotFileError(f"{where}: {exc}") from None
 
 
-def read_session(path: str | os.PathLike) -> dict:
-    """A session file read and validated (SessionFileError or InputNotFoundError, one line)."""
+def read_snapshot(path: str | os.PathLike) -> dict:
+    """A snapshot file read and validated (SnapshotFileError or InputNotFoundError, one line)."""
     p = Path(path)
     if not p.is_file():
         raise InputNotFoundError(f"session file {str(p)!r} not found; save one in the viewer")
     if p.stat().st_size > MAX_FILE_BYTES:
-        raise SessionFileError(f"{p.name} is over {MAX_FILE_BYTES >> 20} MiB: not a session file")
+        raise SnapshotFileError(f"{p.name} is over {MAX_FILE_BYTES >> 20} MiB: not a session file")
     try:
         obj = decode_json(p.read_text(encoding="utf-8"))
     except (ProtocolError, ValueError) as exc:  # UnicodeDecodeError and JSON errors too
-        raise SessionFileError(f"{p.name} is not valid JSON ({exc})") from None
-    return check_session(obj, p.name)
+        raise SnapshotFileError(f"{p.name} is not valid JSON ({exc})") from None
+    return check_snapshot(obj, p.name)
 
 
-def write_session(session: dict) -> bytes:
-    """The session as JSON text, one top-level field a line."""
-    lines = [f"  {json.dumps(k)}: {json.dumps(v)}" for k, v in session.items()]
+def write_snapshot(snapshot: dict) -> bytes:
+    """The snapshot as JSON text, one top-level field a line."""
+    lines = [f"  {json.dumps(k)}: {json.dumps(v)}" for k, v in snapshot.items()]
     return ("{\n" + ",\n".join(lines) + "\n}\n").encode()
 
 
-def apply_session(state: ViewState, session: dict, n_steps: int) -> ViewState:
-    """`state` with every state field of a validated session applied (one step: nothing is
+def apply_snapshot(state: ViewState, snapshot: dict, n_steps: int) -> ViewState:
+    """`state` with every state field of a validated snapshot applied (one step: nothing is
     applied when a field does not fit the data set)."""
-    fields = {k: session[k] for k in STATE_FIELDS if k in session}
+    fields = {k: snapshot[k] for k in STATE_FIELDS if k in snapshot}
     if "shading" in fields and fields["shading"] is None:  # null: the lighting as it is
         del fields["shading"]
     try:
         return merge(state, fields, n_steps)
     except InvalidSelectionError as exc:  # a window beyond the series' steps
-        raise SessionFileError(f"the session does not fit its data set: {exc}") from None
+        raise SnapshotFileError(f"the session does not fit its data set: {exc}") from None
 
 
-def loaded_state(datasets: list[Dataset], state: ViewState, session: dict) -> tuple[int, ViewState]:
-    """The data set a validated session names (by name, else by path) and the state it
-    describes there: `state` with the session applied when that data set is shown, else the
+def loaded_state(
+    datasets: list[Dataset], state: ViewState, snapshot: dict
+) -> tuple[int, ViewState]:
+    """The data set a validated snapshot names (by name, else by path) and the state it
+    describes there: `state` with the snapshot applied when that data set is shown, else the
     data set's defaults with it applied."""
-    ds = session["dataset"]
+    ds = snapshot["dataset"]
     i = find_dataset(datasets, ds["name"], ds.get("path"))
     series = datasets[i].series
     base = state if i == state.dataset else default_state(i, series)
-    return i, apply_session(base, session, series.n_steps)
+    return i, apply_snapshot(base, snapshot, series.n_steps)
 
 
 def checked_focus(state: ViewState, box: Sequence[float] | None) -> tuple | None:
@@ -156,35 +161,35 @@ def checked_focus(state: ViewState, box: Sequence[float] | None) -> tuple | None
     return dataclasses.replace(state.camera, focus=tuple(box)).focus
 
 
-def save_session(
+def save_snapshot(
     downloads: Downloads, state: ViewState, ds: Dataset, focus: Sequence[float] | None = None
 ) -> tuple[str, str]:
-    """`state` (framing `focus`) as a session file download; returns its key and name."""
+    """`state` (framing `focus`) as a snapshot (session file) download; returns its key and name."""
     name = f"{ds.name}-session.json"
-    body = write_session(session_of(state, ds.name, ds.series, ds.path, focus))
+    body = write_snapshot(snapshot_of(state, ds.name, ds.series, ds.path, focus))
     return downloads.add(body, name, "application/json"), name
 
 
-def session_state(session: dict, series: TimeSeries) -> ViewState:
-    """The viewer state a session describes on `series` (the viewer's defaults elsewhere), its
-    camera framing the session's focus."""
-    state = apply_session(default_state(0, series), session, series.n_steps)
-    focus = checked_focus(state, session.get("focus"))
+def snapshot_state(snapshot: dict, series: TimeSeries) -> ViewState:
+    """The viewer state a snapshot describes on `series` (the viewer's defaults elsewhere), its
+    camera framing the snapshot's focus."""
+    state = apply_snapshot(default_state(0, series), snapshot, series.n_steps)
+    focus = checked_focus(state, snapshot.get("focus"))
     return dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=focus))
 
 
-def dataset_path(session: dict, where: str) -> Path:
-    """The store a session names (`dataset.path`), which must exist."""
-    path = session["dataset"].get("path")
+def dataset_path(snapshot: dict, where: str) -> Path:
+    """The store a snapshot names (`dataset.path`), which must exist."""
+    path = snapshot["dataset"].get("path")
     if path is None:
-        raise SessionFileError(
-            f"{where} names the data set {session['dataset']['name']!r} but not its path; "
+        raise SnapshotFileError(
+            f"{where} names the data set {snapshot['dataset']['name']!r} but not its path; "
             "give the store on the command line"
         )
     return Path(path)
 
 
-def render_session(
+def render_snapshot(
     state: ViewState,
     series: TimeSeries,
     *,
