@@ -41,8 +41,9 @@ def _run(*args: str, **env: str) -> list[dict]:
 
 def _check(rows: list[dict], names: set[str]) -> None:
     assert {r["work"] for r in rows} == names
-    for r in rows:  # every kind of work makes several device calls, each failed in turn
-        assert r["calls"] >= 3 and r["failures"] == r["calls"], r
+    for r in rows:  # every kind of work makes several device calls, each failed in turn (a
+        # later run may make more than the first: those too)
+        assert r["calls"] >= 3 and r["failures"] >= r["calls"], r
 
 
 def test_a_failure_at_any_device_call_of_the_gather_frees_nothing_in_use():

@@ -190,6 +190,18 @@ class Streams:
             self.buffers[key] = held
         return held
 
+    def clear(self) -> None:
+        """Release the reused buffers (unmapping the staging ones), with no work on them
+        enqueued: the next brick makes them again (tests/device_faults.py fails each call of
+        a frame's work, these buffers' making included)."""
+        held, self.buffers = self.buffers, {}
+        for buf in held.values():
+            if isinstance(buf, np.ndarray):  # a mapped staging buffer
+                buf.base.release(self.upload)
+            else:
+                buf.release()
+        self.upload.finish()
+
 
 def make_streams(context, device) -> Streams:
     """Three in-order queues, profiling where the device can."""
