@@ -19,6 +19,11 @@ NEWEST := .venv-newest
 # module fixtures, servers and browsers, made once): 2 halved the suite on this 2-core machine
 # (1 650 s to 1 030 s), whose OpenCL tests kept one core busy alone. 0: in this process.
 TEST_WORKERS ?= 2
+# The modules whose paths a GPU changes: its steps kept on the device, bricks copied, slabs
+# uploaded while integrating, the recolouring's gather copied (run with CHRONOCL_DEVICE_KIND=gpu).
+GPU_PATH_TESTS = tests/test_slots.py tests/test_slab_upload.py tests/test_device_faults.py \
+	tests/test_device_steps.py tests/test_device_sliding.py tests/test_recolour_viewer.py \
+	tests/test_process_memory.py tests/test_slide_failure.py
 
 # Another apt-get holding the dpkg lock (an unattended upgrade) is waited for, not failed on.
 APT := apt-get -o DPkg::Lock::Timeout=300
@@ -67,6 +72,8 @@ test: lint
 		else echo "warning: /usr/bin/chromium missing; the browser tests will be skipped"; fi; \
 	fi
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
+	@# Again where a GPU's paths differ from a CPU device's (README: Device limits).
+	CHRONOCL_DEVICE_KIND=gpu $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(GPU_PATH_TESTS)
 
 # The suite with 500 examples in every property test (the default is 60, whose time CI keeps
 # within ten minutes): a deeper search, for a change to a kernel or a mode, or before a release.
