@@ -191,6 +191,7 @@ class Tasks(EventTasks):
             cvs = [s.cv for s in self.views.slots[: len(state.views)]]
             bg = parse_color(state.background)
             panels, *_ = on_gl(self._draw, cvs, state, state.size, bg)
+            panels = self._axes_drawn(panels, state, cvs)  # with the box on, as the page
             name = f"{ds.name}-{sel}.png"
             key, layout = save_image(
                 self.downloads,
@@ -235,6 +236,7 @@ class Tasks(EventTasks):
             self.views.full_resolution(range(len(shown.views)))
             cvs = [s.cv for s in self.views.slots[: len(shown.views)]]
             panels, *_ = on_gl(self._draw, cvs, shown, shown.size, bg)
+            panels = self._axes_drawn(panels, shown, cvs)
             columns = _columns(msg, len(cvs))
             return picture(panels, cvs, bg, columns, ds.name)[0].array  # type: ignore[arg-type]
 

@@ -32,6 +32,7 @@ from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.render.framing import framed
 from chronocl.render.recolour.bricks import warm_kernels
 from chronocl.render.views import describe, parse_color
+from chronocl.viewer.box_axes import box_axes, draw_axes
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.errors import error_text, log
@@ -506,6 +507,7 @@ class ClientWorker(Tasks):
                 clip_outline(cv, state.panel_camera(i), state.size, state.clip)
                 for i, cv in enumerate(cvs)
             ],
+            "axes": self._axes(state, cvs),
             "legend": legend(cvs[0]),
             "legends": [legend(cv) for cv in cvs],  # a view with its own window has its own
             "colorbars": [colour_bar(cv) for cv in cvs],  # null where the data TF is white
@@ -547,6 +549,24 @@ class ClientWorker(Tasks):
                 if self._focus_gen == gen:
                     self._focus = known
         return dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=known[1]))
+
+    def _axes(self, state: ViewState, cvs: list[Chronovolume]) -> list | None:
+        """With the box on, each view's labelled box edges under its camera (`box_axes`), in
+        the series' spacing units; None with the box off."""
+        if not state.outline:
+            return None
+        series = self.datasets[state.dataset].series
+        return [
+            box_axes(cv, state.panel_camera(i), state.size, series.dims, series.spacing)
+            for i, cv in enumerate(cvs)
+        ]
+
+    def _axes_drawn(self, panels: list, state: ViewState, cvs: list[Chronovolume]) -> list:
+        """`panels` as drawn with `_axes` on them (a saved PNG's, a movie's frames)."""
+        axes = self._axes(state, cvs)
+        if axes is None:
+            return panels
+        return [draw_axes(p, a) for p, a in zip(panels, axes, strict=True)]
 
     def _probe_mark(self, state: ViewState, cvs: list[Chronovolume]) -> dict | None:
         """Where the probed voxel is on its panel in this frame (None: no probe, or off-panel)."""

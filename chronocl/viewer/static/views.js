@@ -6,6 +6,7 @@
 // view: the TF editors, the time TF controls and the camera's buttons then edit its copy, and a
 // drag on its picture turns its own camera; toggled on again, the copy is dropped (linked).
 
+import { showAxes } from './box_axes.js';
 import { LINKABLE, frameArrived, send, sentAt, settleLater, shown, update } from './connection.js';
 import { modeChanged } from './fit.js';
 import { drawLegends } from './legend.js';
@@ -124,7 +125,7 @@ function makePanel(i) {
     '<div class="view-label"></div></div>' +
     '<div class="view-pic"><img alt="view" draggable="false">' +
     '<svg class="clip-outline" viewBox="0 0 1 1" preserveAspectRatio="none"><polygon class="clip-cut"/>' +
-    '<polygon class="slice-cut"/></svg>' +
+    '<polygon class="slice-cut"/></svg><svg class="box-axes"></svg>' +
     '<div class="probe-mark"></div><div class="probe-band"></div>' +
     '<div class="view-note" hidden></div></div>' +
     '<div class="view-foot"><canvas class="legend"></canvas><canvas class="colorbar" hidden></canvas>' +
@@ -146,6 +147,7 @@ function makePanel(i) {
     band: el.querySelector('.probe-band'),
     outline: el.querySelector('.clip-outline .clip-cut'),
     sliceCut: el.querySelector('.clip-outline .slice-cut'),
+    axes: el.querySelector('.box-axes'),
     triad: el.querySelector('.triad'),
   };
   if (pictureObserver) pictureObserver.observe(p.pic);
@@ -383,6 +385,8 @@ export function onFrame(buf) {
   panels.forEach((p, i) => {
     const outlines = header.clip_outlines;
     p.outline.setAttribute('points', cut(outlines ? outlines[i] : header.clip_outline));
+    // With the box on, its labelled edges under the view's camera (box_axes.js).
+    showAxes(p.axes, header.axes ? header.axes[i] : null);
   });
   S.legend = header.legend || [];
   S.legends = header.legends || null; // each view's, where views have their own windows
