@@ -23,6 +23,7 @@ import chronocl
 from chronocl.core.errors import ChronoclError, RendererUnavailableError
 from chronocl.data import synthetic
 from chronocl.notebook import bundle
+from chronocl.notebook import state as synced
 from chronocl.notebook.widget import FrameFailedError
 from chronocl.viewer.snapshot import check_snapshot
 
@@ -748,3 +749,119 @@ def test_a_view_with_its_own_camera_shows_its_own_picture(widget, monkeypatch):
     widget.views = ["alpha"]
     linked = {"window": None, "camera": None, "data_tf": None, "time_tf": None}
     assert widget.views == [{"mode": "alpha", "order": "forward", **linked}]
+
+
+# -- suspended while no view shows it --------------------------------------------------------
+
+
+def view(w, what: str) -> None:
+    """widget.js's message: a view of the widget shown on the page ("shown") or removed
+    ("gone": its output cleared, its cell deleted)."""
+    w._handle_msg(
+        {"content": {"data": {"method": "custom", "content": {"view": what}}}, "buffers": []}
+    )
+
+
+def suspended_soon(w, timeout: float = 30.0) -> bool:
+    end = time.monotonic() + timeout
+    while not w.suspended and time.monotonic() < end:
+        time.sleep(0.02)
+    return w.suspended
+
+
+def test_a_widget_no_view_shows_is_suspended_and_resumes_as_it_was(monkeypatch):
+    """Its last view gone for the grace: the worker's thread ends and the kernel lets its steps
+    go; the attributes stay. Any use from code (`wait_frame`, an attribute set) or a view
+    shown again resumes it: a new worker with the same window, views, TFs and camera, whose
+    frame for that state is the one shown before, pixel for pixel."""
+    import chronocl.notebook.widget as nb_widget
+    from chronocl.notebook.kernel import KERNEL
+
+    monkeypatch.setattr(nb_widget, "SUSPEND_AFTER_S", 0.3)
+    w = chronocl.show(vortex()[:8], window=(1, 7))
+    try:
+        series = w._datasets[0].series
+        view(w, "shown")
+        w.camera = {"azimuth": 75, "elevation": -15, "zoom": 1.5}
+        w.time_tf = {"color": "lightness"}
+        w.views = ["max", {"mode": "mean", "camera": {"azimuth": 10}}]
+        points = [[0.0, 1.0, 1.0, 1.0, 0.0], [1.0, 1.0, 0.3, 0.0, 0.9]]
+        w.data_tf = {"points": points, "value_range": [0.0, 1.0]}
+        before = w.wait_frame()
+        png = w.screenshot().data
+        attributes = {name: getattr(w, name) for name in synced.SYNCED}
+        snapshot = w.snapshot()
+        thread, shared = w._worker.thread, w._shared
+        assert KERNEL.held_steps(series) is shared and not w.suspended
+
+        # shown again within the grace (an output re-rendered): nothing is let go
+        view(w, "gone")
+        view(w, "shown")
+        time.sleep(0.8)
+        assert not w.suspended and thread.is_alive()
+
+        view(w, "gone")
+        assert suspended_soon(w)
+        assert not thread.is_alive() and shared._closed and KERNEL.held_steps(series) is None
+        assert {name: getattr(w, name) for name in synced.SYNCED} == attributes
+        assert not w.closed
+
+        # from code: wait_frame resumes it, the same state, the same picture
+        assert w.last_frame is None  # (no frame shown now)
+        made = w.frames
+        frame = w.wait_frame()
+        assert not w.suspended and w._worker.thread is not thread and w._worker.thread.is_alive()
+        assert KERNEL.held_steps(series) is w._shared and w._shared is not shared
+        assert w.frames > made and frame["digest"] == before["digest"]
+        assert w.snapshot() == snapshot
+        assert w.screenshot().data == png
+        assert {name: getattr(w, name) for name in synced.SYNCED} == attributes
+
+        # an attribute set resumes it too, and changes the picture as it would have
+        view(w, "shown")
+        view(w, "gone")
+        assert suspended_soon(w)
+        w.mode = "min"
+        assert not w.suspended and w.mode == "min" and w.views[1]["mode"] == "mean"
+        assert w.views[1]["camera"]["azimuth"] == 10 and w.camera["azimuth"] == 75
+        assert w.wait_frame()["views"][0]["label"].startswith("min")
+
+        # a view shown again resumes it at once (its page's requests follow)
+        view(w, "shown")
+        view(w, "gone")
+        assert suspended_soon(w)
+        view(w, "shown")
+        assert not w.suspended and w._live is not None and KERNEL.held_steps(series) is not None
+        from_page(w, {"type": "open", "id": 1, "dataset": 0})
+        from_page(w, {"type": "update", "id": 2, "size": [320, 240]})
+        assert w.wait_frame()["id"] == 2
+
+        # closed while suspended: nothing is left, and nothing more is done
+        view(w, "gone")
+        assert suspended_soon(w)
+        w.close()
+        assert w.closed and not w.suspended and w._live is None
+        with pytest.raises(ChronoclError, match="closed"):
+            w.wait_frame()
+    finally:
+        w.close()
+
+
+def test_a_widget_in_use_is_not_suspended_under_its_waits(monkeypatch):
+    """The grace passes while the kernel waits on the worker (a screenshot): the wait ends
+    first; a widget never shown (used only from code) is never suspended."""
+    import chronocl.notebook.widget as nb_widget
+
+    monkeypatch.setattr(nb_widget, "SUSPEND_AFTER_S", 0.05)
+    w = chronocl.show(vortex()[:6])
+    try:
+        w.wait_frame()
+        time.sleep(0.3)
+        assert not w.suspended  # never shown: never suspended
+        view(w, "shown")
+        view(w, "gone")
+        for _ in range(3):
+            assert w.screenshot().data[:8] == b"\x89PNG\r\n\x1a\n"
+        assert suspended_soon(w)
+    finally:
+        w.close()

@@ -3,10 +3,12 @@ temporary root), a notebook opened in Debian's chromium through Playwright, `chr
 run in its kernel. The picture appears and is not blank; `w.mode = "max"` from a cell changes
 it; what is done by hand in the widget (its mode menu, a window brushed on its timeline) is
 read back through the kernel; its keys are its own (not the notebook's) and its Save PNG
-downloads over the comm; a second widget on the page keeps its own state; closing the widget
-ends its render thread. The viewer's Events panel, through the widget's comm, lists a series'
-events, and a click on one moves the window, which `w.window` reads back. The server and the
-cells are run with tests/jupyter_lab.py (which bench/notebook_latency.py uses too)."""
+downloads over the comm; a second widget on the page keeps its own state; its output cleared,
+the widget is suspended (its render thread ended, its steps let go) and `display(w)` shows it
+again with the same picture; closing the widget ends its render thread. The viewer's Events
+panel, through the widget's comm, lists a series' events, and a click on one moves the
+window, which `w.window` reads back. The server and the cells are run with
+tests/jupyter_lab.py (which bench/notebook_latency.py uses too)."""
 
 from __future__ import annotations
 
@@ -58,6 +60,17 @@ CELLS = [
     # 6: after the front end closed the second widget's model
     "thread2 = w2._worker.thread\nthread2.join(30)\n"
     "print('FRONT_CLOSED=' + json.dumps({'closed': w2.closed, 'alive': thread2.is_alive()}))",
+    # 7: after the first widget's output was cleared: suspended once the grace passed
+    "import time\nfrom chronocl.notebook.kernel import KERNEL\n"
+    "thread = w._live.thread\nsteps = KERNEL.held_steps(w._datasets[0].series)\n"
+    "end = time.monotonic() + 30\n"
+    "while not w.suspended and time.monotonic() < end:\n    time.sleep(0.05)\n"
+    "thread.join(30)\n"
+    "print('SUSPENDED=' + json.dumps({'suspended': w.suspended, 'alive': thread.is_alive(), "
+    "'steps': KERNEL.held_steps(w._datasets[0].series) is not None, "
+    "'held_before': steps is not None, 'mode': w.mode}))",
+    # 8: shown again
+    "display(w)",
 ]
 # The events notebook: a widget on a series with a merge, a birth and a death
 # (tests/test_viewer_events_browser.py's, written to the lab's root as blobs.zarr).
@@ -139,7 +152,7 @@ def settle(page, before: dict | None) -> dict:
     return last(page)
 
 
-def test_show_in_jupyterlab_is_driven_from_code_and_by_hand(notebook, lab):
+def test_show_in_jupyterlab_is_driven_from_code_and_by_hand(notebook, lab, tmp_path):
     page, problems = notebook
 
     # The widget's first picture: a lit vortex, not a blank panel.
@@ -221,6 +234,45 @@ def test_show_in_jupyterlab_is_driven_from_code_and_by_hand(notebook, lab):
     assert second.locator(".view select.mode").first.input_value() == "alpha"
     assert page.evaluate(f"() => {VIEWER}.S.state.views[0].mode") == "mean"
     assert page.evaluate(f"() => {SECOND}.S.info.name") == "second"
+
+    # The first widget's output cleared (as its menu's Clear Cell Output does): its view goes,
+    # and after the grace the kernel suspends it (its render thread ended, its steps let go);
+    # shown again, it resumes with the picture it had.
+    shown = settle(page, None)
+    page.evaluate(
+        """async () => {
+          const app = window.jupyterapp, nb = app.shell.currentWidget.content;
+          nb.activeCellIndex = 0;
+          nb.deselectAll();
+          await app.commands.execute('notebook:clear-cell-output');
+        }"""
+    )
+    page.wait_for_function(
+        "() => window.jupyterapp.shell.currentWidget.content.widgets[0]"
+        ".node.querySelector('.chronocl-widget') === null",
+        timeout=10_000,
+    )
+    run_cell(page, 7)
+    assert cell_output(page, 7, "SUSPENDED") == {
+        "suspended": True,
+        "alive": False,
+        "steps": False,
+        "held_before": True,
+        "mode": "mean",
+    }
+    again = "window.jupyterapp.shell.currentWidget.content.widgets[8].node"
+    run_cell(page, 8)
+    page.wait_for_function(
+        f"() => {{ const h = {again}.querySelector('.chronocl-widget');"
+        " const v = h && h.viewer, l = v && v.last;"
+        " return !!l && l.quality === 'full' && !l.refining; }",
+        timeout=60_000,
+    )
+    resumed = page.evaluate(f"() => {again}.querySelector('.chronocl-widget').viewer.last")
+    assert resumed["digest"] == shown["digest"]  # the same picture as before it was cleared
+    shot = tmp_path / "widget-shown-again.png"
+    page.locator(".jp-Cell").nth(8).locator(".chronocl-widget").screenshot(path=str(shot))
+    print(f"\nthe widget shown again: {shot}")
 
     # Closed from code: the render thread ends; the second widget goes on.
     run_cell(page, 4)

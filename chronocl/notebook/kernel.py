@@ -11,6 +11,9 @@
   `TimeSeries` read no step twice and hold none twice. The steps go when the last widget
   showing that series closes.
 
+A suspended widget (no view has shown it for a while: chronocl/notebook/widget.py) leaves as a
+closed one does, and joins again when it resumes.
+
 Two arrays are two series, even with equal values: only the same store or the same TimeSeries
 object is shared.
 """
@@ -69,12 +72,17 @@ class Kernel:
         series: TimeSeries,
         store: tuple | None = None,
         memory: str | int | None = None,
+        fallback: str | int | None = None,
     ) -> tuple[SharedSteps, str | int | None]:
         """Widget `widget` shows `series`: its shared steps, and the memory budget its worker
-        is to keep (the kernel's, set or replaced by `memory` where given)."""
+        is to keep (the kernel's, set or replaced by `memory` where given). `fallback`: the
+        limit to make where the kernel has none and no `memory` is given (a suspended widget
+        resumed after every other widget went: the budget it had), never replacing one."""
         total = None if memory is None else parse_memory(memory)  # a bad one: nothing changed
         with self._lock:
             if self.limit is None:  # the first widget: the default limit, as `chronocl view`'s
+                if total is None and fallback is not None:
+                    memory, total = fallback, parse_memory(fallback)
                 if total is None:
                     total = interactive_memory()
                 self.limit = ProcessLimit(total)

@@ -51,15 +51,25 @@ async function render({ model, el }) {
   model.on('change:height', height);
   // Keys typed in the viewer are its own: the notebook does not see them.
   shell.addEventListener('keydown', (e) => e.stopPropagation());
+  // The kernel counts the views shown: with none left for a while (the output cleared, the
+  // cell deleted) it lets the worker go, and a view shown again resumes it. Sent before the
+  // viewer starts, so that it comes before the viewer's own messages.
+  model.send({ view: 'shown' });
   const { viewer, stop } = app.start(
     { root, shell, keys: shell, fragment: false, global: false },
     connection.modelTransport(model),
   );
   host.viewer = viewer; // for scripted use (the tests), as window.viewer is the page's
   host.widgetManager = model.widget_manager; // (the tests close the model through it)
+  // anywidget calls this when the view is removed (its output cleared, its cell deleted).
   return () => {
     model.off('change:height', height);
     stop();
+    try {
+      model.send({ view: 'gone' });
+    } catch {
+      // the model closed (its comm gone): the kernel freed the worker already
+    }
   };
 }
 

@@ -51,6 +51,11 @@ REQUEST_TIMEOUT_S = 120.0
 OWN_IDS = 2**52
 FRAMED = ("update", "open", "load")  # the requests a frame answers
 FAILURES_KEPT = 32  # the frame failures remembered, by request id (the newest kept)
+# How long a widget no view shows keeps its worker before it is suspended (`suspended`): a
+# notebook re-rendering an output (a cell moved, an output area rebuilt, a notebook's tab
+# closed and opened) removes the view and adds one a moment later, and that should cost no
+# new worker and no steps read again.
+SUSPEND_AFTER_S = 3.0
 
 
 class WidgetClosedError(ChronoclError, RuntimeError):
@@ -124,6 +129,7 @@ class ChronoclWidget(anywidget.AnyWidget):
     time_tf = traitlets.Dict(help="the time transfer function")
     camera = traitlets.Dict(help="azimuth, elevation, zoom, fov, projection, up")
     _closed = True  # until its worker runs (a widget that failed to start has nothing to free)
+    _live: ClientWorker | None = None  # the worker; None while suspended (`_worker` resumes)
 
     def __init__(
         self,
@@ -141,6 +147,15 @@ class ChronoclWidget(anywidget.AnyWidget):
         self._datasets = [dataset]
         self._downloads = Downloads()
         self._cond = threading.Condition()
+        # Held while the worker is made, suspended or freed (the kernel's thread and the
+        # suspend timer's): one of them at a time; before `_cond` where both are taken.
+        self._life = threading.RLock()
+        self._engine, self._device, self._store = engine, device, store
+        self._saved: tuple | None = None  # while suspended: the worker's state and focus
+        self._views_shown = 0  # the page's views showing the widget now ({"view": ...})
+        self._view_gen = 0  # counts the views shown and gone (a suspend timer's turn)
+        self._used_at = time.monotonic()  # the worker's last use (`_worker`)
+        self._busy = 0  # the kernel's waits on the worker in progress (no suspending then)
         self._requests: dict[int, dict | None] = {}
         self._next_own = OWN_IDS
         self._newest_id: int | None = None  # the newest request a frame answers
@@ -153,8 +168,9 @@ class ChronoclWidget(anywidget.AnyWidget):
         # page comes only delays the page's own.
         self._drawing = False
         self._shared, memory = KERNEL.join(id(self), dataset.series, store, memory)
+        self._memory = memory  # the worker's budget (a resumed one keeps it)
         try:
-            self._worker = ClientWorker(
+            self._live = ClientWorker(
                 self._datasets, self._deliver, self._downloads, engine=engine, device=device,
                 memory=memory, shared=self._shared,
             )  # fmt: skip
@@ -163,7 +179,7 @@ class ChronoclWidget(anywidget.AnyWidget):
             raise
         self._closed = False
         try:
-            opened = self._worker.open(0, None, frame=False)
+            opened = self._live.open(0, None, frame=False)
         except Exception:  # (the data set's sample unreadable): nothing left running
             self.close()
             raise
@@ -180,6 +196,9 @@ class ChronoclWidget(anywidget.AnyWidget):
     # -- the page's messages (the kernel's thread) ------------------------------------------
     def _on_msg(self, _widget, content, _buffers) -> None:
         if self._closed or not isinstance(content, dict):
+            return
+        if content.get("view") in ("shown", "gone"):  # widget.js: a view rendered, removed
+            self._view_changed(content["view"] == "shown")
             return
         if content.get("type") == "hello":  # a view was rendered: it starts as a socket does
             self.send({"text": json.dumps(info_message(self._datasets))})
@@ -278,8 +297,13 @@ class ChronoclWidget(anywidget.AnyWidget):
         """The timeline's resident steps (`viewer.residency`), as the socket reports them."""
         last = None
         while not self._closed:
+            worker = self._live  # (not `_worker`: a suspended widget stays suspended)
+            if worker is None:
+                last = None  # a resumed worker's steps are reported afresh
+                time.sleep(POLL_S)
+                continue
             try:
-                now = residency(self._worker.views)
+                now = residency(worker.views)
             except Exception:  # the views changing under the poll: the next one reads them
                 now = last
             if now != last and any(v is not None for v in now or []):
@@ -362,22 +386,26 @@ class ChronoclWidget(anywidget.AnyWidget):
             self._newest_id = rid
         end = time.monotonic() + timeout
         with self._cond:
-            while True:
-                last = self.last_frame
-                if (
-                    self._frames > after
-                    and last is not None
-                    and last["id"] == self._newest_id
-                    and _settled(last)
-                ):
-                    return last
-                failed = self._failed.get(self._newest_id)
-                if failed is not None:
-                    raise FrameFailedError(f"the frame failed: {failed}")
-                left = end - time.monotonic()
-                if left <= 0 or self._closed:
-                    raise InvalidParameterError(f"no settled frame came in {timeout:.0f} s")
-                self._cond.wait(min(left, 0.5))
+            self._busy += 1  # not suspended while it waits
+            try:
+                while True:
+                    last = self.last_frame
+                    if (
+                        self._frames > after
+                        and last is not None
+                        and last["id"] == self._newest_id
+                        and _settled(last)
+                    ):
+                        return last
+                    failed = self._failed.get(self._newest_id)
+                    if failed is not None:
+                        raise FrameFailedError(f"the frame failed: {failed}")
+                    left = end - time.monotonic()
+                    if left <= 0 or self._closed:
+                        raise InvalidParameterError(f"no settled frame came in {timeout:.0f} s")
+                    self._cond.wait(min(left, 0.5))
+            finally:
+                self._busy -= 1
 
     @property
     def frames(self) -> int:
@@ -391,6 +419,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         rid = self._own_id()
         with self._cond:
             self._requests[rid] = None
+            self._busy += 1  # not suspended while it waits
         try:
             self._worker.task(msg["type"], msg | {"id": rid})
             end = time.monotonic() + REQUEST_TIMEOUT_S
@@ -404,6 +433,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         finally:
             with self._cond:
                 self._requests.pop(rid, None)
+                self._busy -= 1
         if reply["type"] == "error":
             raise InvalidParameterError(reply["message"])
         return reply
@@ -532,15 +562,113 @@ class ChronoclWidget(anywidget.AnyWidget):
         super().close()  # (forgets the comm; sends nothing more: it is closed)
 
     def _free(self) -> None:
-        if not self._closed:
+        if self._closed:  # closed, or never started (no `_life` either: `check_gl` refused)
+            return
+        with self._life:
+            if self._closed:
+                return
             self._closed = True
             with self._cond:
                 self._cond.notify_all()
-            self._worker.close()
-            self._worker.thread.join(timeout=30)
+            if self._live is not None:  # (a suspended widget let its worker go already)
+                self._end(self._live)  # (kept: what it was stays readable, `_worker.thread`)
             self._downloads.close()
-            KERNEL.leave(id(self), self._datasets[0].series)
+
+    def _end(self, worker: ClientWorker) -> None:
+        """`worker` ended (its thread, GL textures, OpenCL buffers) and the widget's share of
+        the kernel (the series' steps no other widget shows) let go."""
+        worker.close()
+        worker.thread.join(timeout=30)
+        KERNEL.leave(id(self), self._datasets[0].series)
 
     @property
     def closed(self) -> bool:
         return self._closed
+
+    # -- suspended while no view shows it ------------------------------------------------------
+    @property
+    def suspended(self) -> bool:
+        """No view has shown the widget for SUSPEND_AFTER_S (its output cleared, its cell
+        deleted): its worker is let go (its render thread, GL textures, OpenCL buffers, and
+        its share of the kernel's memory and steps), its attributes and state kept. A view
+        shown again (`display(w)`) or any use from code resumes it as it was."""
+        return self._live is None and not self._closed
+
+    @property
+    def _worker(self) -> ClientWorker:
+        """The worker: every use of it goes through here, and a suspended widget's is made
+        again here (`_resume`); WidgetClosedError where one closed while suspended has none."""
+        with self._life:
+            self._used_at = time.monotonic()
+            if self._live is None:
+                self._check_open()
+                self._resume()
+            return self._live  # type: ignore[return-value]
+
+    def _resume(self) -> None:
+        """A new worker (under `_life`), showing what the suspended one showed: its state (the
+        window, views, TFs, camera, panel size) and the region its frames framed."""
+        state, focus = self._saved  # type: ignore[misc]
+        series = self._datasets[0].series
+        shared, _ = KERNEL.join(id(self), series, self._store, fallback=self._memory)
+        try:
+            worker = ClientWorker(
+                self._datasets, self._deliver, self._downloads, engine=self._engine,
+                device=self._device, memory=self._memory, shared=shared,
+            )  # fmt: skip
+        except Exception:
+            KERNEL.leave(id(self), series)
+            raise
+        try:
+            worker.open(0, None, fit=False, frame=False)  # nothing read: the state follows
+            worker.state = state  # its thread idle: no frame is asked for yet
+            if focus is not None:
+                worker.update({"type": "update", "focus": list(focus)}, frame=False)
+        except Exception:
+            self._end(worker)
+            raise
+        self._shared, self._live, self._saved = shared, worker, None
+
+    def _view_changed(self, shown: bool) -> None:
+        """A view of the widget rendered on the page, or removed (its output cleared, its cell
+        deleted): with none left for SUSPEND_AFTER_S the widget is suspended; one shown
+        resumes it now (its page's requests follow), its state integrated meanwhile."""
+        with self._cond:
+            self._views_shown = max(0, self._views_shown + (1 if shown else -1))
+            self._view_gen += 1
+            gen, none = self._view_gen, self._views_shown == 0
+        if shown:
+            was = self.suspended
+            worker = self._worker
+            if was:
+                worker.warm()
+        elif none:
+            self._suspend_after(gen, SUSPEND_AFTER_S)
+
+    def _suspend_after(self, gen: int, delay: float) -> None:
+        timer = threading.Timer(delay, self._suspend, args=(gen,))
+        timer.daemon = True
+        timer.start()
+
+    def _suspend(self, gen: int) -> None:
+        """(The timer's thread.) Let the worker go where no view was shown since turn `gen`,
+        keeping its state for `_resume`; later where the kernel used the worker less than
+        SUSPEND_AFTER_S ago or waits on it now."""
+        with self._life:
+            with self._cond:
+                if self._closed or self._live is None or self._views_shown or gen != self._view_gen:
+                    return
+                busy = self._busy
+            left = self._used_at + SUSPEND_AFTER_S - time.monotonic()
+            if busy or left > 0:
+                self._suspend_after(gen, max(left, POLL_S))
+                return
+            worker, self._live = self._live, None
+            self._saved = (worker.state, worker.shown_focus())
+            # No frame until one is wanted again: a view's first request, or the kernel's; the
+            # new worker's answer it (its frames numbered afresh).
+            self._drawing = False
+            self._end(worker)
+            with self._cond:
+                self.last_frame = None
+            self._shared = None
