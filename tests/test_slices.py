@@ -347,7 +347,16 @@ def test_a_real_server_answers_a_slice_request_with_the_winner_under_the_point(t
         assert probe["voxel"] == got["voxel"] and probe["pinned"] == "slice"
         curve = [float(series.read_region(t, z, y, x)) for t in range(series.n_steps)]
         assert probe["values"] == pytest.approx(curve) and probe["window"] == list(range(2, 9))
-        for bad, needle in (({}, "a view's pixel"), ({"slice": "z=99", "u": 0, "v": 0}, "z=99")):
+        bad_probes = (
+            ({}, "a view's pixel"),
+            ({"slice": "z=16"}, "one of them"),  # no point on it
+            ({"slice": "z=16", "u": 0.3, "v": 0.6, "x": 0.5, "y": 0.5}, "one of them"),
+            ({"u": 0.3, "v": 0.6}, "one of them"),
+            ({"x": 0.5}, "one of them"),
+            ({"x": 0.5, "y": 0.5, "x2": 0.6}, "one of them"),
+            ({"slice": "z=99", "u": 0, "v": 0}, "z=99"),
+        )
+        for bad, needle in bad_probes:
             rid = client.send({"type": "probe", "view": 0, **bad})
             _, error = client.wait("error", rid)
             assert "\n" not in error["message"] and needle in error["message"], error

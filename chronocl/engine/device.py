@@ -177,7 +177,7 @@ class DeviceContext:
 
     @property
     def is_cpu(self) -> bool:
-        return "CPU" in self.info.kind and env.get("CHRONOCL_DEVICE_KIND") != "gpu"
+        return "CPU" in self.info.kind and env.get("CHRONOCL_DEVICE_KIND").lower() != "gpu"
 
     def streams(self):
         """The upload, compute and read-back queues with their reused buffers

@@ -191,9 +191,11 @@ class Streams:
         return held
 
     def clear(self) -> None:
-        """Release the reused buffers (unmapping the staging ones), with no work on them
-        enqueued: the next brick makes them again (tests/device_faults.py fails each call of
+        """Release the reused buffers (unmapping the staging ones) once the queues' work is
+        done: the next brick makes them again (tests/device_faults.py fails each call of
         a frame's work, these buffers' making included)."""
+        for queue in (self.upload, self.compute, self.download):
+            queue.finish()  # nothing enqueued may still use them
         held, self.buffers = self.buffers, {}
         for buf in held.values():
             if isinstance(buf, np.ndarray):  # a mapped staging buffer

@@ -105,8 +105,11 @@ class TokenGuard:
             await self.app(scope, receive, send)
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
-        hosts = sum(k.lower() == b"host" for k, _ in scope["headers"])
-        if hosts > 1 or not self.host_ok(scope, headers):  # two: which one names us? (RFC 9112)
+        names = [k.lower() for k, _ in scope["headers"]]
+        if names.count(b"host") > 1 or names.count(b"origin") > 1:  # which one is meant?
+            await self._refuse(scope, send, "two Host or Origin headers (one of each is allowed)")
+            return
+        if not self.host_ok(scope, headers):
             await self._refuse(
                 scope, send, "the Host header does not name this server (DNS rebinding?)"
             )

@@ -141,10 +141,14 @@ def probe_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
     from empty space probes the feature; only a rectangle whose rays all miss is refused.
     """
     camera = state.panel_camera(view)  # its own camera where it has one
-    if "slice" in msg:
+    pixel, pinned = {"x", "y", "x2", "y2"} & set(msg), {"slice", "u", "v"} & set(msg)
+    if pinned == {"slice", "u", "v"} and not pixel:
         return _pinned_reply(msg, view, state, cv, ds, camera)
-    if "x" not in msg or "y" not in msg:
-        raise ProtocolError("probe needs a view's pixel (x, y), or a slice and its point (u, v)")
+    if pinned or not {"x", "y"} <= pixel or len(pixel) == 3:
+        raise ProtocolError(
+            "probe takes a view's pixel (x, y; a box: x2, y2 too) or a slice and its point "
+            "(slice, u, v), one of them"
+        )
     box_drag = "x2" in msg and "y2" in msg
     rays = _rectangle_rays(msg, state.size) if box_drag else [(msg["x"], msg["y"])]
     hits = [probe_ray(cv, camera, state.size, x, y, state.clip) for x, y in rays]

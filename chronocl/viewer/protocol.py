@@ -12,6 +12,8 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
                                                          focus: frame this world box)
     probe      {"view", "x", "y"[, "x2", "y2"]}         x, y in [0, 1] of the panel, top-left 0;
                                                          x2, y2: a box between two rays' voxels
+               {"view", "slice", "u", "v"}              or pinned on a slice ("z=40") at (u, v)
+                                                         of its voxel grid (reply: "pinned")
     histogram  {"range": [lo, hi]}                       normalised values u in the window
                (+ "view": the view's own window; "of": "change", "value_range": [lo, hi]:
                the changes between its steps)

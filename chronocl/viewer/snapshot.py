@@ -47,6 +47,7 @@ from chronocl.render.framing import framed
 from chronocl.render.image import Image
 from chronocl.render.triad import draw_triad
 from chronocl.render.views import parse_color, raycaster
+from chronocl.viewer.box_axes import box_axes, draw_axes
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.protocol import SESSION_KEY, SESSION_VERSION, SNAPSHOT, decode_json
 from chronocl.viewer.saving import Downloads, picture
@@ -202,10 +203,10 @@ def render_snapshot(
 ) -> Image:
     """The views of `state` drawn as the viewer's Save PNG draws them: the same chronovolumes,
     camera (as the panels are drawn, framing its focus, else the visible region), size, clip,
-    lighting, background and outline, each panel labelled, its legends below, and with the
-    data set's `name` Save PNG's title band over them, naming it and the windows (also the
-    PNG's Title text); `axes` adds the axis triad to each panel (`chronocl render --state
-    --axes`).
+    lighting, background and outline (with its labelled axes), each panel labelled, its
+    legends below, and with the data set's `name` Save PNG's title band over them, naming it
+    and the windows (also the PNG's Title text); `axes` adds the axis triad to each panel
+    (`chronocl render --state --axes`).
     `changes[i]` replaces fields of view i's IntegrationSpec (e.g. a time TF given on the
     command line, a colour map given to its own data TF)."""
     from chronocl.integration.inmemory import integrate
@@ -237,6 +238,9 @@ def render_snapshot(
                     shading=state.shading,
                 )
             )
+            if state.outline:  # the box's labelled axes, as Save PNG draws them
+                edges = box_axes(cv, state.panel_camera(i), state.size, series.dims, series.spacing)
+                panels[-1] = draw_axes(panels[-1], edges)
             if axes:
                 panels[-1] = draw_triad(panels[-1], state.panel_camera(i))
         finally:
