@@ -156,6 +156,12 @@ def test_render_state_options_apply_to_every_views_camera(series):
     assert fields["views"][1]["camera"]["projection"] == "orthographic"  # the rest its own
     assert fields["views"][1]["time_tf"]["alpha"] == "hat"  # its TFs kept
     assert snapshot["views"][1]["camera"]["azimuth"] == 160.0  # the session as it was
+    # --mode changes each view's mode alone: its own camera and TFs stay; a view more is linked
+    fields = _snapshot_fields(snapshot, {"mode": ["max,min", "mean"]})
+    assert [v["mode"] for v in fields["views"]] == ["max", "min", "mean"]
+    assert fields["views"][1]["camera"] == snapshot["views"][1]["camera"]
+    assert fields["views"][1]["time_tf"] == snapshot["views"][1]["time_tf"]
+    assert fields["views"][2] == {"mode": "mean", "order": snapshot["views"][0]["order"]}
 
 
 def test_render_state_colormap_recolours_each_views_own_curve(stores, series, tmp_path):

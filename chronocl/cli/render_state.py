@@ -133,7 +133,11 @@ def _snapshot_fields(snapshot: dict, options: dict) -> dict:
     if "mode" in options:
         names = [m.strip() for item in options["mode"] for m in item.split(",") if m.strip()]
         order = views[0].get("order", "forward")
-        views = [{"mode": m, "order": order} for m in names]
+        # view i keeps its own window, camera and TFs; views beyond the snapshot's are linked
+        views = [
+            (views[i] if i < len(views) else {"order": order}) | {"mode": m}
+            for i, m in enumerate(names)
+        ]
     if "order" in options:
         order = parse_order(options["order"])
         if not isinstance(order, str):
