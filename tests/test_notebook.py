@@ -367,6 +367,19 @@ def test_probe_gives_what_the_page_probe_shows(widget, monkeypatch):
     assert mine["window"] == list(range(2, 9)) and len(mine["values"]) == STEPS
     series = chronocl.TimeSeries.from_array(vortex())
     assert mine["values"] == pytest.approx(chronocl.probe(series, v["x"], v["y"], v["z"]).values)
+    # The page's probe panel was given the code's probe too ("probed from code"), as its own
+    shown = [m for m in sent if m.get("type") == "probe"][-1]
+    assert shown["pinned"] == "code" and shown["voxel"] == page["voxel"]
+    assert shown["values"] == page["values"] and shown["csv"] == page["csv"]
+    assert shown["mark"] == pytest.approx(page["mark"], abs=1e-4)
+    # and the next frames mark it where the voxel lies after a turn; show=False sends nothing
+    widget.camera = {"azimuth": 80}
+    header = widget.wait_frame()
+    assert header["probe"] is not None and header["probe"]["view"] == 0
+    assert (header["probe"]["x"], header["probe"]["y"]) != pytest.approx(tuple(page["mark"]))
+    before = len(sent)
+    widget.probe((v["x"], v["y"], v["z"]), show=False)
+    assert not [m for m in sent[before:] if m.get("type") == "probe"]
 
 
 def test_probe_takes_a_world_point_and_a_box(widget):

@@ -37,7 +37,7 @@ from chronocl.notebook.kernel import KERNEL
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.probe import project
-from chronocl.viewer.protocol import parse_message, unpack_frame
+from chronocl.viewer.protocol import PROBE_THRESHOLD, parse_message, unpack_frame
 from chronocl.viewer.residency import POLL_S, residency
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.snapshot import snapshot_of
@@ -476,7 +476,13 @@ class ChronoclWidget(anywidget.AnyWidget):
         return snapshot_of(state, ds.name, ds.series, ds.path, self._worker.shown_focus())
 
     def probe(
-        self, point: object = None, *, box: object = None, world: bool = False, view: int = 0
+        self,
+        point: object = None,
+        *,
+        box: object = None,
+        world: bool = False,
+        view: int = 0,
+        show: bool = True,
     ) -> dict:
         """v(t) at a point over every step of the series, as the page's probe plots it (its
         reply, the same fields): `point` is (x, y, z), x first, voxel indices of the full
@@ -488,8 +494,9 @@ class ChronoclWidget(anywidget.AnyWidget):
         ...} or None), world (the voxel's or box's centre, physical x, y, z), values (one per
         step), min, max (a box's, else None), window (its steps), times, csv, mark (where the
         centre is on the view's panel in the last frame, (x, y) fractions; None: off it or no
-        frame yet). It reads the point's steps (one small read per run of steps); the page's
-        own probe panel is left as it is."""
+        frame yet). It reads the point's steps (one small read per run of steps). With `show`
+        the page's probe panel plots it too ("probed from code") and the view marks it, as a
+        probe made on the page."""
         self._check_open()
         ds = self._datasets[0]
         series = ds.series
@@ -519,7 +526,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         dims = np.array(series.dims, dtype=np.float64)
         fractions = tuple(float(v) for v in (lo + hi) / 2 / dims)
         window = list(state.selection(series.n_steps, view).steps)
-        return {
+        got = {
             "view": view,
             "voxel": voxel,
             "box": boxed,
@@ -534,6 +541,20 @@ class ChronoclWidget(anywidget.AnyWidget):
             "csv": curve.csv_text(window),
             "mark": self._mark(view, fractions),
         }
+        if show:
+            self._show_probe(got, fractions)
+        return got
+
+    def _show_probe(self, got: dict, fractions: tuple) -> None:
+        """The page's probe panel plots `got` (a `probe` reply as the page's own probe gets)
+        and the frames mark it from now on."""
+        mark = got["mark"]
+        reply = {k: got[k] for k in ("view", "voxel", "box", "values", "min", "max", "window")}
+        reply |= {"type": "probe", "id": None, "csv": got["csv"], "mark": mark}
+        reply |= {"x": None if mark is None else mark[0], "y": None if mark is None else mark[1]}
+        reply |= {"reached": True, "opacity": None, "threshold": PROBE_THRESHOLD}
+        self._worker.pin_probe(got["view"], fractions)
+        self.send({"text": json.dumps(reply | {"pinned": "code"})})
 
     def _mark(self, view: int, fractions: tuple) -> tuple[float, float] | None:
         """Where the box fractions `fractions` are on `view`'s panel as the frames show it (the

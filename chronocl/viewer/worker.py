@@ -177,6 +177,11 @@ class ClientWorker(Tasks):
         self._focus_gen += 1
         self._focus = None if box is None else (self._focus_gen, box)
 
+    def pin_probe(self, view: int, where: tuple[float, float, float]) -> None:
+        """The probe's mark follows box fractions `where` on view `view` in the frames from
+        now on (a probe made from code, as the page's own probe sets it)."""
+        self._probed = (view, where)
+
     def shown_focus(self) -> list | None:
         """The world box the views frame now (None: not known yet)."""
         with self._cond:

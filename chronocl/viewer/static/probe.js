@@ -40,7 +40,7 @@ export function onProbe(msg) {
     return;
   }
   const v = msg.voxel;
-  const found = msg.pinned ? `pinned on the slice` : how;
+  const found = { slice: 'pinned on the slice', code: 'probed from code' }[msg.pinned] || how;
   txt.textContent = `voxel x=${v.x} y=${v.y} z=${v.z} (${found}) · view ${msg.view + 1}`;
 }
 
