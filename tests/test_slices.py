@@ -303,6 +303,13 @@ def test_the_viewers_slice_reply_reads_the_voxel_under_the_point(max_cv):
     with pytest.raises(ChronoclError, match="in \\[0, 1\\]"):
         slice_reply({"slice": "y=4", "u": 2, "v": 0}, 0, state, cv, Dataset("grid", series))
     assert slice_reply({"slice": "z=0"}, 0, state, cv, Dataset("grid", series))["readout"] is None
+    # the page gives its panel's room: each of the two pictures takes half its width, at the
+    # view's aspect (96x80), the captions and legends below
+    sized = slice_reply({"slice": "y=4", "size": [400, 900]}, 0, state, cv, Dataset("g", series))
+    assert sized["size"][0] == 400 and sized["grid"] == reply["grid"]
+    want = render_slice(cv, "y=4", (200, 167), background="white", name="g").array
+    png = base64.b64decode(sized["png"].split(",", 1)[1])
+    assert np.array_equal(np.asarray(PILImage.open(io.BytesIO(png)).convert("RGB")), want)
 
 
 def test_a_real_server_answers_a_slice_request_with_the_winner_under_the_point(tmp_path):

@@ -278,6 +278,7 @@ MESSAGES: dict[str, Obj] = {
             "u": Num(0.0, 1.0),
             "v": Num(0.0, 1.0),
             "picture": Bool(),  # false: the read-out at (u, v) alone (a pointer moving)
+            "size": SIZE,  # the room for the picture on the page (default: the view's size)
         },
         frozenset({"slice"}),
     ),

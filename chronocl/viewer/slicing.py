@@ -2,9 +2,10 @@
 chronovolume (`chronocl.render.slices`), where its voxel grid lies in it, and the read-out at a
 point of the slice.
 
-A `slice` request names the view, the slice ("z=40") and optionally a point (`u`, `v` in
-[0, 1] of the slice's voxel grid, across from the left and down from the top, as a page's
-pointer over the grid `box` gives them). The reply carries the picture as a PNG data URL, its
+A `slice` request names the view, the slice ("z=40"), the picture's `size` (the page's panel;
+the view's by default) and optionally a point (`u`, `v` in [0, 1] of the slice's voxel grid,
+across from the left and down from the top, as a page's pointer over the grid `box` gives
+them). The reply carries the picture as a PNG data URL, its
 `layout` (in pixels of the picture) and `box` (where the grid lies in each of the layout's
 `pictures`, in pixels from that picture's corner), the grid's rows and columns, and at the point
 the voxel, its position in data units, the step that won there, its time and the series' raw
@@ -33,6 +34,7 @@ from chronocl.render.slices import (
 )
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.protocol import MAX_PANEL, MIN_PANEL
 from chronocl.viewer.view_state import ViewState
 
 
@@ -41,6 +43,18 @@ def slice_clip(sl: Slice, cv: Chronovolume) -> tuple[float, float, float, float]
     n = dict(zip("xyz", cv.shape[::-1], strict=True))[sl.axis]
     normal = tuple(1.0 if a == sl.axis else 0.0 for a in "xyz")
     return (*normal, (2 * sl.index + 1) / n - 1)  # type: ignore[return-value]
+
+
+def panel_size(room, view_size, pictures: int) -> tuple[int, int]:
+    """Each of the slice's `pictures` (the colours, and the step map where the mode keeps a
+    t_index) drawn side by side in `room` (W, H), the page's panel: an equal share of its width
+    at the view's aspect, no taller than three quarters of its height (the captions and legend
+    bands take the rest); the view's size where the page names no room."""
+    if room is None:
+        return tuple(view_size)  # type: ignore[return-value]
+    w = max(MIN_PANEL, room[0] // pictures)
+    h = round(w * view_size[1] / view_size[0])
+    return w, max(MIN_PANEL, min(h, MAX_PANEL, room[1] * 3 // 4))
 
 
 def point_voxel(msg: dict, sl: Slice, shape) -> tuple[int, int, int]:
@@ -59,9 +73,10 @@ def point_voxel(msg: dict, sl: Slice, shape) -> tuple[int, int, int]:
 
 def slice_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Dataset) -> dict:
     """The `slice` reply to `msg` for the shown `view` of `state` (its chronovolume `cv`, of
-    data set `ds`): the slice picture at the view's size and background, where its grid lies,
-    and with a point (`u`, `v`) the read-out there (None without one). With `picture` false
-    (a pointer moving over the picture the page has) only the read-out: no picture is drawn."""
+    data set `ds`): the slice picture at the size asked for (else the view's) and background,
+    where its grid lies, and with a point (`u`, `v`) the read-out there (None without one).
+    With `picture` false (a pointer moving over the picture the page has) only the read-out:
+    no picture is drawn."""
     sl = parse_slice(msg.get("slice"), cv.shape)
     reply = {
         "type": "slice",
@@ -72,7 +87,8 @@ def slice_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: Da
         "readout": None,
     }
     if msg.get("picture", True):
-        pic = slice_picture(cv, sl, state.size, state.background, name=ds.name)
+        size = panel_size(msg.get("size"), state.size, 1 if cv.t_index is None else 2)
+        pic = slice_picture(cv, sl, size, state.background, name=ds.name)
         rows, cols = pic.grid
         reply |= {
             "png": "data:image/png;base64," + base64.b64encode(pic.image.png_bytes()).decode(),

@@ -58,6 +58,21 @@ function syncSlider(middle = false) {
   $('slice-at').textContent = `${el.value} / ${n - 1}`;
 }
 
+// The room for the picture in device pixels (the server shares its width among the pictures,
+// slicing.panel_size): the side panel's width, or, shown over the views, the room there.
+function pictureSize() {
+  const dpr = window.devicePixelRatio || 1;
+  const fit = (v) => Math.max(64, Math.min(1024, Math.round(v * dpr)));
+  const big = $('slice-big');
+  if (!big.hidden && big.clientWidth > 0) {
+    const room = big.clientHeight - $('slice-big-readout').offsetHeight - 40; // title, margins
+    return [fit(big.clientWidth - 20), fit(Math.max(64, room))];
+  }
+  // (2: its border; whole 16-pixel steps, so a few pixels' change asks for no new picture)
+  const width = fit($('slice-pic').parentElement.clientWidth - 2);
+  return [Math.max(64, width - (width % 16)), 1024];
+}
+
 // What the picture shows: the slice, and what the selected view is drawn from and with.
 function sliceKey() {
   if (!S.info || !S.state) return null;
@@ -65,6 +80,7 @@ function sliceKey() {
   return JSON.stringify([
     S.info.index, spec(), i, S.state.views[i], S.state.window, shown('data_tf'), shown('time_tf'),
     S.state.enhance, S.state.threshold, S.state.background, S.state.size, shown('camera'),
+    pictureSize(),
   ]);
 }
 
@@ -75,7 +91,7 @@ function ask(delay = ASK_MS) {
     if (!open() || key === null || busy(pictureBusy)) return; // (asked again when it answers)
     asked = key;
     flushUpdates(); // the server draws it first, then answers from what it drew
-    const id = send({ type: 'slice', view: S.selectedView, slice: spec() });
+    const id = send({ type: 'slice', view: S.selectedView, slice: spec(), size: pictureSize() });
     pictureBusy = id ? performance.now() : 0;
     pictureId = id || pictureId;
   }, delay);
@@ -100,7 +116,12 @@ function askReadout(u, v) {
   const wait = hoverAt + HOVER_MS - performance.now();
   clearTimeout(hoverTimer);
   const go = () => {
-    if (!hoverNext || !S.state || busy(hoverBusy)) return; // (the answer sends the point kept)
+    if (!hoverNext || !S.state) return;
+    if (busy(hoverBusy)) {
+      // the answer sends the point kept; one that never comes, once it is stale
+      hoverTimer = setTimeout(go, BUSY_MS - (performance.now() - hoverBusy) + 1);
+      return;
+    }
     hoverAt = performance.now();
     const msg = { type: 'slice', view: S.selectedView, slice: spec(), picture: false, ...hoverNext };
     hoverNext = null;
@@ -254,6 +275,7 @@ export function bindSlice(page) {
   const large = (show) => {
     $('slice-big').hidden = !show;
     $('slice-large').setAttribute('aria-expanded', String(show));
+    if (open()) ask(0); // drawn again at the size it is shown at
   };
   $('slice-large').addEventListener('click', () => large($('slice-big').hidden));
   $('slice-big-close').addEventListener('click', () => {
