@@ -33,6 +33,7 @@ let hoverId = 0; // the id of the newest read-out asked for
 // frames, and holds at most 8 requests): the next is asked when the last one's answer comes.
 // (an answer lost with its socket frees them after BUSY_MS)
 const BUSY_MS = 10_000;
+const SIDE_INSET = 40; // the side panel's padding (20), border (1), picture border (2), scrollbar
 let pictureBusy = 0; // when the picture in flight was asked for (0: none)
 let hoverBusy = 0;
 const busy = (since) => since > 0 && performance.now() - since < BUSY_MS;
@@ -68,8 +69,10 @@ function pictureSize() {
     const room = big.clientHeight - $('slice-big-readout').offsetHeight - 40; // title, margins
     return [fit(big.clientWidth - 20), fit(Math.max(64, room))];
   }
-  // (2: its border; whole 16-pixel steps, so a few pixels' change asks for no new picture)
-  const width = fit($('slice-pic').parentElement.clientWidth - 2);
+  // The side panel's width less its padding, border and a scrollbar's room, whether one shows
+  // or not (the picture's own height makes one come and go: it asked again, at another width);
+  // in whole 16-pixel steps, so a few pixels' change asks for no new picture.
+  const width = fit($('side').offsetWidth - SIDE_INSET);
   return [Math.max(64, width - (width % 16)), 1024];
 }
 
