@@ -372,14 +372,17 @@ def test_probe_gives_what_the_page_probe_shows(widget, monkeypatch):
     assert shown["pinned"] == "code" and shown["voxel"] == page["voxel"]
     assert shown["values"] == page["values"] and shown["csv"] == page["csv"]
     assert shown["mark"] == pytest.approx(page["mark"], abs=1e-4)
-    # and the next frames mark it where the voxel lies after a turn; show=False sends nothing
+    # Another voxel probed from code is the one the next frames mark (the page's pinned v),
+    # where it lies after a turn; show=False sends nothing and moves no mark
+    other = tuple((c + 4) % n for c, n in zip((v["x"], v["y"], v["z"]), SHAPE[::-1], strict=True))
+    widget.probe(other)
     widget.camera = {"azimuth": 80}
     header = widget.wait_frame()
-    assert header["probe"] is not None and header["probe"]["view"] == 0
-    assert (header["probe"]["x"], header["probe"]["y"]) != pytest.approx(tuple(page["mark"]))
     before = len(sent)
-    widget.probe((v["x"], v["y"], v["z"]), show=False)
+    there = widget.probe(other, show=False)["mark"]  # where it is in that frame
     assert not [m for m in sent[before:] if m.get("type") == "probe"]
+    assert header["probe"]["view"] == 0 and there is not None
+    assert (header["probe"]["x"], header["probe"]["y"]) == pytest.approx(tuple(there), abs=1e-4)
 
 
 def test_probe_takes_a_world_point_and_a_box(widget):

@@ -162,6 +162,10 @@ def test_render_state_options_apply_to_every_views_camera(series):
     assert fields["views"][1]["camera"] == snapshot["views"][1]["camera"]
     assert fields["views"][1]["time_tf"] == snapshot["views"][1]["time_tf"]
     assert fields["views"][2] == {"mode": "mean", "order": snapshot["views"][0]["order"]}
+    # --window is every view's: a view's own window is let go
+    fields = _snapshot_fields(snapshot, {"window": "1:5"})
+    assert fields["window"] == {"t0": 1, "t1": 5, "stride": 1}
+    assert all(v["window"] is None for v in fields["views"])
 
 
 def test_render_state_colormap_recolours_each_views_own_curve(stores, series, tmp_path):

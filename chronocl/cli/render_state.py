@@ -156,6 +156,8 @@ def _snapshot_fields(snapshot: dict, options: dict) -> dict:
                 f"with --state, --window is t0:t1[:stride], e.g. 0:10:2; got {options['window']!r}"
             )
         fields["window"] = {"t0": t0, "t1": t1, "stride": rest[0] if rest else 1}
+        for v in views:  # every view shows it (a view's own window is let go)
+            v["window"] = None
     camera = dict(snapshot["camera"])
     if "up" in options:
         from chronocl.render.camera import Camera

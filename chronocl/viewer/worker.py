@@ -180,7 +180,8 @@ class ClientWorker(Tasks):
     def pin_probe(self, view: int, where: tuple[float, float, float]) -> None:
         """The probe's mark follows box fractions `where` on view `view` in the frames from
         now on (a probe made from code, as the page's own probe sets it)."""
-        self._probed = (view, where)
+        with self._cond:
+            self._probed = (view, where)
 
     def shown_focus(self) -> list | None:
         """The world box the views frame now (None: not known yet)."""
@@ -575,8 +576,9 @@ class ClientWorker(Tasks):
 
     def _probe_mark(self, state: ViewState, cvs: list[Chronovolume]) -> dict | None:
         """Where the probed voxel is on its panel in this frame (None: no probe, or off-panel)."""
-        if self._probed is None or self._probed[0] >= len(cvs):
+        probed = self._probed  # (read once: a probe from code sets it from another thread)
+        if probed is None or probed[0] >= len(cvs):
             return None
-        view, where = self._probed
+        view, where = probed
         at = project(cvs[view], state.panel_camera(view), state.size, where)
         return None if at is None else {"view": view, "x": at[0], "y": at[1]}

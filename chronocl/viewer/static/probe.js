@@ -36,7 +36,7 @@ export function onProbe(msg) {
     const n = (b.x[1] - b.x[0]) * (b.y[1] - b.y[0]) * (b.z[1] - b.z[0]);
     txt.textContent =
       `box x ${b.x[0]}:${b.x[1]} y ${b.y[0]}:${b.y[1]} z ${b.z[0]}:${b.z[1]} (${n} voxels): ` +
-      `mean, min-max band · view ${msg.view + 1}`;
+      `mean, min-max band${msg.pinned === 'code' ? ' (probed from code)' : ''} · view ${msg.view + 1}`;
     return;
   }
   const v = msg.voxel;

@@ -42,7 +42,7 @@ let shownKey = null; // what the picture shown was asked for
 const HINT = 'move the pointer over the slice: the voxel, its step, time and value; click: probe v(t) there';
 
 // Pictures are asked for while the panel is open or the slice is shown over the views.
-const open = () => $('slice-panel').open || !$('slice-big').hidden;
+const open = () => ($('slice-panel').open && $('side').offsetWidth > 0) || !$('slice-big').hidden;
 
 // The volume's voxels along `axis`, from the data set's shape {t, z, y, x}.
 const extent = (axis) => (S.info ? S.info.shape[axis] : 1);
@@ -66,8 +66,9 @@ function pictureSize() {
   const fit = (v) => Math.max(64, Math.min(1024, Math.round(v * dpr)));
   const big = $('slice-big');
   if (!big.hidden && big.clientWidth > 0) {
-    const room = big.clientHeight - $('slice-big-readout').offsetHeight - 40; // title, margins
-    return [fit(big.clientWidth - 20), fit(Math.max(64, room))];
+    // less the title, margins and two lines of read-out; in 16-pixel steps, as the panel's
+    const [w, h] = [fit(big.clientWidth - 20), fit(Math.max(64, big.clientHeight - 80))];
+    return [Math.max(64, w - (w % 16)), Math.max(64, h - (h % 16))];
   }
   // The side panel's width less its padding, border and a scrollbar's room, whether one shows
   // or not (the picture's own height makes one come and go: it asked again, at another width);
@@ -91,7 +92,12 @@ function ask(delay = ASK_MS) {
   clearTimeout(askTimer);
   askTimer = setTimeout(() => {
     const key = sliceKey();
-    if (!open() || key === null || busy(pictureBusy)) return; // (asked again when it answers)
+    if (!open() || key === null) return;
+    if (busy(pictureBusy)) {
+      // asked again when it answers; one that never comes, once it is stale
+      askTimer = setTimeout(() => ask(0), BUSY_MS - (performance.now() - pictureBusy) + 1);
+      return;
+    }
     asked = key;
     flushUpdates(); // the server draws it first, then answers from what it drew
     const id = send({ type: 'slice', view: S.selectedView, slice: spec(), size: pictureSize() });
