@@ -684,12 +684,14 @@ class ChronoclWidget(anywidget.AnyWidget):
             if busy or left > 0:
                 self._suspend_after(gen, max(left, POLL_S))
                 return
-            worker, self._live = self._live, None
-            self._saved = (worker.state, worker.shown_focus())
+            worker = self._live
+            saved = (worker.state, worker.shown_focus())
             # No frame until one is wanted again: a view's first request, or the kernel's; the
             # new worker's answer it (its frames numbered afresh).
             self._drawing = False
             self._end(worker)
             with self._cond:
                 self.last_frame = None
-            self._shared = None
+            # suspended (`suspended`) only now, its last frames delivered and forgotten; uses
+            # of the worker meanwhile waited on `_life`
+            self._saved, self._live, self._shared = saved, None, None
