@@ -36,8 +36,8 @@ from chronocl.notebook.bundle import esm
 from chronocl.notebook.kernel import KERNEL
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import on_gl
-from chronocl.viewer.probe import project
-from chronocl.viewer.protocol import PROBE_THRESHOLD, parse_message, unpack_frame
+from chronocl.viewer.probe import pinned_reply, project
+from chronocl.viewer.protocol import parse_message, unpack_frame
 from chronocl.viewer.residency import POLL_S, residency
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.snapshot import snapshot_of
@@ -541,20 +541,11 @@ class ChronoclWidget(anywidget.AnyWidget):
             "csv": curve.csv_text(window),
             "mark": self._mark(view, fractions),
         }
-        if show:
-            self._show_probe(got, fractions)
+        if show:  # the page's probe panel plots it, and the frames mark it from now on
+            self._worker.pin_probe(view, fractions)
+            shown = pinned_reply(view, voxel, boxed, curve, window, got["mark"], "code")
+            self.send({"text": json.dumps(shown)})
         return got
-
-    def _show_probe(self, got: dict, fractions: tuple) -> None:
-        """The page's probe panel plots `got` (a `probe` reply as the page's own probe gets)
-        and the frames mark it from now on."""
-        mark = got["mark"]
-        reply = {k: got[k] for k in ("view", "voxel", "box", "values", "min", "max", "window")}
-        reply |= {"type": "probe", "id": None, "csv": got["csv"], "mark": mark}
-        reply |= {"x": None if mark is None else mark[0], "y": None if mark is None else mark[1]}
-        reply |= {"reached": True, "opacity": None, "threshold": PROBE_THRESHOLD}
-        self._worker.pin_probe(got["view"], fractions)
-        self.send({"text": json.dumps(reply | {"pinned": "code"})})
 
     def _mark(self, view: int, fractions: tuple) -> tuple[float, float] | None:
         """Where the box fractions `fractions` are on `view`'s panel as the frames show it (the

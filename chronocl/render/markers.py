@@ -64,7 +64,7 @@ def draw_markers(
         for shift in _shifts(bottom - top + 2):
             at_x, at_y = px + radius + 2, py - radius + shift
             box = (at_x + left, at_y + top, at_x + right, at_y + bottom)
-            if not any(_overlap(box, other) for other in placed):
+            if not any(boxes_overlap(box, other) for other in placed):
                 break
         placed.append(box)
         draw.text((at_x, at_y), label, fill=MARKER_RGB, font=font, stroke_width=2, stroke_fill=RIM)
@@ -120,5 +120,6 @@ def _shifts(line: float, most: int = 8):
         yield -k * line
 
 
-def _overlap(a, b) -> bool:
+def boxes_overlap(a, b) -> bool:
+    """Whether boxes (x0, y0, x1, y1) `a` and `b` overlap (touching edges do not)."""
     return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]

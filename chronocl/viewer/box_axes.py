@@ -31,6 +31,7 @@ import numpy as np
 from chronocl.core.ticks import multiples, nice_step, tick_text
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera, to_panel
+from chronocl.render.markers import boxes_overlap
 from chronocl.render.triad import AXIS_COLOURS
 from chronocl.viewer.slots import geometry
 
@@ -203,7 +204,7 @@ def draw_axes(panel: np.ndarray, edges: list[dict] | None) -> np.ndarray:
             or box[1] < 0
             or box[2] > w
             or box[3] > h
-            or any(_overlap(box, k) for k in kept)
+            or any(boxes_overlap(box, k) for k in kept)
         ):
             return None
         kept.append(box)
@@ -227,10 +228,6 @@ def draw_axes(panel: np.ndarray, edges: list[dict] | None) -> np.ndarray:
         at = np.clip(at, NAME_GAP_PX, [w - NAME_GAP_PX, h - NAME_GAP_PX])  # on the picture
         text(at, name["label"], AXIS_COLOURS["xyz".index(edge["axis"])], "mm")
     return np.asarray(out)
-
-
-def _overlap(a, b) -> bool:
-    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
 
 
 def _anchor(out: np.ndarray) -> str:

@@ -191,12 +191,21 @@ def _pinned_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: 
     voxel = point_voxel(msg, parse_slice(msg["slice"], cv.shape), cv.shape)
     where = box_fractions(cv, voxel)
     mark = project(cv, camera, state.size, where)
-    curve = ds.curve(voxel)
     window = list(state.selection(ds.series.n_steps, view).steps)
+    at = dict(zip("xyz", voxel, strict=True))
+    reply = pinned_reply(view, at, None, ds.curve(voxel), window, mark, "slice")
+    return reply | {"id": msg.get("id"), "where": where}
+
+
+def pinned_reply(view: int, voxel, box, curve, window: list, mark, by: str) -> dict:
+    """The `probe` reply for a probe pinned at a voxel ({x, y, z}) or a box ({x: [x0, x1],
+    ...}) rather than met by a ray (`by`: "slice", a click on the slice; "code", the notebook
+    widget's `probe`): `curve` (`Dataset.curve`'s) there, `window` its view's steps, `mark`
+    where it lies on the view (`x`, `y` too: None where off the picture)."""
     x, y = mark if mark is not None else (None, None)
     return {
         "type": "probe",
-        "id": msg.get("id"),
+        "id": None,
         "view": view,
         "x": x,
         "y": y,
@@ -204,13 +213,12 @@ def _pinned_reply(msg: dict, view: int, state: ViewState, cv: Chronovolume, ds: 
         "opacity": None,
         "threshold": PROBE_THRESHOLD,
         "window": window,
-        "voxel": dict(zip("xyz", voxel, strict=True)),
-        "box": None,
+        "voxel": voxel,
+        "box": box,
         "values": [float(t) for t in curve.values],
-        "min": None,
-        "max": None,
+        "min": None if curve.min is None else [float(t) for t in curve.min],
+        "max": None if curve.max is None else [float(t) for t in curve.max],
         "csv": curve.csv_text(window),
         "mark": mark,
-        "where": where,
-        "pinned": "slice",
+        "pinned": by,
     }
