@@ -30,10 +30,12 @@ import numpy as np
 
 from chronocl.core.ticks import multiples, nice_step, tick_text
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
 from chronocl.render.camera import Camera, to_panel
 from chronocl.render.markers import boxes_overlap
 from chronocl.render.triad import AXIS_COLOURS
 from chronocl.viewer.slots import geometry
+from chronocl.viewer.view_state import ViewState
 
 MIN_EDGE_PX = 40  # an edge shorter than this on the panel is seen end-on: no ticks
 TICK_GAP_PX = 50  # ticks along an edge at least about this far apart
@@ -90,6 +92,18 @@ def box_axes(
         edge["ticks"] = _ticks(a, corners[i], extent, camera, size, dims[a], spacing[a], length)
         edges.append(edge)
     return edges
+
+
+def views_axes(state: ViewState, cvs: list[Chronovolume], series: TimeSeries) -> list | None:
+    """With `state`'s box on (its outline), each view's labelled edges (`box_axes`) under its
+    own camera, in `series`' spacing units; None with the box off. The frames' header, Save
+    PNG, movie frames and `chronocl render --state` take them from here."""
+    if not state.outline:
+        return None
+    return [
+        box_axes(cv, state.panel_camera(i), state.size, series.dims, series.spacing)
+        for i, cv in enumerate(cvs)
+    ]
 
 
 def _facing(camera: Camera, extent: np.ndarray, size: tuple[int, int]) -> np.ndarray:

@@ -47,7 +47,7 @@ from chronocl.render.framing import framed
 from chronocl.render.image import Image
 from chronocl.render.triad import draw_triad
 from chronocl.render.views import parse_color, raycaster
-from chronocl.viewer.box_axes import box_axes, draw_axes
+from chronocl.viewer.box_axes import draw_axes, views_axes
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.protocol import SESSION_KEY, SESSION_VERSION, SNAPSHOT, decode_json
 from chronocl.viewer.saving import Downloads, picture
@@ -222,6 +222,7 @@ def render_snapshot(
     state = dataclasses.replace(state, camera=framed(state.camera, cvs))
     rc = raycaster()
     bg = parse_color(state.background)
+    labelled = views_axes(state, cvs, series)  # the box axes (`axes` is the triad)
     panels = []
     for i, cv in enumerate(cvs):
         volume = rc.upload(cv)
@@ -238,9 +239,8 @@ def render_snapshot(
                     shading=state.shading,
                 )
             )
-            if state.outline:  # the box's labelled axes, as Save PNG draws them
-                edges = box_axes(cv, state.panel_camera(i), state.size, series.dims, series.spacing)
-                panels[-1] = draw_axes(panels[-1], edges)
+            if labelled is not None:  # the box's labelled axes, as Save PNG draws them
+                panels[-1] = draw_axes(panels[-1], labelled[i])
             if axes:
                 panels[-1] = draw_triad(panels[-1], state.panel_camera(i))
         finally:

@@ -32,7 +32,7 @@ from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.render.framing import framed
 from chronocl.render.recolour.bricks import warm_kernels
 from chronocl.render.views import describe, parse_color
-from chronocl.viewer.box_axes import box_axes, draw_axes
+from chronocl.viewer.box_axes import draw_axes, views_axes
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset, find_dataset
 from chronocl.viewer.errors import error_text, log
@@ -557,15 +557,8 @@ class ClientWorker(Tasks):
         return dataclasses.replace(state, camera=dataclasses.replace(state.camera, focus=known[1]))
 
     def _axes(self, state: ViewState, cvs: list[Chronovolume]) -> list | None:
-        """With the box on, each view's labelled box edges under its camera (`box_axes`), in
-        the series' spacing units; None with the box off."""
-        if not state.outline:
-            return None
-        series = self.datasets[state.dataset].series
-        return [
-            box_axes(cv, state.panel_camera(i), state.size, series.dims, series.spacing)
-            for i, cv in enumerate(cvs)
-        ]
+        """`views_axes` of the views shown (None with the box off)."""
+        return views_axes(state, cvs, self.datasets[state.dataset].series)
 
     def _axes_drawn(self, panels: list, state: ViewState, cvs: list[Chronovolume]) -> list:
         """`panels` as drawn with `_axes` on them (a saved PNG's, a movie's frames)."""
