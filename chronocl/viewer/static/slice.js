@@ -181,6 +181,18 @@ function answered(picture) {
   }
 }
 
+// The read-out of `msg` (a reply to the pointer's point) under both pictures, or the hint.
+function showReadout(msg) {
+  viewer.sliceReadout = msg.readout;
+  viewer.sliceReadoutId = msg.id;
+  for (const id of ['slice-readout', 'slice-big-readout']) $(id).textContent = readoutText(msg);
+}
+
+function clearReadout() {
+  viewer.sliceReadout = null;
+  for (const id of ['slice-readout', 'slice-big-readout']) $(id).textContent = HINT;
+}
+
 // A `slice` reply: the picture (an older one than the newest asked for is dropped) and, with
 // a point, its read-out.
 export function onSlice(msg) {
@@ -189,10 +201,7 @@ export function onSlice(msg) {
   if (!msg.png) {
     // a read-out alone (the pointer over the picture shown): the picture stays
     if (msg.readout && msg.id >= hoverId && viewer.slice && msg.slice === viewer.slice.slice) {
-      viewer.sliceReadout = msg.readout;
-      viewer.sliceReadoutId = msg.id;
-      $('slice-readout').textContent = readoutText(msg);
-      $('slice-big-readout').textContent = readoutText(msg);
+      showReadout(msg);
     }
     return;
   }
@@ -202,9 +211,7 @@ export function onSlice(msg) {
     // another picture (the view or the slice changed): the read-out of the last one goes
     shownKey = asked;
     if (!msg.readout) {
-      viewer.sliceReadout = null;
-      $('slice-readout').textContent = HINT;
-      $('slice-big-readout').textContent = HINT;
+      clearReadout();
       if (hoverLast) askReadout(hoverLast.u, hoverLast.v); // the pointer still rests there
     }
   }
@@ -221,10 +228,7 @@ export function onSlice(msg) {
   $('slice-note').classList.remove('error');
   $('slice-big-title').textContent = `Slice ${what}`;
   if (msg.readout && msg.id >= hoverId) {
-    viewer.sliceReadout = msg.readout;
-    viewer.sliceReadoutId = msg.id;
-    $('slice-readout').textContent = readoutText(msg);
-    $('slice-big-readout').textContent = readoutText(msg);
+    showReadout(msg);
   }
 }
 
@@ -242,9 +246,7 @@ export function bindSlice(page) {
   viewer.sliceReadout = null;
   viewer.sliceReadoutId = -1; // the request its read-out answers
   const moved = () => {
-    viewer.sliceReadout = null;
-    $('slice-readout').textContent = HINT;
-    $('slice-big-readout').textContent = HINT;
+    clearReadout();
     ask();
   };
   $('slice-axis').addEventListener('change', () => {
