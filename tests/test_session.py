@@ -9,6 +9,7 @@ double-ended sliding aggregate on its own, with a non-commutative operation.
 
 from __future__ import annotations
 
+import gc
 import math
 
 import numpy as np
@@ -315,3 +316,40 @@ def test_fixed_point_sums_cancel_exactly(mode, data) -> None:
             sums / 2.0**40, sum(s[..., :c].astype(np.float64) for s in steps), atol=1e-9
         )
     np.testing.assert_allclose(results[0], results[1], rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("level", [0, "auto"])
+@pytest.mark.parametrize("display", [False, True])
+@pytest.mark.parametrize("mode", ["alpha", "max", "first_hit", "change"])
+def test_a_chronovolume_kept_across_edits_is_unchanged(mode: str, display: bool, level) -> None:
+    """A chronovolume handed out is the holder's: TF edits (which recolour a max, first_hit or
+    change window from its winners), a mode switch, slides and a jump back to its window all
+    make new arrays and never write into the one kept, on every path that hands one out
+    (float32 or the display format, one level or chosen per frame). Its bytes are compared
+    after a collection, so memory recycled from dead outputs (`recycled_empty`) would show."""
+    rng = np.random.default_rng(23)
+    # The longest axis 70 gives a coarse level (35) for "auto" to show first.
+    series = TimeSeries.from_array(rng.random((14, 5, 9, 70), dtype=np.float32))
+    with Session(series, mode=mode, display=display, level=level, memory="64MB") as s:
+        kept = s.set_window(3, 9)
+        rgba = kept.rgba.copy()
+        t_index = None if kept.t_index is None else kept.t_index.copy()
+        edits = [
+            lambda: s.set_spec(time_tf=TimeTF.preset("rgb", positions="absolute")),
+            lambda: s.set_spec(time_tf=TimeTF.preset("rgb")),
+            lambda: s.set_spec(mode="alpha" if mode != "alpha" else "max"),
+            lambda: s.set_spec(mode=mode),
+            lambda: s.slide(1),
+            lambda: s.slide(2),
+            lambda: s.set_window(3, 9),
+        ]
+        for edit in edits:
+            other = edit()
+            if level == "auto":
+                other = s.refine() or other
+            assert other.rgba is not kept.rgba
+            assert not np.shares_memory(other.rgba, kept.rgba)
+            gc.collect()
+        np.testing.assert_array_equal(kept.rgba, rgba)
+        if t_index is not None:
+            np.testing.assert_array_equal(kept.t_index, t_index)

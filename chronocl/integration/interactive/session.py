@@ -75,7 +75,10 @@ class Session:
     pooling) among sessions, and `manager` shares another session's resident steps
     (parallel views of one window) instead. With `display` (a viewer's), a window integrated
     from its steps comes back in the display format where the engine writes it: RGBA8
-    (`integrate_bricks`); slides and other engines still return float32. With `slide_costs`
+    (`integrate_bricks`); slides and other engines still return float32. The viewer alone
+    holds those: its recolouring writes a TF edit into the RGBA8 the window shows
+    (`chronocl.render.recolour.bricks.shown_output`) and hands it back (`adopt`); this class
+    never writes into a chronovolume it returned. With `slide_costs`
     (a viewer's `costs.SlideCosts`, fed the times of this session's integrations and slides) a
     window slides only where a slide is predicted cheaper than integrating it again
     (`slider.slide_plan`); without (the default), every window that can slide does.
