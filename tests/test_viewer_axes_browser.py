@@ -1,6 +1,8 @@
 """The box's axes in Chromium: with the header's "box" on, each view's picture carries tick
 labels in the data's spacing units and the axis names x, y and z over its box's edges, inside
-the picture and none on top of another; they move when the camera turns, and go with the box.
+the picture and none on top of another, every named axis with its labels (in four small views
+too, where an edge runs along the picture's border); they move when the camera turns, label
+the part a clip plane keeps, and go with the box.
 
 Screenshots go to $CHRONOCL_SCREENSHOTS (else the test's temporary folder).
 """
@@ -57,13 +59,15 @@ def overlap(a: dict, b: dict) -> float:
 
 
 def check_readable(view: dict, names: int = 3, ticks: int = 6) -> None:
-    """Tick labels that are numbers, the axes' names, all inside the picture, none on top of
-    another."""
+    """Tick labels that are numbers, the axes' names, each named axis with tick labels, all
+    inside the picture, none on top of another."""
     texts, pic = view["texts"], view["pic"]
     numbers = [t for t in texts if not t["name"]]
     shown = [t["text"] for t in texts if t["name"]]
     assert len(shown) >= names and len(set(shown)) == len(shown) and set(shown) <= set("xyz")
     assert len(numbers) >= ticks and all(float(t["text"]) >= 0 for t in numbers)
+    for axis in shown:  # (an axis along the picture's border too: its labels inside)
+        assert any(t["axis"] == axis for t in numbers), (axis, texts)
     for t in texts:
         assert t["w"] > 2 and t["h"] > 6, t
         assert pic["x"] - 1 <= t["x"] and t["x"] + t["w"] <= pic["x"] + pic["w"] + 1, t
@@ -102,11 +106,31 @@ def test_box_axes_are_labelled_and_follow_the_camera(browser, server, tmp_path):
         assert len(same) < len(moved) / 2, same
         page.locator("#views").screenshot(path=os.path.join(shots, "box-axes-turned.png"))
 
-        # Four small views at a laptop's size: each still labelled, nothing on top of another.
+        # A clip plane keeping z >= the middle: z's labels from the plane's z on (voxel 5.5 of
+        # 12, times 2.5), x and y still labelled; off again, z's below it again.
+        page.eval_on_selector("#clip-on", "(el) => el.closest('details').open = true")
+        page.select_option("#clip-axis", "0,0,1")
+        before = p.last()
+        page.check("#clip-on")
+        p.settle(before)
+        clipped = p.eval(LABELS)[0]
+        check_readable(clipped, ticks=4)
+        z = [float(t["text"]) for t in clipped["texts"] if t["axis"] == "z" and not t["name"]]
+        assert z and min(z) >= 5.5 * SPACING[2], z
+        page.locator("#views").screenshot(path=os.path.join(shots, "box-axes-clipped.png"))
+        before = p.last()
+        page.uncheck("#clip-on")
+        p.settle(before)
+        whole = p.eval(LABELS)[0]["texts"]
+        z = [float(t["text"]) for t in whole if t["axis"] == "z" and not t["name"]]
+        assert z and min(z) < 5.5 * SPACING[2], z
+
+        # Four small views at a laptop's size: each still labelled, every axis (x's edge runs
+        # along the picture's top), nothing on top of another.
         page.set_viewport_size({"width": 1024, "height": 700})
         set_views(p, 4)
         for view in p.eval(LABELS):
-            check_readable(view, names=2, ticks=3)
+            check_readable(view, names=3, ticks=4)
         page.locator("#views").screenshot(path=os.path.join(shots, "box-axes-four.png"))
 
         before = p.last()

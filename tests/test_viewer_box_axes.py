@@ -2,7 +2,10 @@
 carries three labelled edges of the volume's box whose ticks are 1-2-5 values of the data's
 coordinates (voxel index times the series' spacing, one axis not 1) within its extent, placed
 where `probe.project` puts those points under the view's camera; an axis seen end-on has none,
-the edges chosen lie towards the panel's lower left, and the saved picture draws them."""
+the edges chosen lie towards the panel's lower left, and the saved picture draws them. With a
+clip plane they label the part it keeps (none of their ticks where it cuts the box away), and
+an edge along the picture's border keeps its labels (on its inner side where the outer is off
+the picture)."""
 
 from __future__ import annotations
 
@@ -123,6 +126,127 @@ def test_the_edges_lie_towards_the_lower_left_and_an_end_on_axis_has_none():
     assert x["from"][0] < x["to"][0] and y["from"][1] > y["to"][1]  # 0 at the lower left
 
 
+def tick_fractions(edge, tick, cv, camera, size, dims, spacing, bounds) -> np.ndarray:
+    """The box fractions (x, y, z) of `tick`'s point: its value along its axis, on one of the
+    edges of the box `bounds` ((lo, hi) box fractions per axis) along it, the one where
+    `project` puts the tick."""
+    a = "xyz".index(edge["axis"])
+    found = []
+    for others in itertools.product(*[bounds[k] for k in range(3) if k != a]):
+        where = list(others)
+        where.insert(a, (tick["value"] / spacing[a] + 0.5) / dims[a])
+        at = project(cv, camera, size, tuple(where))
+        if at is not None and np.hypot(*np.subtract(at, [tick["x"], tick["y"]])) < 2e-5:
+            found.append(where)
+    assert found, (edge["axis"], tick)
+    return np.array(found[0])
+
+
+def test_the_axes_label_the_part_an_axis_aligned_clip_plane_keeps():
+    cv = geometry_only()
+    size = (480, 360)
+    camera = Camera(azimuth=40.0, elevation=25.0)
+    dims = cv.dims
+    # x >= the box's middle kept: x's ticks from the plane's data x (voxel 11.5 of 24, times
+    # 0.5) to the last voxel's; every tick on the kept half's edges
+    edges = box_axes(cv, camera, size, dims, SPACING, (1.0, 0.0, 0.0, 0.0))
+    assert sorted(e["axis"] for e in edges) == ["x", "y", "z"]
+    x = next(e for e in edges if e["axis"] == "x")
+    values = [t["value"] for t in x["ticks"]]
+    assert values and min(values) >= 11.5 * SPACING[0], values
+    assert max(values) <= (dims[0] - 1) * SPACING[0]
+    whole = next(e for e in box_axes(cv, camera, size, dims, SPACING) if e["axis"] == "x")
+    assert min(t["value"] for t in whole["ticks"]) == 0  # (unclipped: from the first voxel)
+    bounds = [(0.5, 1.0), (0.0, 1.0), (0.0, 1.0)]
+    for edge in edges:
+        for tick in edge["ticks"]:
+            where = tick_fractions(edge, tick, cv, camera, size, dims, SPACING, bounds)
+            assert where[0] >= 0.5 - 1e-9, (edge["axis"], tick)
+    # The x edge runs from the plane (x fraction 0.5) to the box's high x face, at a corner of
+    # the kept half.
+    for end, fraction in ((x["from"], 0.5), (x["to"], 1.0)):
+        corners = [project(cv, camera, size, (fraction, y, z)) for y in (0, 1) for z in (0, 1)]
+        assert min(np.hypot(*np.subtract(c, end)) for c in corners) < 2e-5, (end, fraction)
+    # A plane that keeps nothing: no axes; one that keeps all: the whole box's.
+    assert box_axes(cv, camera, size, dims, SPACING, (1.0, 0.0, 0.0, 1.0)) == []
+    assert box_axes(cv, camera, size, dims, SPACING, (1.0, 0.0, 0.0, -1.0)) == box_axes(
+        cv, camera, size, dims, SPACING
+    )
+
+
+def test_no_labelled_tick_lies_where_an_oblique_clip_plane_cuts_the_box_away():
+    from chronocl.render.raycaster import clip_plane
+    from chronocl.viewer.box_axes import visible_bounds
+    from chronocl.viewer.slots import geometry
+
+    cv = geometry_only()
+    size = (480, 360)
+    dims = cv.dims
+    extent, _ = geometry(cv)
+    clip = (1.0, 1.0, 0.0, 0.5)
+    *n, d = clip_plane(clip, extent)
+    lo, hi = visible_bounds(extent, clip)
+    bounds = list(zip(lo / extent + 0.5, hi / extent + 0.5, strict=True))
+    assert all(b - a < 1 for a, b in bounds[:2])  # the kept part's box is smaller in x and y
+    for camera in (Camera(), Camera(azimuth=-130.0, elevation=-30.0)):
+        edges = box_axes(cv, camera, size, dims, SPACING, clip)
+        assert edges and sum(len(e["ticks"]) for e in edges) >= 4
+        for edge in edges:
+            for tick in edge["ticks"]:
+                where = tick_fractions(edge, tick, cv, camera, size, dims, SPACING, bounds)
+                world = (where - 0.5) * extent
+                assert world @ n + d >= -1e-9, (camera, edge["axis"], tick)
+
+
+def labels_drawn(edges, size) -> dict[str, int]:
+    """Per axis, how many of its tick labels `draw_axes` draws on a black panel of `size`:
+    light grey ink just off each tick on its edge's `out` side."""
+    w, h = size
+    drawn = draw_axes(np.zeros((h, w, 3), np.uint8), edges)
+    grey = (drawn > 180).all(axis=2)
+    counts = {}
+    for edge in edges:
+        n = 0
+        for tick in edge["ticks"]:
+            at = np.array([tick["x"] * w, tick["y"] * h]) + np.multiply(edge["out"], 14)
+            x, y = np.round(at).astype(int)
+            n += bool(grey[max(0, y - 7) : y + 8, max(0, x - 7) : x + 8].any())
+        counts[edge["axis"]] = n
+    return counts
+
+
+@pytest.mark.parametrize(
+    "camera, size, spacing, dims, want",
+    [
+        # the four-view panel of the browser test: x's best edge runs along the top border
+        (
+            Camera(
+                zoom=1.2,
+                focus=(-0.2333333, -0.3333333, -0.4166667, 0.25, 0.4, 0.4166667),
+            ),
+            (351, 171),
+            (0.5, 1.0, 2.5),
+            (32, 24, 12),
+            {"x": 2, "y": 2, "z": 1},
+        ),
+        # seen from the front, magnified: the box's lower edge a few pixels above the bottom
+        (
+            Camera(azimuth=0.0, elevation=0.0, projection="orthographic", zoom=2.1),
+            (400, 300),
+            SPACING,
+            (24, 16, 12),
+            {"x": 2, "y": 2},
+        ),
+    ],
+)
+def test_an_edge_along_the_pictures_border_keeps_its_labels(camera, size, spacing, dims, want):
+    cv = geometry_only(dims[::-1], spacing)
+    edges = box_axes(cv, camera, size, dims, spacing)
+    assert {e["axis"] for e in edges} == set(want)
+    got = labels_drawn(edges, size)
+    assert all(got[a] >= k for a, k in want.items()), (got, edges)
+
+
 def test_the_saved_picture_draws_the_labels():
     cv = geometry_only()
     camera = Camera()
@@ -207,6 +331,16 @@ def test_the_frame_header_carries_each_views_axes_with_the_box_on(server, tmp_pa
                 at = np.array([tick["x"] * w, tick["y"] * h]) + np.multiply(edge["out"], 14)
                 x, y = np.clip(at.round().astype(int), 8, [w - 9, h - 9])
                 assert (picture[y - 8 : y + 9, x - 8 : x + 9].min(axis=-1) > 200).any(), tick
+
+        # A clip plane keeping z >= the middle: each view's z ticks from the plane on (its
+        # data z: voxel 5.5 of 12, times 2.5).
+        rid = client.send({"type": "update", "clip": {"normal": [0, 0, 1], "offset": 0.0}})
+        _, header, _ = client.frame_for(rid)
+        while header["id"] != rid or header["refining"]:
+            _, header, _ = client.frame_for(rid)
+        for view in header["axes"]:
+            z = next(e for e in view if e["axis"] == "z")
+            assert z["ticks"] and min(t["value"] for t in z["ticks"]) >= 5.5 * SPACING[2]
 
         rid = client.send({"type": "update", "outline": False})
         assert client.frame_for(rid)[1]["axes"] is None

@@ -1,10 +1,12 @@
 """What the viewer page writes beside the pictures, in Chromium (issue 49): the timeline's
 ticks at nice steps, times or dates, in a row of their own that no cell, residency bar or
-brush draws into, never overlapping at any width; a new view copies the selected view's mode
-and order (the transfer functions are every view's), and the page's address keeps it; the
-data set menu shows a long name and its shape whole at 1400 and 1000 px; the fit's note under
-the TF editor says when the curve is no longer fitted to the mode and window shown; a nearly
-empty view's note lies in a strip at the picture's foot, clear of its middle.
+brush draws into, never overlapping at any width; its time-colour cells a row per view where
+views draw their own (window or time TF), the selected view's bright; a new view copies the
+selected view's mode and order (the transfer functions are every view's), and the page's
+address keeps it; the data set menu shows a long name and its shape whole at 1400 and 1000 px;
+the fit's note under the TF editor says when the curve is no longer fitted to the mode and
+window shown; a nearly empty view's note lies in a strip at the picture's foot, clear of its
+middle.
 
 Screenshots go to $CHRONOCL_SCREENSHOTS (else the test's temporary folder).
 """
@@ -213,6 +215,94 @@ def test_timeline_ticks_are_nice_apart_and_clear_of_the_cells(browser, server, t
         page.locator("#timeline-row").screenshot(path=os.path.join(shots, "timeline-hourly.png"))
         for width in (600, 250, 100):
             check_timeline(redraw_at(p, width))
+    finally:
+        p.close()
+
+
+# ------------------------------------------------- 1b: the timeline's time-colour cells per view
+# Each row of cells as drawn: its views, steps and whether it is the selected view's, with the
+# canvas' pixel (r, g, b, a) at the middle of its first cell, each view's legend (step -> rgb)
+# and the canvas' tooltip.
+ROWS = """() => {
+  const c = document.getElementById('timeline');
+  const L = window.viewer.timelineLayout;
+  const k = c.width / L.width;
+  const cell = L.width / window.viewer.S.info.shape.t;
+  const ctx = c.getContext('2d');
+  return {
+    rows: L.rows.map((r) => ({...r, pixel: [...ctx.getImageData(
+      Math.floor((r.steps[0] + 0.5) * cell * k), Math.floor((r.y + r.h / 2) * k), 1, 1).data]})),
+    legends: window.viewer.S.legends.map((l) => Object.fromEntries(
+      l.map((x) => [x.step, x.rgb.map((v) => Math.round(v * 255))]))),
+    title: c.title,
+  };
+}"""
+
+
+def own_window(p: Page, view: int, text: str) -> dict:
+    field = f'.view[data-i="{view}"] input.own-window'
+    return act(p, lambda: (p.page.fill(field, text), p.page.press(field, "Enter")))
+
+
+def test_the_timeline_shows_each_views_cells(browser, server, tmp_path):  # noqa: F811
+    shots = shots_dir(tmp_path)
+    p = Page(browser, server, 1400, 900)
+    try:
+        page = p.page
+        act(p, lambda: page.select_option("#nviews", "2"))
+        # Both views linked: one row, the timeline's window 5:15, as with one view.
+        t = p.eval(ROWS)
+        assert [(r["views"], r["steps"]) for r in t["rows"]] == [([0, 1], list(range(5, 15)))]
+        assert "top to bottom" not in t["title"]
+
+        # The second view's own window: a row of its own under the first's, at its steps, in
+        # its legend's colours; the selected (first) view's row bright, the other's faded.
+        own_window(p, 1, "0:4")
+        t = p.eval(ROWS)
+        rows = t["rows"]
+        assert [(r["views"], r["steps"]) for r in rows] == [
+            ([0], list(range(5, 15))),
+            ([1], [0, 1, 2, 3]),
+        ]
+        assert [r["selected"] for r in rows] == [True, False]
+        assert rows[0]["y"] + rows[0]["h"] <= rows[1]["y"] and min(r["h"] for r in rows) >= 3
+        bright, faded = rows[0]["pixel"], rows[1]["pixel"]
+        assert bright[3] == 255 and np.allclose(bright[:3], t["legends"][0]["5"], atol=3)
+        assert 60 < faded[3] < 160, faded  # (nothing under it: the window starts at 5)
+        assert "view 1: steps 5:15" in t["title"] and "view 2: own window 0:4" in t["title"]
+        check_timeline(p.eval(TIMELINE))  # the axis' labels: nothing draws over them
+        page.locator("#timeline-row").screenshot(path=os.path.join(shots, "timeline-rows.png"))
+
+        # The second view selected (a click on its picture): its row is the bright one.
+        page.locator('.view[data-i="1"] img').click()
+        page.wait_for_function("() => window.viewer.timelineLayout.rows[1].selected")
+        rows = p.eval(ROWS)["rows"]
+        assert [r["selected"] for r in rows] == [False, True] and rows[1]["pixel"][3] == 255
+
+        # The same window again but the first view's own time colours: still two rows, at the
+        # same steps, in each view's colours.
+        own_window(p, 1, "")
+        act(p, lambda: page.locator('.view[data-i="0"] .link[data-link="time_tf"]').click())
+        colour = p.eval(
+            """() => [...document.getElementById('time-color').options].map((o) => o.value)
+                     .find((v) => v !== window.viewer.S.state.views[0].time_tf.color)"""
+        )
+        page.eval_on_selector("#time-color", "(el) => el.closest('details').open = true")
+        act(p, lambda: page.select_option("#time-color", colour))
+        t = p.eval(ROWS)
+        assert [(r["views"], r["steps"]) for r in t["rows"]] == [
+            ([0], list(range(5, 15))),
+            ([1], list(range(5, 15))),
+        ]
+        assert t["legends"][0] != t["legends"][1] and "own time TF" in t["title"]
+        check_timeline(p.eval(TIMELINE))
+        page.locator("#timeline-row").screenshot(
+            path=os.path.join(shots, "timeline-rows-own-time-tf.png")
+        )
+
+        # Linked again: one row.
+        act(p, lambda: page.locator('.view[data-i="0"] .link[data-link="time_tf"]').click())
+        assert [r["views"] for r in p.eval(ROWS)["rows"]] == [[0, 1]]
     finally:
         p.close()
 

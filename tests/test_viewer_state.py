@@ -13,6 +13,7 @@ import pytest
 from chronocl.cli.render_state import render_state
 from chronocl.core.errors import ChronoclError
 from chronocl.data.series import open_series
+from chronocl.viewer.box_axes import draw_axes
 from chronocl.viewer.snapshot import (
     SnapshotFileError,
     check_snapshot,
@@ -192,7 +193,9 @@ def test_server_saves_and_loads_and_render_state_draws_its_frame(stores, tmp_pat
     cap = figure.shape[0] - h - 2 * max(36, h // 8)
     assert figure.shape[1] == 2 * w and figure.shape[0] > cap + h  # two panels, legends below
     for k, jpeg in enumerate(images):
-        frame = _frame_pixels(jpeg)
+        # the frame with the box's labelled axes of its header drawn as the page draws them
+        frame = _frame_pixels(jpeg).astype(np.uint8)
+        frame = draw_axes(frame, header["axes"][k]).astype(np.int16)
         panel = figure[cap : cap + h, k * w : (k + 1) * w].astype(np.int16)
         diff = np.abs(panel - frame)  # the whole picture: no caption over it
         assert diff.mean() < 2.0 and np.percentile(diff, 99) < 40, (diff.mean(), diff.max())

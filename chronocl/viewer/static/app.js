@@ -250,6 +250,7 @@ export function start(host, transport) {
     syncControls();
     drawTF();
     drawTriads();
+    drawTimeline(); // its row of the selected view's cells
     sliceFrame();
   });
   bindProbe(page);

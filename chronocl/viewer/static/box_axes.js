@@ -2,9 +2,11 @@
 // volume's box, one along x, y and z, with ticks at 1-2-5 values in the data's spacing units
 // and each axis' name off its edge's middle beyond the tick labels. The server picks the edges
 // and projects the ticks with the view's camera (chronocl/viewer/box_axes.py, the frame
-// header's `axes`); here they are drawn as SVG in CSS pixels, each label set off from its tick
-// away from the box (the edge's `out`), and a label that would overlap one drawn before it
-// (the shared corner's zeros, a foreshortened edge's ticks) or reach past the picture left out.
+// header's `axes`: with a clip plane, of the part it keeps); here they are drawn as SVG in CSS
+// pixels, each label set off from its tick on the edge's `out` side (away from the box, or into
+// it along the picture's border, where the server found no room outside), and a label that
+// would overlap one drawn before it (the shared corner's zeros, a foreshortened edge's ticks)
+// or reach past the picture left out.
 
 const NS = 'http://www.w3.org/2000/svg';
 // As box_axes.py: a tick mark's length, a label's gap from the edge, the name's beyond them.

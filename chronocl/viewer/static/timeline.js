@@ -1,9 +1,13 @@
 // The timeline under the views: per-step sparklines of the data, the window brush (drag to
 // select, move or resize it), stride, and play (speed in slides a second, loop or bounce).
-// Its keys (arrows, space, +, -, b) are in keys.js's table. A thin bar under the window's steps
-// shows which steps are in memory (the server's `steps` messages, residency.py): filled =
-// resident, hatched = being fetched, empty = not loaded. Under it, in a row of their own, the
-// axis' ticks at nice steps or times (ticks.js), as many as fit apart.
+// Its keys (arrows, space, +, -, b) are in keys.js's table. Under the sparklines the steps each
+// view integrates in their time colours: one row of cells where every view draws the same
+// (linked), else a row per view that draws its own (its own window or time TF; views drawing
+// alike share a row), top to bottom in the views' order, the selected view's row bright and the
+// others faded, as a track per layer; the canvas' tooltip names each row's views and window.
+// A thin bar under them shows which steps are in memory (the server's `steps` messages,
+// residency.py): filled = resident, hatched = being fetched, empty = not loaded. Under it, in
+// a row of their own, the axis' ticks at nice steps or times (ticks.js), as many as fit apart.
 
 import { update } from './connection.js';
 import { $, canvasSize } from './state.js';
@@ -13,15 +17,47 @@ import { axisOf, axisTicks } from './ticks.js';
 let S;
 let viewer;
 
-const tl = { drag: null };
+const tl = { drag: null, title: '' }; // title: the canvas' own tooltip (index.html)
 
 // The canvas from the top: a key row (the sparklines' key left, the residency key right), the
-// sparklines, the window's steps in their time colours, the residency bar, and the axis: tick
-// marks and labels in a row of their own that nothing else draws into (ticks.js places them).
+// sparklines, the views' steps in their time colours (a row or more), the residency bar, and
+// the axis: tick marks and labels in a row of their own that nothing else draws into (ticks.js
+// places them).
 const KEY_H = 14; // the key row
 const AXIS_H = 13; // tick marks and labels
 const RES_H = 4; // the residency bar
-const CELL_H = 5; // the time-colour cells
+const CELL_H = 5; // a row of time-colour cells, the tallest
+const CELLS_H = 15; // the most that the rows take together (four of 3 px, 1 px apart)
+
+// The rows of time-colour cells: each view's steps (its own window's, else the timeline's,
+// as the state says now, so they follow a drag before its frame comes) coloured as its last
+// frame's legend colours them; views whose cells are alike share a row. [{views, steps, rgb}]
+function cellRows() {
+  const rows = [];
+  S.state.views.forEach((view, v) => {
+    const { t0, t1, stride } = view.window || S.state.window;
+    const legend = (S.legends && S.legends[v]) || S.legend;
+    const colours = new Map(legend.map((l) => [l.step, l.rgb]));
+    const steps = [];
+    for (let s = t0; s < t1; s += stride) steps.push(s);
+    const rgb = steps.map((s) => colours.get(s) || null);
+    const key = JSON.stringify([steps, rgb]);
+    const row = rows.find((r) => r.key === key);
+    if (row) row.views.push(v);
+    else rows.push({ key, views: [v], steps, rgb, window: view.window });
+  });
+  return rows;
+}
+
+// 'view 1' or 'views 2, 3', and what their row shows (for the tooltip).
+function rowText(r) {
+  const who = `view${r.views.length > 1 ? 's' : ''} ${r.views.map((v) => v + 1).join(', ')}`;
+  const { t0, t1, stride } = r.window || S.state.window;
+  const own = r.window ? 'own window ' : 'steps ';
+  const tf = r.views.some((v) => S.state.views[v].time_tf) ? ', own time TF' : '';
+  return `${who}: ${own}${t0}:${t1}${stride > 1 ? ':' + stride : ''}${tf}`;
+}
+
 export function drawTimeline() {
   if (!S.info) return;
   const c = $('timeline');
@@ -32,7 +68,9 @@ export function drawTimeline() {
   ctx.clearRect(0, 0, w, h);
   const axisTop = h - AXIS_H; // labels and marks below it, nothing else
   const resY = axisTop - 1 - RES_H; // the residency bar (its frame half a px around)
-  const cellY = resY - 2 - CELL_H;
+  const rows = cellRows();
+  const rowH = Math.max(3, Math.min(CELL_H, Math.floor((CELLS_H + 1) / rows.length) - 1));
+  const cellY = resY - 2 - rows.length * (rowH + 1) + 1; // the top row's
   const top = KEY_H;
   const bottom = cellY - 2; // the sparklines' foot
   const ph = bottom - top;
@@ -58,16 +96,24 @@ export function drawTimeline() {
   ctx.strokeStyle = 'rgba(230,230,230,0.8)';
   ctx.lineWidth = 1.2;
   ctx.stroke();
-  // Selected steps, coloured by their time colour.
-  const colours = new Map(S.legend.map((l) => [l.step, l]));
+  // The views' steps, coloured by their time colour (orange before a frame says it).
   const cells = [];
-  for (let s = t0; s < t1; s += stride) {
-    const l = colours.get(s);
-    ctx.fillStyle = l ? `rgb(${l.rgb.map((c) => Math.round(c * 255)).join(',')})` : '#f0a030';
-    const box = { x: s * cell + cell * 0.15, y: cellY, w: Math.max(2, cell * 0.7), h: CELL_H };
-    ctx.fillRect(box.x, box.y, box.w, box.h);
-    cells.push(box);
-  }
+  const selected = rows.length > 1 ? rows.findIndex((r) => r.views.includes(S.selectedView)) : 0;
+  const rowBoxes = rows.map((r, k) => {
+    const y = cellY + k * (rowH + 1);
+    ctx.globalAlpha = k === selected ? 1 : 0.45;
+    r.steps.forEach((s, j) => {
+      const rgb = r.rgb[j];
+      ctx.fillStyle = rgb ? `rgb(${rgb.map((c) => Math.round(c * 255)).join(',')})` : '#f0a030';
+      const box = { x: s * cell + cell * 0.15, y, w: Math.max(2, cell * 0.7), h: rowH };
+      ctx.fillRect(box.x, box.y, box.w, box.h);
+      cells.push(box);
+    });
+    return { views: r.views, steps: r.steps, y, h: rowH, selected: k === selected };
+  });
+  ctx.globalAlpha = 1;
+  const which = rows.length > 1 ? `\ncells, top to bottom:\n${rows.map(rowText).join('\n')}` : '';
+  c.title = tl.title + which;
   drawResidency(ctx, cell, resY, w);
   // Brush edges, down to the axis row.
   ctx.strokeStyle = '#f0a030';
@@ -102,7 +148,7 @@ export function drawTimeline() {
   // For scripted use (the tests): what is drawn where, in CSS px of the canvas.
   c.dataset.ticks = ticks.map((t) => t.text).join('|');
   viewer.timelineLayout = {
-    width: w, height: h, axis: axis.kind, axisTop, labels, cells,
+    width: w, height: h, axis: axis.kind, axisTop, labels, cells, rows: rowBoxes,
     residency: { x: 0, y: resY - 0.5, w, h: RES_H + 1 },
   };
   const label = (s) => (S.info.time_labels ? S.info.time_labels[s] : String(s));
@@ -214,6 +260,7 @@ export function bindTimeline(page) {
     return { x: r.left + ((step + 0.5) / S.info.shape.t) * r.width, y: r.top + r.height / 2 };
   };
   const c = $('timeline');
+  tl.title = c.title;
   const stepAt = (e) => {
     const r = c.getBoundingClientRect();
     return ((e.clientX - r.left) / r.width) * S.info.shape.t;
