@@ -91,7 +91,7 @@ def slides(series: TimeSeries, engine, mode: str, width: int, n: int, on_device:
                     s.slide(k)
                     times.append(time.perf_counter() - t)
                 assert s.stats["path"] == "incremental", s.stats
-                assert (s._slider.dc is not None) == on_device
+                assert (s.at(0)._slider.dc is not None) == on_device
                 up.append(moved.up)
                 down.append(moved.down)
     finally:

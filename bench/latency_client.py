@@ -9,15 +9,13 @@ import json
 import time
 from contextlib import ExitStack
 
-from chronocl.viewer import worker
+from chronocl.core.tuning import TUNING
 from chronocl.viewer.protocol import unpack_frame
 from chronocl.viewer.server import ViewerServer
 
 WINDOW = 10  # steps
 SLIDES_PER_STOP = 3
 PROBE_DELAYS_MS = (50, 150, 300)  # after the refine was due
-# The worker's idle wait before refining a coarse or reduced frame (0.25 s when this was written).
-REFINE_AFTER_S = getattr(worker, "REFINE_AFTER_S", 0.25)
 
 
 def sharp(header: dict) -> bool:
@@ -184,7 +182,7 @@ def refine_probes(c: Client, edit: Edits) -> list[dict]:
     for delay in PROBE_DELAYS_MS:
         ms, h = c.request(edit())
         before = c.rid
-        c.pump(c.sent[before] + ms / 1e3 + REFINE_AFTER_S + delay / 1e3)
+        c.pump(c.sent[before] + ms / 1e3 + TUNING.refine_after_s + delay / 1e3)
         done = any(k == "frame" and m["id"] == before and sharp(m) for _, k, m in c.log)
         wait_ms, _ = c.request(edit())
         c.wait(c.rid, full=True)  # settled before the next probe

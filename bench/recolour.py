@@ -131,9 +131,11 @@ def main() -> None:
         save(first, args.png / "max_before.png")
 
     a = time.perf_counter()
-    s.winners()  # numpy's gather (reads every step of the window)
+    s.at(0).winners()  # numpy's gather (reads every step of the window)
     b = time.perf_counter()
-    won = s.winners(gather)  # the OpenCL one (each voxel reads its winner), as the viewer does
+    won = s.at(0).winners(
+        gather
+    )  # the OpenCL one (each voxel reads its winner), as the viewer does
     c = time.perf_counter()
     paths = tuple(args.paths.split(","))
     if "integrate" not in paths or not set(paths) <= {"integrate", "bricks", "gl"}:
@@ -170,7 +172,7 @@ def main() -> None:
                 b = time.perf_counter()
                 vol = upload(rc, slot, cv)
             elif path == "bricks":  # PoCL recolours the bricks that may be coloured
-                new, reason = s.recolours(spec)
+                new, reason = s.at(0).recolours(spec)
                 assert reason is None, reason
                 changed = brick_recolourer.apply(bricks, new, own.volume)
                 b = time.perf_counter()
@@ -179,7 +181,7 @@ def main() -> None:
                 held = changed.coloured
                 rewritten[i] = changed.rewritten / changed.coloured.size
             else:  # the compute pass rewrites the texture: nothing uploaded
-                new, reason = s.recolours(spec)
+                new, reason = s.at(0).recolours(spec)
                 assert reason is None, reason
                 changed = rec.apply(rv, new, slot.volume)
                 show(rc.ctx, changed, series.spacing)

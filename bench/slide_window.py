@@ -43,8 +43,8 @@ from latency_client import Client, sharp
 from viewer_latency import make_store
 
 from chronocl.core.budget import resident_bytes
+from chronocl.core.tuning import TUNING
 from chronocl.data.series import open_series
-from chronocl.integration.interactive import costs
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.server import ViewerServer
 
@@ -114,12 +114,12 @@ def main() -> None:
         "--guess",
         default=None,
         help="the viewer's guesses before it measured, in voxel-steps of integration: a slide "
-        f"and a fill per step, 'S,F' (costs.SLIDE_STEPS, FILL_STEPS: "
-        f"{costs.SLIDE_STEPS:g},{costs.FILL_STEPS:g}); lower, it tries sliding, then decides",
+        f"and a fill per step, 'S,F' (TUNING.slide_steps, fill_steps: "
+        f"{TUNING.slide_steps:g},{TUNING.fill_steps:g}); lower, it tries sliding, then decides",
     )
     args = ap.parse_args()
     if args.guess:  # the server runs in this process
-        costs.SLIDE_STEPS, costs.FILL_STEPS = (float(v) for v in args.guess.split(","))
+        TUNING.slide_steps, TUNING.fill_steps = (float(v) for v in args.guess.split(","))
     widths = [int(w) for w in args.widths.split(",")]
     slides = args.slides or (3 if args.quick else 6)
     rounds = args.rounds or (1 if args.quick else 2)
@@ -136,7 +136,7 @@ def main() -> None:
                 "mode": args.mode,
                 "image": size,
                 "memory": args.memory or "the viewer's default",
-                "guess_slide_fill_steps": [costs.SLIDE_STEPS, costs.FILL_STEPS],
+                "guess_slide_fill_steps": [TUNING.slide_steps, TUNING.fill_steps],
             },
         )
     )

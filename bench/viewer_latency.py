@@ -21,7 +21,7 @@ process may, else the summary says `page_cache: hot`), keeps the viewer's defaul
 - scrub stops (SLIDES_PER_STOP one-step slides in a row, the last at "full" quality as when the
   drag is let go, timed from its send to its sharp frame);
 - input during a refine: an edit sent 50-300 ms after the refine of the last edit's coarse
-  frame was due (REFINE_AFTER_S after that frame), timed to the first frame answering it.
+  frame was due (TUNING.refine_after_s after that frame), timed to the first frame answering it.
 
 The sharp frames' split (integrate / read-back / upload / render / encode) comes from the frame
 headers; read-back is null while the server counts it inside integrate_ms. The direct baseline
@@ -85,7 +85,7 @@ from chronocl.viewer.server import ViewerServer
 
 BENCH = "viewer_latency"
 # A user looks at a new mode's picture before editing its TF: this long, here. The viewer
-# gathers the winners of max, min, first_hit and change meanwhile (worker.PREPARE_AFTER_S);
+# gathers the winners of max, min, first_hit and change meanwhile (TUNING.prepare_after_s);
 # `first_edit_ms` is the edit sent at once, which gives that gather up and makes its own.
 LOOK_S = 3.0
 USERS_PANEL = (930, 640)  # the view area of a 1400x900 page showing one view
@@ -174,7 +174,7 @@ def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, cas
     from chronocl.render.gl import gl_context
     from chronocl.render.views import raycaster
     from chronocl.viewer.fit import fitted_default
-    from chronocl.viewer.frames import JPEG_QUALITY, PIXEL_BUDGET, encode, render_size
+    from chronocl.viewer.frames import JPEG_QUALITY, encode, render_size
     from chronocl.viewer.slots import ViewSlot, upload
     from chronocl.viewer.view_state import default_state, describe_state, merge
 
@@ -183,7 +183,7 @@ def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, cas
     state = fitted_default(series, default_state(0, series))
     state = merge(state, {"size": list(size)}, n)
     edit = Edits(describe_state(state)["data_tf"])
-    draw_size = render_size(state.size, 1, 1.0, PIXEL_BUDGET)
+    draw_size = render_size(state.size, 1, 1.0)
     rows = []
     options = {"display": True, "slide_costs": SlideCosts()}  # as the viewer's sessions
     with gl_context(), Session(series, memory=memory, spec=state.spec(0), **options) as s:

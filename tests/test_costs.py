@@ -13,14 +13,12 @@ import pytest
 
 import chronocl
 from chronocl.core.tf import TimeTF
+from chronocl.core.tuning import TUNING
 from chronocl.integration.inmemory import make_spec
 from chronocl.integration.interactive import costs
 from chronocl.integration.interactive.costs import (
-    FILL_STEPS,
     INVERT_PIECES,
-    SLIDE_MEMORY,
     SLIDE_PIECES,
-    SLIDE_STEPS,
     Move,
     ReadAhead,
     SlideCosts,
@@ -80,27 +78,27 @@ def test_a_gpu_and_a_cpu_find_their_own_threshold():
 
 
 def test_unmeasured_slides_and_fills_are_guessed_from_the_integration():
-    """Before a slide is timed, it is guessed at SLIDE_STEPS voxel-steps and a fill at
-    FILL_STEPS a step; where the steps travel for every integration, both at one voxel-step
+    """Before a slide is timed, it is guessed at TUNING.slide_steps voxel-steps and a fill at
+    TUNING.fill_steps a step; where the steps travel for every integration, both at one voxel-step
     (the transfer, which a slide pays for its entering step alone); a mode sliding by sums
     alone at its fewer pieces. The first slide measures the fill, the next ones a slide."""
     c = SlideCosts()
     c.record_direct(0, ms=1.0, voxels=V, steps=1)
-    width = int(SLIDE_STEPS + FILL_STEPS)
+    width = int(TUNING.slide_steps + TUNING.fill_steps)
     assert c.why_not(V, width + 1) is None
     assert "not measured yet" in c.why_not(V, width - 1)
-    assert c.why_not(V, int(SLIDE_STEPS) + 1, Move(filled=True)) is None
+    assert c.why_not(V, int(TUNING.slide_steps) + 1, Move(filled=True)) is None
     assert c.why_not(V, 3, Move(travels=True)) is None and c.why_not(V, 2, Move(travels=True))
-    inverting = SLIDE_STEPS * INVERT_PIECES / SLIDE_PIECES + FILL_STEPS
+    inverting = TUNING.slide_steps * INVERT_PIECES / SLIDE_PIECES + TUNING.fill_steps
     assert c.why_not(V, int(inverting) + 1, Move(inverts=True)) is None
     # the fill measured dear: a state is not started where it was guessed to pay
-    c.record_slide(0, ms=100 * FILL_STEPS * 1e-6 * V * 20, voxels=V, fill=20)
+    c.record_slide(0, ms=100 * TUNING.fill_steps * 1e-6 * V * 20, voxels=V, fill=20)
     assert c.why_not(V, width + 1) is not None
     assert c.why_not(V, width + 1, Move(filled=True)) is None  # a filled one slides on
 
 
 def test_steady_slides_are_averaged_over_the_splits_period():
-    """s is the mean of the last SLIDE_MEMORY slides: a split of the stacks (tens of pieces
+    """s is the mean of the last TUNING.slide_memory slides: a split of the stacks (tens of pieces
     at once) counts at its share, not as the new rate."""
     c = _measured(d=1e-6, s=10e-6, f=10e-6)
     for _ in range(20):
@@ -109,8 +107,8 @@ def test_steady_slides_are_averaged_over_the_splits_period():
     assert c.slide[0] < 40e-6
     assert c.why_not(V, 40, Move(filled=True)) is None  # one split does not drop the state
     slower = SlideCosts()
-    for k in range(3 * SLIDE_MEMORY):  # a machine getting slower is followed
-        slower.record_slide(0, ms=(1 if k < SLIDE_MEMORY else 100) * V * 1e-6, voxels=V)
+    for k in range(3 * TUNING.slide_memory):  # a machine getting slower is followed
+        slower.record_slide(0, ms=(1 if k < TUNING.slide_memory else 100) * V * 1e-6, voxels=V)
     assert slower.slide[0] > 50e-6
 
 
@@ -264,7 +262,7 @@ def test_a_viewers_long_window_slides_incrementally_and_equals_the_direct_integr
                 _, _, incremental = views.chronovolumes(state)
                 views.full_resolution(range(1))
                 slot = views.slots[0]
-                full = slot.session.pool.sessions[(0, slot.session.spec.integration.pool)]
+                full = slot.session.at(0)
                 assert slot.session.shown_level == 0
                 assert full.stats["path"] == path, full.stats
                 assert (full.stats["why_not_incremental"] is None) == (path == "incremental")

@@ -16,6 +16,7 @@ import pytest
 from chronocl import Session, integrate, modes
 from chronocl.core.selection import parse_selection
 from chronocl.core.tf import DataTF
+from chronocl.core.tuning import TUNING
 from chronocl.core.values import normalize
 from chronocl.data import synthetic
 from chronocl.data.chronovolume import Chronovolume
@@ -76,7 +77,7 @@ def test_a_store_too_large_for_any_level_is_fitted_from_its_coarsest_level(tmp_p
     series = open_series(path)
     assert series.n_levels >= 2
     coarsest = series.level(series.n_levels - 1)
-    monkeypatch.setattr(fit_range, "SAMPLE_VALUES", 2000)  # smaller than every level
+    monkeypatch.setattr(TUNING, "fit_sample_values", 2000)  # smaller than every level
     assert math.prod(coarsest.volume_shape) > 2000 / 10
     shutil.rmtree(path / "data" / "c")  # level 0's chunks gone: reading one would fail
     selection = parse_selection("0:10", series.n_steps)

@@ -77,8 +77,8 @@ def _run_all(series: TimeSeries, mode: str) -> dict[str, np.ndarray]:
                 keep(f"slide{move:+d}.display{display}", s.slide(move))
             keep(f"edit.display{display}", s.set_spec(_spec(mode, EDIT)))
             if mode in RECOLOURED and not display:
-                _, reason = s.recolours(_spec(mode, EDIT))
-                w = s.winners(gather)
+                _, reason = s.at(0).recolours(_spec(mode, EDIT))
+                w = s.at(0).winners(gather)
                 assert reason is None and w is not None, reason
                 out["winners.u"], out["winners.k"] = w.u.copy(), w.k.copy()
     curve = probe(series, region=((3, 40), (2, 30), (5, 33)))

@@ -85,7 +85,7 @@ def test_slides_with_the_state_on_the_device_equal_the_reference(copying, conver
                 after = session.selection
                 if after != before and set(before.steps) & set(after.steps):
                     assert session.stats["path"] == "incremental"
-                    assert session._slider.dc is not None  # the state is on the device
+                    assert session.at(0)._slider.dc is not None  # the state is on the device
             _check(session, cv, series)
 
 
@@ -165,11 +165,11 @@ def test_the_state_is_held_from_the_device_budget(copying, monkeypatch):
         monkeypatch.setenv("CHRONOCL_DEVICE_MEMORY", str(budget))
         with Session(series, mode="alpha", time_tf=rgb, engine=copying, memory="64MB") as s:
             s.set_window(0, width)
-            assert s._device.slots is not None
+            assert s.at(0)._device.slots is not None
             left = budget_left(copying.dc)  # the slots only: the state is held from a slide on
             for k in (1, 2, -1):
                 _check(s, s.slide(k), series)
-                assert (s._slider.dc is not None) == on_device
+                assert (s.at(0)._slider.dc is not None) == on_device
                 assert budget_left(copying.dc) == (0 if on_device else left)
         assert budget_left(copying.dc) == budget - others
 

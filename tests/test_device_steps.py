@@ -93,7 +93,7 @@ def test_an_edit_uploads_no_step_and_a_slide_one(copying, tmp_path):
     rgb = TimeTF.preset("rgb", positions="absolute")
     with Session(series, mode="max", time_tf=rgb, engine=copying, memory="64MB") as session:
         session.set_window(2, 10)
-        slots = session._device.slots
+        slots = session.at(0)._device.slots
         assert slots is not None and slots.uploads == 8
         assert session.stats["why_not_on_device"] is None
         for change in ({"order": "backward"}, {"mode": "alpha"}, {"order": "forward"}):
@@ -121,7 +121,7 @@ def test_a_window_over_the_device_budget_is_sent_from_the_host(copying, tmp_path
     series = chronocl.TimeSeries.from_array(rng.random((6, 8, 9, 33), dtype=np.float32))
     with Session(series, mode="alpha", engine=copying, memory="64MB") as session:
         cv = session.set_window(0, 5)
-        assert session._device.slots is None
+        assert session.at(0)._device.slots is None
         assert "device memory" in session.stats["why_not_on_device"]
         assert_same(cv, chronocl.integrate(series, session.window(), spec=session.spec))
 
@@ -171,7 +171,7 @@ def test_float64_steps_stay_on_the_host(copying):
     series = chronocl.TimeSeries.from_array(rng.random((6, 4, 5, 17)))  # float64
     with Session(series, mode="alpha", engine=copying, memory="64MB") as session:
         cv = session.set_window(0, 4)
-        assert session._device.slots is None
+        assert session.at(0)._device.slots is None
         assert_same(cv, chronocl.integrate(series, session.window(), spec=session.spec))
 
 
@@ -183,15 +183,15 @@ def test_slots_count_against_one_device_budget(copying, monkeypatch):
     monkeypatch.setenv("CHRONOCL_DEVICE_MEMORY", str(9 * step))
     with Session(series, mode="alpha", engine=copying, memory="64MB") as a:
         a.set_window(0, 5)
-        assert a._device.slots is not None and a._device.slots.count == 7  # 5 + 2 spare
+        assert a.at(0)._device.slots is not None and a.at(0)._device.slots.count == 7  # 5 + 2 spare
         with Session(series, mode="max", engine=copying, memory="64MB") as b:
             cv = b.set_window(0, 4)  # 2 slots left on the device: sent from the host
-            assert b._device.slots is None and "free" in b.stats["why_not_on_device"]
+            assert b.at(0)._device.slots is None and "free" in b.stats["why_not_on_device"]
             assert_same(cv, chronocl.integrate(series, b.window(), spec=b.spec))
         a.close()
         with Session(series, mode="max", engine=copying, memory="64MB") as c:
             c.set_window(0, 4)  # the first's slots were given back
-            assert c._device.slots is not None
+            assert c.at(0)._device.slots is not None
 
 
 def test_a_hold_dying_while_the_budget_is_locked_does_not_deadlock():

@@ -19,6 +19,7 @@ import chronocl
 import chronocl.integration.runs.distributed as dist
 import chronocl.integration.runs.streaming as streaming
 from chronocl.core.errors import EngineUnavailableError, InvalidParameterError
+from chronocl.core.tuning import TUNING
 from chronocl.data.series import write_series
 from chronocl.integration.runs.streaming import RUN_DIR, integrate_to_store, partial_path
 
@@ -199,7 +200,7 @@ def test_cli_runs_on_a_scheduler(tmp_path, client, store, local):
 
 
 def test_unreachable_scheduler_is_one_line_exit_2(tmp_path, store):
-    assert dist.CONNECT_TIMEOUT <= 10
+    assert TUNING.connect_timeout_s <= 10
     with pytest.raises(dist.SchedulerUnreachableError, match="cannot reach the dask scheduler"):
         dist.connect_scheduler("tcp://127.0.0.1:9", timeout=1)
     result = cli("integrate", store.path, tmp_path / "cv.zarr", "--scheduler", "tcp://127.0.0.1:9")

@@ -10,6 +10,7 @@ named lines (a broken parser would otherwise pass everything).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -222,3 +223,54 @@ def test_no_engine_capability_is_guessed():
     assert set(declared) == set(names) - {"dc"}
     for engine in (NumpyEngine(), OpenCLEngine()):
         assert all(hasattr(engine, n) for n in declared), engine
+
+
+# Numeric ALL-CAPS module constants in viewer/render/data (`NAME = 3`, `NAME: int = 2**20`), as
+# `grep -rnE "^[A-Z][A-Z0-9_]{2,}\s*(:\s*[^=]+)?=\s*[-0-9]"` counts them: 118 before the tuning
+# constants moved to chronocl/core/tuning.py (issue 47). The rest size the code beside them
+# (protocol limits, layout pixels, kernel-fixed sizes, file formats, a heuristic's thresholds).
+# Lower this as constants go; a tuning constant belongs in `Tuning`, with its measurement.
+MAX_NUMERIC_CONSTANTS = 71
+NUMERIC_CONSTANT = re.compile(r"^[A-Z][A-Z0-9_]{2,}\s*(:\s*[^=]+)?=\s*[-0-9]")
+
+
+def test_numeric_constants_do_not_grow_back():
+    """Tuning constants live in `chronocl.core.tuning.Tuning`; the count of the others in
+    viewer/render/data stays at or under MAX_NUMERIC_CONSTANTS (issue 47)."""
+    root = TESTS.parent / "chronocl"
+    found = [
+        f"{p.relative_to(root.parent)}:{n}: {line.strip()}"
+        for package in ("viewer", "render", "data")
+        for p in sorted((root / package).rglob("*.py"))
+        for n, line in enumerate(p.read_text().splitlines(), 1)
+        if NUMERIC_CONSTANT.match(line)
+    ]
+    assert len(found) > 10  # the pattern matches at all
+    assert len(found) <= MAX_NUMERIC_CONSTANTS, (
+        f"{len(found)} numeric ALL-CAPS constants in viewer/render/data, at most "
+        f"{MAX_NUMERIC_CONSTANTS}: a tuning constant goes in chronocl/core/tuning.py's `Tuning` "
+        "with a comment saying how it was measured\n" + "\n".join(found)
+    )
+
+
+def test_every_tuning_field_says_what_it_tunes_and_how_it_was_measured():
+    """Each field of `Tuning` has a comment right above it (what it tunes, and the machine,
+    command and figure it was measured with, or "not measured" and why the value)."""
+    import ast
+    import dataclasses
+
+    from chronocl.core.tuning import TUNING, Tuning
+
+    path = TESTS.parent / "chronocl" / "core" / "tuning.py"
+    lines = path.read_text().splitlines()
+    (cls,) = [
+        node
+        for node in ast.parse("\n".join(lines)).body
+        if isinstance(node, ast.ClassDef) and node.name == "Tuning"
+    ]
+    fields = [node for node in cls.body if isinstance(node, ast.AnnAssign)]
+    assert [f.target.id for f in fields] == [f.name for f in dataclasses.fields(Tuning)]
+    bare = [f.target.id for f in fields if not lines[f.lineno - 2].strip().startswith("#")]
+    assert not bare, f"Tuning fields without a comment above them: {bare}"
+    assert not Tuning.__dataclass_params__.frozen  # tests set a field of the one instance
+    assert isinstance(TUNING, Tuning)

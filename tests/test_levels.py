@@ -13,8 +13,7 @@ from chronocl import modes
 from chronocl.core.errors import ChronoclError, InvalidParameterError
 from chronocl.core.tf import TimeTF
 from chronocl.data import synthetic
-from chronocl.integration.interactive.levels import LatencyModel
-from chronocl.integration.interactive.session import Session
+from chronocl.integration.interactive.session import LatencyModel, Session
 from chronocl.modes.spec import IntegrationSpec
 
 # Drawn transfer functions and data are often transparent on purpose; the warnings saying so

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 import chronocl
 from chronocl import modes
 from chronocl.core.errors import EngineUnavailableError, KernelBuildError
+from chronocl.core.tuning import TUNING
 from chronocl.engine.device import list_devices
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.modes.spec import IntegrationSpec
@@ -152,10 +153,9 @@ def test_early_exit_on_opaque_front_and_window_of_40():
 
 
 def test_device_tables_are_kept_and_an_edited_tf_gets_its_own():
-    """An engine keeps the device tables of its last LUT_CACHE integrations (read-only, so no
+    """An engine keeps the device tables of its last TUNING.lut_cache integrations (read-only, so no
     caller can change them), and an edited data TF, time TF, window or value range builds
     tables of its own: each integration equals the reference."""
-    from chronocl.engine import tables
 
     engine = OpenCLEngine()
     spec = IntegrationSpec(mode="max")
@@ -173,10 +173,10 @@ def test_device_tables_are_kept_and_an_edited_tf_gets_its_own():
     assert engine.luts(spec, pos, False, (0.5, 1.0))[3] != first[3]  # the skip cut
     assert first[4] is not None  # the default TF as pieces, but not for an engine without them
     assert engine.with_options(pieces=False).luts(spec, pos, False, (0.0, 1.0))[4] is None
-    for n in range(2 * tables.LUT_CACHE):  # the one in use stays, the others come and go
+    for n in range(2 * TUNING.lut_cache):  # the one in use stays, the others come and go
         assert engine.luts(spec, pos, False, (0.0, 1.0)) is first
         engine.luts(spec, np.linspace(0.0, 1.0, n + 2), False, (0.0, 1.0))
-    assert len(engine._luts) == tables.LUT_CACHE
+    assert len(engine._luts) == TUNING.lut_cache
     assert engine.luts(spec, pos, False, (0.0, 1.0)) is first
     # points given to a preset that does not use them (a TF file may carry them) are dropped
     unused = chronocl.TimeTF(color=chronocl.TimeColor("rgb", points=[[0, 0, 0, 1], [1, 1, 0, 0]]))

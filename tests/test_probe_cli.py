@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, StoreCorruptError
-from chronocl.data import probe as probe_module
+from chronocl.core.tuning import TUNING
 from chronocl.data.integrity import CheckedStore
 from chronocl.data.probe import probe
 from chronocl.data.series import TimeSeries, open_series, write_series
@@ -288,8 +288,8 @@ def test_curve_of_one_step_plots(tmp_path):
 
 
 def test_progress_bar_appears_when_slow(series, monkeypatch, capsys):
-    monkeypatch.setattr(probe_module, "BAR_AFTER_S", -1.0)
-    monkeypatch.setattr(probe_module, "MAX_STEPS_PER_READ", 2)
+    monkeypatch.setattr(TUNING, "probe_bar_after_s", -1.0)
+    monkeypatch.setattr(TUNING, "probe_steps_per_read", 2)
     curve = probe(series, 3, 3, 3, progress=True)
     assert "probe" in capsys.readouterr().err
     np.testing.assert_array_equal(curve.values, _values()[:, 3, 3, 3])

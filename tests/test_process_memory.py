@@ -14,6 +14,7 @@ from chronocl.core import process_memory
 from chronocl.core.budget import resident_bytes
 from chronocl.core.memory import spares
 from chronocl.core.process_memory import ProcessLimit, Streaming
+from chronocl.core.tuning import TUNING
 from chronocl.data.slots import StepSlots
 from chronocl.data.window import WindowManager
 from chronocl.viewer.view_sessions import SharedSteps
@@ -370,7 +371,7 @@ def test_a_window_handed_out_and_let_go_by_its_views_gives_way_to_another_views_
 
 def _level0(slot):
     """The full-resolution session of a view's `AutoSession` (its pooling's)."""
-    return slot.session.pool.sessions[(0, slot.session.spec.integration.pool)]
+    return slot.session.at(0)
 
 
 @pytest.mark.parametrize("mode", ["alpha", "max"])
@@ -380,19 +381,19 @@ def test_a_window_that_does_not_fit_beside_the_views_frames_streams_and_equals_i
     from the store slab by slab, holding none of its steps, and shows what it shows resident;
     max keeps the winners its kernels wrote, so that a TF edit still recolours."""
     from chronocl.viewer.datasets import Dataset
-    from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
+    from chronocl.viewer.view_sessions import Views
     from chronocl.viewer.view_state import default_state, merge
 
     series = series_of(6)
     state = merge(default_state(0, series), {"window": {"t0": 1, "t1": 5}}, 6)
     state = merge(state, {"views": [{"mode": mode}]}, 6)
-    frames = FRAME_VOXEL_BYTES * int(np.prod(SHAPE))
+    frames = TUNING.frame_voxel_bytes * int(np.prod(SHAPE))
     got = {}
     for name, total in (
         ("resident", 10 * (1 << 30)),
-        ("streamed", process_memory.PROCESS_BYTES + frames + int(1.5 * STEP)),
+        ("streamed", TUNING.process_bytes + frames + int(1.5 * STEP)),
         # two of the four steps fit beside two slabs of an eighth of the window each
-        ("partly", process_memory.PROCESS_BYTES + frames + int(3.5 * STEP)),
+        ("partly", TUNING.process_bytes + frames + int(3.5 * STEP)),
     ):
         spares.clear()
         gc.collect()
@@ -424,7 +425,7 @@ def test_the_window_room_is_the_limit_less_every_client_s_frames_and_the_process
     class Client:
         pass
 
-    limit = ProcessLimit(10 * STEP + process_memory.PROCESS_BYTES)
+    limit = ProcessLimit(10 * STEP + TUNING.process_bytes)
     a, b = Client(), Client()
     limit.expect(a, 3 * STEP)
     limit.expect(b, 2 * STEP)
@@ -441,18 +442,18 @@ def test_a_second_view_that_leaves_the_window_no_room_lets_its_steps_go_before_s
     room, so both views stream from then on, and every view lets go of the steps, and the
     manager drops them, before the first streams (else the window stayed resident beside the
     streaming: twice over at the peak)."""
-    from chronocl.integration.interactive.session import Session
+    from chronocl.integration.interactive.level_session import LevelSession
     from chronocl.viewer.datasets import Dataset
-    from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
+    from chronocl.viewer.view_sessions import Views
     from chronocl.viewer.view_state import default_state, merge
 
     series = series_of(6)
     one = merge(default_state(0, series), {"window": {"t0": 1, "t1": 5}}, 6)
     two = merge(one, {"views": [{"mode": "alpha"}, {"mode": "max"}]}, 6)
-    frame = FRAME_VOXEL_BYTES * int(np.prod(SHAPE))
-    limit = ProcessLimit(process_memory.PROCESS_BYTES + frame + 5 * STEP)  # 4-step window
+    frame = TUNING.frame_voxel_bytes * int(np.prod(SHAPE))
+    limit = ProcessLimit(TUNING.process_bytes + frame + 5 * STEP)  # 4-step window
     held_at_streams: list[int] = []
-    stream = Session._stream
+    stream = LevelSession._stream
 
     def noting(self, *args, **kwargs):
         # full resolution's steps, held by a session or left in the manager (coarse levels'
@@ -472,7 +473,7 @@ def test_a_second_view_that_leaves_the_window_no_room_lets_its_steps_go_before_s
             views.chronovolumes(one)
             views.full_resolution(range(1))
             assert _level0(views.slots[0]).stats["path"] != "streamed"
-            monkeypatch.setattr(Session, "_stream", noting)
+            monkeypatch.setattr(LevelSession, "_stream", noting)
             views.chronovolumes(two)
             views.full_resolution(range(2))
             # the first view's frame stands (nothing of it changed), its steps let go
@@ -491,7 +492,7 @@ def test_the_windows_shown_count_each_step_once_over_every_client():
     class Client:
         pass
 
-    limit = ProcessLimit(process_memory.PROCESS_BYTES + 25 * STEP)
+    limit = ProcessLimit(TUNING.process_bytes + 25 * STEP)
     a, b, c = Client(), Client(), Client()
     assert limit.resident(a, 0, set(range(0, 10)), STEP)[:3] == (True, 10 * STEP, 25 * STEP)
     assert limit.resident(b, 1, set(range(0, 4)), 2 * STEP)[0]  # another data set
@@ -536,12 +537,12 @@ def test_a_second_client_whose_window_does_not_fit_beside_the_first_s_streams():
     """Two clients on windows of their own, each fitting the room alone but not together: the
     first keeps its window resident, the second streams (each deciding alone, both stayed)."""
     from chronocl.viewer.datasets import Dataset
-    from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
+    from chronocl.viewer.view_sessions import Views
     from chronocl.viewer.view_state import default_state, merge
 
     series = series_of(10)
-    frame = FRAME_VOXEL_BYTES * int(np.prod(SHAPE))
-    limit = ProcessLimit(process_memory.PROCESS_BYTES + 2 * frame + 6 * STEP)
+    frame = TUNING.frame_voxel_bytes * int(np.prod(SHAPE))
+    limit = ProcessLimit(TUNING.process_bytes + 2 * frame + 6 * STEP)
     with process_memory.limited(limit):
         shared = SharedSteps()
         first = Views([Dataset("d", series)], "opencl", None, "10GB", shared)
@@ -566,14 +567,14 @@ def test_a_streaming_view_reads_no_full_resolution_window_ahead(monkeypatch):
     stream)."""
     from chronocl.core import host_threads
     from chronocl.viewer.datasets import Dataset
-    from chronocl.viewer.view_sessions import FRAME_VOXEL_BYTES, Views
+    from chronocl.viewer.view_sessions import Views
     from chronocl.viewer.view_state import default_state, merge
 
     monkeypatch.setattr(host_threads, "workers", lambda: 16)
     series = series_of(6)
     state = merge(default_state(0, series), {"window": {"t0": 1, "t1": 5}}, 6)
-    frame = FRAME_VOXEL_BYTES * int(np.prod(SHAPE))
-    with process_memory.limited(ProcessLimit(process_memory.PROCESS_BYTES + frame + STEP)):
+    frame = TUNING.frame_voxel_bytes * int(np.prod(SHAPE))
+    with process_memory.limited(ProcessLimit(TUNING.process_bytes + frame + STEP)):
         views = Views([Dataset("d", series)], "opencl", None, "10GB")
         try:
             views.chronovolumes(state)
@@ -595,7 +596,7 @@ def test_a_window_that_does_not_fit_keeps_the_steps_that_do_and_streams_the_rest
     class Client:
         pass
 
-    limit = ProcessLimit(process_memory.PROCESS_BYTES + 10 * STEP)
+    limit = ProcessLimit(TUNING.process_bytes + 10 * STEP)
     a, b = Client(), Client()
     assert limit.resident(a, 0, {0, 1, 2, 3}, STEP).fits
     got = limit.resident(b, 0, set(range(2, 12)), STEP, reserve=STEP)
@@ -649,6 +650,6 @@ def test_a_session_streaming_part_of_its_window_keeps_those_steps_and_reads_only
         assert (again.t_index is None) == (whole[1] is None) == (mode == "alpha")
         if whole[1] is not None:
             np.testing.assert_array_equal(again.t_index, whole[1])
-        assert s.has_winners() == (mode == "max")
+        assert s.at(0).has_winners() == (mode == "max")
         for m in managers.values():
             m.close()

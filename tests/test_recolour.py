@@ -20,6 +20,7 @@ from chronocl import reference
 from chronocl.core.enhance import Enhance
 from chronocl.core.memory import aligned_empty
 from chronocl.core.tf import DataTF, TimeAlpha, TimeTF
+from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate
@@ -228,9 +229,9 @@ def test_session_recolours_after_slides_both_ways(gl, mode) -> None:
         for move in (+2, -3, +1):
             s.slide(move)
             assert s.stats["path"] == "incremental"
-            fixed, reason = s.recolours(edit)
+            fixed, reason = s.at(0).recolours(edit)
             assert reason is None, reason
-            w = s.winners()
+            w = s.at(0).winners()
             assert w is not None and w.steps == s.selection.steps
             want = integrate(series, s.selection, spec=fixed, engine="opencl")
             prepared = rec.prepare(w)
@@ -251,9 +252,9 @@ def test_max_min_recolour_at_another_value_range(mode) -> None:
         s.set_window(1, 7)
         for vr in [(0.0, 12.0), (-4.0, 5.0)]:  # each clips many voxels to u = 0 or 1
             edit = _spec(mode, DataTF(), TimeTF.preset("warm-cool"), value_range=vr)
-            fixed, reason = s.recolours(edit)
+            fixed, reason = s.at(0).recolours(edit)
             assert reason is None, reason
-            w = s.winners(spec=fixed)
+            w = s.at(0).winners(spec=fixed)
             assert w.value_range == vr and w.steps == s.selection.steps
             want = integrate(series, s.selection, spec=fixed, engine="opencl")
             _same_on_host(w, fixed, want.rgba)
@@ -365,13 +366,13 @@ def test_recolouring_writes_into_the_rgba8_shown(mode) -> None:
     with Session(series, engine="opencl", spec=spec, memory="256MB", display=True) as s:
         cv = s.set_window(2, 9)
         assert shown_output(cv.rgba, cv.shape)
-        w = s.winners(gather)
+        w = s.at(0).winners(gather)
         bricks = BrickRecolourer()
         prepared = bricks.prepare(w, start=cv.rgba)
         try:
             before = prepared.output[1].copy()  # the bricks the shown spec may colour
             for edit in [*edits, spec]:
-                fixed = s.recolours(edit)[0]
+                fixed = s.at(0).recolours(edit)[0]
                 changed = bricks.apply(prepared, fixed)
                 assert changed.rgba is cv.rgba
                 np.testing.assert_array_equal(changed.rgba, _whole(w, fixed))
@@ -400,18 +401,18 @@ def test_brick_outputs_taken_over_by_the_next_window_recolour_it_right(mode) -> 
     with Session(series, engine="opencl", spec=spec, memory="256MB") as s:
         s.set_window(0, 6)
         bricks = BrickRecolourer()
-        first = bricks.prepare(s.winners(gather))
+        first = bricks.prepare(s.at(0).winners(gather))
         for edit in edits:
-            bricks.apply(first, s.recolours(edit)[0])
+            bricks.apply(first, s.at(0).recolours(edit)[0])
         held = first.take_held()
         first.release()
         s.set_window(5, 11)
-        w = s.winners(gather)
+        w = s.at(0).winners(gather)
         taken = bricks.prepare(w, held=held)
         try:
             assert taken.output[0] is held[0]
             for edit in [*edits[::-1], spec]:
-                fixed = s.recolours(edit)[0]
+                fixed = s.at(0).recolours(edit)[0]
                 np.testing.assert_array_equal(bricks.apply(taken, fixed).rgba, _whole(w, fixed))
         finally:
             taken.release()
@@ -424,11 +425,10 @@ def test_a_recoloured_frame_and_its_winners_come_back_whole(monkeypatch) -> None
     (at 512^3 fresh pages for the winners cost 0.6 s of the first edit after a switch)."""
     import gc
 
-    from chronocl.core import memory
     from chronocl.core.memory import spares
     from chronocl.core.selection import parse_selection
 
-    monkeypatch.setattr(memory, "MAPPED_BYTES", 1)  # small arrays recycled as large ones are
+    monkeypatch.setattr(TUNING, "mapped_bytes", 1)  # small arrays recycled as large ones are
     misses: list[int] = []
     real = spares.take
 
@@ -445,14 +445,14 @@ def test_a_recoloured_frame_and_its_winners_come_back_whole(monkeypatch) -> None
     try:
         with Session(series, engine="opencl", mode="max", display=True, memory="256MB") as s:
             cv = s.set_window(0, 4)
-            w = s.winners(gather)
+            w = s.at(0).winners(gather)
             assert cv.rgba.dtype == np.uint8 and misses  # the first frame: fresh memory
             misses.clear()
             s.leaving(parse_selection("4:8", 8))  # as the viewer does before a jump
             del cv, w
             gc.collect()
             s.set_window(4, 8)
-            assert s.winners(gather) is not None
+            assert s.at(0).winners(gather) is not None
             assert misses == []
     finally:
         spares.clear()
@@ -537,7 +537,7 @@ def test_the_kernels_winners_equal_the_gathered_ones(data) -> None:
 def test_a_session_keeps_the_kernels_winners_until_its_window_changes(monkeypatch) -> None:
     """A viewer's session (display) in max hands out the winners its integration wrote: no
     gather; after a slide or a value range they are gathered again; the numpy engine gathers."""
-    from chronocl.integration.interactive import session as session_module
+    from chronocl.integration.interactive import level_session as session_module
 
     gathered = []
     real = session_module.of_window
@@ -551,7 +551,7 @@ def test_a_session_keeps_the_kernels_winners_until_its_window_changes(monkeypatc
     series = TimeSeries.from_array(rng.random((8, 5, 6, 21), dtype=np.float32))
     s = Session(series, memory="64MB", mode="max", display=True, time_tf="rgb")
     cv = s.set_window(1, 5)
-    w = s.winners()
+    w = s.at(0).winners()
     assert not gathered and w is not None
     want = winners(
         cv.t_index,
@@ -564,10 +564,10 @@ def test_a_session_keeps_the_kernels_winners_until_its_window_changes(monkeypatc
     np.testing.assert_array_equal(w.u, want.u)
     np.testing.assert_array_equal(w.k, want.k)
     assert w.spec == s.spec
-    s.winners(spec=s.spec.with_value_range((0.2, 0.7)))  # u at another range: gathered
+    s.at(0).winners(spec=s.spec.with_value_range((0.2, 0.7)))  # u at another range: gathered
     assert len(gathered) == 1
     cv = s.slide(1)  # slid (gathered) or integrated again (written): the new window's
-    w = s.winners()
+    w = s.at(0).winners()
     assert len(gathered) == (2 if s.stats["path"] == "incremental" else 1)
     want = winners(
         cv.t_index,

@@ -14,6 +14,7 @@ pytest.importorskip("websockets")
 
 from chronocl.core.errors import SupersededError
 from chronocl.core.interrupt import checkpoint
+from chronocl.core.tuning import TUNING
 from chronocl.viewer import recolouring
 
 from .viewer_helpers import Client, connected_client, make_stores, serving  # noqa: F401
@@ -426,10 +427,9 @@ def test_a_window_streamed_under_the_memory_limit_still_recolours_its_tf_edits(t
     """A `--memory` that leaves the window's steps no room beside the views' frames: the
     window streams from the store (the frame says why), and max's TF edit still recolours
     with the winners its streamed integration wrote, showing what integrating shows."""
-    from chronocl.core.process_memory import PROCESS_BYTES
     from chronocl.viewer.server import ViewerServer
 
-    server = ViewerServer(make_stores(tmp_path), memory=PROCESS_BYTES + (1 << 20))
+    server = ViewerServer(make_stores(tmp_path), memory=TUNING.process_bytes + (1 << 20))
     server.start()
     client = Client(server)
     try:

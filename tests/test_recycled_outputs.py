@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 import chronocl
 from chronocl.core import memory
 from chronocl.core.memory import recycled_empty, spares
+from chronocl.core.tuning import TUNING
 from chronocl.data.bricks import ResidentBricks
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.integration import inmemory
@@ -34,9 +35,9 @@ pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWa
 @pytest.fixture(autouse=True)
 def small_maps(monkeypatch):
     """Every output is recycled, so the small volumes here are too."""
-    monkeypatch.setattr(memory, "MAPPED_BYTES", 1)
-    monkeypatch.setattr(memory, "SPARE_MAPS", 3)
-    monkeypatch.setattr(memory, "SPARE_SIZES", 3, raising=False)  # `poison`'s three sizes
+    monkeypatch.setattr(TUNING, "mapped_bytes", 1)
+    monkeypatch.setattr(TUNING, "spare_maps", 3)
+    monkeypatch.setattr(TUNING, "spare_sizes", 3)  # `poison`'s three sizes
     spares.clear()
     yield
     spares.clear()
@@ -112,8 +113,8 @@ def test_a_caller_giving_back_before_it_takes_leaves_the_other_spares(monkeypatc
     last rgba and t_index) where they were; with two maps in all, it pushed them out."""
     import mmap
 
-    monkeypatch.setattr(memory, "SPARE_MAPS", 2)
-    monkeypatch.setattr(memory, "SPARE_SIZES", 2, raising=False)
+    monkeypatch.setattr(TUNING, "spare_maps", 2)
+    monkeypatch.setattr(TUNING, "spare_sizes", 2)
     rgba, t_index = 16 * mmap.PAGESIZE, 4 * mmap.PAGESIZE
     for size in (rgba, t_index):  # chronocl.integrate's output died
         spares.give(mmap.mmap(-1, size))
@@ -131,15 +132,15 @@ def test_arrays_dying_fast_start_one_timer_not_one_each():
 
 
 def test_spares_are_bounded_in_number_and_time(monkeypatch):
-    held = [recycled_empty((100 + i, 64), np.float32) for i in range(3 * memory.SPARE_SIZES)]
+    held = [recycled_empty((100 + i, 64), np.float32) for i in range(3 * TUNING.spare_sizes)]
     del held
     gc.collect()
-    assert len(spares.maps) == memory.SPARE_SIZES  # one of each of the last sizes
-    held = [recycled_empty((100, 64), np.float32) for _ in range(3 * memory.SPARE_MAPS)]
+    assert len(spares.maps) == TUNING.spare_sizes  # one of each of the last sizes
+    held = [recycled_empty((100, 64), np.float32) for _ in range(3 * TUNING.spare_maps)]
     del held
     gc.collect()
-    assert sum(len(m) == len(spares.maps[-1]) for m in spares.maps) == memory.SPARE_MAPS
-    monkeypatch.setattr(memory, "SPARE_SECONDS", 0.05)
+    assert sum(len(m) == len(spares.maps[-1]) for m in spares.maps) == TUNING.spare_maps
+    monkeypatch.setattr(TUNING, "spare_seconds", 0.05)
     recycled_empty((100, 64), np.float32)  # dies at once: a spare again, for 0.05 s
     for _ in range(200):
         if not spares.maps:
@@ -246,8 +247,9 @@ def test_arrays_alive_at_exit_give_nothing_back():
     script = (
         "import numpy as np\n"
         "from chronocl.core import memory\n"
+        "from chronocl.core.tuning import TUNING\n"
         "memory.spares.give = lambda mapped: print('given at exit')\n"
-        "kept = memory.recycled_empty((1, memory.MAPPED_BYTES), np.uint8)\n"
+        "kept = memory.recycled_empty((1, TUNING.mapped_bytes), np.uint8)\n"
     )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert done.returncode == 0 and not done.stderr, done.stderr
@@ -262,7 +264,8 @@ def test_an_array_dying_while_the_spares_are_locked_does_not_deadlock():
     script = (
         "import numpy as np\n"
         "from chronocl.core import memory\n"
-        "a = memory.recycled_empty((memory.MAPPED_BYTES,), np.uint8)\n"
+        "from chronocl.core.tuning import TUNING\n"
+        "a = memory.recycled_empty((TUNING.mapped_bytes,), np.uint8)\n"
         "with memory.spares.lock:\n"
         "    del a\n"
         "assert len(memory.spares.maps) == 1\n"

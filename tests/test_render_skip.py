@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 import chronocl
 from chronocl.core.errors import InvalidParameterError, RendererUnavailableError
+from chronocl.core.tuning import TUNING
 from chronocl.render import Camera, Shading, brick_grid
 from chronocl.render.raycaster import Raycaster
 from chronocl.render.upload import convert
@@ -70,11 +71,12 @@ def test_grid_is_the_grown_brick_maximum(shape, brick, fill, seed):
 
 def test_grid_on_the_pool_equals_serial():
     rng = np.random.default_rng(3)
-    alpha = np.zeros((140, 131, 129), dtype=np.uint8)  # above SERIAL_VOXELS: slab tasks
+    # above TUNING.brick_grid_serial_voxels: slab tasks
+    alpha = np.zeros((140, 131, 129), dtype=np.uint8)
     for _ in range(30):
         z, y, x = rng.integers(0, 128, 3)
         alpha[z : z + 3, y : y + 2, x] = rng.integers(1, 256)
-    assert alpha.size > brick_grid.SERIAL_VOXELS
+    assert alpha.size > TUNING.brick_grid_serial_voxels
     assert np.array_equal(brick_grid.grid(alpha), brute_grid(alpha, brick_grid.BRICK))
 
 
@@ -208,7 +210,6 @@ def test_a_draw_that_may_be_given_up_is_the_same_picture_and_stops_between_bands
     """A refine's draw goes in bands of rows with a look at newer input before each: the
     picture is the one drawn at once, and the draw stops at the first band after input."""
     from chronocl.core.errors import SupersededError
-    from chronocl.render.raycaster import DRAW_BANDS
 
     cv = sparse_chronovolume((33, 33, 17), 7)
     vol = rc.upload(cv)
@@ -222,7 +223,7 @@ def test_a_draw_that_may_be_given_up_is_the_same_picture_and_stops_between_bands
             banded = rc.draw(
                 vol, view["camera"], size, stop=lambda seen=looks: seen.append(1) or False, **args
             )
-            assert np.array_equal(wholes[-1], banded) and len(looks) == DRAW_BANDS
+            assert np.array_equal(wholes[-1], banded) and len(looks) == TUNING.draw_bands
         calls = iter([False, False, True])
         with pytest.raises(SupersededError):
             rc.draw(vol, VIEWS[0]["camera"], size, stop=lambda: next(calls))

@@ -11,8 +11,9 @@ import chronocl
 from chronocl.core.errors import SupersededError
 from chronocl.core.interrupt import interruptible
 from chronocl.core.slab_sink import slabs_to
+from chronocl.core.tuning import TUNING
 from chronocl.data import synthetic
-from chronocl.integration.interactive.session import REFINE_SLABS, Session
+from chronocl.integration.interactive.session import Session
 from chronocl.render import Camera
 from chronocl.viewer import slots
 from chronocl.viewer.gl_thread import on_gl
@@ -73,7 +74,7 @@ def test_slabs_written_while_integrating_draw_what_a_whole_upload_draws(
             cv = session.set_window(1, 8)
         writes.done(cv)
     assert cv.rgba.dtype == np.uint8
-    assert len(writes.jobs) == -(-SHAPE[0] // -(-SHAPE[0] // REFINE_SLABS)) > 1
+    assert len(writes.jobs) == -(-SHAPE[0] // -(-SHAPE[0] // TUNING.refine_slabs)) > 1
     assert slot.written is cv and slot.uploaded is None
     data, a, b = texture_and_pictures(slot, cv)
     assert writes_counted == []  # nothing written again (the fresh slot's is a new texture)
@@ -88,7 +89,7 @@ def test_a_refine_given_up_half_way_is_written_whole_next_time(series, writes_co
     writes = SlabUpload(slot)
 
     def given_up() -> bool:
-        return writes.rows >= 2 * -(-SHAPE[0] // REFINE_SLABS)  # newer input after two slabs
+        return writes.rows >= 2 * -(-SHAPE[0] // TUNING.refine_slabs)  # newer input after two slabs
 
     with Session(series, mode="alpha", display=True, memory="256MB") as session:
         with pytest.raises(SupersededError), interruptible(given_up), slabs_to(writes.put):

@@ -87,7 +87,9 @@ def test_a_slide_given_up_for_newer_input_is_not_shown_nor_slid_on(mode, pieces)
         sliding = [p for p in told if p[0] == "sliding"]
         assert sliding == [("sliding", i, 20) for i in range(pieces)]
         assert_same(session.current(), _reference(session, series))
-        assert session.stats["path"] == "reintegrate"
+        # Given up before the state was touched (no piece: while the entering step was read),
+        # the window slides on from it; given up half way, it is integrated anew.
+        assert session.stats["path"] == ("incremental" if pieces == 0 else "reintegrate")
         for k in (1, 1, -3):
             assert_same(session.slide(k), _reference(session, series))
             assert session.stats["path"] == "incremental"

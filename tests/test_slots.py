@@ -258,7 +258,7 @@ def test_a_long_scrub_keeps_every_window_in_one_block():
         s.set_window(0, 10)
         for _ in range(25):
             s.slide(1)
-            assert slot_brick(list(s._arrays.values())) is not None
+            assert slot_brick(list(s.at(0)._arrays.values())) is not None
         assert s.manager.slots.own_arrays == 0
 
 
@@ -279,14 +279,14 @@ def test_a_window_integrated_anew_takes_the_slots_of_the_steps_that_left(host_pt
         s.set_window(0, 10)
         for t0 in range(3, 19, 3):
             before = engine.in_place
-            slots = s._device.slots
+            slots = s.at(0)._device.slots
             sent = None if slots is None else slots.uploads
             cv = s.set_window(t0, t0 + 10)
             if host_ptr:
                 assert engine.in_place > before and slots is None  # read where the steps lie
             else:
                 assert engine.in_place == 0 and s.stats["why_not_on_device"] is None
-                assert s._device.slots is slots and slots.uploads - sent == 3
+                assert s.at(0)._device.slots is slots and slots.uploads - sent == 3
             assert_same(cv, chronocl.integrate(series, s.window(), spec=s.spec))
         assert s.stats["why_not_incremental"] is not None
         assert s.manager.slots.own_arrays == 0

@@ -20,10 +20,11 @@ import chronocl
 from chronocl import modes
 from chronocl.core import values
 from chronocl.core.errors import ChronoclError, InvalidParameterError, UnknownNameError
+from chronocl.core.tuning import TUNING
 from chronocl.engine import opencl as opencl_module
 from chronocl.engine import transfer
 from chronocl.engine.device import get_context
-from chronocl.engine.device_formats import PARALLEL_MIN, quantize, resolve_format, stored_dtype
+from chronocl.engine.device_formats import quantize, resolve_format, stored_dtype
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.engine.transfer import chunks_of
 from chronocl.modes.spec import IntegrationSpec
@@ -395,7 +396,8 @@ def test_bench_transfer_reports_null_on_cpu_and_figures_when_forced():
 
 @pytest.mark.parametrize("name", ["float16", "uint8", "uint16", "float32", "auto"])
 def test_conversions_split_over_threads_equal_one_pass(name):
-    v = np.random.default_rng(3).normal(0, 3e4, PARALLEL_MIN * 2 + 7).astype(np.float32)
+    n = TUNING.format_parallel_min * 2 + 7  # above the threshold: split
+    v = np.random.default_rng(3).normal(0, 3e4, n).astype(np.float32)
     fmt = resolve_format(name, np.float32, (-1e4, 2e4))
     split = fmt.encode(v)
     np.testing.assert_array_equal(split, fmt._encode(v, np.empty(v.shape, fmt.dtype)))

@@ -59,7 +59,7 @@ def cv_of(rgba: np.ndarray) -> chronocl.Chronovolume:
 @pytest.mark.parametrize("shape", [(1, 3, 5), (7, 5, 3), (33, 20, 70), (40, 64, 64)])
 def test_convert_matches_numpy(shape):
     """Every format's bytes and the occupancy match plain numpy, serial and threaded alike
-    (the last two shapes are above SERIAL_VOXELS)."""
+    (the last two shapes are above TUNING.upload_serial_voxels)."""
     rgba = random_rgba(shape, empty=0.7)
     rgba[: shape[0] // 2] = 0.0  # empty slices, rows and columns at the low end
     rgba[..., -1:, :] = 0.0

@@ -12,10 +12,10 @@ import pytest
 
 import chronocl
 from chronocl.core.errors import ChronoclError
+from chronocl.core.tuning import TUNING
 from chronocl.core.values import normalize
 from chronocl.data import synthetic
 from chronocl.data.series import open_series, write_series
-from chronocl.viewer import datasets
 from chronocl.viewer.datasets import HIST_BINS, Dataset, sample_level, sample_steps
 from chronocl.viewer.side_work import SideWork
 
@@ -68,8 +68,8 @@ def test_a_store_without_levels_decodes_a_bounded_strided_part_of_each_step(tmp_
     # At most 3 chunks' bytes decoded per step (the budget of a 64 MiB step at 32 MiB,
     # scaled): chunks 1, 4 and 6 (the middle ones of 3 stretches of z), every 2nd voxel of
     # them (3 * 8 * 40 * 48 / 2^3 = 5760 voxels; the sample size scaled alike).
-    monkeypatch.setattr(datasets, "HIST_READ_BYTES", 3 * step_bytes // 8)
-    monkeypatch.setattr(datasets, "HIST_SAMPLE_VOXELS", 5760)
+    monkeypatch.setattr(TUNING, "hist_read_bytes", 3 * step_bytes // 8)
+    monkeypatch.setattr(TUNING, "hist_sample_voxels", 5760)
     for c in (0, 2, 3, 5, 7):  # the chunks the sample skips are never read
         shutil.rmtree(tmp_path / "flat.zarr" / "data" / "c" / "2" / str(c))
     ds = Dataset("flat", series)

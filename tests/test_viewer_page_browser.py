@@ -19,6 +19,7 @@ import pytest
 pytest.importorskip("starlette")
 playwright_api = pytest.importorskip("playwright.sync_api")
 
+from chronocl.core.tuning import TUNING  # noqa: E402
 from chronocl.viewer import frames  # noqa: E402
 from chronocl.viewer import worker as worker_module  # noqa: E402
 
@@ -406,7 +407,7 @@ def test_a_slow_frame_shows_a_busy_indicator(open_page, monkeypatch, tmp_path):
 def test_render_size_keeps_the_aspect_within_the_budget():
     assert frames.render_size((512, 512), 1) == (512, 512)
     w, h = frames.render_size((1024, 733), 4)
-    assert 4 * w * h <= frames.PIXEL_BUDGET and abs(w / h - 1024 / 733) < 0.01
+    assert 4 * w * h <= TUNING.pixel_budget and abs(w / h - 1024 / 733) < 0.01
     assert frames.render_size((1024, 733), 1, 0.5) == (512, 366)
     budget = frames.DrawBudget(target_ms=80, floor=100, cap=10_000)
     assert budget.pixels() == 10_000  # nothing measured yet
@@ -454,7 +455,7 @@ def test_a_frame_over_the_draw_budget_is_reduced_then_redrawn_in_full(server, mo
         full = frames.render_size((1024, 733), 1)
         w, h = fast["views"][0]["width"], fast["views"][0]["height"]
         assert fast["reduced"] and fast["refining"]
-        assert w * h <= frames.MIN_PIXELS * 1.01 and abs(w / h - 1024 / 733) < 0.02
+        assert w * h <= TUNING.min_pixels * 1.01 and abs(w / h - 1024 / 733) < 0.02
         _, final, _ = client.frame_for(rid)  # after a short idle, the same state in full
         assert final["seq"] > fast["seq"] and not final["reduced"] and not final["refining"]
         assert (final["views"][0]["width"], final["views"][0]["height"]) == full

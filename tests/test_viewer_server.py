@@ -17,6 +17,7 @@ pytest.importorskip("starlette")
 pytest.importorskip("websockets")
 
 from chronocl import modes
+from chronocl.core.tuning import TUNING
 from chronocl.data import synthetic
 from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
 
@@ -700,10 +701,11 @@ def test_a_reloaded_page_s_first_frame_waits_for_the_old_socket_to_let_go(server
 
 def test_a_client_that_left_and_stays_busy_stalls_the_others_once(server, monkeypatch):
     """A client that left but is still busy (a long movie) holds its frames: the others' frames
-    wait for it only until LEFT_WAIT_S after it left, then come, and every later frame at once."""
+    wait for it only until TUNING.left_wait_s after it left, then come, and every later frame at
+    once."""
     from chronocl.viewer import worker
 
-    monkeypatch.setattr(worker, "LEFT_WAIT_S", 1.0)
+    monkeypatch.setattr(TUNING, "left_wait_s", 1.0)
     busy = object()  # a worker closed whose thread has not let go (never will, here)
     with worker._left:
         worker._leaving[busy] = time.monotonic()

@@ -27,10 +27,10 @@ from chronocl.core.errors import (
     StoreChangedError,
     SupersededError,
 )
+from chronocl.core.tuning import TUNING
 from chronocl.data import slots as slots_module
-from chronocl.data import window as window_module
 from chronocl.data.series import TimeSeries, open_series
-from chronocl.data.slots import WARM_POLL_S, StepSlots, _warmer
+from chronocl.data.slots import StepSlots, _warmer
 from chronocl.data.window import WindowManager
 
 
@@ -149,18 +149,18 @@ def test_free_slots_for_a_jump_of_a_whole_window_are_faulted_in_once_reads_pause
         grown = resident_bytes() - before
         return (steps - 0.5) * step <= grown <= (steps + 1.5) * step
 
-    monkeypatch.setattr(window_module, "WARM_AFTER_S", 60.0)
+    monkeypatch.setattr(TUNING, "warm_after_s", 60.0)
     with WindowManager(series, 10 * step, prefetch=0) as wm:
         before = resident_bytes()
         wm.get(list(range(window)))
-        time.sleep(3 * WARM_POLL_S)
+        time.sleep(3 * TUNING.warm_poll_s)
         assert grown_by(window)  # reads only: they ran a moment ago
-        monkeypatch.setattr(window_module, "WARM_AFTER_S", 0.0)
+        monkeypatch.setattr(TUNING, "warm_after_s", 0.0)
         warms_looked()
         assert grown_by(2 * window)
         got = wm.get(list(range(window, 2 * window)))  # the jump: into the warm slots
         assert all((a == 1).all() for a in got) and wm.slots.own_arrays == 0
-    monkeypatch.setattr(window_module, "WARM_AFTER_S", 60.0)
+    monkeypatch.setattr(TUNING, "warm_after_s", 60.0)
     with WindowManager(series, 10 * step, prefetch=0) as wm:
         before = resident_bytes()
         wm.get(list(range(window)))
@@ -173,7 +173,7 @@ def test_a_manager_reading_on_holds_up_neither_warms_nor_memory_of_others(monkey
     view playing on and on) lets the others' run, and a closed manager's memory, which its warm
     held, goes at once; the thread idle holds nothing of the last warm it ran."""
     series = TimeSeries.from_array(np.ones((8, 4, 64, 64), np.float32))
-    monkeypatch.setattr(window_module, "WARM_AFTER_S", 60.0)  # reads never pause that long
+    monkeypatch.setattr(TUNING, "warm_after_s", 60.0)  # reads never pause that long
     with WindowManager(series, "1MB", prefetch=0) as reading:
         reading.get([0, 1])
         for _ in range(2):
@@ -203,7 +203,7 @@ def test_free_slots_are_warmed_once_every_managers_reads_have_paused(monkeypatch
     monkeypatch.setattr(
         slots_module, "prefault", lambda slot, between=None: faulted.append(slot.shape)
     )
-    monkeypatch.setattr(window_module, "WARM_AFTER_S", 0.0)
+    monkeypatch.setattr(TUNING, "warm_after_s", 0.0)
     series, gated = gated_series()
     coarse = TimeSeries.from_array(np.ones((8, 2, 8, 8), np.float32))
     with WindowManager(series, "1MB", prefetch=0) as fine, WindowManager(coarse, "1MB") as wm:
@@ -221,9 +221,10 @@ def test_free_slots_are_warmed_once_every_managers_reads_have_paused(monkeypatch
 
 UNCLOSED = """
 import sys, numpy as np
+from chronocl.core.tuning import TUNING
 from chronocl.data import window
 from chronocl.data.series import TimeSeries
-window.WARM_AFTER_S = 600.0
+TUNING.warm_after_s = 600.0
 wm = window.WindowManager(TimeSeries.from_array(np.ones((8, 4, 8, 8), np.float32)), 8 * 1024)
 wm.get([0, 1])
 print("read", flush=True)
@@ -232,7 +233,8 @@ print("read", flush=True)
 
 def test_a_manager_never_closed_does_not_hold_up_the_exit():
     """The documented `Session(...)` with no `with` or close: its warm, waiting for the reads to
-    pause, does not hold the program's end (it did for WARM_AFTER_S, then faulted in slots)."""
+    pause, does not hold the program's end (it did for TUNING.warm_after_s, then faulted in
+    slots)."""
     root = Path(__file__).parents[1]
     done = subprocess.run(
         [sys.executable, "-c", UNCLOSED], cwd=root, capture_output=True, text=True, timeout=20
@@ -242,10 +244,11 @@ def test_a_manager_never_closed_does_not_hold_up_the_exit():
 
 FORKED = """
 import os, numpy as np
+from chronocl.core.tuning import TUNING
 from chronocl.data import window
 from chronocl.data.series import TimeSeries
 from chronocl.data.slots import _warmer
-window.WARM_AFTER_S = 600.0
+TUNING.warm_after_s = 600.0
 wm = window.WindowManager(TimeSeries.from_array(np.ones((8, 4, 8, 8), np.float32)), 8 * 1024)
 wm.get([0, 1])
 _warmer()

@@ -7,6 +7,7 @@ import os
 from dask.utils import format_bytes, parse_bytes
 
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.tuning import TUNING
 
 DEFAULT_MEMORY = "2GB"
 MAX_MEMORY = 2**50  # 1 PiB: a larger budget is a typo, not a machine
@@ -91,16 +92,15 @@ malloc_trim = _load_trim()
 # glibc raises its mmap threshold to the size of each large block freed (up to 32 MiB), after
 # which decoded chunks and slabs come from per-thread arenas that keep them when freed: with
 # 16 threads a 64 MB budget peaked at 1.25-1.4x (tests/test_budget_threads.py).
-# A fixed threshold keeps every block of a MiB or more in its own mapping, handed back on free.
-MMAP_THRESHOLD = 1 << 20
-TRIM_THRESHOLD = 128 << 10  # glibc's own default: what an arena keeps free at its top
+# A fixed threshold (`TUNING.mmap_threshold`, `trim_threshold`) keeps every block of a MiB or
+# more in its own mapping, handed back on free.
 _M_MMAP_THRESHOLD = -3
 _M_TRIM_THRESHOLD = -1
 _bounded: list[bool] = []
 
 
 def bound_allocator() -> bool:
-    """Fix glibc's mmap threshold at MMAP_THRESHOLD for this process (once), so that what the
+    """Fix glibc's mmap threshold at TUNING.mmap_threshold for this process (once), so that what the
     threads of a run free goes back to the system however many threads there are; False on
     other C libraries."""
     if not _bounded:
@@ -110,8 +110,8 @@ def bound_allocator() -> bool:
 
             libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
             # The trim threshold too: the raised mmap threshold had raised it to twice as much.
-            ok = libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
-            ok = ok and libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD)
+            ok = libc.mallopt(_M_MMAP_THRESHOLD, TUNING.mmap_threshold)
+            ok = ok and libc.mallopt(_M_TRIM_THRESHOLD, TUNING.trim_threshold)
             _bounded.append(bool(ok))
             if ok and malloc_trim is not None:
                 malloc_trim(0)  # what the arenas kept under the old thresholds

@@ -15,9 +15,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-# The longest a piece of background work waits for frames to pause: frames made back to back
-# (a view playing) must not hold it back for ever.
-MAX_YIELD_S = 5.0
+from chronocl.core.tuning import TUNING
 
 _lock = threading.Lock()
 _frames = 0
@@ -46,6 +44,8 @@ def busy() -> bool:
     return not _idle.is_set()
 
 
-def yield_to_frames(timeout: float = MAX_YIELD_S) -> bool:
-    """Wait while a frame is being made (at most `timeout` s); whether none is now."""
-    return _idle.wait(timeout)
+def yield_to_frames(timeout: float | None = None) -> bool:
+    """Wait while a frame is being made (at most `timeout` s; None: `TUNING.max_yield_s`, so
+    that frames made back to back, a view playing, do not hold the work back for ever); whether
+    none is now."""
+    return _idle.wait(TUNING.max_yield_s if timeout is None else timeout)

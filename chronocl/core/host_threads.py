@@ -20,9 +20,9 @@ import numpy as np
 
 from chronocl.core import env
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.tuning import TUNING
 
 MAX_THREADS = 8
-PARALLEL_MIN_BYTES = 1 << 22  # copies smaller than this run on the calling thread
 
 _lock = threading.Lock()
 _held: list[ThreadPoolExecutor] = []
@@ -59,7 +59,7 @@ def copy_all(pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> None:
     spread over the pool's threads (on the calling thread when small)."""
     total = sum(dst.nbytes for dst, _ in pairs)
     n = workers()
-    if n == 1 or total < PARALLEL_MIN_BYTES:
+    if n == 1 or total < TUNING.parallel_min_bytes:
         for dst, src in pairs:
             dst[...] = src
         return

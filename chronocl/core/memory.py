@@ -18,8 +18,9 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from chronocl.core.tuning import TUNING
+
 ALIGN = 64
-MAPPED_BYTES = 16 * 2**20  # arrays this large get a memory map of their own (`aligned_empty`)
 MADV_POPULATE_WRITE = 23  # Linux 5.14: fault pages in writable without touching their data
 # `aligned_empty`'s maps are shared (Python's anonymous mmap): MADV_DONTNEED only unmaps their
 # pages, which keep their memory (and contents) until the map goes; MADV_REMOVE frees them.
@@ -29,14 +30,14 @@ MADV_FREE_SHARED = getattr(mmap, "MADV_REMOVE", 9)
 def aligned_empty(shape: tuple[int, ...], dtype: object, align: int = ALIGN) -> np.ndarray:
     """An uninitialised C-contiguous array whose data start on an `align`-byte boundary.
 
-    From `MAPPED_BYTES` up, an anonymous memory map of its own (page-aligned): numpy asks the
+    From `TUNING.mapped_bytes` up, an anonymous memory map of its own (page-aligned): numpy asks the
     kernel for transparent huge pages on large arrays, and where memory is fragmented (a long
     session beside a full page cache) each first touch of a fresh 2 MB page may then wait for the
     kernel to compact memory: 512 MB took 1.6-10 s to fill here where 4 KB pages take 0.4 s.
     """
     dt = np.dtype(dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
-    if nbytes >= MAPPED_BYTES and align <= mmap.PAGESIZE:
+    if nbytes >= TUNING.mapped_bytes and align <= mmap.PAGESIZE:
         try:
             mapped = mmap.mmap(-1, nbytes)
         except OSError as exc:  # ENOMEM: out of memory, as numpy's allocation would say
@@ -47,19 +48,11 @@ def aligned_empty(shape: tuple[int, ...], dtype: object, align: int = ALIGN) -> 
     return raw[offset : offset + nbytes].view(dt).reshape(shape)
 
 
-# Maps of dead outputs of one size kept for the next ones of that size: a viewer's frame in
-# max, min, first_hit or change holds three of 4 bytes a voxel (RGBA8, t_index, the winners'
-# u); with two kept, the winners of the next window's frame took fresh pages (512^3: the
-# gather of the first edit after a mode switch 1.1 s, 0.45 s on recycled memory)
-SPARE_MAPS = 3
-SPARE_SIZES = 2  # sizes kept: a chronovolume's rgba and t_index (a viewer's two levels)
-SPARE_SECONDS = 30.0  # and for this long: memory nobody asks for again goes back
-
-
 class _Spares:
     """The memory maps of `recycled_empty` arrays that died, most recent last: at most
-    `SPARE_MAPS` of a size, of the `SPARE_SIZES` sizes given back last, for at most
-    `SPARE_SECONDS`. What the caller held a moment ago, so keeping it adds nothing to the peak.
+    `TUNING.spare_maps` of a size, of the `TUNING.spare_sizes` sizes given back last, for at
+    most `TUNING.spare_seconds`. What the caller held a moment ago, so keeping it adds nothing
+    to the peak.
     Counted per size: a session gives its last chronovolume back before it takes memory for the
     next, and with two maps in all it pushed out the spares of every other caller (in
     bench/integrate.py's race `chronocl.integrate` then wrote on fresh pages: 2x slower)."""
@@ -70,7 +63,7 @@ class _Spares:
         self.lock = threading.RLock()
         self.maps: list[mmap.mmap] = []
         self._expiry: threading.Timer | None = None  # one at a time, however often they die
-        self._until = 0.0  # when the spares go back, SPARE_SECONDS after the last came
+        self._until = 0.0  # when the spares go back, TUNING.spare_seconds after the last came
         self._fires_at = 0.0  # when the pending timer looks at `_until`
 
     def take(self, size: int) -> mmap.mmap | None:
@@ -85,14 +78,16 @@ class _Spares:
             self.maps.append(mapped)
             size = len(mapped)
             same = [m for m in self.maps if len(m) == size]
-            recent = list(dict.fromkeys(len(m) for m in reversed(self.maps)))[:SPARE_SIZES]
-            drop = {id(m) for m in same[:-SPARE_MAPS]}
+            recent = list(dict.fromkeys(len(m) for m in reversed(self.maps)))[: TUNING.spare_sizes]
+            drop = {id(m) for m in same[: -TUNING.spare_maps]}
             self.maps = [m for m in self.maps if len(m) in recent and id(m) not in drop]
-            self._until = time.monotonic() + SPARE_SECONDS
-            if self._expiry is None or self._until < self._fires_at:  # (a shorter SPARE_SECONDS)
+            self._until = time.monotonic() + TUNING.spare_seconds
+            if (
+                self._expiry is None or self._until < self._fires_at
+            ):  # (a shorter TUNING.spare_seconds)
                 if self._expiry is not None:
                     self._expiry.cancel()
-                self._start_expiry(SPARE_SECONDS)
+                self._start_expiry(TUNING.spare_seconds)
 
     def _start_expiry(self, seconds: float) -> None:
         self._fires_at = time.monotonic() + seconds
@@ -160,12 +155,12 @@ class _Exported:
 
 def recycled_empty(shape: tuple[int, ...], dtype: object) -> np.ndarray:
     """`aligned_empty`, on the memory of an earlier array of the same size that died where there
-    is one (its old contents: the caller writes every element). Below `MAPPED_BYTES` a plain
+    is one (its old contents: the caller writes every element). Below `TUNING.mapped_bytes` a plain
     `aligned_empty`. Writing a fresh 268 MB output costs 0.07 s of page faults here and
     unmapping it 0.03 s, half of integrating 10 x 256^3 float32 steps."""
     dt = np.dtype(dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
-    if nbytes < MAPPED_BYTES:
+    if nbytes < TUNING.mapped_bytes:
         return aligned_empty(shape, dt)
     size = -(-nbytes // mmap.PAGESIZE) * mmap.PAGESIZE
     mapped = spares.take(size)

@@ -12,13 +12,13 @@ under the limit, and the steps are what gives way:
   frames need fit the limit (`fit`). The memory of dead outputs kept for the next frames
   (`chronocl.core.memory.spares`) counts as the frames': the next frame takes it again, so
   dropping it would lower no peak and fault as much in afresh (about 1 s for 1 GB at 512^3);
-  what nobody takes goes back after `SPARE_SECONDS`;
+  what nobody takes goes back after `TUNING.spare_seconds`;
 - what the frames need is what the process holds beside its steps now or after any of the last
   frames, whichever is more, and at least what the clients' views now expect theirs to hold
-  (`floor`, `expect`) with the process's own (`PROCESS_BYTES`);
+  (`floor`, `expect`) with the process's own (`TUNING.process_bytes`);
 - the steps of the windows being shown are never dropped. So a window is kept resident only
   where its steps fit beside what the views' frames are expected to hold (`expect`) and the
-  process's own memory (`PROCESS_BYTES`): `window_room`, against which a viewer weighs the
+  process's own memory (`TUNING.process_bytes`): `window_room`, against which a viewer weighs the
   steps of every window shown that stays resident (`resident`, each step once) before a
   frame; where they do not fit, the steps that still fit stay and the rest of its views'
   windows stream from the store slab by slab (`chronocl.integration.interactive.session`).
@@ -39,12 +39,7 @@ from contextlib import contextmanager
 from typing import NamedTuple, Protocol
 
 from chronocl.core.budget import resident_bytes
-
-RECENT_FRAMES = 8  # frames whose memory beside the steps is kept in mind (`need`)
-# The viewer's own memory beside steps and frames (Python, the libraries, the OpenCL and GL
-# drivers): 383 MiB fitted at 512^3 on the 2-core PoCL/llvmpipe machine (2026-11-30: the
-# resident memory less the steps with one view and with two, the second view's share taken off).
-PROCESS_BYTES = 400 * 2**20
+from chronocl.core.tuning import TUNING
 
 
 class Residency(NamedTuple):
@@ -84,7 +79,7 @@ class ProcessLimit:
         self._expected: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # `expect`
         self._windows: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # `resident`
         self.over = 0  # bytes past the limit after the last fit, with nothing left to drop
-        self._after: deque[int] = deque(maxlen=RECENT_FRAMES)
+        self._after: deque[int] = deque(maxlen=TUNING.recent_frames)
         self._holders: weakref.WeakSet = weakref.WeakSet()
         self._lock = threading.Lock()
 
@@ -122,12 +117,12 @@ class ProcessLimit:
         mode holding more, gets its room before its frame, not after: the soak's second
         view peaked 15% over the limit when only earlier frames were counted)."""
         measured = max(self.beside(), max(self._after) if self._after else 0)
-        return max(measured, self.floor + PROCESS_BYTES)
+        return max(measured, self.floor + TUNING.process_bytes)
 
     def window_room(self) -> int:
         """Bytes the windows shown may keep resident: the limit less what every client's views
         expect their frames to hold at their peak (`expect`) and the process's own."""
-        return self.total - self.floor - PROCESS_BYTES
+        return self.total - self.floor - TUNING.process_bytes
 
     def resident(
         self, owner: object, key: object, steps: set[int], step_bytes: int, reserve: int = 0
@@ -149,7 +144,7 @@ class ProcessLimit:
             before = sum(len(st) * nbytes for st, nbytes in others.values())
             own = sorted(set(steps) - theirs)
             need = before + len(own) * int(step_bytes)
-            room = self.total - sum(self._expected.values()) - PROCESS_BYTES
+            room = self.total - sum(self._expected.values()) - TUNING.process_bytes
             fits = need <= room
             if fits:
                 keep = frozenset(steps)

@@ -27,7 +27,8 @@ import numpy as np
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.host_threads import copy_all
 from chronocl.core.memory import ALIGN, aligned_empty
-from chronocl.data.timeseries import STEPS_PER_READ, TimeSeries
+from chronocl.core.tuning import TUNING
+from chronocl.data.timeseries import TimeSeries
 
 
 @dataclass(frozen=True)
@@ -172,10 +173,10 @@ class SeriesBricks:
         self,
         series: TimeSeries,
         buffers: Sequence[np.ndarray] = (),
-        per_call: int = STEPS_PER_READ,
+        per_call: int | None = None,  # None: TUNING.steps_per_read
     ) -> None:
         self.series = series
-        self.per_call = per_call
+        self.per_call = TUNING.steps_per_read if per_call is None else per_call
         self.buffers = list(buffers) if stored_z_chunk(series) else []
         self.turn = 0
 
@@ -186,7 +187,7 @@ class SeriesBricks:
         rows: int,
         width: int,
         count: int = 2,
-        per_call: int = STEPS_PER_READ,
+        per_call: int | None = None,
     ) -> SeriesBricks:
         """A source with `count` buffers of `rows` rows (fresh pages cost as much as reading:
         two where the next brick is read while one is integrated)."""
@@ -196,7 +197,7 @@ class SeriesBricks:
 
     @classmethod
     def per_thread(
-        cls, series: TimeSeries, rows: int, width: int, per_call: int = STEPS_PER_READ
+        cls, series: TimeSeries, rows: int, width: int, per_call: int | None = None
     ) -> SeriesBricks:
         """A source whose one buffer stays with the calling thread from call to call (a dask
         worker's thread runs task after task), grown to the largest brick asked for."""

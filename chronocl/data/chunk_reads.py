@@ -6,7 +6,7 @@ of them. At 512³ float32 that made a step cost about three times its decode (0.
 0.1 s here). For the layouts chronocl's writer and zarr write by default (bytes, then zstd or
 nothing, then optionally crc32c; no sharding; a chunk holding whole y-x planes of one step) a
 chunk's file is read, its checksum checked and its frame decoded here, into the destination
-where it is contiguous and else into a buffer of a small process-wide pool (KEEP_BUFFERS stay
+where it is contiguous and else into a buffer of a small process-wide pool (TUNING.keep_buffers stay
 between reads).
 
 Anything else goes through zarr, and so does any chunk that is missing, fails its checksum or
@@ -29,13 +29,10 @@ import zarr
 from zarr.storage import LocalStore
 
 from chronocl.core import host_threads
+from chronocl.core.tuning import TUNING
 from chronocl.data.integrity import checked_read
 
 _ZSTD_MAGIC = 0xFD2FB528
-# Larger chunks that land in strided rows go through zarr: each decode in flight holds one
-# buffer of a chunk's size.
-SCRATCH_BYTES = 64 * 2**20
-KEEP_BUFFERS = 2  # decode buffers kept between reads (their pages stay faulted in)
 
 
 class DirectChunks:
@@ -83,7 +80,7 @@ class DirectChunks:
         its size, or too large to decode aside)."""
         whole = out.dtype == self.dtype and out.shape == self.chunk_shape and first == 0
         whole = whole and out.flags.c_contiguous
-        if not whole and self.nbytes > SCRATCH_BYTES:
+        if not whole and self.nbytes > TUNING.scratch_bytes:
             return False
         try:
             data = (self.folder / self.arr.metadata.encode_chunk_key((step, zc, 0, 0))).read_bytes()
@@ -173,7 +170,7 @@ def _through_zarr(path, arr, step: int, z0: int, z1: int, out: np.ndarray) -> No
 
 class _Buffers:
     """Decode buffers of one chunk's size, reused: as many exist as decodes run at once (at
-    most the host threads plus the window's readers), and KEEP_BUFFERS stay between reads."""
+    most the host threads plus the window's readers), and TUNING.keep_buffers stay between reads."""
 
     def __init__(self) -> None:
         self._free: list[np.ndarray] = []
@@ -189,7 +186,7 @@ class _Buffers:
         finally:
             with self._lock:
                 self._free.append(buf)
-                del self._free[:-KEEP_BUFFERS]
+                del self._free[: -TUNING.keep_buffers]
 
 
 _BUFFERS = _Buffers()

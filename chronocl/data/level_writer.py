@@ -27,6 +27,7 @@ from zarr.storage import LocalStore
 from chronocl.core.atomic import partial_path, remove_path, remove_stale, replace
 from chronocl.core.errors import InvalidDataError, StoreFormatError
 from chronocl.core.progress import track
+from chronocl.core.tuning import TUNING
 from chronocl.data.integrity import CheckedStore, checked_read
 from chronocl.data.metadata import FORMAT, checked_attrs
 from chronocl.data.pyramid import (
@@ -35,7 +36,6 @@ from chronocl.data.pyramid import (
     LEVELS,
     LEVELS_FORMAT,
     POOLS,
-    SLAB_BYTES,
     describe_levels,
     downsample,
     level_shapes,
@@ -129,18 +129,18 @@ class LevelWriter:
     def pool(self, t: int, step: np.ndarray) -> Pooled:
         """Step `t` (Z, Y, X) pooled into every level and pool, its statistics recorded.
 
-        Steps come in order. The step is pooled in z-slabs of about SLAB_BYTES (a multiple of
-        2^L planes, so every level's slab starts on an even plane), which stay in the CPU's
-        cache through all levels. Only this reads `step`; `write` needs just the result. The
-        step's own minimum and maximum are those of level 1's min and max pools, and its sum
-        comes with level 1's mean (`downsample`'s `total`), so `write_store` need not read the
-        step again for its statistics.
+        Steps come in order. The step is pooled in z-slabs of about `TUNING.pyramid_slab_bytes` (a
+        multiple of 2^L planes, so every level's slab starts on an even plane), which stay in the
+        CPU's cache through all levels. Only this reads `step`; `write` needs just the result. The
+        step's own minimum and maximum are those of level 1's min and max pools, and its sum comes
+        with level 1's mean (`downsample`'s `total`), so `write_store` need not read the step again
+        for its statistics.
         """
         if t != self.done:
             raise InvalidDataError(f"levels got time step {t}, expected {self.done}")
         depth = len(self.shapes)
         plane = max(1, step[0].nbytes)
-        planes = max(1, SLAB_BYTES // plane >> depth) << depth
+        planes = max(1, TUNING.pyramid_slab_bytes // plane >> depth) << depth
         out = {
             (n, pool): np.empty(self.shapes[n - 1], self.dtype)
             for n in range(1, depth + 1)

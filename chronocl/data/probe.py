@@ -33,6 +33,7 @@ from chronocl.core.atomic import atomic_file
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.progress import meter
 from chronocl.core.selection import parse_selection
+from chronocl.core.tuning import TUNING
 from chronocl.data.probe_plot import figure
 
 if TYPE_CHECKING:
@@ -40,9 +41,6 @@ if TYPE_CHECKING:
 
 AXES = ("x", "y", "z")
 SUFFIXES = (".csv", ".png")
-READ_BYTES = 64 << 20  # a run of steps read at once holds at most this much of the block
-MAX_STEPS_PER_READ = 64  # zarr decodes the chunks of one read concurrently
-BAR_AFTER_S = 1.0  # the progress bar appears once the probe has taken this long
 
 Box = tuple[tuple[int, int], tuple[int, int], tuple[int, int]]  # (x0, x1), (y0, y1), (z0, z1)
 
@@ -280,7 +278,7 @@ def probe(
     n_steps = series.n_steps
     block = (z1 - z0) * (y1 - y0) * (x1 - x0)
     nbytes = block * series.dtype.itemsize
-    per_read = max(1, min(MAX_STEPS_PER_READ, READ_BYTES // max(1, nbytes)))
+    per_read = max(1, min(TUNING.probe_steps_per_read, TUNING.probe_read_bytes // max(1, nbytes)))
     values = np.empty(n_steps, np.float64)
     lows = np.empty(n_steps, np.float64) if box else None
     highs = np.empty(n_steps, np.float64) if box else None
@@ -311,7 +309,8 @@ def probe(
 
 @contextlib.contextmanager
 def _steps_meter(total: int, enabled: bool) -> Iterator[Callable[[int, int], None]]:
-    """Yield advance(steps, nbytes); a bar is shown once the work has taken BAR_AFTER_S."""
+    """Yield advance(steps, nbytes); a bar is shown once the work has taken
+    `TUNING.probe_bar_after_s`."""
     start = time.perf_counter()
     done = 0
     tick: Callable[[int], None] | None = None
@@ -323,7 +322,9 @@ def _steps_meter(total: int, enabled: bool) -> Iterator[Callable[[int, int], Non
             if tick is not None:
                 for _ in range(n):
                     tick(nbytes // max(n, 1))
-            elif enabled and done < total and time.perf_counter() - start > BAR_AFTER_S:
+                return
+            waited = time.perf_counter() - start
+            if enabled and done < total and waited > TUNING.probe_bar_after_s:
                 tick = stack.enter_context(meter(total, "probe", True, done=done, unit="steps"))
 
         yield advance

@@ -36,7 +36,6 @@ from chronocl.data.metadata import SeriesStats, stats_from_steps
 POOLS = ("mean", "max", "min")
 LEVELS = "levels"
 LEVELS_FORMAT = "chronocl.levels"
-SLAB_BYTES = 2 * 2**20  # level-0 bytes pooled at once (through every level) while in cache
 LEVEL_CODEC = BloscCodec(cname="lz4", clevel=1, shuffle="noshuffle")  # ~3x faster than zstd
 COARSEST = 64  # levels are added while the previous level's largest axis is larger
 

@@ -44,11 +44,10 @@ from chronocl.core.errors import (
     RemoteStoreError,
     StoreCorruptError,
 )
+from chronocl.core.tuning import TUNING
 from chronocl.data.integrity import MissingChunks
 
 SCHEMES = ("http://", "https://", "s3://")
-DEFAULT_RETRIES = 3
-DEFAULT_BACKOFF_S = 0.2
 
 
 def is_url(path: object) -> bool:
@@ -110,8 +109,8 @@ def check_storage_options(path: object, storage_options: object) -> None:
 def retry_policy() -> tuple[int, float]:
     """(retries after the first try, first backoff in seconds), from the environment."""
     try:
-        retries = int(env.get("CHRONOCL_REMOTE_RETRIES") or DEFAULT_RETRIES)
-        backoff = float(env.get("CHRONOCL_REMOTE_BACKOFF_S") or DEFAULT_BACKOFF_S)
+        retries = int(env.get("CHRONOCL_REMOTE_RETRIES") or TUNING.remote_retries)
+        backoff = float(env.get("CHRONOCL_REMOTE_BACKOFF_S") or TUNING.remote_backoff_s)
     except ValueError:
         raise InvalidParameterError(
             "CHRONOCL_REMOTE_RETRIES must be a whole number and CHRONOCL_REMOTE_BACKOFF_S a "
@@ -223,7 +222,6 @@ def remote_store(
     return store
 
 
-SETTLE_S = 5.0  # at most this long for the reads given up to unwind (`settle`)
 _reads: weakref.WeakSet = weakref.WeakSet()  # the tasks that read a remote store (`settle`)
 _reads_lock = threading.Lock()
 NO_CREDENTIALS = ("NoCredentialsError", "PartialCredentialsError", "CredentialRetrievalError")
@@ -268,7 +266,7 @@ def access_error(where: str, status: str) -> RemoteAccessError:
     return RemoteAccessError(f"access to {where} was refused ({status}); {fix}")
 
 
-def settle(timeout: float = SETTLE_S) -> None:
+def settle(timeout: float | None = None) -> None:
     """Cancel the remote reads still running and let them unwind on their own event loop.
 
     zarr reads several keys at once; when one fails, the others go on (retrying), and at
@@ -276,7 +274,9 @@ def settle(timeout: float = SETTLE_S) -> None:
     in: <coroutine object RemoteStore.get>' with a traceback (aiobotocore resets a context
     variable from another context), 37-109 lines after the error's one line. It runs at exit
     (registered when the first remote store is opened), and a command that stops on an error
-    calls it first. Only the tasks reading a remote store are cancelled (`_reads`)."""
+    calls it first. Only the tasks reading a remote store are cancelled (`_reads`), each
+    waited for `timeout` seconds at most (None: `TUNING.remote_settle_s`)."""
+    timeout = TUNING.remote_settle_s if timeout is None else timeout
     with _reads_lock:
         pending = [t for t in _reads if not t.done()]
     by_loop: dict = {}

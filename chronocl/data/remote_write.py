@@ -41,11 +41,11 @@ from chronocl.core.errors import (
     RemoteAccessError,
     RemoteStoreError,
 )
+from chronocl.core.tuning import TUNING
 from chronocl.data.remote_store import Url, classify, filesystem, is_url, parse_storage_options
 
 ROOT_MARKERS = ("zarr.json", ".zgroup", ".zattrs", ".zarray", ".zmetadata")
 MANIFEST_SUFFIXES = (".json", ".pvd")  # written last too: they list what the output holds
-UPLOAD_CONCURRENCY = 16
 
 
 def split_url(url: str) -> tuple[str, str]:
@@ -202,13 +202,13 @@ def publish(
 
 
 def upload(fs, pairs: list[tuple[Path, str]]) -> None:
-    """PUT each (local file, key) of `pairs`, UPLOAD_CONCURRENCY at a time: threads calling
+    """PUT each (local file, key) of `pairs`, TUNING.upload_concurrency at a time: threads calling
     s3fs's `put_file`, whose requests share its event loop. Interrupted (Ctrl-C, an error), the
     uploads not yet started are dropped and those in flight waited for (up to 60 s) before this
     returns, so that the cleanup that follows is not outrun by a late PUT."""
     if not pairs:
         return
-    pool = concurrent.futures.ThreadPoolExecutor(UPLOAD_CONCURRENCY, "chronocl-upload")
+    pool = concurrent.futures.ThreadPoolExecutor(TUNING.upload_concurrency, "chronocl-upload")
     pending = {pool.submit(fs.put_file, str(path), key) for path, key in pairs}
     try:
         while pending:  # short waits, so Ctrl-C lands here

@@ -4,13 +4,14 @@ A step `d` steps ahead of the window's edge is wanted `d / v` seconds from now w
 scrubs at `v` steps a second; a read started now lands after `r`, the time a step takes to read
 (measured, a running average). So every step within `v * r` of the edge must be under way
 already, or the scrub catches up with the reads: `ScrubModel.ahead` asks for that many steps,
-with a margin (`MARGIN`), at least one. A slow scrub (or a first request, speed unknown) reads
-one step ahead; a fast one over a slow store reads many.
+with a margin (`TUNING.scrub_margin`), at least one. A slow scrub (or a first request, speed
+unknown) reads one step ahead; a fast one over a slow store reads many.
 
-The speed is that of the window's start over the last `HISTORY_N` requests (within `HISTORY_S`
-seconds, in one direction): few, so that it follows a scrub speeding up at once (a first window
-that took long to arrive does not hold it down). A change of direction starts a new history,
-and a scrub that has stopped (its last request older than `HISTORY_S`) has no speed.
+The speed is that of the window's start over the last `TUNING.scrub_history_n` requests (within
+`TUNING.scrub_history_s` seconds, in one direction): few, so that it follows a scrub speeding up at
+once (a first window that took long to arrive does not hold it down). A change of direction starts a
+new history, and a scrub that has stopped (its last request older than `TUNING.scrub_history_s`) has
+no speed.
 Thread-safe: requests come from the client's thread, read times from the manager's readers.
 """
 
@@ -22,10 +23,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 
-HISTORY_S = 1.5  # older requests say nothing about the scrub now
-HISTORY_N = 4  # three intervals between requests
-MARGIN = 1.5  # steps under way beyond the bare v * r: reads queue behind each other
-READ_WEIGHT = 0.3  # of the newest read in the running average
+from chronocl.core.tuning import TUNING
 
 
 class ScrubModel:
@@ -39,7 +37,7 @@ class ScrubModel:
         self.clock = clock
         self.read_s: float | None = None  # running average of one step's read, seconds
         self.direction = 0
-        self._history: deque[tuple[float, int]] = deque(maxlen=HISTORY_N)
+        self._history: deque[tuple[float, int]] = deque(maxlen=TUNING.scrub_history_n)
         self._lock = threading.Lock()
 
     def record_request(self, start: int, direction: int) -> None:
@@ -56,13 +54,14 @@ class ScrubModel:
         with self._lock:
             old = self.read_s
             new = float(seconds)
-            self.read_s = new if old is None else (1 - READ_WEIGHT) * old + READ_WEIGHT * new
+            weight = TUNING.scrub_read_weight
+            self.read_s = new if old is None else (1 - weight) * old + weight * new
 
     def velocity(self) -> float:
         """Steps a second the window's start moved over the recent requests (0: unknown)."""
         now = self.clock()
         with self._lock:
-            recent = [(t, s) for t, s in self._history if now - t <= HISTORY_S]
+            recent = [(t, s) for t, s in self._history if now - t <= TUNING.scrub_history_s]
         if len(recent) < 2:
             return 0.0
         dt = recent[-1][0] - recent[0][0]
@@ -74,4 +73,4 @@ class ScrubModel:
         v, r = self.velocity(), self.read_s
         if not v or r is None:
             return 1
-        return max(1, math.ceil(MARGIN * v * r / max(1, stride)))
+        return max(1, math.ceil(TUNING.scrub_margin * v * r / max(1, stride)))

@@ -36,10 +36,7 @@ import numpy as np
 from chronocl.core import foreground
 from chronocl.core.budget import resident_bytes
 from chronocl.core.memory import aligned_empty, discard, prefault
-
-WARM_NICE = 10  # the pre-faulting thread's nice value: it takes idle cores only
-WARM_POLL_S = 0.2  # how often a warm waiting for its caller's `ready` looks again
-COLLECT_EVERY_S = 5.0
+from chronocl.core.tuning import TUNING
 
 
 class StepSlots:
@@ -53,14 +50,14 @@ class StepSlots:
         self._lock = threading.RLock()
         self.own_arrays = 0  # steps that found no free slot
         self._warm: set[int] = set()  # slots handed out or faulted in once
-        self._collected = -COLLECT_EVERY_S  # when `take` last ran the garbage collector
+        self._collected = -TUNING.collect_every_s  # when `take` last ran the garbage collector
 
     def take(self) -> np.ndarray:
         """A (Z, Y, X) array for one step: a free slot, else an array of its own (the next
         free slots are warmed by `warm`, when the caller says)."""
         with self._lock:
             now = time.monotonic()
-            if not self._free and now - self._collected > COLLECT_EVERY_S:
+            if not self._free and now - self._collected > TUNING.collect_every_s:
                 # Views of evicted steps caught in reference cycles give their slots back only
                 # when collected: collect before giving a step an array of its own, which
                 # would make every window holding it stack (5 GB copied per 512^3 window).
@@ -185,7 +182,7 @@ def _prefault_when(slots: StepSlots, which: list[int], ready) -> None:
         if state is None:
             return
         if not state:
-            time.sleep(WARM_POLL_S)
+            time.sleep(TUNING.warm_poll_s)
             _warmer().submit(_prefault_when, slots, which[k:], ready)
             return
         slots._prefault(j)
@@ -242,6 +239,6 @@ def _warmer() -> _Warmer:
 
 def _low() -> None:
     try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), WARM_NICE)
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), TUNING.warm_nice)
     except (AttributeError, OSError):  # not Linux, or not allowed
         pass

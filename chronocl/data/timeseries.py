@@ -24,6 +24,7 @@ import zarr
 from chronocl.core.errors import StoreChangedError, UnknownNameError
 from chronocl.core.host_threads import copy_all
 from chronocl.core.memory import aligned_empty
+from chronocl.core.tuning import TUNING
 from chronocl.core.values import normalize
 from chronocl.data.array_fields import array_fields
 from chronocl.data.chunk_reads import read_rows
@@ -36,10 +37,6 @@ from chronocl.data.steps import Steps
 from chronocl.data.store_open import open_array
 from chronocl.data.store_reads import metadata_stamp, read_runs, stored_shape
 from chronocl.data.writer import VARIABLES, write_store
-
-# Steps read per zarr call by default, whose chunks zarr decodes concurrently (at most 10 at
-# once, zarr's async.concurrency). The streaming plan chooses fewer when the budget is tight.
-STEPS_PER_READ = 8
 
 
 @dataclass
@@ -219,15 +216,16 @@ class TimeSeries:
         z0: int = 0,
         z1: int | None = None,
         out: np.ndarray | None = None,
-        per_call: int = STEPS_PER_READ,
+        per_call: int | None = None,
     ) -> np.ndarray:
         """Raw values of z rows [z0, z1) of the given steps as an xytz brick (z1 - z0, W, Y, X).
 
         `out`, if given, is filled and returned (a C-contiguous array of that shape and dtype).
         A zarr store is read up to `per_call` evenly spaced steps per call, decoding straight
         into the brick: zarr fetches and decodes the chunks of one call concurrently, where
-        one call per step would decode them one at a time.
+        one call per step would decode them one at a time (None: `TUNING.steps_per_read`).
         """
+        per_call = TUNING.steps_per_read if per_call is None else per_call
         z1 = self.shape[1] if z1 is None else z1
         if out is None:
             out = aligned_empty((z1 - z0, len(steps), *self.shape[2:]), self.dtype)

@@ -40,6 +40,7 @@ from chronocl.core import process_memory
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, SupersededError
 from chronocl.core.interrupt import checkpoint, watched
+from chronocl.core.tuning import TUNING
 from chronocl.data.bricks import ResidentBricks
 from chronocl.data.scrub_model import ScrubModel
 from chronocl.data.series import TimeSeries
@@ -88,10 +89,8 @@ class Request:
         return self.manager._wait(self, timeout)
 
 
-WARM_AFTER_S = 2.0  # reads paused this long: free slots are warmed (`_quiet`)
 _managers: weakref.WeakSet[WindowManager] = weakref.WeakSet()  # whose reads `_quiet` looks at
 _managers_lock = threading.Lock()
-READER_NICE = 10  # the readers' priority below the frames' (`_background`)
 
 
 class WindowManager:
@@ -429,7 +428,7 @@ class WindowManager:
         load.future = self._pool.submit(self._read, load)
 
     def _quiet(self) -> bool | None:
-        """Whether no read of any manager has run for `WARM_AFTER_S` (None: this one closed):
+        """Whether no read of any manager has run for `TUNING.warm_after_s` (None: this one closed):
         slots are warmed then, not beside the reads and the frame made of them, on the same
         cores (a coarse level's reads paused while level 0's, the refine's, went on)."""
         with self._lock:
@@ -442,7 +441,7 @@ class WindowManager:
 
     def _idle(self, now: float) -> bool:
         with self._lock:
-            return self._closed or (not self._loads and now - self._read_at >= WARM_AFTER_S)
+            return self._closed or (not self._loads and now - self._read_at >= TUNING.warm_after_s)
 
     def _cancel(self, load: _Load) -> None:
         """Drop a load nobody wants: not started -> never runs; running -> stops (locked)."""
@@ -498,8 +497,9 @@ class WindowManager:
 
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
         deadline = None if timeout is None else time.monotonic() + timeout
-        # Work that may be given up (`chronocl.core.interrupt`) looks up every 50 ms.
-        poll = WATCHED_POLL_S if watched() else None
+        # Work that may be given up (`chronocl.core.interrupt`) looks up every
+        # `TUNING.watched_poll_s` seconds.
+        poll = TUNING.watched_poll_s if watched() else None
         while True:
             with self._lock:
                 missing = [s for s in request.steps if s not in self._cache]
@@ -531,7 +531,6 @@ class WindowManager:
                 checkpoint("reading steps", loaded, len(request.steps))
 
 
-WATCHED_POLL_S = 0.05
 # sys.getrefcount of a cached step's array that only the cache holds: the dict's reference and
 # the call's argument. A session integrating the step (another view's window) holds one more.
 HELD_BY_CACHE_ONLY = 2
@@ -546,6 +545,6 @@ def _background() -> None:
     waits for has the cores to itself anyway, and reads ahead then take only the cores the
     frames leave idle (on 2 cores they doubled the longest scrub stall at normal priority)."""
     try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), READER_NICE)
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), TUNING.reader_nice)
     except (AttributeError, OSError):  # not Linux, or not allowed: normal priority
         pass

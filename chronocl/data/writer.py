@@ -23,6 +23,7 @@ from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import InvalidDataError, InvalidParameterError
 from chronocl.core.progress import track
 from chronocl.core.times_meta import Cadence
+from chronocl.core.tuning import TUNING
 from chronocl.data.level_writer import LevelWriter
 from chronocl.data.metadata import (
     FORMAT,
@@ -35,7 +36,6 @@ from chronocl.data.metadata import (
 from chronocl.data.pyramid import LEVELS, level_shapes
 from chronocl.data.remote_store import is_url
 
-CHUNK_BYTES = 16 * 2**20
 # Optional attributes a store may record beside its statistics (`write_store(attrs=...)`):
 # `variable` (its name) and `variables` (all of a multi-variable store, whose others sit in
 # VARIABLES/<name>/ as stores of their own), `quantity` ("magnitude") and its `components`,
@@ -79,7 +79,7 @@ def write_store(
     progress: bool = False,
     nan_fill: float | None = None,
     labels: Sequence[str] | None = None,
-    chunk_bytes: int = CHUNK_BYTES,
+    chunk_bytes: int | None = None,  # None: TUNING.chunk_bytes
     compressor: str = "zstd",
     checksum: bool = True,
     levels: bool = True,
@@ -92,7 +92,8 @@ def write_store(
 
     Non-finite values are rejected unless `nan_fill` is given, which replaces them.
     `labels` name each step's origin (e.g. its file) in error messages. Chunks are
-    (1, zc, Y, X) of at most `chunk_bytes` (small chunks suit small streaming budgets);
+    (1, zc, Y, X) of at most `chunk_bytes` (None: `TUNING.chunk_bytes`; small chunks suit small
+    streaming budgets);
     `compressor` is one of COMPRESSORS; `checksum` adds a crc32c per chunk. `levels` adds
     the coarse levels (group ``levels``) in the same pass when the volume has any. `attrs`
     adds the EXTRA_KEYS it has to the store's metadata.
@@ -107,6 +108,7 @@ def write_store(
                 nan_fill=nan_fill, labels=labels, chunk_bytes=chunk_bytes,
                 compressor=compressor, checksum=checksum, levels=levels, attrs=attrs,
             )  # fmt: skip
+    chunk_bytes = TUNING.chunk_bytes if chunk_bytes is None else chunk_bytes
     dt = np.dtype(dtype)
     check_dtype(dt)
     extra = {k: v for k, v in (attrs or {}).items() if v}

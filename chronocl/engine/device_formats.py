@@ -19,12 +19,12 @@ import numpy as np
 
 from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.core.tuning import TUNING
 
 FORMATS = ("auto", "float32", "uint8", "uint16", "float16")
 QUANT_MAX = {"uint8": 255, "uint16": 65535}
 HALF_MAX = 65504.0  # the largest finite float16
 HALF_EPS = 2.0**-11  # float16 rounding: relative error of a normal value
-PARALLEL_MIN = 1 << 18  # values from which a conversion is split over threads
 
 
 def stored_dtype(dtype: np.dtype) -> np.dtype:
@@ -81,7 +81,7 @@ class DeviceFormat:
         """
         if out is None:
             out = np.empty(src.shape, self.dtype)
-        parts = host_threads.workers() if src.size >= PARALLEL_MIN else 1
+        parts = host_threads.workers() if src.size >= TUNING.format_parallel_min else 1
         if parts > 1 and src.flags.c_contiguous and out.flags.c_contiguous:
             flat_src, flat_out = src.reshape(-1), out.reshape(-1)
             bounds = np.linspace(0, src.size, parts + 1).astype(int)

@@ -134,8 +134,8 @@ class OpenCLEngine:
         quant: bool,
         value_range: tuple[float, float],
     ) -> Tables:
-        """The host tables of one integration (`chronocl.engine.tables.host_tables`), kept
-        for the LUT_CACHE most recently used (`TableCache`, shared by `with_options` copies)."""
+        """The host tables of one integration (`chronocl.engine.tables.host_tables`), kept for the
+        TUNING.lut_cache most recently used (`TableCache`, shared by `with_options` copies)."""
         return self._luts.get(spec, positions, quant, value_range, self.pieces)
 
     def accumulate(

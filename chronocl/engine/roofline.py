@@ -34,6 +34,7 @@ import numpy as np
 
 from chronocl.core.memory import aligned_empty
 from chronocl.core.timing import race
+from chronocl.core.tuning import TUNING
 from chronocl.engine.buffers import DeviceWork, buffer, max_alloc
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.device_steps import reserve
@@ -41,7 +42,6 @@ from chronocl.engine.program import kernel
 from chronocl.engine.transfer import MAX_CHUNK, make_streams
 
 VEC = 16  # voxels along x per work-item of read_sum
-PIECES_PER_THREAD = 8
 
 
 def padded(brick: np.ndarray) -> np.ndarray:
@@ -66,11 +66,12 @@ def _pool(n: int) -> ThreadPoolExecutor:
 
 
 def memory_read_fn(brick: np.ndarray, threads: int | None = None) -> Callable[[], object]:
-    """Read every byte of `brick` once on `threads` threads (default: every core): numpy's max
-    over pieces of z rows, PIECES_PER_THREAD per thread taken in turn by whichever thread is
-    free, so that a thread the system delays does not hold up the rest (as PoCL's work-groups)."""
+    """Read every byte of `brick` once on `threads` threads (default: every core): numpy's max over
+    pieces of z rows, TUNING.roofline_pieces_per_thread per thread taken in turn by whichever thread
+    is free, so that a thread the system delays does not hold up the rest (as PoCL's
+    work-groups)."""
     n = max(1, threads or os.cpu_count() or 1)
-    cuts = max(1, min(brick.shape[0], n * PIECES_PER_THREAD))
+    cuts = max(1, min(brick.shape[0], n * TUNING.roofline_pieces_per_thread))
     edges = np.linspace(0, brick.shape[0], cuts + 1).round().astype(int)
     pieces = [brick[a:b] for a, b in itertools.pairwise(edges) if b > a]
     if n == 1 or len(pieces) == 1:

@@ -23,9 +23,9 @@ import numpy as np
 
 from chronocl.core import values
 from chronocl.core.tf import lut_lerp32
+from chronocl.core.tuning import TUNING
 from chronocl.modes.spec import IntegrationSpec
 
-LUT_CACHE = 16  # integrations whose host tables an engine keeps (`TableCache`)
 MAX_SEGMENTS = 8  # straight pieces of the data TF evaluated without lookups
 SEGMENT_TOLERANCE = 2e-7  # how far a LUT entry may lie from its piece (float32 rounding)
 # the most `opacity_error` the threshold modes accept: half the kernels' SEG_MARGIN (1e-5)
@@ -93,15 +93,16 @@ def host_tables(
 
 
 class TableCache:
-    """The host tables of the LUT_CACHE integrations most recently used, read-only.
+    """The host tables of the `size` (None: `TUNING.lut_cache`) integrations most recently
+    used, read-only.
 
     A series integrated slab by slab, or again with the same transfer functions, builds its
     tables once (about a third of a millisecond each time, where max over 30x128^3 takes 9).
     Safe to share between threads and engines (the key holds `pieces`).
     """
 
-    def __init__(self, size: int = LUT_CACHE) -> None:
-        self.size = size
+    def __init__(self, size: int | None = None) -> None:
+        self.size = TUNING.lut_cache if size is None else size
         self._tables: dict[tuple, Tables] = {}
         self._lock = threading.Lock()
 

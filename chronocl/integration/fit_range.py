@@ -12,9 +12,10 @@ is the window's own, taken from the values the mode shows:
   minimum (a background at the bottom stays transparent, the faint rest shows);
   high end: their 99.9th percentile, so one hot voxel does not darken the rest.
 
-The values come from a sample of at most `SAMPLE_VALUES` voxels (a stored coarse level where
-the series has one, else every n-th voxel along each axis) of at most `SAMPLE_STEPS` evenly
-spaced selected steps. Results are kept per series, selection and mode.
+The values come from a sample of at most `TUNING.fit_sample_values` voxels (a stored coarse level
+where the series has one, else every n-th voxel along each axis) of at most
+`TUNING.fit_sample_steps` evenly spaced selected steps. Results are kept per series, selection and
+mode.
 """
 
 from __future__ import annotations
@@ -27,9 +28,8 @@ from collections import OrderedDict
 import numpy as np
 
 from chronocl.core.selection import Selection
+from chronocl.core.tuning import TUNING
 
-SAMPLE_VALUES = 1 << 20  # 4 MB of float32
-SAMPLE_STEPS = 16
 TOP_PERCENTILE = 99.9
 _CACHE: OrderedDict = OrderedDict()
 _CACHE_SIZE = 64
@@ -60,8 +60,8 @@ def _fit(series, selection: Selection, mode) -> tuple[float, float]:
     w_max = max(stats.step_max[s] for s in steps)
     if not w_max > w_min or mode.name == "change":
         return _distinct(w_min, w_max)
-    if len(steps) > SAMPLE_STEPS:
-        picks = np.linspace(0, len(steps) - 1, SAMPLE_STEPS).round().astype(int)
+    if len(steps) > TUNING.fit_sample_steps:
+        picks = np.linspace(0, len(steps) - 1, TUNING.fit_sample_steps).round().astype(int)
         steps = [steps[i] for i in sorted(set(picks.tolist()))]
     sample = sample_steps(series, steps, mode.pool)
     if mode.name == "max":
@@ -85,10 +85,10 @@ def _fit(series, selection: Selection, mode) -> tuple[float, float]:
 
 
 def sample_steps(series, steps: list[int], pool: str = "mean") -> np.ndarray:
-    """(n, z, y, x) float32 values of `steps`, about SAMPLE_VALUES voxels in all: a stored
-    coarse level (pooled by `pool`) when there is a small enough one, else every n-th voxel of
-    the coarsest stored level (of level 0 where none is stored)."""
-    budget = SAMPLE_VALUES / len(steps)
+    """(n, z, y, x) float32 values of `steps`, about TUNING.fit_sample_values voxels in all: a
+    stored coarse level (pooled by `pool`) when there is a small enough one, else every n-th voxel
+    of the coarsest stored level (of level 0 where none is stored)."""
+    budget = TUNING.fit_sample_values / len(steps)
     source = series
     stored = series.path is not None or getattr(series.level_source, "stored", False)
     if stored:  # stored levels (local or remote) read cheaply; in memory they would pool it all

@@ -19,7 +19,8 @@ grid reads and hops), 8^3 276 ms, 16^3 328 ms (a third more samples per ray).
 
 `grid(alpha)` takes the alpha channel (uint8 or float, any strides, e.g. `rgba[..., 3]`) and
 returns the grid (`from_rgba(rgba)`: the same from a whole RGBA volume, faster for RGBA8); both
-work in z-slabs of bricks on chronocl/core/host_threads.py's pool above `SERIAL_VOXELS`.
+work in z-slabs of bricks on chronocl/core/host_threads.py's pool above
+`TUNING.brick_grid_serial_voxels` voxels.
 `texture(ctx, grid, previous)` makes (or rewrites) the grid's texture.
 """
 
@@ -34,10 +35,10 @@ import numpy as np
 
 from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.tuning import TUNING
 
 BRICK = 8
 LITTLE_ENDIAN = sys.byteorder == "little"
-SERIAL_VOXELS = 2**21  # below 128^3 one task on the calling thread (about a millisecond)
 # not the host pool: a task there waiting on its own slabs could wait for itself
 _starter = ThreadPoolExecutor(1, thread_name_prefix="chronocl-bricks")
 
@@ -81,7 +82,7 @@ def _grid(values: np.ndarray, brick: int, finish) -> np.ndarray:
         raise InvalidParameterError(f"brick size {brick}; use a positive number of voxels")
     out = np.empty(grid_shape(values.shape, brick), dtype=np.uint8)
     gz = out.shape[0]
-    if values.size <= SERIAL_VOXELS or gz == 1:
+    if values.size <= TUNING.brick_grid_serial_voxels or gz == 1:
         _slab(values, out, brick, 0, gz, finish)
         return out
     cuts = np.linspace(0, gz, min(gz, 2 * host_threads.workers()) + 1).astype(int)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from chronocl.core.errors import InvalidParameterError, SupersededError
+from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render import brick_grid
 from chronocl.render.camera import Camera, world_extent
@@ -27,7 +28,6 @@ from chronocl.render.upload import FORMATS, convert, occupancy
 
 MIN_SIZE, MAX_SIZE = 16, 8192
 TEXTURE_TYPES = FORMATS
-DRAW_BANDS = 4  # bands of a draw that may be given up (`draw`'s stop): ~40 ms each at 930x640
 BRICKS_UNIT = 5  # the brick grid's texture unit, clear of the volume's (0) and others' low units
 
 
@@ -125,7 +125,7 @@ class Raycaster:
         `shading` lights the samples (chronocl/render/shading.py); off, the unlit shader runs.
         `skip` jumps rays across the empty bricks of the volume's brick grid (same picture).
         With `stop` (work that newer input gives up: a viewer's refine) the view is drawn in
-        DRAW_BANDS bands of rows, and SupersededError raised before each once `stop()` is
+        TUNING.draw_bands bands of rows, and SupersededError raised before each once `stop()` is
         true (the same picture: every pixel's ray is its own).
         """
         w, h = check_size(size)
@@ -150,7 +150,7 @@ class Raycaster:
 
     def _draw_in_bands(self, vao, size: tuple[int, int], stop: Callable[[], bool]) -> None:
         w, h = size
-        edges = np.linspace(0, h, DRAW_BANDS + 1).round().astype(int)
+        edges = np.linspace(0, h, TUNING.draw_bands + 1).round().astype(int)
         try:
             for a, b in itertools.pairwise(edges):
                 if stop():

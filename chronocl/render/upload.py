@@ -19,12 +19,11 @@ import numpy as np
 
 from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.tuning import TUNING
 from chronocl.integration import inmemory
 
 FORMATS: dict[str, type] = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
-BLOCK_VALUES = 2**16  # floats per block (256 KB): a block and its scratch stay in L2
-SERIAL_VOXELS = 2**15
-LITTLE_ENDIAN = sys.byteorder == "little"  # below this, one task on the calling thread
+LITTLE_ENDIAN = sys.byteorder == "little"
 _scratch = threading.local()
 
 
@@ -107,7 +106,7 @@ def convert(
     z = np.zeros(nz, dtype=bool)
     y = np.zeros(ny, dtype=bool)
     x = np.zeros(nx, dtype=bool)
-    if nz * ny * nx <= SERIAL_VOXELS or nz == 1:
+    if nz * ny * nx <= TUNING.upload_serial_voxels or nz == 1:
         parts = [_convert_slab(rgba, out, fmt, 0, nz, as_is)]
     else:
         workers = host_threads.workers()
@@ -130,7 +129,7 @@ def _convert_slab(rgba, out, fmt: str, z0: int, z1: int, as_is: bool):
     if as_is and rgba.dtype == np.uint8 and LITTLE_ENDIAN:
         return _rgba8_occupancy(rgba, z0, z1)
     _, ny, nx, _ = rgba.shape
-    rows = max(1, BLOCK_VALUES // (4 * nx))
+    rows = max(1, TUNING.upload_block_values // (4 * nx))
     occ_z = np.zeros(z1 - z0, dtype=bool)
     occ_y = np.zeros(ny, dtype=bool)
     occ_x = np.zeros(nx, dtype=bool)

@@ -13,10 +13,11 @@ from importlib import resources
 from chronocl.core import process_memory
 from chronocl.core.budget import parse_memory
 from chronocl.core.process_memory import ProcessLimit
+from chronocl.core.tuning import TUNING
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import internal_error, log
 from chronocl.viewer.guard import TokenGuard
-from chronocl.viewer.heap import HEAP_CHECK_S, HeapKeeper
+from chronocl.viewer.heap import HeapKeeper
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.sockets import serve_socket
 from chronocl.viewer.view_sessions import SharedSteps
@@ -125,7 +126,7 @@ def make_app(
 
     async def keep_heap() -> None:
         while True:
-            await asyncio.sleep(HEAP_CHECK_S)
+            await asyncio.sleep(TUNING.heap_check_s)
             await asyncio.to_thread(heap.check)
 
     # One memory limit for the whole process, every client's steps and frames within it, and

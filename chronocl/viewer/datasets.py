@@ -4,9 +4,9 @@ change mode), and v(t) at a voxel or over a box for the probe.
 
 A window's histogram never reads full-resolution steps: it is the sum of small per-step
 counts, each counted once per (step, range) from a small sample of that step (`step_sample`):
-the series' coarsest stored level that still holds about HIST_MIN_VOXELS voxels (the "mean"
-pool), else a strided sample of the step that decodes at most HIST_READ_BYTES of its stored
-chunks (a series in memory: a strided view of its array).
+the series' coarsest stored level that still holds about `TUNING.hist_min_voxels` voxels (the
+"mean" pool), else a strided sample of the step that decodes at most `TUNING.hist_read_bytes` of
+its stored chunks (a series in memory: a strided view of its array).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
 from chronocl.core.time_labels import display_labels, has_labels
+from chronocl.core.tuning import TUNING
 from chronocl.core.values import normalize
 from chronocl.data.level_sources import AdoptedLevels
 from chronocl.data.probe import TimeCurve, probe
@@ -31,28 +32,22 @@ from chronocl.data.remote_store import is_url
 from chronocl.data.series import TimeSeries, open_series
 
 HIST_BINS = 128
-HIST_SAMPLE_STEPS = 8  # at most this many steps of the window are sampled
-HIST_SAMPLE_VOXELS = 2**18  # about this many voxels of each (strided along every axis)
-HIST_MIN_VOXELS = 2**15  # the coarsest stored level with at least this many voxels is sampled
-HIST_READ_BYTES = 32 * 2**20  # a step without such a level: at most this much decoded for it
-HIST_CACHE_STEPS = 64  # steps whose samples are kept (a window sliding by one reads one step)
-HIST_CACHE_COUNTS = 4096  # per-(step, range) counts kept (a KiB each)
 
 
 def sample_steps(steps: Sequence[int], stride: int = 1) -> list[int]:
     """The steps of a window whose values make its histogram: all when there are at most
-    HIST_SAMPLE_STEPS, else every m-th on the grid of the window's stride, so that a window
+    TUNING.hist_sample_steps, else every m-th on the grid of the window's stride, so that a window
     sliding by one stride keeps most of its samples (and their cache)."""
     steps = sorted(int(s) for s in steps)
-    if len(steps) <= HIST_SAMPLE_STEPS:
+    if len(steps) <= TUNING.hist_sample_steps:
         return steps
-    m = -(-len(steps) // HIST_SAMPLE_STEPS)
+    m = -(-len(steps) // TUNING.hist_sample_steps)
     return [s for s in steps if (s // max(1, stride)) % m == 0]
 
 
 def sample_level(series: TimeSeries) -> int:
     """The level a step's histogram sample is read from: the coarsest level read from storage
-    (not pooled on the fly from level 0) with at least HIST_MIN_VOXELS voxels; 0: none."""
+    (not pooled on the fly from level 0) with at least TUNING.hist_min_voxels voxels; 0: none."""
     source = series.level_source
     if source is None and series.path is not None:
         stored = range(1, series.n_levels)  # the store's own levels
@@ -61,13 +56,15 @@ def sample_level(series: TimeSeries) -> int:
     else:
         return 0  # levels would be pooled from level 0: sample level 0 instead
     shapes = level_shapes(series.volume_shape)
-    big = [n for n in stored if n <= len(shapes) and math.prod(shapes[n - 1]) >= HIST_MIN_VOXELS]
+    big = [
+        n for n in stored if n <= len(shapes) and math.prod(shapes[n - 1]) >= TUNING.hist_min_voxels
+    ]
     return max(big, default=0)
 
 
 def _stride(voxels: int) -> int:
-    """The stride along every axis that leaves about HIST_SAMPLE_VOXELS of `voxels`."""
-    return max(1, round(float(np.cbrt(voxels / HIST_SAMPLE_VOXELS))))
+    """The stride along every axis that leaves about TUNING.hist_sample_voxels of `voxels`."""
+    return max(1, round(float(np.cbrt(voxels / TUNING.hist_sample_voxels))))
 
 
 def raw_sample(series: TimeSeries, step: int, level: int | None = None) -> np.ndarray:
@@ -82,11 +79,11 @@ def raw_sample(series: TimeSeries, step: int, level: int | None = None) -> np.nd
         if source.host is not None:
             return np.array(source.host[step, every, every, every])
         return source.read_region(slice(step, step + 1), every, every, every)[0]
-    # A stored step without levels: whole z chunks, decoding at most HIST_READ_BYTES of them.
+    # A stored step without levels: whole z chunks, decoding at most TUNING.hist_read_bytes of them.
     zc = source.z_chunk
     n_chunks = -(-shape[0] // zc)
     chunk_bytes = zc * shape[1] * shape[2] * source.dtype.itemsize
-    keep = max(1, min(n_chunks, HIST_READ_BYTES // max(1, chunk_bytes)))
+    keep = max(1, min(n_chunks, TUNING.hist_read_bytes // max(1, chunk_bytes)))
     if keep == n_chunks:
         return source.read_region(slice(step, step + 1), every, every, every)[0]
     s = _stride(keep * zc * shape[1] * shape[2])
@@ -139,8 +136,8 @@ class Dataset:
         }
 
     def step_sample(self, step: int) -> np.ndarray:
-        """Normalised values u of one step's histogram sample, about HIST_SAMPLE_VOXELS of them
-        (`raw_sample`; cached)."""
+        """Normalised values u of one step's histogram sample, about
+        `TUNING.hist_sample_voxels` of them (`raw_sample`; cached)."""
         with self._lock:
             got = self._samples.get(step)
             if got is not None:
@@ -152,7 +149,7 @@ class Dataset:
         got = normalize(raw_sample(s, step, self._level), s.vmin, s.vmax).ravel()
         with self._lock:
             self._samples[step] = got
-            while len(self._samples) > HIST_CACHE_STEPS:
+            while len(self._samples) > TUNING.hist_cache_steps:
                 self._samples.popitem(last=False)
         return got
 
@@ -168,7 +165,7 @@ class Dataset:
         got = got.astype(np.int64)
         with self._lock:
             self._counts[key] = got
-            while len(self._counts) > HIST_CACHE_COUNTS:
+            while len(self._counts) > TUNING.hist_cache_counts:
                 self._counts.popitem(last=False)
         return got
 
@@ -196,7 +193,7 @@ class Dataset:
         got = got.astype(np.int64)
         with self._lock:
             self._counts[key] = got
-            while len(self._counts) > HIST_CACHE_COUNTS:
+            while len(self._counts) > TUNING.hist_cache_counts:
                 self._counts.popitem(last=False)
         return got
 

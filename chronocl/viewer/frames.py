@@ -11,31 +11,21 @@ import io
 
 import numpy as np
 
+from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.integration.interactive.settings import TARGET_MS
 from chronocl.render.colorbar import data_bar
 from chronocl.render.legends import FRACTION_ENDS, fraction_ramp
 
 COLOUR_BAR_SAMPLES = 64  # colours a colour bar sends (the page draws a gradient through them)
-PREVIEW_SCALE = 0.5
 JPEG_QUALITY = {"preview": 70, "full": 88}
 # Drawing time grows with the pixels drawn (llvmpipe: ~80-140 ms for a 128^3 volume at 512^2,
 # docs/display.md). A frame answering input draws as many pixels, over all its views, as
-# `DrawBudget` predicts to take DRAW_TARGET_MS; once input stops the frame is redrawn with up
-# to PIXEL_BUDGET pixels: a 1400x900 page's single panel (1024x733; the benches' users' case
-# asks 930x640) is drawn whole (768^2 before drew it at 907x649, scaled up by the browser);
-# beyond that the browser scales a frame up to its panels. Saved PNGs are drawn at the panels'
-# full size.
-PIXEL_BUDGET = 1024 * 768
-DRAW_TARGET_MS = 80.0  # about a 512^2 draw of 128^3 on llvmpipe, 2 cores
-# A full-resolution frame whose full-size draw fits this is drawn at full size at once, not
-# reduced and redrawn (the latency target of a frame).
-SHARP_DRAW_MS = TARGET_MS
-# ... and one predicted within this many times that, too: reduced, it would save at most a third
-# of a draw, and the redraw once input stops costs a whole one (a sharp frame at 930x640 on
-# llvmpipe draws in 130-170 ms: one in two was drawn twice, 150 ms more to the sharp frame).
-SHARP_OVERRUN = 1.5
-MIN_PIXELS = 256 * 256  # never fewer, however slow the draws (a floor on sharpness)
+# `DrawBudget` predicts to take `TUNING.draw_target_ms`; once input stops the frame is redrawn
+# with up to `TUNING.pixel_budget` pixels (beyond that the browser scales a frame up to its
+# panels), never fewer than `TUNING.min_pixels`. Saved PNGs are drawn at the panels' full size.
+# A full-resolution frame whose full-size draw fits the frame's latency target
+# (`TUNING.target_ms`) is drawn at full size at once, not reduced and redrawn, and so is one
+# predicted within `TUNING.sharp_overrun` times that.
 EMPTY_BELOW = 0.01  # a panel with less than this fraction of visible pixels gets a note
 
 
@@ -45,12 +35,15 @@ class DrawBudget:
 
     def __init__(
         self,
-        target_ms: float = DRAW_TARGET_MS,
-        floor: int = MIN_PIXELS,
-        cap: int = PIXEL_BUDGET,
-        sharp_ms: float = SHARP_DRAW_MS,
+        target_ms: float | None = None,  # None: TUNING.draw_target_ms
+        floor: int | None = None,  # None: TUNING.min_pixels
+        cap: int | None = None,  # None: TUNING.pixel_budget
+        sharp_ms: float | None = None,  # None: TUNING.target_ms
     ) -> None:
-        self.target_ms, self.floor, self.cap, self.sharp_ms = target_ms, floor, cap, sharp_ms
+        self.target_ms = TUNING.draw_target_ms if target_ms is None else target_ms
+        self.floor = TUNING.min_pixels if floor is None else floor
+        self.cap = TUNING.pixel_budget if cap is None else cap
+        self.sharp_ms = TUNING.target_ms if sharp_ms is None else sharp_ms
         self.ms_per_pixel: float | None = None
 
     def record(self, ms: float, pixels: int) -> None:
@@ -62,20 +55,26 @@ class DrawBudget:
 
     def pixels(self, sharp: bool = False, full: int | None = None) -> int:
         """Pixels drawn in the target (`sharp`: a full-resolution frame's, `sharp_ms`; one
-        whose `full` pixels are predicted within `SHARP_OVERRUN` times that: `cap`)."""
+        whose `full` pixels are predicted within `TUNING.sharp_overrun` times that: `cap`)."""
         if self.ms_per_pixel is None:
             return self.cap
-        if sharp and full is not None and full * self.ms_per_pixel <= SHARP_OVERRUN * self.sharp_ms:
+        if (
+            sharp
+            and full is not None
+            and full * self.ms_per_pixel <= TUNING.sharp_overrun * self.sharp_ms
+        ):
             return self.cap
         target = self.sharp_ms if sharp else self.target_ms
         return int(min(self.cap, max(self.floor, target / self.ms_per_pixel)))
 
 
 def render_size(
-    size: tuple[int, int], n_views: int, scale: float = 1.0, budget: int = PIXEL_BUDGET
+    size: tuple[int, int], n_views: int, scale: float = 1.0, budget: int | None = None
 ) -> tuple[int, int]:
     """The size each of `n_views` panels of `size` (w, h) is drawn at: `scale` of it, shrunk
-    (same aspect) so that all views together stay within `budget` pixels, at least 32 px."""
+    (same aspect) so that all views together stay within `budget` pixels (None:
+    `TUNING.pixel_budget`), at least 32 px."""
+    budget = TUNING.pixel_budget if budget is None else budget
     w, h = size[0] * scale, size[1] * scale
     fit = min(1.0, (budget / max(1.0, w * h * n_views)) ** 0.5)
     return max(32, int(w * fit)), max(32, int(h * fit))

@@ -6,9 +6,7 @@ import gc
 import time
 
 from chronocl.core.budget import malloc_trim, resident_bytes
-
-HEAP_ALLOWANCE = 64 * 2**20  # growth since the last clean-up that starts another
-HEAP_CHECK_S = 1.0
+from chronocl.core.tuning import TUNING
 
 
 class HeapKeeper:
@@ -25,8 +23,8 @@ class HeapKeeper:
     several times cheaper under that load.
     """
 
-    def __init__(self, allowance: int = HEAP_ALLOWANCE) -> None:
-        self.allowance = allowance
+    def __init__(self, allowance: int | None = None) -> None:  # None: TUNING.heap_allowance
+        self.allowance = TUNING.heap_allowance if allowance is None else allowance
         self.floor = resident_bytes()
         self.cleanups = 0
         self.collect_s = 0.0  # collecting (every Python thread stopped), not waiting for it

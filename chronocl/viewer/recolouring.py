@@ -30,7 +30,6 @@ from chronocl.core.interrupt import checkpoint
 from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine.buffers import DeviceLimitError
-from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour import Changed, Recolourer
@@ -74,7 +73,7 @@ class Recolouring:
         or nothing was edited: the spec shown is `spec`)."""
         slot.why_not_recoloured = None
         s, shown = slot.session, slot.cv
-        if isinstance(s, AutoSession) and s.asked == spec:
+        if s is not None and s.asked == spec:
             return None  # no edit: a slide or a jump
         found = _recolourable(slot, spec, sel)
         if isinstance(found, str):
@@ -105,7 +104,6 @@ class Recolouring:
             cv = Chronovolume(changed.rgba, shown.t_index, meta)
             self._show(slot, prepared, changed, shown, cv)
         slot.cv, slot.uploaded = cv, cv
-        full.adopt(spec, new, cv)
         s.adopt(spec, new, cv)
         self.ms += 1e3 * (time.perf_counter() - t) - (self.upload_ms - uploaded)
         return cv
@@ -115,7 +113,7 @@ class Recolouring:
         are not ready, so that the first TF edit only recolours (the viewer calls it at idle,
         given up by new input: `chronocl.core.interrupt`). Whether it prepared them."""
         s, shown = slot.session, slot.cv
-        if not isinstance(s, AutoSession) or s.asked is None or shown is None:
+        if s is None or s.asked is None or shown is None:
             return False
         if s.spec.mode not in RECOLOURED:
             return False
@@ -198,7 +196,7 @@ def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> tupl
     s, shown = slot.session, slot.cv
     if spec.mode not in RECOLOURED:
         return f"{spec.mode} mixes every step's colour"
-    if not isinstance(s, AutoSession) or shown is None or shown.t_index is None:
+    if s is None or shown is None or shown.t_index is None:
         return "no integrated window with a step per voxel is shown"
     if s.selection != sel:
         return "another window"
@@ -206,7 +204,7 @@ def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> tupl
         return "a coarse level is shown"
     if slot.volume is None or slot.uploaded is not shown:
         return "the texture holds another frame"
-    full = s.pool.sessions.get((0, spec.integration.pool))
+    full = s.at(0, spec)
     if full is None or full.selection != sel:
         return "the window is not integrated at full resolution"
     new, reason = full.recolours(spec)  # a reason when it has integrated nothing

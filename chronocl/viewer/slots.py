@@ -9,23 +9,20 @@ from itertools import pairwise
 import numpy as np
 
 from chronocl.core.errors import SupersededError
+from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.integration.interactive.levels import AutoSession
 from chronocl.integration.interactive.session import Session
 from chronocl.render import brick_grid
 from chronocl.render.camera import world_extent
 from chronocl.render.raycaster import Volume
 from chronocl.render.upload import convert, display_format
 
-KEPT_TEXTURES = 2  # textures of other shapes a panel keeps (`ViewSlot.swap_volume`)
-UPLOAD_SLABS = 8  # z-slabs of a texture write that may be given up (`upload`)
-
 
 @dataclass
 class ViewSlot:
     """One panel: its session (window + spec), current chronovolume and texture."""
 
-    session: AutoSession | Session | None = None
+    session: Session | None = None
     cv: Chronovolume | None = None
     volume: Volume | None = None
     uploaded: Chronovolume | None = None
@@ -51,13 +48,13 @@ class ViewSlot:
 
     def swap_volume(self, key: tuple) -> Volume | None:
         """Keep the current texture under its (size, format) and take the one kept for `key`
-        (None: none kept); at most `KEPT_TEXTURES` stay besides the current one."""
+        (None: none kept); at most `TUNING.kept_textures` stay besides the current one."""
         self.release_recolour()  # its winners are the old texture's
         if self.volume is not None:
             self.kept[(self.volume.texture.size, self.volume.texture.dtype)] = self.volume
         self.volume = self.uploaded = self.written = None
         vol = self.kept.pop(key, None)
-        while len(self.kept) > KEPT_TEXTURES:
+        while len(self.kept) > TUNING.kept_textures:
             self.kept.pop(next(iter(self.kept))).release()
         return vol
 
@@ -83,8 +80,8 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     and format are unchanged (allocating a new 3D texture costs more than the write); a new
     shape or format takes the texture kept for it (`ViewSlot.swap_volume`: the coarse level and
     full resolution alternate), else allocates one. With `given_up` (a refine's frame) the
-    texture is written in `UPLOAD_SLABS` z-slabs and SupersededError raised between them once it
-    returns true; the slot then shows nothing uploaded (its next frame writes it again).
+    texture is written in `TUNING.upload_slabs` z-slabs and SupersededError raised between them
+    once it returns true; the slot then shows nothing uploaded (its next frame writes it again).
 
     The format follows `display_format` (docs/display.md, measured by bench/upload.py): RGBA8
     above 32^3 (a quarter of float32's bytes, and llvmpipe draws it faster at every size
@@ -137,10 +134,10 @@ def new_volume(rc, size: tuple[int, int, int], fmt: str, data: np.ndarray | None
 def _write(slot: ViewSlot, vol: Volume, data: np.ndarray, given_up) -> None:
     """Write `data` into the volume's texture, in slabs where it may be given up."""
     nz, ny, nx = data.shape[:3]
-    if given_up is None or nz < UPLOAD_SLABS:
+    if given_up is None or nz < TUNING.upload_slabs:
         vol.texture.write(data)
         return
-    cuts = np.linspace(0, nz, UPLOAD_SLABS + 1).astype(int)
+    cuts = np.linspace(0, nz, TUNING.upload_slabs + 1).astype(int)
     for z0, z1 in pairwise(cuts.tolist()):
         if given_up():
             slot.volume, slot.uploaded = vol, None  # half written: uploaded again next time

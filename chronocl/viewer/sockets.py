@@ -16,6 +16,7 @@ import json
 import threading
 
 from chronocl.core.errors import ChronoclError
+from chronocl.core.tuning import TUNING
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import internal_error, log
 from chronocl.viewer.progress import refine_progress
@@ -24,8 +25,6 @@ from chronocl.viewer.residency import report_steps
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.view_sessions import SharedSteps
 from chronocl.viewer.worker import ClientWorker
-
-SEND_TIMEOUT_S = 60.0
 
 
 def info_message(datasets: list[Dataset]) -> dict:
@@ -129,7 +128,7 @@ async def serve_socket(
         try:
             sent = asyncio.run_coroutine_threadsafe(deliver(data), loop)
             if wait:
-                sent.result(SEND_TIMEOUT_S)
+                sent.result(TUNING.send_timeout_s)
         except Exception:  # cancelled, timed out: the client is gone
             gone.set()
         return not gone.is_set()

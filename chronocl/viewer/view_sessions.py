@@ -21,11 +21,12 @@ from chronocl.core.budget import human
 from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.core.process_memory import Streaming
 from chronocl.core.slab_sink import slabs_to
+from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
 from chronocl.integration.interactive.costs import SlideCosts
-from chronocl.integration.interactive.session import STREAM_SLABS, Session
-from chronocl.integration.interactive.settings import TARGET_MS, manager_key
+from chronocl.integration.interactive.session import Session
+from chronocl.integration.interactive.settings import manager_key
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.gl_thread import gl_submit, release_on_gl
 from chronocl.viewer.recolouring import Recolouring
@@ -34,16 +35,6 @@ from chronocl.viewer.slots import ViewSlot
 from chronocl.viewer.view_state import ViewState
 
 INTEGRATE_LOCK = threading.Lock()
-# What a view's frames hold beside the steps, per full-resolution voxel: the process's memory
-# limit keeps the windows' steps resident only where they fit beside this for every view
-# (`ProcessLimit.window_room`; else they stream). At 512^3 on the 2-core PoCL/llvmpipe
-# machine (2026-11-30) a max view held 17 bytes a voxel steadily (its RGBA8 chronovolume and
-# texture, t_index, u and step index) and 21 at the peak of its switch, a second max view 17,
-# an alpha view 8 steadily and 20 at the peak of a TF edit (the new chronovolume written while
-# the old one and the texture's staging are alive). The steady 17 is counted: one view's
-# transient at a time (up to 1.5 GB at 512^3) lies within the 10% over the limit the soak's
-# target allows (counting 20 streamed two views of the users' window at an 11 GB limit).
-FRAME_VOXEL_BYTES = 17
 
 
 class SharedSteps:
@@ -138,7 +129,7 @@ class Views:
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the frame
             voxels = math.prod(series.volume_shape) * len(state.views)
-            limit.expect(self, FRAME_VOXEL_BYTES * voxels)
+            limit.expect(self, TUNING.frame_voxel_bytes * voxels)
             self._streaming = self._stream_or_not(limit, series, state)
             for slot in self.slots[: len(state.views)]:
                 if slot.session is not None:
@@ -193,7 +184,7 @@ class Views:
         steps = set().union(*windows)
         step = math.prod(series.volume_shape) * series.dtype.itemsize
         # two slabs of the widest window at once: one integrated while the next is read
-        slabs = 2 * max(map(len, windows), default=0) * -(-step // STREAM_SLABS)
+        slabs = 2 * max(map(len, windows), default=0) * -(-step // TUNING.stream_slabs)
         fits, need, room, keep = limit.resident(self, state.dataset, steps, step, slabs)
         if fits:
             return None
@@ -218,7 +209,6 @@ class Views:
                 device=self.device,
                 spec=spec,
                 level="auto",
-                target_ms=TARGET_MS,
                 managers=self._managers,
                 display=True,  # full-resolution frames as RGBA8 from the kernels
                 slide_costs=self.slide_costs,

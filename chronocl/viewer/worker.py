@@ -27,6 +27,7 @@ from chronocl import modes
 from chronocl.core import foreground, process_memory
 from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.core.interrupt import interruptible
+from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.render.framing import framed
@@ -39,8 +40,6 @@ from chronocl.viewer.errors import error_text, log
 from chronocl.viewer.fit import fit_reply, fitted_default
 from chronocl.viewer.frames import (
     JPEG_QUALITY,
-    PIXEL_BUDGET,
-    PREVIEW_SCALE,
     DrawBudget,
     colour_bar,
     count_bar,
@@ -63,14 +62,13 @@ from chronocl.viewer.view_sessions import SharedSteps, Views
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
 MAX_TASKS = 8
-REFINE_AFTER_S = 0.25  # after a drag's coarse frame; an edit's end refines at once
-# After a sharp frame of a mode that recolours, this long without input: its winners are
-# gathered, so that the first TF edit only recolours (new input gives the gather up).
-PREPARE_AFTER_S = 0.3
-# A frame waits for a client that left to let go of its frames (a page reloaded: the old
-# socket's frames, 2 GB at 512^3 in max, and the new ones held at once) until this long after
-# it left, at most: one still busy (a movie) stalls the others' frames once, not each.
-LEFT_WAIT_S = 30.0
+# Delays (`TUNING.refine_after_s`, `prepare_after_s`, `left_wait_s`): after a drag's coarse
+# frame a refine waits (an edit's end refines at once); after a sharp frame of a mode that
+# recolours, its winners are gathered once input pauses, so that the first TF edit only
+# recolours (new input gives the gather up); a frame waits for a client that left to let go of
+# its frames (a page reloaded: the old socket's frames, 2 GB at 512^3 in max, and the new ones
+# held at once), at most that long after it left: one still busy (a movie) stalls the others'
+# frames once, not each.
 _leaving: dict = {}  # workers closed whose views are not released yet: when they left
 _left = threading.Condition()
 
@@ -390,7 +388,7 @@ class ClientWorker(Tasks):
     def _left_wait(self) -> float:
         """Seconds this frame may still wait for the clients that left (`_left` held)."""
         now = time.monotonic()
-        ends = [t + LEFT_WAIT_S - now for w, t in _leaving.items() if w is not self]
+        ends = [t + TUNING.left_wait_s - now for w, t in _leaving.items() if w is not self]
         return max(ends, default=0.0)
 
     def _memory_after(self) -> None:
@@ -452,12 +450,13 @@ class ClientWorker(Tasks):
         self, state, rid, cvs, integrate_ms, incremental, t_start, final: bool = False
     ) -> None:
         """Draw, encode and send the frame. A frame answering input draws what the draw budget
-        allows in DRAW_TARGET_MS; if that is less than the panels' size (within PIXEL_BUDGET),
-        the frame is redrawn in full once input stops (`final`), as coarse levels are."""
+        allows in `TUNING.draw_target_ms`; if that is less than the panels' size (within
+        `TUNING.pixel_budget`), the frame is redrawn in full once input stops (`final`), as
+        coarse levels are."""
         state = self._framed(state, cvs)
         preview = state.quality == "preview"
-        scale = PREVIEW_SCALE if preview else 1.0
-        w, h = full_w, full_h = render_size(state.size, len(cvs), scale, PIXEL_BUDGET)
+        scale = TUNING.preview_scale if preview else 1.0
+        w, h = full_w, full_h = render_size(state.size, len(cvs), scale)
         if not final:  # a sharp frame whose full-size draw fits the latency target: at once
             sharp = not preview and self.views.sharp(len(cvs))
             budget = self._draw_budget.pixels(sharp, full_w * full_h * len(cvs))
@@ -482,10 +481,11 @@ class ClientWorker(Tasks):
         level = max((session.shown_level for session in sessions), default=0)
         levels = max((session.stats.get("levels", 1) for session in sessions), default=1)
         refining = (level > 0 or reduced) and not self._cancelled
-        wait = REFINE_AFTER_S if state.quality == "preview" else 0.0  # newer input gives it up
+        # newer input gives the refine up
+        wait = TUNING.refine_after_s if state.quality == "preview" else 0.0
         self._refine_at = time.monotonic() + wait if refining else None
         recolours = any(mode in RECOLOURED for mode, _ in state.views)
-        self._prepare_at = None if refining or not recolours else t_done + PREPARE_AFTER_S
+        self._prepare_at = None if refining or not recolours else t_done + TUNING.prepare_after_s
         header = {
             "type": "frame",
             "id": rid,

@@ -28,6 +28,7 @@ from chronocl.core.errors import (
     UnknownNameError,
 )
 from chronocl.core.progress import track
+from chronocl.core.tuning import TUNING
 from chronocl.data.formats.contract import Exporter, Reader, StepExport, time_attrs
 from chronocl.data.formats.raw_reading import ENDIANS, Reading, likelier_reading
 from chronocl.data.inputs import expand_inputs
@@ -103,7 +104,9 @@ def raw_steps(
     check_reading(files[0], np.memmap(files[0], dtype=np.uint8, mode="r"), given)
     # The check reads the first file's first slabs only (enough for every order's neighbours).
     pair = max(a * b for a, b in itertools.combinations((nx, ny, nz), 2))
-    head = np.fromfile(files[0], dtype=file_dtype, count=min(nx * ny * nz, 2 * pair + DIMS_SAMPLES))
+    head = np.fromfile(
+        files[0], dtype=file_dtype, count=min(nx * ny * nz, 2 * pair + TUNING.raw_dims_samples)
+    )
     better = likelier_dims(head, (nx, ny, nz))
     if better is not None:
         warnings.warn(
@@ -146,7 +149,6 @@ def check_reading(path: Path, raw: np.ndarray, given: Reading) -> None:
     )
 
 
-DIMS_SAMPLES = 1 << 20  # voxel pairs compared per axis by `likelier_dims`
 MIN_DIMS_SIDE = 4  # thinner volumes (2D steps, a few slices) are not judged
 
 
@@ -170,7 +172,7 @@ def likelier_dims(values: np.ndarray, dims: tuple[int, int, int]) -> tuple[int, 
             n = flat.size - offset
             if n <= 0:
                 return math.inf
-            stride = max(1, n // DIMS_SAMPLES)
+            stride = max(1, n // TUNING.raw_dims_samples)
             a = flat[:n:stride].astype(np.float64)
             b = flat[offset : offset + n : stride].astype(np.float64)
             total += float(np.mean(np.abs(b - a)))

@@ -13,19 +13,19 @@ a leaf and a combine per step. With, per level,
     s = ms per voxel of a steady one-step slide                     (`record_slide`)
     f = ms per voxel-step of a state's fill                         (`record_slide(fill=W)`)
 
-a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * V * k`, plus, where
-the state is still to be filled, the fill's `f * V * W` shared by the W slides a state is taken
-to serve (a scrub across its window): `f * V`. Integrating is predicted at `d * V * W`, and the
-cheaper is taken, so sliding pays from a width of about `(s + f) / d` on, which each machine and
-engine finds for itself; a state already filled keeps sliding while `s * k < d * W`. Until measured,
-s and f are guessed in voxel-steps of integration (SLIDE_STEPS, FILL_STEPS, from this machine);
-where the window's steps travel to the device for every integration (a GPU whose memory holds
-not the window), d is mostly that transfer, which a slide pays only for its entering steps and a
-fill once per step: both are then guessed at d. The first slide measures f, the next ones s.
+a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * V * k`, plus, where the
+state is still to be filled, the fill's `f * V * W` shared by the W slides a state is taken to serve
+(a scrub across its window): `f * V`. Integrating is predicted at `d * V * W`, and the cheaper is
+taken, so sliding pays from a width of about `(s + f) / d` on, which each machine and engine finds
+for itself; a state already filled keeps sliding while `s * k < d * W`. Until measured, s and f are
+guessed in voxel-steps of integration (`TUNING.slide_steps`, `fill_steps`, from this machine); where
+the window's steps travel to the device for every integration (a GPU whose memory holds not the
+window), d is mostly that transfer, which a slide pays only for its entering steps and a fill once
+per step: both are then guessed at d. The first slide measures f, the next ones s.
 
 Rates are per level (a coarse level's voxels cost more each: fixed overheads): d and f running
-averages (SMOOTHING), s the mean of the last SLIDE_MEMORY slides (so that the splits of the
-stacks, a slide in tens dearer than the others, count at their share).
+averages (`TUNING.cost_smoothing`), s the mean of the last `TUNING.slide_memory` slides (so that
+the splits of the stacks, a slide in tens dearer than the others, count at their share).
 
 **Read ahead or not.** While a coarse level shows a window (a scrub), its full-resolution steps
 can be read in the background so that the refine at the stop finds them. The reads take host
@@ -45,22 +45,14 @@ import os
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-SMOOTHING = 0.5  # weight of the newest measurement in the running rates (not s: SLIDE_MEMORY)
-# Slides averaged for s: longer than the splits' period (3/4 W slides) at the widths scrubbed.
-SLIDE_MEMORY = 64
+from chronocl.core.tuning import TUNING
+
 # Pieces (leaves + combines) of a one-step slide through a `SlidingAggregate`, the splits of its
 # stacks amortised: counted over 200 slides at W = 10 and 50 (5.5 and 6.7; tests/test_costs.py
 # counts them); an inverting mode without an aggregated part integrates the entering and the
 # leaving step alone: 2. Only their ratio scales the guess for such a mode.
 SLIDE_PIECES = 7.0
 INVERT_PIECES = 2.0
-# Guesses until measured, in voxel-steps of an integration from resident steps: a steady one-step
-# slide, and a fill per window step. Measured on 2 PoCL cores, recycled partials (2026-11-30,
-# alpha and max, bench/slide_window.py and a forced `Session`): a slide 12-33 at 128^3 W = 50,
-# 17-22 at 256^3 W = 50, 20 through the viewer (before partials were recycled, 30-70); a fill
-# 12 (128^3 alpha), 36 (128^3 max), 15-20 (256^3 alpha) per step.
-SLIDE_STEPS = 20.0
-FILL_STEPS = 20.0
 
 
 class Move(NamedTuple):
@@ -87,7 +79,8 @@ class SlideCosts:
         self.direct: dict[int, float] = {}  # level -> ms per voxel-step, integrated
         self.slide: dict[int, float] = {}  # level -> ms per voxel of a steady one-step slide
         self.fill: dict[int, float] = {}  # level -> ms per voxel-step of a state's fill
-        self._slides: dict[int, int] = {}  # level -> slides averaged so far (to SLIDE_MEMORY)
+        # level -> slides averaged so far (up to TUNING.slide_memory)
+        self._slides: dict[int, int] = {}
 
     def record_direct(self, level: int, ms: float, voxels: int, steps: int) -> None:
         """A window of `steps` steps over `voxels` voxels integrated from its steps in `ms`."""
@@ -101,7 +94,7 @@ class SlideCosts:
         if fill:
             _blend(self.fill, level, ms / max(1, voxels * fill))
             return
-        n = self._slides[level] = min(SLIDE_MEMORY, self._slides.get(level, 0) + 1)
+        n = self._slides[level] = min(TUNING.slide_memory, self._slides.get(level, 0) + 1)
         value, old = ms / max(1, voxels * steps), self.slide.get(level)
         self.slide[level] = value if old is None else old + (value - old) / n
 
@@ -113,11 +106,11 @@ class SlideCosts:
             return None
         shift = max(1, abs(move.shift))
         pieces = INVERT_PIECES if move.inverts else SLIDE_PIECES
-        guess = d if move.travels else SLIDE_STEPS * d * pieces / SLIDE_PIECES
+        guess = d if move.travels else TUNING.slide_steps * d * pieces / SLIDE_PIECES
         steady = self.slide.get(move.level, guess) * voxels * shift
         fill = 0.0
         if not move.filled:  # its share over a scrub across the window: W slides
-            fill = self.fill.get(move.level, d if move.travels else FILL_STEPS * d) * voxels
+            fill = self.fill.get(move.level, d if move.travels else TUNING.fill_steps * d) * voxels
         measured = move.level in self.slide and (move.filled or move.level in self.fill)
         return d * voxels * width, steady + fill, measured
 
@@ -139,11 +132,8 @@ class SlideCosts:
 
 def _blend(table: dict[int, float], key: int, value: float) -> None:
     old = table.get(key)
-    table[key] = value if old is None else (1 - SMOOTHING) * old + SMOOTHING * value
-
-
-# A reader thread decodes one step at a time: reading ahead needs a core the frames leave idle.
-READER_CORES = 1.0
+    weight = TUNING.cost_smoothing
+    table[key] = value if old is None else (1 - weight) * old + weight * value
 
 
 @dataclass
@@ -169,7 +159,7 @@ class ReadAhead:
         if missing * read_ms <= target_ms:
             return f"reading the {missing} steps at the stop takes {missing * read_ms:.0f} ms"
         idle = self.cores - self.busy
-        if idle < READER_CORES:
+        if idle < TUNING.reader_cores:
             return f"the coarse frames keep {self.busy:.1f} of {self.cores} cores busy"
         return None
 
@@ -183,4 +173,5 @@ def cores_here() -> int:
 
 
 def _smoothed(old: float | None, new: float) -> float:
-    return new if old is None else (1 - SMOOTHING) * old + SMOOTHING * new
+    weight = TUNING.cost_smoothing
+    return new if old is None else (1 - weight) * old + weight * new

@@ -1,13 +1,13 @@
-"""How a session's window and spec move: the part a fixed-level `Session` and an `AutoSession`
-share.
+"""How a session's window and spec move.
 
-Each session's `set_window`, `slide` and `set_spec` turn a move into the window (`jump`,
-`slid`) or spec (`changed`) to show and call the session's own `show`, which takes the spec
-to integrate from `fixed`: its value range fitted to the first window shown and to the
-window of each spec change, then kept, so every window of a slide uses the same range.
+`Session.set_window`, `slide` and `set_spec` turn a move into the window (`jump`, `slid`) or
+spec (`changed`) to show and call `Session.show`, which takes the spec to integrate from
+`fixed`: its value range fitted to the first window shown and to the window of each spec
+change, then kept, so every window of a slide uses the same range (a `LevelSession` takes the
+spec so fixed as it is).
 
-These are functions, not a base class, so that a reader (or a tool) following a move from a
-session's method sees each call it makes.
+These are functions, not methods, so that a reader (or a tool) following a move sees each
+call it makes.
 """
 
 from __future__ import annotations

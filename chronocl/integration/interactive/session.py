@@ -1,149 +1,217 @@
 """Interactive sessions: a series, a moving time window, and the chronovolume kept up to date.
 
-A `Session` is what a viewer or notebook scrubs through time with. Its steps
-come from a `WindowManager` (resident under the memory budget, prefetched in
-the scrub direction, no step read twice while resident). How a new window is
-integrated depends on the time positions (docs/semantics.md, sliding windows):
+A `Session` is what a viewer or notebook scrubs through time with. It moves its window and
+spec once for all the levels it shows: each move becomes a window and a spec with its value
+range fixed (`moves`), its level policy picks the level, and that level's session
+(`LevelSession`, from a `SessionPool`) brings its chronovolume up to date, sliding
+incrementally where it can.
 
-- ``absolute`` positions with forward or backward order: a step's colour does
-  not depend on the window, so the window's state is updated instead of
-  recomputed. Each mode says how (`chronocl.modes`): modes that slide by
-  inversion keep sums in fixed point and add the entering and subtract the
-  leaving steps exactly (a part they aggregate, like additive's opacity, slides
-  like the others); the rest slide through a `SlidingAggregate` of partial
-  chronovolumes, combined on the engine.
-- ``relative`` positions, importance orders, jumps to a window that does not
-  overlap the last one, and spec changes: the window is re-integrated, from
-  resident data only.
-
-The partial volumes that sliding holds are charged to the same memory budget
-as the resident steps; when both do not fit, the session re-integrates. On a GPU
-they stay on the device, held from its budget too (`Slider`, docs/window.md).
-
-A `Session` integrates one level of the series. ``Session(series, level="auto")`` gives an
-`AutoSession` instead (`chronocl.integration.interactive.levels`), which picks a level per
-frame from a `SessionPool` of these fixed-level sessions.
+The level policies: `FixedLevel` always draws the level asked. `LatencyModel`
+(``Session(series, level="auto")``) picks for each new window or spec the finest level whose
+predicted time to a drawn frame (integrate, plus upload and render as the display reports
+them) meets a latency target. It starts from the coarsest level, whose frame is always cheap,
+and learns from every frame's own timings; `refine` then brings the same window and spec to
+full resolution when the caller is idle. Both say which level a refine brings a frame to
+(`finest`) and take the same measurements (`record_*`), which a fixed level ignores.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
+from collections.abc import Callable
 
-import numpy as np
-
-from chronocl.core.budget import human
 from chronocl.core.errors import InvalidParameterError
-from chronocl.core.interrupt import watched
 from chronocl.core.process_memory import Streaming
 from chronocl.core.selection import Selection, parse_selection
-from chronocl.data.bricks import PartlyResidentBricks, ResidentBricks, SeriesBricks
+from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.pyramid import level_shapes
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
-from chronocl.engine.device_steps import DeviceBricks, DeviceWindow
-from chronocl.integration.inmemory import WinnersOut, check_level, integrate_bricks, window_job
-from chronocl.integration.interactive.costs import Move
-from chronocl.integration.interactive.levels import AutoSession
+from chronocl.integration.inmemory import check_level
+from chronocl.integration.interactive.costs import ReadAhead
+from chronocl.integration.interactive.level_session import LevelSession, SessionPool
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
-from chronocl.integration.interactive.settings import TARGET_MS, Settings, manager_key, settings
-from chronocl.integration.interactive.slider import Slider, slide_plan
-from chronocl.integration.interactive.winners import Winners, of_window, recolours
+from chronocl.integration.interactive.settings import manager_key, settings
 from chronocl.modes.spec import IntegrationSpec
 
-REFINE_SLABS = 8  # slabs of a window integrated where it may be given up (`Session._slab_rows`)
-# A streamed window's slabs are at least 1/STREAM_SLABS of the volume: with slabs of one row
-# (a limit leaving no room) each chunk of the store was decoded once a row, 96^3 x 8 steps
-# streamed in 4.1 s against 1.55 s in slabs of 6 rows and 1.0 s resident (2026-11-30).
-STREAM_SLABS = 8
+
+class LatencyModel:
+    """Predicted milliseconds from a request to its drawn frame, per level.
+
+    Integration is modelled per voxel-step (the rate measured at the finest level seen,
+    which is the most efficient, so coarse-level overheads never make a fine level look
+    cheap); display (upload + render) per level, scaled by voxels from the nearest level
+    measured. Unmeasured: only the coarsest level is predicted to fit.
+    """
+
+    finest = 0  # a refine brings a coarse frame to full resolution
+
+    def __init__(self, voxels: list[int], target_ms: float) -> None:
+        if not target_ms > 0:
+            raise InvalidParameterError(f"target_ms is {target_ms}; give a positive number")
+        self.voxels = voxels
+        self.target_ms = float(target_ms)
+        self.rate: dict[int, float] = {}  # level -> ms per voxel-step of integration
+        self.display: dict[int, float] = {}  # level -> ms of upload + render
+        self.reads: dict[int, float] = {}  # level -> ms per voxel of reading one step
+
+    def record_integrate(self, level: int, ms: float, steps: int) -> None:
+        self._blend(self.rate, level, ms / max(1, self.voxels[level] * steps))
+
+    def record_display(self, level: int, ms: float) -> None:
+        self._blend(self.display, level, ms)
+
+    def record_read(self, level: int, seconds: float | None) -> None:
+        """A step's read time at `level` (the window manager's running average)."""
+        if seconds:
+            self._blend(self.reads, level, 1e3 * seconds / self.voxels[level])
+
+    @staticmethod
+    def _blend(table: dict[int, float], level: int, value: float) -> None:
+        old = table.get(level)
+        w = TUNING.level_smoothing
+        table[level] = value if old is None else (1 - w) * old + w * value
+
+    def predict(self, level: int, steps: int, missing: int = 0) -> float | None:
+        """Predicted ms for `level` (None: nothing measured yet), `missing` of the window's
+        steps to be read first (a level not shown lately has none of them resident: a scrub
+        at 64^3 that tried 256^3 waited 0.7 s for ten of its steps)."""
+        if not self.rate:
+            return None
+        finest = min(self.rate)
+        ms = max(self.rate[finest], self.rate.get(level, 0.0)) * self.voxels[level] * steps
+        if self.display:
+            near = min(self.display, key=lambda m: abs(m - level))
+            ms += self.display[near] * self.voxels[level] / self.voxels[near]
+        if missing and self.reads:
+            read = max(self.reads[min(self.reads)], self.reads.get(level, 0.0))
+            ms += missing * read * self.voxels[level]
+        return ms
+
+    def pick(self, steps: int, missing: Callable[[int], int] = lambda level: 0) -> tuple[int, str]:
+        """The level to draw next and why; `missing(level)`: the steps it would read."""
+        coarsest = len(self.voxels) - 1
+        for level in range(coarsest + 1):
+            ms = self.predict(level, steps, missing(level))
+            if ms is not None and ms <= self.target_ms:
+                finer = "" if level == 0 else "; finer levels predicted over it"
+                return level, f"level {level} predicted at {ms:.0f} ms, within the target{finer}"
+        if self.predict(coarsest, steps) is None:
+            return coarsest, "first frame: the coarsest level, measuring this machine"
+        return coarsest, f"no level predicted within {self.target_ms:g} ms: the coarsest"
+
+
+class FixedLevel:
+    """The level policy of a session at one level (0: full resolution): never refined."""
+
+    def __init__(self, level: int) -> None:
+        self.finest = level
+
+    def pick(self, steps: int, missing: Callable[[int], int] = lambda level: 0) -> tuple[int, str]:
+        return self.finest, f"level {self.finest} asked"
+
+    def record_integrate(self, level: int, ms: float, steps: int) -> None:
+        pass
+
+    def record_display(self, level: int, ms: float) -> None:
+        pass
+
+    def record_read(self, level: int, seconds: float | None) -> None:
+        pass
 
 
 class Session:
-    """A series, a window and an integration spec at one level; every call returns the
-    current Chronovolume.
+    """A series, a window and an integration spec; every move returns the current Chronovolume.
 
         s = Session(series, memory="2GB", mode="max", time_tf="rgb")
         cv = s.set_window(0, 16)       # steps 0..15
         cv = s.slide(+1)               # steps 1..16, updated incrementally
         cv = s.set_spec(mode="alpha")  # re-integrated from resident steps
 
-    Keywords (`settings` reads those every level shares): `memory` is the budget for resident
-    steps plus sliding state (default: half the memory free, at least 2 GB); `engine` (a
-    name, with `device`, or an `Engine`); `spec`, or the fields of one (`mode`, `time_tf`,
-    ... as `make_spec` takes them); `prefetch`, the steps read ahead in the scrub direction;
-    `managers` (a dict the caller owns and closes) shares one window manager per (level,
-    pooling) among sessions, and `manager` shares another session's resident steps
-    (parallel views of one window) instead. With `display` (a viewer's), a window integrated
-    from its steps comes back in the display format where the engine writes it: RGBA8
-    (`integrate_bricks`); slides and other engines still return float32. The viewer alone
-    holds those: its recolouring writes a TF edit into the RGBA8 the window shows
-    (`chronocl.render.recolour.bricks.shown_output`) and hands it back (`adopt`); this class
-    never writes into a chronovolume it returned. With `slide_costs`
-    (a viewer's `costs.SlideCosts`, fed the times of this session's integrations and slides) a
-    window slides only where a slide is predicted cheaper than integrating it again
+    Keywords (`settings` reads them): `memory` is the budget for resident steps plus sliding
+    state (default: half the memory free, at least 2 GB); `engine` (a name, with `device`, or
+    an `Engine`); `spec`, or the fields of one (`mode`, `time_tf`, ... as `make_spec` takes
+    them); `prefetch`, the steps read ahead in the scrub direction; `managers` (a dict the
+    caller owns and closes) shares one window manager per (level, pooling) among sessions, and
+    `manager` shares another session's resident steps at a fixed level (parallel views of one
+    window) instead. With `display` (a viewer's), a window integrated from its steps comes
+    back in the display format where the engine writes it: RGBA8 (`integrate_bricks`); slides
+    and other engines still return float32. The viewer alone holds those: its recolouring
+    writes a TF edit into the RGBA8 the window shows
+    (`chronocl.render.recolour.bricks.shown_output`) and hands it back (`adopt`). With
+    `slide_costs` (a viewer's `costs.SlideCosts`, fed the times of the integrations and
+    slides) a window slides only where a slide is predicted cheaper than integrating it again
     (`slider.slide_plan`); without (the default), every window that can slide does.
 
-    `level` is a coarse level of the series (0: full resolution). ``level="auto"`` does not
-    make a `Session`: ``Session(...)`` then returns an `AutoSession`
-    (`chronocl.integration.interactive.levels`), which chooses a level per frame to meet
-    `target_ms` and moves like a `Session`; it takes the same keywords, but not `manager` (one
-    manager cannot serve every level: pass `managers`), which it ignores. A fixed level ignores
-    `target_ms`.
+    `level` is the level of the series drawn (0: full resolution), or ``"auto"``: each window
+    at the finest level predicted to meet `target_ms` (default `TUNING.target_ms`; a coarse
+    frame first), which `refine`
+    brings to full resolution when the caller is idle; `manager` then serves no level (one
+    manager cannot serve every level: pass `managers`). A fixed level ignores `target_ms`.
+    `stats` are those of the level drawn, with the level and why.
 
     `slide` clamps at either end of the series (the window keeps its width);
     `set_window` raises InvalidSelectionError for steps outside the series.
     Returned chronovolumes are new arrays each time: keep them as long as needed.
     """
 
-    def __new__(cls, series: TimeSeries, *, level: int | str = 0, **options: object):
-        if level == "auto":
-            return auto_session(series, **options)  # type: ignore[arg-type]
-        return super().__new__(cls)
-
     def __init__(
         self,
         series: TimeSeries,
         *,
-        level: int = 0,
+        level: int | str = 0,
         manager: WindowManager | None = None,
-        target_ms: float = TARGET_MS,
+        target_ms: float | None = None,
         **options: object,
     ) -> None:
         setup = settings(**options)  # type: ignore[arg-type]
         self.base = series
-        # The spec as asked; `self.spec` is it with its value range fixed (`fix_range`).
-        self.asked = self.spec = setup.asked
         self.engine = setup.engine
-        self.budget = setup.budget
-        self.display = setup.display
-        self.costs = setup.slide_costs  # measured rates: slide or integrate (None: slide)
+        # The spec as asked; `self.spec` is it with its value range fixed (`moves.fixed`).
+        self.asked = self.spec = setup.asked
         self.selection: Selection | None = None
         self.stats: dict = {}
-        self._arrays: dict[int, np.ndarray] = {}
-        # CPU devices read the window where the manager's slots hold it; others stack it.
-        in_place = self.engine.reads_in_place
-        self._bricks = ResidentBricks(self._arrays, in_place=in_place)
-        self._slider: Slider | None = None
+        if level == "auto":
+            # The shapes by the rule: building the level series here would pool lazy levels.
+            shapes = [series.volume_shape, *level_shapes(series.volume_shape)]
+            voxels = [int(z) * int(y) * int(x) for z, y, x in shapes[: series.n_levels]]
+            target = TUNING.target_ms if target_ms is None else target_ms
+            self.policy: FixedLevel | LatencyModel = LatencyModel(voxels, target)
+            self.shown = len(voxels) - 1
+            manager = None
+        else:
+            self.policy = FixedLevel(check_level(series, level))  # type: ignore[arg-type]
+            self.shown = self.policy.finest
+        finest = self.policy.finest
+        shared = None
+        if manager is not None:
+            shared = (manager_key(finest, self.asked.integration.pool), manager)
+        self.pool = SessionPool(series, setup, finest, shared)
+        self.why = ""
+        self._last: tuple[Selection, IntegrationSpec] | None = None
         self._cv: Chronovolume | None = None
-        # (t_index, winners) the kernels wrote with the window's integration (`winners`)
-        self._won: tuple[np.ndarray, Winners] | None = None
-        self.streaming: Streaming | None = None  # `stream`
-        self._prefetch = prefetch = setup.prefetch
-        self.level = check_level(series, level)
-        self.series = series.level(self.level, self.spec.integration.pool)
-        # GPUs keep the window's steps in device memory: an edit uploads none, a slide one.
-        self._device = DeviceWindow(self.engine, self.series)
-        # Sessions that show one window in several views can share one manager's resident steps.
-        managers = setup.managers
-        self._owns_manager = manager is None and managers is None
-        if manager is None and managers is not None:
-            key = manager_key(self.level, self.spec.integration.pool)
-            if key not in managers:
-                managers[key] = WindowManager(self.series, self.budget, prefetch=prefetch)
-            manager = managers[key]
-        self.manager = manager or WindowManager(self.series, self.budget, prefetch=prefetch)
+        self._streaming: Streaming | None = None  # the finest level's (`stream`)
+        self.ahead = ReadAhead()  # whether coarse frames read the finest level's steps ahead
+        self.why_not_read_ahead: str | None = None
+        self._reading_ahead = False
 
-    # -- public --------------------------------------------------------------------------
+    @property
+    def shown_level(self) -> int:
+        """The level of the last chronovolume returned (0: full resolution)."""
+        return self.shown
+
+    def at(self, level: int, spec: IntegrationSpec | None = None) -> LevelSession | None:
+        """The session of `level` for the pooling of `spec` (default: the current spec's);
+        None: not made yet."""
+        pool = (spec or self.spec).integration.pool
+        return self.pool.sessions.get(manager_key(level, pool))
+
+    @property
+    def manager(self) -> WindowManager:
+        """The window manager of the level shown: its resident steps and their reads."""
+        return self.pool.session(self.shown, self.spec).manager
+
     def set_window(self, t0: Window, t1: int | None = None, stride: int = 1) -> Chronovolume:
         """Jump to the window [t0, t1) with a stride (or a '0:16:2' string, list or Selection)."""
         return self.show(jump(t0, t1, stride, self.base.n_steps))
@@ -163,138 +231,63 @@ class Session:
         return self.selection
 
     def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume:
-        """The chronovolume of `selection` under `spec` (default: the current one): a window
-        and a spec change at once, integrated once."""
+        """The chronovolume of `selection` under `spec` (default: the current one), a window
+        and a spec change at once, at the level the policy picks. The value range is fixed
+        here, so every level is normalised by level 0's range."""
         self.asked, spec = fixed(self.base, self.asked, self.spec, spec, selection)
-        if spec != self.spec:
-            if self.level and spec.integration.pool != self.spec.integration.pool:
-                self._repool(spec.integration.pool)
-            self.spec = spec
-            self._slider = None
-            self._cv = self._won = None
-        return self._update(selection)
+        # the last chronovolume goes first: a move that fails half way must not leave it shown
+        self.spec, self.selection, self._cv = spec, selection, None
+        level, self.why = self.policy.pick(selection.width, lambda n: self._missing(n, selection))
+        return self._at(level, selection, spec)
 
     def current(self) -> Chronovolume:
         """The chronovolume of the current window and spec."""
         if self._cv is None:
-            return self._update(self.window())
+            return self.show(self.window(), self.spec)
         return self._cv
 
-    def winners(self, gather=None, spec: IntegrationSpec | None = None) -> Winners | None:
-        """The window's winners, to recolour a TF edit without integrating: those the kernels
-        wrote with the window's integration (a display session in max, min or change), else
-        gathered (`winners.of_window`); their u at the value range of `spec` (a fixed spec from
-        `recolours`), else the shown's."""
-        vr = None if spec is None else self.value_range_of(spec)
-        kept = self._kept_winners(vr)
-        if kept is not None:
-            return kept
-        return of_window(
-            self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather, vr
-        )
-
-    def has_winners(self, spec: IntegrationSpec | None = None) -> bool:
-        """Whether `winners(spec=spec)` hands out the kernels' winners (nothing to gather)."""
-        vr = None if spec is None else self.value_range_of(spec)
-        return self._kept_winners(vr) is not None
-
-    def _kept_winners(self, vr: tuple[float, float] | None) -> Winners | None:
-        """The winners the kernels wrote with the chronovolume shown, their u at `vr` (None:
-        the range it is coloured at), under the spec shown; else None."""
-        cv, won = self._cv, self._won
-        if cv is None or won is None or won[0] is not cv.t_index:
+    def refine(self) -> Chronovolume | None:
+        """The chronovolume of what was last shown coarse at the finest level (None when the
+        last one was at the finest level already, as every one of a fixed level is)."""
+        if self.shown == self.policy.finest or self._last is None:
             return None
-        want = tuple(map(float, vr if vr is not None else cv.metadata["value_range"]))
-        if want != tuple(map(float, won[1].value_range)):
-            return None
-        return dataclasses.replace(won[1], spec=self.spec)  # the spec shown, as gathered
-
-    def value_range_of(self, spec: IntegrationSpec) -> tuple[float, float]:
-        """The value range `spec` normalises the window's values by."""
-        return tuple(map(float, window_job(self.series, self.window(), spec).value_range))
-
-    def recolours(self, spec: IntegrationSpec) -> tuple[IntegrationSpec, str | None]:
-        """`spec` fixed for the window, and None where it only recolours (else why not)."""
-        sel = self.window()
-        _, new = fixed(self.base, self.asked, self.spec, spec, sel)
-        if self._cv is None:
-            return new, "nothing is integrated yet"
-        new_range = self.value_range_of(new)
-        return new, recolours(self._cv, self.spec, new, new_range, self.base.n_steps)
+        self.why = "refined to full resolution"
+        return self._at(self.policy.finest, *self._last)
 
     def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
-        """Show `cv`, this window recoloured under `spec` (asked as `asked`), as if integrated.
-        The sliding state held the old colours: the next slide integrates the window again."""
-        self.asked, self.spec, self._cv, self._slider = asked, spec, cv, None
-
-    def read_ahead(self, selection: Selection) -> None:
-        """Start reading `selection`'s steps in the background where they fit the budget (an
-        `AutoSession` shows the window at a coarse level meanwhile)."""
-        window = selection.width * self.manager.step_bytes
-        if window <= self.manager.budget and self.streaming is None:
-            self.manager.request(selection.steps, owner=self)
-
-    def refine(self) -> Chronovolume | None:
-        """None: a fixed level is never refined (`AutoSession.refine` is)."""
-        return None
+        """Show `cv`, the window at the finest level recoloured under `spec` (asked as
+        `asked`), as if integrated; its level's session too (`LevelSession.adopt`)."""
+        finest = self.policy.finest
+        self.pool.session(finest, spec).adopt(asked, spec, cv)
+        self.asked, self.spec, self._cv = asked, spec, cv
+        self.shown, self._last = finest, (self.window(), spec)
+        self.why = "recoloured at full resolution"
+        self.stats = {**self.stats, "level": finest, "why_level": self.why, "refining": False}
+        self.stats.update(integrate_ms=0.0, path="recoloured", incremental=False)
 
     def record_display(self, ms: float) -> None:
-        """The display's time for the last chronovolume: only `AutoSession` learns from it."""
-
-    @property
-    def shown_level(self) -> int:
-        """The level of the last chronovolume returned (0: full resolution)."""
-        return self.level
+        """The display's upload + render time of the last chronovolume returned: a latency
+        policy learns from it which level meets the target next time."""
+        self.policy.record_display(self.shown, ms)
 
     def leaving(self, selection: Selection) -> None:
-        """`selection` is shown next: the chronovolume of another window is never shown again,
-        so it goes now, before any view integrates (the new one takes its memory); the steps
-        leaving go too unless the window slides incrementally (which reads them), before another
-        view reads `selection` (two views of one window jumping held the old window while the
-        first read the new one, and both old frames: 4 GB over the steady 8.8 at 512^3)."""
-        if self.selection is None or selection == self.selection:
-            return
-        self._cv = self._won = None
-        if not (self._slider is not None and self._slider.can_move_to(selection)):
-            self._let_go(selection)  # integrated anew: the steps leaving help no more
+        """`selection` is shown next: each level lets go of what no longer helps
+        (`LevelSession.leaving`), and so does this session of its last chronovolume."""
+        if self.selection is not None and selection != self.selection:
+            self._cv = None
+        for s in self.pool.sessions.values():
+            s.leaving(selection)
 
     def stream(self, why: Streaming | None) -> None:
-        """From now on the window streams from the store (`why`: the reason, the bytes its
-        slabs may take and the steps that stay resident), or stays resident again (None): a
-        viewer's decision for every view at once, before a frame
-        (`chronocl.viewer.view_sessions`). Streaming, it holds only the steps kept, and the
-        others nobody else wants give way now, before any view streams them (held meanwhile,
-        the window was there twice over at the peak); the chronovolume and winners shown
-        stay."""
-        self.streaming = why
-        if why is None:
-            return
-        held = self._arrays
-        leaving = [s for s in held if s not in why.keep]
-        if not self._owns_manager:
-            self.manager.let_go(self)
-        self._hold({s: a for s, a in held.items() if s in why.keep})
-        del held
-        self._bricks.forget()
-        self._slider = None
-        self.manager.drop(leaving)
-
-    def set_aside(self) -> None:
-        """Hold nothing of the window: another pooling's session of this level shows it now.
-        Its steps stay resident in the shared manager but may give way; its chronovolume,
-        sliding state and device copies go (shown again, the window integrates anew)."""
-        if not self._owns_manager:  # its window gives way to the others' (`let_go`)
-            self.manager.let_go(self)
-        self._device.release()
-        self._hold({})
-        self._bricks.forget()
-        self._slider = None
-        self._cv = self._won = None
+        """The finest level streams its window from now on (`LevelSession.stream`), or not
+        (None); coarser levels' windows are small and stay resident."""
+        self._streaming = why
+        for (level, _), s in self.pool.sessions.items():
+            if level == self.policy.finest:
+                s.stream(why)
 
     def close(self) -> None:
-        if self._owns_manager:
-            self.manager.close()
-        self.set_aside()
+        self.pool.close()
 
     def __enter__(self) -> Session:
         return self
@@ -303,242 +296,55 @@ class Session:
         self.close()
 
     # -- internals -----------------------------------------------------------------------
-    def _repool(self, pool: str) -> None:
-        """A coarse session whose new mode pools levels differently reads the other level."""
-        if not self._owns_manager:
-            raise InvalidParameterError(
-                f"mode {self.spec.mode!r} pools coarse levels differently; give this session "
-                "its own window manager, or use level='auto'"
-            )
-        self.manager.close()
-        self.series = self.base.level(self.level, pool)
-        self._device.release()  # its steps are the other pooling's
-        self._device = DeviceWindow(self.engine, self.series)
-        self.manager = WindowManager(self.series, self.budget, prefetch=self._prefetch)
-        self._hold({})
-        self._bricks.forget()
-        self.selection = None
+    def _missing(self, level: int, selection: Selection) -> int:
+        """The steps of `selection` not resident at `level` (all, where it has no session)."""
+        held = self.at(level)
+        if held is None:
+            return selection.width
+        resident = set(held.manager.resident())
+        if level == self.policy.finest and self._streaming is not None:
+            resident &= self._streaming.keep  # the steps not kept are read again
+        return sum(1 for t in selection.steps if t not in resident)
 
-    def _update(self, selection: Selection) -> Chronovolume:
-        t = time.perf_counter()
-        old = self.selection
-        if old is not None and selection == old and self._cv is not None:
-            return self._cv
-        window = selection.width * self.manager.step_bytes
-        if self.streaming is not None:  # a viewer's memory limit: the steps have no room
-            return self._stream(selection, t, self.streaming)
-        if window > self.budget:
-            why = f"the window needs {human(window)} > budget {human(self.budget)}"
-            return self._stream(selection, t, Streaming(why, self.budget))
-        # the move as a slide is costed: the steps entering where the state can slide (else a
-        # one-step slide's, which decides whether the window integrated now keeps a state), the
-        # steps sent to the device for every integration, the state's fill paid already
-        voxels, move = int(np.prod(self.series.volume_shape)), Move(self.level)
-        move = move._replace(travels=self._device.why is not None)
-        if old is not None and self._slider is not None and self._slider.can_move_to(selection):
-            entering = len(set(selection.steps) - set(old.steps))
-            move = move._replace(shift=entering, filled=self._slider.placed)
-        width, budget, costs = selection.width, self.budget, self.costs
-        reason, keep, state = slide_plan(self.spec, voxels, width, window, budget, costs, move)
-        self._bricks.keep = keep
-        if self._owns_manager:
-            self.manager.budget = self.budget - (0 if reason else state) - keep * window
-        direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
-        if not (reason is None and self._slider and self._slider.can_move_to(selection)):
-            self._let_go(selection)
-        arrays = dict(
-            zip(
-                selection.steps,
-                self.manager.get(selection.steps, direction, owner=self),
-                strict=True,
-            )
-        )
-        leaving = {s: a for s, a in self._arrays.items() if s not in arrays}
-        self._hold(arrays)
-        self.selection = selection
-        slider = self._slider
-        path = "reintegrate"
-        if reason is None and slider is not None and slider.can_move_to(selection):
-            # Neither holds until it completes: a slide failing half way (out of memory) is torn
-            self._cv, self._slider, self._won = None, None, None
-            t_slide, fill = time.perf_counter(), 0 if slider.placed else selection.width
-            cv = slider.move_to(selection, {**leaving, **arrays})
-            self._slider, path = slider, "incremental"
-            if self.costs is not None:  # the first slide of a state fills it
-                ms = 1e3 * (time.perf_counter() - t_slide)
-                self.costs.record_slide(self.level, ms, voxels, move.shift, fill)
-        else:
-            job = window_job(self.series, selection, self.spec)
-            bricks = self._device.bricks(self._arrays, selection.width) or self._bricks
-            # Neither the last chronovolume nor the sliding state holds for this window until
-            # the integration below completes (it may be given up: `chronocl.core.interrupt`).
-            self._cv, self._slider, self._won = None, None, None
-            t_direct = time.perf_counter()
-            # a viewer's full-resolution window in max, min or change: each voxel's winner too,
-            # as it integrates (its TF edits recolour level 0 alone)
-            won = WinnersOut() if self.display and self.level == 0 else None
-            slab = self._slab_rows(bricks)
-            cv = integrate_bricks(
-                job, self.engine, bricks, slab=slab, display=self.display, winners=won
-            )
-            if self.costs is not None:
-                ms = 1e3 * (time.perf_counter() - t_direct)
-                self.costs.record_direct(self.level, ms, voxels, selection.width)
-            if won is not None and won.u is not None:
-                w = Winners(
-                    won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
-                )
-                self._won = (cv.t_index, w)
-            # Jumps and spec changes integrate directly (one pass over the window); the
-            # sliding state starts from this window and is filled lazily on the next slide.
-            if reason is None:
-                self._slider = Slider(
-                    self.series, self.engine, self.spec, selection, job.value_range, self._device
-                )
-        self._cv = cv
-        self._record(t, path, reason)
+    def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
+        s = self.pool.session(level, spec)
+        finest = self.policy.finest
+        if level == finest and s.streaming != self._streaming:  # made since `stream`
+            s.stream(self._streaming)
+        t, cpu = time.perf_counter(), time.process_time()
+        cv = s.show(selection, spec)
+        wall = time.perf_counter() - t
+        self.policy.record_integrate(level, 1e3 * wall, selection.width)
+        self.policy.record_read(level, s.manager.scrub.read_s)
+        if level != finest:
+            self._read_ahead(selection, spec, wall, time.process_time() - cpu)
+        self.shown, self._last, self._cv = level, (selection, spec), cv
+        self.stats = {
+            **s.stats,
+            "level": level,
+            "levels": self.base.n_levels,
+            "why_level": self.why,
+            "refining": level != finest,
+            "why_not_read_ahead": self.why_not_read_ahead if level != finest else None,
+        }
         return cv
 
-    def _let_go(self, selection: Selection) -> None:
-        """Drop the steps that leave a window integrated anew before the entering ones are
-        read, so that their slots take them: held, they left entering steps arrays outside
-        the slots' block, and each window holding one was stacked (5 GB copied at 512^3)."""
-        wanted = set(selection.steps)
-        self._hold({s: a for s, a in self._arrays.items() if s in wanted})
-        self._bricks.forget()
-        self._slider = None
-
-    def _hold(self, arrays: dict[int, np.ndarray]) -> None:
-        """The window's step arrays, for the session and its bricks alike: a step either one
-        still held could not give way in the shared manager (`WindowManager._held`)."""
-        self._arrays = arrays
-        self._bricks.arrays = arrays
-
-    def _stream(self, selection: Selection, t: float, streaming: Streaming) -> Chronovolume:
-        """A window whose steps have no room to stay resident (`streaming`: why, the bytes its
-        slabs may take and the steps kept resident): integrated z-slab by z-slab, the steps
-        kept copied from memory and the rest read from the store, each slab's brick a quarter
-        of the room at most but at least 1/STREAM_SLABS of the volume (slabs of a row or two
-        decoded every chunk once a row), no sliding; a display session at full resolution keeps
-        its winners as it would resident, so that its TF edits recolour without streaming the
-        window again (unless the value range changes)."""
-        why, room, keep = streaming
-        job = window_job(self.series, selection, self.spec)
-        rows = max(
-            room // (4 * max(1, job.row_bytes)), -(-self.series.volume_shape[0] // STREAM_SLABS)
-        )
-        self._slider, self.selection, self._cv, self._won = None, selection, None, None
-        self._bricks.forget()
-        kept = [s for s in selection.steps if s in keep]
-        arrays = self.manager.get(kept, owner=self) if kept else []
-        self._hold(dict(zip(kept, arrays, strict=True)))
-        del arrays
-        bricks = PartlyResidentBricks(self.series, self._arrays) if kept else None
-        won = WinnersOut() if self.display and self.level == 0 else None
-        cv = integrate_bricks(
-            job,
-            self.engine,
-            bricks or SeriesBricks(self.series),
-            slab=max(1, rows),
-            display=self.display,
-            winners=won,
-        )
-        if won is not None and won.u is not None:
-            w = Winners(
-                won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
-            )
-            self._won = (cv.t_index, w)
-        self._cv = cv
-        some = f"{len(kept)} of {selection.width} steps resident, the rest " if kept else ""
-        self._record(t, "streamed", f"{why}: {some}streamed by z-slabs")
-        return self._cv
-
-    def _slab_rows(self, bricks: object) -> int | None:
-        """Rows per slab of a window integrated from `bricks`: work that may be given up (a
-        viewer's refine) integrates a window read in place on the host, or from its steps kept
-        on the device (`DeviceBricks`), in REFINE_SLABS slabs, so newer input stops it within
-        one slab's time and each finished slab is handed on (`chronocl.core.slab_sink`) while
-        the next integrates; such slabs cost no copy. Otherwise (and for a window stacked, which
-        a kept brick serves whole again) as many rows as the engine takes at once."""
-        free = isinstance(bricks, DeviceBricks) or (bricks is self._bricks and bricks.in_place)
-        if not (watched() and free):
-            return None
-        return -(-self.series.volume_shape[0] // REFINE_SLABS)
-
-    def _record(self, t: float, path: str, reason: str | None) -> None:
-        self.stats = {
-            "level": self.level,
-            "integrate_ms": 1e3 * (time.perf_counter() - t),
-            "path": path,
-            "incremental": path == "incremental",
-            "why_not_incremental": reason,
-            "steps": list(self.selection.steps),
-            "resident_steps": len(self.manager.resident()),
-            "reads": sum(self.manager.reads.values()),
-            "held_partials": 0 if self._slider is None else self._slider.held,
-            "device_steps": None if self._device.slots is None else self._device.slots.resident(),
-            "why_not_on_device": self._device.why,
-            # why the window is read from the store slab by slab, not resident (None: it is);
-            # kept by a recolouring's stats (`AutoSession.adopt`): the window still streams
-            "streamed": reason if path == "streamed" else None,
-        }
-
-
-class SessionPool:
-    """The fixed-level sessions behind an `AutoSession`: one per (level, pooling) of `series`,
-    built when first asked for from `setup`, sharing its engine and, when it has `managers`,
-    the window managers in it (the views of one client)."""
-
-    def __init__(self, series: TimeSeries, setup: Settings) -> None:
-        self.series = series
-        self.setup = setup
-        self.sessions: dict[tuple[int, str], Session] = {}
-
-    def session(self, level: int, spec: IntegrationSpec) -> Session:
-        """The session of `level` for `spec`'s pooling."""
-        key = (level, spec.integration.pool)
-        # Another pooling's session of the level held its window (the same steps at level 0)
-        # after a mode switch: a jump then read the new window beside it, over the limit.
-        for other, s in self.sessions.items():
-            if other != key and other[0] == level:
-                s.set_aside()
-        if key not in self.sessions:
-            o = self.setup
-            # Coarse levels hold 1/8 of the voxels of the next finer one or less.
-            budget = o.budget if level == 0 else max(1, o.budget // 8)
-            self.sessions[key] = Session(
-                self.series,
-                memory=budget,
-                engine=o.engine,
-                spec=spec,
-                level=level,
-                prefetch=o.prefetch,
-                managers=o.managers,
-                display=o.display,
-                slide_costs=o.slide_costs,
-            )
-        return self.sessions[key]
-
-    def read_ahead(self, selection: Selection, spec: IntegrationSpec) -> None:
-        """Full-resolution steps of `selection` read in the background (`Session.read_ahead`)."""
-        self.session(0, spec).read_ahead(selection)
-
-    def close(self) -> None:
-        for s in self.sessions.values():
-            s.close()
-        self.sessions = {}
-
-
-def auto_session(
-    series: TimeSeries,
-    *,
-    target_ms: float = TARGET_MS,
-    manager: WindowManager | None = None,
-    **options: object,
-) -> AutoSession:
-    """`Session(series, level="auto", ...)`: a session that draws each frame at the finest
-    level predicted to meet `target_ms`, from a pool of fixed-level sessions.
-    `options` are those of every level (`settings`); `manager` is ignored (it holds one level's
-    steps: `managers` shares one per level)."""
-    setup = settings(**options)  # type: ignore[arg-type]
-    return AutoSession(SessionPool(series, setup), setup.asked, target_ms)
+    def _read_ahead(
+        self, selection: Selection, spec: IntegrationSpec, wall_s: float, cpu_s: float
+    ) -> None:
+        """The refine to come finds the window's full-resolution steps read, where that pays
+        (`costs.ReadAhead`: the coarse frames leave a core idle, and reading the steps at the
+        stop would take longer than the target). On 2 PoCL cores the reads took the cores the
+        coarse frames needed (docs/window.md): their integration keeps both busy there."""
+        model = self.policy
+        assert isinstance(model, LatencyModel)  # a fixed level is never shown coarse
+        if not self._reading_ahead:  # the readers' CPU time would count as the frame's
+            self.ahead.record_frame(wall_s, cpu_s)
+        finest = min(model.reads, default=None)  # ms per voxel of a step's read
+        read = None if finest is None else model.reads[finest] * model.voxels[0]
+        missing = self._missing(0, selection)
+        why = "full resolution streams its window" if self._streaming is not None else None
+        why = why or self.ahead.why_not(missing, read, model.target_ms)
+        self.why_not_read_ahead, self._reading_ahead = why, why is None
+        if why is None:
+            self.pool.read_ahead(selection, spec)

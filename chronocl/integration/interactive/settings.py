@@ -1,5 +1,5 @@
 """What every session of a series is built from, whatever its level: the keywords a `Session`
-(and an `AutoSession`'s pool of them) takes, resolved once (`settings`).
+(and each of its level sessions) takes, resolved once (`settings`).
 """
 
 from __future__ import annotations
@@ -15,10 +15,6 @@ from chronocl.integration.interactive.costs import SlideCosts
 from chronocl.modes.spec import IntegrationSpec
 
 Managers = dict[tuple[int, str], WindowManager]
-# The latency target of a frame: an interactive session shows a coarse level first where full
-# resolution would take longer, and the viewer draws a sharp frame whole where its draw fits it
-# (chronocl/viewer/frames.py); 150 ms reads as immediate (docs/display.md).
-TARGET_MS = 150.0
 
 
 class Settings(NamedTuple):

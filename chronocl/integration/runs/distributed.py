@@ -33,6 +33,7 @@ from chronocl.core.errors import (
     SlabTaskError,
 )
 from chronocl.core.progress import meter
+from chronocl.core.tuning import TUNING
 from chronocl.data.bricks import Slab
 from chronocl.data.series import TimeSeries, open_series
 from chronocl.engine import get_engine
@@ -40,8 +41,6 @@ from chronocl.engine.base import Engine
 from chronocl.integration.inmemory import Job
 from chronocl.integration.runs.local import Bounds, SlabWork
 from chronocl.integration.runs.plan import Plan
-
-CONNECT_TIMEOUT = 5.0  # seconds before an unreachable scheduler is reported
 
 
 class SchedulerUnreachableError(ChronoclError, ConnectionError):
@@ -78,8 +77,10 @@ def local_cluster(workers: int, memory_limit: str | int | None = "auto", **kwarg
     return LocalCluster(**options)
 
 
-def connect_scheduler(address: str, timeout: float = CONNECT_TIMEOUT):
-    """A Client of the scheduler at `address`, or SchedulerUnreachableError within `timeout` s."""
+def connect_scheduler(address: str, timeout: float | None = None):
+    """A Client of the scheduler at `address`, or SchedulerUnreachableError within `timeout` s
+    (None: `TUNING.connect_timeout_s`)."""
+    timeout = TUNING.connect_timeout_s if timeout is None else timeout
     from distributed import Client
 
     try:
@@ -150,7 +151,6 @@ def engine_on_worker(name: str, device: str | None) -> Engine:
 
 
 # -- on the client ----------------------------------------------------------------------------
-TASKS_PER_THREAD = 4  # enough slabs for every worker thread to take several (load balance)
 
 
 def slab_rows_for(client, nz: int) -> int:
@@ -159,7 +159,7 @@ def slab_rows_for(client, nz: int) -> int:
         threads = max(1, sum(client.nthreads().values()))
     except Exception:  # an unusual client; slabs then follow the memory budget alone
         return nz
-    return max(1, -(-nz // (threads * TASKS_PER_THREAD)))
+    return max(1, -(-nz // (threads * TUNING.tasks_per_thread)))
 
 
 class DaskExecutor:

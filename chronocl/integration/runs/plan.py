@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from operator import itemgetter
 
 import numpy as np
@@ -20,16 +20,11 @@ import zarr
 
 from chronocl.core import env, host_threads
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.tuning import TUNING
 from chronocl.data.bricks import Slab, slabs, stored_z_chunk
-from chronocl.data.timeseries import STEPS_PER_READ
 from chronocl.integration.inmemory import Job
 
 CHUNK_BYTES = 8 * 2**20  # output chunk size, as Chronovolume.save
-BASE_BYTES = 2 * 2**20  # tables, small buffers and bookkeeping of one slab
-# What each thread of a run holds besides the buffers counted: its stack pages, its malloc
-# arena's head and small blocks. 16 forced threads of each kind grew a run by 6-8 MB more than
-# 2 did (tests/test_budget_threads.py).
-THREAD_BYTES = 256 * 2**10
 
 # (steps decoded at once, read-ahead) from fastest to leanest: on two cores 8 steps per read
 # streamed 1.1x faster than 4 with read-ahead, which was 1.15x faster than 2.
@@ -45,7 +40,8 @@ class Plan:
     chunk_rows: int
     peak_bytes: int  # estimated memory held while one slab is integrated and written
     read_ahead: bool = True  # the next brick is read while this one is integrated
-    steps_per_read: int = STEPS_PER_READ  # steps whose chunks are decoded at once
+    # steps whose chunks are decoded at once
+    steps_per_read: int = field(default_factory=lambda: TUNING.steps_per_read)
 
 
 def run_threads() -> int:
@@ -65,25 +61,26 @@ def slab_bytes(
     engine: str,
     read_ahead: bool = True,
     write_behind: bool | None = None,
-    steps_per_read: int = STEPS_PER_READ,
+    steps_per_read: int | None = None,  # None: TUNING.steps_per_read
     threads: int | None = None,
 ) -> int:
     """Memory held while a slab of `rows` output rows is read, integrated and written.
 
     Counts the brick being integrated and the one read ahead, one step's rows as the store
-    returns them plus the stored chunks decoded at once for `steps_per_read` steps (compressed
-    and decoded; at most zarr's async.concurrency), the engine's own work arrays (float64
-    input goes to OpenCL as float32; the numpy reference works in float64), the slab's output
-    and the previous one being written (write-behind; by default where there is read-ahead),
-    and zarr's encoded copies while writing, and THREAD_BYTES for each of `threads` (default:
-    `run_threads()`), so that the budget holds at any thread count.
+    returns them plus the stored chunks decoded at once for `steps_per_read` steps (compressed and
+    decoded; at most zarr's async.concurrency), the engine's own work arrays (float64 input goes to
+    OpenCL as float32; the numpy reference works in float64), the slab's output and the previous one
+    being written (write-behind; by default where there is read-ahead), and zarr's encoded copies
+    while writing, and TUNING.run_thread_bytes for each of `threads` (default: `run_threads()`), so
+    that the budget holds at any thread count.
     """
+    steps_per_read = TUNING.steps_per_read if steps_per_read is None else steps_per_read
     nz, ny, nx = job.series.volume_shape
     plane, w, item = ny * nx, job.selection.width, job.series.dtype.itemsize
     read_rows = min(nz, rows + 2 * job.halo)
     brick = read_rows * w * plane * item
-    total = BASE_BYTES + brick * (2 if read_ahead else 1)
-    total += THREAD_BYTES * (run_threads() if threads is None else threads)
+    total = TUNING.run_base_bytes + brick * (2 if read_ahead else 1)
+    total += TUNING.run_thread_bytes * (run_threads() if threads is None else threads)
     zc = stored_z_chunk(job.series)
     if zc:
         # Stored chunks a read of these rows can touch: as many as they fill when a slab of

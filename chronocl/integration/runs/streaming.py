@@ -20,7 +20,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
@@ -33,9 +33,9 @@ from chronocl.core.budget import bound_allocator, parse_memory
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.paths import check_apart, check_output
 from chronocl.core.selection import Selection
+from chronocl.core.tuning import TUNING
 from chronocl.data.bricks import BrickSource, SeriesBricks, Slab
 from chronocl.data.series import TimeSeries
-from chronocl.data.timeseries import STEPS_PER_READ
 from chronocl.data.writer import compressors
 from chronocl.engine import get_engine
 from chronocl.engine.device_formats import check_device_format, with_device_format
@@ -112,7 +112,7 @@ class SlabTask:
     digest: str
     engine: str = "opencl"
     device: str | None = None
-    steps_per_read: int = STEPS_PER_READ
+    steps_per_read: int = field(default_factory=lambda: TUNING.steps_per_read)
     device_format: str = "auto"  # what bricks travel to the device in (engine.device_formats)
 
     @cached_property

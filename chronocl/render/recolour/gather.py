@@ -16,14 +16,11 @@ import numpy as np
 
 from chronocl.core.interrupt import checkpoint, watched
 from chronocl.core.memory import ALIGN, aligned_empty, is_aligned, recycled_empty
+from chronocl.core.tuning import TUNING
 from chronocl.integration.interactive.winners import Winners, index_table
 from chronocl.modes.spec import IntegrationSpec
 
 CHUNK = 8  # steps per gather pass (the kernel's p1..p8)
-# A gather that may be given up (the viewer prepares winners at idle) runs in this many slabs,
-# each waited for: new input waits for one slab at most (512^3, 10 steps: 1.2-1.4 s in all
-# here, so 0.2 s).
-GIVEN_UP_PIECES = 8
 CL_TYPES = {  # numpy's name -> OpenCL's, for the raw values the gather reads
     "float32": "float",
     "float64": "double",
@@ -85,7 +82,7 @@ def gather(
             rows = limit // (plane * per_voxel)
     aligned_rows = ALIGN // math.gcd(plane, ALIGN)
     if watched():  # in pieces, each a checkpoint
-        rows = min(rows, max(aligned_rows, -(-nz // GIVEN_UP_PIECES)))
+        rows = min(rows, max(aligned_rows, -(-nz // TUNING.gather_pieces)))
     if rows < nz:  # slabs start aligned, as PoCL uses host memory in place (k: 1 byte a voxel)
         rows -= rows % aligned_rows
     in_place = all(arrays[s].flags.c_contiguous and is_aligned(arrays[s]) for s in steps)

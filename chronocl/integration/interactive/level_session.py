@@ -1,0 +1,453 @@
+"""One level of an interactive session: a series, a moving time window, and the chronovolume
+kept up to date.
+
+A `LevelSession` is what a `Session` (a viewer's or a notebook's) integrates each level with. Its
+steps come from a `WindowManager` (resident under the memory budget, prefetched in
+the scrub direction, no step read twice while resident). How a new window is
+integrated depends on the time positions (docs/semantics.md, sliding windows):
+
+- ``absolute`` positions with forward or backward order: a step's colour does
+  not depend on the window, so the window's state is updated instead of
+  recomputed. Each mode says how (`chronocl.modes`): modes that slide by
+  inversion keep sums in fixed point and add the entering and subtract the
+  leaving steps exactly (a part they aggregate, like additive's opacity, slides
+  like the others); the rest slide through a `SlidingAggregate` of partial
+  chronovolumes, combined on the engine.
+- ``relative`` positions, importance orders, jumps to a window that does not
+  overlap the last one, and spec changes: the window is re-integrated, from
+  resident data only.
+
+The partial volumes that sliding holds are charged to the same memory budget
+as the resident steps; when both do not fit, the session re-integrates. On a GPU
+they stay on the device, held from its budget too (`Slider`, docs/window.md).
+
+A `LevelSession` integrates one level of the series; a `Session`
+(`chronocl.integration.interactive.session`) takes one from its `SessionPool` for each level and
+pooling it shows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from chronocl.core.budget import human
+from chronocl.core.interrupt import watched
+from chronocl.core.process_memory import Streaming
+from chronocl.core.selection import Selection, parse_selection
+from chronocl.core.tuning import TUNING
+from chronocl.data.bricks import PartlyResidentBricks, ResidentBricks, SeriesBricks
+from chronocl.data.chronovolume import Chronovolume
+from chronocl.data.series import TimeSeries
+from chronocl.data.window import WindowManager
+from chronocl.engine.device_steps import DeviceBricks, DeviceWindow
+from chronocl.integration.inmemory import WinnersOut, check_level, integrate_bricks, window_job
+from chronocl.integration.interactive.costs import Move
+from chronocl.integration.interactive.moves import fixed
+from chronocl.integration.interactive.settings import Settings, manager_key, settings
+from chronocl.integration.interactive.slider import Slider, slide_plan
+from chronocl.integration.interactive.winners import Winners, of_window, recolours
+from chronocl.modes.spec import IntegrationSpec
+
+
+class LevelSession:
+    """One level of a `Session`: a series, a window and an integration spec at that level,
+    which `show` brings up to date and returns as a Chronovolume (its keywords `settings`
+    reads, as `Session` takes them; `manager`: another's resident steps, parallel views of
+    one window). It never writes into a chronovolume it returned."""
+
+    def __init__(
+        self,
+        series: TimeSeries,
+        *,
+        level: int = 0,
+        manager: WindowManager | None = None,
+        **options: object,
+    ) -> None:
+        setup = settings(**options)  # type: ignore[arg-type]
+        self.base = series
+        # The spec as asked; `self.spec` is it with its value range fixed (`fix_range`).
+        self.asked = self.spec = setup.asked
+        self.engine = setup.engine
+        self.budget = setup.budget
+        self.display = setup.display
+        self.costs = setup.slide_costs  # measured rates: slide or integrate (None: slide)
+        self.selection: Selection | None = None
+        self.stats: dict = {}
+        self._arrays: dict[int, np.ndarray] = {}
+        # CPU devices read the window where the manager's slots hold it; others stack it.
+        in_place = self.engine.reads_in_place
+        self._bricks = ResidentBricks(self._arrays, in_place=in_place)
+        self._slider: Slider | None = None
+        self._cv: Chronovolume | None = None
+        # (t_index, winners) the kernels wrote with the window's integration (`winners`)
+        self._won: tuple[np.ndarray, Winners] | None = None
+        self.streaming: Streaming | None = None  # `stream`
+        self._prefetch = prefetch = setup.prefetch
+        self.level = check_level(series, level)
+        self.series = series.level(self.level, self.spec.integration.pool)
+        # GPUs keep the window's steps in device memory: an edit uploads none, a slide one.
+        self._device = DeviceWindow(self.engine, self.series)
+        # Sessions that show one window in several views can share one manager's resident steps.
+        managers = setup.managers
+        self._owns_manager = manager is None and managers is None
+        if manager is None and managers is not None:
+            key = manager_key(self.level, self.spec.integration.pool)
+            if key not in managers:
+                managers[key] = WindowManager(self.series, self.budget, prefetch=prefetch)
+            manager = managers[key]
+        self.manager = manager or WindowManager(self.series, self.budget, prefetch=prefetch)
+
+    # -- public --------------------------------------------------------------------------
+    def window(self) -> Selection:
+        """The window shown (before any: every step)."""
+        if self.selection is None:
+            self.selection = parse_selection(None, self.base.n_steps)
+        return self.selection
+
+    def show(self, selection: Selection, spec: IntegrationSpec | None = None) -> Chronovolume:
+        """The chronovolume of `selection` under `spec` (default: the current one): a window
+        and a spec change at once, integrated once."""
+        self.asked, spec = fixed(self.base, self.asked, self.spec, spec, selection)
+        if spec != self.spec:  # of this session's pooling (`SessionPool.session`)
+            self.spec = spec
+            self._slider = None
+            self._cv = self._won = None
+        return self._update(selection)
+
+    def current(self) -> Chronovolume:
+        """The chronovolume of the current window and spec."""
+        if self._cv is None:
+            return self._update(self.window())
+        return self._cv
+
+    def winners(self, gather=None, spec: IntegrationSpec | None = None) -> Winners | None:
+        """The window's winners, to recolour a TF edit without integrating: those the kernels
+        wrote with the window's integration (a display session in max, min or change), else
+        gathered (`winners.of_window`); their u at the value range of `spec` (a fixed spec from
+        `recolours`), else the shown's."""
+        vr = None if spec is None else self.value_range_of(spec)
+        kept = self._kept_winners(vr)
+        if kept is not None:
+            return kept
+        return of_window(
+            self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather, vr
+        )
+
+    def has_winners(self, spec: IntegrationSpec | None = None) -> bool:
+        """Whether `winners(spec=spec)` hands out the kernels' winners (nothing to gather)."""
+        vr = None if spec is None else self.value_range_of(spec)
+        return self._kept_winners(vr) is not None
+
+    def _kept_winners(self, vr: tuple[float, float] | None) -> Winners | None:
+        """The winners the kernels wrote with the chronovolume shown, their u at `vr` (None:
+        the range it is coloured at), under the spec shown; else None."""
+        cv, won = self._cv, self._won
+        if cv is None or won is None or won[0] is not cv.t_index:
+            return None
+        want = tuple(map(float, vr if vr is not None else cv.metadata["value_range"]))
+        if want != tuple(map(float, won[1].value_range)):
+            return None
+        return dataclasses.replace(won[1], spec=self.spec)  # the spec shown, as gathered
+
+    def value_range_of(self, spec: IntegrationSpec) -> tuple[float, float]:
+        """The value range `spec` normalises the window's values by."""
+        return tuple(map(float, window_job(self.series, self.window(), spec).value_range))
+
+    def recolours(self, spec: IntegrationSpec) -> tuple[IntegrationSpec, str | None]:
+        """`spec` fixed for the window, and None where it only recolours (else why not)."""
+        sel = self.window()
+        _, new = fixed(self.base, self.asked, self.spec, spec, sel)
+        if self._cv is None:
+            return new, "nothing is integrated yet"
+        new_range = self.value_range_of(new)
+        return new, recolours(self._cv, self.spec, new, new_range, self.base.n_steps)
+
+    def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
+        """Show `cv`, this window recoloured under `spec` (asked as `asked`), as if integrated.
+        The sliding state held the old colours: the next slide integrates the window again."""
+        self.asked, self.spec, self._cv, self._slider = asked, spec, cv, None
+
+    def read_ahead(self, selection: Selection) -> None:
+        """Start reading `selection`'s steps in the background where they fit the budget (a
+        `Session` shows the window at a coarse level meanwhile)."""
+        window = selection.width * self.manager.step_bytes
+        if window <= self.manager.budget and self.streaming is None:
+            self.manager.request(selection.steps, owner=self)
+
+    def leaving(self, selection: Selection) -> None:
+        """`selection` is shown next: the chronovolume of another window is never shown again,
+        so it goes now, before any view integrates (the new one takes its memory); the steps
+        leaving go too unless the window slides incrementally (which reads them), before another
+        view reads `selection` (two views of one window jumping held the old window while the
+        first read the new one, and both old frames: 4 GB over the steady 8.8 at 512^3)."""
+        if self.selection is None or selection == self.selection:
+            return
+        self._cv = self._won = None
+        if not (self._slider is not None and self._slider.can_move_to(selection)):
+            self._let_go(selection)  # integrated anew: the steps leaving help no more
+
+    def stream(self, why: Streaming | None) -> None:
+        """From now on the window streams from the store (`why`: the reason, the bytes its
+        slabs may take and the steps that stay resident), or stays resident again (None): a
+        viewer's decision for every view at once, before a frame
+        (`chronocl.viewer.view_sessions`). Streaming, it holds only the steps kept, and the
+        others nobody else wants give way now, before any view streams them (held meanwhile,
+        the window was there twice over at the peak); the chronovolume and winners shown
+        stay."""
+        self.streaming = why
+        if why is None:
+            return
+        held = self._arrays
+        leaving = [s for s in held if s not in why.keep]
+        if not self._owns_manager:
+            self.manager.let_go(self)
+        self._hold({s: a for s, a in held.items() if s in why.keep})
+        del held
+        self._bricks.forget()
+        self._slider = None
+        self.manager.drop(leaving)
+
+    def set_aside(self) -> None:
+        """Hold nothing of the window: another pooling's session of this level shows it now.
+        Its steps stay resident in the shared manager but may give way; its chronovolume,
+        sliding state and device copies go (shown again, the window integrates anew)."""
+        if not self._owns_manager:  # its window gives way to the others' (`let_go`)
+            self.manager.let_go(self)
+        self._device.release()
+        self._hold({})
+        self._bricks.forget()
+        self._slider = None
+        self._cv = self._won = None
+
+    def close(self) -> None:
+        if self._owns_manager:
+            self.manager.close()
+        self.set_aside()
+
+    # -- internals -----------------------------------------------------------------------
+    def _update(self, selection: Selection) -> Chronovolume:
+        t = time.perf_counter()
+        old = self.selection
+        if old is not None and selection == old and self._cv is not None:
+            return self._cv
+        window = selection.width * self.manager.step_bytes
+        if self.streaming is not None:  # a viewer's memory limit: the steps have no room
+            return self._stream(selection, t, self.streaming)
+        if window > self.budget:
+            why = f"the window needs {human(window)} > budget {human(self.budget)}"
+            return self._stream(selection, t, Streaming(why, self.budget))
+        # the move as a slide is costed: the steps entering where the state can slide (else a
+        # one-step slide's, which decides whether the window integrated now keeps a state), the
+        # steps sent to the device for every integration, the state's fill paid already
+        voxels, move = int(np.prod(self.series.volume_shape)), Move(self.level)
+        move = move._replace(travels=self._device.why is not None)
+        if old is not None and self._slider is not None and self._slider.can_move_to(selection):
+            entering = len(set(selection.steps) - set(old.steps))
+            move = move._replace(shift=entering, filled=self._slider.placed)
+        width, budget, costs = selection.width, self.budget, self.costs
+        reason, keep, state = slide_plan(self.spec, voxels, width, window, budget, costs, move)
+        self._bricks.keep = keep
+        if self._owns_manager:
+            self.manager.budget = self.budget - (0 if reason else state) - keep * window
+        direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
+        if not (reason is None and self._slider and self._slider.can_move_to(selection)):
+            self._let_go(selection)
+        arrays = dict(
+            zip(
+                selection.steps,
+                self.manager.get(selection.steps, direction, owner=self),
+                strict=True,
+            )
+        )
+        leaving = {s: a for s, a in self._arrays.items() if s not in arrays}
+        self._hold(arrays)
+        self.selection = selection
+        slider = self._slider
+        path = "reintegrate"
+        if reason is None and slider is not None and slider.can_move_to(selection):
+            # Neither holds until it completes: a slide failing half way (out of memory) is torn
+            self._cv, self._slider, self._won = None, None, None
+            t_slide, fill = time.perf_counter(), 0 if slider.placed else selection.width
+            cv = slider.move_to(selection, {**leaving, **arrays})
+            self._slider, path = slider, "incremental"
+            if self.costs is not None:  # the first slide of a state fills it
+                ms = 1e3 * (time.perf_counter() - t_slide)
+                self.costs.record_slide(self.level, ms, voxels, move.shift, fill)
+        else:
+            job = window_job(self.series, selection, self.spec)
+            bricks = self._device.bricks(self._arrays, selection.width) or self._bricks
+            # Neither the last chronovolume nor the sliding state holds for this window until
+            # the integration below completes (it may be given up: `chronocl.core.interrupt`).
+            self._cv, self._slider, self._won = None, None, None
+            t_direct = time.perf_counter()
+            # a viewer's full-resolution window in max, min or change: each voxel's winner too,
+            # as it integrates (its TF edits recolour level 0 alone)
+            won = WinnersOut() if self.display and self.level == 0 else None
+            slab = self._slab_rows(bricks)
+            cv = integrate_bricks(
+                job, self.engine, bricks, slab=slab, display=self.display, winners=won
+            )
+            if self.costs is not None:
+                ms = 1e3 * (time.perf_counter() - t_direct)
+                self.costs.record_direct(self.level, ms, voxels, selection.width)
+            if won is not None and won.u is not None:
+                w = Winners(
+                    won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
+                )
+                self._won = (cv.t_index, w)
+            # Jumps and spec changes integrate directly (one pass over the window); the
+            # sliding state starts from this window and is filled lazily on the next slide.
+            if reason is None:
+                self._slider = Slider(
+                    self.series, self.engine, self.spec, selection, job.value_range, self._device
+                )
+        self._cv = cv
+        self._record(t, path, reason)
+        return cv
+
+    def _let_go(self, selection: Selection) -> None:
+        """Drop the steps that leave a window integrated anew before the entering ones are
+        read, so that their slots take them: held, they left entering steps arrays outside
+        the slots' block, and each window holding one was stacked (5 GB copied at 512^3)."""
+        wanted = set(selection.steps)
+        self._hold({s: a for s, a in self._arrays.items() if s in wanted})
+        self._bricks.forget()
+        self._slider = None
+
+    def _hold(self, arrays: dict[int, np.ndarray]) -> None:
+        """The window's step arrays, for the session and its bricks alike: a step either one
+        still held could not give way in the shared manager (`WindowManager._held`)."""
+        self._arrays = arrays
+        self._bricks.arrays = arrays
+
+    def _stream(self, selection: Selection, t: float, streaming: Streaming) -> Chronovolume:
+        """A window whose steps have no room to stay resident (`streaming`: why, the bytes its
+        slabs may take and the steps kept resident): integrated z-slab by z-slab, the steps
+        kept copied from memory and the rest read from the store, each slab's brick a quarter
+        of the room at most but at least 1/`TUNING.stream_slabs` of the volume (slabs of a row
+        or two decoded every chunk once a row), no sliding; a display session at full
+        resolution keeps its winners as it would resident, so that its TF edits recolour
+        without streaming the window again (unless the value range changes)."""
+        why, room, keep = streaming
+        job = window_job(self.series, selection, self.spec)
+        rows = max(
+            room // (4 * max(1, job.row_bytes)),
+            -(-self.series.volume_shape[0] // TUNING.stream_slabs),
+        )
+        self._slider, self.selection, self._cv, self._won = None, selection, None, None
+        self._bricks.forget()
+        kept = [s for s in selection.steps if s in keep]
+        arrays = self.manager.get(kept, owner=self) if kept else []
+        self._hold(dict(zip(kept, arrays, strict=True)))
+        del arrays
+        bricks = PartlyResidentBricks(self.series, self._arrays) if kept else None
+        won = WinnersOut() if self.display and self.level == 0 else None
+        cv = integrate_bricks(
+            job,
+            self.engine,
+            bricks or SeriesBricks(self.series),
+            slab=max(1, rows),
+            display=self.display,
+            winners=won,
+        )
+        if won is not None and won.u is not None:
+            w = Winners(
+                won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
+            )
+            self._won = (cv.t_index, w)
+        self._cv = cv
+        some = f"{len(kept)} of {selection.width} steps resident, the rest " if kept else ""
+        self._record(t, "streamed", f"{why}: {some}streamed by z-slabs")
+        return self._cv
+
+    def _slab_rows(self, bricks: object) -> int | None:
+        """Rows per slab of a window integrated from `bricks`: work that may be given up (a
+        viewer's refine) integrates a window read in place on the host, or from its steps kept
+        on the device (`DeviceBricks`), in `TUNING.refine_slabs` slabs, so newer input stops it
+        within one slab's time and each finished slab is handed on (`chronocl.core.slab_sink`)
+        while the next integrates; such slabs cost no copy. Otherwise (and for a window
+        stacked, which a kept brick serves whole again) as many rows as the engine takes at
+        once."""
+        free = isinstance(bricks, DeviceBricks) or (bricks is self._bricks and bricks.in_place)
+        if not (watched() and free):
+            return None
+        return -(-self.series.volume_shape[0] // TUNING.refine_slabs)
+
+    def _record(self, t: float, path: str, reason: str | None) -> None:
+        self.stats = {
+            "level": self.level,
+            "integrate_ms": 1e3 * (time.perf_counter() - t),
+            "path": path,
+            "incremental": path == "incremental",
+            "why_not_incremental": reason,
+            "steps": list(self.selection.steps),
+            "resident_steps": len(self.manager.resident()),
+            "reads": sum(self.manager.reads.values()),
+            "held_partials": 0 if self._slider is None else self._slider.held,
+            "device_steps": None if self._device.slots is None else self._device.slots.resident(),
+            "why_not_on_device": self._device.why,
+            # why the window is read from the store slab by slab, not resident (None: it is);
+            # kept by a recolouring's stats (`Session.adopt`): the window still streams
+            "streamed": reason if path == "streamed" else None,
+        }
+
+
+class SessionPool:
+    """The level sessions of a `Session`: one per level and, coarse, pooling of `series`
+    (`manager_key`), built when first asked for from `setup`, sharing its engine and, when it
+    has `managers`, the window managers in it (the views of one client). `finest` (the level
+    a `Session` refines to) gets the whole budget, coarser levels an eighth; `manager` serves
+    the session of its `manager_key` (another session's resident steps)."""
+
+    def __init__(
+        self,
+        series: TimeSeries,
+        setup: Settings,
+        finest: int = 0,
+        manager: tuple[tuple[int, str], WindowManager] | None = None,
+    ) -> None:
+        self.series = series
+        self.setup = setup
+        self.finest = finest
+        self.manager = manager
+        self.sessions: dict[tuple[int, str], LevelSession] = {}
+
+    def session(self, level: int, spec: IntegrationSpec) -> LevelSession:
+        """The session of `level` for `spec`'s pooling (full resolution: one for all)."""
+        key = manager_key(level, spec.integration.pool)
+        # Another pooling's session of the level held its window (the same steps at level 0)
+        # after a mode switch: a jump then read the new window beside it, over the limit.
+        for other, s in self.sessions.items():
+            if other != key and other[0] == level:
+                s.set_aside()
+        if key not in self.sessions:
+            o = self.setup
+            # Coarse levels hold 1/8 of the voxels of the next finer one or less.
+            budget = o.budget if level == self.finest else max(1, o.budget // 8)
+            shared = self.manager
+            self.sessions[key] = LevelSession(
+                self.series,
+                memory=budget,
+                engine=o.engine,
+                spec=spec,
+                level=level,
+                manager=shared[1] if shared and shared[0] == key else None,
+                prefetch=o.prefetch,
+                managers=o.managers,
+                display=o.display,
+                slide_costs=o.slide_costs,
+            )
+        return self.sessions[key]
+
+    def read_ahead(self, selection: Selection, spec: IntegrationSpec) -> None:
+        """Steps of `selection` at the finest level read in the background
+        (`LevelSession.read_ahead`)."""
+        self.session(self.finest, spec).read_ahead(selection)
+
+    def close(self) -> None:
+        for s in self.sessions.values():
+            s.close()
+        self.sessions = {}
