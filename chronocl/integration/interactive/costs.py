@@ -1,7 +1,7 @@
 """Two choices of an interactive session made from rates measured on the machine at hand:
 whether a window slides incrementally or is integrated again (`SlideCosts`), and whether a
 coarse frame reads full resolution's steps ahead (`ReadAhead`). Both are pure: fed numbers,
-they answer; the sessions feed them what they timed (`Session._update`, `AutoSession._at`).
+they answer; the sessions feed them what they timed (`LevelSession._update`, `Session._at`).
 
 **Slide or integrate.** A one-step slide costs about the same whatever the window's width (a
 few leaves, one step integrated alone into a partial volume, and combines of two partials; the
