@@ -16,18 +16,37 @@ a second Chromium page, its view panel sized as the widget's. Timed:
 - data-TF edits by hand, in the widget and on the viewer page alike: an opacity handle dragged
   with the mouse and let go, each to a value no edit before had, timed from the release's
   request to its sharp frame (`viewer.last.roundTripMs`, the page's own clock), the first
-  COLD_EDITS apart from the rest as in bench/viewer_latency.py.
+  COLD_EDITS apart from the rest as in bench/viewer_latency.py;
+- a scrub, in the widget and on the viewer page alike, after the edits, the two pages taking
+  turns slide by slide (so that both meet the same load; which goes first alternates): the
+  window brushed by hand over the series' last steps (where the widget's and the page's windows
+  differ before), then dragged by hand one step at a time along the timeline (pressed inside it,
+  moved one step's width, let go; to the series' start and back), as many slides as `--slides`.
+  Each slide is timed on the page's clock from its drag's first input (the pointer move that
+  moved the window; its request, a preview, goes on the next animation frame) to the first frame
+  answering the drag (`first_frame_ms`) and to the sharp frame answering the release
+  (`sharp_ms`), and from the release to that sharp frame (`release_sharp_ms`). Frames are seen
+  as they arrive (an observer of the page's frame count), not polled. Slide 1 is the cold one
+  (the session's first slide), slide 10 the warm one the issue names; p50 / p95 / max are over
+  slides COLD_SLIDES + 1 on.
 
 One JSON line for the environment, then one with the summary: `first_picture_ms`,
 `first_sharp_ms`, `import_s`, `show_s` (the `show` call in the kernel), `widget_view_ms` (the
 cell run to the widget's view on the page: the front end loaded, the viewer's modules linked),
 `widget_tf_sharp_ms` / `viewer_tf_sharp_ms` (p50, p95, max of the warm edits) and
 `*_cold_tf_sharp_ms`, `ratio_tf_sharp_p50` (widget over viewer; issue 50: within 1.2), the
-panels' sizes, and `targets`.
+scrub's `widget_scrub` / `viewer_scrub` (each: the first and the tenth slide's `first_frame_ms`,
+`sharp_ms` and `release_sharp_ms`, and p50 / p95 / max of the warm slides' `sharp_ms`,
+`first_frame_ms`, `release_sharp_ms` and `transit_ms`: a frame's round trip less the worker's
+time on it, the way to the worker and back), their ratios `ratio_scrub_first_sharp`,
+`ratio_scrub_tenth_sharp`, `ratio_scrub_sharp_p50` and `ratio_scrub_first_frame_p50` (widget
+over viewer; issue 50: a scrub's frames within 1.2), the panels' sizes, and `targets`. One line
+per slide before it (`"case": "scrub"`, `"impl": "widget"` or `"viewer"`).
 
     python bench/notebook_latency.py                 # 256^3 x 20, a 10-step window
     python bench/notebook_latency.py --quick         # 128^3 x 12
     python bench/notebook_latency.py --keep /tmp/nb  # keep the store there, reuse it
+    python bench/notebook_latency.py --slides 20     # a longer scrub (default 12)
 """
 
 from __future__ import annotations
@@ -64,14 +83,61 @@ BROWSER_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networkin
 VIEWPORT = (1400, 1000)
 HEIGHT = 600  # the widget's height (issue 50: a cell output of about 900 x 600)
 COLD_EDITS = 2
-TARGETS = {"first_picture_ms": 1000, "ratio_tf_sharp_p50": 1.2}
+COLD_SLIDES = 3  # BENCH.md: the first three actions after an open are the cold ones
+TARGETS = {
+    "first_picture_ms": 1000, "ratio_tf_sharp_p50": 1.2, "ratio_scrub_sharp_p50": 1.2,
+    "ratio_scrub_first_frame_p50": 1.2,
+}  # fmt: skip
 WIDGET = "document.querySelector('.chronocl-widget').viewer"
+# Where the viewer's elements are: the widget's shadow root, the viewer page's document.
+WIDGET_ROOT = "document.querySelector('.chronocl-widget').shadowRoot"
+PAGE_ROOT = "document"
 # A widget's page holds its first frame.
 FIRST_FRAME = (
     "() => { const h = document.querySelector('.chronocl-widget');"
     " return !!h && !!h.viewer && h.viewer.frames >= 1; }"
 )
 PAGE = "window.viewer"
+# A slide's recorder, installed before its drag: the page's clock at the drag's first input
+# (the first pointer move on the timeline that moved the window: the viewer merges it into its
+# state at once and sends it on the next animation frame, on either page), at the release, at
+# the first frame answering a request sent since and at the sharp frame answering the release
+# (a request sent after it: level 0, full quality, not refining), each frame seen as it arrives
+# (an observer of the frame count the viewer writes on its element), and those two frames'
+# transit (the round trip less the worker's `server_ms`). The listeners run after the viewer's
+# own. Left in `window.__slide`.
+RECORD_SLIDE = """() => {
+  const v = %s, root = %s;
+  const timeline = root.querySelector('#timeline'), shell = root.querySelector('[data-frames]');
+  const t0 = v.S.state.window.t0;
+  const rec = { sent: v.sent, start: null, release: null, releasedAfter: null, first: null,
+                sharp: null, frames: 0, window: null };
+  const moved = () => {
+    if (rec.start === null && v.S.state.window.t0 !== t0) rec.start = performance.now();
+  };
+  const released = () => { rec.release = performance.now(); rec.releasedAfter = v.sent; };
+  timeline.addEventListener('pointermove', moved);
+  timeline.addEventListener('pointerup', released);
+  const seen = new MutationObserver(() => {
+    const l = v.last, now = performance.now();
+    if (l.id === null || l.id <= rec.sent) return;
+    rec.frames += 1;
+    const transit = (f) => (f.roundTripMs === null || !f.timings ? null
+      : f.roundTripMs - f.timings.server_ms);
+    if (rec.first === null) { rec.first = now; rec.firstTransit = transit(l); }
+    if (rec.releasedAfter !== null && l.id > rec.releasedAfter && l.quality === 'full'
+        && !l.refining && l.level === 0) {
+      rec.sharp = now;
+      rec.sharpTransit = transit(l);
+      rec.window = [v.S.state.window.t0, v.S.state.window.t1];
+      seen.disconnect();
+      timeline.removeEventListener('pointermove', moved);
+      timeline.removeEventListener('pointerup', released);
+    }
+  });
+  seen.observe(shell, { attributes: true, attributeFilter: ['data-frames'] });
+  window.__slide = rec;
+}"""
 # A sharp frame after frame `seq`, answering the newest request.
 SHARP = """([seq]) => {
   const v = %s, l = v && v.last;
@@ -133,6 +199,118 @@ def tf_edits(page, viewer: str, n: int) -> list[float]:
     return out
 
 
+class Scrub:
+    """One page's scrub: one-step slides of the window dragged by hand on its timeline, to the
+    series' start and back, one slide at a time (`slide`), so that two pages' slides alternate
+    and meet the same load; each slide's times (RECORD_SLIDE's) in ms from its drag's first
+    input, in `slides`."""
+
+    def __init__(self, page, viewer: str, root: str) -> None:
+        self.page, self.viewer, self.root = page, viewer, root
+        self.slides: list[dict] = []
+        self.direction = 1
+
+    def window(self) -> list[int]:
+        return self.page.evaluate(
+            f"() => [{self.viewer}.S.state.window.t0, {self.viewer}.S.state.window.t1]"
+        )
+
+    def drag(self, a: int, b: int, steps: int = 4) -> None:
+        """The mouse pressed on step `a` of the timeline, moved to step `b`, let go."""
+        page, viewer = self.page, self.viewer
+        at = page.evaluate(f"(s) => {viewer}.timelineAt(s)", a)
+        to = page.evaluate(f"(s) => {viewer}.timelineAt(s)", b)
+        page.mouse.move(at["x"], at["y"])
+        page.mouse.down()
+        page.mouse.move((at["x"] + to["x"]) / 2, at["y"], steps=steps // 2)
+        page.mouse.move(to["x"], to["y"], steps=steps // 2)
+        page.mouse.up()
+
+    def prepare(self) -> None:
+        """Both pages from the same place: the window brushed over the last steps by hand."""
+        page, viewer = self.page, self.viewer
+        page.evaluate(
+            f"() => {self.root}.querySelector('#timeline').scrollIntoView({{block: 'center'}})"
+        )
+        time.sleep(0.3)
+        self.steps = page.evaluate(f"() => {viewer}.S.info.shape.t")
+        t0, t1 = self.window()
+        if t1 != self.steps:
+            before = page.evaluate(f"() => {viewer}.last")
+            self.drag(self.steps - 1, self.steps - (t1 - t0))  # outside the window: a new one
+            sharp(page, viewer, before["seq"])
+            got = self.window()
+            if got != [self.steps - (t1 - t0), self.steps]:
+                raise RuntimeError(f"the window brushed to the last steps is {got}")
+
+    def slide(self) -> None:
+        page = self.page
+        t0, t1 = self.window()
+        if not (0 <= t0 + self.direction and t1 + self.direction <= self.steps):
+            self.direction = -self.direction
+        mid = (t0 + t1) // 2  # pressed inside the window, away from its edges: a move
+        page.evaluate(RECORD_SLIDE % (self.viewer, self.root))
+        self.drag(mid, mid + self.direction)
+        page.wait_for_function("() => window.__slide.sharp !== null", timeout=120_000)
+        rec = page.evaluate("() => window.__slide")
+        if rec["window"] != [t0 + self.direction, t1 + self.direction]:
+            raise RuntimeError(f"slide from {[t0, t1]} by {self.direction} showed {rec['window']}")
+        self.slides.append(
+            {
+                "window": rec["window"],
+                "first_frame_ms": round(rec["first"] - rec["start"], 1),
+                "sharp_ms": round(rec["sharp"] - rec["start"], 1),
+                "release_sharp_ms": round(rec["sharp"] - rec["release"], 1),
+                "frames": rec["frames"],
+                "first_transit_ms": rnd(rec.get("firstTransit")),
+                "sharp_transit_ms": rnd(rec.get("sharpTransit")),
+            }
+        )
+
+
+def scrub(scrubs: list[Scrub], n: int) -> None:
+    """`n` slides on each page, the pages taking turns (which goes first alternating)."""
+    for one in scrubs:
+        one.prepare()
+    time.sleep(1.0)
+    for k in range(n):
+        for one in scrubs if k % 2 == 0 else scrubs[::-1]:
+            one.slide()
+            time.sleep(0.3)  # a user looks at it before the next step
+
+
+def rnd(ms: float | None) -> float | None:
+    return None if ms is None else round(ms, 1)
+
+
+def scrub_summary(slides: list[dict]) -> dict:
+    """The first (cold) and tenth slide, and the warm slides' percentiles."""
+    warm = slides[COLD_SLIDES:]
+    keys = ("first_frame_ms", "sharp_ms", "release_sharp_ms")
+    return {
+        "slides": len(slides),
+        "first": {k: slides[0][k] for k in keys},
+        "tenth": {k: slides[9][k] for k in keys} if len(slides) >= 10 else None,
+        "sharp_ms": percentiles([s["sharp_ms"] for s in warm]),
+        "first_frame_ms": percentiles([s["first_frame_ms"] for s in warm]),
+        "release_sharp_ms": percentiles([s["release_sharp_ms"] for s in warm]),
+        # a frame's round trip less the worker's time on it (`server_ms`): the way to the
+        # worker and back, queues included (the comm's, or the viewer's socket)
+        "transit_ms": percentiles(
+            [
+                s[k]
+                for s in warm
+                for k in ("first_transit_ms", "sharp_transit_ms")
+                if s[k] is not None
+            ]
+        ),
+    }
+
+
+def ratio(a: float | None, b: float | None) -> float | None:
+    return None if a is None or b is None else round(float(a) / float(b), 2)
+
+
 def panel(page, viewer: str) -> list[int]:
     return page.evaluate(f"() => {viewer}.S.state.size")
 
@@ -144,6 +322,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--window", type=int, default=10)
     parser.add_argument("--edits", type=int, default=6)
+    parser.add_argument("--slides", type=int, default=12, help="one-step slides in the scrub")
     parser.add_argument("--keep", type=Path, default=None, help="keep the store here")
     args = parser.parse_args()
     n = args.size or (128 if args.quick else 256)
@@ -188,16 +367,6 @@ def main() -> None:
             f"widget: first {first_ms:.0f} ms, sharp {sharp_ms:.0f}, edits {widget_ms}",
             file=sys.stderr,
         )
-        run_cell(page, 2, wait=False)
-        shown = cell_output(page, 2, "SHOW", timeout_s=120)
-        page.wait_for_function("() => !document.querySelector('.chronocl-widget')")
-        # A second widget in the same kernel: the imports, GL context and kernels warm.
-        started = run_cell(page, 3, wait=False)
-        page.wait_for_function(FIRST_FRAME, timeout=120_000, polling="raf")
-        again_ms = page.evaluate("(t) => performance.now() - t", started)
-        sharp(page, WIDGET, -1)
-        again_sharp_ms = page.evaluate("(t) => performance.now() - t", started)
-        run_cell(page, 4, wait=False)
 
         # The browser viewer on the same store, its panel the widget's size.
         server = ViewerServer([data])
@@ -227,6 +396,27 @@ def main() -> None:
         viewer_ms = tf_edits(vpage, PAGE, args.edits)
         vsize = panel(vpage, PAGE)
 
+        # The scrub: the widget's and the page's slides taking turns.
+        scrubs = [Scrub(page, WIDGET, WIDGET_ROOT), Scrub(vpage, PAGE, PAGE_ROOT)]
+        scrub(scrubs, args.slides)
+        widget_slides, viewer_slides = scrubs[0].slides, scrubs[1].slides
+
+        run_cell(page, 2, wait=False)
+        shown = cell_output(page, 2, "SHOW", timeout_s=120)
+        page.wait_for_function("() => !document.querySelector('.chronocl-widget')")
+        # A second widget in the same kernel: the imports, GL context and kernels warm.
+        started = run_cell(page, 3, wait=False)
+        page.wait_for_function(FIRST_FRAME, timeout=120_000, polling="raf")
+        again_ms = page.evaluate("(t) => performance.now() - t", started)
+        sharp(page, WIDGET, -1)
+        again_sharp_ms = page.evaluate("(t) => performance.now() - t", started)
+        run_cell(page, 4, wait=False)
+
+    for impl, slides in (("widget", widget_slides), ("viewer", viewer_slides)):
+        for k, slide in enumerate(slides, 1):
+            emit({"bench": BENCH, "case": "scrub", "impl": impl, "slide": k, **slide})
+    ws, vs = scrub_summary(widget_slides), scrub_summary(viewer_slides)
+
     warm_w, warm_v = widget_ms[COLD_EDITS:], viewer_ms[COLD_EDITS:]
     summary = {
         "bench": BENCH,
@@ -244,6 +434,15 @@ def main() -> None:
             "widget_cold_tf_sharp_ms": [round(v, 1) for v in widget_ms[:COLD_EDITS]],
             "viewer_cold_tf_sharp_ms": [round(v, 1) for v in viewer_ms[:COLD_EDITS]],
             "ratio_tf_sharp_p50": round(float(np.median(warm_w) / np.median(warm_v)), 2),
+            "widget_scrub": ws, "viewer_scrub": vs,
+            "ratio_scrub_first_sharp": ratio(ws["first"]["sharp_ms"], vs["first"]["sharp_ms"]),
+            "ratio_scrub_tenth_sharp": (
+                ratio(ws["tenth"]["sharp_ms"], vs["tenth"]["sharp_ms"]) if ws["tenth"] else None
+            ),
+            "ratio_scrub_sharp_p50": ratio(ws["sharp_ms"].get("p50"), vs["sharp_ms"].get("p50")),
+            "ratio_scrub_first_frame_p50": ratio(
+                ws["first_frame_ms"].get("p50"), vs["first_frame_ms"].get("p50")
+            ),
             "targets": TARGETS,
         },
     }  # fmt: skip

@@ -12,6 +12,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -861,6 +862,67 @@ def test_a_widget_no_view_shows_is_suspended_and_resumes_as_it_was(monkeypatch):
             w.wait_frame()
     finally:
         w.close()
+
+
+def test_a_widget_being_suspended_frees_its_lock_and_resumes_after_its_share_goes(monkeypatch):
+    """The suspend takes the worker under the widget's lock and ends it after: while the old
+    worker's end is under way (held here at its share's release, KERNEL.leave wrapped with a
+    gate before the real one runs) the lock is free and the widget not yet `suspended`; a use
+    from code meanwhile resumes only once the old share is let go, so the kernel holds the new
+    share (a widget's share is one per widget: joined before the old one left, it would be
+    the one let go)."""
+    import chronocl.notebook.widget as nb_widget
+    from chronocl.notebook.kernel import KERNEL
+
+    monkeypatch.setattr(nb_widget, "SUSPEND_AFTER_S", 0.05)
+    order: list[str] = []
+    gate = threading.Event()
+    leave, join = KERNEL.leave, KERNEL.join
+
+    def gated_leave(widget, series):
+        order.append("leave")
+        gate.wait(60)
+        leave(widget, series)
+        order.append("left")
+
+    def joining(*args, **kwargs):
+        order.append("join")
+        return join(*args, **kwargs)
+
+    w = chronocl.show(vortex()[:6], window=(0, 4))
+    try:
+        series = w._datasets[0].series
+        before = w.wait_frame()
+        thread = w._worker.thread
+        monkeypatch.setattr(KERNEL, "leave", gated_leave)
+        monkeypatch.setattr(KERNEL, "join", joining)
+        view(w, "shown")
+        view(w, "gone")
+        end = time.monotonic() + 30
+        while "leave" not in order and time.monotonic() < end:
+            time.sleep(0.01)
+        assert order == ["leave"]  # the old worker's thread joined; its share not yet let go
+        assert not thread.is_alive()
+        assert w._life.acquire(timeout=5)  # the widget's lock is free meanwhile
+        w._life.release()
+        assert not w.suspended and w._live is None
+
+        got: list[dict] = []
+        user = threading.Thread(target=lambda: got.append(w.wait_frame()), daemon=True)
+        user.start()  # a use from code: it waits for the old share to go
+        time.sleep(0.5)
+        assert order == ["leave"] and user.is_alive() and not got
+
+        gate.set()
+        user.join(60)
+        assert order == ["leave", "left", "join"]
+        assert got and got[0]["digest"] == before["digest"]
+        assert not w.suspended and w._worker.thread is not thread
+        assert w._shared is not None and KERNEL.held_steps(series) is w._shared
+    finally:
+        gate.set()
+        w.close()
+    assert KERNEL.held_steps(series) is None
 
 
 def test_a_widget_in_use_is_not_suspended_under_its_waits(monkeypatch):

@@ -130,6 +130,9 @@ class ChronoclWidget(anywidget.AnyWidget):
     camera = traitlets.Dict(help="azimuth, elevation, zoom, fov, projection, up")
     _closed = True  # until its worker runs (a widget that failed to start has nothing to free)
     _live: ClientWorker | None = None  # the worker; None while suspended (`_worker` resumes)
+    # Set while a suspended worker is being ended (outside `_life`): cleared, with its share of
+    # the kernel let go, before anything resumes (`_let_go`).
+    _ending: threading.Event | None = None
 
     def __init__(
         self,
@@ -584,6 +587,7 @@ class ChronoclWidget(anywidget.AnyWidget):
                 self._cond.notify_all()
             if self._live is not None:  # (a suspended widget let its worker go already)
                 self._end(self._live)  # (kept: what it was stays readable, `_worker.thread`)
+            self._let_go()  # (one being suspended: ended by its timer's thread)
             self._downloads.close()
 
     def _end(self, worker: ClientWorker) -> None:
@@ -604,7 +608,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         deleted): its worker is let go (its render thread, GL textures, OpenCL buffers, and
         its share of the kernel's memory and steps), its attributes and state kept. A view
         shown again (`display(w)`) or any use from code resumes it as it was."""
-        return self._live is None and not self._closed
+        return self._live is None and not self._closed and self._ending is None
 
     @property
     def _worker(self) -> ClientWorker:
@@ -617,9 +621,18 @@ class ChronoclWidget(anywidget.AnyWidget):
                 self._resume()
             return self._live  # type: ignore[return-value]
 
+    def _let_go(self) -> None:
+        """(Under `_life`.) Wait until a worker being suspended has ended and its share of the
+        kernel is let go: a widget's share is one per widget (`KERNEL.join` by its id), so a
+        new one joined before the old one left would be the one let go."""
+        ending = self._ending
+        if ending is not None:
+            ending.wait()
+
     def _resume(self) -> None:
         """A new worker (under `_life`), showing what the suspended one showed: its state (the
         window, views, TFs, camera, panel size) and the region its frames framed."""
+        self._let_go()
         state, focus = self._saved  # type: ignore[misc]
         series = self._datasets[0].series
         shared, _ = KERNEL.join(id(self), series, self._store, fallback=self._memory)
@@ -650,8 +663,9 @@ class ChronoclWidget(anywidget.AnyWidget):
             self._view_gen += 1
             gen, none = self._view_gen, self._views_shown == 0
         if shown:
-            was = self.suspended
-            worker = self._worker
+            with self._life:
+                was = self._live is None  # (suspended, or being suspended)
+                worker = self._worker
             if was:
                 worker.warm()
         elif none:
@@ -665,7 +679,9 @@ class ChronoclWidget(anywidget.AnyWidget):
     def _suspend(self, gen: int) -> None:
         """(The timer's thread.) Let the worker go where no view was shown since turn `gen`,
         keeping its state for `_resume`; later where the kernel used the worker less than
-        SUSPEND_AFTER_S ago or waits on it now."""
+        SUSPEND_AFTER_S ago or waits on it now. The worker is taken under `_life` and ended
+        after it (its thread's join can take long): a use meanwhile resumes once it has ended
+        and its share is let go (`_let_go`)."""
         with self._life:
             with self._cond:
                 if self._closed or self._live is None or self._views_shown or gen != self._view_gen:
@@ -676,13 +692,18 @@ class ChronoclWidget(anywidget.AnyWidget):
                 self._suspend_after(gen, max(left, POLL_S))
                 return
             worker = self._live
-            saved = (worker.state, worker.shown_focus())
+            self._saved = (worker.state, worker.shown_focus())
             # No frame until one is wanted again: a view's first request, or the kernel's; the
             # new worker's answer it (its frames numbered afresh).
             self._drawing = False
+            self._ending = threading.Event()  # (first: `suspended` reads both)
+            self._live = None
+        try:
             self._end(worker)
+        finally:
             with self._cond:
                 self.last_frame = None
-            # suspended (`suspended`) only now, its last frames delivered and forgotten; uses
-            # of the worker meanwhile waited on `_life`
-            self._saved, self._live, self._shared = saved, None, None
+            # suspended (`suspended`) only now, its last frames delivered and forgotten
+            self._shared = None
+            ending, self._ending = self._ending, None
+            ending.set()
