@@ -355,6 +355,87 @@ def test_overlaps_count_shared_voxels():
     assert overlaps(a, b) == {(1, 3): 1, (2, 3): 1}
 
 
+def test_large_steps_are_masked_measured_and_matched_in_chunks_alike(monkeypatch):
+    """A large step is masked, measured and matched a few million voxels at a time; with tiny
+    chunks the features are cc3d's own statistics and the overlaps a count over the whole
+    arrays, whether the shown voxels' indices are given or found."""
+    from chronocl.events import features as features_module
+    from chronocl.events import tracking as tracking_module
+
+    rng = np.random.default_rng(11)
+    a = (rng.random((2, 9, 10, 11)) * 2.0).astype(np.float32)  # 15 % shown at 1.7: specks
+    whole = [label_step(step, Mask.of_threshold(1.7), t) for t, step in enumerate(a)]
+    monkeypatch.setattr(features_module, "CHUNK", 97)
+    monkeypatch.setattr(tracking_module, "CHUNK", 89)
+    chunked = [label_step(step, Mask.of_threshold(1.7), t) for t, step in enumerate(a)]
+    for w, c, step in zip(whole, chunked, a, strict=True):
+        np.testing.assert_array_equal(w.labels, c.labels)
+        scratch = np.ones(step.shape, bool)  # a mask written into a buffer used before
+        shown = Mask.of_threshold(1.7)(step, scratch)
+        assert shown is scratch
+        np.testing.assert_array_equal(shown, (step >= 1.7))
+        again = label_step(step, Mask.of_threshold(1.7), w.step, scratch=scratch)
+        np.testing.assert_array_equal(again.labels, w.labels)
+        np.testing.assert_array_equal(c.voxels, np.flatnonzero(c.labels))
+        stats = cc3d.statistics(c.labels)
+        assert [f.size for f in c.features] == stats["voxel_counts"][1:].tolist()
+        for f, centroid, box in zip(
+            c.features, stats["centroids"][1:], stats["bounding_boxes"][1:], strict=True
+        ):
+            np.testing.assert_allclose(f.centroid_zyx, centroid, rtol=1e-12)
+            assert f.bbox_zyx == tuple((b.start, b.stop) for b in box)
+            assert f.value_sum == pytest.approx(float(step[c.labels == f.id].sum(dtype=np.float64)))
+        assert [f.size for f in w.features] == [f.size for f in c.features]
+    first, second = chunked
+    both = (first.labels > 0) & (second.labels > 0)
+    pairs, counts = np.unique(
+        np.stack([first.labels[both], second.labels[both]]), axis=1, return_counts=True
+    )
+    want = {(int(x), int(y)): int(n) for (x, y), n in zip(pairs.T, counts, strict=True)}
+    assert len(want) > 1
+    assert overlaps(first.labels, second.labels) == want
+    assert overlaps(first.labels, second.labels, first.voxels) == want
+
+
+def test_the_memory_budget_bounds_the_steps_in_flight(monkeypatch):
+    """Within a budget of one step's working set, one step is read and labelled at a time;
+    the timings of the run are filled in."""
+    a = series(6)
+    for t in range(6):
+        paint(a, t, (2, 5), (1 + t % 4, 5 + t % 4))
+    s = TimeSeries.from_array(a)
+    per_step = a[0].size * (a.dtype.itemsize + 13)
+    assert events_run.steps_in_flight(s, per_step) == 1
+    assert events_run.steps_in_flight(s, 100 * per_step) == events_run.AHEAD
+    read, lock, held, most = [], threading.Lock(), [0], [0]
+    plain = TimeSeries.read_brick
+    original_label = events_run.label_step
+
+    def counted(self, steps, *args, **kwargs):
+        with lock:
+            read.extend(steps)
+            held[0] += 1
+            most[0] = max(most[0], held[0])
+        return plain(self, steps, *args, **kwargs)
+
+    def labelled(*args, **kwargs):
+        try:
+            return original_label(*args, **kwargs)
+        finally:
+            with lock:
+                held[0] -= 1
+
+    monkeypatch.setattr(TimeSeries, "read_brick", counted)
+    monkeypatch.setattr(events_run, "label_step", labelled)
+    spent = events_run.Timings()
+    job = events_run.prepare(s, threshold=0.5)
+    g = events_run.find(job, timings=spent, memory=per_step)
+    assert sorted(read) == list(range(6)) and most[0] == 1
+    assert [e["kind"] for e in g.events] == ["continuation"] * 5
+    parts = (spent.read_s, spent.label_s, spent.match_s, spent.wait_s, spent.tracks_s)
+    assert spent.total_s > 0 and all(p >= 0 for p in parts) and spent.label_s > 0
+
+
 # -- tracks: global against local --------------------------------------------------------------
 def _weak_step() -> np.ndarray:
     """A blob A moving right; at step 2 a rival S overlaps A's step 1 more than A's own next

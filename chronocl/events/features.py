@@ -35,6 +35,7 @@ AXES = "zyx"  # the array's axis order; every per-axis tuple here follows it unl
 CONNECTIVITIES = (6, 18, 26)
 Periodic = tuple[bool, bool, bool]  # z, y, x
 NOT_PERIODIC: Periodic = (False, False, False)
+CHUNK = 1 << 22  # voxels masked or measured at once: the temporaries of a large step stay small
 
 
 def check_connectivity(connectivity: object) -> int:
@@ -104,8 +105,22 @@ class Mask:
         lo, hi = (float(v) for v in value_range)
         return cls("opacity", value, data_tf, (lo, hi))
 
-    def __call__(self, values: np.ndarray) -> np.ndarray:
-        """The shown voxels of `values` (Z, Y, X) as a bool array."""
+    def __call__(self, values: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The shown voxels of `values` (Z, Y, X) as a bool array (written into `out` where
+        given, a bool array of their shape), a few z rows at a time (the temporaries of a large
+        step stay small)."""
+        if out is None and (values.ndim != 3 or values.size <= CHUNK):
+            return self._shown(values)
+        shown = np.empty(values.shape, bool) if out is None else out
+        if values.ndim != 3:
+            shown[...] = self._shown(values)
+            return shown
+        rows = max(1, CHUNK // max(1, values[0].size))
+        for z in range(0, values.shape[0], rows):
+            shown[z : z + rows] = self._shown(values[z : z + rows])
+        return shown
+
+    def _shown(self, values: np.ndarray) -> np.ndarray:
         if self.kind == "threshold":
             return (values >= self.threshold) & np.isfinite(values)  # NaN compares False
         assert self.data_tf is not None and self.value_range is not None
@@ -180,11 +195,14 @@ class Feature:
 @dataclass(frozen=True)
 class StepFeatures:
     """A labelled step: `labels` (Z, Y, X) uint32, 0 outside the features, k for feature k
-    (features numbered 1.. in the order of their first voxel, z slowest), and the features."""
+    (features numbered 1.. in the order of their first voxel, z slowest), and the features;
+    `voxels`, where known, the flat (raster order) indices of the voxels in a feature,
+    ascending, so that matching need not scan the whole step again."""
 
     step: int
     labels: np.ndarray
     features: tuple[Feature, ...]
+    voxels: np.ndarray | None = None
 
 
 def label_step(
@@ -195,15 +213,19 @@ def label_step(
     periodic: Periodic = NOT_PERIODIC,
     spacing_xyz: Sequence[float] = (1.0, 1.0, 1.0),
     origin_xyz: Sequence[float] = (0.0, 0.0, 0.0),
+    scratch: np.ndarray | None = None,
 ) -> StepFeatures:
-    """The features of one step's `values` (Z, Y, X) under `mask`."""
+    """The features of one step's `values` (Z, Y, X) under `mask`; `scratch`, a bool array of
+    their shape, holds the mask (a caller labelling step after step passes the same one)."""
     # an axis of one or two voxels has no face to wrap across (its voxels are neighbours
     # already): nothing wraps there, though its faces are no boundary either
     wrapping = tuple(p and n > 2 for p, n in zip(periodic, values.shape, strict=True))
-    labels, wraps = label(mask(values), connectivity, wrapping)  # type: ignore[arg-type]
-    return StepFeatures(
-        step, labels, measure(labels, values, step, periodic, wraps, spacing_xyz, origin_xyz)
-    )
+    shown = mask(values, scratch)
+    labels, wraps = label(shown, connectivity, wrapping)  # type: ignore[arg-type]
+    voxels = np.flatnonzero(shown)  # every shown voxel is in a feature
+    del shown
+    found = measure(labels, values, step, periodic, wraps, spacing_xyz, origin_xyz, voxels)
+    return StepFeatures(step, labels, found, voxels)
 
 
 def label(
@@ -293,22 +315,42 @@ def measure(
     wraps: dict[int, str] | None = None,
     spacing_xyz: Sequence[float] = (1.0, 1.0, 1.0),
     origin_xyz: Sequence[float] = (0.0, 0.0, 0.0),
+    voxels: np.ndarray | None = None,
 ) -> tuple[Feature, ...]:
-    """The features of `labels` (1..n) with their sizes, value sums, centroids and boxes."""
+    """The features of `labels` (1..n) with their sizes, value sums, centroids and boxes.
+
+    Measured over the features' voxels alone (`voxels`: their flat indices, ascending; found
+    here when not given), a few million at a time: the work follows the shown voxels, not the
+    volume, and no float64 copy of the step is made."""
     wraps = wraps or {}
     n = int(labels.max(initial=0))
     if n == 0:
         return ()
-    stats = extra.cc3d().statistics(labels)
-    sizes = np.asarray(stats["voxel_counts"], np.int64)
-    centroids = np.asarray(stats["centroids"], np.float64)
-    # entry 0 is the background's, None where every voxel is shown
-    boxes = [None] + [[(s.start, s.stop) for s in box] for box in stats["bounding_boxes"][1:]]
-    shown = labels > 0  # summed over the features' voxels alone: no float64 copy of the step
-    sums = np.bincount(labels[shown], weights=values[shown].astype(np.float64), minlength=n + 1)
+    shape = labels.shape
+    flat_labels, flat_values = labels.reshape(-1), values.reshape(-1)
+    if voxels is None:
+        voxels = np.flatnonzero(flat_labels)
+    sizes = np.zeros(n + 1, np.int64)
+    sums = np.zeros(n + 1, np.float64)
+    coord_sums = np.zeros((3, n + 1), np.float64)
+    lows = np.full((3, n + 1), np.iinfo(np.int64).max, np.int64)
+    highs = np.full((3, n + 1), -1, np.int64)
+    for start in range(0, voxels.size, CHUNK):
+        where = voxels[start : start + CHUNK]
+        owner = flat_labels[where]
+        sizes += np.bincount(owner, minlength=n + 1)
+        sums += np.bincount(owner, weights=flat_values[where], minlength=n + 1)
+        for axis, index in enumerate(np.unravel_index(where, shape)):
+            coord_sums[axis] += np.bincount(owner, weights=index, minlength=n + 1)
+            np.minimum.at(lows[axis], owner, index)
+            np.maximum.at(highs[axis], owner, index)
+    centroids = np.zeros((n + 1, 3), np.float64)
+    centroids[1:] = (coord_sums[:, 1:] / sizes[1:]).T
+    boxes: list = [None] + [
+        [(int(lows[a, k]), int(highs[a, k]) + 1) for a in range(3)] for k in range(1, n + 1)
+    ]
     if wraps:
         _unwrap(labels, wraps, centroids, boxes)
-    shape = labels.shape
     edge = [not p and size > 1 for p, size in zip(periodic, shape, strict=True)]
     spacing = np.asarray(spacing_xyz, np.float64)[::-1]
     origin = np.asarray(origin_xyz, np.float64)[::-1]

@@ -178,6 +178,8 @@ def _mark_events(ax, graph: Drawn, column: dict, box: dict, gap: float) -> None:
                 fontsize=8,
                 color=colour,
                 zorder=5,
+                # on a white ground: a name would vanish over a bar of its own colour
+                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85},
             )
 
 

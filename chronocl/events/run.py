@@ -3,10 +3,12 @@ into events and tracks (an `EventGraph`).
 
 Every argument is checked first (`prepare`), before any step is read. Then the steps are read
 through the series' normal read path and labelled on a few threads at once (at most
-`AHEAD` steps in flight, each read, masked and labelled on its own thread), while this thread
+`AHEAD` steps in flight, fewer where the memory budget holds fewer: `steps_in_flight`; each
+read into a buffer used again, masked and labelled on its own thread), while this thread
 takes them in order and matches each with the step before it: besides the steps in flight,
-only the labels of the previous step are held, never the window. The events and tracks are
-found once every step is matched (`chronocl.events.tracking`). Between steps `find` passes a
+only the labels of the previous step (and its shown voxels' indices) are held, never the
+window. The events and tracks are found once every step is matched
+(`chronocl.events.tracking`). Between steps `find` passes a
 `chronocl.core.interrupt.checkpoint`: inside `interruptible` (the viewer's events panel) it is
 given up there once unwanted and reports how far it got; elsewhere it does nothing.
 """
@@ -14,16 +16,20 @@ given up there once unwanted and reports how far it got; elsewhere it does nothi
 from __future__ import annotations
 
 import os
+import time
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from queue import Empty, SimpleQueue
 
 import numpy as np
 
 from chronocl import modes
+from chronocl.core.budget import interactive_memory
 from chronocl.core.errors import InvalidParameterError, InvalidTransferFunctionError
 from chronocl.core.host_threads import workers
 from chronocl.core.interrupt import checkpoint
+from chronocl.core.memory import aligned_empty
 from chronocl.core.progress import track
 from chronocl.core.selection import Selection, parse_selection
 from chronocl.core.tf import GLOBAL, DataTF, TFSetting
@@ -43,6 +49,36 @@ from chronocl.integration.fit_range import window_range
 
 AHEAD = 4  # steps read and labelled at once, at most (and at most one per host thread)
 ORIGIN_XYZ = (0.0, 0.0, 0.0)  # world position of voxel (0, 0, 0), as chronocl's exports place it
+
+
+def memory_budget() -> int:
+    """The memory a `find` plans its steps in flight for, unless given one: an interactive
+    session's (`chronocl.core.budget.interactive_memory`, half the memory free, at least 2 GB)."""
+    return interactive_memory()
+
+
+def steps_in_flight(series: TimeSeries, memory: int) -> int:
+    """How many steps `find` reads and labels at once within `memory` bytes: each costs its
+    read buffer, its mask (a byte a voxel), its labels (4) and the indices of its shown voxels
+    (up to 8): at least one, at most AHEAD."""
+    voxels = int(np.prod(series.volume_shape))
+    per_step = voxels * (np.dtype(series.dtype).itemsize + 13)
+    return max(1, min(AHEAD, memory // max(1, per_step)))
+
+
+@dataclass
+class Timings:
+    """Where a `find` spent its time, in seconds: reading and labelling (masking, labelling,
+    measuring) the steps, each summed over the threads that did it; matching consecutive steps
+    and finding the tracks and the graph, on the calling thread; the calling thread's waits
+    for the next labelled step; and the whole."""
+
+    read_s: float = 0.0
+    label_s: float = 0.0
+    match_s: float = 0.0
+    wait_s: float = 0.0
+    tracks_s: float = 0.0
+    total_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -183,18 +219,51 @@ def _value_range(series: TimeSeries, selection: Selection, data_tf: DataTF) -> t
     return window_range(series, selection, modes.get(modes.DEFAULT))
 
 
-def find(job: EventsJob, progress: bool = False, max_features: int | None = None) -> EventGraph:
+def find(
+    job: EventsJob,
+    progress: bool = False,
+    max_features: int | None = None,
+    timings: Timings | None = None,
+    memory: int | None = None,
+) -> EventGraph:
     """Label, match and track the steps of a prepared job (the module's docstring).
     `max_features`: a step of more features than this is refused as it is labelled
-    (InvalidParameterError, before any matching or tracking of it)."""
+    (InvalidParameterError, before any matching or tracking of it). `timings`, if given, is
+    filled in (`Timings`). `memory` (bytes, default `memory_budget`) bounds the steps in
+    flight (`steps_in_flight`)."""
+    clock = time.perf_counter
+    start = clock()
+    spent = Timings() if timings is None else timings
     series, steps = job.series, job.selection.steps
     spacing = tuple(float(s) for s in series.spacing)
 
-    def labelled(step: int) -> StepFeatures:
-        values = series.read_brick([step], per_call=1)[:, 0]
-        return label_step(
-            values, job.mask, step, job.connectivity, job.periodic, spacing, ORIGIN_XYZ
-        )
+    # The steps are read, and masked, into buffers used again and again: a fresh step-sized
+    # array costs a page fault per page, which on a busy host took as long as the read itself.
+    buffers: SimpleQueue[tuple[np.ndarray, np.ndarray]] = SimpleQueue()
+    brick = (series.volume_shape[0], 1, *series.volume_shape[1:])
+
+    def labelled(step: int) -> tuple[StepFeatures, float, float]:
+        t0 = clock()
+        try:
+            out, shown = buffers.get_nowait()
+        except Empty:
+            out, shown = aligned_empty(brick, series.dtype), np.empty(series.volume_shape, bool)
+        try:
+            values = series.read_brick([step], out=out, per_call=1)[:, 0]
+            t1 = clock()
+            found = label_step(
+                values,
+                job.mask,
+                step,
+                job.connectivity,
+                job.periodic,
+                spacing,
+                ORIGIN_XYZ,
+                scratch=shown,
+            )
+        finally:
+            buffers.put((out, shown))
+        return found, t1 - t0, clock() - t1
 
     features, edges, found = [], [], []
     queue: deque[Future] = deque()
@@ -202,8 +271,9 @@ def find(job: EventsJob, progress: bool = False, max_features: int | None = None
     # A pool of its own, as many threads as the host pool's: a step's read may itself split
     # its copies over the host pool (`host_threads.copy_all`), which would wait forever for
     # threads that are all busy labelling.
+    ahead = steps_in_flight(series, memory_budget() if memory is None else memory)
     with ThreadPoolExecutor(
-        max(1, min(workers(), AHEAD)), thread_name_prefix="chronocl-events"
+        max(1, min(workers(), ahead)), thread_name_prefix="chronocl-events"
     ) as pool:
 
         def submit() -> None:
@@ -212,12 +282,17 @@ def find(job: EventsJob, progress: bool = False, max_features: int | None = None
                 queue.append(pool.submit(labelled, step))
 
         try:
-            for _ in range(AHEAD):
+            for _ in range(ahead):
                 submit()
             before: StepFeatures | None = None
             for k in track(range(len(steps)), len(steps), "labelling steps", progress):
                 checkpoint("labelling steps", k, len(steps))  # a viewer's find: given up here
-                now = queue.popleft().result()
+                t0 = clock()
+                now, read_s, label_s = queue.popleft().result()
+                t1 = clock()
+                spent.wait_s += t1 - t0
+                spent.read_s += read_s
+                spent.label_s += label_s
                 if max_features is not None and len(now.features) > max_features:
                     raise InvalidParameterError(
                         f"{len(now.features)} features in step {now.step}: raise the threshold "
@@ -233,18 +308,21 @@ def find(job: EventsJob, progress: bool = False, max_features: int | None = None
                         now.step,
                         now.labels,
                         now.features,
+                        before.voxels,
                     )
                     edges += pair
                     found += classify(before.step, now.step, before.features, now.features, pair)
                 before = now
+                spent.match_s += clock() - t1
         finally:
             for pending in queue:
                 pending.cancel()
+    t0 = clock()
     nodes = [(f.step, f.id) for f in features]
     paths = tracks_of(job.method, nodes, edges, steps)
     track_of = {node: k for k, path in enumerate(paths) for node in path}
     times = series.times
-    return EventGraph(
+    graph = EventGraph(
         features=[
             {**f.to_dict(), "time": jsonable(times[f.step]), "track": track_of[f.step, f.id]}
             for f in features
@@ -263,6 +341,9 @@ def find(job: EventsJob, progress: bool = False, max_features: int | None = None
         ],
         meta=_meta(job, spacing),
     )
+    spent.tracks_s = clock() - t0
+    spent.total_s = clock() - start
+    return graph
 
 
 def _meta(job: EventsJob, spacing: tuple[float, ...]) -> dict:

@@ -109,15 +109,32 @@ class Event:
         }
 
 
-def overlaps(a: np.ndarray, b: np.ndarray) -> dict[tuple[int, int], int]:
-    """Voxels shared by each pair (label of `a`, label of `b`) of two label arrays."""
-    both = (a > 0) & (b > 0)
-    keys = (a[both].astype(np.uint64) << np.uint64(32)) | b[both].astype(np.uint64)
-    found, counts = np.unique(keys, return_counts=True)
-    return {
-        (int(k >> 32), int(k & 0xFFFFFFFF)): int(c)
-        for k, c in zip(found.tolist(), counts.tolist(), strict=True)
-    }
+CHUNK = 1 << 22  # voxels of `a`'s features compared at once: small temporaries on dense steps
+
+
+def overlaps(
+    a: np.ndarray, b: np.ndarray, a_voxels: np.ndarray | None = None
+) -> dict[tuple[int, int], int]:
+    """Voxels shared by each pair (label of `a`, label of `b`) of two label arrays.
+
+    `a_voxels`, the flat indices of `a`'s labelled voxels (`StepFeatures.voxels`), spares a
+    scan of both whole arrays: only those voxels are looked up in `b`."""
+    if a_voxels is None:
+        a_voxels = np.flatnonzero(a)
+    flat_a, flat_b = a.reshape(-1), b.reshape(-1)
+    shared: dict[tuple[int, int], int] = {}
+    for start in range(0, a_voxels.size, CHUNK):
+        where = a_voxels[start : start + CHUNK]
+        there = flat_b[where]
+        both = there > 0
+        keys = (flat_a[where][both].astype(np.uint64) << np.uint64(32)) | there[both].astype(
+            np.uint64
+        )
+        found, counts = np.unique(keys, return_counts=True)
+        for k, c in zip(found.tolist(), counts.tolist(), strict=True):
+            pair = (int(k >> 32), int(k & 0xFFFFFFFF))
+            shared[pair] = shared.get(pair, 0) + int(c)
+    return shared
 
 
 def similarity(overlap: int, size_a: int, size_b: int) -> float:
@@ -132,13 +149,15 @@ def link(
     next_step: int,
     next_labels: np.ndarray,
     next_features: Sequence[Feature],
+    voxels: np.ndarray | None = None,
 ) -> list[Edge]:
-    """The overlap edges from the features of `step` to those of `next_step`."""
+    """The overlap edges from the features of `step` to those of `next_step` (`voxels`: the
+    flat indices of the voxels `labels` labels, where known: `overlaps`)."""
     size = {f.id: f.size for f in features}
     next_size = {f.id: f.size for f in next_features}
     return [
         Edge((step, a), (next_step, b), n, similarity(n, size[a], next_size[b]))
-        for (a, b), n in sorted(overlaps(labels, next_labels).items())
+        for (a, b), n in sorted(overlaps(labels, next_labels, voxels).items())
     ]
 
 
