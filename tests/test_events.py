@@ -792,3 +792,38 @@ def test_cli_render_marks_the_window_s_events(store, tmp_path):
         bad = cli(*base, "-o", tmp_path / "x.png", "--events", tmp_path / events)
         assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
         assert needle in bad.stderr and not (tmp_path / "x.png").exists()
+
+
+def test_crowded_markers_keep_their_labels_apart_and_beside_their_rings(monkeypatch):
+    """Forty markers on a few pixels (a Gray-Scott front's events from afar): every label drawn
+    sits beside its own ring, on the panel, and overlaps no other; those with no room are left
+    out (their rings stay). Before, a label with no room was drawn anyway, up to eight lines
+    away, over the others."""
+    from chronocl.render import Camera, markers
+
+    drawn: list[tuple[float, float, tuple]] = []  # ring centre, label box
+    spot = markers._label_spot
+
+    def noting(bounds, px, py, radius, placed, size):
+        found = spot(bounds, px, py, radius, placed, size)
+        if found is not None:
+            drawn.append((px, py, found[1]))
+        return found
+
+    monkeypatch.setattr(markers, "_label_spot", noting)
+    a = np.zeros((3, 9, 9, 9), np.float32)
+    cv = chronocl.integrate(chronocl.TimeSeries.from_array(a), "0:3", mode="max")
+    rng = np.random.default_rng(4)
+    crowd = [
+        ((0.5 + d[0], 0.5 + d[1], 0.5), f"split {k}")
+        for k, d in enumerate(rng.normal(0, 0.03, (40, 2)))
+    ]
+    size = (240, 200)
+    chronocl.render(cv, Camera(0.0, 0.0, 1.0, frame="box"), size, markers=crowd)
+    assert 3 <= len(drawn) < 40
+    for i, (px, py, box) in enumerate(drawn):
+        assert 0 <= box[0] and 0 <= box[1] and box[2] <= size[0] and box[3] <= size[1]
+        near_x = min(abs(box[0] - px), abs(box[2] - px))
+        assert near_x < 20 and box[1] - 60 < py < box[3] + 60, (px, py, box)  # beside its ring
+        for other in drawn[i + 1 :]:
+            assert not markers.boxes_overlap(box, other[2])

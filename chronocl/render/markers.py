@@ -5,7 +5,8 @@ that a picture says where in the chronovolume something happened.
 A marker is (x, y, z as fractions of the volume's box, voxel centres at (i + 0.5) / n;
 label): the same at every level of the series. It is projected with the panel's camera as the
 raycaster lays the volume out (`camera.world_extent`, `camera.to_panel`); markers behind the
-camera or off the panel are left out. Rings and labels have a dark rim, so they read on black
+camera or off the panel are left out, and so is a label with no room beside its ring (labels
+never overlap, nor stray to another ring). Rings and labels have a dark rim, so they read on black
 and on white. `draw_path` draws a line through points of the box instead, a dot at each and a
 label at its start: a feature's track through a window (the viewer's events panel highlights the
 track chosen).
@@ -60,15 +61,30 @@ def draw_markers(
         ring = (px - radius, py - radius, px + radius, py + radius)
         draw.ellipse(ring, outline=RIM, width=4)
         draw.ellipse(ring, outline=MARKER_RGB, width=2)
-        left, top, right, bottom = draw.textbbox((0, 0), label, font=font, stroke_width=2)
-        for shift in _shifts(bottom - top + 2):
-            at_x, at_y = px + radius + 2, py - radius + shift
-            box = (at_x + left, at_y + top, at_x + right, at_y + bottom)
-            if not any(boxes_overlap(box, other) for other in placed):
-                break
-        placed.append(box)
-        draw.text((at_x, at_y), label, fill=MARKER_RGB, font=font, stroke_width=2, stroke_fill=RIM)
+        bounds = draw.textbbox((0, 0), label, font=font, stroke_width=2)
+        spot = _label_spot(bounds, px, py, radius, placed, (w, h))
+        if spot is None:  # no room beside its ring: the ring alone (the events' list names it)
+            continue
+        placed.append(spot[1])
+        draw.text(spot[0], label, fill=MARKER_RGB, font=font, stroke_width=2, stroke_fill=RIM)
     return np.asarray(image)
+
+
+def _label_spot(bounds, px: float, py: float, radius: float, placed: list, size: tuple):
+    """Where a label of text box `bounds` (at the origin) goes beside the ring at (px, py):
+    right of it, then left, each in place, a line lower or higher, two lines; the first spot
+    on the panel that overlaps no label placed, as ((x, y), box); None: none. Farther away a
+    label would name another marker's ring."""
+    left, top, right, bottom = bounds
+    w, h = size
+    for shift in _shifts(bottom - top + 2, most=2):
+        for at_x in (px + radius + 2, px - radius - 2 - (right - left)):
+            at_y = py - radius + shift
+            box = (at_x + left, at_y + top, at_x + right, at_y + bottom)
+            inside = box[0] >= 0 and box[1] >= 0 and box[2] <= w and box[3] <= h
+            if inside and not any(boxes_overlap(box, other) for other in placed):
+                return (at_x, at_y), box
+    return None
 
 
 def draw_path(
