@@ -11,7 +11,7 @@ and time-TF edits (each a value no edit before it had):
 - after: `Session.recolours` says the edit only recolours, `GLRecolourer.apply` rewrites the
   texture from the winners (kernels/glsl/recolour.comp), the raycaster draws it ("gl", the GPU
   path); or `BrickRecolourer.apply` writes RGBA8 on the OpenCL device over the bricks the edit
-  may colour or the array held, and `recolour.texture.show` writes what changed into a texture
+  may colour or the array held, and `recolour.show` writes what changed into a texture
   of its own ("bricks", the viewer's path on llvmpipe; `bricks_recoloured` the share of
   bricks). Preparing the winners (gathered by numpy and by OpenCL, the
   GL upload, the brick summaries) is timed on its own: it happens once per integrated window,
@@ -49,10 +49,10 @@ from chronocl.data.series import TimeSeries
 from chronocl.integration.interactive.session import Session
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
+from chronocl.render.recolour import show
 from chronocl.render.recolour.bricks import BrickRecolourer
 from chronocl.render.recolour.gather import gather
 from chronocl.render.recolour.gl import GLRecolourer
-from chronocl.render.recolour.texture import show
 from chronocl.viewer.slots import ViewSlot, upload
 
 TIME_COLOURS = ("warm-cool", "rgb", "lightness", "white")
@@ -177,14 +177,14 @@ def main() -> None:
                 changed = brick_recolourer.apply(bricks, new, own.volume)
                 b = time.perf_counter()
                 vol = own.volume
-                show(rc.ctx, changed, series.spacing, held)
+                show(changed, series.spacing, held)
                 held = changed.coloured
                 rewritten[i] = changed.rewritten / changed.coloured.size
             else:  # the compute pass rewrites the texture: nothing uploaded
                 new, reason = s.at(0).recolours(spec)
                 assert reason is None, reason
                 changed = rec.apply(rv, new, slot.volume)
-                show(rc.ctx, changed, series.spacing)
+                show(changed, series.spacing)
                 vol = changed.volume
                 b = time.perf_counter()
             c = time.perf_counter()

@@ -37,12 +37,14 @@ from common import emit, env_record, race
 
 import chronocl
 from chronocl.data import synthetic
-from chronocl.render import Camera
+from chronocl.render import Camera, brick_grid
+from chronocl.render.camera import world_geometry
 from chronocl.render.gl import gl_context
-from chronocl.render.raycaster import Volume, occupied_box
+from chronocl.render.raycaster import occupied_box
 from chronocl.render.upload import FORMATS, convert, display_format
 from chronocl.render.views import raycaster
-from chronocl.viewer.slots import ViewSlot, geometry, upload
+from chronocl.render.volume import Volume
+from chronocl.viewer.slots import ViewSlot, upload
 
 BENCH = "upload"
 CAMERA = Camera(azimuth=30.0, elevation=20.0, zoom=1.2)  # the viewer's default view
@@ -73,8 +75,6 @@ def main() -> None:
     sizes = [int(s) for s in args.sizes.split(",")]
     emit(env_record(BENCH, {"sizes": sizes, "steps": 10, "image": list(IMAGE), "mode": "alpha"}))
 
-    import moderngl
-
     ctx = gl_context()
     rc = raycaster()
     keys = ("convert_ms", "write_ms", "upload_ms", "draw_ms", "total_ms")
@@ -88,17 +88,14 @@ def main() -> None:
         cvs = chronovolumes(n)
         made_s = time.perf_counter() - t0
         for name, cv in cvs.items():
-            extent, voxel = geometry(cv)
-            unit = float(np.min(voxel))
+            extent, voxel = world_geometry(cv.shape, cv.spacing)
             staging: dict[str, np.ndarray | None] = dict.fromkeys(FORMATS)
             volumes: dict[str, Volume] = {}
             for fmt in FORMATS:
                 data, occ = convert(cv.rgba, fmt)
                 staging[fmt] = data
-                tex = ctx.texture3d((n, n, n), 4, data, dtype=fmt)
-                tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-                tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-                volumes[fmt] = Volume(tex, extent, unit, occ.corners(extent, voxel))
+                volumes[fmt] = Volume.allocate(ctx, (n, n, n), fmt, data)
+                volumes[fmt].place(cv.spacing, occ.bounds(), brick_grid.from_rgba(data))
             today_fmt = "f4" if n**3 <= TODAY_FLOAT_VOXELS else "f2"
             today_tex = volumes[today_fmt].texture
             slot = ViewSlot()

@@ -37,10 +37,10 @@ from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
+from chronocl.render.recolour import show
 from chronocl.render.recolour.bricks import BrickRecolourer, shown_output
 from chronocl.render.recolour.gather import gather
 from chronocl.render.recolour.gl import GLRecolourer, available
-from chronocl.render.recolour.texture import show
 from chronocl.render.upload import convert, display_format
 
 from .strategies import data_tfs, examples, specs, time_tfs
@@ -153,7 +153,7 @@ def test_recolour_equals_integrating_the_edit(gl, data) -> None:
 def _on_gpu(rc, rec, prepared, spec, spacing, into=None):
     """The GPU's recolouring of `prepared` under `spec`, shown in `into` (None: its own)."""
     changed = rec.apply(prepared, spec, into)
-    show(rc.ctx, changed, spacing)
+    show(changed, spacing)
     return changed.volume
 
 
@@ -179,7 +179,7 @@ def _same_by_bricks(rc, w, specs, first: np.ndarray, want: np.ndarray) -> None:
         held = None
         for spec in specs:
             changed = bricks.apply(prepared, spec, vol)
-            show(rc.ctx, changed, (1.0, 1.0, 1.0), held)
+            show(changed, (1.0, 1.0, 1.0), held)
             held = changed.coloured
         data, _ = convert(want, "f1")
         np.testing.assert_allclose(changed.rgba, data, rtol=0, atol=1)

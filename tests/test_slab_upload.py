@@ -15,7 +15,7 @@ from chronocl.core.tuning import TUNING
 from chronocl.data import synthetic
 from chronocl.integration.interactive.session import Session
 from chronocl.render import Camera
-from chronocl.viewer import slots
+from chronocl.render.volume import Volume
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.slab_upload import SlabUpload
 from chronocl.viewer.slots import ViewSlot, upload
@@ -30,16 +30,16 @@ def series() -> chronocl.TimeSeries:
 
 
 @pytest.fixture
-def writes_counted(monkeypatch) -> list[int]:
-    """The z-extent of every write `upload` makes into a slot's existing texture."""
-    calls: list[int] = []
-    write = slots._write
+def writes_counted(monkeypatch) -> list[tuple[Volume, int]]:
+    """The volume and z-extent of every whole write `upload` makes."""
+    calls: list[tuple[Volume, int]] = []
+    write = Volume.write
 
-    def counted(slot, vol, data, given_up):
-        calls.append(data.shape[0])
-        return write(slot, vol, data, given_up)
+    def counted(vol, data, given_up=None):
+        calls.append((vol, data.shape[0]))
+        return write(vol, data, given_up)
 
-    monkeypatch.setattr(slots, "_write", counted)
+    monkeypatch.setattr(Volume, "write", counted)
     return calls
 
 
@@ -77,7 +77,7 @@ def test_slabs_written_while_integrating_draw_what_a_whole_upload_draws(
     assert len(writes.jobs) == -(-SHAPE[0] // -(-SHAPE[0] // TUNING.refine_slabs)) > 1
     assert slot.written is cv and slot.uploaded is None
     data, a, b = texture_and_pictures(slot, cv)
-    assert writes_counted == []  # nothing written again (the fresh slot's is a new texture)
+    assert [n for vol, n in writes_counted if vol is slot.volume] == []  # not written again
     np.testing.assert_array_equal(data, cv.rgba)
     np.testing.assert_array_equal(a, b)
     assert a.max() > 0 and slot.uploaded is cv and slot.written is None
@@ -99,7 +99,7 @@ def test_a_refine_given_up_half_way_is_written_whole_next_time(series, writes_co
         assert slot.written is None and slot.uploaded is None  # half written: no picture's
         cv = session.set_window(1, 8)
     data, a, b = texture_and_pictures(slot, cv)
-    assert writes_counted == [SHAPE[0]]  # this slot's texture written whole
+    assert [n for vol, n in writes_counted if vol is slot.volume] == [SHAPE[0]]  # written whole
     np.testing.assert_array_equal(data, cv.rgba)
     np.testing.assert_array_equal(a, b)
     on_gl(lambda rc: slot.release_gl())

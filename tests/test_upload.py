@@ -12,9 +12,10 @@ from chronocl.core.errors import InvalidParameterError, RendererUnavailableError
 from chronocl.data import synthetic
 from chronocl.integration import inmemory
 from chronocl.render import Camera
+from chronocl.render.camera import world_geometry
 from chronocl.render.raycaster import Raycaster, occupied_box
 from chronocl.render.upload import FORMATS, convert, occupancy
-from chronocl.viewer.slots import ViewSlot, geometry, upload
+from chronocl.viewer.slots import ViewSlot, upload
 
 from .strategies import examples
 
@@ -171,7 +172,7 @@ def test_in_place_update_draws_what_a_fresh_upload_draws(rc, demo, fmt):
     vol = upload_as(rc, slot, first, fmt)
     texture, staging = vol.texture, slot.staging
     vol = upload_as(rc, slot, second, fmt)
-    assert vol.texture is texture  # written in place, not reallocated
+    assert vol.texture is texture and slot.allocated == 1  # written in place, not reallocated
     assert slot.staging is staging  # the same host buffer (None for float32: sent as it is)
     fresh_slot = ViewSlot()
     fresh = upload_as(rc, fresh_slot, second, fmt)
@@ -197,17 +198,18 @@ def test_shape_or_format_change_reallocates(rc):
     vol = upload_as(rc, slot, other, "f1")
     assert vol.texture is not texture and vol.texture.size == (8, 10, 6)
     assert slot.staging is not staging and slot.staging.shape == (6, 10, 8, 4)
-    extent, voxel = geometry(other)
+    extent, voxel = world_geometry(other.shape, other.spacing)
     np.testing.assert_allclose(vol.extent, extent)
     assert vol.unit == pytest.approx(float(voxel.min()))
     texture = vol.texture
     vol = upload_as(rc, slot, other, "f4")
     assert vol.texture is not texture and vol.texture.dtype == "f4"
+    assert slot.allocated == 3
     # Shapes that alternate (a coarse level, then full resolution) reuse their kept textures.
     first = upload_as(rc, slot, small, "f1").texture
     assert upload_as(rc, slot, other, "f1").texture is texture
     again = upload_as(rc, slot, small, "f1")
-    assert again.texture is first
+    assert again.texture is first and slot.allocated == 3
     fresh_slot = ViewSlot()
     a = rc.draw(again, CAMERA, (64, 64), jitter=False)
     b = rc.draw(upload_as(rc, fresh_slot, small, "f1"), CAMERA, (64, 64), jitter=False)

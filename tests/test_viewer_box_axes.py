@@ -66,10 +66,9 @@ def check_axes(edges, cv, camera, size, dims, spacing) -> None:
 
 def projected_corners(cv, camera, size) -> np.ndarray:
     """The box's 8 corners on the panel (fractions, beyond 0..1 off it)."""
-    from chronocl.render.camera import to_panel
-    from chronocl.viewer.slots import geometry
+    from chronocl.render.camera import to_panel, world_extent
 
-    extent, _ = geometry(cv)
+    extent = world_extent(cv.shape, cv.spacing)
     corners = np.array(list(itertools.product((-0.5, 0.5), repeat=3))) * extent
     return to_panel(camera, extent, size, corners)
 
@@ -77,10 +76,9 @@ def projected_corners(cv, camera, size) -> np.ndarray:
 def edge_corner(edge, cv, camera, size) -> list[float]:
     """The box fractions (x, y, z) of the corner the edge starts at (the one whose projection
     is its `from`; corners may lie off the panel, where `project` gives None)."""
-    from chronocl.render.camera import to_panel
-    from chronocl.viewer.slots import geometry
+    from chronocl.render.camera import to_panel, world_extent
 
-    extent, _ = geometry(cv)
+    extent = world_extent(cv.shape, cv.spacing)
     a = "xyz".index(edge["axis"])
     starts = [c for c in itertools.product((0.0, 1.0), repeat=3) if c[a] == 0.0]
     at = to_panel(camera, extent, size, (np.array(starts) - 0.5) * extent)
@@ -175,14 +173,14 @@ def test_the_axes_label_the_part_an_axis_aligned_clip_plane_keeps():
 
 
 def test_no_labelled_tick_lies_where_an_oblique_clip_plane_cuts_the_box_away():
+    from chronocl.render.camera import world_extent
     from chronocl.render.raycaster import clip_plane
     from chronocl.viewer.box_axes import visible_bounds
-    from chronocl.viewer.slots import geometry
 
     cv = geometry_only()
     size = (480, 360)
     dims = cv.dims
-    extent, _ = geometry(cv)
+    extent = world_extent(cv.shape, cv.spacing)
     clip = (1.0, 1.0, 0.0, 0.5)
     *n, d = clip_plane(clip, extent)
     lo, hi = visible_bounds(extent, clip)

@@ -162,12 +162,14 @@ def test_state_frames_and_incremental_slides(client):
     rid = client.send({"type": "update", "views": [{"mode": "alpha"}, {"mode": "max"}]})
     _, header, images = client.frame_for(rid)
     assert len(images) == 2 and images[0] != images[1]
+    assert header["timings"]["allocated"] == 1  # the new panel's texture
     assert header["views"][1]["label"].startswith("max, forward, steps 1:11")
 
     # A camera change only re-renders: no integration.
     rid = client.send({"type": "update", "camera": {"azimuth": 100.0}})
     _, header, moved = client.frame_for(rid)
     assert header["timings"]["integrate_ms"] == 0 and moved[0] != images[0]
+    assert header["timings"]["allocated"] == 0  # the textures rewritten in place
 
     # The same state renders the same pixels (the jitter is a fixed per-pixel pattern).
     rid = client.send({"type": "update", "camera": {"azimuth": 30.0}})
@@ -178,7 +180,7 @@ def test_state_frames_and_incremental_slides(client):
     rid = client.send({"type": "update", "window": {"t0": 2, "t1": 12, "stride": 1}})
     _, header, slid = client.frame_for(rid)
     assert [e["step"] for e in header["legend"]] == list(range(2, 12))
-    assert slid[0] != images[0]
+    assert slid[0] != images[0] and header["timings"]["allocated"] == 0
 
     # Preview frames are smaller.
     rid = client.send({"type": "update", "camera": {"azimuth": 50.0}, "quality": "preview"})

@@ -113,7 +113,7 @@ class Tuning:
     # of a TF edit. The steady 17 is counted: one view's transient at a time (up to 1.5 GB at
     # 512^3) lies within the 10% over the limit the soak's target allows.
     frame_voxel_bytes: int = 17
-    # Textures of other shapes a panel keeps (viewer/slots.py `ViewSlot.swap_volume`). Not
+    # Textures of other shapes a panel keeps (viewer/slots.py `ViewSlot.texture`). Not
     # measured as a figure: two, so that coarse and full-resolution frames stop reallocating a
     # 512^3 texture each edit (dc27825, 2026-11-27).
     kept_textures: int = 2

@@ -188,6 +188,13 @@ def world_extent(shape_zyx: tuple[int, int, int], spacing_xyz) -> np.ndarray:
     return physical / physical.max()
 
 
+def world_geometry(shape_zyx, spacing_xyz) -> tuple[np.ndarray, np.ndarray]:
+    """A volume's `world_extent` and the world size (x, y, z) of one of its voxels."""
+    nz, ny, nx = shape_zyx
+    extent = world_extent((nz, ny, nx), spacing_xyz)
+    return extent, extent / np.array([nx, ny, nz])
+
+
 def to_panel(
     camera: Camera, extent: np.ndarray, size: tuple[int, int], world: np.ndarray
 ) -> np.ndarray | None:

@@ -1,11 +1,12 @@
 """The moderngl raycaster: a chronovolume as a 3D texture, rays through the box, PNG-ready pixels.
 
-See kernels/glsl/raycast.frag for the compositing. A `Volume` is an uploaded chronovolume
-(RGBA16F or RGBA8 texture, trilinear or nearest) with its world-space box; `draw` renders one
-view of it into an (H, W, 3) uint8 array, top-down; with `shading` (chronocl/render/shading.py)
-it runs the lit build of the shader, without it the unlit one, unchanged. Each volume carries
-its brick occupancy grid (chronocl/render/brick_grid.py), across whose empty bricks rays jump
-(`skip`, on by default; the picture is the same), and `samples` counts what a ray costs.
+See kernels/glsl/raycast.frag for the compositing. A `Volume` (chronocl/render/volume.py) is
+an uploaded chronovolume (RGBA16F or RGBA8 texture, trilinear or nearest) with its world-space
+box; `draw` renders one view of it into an (H, W, 3) uint8 array, top-down; with `shading`
+(chronocl/render/shading.py) it runs the lit build of the shader, without it the unlit one,
+unchanged. Each volume carries its brick occupancy grid (chronocl/render/brick_grid.py), across
+whose empty bricks rays jump (`skip`, on by default; the picture is the same), and `samples`
+counts what a ray costs.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,10 +21,11 @@ from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render import brick_grid
-from chronocl.render.camera import Camera, world_extent
+from chronocl.render.camera import Camera
 from chronocl.render.gl import gl_context, program
 from chronocl.render.shading import OFF, Shading
-from chronocl.render.upload import FORMATS, convert, occupancy
+from chronocl.render.upload import FORMATS, convert, occupancy, occupied_corners
+from chronocl.render.volume import Volume
 
 MIN_SIZE, MAX_SIZE = 16, 8192
 TEXTURE_TYPES = FORMATS
@@ -42,24 +43,6 @@ def check_size(size: tuple[int, int]) -> tuple[int, int]:
             "choose e.g. --size 512x512"
         )
     return w, h
-
-
-@dataclass
-class Volume:
-    """A chronovolume on the GPU: its texture and world-space box."""
-
-    texture: object
-    extent: np.ndarray  # world size (x, y, z); the longest side is 1
-    unit: float  # world length of one voxel (the smallest side), the opacity reference
-    occupied: tuple[np.ndarray, np.ndarray]  # world corners of the voxels with opacity > 0
-    # the brick grid's R8 texture (brick_grid.texture), read to skip empty space; None: no skipping
-    bricks: object | None = None
-
-    def release(self) -> None:
-        self.texture.release()
-        if self.bricks is not None:
-            self.bricks.release()
-            self.bricks = None
 
 
 class Raycaster:
@@ -81,26 +64,12 @@ class Raycaster:
         helper; the viewer keeps its textures and rewrites them in place, see
         chronocl/viewer/slots.py). Half float stays the default for renders and turntables:
         their golden images and pixel-exact tests are recorded with it."""
-        import moderngl
-
         nz, ny, nx, _ = cv.rgba.shape
         dtype = "f1" if cv.rgba.dtype == np.uint8 else dtype  # RGBA8 from the kernels as it is
         data, occ = convert(cv.rgba, dtype)
-        tex = self.ctx.texture3d((nx, ny, nz), 4, data, dtype=dtype)
-        tex.filter = (
-            (moderngl.NEAREST, moderngl.NEAREST)
-            if nearest
-            else (
-                moderngl.LINEAR,
-                moderngl.LINEAR,
-            )
-        )
-        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-        extent = world_extent((nz, ny, nx), cv.spacing)
-        voxel = extent / np.array([nx, ny, nz])
-        unit = float(np.min(voxel))
-        bricks = brick_grid.texture(self.ctx, brick_grid.from_rgba(data))
-        return Volume(tex, extent, unit, occ.corners(extent, voxel), bricks)
+        vol = Volume.allocate(self.ctx, (nx, ny, nz), dtype, data, nearest)
+        vol.place(cv.spacing, occ.bounds(), brick_grid.from_rgba(data))
+        return vol
 
     def draw(
         self,
@@ -259,9 +228,8 @@ def set_shading(prog, shading: Shading, volume: Volume) -> None:
     """The lit shader's uniforms: a voxel in texture space, and the scale that turns opacity
     differences two voxels apart into the change per `unit_world` (spacing honoured)."""
     dims = np.array(volume.texture.size, dtype=np.float64)  # voxels along x, y, z
-    voxel = volume.extent / dims
     prog["texel"].value = tuple(1.0 / dims)
-    prog["grad_scale"].value = tuple(volume.unit / (2.0 * voxel))
+    prog["grad_scale"].value = tuple(volume.unit / (2.0 * volume.voxel))
     for name in ("ambient", "diffuse", "specular", "shininess"):
         prog[name].value = float(getattr(shading, name))
 
@@ -269,7 +237,7 @@ def set_shading(prog, shading: Shading, volume: Volume) -> None:
 def occupied_box(alpha: np.ndarray, extent: np.ndarray, voxel: np.ndarray):
     """World corners of the voxels with opacity > 0, grown by one voxel (trilinear reach) and
     kept inside the box; an empty volume gives an empty box."""
-    return occupancy(alpha).corners(extent, voxel)
+    return occupied_corners(occupancy(alpha).bounds(), alpha.shape[::-1], extent, voxel)
 
 
 def check_clip(clip: object) -> tuple[float, float, float, float]:

@@ -49,18 +49,26 @@ class Occupancy:
     y: np.ndarray
     x: np.ndarray
 
-    def corners(self, extent: np.ndarray, voxel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World corners of the occupied voxels grown by one voxel (trilinear reach), kept
-        inside the box; an empty volume gives an empty box (min > max: every ray misses)."""
-        half = extent / 2
+    def bounds(self) -> np.ndarray:
+        """The first and last occupied index along x, y, z (`occupied_corners`' bounds)."""
         if not self.z.any():
-            return half.copy(), -half.copy()
-        lo, hi = [], []
-        for filled in (self.x, self.y, self.z):
-            idx = np.flatnonzero(filled)
-            lo.append(max(int(idx[0]) - 1, 0))
-            hi.append(min(int(idx[-1]) + 2, filled.size))
-        return -half + np.array(lo) * voxel, -half + np.array(hi) * voxel
+            return np.array([0, 0, 0, -1, -1, -1])
+        idx = [np.flatnonzero(filled) for filled in (self.x, self.y, self.z)]
+        return np.array([i[0] for i in idx] + [i[-1] for i in idx])
+
+
+def occupied_corners(bounds, size, extent: np.ndarray, voxel: np.ndarray):
+    """World corners of the voxels from index `bounds` (the first occupied x, y, z, then the
+    last; a last x below 0: none) grown by one voxel (trilinear reach) and kept inside the box
+    of `size` (x, y, z) voxels of `voxel` (world_geometry's extent and voxel); none gives an
+    empty box (min > max: every ray misses)."""
+    half = extent / 2
+    lo, hi = np.asarray(bounds[:3]), np.asarray(bounds[3:])
+    if hi[0] < 0:
+        return half.copy(), -half.copy()
+    lo = np.maximum(lo - 1, 0)
+    hi = np.minimum(hi + 2, np.array(size))
+    return -half + lo * voxel, -half + hi * voxel
 
 
 def occupancy(alpha: np.ndarray) -> Occupancy:

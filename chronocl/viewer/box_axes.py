@@ -39,12 +39,11 @@ import numpy as np
 from chronocl.core.ticks import multiples, nice_step, tick_text
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
-from chronocl.render.camera import Camera, to_panel
+from chronocl.render.camera import Camera, to_panel, world_extent
 from chronocl.render.markers import boxes_overlap
 from chronocl.render.raycaster import clip_plane
 from chronocl.render.triad import AXIS_COLOURS
 from chronocl.viewer.clip_outline import plane_polygon
-from chronocl.viewer.slots import geometry
 from chronocl.viewer.view_state import ViewState
 
 MIN_EDGE_PX = 40  # an edge shorter than this on the panel is seen end-on: no ticks
@@ -77,7 +76,7 @@ def box_axes(
     the edge's part on the panel: the name goes `out` from it beyond the labels)}; positions
     are fractions of the panel (top-left 0, as `probe.project`), ticks off the panel left out.
     [] when the clip plane keeps nothing; None when a corner of the box is behind the camera."""
-    extent, _ = geometry(cv)
+    extent = world_extent(cv.shape, cv.spacing)
     bounds = visible_bounds(extent, clip)
     if bounds is None:
         return []

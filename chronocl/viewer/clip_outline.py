@@ -8,9 +8,8 @@ import itertools
 import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.render.camera import Camera, to_panel
+from chronocl.render.camera import Camera, to_panel, world_extent
 from chronocl.render.raycaster import clip_plane
-from chronocl.viewer.slots import geometry
 
 
 def plane_polygon(clip: tuple[float, float, float, float], extent: np.ndarray) -> np.ndarray:
@@ -51,7 +50,7 @@ def clip_outline(
     behind the camera."""
     if clip is None:
         return None
-    extent, _ = geometry(cv)
+    extent = world_extent(cv.shape, cv.spacing)
     polygon = plane_polygon(clip, extent)
     if not len(polygon):
         return None

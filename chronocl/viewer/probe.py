@@ -11,14 +11,13 @@ from __future__ import annotations
 import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
-from chronocl.render.camera import Camera, to_panel
+from chronocl.render.camera import Camera, to_panel, world_extent, world_geometry
 from chronocl.render.raycaster import clip_plane
 from chronocl.render.slices import parse_slice
 from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.protocol import PROBE_THRESHOLD
 from chronocl.viewer.schema import ProtocolError
 from chronocl.viewer.slicing import point_voxel
-from chronocl.viewer.slots import geometry
 from chronocl.viewer.view_state import ViewState
 
 
@@ -38,7 +37,7 @@ def probe_ray(
     "reached": whether the accumulated opacity passed `threshold`}. When it never does, the
     voxel of the largest opacity increment is returned (None if the ray sees nothing).
     """
-    extent, voxel = geometry(cv)
+    extent, voxel = world_geometry(cv.shape, cv.spacing)
     w, h = size
     view, proj = camera.matrices(extent, w / h)
     inv = np.linalg.inv(proj @ view)
@@ -100,7 +99,7 @@ def project(
 ) -> tuple[float, float] | None:
     """Where the point at `where` (x, y, z as fractions of the box) lands on a panel of `size`
     with `camera`: (x, y) fractions, top-left origin; None if behind the camera or off-panel."""
-    extent, _ = geometry(cv)
+    extent = world_extent(cv.shape, cv.spacing)
     world = (np.asarray(where, dtype=np.float64) - 0.5) * extent
     at = to_panel(camera, extent, size, world[None])
     if at is None:

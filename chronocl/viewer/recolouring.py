@@ -32,11 +32,10 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine.buffers import DeviceLimitError
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
-from chronocl.render.recolour import Changed, Recolourer
+from chronocl.render.recolour import Changed, Recolourer, show
 from chronocl.render.recolour.bricks import BrickRecolourer, shown_output, takes_over
 from chronocl.render.recolour.gather import gather
 from chronocl.render.recolour.gl import available, recolourer, software_gl
-from chronocl.render.recolour.texture import show
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.slots import ViewSlot
 
@@ -252,9 +251,9 @@ def _prepare_on_gpu(rc, w) -> tuple:
 
 def _apply_and_show(rc, prepared: Prepared, spec, into, spacing):
     changed = prepared.recolourer.apply(prepared.winners, spec, into)
-    show(rc.ctx, changed, spacing)
+    show(changed, spacing)
     return changed.volume
 
 
 def _write(rc, changed: Changed, held, spacing) -> None:
-    show(rc.ctx, changed, spacing, held)
+    show(changed, spacing, held)

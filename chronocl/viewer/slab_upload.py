@@ -27,9 +27,9 @@ from chronocl.core import env
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
-from chronocl.render.raycaster import Volume
+from chronocl.render.volume import Volume
 from chronocl.viewer.gl_thread import gl_submit
-from chronocl.viewer.slots import ViewSlot, new_volume
+from chronocl.viewer.slots import ViewSlot
 
 FORMAT = "f1"  # the display chronovolume's RGBA8, written as it is
 
@@ -66,18 +66,12 @@ class SlabUpload:
     def _write(self, rc, rgba: np.ndarray, z0: int, z1: int) -> None:
         """On the GL thread: the slot's texture of this shape takes rows z0..z1."""
         t = time.perf_counter()
-        nz, ny, nx, _ = rgba.shape
-        slot = self.slot
         if self.volume is None:
-            size = (nx, ny, nz)
-            vol = slot.volume
-            if vol is None or vol.texture.size != size or vol.texture.dtype != FORMAT:
-                vol = slot.swap_volume((size, FORMAT)) or new_volume(rc, size, FORMAT)
+            nz, ny, nx, _ = rgba.shape
             # Until the last slab it holds no chronovolume's picture: a frame drawn from it
             # first uploads again.
-            slot.volume, slot.uploaded, slot.written = vol, None, None
-            self.volume = vol
-        self.volume.texture.write(rgba[z0:z1], viewport=(0, 0, z0, nx, ny, z1 - z0))
+            self.volume = self.slot.texture(rc.ctx, (nx, ny, nz), FORMAT)
+        self.volume.write_slab(rgba, z0, z1)
         self.ms += 1e3 * (time.perf_counter() - t)
 
     def done(self, cv: Chronovolume | None) -> None:

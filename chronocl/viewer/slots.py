@@ -1,10 +1,10 @@
 """One panel of a client's page: its integration session, its current chronovolume and that
-chronovolume's 3D texture, and how a chronovolume is laid out in the raycaster's world."""
+chronovolume's display volume (chronocl/render/volume.py), allocated once per shape and format
+and rewritten in place."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from itertools import pairwise
 
 import numpy as np
 
@@ -13,9 +13,8 @@ from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.integration.interactive.session import Session
 from chronocl.render import brick_grid
-from chronocl.render.camera import world_extent
-from chronocl.render.raycaster import Volume
 from chronocl.render.upload import convert, display_format
+from chronocl.render.volume import Volume
 
 
 @dataclass
@@ -34,6 +33,7 @@ class ViewSlot:
     # Textures of other shapes or formats, kept for reuse: frames alternate between a coarse
     # level and full resolution, and allocating a 512^3 texture costs about a second here.
     kept: dict = field(default_factory=dict)
+    allocated: int = 0  # textures allocated since the last frame was sent (its header says)
 
     def release_gl(self) -> None:
         self.release_recolour()
@@ -46,16 +46,23 @@ class ViewSlot:
         self.kept = {}
         self.staging = None
 
-    def swap_volume(self, key: tuple) -> Volume | None:
-        """Keep the current texture under its (size, format) and take the one kept for `key`
-        (None: none kept); at most `TUNING.kept_textures` stay besides the current one."""
-        self.release_recolour()  # its winners are the old texture's
-        if self.volume is not None:
-            self.kept[(self.volume.texture.size, self.volume.texture.dtype)] = self.volume
-        self.volume = self.uploaded = self.written = None
-        vol = self.kept.pop(key, None)
-        while len(self.kept) > TUNING.kept_textures:
-            self.kept.pop(next(iter(self.kept))).release()
+    def texture(self, ctx, size: tuple[int, int, int], fmt: str) -> Volume:
+        """The slot's volume for a texture of `size` (x, y, z) and format `fmt`, about to be
+        written (nothing in it is shown until then): the current one, else the one kept for
+        them (the current one kept in its place; at most `TUNING.kept_textures` besides it),
+        else a new one, counted in `allocated`."""
+        vol = self.volume
+        if vol is None or not vol.fits(size, fmt):
+            self.release_recolour()  # its winners are the old texture's
+            if vol is not None:
+                self.kept[(vol.texture.size, vol.texture.dtype)] = vol
+            vol = self.kept.pop((tuple(size), fmt), None)
+            while len(self.kept) > TUNING.kept_textures:
+                self.kept.pop(next(iter(self.kept))).release()
+            if vol is None:
+                vol = Volume.allocate(ctx, size, fmt)
+                self.allocated += 1
+        self.volume, self.uploaded, self.written = vol, None, None
         return vol
 
     def release_recolour(self) -> None:
@@ -78,7 +85,7 @@ class ViewSlot:
 def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     """The chronovolume as a 3D texture, rewriting the slot's texture in place when its shape
     and format are unchanged (allocating a new 3D texture costs more than the write); a new
-    shape or format takes the texture kept for it (`ViewSlot.swap_volume`: the coarse level and
+    shape or format takes the texture kept for it (`ViewSlot.texture`: the coarse level and
     full resolution alternate), else allocates one. With `given_up` (a refine's frame) the
     texture is written in `TUNING.upload_slabs` z-slabs and SupersededError raised between them
     once it returns true; the slot then shows nothing uploaded (its next frame writes it again).
@@ -100,53 +107,14 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     fmt = "f1" if cv.rgba.dtype == np.uint8 else display_format(nz * ny * nx)
     data, occ = convert(cv.rgba, fmt, slot.staging)
     bricks = brick_grid.submit(data)  # the empty-space grid, beside the texture write
-    vol = slot.volume
     # Written slab by slab while it integrated (`chronocl.viewer.slab_upload`): nothing to write
-    prewritten = slot.written is cv and vol is not None
-    slot.written = None
-    if not prewritten:
-        if vol is None or vol.texture.size != (nx, ny, nz) or vol.texture.dtype != fmt:
-            vol = slot.swap_volume(((nx, ny, nz), fmt))
-        if vol is not None:
-            _write(slot, vol, data, given_up)
-        else:
-            vol = new_volume(rc, (nx, ny, nz), fmt, data)
+    if slot.written is cv and slot.volume is not None:
+        vol = slot.volume
+    else:
+        vol = slot.texture(rc.ctx, (nx, ny, nz), fmt)
+        vol.write(data, given_up)  # given up: half written, uploaded again next time
     if data is not cv.rgba:  # RGBA8 from the kernels is sent as it is: the staging stays
         slot.staging = data
-    extent, voxel = geometry(cv)
-    vol.extent, vol.unit = extent, float(np.min(voxel))
-    vol.occupied = occ.corners(extent, voxel)
-    vol.bricks = brick_grid.texture(rc.ctx, bricks.result(), vol.bricks)
-    slot.volume, slot.uploaded = vol, cv
+    vol.place(cv.spacing, occ.bounds(), bricks.result())
+    slot.uploaded, slot.written = cv, None
     return vol
-
-
-def new_volume(rc, size: tuple[int, int, int], fmt: str, data: np.ndarray | None = None) -> Volume:
-    """A 3D texture of `size` (x, y, z) and format `fmt` as a volume (placed by `upload`)."""
-    import moderngl
-
-    tex = rc.ctx.texture3d(size, 4, data, dtype=fmt)
-    tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-    tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-    return Volume(tex, np.zeros(3), 0.0, (np.zeros(3), np.zeros(3)))
-
-
-def _write(slot: ViewSlot, vol: Volume, data: np.ndarray, given_up) -> None:
-    """Write `data` into the volume's texture, in slabs where it may be given up."""
-    nz, ny, nx = data.shape[:3]
-    if given_up is None or nz < TUNING.upload_slabs:
-        vol.texture.write(data)
-        return
-    cuts = np.linspace(0, nz, TUNING.upload_slabs + 1).astype(int)
-    for z0, z1 in pairwise(cuts.tolist()):
-        if given_up():
-            slot.volume, slot.uploaded = vol, None  # half written: uploaded again next time
-            raise SupersededError("newer input came while the refined frame was uploaded")
-        vol.texture.write(np.ascontiguousarray(data[z0:z1]), viewport=(0, 0, z0, nx, ny, z1 - z0))
-
-
-def geometry(cv: Chronovolume) -> tuple[np.ndarray, np.ndarray]:
-    """World extent (x, y, z; longest side 1) and voxel size, as the raycaster lays them out."""
-    nz, ny, nx = cv.shape
-    extent = world_extent(cv.shape, cv.spacing)
-    return extent, extent / np.array([nx, ny, nz])

@@ -533,6 +533,7 @@ class ClientWorker(Tasks):
                 # + a recolour's texture write; a refine's slabs are written within integrate_ms
                 "upload_ms": round(1e3 * (t_draw - t_up) + self.views.recolouring.upload_ms, 2),
                 "upload_overlapped_ms": round(self.views.slab_upload_ms, 2),
+                "allocated": self._allocated(),  # textures: 0 once each panel and level has one
                 "render_ms": round(1e3 * (t_done - t_draw), 2),
                 "gl_wait_ms": round(1e3 * (t_up - t0), 2),
                 "encode_ms": round(1e3 * (t_enc - t_done), 2),
@@ -543,6 +544,15 @@ class ClientWorker(Tasks):
             "sent_at": time.time(),
         }
         self.send(pack_frame(header, images))
+
+    def _allocated(self) -> int:
+        """The textures the views allocated since the last frame was sent; their counts start
+        again."""
+        slots = self.views.slots
+        allocated = sum(slot.allocated for slot in slots)
+        for slot in slots:
+            slot.allocated = 0
+        return allocated
 
     def _framed(self, state: ViewState, cvs: list[Chronovolume]) -> ViewState:
         """`state` with its camera framing this generation's visible region."""

@@ -12,8 +12,8 @@ time TF of the winning step). One protocol, `Recolourer`, two implementations:
   than PoCL's kernels, and its textures are host memory anyway), in z-spans of rows of bricks
   where the winners are over the device's largest buffer.
 
-`texture.show` then puts what changed into the display `Volume` (the bricks' boxes of host
-RGBA8, and either's box and grid); `gather.gather` gathers winners on the OpenCL device.
+`show` then puts what changed into the display `Volume` (the bricks of host RGBA8 that may
+differ, and either's box and grid); `gather.gather` gathers winners on the OpenCL device.
 """
 
 from __future__ import annotations
@@ -25,13 +25,12 @@ import numpy as np
 
 from chronocl.integration.interactive.winners import Winners
 from chronocl.modes.spec import IntegrationSpec
-from chronocl.render.camera import world_extent
-from chronocl.render.raycaster import Volume
+from chronocl.render.volume import Volume
 
 
 @dataclass
 class Changed:
-    """What one `apply` changed, for `texture.show` to put into `volume`."""
+    """What one `apply` changed, for `show` to put into `volume`."""
 
     volume: Volume  # the display texture it is shown in
     bounds: np.ndarray  # int32 (lo x, y, z, hi x, y, z) of voxels with opacity > 0; hi -1: none
@@ -54,22 +53,17 @@ class Recolourer(Protocol):
         `into` (the viewer's texture of the window)."""
 
 
-def volume_geometry(dims, spacing) -> tuple[np.ndarray, np.ndarray]:
-    """World extent (longest side 1) and voxel size, as `Raycaster.upload` lays them out."""
-    extent = world_extent(tuple(dims)[::-1], spacing)
-    return extent, extent / np.array(dims, dtype=np.float64)
-
-
-def occupied_corners(bounds: np.ndarray, dims, extent, voxel) -> tuple[np.ndarray, np.ndarray]:
-    """`chronocl.render.upload.Occupancy.corners` from the first and last occupied index per
-    axis (x, y, z): grown by one voxel, kept inside the box; none: an empty box."""
-    half = extent / 2
-    lo, hi = bounds[:3], bounds[3:]
-    if hi[0] < 0:
-        return half.copy(), -half.copy()
-    lo = np.maximum(lo - 1, 0)
-    hi = np.minimum(hi + 2, np.array(dims))
-    return -half + lo * voxel, -half + hi * voxel
+def show(changed: Changed, spacing, held: np.ndarray | None = None) -> None:
+    """Put `changed` into its `Volume` (on the GL thread): the host RGBA8's bricks that may
+    differ from what the texture holds (`held`: the bricks that may be coloured there, the
+    `coloured` of the result it holds; None: unknown, the whole texture), then its place in
+    the world, occupied box and brick grid. A 512^3 texture is 512 MB; a TF edit of the vortex
+    changes a fifth of its bricks."""
+    vol = changed.volume
+    if changed.rgba is not None:
+        redo = np.ones_like(changed.coloured) if held is None else changed.coloured | held
+        vol.write_bricks(changed.rgba, redo)
+    vol.place(spacing, changed.bounds, changed.bricks)
 
 
 def empty_bounds() -> np.ndarray:

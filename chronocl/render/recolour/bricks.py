@@ -15,7 +15,7 @@ draws its frames from the texture and reads the array for probes and saves on th
 recolours, so it changes only between frames), and reads back the occupied voxels' box and the
 brick grid (grown by one voxel, as brick_grid.py defines it) over the bricks next to a
 coloured one: both are then exactly what the viewer's upload finds in the whole array.
-`texture.show` writes only the bricks that may differ from what the texture holds. The
+`recolour.show` writes only the bricks that may differ from what the texture holds. The
 winners and the output are used in place on a CPU device (host pointers, nothing copied).
 
 The device holds the winners in z-spans of whole rows of bricks, each span's u, k and output
@@ -39,9 +39,9 @@ from chronocl.core.memory import ALIGN, aligned_empty, is_aligned
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
-from chronocl.render.raycaster import Volume
 from chronocl.render.recolour import Changed, empty_bounds
 from chronocl.render.recolour.gather import aligned, gather, index_type
+from chronocl.render.volume import Volume
 
 B = brick_grid.BRICK
 RUN_BRICKS = 64  # bricks a work-item recolours at most (a 512-voxel row)
@@ -188,7 +188,7 @@ class BrickWinners:
 class BrickRecolourer:
     """`chronocl.render.recolour.Recolourer` on the OpenCL device `device` (RGBA8 out)."""
 
-    gl_thread = False  # its RGBA8 goes up in `texture.show`
+    gl_thread = False  # its RGBA8 goes up in `recolour.show`
 
     def __init__(self, device: str | None = None) -> None:
         from chronocl.engine.device import get_context
@@ -254,7 +254,7 @@ class BrickRecolourer:
     ) -> Changed:
         """Premultiplied RGBA8 (Z, Y, X, 4) of the winners under `spec`, written over their
         one output in the bricks coloured now or in it, with the grid and occupied box of the
-        result; to be shown in `into` (`texture.show`)."""
+        result; to be shown in `into` (`recolour.show`)."""
         p, w = prepared, prepared.w
         coloured = p.coloured(spec)
         out, before = p.output

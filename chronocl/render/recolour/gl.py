@@ -22,9 +22,9 @@ from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
 from chronocl.render.gl import shader_source
-from chronocl.render.raycaster import Volume
 from chronocl.render.recolour import Changed, empty_bounds
 from chronocl.render.upload import display_format
+from chronocl.render.volume import Volume
 
 GROUP = 8  # recolour.comp's groups: 8 x-rows (along y), one invocation a row
 _IMAGE_FORMAT = {"f1": "rgba8", "f4": "rgba32f"}
@@ -149,16 +149,11 @@ class GLRecolourer:
 
     def _own(self, prepared: GLWinners, fmt: str) -> Volume:
         """`prepared`'s own display texture in `fmt`, made (again) where it has none in it."""
-        import moderngl
-
         if prepared.volume is not None and not _fits(prepared.volume, prepared.dims, fmt):
             prepared.volume.release()
             prepared.volume = None
         if prepared.volume is None:
-            tex = self.ctx.texture3d(prepared.dims, 4, dtype=fmt)
-            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-            prepared.volume = Volume(tex, np.zeros(3), 0.0, (np.zeros(3), np.zeros(3)))
+            prepared.volume = Volume.allocate(self.ctx, prepared.dims, fmt)
         return prepared.volume
 
     def _table(self, rows: np.ndarray):
@@ -188,4 +183,4 @@ class GLRecolourer:
 
 
 def _fits(v: Volume | None, dims, fmt: str) -> bool:
-    return v is not None and tuple(v.texture.size) == tuple(dims) and v.texture.dtype == fmt
+    return v is not None and v.fits(dims, fmt)
