@@ -32,14 +32,15 @@ def map_colours(name: str, n: int = 256) -> np.ndarray:
     return colormaps[name](np.linspace(0.0, 1.0, n))[:, :3] * 255.0
 
 
-def longest_map_run(rows: np.ndarray, name: str) -> tuple[int, float]:
+def longest_map_run(rows: np.ndarray, name: str, near_by: float = 10.0) -> tuple[int, float]:
     """The longest horizontal run of pixels in `rows` (H, W, 3) that are the colours of map
-    `name` in increasing order, as (its length in px, the share of the map it covers)."""
+    `name` in increasing order (each within `near_by` of one), as (its length in px, the share
+    of the map it covers)."""
     lut = map_colours(name)
     best = (0, 0.0)
     for row in rows.astype(np.float64):
         dist = np.linalg.norm(row[:, None, :] - lut[None, :, :], axis=-1)
-        index, near = dist.argmin(axis=1), dist.min(axis=1) < 10.0
+        index, near = dist.argmin(axis=1), dist.min(axis=1) < near_by
         start = 0
         for x in range(1, len(row) + 1):
             if x < len(row) and near[x] and near[x - 1] and index[x] >= index[x - 1] - 3:

@@ -24,6 +24,7 @@ from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
 from chronocl.render.panels import compose
 
+from .test_colour_bar import longest_map_run
 from .viewer_helpers import Client, full_size_frames, serving  # noqa: F401
 
 pytestmark = pytest.mark.usefixtures("full_size_frames")
@@ -130,7 +131,10 @@ def test_movie_frames_are_composed_as_the_saved_png(server, client):
     import imageio.v3 as iio
     from PIL import Image
 
-    client.open(0, size=(96, 96))
+    client.open(0, size=(160, 128))
+    viridis = DataTF().with_colormap("viridis")  # a coloured data TF: the frames have its bar
+    rid = client.send({"type": "update", "data_tf": {"points": [list(p) for p in viridis.points]}})
+    client.frame_for(rid)
     rid = client.send({"type": "save", "what": "image"})
     _, dl = client.wait("download", rid)
     still = np.asarray(Image.open(io.BytesIO(fetch(server, dl["url"]))).convert("RGB"))
@@ -144,6 +148,12 @@ def test_movie_frames_are_composed_as_the_saved_png(server, client):
     title = dl["layout"]["title"]
     # The first frame is the still (GIF's palette aside), its title band too.
     assert np.abs(crop(frames[0][..., :3], title).astype(int) - crop(still, title)).mean() < 4
+    # The data colour bar is in the first frame, as in the still: viridis in order over most of
+    # a row of its legend band (GIF's palette: nearer than 25 to the map's colours).
+    (legend,) = dl["layout"]["legends"]
+    for image in (still, frames[0][..., :3]):
+        length, cover = longest_map_run(crop(image, legend), "viridis", 25.0)
+        assert cover > 0.9 and length > 0.5 * legend[2], (length, cover, legend)
 
 
 def test_compose_puts_the_title_over_the_panels_untouched():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+import sys
 from typing import Annotated
 
 import typer
@@ -36,6 +38,15 @@ def view(
     ] = 32,
     anon: AnonOpt = False,
     storage_option: StorageOpt = None,
+    log_level: Annotated[
+        str,
+        typer.Option(
+            "--log-level",
+            help="What the server logs on stderr: warning (default: warnings, and internal "
+            "errors with their tracebacks), info, or debug (everything the chronocl loggers "
+            "say).",
+        ),
+    ] = "warning",
 ) -> None:
     """Interactive viewer in the browser, rendered here (OpenCL + EGL) and streamed as frames.
 
@@ -50,7 +61,10 @@ def view(
       chronocl view vortex.zarr --port 8765 --no-browser
 
       chronocl view s3://open-data/plume.zarr --anon
+
+      chronocl view vortex.zarr --log-level debug
     """
+    level = log_levels(log_level)
     from chronocl.viewer import serve
 
     try:
@@ -66,6 +80,7 @@ def view(
         raise InvalidParameterError(
             "--anon and --storage-option apply to http(s):// and s3:// stores; none was given"
         )
+    configure_logging(level)
     serve(
         stores,
         host=host,
@@ -77,3 +92,36 @@ def view(
         max_clients=max_clients,
         storage_options=parse_storage_options(storage_option, anon),
     )
+
+
+LOG_LEVELS = {"warning": logging.WARNING, "info": logging.INFO, "debug": logging.DEBUG}
+
+
+def log_levels(name: str) -> int:
+    """The logging level `--log-level` names (warning, info, debug; any case)."""
+    level = LOG_LEVELS.get(name.strip().lower())
+    if level is None:
+        raise InvalidParameterError(
+            f"--log-level {name!r} is not a level; choose one of {', '.join(LOG_LEVELS)}"
+        )
+    return level
+
+
+def configure_logging(level: int) -> None:
+    """The `chronocl` loggers' records at `level` and above written to stderr by one handler
+    of ours (replaced, not added again, when called twice). At warning each record is its
+    message (its traceback under it), as Python printed them with no handler; at info and
+    debug, with the time, level and logger before it, as there are many."""
+    log = logging.getLogger("chronocl")
+    for h in [h for h in log.handlers if getattr(h, "chronocl_cli", False)]:
+        log.removeHandler(h)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.chronocl_cli = True  # type: ignore[attr-defined]
+    fmt = (
+        "%(message)s"
+        if level >= logging.WARNING
+        else "%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
+    handler.setFormatter(logging.Formatter(fmt))
+    log.addHandler(handler)
+    log.setLevel(level)

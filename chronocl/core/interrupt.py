@@ -4,8 +4,10 @@ The viewer refines a picture to full resolution while the user may act again at 
 It runs the refine inside `interruptible(check, progress)`; the long loops under it (the
 slabs of an integration, the steps a window waits for) call `checkpoint` between their
 pieces, which raises `SupersededError` as soon as `check()` says the work is no longer
-wanted and tells `progress` how far it got. Outside `interruptible` a checkpoint does
-nothing, so the command line and the library run as before.
+wanted and tells `progress` how far it got. Work that is only told of (`reported`: a frame
+answering input, which the page waits for) hears the same checkpoints and is never given up, nor
+split into pieces for it. Outside both a checkpoint does nothing, so the command line and the
+library run as before.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ Progress = Callable[[str, int, int], None]
 
 @dataclass(frozen=True)
 class _Watch:
-    check: Callable[[], bool]
+    check: Callable[[], bool] | None  # None: reported, never given up
     progress: Progress | None
 
 
@@ -40,17 +42,35 @@ def interruptible(check: Callable[[], bool], progress: Progress | None = None) -
         _current.reset(token)
 
 
+@contextmanager
+def reported(progress: Progress) -> Iterator[None]:
+    """`progress(stage, done, total)` hears each checkpoint of the work inside, which is never
+    given up (not `watched`)."""
+    token = _current.set(_Watch(None, progress))
+    try:
+        yield
+    finally:
+        _current.reset(token)
+
+
 def checkpoint(stage: str, done: int, total: int) -> None:
     """Between two pieces of long work: `done` of `total` pieces of `stage` are done."""
     watch = _current.get()
     if watch is None:
         return
-    if watch.check():
+    if watch.check is not None and watch.check():
         raise SupersededError(f"{stage} given up at {done} of {total}: newer input came")
     if watch.progress is not None:
         watch.progress(stage, done, total)
 
 
 def watched() -> bool:
-    """Whether the work running now can be given up (it runs inside `interruptible`)."""
+    """Whether the work running now can be given up (it runs inside `interruptible`): then it
+    goes in pieces, each a checkpoint."""
+    watch = _current.get()
+    return watch is not None and watch.check is not None
+
+
+def heard() -> bool:
+    """Whether a checkpoint now is heard at all (inside `interruptible` or `reported`)."""
     return _current.get() is not None

@@ -39,7 +39,7 @@ import numpy as np
 from chronocl.core import process_memory
 from chronocl.core.budget import human, parse_memory
 from chronocl.core.errors import InvalidParameterError, InvalidSelectionError, SupersededError
-from chronocl.core.interrupt import checkpoint, watched
+from chronocl.core.interrupt import checkpoint, heard
 from chronocl.core.tuning import TUNING
 from chronocl.data.bricks import ResidentBricks
 from chronocl.data.scrub_model import ScrubModel
@@ -497,9 +497,9 @@ class WindowManager:
 
     def _wait(self, request: Request, timeout: float | None) -> list[np.ndarray]:
         deadline = None if timeout is None else time.monotonic() + timeout
-        # Work that may be given up (`chronocl.core.interrupt`) looks up every
-        # `TUNING.watched_poll_s` seconds.
-        poll = TUNING.watched_poll_s if watched() else None
+        # Work that may be given up, or is told of (`chronocl.core.interrupt`), looks up every
+        # `TUNING.watched_poll_s` seconds (a load wakes it at once either way).
+        poll = TUNING.watched_poll_s if heard() else None
         while True:
             with self._lock:
                 missing = [s for s in request.steps if s not in self._cache]

@@ -118,9 +118,8 @@ def make_app(
             )
         except WebSocketDisconnect:
             pass
-        except Exception as exc:  # one line in the log; the server goes on
-            log.error("chronocl viewer: %s", internal_error(exc, "on a socket"))
-            log.debug("chronocl viewer: socket failed", exc_info=True)
+        except Exception as exc:  # a bug: its line and traceback in the log; the server goes on
+            log.error("chronocl viewer: %s", internal_error(exc, "on a socket"), exc_info=exc)
         finally:
             active -= 1
 

@@ -1,25 +1,40 @@
-"""How far a refine to full resolution got, told to the client as it goes.
+"""How far a frame's work got, told to the client as it goes.
 
-The render worker refines a coarse frame view by view; under it the session reads the
-window's steps and integrates them slab by slab, calling `chronocl.core.interrupt.checkpoint`
-between pieces. `RefineProgress` turns those checkpoints into `progress` messages
-({"what": "refine", "stage", "done", "total", "view", "views"}), one per change, so the page
-can say "integrating 3/8 slabs" and offer to cancel.
+The render worker makes a frame answering input, and refines a coarse frame view by view;
+under both the session reads the window's steps, integrates them slab by slab and gathers a
+recolouring's winners in pieces, calling `chronocl.core.interrupt.checkpoint` between pieces.
+`RefineProgress` turns those checkpoints into `progress` messages ({"what": "refine" or
+"frame", "stage", "done", "total", "view", "views"}), one per change, so the page can say
+"integrating 3/8 slabs" (a refine, in the status line, with an offer to cancel) or "reading
+steps 3/10" (a frame answering input, in the busy box). `reporting` runs a frame's work
+under it without making that work one that newer input gives up.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import AbstractContextManager
+
+from chronocl.core.interrupt import reported
 
 
 class RefineProgress:
     """Sends a `progress` message through `reply` at each new checkpoint of a refine of
-    `views` views (`view`: the one refining now)."""
+    `views` views (`view`: the one refining now; None where the work does not go view by
+    view), or with `what` "frame" of the frame answering request `rid`."""
 
-    def __init__(self, reply: Callable[[dict], bool], views: int) -> None:
+    def __init__(
+        self,
+        reply: Callable[[dict], bool],
+        views: int,
+        what: str = "refine",
+        rid: int | None = None,
+    ) -> None:
         self.reply = reply
         self.views = views
-        self.view = 0
+        self.what = what
+        self.rid = rid
+        self.view: int | None = 0 if what == "refine" else None
         self._last: tuple | None = None
 
     def __call__(self, stage: str, done: int, total: int) -> None:
@@ -27,10 +42,11 @@ class RefineProgress:
         if key == self._last:
             return
         self._last = key
-        self.reply(refine_progress(stage, done, total, self.view, self.views))
+        msg = refine_progress(stage, done, total, self.view, self.views)
+        self.reply({**msg, "what": self.what, "id": self.rid})
 
 
-def refine_progress(stage: str, done: int, total: int, view: int, views: int) -> dict:
+def refine_progress(stage: str, done: int, total: int, view: int | None, views: int) -> dict:
     """The `progress` message of a refine (stage "cancelled": the answer to `cancel`)."""
     return {
         "type": "progress",
@@ -42,3 +58,10 @@ def refine_progress(stage: str, done: int, total: int, view: int, views: int) ->
         "view": view,
         "views": views,
     }
+
+
+def reporting(progress: RefineProgress) -> AbstractContextManager[None]:
+    """The work inside tells `progress` of its checkpoints (a frame answering input: the reads
+    of its steps, its integration, its recolouring's gather). Unlike a refine's it is never
+    given up, nor split into more pieces than it would be anyway (`interrupt.reported`)."""
+    return reported(progress)

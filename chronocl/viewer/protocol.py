@@ -45,7 +45,10 @@ Every field is checked against its schema: unknown fields, wrong types and out-o
 before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
 Server -> client: JSON text messages (info, dataset, histogram, fit, probe, progress, download,
 events, error, steps: `residency`) and binary frames (`pack_frame`: a 4-byte big-endian header
-length, a JSON header, then the images' bytes back to back). `info`, sent first on every socket,
+length, a JSON header, then the images' bytes back to back). A `progress` says how far work got:
+of what "refine" (a view's refine, `view` of `views`), "frame" (the frame answering request
+`id`, for the busy box), "movie" or "events" ({"stage", "done", "total"}). `info`, sent first on
+every socket,
 lists the data sets and `choices()`: the registered modes and every other menu, default and
 bound the page offers (and whether feature tracking is installed), so the page copies nothing
 from here. The schema primitives are in `schema`.

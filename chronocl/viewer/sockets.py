@@ -15,10 +15,9 @@ import asyncio
 import json
 import threading
 
-from chronocl.core.errors import ChronoclError
 from chronocl.core.tuning import TUNING
 from chronocl.viewer.datasets import Dataset
-from chronocl.viewer.errors import internal_error, log
+from chronocl.viewer.errors import error_text
 from chronocl.viewer.progress import refine_progress
 from chronocl.viewer.protocol import ProtocolError, choices, parse_message, request_id
 from chronocl.viewer.residency import report_steps
@@ -67,13 +66,9 @@ def handle(worker: ClientWorker, msg: dict) -> dict | None:
 
 def error_reply(exc: Exception, text: object) -> dict:
     """The `error` answer to the client message `text` that raised `exc`: a ChronoclError's
-    own text; anything else is a bug, logged in one line and answered without a traceback."""
-    if isinstance(exc, ChronoclError):
-        message = str(exc)
-    else:
-        message = internal_error(exc, "on a message")
-        log.error("chronocl viewer: %s", message)
-        log.debug("chronocl viewer: message failed", exc_info=exc)
+    own text; anything else is a bug: answered in one line without a traceback, and logged at
+    ERROR with its traceback (`errors.error_text`), as a frame's is."""
+    message = error_text(exc, "on a message")
     return {"type": "error", "id": request_id(text), "message": message}
 
 
@@ -159,7 +154,7 @@ async def serve_socket(
                     reply = await asyncio.to_thread(handle, worker, msg)
                 else:
                     reply = handle(worker, msg)
-            except Exception as exc:  # answered; a bug also logged in one line, no traceback
+            except Exception as exc:  # answered in one line; a bug logged with its traceback
                 reply = error_reply(exc, text)
             if reply is not None:
                 await deliver(json.dumps(reply))

@@ -51,7 +51,7 @@ from chronocl.viewer.frames import (
 )
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.probe import project
-from chronocl.viewer.progress import RefineProgress
+from chronocl.viewer.progress import RefineProgress, reporting
 from chronocl.viewer.protocol import pack_frame
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.side_work import SideWork
@@ -367,7 +367,11 @@ class ClientWorker(Tasks):
                 _left.wait(wait)
         if self._closed:
             return  # nobody will see it
-        cvs, integrate_ms, incremental = self.views.chronovolumes(state)
+        # the page's busy box hears how far it got: reading steps n/N, integrating slab n/N...
+        progress = RefineProgress(self._note, len(state.views), "frame", rid)
+        with reporting(progress):
+            cvs, integrate_ms, incremental = self.views.chronovolumes(state)
+        progress("drawing", 0, len(cvs))
         try:
             self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
         finally:  # a recoloured view's RGBA, read after the frame went (probes, saves read it)

@@ -21,7 +21,7 @@
 //   controls.js    the other controls, filled from the server's choices
 //   shading.js     the lighting toggle and strengths
 
-import { connect, disconnect, frameArrived, send, shown, update } from './connection.js';
+import { connect, disconnect, frameArrived, send, showFrameProgress, shown, update } from './connection.js';
 import { bindControls, fillControls, movieProgress, syncControls } from './controls.js';
 import {
   bindEvents, clearEvents, drawTrack, eventsFailed, eventsProbed, eventsProgress, fillEvents, onEvents,
@@ -182,6 +182,7 @@ function onText(msg) {
       break;
     case 'progress':
       if (msg.what === 'refine') showRefineProgress(msg);
+      else if (msg.what === 'frame') showFrameProgress(msg);
       else if (msg.what === 'events') eventsProgress(msg);
       else movieProgress(msg);
       break;

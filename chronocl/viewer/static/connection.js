@@ -4,7 +4,8 @@
 // newest state only, so the page may send freely; it still coalesces input to one update
 // message per animation frame. While a frame is awaited for longer than BUSY_AFTER_MS (a large
 // window's steps are read, a mode's first use builds its kernels) the #busy indicator says so,
-// with the time waited.
+// with the latest stage the server reported of it ('reading steps 3/10', 'integrating',
+// 'recolouring', 'drawing') and the time waited.
 //
 // A transport is { open(callbacks), send(text), isOpen(), retries, close() }: `open` starts it
 // and calls callbacks.onOpen(), callbacks.onMessage(text or ArrayBuffer) for each message from
@@ -213,19 +214,47 @@ export function flushUpdates() {
   }
 }
 
+// The latest stage the server reported of the frame awaited (a `progress` message of what
+// 'frame'): { stage, done, total }, or null before the first.
+let busyStage = null;
+
+// Each stage's pieces, as the busy box counts them.
+const PIECES = { 'reading steps': '', integrating: ' slabs', sliding: ' parts' };
+
+// The busy box's words for a stage: its name and how far it got ('reading steps 3/10',
+// 'integrating 2/8 slabs'), or its name alone: 'recolouring' (a TF edit's winners gathered,
+// counted in rows and then phases: no count that reads well) and 'drawing' (draw, encode, send).
+export function stageText(p) {
+  if (p.stage === 'preparing the recolouring') return 'recolouring';
+  if (p.stage === 'drawing' || !(p.total > 1)) return p.stage; // one piece: nothing to count
+  return `${p.stage} ${p.done}/${p.total}${PIECES[p.stage] ?? ''}`;
+}
+
+// How far the frame awaited got: the busy box says its latest stage (shown once the wait is
+// longer than BUSY_AFTER_MS).
+export function showFrameProgress(msg) {
+  if (waitingSince === null) return; // its frame came already
+  busyStage = msg;
+  showBusy();
+}
+
 function showBusy() {
   const el = $('busy');
   const waited = waitingSince === null ? 0 : performance.now() - waitingSince;
   el.hidden = waited < BUSY_AFTER_MS;
   if (!el.hidden) {
-    // The server does not say which part takes the time; name them all rather than guess one.
-    el.textContent = `working… ${(waited / 1000).toFixed(1)} s (reading the window's steps, building a new mode's kernels, integrating, drawing)`;
+    // Before the server's first report (a mode's first use builds its kernels, a frame waits
+    // for another's) it says only how long it has waited.
+    const what = busyStage ? stageText(busyStage) : 'working';
+    el.textContent = `${what}… ${(waited / 1000).toFixed(1)} s`;
+    el.title = busyStage ? `the frame awaited: ${what}` : "the frame awaited: not started yet, or building a mode's kernels";
   }
 }
 
 // A frame (or an error) answering the newest update arrived.
 export function frameArrived() {
   waitingSince = null;
+  busyStage = null;
   clearInterval(busyTimer);
   $('busy').hidden = true;
 }

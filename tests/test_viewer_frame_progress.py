@@ -1,0 +1,81 @@
+"""A frame answering input tells the page how far it got (issue 49): `progress` messages of
+what "frame", with the request's id, from the same checkpoints a refine reports
+(`chronocl.viewer.progress`), the last one "drawing" before the frame itself. Over the socket,
+no browser (`test_viewer_busy_browser` checks what the busy box makes of them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("websockets")
+
+from chronocl.data import synthetic
+from chronocl.data.timeseries import TimeSeries
+
+from .viewer_helpers import Client, start_server
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    path = tmp_path_factory.mktemp("viewer-frame-progress") / "vortex.zarr"
+    data = np.stack(list(synthetic.steps("vortex", 24, (64, 64, 64))))
+    TimeSeries.from_array(data, source="vortex").save(path)
+    srv = start_server([path])
+    yield srv
+    srv.stop()
+
+
+def notes_until_frame(client: Client, rid: int) -> list[dict]:
+    """The `progress` messages of what "frame" before the frame answering `rid`."""
+    notes = []
+    while True:
+        got = client.recv(60)
+        if got[0] == "progress" and got[1]["what"] == "frame":
+            notes.append(got[1])
+        if got[0] == "frame" and (got[1]["id"] or 0) >= rid:
+            return notes
+
+
+def test_a_frame_answering_input_reports_its_stages(server):
+    c = Client(server)
+    try:
+        c.open(0, size=(96, 96))
+        # a jump: the window's steps read and integrated, then drawn
+        rid = c.send({"type": "update", "window": {"t0": 12, "t1": 20}})
+        notes = notes_until_frame(c, rid)
+        assert notes and all(n["id"] == rid and n["view"] is None for n in notes), notes
+        assert notes[-1]["stage"] == "drawing", notes
+        stages = {n["stage"] for n in notes}
+        assert stages & {"reading steps", "integrating", "sliding"}, notes
+        for n in notes:
+            assert 0 <= n["done"] <= n["total"] and n["views"] == 1, n
+        # a mode change integrates the window again: its slabs counted, in order
+        rid = c.send({"type": "update", "views": [{"mode": "max"}]})
+        notes = notes_until_frame(c, rid)
+        slabs = [n["done"] for n in notes if n["stage"] == "integrating"]
+        assert slabs == sorted(slabs) and notes[-1]["stage"] == "drawing", notes
+        # a camera turn only draws
+        rid = c.send({"type": "update", "camera": {"azimuth": 50.0}})
+        assert [n["stage"] for n in notes_until_frame(c, rid)] == ["drawing"]
+    finally:
+        c.close()
+
+
+def test_reported_work_is_heard_and_neither_given_up_nor_split():
+    """A frame answering input runs under `interrupt.reported`: its checkpoints reach the
+    progress, but it is not `watched`, so a session integrates it whole and a gather goes in
+    one piece, as without the report (a refine, `interruptible`, goes in pieces)."""
+    from chronocl.core.interrupt import checkpoint, heard, interruptible, reported, watched
+
+    told: list[tuple] = []
+    assert not heard() and not watched()
+    with reported(lambda *p: told.append(p)):
+        assert heard() and not watched()
+        checkpoint("reading steps", 1, 4)
+    with interruptible(lambda: False, lambda *p: told.append(p)):
+        assert heard() and watched()
+        checkpoint("integrating", 2, 8)
+    assert told == [("reading steps", 1, 4), ("integrating", 2, 8)]
