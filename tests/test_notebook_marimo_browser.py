@@ -98,7 +98,11 @@ VIEWER = f"({HOST} || {{}}).viewer"
 # The share of the first view's picture that is not background (near black), 0..1.
 LIT_SHARE = f"""async () => {{
   const img = {HOST}.shadowRoot.querySelector('.view img');
-  await img.decode();
+  // a newer frame may replace the picture mid-decode (EncodingError): decode that one
+  for (let k = 0; ; k++) {{
+    try {{ await img.decode(); break; }} catch (e) {{ if (k > 20) throw e; }}
+    await new Promise((r) => setTimeout(r, 50));
+  }}
   const c = document.createElement('canvas');
   c.width = img.naturalWidth; c.height = img.naturalHeight;
   const g = c.getContext('2d');

@@ -54,7 +54,11 @@ def server(tmp_path_factory):
 # all of it, or (`r` given) the square within `r` pixels either way of its middle.
 COLOURED = """async ([rgb, r]) => {
   const img = document.querySelector('.view img');
-  await img.decode();
+  // a newer frame may replace the picture mid-decode (EncodingError): decode that one
+  for (let k = 0; ; k++) {
+    try { await img.decode(); break; } catch (e) { if (k > 20) throw e; }
+    await new Promise((r) => setTimeout(r, 50));
+  }
   const c = document.createElement('canvas');
   c.width = img.naturalWidth;
   c.height = img.naturalHeight;

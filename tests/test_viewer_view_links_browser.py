@@ -37,7 +37,11 @@ def _full_size(full_size_frames):  # noqa: F811
 # Panel k's image as the page shows it, as PNG (a data URL).
 PANEL_PNG = """async (k) => {
   const img = document.querySelectorAll('#views .view img')[k];
-  await img.decode();
+  // a newer frame may replace the picture mid-decode (EncodingError): decode that one
+  for (let k = 0; ; k++) {
+    try { await img.decode(); break; } catch (e) { if (k > 20) throw e; }
+    await new Promise((r) => setTimeout(r, 50));
+  }
   const c = document.createElement('canvas');
   c.width = img.naturalWidth;
   c.height = img.naturalHeight;
