@@ -8,9 +8,9 @@ and time-TF edits (each a value no edit before it had):
 - before (what a TF edit costs without recolouring): `Session.set_spec` integrates the window
   (the viewer's display format, RGBA8 from the kernels), the viewer's `upload` writes it into
   the texture, the raycaster draws it;
-- after: `Session.recolours` says the edit only recolours, `GLRecolourer.apply` rewrites the
-  texture from the winners (kernels/glsl/recolour.comp), the raycaster draws it ("gl", the GPU
-  path); or `BrickRecolourer.apply` writes RGBA8 on the OpenCL device over the bricks the edit
+- after: `LevelSession.recolours` (of `session.at(0)`) says the edit only recolours,
+  `GLRecolourer.apply` rewrites the texture from the winners (kernels/glsl/recolour.comp),
+  the raycaster draws it ("gl", the GPU path); or `BrickRecolourer.apply` writes RGBA8 on the OpenCL device over the bricks the edit
   may colour or the array held, and `recolour.show` writes what changed into a texture
   of its own ("bricks", the viewer's path on llvmpipe; `bricks_recoloured` the share of
   bricks). Preparing the winners (gathered by numpy and by OpenCL, the

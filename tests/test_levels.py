@@ -109,12 +109,21 @@ def test_auto_picks_finer_levels_once_they_are_predicted_to_fit(series):
 
 
 def test_fixed_level_session_follows_the_modes_pooling(series):
-    with Session(series, mode="alpha", level=1) as s:
+    """A coarse level's modes pool it differently: a switch reads the other pooling's steps,
+    and the steps of the pooling left go with its session, so that whatever the switches the
+    resident steps stay within the budget (each pooling's kept its steps, over it)."""
+    coarse = series.level(1)
+    step = int(np.prod(coarse.volume_shape)) * coarse.dtype.itemsize
+    with Session(series, mode="alpha", level=1, memory=6 * step) as s:
         a = s.set_window(0, 4)
         m = s.set_spec(mode="max")
         assert a.shape == m.shape == series.level(1).volume_shape
         ref = chronocl.integrate(series, "0:4", "max", level=1)
         np.testing.assert_array_equal(m.rgba, ref.rgba)
+        for mode in ("mean", "max", "min", "alpha"):
+            s.set_spec(mode=mode)
+            held = [t for ls in s.pool.sessions.values() for t in ls.manager.resident()]
+            assert len(held) * step <= 6 * step and len(s.pool.sessions) == 1, held
 
 
 def test_every_level_takes_the_keywords_of_the_other(series):
@@ -256,3 +265,26 @@ def test_modes_pooling_differently_share_level_0s_resident_steps(series):
             s.close()
         for m in managers.values():
             m.close()
+
+
+def test_a_move_that_fails_leaves_nothing_of_the_last_window_to_refine(series, monkeypatch):
+    """A move whose integration fails (out of memory, given up) leaves the session on the window
+    asked for: a refine then has nothing coarse to bring to full resolution (it brought the old
+    window back, which `current()` then gave for the new one), and `current()` integrates the
+    new window."""
+    from chronocl.integration.interactive.level_session import LevelSession
+
+    with Session(series, mode="max", time_tf="rgb", level="auto", memory="1GB") as s:
+        s.set_window(0, 5)
+        assert s.shown_level > 0
+        show = LevelSession.show
+
+        def failing(self, *args, **kwargs):
+            raise MemoryError("out of device memory")
+
+        monkeypatch.setattr(LevelSession, "show", failing)
+        with pytest.raises(MemoryError):
+            s.set_window(3, 8)
+        monkeypatch.setattr(LevelSession, "show", show)
+        assert s.refine() is None
+        assert s.current().steps == (3, 4, 5, 6, 7)

@@ -370,7 +370,7 @@ def test_a_window_handed_out_and_let_go_by_its_views_gives_way_to_another_views_
 
 
 def _level0(slot):
-    """The full-resolution session of a view's `AutoSession` (its pooling's)."""
+    """The full-resolution `LevelSession` of a view's `Session`."""
     return slot.session.at(0)
 
 

@@ -1,9 +1,12 @@
-"""Every tuning constant in one place: latency targets and delays, sizes chosen for speed or
-memory, polling intervals and the adaptive models' weights (issue 47).
+"""The tuning constants of the interactive paths in one place: latency targets and delays,
+sizes chosen for speed or memory, polling intervals and the adaptive models' weights (issue 47).
 
-Code reads them at call time as `TUNING.field`, never copied into a module global, so that a
-test (or a bench) may set a field of the one instance and be heard everywhere:
-`monkeypatch.setattr(TUNING, "refine_after_s", 0.0)`.
+Code reads them as `TUNING.field` when it uses them, or when it builds the object that uses
+them (a `DrawBudget`, a `HeapKeeper`, a queue's length, a session's latency target, the engine's
+table cache), never copied into a module global, so that a test (or a bench) may set a field of
+the one instance before the work or object it tunes: `monkeypatch.setattr(TUNING,
+"refine_after_s", 0.0)`. Some tuning of other paths is still beside its code (the event
+tracking's chunks and steps in flight, the widget's suspend delay, the OpenCL row blocks).
 
 Each field has a comment saying what it tunes and how it was measured: the machine, the command
 or case, the figure, and the commit that carries the measurement. "The 2-core machine" is the

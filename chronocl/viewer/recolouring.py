@@ -11,7 +11,7 @@ there than llvmpipe's compute shaders: bench/recolour.py), and only what changed
 frame's `upload_ms` counts that write, `recolour_ms` the rest).
 
 The winners (value and step per voxel) are those the kernels wrote as they integrated the
-window (max, min, change: `Session.winners`), else gathered from the level-0 session's
+window (max, min, change: `LevelSession.winners`), else gathered from the level-0 session's
 resident steps; they are prepared on the first edit of a window (or at idle, `prepare`), then
 kept in the slot; any integration of the window makes them stale.
 """

@@ -9,7 +9,7 @@ each view's session for its `state()` every `POLL_S` seconds and, when it change
 
 (null: the view has no session yet), for the views of the last frame: the managers the render
 thread published after it (`Views.shown_managers`). Level 0 is what a refine needs: a coarse
-frame asks it for the window in the background (`Session.read_ahead`), and a scrub at full
+frame asks it for the window in the background (`LevelSession.read_ahead`), and a scrub at full
 resolution reads ahead in it (`chronocl.data.window`). The poll runs on the event loop and takes
 each manager's lock for a moment, never the render thread's: steps being fetched show while a
 frame is drawn.

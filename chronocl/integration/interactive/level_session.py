@@ -92,7 +92,7 @@ class LevelSession:
         self._device = DeviceWindow(self.engine, self.series)
         # Sessions that show one window in several views can share one manager's resident steps.
         managers = setup.managers
-        self._owns_manager = manager is None and managers is None
+        self.owns_manager = manager is None and managers is None
         if manager is None and managers is not None:
             key = manager_key(self.level, self.spec.integration.pool)
             if key not in managers:
@@ -202,7 +202,7 @@ class LevelSession:
             return
         held = self._arrays
         leaving = [s for s in held if s not in why.keep]
-        if not self._owns_manager:
+        if not self.owns_manager:
             self.manager.let_go(self)
         self._hold({s: a for s, a in held.items() if s in why.keep})
         del held
@@ -214,7 +214,7 @@ class LevelSession:
         """Hold nothing of the window: another pooling's session of this level shows it now.
         Its steps stay resident in the shared manager but may give way; its chronovolume,
         sliding state and device copies go (shown again, the window integrates anew)."""
-        if not self._owns_manager:  # its window gives way to the others' (`let_go`)
+        if not self.owns_manager:  # its window gives way to the others' (`let_go`)
             self.manager.let_go(self)
         self._device.release()
         self._hold({})
@@ -223,7 +223,7 @@ class LevelSession:
         self._cv = self._won = None
 
     def close(self) -> None:
-        if self._owns_manager:
+        if self.owns_manager:
             self.manager.close()
         self.set_aside()
 
@@ -250,7 +250,7 @@ class LevelSession:
         width, budget, costs = selection.width, self.budget, self.costs
         reason, keep, state = slide_plan(self.spec, voxels, width, window, budget, costs, move)
         self._bricks.keep = keep
-        if self._owns_manager:
+        if self.owns_manager:
             self.manager.budget = self.budget - (0 if reason else state) - keep * window
         direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
         if not (reason is None and self._slider and self._slider.can_move_to(selection)):
@@ -418,11 +418,16 @@ class SessionPool:
     def session(self, level: int, spec: IntegrationSpec) -> LevelSession:
         """The session of `level` for `spec`'s pooling (full resolution: one for all)."""
         key = manager_key(level, spec.integration.pool)
-        # Another pooling's session of the level held its window (the same steps at level 0)
-        # after a mode switch: a jump then read the new window beside it, over the limit.
-        for other, s in self.sessions.items():
+        # Another pooling's session of the level held its window after a mode switch: a jump
+        # then read the new window beside it, over the limit. One that owns its manager goes
+        # whole (its steps are the other pooling's; coming back reads them again).
+        for other, s in list(self.sessions.items()):
             if other != key and other[0] == level:
-                s.set_aside()
+                if s.owns_manager:
+                    s.close()
+                    del self.sessions[other]
+                else:
+                    s.set_aside()
         if key not in self.sessions:
             o = self.setup
             # Coarse levels hold 1/8 of the voxels of the next finer one or less.

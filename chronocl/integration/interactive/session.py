@@ -235,8 +235,9 @@ class Session:
         and a spec change at once, at the level the policy picks. The value range is fixed
         here, so every level is normalised by level 0's range."""
         self.asked, spec = fixed(self.base, self.asked, self.spec, spec, selection)
-        # the last chronovolume goes first: a move that fails half way must not leave it shown
-        self.spec, self.selection, self._cv = spec, selection, None
+        # the last chronovolume goes first: a move that fails half way must not leave it shown,
+        # nor a refine bring it back
+        self.spec, self.selection, self._cv, self._last = spec, selection, None, None
         level, self.why = self.policy.pick(selection.width, lambda n: self._missing(n, selection))
         return self._at(level, selection, spec)
 
