@@ -10,12 +10,12 @@ and time-TF edits (each a value no edit before it had):
   the texture, the raycaster draws it;
 - after: `LevelSession.recolours` (of `session.at(0)`) says the edit only recolours,
   `GLRecolourer.apply` rewrites the texture from the winners (kernels/glsl/recolour.comp),
-  the raycaster draws it ("gl", the GPU path); or `BrickRecolourer.apply` writes RGBA8 on the OpenCL device over the bricks the edit
-  may colour or the array held, and `recolour.show` writes what changed into a texture
-  of its own ("bricks", the viewer's path on llvmpipe; `bricks_recoloured` the share of
-  bricks). Preparing the winners (gathered by numpy and by OpenCL, the
-  GL upload, the brick summaries) is timed on its own: it happens once per integrated window,
-  at its first edit.
+  the raycaster draws it ("gl", the GPU path); or `BrickRecolourer.apply` writes RGBA8 on the
+  OpenCL device over the bricks the edit may colour or the array held, and `recolour.show`
+  writes what changed into a texture of its own ("bricks", the viewer's path on llvmpipe;
+  `bricks_recoloured` the share of bricks). Preparing the winners (gathered by numpy and by
+  OpenCL, the GL upload, the brick summaries) is timed on its own: it happens once per
+  integrated window, at its first edit.
 
 Each edit's recoloured picture is compared with the integrated one (max / 99th percentile
 pixel difference). `--png DIR` saves the picture before the edits, each recoloured and the
