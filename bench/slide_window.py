@@ -83,11 +83,14 @@ def measured_rates() -> list[dict]:
     out = []
     for views in (o for o in gc.get_objects() if isinstance(o, Views)):
         rates = views.slide_costs
-        for level in sorted(rates.direct):
-            d, s, f = rates.direct[level], rates.slide.get(level), rates.fill.get(level)
+        kinds = {key for key in (*rates.slide, *rates.fill)} or {(lv, False) for lv in rates.direct}
+        for level, inverts in sorted(k for k in kinds if k[0] in rates.direct):
+            d = rates.direct[level]
+            s, f = rates.slide.get((level, inverts)), rates.fill.get((level, inverts))
             out.append(
                 {
                     "level": level,
+                    "slides_by_sums": inverts,  # the mode adds and takes out steps (mean, count)
                     "direct_ns_per_voxel_step": round(1e6 * d, 4),
                     "slide_ns_per_voxel": None if s is None else round(1e6 * s, 4),
                     "fill_ns_per_voxel_step": None if f is None else round(1e6 * f, 4),

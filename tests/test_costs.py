@@ -39,13 +39,13 @@ def test_nothing_measured_slides_as_a_library_session_does():
     assert SlideCosts().why_not(V, 50) is None
 
 
-def _measured(d: float, s: float, f: float) -> SlideCosts:
+def _measured(d: float, s: float, f: float, inverts: bool = False) -> SlideCosts:
     """Rates in ms per voxel-step integrated (d), per voxel of a steady slide (s) and per
-    voxel-step of a fill (f), as the sessions feed them."""
+    voxel-step of a fill (f), as the sessions feed them (`inverts`: of a mode sliding by sums)."""
     c = SlideCosts()
     c.record_direct(0, ms=d * V * 10, voxels=V, steps=10)
-    c.record_slide(0, ms=f * V * 30, voxels=V, fill=30)
-    c.record_slide(0, ms=s * V, voxels=V)
+    c.record_slide(0, ms=f * V * 30, voxels=V, fill=30, inverts=inverts)
+    c.record_slide(0, ms=s * V, voxels=V, inverts=inverts)
     return c
 
 
@@ -104,12 +104,12 @@ def test_steady_slides_are_averaged_over_the_splits_period():
     for _ in range(20):
         c.record_slide(0, ms=10e-6 * V, voxels=V)
     c.record_slide(0, ms=400e-6 * V, voxels=V)  # a split
-    assert c.slide[0] < 40e-6
+    assert c.slide[0, False] < 40e-6
     assert c.why_not(V, 40, Move(filled=True)) is None  # one split does not drop the state
     slower = SlideCosts()
     for k in range(3 * TUNING.slide_memory):  # a machine getting slower is followed
         slower.record_slide(0, ms=(1 if k < TUNING.slide_memory else 100) * V * 1e-6, voxels=V)
-    assert slower.slide[0] > 50e-6
+    assert slower.slide[0, False] > 50e-6
 
 
 def test_rates_are_per_level_and_follow_the_machine():
@@ -121,6 +121,35 @@ def test_rates_are_per_level_and_follow_the_machine():
     assert c.direct[0] == pytest.approx(2e-6)
 
 
+def test_each_kind_of_slide_is_measured_apart(monkeypatch):
+    """A mode sliding by its sums (mean: the entering and the leaving step, two pieces) and one
+    sliding through the aggregate (max: about seven pieces a slide) keep their own slide and
+    fill rates: after mean's cheap slides, max's slide is still predicted from the guess (they
+    shared one rate per level, so a switch to max took mean's rate for its own)."""
+    c = SlideCosts()
+    c.record_direct(0, ms=1e-6 * V * 10, voxels=V, steps=10)
+    c.record_slide(0, ms=0.1e-6 * V * 10, voxels=V, fill=10, inverts=True)
+    c.record_slide(0, ms=0.1e-6 * V, voxels=V, inverts=True)
+    _, slide, measured = c.predict(V, 10, Move(filled=True, inverts=True))
+    assert measured and slide == pytest.approx(0.1e-6 * V)
+    _, slide, measured = c.predict(V, 10, Move(filled=True))
+    assert not measured and slide == pytest.approx(TUNING.slide_steps * 1e-6 * V)
+    # a session feeds its mode's kind: mean's slides by sums, max's through the aggregate
+    data = np.random.default_rng(2).random((12, 4, 6, 21), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    monkeypatch.setattr(TUNING, "slide_steps", 0.01)  # guessed cheap: the first slides slide
+    monkeypatch.setattr(TUNING, "fill_steps", 0.01)
+    fed = SlideCosts()
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    for mode in ("mean", "max"):
+        with chronocl.Session(series, mode=mode, time_tf=absolute, slide_costs=fed) as session:
+            session.set_window(0, 6)
+            session.slide(1)
+            session.slide(1)
+            assert session.stats["path"] == "incremental"
+    assert set(fed.slide) == set(fed.fill) == {(0, True), (0, False)}
+
+
 def test_slide_plan_asks_the_costs_only_where_a_slide_is_possible():
     spec = make_spec("alpha", time_tf=TimeTF.preset("rgb", positions="absolute"))
     c = _measured(d=1e-6, s=1e-3, f=1e-3)
@@ -130,7 +159,7 @@ def test_slide_plan_asks_the_costs_only_where_a_slide_is_possible():
     relative = make_spec("alpha", time_tf=TimeTF.preset("rgb"))
     assert "relative" in slide_plan(relative, V, 10, 10 * 4 * V, 2**40, c)[0]
     mean = make_spec("mean", time_tf=TimeTF.preset("rgb", positions="absolute"))
-    cheap = _measured(d=1e-6, s=1e-9, f=1e-9)
+    cheap = _measured(d=1e-6, s=1e-9, f=1e-9, inverts=True)  # mean slides by its sums
     assert slide_plan(mean, V, 10, 10 * 4 * V, 2**40, cheap, Move(level=0))[0] is None
 
 
@@ -219,14 +248,14 @@ class _Fixed(SlideCosts):
 
     def _reset(self) -> None:
         self.direct = {lv: self.rates[0] for lv in range(4)}
-        self.slide = {lv: self.rates[1] for lv in range(4)}
-        self.fill = {lv: self.rates[1] for lv in range(4)}
+        self.slide = {(lv, k): self.rates[1] for lv in range(4) for k in (False, True)}
+        self.fill = {(lv, k): self.rates[1] for lv in range(4) for k in (False, True)}
 
     def record_direct(self, level, ms, voxels, steps) -> None:
         self.fed.append(("direct", level))
         self._reset()
 
-    def record_slide(self, level, ms, voxels, steps=1, fill=0) -> None:
+    def record_slide(self, level, ms, voxels, steps=1, fill=0, inverts=False) -> None:
         self.fed.append(("fill" if fill else "slide", level))
         self._reset()
 

@@ -122,13 +122,14 @@ class _Rates(SlideCosts):
 
     def __init__(self, direct: float, slide: float) -> None:
         super().__init__()
-        self.direct, self.slide, self.fill = {0: direct}, {0: slide}, {0: slide}
+        kinds = {(0, False): slide, (0, True): slide}  # through the aggregate, by sums
+        self.direct, self.slide, self.fill = {0: direct}, dict(kinds), dict(kinds)
         self.fed: list[str] = []
 
     def record_direct(self, level, ms, voxels, steps) -> None:
         self.fed.append("direct")
 
-    def record_slide(self, level, ms, voxels, steps=1, fill=0) -> None:
+    def record_slide(self, level, ms, voxels, steps=1, fill=0, inverts=False) -> None:
         assert steps > 0
         self.fed.append("fill" if fill else "slide")
 

@@ -23,7 +23,10 @@ the window's steps travel to the device for every integration (a GPU whose memor
 window), d is mostly that transfer, which a slide pays only for its entering steps and a fill once
 per step: both are then guessed at d. The first slide measures f, the next ones s.
 
-Rates are per level (a coarse level's voxels cost more each: fixed overheads): d and f running
+Rates are per level (a coarse level's voxels cost more each: fixed overheads), and s and f per
+kind of slide besides (`Move.inverts`: a mode sliding by its sums alone adds the entering and
+takes out the leaving steps, two pieces, where the others combine partials, about seven): one
+kind's slides say little of the other's. d and f are running
 averages (`TUNING.cost_smoothing`), s the mean of the last `TUNING.slide_memory` slides (so that
 the splits of the stacks, a slide in tens dearer than the others, count at their share).
 
@@ -77,26 +80,35 @@ class SlideCosts:
 
     def __init__(self) -> None:
         self.direct: dict[int, float] = {}  # level -> ms per voxel-step, integrated
-        self.slide: dict[int, float] = {}  # level -> ms per voxel of a steady one-step slide
-        self.fill: dict[int, float] = {}  # level -> ms per voxel-step of a state's fill
-        # level -> slides averaged so far (up to TUNING.slide_memory)
-        self._slides: dict[int, int] = {}
+        # (level, inverts) -> ms per voxel of a steady one-step slide, of a state's fill per
+        # voxel-step, and the slides averaged so far (up to TUNING.slide_memory)
+        self.slide: dict[tuple[int, bool], float] = {}
+        self.fill: dict[tuple[int, bool], float] = {}
+        self._slides: dict[tuple[int, bool], int] = {}
 
     def record_direct(self, level: int, ms: float, voxels: int, steps: int) -> None:
         """A window of `steps` steps over `voxels` voxels integrated from its steps in `ms`."""
         _blend(self.direct, level, ms / max(1, voxels * steps))
 
     def record_slide(
-        self, level: int, ms: float, voxels: int, steps: int = 1, fill: int = 0
+        self,
+        level: int,
+        ms: float,
+        voxels: int,
+        steps: int = 1,
+        fill: int = 0,
+        inverts: bool = False,
     ) -> None:
         """A slide of `steps` entering steps that took `ms` over `voxels` voxels; `fill`: the
-        width of the window whose state this slide filled (0: a steady slide)."""
+        width of the window whose state this slide filled (0: a steady slide); `inverts`: of a
+        mode sliding by its sums alone."""
+        key = (level, inverts)
         if fill:
-            _blend(self.fill, level, ms / max(1, voxels * fill))
+            _blend(self.fill, key, ms / max(1, voxels * fill))
             return
-        n = self._slides[level] = min(TUNING.slide_memory, self._slides.get(level, 0) + 1)
-        value, old = ms / max(1, voxels * steps), self.slide.get(level)
-        self.slide[level] = value if old is None else old + (value - old) / n
+        n = self._slides[key] = min(TUNING.slide_memory, self._slides.get(key, 0) + 1)
+        value, old = ms / max(1, voxels * steps), self.slide.get(key)
+        self.slide[key] = value if old is None else old + (value - old) / n
 
     def predict(self, voxels: int, width: int, move: Move = ONE_STEP) -> tuple | None:
         """(ms integrating, ms sliding, whether sliding is measured) for `move` of a window of
@@ -107,11 +119,12 @@ class SlideCosts:
         shift = max(1, abs(move.shift))
         pieces = INVERT_PIECES if move.inverts else SLIDE_PIECES
         guess = d if move.travels else TUNING.slide_steps * d * pieces / SLIDE_PIECES
-        steady = self.slide.get(move.level, guess) * voxels * shift
+        key = (move.level, move.inverts)
+        steady = self.slide.get(key, guess) * voxels * shift
         fill = 0.0
         if not move.filled:  # its share over a scrub across the window: W slides
-            fill = self.fill.get(move.level, d if move.travels else TUNING.fill_steps * d) * voxels
-        measured = move.level in self.slide and (move.filled or move.level in self.fill)
+            fill = self.fill.get(key, d if move.travels else TUNING.fill_steps * d) * voxels
+        measured = key in self.slide and (move.filled or key in self.fill)
         return d * voxels * width, steady + fill, measured
 
     def why_not(self, voxels: int, width: int, move: Move = ONE_STEP) -> str | None:
@@ -130,7 +143,7 @@ class SlideCosts:
         )
 
 
-def _blend(table: dict[int, float], key: int, value: float) -> None:
+def _blend(table: dict, key: object, value: float) -> None:
     old = table.get(key)
     weight = TUNING.cost_smoothing
     table[key] = value if old is None else (1 - weight) * old + weight * value

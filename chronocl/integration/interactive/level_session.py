@@ -47,7 +47,7 @@ from chronocl.integration.inmemory import WinnersOut, check_level, integrate_bri
 from chronocl.integration.interactive.costs import Move
 from chronocl.integration.interactive.moves import fixed
 from chronocl.integration.interactive.settings import Settings, manager_key, settings
-from chronocl.integration.interactive.slider import Slider, slide_plan
+from chronocl.integration.interactive.slider import Slider, slide_plan, slides_by_sums
 from chronocl.integration.interactive.winners import Winners, of_window, recolours
 from chronocl.modes.spec import IntegrationSpec
 
@@ -242,7 +242,8 @@ class LevelSession:
         # the move as a slide is costed: the steps entering where the state can slide (else a
         # one-step slide's, which decides whether the window integrated now keeps a state), the
         # steps sent to the device for every integration, the state's fill paid already
-        voxels, move = int(np.prod(self.series.volume_shape)), Move(self.level)
+        voxels = int(np.prod(self.series.volume_shape))
+        move = Move(self.level, inverts=slides_by_sums(self.spec))
         move = move._replace(travels=self._device.why is not None)
         if old is not None and self._slider is not None and self._slider.can_move_to(selection):
             entering = len(set(selection.steps) - set(old.steps))
@@ -275,7 +276,7 @@ class LevelSession:
             self._slider, path = slider, "incremental"
             if self.costs is not None:  # the first slide of a state fills it
                 ms = 1e3 * (time.perf_counter() - t_slide)
-                self.costs.record_slide(self.level, ms, voxels, move.shift, fill)
+                self.costs.record_slide(self.level, ms, voxels, move.shift, fill, move.inverts)
         else:
             job = window_job(self.series, selection, self.spec)
             bricks = self._device.bricks(self._arrays, selection.width) or self._bricks

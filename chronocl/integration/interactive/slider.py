@@ -324,6 +324,13 @@ def slide_plan(
     elif window + state > budget:
         reason = f"window and sliding state need {human(window + state)} > budget {human(budget)}"
     elif costs is not None:
-        inverts = mode.slides == "invert" and not mode.combines()
-        reason = costs.why_not(voxels, width, (move or Move())._replace(inverts=inverts))
+        move = (move or Move())._replace(inverts=slides_by_sums(spec))
+        reason = costs.why_not(voxels, width, move)
     return reason, keep, state
+
+
+def slides_by_sums(spec: IntegrationSpec) -> bool:
+    """Whether `spec`'s mode slides by its sums alone, adding the entering steps and taking out
+    the leaving ones (`costs.Move.inverts`), not through an aggregate of partials."""
+    mode = spec.integration
+    return mode.slides == "invert" and not mode.combines()
