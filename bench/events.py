@@ -37,31 +37,10 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import emit, env_record
+from common import emit, env_record, peak_rss, reset_peak_rss
 
 TARGET_S = 30.0
 THRESHOLD = 0.3
-
-
-def _hwm() -> int | None:
-    """The process's peak RSS (VmHWM) in bytes, None where /proc has none."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
-
-
-def _reset_peak() -> bool:
-    """Reset the kernel's RSS high-water mark; False where not allowed."""
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-        return True
-    except OSError:
-        return False
 
 
 def child(store: str, window: str, threshold: float, repeats: int) -> None:
@@ -98,10 +77,10 @@ def child(store: str, window: str, threshold: float, repeats: int) -> None:
     for repeat in range(repeats):
         read_s = read_all()
         baseline = psutil.Process().memory_info().rss
-        reset = _reset_peak()
+        reset = reset_peak_rss()
         spent = Timings()
         graph = find(job, timings=spent)
-        peak = _hwm() if reset else None
+        peak = peak_rss() if reset else None
         print(
             json.dumps(
                 {

@@ -14,9 +14,9 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
+from common import peak_rss, reset_peak_rss
 
 from chronocl.data.series import open_series
 
@@ -25,26 +25,6 @@ def _rss() -> int:
     import psutil
 
     return psutil.Process().memory_info().rss
-
-
-def _reset_peak() -> bool:
-    """Reset the kernel's RSS high-water mark (VmHWM); False where not allowed."""
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-        return True
-    except OSError:
-        return False
-
-
-def _hwm() -> int | None:
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
 
 
 def child(store: str, out: str, budget: int, mode: str, compressor: str) -> None:
@@ -72,7 +52,7 @@ def child(store: str, out: str, budget: int, mode: str, compressor: str) -> None
         while not stop.wait(0.002):
             sampled.append(_rss())
 
-    hwm_ok = _reset_peak()
+    hwm_ok = reset_peak_rss()
     sampler = threading.Thread(target=sample, daemon=True)
     sampler.start()
     t0 = time.perf_counter()
@@ -82,7 +62,7 @@ def child(store: str, out: str, budget: int, mode: str, compressor: str) -> None
     seconds = time.perf_counter() - t0
     stop.set()
     sampler.join()
-    hwm = _hwm() if hwm_ok else None
+    hwm = peak_rss() if hwm_ok else None
     peak = max(hwm or 0, max(sampled))
     print(
         json.dumps(
