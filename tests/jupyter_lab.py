@@ -25,6 +25,24 @@ from contextlib import contextmanager
 from pathlib import Path
 
 START_TIMEOUT_S = 60
+
+
+def wait_for_port(proc: subprocess.Popen, port: int, log_path: Path, name: str) -> None:
+    """Until the server `proc` (its output in `log_path`) takes connections on `port` of
+    127.0.0.1; RuntimeError with the log's end where it died or START_TIMEOUT_S passed."""
+    end = time.monotonic() + START_TIMEOUT_S
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > end:
+                raise RuntimeError(
+                    f"{name} did not start: {log_path.read_text()[-2000:]}"
+                ) from None
+            time.sleep(0.2)
+
+
 # True once the notebook's kernel is idle and its cells (the argument: how many) are shown.
 NOTEBOOK_READY = """(cells) => {
   const app = window.jupyterapp, nb = app && app.shell.currentWidget;
@@ -105,17 +123,7 @@ def jupyter_server(root: Path, home: Path, front_end: str = "lab") -> Iterator[d
             env=env, stdout=log, stderr=subprocess.STDOUT, cwd=root,
         )  # fmt: skip
         try:
-            end = time.monotonic() + START_TIMEOUT_S
-            while True:
-                try:
-                    socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                    break
-                except OSError:
-                    if proc.poll() is not None or time.monotonic() > end:
-                        raise RuntimeError(
-                            f"{spec['name']} did not start: {log_path.read_text()[-2000:]}"
-                        ) from None
-                    time.sleep(0.2)
+            wait_for_port(proc, port, log_path, spec["name"])
             yield {
                 "base": f"http://127.0.0.1:{port}",
                 "token": token,

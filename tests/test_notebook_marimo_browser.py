@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import os
 import secrets
-import socket
 import subprocess
 import sys
 import time
@@ -24,14 +23,13 @@ pytest.importorskip("playwright.sync_api")
 pytest.importorskip("anywidget")
 pytest.importorskip("marimo")
 
-from .jupyter_lab import free_port
+from .jupyter_lab import free_port, wait_for_port
 from .viewer_helpers import CHROMIUM, launch_browser
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
 )
 
-START_TIMEOUT_S = 60
 # The notebook: the widget, two buttons (the first's cell sets the mode from code, the
 # second's reads the widget's state back), the state printed after STATE=.
 NOTEBOOK = """import marimo
@@ -154,17 +152,7 @@ def marimo_app(tmp_path_factory):
             env=env, stdout=log, stderr=subprocess.STDOUT, cwd=root,
         )  # fmt: skip
         try:
-            end = time.monotonic() + START_TIMEOUT_S
-            while True:
-                try:
-                    socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                    break
-                except OSError:
-                    if proc.poll() is not None or time.monotonic() > end:
-                        raise RuntimeError(
-                            f"marimo did not start: {log_path.read_text()[-2000:]}"
-                        ) from None
-                    time.sleep(0.2)
+            wait_for_port(proc, port, log_path, "marimo")
             yield {"url": f"http://127.0.0.1:{port}/?access_token={token}", "log": log_path}
         finally:
             proc.terminate()
