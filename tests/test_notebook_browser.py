@@ -83,14 +83,18 @@ EVENT_CELLS = [
 # The first widget's viewer (widget.js puts it on the element that holds the shadow root).
 VIEWER = "(document.querySelector('.chronocl-widget') || {}).viewer"
 SECOND = "(document.querySelectorAll('.chronocl-widget')[1] || {}).viewer"
-# The share of the first view's picture that is not background (near black), 0..1.
-LIT_SHARE = """async () => {
-  const img = document.querySelector('.chronocl-widget').shadowRoot.querySelector('.view img');
+
+
+def lit_share(host: str) -> str:
+    """The share of the first view's picture in the widget `host` (a JS expression for its
+    element) that is not background (near black), 0..1, as a page function."""
+    return f"""async () => {{
+  const img = {host}.shadowRoot.querySelector('.view img');
   // a newer frame may replace the picture mid-decode (EncodingError): decode that one
-  for (let k = 0; ; k++) {
-    try { await img.decode(); break; } catch (e) { if (k > 20) throw e; }
+  for (let k = 0; ; k++) {{
+    try {{ await img.decode(); break; }} catch (e) {{ if (k > 20) throw e; }}
     await new Promise((r) => setTimeout(r, 50));
-  }
+  }}
   const c = document.createElement('canvas');
   c.width = img.naturalWidth; c.height = img.naturalHeight;
   const g = c.getContext('2d');
@@ -99,7 +103,10 @@ LIT_SHARE = """async () => {
   let lit = 0;
   for (let i = 0; i < px.length; i += 4) if (px[i] + px[i + 1] + px[i + 2] > 60) lit += 1;
   return lit / (px.length / 4);
-}"""
+}}"""
+
+
+LIT_SHARE = lit_share("document.querySelector('.chronocl-widget')")
 SETTLED = f"""([seq]) => {{
   const v = {VIEWER}, l = v && v.last;
   return !!l && l.seq > seq && l.quality === 'full' && !l.refining;

@@ -24,6 +24,7 @@ pytest.importorskip("anywidget")
 pytest.importorskip("marimo")
 
 from .jupyter_lab import free_port, wait_for_port
+from .test_notebook_browser import lit_share
 from .viewer_helpers import CHROMIUM, launch_browser
 
 pytestmark = pytest.mark.skipif(
@@ -93,23 +94,7 @@ HOST = """(() => {
   return find(document);
 })()"""
 VIEWER = f"({HOST} || {{}}).viewer"
-# The share of the first view's picture that is not background (near black), 0..1.
-LIT_SHARE = f"""async () => {{
-  const img = {HOST}.shadowRoot.querySelector('.view img');
-  // a newer frame may replace the picture mid-decode (EncodingError): decode that one
-  for (let k = 0; ; k++) {{
-    try {{ await img.decode(); break; }} catch (e) {{ if (k > 20) throw e; }}
-    await new Promise((r) => setTimeout(r, 50));
-  }}
-  const c = document.createElement('canvas');
-  c.width = img.naturalWidth; c.height = img.naturalHeight;
-  const g = c.getContext('2d');
-  g.drawImage(img, 0, 0);
-  const px = g.getImageData(0, 0, c.width, c.height).data;
-  let lit = 0;
-  for (let i = 0; i < px.length; i += 4) if (px[i] + px[i + 1] + px[i + 2] > 60) lit += 1;
-  return lit / (px.length / 4);
-}}"""
+LIT_SHARE = lit_share(HOST)
 SHOWN = f"""() => {{
   const h = {HOST}, img = h && h.shadowRoot.querySelector('.view img');
   return !!img && img.complete && img.naturalWidth > 0;
