@@ -22,6 +22,7 @@ pytest.importorskip("playwright.sync_api")
 from chronocl.data import synthetic
 from chronocl.data.timeseries import TimeSeries
 
+from .test_viewer_refine_browser import WINDOW
 from .viewer_helpers import CHROMIUM, browser_page, start_server
 
 pytestmark = pytest.mark.skipif(
@@ -29,10 +30,6 @@ pytestmark = pytest.mark.skipif(
 )
 
 READ_DELAY_S = 0.4  # per read of a step's rows, once `slow["on"]`
-WINDOW = """async (w) => {
-  const m = await import(new URL('static/connection.js', location.href).href);
-  m.update({window: w}, 'full');
-}"""
 STAGES = """async (ps) => {
   const m = await import(new URL('static/connection.js', location.href).href);
   return ps.map((p) => m.stageText(p));

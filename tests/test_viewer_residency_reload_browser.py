@@ -25,6 +25,7 @@ from chronocl.data.timeseries import TimeSeries
 
 from .test_prefetch_browser import BAR_PIXEL
 from .test_viewer_page_browser import Page, browser, shots_dir  # noqa: F401
+from .test_viewer_refine_browser import WINDOW
 from .viewer_helpers import CHROMIUM, SETTLED_FRAME, start_server
 
 pytestmark = pytest.mark.skipif(
@@ -33,10 +34,6 @@ pytestmark = pytest.mark.skipif(
 
 SHARED, OWN = (10, 20), (0, 5)
 SOLID = [88, 166, 255, 255]  # a resident step's cell of the residency bar
-WINDOW = """async (w) => {
-  const m = await import(new URL('static/connection.js', location.href).href);
-  m.update({window: w}, 'full');
-}"""
 RESIDENT = """(want) => {
   const r = window.viewer.residency;
   return !!r && want.every((s) => r.resident.includes(s));
