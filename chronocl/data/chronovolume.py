@@ -89,6 +89,13 @@ class Chronovolume:
         return self.rgba.shape[2::-1]  # type: ignore[return-value]
 
     @property
+    def rgba_dtype(self) -> np.dtype:
+        """The RGBA's dtype (uint8: a display chronovolume). A viewer's GPU recolour knows it
+        without reading its RGBA back from the texture (`chronocl.viewer.recolouring.InTexture`,
+        which also knows `shape` and `dims`)."""
+        return self.rgba.dtype
+
+    @property
     def spec(self) -> IntegrationSpec:
         return IntegrationSpec.from_dict(self.metadata["spec"])
 

@@ -4,8 +4,10 @@ Eligibility: the view shows its window integrated at full resolution in its text
 new spec differs from the one shown only where `winners.why_not` allows (max, min, first_hit,
 change). Where it does not, the frame says why (`slot.why_not_recoloured`, the frame header's
 `why_integrated`). Dispatch: on a GPU, the compute pass rewrites the view's texture
-(`chronocl.render.recolour.gl`), and the frame's chronovolume gets its RGBA read back after the
-frame is sent (`finish`), for probes, saves and framing; on llvmpipe with an RGBA8 texture, the
+(`chronocl.render.recolour.gl`), and the frame's chronovolume (`InTexture`) reads its RGBA back
+from it only when something reads `rgba` (a probe, a save, framing, a movie's frame): an edit
+that nothing read is never read back (512 MB to 2 GB at 512^3), because the texture is its
+owner until it takes another frame (`settle`); on llvmpipe with an RGBA8 texture, the
 OpenCL device recolours brick by brick (`chronocl.render.recolour.bricks`, several times faster
 there than llvmpipe's compute shaders: bench/recolour.py), and only what changed goes up (the
 frame's `upload_ms` counts that write, `recolour_ms` the rest).
@@ -19,6 +21,7 @@ kept in the slot; any integration of the window makes them stale.
 from __future__ import annotations
 
 import functools
+import threading
 import time
 import weakref
 from dataclasses import dataclass
@@ -26,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from chronocl.core import process_memory
+from chronocl.core.errors import ChronoclError
 from chronocl.core.interrupt import checkpoint
 from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
@@ -64,7 +68,11 @@ class Recolouring:
         self.device = device  # the OpenCL device of recolouring on the host
         self.ms = 0.0  # recolouring time of the last frame's views
         self.upload_ms = 0.0  # of which writing textures (llvmpipe's brick-wise path)
-        self._unread: list[tuple[Chronovolume, object]] = []
+        self.readback_ms = 0.0  # reading `InTexture`s back since the worker zeroed it
+        self.read_bytes = 0  # read back in all (a count for tests and benchmarks)
+        # each view's chronovolume whose RGBA is still only in its texture (weakly held: one
+        # nothing holds any more is never read)
+        self._unread: list[tuple[ViewSlot, weakref.ref]] = []
 
     def view(self, slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> Chronovolume | None:
         """The view's chronovolume for `spec` recoloured, its texture rewritten; None where the
@@ -91,21 +99,43 @@ class Recolouring:
             if prepared is None:  # why: `_prepare` said
                 return None
         meta = {**shown.metadata, "spec": new.to_dict(), "value_range": list(new_range)}
-        if prepared.recolourer.gl_thread:  # the texture rewritten, its RGBA read by `finish`
-            vol = on_gl(_apply_and_show, prepared, new, slot.volume, shown.spacing)
-            fmt = vol.texture.dtype
-            rgba = np.empty((*shown.shape, 4), dtype=np.uint8 if fmt == "f1" else np.float32)
-            cv = Chronovolume(rgba, shown.t_index, meta)
-            slot.volume = vol
-            self._unread.append((cv, vol))
-        else:  # RGBA8 on the host, what changed written into the texture
+        spacing, held = shown.spacing, _held_by(prepared, shown, slot)
+        if prepared.recolourer.gl_thread:  # the compute pass writes the texture, below
+            fmt = slot.volume.texture.dtype
+            unread = InTexture(shown.shape, fmt, shown.t_index, meta, self)
+            cv, changed = unread, None
+        else:  # RGBA8 on the host; what changed is written into the texture below
             changed = prepared.recolourer.apply(prepared.winners, new, slot.volume)
             cv = Chronovolume(changed.rgba, shown.t_index, meta)
-            self._show(slot, prepared, changed, shown, cv)
+        # all that showed the old frame shows the new one before the texture is rewritten, so
+        # that an old frame never read is read back only where something else still holds it
         slot.cv, slot.uploaded = cv, cv
         s.adopt(spec, new, cv)
+        del shown, found, full
+        self.settle(slot)
+        if changed is None:  # (written, the texture owns it: an error before, nothing does)
+            slot.volume = on_gl(_apply_and_show, prepared, new, slot.volume, spacing, unread)
+            self._unread.append((slot, weakref.ref(unread)))
+        else:
+            self._show(slot, prepared, changed, held, spacing, cv)
         self.ms += 1e3 * (time.perf_counter() - t) - (self.upload_ms - uploaded)
         return cv
+
+    def settle(self, slot: ViewSlot) -> None:
+        """The slot's texture takes another frame next: the frame it holds whose RGBA was never
+        read is read back now where anything but the slot still holds it (a session keeping
+        it to show again, a caller), and otherwise let go unread (call it on the worker's
+        thread, or on the GL thread while the worker waits for it)."""
+        mine = [ref for s, ref in self._unread if s is slot]
+        if not mine:
+            return
+        self._unread = [(s, ref) for s, ref in self._unread if s is not slot]
+        for ref in mine:
+            if slot.uploaded is not None and slot.uploaded is ref():
+                slot.uploaded = None  # it is rewritten next: the slot shows nothing meanwhile
+            cv = ref()
+            if cv is not None:
+                cv.read()
 
     def prepare(self, slot: ViewSlot) -> bool:
         """Gather the winners of the window the slot shows, where its mode recolours and they
@@ -122,13 +152,11 @@ class Recolouring:
         found = _recolourable(slot, s.asked, s.selection)
         return not isinstance(found, str) and self._prepare(slot, found[0], shown, None) is not None
 
-    def _show(self, slot: ViewSlot, prepared: Prepared, changed: Changed, shown, cv) -> None:
-        """Write what changed into the slot's texture (all of it unless the texture holds the
-        last one written)."""
-        ours = prepared.written is not None and prepared.written() is shown
-        held = prepared.held if ours and prepared.texture is slot.volume.texture else None
+    def _show(self, slot: ViewSlot, prepared: Prepared, changed: Changed, held, spacing, cv):
+        """Write what changed into the slot's texture (all of it where `held`, the bricks the
+        texture may colour, is None: `_held_by`)."""
         t = time.perf_counter()
-        on_gl(_write, changed, held, shown.spacing)
+        on_gl(_write, changed, held, spacing)
         self.upload_ms += 1e3 * (time.perf_counter() - t)
         prepared.written, prepared.texture = weakref.ref(cv), slot.volume.texture
         prepared.held = changed.coloured
@@ -181,11 +209,94 @@ class Recolouring:
         slot.recolour = prepared
         return prepared
 
-    def finish(self) -> None:
-        """Read the recoloured textures back into their chronovolumes' RGBA."""
-        unread, self._unread = self._unread, []
-        if unread:
-            on_gl(lambda rc: [vol.texture.read_into(cv.rgba) for cv, vol in unread])
+    def read_back(self, ms: float, nbytes: int) -> None:
+        """Count an `InTexture`'s read-back (the frame header's `readback_ms`)."""
+        self.readback_ms += ms
+        self.read_bytes += nbytes
+
+
+class TextureLostError(ChronoclError, RuntimeError):
+    """A recoloured chronovolume's RGBA was asked for after its texture took another frame."""
+
+
+_gl_thread: list[int] = []  # the GL thread's id, once a compute pass ran there
+
+
+class InTexture(Chronovolume):
+    """A view's chronovolume recoloured by the GPU's compute pass, whose RGBA is in the view's
+    texture only: `rgba` reads it back (on the GL thread) the first time anything reads it.
+    Its shape and `rgba_dtype` are known without it. The texture stays its owner until it
+    takes another frame (`Recolouring.settle`, which reads it back first where something
+    still holds it)."""
+
+    def __init__(self, shape, fmt: str, t_index, metadata: dict, owner: Recolouring) -> None:
+        self._volume = None  # the texture holding the RGBA (None: read, or not written yet)
+        self._shape = tuple(shape)
+        self._dtype = np.dtype(np.uint8 if fmt == "f1" else np.float32)
+        self._owner = owner
+        self._rgba: np.ndarray | None = None
+        super().__init__(None, t_index, metadata)  # type: ignore[arg-type]
+
+    @property  # type: ignore[override]
+    def rgba(self) -> np.ndarray:
+        if self._rgba is None:
+            self.read()
+        return self._rgba  # type: ignore[return-value]
+
+    @rgba.setter
+    def rgba(self, value: np.ndarray | None) -> None:
+        self._rgba = value
+        if value is not None:
+            self._volume = None
+
+    @property
+    def rgba_dtype(self) -> np.dtype:
+        return self._dtype
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self._shape  # type: ignore[return-value]
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        return self._shape[::-1]  # type: ignore[return-value]
+
+    def __getstate__(self) -> dict:
+        """A copy or a pickle holds the RGBA itself (read back now): the texture is no owner
+        of theirs (`settle` knows only this one)."""
+        self.read()
+        return {**self.__dict__, "_volume": None, "_owner": None}
+
+    def read(self) -> None:
+        """Read the RGBA back from the texture, unless it was read already."""
+        if self._rgba is not None:
+            return
+        if _gl_thread and threading.get_ident() == _gl_thread[0]:
+            self._read(None)
+        else:
+            on_gl(self._read)
+
+    def _read(self, rc) -> None:
+        """On the GL thread, where every write of the texture runs too."""
+        if self._rgba is not None:
+            return
+        if self._volume is None:
+            raise TextureLostError(
+                "a recoloured view's RGBA was asked for while its texture held another frame; "
+                "read the view's chronovolume while it is shown"
+            )
+        t = time.perf_counter()
+        rgba = np.empty((*self._shape, 4), dtype=self._dtype)
+        self._volume.texture.read_into(rgba)
+        self.rgba = rgba
+        self._owner.read_back(1e3 * (time.perf_counter() - t), rgba.nbytes)
+
+
+def _held_by(prepared: Prepared, shown: Chronovolume, slot: ViewSlot) -> np.ndarray | None:
+    """The bricks that may be coloured in the slot's texture, where it holds the last output
+    `prepared` wrote on the host (None: unknown, the whole texture is written)."""
+    ours = prepared.written is not None and prepared.written() is shown
+    return prepared.held if ours and prepared.texture is slot.volume.texture else None
 
 
 def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> tuple | str:
@@ -249,9 +360,13 @@ def _prepare_on_gpu(rc, w) -> tuple:
     return gl, gl.prepare(w)
 
 
-def _apply_and_show(rc, prepared: Prepared, spec, into, spacing):
+def _apply_and_show(rc, prepared: Prepared, spec, into, spacing, cv: InTexture):
+    """The compute pass writes `cv` into the texture (`into`, where it fits), which holds it
+    from now on."""
+    _gl_thread[:] = [threading.get_ident()]
     changed = prepared.recolourer.apply(prepared.winners, spec, into)
     show(changed, spacing)
+    cv._volume = changed.volume
     return changed.volume
 
 

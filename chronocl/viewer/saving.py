@@ -108,7 +108,7 @@ def full_precision(
     """`cv` as `chronocl integrate` writes it: a display chronovolume (RGBA8, the viewer's
     full-resolution frame) integrated again in float32 from `series`, in z-slabs whose bricks
     take a quarter of `budget` bytes at most; others as they are."""
-    if cv.rgba.dtype != np.uint8:
+    if cv.rgba_dtype != np.uint8:  # (a GPU recolour's RGBA8 is not read back for it)
         return cv
     meta, spec = cv.metadata, cv.spec
     level = int(meta.get("level") or 0)

@@ -281,6 +281,8 @@ class Views:
             self.refine_incremental, self.why_not_incremental = False, None
         if self._slabs is None:
             self._slabs = pays(self.engine, self.device)
+        if self._slabs:  # its texture is rewritten as it integrates: an unread recolour goes
+            self.recolouring.settle(slot)
         writes = SlabUpload(slot)  # its texture written slab by slab as it integrates
         with INTEGRATE_LOCK, slabs_to(writes.put) if self._slabs else nullcontext():
             cv = slot.session.refine()  # type: ignore[union-attr]

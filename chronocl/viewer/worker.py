@@ -337,8 +337,10 @@ class ClientWorker(Tasks):
         """Upload what changed and draw every view (on the GL thread); `given_up` (a refine's)
         true between upload slabs, before the draw or between its bands: SupersededError."""
         t_up = time.perf_counter()
+        recolouring = self.views.recolouring
         for slot, cv in zip(self.views.slots, cvs, strict=False):
             if slot.uploaded is not cv:
+                recolouring.settle(slot)  # a recoloured frame never read: read where held
                 upload(rc, slot, cv, given_up)
         t_draw = time.perf_counter()
         panels = [
@@ -356,12 +358,14 @@ class ClientWorker(Tasks):
             for i, slot in enumerate(self.views.slots[: len(cvs)])
         ]
         for slot in self.views.slots[len(cvs) :]:
+            recolouring.settle(slot)
             slot.release_gl()
         panels = self._marked(panels, cvs, state)  # the events panel's markers, if shown
         return panels, t_up, t_draw, time.perf_counter()
 
     def _render(self, state: ViewState, rid: int | None) -> None:
         t_start = time.perf_counter()
+        self.views.recolouring.readback_ms = 0.0  # the frame's own (a probe's came before)
         with _left:  # a client that left lets go of its frames before this one makes more
             while not self._closed and (wait := self._left_wait()) > 0:
                 _left.wait(wait)
@@ -372,10 +376,7 @@ class ClientWorker(Tasks):
         with reporting(progress):
             cvs, integrate_ms, incremental = self.views.chronovolumes(state)
         progress("drawing", 0, len(cvs))
-        try:
-            self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
-        finally:  # a recoloured view's RGBA, read after the frame went (probes, saves read it)
-            self.views.recolouring.finish()
+        self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
         self._memory_after()
         self._histogram_after(state)
         self._warm_after(state)
@@ -413,6 +414,7 @@ class ClientWorker(Tasks):
         if any(slot.cv is None for slot in self.views.slots[: len(state.views)]):
             return  # a frame moving the window failed since: nothing shown to refine
         t_start, integrate_ms = time.perf_counter(), 0.0
+        self.views.recolouring.readback_ms = 0.0
         progress = RefineProgress(self._note, len(state.views))
         try:
             with interruptible(self._given_up, progress):
@@ -420,6 +422,8 @@ class ClientWorker(Tasks):
                     progress.view = i
                     if self._given_up() or slot.session is None:
                         return  # newer input: the frame for it comes instead
+                    if slot.uploaded is not slot.cv:  # its slabs may go into the texture
+                        self.views.recolouring.settle(slot)
                     integrate_ms += self.views.refine_slot(slot)
             cvs = [slot.cv for slot in self.views.slots[: len(state.views)]]
             incremental = self.views.refine_incremental  # its views' level 0 slid
@@ -470,7 +474,10 @@ class ClientWorker(Tasks):
         bg = parse_color(state.background)
         t0 = time.perf_counter()
         stop = self._given_up if final else None  # a refine's upload and draw are given up too
+        read_ms = self.views.recolouring.readback_ms
         panels, t_up, t_draw, t_done = on_gl(self._draw, cvs, state, (w, h), bg, stop)
+        # an older recoloured frame read back before its texture took this one: readback_ms's
+        upload_s = t_draw - t_up - (self.views.recolouring.readback_ms - read_ms) / 1e3
         images = [encode(p, JPEG_QUALITY[state.quality]) for p in panels]
         t_enc = time.perf_counter()
         self._frame += 1
@@ -479,7 +486,7 @@ class ClientWorker(Tasks):
         # The level model predicts frames answering input: a final frame counts as their share.
         share = min(1.0, self._draw_budget.pixels() / max(1, w * h * len(cvs)))
         self._draw_budget.record(1e3 * (t_done - t_draw), w * h * len(cvs))
-        display_ms = 1e3 * ((t_draw - t_up) + share * (t_done - t_draw)) / max(1, len(cvs))
+        display_ms = 1e3 * (upload_s + share * (t_done - t_draw)) / max(1, len(cvs))
         for session in sessions:
             session.record_display(display_ms)
         level = max((session.shown_level for session in sessions), default=0)
@@ -532,10 +539,13 @@ class ClientWorker(Tasks):
             "timings": {
                 "integrate_ms": round(integrate_ms, 2),
                 "recolour_ms": round(self.views.recolouring.ms, 2),  # a TF edit's, not integrated
+                # a GPU recolour's RGBA read back for this frame (framing; an older one still
+                # held, its texture taking this one): 0 where nothing read it
+                "readback_ms": round(self.views.recolouring.readback_ms, 2),
                 "incremental": incremental,
                 "why_not_incremental": self.views.why_not_incremental,  # integrated again: why
                 # + a recolour's texture write; a refine's slabs are written within integrate_ms
-                "upload_ms": round(1e3 * (t_draw - t_up) + self.views.recolouring.upload_ms, 2),
+                "upload_ms": round(1e3 * upload_s + self.views.recolouring.upload_ms, 2),
                 "upload_overlapped_ms": round(self.views.slab_upload_ms, 2),
                 "allocated": self._allocated(),  # textures: 0 once each panel and level has one
                 "render_ms": round(1e3 * (t_done - t_draw), 2),
@@ -562,8 +572,7 @@ class ClientWorker(Tasks):
         """`state` with its camera framing this generation's visible region."""
         with self._cond:
             gen, known = self._focus_gen, self._focus
-        if known is None or known[0] != gen:
-            self.views.recolouring.finish()  # framing reads the RGBA
+        if known is None or known[0] != gen:  # (framing reads the RGBA: a GPU recolour's too)
             known = (gen, framed(dataclasses.replace(state.camera, focus=None), cvs).focus)
             with self._cond:
                 if self._focus_gen == gen:
