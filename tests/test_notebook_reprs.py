@@ -93,7 +93,10 @@ def test_store_without_levels_reads_one_layer_of_one_step(tmp_path):
     assert "slice z=32, 1 in 2 voxels" in html
     assert 1 <= len(reads) < n_chunks / STEPS  # a layer of chunks, less than one step's
     assert {r[0] for r in reads} == {STEPS // 2}
-    assert picture(html).shape == (32, 64)  # every 2nd voxel: at most PICTURE across
+    assert picture(html).shape == (
+        32,
+        64,
+    )  # every 2nd voxel: at most TUNING.repr_picture_voxels across
 
 
 def test_array_series_is_sampled_in_place():

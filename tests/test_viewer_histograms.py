@@ -16,7 +16,7 @@ from chronocl.core.tuning import TUNING
 from chronocl.core.values import normalize
 from chronocl.data import synthetic
 from chronocl.data.series import open_series, write_series
-from chronocl.viewer.datasets import HIST_BINS, Dataset, sample_level, sample_steps
+from chronocl.viewer.datasets import Dataset, sample_level, sample_steps
 from chronocl.viewer.side_work import SideWork
 
 
@@ -26,10 +26,10 @@ def _steps(shape, n=6):
 
 def _direct(series, source, steps, lo, hi) -> list[int]:
     """The counts summed step by step from `source(step)` (raw values), normalised as u."""
-    counts = np.zeros(HIST_BINS, np.int64)
+    counts = np.zeros(TUNING.hist_bins, np.int64)
     for t in steps:
         u = normalize(source(t), series.vmin, series.vmax)
-        counts += np.histogram(u, bins=HIST_BINS, range=(lo, hi))[0]
+        counts += np.histogram(u, bins=TUNING.hist_bins, range=(lo, hi))[0]
     return counts.tolist()
 
 
@@ -151,7 +151,7 @@ def test_a_change_histogram_counts_the_changes_between_consecutive_steps(value_r
     window = list(range(1, 11, 2))  # 1:11:2
     hist = ds.histogram(0.0, 0.5, window, 2, of="change", value_range=value_range)
     assert hist["of"] == "change" and hist["steps"] == [3, 5, 7, 9]  # 1 has no step before
-    want = np.zeros(HIST_BINS, np.int64)
+    want = np.zeros(TUNING.hist_bins, np.int64)
     for t in hist["steps"]:
         # the same voxels as the sample: u over the series' range, then the TF's range
         w = [
@@ -167,7 +167,7 @@ def test_a_change_histogram_counts_the_changes_between_consecutive_steps(value_r
             )
             for s in (t - 2, t)
         ]
-        want += np.histogram(np.abs(w[1] - w[0]), bins=HIST_BINS, range=(0.0, 0.5))[0]
+        want += np.histogram(np.abs(w[1] - w[0]), bins=TUNING.hist_bins, range=(0.0, 0.5))[0]
     assert hist["counts"] == want.tolist() and sum(want) > 0
     # a constant series changes nowhere: every count in the first bin
     flat = Dataset("f", chronocl.TimeSeries.from_array(np.ones((3, 8, 8, 8), np.float32)))

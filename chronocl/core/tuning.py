@@ -13,8 +13,10 @@ or case, the figure, and the commit that carries the measurement. "The 2-core ma
 project's development machine: 2 cores, PoCL for OpenCL and llvmpipe for GL. Where nothing was
 measured, the comment says "not measured" and what the value was chosen as.
 
-Constants that are not tuning stay beside the code they size: protocol limits, file formats,
-GL texture units, layout sizes in pixels, sizes baked into kernels.
+Constants that are not tuning have homes of their own: the limits the viewer's server enforces
+in `chronocl.viewer.protocol.LIMITS`, the sizes of the annotations drawn on pictures in
+`chronocl.render.layout.LAYOUT`; file formats, GL texture units and sizes baked into kernels
+stay beside the code they size.
 """
 
 from __future__ import annotations
@@ -147,6 +149,9 @@ class Tuning:
     hist_cache_steps: int = 64
     # Per-(step, range) counts kept, a KiB each. Not measured: chosen as 4 MiB in all (32a8de9).
     hist_cache_counts: int = 4096
+    # Bins of a histogram sent for the TF editor (the page draws as many as it gets). Not
+    # measured: chosen as 128 (59cb087, 2026-11-22).
+    hist_bins: int = 128
 
     # --- Host conversions and scans (render) ---
 
@@ -163,6 +168,28 @@ class Tuning:
     # Voxels read, at most, to frame the visible region (render/framing.py); larger volumes are
     # sampled with a stride. Not measured: chosen as 128^3 (16ccb5a, 2026-11-23).
     framing_sample_voxels: int = 2**21
+    # Opacity above which a voxel counts as visible when framing the visible region
+    # (render/framing.py; a tenth of the largest opacity where that is less). Not measured:
+    # chosen as 2% (16ccb5a, 2026-11-23).
+    visible_alpha: float = 0.02
+
+    # --- Pictures' defaults (render/default_view.py, render/visible_steps.py, viewer) ---
+
+    # Shifts of the window's centre of mass under this fraction of the box's half diagonal keep
+    # the default view. Not measured: chosen by hand (f3de5ef, 2026-11-27).
+    default_view_min_shift: float = 0.08
+    # Cosine between the best side view and the shift under which the default view stays. Not
+    # measured: chosen as 60 degrees (f3de5ef, 2026-11-27).
+    default_view_min_align: float = 0.5
+    # Pixels a selected step must change, at least (and 0.05% of the picture), when taken out,
+    # to count as shown (`steps_shown`). Not measured: chosen by hand (f3de5ef, 2026-11-27).
+    shown_step_pixels: int = 8
+    # Change of a channel, in [0, 1], above which a pixel counts as changed by a step taken out.
+    # Not measured: chosen as 3 of 255 levels, above rounding (f3de5ef, 2026-11-27).
+    shown_step_level: float = 3 / 255
+    # Fraction of a viewer panel's pixels visible below which the panel gets a note saying why
+    # (viewer/frames.py). Not measured: chosen as 1% (2afd36b, 2026-11-23).
+    empty_panel_fraction: float = 0.01
 
     # --- Slide or integrate (integration/interactive/costs.py) ---
 
@@ -250,6 +277,32 @@ class Tuning:
     # Voxel pairs compared per axis when judging a raw file's --dims order (`likelier_dims`).
     # Not measured: chosen as 2^20 (284d5cb, 2026-11-27).
     raw_dims_samples: int = 1 << 20
+    # Voxels along an axis below which a raw file's --dims order is not judged (2D steps, a
+    # few slices). Not measured: chosen as 4 once a 2D step always warned (d990dc8, 2026-11-27).
+    raw_dims_min_side: int = 4
+
+    # --- A raw file's misreadings (data/formats/raw_reading.py) ---
+
+    # Float magnitude from which a reading is a misread, not data. Measured with the thresholds
+    # below as one check (60e2e29, 2026-11-30): over vortex, plume, Gray-Scott and noise fields
+    # written as float32, float64, uint16, int16 and uint8 in both byte orders at two sizes,
+    # 0 false alarms on right readings, 0 wrong suggestions, 906 of 1134 misreads named.
+    misread_beyond: float = 1e30
+    # Roughness (of x neighbours, over the non-zero values) under which a reading is data.
+    # Measured as misread_beyond (60e2e29).
+    misread_smooth: float = 0.15
+    # Times smoother than a rough given reading another must be to be named. Measured as
+    # misread_beyond (60e2e29).
+    misread_clearly: float = 1.5
+    # Times smoother than a smooth given reading one of the same width must be to be named.
+    # Measured as misread_beyond (60e2e29).
+    misread_smoother: float = 3.0
+    # Roughness under which a narrower type shows that a plausible wider reading is pairs of it.
+    # Measured as misread_beyond (60e2e29).
+    misread_narrower_smooth: float = 0.12
+    # Neighbour pairs both non-zero below which a reading is not judged. Measured as
+    # misread_beyond (60e2e29); a single-valued reading has no say since e485e74 (2026-11-30).
+    misread_min_pairs: int = 64
 
     # --- Store writes ---
 
@@ -259,6 +312,9 @@ class Tuning:
     # Level-0 bytes pooled at once, through every level, while in cache (data/pyramid.py). Not
     # measured: chosen as 2 MiB, to stay in cache (12e8eb9, 2026-11-23).
     pyramid_slab_bytes: int = 2 * MiB
+    # Coarse levels are added while the previous level's largest axis is larger than this
+    # (data/pyramid.py). Not measured: chosen as 64 (12e8eb9, 2026-11-23).
+    pyramid_coarsest: int = 64
     # Files uploaded at once to a remote store (data/remote_write.py). Not measured (30c3107).
     upload_concurrency: int = 16
 
@@ -321,6 +377,18 @@ class Tuning:
     # fitted, the resident memory less the steps with one view and with two, the second view's
     # share taken off (9ecb08c).
     process_bytes: int = 400 * MiB
+
+    # --- Notebook summaries' pictures (data/repr_html.py) ---
+
+    # A summary picture's longest side, in voxels sampled (and pixels before scaling up).
+    # Measured with the summaries as a whole on the 2-core machine: 6-190 ms at 256^3 (a coarse
+    # level's or a strided projection, one slice of a store without levels); the size itself not
+    # measured (0d3be74, 2026-11-30).
+    repr_picture_voxels: int = 96
+    # Coarse levels narrower than this are not pictured: a finer one is. Not measured (0d3be74).
+    repr_min_side: int = 24
+    # The picture's longest side on the page, CSS pixels. Not measured (0d3be74, 2026-11-30).
+    repr_shown_px: int = 160
 
     # --- Engines ---
 

@@ -5,15 +5,17 @@ levels, where they are stored) beside a small picture, as a PNG inlined in the H
 A repr stays cheap: it never reads a series at full resolution. Its picture is one step (the
 middle one), as a maximum along z of
 
-- the coarsest stored level at least `MIN_SIDE` voxels across (a store's ``levels``, a remote
-  store's or a format's own), read whole: at 256^3 with levels, a 64^3 block;
+- the coarsest stored level at least `TUNING.repr_min_side` voxels across (a store's
+  ``levels``, a remote store's or a format's own), read whole: at 256^3 with levels, a 64^3
+  block;
 - or, for a series over a numpy array (`TimeSeries.from_array`), a strided view of it (every
-  voxel along each axis but `PICTURE` of them skipped: nothing is copied first);
+  voxel along each axis but `TUNING.repr_picture_voxels` of them skipped: nothing is copied first);
 
 and otherwise (a store without levels, a dask array) the middle z slice of that step at full
 resolution: one layer of chunks, not the step. A chronovolume's picture composites its RGBA
 front to back along z (an orthographic look down z, as a render with the default lights off
-would show it) over a strided view at most `PICTURE` voxels across. No GL, no matplotlib.
+would show it) over a strided view at most `TUNING.repr_picture_voxels` voxels across. No GL,
+no matplotlib.
 """
 
 from __future__ import annotations
@@ -25,12 +27,10 @@ import math
 
 import numpy as np
 
+from chronocl.core.tuning import TUNING
 from chronocl.data.level_sources import POOLED, STORED, AdoptedLevels
 from chronocl.data.pyramid import describe_levels, level_shapes
 
-PICTURE = 96  # a picture's longest side, voxels sampled (and pixels before scaling up)
-MIN_SIDE = 24  # a coarse level narrower than this is not pictured: a finer one is
-SHOWN_PX = 160  # the picture's longest side on the page, CSS pixels
 STYLE = (
     "<style>.chronocl-repr{display:flex;gap:12px;align-items:flex-start;font-size:12px}"
     ".chronocl-repr table{border-collapse:collapse}.chronocl-repr th{text-align:left;"
@@ -53,12 +53,12 @@ def series_picture(series) -> tuple[np.ndarray, str]:
         what = f"max along z, level {level} ({'×'.join(map(str, block.shape[::-1]))})"
         plane = block.max(axis=0)
     elif series.host is not None:
-        stride = max(1, math.ceil(max(series.volume_shape) / PICTURE))
+        stride = max(1, math.ceil(max(series.volume_shape) / TUNING.repr_picture_voxels))
         plane = series.host[t, ::stride, ::stride, ::stride].max(axis=0)
         what = "max along z" + _sampled(stride)
     else:
         z = series.volume_shape[0] // 2
-        stride = max(1, math.ceil(max(series.volume_shape[1:]) / PICTURE))
+        stride = max(1, math.ceil(max(series.volume_shape[1:]) / TUNING.repr_picture_voxels))
         plane = np.asarray(series.data[t, z])[::stride, ::stride]
         what = f"slice z={z}" + _sampled(stride)
     u = (np.asarray(plane, dtype=np.float64) - lo) / ((hi - lo) or 1.0)
@@ -68,7 +68,7 @@ def series_picture(series) -> tuple[np.ndarray, str]:
 
 def _coarse_level(series) -> int | None:
     """The coarsest level of `series` held as it is (read without pooling level 0) whose
-    longest side is at least MIN_SIDE; None where it has none."""
+    longest side is at least `TUNING.repr_min_side`; None where it has none."""
     root = series.level(0)
     source = root.level_source or (STORED if root.path is not None else POOLED)
     if source is POOLED:
@@ -76,14 +76,14 @@ def _coarse_level(series) -> int | None:
     shapes = level_shapes(root.volume_shape)
     n = root.n_levels
     held = range(1, n) if not isinstance(source, AdoptedLevels) else sorted(source.arrays)
-    fit = [k for k in held if 1 <= k <= len(shapes) and max(shapes[k - 1]) >= MIN_SIDE]
+    fit = [k for k in held if 1 <= k <= len(shapes) and max(shapes[k - 1]) >= TUNING.repr_min_side]
     return max(fit) if fit else None
 
 
 def chronovolume_picture(cv) -> tuple[np.ndarray, str]:
     """A small RGB picture (H, W, 3) uint8 of `cv`: its premultiplied RGBA composited front
     to back along z (from the top, z largest, down) over black, on a strided view."""
-    stride = max(1, math.ceil(max(cv.shape) / PICTURE))
+    stride = max(1, math.ceil(max(cv.shape) / TUNING.repr_picture_voxels))
     rgba = cv.rgba[::stride, ::stride, ::stride]
     scale = 1.0 / 255.0 if rgba.dtype == np.uint8 else 1.0
     out = np.zeros((*rgba.shape[1:3], 3), dtype=np.float32)
@@ -175,7 +175,7 @@ def _summary(
         )
     else:
         h, w = image.shape[:2]
-        scale = SHOWN_PX / max(h, w)
+        scale = TUNING.repr_shown_px / max(h, w)
         size = f'width="{round(w * scale)}" height="{round(h * scale)}"'
         figure = (
             f'<figure style="margin:0"><img src="{png_data_url(image)}" {size} '

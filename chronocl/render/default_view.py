@@ -17,16 +17,14 @@ import itertools
 import numpy as np
 
 from chronocl.core.selection import Selection
+from chronocl.core.tuning import TUNING
 from chronocl.integration.window_centres import window_centres
 from chronocl.render.camera import Camera
 
-# Shifts of the centre of mass under this fraction of the box's half diagonal keep the view.
-MIN_SHIFT = 0.08
 AZIMUTHS = range(0, 360, 15)
 # Views from far below the up axis read as upside down; a shift mostly along it (a plume
 # rising) is seen from the side, where its steps stand one above the other anyway.
 ELEVATIONS = range(-15, 61, 15)
-MIN_ALIGN = 0.5  # cosine between the best view and the shift under which the view stays
 
 
 def early_side(camera: Camera, centres: dict | None) -> Camera:
@@ -37,7 +35,7 @@ def early_side(camera: Camera, centres: dict | None) -> Camera:
     c0, c1 = np.asarray(centres["first"], float), np.asarray(centres["last"], float)
     extent = np.asarray(centres["extent"], dtype=np.float64)
     shift = c0 - c1
-    if np.linalg.norm(shift) < MIN_SHIFT * 0.5 * np.linalg.norm(extent):
+    if np.linalg.norm(shift) < TUNING.default_view_min_shift * 0.5 * np.linalg.norm(extent):
         return camera
     want = shift / np.linalg.norm(shift)
 
@@ -46,7 +44,7 @@ def early_side(camera: Camera, centres: dict | None) -> Camera:
         return float(np.dot(turned.eye_direction(), want))
 
     best = max(itertools.product(AZIMUTHS, ELEVATIONS), key=align)
-    if align(best) < MIN_ALIGN:
+    if align(best) < TUNING.default_view_min_align:
         return camera
     return dataclasses.replace(camera, azimuth=float(best[0]), elevation=float(best[1]))
 

@@ -2,7 +2,7 @@
 
 A chronovolume often fills a small part of its box (a plume rising in a tall domain); framing
 the box then draws it as a speck. `visible_box` finds the voxels whose opacity exceeds
-`VISIBLE_ALPHA` (or a tenth of the largest opacity, for faint volumes) by per-axis `any`
+`TUNING.visible_alpha` (or a tenth of the largest opacity, for faint volumes) by per-axis `any`
 over a strided sample of at most `TUNING.framing_sample_voxels`, grown by the stride so that nothing
 sampled past is cut off. `framed` gives a camera with `frame="visible"` that box as its focus;
 an all-transparent volume keeps the whole box.
@@ -20,12 +20,13 @@ from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera, world_extent
 
-VISIBLE_ALPHA = 0.02  # a voxel more opaque than this counts as visible
 
-
-def visible_box(cv: Chronovolume, threshold: float = VISIBLE_ALPHA) -> np.ndarray | None:
-    """World box (x0, y0, z0, x1, y1, z1) of the voxels more opaque than `threshold` (or a
-    tenth of the largest opacity, if that is less); None when every voxel is transparent."""
+def visible_box(cv: Chronovolume, threshold: float | None = None) -> np.ndarray | None:
+    """World box (x0, y0, z0, x1, y1, z1) of the voxels more opaque than `threshold` (None:
+    `TUNING.visible_alpha`; or a tenth of the largest opacity, if that is less); None when every
+    voxel is transparent."""
+    if threshold is None:
+        threshold = TUNING.visible_alpha
     alpha = cv.rgba[..., 3]
     stride = max(1, math.ceil((alpha.size / TUNING.framing_sample_voxels) ** (1 / 3)))
     sample = alpha[::stride, ::stride, ::stride]

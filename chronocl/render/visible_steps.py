@@ -5,7 +5,8 @@ everything else as it was (the other steps' time positions and colours, the valu
 additive's normalisation): the step's values are replaced by ones that contribute nothing,
 the bottom of the value range (transparent under a TF that is transparent there, never a
 maximum) or for `min` the top (never a minimum). A step counts as shown when at least
-`MIN_PIXELS` pixels (and 0.05 % of the picture) change by more than `LEVEL` in some channel.
+`TUNING.shown_step_pixels` pixels (and 0.05 % of the picture) change by more than
+`TUNING.shown_step_level` in some channel.
 
 This is what the demo gallery prints per picture and what the tests of the default transfer
 functions check ("every selected step shows"). It integrates and renders W + 1 times: meant
@@ -20,11 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from chronocl.core.errors import ChronoclWarning
+from chronocl.core.tuning import TUNING
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate, prepare
-
-MIN_PIXELS = 8
-LEVEL = 3 / 255
 
 
 @dataclass(frozen=True)
@@ -64,8 +63,8 @@ def steps_shown(series: TimeSeries, window, mode: str, picture, **args) -> Steps
     for k, step in enumerate(steps):
         ablated = data.copy()
         ablated[k] = gone
-        changed = (np.abs(pixels(ablated) - base) > LEVEL).any(axis=-1).sum()
-        need = max(MIN_PIXELS, 5e-4 * base.shape[0] * base.shape[1])
+        changed = (np.abs(pixels(ablated) - base) > TUNING.shown_step_level).any(axis=-1).sum()
+        need = max(TUNING.shown_step_pixels, 5e-4 * base.shape[0] * base.shape[1])
         (shown if changed >= need else hidden).append(step)
     return StepsShown(tuple(shown), tuple(hidden))
 

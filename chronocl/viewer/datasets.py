@@ -31,8 +31,6 @@ from chronocl.data.remote import storage_options_for
 from chronocl.data.remote_store import is_url
 from chronocl.data.series import TimeSeries, open_series
 
-HIST_BINS = 128
-
 
 def sample_steps(steps: Sequence[int], stride: int = 1) -> list[int]:
     """The steps of a window whose values make its histogram: all when there are at most
@@ -154,14 +152,15 @@ class Dataset:
         return got
 
     def step_counts(self, step: int, lo: float, hi: float) -> np.ndarray:
-        """HIST_BINS counts of one step's sample over [lo, hi] (cached per step and range)."""
+        """`TUNING.hist_bins` counts of one step's sample over [lo, hi] (cached per step and
+        range)."""
         key = (int(step), float(lo), float(hi))
         with self._lock:
             got = self._counts.get(key)
             if got is not None:
                 self._counts.move_to_end(key)
                 return got
-        got = np.histogram(self.step_sample(step), bins=HIST_BINS, range=(lo, hi))[0]
+        got = np.histogram(self.step_sample(step), bins=TUNING.hist_bins, range=(lo, hi))[0]
         got = got.astype(np.int64)
         with self._lock:
             self._counts[key] = got
@@ -172,7 +171,7 @@ class Dataset:
     def change_counts(
         self, before: int, step: int, lo: float, hi: float, value_range: tuple[float, float]
     ) -> np.ndarray:
-        """HIST_BINS counts over [lo, hi] of the changes δ from step `before` to `step` in
+        """`TUNING.hist_bins` counts over [lo, hi] of the changes δ from step `before` to `step` in
         their samples (the same voxels), as the change mode compares them: each value clipped
         to `value_range` and scaled to it, δ = |w(step) - w(before)| (cached per pair and
         ranges)."""
@@ -189,7 +188,7 @@ class Dataset:
             v = float(s.vmin) + self.step_sample(t).astype(np.float64) * (s.vmax - s.vmin)
             return np.clip((v - vlo) / span, 0.0, 1.0)
 
-        got = np.histogram(np.abs(w(step) - w(before)), bins=HIST_BINS, range=(lo, hi))[0]
+        got = np.histogram(np.abs(w(step) - w(before)), bins=TUNING.hist_bins, range=(lo, hi))[0]
         got = got.astype(np.int64)
         with self._lock:
             self._counts[key] = got
@@ -207,7 +206,7 @@ class Dataset:
         of: str = "value",
         value_range: Sequence[float] | None = None,
     ) -> dict | None:
-        """Counts in HIST_BINS bins over [lo, hi] in the window of `steps` (None: the whole
+        """Counts in `TUNING.hist_bins` bins over [lo, hi] in the window of `steps` (None: the whole
         series) of u, or (`of` "change") of the changes δ between its consecutive steps scaled
         to `value_range` (None: the series'), which a change mode's data TF maps: the sum of
         the per-step counts (`step_counts`, `change_counts`) of the steps `sample_steps`
@@ -222,7 +221,7 @@ class Dataset:
         before = dict(zip(window[1:], window[:-1], strict=True))
         if of == "change":
             chosen = [t for t in chosen if t in before]  # the first step changes from nothing
-        counts = np.zeros(HIST_BINS, np.int64)
+        counts = np.zeros(TUNING.hist_bins, np.int64)
         for step in chosen:
             if given_up is not None and given_up():
                 return None

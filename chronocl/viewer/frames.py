@@ -26,7 +26,6 @@ JPEG_QUALITY = {"preview": 70, "full": 88}
 # A full-resolution frame whose full-size draw fits the frame's latency target
 # (`TUNING.target_ms`) is drawn at full size at once, not reduced and redrawn, and so is one
 # predicted within `TUNING.sharp_overrun` times that.
-EMPTY_BELOW = 0.01  # a panel with less than this fraction of visible pixels gets a note
 
 
 class DrawBudget:
@@ -89,8 +88,9 @@ def visible_fraction(pixels: np.ndarray, background: tuple[float, float, float])
 
 
 def empty_note(mode: str, summary: str, visible: float) -> str | None:
-    """Why a panel shows (almost) nothing, when less than `EMPTY_BELOW` of it is visible."""
-    if visible >= EMPTY_BELOW:
+    """Why a panel shows (almost) nothing, when less than `TUNING.empty_panel_fraction` of it is
+    visible."""
+    if visible >= TUNING.empty_panel_fraction:
         return None
     return (
         f"{mode}: almost nothing is visible ({100 * visible:.1f} % of the view). "

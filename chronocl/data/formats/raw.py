@@ -149,9 +149,6 @@ def check_reading(path: Path, raw: np.ndarray, given: Reading) -> None:
     )
 
 
-MIN_DIMS_SIDE = 4  # thinner volumes (2D steps, a few slices) are not judged
-
-
 def likelier_dims(values: np.ndarray, dims: tuple[int, int, int]) -> tuple[int, ...] | None:
     """Another order of `dims` (NX, NY, NZ) under which the flat step `values` is clearly
     smoother, or None.
@@ -162,7 +159,7 @@ def likelier_dims(values: np.ndarray, dims: tuple[int, int, int]) -> tuple[int, 
     data and volumes with equal sizes give None.
     """
     flat = np.asarray(values).ravel()
-    if len(set(dims)) == 1 or min(dims) < MIN_DIMS_SIDE:
+    if len(set(dims)) == 1 or min(dims) < TUNING.raw_dims_min_side:
         return None  # one order only, or too thin to tell a neighbour from a copy
 
     def roughness(order: tuple[int, ...]) -> float:

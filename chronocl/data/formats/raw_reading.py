@@ -26,16 +26,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from chronocl.core.tuning import TUNING
 from chronocl.data.metadata import SUPPORTED_DTYPES
 
+# The check's thresholds (a value beyond which floats are misread, how smooth is data, how much
+# smoother another reading must be) are TUNING's misread_* fields, measured together.
 ENDIANS = ("little", "big")
-BEYOND = 1e30  # a float value this large is a misread, not data
 SAMPLES, RUN = 64, 4096  # runs of consecutive values sampled per step
-SMOOTH = 0.15  # a reading this smooth is data
-CLEARLY = 1.5  # a smooth reading this many times smoother than a rough given one
-SMOOTHER = 3.0  # a reading as wide this many times smoother than a smooth given one
-NARROWER_SMOOTH = 0.12  # a narrower type this smooth shows a plausible wide reading is pairs
-MIN_PAIRS = 64  # fewer neighbours both non-zero: nothing to judge
 
 
 @dataclass(frozen=True)
@@ -76,10 +73,11 @@ def roughness(values: np.ndarray) -> float | None:
     flat = np.concatenate(parts)
     if flat.size == 0:
         return float("nan")
-    if values.dtype.kind == "f" and not (np.isfinite(flat).all() and np.abs(flat).max() <= BEYOND):
+    beyond = TUNING.misread_beyond
+    if values.dtype.kind == "f" and not (np.isfinite(flat).all() and np.abs(flat).max() <= beyond):
         return None
     steps = np.concatenate([np.abs(np.diff(p))[(p[1:] != 0) & (p[:-1] != 0)] for p in parts])
-    if steps.size < MIN_PAIRS:
+    if steps.size < TUNING.misread_min_pairs:
         return float("nan")
     lo, hi = np.percentile(flat[flat != 0], [1, 99])
     spread = hi - lo
@@ -104,7 +102,9 @@ def rank_roughness(values: np.ndarray) -> float:
         np.abs(np.diff(np.searchsorted(order, p)))[(p[1:] != 0) & (p[:-1] != 0)] for p in parts
     ]
     pairs = np.concatenate(steps)
-    return float(np.mean(pairs) / order.size) if pairs.size >= MIN_PAIRS else float("nan")
+    if pairs.size < TUNING.misread_min_pairs:
+        return float("nan")
+    return float(np.mean(pairs) / order.size)
 
 
 def readings(given: Reading, nbytes: int) -> list[Reading]:
@@ -137,25 +137,32 @@ def likelier_reading(raw: np.ndarray, given: Reading) -> tuple[Reading, str] | N
     r_given = roughness(raw.view(given.numpy()))
     scores = {c: roughness(raw.view(c.numpy())) for c in readings(given, raw.size)}
     width = np.dtype(given.dtype).itemsize
+    t = TUNING
 
     def smooth(c: Reading, bound: float) -> bool:
         r = scores[c]
         return r is not None and r < bound
 
     if r_given is None:
-        found = [c for c in scores if smooth(c, SMOOTH)]
-        why = "values NaN, infinite or beyond 1e30"
-    elif r_given >= SMOOTH:  # not data-like: another reading that is, clearly smoother
-        found = [c for c in scores if smooth(c, min(SMOOTH, r_given / CLEARLY))]
+        found = [c for c in scores if smooth(c, t.misread_smooth)]
+        why = f"values NaN, infinite or beyond {t.misread_beyond:.0e}".replace("e+", "e")
+    elif r_given >= t.misread_smooth:  # not data-like: another reading that is, clearly smoother
+        clearly = min(t.misread_smooth, r_given / t.misread_clearly)
+        found = [c for c in scores if smooth(c, clearly)]
         # a wider one by ranks too: white noise read in a wider type looks smooth by value
         wider = {c for c in found if np.dtype(c.dtype).itemsize > width}
-        found = [c for c in found if c not in wider or rank_roughness(raw.view(c.numpy())) < SMOOTH]
+        found = [
+            c
+            for c in found
+            if c not in wider or rank_roughness(raw.view(c.numpy())) < t.misread_smooth
+        ]
         why = "rough values"
     else:  # smooth, but a reading as wide is several times smoother, or a narrower one smooth
         # (a wider type reads pairs of smooth values as smooth: never suggested here)
         size = {c: np.dtype(c.dtype).itemsize for c in scores}
-        found = [c for c in scores if size[c] == width and smooth(c, r_given / SMOOTHER)]
-        found += [c for c in scores if size[c] < width and smooth(c, NARROWER_SMOOTH)]
+        smoother = r_given / t.misread_smoother
+        found = [c for c in scores if size[c] == width and smooth(c, smoother)]
+        found += [c for c in scores if size[c] < width and smooth(c, t.misread_narrower_smooth)]
         why = "values rougher than another reading's"
     if not found:
         return None
