@@ -30,7 +30,7 @@ from websockets.sync.client import connect
 import chronocl
 from chronocl.core.errors import ChronoclError
 from chronocl.viewer.guard import host_names, is_ip_host
-from chronocl.viewer.protocol import FLOAT32_MAX, MAX_DEPTH, MESSAGES
+from chronocl.viewer.protocol import FLOAT32_MAX, LIMITS, MESSAGES
 from chronocl.viewer.server import ViewerServer, serve
 
 from .strategies import examples
@@ -186,7 +186,10 @@ def test_deeply_nested_messages_are_refused_before_decoding(server, fuzzer):
         "[" * n + "]" * n,
         '{"type": "update", "camera": ' + "[" * n + "]" * n + "}",
         '{"a":' * 5000 + "1" + "}" * 5000,
-        '{"type": "update", "id": 7, "x": ' + "[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1) + "}",
+        '{"type": "update", "id": 7, "x": '
+        + "[" * (LIMITS.depth + 1)
+        + "]" * (LIMITS.depth + 1)
+        + "}",
         "[" * n,  # unbalanced
     ):
         assert "nests" in error_for(fuzzer, text)

@@ -19,7 +19,7 @@ pytest.importorskip("websockets")
 from chronocl import modes
 from chronocl.core.tuning import TUNING
 from chronocl.data import synthetic
-from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
+from chronocl.viewer.protocol import LIMITS
 
 from .viewer_helpers import Client, connected_client, make_stores, serving  # noqa: F401
 
@@ -140,7 +140,7 @@ def test_bad_messages_get_an_error_reply_and_the_server_keeps_serving(client):
     client.send_raw('{"type": "update", "id": 4242, "threshold": 5}')
     assert client.wait("error", timeout=30)[1]["id"] == 4242
     # Oversized and binary messages too.
-    client.send_raw(json.dumps({"type": "update", "pad": "x" * (MAX_MESSAGE_BYTES + 10)}))
+    client.send_raw(json.dumps({"type": "update", "pad": "x" * (LIMITS.message_bytes + 10)}))
     assert "over the limit" in client.wait("error", timeout=30)[1]["message"]
     client.send_raw(b"\x00\x01binary")
     assert "binary" in client.wait("error", timeout=30)[1]["message"]

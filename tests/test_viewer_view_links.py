@@ -16,7 +16,7 @@ import pytest
 from chronocl.core.errors import ChronoclError
 from chronocl.data.series import open_series
 from chronocl.viewer.movie import movie_states
-from chronocl.viewer.protocol import MAX_DEPTH, parse_message
+from chronocl.viewer.protocol import LIMITS, parse_message
 from chronocl.viewer.schema import ProtocolError
 from chronocl.viewer.snapshot import check_snapshot, snapshot_of, snapshot_state
 from chronocl.viewer.view_state import default_state, describe_state, merge
@@ -127,7 +127,7 @@ def test_an_own_tf_that_does_not_fit_changes_nothing(series):
     with pytest.raises(ChronoclError):
         merge(state, bad, series.n_steps)
     # The deepest message (an own data TF's point) is within the depth allowed.
-    assert MAX_DEPTH >= 6
+    assert LIMITS.depth >= 6
 
 
 def test_snapshot_keeps_the_links(stores, series):

@@ -18,6 +18,7 @@ from chronocl.viewer.datasets import Dataset
 from chronocl.viewer.errors import internal_error, log
 from chronocl.viewer.guard import TokenGuard
 from chronocl.viewer.heap import HeapKeeper
+from chronocl.viewer.protocol import LIMITS
 from chronocl.viewer.saving import Downloads
 from chronocl.viewer.sockets import serve_socket
 from chronocl.viewer.view_sessions import SharedSteps
@@ -27,7 +28,6 @@ MEDIA_TYPES = {
     ".js": "text/javascript; charset=utf-8",
     ".css": "text/css; charset=utf-8",
 }
-MAX_CLIENTS = 32
 CLOSE_TRY_AGAIN = 1013  # WebSocket close code: try again later
 
 
@@ -59,7 +59,7 @@ def make_app(
     device: str | None = None,
     memory: str | int | None = None,
     downloads: Downloads | None = None,
-    max_clients: int = MAX_CLIENTS,
+    max_clients: int = LIMITS.clients,
     host: str = "127.0.0.1",
     port: int | None = None,
 ):

@@ -8,16 +8,16 @@ from __future__ import annotations
 import logging
 
 from chronocl.core.errors import ChronoclError
+from chronocl.viewer.protocol import LIMITS
 
 log = logging.getLogger("chronocl.viewer")
-MESSAGE_CHARS = 300  # of an exception's message in the one line
 
 
 def internal_error(exc: BaseException, where: str) -> str:
     """One line for an unexpected error, for the client and the log: the exception's type and
     the first line of its message."""
     lines = str(exc).strip().splitlines()
-    said = f": {lines[0][:MESSAGE_CHARS]}" if lines else ""
+    said = f": {lines[0][: LIMITS.error_chars]}" if lines else ""
     return (
         f"internal error ({type(exc).__name__}{said}) {where}; the server keeps serving "
         "(please report it with the server's log)"

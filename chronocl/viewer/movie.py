@@ -17,7 +17,7 @@ import numpy as np
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.render.video import check_video_writer, write_video
-from chronocl.viewer.protocol import MAX_MOVIE_FRAMES, MOVIE_FORMATS, MOVIES
+from chronocl.viewer.protocol import LIMITS, MOVIE_FORMATS, MOVIES
 from chronocl.viewer.view_state import ViewState
 
 
@@ -27,7 +27,7 @@ def movie_states(state: ViewState, kind: str, frames: int, n_steps: int) -> list
     orbit: `frames` cameras a full turn apart in azimuth (each view's own camera turning as
     the shared one), the window as shown. play: the
     window, keeping its length and stride, slid one stride at a time from the series' first
-    step until it reaches the last (at most MAX_MOVIE_FRAMES positions), the camera as shown.
+    step until it reaches the last (at most `LIMITS.movie_frames` positions), the camera as shown.
     """
     state = dataclasses.replace(state, quality="full")
     if kind == "orbit":
@@ -51,7 +51,7 @@ def movie_states(state: ViewState, kind: str, frames: int, n_steps: int) -> list
             f"the window spans {length} of {n_steps} steps, so it cannot slide; "
             "shorten it to make a play-through"
         )
-    starts = starts[:MAX_MOVIE_FRAMES]
+    starts = starts[: LIMITS.movie_frames]
     return [dataclasses.replace(state, window=(s, s + length, stride)) for s in starts]
 
 

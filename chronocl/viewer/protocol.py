@@ -1,6 +1,6 @@
 """The viewer's WebSocket protocol: message schemas and their validation.
 
-Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each with a
+Client -> server messages are JSON objects of at most `LIMITS.message_bytes`, each with a
 `type` and an optional request `id` (echoed in replies and frames):
 
     open       {"dataset": index or name[, "fit"]}      switch data set (defaults reset; the
@@ -41,7 +41,7 @@ Client -> server messages are JSON objects of at most `MAX_MESSAGE_BYTES`, each 
 
 Every field is checked against its schema: unknown fields, wrong types and out-of-range values
 (numbers must be finite; data values must fit float32, ranges need lo < hi) raise
-`ProtocolError` naming the field; so do messages nested deeper than `MAX_DEPTH`, refused
+`ProtocolError` naming the field; so do messages nested deeper than `LIMITS.depth`, refused
 before decoding. The server answers {"type": "error", "id", "message"} and keeps serving.
 Server -> client: JSON text messages (info, dataset, histogram, fit, probe, progress, download,
 events, error, steps: `residency`) and binary frames (`pack_frame`: a 4-byte big-endian header
@@ -59,6 +59,7 @@ from __future__ import annotations
 import json
 import re
 import struct
+from dataclasses import dataclass
 
 from chronocl import modes
 from chronocl.core import tf
@@ -84,14 +85,44 @@ from chronocl.viewer.schema import (
     show,
 )
 
-MAX_MESSAGE_BYTES = 64 * 1024
-MAX_DEPTH = 8  # the deepest message (update.views[i].data_tf.points[i][j]) nests 6 containers
-MAX_VIEWS = 4
-MAX_TF_POINTS = 64
-MIN_PANEL, MAX_PANEL = 64, 1024
+
+@dataclass(frozen=True)
+class Limits:
+    """Every limit the viewer's server enforces, in one place (one instance: `LIMITS`): on what
+    a client sends, what it may ask for, and what the server holds or tells per client. The
+    `info` message gives the page those it checks itself (`choices()["limits"]`). Not tuning:
+    bounds against a page flooding or crashing the server, none timed."""
+
+    # A client message's size in bytes (UTF-8), checked before decoding; the socket itself
+    # takes at most 4 times this per frame.
+    message_bytes: int = 64 * 1024
+    # Arrays and objects nested in a message, at most, checked before decoding: the deepest
+    # message (update.views[i].data_tf.points[i][j]) nests 6.
+    depth: int = 8
+    # Views (panels) a client shows at once, and points of a transfer function.
+    views: int = 4
+    tf_points: int = 64
+    # A panel's side in pixels, as the page asks for it.
+    panel_min: int = 64
+    panel_max: int = 1024
+    # Frames of a movie the viewer saves (a window sliding further stops there).
+    movie_frames: int = 600
+    # Sockets served at once by default (--max-clients), and --max-clients at most.
+    clients: int = 32
+    clients_most: int = 1000
+    # A client's side jobs waiting at once (viewer/side_work.py): more is the page flooding
+    # the server.
+    side_jobs: int = 16
+    # A session file's size, at most (viewer/snapshot.py).
+    session_file_bytes: int = 1 << 20
+    # Characters of an unexpected exception's message told to the client and the log
+    # (viewer/errors.py).
+    error_chars: int = 300
+
+
+LIMITS = Limits()
 MOVIES = ("orbit", "play")  # a turn of the camera, or the window slid over the series
 MOVIE_FORMATS = {"mp4": "video/mp4", "gif": "image/gif"}
-MAX_MOVIE_FRAMES = 600
 PROBE_THRESHOLD = 0.5  # the probe finds the voxel where a ray's opacity passes this
 
 
@@ -137,7 +168,7 @@ WINDOW = Obj(
 MODE = Enum(modes.names())
 DATA_TF = Obj(
     {
-        "points": List(List(Num(0.0, 1.0), 5, 5), 1, MAX_TF_POINTS),
+        "points": List(List(Num(0.0, 1.0), 5, 5), 1, LIMITS.tf_points),
         "value_range": Nullable(Range(Num(-FLOAT32_MAX, FLOAT32_MAX))),
     },
     frozenset({"points"}),
@@ -196,7 +227,7 @@ THRESHOLD = Num(0.0, 0.99)
 # longest side is 1, centred on the origin).
 FOCUS = List(Num(-1.0, 1.0), 6, 6)
 ID = Int(0, 2**53)
-SIZE = List(Int(MIN_PANEL, MAX_PANEL), 2, 2)
+SIZE = List(Int(LIMITS.panel_min, LIMITS.panel_max), 2, 2)
 
 # A snapshot: the saved viewer state (the viewer's Save session, the URL fragment, `chronocl
 # render --state`; viewer/snapshot.py): the state fields of an update message plus the data set
@@ -208,7 +239,7 @@ SESSION_KEY = "chronocl_session"
 # What a frame depends on, as the update message and a snapshot both give it.
 VIEW_FIELDS = {
     "window": WINDOW,
-    "views": List(VIEW, 1, MAX_VIEWS),
+    "views": List(VIEW, 1, LIMITS.views),
     "camera": CAMERA,
     "data_tf": DATA_TF,
     "time_tf": TIME_TF,
@@ -260,7 +291,7 @@ MESSAGES: dict[str, Obj] = {
         {
             "type": Enum(("probe",)),
             "id": ID,
-            "view": Int(0, MAX_VIEWS - 1),
+            "view": Int(0, LIMITS.views - 1),
             "x": Num(0.0, 1.0),
             "y": Num(0.0, 1.0),
             "x2": Num(0.0, 1.0),
@@ -276,7 +307,7 @@ MESSAGES: dict[str, Obj] = {
         {
             "type": Enum(("slice",)),
             "id": ID,
-            "view": Int(0, MAX_VIEWS - 1),
+            "view": Int(0, LIMITS.views - 1),
             "slice": Text(40),
             "u": Num(0.0, 1.0),
             "v": Num(0.0, 1.0),
@@ -294,22 +325,22 @@ MESSAGES: dict[str, Obj] = {
             "range": UNIT_RANGE,
             "of": Enum(("value", "change")),
             "value_range": Nullable(Range(Num(-FLOAT32_MAX, FLOAT32_MAX))),
-            "view": Int(0, MAX_VIEWS - 1),  # whose window it counts (default 0)
+            "view": Int(0, LIMITS.views - 1),  # whose window it counts (default 0)
         },
         NEEDS_RANGE,
     ),
-    "fit": Obj({"type": Enum(("fit",)), "id": ID, "view": Int(0, MAX_VIEWS - 1), "mode": MODE}),
+    "fit": Obj({"type": Enum(("fit",)), "id": ID, "view": Int(0, LIMITS.views - 1), "mode": MODE}),
     "save": Obj(
         {
             "type": Enum(("save",)),
             "id": ID,
             "what": Enum(("image", "chronovolume", "movie", "session")),
-            "view": Int(0, MAX_VIEWS - 1),
+            "view": Int(0, LIMITS.views - 1),
             "movie": Enum(MOVIES),
             "format": Enum(tuple(MOVIE_FORMATS)),
             "frames": Int(2, 360),
             "fps": Int(1, 60),
-            "columns": Int(1, MAX_VIEWS),  # panels per row, as on screen (image, movie)
+            "columns": Int(1, LIMITS.views),  # panels per row, as on screen (image, movie)
         },
         frozenset({"what"}),
     ),
@@ -320,7 +351,7 @@ MESSAGES: dict[str, Obj] = {
             "type": Enum(("events",)),
             "id": ID,
             "action": Enum(EVENT_ACTIONS),
-            "view": Int(0, MAX_VIEWS - 1),
+            "view": Int(0, LIMITS.views - 1),
             "by": Enum(EVENT_BY),
             "opacity": EVENT_OPACITY,
             "value": Num(-FLOAT32_MAX, FLOAT32_MAX),
@@ -422,11 +453,11 @@ def choices() -> dict:
         },
         "events": events_choices(),
         "limits": {
-            "max_views": MAX_VIEWS,
-            "max_message_bytes": MAX_MESSAGE_BYTES,
-            "max_tf_points": MAX_TF_POINTS,
-            "min_panel": MIN_PANEL,
-            "max_panel": MAX_PANEL,
+            "max_views": LIMITS.views,
+            "max_message_bytes": LIMITS.message_bytes,
+            "max_tf_points": LIMITS.tf_points,
+            "min_panel": LIMITS.panel_min,
+            "max_panel": LIMITS.panel_max,
             "probe_threshold": PROBE_THRESHOLD,
         },
     }
@@ -457,7 +488,7 @@ _STRINGS = re.compile(r'"(?:[^"\\]|\\.)*"', re.S)
 _BRACKETS = re.compile(r"[\[\]{}]")
 
 
-def too_deep(text: str, limit: int = MAX_DEPTH) -> bool:
+def too_deep(text: str, limit: int = LIMITS.depth) -> bool:
     """Whether the JSON text nests arrays and objects deeper than `limit` (strings skipped;
     a cheap scan before decoding, which recurses once per level)."""
     depth = 0
@@ -475,7 +506,7 @@ def decode_json(text: str) -> object:
     """json.loads without NaN/Infinity and without deep nesting (ProtocolError, ValueError)."""
     if too_deep(text):
         raise ProtocolError(
-            f"message nests arrays or objects more than {MAX_DEPTH} deep; send a flat message"
+            f"message nests arrays or objects more than {LIMITS.depth} deep; send a flat message"
         )
     try:
         return json.loads(text, parse_constant=_reject_constant)
@@ -485,7 +516,7 @@ def decode_json(text: str) -> object:
 
 def request_id(text: object) -> int | None:
     """The `id` of a message, if it has a usable one (for error replies to bad messages)."""
-    if not isinstance(text, str) or len(text) > MAX_MESSAGE_BYTES or too_deep(text):
+    if not isinstance(text, str) or len(text) > LIMITS.message_bytes or too_deep(text):
         return None
     try:  # NaN and Infinity elsewhere in the message do not hide its id
         msg = json.loads(text, parse_constant=lambda name: None)
@@ -501,12 +532,11 @@ def parse_message(text: object) -> dict:
         raise ProtocolError("binary messages are not accepted; send JSON text")
     if not isinstance(text, str):
         raise ProtocolError("empty message; send a JSON object")
-    if len(text) > MAX_MESSAGE_BYTES:  # characters; a cheap bound before decoding
-        raise ProtocolError(
-            f"message of {len(text)} characters is over the limit of {MAX_MESSAGE_BYTES}"
-        )
-    if len(text.encode()) > MAX_MESSAGE_BYTES:
-        raise ProtocolError(f"message is over the limit of {MAX_MESSAGE_BYTES} bytes")
+    most = LIMITS.message_bytes
+    if len(text) > most:  # characters; a cheap bound before decoding
+        raise ProtocolError(f"message of {len(text)} characters is over the limit of {most}")
+    if len(text.encode()) > most:
+        raise ProtocolError(f"message is over the limit of {most} bytes")
     try:
         msg = decode_json(text)
     except ProtocolError:

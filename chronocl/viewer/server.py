@@ -29,14 +29,13 @@ from collections.abc import Sequence
 from chronocl.core import env
 from chronocl.core.budget import human, interactive_memory, parse_memory
 from chronocl.core.errors import InvalidParameterError, UnknownNameError
-from chronocl.viewer.app import MAX_CLIENTS, make_app
+from chronocl.viewer.app import make_app
 from chronocl.viewer.datasets import Dataset, open_datasets
-from chronocl.viewer.protocol import MAX_MESSAGE_BYTES
+from chronocl.viewer.protocol import LIMITS
 from chronocl.viewer.saving import Downloads
 
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 TOKEN_ENV = "CHRONOCL_VIEWER_TOKEN"
-MAX_CLIENTS_LIMIT = 1000
 
 
 class _DenialNotAnError(logging.Filter):
@@ -60,7 +59,7 @@ def check_options(
     engine: object = "opencl",
     device: object = None,
     memory: object = None,
-    max_clients: object = MAX_CLIENTS,
+    max_clients: object = LIMITS.clients,
     token: object = None,
 ) -> None:
     """Raise the ChronoclError naming the first bad server option (before anything starts)."""
@@ -77,11 +76,11 @@ def check_options(
     if (
         isinstance(max_clients, bool)
         or not isinstance(max_clients, int)
-        or not 1 <= max_clients <= MAX_CLIENTS_LIMIT
+        or not 1 <= max_clients <= LIMITS.clients_most
     ):
         raise InvalidParameterError(
             f"max_clients (--max-clients) {max_clients!r} must be an integer in "
-            f"1..{MAX_CLIENTS_LIMIT}, e.g. {MAX_CLIENTS}"
+            f"1..{LIMITS.clients_most}, e.g. {LIMITS.clients}"
         )
     if token is not None and (not isinstance(token, str) or len(token) < 8):
         raise InvalidParameterError("token must be a string of at least 8 characters")
@@ -109,7 +108,7 @@ class ViewerServer:
         engine: str = "opencl",
         device: str | None = None,
         memory: str | int | None = None,
-        max_clients: int = MAX_CLIENTS,
+        max_clients: int = LIMITS.clients,
         storage_options: dict | None = None,
     ) -> None:
         import uvicorn
@@ -166,7 +165,7 @@ class ViewerServer:
         config = uvicorn.Config(
             app,
             log_level="warning",
-            ws_max_size=4 * MAX_MESSAGE_BYTES,
+            ws_max_size=4 * LIMITS.message_bytes,
             ws_per_message_deflate=False,
             lifespan="on",
         )
@@ -224,7 +223,7 @@ def serve(
     engine: str = "opencl",
     device: str | None = None,
     memory: str | int | None = None,
-    max_clients: int = MAX_CLIENTS,
+    max_clients: int = LIMITS.clients,
     storage_options: dict | None = None,
 ) -> None:
     """Run the viewer: print the URL (with its token), open the browser, serve until Ctrl-C.

@@ -15,8 +15,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Hashable
 
 from chronocl.viewer.errors import error_text
-
-MAX_WAITING = 16  # jobs waiting at once; more is the page flooding the server
+from chronocl.viewer.protocol import LIMITS
 
 
 class SideWork:
@@ -32,9 +31,9 @@ class SideWork:
 
     def submit(self, key: Hashable, job: Callable[[], None]) -> bool:
         """Run `job` after those waiting, in place of a waiting job of the same key; False
-        (nothing queued) when closed or MAX_WAITING jobs wait."""
+        (nothing queued) when closed or `LIMITS.side_jobs` jobs wait."""
         with self._cond:
-            if self._closed or (key not in self._jobs and len(self._jobs) >= MAX_WAITING):
+            if self._closed or (key not in self._jobs and len(self._jobs) >= LIMITS.side_jobs):
                 return False
             self._jobs.pop(key, None)
             self._jobs[key] = job

@@ -34,7 +34,7 @@ from chronocl.render.slices import (
 )
 from chronocl.viewer.clip_outline import clip_outline
 from chronocl.viewer.datasets import Dataset
-from chronocl.viewer.protocol import MAX_PANEL, MIN_PANEL
+from chronocl.viewer.protocol import LIMITS
 from chronocl.viewer.view_state import ViewState
 
 
@@ -52,9 +52,9 @@ def panel_size(room, view_size, pictures: int) -> tuple[int, int]:
     bands take the rest); the view's size where the page names no room."""
     if room is None:
         return tuple(view_size)  # type: ignore[return-value]
-    w = max(MIN_PANEL, room[0] // pictures)
+    w = max(LIMITS.panel_min, room[0] // pictures)
     h = round(w * view_size[1] / view_size[0])
-    return w, max(MIN_PANEL, min(h, MAX_PANEL, room[1] * 3 // 4))
+    return w, max(LIMITS.panel_min, min(h, LIMITS.panel_max, room[1] * 3 // 4))
 
 
 def point_voxel(msg: dict, sl: Slice, shape) -> tuple[int, int, int]:

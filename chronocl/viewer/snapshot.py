@@ -49,12 +49,17 @@ from chronocl.render.triad import draw_triad
 from chronocl.render.views import parse_color, raycaster
 from chronocl.viewer.box_axes import draw_axes, views_axes
 from chronocl.viewer.datasets import Dataset, find_dataset
-from chronocl.viewer.protocol import SESSION_KEY, SESSION_VERSION, SNAPSHOT, decode_json
+from chronocl.viewer.protocol import (
+    LIMITS,
+    SESSION_KEY,
+    SESSION_VERSION,
+    SNAPSHOT,
+    decode_json,
+)
 from chronocl.viewer.saving import Downloads, picture
 from chronocl.viewer.schema import ProtocolError
 from chronocl.viewer.view_state import ViewState, default_state, describe_state, merge
 
-MAX_FILE_BYTES = 1 << 20
 # The fields `merge` applies (the rest: version, data set, shading).
 STATE_FIELDS = (
     "window",
@@ -115,8 +120,10 @@ def read_snapshot(path: str | os.PathLike) -> dict:
     p = Path(path)
     if not p.is_file():
         raise InputNotFoundError(f"session file {str(p)!r} not found; save one in the viewer")
-    if p.stat().st_size > MAX_FILE_BYTES:
-        raise SnapshotFileError(f"{p.name} is over {MAX_FILE_BYTES >> 20} MiB: not a session file")
+    if p.stat().st_size > LIMITS.session_file_bytes:
+        raise SnapshotFileError(
+            f"{p.name} is over {LIMITS.session_file_bytes >> 20} MiB: not a session file"
+        )
     try:
         obj = decode_json(p.read_text(encoding="utf-8"))
     except (ProtocolError, ValueError) as exc:  # UnicodeDecodeError and JSON errors too
