@@ -14,17 +14,13 @@ from chronocl.core.ticks import multiples, nice_step, tick_text
 from chronocl.core.time_labels import compact, display_labels, has_labels
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.colorbar import DataBar
+from chronocl.render.layout import LAYOUT
 
 
 def step_texts(cv: Chronovolume, prefer: str = "labels") -> list[str]:
     """The display labels of the chronovolume's steps (`chronocl.core.time_labels`)."""
     meta = cv.metadata
     return display_labels(cv.steps, meta.get("time_labels"), prefer, meta.get("time_unit"))
-
-
-# A legend band as wide as this many digits holds a time legend and a colour bar side by side.
-BESIDE_MIN_DIGITS = 64
-TIME_SHARE = 0.55  # of a shared band's width, the time legend's
 
 
 def legend_band(draw, cv, bar, box, beside, font, text_rgb, time_labels="labels") -> None:
@@ -166,7 +162,7 @@ def split_legend(box, beside: bool):
     bar: side by side (time on the left), or one above the other."""
     x0, y0, width, height = box
     if beside:
-        time_w = round(width * TIME_SHARE)
+        time_w = round(width * LAYOUT.time_share)
         gap = 36  # "newest" and the colour bar's title must not read as one label
         return (x0, y0, time_w, height), (x0 + time_w + gap, y0, width - time_w - gap, height)
     half = (height + 8) // 2

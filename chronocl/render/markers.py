@@ -21,10 +21,9 @@ import numpy as np
 
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera, to_panel, world_extent
+from chronocl.render.layout import LAYOUT
 
 Marker = tuple[Sequence[float], str]  # (x, y, z) fractions of the box, label
-RING_FRACTION = 0.018  # of the panel's shorter side: the ring's radius
-MIN_RING = 4  # pixels
 MARKER_RGB = (255, 230, 90)
 PATH_RGB = (90, 220, 255)  # a track's path: apart from the markers' yellow
 RIM = (0, 0, 0)
@@ -48,7 +47,7 @@ def draw_markers(
     at = [to_panel(camera, extent, (w, h), p[None]) for p in world]  # None: behind the camera
     image = PILImage.fromarray(panel)
     draw = ImageDraw.Draw(image)
-    radius = max(MIN_RING, round(RING_FRACTION * min(w, h)))
+    radius = max(LAYOUT.ring_min_px, round(LAYOUT.ring_fraction * min(w, h)))
     font = label_font(max(10, radius * 2))
     placed: list[tuple[float, float, float, float]] = []  # labels drawn: none overlaps
     for point, (_, label) in zip(at, markers, strict=True):
@@ -112,7 +111,7 @@ def draw_path(
     xy = [None if a is None else (a[0][0] * w, a[0][1] * h) for a in at]
     image = PILImage.fromarray(panel)
     draw = ImageDraw.Draw(image)
-    dot = max(3, round(RING_FRACTION * min(w, h) / 2))
+    dot = max(3, round(LAYOUT.ring_fraction * min(w, h) / 2))
     for colour, width in ((RIM, 6), (rgb, 3)):
         for a, b in pairwise(xy):
             if a is not None and b is not None:

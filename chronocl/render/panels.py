@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from chronocl.render.colorbar import data_bar
-from chronocl.render.legends import BESIDE_MIN_DIGITS, TRACK_KEY, legend_band, two_part_legend
+from chronocl.render.layout import LAYOUT
+from chronocl.render.legends import TRACK_KEY, legend_band, two_part_legend
 
 
 def label_font(size: int):
@@ -41,10 +42,7 @@ def line_height(font) -> int:
     return int(bottom - top) + 3
 
 
-CAPTION_LINES = 3  # a caption wraps onto at most this many lines, then ends in '…'
-
-
-def wrap_text(draw, text: str, font, width: float, most: int = CAPTION_LINES) -> list[str]:
+def wrap_text(draw, text: str, font, width: float, most: int = LAYOUT.caption_lines) -> list[str]:
     """`text` broken at spaces into lines of at most `width` pixels, at most `most` of them (the
     last shortened with '…' when the text is longer still)."""
     lines: list[str] = []
@@ -107,7 +105,7 @@ def compose(
     bars = [None if TRACK_KEY in cv.metadata else data_bar(cv) for cv in legend_of or []]
     # A data colour bar sits beside the time legend where the band is wide enough for both
     # to show several ticks, else under it (the band twice as tall).
-    beside = w - 16 >= measure.textlength("0" * BESIDE_MIN_DIGITS, font=font)
+    beside = w - 16 >= measure.textlength("0" * LAYOUT.beside_min_digits, font=font)
     legend_h = max(36, h // 8) if legend_of else 0
     two = [two_part_legend(cv, bar) for cv, bar in zip(legend_of or [], bars, strict=True)]
     if any(two) and not beside:

@@ -15,7 +15,7 @@ cut the box away; a plane that keeps nothing leaves no axes.
 Which edges: of the four edges along an axis, those on the projected box's outline (one of the
 edge's two faces towards the camera, the other not; usually two), so that the labels, set off
 from the edge away from the box's projected centre (`out`), lie outside the volume's box; of
-those, one long enough on the panel (`MIN_EDGE_PX`, counting only its part on the panel: the
+those, one long enough on the panel (`LAYOUT.edge_min_px`, counting only its part on the panel: the
 camera frames the visible region, so the box may reach past the panel), then one with room on
 the panel for its labels outside the box (an edge along the panel's border has none), then
 inside it, then one mostly on the panel, then the one whose projected middle lies farthest
@@ -40,24 +40,12 @@ from chronocl.core.ticks import multiples, nice_step, tick_text
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.render.camera import Camera, to_panel, world_extent
+from chronocl.render.layout import LAYOUT
 from chronocl.render.markers import boxes_overlap
 from chronocl.render.raycaster import clip_plane
 from chronocl.render.triad import AXIS_COLOURS
 from chronocl.viewer.clip_outline import plane_polygon
 from chronocl.viewer.view_state import ViewState
-
-MIN_EDGE_PX = 40  # an edge shorter than this on the panel is seen end-on: no ticks
-TICK_GAP_PX = 50  # ticks along an edge at least about this far apart
-# As views.js draws them: a tick mark's length outwards from its edge, a label's gap from the
-# edge, and an axis name's gap beyond its tick labels.
-TICK_PX = 5
-LABEL_PX = 8
-NAME_GAP_PX = 8
-# About how far a tick label reaches beyond its gap (the page's 11 px font, a few digits):
-# across one set off sideways, down one set off downwards. Only to judge whether an edge's
-# labels have room on the panel; the page and `draw_axes` measure the labels they draw.
-LABEL_W_PX = 30
-LABEL_H_PX = 14
 
 
 def box_axes(
@@ -112,7 +100,7 @@ def box_axes(
         if not candidates:
             continue
         p0, p1, out, ticks = max(candidates, key=lambda e: _preference(*e, px))
-        if _shown_length(p0, p1, px) < MIN_EDGE_PX:
+        if _shown_length(p0, p1, px) < LAYOUT.edge_min_px:
             continue
         if _labels_on_panel(ticks, -out, px) > _labels_on_panel(ticks, out, px):
             out = -out  # along the panel's border its labels fall off it: inside the box
@@ -207,7 +195,7 @@ def _preference(
     mid = (p0 + p1) / 2
     want = min(2, len(ticks))
     return (
-        _shown_length(p0, p1, px) >= MIN_EDGE_PX,
+        _shown_length(p0, p1, px) >= LAYOUT.edge_min_px,
         _labels_on_panel(ticks, out, px) >= want,
         _labels_on_panel(ticks, -out, px) >= want,
         hi - lo > 0.5,
@@ -218,15 +206,16 @@ def _preference(
 def _labels_on_panel(ticks: list[dict], out: np.ndarray, px: np.ndarray) -> int:
     """How many of `ticks`' labels, set off in direction `out` (pixels) and anchored as the
     page and `draw_axes` anchor them (`_anchor`), would lie on the panel (`px` its size), at
-    about `LABEL_W_PX` by `LABEL_H_PX`: an edge along the panel's border keeps none on its
-    outer side."""
+    about `LAYOUT.tick_label_w_px` by `LAYOUT.tick_label_h_px`: an edge along the panel's
+    border keeps none on its outer side."""
     anchor = _anchor(out)
-    x0 = {"l": 0.0, "m": -0.5, "r": -1.0}[anchor[0]] * LABEL_W_PX
-    y0 = {"t": 0.0, "m": -0.5, "b": -1.0}[anchor[1]] * LABEL_H_PX
+    lw, lh = LAYOUT.tick_label_w_px, LAYOUT.tick_label_h_px
+    x0 = {"l": 0.0, "m": -0.5, "r": -1.0}[anchor[0]] * lw
+    y0 = {"t": 0.0, "m": -0.5, "b": -1.0}[anchor[1]] * lh
     n = 0
     for t in ticks:
-        x, y = np.array([t["x"], t["y"]]) * px + out * LABEL_PX + (x0, y0)
-        n += 0 <= x and x + LABEL_W_PX <= px[0] and 0 <= y and y + LABEL_H_PX <= px[1]
+        x, y = np.array([t["x"], t["y"]]) * px + out * LAYOUT.tick_label_gap_px + (x0, y0)
+        n += 0 <= x and x + lw <= px[0] and 0 <= y and y + lh <= px[1]
     return n
 
 
@@ -265,13 +254,13 @@ def _out(ends: np.ndarray, px: np.ndarray, centre: np.ndarray) -> np.ndarray:
 def _ticks(a, kept, extent, camera, size, n, step_size, length) -> list[dict]:
     """The ticks of the world segment `kept` (its low end first; `length` pixels long on the
     panel) along axis `a`: at 1-2-5 data coordinates of the voxels' centres (`n` of them,
-    `step_size` apart) it spans, about `TICK_GAP_PX` apart at least."""
+    `step_size` apart) it spans, about `LAYOUT.tick_gap_px` apart at least."""
     # world -> data coordinate along a: the box spans voxel centres -0.5 .. n - 0.5
     ends = [((w / extent[a] + 0.5) * n - 0.5) * step_size for w in kept[:, a]]
     lo, hi = max(0.0, ends[0]), min((n - 1) * step_size, ends[1])
     if hi < lo:
         return []
-    most = int(length * (hi - lo) / (ends[1] - ends[0]) // TICK_GAP_PX) + 1  # and the first
+    most = int(length * (hi - lo) / (ends[1] - ends[0]) // LAYOUT.tick_gap_px) + 1  # and the first
     step = nice_step(lo, hi, most)
     values = multiples(lo, hi, step)
     world = np.repeat(kept[:1], len(values), axis=0)
@@ -331,14 +320,15 @@ def draw_axes(panel: np.ndarray, edges: list[dict] | None) -> np.ndarray:
         reach = 0.0
         for tick in edge["ticks"]:
             p = np.array([tick["x"] * w, tick["y"] * h])
-            box = text(p + o * LABEL_PX, tick["label"], grey, _anchor(o))
+            box = text(p + o * LAYOUT.tick_label_gap_px, tick["label"], grey, _anchor(o))
             if box is not None:
-                draw.line([tuple(p), tuple(p + o * TICK_PX)], fill=grey, width=1)
+                draw.line([tuple(p), tuple(p + o * LAYOUT.tick_px)], fill=grey, width=1)
                 size = abs(o[0]) * (box[2] - box[0]) + abs(o[1]) * (box[3] - box[1])
                 reach = max(reach, size)
         name = edge["name"]
-        at = np.array([name["x"] * w, name["y"] * h]) + o * (LABEL_PX + reach + NAME_GAP_PX)
-        at = np.clip(at, NAME_GAP_PX, [w - NAME_GAP_PX, h - NAME_GAP_PX])  # on the picture
+        gap = LAYOUT.axis_name_gap_px
+        at = np.array([name["x"] * w, name["y"] * h]) + o * (LAYOUT.tick_label_gap_px + reach + gap)
+        at = np.clip(at, gap, [w - gap, h - gap])  # on the picture
         text(at, name["label"], AXIS_COLOURS["xyz".index(edge["axis"])], "mm")
     return np.asarray(out)
 
