@@ -9,7 +9,8 @@
 // or reach past the picture left out.
 
 const NS = 'http://www.w3.org/2000/svg';
-// As box_axes.py: a tick mark's length, a label's gap from the edge, the name's beyond them.
+// As render/layout.py's LAYOUT (tick_px, tick_label_gap_px, axis_name_gap_px): a tick mark's length, a
+// label's gap from the edge, the name's beyond them.
 const TICK_PX = 5;
 const LABEL_PX = 8;
 const NAME_GAP_PX = 8;
