@@ -115,7 +115,6 @@ class DeviceSteps:
         self._held = weakref.finalize(self, _give_back, id(dc), self.nbytes)
         self._slot: OrderedDict[int, int] = OrderedDict()  # step -> slot, least recent first
         self.uploads = 0  # steps uploaded so far
-        self.uploaded_bytes = 0
 
     @classmethod
     def fitting(
@@ -186,7 +185,6 @@ class DeviceSteps:
                 at = (z * self.count + slot) * row
                 cl.enqueue_copy(self.dc.queue, self.buffer, src, dst_offset=at, is_blocking=False)
         self.uploads += 1
-        self.uploaded_bytes += nz * row
 
 
 class DeviceBricks:

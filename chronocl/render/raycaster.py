@@ -24,11 +24,10 @@ from chronocl.render import brick_grid
 from chronocl.render.camera import Camera
 from chronocl.render.gl import gl_context, program
 from chronocl.render.shading import OFF, Shading
-from chronocl.render.upload import FORMATS, convert, occupancy, occupied_corners
+from chronocl.render.upload import convert, occupancy, occupied_corners
 from chronocl.render.volume import Volume
 
 MIN_SIZE, MAX_SIZE = 16, 8192
-TEXTURE_TYPES = FORMATS
 BRICKS_UNIT = 5  # the brick grid's texture unit, clear of the volume's (0) and others' low units
 
 
