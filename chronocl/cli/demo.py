@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from chronocl.cli.options import EngineOpt, check_engine
+from chronocl.cli.options import EngineOpt
 
 
 def demo(
@@ -35,6 +35,8 @@ def demo(
 
     Without an OpenCL device: chronocl demo --out demo-out --engine numpy
     """
+    from chronocl.engine import check_engine
+
     check_engine(engine)
     if data is None:
         from chronocl.demo import run_demo

@@ -161,15 +161,6 @@ def modes_help(width: int = 76) -> str:
     return "Modes:\n\n\b\n" + "\n".join(lines)
 
 
-def check_engine(engine: str) -> None:
-    """An engine name chronocl has (opencl or numpy)."""
-    from chronocl.core.errors import UnknownNameError
-    from chronocl.engine import ENGINES
-
-    if engine not in ENGINES:
-        raise UnknownNameError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
-
-
 def parse_sizes(text: str, n: int, form: str, example: str) -> tuple[int, ...]:
     """n positive integers written AxB[xC], e.g. 64x64x64."""
     try:

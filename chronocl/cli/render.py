@@ -29,7 +29,6 @@ from chronocl.cli.options import (
     TimeTfOpt,
     ValueRangeOpt,
     WindowOpt,
-    check_engine,
     err,
     local_input,
     mode_choices,
@@ -232,6 +231,7 @@ def render(
     from chronocl.data.formats.outputs import output_kind
     from chronocl.data.formats.outputs import save_chronovolume as save_any
     from chronocl.data.series import open_series
+    from chronocl.engine import check_engine
     from chronocl.engine.device_formats import check_device_format, check_format_name
     from chronocl.events import load_events
     from chronocl.integration.inmemory import at_level, check_level, prepare
@@ -293,7 +293,6 @@ def render(
             f"note: {store} holds {', '.join(series.variables)}; drawing {series.variables[0]}"
         )
     picked = [series.variable(n) for n in names] or [series]
-    jobs = []
     for one in picked:
         check_level(one, level)
     if slice_at is not None:  # inside the volume at the level drawn, before any work
@@ -301,26 +300,20 @@ def render(
 
         at = picked[0].level(level) if level else picked[0]
         slice_at = str(parse_slice(slice_at, at.volume_shape))
-    for one in picked:
-        for m in modes:  # window, modes, order, transfer functions, normalisation, threshold
-            job = prepare(one, window, m, None, args)
-            jobs.append(job)
+    # window, modes, order, transfer functions, normalisation, threshold
+    jobs = [prepare(one, window, m, None, args) for one in picked for m in modes]
+    selection = jobs[0].selection  # one window for every variable and mode
     if azimuth is None and elevation is None:  # the default view: from the first steps' side
-        camera = series_early_side(picked[0], job.selection, jobs[0].value_range, camera)
+        camera = series_early_side(picked[0], selection, jobs[0].value_range, camera)
     tracks = None
     if track_by is not None:  # the events cover the window: checked before any step is read
         from chronocl.events.colour import TrackColour, check_steps
 
-        check_steps(graph, jobs[0].selection.steps, series.volume_shape)
+        check_steps(graph, selection.steps, series.volume_shape)
         tracks = TrackColour(graph, series, track_by)
     if device_format != "auto":  # over each level's value range, which it quantises
         for job in jobs:
-            job = at_level(job, level)
-            check_device_format(
-                device_format,
-                engine,
-                *job.format_input(),
-            )
+            check_device_format(device_format, engine, *at_level(job, level).format_input())
     views = ModeViews(
         picked[0],
         window,
@@ -336,7 +329,7 @@ def render(
             axes=axes,
             shading=lighting,
             time_labels=time_labels,
-            markers=None if graph is None else graph.markers(job.selection.steps),
+            markers=None if graph is None else graph.markers(selection.steps),
         ),
         level=level,
         device_format=device_format,

@@ -205,16 +205,11 @@ def with_device_format(
     ``auto`` keeps the engine as it is (with any format it was made with); another format needs
     an engine that copies bricks to a device (the OpenCL one).
     """
-    check_format_name(name)
-    if name == "auto":
+    if check_format_name(name) == "auto":
         return engine
-    if not hasattr(engine, "with_options"):
-        label = getattr(engine, "name", type(engine).__name__)
-        raise InvalidParameterError(
-            f"--device-format {name} applies to the opencl engine; the {label} engine reads "
-            "the data as stored (use --device-format auto)"
-        )
-    resolve_format(name, dtype, value_range, mode, data_range)
+    copies = hasattr(engine, "with_options")  # the OpenCL engine; any other is refused by name
+    label = "opencl" if copies else getattr(engine, "name", type(engine).__name__)
+    check_device_format(name, label, dtype, value_range, mode, data_range)
     return engine.with_options(device_format=name)
 
 

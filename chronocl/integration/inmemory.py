@@ -14,6 +14,7 @@ integrated here, slid (`chronocl.integration.interactive`) or streamed.
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -352,11 +353,7 @@ def integrate(
     whole = prepare(series, window, mode, spec, spec_args)
     job = at_level(whole, level)
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
-    eng = with_device_format(
-        eng,
-        device_format,
-        *job.format_input(),
-    )
+    eng = with_device_format(eng, device_format, *job.format_input())
     cv = integrate_bricks(job, eng, SeriesBricks(job.series), slab, progress)
     warn_invisible(job, cv)  # steps, or a whole picture, the transfer functions hide
     # where the window's first and last steps lie: `chronocl.render` looks from the first
@@ -410,10 +407,8 @@ def integrate_bricks(
         # z is the outermost axis, so a slab of the output is a contiguous view.
         return tuple(None if a is None else a[s.z0 : s.z1] for a in outputs)
 
-    def integrate_one(s: Slab, brick: np.ndarray, buffers: Out | None) -> tuple[Partial, bool]:
-        return integrate_brick(job, eng, s, brick, buffers)
-
     final = True
+    integrate_one = functools.partial(integrate_brick, job, eng)
     results = integrate_slabs(parts, job.selection.steps, bricks, integrate_one, out)
     handed_on = rgba8 and listening()  # RGBA8 final per voxel: each slab is done when written
     for s, _, last in track(results, len(parts), "integrating bricks", progress):

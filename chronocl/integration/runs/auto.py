@@ -19,11 +19,11 @@ from urllib.parse import urlsplit
 
 from chronocl import modes
 from chronocl.core.budget import DEFAULT_MEMORY, parse_memory
-from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.core.errors import InvalidParameterError
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.formats.outputs import output_kind, save_chronovolume
 from chronocl.data.series import TimeSeries
-from chronocl.engine import ENGINES
+from chronocl.engine import check_engine
 from chronocl.engine.device_formats import check_device_format
 from chronocl.integration.inmemory import Job, at_level, integrate, prepare
 from chronocl.integration.runs.plan import fits_in_memory
@@ -44,8 +44,7 @@ def check_run_options(
     any work; return the memory budget in bytes."""
     output_kind(out_path)
     budget = parse_memory(memory)
-    if engine not in ENGINES:
-        raise UnknownNameError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    check_engine(engine)
     if workers is not None and workers < 1:
         raise InvalidParameterError(f"--workers is {workers}; start at least 1 worker")
     if scheduler is not None:
@@ -179,11 +178,7 @@ def plan_run(
             f"this window needs more than --memory {memory or DEFAULT_MEMORY} in memory; "
             "write a .zarr OUT (streamed slab by slab) and convert it, or give a larger --memory"
         )
-    check_device_format(
-        device_format,
-        engine,
-        *job.format_input(),
-    )
+    check_device_format(device_format, engine, *job.format_input())
     return Run(
         job,
         Path(out_path),

@@ -37,7 +37,7 @@ from chronocl.core.tuning import TUNING
 from chronocl.data.bricks import BrickSource, SeriesBricks, Slab
 from chronocl.data.series import TimeSeries
 from chronocl.data.writer import compressors
-from chronocl.engine import get_engine
+from chronocl.engine import check_engine, get_engine
 from chronocl.engine.device_formats import check_device_format, with_device_format
 from chronocl.integration.inmemory import Job, Out, integrate_brick, prepare
 from chronocl.integration.runs import distributed, stages
@@ -122,13 +122,8 @@ class SlabTask:
     def integrate(self, slab: Slab, brick: np.ndarray, out: Out | None = None):
         """The slab's partial and whether it is final (into `out` if given)."""
         eng = get_engine(self.engine, self.device)
-        job = self.job
-        eng = with_device_format(
-            eng,
-            self.device_format,
-            *job.format_input(),
-        )
-        return integrate_brick(job, eng, slab, brick, out)
+        eng = with_device_format(eng, self.device_format, *self.job.format_input())
+        return integrate_brick(self.job, eng, slab, brick, out)
 
     def write(self, slab: Slab, partial: Partial, final: bool, started: float) -> dict:
         """Write the slab and its marker; {"slab", "seconds", "bytes" read[, "maxima"]}."""
@@ -256,15 +251,10 @@ def integrate_to_store(
             f"streamed output {str(target)!r} must be a chronocl .zarr store; "
             "convert it afterwards, or give a larger --memory to write .vti / .ome.zarr"
         )
-    if engine not in ("opencl", "numpy"):
-        raise InvalidParameterError(f"unknown engine {engine!r}; choose opencl or numpy")
+    check_engine(engine)
     mode = str(spec_args.pop("mode", modes.DEFAULT))
     job = prepare(series, window, mode, spec, spec_args)
-    check_device_format(
-        device_format,
-        engine,
-        *job.format_input(),
-    )
+    check_device_format(device_format, engine, *job.format_input())
     warn_invisible(job)  # steps the transfer functions hide: said before hours of streaming
     budget = parse_memory(memory)
     if client is None:
