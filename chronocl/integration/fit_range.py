@@ -24,6 +24,7 @@ import math
 import threading
 import weakref
 from collections import OrderedDict
+from collections.abc import Callable
 
 import numpy as np
 
@@ -31,26 +32,42 @@ from chronocl.core.selection import Selection
 from chronocl.core.tuning import TUNING
 
 TOP_PERCENTILE = 99.9
-_CACHE: OrderedDict = OrderedDict()
-_CACHE_SIZE = 64
-_CACHE_LOCK = threading.Lock()  # the viewer fits from several clients' threads
+
+
+class SeriesCache:
+    """The last `size` results computed from a series, least recently used dropped first.
+    Thread-safe (the viewer fits from several clients' threads); keeps no series alive."""
+
+    def __init__(self, size: int = 64) -> None:
+        self.size = size
+        self._results: OrderedDict = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, series, key: tuple, compute: Callable[[], object]):
+        """The result kept for `series` and `key`, else `compute()` (called outside the lock:
+        it reads data) kept."""
+        key = (id(series), series.path, *key)
+        with self._lock:
+            hit = self._results.get(key)
+            if hit is not None and hit[0]() is series:
+                self._results.move_to_end(key)
+                return hit[1]
+        result = compute()
+        with self._lock:
+            self._results[key] = (weakref.ref(series), result)
+            while len(self._results) > self.size:
+                self._results.popitem(last=False)
+        return result
+
+
+_FITTED = SeriesCache()
 
 
 def window_range(series, selection: Selection, mode) -> tuple[float, float]:
     """(lo, hi) for normalising the values of `selection` of `series` integrated by `mode`
     (a registered Mode), lo < hi; the window's own (min, max) where the sample is flat."""
-    key = (id(series), series.path, tuple(selection.steps), mode.name)
-    with _CACHE_LOCK:
-        hit = _CACHE.get(key)
-        if hit is not None and hit[0]() is series:
-            _CACHE.move_to_end(key)
-            return hit[1]
-    fitted = _fit(series, selection, mode)  # outside the lock: it reads data
-    with _CACHE_LOCK:
-        _CACHE[key] = (weakref.ref(series), fitted)  # the cache keeps no series alive
-        while len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
-    return fitted
+    key = (tuple(selection.steps), mode.name)
+    return _FITTED.get(series, key, lambda: _fit(series, selection, mode))
 
 
 def _fit(series, selection: Selection, mode) -> tuple[float, float]:

@@ -8,36 +8,20 @@ alone, as the command line does from the series: one default view for both.
 
 from __future__ import annotations
 
-import threading
-import weakref
-from collections import OrderedDict
-
 import numpy as np
 
 from chronocl.core.selection import Selection
-from chronocl.integration.fit_range import sample_steps
+from chronocl.integration.fit_range import SeriesCache, sample_steps
 
-_CACHE: OrderedDict = OrderedDict()  # render integrates mode by mode, turntables frame by frame
-_CACHE_SIZE = 64
-_CACHE_LOCK = threading.Lock()
+_CENTRES = SeriesCache()  # render integrates mode by mode, turntables frame by frame
 
 
 def window_centres(series, selection: Selection, value_range) -> dict | None:
     """{"first": [x, y, z], "last": [x, y, z], "extent": [x, y, z]} in world units; None for
     a window of one step or a step with nothing above the range's low end. Kept per series,
     window and range (two sampled steps read once)."""
-    key = (id(series), series.path, selection.steps[0], selection.steps[-1], float(value_range[0]))
-    with _CACHE_LOCK:
-        hit = _CACHE.get(key)
-        if hit is not None and hit[0]() is series:
-            _CACHE.move_to_end(key)
-            return hit[1]
-    centres = _centres(series, selection, value_range)  # outside the lock: it reads data
-    with _CACHE_LOCK:
-        _CACHE[key] = (weakref.ref(series), centres)  # the cache keeps no series alive
-        while len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
-    return centres
+    key = (selection.steps[0], selection.steps[-1], float(value_range[0]))
+    return _CENTRES.get(series, key, lambda: _centres(series, selection, value_range))
 
 
 def _centres(series, selection: Selection, value_range) -> dict | None:
