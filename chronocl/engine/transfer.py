@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -60,19 +60,7 @@ class TransferStats:
         return w / max(k, t)
 
     def to_dict(self) -> dict:
-        return {
-            "chunks": self.chunks,
-            "overlapped": self.overlapped,
-            "upload_bytes": self.upload_bytes,
-            "download_bytes": self.download_bytes,
-            "upload_s": self.upload_s,
-            "download_s": self.download_s,
-            "transfer_s": self.transfer_s,
-            "kernel_s": self.kernel_s,
-            "wall_s": self.wall_s,
-            "host_s": self.host_s,
-            "overlap": self.overlap,
-        }
+        return {**asdict(self), "transfer_s": self.transfer_s, "overlap": self.overlap}
 
 
 @dataclass(frozen=True)
@@ -109,11 +97,7 @@ def chunks_of(
     if chunk_bytes is None:
         chunk_bytes = int(np.clip(nzb * row_bytes // 8, MIN_CHUNK, MAX_CHUNK))
     per = n if chunk_bytes == 0 else max(1, chunk_bytes // max(1, row_bytes) - 2 * halo)
-    out = []
-    for a in range(z0, z1, per):
-        b = min(a + per, z1)
-        out.append(Chunk(a, b, max(0, a - halo), min(nzb, b + halo)))
-    return out
+    return _cut(z0, z1, per, halo, nzb)
 
 
 def fit(
@@ -134,13 +118,15 @@ def fit(
         )
     out = []
     for c in chunks:
-        if c.b - c.a <= most and (c.r1 - c.r0) * in_row <= limit:
-            out.append(c)
-            continue
-        for a in range(c.a, c.b, most):
-            b = min(a + most, c.b)
-            out.append(Chunk(a, b, max(0, a - halo), min(nzb, b + halo)))
+        fits = c.b - c.a <= most and (c.r1 - c.r0) * in_row <= limit
+        out += [c] if fits else _cut(c.a, c.b, most, halo, nzb)
     return out
+
+
+def _cut(a0: int, a1: int, per: int, halo: int, nzb: int) -> list[Chunk]:
+    """Output rows [a0, a1) in chunks of `per`, each with up to `halo` brick rows either side."""
+    bounds = [(a, min(a + per, a1)) for a in range(a0, a1, per)]
+    return [Chunk(a, b, max(0, a - halo), min(nzb, b + halo)) for a, b in bounds]
 
 
 @dataclass
