@@ -31,7 +31,6 @@ from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from chronocl import modes
 from chronocl.core.atomic import remove_path
 from chronocl.core.errors import EngineUnavailableError, InvalidParameterError
 from chronocl.core.timing import race_times
@@ -126,13 +125,6 @@ def check_matrix(volume_zyx: Sequence[int], n_steps: int, windows, workers) -> i
             "larger volume"
         )
     return unit
-
-
-def check_mode(mode: str) -> None:
-    if mode not in modes.names():
-        raise InvalidParameterError(
-            f"unknown mode {mode!r}; choose one of {', '.join(modes.names())}"
-        )
 
 
 # -- data -------------------------------------------------------------------------------------

@@ -124,6 +124,20 @@ def _device_name(report: dict, index: str) -> str:
     return index
 
 
+def _cores_bound(ax, report: dict, bound) -> None:
+    """The line `bound(workers, cores)` where there are more workers than the machine's cores."""
+    workers, n_cores = report["parameters"]["workers"], bounds.cores(report)
+    if bounds.cores_limited(workers, n_cores):
+        ax.plot(
+            workers,
+            bound(workers, n_cores),
+            color="k",
+            linewidth=2,
+            alpha=0.6,
+            label=f"bound from the machine's {n_cores} cores",
+        )
+
+
 def throughput_figure(report: dict):
     """G voxel-steps/s against window length, per device and worker count, with rooflines."""
     fig, ax = _figure()
@@ -188,16 +202,7 @@ def strong_figure(report: dict):
     cells, p = report["cells"], report["parameters"]
     workers = p["workers"]
     ax.plot(workers, workers, color="0.5", linestyle="--", label="ideal (speed-up = workers)")
-    n_cores = bounds.cores(report)
-    if bounds.cores_limited(workers, n_cores):
-        ax.plot(
-            workers,
-            bounds.speedup_bound(workers, n_cores),
-            color="k",
-            linewidth=2,
-            alpha=0.6,
-            label=f"bound from the machine's {n_cores} cores",
-        )
+    _cores_bound(ax, report, bounds.speedup_bound)
     k = 0
     for d in p["devices"]:
         for w in p["windows"]:
@@ -227,16 +232,7 @@ def weak_figure(report: dict):
     cells, p = report["cells"], report["parameters"]
     workers = p["workers"]
     ax.axhline(1.0, color="0.5", linestyle="--", label="ideal (efficiency 1)")
-    n_cores = bounds.cores(report)
-    if bounds.cores_limited(workers, n_cores):
-        ax.plot(
-            workers,
-            bounds.efficiency_bound(workers, n_cores),
-            color="k",
-            linewidth=2,
-            alpha=0.6,
-            label=f"bound from the machine's {n_cores} cores",
-        )
+    _cores_bound(ax, report, bounds.efficiency_bound)
     for i, d in enumerate(p["devices"]):
         rows = _series(cells, "weak", d)
         e = efficiencies(rows)

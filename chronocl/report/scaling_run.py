@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
+from chronocl import modes
 from chronocl.core.atomic import atomic_directory, remove_path
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.paths import check_apart, check_input, check_writable
@@ -24,7 +25,6 @@ from chronocl.core.progress import meter
 from chronocl.data.series import TimeSeries, open_series
 from chronocl.report.scaling import (
     check_matrix,
-    check_mode,
     cluster,
     crop_rows,
     default_workers,
@@ -82,7 +82,7 @@ def run_report(
     cores (or the scheduler's workers); `devices` is None (the chosen device), 'all' or a
     comma list of indices or name parts.
     """
-    check_mode(mode)
+    modes.get(mode)  # an unknown mode: one line, before any work
     if (store is None) == (size_xyz is None):
         raise InvalidParameterError("give a STORE or --synthetic SIZE (one of the two)")
     if repeats < 1:
