@@ -9,6 +9,7 @@ with the fraction of the window's steps each shows.
 from __future__ import annotations
 
 import html
+import textwrap
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -250,8 +251,7 @@ def _gallery(out_dir: Path, paths: list[Path]) -> Path:
     rows.append(row)
     line_h = 16
     caption_h = 8 + line_h * max(
-        len(_wrap(f.caption, max(20, t.width // 8)))
-        for t, f in ((t, f) for r in rows for t, f in r)
+        len(_wrap(f.caption, max(20, t.width // 8))) for r in rows for t, f in r
     )
     sheet_w = max(sum(t.width for t, _ in r) for r in rows)
     sheet = PILImage.new("RGB", (sheet_w, len(rows) * (height + caption_h)), (16, 16, 16))
@@ -272,14 +272,8 @@ def _gallery(out_dir: Path, paths: list[Path]) -> Path:
 
 
 def _wrap(text: str, width: int) -> list[str]:
-    lines, line = [], ""
-    for word in text.split():
-        if len(line) + len(word) + 1 > width and line:
-            lines.append(line)
-            line = word
-        else:
-            line = f"{line} {word}".strip()
-    return [*lines, line]
+    """Lines of at most `width` characters, words (hyphenated ones too) kept whole."""
+    return textwrap.wrap(text, width, break_long_words=False, break_on_hyphens=False)
 
 
 def _index(out_dir: Path, paths: list[Path]) -> Path:
