@@ -194,26 +194,21 @@ def ingest(
             )
         options = {}
     options.update(nan_fill=nan_fill, overwrite=overwrite, progress=True)
-    if dims is not None:
-        options["dims"] = dims
-    for key, value, default in (
+    for key, value, default in (  # only the options given: each reader refuses others
+        ("dims", dims, None),
         ("dtype", dtype, None),
         ("endian", endian, None),
         ("channel", channel, 0),
         ("level", level, 0),
+        ("var", var, None),
+        ("magnitude", magnitude, None),
+        ("resample", resample, None),
+        ("time_dim", time_dim, None),
     ):
         if value != default:
             options[key] = value
-    if var is not None:
-        options["var"] = var
     if variables:
         options["variables"] = [n for item in variables for n in item.split(",")]
-    if magnitude is not None:
-        options["magnitude"] = magnitude
-    if resample is not None:
-        options["resample"] = resample
-    if time_dim is not None:
-        options["time_dim"] = time_dim
     if dims_order is not None:
         options["dims_order"] = [d.strip() for d in dims_order.split(",")]
     if spacing is not None:

@@ -173,8 +173,5 @@ def _snapshot_fields(snapshot: dict, options: dict) -> dict:
                 v["camera"] = dict(v["camera"]) | given_camera
     if "enhance" in options:
         fields["enhance"] = {"kind": options["enhance"]}
-    if "threshold" in options:
-        fields["threshold"] = options["threshold"]
-    if "outline" in options:
-        fields["outline"] = options["outline"]
+    fields |= {k: options[k] for k in ("threshold", "outline") if k in options}
     return fields
