@@ -252,13 +252,8 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
     """Yield a temporary sibling directory that replaces `path` when the block succeeds."""
     target = check_output(path, overwrite)
     target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = partial_path(target)
-    try:
+    with _replacing(partial_path(target), target) as tmp:
         yield tmp
-        replace(tmp, target)
-    except BaseException:
-        remove_path(tmp)
-        raise
 
 
 @contextlib.contextmanager
@@ -271,7 +266,13 @@ def atomic_file(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Pa
             "remove the folder or choose another name"
         )
     target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = partial_path(target, target.suffix)
+    with _replacing(partial_path(target, target.suffix), target) as tmp:
+        yield tmp
+
+
+@contextlib.contextmanager
+def _replacing(tmp: Path, target: Path) -> Iterator[Path]:
+    """Yield `tmp`, which replaces `target` when the block succeeds and is removed otherwise."""
     try:
         yield tmp
         replace(tmp, target)

@@ -75,19 +75,19 @@ def human(n: float) -> str:
     return format_bytes(int(n))
 
 
-def _load_trim():
-    """glibc's malloc_trim, or None on other C libraries."""
-    try:
-        import ctypes
-        import ctypes.util
+def _load_libc():
+    """The C library, or None where it cannot be loaded."""
+    import ctypes
+    import ctypes.util
 
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        return libc.malloc_trim
-    except (OSError, AttributeError):  # not glibc: nothing to trim
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+    except OSError:
         return None
 
 
-malloc_trim = _load_trim()
+_libc = _load_libc()
+malloc_trim = getattr(_libc, "malloc_trim", None)  # glibc's; None: not glibc, nothing to trim
 
 # glibc raises its mmap threshold to the size of each large block freed (up to 32 MiB), after
 # which decoded chunks and slabs come from per-thread arenas that keep them when freed: with
@@ -104,19 +104,13 @@ def bound_allocator() -> bool:
     threads of a run free goes back to the system however many threads there are; False on
     other C libraries."""
     if not _bounded:
-        try:
-            import ctypes
-            import ctypes.util
-
-            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-            # The trim threshold too: the raised mmap threshold had raised it to twice as much.
-            ok = libc.mallopt(_M_MMAP_THRESHOLD, TUNING.mmap_threshold)
-            ok = ok and libc.mallopt(_M_TRIM_THRESHOLD, TUNING.trim_threshold)
-            _bounded.append(bool(ok))
-            if ok and malloc_trim is not None:
-                malloc_trim(0)  # what the arenas kept under the old thresholds
-        except (OSError, AttributeError):
-            _bounded.append(False)
+        mallopt = getattr(_libc, "mallopt", None)
+        # The trim threshold too: the raised mmap threshold had raised it to twice as much.
+        ok = mallopt is not None and mallopt(_M_MMAP_THRESHOLD, TUNING.mmap_threshold)
+        ok = ok and mallopt(_M_TRIM_THRESHOLD, TUNING.trim_threshold)
+        _bounded.append(bool(ok))
+        if ok and malloc_trim is not None:
+            malloc_trim(0)  # what the arenas kept under the old thresholds
     return _bounded[0]
 
 

@@ -13,7 +13,7 @@ library run as before.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
 
@@ -32,9 +32,11 @@ _current: ContextVar[_Watch | None] = ContextVar("chronocl_interrupt", default=N
 
 
 @contextmanager
-def interruptible(check: Callable[[], bool], progress: Progress | None = None) -> Iterator[None]:
+def interruptible(
+    check: Callable[[], bool] | None, progress: Progress | None = None
+) -> Iterator[None]:
     """Give the work inside up (SupersededError at its next checkpoint) once `check()` is
-    true; `progress(stage, done, total)` hears each checkpoint."""
+    true (None: never); `progress(stage, done, total)` hears each checkpoint."""
     token = _current.set(_Watch(check, progress))
     try:
         yield
@@ -42,15 +44,10 @@ def interruptible(check: Callable[[], bool], progress: Progress | None = None) -
         _current.reset(token)
 
 
-@contextmanager
-def reported(progress: Progress) -> Iterator[None]:
+def reported(progress: Progress) -> AbstractContextManager[None]:
     """`progress(stage, done, total)` hears each checkpoint of the work inside, which is never
     given up (not `watched`)."""
-    token = _current.set(_Watch(None, progress))
-    try:
-        yield
-    finally:
-        _current.reset(token)
+    return interruptible(None, progress)
 
 
 def checkpoint(stage: str, done: int, total: int) -> None:
