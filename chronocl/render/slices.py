@@ -66,14 +66,10 @@ class Slice:
 def parse_slice(spec: object, shape_zyx: tuple[int, int, int] | None = None) -> Slice:
     """A slice from "z=40" (or ("z", 40), or a Slice); with the volume's (Z, Y, X) shape, its
     index checked inside it. One line naming what is wrong otherwise."""
+    m = _SPEC.match(spec) if isinstance(spec, str) else None
     if isinstance(spec, Slice):
         axis, index = spec.axis, spec.index
-    elif isinstance(spec, str):
-        m = _SPEC.match(spec)
-        if not m or m.group(1).lower() not in AXES:
-            raise InvalidParameterError(
-                f"slice {spec!r} must be x=N, y=N or z=N (N a voxel index), e.g. z=40"
-            )
+    elif m and m.group(1).lower() in AXES:
         axis, index = m.group(1).lower(), int(m.group(2))
     elif isinstance(spec, tuple | list) and len(spec) == 2 and spec[0] in tuple(AXES):
         axis, index = spec

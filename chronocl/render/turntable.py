@@ -123,24 +123,17 @@ class ModeViews:
         them) uploaded once and drawn from every angle, or integrated again for every frame's
         view when they follow the camera. Every frame frames what `camera` frames for them."""
         camera = framed(camera, chronovolumes)  # once: re-integrated frames keep one focus
-        if self.follows_camera:
-            return turntable(
-                lambda cam: self.draw(self.integrate(cam), cam),
-                camera,
-                path,
-                frames=frames,
-                overwrite=overwrite,
-                progress=progress,
-            )
-        volumes = [raycaster().upload(cv) for cv in chronovolumes]
+        follows = self.follows_camera
+        volumes = [] if follows else [raycaster().upload(cv) for cv in chronovolumes]
+
+        def frame(cam: Camera) -> Image:
+            if follows:
+                return self.draw(self.integrate(cam), cam)
+            return self.draw(chronovolumes, cam, volumes)
+
         try:
             return turntable(
-                lambda cam: self.draw(chronovolumes, cam, volumes),
-                camera,
-                path,
-                frames=frames,
-                overwrite=overwrite,
-                progress=progress,
+                frame, camera, path, frames=frames, overwrite=overwrite, progress=progress
             )
         finally:
             for volume in volumes:

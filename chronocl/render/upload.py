@@ -160,11 +160,7 @@ def _convert_slab(rgba, out, fmt: str, z0: int, z1: int, as_is: bool):
                     filled = dst.view(np.uint32)[..., 0] > 0xFFFFFF
                 else:
                     filled = dst[..., 3] > 0
-            elif src.dtype == np.uint8:  # RGBA8 as it is: only the occupancy
-                filled = (
-                    src.view(np.uint32)[..., 0] > 0xFFFFFF if LITTLE_ENDIAN else src[..., 3] > 0
-                )
-            else:
+            else:  # f4 or f2, or the data as it is (RGBA8 here: a big-endian host)
                 if not as_is:
                     np.copyto(dst, src, casting="same_kind")
                 filled = src[..., 3] > 0
