@@ -10,6 +10,7 @@ import typer
 
 from chronocl.cli.options import AnonOpt, DeviceOpt, EngineOpt, StorageOpt
 from chronocl.core.errors import InvalidParameterError
+from chronocl.viewer.protocol import LIMITS
 
 
 def view(
@@ -35,7 +36,7 @@ def view(
     ] = None,
     max_clients: Annotated[
         int, typer.Option(help="Most browser connections served at once (each has a thread).")
-    ] = 32,
+    ] = LIMITS.clients,
     anon: AnonOpt = False,
     storage_option: StorageOpt = None,
     log_level: Annotated[

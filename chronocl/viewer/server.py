@@ -28,7 +28,7 @@ from collections.abc import Sequence
 
 from chronocl.core import env
 from chronocl.core.budget import human, interactive_memory, parse_memory
-from chronocl.core.errors import InvalidParameterError, UnknownNameError
+from chronocl.core.errors import InvalidParameterError
 from chronocl.viewer.app import make_app
 from chronocl.viewer.datasets import Dataset, open_datasets
 from chronocl.viewer.protocol import LIMITS
@@ -63,14 +63,13 @@ def check_options(
     token: object = None,
 ) -> None:
     """Raise the ChronoclError naming the first bad server option (before anything starts)."""
-    from chronocl.engine import ENGINES
+    from chronocl.engine import check_engine
 
     if not isinstance(host, str) or not host.strip() or any(c.isspace() for c in host):
         raise InvalidParameterError(f"host {host!r} is not an address; use e.g. 127.0.0.1")
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
         raise InvalidParameterError(f"port {port!r} is outside 0..65535; use 0 for a free one")
-    if engine not in ENGINES:
-        raise UnknownNameError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    check_engine(engine)
     if device is not None and not isinstance(device, str):
         raise InvalidParameterError(f"device {device!r} must be a string such as 0:1 or a name")
     if (
