@@ -13,14 +13,25 @@ Generated stores are written under the system's temporary folder and removed aft
 (keep one with --keep DIR). Issue 51's target: 512^3 x 20 events in <= 30 s, peak RSS within
 the budget. Prints JSON lines: env, one line per repeat, the summary.
 
-Here (2 cores, shared with other work, load 2-3, 2026-11-30; the vortex at threshold 0.3, 64
-features, the store in the page cache): 512^3 x 20 in 12.0 s (median of 3; 9.7-12.2) against a
-read bound of 0.9 s; per step, thread-summed, read 184 ms, labelling 948 ms, matching 67 ms;
-peak RSS 3.1 GB of an 11.8 GB budget (0.27). connected-components-3d holds the GIL while it
-labels, so here two threads gain nothing over one (CHRONOCL_THREADS=1: 11.3 s, min 8.9, labelling
-476 ms a step, peak 1.9 GB). Before the shown voxels were measured and matched by their
-indices and the read and mask buffers used again it took 55 s (load 6-9): labelling 2.9 s,
-matching 1.6 s a step.
+Labelling on threads (before issue 51's worker processes; 2 cores, shared with other work,
+load 2-3, 2026-11-30; the vortex at threshold 0.3, 64 features, the store in the page cache):
+512^3 x 20 in 12.0 s (median of 3; 9.7-12.2) against a read bound of 0.9 s; per step,
+thread-summed, read 184 ms, labelling 948 ms, matching 67 ms; peak RSS 3.1 GB of an 11.8 GB
+budget (0.27). connected-components-3d holds the GIL while it labels, so two threads gain
+nothing over one (CHRONOCL_THREADS=1: 11.3 s, min 8.9, labelling 476 ms a step, peak 1.9 GB).
+Before the shown voxels were measured and matched by their indices and the read and mask
+buffers used again it took 55 s (load 6-9): labelling 2.9 s, matching 1.6 s a step.
+
+On worker processes (`chronocl.events.processes`: a window of 1.5e9 voxels or more from a
+store; same host, load about 4, 2026-11-30, back to back): 12.35 s (median of 3; 11.7-12.8)
+against 14.0 s (9.2-21.6) on threads; per step, worker-summed, read 138 ms, labelling with
+the overlaps 834 ms, matching 10 ms on the calling process (which now only turns overlap
+counts into edges); peak RSS 148 MB here plus 2.76 GB over both workers (their peaks summed).
+One find per fresh process, 20 steps, 5 of each interleaved: threads (2) median 15.4 s (min
+7.5), processes (2) 11.3 s (min 6.6), threads (1) 13.6 s (min 10.0); CPU (user + sys) about
+12-14.6 s for the processes against 9-11 s for one thread: the two workers' start (imports,
+buffers) costs about 1.7 s, which is why short windows stay on threads. --quick (128^3) labels
+on threads as before: 0.15 s.
 """
 
 from __future__ import annotations
@@ -96,6 +107,8 @@ def child(store: str, window: str, threshold: float, repeats: int) -> None:
                     "peak_rss": peak,
                     "budget": memory_budget(),
                     "threads": workers(),
+                    "processes": spent.processes,
+                    "worker_peak_rss": spent.worker_peak_rss,
                     "features": len(graph.features),
                     "events": len([e for e in graph.events if e["kind"] != "continuation"]),
                 }
@@ -213,7 +226,11 @@ def summary(case: str, steps: int, runs: list[dict]) -> None:
                     k: round(1000 * med(f"{k}_s") / steps, 1) for k in ("read", "label", "match")
                 },
                 "threads": runs[0]["threads"],
+                "processes": runs[0]["processes"],  # 0: labelled on threads
                 "peak_rss_mb": None if peak is None else round(peak / 1e6),
+                # the workers' peaks summed: an upper bound (a label file shared with this
+                # process is counted in both); add it to peak_rss_mb for the run's whole
+                "workers_peak_rss_mb": round(max(r["worker_peak_rss"] for r in runs) / 1e6),
                 "budget_mb": round(budget / 1e6),
                 "peak_over_budget": None if peak is None else round(peak / budget, 2),
                 "features": runs[0]["features"],

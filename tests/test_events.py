@@ -14,6 +14,7 @@ import itertools
 import json
 import os
 import sys
+import tempfile
 import threading
 import tomllib
 from importlib.metadata import version
@@ -31,6 +32,7 @@ from chronocl.core.errors import (
     InvalidParameterError,
     InvalidSelectionError,
     InvalidTransferFunctionError,
+    StoreCorruptError,
     UnknownNameError,
 )
 from chronocl.core.selection import Selection
@@ -38,6 +40,7 @@ from chronocl.core.tf import DataTF, TFSetting, lut_lerp32
 from chronocl.core.values import normalize
 from chronocl.data.series import TimeSeries, open_series, write_series
 from chronocl.events import EventGraph, load_events
+from chronocl.events import processes as events_processes
 from chronocl.events import run as events_run
 from chronocl.events.extra import MissingExtraError
 from chronocl.events.features import Mask, label, label_step, offsets
@@ -524,6 +527,73 @@ def test_steps_are_read_once_each_through_the_series_and_a_few_at_a_time(monkeyp
     g = chronocl.events(s, threshold=0.5)
     assert sorted(read) == list(range(12)) and len(g.features) == 12
     assert most[0] <= events_run.AHEAD
+
+
+def _stored_vortex(path: Path, steps: int = 6) -> np.ndarray:
+    from chronocl.data import synthetic
+
+    shape = (20, 24, 28)
+    a = np.stack([np.ascontiguousarray(s) for s in synthetic.steps("vortex", steps, shape, 0)])
+    write_series(path, iter(a), n_steps=steps, volume_shape=shape, dtype="float32")
+    return a
+
+
+def _label_folders() -> set[str]:
+    shared = events_processes.SHARED_MEMORY
+    folder = shared if shared.is_dir() else Path(tempfile.gettempdir())
+    return {p.name for p in folder.glob("chronocl-events-*")}
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"threshold": 0.3},
+        {"threshold": 0.3, "periodic": "xz", "connectivity": 6},
+        {"tf": DataTF(), "opacity": 0.3},
+    ],
+)
+def test_a_stored_series_labels_on_worker_processes_as_on_threads(tmp_path, monkeypatch, kwargs):
+    """From a store, with two cores, the steps are labelled on two worker processes that read
+    them themselves: the same graph as the threads find from the same steps in memory, and no
+    label file is left behind."""
+    a = _stored_vortex(tmp_path / "v.zarr")
+    before = _label_folders()
+    monkeypatch.setenv("CHRONOCL_THREADS", "2")
+    monkeypatch.setattr(events_run, "PROCESS_MIN_VOXELS", 0)
+    spent = events_run.Timings()
+    job = events_run.prepare(open_series(tmp_path / "v.zarr"), **kwargs)
+    stored = events_run.find(job, timings=spent)
+    assert spent.processes == 2 and spent.worker_peak_rss > 0
+    in_memory = chronocl.events(a, **kwargs)  # an array: threads
+    assert len(stored.features) > 6 and stored.events
+    for part in ("features", "edges", "events", "tracks"):
+        assert getattr(stored, part) == getattr(in_memory, part)
+    assert _label_folders() == before
+
+
+def test_a_worker_process_s_error_reaches_the_caller_as_itself(tmp_path, monkeypatch):
+    _stored_vortex(tmp_path / "v.zarr")
+    chunk = next((tmp_path / "v.zarr").rglob("c/3/*/*/*"))
+    chunk.write_bytes(b"not a chunk")
+    monkeypatch.setenv("CHRONOCL_THREADS", "2")
+    monkeypatch.setattr(events_run, "PROCESS_MIN_VOXELS", 0)
+    before = _label_folders()
+    with pytest.raises(StoreCorruptError, match=r"\(step 3\)"):
+        chronocl.events(tmp_path / "v.zarr", threshold=0.3)
+    assert _label_folders() == before
+
+
+def test_small_steps_and_one_core_label_on_threads(tmp_path, monkeypatch):
+    _stored_vortex(tmp_path / "v.zarr", 3)
+    job = events_run.prepare(open_series(tmp_path / "v.zarr"), threshold=0.3)
+    monkeypatch.setenv("CHRONOCL_THREADS", "2")
+    spent = events_run.Timings()
+    events_run.find(job, timings=spent)  # 20 x 24 x 28 voxels: below PROCESS_MIN_VOXELS
+    assert spent.processes == 0
+    monkeypatch.setattr(events_run, "PROCESS_MIN_VOXELS", 0)
+    monkeypatch.setenv("CHRONOCL_THREADS", "1")
+    events_run.find(job, timings=spent)
+    assert spent.processes == 0
 
 
 @pytest.mark.parametrize(

@@ -2,22 +2,29 @@
 into events and tracks (an `EventGraph`).
 
 Every argument is checked first (`prepare`), before any step is read. Then the steps are read
-through the series' normal read path and labelled on a few threads at once (at most
-`AHEAD` steps in flight, fewer where the memory budget holds fewer: `steps_in_flight`; each
-read into a buffer used again, masked and labelled on its own thread), while this thread
-takes them in order and matches each with the step before it: besides the steps in flight,
-only the labels of the previous step (and its shown voxels' indices) are held, never the
-window. The events and tracks are found once every step is matched
-(`chronocl.events.tracking`). Between steps `find` passes a
+through the series' normal read path and labelled a few at once (at most `AHEAD` steps in
+flight, fewer where the memory budget holds fewer: `steps_in_flight`), while this thread takes
+them in order and matches each with the step before it: besides the steps in flight, only the
+previous step's labels (and its shown voxels' indices) are held, never the window. The
+labelling runs on threads (`_Threads`: each step read into a buffer used again, masked and
+labelled on its own thread; connected-components-3d holds the GIL, so one labels at a time),
+or, for a large window of a stored series on two or more cores (`on_processes`), on worker
+processes that read their steps from the store themselves and count each step's overlaps with
+the step before (`chronocl.events.processes`): every core labels. Steps a window manager holds
+(`resident`: the viewer's) are labelled where they lie, on threads. The events and tracks are
+found once every step is matched (`chronocl.events.tracking`). Between steps `find` passes a
 `chronocl.core.interrupt.checkpoint`: inside `interruptible` (the viewer's events panel) it is
 given up there once unwanted and reports how far it got; elsewhere it does nothing.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import pickle
 import time
 from collections import deque
+from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from queue import Empty, SimpleQueue
@@ -35,6 +42,7 @@ from chronocl.core.selection import Selection, parse_selection
 from chronocl.core.tf import GLOBAL, DataTF, TFSetting
 from chronocl.data.series import TimeSeries, open_series
 from chronocl.events.features import (
+    Feature,
     Mask,
     Periodic,
     StepFeatures,
@@ -44,11 +52,26 @@ from chronocl.events.features import (
     periodic_text,
 )
 from chronocl.events.graph import EventGraph, jsonable
-from chronocl.events.tracking import SIMILARITY, check_method, classify, link, tracks_of
+from chronocl.events.processes import Labellers
+from chronocl.events.tracking import (
+    SIMILARITY,
+    Edge,
+    check_method,
+    classify,
+    link,
+    tracks_of,
+)
 from chronocl.integration.fit_range import window_range
 
 AHEAD = 4  # steps read and labelled at once, at most (and at most one per host thread)
 ORIGIN_XYZ = (0.0, 0.0, 0.0)  # world position of voxel (0, 0, 0), as chronocl's exports place it
+# A window of fewer voxels (steps x voxels a step) labels on threads even from a store:
+# starting the worker processes costs about 1.7 s of CPU (each imports chronocl, zarr, dask
+# and cc3d and faults its buffers in), which a short window does not win back. Measured on 2
+# cores shared with other work (load 3-5), one find per fresh process, the 512^3 vortex of
+# bench/events.py, wall seconds, threads (2) against processes (2): 8 steps 5.2-6.8 against
+# 6.7-8.7, 12 steps 8.9-9.1 against 7.1-9.6, 20 steps median 15.4 against 11.3 (of 5 each).
+PROCESS_MIN_VOXELS = 1_500_000_000  # about 11 steps of 512^3
 
 
 def memory_budget() -> int:
@@ -69,9 +92,10 @@ def steps_in_flight(series: TimeSeries, memory: int) -> int:
 @dataclass
 class Timings:
     """Where a `find` spent its time, in seconds: reading and labelling (masking, labelling,
-    measuring) the steps, each summed over the threads that did it; matching consecutive steps
-    and finding the tracks and the graph, on the calling thread; the calling thread's waits
-    for the next labelled step; and the whole."""
+    measuring; on worker processes counting the overlaps too) the steps, each summed over the
+    threads or processes that did it; matching consecutive steps and finding the tracks and
+    the graph, on the calling thread; the calling thread's waits for the next labelled step;
+    and the whole. Where processes labelled, how many and their peak memory."""
 
     read_s: float = 0.0
     label_s: float = 0.0
@@ -79,6 +103,8 @@ class Timings:
     wait_s: float = 0.0
     tracks_s: float = 0.0
     total_s: float = 0.0
+    processes: int = 0  # worker processes that labelled the steps; 0: threads of this process
+    worker_peak_rss: int = 0  # their peak RSS summed (bytes; counts shared label files twice)
 
 
 @dataclass(frozen=True)
@@ -219,37 +245,74 @@ def _value_range(series: TimeSeries, selection: Selection, data_tf: DataTF) -> t
     return window_range(series, selection, modes.get(modes.DEFAULT))
 
 
-def find(
-    job: EventsJob,
-    progress: bool = False,
-    max_features: int | None = None,
-    timings: Timings | None = None,
-    memory: int | None = None,
-) -> EventGraph:
-    """Label, match and track the steps of a prepared job (the module's docstring).
-    `max_features`: a step of more features than this is refused as it is labelled
-    (InvalidParameterError, before any matching or tracking of it). `timings`, if given, is
-    filled in (`Timings`). `memory` (bytes, default `memory_budget`) bounds the steps in
-    flight (`steps_in_flight`)."""
-    clock = time.perf_counter
-    start = clock()
-    spent = Timings() if timings is None else timings
-    series, steps = job.series, job.selection.steps
-    spacing = tuple(float(s) for s in series.spacing)
+def on_processes(series: TimeSeries, count: int, steps: int) -> bool:
+    """Whether `find` labels `steps` steps of `series` on `count` worker processes
+    (`chronocl.events.processes`) rather than on threads: where there are two or more, the
+    series is read from a store (so each worker reads its steps itself) and the window is
+    large enough to repay starting them (`PROCESS_MIN_VOXELS`)."""
+    stored = series.zarr_array is not None and series.host is None
+    voxels = steps * int(np.prod(series.volume_shape))
+    return count > 1 and stored and voxels >= PROCESS_MIN_VOXELS
 
-    # The steps are read, and masked, into buffers used again and again: a fresh step-sized
-    # array costs a page fault per page, which on a busy host took as long as the read itself.
-    buffers: SimpleQueue[tuple[np.ndarray, np.ndarray]] = SimpleQueue()
-    brick = (series.volume_shape[0], 1, *series.volume_shape[1:])
 
-    def labelled(step: int) -> tuple[StepFeatures, float, float]:
+@dataclass(frozen=True)
+class _Labelled:
+    """A step labelled on a thread: its features and what its read and labelling took."""
+
+    found: StepFeatures
+    read_s: float
+    label_s: float
+
+
+class _Threads:
+    """Steps labelled on `count` threads of this process, with the interface of
+    `chronocl.events.processes.Labellers`: `submit`, `features`, `edges`, `release`."""
+
+    def __init__(
+        self,
+        job: EventsJob,
+        spacing: tuple[float, ...],
+        count: int,
+        resident: Mapping[int, np.ndarray],
+    ) -> None:
+        self.job, self.spacing, self.resident = job, spacing, resident
+        series = job.series
+        # The steps are read, and masked, into buffers used again and again: a fresh
+        # step-sized array costs a page fault per page, which on a busy host took as long as
+        # the read itself.
+        self.buffers: SimpleQueue[tuple[np.ndarray, np.ndarray]] = SimpleQueue()
+        self.brick = (series.volume_shape[0], 1, *series.volume_shape[1:])
+        # A pool of its own: a step's read may itself split its copies over the host pool
+        # (`host_threads.copy_all`), which would wait forever for threads that are all busy
+        # labelling.
+        self.pool = ThreadPoolExecutor(count, thread_name_prefix="chronocl-events")
+
+    def __enter__(self) -> _Threads:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.pool.shutdown()
+
+    def submit(self, step: int, previous: int | None = None) -> Future:
+        """The step's `_Labelled`; `previous` is for `Labellers`' interface (matching is
+        `edges`')."""
+        return self.pool.submit(self._label, step)
+
+    def _label(self, step: int) -> _Labelled:
+        job, series, clock = self.job, self.job.series, time.perf_counter
         t0 = clock()
         try:
-            out, shown = buffers.get_nowait()
+            out, shown = self.buffers.get_nowait()
         except Empty:
-            out, shown = aligned_empty(brick, series.dtype), np.empty(series.volume_shape, bool)
+            out, shown = (
+                aligned_empty(self.brick, series.dtype),
+                np.empty(series.volume_shape, bool),
+            )
         try:
-            values = series.read_brick([step], out=out, per_call=1)[:, 0]
+            if step in self.resident:
+                values = self.resident[step]  # labelled where it lies
+            else:
+                values = series.read_brick([step], out=out, per_call=1)[:, 0]
             t1 = clock()
             found = label_step(
                 values,
@@ -257,66 +320,113 @@ def find(
                 step,
                 job.connectivity,
                 job.periodic,
-                spacing,
+                self.spacing,
                 ORIGIN_XYZ,
                 scratch=shown,
             )
         finally:
-            buffers.put((out, shown))
-        return found, t1 - t0, clock() - t1
+            self.buffers.put((out, shown))
+        return _Labelled(found, t1 - t0, clock() - t1)
 
-    features, edges, found = [], [], []
-    queue: deque[Future] = deque()
-    todo = iter(steps)
-    # A pool of its own, as many threads as the host pool's: a step's read may itself split
-    # its copies over the host pool (`host_threads.copy_all`), which would wait forever for
-    # threads that are all busy labelling.
+    @staticmethod
+    def features(done: _Labelled) -> tuple[Feature, ...]:
+        return done.found.features
+
+    @staticmethod
+    def edges(before: _Labelled, done: _Labelled) -> list[Edge]:
+        """The overlap edges from the features of the step before (`before`) to `done`'s."""
+        a, b = before.found, done.found
+        return link(a.step, a.labels, a.features, b.step, b.labels, b.features, a.voxels)
+
+    @staticmethod
+    def release(done: _Labelled) -> None:
+        """Nothing to remove: the step's arrays go with the last reference to them."""
+
+
+def find(
+    job: EventsJob,
+    progress: bool = False,
+    max_features: int | None = None,
+    timings: Timings | None = None,
+    memory: int | None = None,
+    resident: Mapping[int, np.ndarray] | None = None,
+) -> EventGraph:
+    """Label, match and track the steps of a prepared job (the module's docstring).
+    `max_features`: a step of more features than this is refused as it is labelled
+    (InvalidParameterError, before any matching or tracking of it). `timings`, if given, is
+    filled in (`Timings`). `memory` (bytes, default `memory_budget`) bounds the steps in
+    flight (`steps_in_flight`). `resident`: steps of the series already in memory, by step
+    (a window manager's, `WindowManager.hold`), labelled where they lie, not read again."""
+    clock = time.perf_counter
+    start = clock()
+    spent = Timings() if timings is None else timings
+    series, steps = job.series, job.selection.steps
+    spacing = tuple(float(s) for s in series.spacing)
+
     ahead = steps_in_flight(series, memory_budget() if memory is None else memory)
-    with ThreadPoolExecutor(
-        max(1, min(workers(), ahead)), thread_name_prefix="chronocl-events"
-    ) as pool:
+    count = max(1, min(workers(), ahead))
+    features, edges, found = [], [], []
+    with contextlib.ExitStack() as stack:
+        labeller = None
+        resident = resident or {}
+        if not resident and on_processes(series, count, len(steps)):
+            with contextlib.suppress(pickle.PicklingError, TypeError, AttributeError):
+                labeller = stack.enter_context(
+                    Labellers(
+                        series,
+                        job.mask,
+                        job.connectivity,
+                        job.periodic,
+                        spacing,
+                        ORIGIN_XYZ,
+                        count,
+                    )
+                )  # a series that does not pickle (a remote store's session) stays on threads
+        if labeller is None:
+            labeller = stack.enter_context(_Threads(job, spacing, count, resident))
+        spent.processes = count if isinstance(labeller, Labellers) else 0
+        queue: deque[Future] = deque()
+        todo = iter(steps)
+        given: list[int] = []  # the steps given out, in order
 
         def submit() -> None:
             step = next(todo, None)
             if step is not None:
-                queue.append(pool.submit(labelled, step))
+                queue.append(labeller.submit(step, given[-1] if given else None))
+                given.append(step)
 
         try:
             for _ in range(ahead):
                 submit()
-            before: StepFeatures | None = None
+            before = None
             for k in track(range(len(steps)), len(steps), "labelling steps", progress):
                 checkpoint("labelling steps", k, len(steps))  # a viewer's find: given up here
                 t0 = clock()
-                now, read_s, label_s = queue.popleft().result()
+                done = queue.popleft().result()
+                now = labeller.features(done)
                 t1 = clock()
                 spent.wait_s += t1 - t0
-                spent.read_s += read_s
-                spent.label_s += label_s
-                if max_features is not None and len(now.features) > max_features:
+                spent.read_s += done.read_s
+                spent.label_s += done.label_s
+                if max_features is not None and len(now) > max_features:
                     raise InvalidParameterError(
-                        f"{len(now.features)} features in step {now.step}: raise the threshold "
+                        f"{len(now)} features in step {steps[k]}: raise the threshold "
                         f"or the opacity, or narrow the window (at most {max_features} a step)"
                     )
                 submit()
-                features += now.features
+                features += now
                 if before is not None:
-                    pair = link(
-                        before.step,
-                        before.labels,
-                        before.features,
-                        now.step,
-                        now.labels,
-                        now.features,
-                        before.voxels,
-                    )
+                    pair = labeller.edges(before, done)
                     edges += pair
-                    found += classify(before.step, now.step, before.features, now.features, pair)
-                before = now
+                    found += classify(steps[k - 1], steps[k], labeller.features(before), now, pair)
+                    labeller.release(before)
+                before = done
                 spent.match_s += clock() - t1
         finally:
             for pending in queue:
                 pending.cancel()
+            if isinstance(labeller, Labellers):
+                spent.worker_peak_rss = sum(labeller.peaks.values())
     t0 = clock()
     nodes = [(f.step, f.id) for f in features]
     paths = tracks_of(job.method, nodes, edges, steps)

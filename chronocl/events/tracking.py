@@ -113,23 +113,31 @@ CHUNK = 1 << 22  # voxels of `a`'s features compared at once: small temporaries 
 
 
 def overlaps(
-    a: np.ndarray, b: np.ndarray, a_voxels: np.ndarray | None = None
+    a: np.ndarray | None,
+    b: np.ndarray,
+    a_voxels: np.ndarray | None = None,
+    a_owners: np.ndarray | None = None,
 ) -> dict[tuple[int, int], int]:
     """Voxels shared by each pair (label of `a`, label of `b`) of two label arrays.
 
     `a_voxels`, the flat indices of `a`'s labelled voxels (`StepFeatures.voxels`), spares a
-    scan of both whole arrays: only those voxels are looked up in `b`."""
+    scan of both whole arrays: only those voxels are looked up in `b`. `a_owners`, given with
+    them, are `a`'s labels there (in their order): `a` itself is then not needed (None)."""
     if a_voxels is None:
+        assert a is not None
         a_voxels = np.flatnonzero(a)
-    flat_a, flat_b = a.reshape(-1), b.reshape(-1)
+    flat_b = b.reshape(-1)
     shared: dict[tuple[int, int], int] = {}
     for start in range(0, a_voxels.size, CHUNK):
         where = a_voxels[start : start + CHUNK]
+        if a_owners is None:
+            assert a is not None
+            owners = a.reshape(-1)[where]
+        else:
+            owners = a_owners[start : start + CHUNK]
         there = flat_b[where]
         both = there > 0
-        keys = (flat_a[where][both].astype(np.uint64) << np.uint64(32)) | there[both].astype(
-            np.uint64
-        )
+        keys = (owners[both].astype(np.uint64) << np.uint64(32)) | there[both].astype(np.uint64)
         found, counts = np.unique(keys, return_counts=True)
         for k, c in zip(found.tolist(), counts.tolist(), strict=True):
             pair = (int(k >> 32), int(k & 0xFFFFFFFF))
@@ -153,11 +161,23 @@ def link(
 ) -> list[Edge]:
     """The overlap edges from the features of `step` to those of `next_step` (`voxels`: the
     flat indices of the voxels `labels` labels, where known: `overlaps`)."""
+    shared = overlaps(labels, next_labels, voxels)
+    return edges_of(step, features, next_step, next_features, shared)
+
+
+def edges_of(
+    step: int,
+    features: Sequence[Feature],
+    next_step: int,
+    next_features: Sequence[Feature],
+    shared: dict[tuple[int, int], int],
+) -> list[Edge]:
+    """The edges of two steps' features that share voxels (`shared`: `overlaps`), in order."""
     size = {f.id: f.size for f in features}
     next_size = {f.id: f.size for f in next_features}
     return [
         Edge((step, a), (next_step, b), n, similarity(n, size[a], next_size[b]))
-        for (a, b), n in sorted(overlaps(labels, next_labels, voxels).items())
+        for (a, b), n in sorted(shared.items())
     ]
 
 
