@@ -471,3 +471,30 @@ def test_a_histogram_is_answered_while_a_find_runs(client, slow_labels):
             order.append(("events", time.monotonic() - t0))
     assert order[0][0] == "histogram" and order[0][1] < 1.0, order
     assert order[1][0] == "events"
+
+
+def test_a_find_labels_the_steps_the_view_holds_and_reads_the_others(server, monkeypatch):
+    """Before the view's first frame nothing is resident: the find reads each step of the
+    window from the store once. After it, the view's window manager holds the window: the find
+    labels the steps where they lie, reading none, and finds the same."""
+    reads: list[int] = []
+    real = TimeSeries.read_brick
+
+    def counted(self, steps, *args, **kwargs):
+        reads.extend(int(s) for s in steps)
+        return real(self, steps, *args, **kwargs)
+
+    monkeypatch.setattr(TimeSeries, "read_brick", counted)
+    c = Client(server)
+    try:
+        c.wait("dataset", c.send({"type": "open", "dataset": 0}))
+        _, streamed = find(c)
+        assert sorted(reads) == list(range(8))
+        c.frame_for(c.send({"type": "update", "size": [128, 128]}))  # the window resident
+        reads.clear()
+        _, held = find(c)
+        assert reads == []
+        assert [e["kind"] for e in held["events"]] == ["merge"]
+        assert held["events"] == streamed["events"] and held["tracks"] == streamed["tracks"]
+    finally:
+        c.close()

@@ -170,6 +170,14 @@ class WindowManager:
         with self._lock:
             return sorted(self._cache)
 
+    def hold(self, steps: Sequence[int]) -> dict[int, np.ndarray]:
+        """The steps among `steps` resident now, by step (read-only arrays; those not resident
+        are left out: read them elsewhere). While the caller keeps the arrays, the steps are
+        held as a session's are: never evicted, shed nor dropped (`_held`); letting go of the
+        arrays lets them go."""
+        with self._lock:
+            return {int(s): self._cache[s] for s in steps if s in self._cache}
+
     def held_bytes(self) -> int:
         """Bytes of memory the steps may hold: every slot written or warmed (a process limit
         counts them, `chronocl.core.process_memory`)."""

@@ -6,7 +6,8 @@ answers the `events` message:
 
 - `find` runs on a thread of its own (one find at a time), never on the frame thread nor on the
   side thread (`side_work`: a long find would hold histograms and fits back): the steps of
-  the view's window at full resolution, a step showing where the data TF's opacity exceeds
+  the view's window at full resolution (labelled where the view's window manager holds them,
+  read from the store where it does not), a step showing where the data TF's opacity exceeds
   `opacity` (as `chronocl.events(..., tf=...)`) or the values reach `value`. After a second it
   sends `progress` messages ({"what": "events", "done", "total"}); it is given up (at the next
   step, `chronocl.core.interrupt`, and once more before its result is kept) once the window or
@@ -188,9 +189,12 @@ class EventTasks:
                 job = prepare(
                     ds.series, selection, connectivity=msg.get("connectivity", 26), **mask
                 )
-                graph = find(job, max_features=MAX_FEATURES_PER_STEP)
+                held = self._resident_steps(view, ds.series, job.selection.steps)
+                graph = find(job, max_features=MAX_FEATURES_PER_STEP, resident=held)
         except SupersededError:
             why.append("it was given up")
+        finally:
+            held = {}  # the window manager may evict them again
         with self._cond:  # (tracking has no checkpoint: the window may have moved meanwhile)
             if not why and not given_up():
                 self._events_found = (state.dataset, graph, job.mask, rid, {})
@@ -214,6 +218,16 @@ class EventTasks:
                 **reply,
             }
         )
+
+    def _resident_steps(self, view: int, series, steps) -> dict[int, np.ndarray]:
+        """The steps of `steps` the view's full-resolution window manager holds now (the
+        window shown), held there while the find labels them (`WindowManager.hold`): read
+        again only where they are not resident."""
+        managers = self.views.shown_managers  # (published whole by the render thread)
+        manager = managers[view] if view < len(managers) else None
+        if manager is None or manager.series is not series:
+            return {}
+        return manager.hold(steps)
 
     def _probed_track(self, reply: dict, dataset: int) -> dict | None:
         """The track of the feature a probe's voxel lies in (`picked_feature`), where events of
