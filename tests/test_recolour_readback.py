@@ -161,3 +161,24 @@ def test_a_recoloured_frame_something_holds_keeps_its_own_rgba(
         assert len(reads) == 2
     finally:
         client.close()
+
+
+def test_a_probe_between_edits_keeps_the_next_edit_recoloured_where_slabs_are_written(
+    server, stores, reads, monkeypatch
+) -> None:
+    """Where a refine writes its texture slab by slab (a GPU engine's `slab_upload.pays`,
+    forced here), a probe after a GPU recolour asks for the full-resolution frame, which is
+    there already: nothing is rewritten, so the recolour still owns the texture and the next
+    edit recolours it (a first version settled the frame there and integrated that edit)."""
+    monkeypatch.setenv("CHRONOCL_SLAB_UPLOAD", "1")
+    client = Client(server)
+    try:
+        fitted, _ = _open_in(client, "max")
+        _sharp(client, _opaque_from(0.75, fitted))
+        rid = client.send({"type": "probe", "x": 0.5, "y": 0.5})
+        client.wait("probe", rid)
+        header, _ = _sharp(client, _opaque_from(0.3, fitted))
+        t = header["timings"]
+        assert t["integrate_ms"] == 0 and t["recolour_ms"] > 0, (t, header["views"])
+    finally:
+        client.close()

@@ -6,7 +6,7 @@ change). Where it does not, the frame says why (`slot.why_not_recoloured`, the f
 `why_integrated`). Dispatch: on a GPU, the compute pass rewrites the view's texture
 (`chronocl.render.recolour.gl`), and the frame's chronovolume (`InTexture`) reads its RGBA back
 from it only when something reads `rgba` (a probe, a save, framing, a movie's frame): an edit
-that nothing read is never read back (512 MB to 2 GB at 512^3), because the texture is its
+that nothing read is never read back (512 MB at 512^3), because the texture is its
 owner until it takes another frame (`settle`); on llvmpipe with an RGBA8 texture, the
 OpenCL device recolours brick by brick (`chronocl.render.recolour.bricks`, several times faster
 there than llvmpipe's compute shaders: bench/recolour.py), and only what changed goes up (the
@@ -87,7 +87,7 @@ class Recolouring:
             slot.why_not_recoloured = found
             return None
         full, new = found
-        t, uploaded = time.perf_counter(), self.upload_ms
+        t, uploaded, read = time.perf_counter(), self.upload_ms, self.readback_ms
         prepared = slot.recolour
         new_range = full.value_range_of(new)  # max/min: another range keeps the winners
         if (
@@ -118,7 +118,8 @@ class Recolouring:
             self._unread.append((slot, weakref.ref(unread)))
         else:
             self._show(slot, prepared, changed, held, spacing, cv)
-        self.ms += 1e3 * (time.perf_counter() - t) - (self.upload_ms - uploaded)
+        spent = 1e3 * (time.perf_counter() - t)  # less the texture writes and reads timed apart
+        self.ms += spent - (self.upload_ms - uploaded) - (self.readback_ms - read)
         return cv
 
     def settle(self, slot: ViewSlot) -> None:

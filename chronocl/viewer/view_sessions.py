@@ -281,7 +281,9 @@ class Views:
             self.refine_incremental, self.why_not_incremental = False, None
         if self._slabs is None:
             self._slabs = pays(self.engine, self.device)
-        if self._slabs:  # its texture is rewritten as it integrates: an unread recolour goes
+        if self._slabs and slot.session.shown_level != 0:  # type: ignore[union-attr]
+            # a refine comes: its slabs rewrite the texture as it integrates, so an unread
+            # recolour there goes first (at full resolution already nothing is rewritten)
             self.recolouring.settle(slot)
         writes = SlabUpload(slot)  # its texture written slab by slab as it integrates
         with INTEGRATE_LOCK, slabs_to(writes.put) if self._slabs else nullcontext():
