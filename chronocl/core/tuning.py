@@ -312,9 +312,6 @@ class Tuning:
     # Level-0 bytes pooled at once, through every level, while in cache (data/pyramid.py). Not
     # measured: chosen as 2 MiB, to stay in cache (12e8eb9, 2026-11-23).
     pyramid_slab_bytes: int = 2 * MiB
-    # Coarse levels are added while the previous level's largest axis is larger than this
-    # (data/pyramid.py). Not measured: chosen as 64 (12e8eb9, 2026-11-23).
-    pyramid_coarsest: int = 64
     # Files uploaded at once to a remote store (data/remote_write.py). Not measured (30c3107).
     upload_concurrency: int = 16
 

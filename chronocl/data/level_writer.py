@@ -31,6 +31,7 @@ from chronocl.core.tuning import TUNING
 from chronocl.data.integrity import CheckedStore, checked_read
 from chronocl.data.metadata import FORMAT, checked_attrs
 from chronocl.data.pyramid import (
+    COARSEST,
     LEVEL_CODEC,
     LEVELS,
     LEVELS_FORMAT,
@@ -335,8 +336,7 @@ def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = Fa
         return {
             **summary,
             "levels": describe_levels(shape[1:], 1),
-            "status": "nothing to add: levels are made while the largest axis is > "
-            f"{TUNING.pyramid_coarsest}",
+            "status": f"nothing to add: levels are made while the largest axis is > {COARSEST}",
         }
     if target.exists() and not force:
         read_levels(p, shape)  # damaged levels are reported, not kept silently

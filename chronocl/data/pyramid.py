@@ -8,9 +8,9 @@ the levels were built from and, per level, its shape, its factor (level-0 shape 
 per axis) and per pool the per-step min/max/mean.
 
 Rule: level n is ceil(shape_{n-1} / 2) per axis; levels are added while the previous level's
-largest axis is > `TUNING.pyramid_coarsest` (64). Each level pools 2x2x2 blocks of the previous
-level of the same pool (partial blocks at odd edges use the voxels present): "mean" in float64
-(integer data rounded half to even and cast back), "max" and "min" exact. See docs/levels.md.
+largest axis is > COARSEST. Each level pools 2x2x2 blocks of the previous level of the same
+pool (partial blocks at odd edges use the voxels present): "mean" in float64 (integer data
+rounded half to even and cast back), "max" and "min" exact. See docs/levels.md.
 
 Writing levels (with a store, or added to one) is `chronocl.data.level_writer`'s; where a
 series takes its levels from (this store, pooling on the fly, an image's own) is
@@ -30,7 +30,6 @@ import zarr
 from zarr.codecs import BloscCodec
 
 from chronocl.core.errors import ChronoclError, InvalidDataError, InvalidParameterError
-from chronocl.core.tuning import TUNING
 from chronocl.data.integrity import CheckedStore, damaged
 from chronocl.data.metadata import SeriesStats, stats_from_steps
 
@@ -38,13 +37,16 @@ POOLS = ("mean", "max", "min")
 LEVELS = "levels"
 LEVELS_FORMAT = "chronocl.levels"
 LEVEL_CODEC = BloscCodec(cname="lz4", clevel=1, shuffle="noshuffle")  # ~3x faster than zstd
+# Levels are added while the previous level's largest axis is larger. Part of the store format
+# (docs/levels.md): `check_levels` reads stored levels against `level_shapes`.
+COARSEST = 64
 
 
 def level_shapes(volume_shape: Sequence[int]) -> list[tuple[int, int, int]]:
     """The (Z, Y, X) shapes of levels 1..L of a volume of `volume_shape` (level 0)."""
     shape = tuple(int(n) for n in volume_shape)
     shapes = []
-    while max(shape) > TUNING.pyramid_coarsest:
+    while max(shape) > COARSEST:
         shape = tuple(-(-n // 2) for n in shape)
         shapes.append(shape)
     return shapes  # type: ignore[return-value]

@@ -23,9 +23,8 @@ import zarr
 from chronocl.core import env
 from chronocl.core.errors import InvalidParameterError, StoreFormatError
 from chronocl.core.progress import track
-from chronocl.core.tuning import TUNING
 from chronocl.data.level_writer import LevelWriter
-from chronocl.data.pyramid import LEVELS, describe_levels, level_shapes
+from chronocl.data.pyramid import COARSEST, LEVELS, describe_levels, level_shapes
 from chronocl.data.remote_levels import remote_levels
 from chronocl.data.remote_store import filesystem, is_url, join, parse_storage_options
 from chronocl.data.remote_write import publish, split_url
@@ -98,8 +97,7 @@ def add_remote_levels(
         return {
             **summary,
             "levels": describe_levels(shape[1:], 1),
-            "status": "nothing to add: levels are made while the largest axis is > "
-            f"{TUNING.pyramid_coarsest}",
+            "status": f"nothing to add: levels are made while the largest axis is > {COARSEST}",
         }
     has = filesystem(options).exists(f"{bucket}/{key}/{LEVELS}/zarr.json")
     if has and not force:
