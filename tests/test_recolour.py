@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from chronocl import reference
 from chronocl.core.enhance import Enhance
 from chronocl.core.memory import aligned_empty
+from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeAlpha, TimeTF
 from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
@@ -119,11 +120,21 @@ def test_recolour_equals_integrating_the_edit(gl, data) -> None:
     threshold = data.draw(st.sampled_from([0.0, 0.1]))
     old = _spec(mode, data.draw(data_tfs()), data.draw(time_tfs()), order, threshold)
     new = _spec(mode, data.draw(data_tfs()), data.draw(time_tfs()), order, threshold)
-    if mode == "first_hit" and data.draw(st.booleans()):
+    edit = data.draw(st.sampled_from(["any", "colour", "opacity"]))
+    if mode == "first_hit" and edit == "colour":
         new = dataclasses.replace(new, data_tf=old.data_tf, time_tf=old.time_tf)
         # a colour-only edit keeps every opacity, so the hits
         pts = tuple((p[0], *rng.random(3), p[4]) for p in old.data_tf.points)
         new = dataclasses.replace(new, data_tf=dataclasses.replace(new.data_tf, points=pts))
+    elif mode == "first_hit" and edit == "opacity":
+        # opacity 0 below a cut, scaled elsewhere: the zeros stay, so at a threshold of 0 the
+        # crossings from them stay where they were (`same_hits`), whatever the scale
+        cut = rng.uniform(0.0, 0.6)
+        pts = tuple((*p[:4], 0.0 if p[0] < cut else p[4]) for p in old.data_tf.points)
+        old = dataclasses.replace(old, data_tf=dataclasses.replace(old.data_tf, points=pts))
+        pts = tuple((*p[:4], min(1.0, p[4] * rng.uniform(0.2, 1.5))) for p in pts)
+        tf = dataclasses.replace(old.data_tf, points=pts)
+        new = dataclasses.replace(new, data_tf=tf, time_tf=old.time_tf)
     order_idx = np.arange(width) if order == "forward" else np.arange(width)[::-1]
 
     def run(spec):
@@ -148,6 +159,46 @@ def test_recolour_equals_integrating_the_edit(gl, data) -> None:
     mid = _spec(mode, data.draw(data_tfs()), data.draw(time_tfs()), order, threshold)
     if why_not(old, mid, UNIT, UNIT, steps, n_steps) is None:
         _same_by_bricks(rc, w, [old, mid, new], run(old)[0], want)
+
+
+def test_first_hit_opacity_edits_that_keep_the_zeros_keep_the_hits() -> None:
+    """At a threshold of 0, an opacity edit that keeps the TF's zeros keeps who hits
+    (`same_hits`): the viewer's default TF with its middle point's opacity moved (the page's
+    usual edit) recolours, and values a float32 step past the zero entry, or short of it,
+    hit or miss alike under both, on the numpy reference and the OpenCL kernels. A rise from
+    the first entry, or a threshold above 0, still integrates."""
+    size = DataTF().size
+    first_live = next(i for i, a in enumerate(DataTF().lut[:, 3]) if a > 0)  # 13 of 256
+    zero = np.float32((first_live - 1) / (size - 1))  # the last entry at 0
+    u = [zero]
+    for _ in range(4):  # the least float32 steps either side of the crossing
+        u += [np.nextafter(u[-1], np.float32(1)), np.nextafter(u[0], np.float32(0))]
+    u = np.array(sorted(u) * 3, dtype=np.float32)[:27].reshape(3, 3, 3)
+    n_steps, steps = 3, (0, 1, 2)
+    raw = np.stack([u, np.flip(u), u + np.float32(0.3)])
+    tf_old = DataTF(value_range=UNIT)
+    for opacity in (0.05, 0.9):
+        pts = [list(p) for p in DataTF().points]
+        pts[2][4] = opacity
+        tf_new = DataTF(points=tuple(map(tuple, pts)), value_range=UNIT)
+        old, new = (_spec("first_hit", tf, TimeTF()) for tf in (tf_old, tf_new))
+        assert same_hits(old, new, steps, n_steps)
+        assert why_not(old, new, UNIT, UNIT, steps, n_steps) is None
+        pos = TimeTF().positions_of(steps, n_steps)
+        t_old = reference.integrate(raw, steps, pos, np.arange(3), old)[1]
+        t_new = reference.integrate(raw, steps, pos, np.arange(3), new)[1]
+        np.testing.assert_array_equal(t_old, t_new)
+        series = TimeSeries.from_array(raw)
+        sel = Selection(steps, n_steps)
+        got = [integrate(series, sel, spec=s, engine="opencl") for s in (old, new)]
+        np.testing.assert_array_equal(got[0].t_index, t_old)
+        np.testing.assert_array_equal(got[1].t_index, t_old)
+    ramp = DataTF(points=((0, 1, 1, 1, 0.0), (1, 1, 1, 1, 0.5)), value_range=UNIT)
+    steeper = DataTF(points=((0, 1, 1, 1, 0.0), (1, 1, 1, 1, 0.9)), value_range=UNIT)
+    old, new = (_spec("first_hit", tf, TimeTF()) for tf in (ramp, steeper))
+    assert not same_hits(old, new, steps, n_steps)  # from entry 0: f = u * 255 may underflow
+    old, new = (_spec("first_hit", tf, TimeTF(), threshold=0.01) for tf in (tf_old, tf_new))
+    assert not same_hits(old, new, steps, n_steps)  # the crossing moves with the opacity
 
 
 def _on_gpu(rc, rec, prepared, spec, spacing, into=None):

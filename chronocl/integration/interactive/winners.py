@@ -126,13 +126,23 @@ def _passes(spec: IntegrationSpec, steps: tuple[int, ...], n_steps: int) -> np.n
     return np.clip(a, np.float32(0), np.float32(1)) > np.float32(spec.threshold)
 
 
+# The least product of a crossing's non-zero LUT end and a step's time opacity for which a
+# threshold of 0 is passed wherever the other end is 0 (see `same_hits`): the opacity is then at
+# least this times 2^-24, far above float32's smallest normal (2^-126), so nothing underflows.
+ZERO_CROSSING_LEAST = 2.0**-70
+
+
 def same_hits(
     old: IntegrationSpec, new: IntegrationSpec, steps: tuple[int, ...], n_steps: int
 ) -> bool:
     """Whether every value passes first_hit's threshold at every step under `new` exactly
     where it does under `old`. The opacity is linear between LUT entries: where both ends of a
     segment pass (or both fail) so does the segment; where they differ, the crossing is where
-    it was only if the segment is unchanged. Sufficient, not necessary (data not looked at)."""
+    it was if the segment is unchanged, or, at a threshold of 0, if the end that fails is 0 in
+    both: the kernels' lo * (1 - f) + hi * f (`tf.lut_lerp32`) is then hi * f or lo * (1 - f),
+    above 0 exactly where f is above 0 (below 1) whatever the other end's value, as long as
+    f's least step is not smaller than 2^-24: not so for a rise from the first entry, where f
+    is u * (size - 1) itself. Sufficient, not necessary (data not looked at)."""
     if old.data_tf.size != new.data_tf.size:
         return False
     p_old, p_new = _passes(old, steps, n_steps), _passes(new, steps, n_steps)
@@ -145,9 +155,19 @@ def same_hits(
     _, at_o = old.time_tf.evaluate(old.time_tf.positions_of(steps, n_steps))
     _, at_n = new.time_tf.evaluate(new.time_tf.positions_of(steps, n_steps))
     seg = np.flatnonzero(crossing.any(axis=0))
-    ends_same = (lut_o[seg] == lut_n[seg]) & (lut_o[seg + 1] == lut_n[seg + 1])
+    lo_o, hi_o, lo_n, hi_n = lut_o[seg], lut_o[seg + 1], lut_n[seg], lut_n[seg + 1]
+    ends_same = (lo_o == lo_n) & (hi_o == hi_n)
     steps_same = np.float32(at_o) == np.float32(at_n)
-    return bool(ends_same.all() and steps_same[crossing.any(axis=1)].all())
+    crossed = crossing.any(axis=1)
+    if not steps_same[crossed].all():
+        return False
+    if old.threshold == 0.0 and new.threshold == 0.0:
+        rising = (lo_o == 0) & (lo_n == 0) & (seg >= 1)
+        falling = (hi_o == 0) & (hi_n == 0)
+        end = np.where(rising, np.minimum(hi_o, hi_n), np.minimum(lo_o, lo_n)).astype(np.float64)
+        least_time = float(np.float32(at_o)[crossed].min())
+        ends_same |= (rising | falling) & (end * least_time >= ZERO_CROSSING_LEAST)
+    return bool(ends_same.all())
 
 
 def winners(
