@@ -75,9 +75,9 @@ def slide_to(c: Client, t0: int, width: int) -> dict:
 
 def measured_rates() -> list[dict]:
     """The slide costs of the server's views (read, not changed): per level ns per voxel-step
-    integrated (d), per voxel of a steady one-step slide (s) and per voxel-step of a fill (f),
-    and the widths from which a slide is predicted cheaper, its state filled (s / d) and to
-    fill (s + f) / d."""
+    integrated (d), and in voxel-steps of it a steady one-step slide (s) and a fill per step
+    (f), which are the widths from which a slide is predicted cheaper, its state filled (s) and
+    to fill (s + f)."""
     from chronocl.viewer.view_sessions import Views
 
     out = []
@@ -92,10 +92,10 @@ def measured_rates() -> list[dict]:
                     "level": level,
                     "slides_by_sums": inverts,  # the mode adds and takes out steps (mean, count)
                     "direct_ns_per_voxel_step": round(1e6 * d, 4),
-                    "slide_ns_per_voxel": None if s is None else round(1e6 * s, 4),
-                    "fill_ns_per_voxel_step": None if f is None else round(1e6 * f, 4),
-                    "pays_from_width_filled": None if s is None else round(s / d, 1),
-                    "pays_from_width": None if s is None or f is None else round((s + f) / d, 1),
+                    "slide_voxel_steps": None if s is None else round(s, 1),
+                    "fill_voxel_steps": None if f is None else round(f, 1),
+                    "pays_from_width_filled": None if s is None else round(s, 1),
+                    "pays_from_width": None if s is None or f is None else round(s + f, 1),
                 }
             )
     return out

@@ -30,10 +30,17 @@ ELEMENT_GROUP = 64
 
 
 def combine(
-    dc: DeviceContext, host_ptr: bool, front: Partial, back: Partial, spec: IntegrationSpec
+    dc: DeviceContext,
+    host_ptr: bool,
+    front: Partial,
+    back: Partial,
+    spec: IntegrationSpec,
+    rgba8: bool = False,
 ) -> Partial:
     """The partial of `front` then `back` (see the mode's `combine`); new arrays, on the device
-    where `front`'s are."""
+    where `front`'s are. With `rgba8` (a mode combining partials), its colour in the display
+    format, RGBA8 by the host conversion's rule (kernels/opencl/rgba8.h): a final value only,
+    never combined again."""
     mode = spec.integration
     file, function, defines = mode.combine_kernel(spec)
     shape, device = front.rgba.shape, on_device(front.rgba)
@@ -42,7 +49,8 @@ def combine(
         ins = [front.rgba, back.rgba]
         run(dc, host_ptr, mode.kernel, function, front.rgba.size, defines, ins, [out])
         return Partial(out, None)
-    rgba = empty(dc, shape, np.float32, device)
+    rgba = empty(dc, shape, np.uint8 if rgba8 else np.float32, device)
+    defines = {**defines, "OUT8": rgba8}
     t_index = empty(dc, shape[:-1], np.int32, device) if mode.has_t_index else None
     value = empty(dc, shape[:-1], np.float32, device) if front.value is not None else None
     ins = [a for p in (front, back) for a in (p.rgba, p.t_index, p.value) if a is not None]

@@ -34,10 +34,10 @@ __kernel void integrate_alpha_rows(KERNEL_ARGS, __global out_t *out, ROWS_ARGS(R
  * (chronocl/modes/alpha.py `combine` is the oracle). One voxel per work-item. */
 
 __kernel void combine_over(__global const float4 *front, __global const float4 *back,
-                           __global float4 *out, ELEMENT_ARGS)
+                           __global colour_t *out, ELEMENT_ARGS)
 {
     ELEMENT(i);
     const float4 f = front[i];
-    out[i] = f + (1.0f - f.w) * back[i];
+    out[i] = COLOUR(f + (1.0f - f.w) * back[i]);
 }
 #endif

@@ -83,7 +83,7 @@ __kernel void integrate_extreme_rows(KERNEL_ARGS, __global out_t *out, __global 
 __kernel void combine_extreme(__global const float4 *front, __global const int *front_t,
                               __global const float *front_v, __global const float4 *back,
                               __global const int *back_t, __global const float *back_v,
-                              __global float4 *out, __global int *out_t, __global float *out_v,
+                              __global colour_t *out, __global int *out_t, __global float *out_v,
                               ELEMENT_ARGS)
 {
     ELEMENT(i);
@@ -94,7 +94,7 @@ __kernel void combine_extreme(__global const float4 *front, __global const int *
     const int beats = b > a;
 #endif
     const int keep = front_t[i] >= 0 && !(beats && back_t[i] >= 0);
-    out[i] = keep ? front[i] : back[i];
+    out[i] = COLOUR(keep ? front[i] : back[i]);
     out_t[i] = keep ? front_t[i] : back_t[i];
     out_v[i] = keep ? a : b;
 }

@@ -50,11 +50,11 @@ __kernel void integrate_first_hit_rows(KERNEL_ARGS, const float threshold, __glo
 
 __kernel void combine_first(__global const float4 *front, __global const int *front_t,
                             __global const float4 *back, __global const int *back_t,
-                            __global float4 *out, __global int *out_t, ELEMENT_ARGS)
+                            __global colour_t *out, __global int *out_t, ELEMENT_ARGS)
 {
     ELEMENT(i);
     const int keep = front_t[i] >= 0;
-    out[i] = keep ? front[i] : back[i];
+    out[i] = COLOUR(keep ? front[i] : back[i]);
     out_t[i] = keep ? front_t[i] : back_t[i];
 }
 #endif

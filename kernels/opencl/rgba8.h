@@ -17,6 +17,17 @@ inline uchar4 rgba8(const float4 v)
     return convert_uchar4(y);
 }
 
+/* The combine kernels' colour output (built SLIDING): float32, or, built OUT8, RGBA8 by the rule
+ * above, for a sliding window's last combine, its value shown as it is (the partials its stacks
+ * keep stay float32; chronocl/integration/interactive/slider.py `Combine.last`). */
+#ifdef OUT8
+typedef uchar4 colour_t;
+#define COLOUR(v) rgba8(v)
+#else
+typedef float4 colour_t;
+#define COLOUR(v) (v)
+#endif
+
 /* Sixteen lanes of one channel at once: the store of the integrate kernels built RGBA8 at VEC 16
  * (after common.h, whose pragma keeps PoCL's -Wpsabi note on 16-lane calls quiet). */
 #if defined(RGBA8) && VEC == 16

@@ -10,18 +10,24 @@ costs its width in voxel-steps; and a sliding state is filled once, by its first
 a leaf and a combine per step. With, per level,
 
     d = ms per voxel-step of an integration from resident steps    (`record_direct`)
-    s = ms per voxel of a steady one-step slide                     (`record_slide`)
-    f = ms per voxel-step of a state's fill                         (`record_slide(fill=W)`)
+    s = voxel-steps of integration (d) of a steady one-step slide   (`record_slide`)
+    f = voxel-steps of integration of a state's fill, per step      (`record_slide(fill=W)`)
 
-a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * V * k`, plus, where the
-state is still to be filled, the fill's `f * V * W` shared by the W slides a state is taken to serve
-(a scrub across its window): `f * V`. Integrating is predicted at `d * V * W`, and the cheaper is
-taken, so sliding pays from a width of about `(s + f) / d` on, which each machine and engine finds
-for itself; a state already filled keeps sliding while `s * k < d * W`. Until measured, s and f are
-guessed in voxel-steps of integration (`TUNING.slide_steps`, `fill_steps`, from this machine); where
-the window's steps travel to the device for every integration (a GPU whose memory holds not the
-window), d is mostly that transfer, which a slide pays only for its entering steps and a fill once
-per step: both are then guessed at d. The first slide measures f, the next ones s.
+a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * d * V * k`, plus, where
+the state is still to be filled, the fill's `f * d * V * W` shared by the W slides a state is taken
+to serve (a scrub across its window): `f * d * V`. Integrating is predicted at `d * V * W`, and the
+cheaper is taken, so sliding pays from a width of about `s + f` on, which each machine and engine
+finds for itself; a state already filled keeps sliding while `s * k < W`. Until measured, s and f
+are guessed (`TUNING.slide_steps`, `fill_steps`, from this machine); where the window's steps
+travel to the device for every integration (a GPU whose memory holds not the window), d is mostly
+that transfer, which a slide pays only for its entering steps and a fill once per step: both are
+then guessed at 1. The first slide measures f, the next ones s.
+
+s and f are kept in units of d as it stood when they were measured (a slide's ms over the
+integration rate then), not in ms: on a machine shared with other work both slow down alike, and
+in ms a slide timed while the machine was busy weighed against every later integration at the
+busy rate, for good, since an integrated window measures no slide (bench/slide_window.py, 256^3
+alpha on 2 cores shared at load 2.4-7, 2026-11-30: d was 0.40-0.83 ns a voxel-step run to run).
 
 Rates are per level (a coarse level's voxels cost more each: fixed overheads), and s and f per
 kind of slide besides (`Move.inverts`: a mode sliding by its sums alone adds the entering and
@@ -80,8 +86,8 @@ class SlideCosts:
 
     def __init__(self) -> None:
         self.direct: dict[int, float] = {}  # level -> ms per voxel-step, integrated
-        # (level, inverts) -> ms per voxel of a steady one-step slide, of a state's fill per
-        # voxel-step, and the slides averaged so far (up to TUNING.slide_memory)
+        # (level, inverts) -> voxel-steps of integration of a steady one-step slide, of a
+        # state's fill per step, and the slides averaged so far (up to TUNING.slide_memory)
         self.slide: dict[tuple[int, bool], float] = {}
         self.fill: dict[tuple[int, bool], float] = {}
         self._slides: dict[tuple[int, bool], int] = {}
@@ -101,13 +107,16 @@ class SlideCosts:
     ) -> None:
         """A slide of `steps` entering steps that took `ms` over `voxels` voxels; `fill`: the
         width of the window whose state this slide filled (0: a steady slide); `inverts`: of a
-        mode sliding by its sums alone."""
-        key = (level, inverts)
+        mode sliding by its sums alone. Kept against the level's integration rate now (none
+        yet: nothing to weigh it by, and a session integrates a window before it slides it)."""
+        d, key = self.direct.get(level), (level, inverts)
+        if not d:
+            return
         if fill:
-            _blend(self.fill, key, ms / max(1, voxels * fill))
+            _blend(self.fill, key, ms / max(1, voxels * fill) / d)
             return
         n = self._slides[key] = min(TUNING.slide_memory, self._slides.get(key, 0) + 1)
-        value, old = ms / max(1, voxels * steps), self.slide.get(key)
+        value, old = ms / max(1, voxels * steps) / d, self.slide.get(key)
         self.slide[key] = value if old is None else old + (value - old) / n
 
     def predict(self, voxels: int, width: int, move: Move = ONE_STEP) -> tuple | None:
@@ -118,14 +127,26 @@ class SlideCosts:
             return None
         shift = max(1, abs(move.shift))
         pieces = INVERT_PIECES if move.inverts else SLIDE_PIECES
-        guess = d if move.travels else TUNING.slide_steps * d * pieces / SLIDE_PIECES
+        guess = 1.0 if move.travels else TUNING.slide_steps * pieces / SLIDE_PIECES
         key = (move.level, move.inverts)
-        steady = self.slide.get(key, guess) * voxels * shift
+        steady = self.slide.get(key, guess) * d * voxels * shift
         fill = 0.0
         if not move.filled:  # its share over a scrub across the window: W slides
-            fill = self.fill.get(key, d if move.travels else TUNING.fill_steps * d) * voxels
+            fill = self.fill.get(key, 1.0 if move.travels else TUNING.fill_steps) * d * voxels
         measured = key in self.slide and (move.filled or key in self.fill)
         return d * voxels * width, steady + fill, measured
+
+    def slide_ms(self, voxels: int, width: int, move: Move = ONE_STEP) -> float | None:
+        """The ms `move` of a window of `width` over `voxels` voxels takes as a slide itself: a
+        steady slide, and where its state is still to be filled the whole fill, not its share
+        (None: nothing integrated at its level yet)."""
+        steady = self.predict(voxels, width, move._replace(filled=True))
+        if steady is None:
+            return None
+        if move.filled:
+            return steady[1]
+        share = self.predict(voxels, width, move)[1] - steady[1]  # type: ignore[index]
+        return steady[1] + share * width
 
     def why_not(self, voxels: int, width: int, move: Move = ONE_STEP) -> str | None:
         """None where sliding is predicted to pay (or nothing is measured yet), else why not."""

@@ -239,15 +239,7 @@ class LevelSession:
         if window > self.budget:
             why = f"the window needs {human(window)} > budget {human(self.budget)}"
             return self._stream(selection, t, Streaming(why, self.budget))
-        # the move as a slide is costed: the steps entering where the state can slide (else a
-        # one-step slide's, which decides whether the window integrated now keeps a state), the
-        # steps sent to the device for every integration, the state's fill paid already
-        voxels = int(np.prod(self.series.volume_shape))
-        move = Move(self.level, inverts=slides_by_sums(self.spec))
-        move = move._replace(travels=self._device.why is not None)
-        if old is not None and self._slider is not None and self._slider.can_move_to(selection):
-            entering = len(set(selection.steps) - set(old.steps))
-            move = move._replace(shift=entering, filled=self._slider.placed)
+        voxels, move = int(np.prod(self.series.volume_shape)), self._move(selection)
         width, budget, costs = selection.width, self.budget, self.costs
         reason, keep, state = slide_plan(self.spec, voxels, width, window, budget, costs, move)
         self._bricks.keep = keep
@@ -303,11 +295,43 @@ class LevelSession:
             # sliding state starts from this window and is filled lazily on the next slide.
             if reason is None:
                 self._slider = Slider(
-                    self.series, self.engine, self.spec, selection, job.value_range, self._device
+                    self.series,
+                    self.engine,
+                    self.spec,
+                    selection,
+                    job.value_range,
+                    self._device,
+                    self.display,
                 )
         self._cv = cv
         self._record(t, path, reason)
         return cv
+
+    def _move(self, selection: Selection) -> Move:
+        """The move to `selection` as a slide is costed: the steps entering where the state can
+        slide (else a one-step slide's, which decides whether the window integrated now keeps a
+        state), the steps sent to the device for every integration, the state's fill paid."""
+        move = Move(self.level, inverts=slides_by_sums(self.spec))
+        move = move._replace(travels=self._device.why is not None)
+        old, slider = self.selection, self._slider
+        if old is not None and slider is not None and slider.can_move_to(selection):
+            entering = len(set(selection.steps) - set(old.steps))
+            move = move._replace(shift=entering, filled=slider.placed)
+        return move
+
+    def slide_ms(self, selection: Selection, spec: IntegrationSpec) -> float | None:
+        """The ms moving to `selection` under `spec` (fixed: `moves.fixed`) is predicted to take
+        where it slides incrementally (a viewer's costs, `costs.SlideCosts.slide_ms`), else None:
+        a level policy predicts such a frame from it, not from integrating its window."""
+        slider, costs = self._slider, self.costs
+        if costs is None or slider is None or spec != self.spec or self.streaming is not None:
+            return None
+        if self.selection is None or not slider.can_move_to(selection):
+            return None
+        voxels, move = int(np.prod(self.series.volume_shape)), self._move(selection)
+        window = selection.width * self.manager.step_bytes
+        reason, _, _ = slide_plan(spec, voxels, selection.width, window, self.budget, costs, move)
+        return None if reason else costs.slide_ms(voxels, selection.width, move)
 
     def _let_go(self, selection: Selection) -> None:
         """Drop the steps that leave a window integrated anew before the entering ones are

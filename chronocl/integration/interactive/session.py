@@ -73,14 +73,18 @@ class LatencyModel:
         w = TUNING.level_smoothing
         table[level] = value if old is None else (1 - w) * old + w * value
 
-    def predict(self, level: int, steps: int, missing: int = 0) -> float | None:
+    def predict(
+        self, level: int, steps: int, missing: int = 0, slide_ms: float | None = None
+    ) -> float | None:
         """Predicted ms for `level` (None: nothing measured yet), `missing` of the window's
         steps to be read first (a level not shown lately has none of them resident: a scrub
-        at 64^3 that tried 256^3 waited 0.7 s for ten of its steps)."""
+        at 64^3 that tried 256^3 waited 0.7 s for ten of its steps), `slide_ms` the level's
+        prediction of a slide where it slides incrementally (None: it integrates)."""
         if not self.rate:
             return None
         finest = min(self.rate)
-        ms = max(self.rate[finest], self.rate.get(level, 0.0)) * self.voxels[level] * steps
+        rate = max(self.rate[finest], self.rate.get(level, 0.0))
+        ms = rate * self.voxels[level] * steps if slide_ms is None else slide_ms
         if self.display:
             near = min(self.display, key=lambda m: abs(m - level))
             ms += self.display[near] * self.voxels[level] / self.voxels[near]
@@ -89,11 +93,17 @@ class LatencyModel:
             ms += missing * read * self.voxels[level]
         return ms
 
-    def pick(self, steps: int, missing: Callable[[int], int] = lambda level: 0) -> tuple[int, str]:
-        """The level to draw next and why; `missing(level)`: the steps it would read."""
+    def pick(
+        self,
+        steps: int,
+        missing: Callable[[int], int] = lambda level: 0,
+        slides: Callable[[int], float | None] = lambda level: None,
+    ) -> tuple[int, str]:
+        """The level to draw next and why; `missing(level)`: the steps it would read;
+        `slides(level)`: the ms its slide is predicted at where it slides (else None)."""
         coarsest = len(self.voxels) - 1
         for level in range(coarsest + 1):
-            ms = self.predict(level, steps, missing(level))
+            ms = self.predict(level, steps, missing(level), slides(level))
             if ms is not None and ms <= self.target_ms:
                 finer = "" if level == 0 else "; finer levels predicted over it"
                 return level, f"level {level} predicted at {ms:.0f} ms, within the target{finer}"
@@ -108,7 +118,12 @@ class FixedLevel:
     def __init__(self, level: int) -> None:
         self.finest = level
 
-    def pick(self, steps: int, missing: Callable[[int], int] = lambda level: 0) -> tuple[int, str]:
+    def pick(
+        self,
+        steps: int,
+        missing: Callable[[int], int] = lambda level: 0,
+        slides: Callable[[int], float | None] = lambda level: None,
+    ) -> tuple[int, str]:
         return self.finest, f"level {self.finest} asked"
 
     def record_integrate(self, level: int, ms: float, steps: int) -> None:
@@ -238,7 +253,11 @@ class Session:
         # the last chronovolume goes first: a move that fails half way must not leave it shown,
         # nor a refine bring it back
         self.spec, self.selection, self._cv, self._last = spec, selection, None, None
-        level, self.why = self.policy.pick(selection.width, lambda n: self._missing(n, selection))
+        level, self.why = self.policy.pick(
+            selection.width,
+            lambda n: self._missing(n, selection),
+            lambda n: self._slide_ms(n, selection, spec),
+        )
         return self._at(level, selection, spec)
 
     def current(self) -> Chronovolume:
@@ -307,6 +326,12 @@ class Session:
             resident &= self._streaming.keep  # the steps not kept are read again
         return sum(1 for t in selection.steps if t not in resident)
 
+    def _slide_ms(self, level: int, selection: Selection, spec: IntegrationSpec) -> float | None:
+        """The ms `level` is predicted to slide to `selection` in, where it slides (a viewer's
+        slide costs: `LevelSession.slide_ms`); None where it integrates or has no session."""
+        held = self.at(level, spec)
+        return None if held is None else held.slide_ms(selection, spec)
+
     def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
         s = self.pool.session(level, spec)
         finest = self.policy.finest
@@ -315,7 +340,8 @@ class Session:
         t, cpu = time.perf_counter(), time.process_time()
         cv = s.show(selection, spec)
         wall = time.perf_counter() - t
-        self.policy.record_integrate(level, 1e3 * wall, selection.width)
+        if not s.stats.get("incremental"):  # a slide's ms say nothing of integrating the window
+            self.policy.record_integrate(level, 1e3 * wall, selection.width)
         self.policy.record_read(level, s.manager.scrub.read_s)
         if level != finest:
             self._read_ahead(selection, spec, wall, time.process_time() - cpu)

@@ -27,12 +27,13 @@ from chronocl.core.selection import Selection
 from chronocl.data.bricks import ResidentBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
+from chronocl.engine import elementwise
 from chronocl.engine.base import Engine
 from chronocl.engine.buffers import max_alloc
 from chronocl.engine.device_arrays import to_host, zeros
 from chronocl.engine.device_leaves import alpha_of, leaf, leaf_value
 from chronocl.engine.device_steps import reserve
-from chronocl.integration.inmemory import chronovolume_metadata, engine_name
+from chronocl.integration.inmemory import DISPLAY_VOXELS, chronovolume_metadata, engine_name
 from chronocl.integration.interactive.costs import Move, SlideCosts
 from chronocl.integration.interactive.sliding import SlidingAggregate, block_size
 from chronocl.modes.base import Partial, Values
@@ -40,16 +41,32 @@ from chronocl.modes.spec import IntegrationSpec
 
 
 class Combine:
-    """`op(earlier, later)` of a sliding aggregate: the engine's combine, in the spec's order."""
+    """`op(earlier, later)` of a sliding aggregate: the engine's combine, in the spec's order;
+    `last`, the combine of the window's two ends into its value, which with `rgba8` the
+    kernels write in the display format (RGBA8, by the rule the host converts a float32 frame
+    with, so the same bytes): a quarter of the bytes written, read back from a device and
+    converted by the viewer (render/upload.py `convert` took 70-80 ms for a 256^3 float32 frame
+    on the 2 busy cores here, 2026-11-30)."""
 
-    def __init__(self, engine: Engine, spec: IntegrationSpec, leaves: Leaves) -> None:
+    def __init__(
+        self, engine: Engine, spec: IntegrationSpec, leaves: Leaves, rgba8: bool = False
+    ) -> None:
         self.engine, self.spec, self.leaves = engine, spec, leaves  # `leaves` counts the pieces
+        self.rgba8 = rgba8
 
     def __call__(self, earlier: Partial, later: Partial) -> Partial:
         self.leaves.tick()
         if self.spec.order == "backward":
             return self.engine.combine(later, earlier, self.spec)
         return self.engine.combine(earlier, later, self.spec)
+
+    def last(self, earlier: Partial, later: Partial) -> Partial:
+        if not self.rgba8:
+            return self(earlier, later)
+        self.leaves.tick()
+        front, back = (later, earlier) if self.spec.order == "backward" else (earlier, later)
+        engine = self.engine  # an OpenCL engine (`writes_display`): its context and buffers
+        return elementwise.combine(engine.dc, engine.host_ptr, front, back, self.spec, True)
 
 
 class Leaves:
@@ -160,9 +177,12 @@ class Slider:
         selection: Selection,
         value_range: tuple[float, float],
         device: object | None = None,
+        display: bool = False,
     ) -> None:
         """`device`: the session's `DeviceWindow`, whose steps on the device the leaves are
-        integrated from where the engine copies bricks."""
+        integrated from where the engine copies bricks; `display` (a viewer's session): the
+        window's value comes in the display format where an integration's would
+        (`integrate_bricks`) and the mode combines partials."""
         self.series, self.engine, self.spec = series, engine, spec
         self.mode = spec.integration
         self.selection = selection
@@ -174,9 +194,12 @@ class Slider:
         self.leaves = Leaves(series.n_steps, engine, spec, value_range)
         self.inverts = self.leaves.inverts
         self.agg: SlidingAggregate[Partial] | None = None
+        voxels = int(np.prod(series.volume_shape))
+        rgba8 = display and engine.writes_display and voxels > DISPLAY_VOXELS
+        rgba8 = rgba8 and not self.inverts and not self.mode.finalize_is_global(spec)
+        self.combine = Combine(engine, spec, self.leaves, rgba8)
         if not self.inverts or self.mode.state_bytes:
-            combine = Combine(engine, spec, self.leaves)
-            self.agg = SlidingAggregate(self.leaves.for_aggregate, combine)
+            self.agg = SlidingAggregate(self.leaves.for_aggregate, self.combine)
             self.agg.reset(self._items(selection))
         self.acc = None  # inverting modes: fixed-point sums (Z, Y, X, C), host or device
 
@@ -244,14 +267,18 @@ class Slider:
             for s in leaving:
                 engine.fixed_add(self.acc, leaves.full(s).rgba, -1)
                 leaves.forget(s)
+        # The leaving steps leave the aggregate before the entering ones enter: the partials
+        # popped die first, and their memory makes the new ones (`recycled_empty`). Pushed
+        # first, a 256^3 slide's combine after the state's fill mapped a fresh 256 MB partial:
+        # 480-670 ms on the 2 busy cores here against 20 ms on a spare (bench/slide_window.py).
+        for _ in leaving:
+            if self.agg is not None:
+                self.agg.pop_front() if forward else self.agg.pop_back()
         for s in entering if forward else entering[::-1]:
             if self.inverts:
                 engine.fixed_add(self.acc, leaves.full(s).rgba, +1)
             if self.agg is not None:
                 self.agg.push_back(s) if forward else self.agg.push_front(s)
-        for _ in leaving:
-            if self.agg is not None:
-                self.agg.pop_front() if forward else self.agg.pop_back()
         leaves.forget()
         self.selection = selection
         cv = self._chronovolume()
@@ -265,7 +292,7 @@ class Slider:
         shape = series.volume_shape
         value = None
         if self.agg is not None and self.agg.steps:
-            value = self.agg.value()
+            value = self.agg.value(self.combine.last)
         if self.inverts:
             alpha = None if value is None else value.rgba
             positions = spec.time_tf.positions_of(selection.steps, series.n_steps)
@@ -275,8 +302,10 @@ class Slider:
             t_index = np.full(shape, -1, np.int32) if spec.has_t_index else None
         elif self.dc is not None:  # read back: the one transfer of a slide on the device
             rgba, t_index = to_host(self.dc, value.rgba), to_host(self.dc, value.t_index)
-        else:
-            rgba = np.asarray(value.rgba, dtype=np.float32)
+        else:  # RGBA8 (`Combine.last`) or float32, as it is
+            rgba = (
+                value.rgba if value.rgba.dtype == np.uint8 else np.asarray(value.rgba, np.float32)
+            )
             t_index = None if value.t_index is None else np.array(value.t_index, dtype=np.int32)
         meta = chronovolume_metadata(
             series, selection, spec, self.value_range, engine_name(self.engine)
@@ -286,12 +315,12 @@ class Slider:
 
 def state_bytes(mode, width: int, voxels: int) -> int:
     """Bytes of the state sliding a window of `width` steps over `voxels` voxels holds: the
-    partials its stacks keep (each stack of n steps every B-th level and the B below its top,
-    n / B + B + 1; both, at most ceil(W / B) + 2 B + 2, and never more than W: counted over
-    random walks both ways in tests/test_costs.py), 4 in hand (a leaf, the level under it,
-    their combine, the window's value), and the fixed-point sums."""
+    partials its stacks keep (every B-th level of each, the top two of the one pushed onto and
+    the B below the top of the one popped: at most ceil(W / B) + B + 2, and never more than W;
+    counted over random walks both ways in tests/test_costs.py), 4 in hand (a leaf, the level
+    under it, their combine, the window's value), and the fixed-point sums."""
     b = block_size(width)
-    held = min(width, -(-width // b) + 2 * b + 2) if mode.combines() else 0
+    held = min(width, -(-width // b) + b + 2) if mode.combines() else 0
     partials = (held + 4) * mode.state_bytes * voxels
     return partials + 8 * mode.sum_channels * voxels
 
