@@ -9,6 +9,8 @@ from hypothesis import strategies as st
 
 import chronocl
 from chronocl.core.errors import InvalidParameterError, RendererUnavailableError
+from chronocl.core.memory import spares
+from chronocl.core.tuning import TUNING
 from chronocl.data import synthetic
 from chronocl.integration import inmemory
 from chronocl.render import Camera
@@ -170,10 +172,9 @@ def test_in_place_update_draws_what_a_fresh_upload_draws(rc, demo, fmt):
     first, second = demo["vortex", "alpha"], demo["jet", "max"]
     slot = ViewSlot()
     vol = upload_as(rc, slot, first, fmt)
-    texture, staging = vol.texture, slot.staging
+    texture = vol.texture
     vol = upload_as(rc, slot, second, fmt)
     assert vol.texture is texture and slot.allocated == 1  # written in place, not reallocated
-    assert slot.staging is staging  # the same host buffer (None for float32: sent as it is)
     fresh_slot = ViewSlot()
     fresh = upload_as(rc, fresh_slot, second, fmt)
     assert fresh.texture is not texture
@@ -185,19 +186,42 @@ def test_in_place_update_draws_what_a_fresh_upload_draws(rc, demo, fmt):
     assert a.max() > 0
     slot.release_gl()
     fresh_slot.release_gl()
-    assert slot.staging is None and slot.volume is None
+    assert slot.volume is None
+
+
+def test_a_slots_staging_goes_back_to_the_pool_and_the_next_frame_writes_on_it(rc):
+    """The texture data's host staging is the pool's, not the panel's (issue 47): given back
+    once written, so the next frame, of this view or another, converts into the same memory
+    (already faulted in), and an idle panel holds none."""
+    shape = (64, 256, 256)  # its RGBA8 staging is 16 MiB: TUNING.mapped_bytes, pooled
+    nbytes = int(np.prod(shape)) * 4
+    assert nbytes >= TUNING.mapped_bytes
+    spares.clear()
+    slot, other = ViewSlot(), ViewSlot()
+    first, second = np.zeros((*shape, 4), np.float32), np.zeros((*shape, 4), np.float32)
+    first[10:20, 30:40, 50:60] = 0.5
+    second[40:50, 100:140, 7:9] = 0.25
+    upload_as(rc, slot, cv_of(first), "f1")
+    (given,) = [m for m in spares.maps if len(m) == nbytes]  # back in the pool, not the slot's
+    vol = upload_as(rc, other, cv_of(second), "f1")
+    (again,) = [m for m in spares.maps if len(m) == nbytes]
+    assert again is given  # the second frame took it, wrote on it, and gave it back
+    texels = np.empty((*shape, 4), np.uint8)
+    vol.texture.read_into(texels)
+    np.testing.assert_array_equal(texels, np.round(second * 255).astype(np.uint8))
+    slot.release_gl()
+    other.release_gl()
 
 
 def test_shape_or_format_change_reallocates(rc):
     slot = ViewSlot()
     small = cv_of(random_rgba((12, 10, 8), seed=2))
     vol = upload_as(rc, slot, small, "f1")
-    texture, staging = vol.texture, slot.staging
-    assert texture.size == (8, 10, 12) and staging.shape == (12, 10, 8, 4)
+    texture = vol.texture
+    assert texture.size == (8, 10, 12)
     other = cv_of(random_rgba((6, 10, 8), seed=3))
     vol = upload_as(rc, slot, other, "f1")
     assert vol.texture is not texture and vol.texture.size == (8, 10, 6)
-    assert slot.staging is not staging and slot.staging.shape == (6, 10, 8, 4)
     extent, voxel = world_geometry(other.shape, other.spacing)
     np.testing.assert_allclose(vol.extent, extent)
     assert vol.unit == pytest.approx(float(voxel.min()))

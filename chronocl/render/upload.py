@@ -2,10 +2,12 @@
 
 Formats: "f4" float32 (no conversion), "f2" half float, "f1" RGBA8 unorm (round(v * 255),
 clipped to 0..255). `convert` works in z-slab tasks on a small thread pool (numpy's casts and
-ufuncs release the GIL), one cache-sized block at a time, straight into a staging buffer the
-caller keeps and passes back next frame (no allocation per frame). The same pass finds the
-slices, rows and columns with opacity > 0, from which the raycaster's occupied box comes, so the
-volume is read once. Which format the viewer sends at which size, and why: docs/display.md.
+ufuncs release the GIL), one cache-sized block at a time, straight into a staging buffer: for
+the viewer's frames one from the pool of reused host buffers (`chronocl.core.memory`), let go
+once written, whose memory the next frame takes again, already faulted in. The same pass
+finds the slices, rows and columns with opacity > 0, from which the raycaster's occupied box
+comes, so the volume is read once. Which format the viewer sends at which size, and why:
+docs/display.md.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import numpy as np
 
 from chronocl.core import host_threads
 from chronocl.core.errors import InvalidParameterError
+from chronocl.core.memory import recycled_empty
 from chronocl.core.tuning import TUNING
 from chronocl.integration import inmemory
 
@@ -77,8 +80,13 @@ def occupancy(alpha: np.ndarray) -> Occupancy:
     return Occupancy(filled.any(axis=(1, 2)), filled.any(axis=(0, 2)), filled.any(axis=(0, 1)))
 
 
-def staging_for(shape: tuple[int, ...], fmt: str, staging: np.ndarray | None) -> np.ndarray:
-    """`staging` when it has this shape and format's type, else a new C-contiguous buffer."""
+def staging_for(
+    shape: tuple[int, ...], fmt: str, staging: np.ndarray | None, pooled: bool = False
+) -> np.ndarray:
+    """`staging` when it has this shape and format's type, else a new C-contiguous buffer:
+    where `pooled`, from the pool (`recycled_empty`: the memory of the last one of its size
+    that died). Not by default: a render's half floats would be a size of their own in the
+    pool, pushing out the spares of the chronovolumes integrated between renders."""
     dtype = np.dtype(FORMATS[fmt])
     if (
         staging is not None
@@ -87,17 +95,18 @@ def staging_for(shape: tuple[int, ...], fmt: str, staging: np.ndarray | None) ->
         and staging.flags.c_contiguous
     ):
         return staging
-    return np.empty(shape, dtype=dtype)
+    return recycled_empty(tuple(shape), dtype) if pooled else np.empty(shape, dtype=dtype)
 
 
 def convert(
-    rgba: np.ndarray, fmt: str, staging: np.ndarray | None = None
+    rgba: np.ndarray, fmt: str, staging: np.ndarray | None = None, pooled: bool = False
 ) -> tuple[np.ndarray, Occupancy]:
     """Premultiplied RGBA (Z, Y, X, 4) as texture data of format `fmt`, and its occupancy.
 
-    The data is written into `staging` when it fits (see `staging_for`; keep the returned
-    array and pass it back next time). A C-contiguous float32 input for "f4", or uint8 (RGBA8,
-    a display chronovolume) for "f1", is returned as it is (only the occupancy is computed).
+    The data is written into `staging` when it fits, else into a new buffer, from the pool
+    where `pooled` (`staging_for`: let it go once written, the next call takes its memory
+    again). A C-contiguous float32 input for "f4", or uint8 (RGBA8, a display chronovolume)
+    for "f1", is returned as it is (only the occupancy is computed).
     """
     if fmt not in FORMATS:
         raise InvalidParameterError(f"texture format {fmt!r}; use one of {', '.join(FORMATS)}")
@@ -110,7 +119,7 @@ def convert(
     as_is = rgba.flags.c_contiguous and (
         (fmt == "f4" and rgba.dtype == np.float32) or (fmt == "f1" and rgba.dtype == np.uint8)
     )
-    out = rgba if as_is else staging_for(rgba.shape, fmt, staging)
+    out = rgba if as_is else staging_for(rgba.shape, fmt, staging, pooled)
     z = np.zeros(nz, dtype=bool)
     y = np.zeros(ny, dtype=bool)
     x = np.zeros(nx, dtype=bool)

@@ -1,6 +1,8 @@
 """One panel of a client's page: its integration session, its current chronovolume and that
 chronovolume's display volume (chronocl/render/volume.py), allocated once per shape and format
-and rewritten in place."""
+and rewritten in place. The texture data's host staging is not the panel's: it comes from the
+process's pool of reused host buffers for the write and goes back to it after
+(`chronocl.core.memory`)."""
 
 from __future__ import annotations
 
@@ -26,7 +28,6 @@ class ViewSlot:
     volume: Volume | None = None
     uploaded: Chronovolume | None = None
     written: Chronovolume | None = None  # whose RGBA `volume`'s texture holds (slab_upload)
-    staging: np.ndarray | None = None  # the texture data's host buffer, reused frame to frame
     # the window's winners where it recolours: GPU textures, or on the OpenCL device (llvmpipe)
     recolour: object | None = None  # (viewer/recolouring.py `Prepared`)
     why_not_recoloured: str | None = None  # the last frame's edit integrated: why (one line)
@@ -44,7 +45,6 @@ class ViewSlot:
         for vol in self.kept.values():
             vol.release()
         self.kept = {}
-        self.staging = None
 
     def texture(self, ctx, size: tuple[int, int, int], fmt: str) -> Volume:
         """The slot's volume for a texture of `size` (x, y, z) and format `fmt`, about to be
@@ -93,19 +93,21 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     The format follows `display_format` (docs/display.md, measured by bench/upload.py): RGBA8
     above 32^3 (a quarter of float32's bytes, and llvmpipe draws it faster at every size
     measured; 256^3: upload 0.65 s -> 0.15 s, upload + 512^2 draw 2x faster), float32 below.
-    The conversion runs on a thread pool into the slot's staging buffer, reused frame to
-    frame, and finds the occupied box in the same pass. The whole texture is written each
-    time: at 256^3 the RGBA8 write costs 12-16 ms, and finding the unchanged slabs means
-    comparing with the previous frame's data, as many bytes as the write moves (a TF edit
-    or a window slide changes nearly every voxel anyway). A refine's chronovolume whose slabs
-    were written as they integrated (`slot.written`) is not written again.
+    The conversion runs on a thread pool into a staging buffer from the pool of reused host
+    buffers (`chronocl.core.memory.recycled_empty`), given back once written: the next frame
+    of any view takes its memory again, and an idle panel holds none. It finds the occupied
+    box in the same pass. The whole texture is written each time: at 256^3 the RGBA8 write
+    costs 12-16 ms, and finding the unchanged slabs means comparing with the previous frame's
+    data, as many bytes as the write moves (a TF edit or a window slide changes nearly every
+    voxel anyway). A refine's chronovolume whose slabs were written as they integrated
+    (`slot.written`) is not written again.
     """
     nz, ny, nx, _ = cv.rgba.shape
     if given_up is not None and given_up():  # before the occupancy pass, too
         raise SupersededError("newer input came before the refined frame was uploaded")
     # RGBA8 from the kernels (a display chronovolume) as it is, whatever the size
     fmt = "f1" if cv.rgba.dtype == np.uint8 else display_format(nz * ny * nx)
-    data, occ = convert(cv.rgba, fmt, slot.staging)
+    data, occ = convert(cv.rgba, fmt, pooled=True)
     bricks = brick_grid.submit(data)  # the empty-space grid, beside the texture write
     # Written slab by slab while it integrated (`chronocl.viewer.slab_upload`): nothing to write
     if slot.written is cv and slot.volume is not None:
@@ -113,8 +115,6 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     else:
         vol = slot.texture(rc.ctx, (nx, ny, nz), fmt)
         vol.write(data, given_up)  # given up: half written, uploaded again next time
-    if data is not cv.rgba:  # RGBA8 from the kernels is sent as it is: the staging stays
-        slot.staging = data
     vol.place(cv.spacing, occ.bounds(), bricks.result())
     slot.uploaded, slot.written = cv, None
     return vol
