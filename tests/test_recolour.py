@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from chronocl import reference
 from chronocl.core.enhance import Enhance
-from chronocl.core.memory import aligned_empty
+from chronocl.core.memory import aligned_empty, recycled_empty, spares
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeAlpha, TimeTF
 from chronocl.core.tuning import TUNING
@@ -467,6 +467,39 @@ def test_brick_outputs_taken_over_by_the_next_window_recolour_it_right(mode) -> 
                 np.testing.assert_array_equal(bricks.apply(taken, fixed).rgba, _whole(w, fixed))
         finally:
             taken.release()
+
+
+def test_a_brick_output_of_its_own_comes_from_the_pool_zeroed_and_goes_back() -> None:
+    """Winners with no output to take over recolour into one from the pool of reused host
+    buffers (issue 47): the memory of a dead frame's array of its size, already faulted in,
+    zeroed (its old contents must not show in bricks nothing colours), given back once the
+    winners are released."""
+    shape = (64, 256, 256)  # an RGBA8 output of 16 MiB: TUNING.mapped_bytes, pooled
+    nbytes = int(np.prod(shape)) * 4
+    assert nbytes >= TUNING.mapped_bytes
+    rng = np.random.default_rng(11)
+    u = np.zeros(shape, np.float32)
+    k = np.full(shape, 255, np.uint8)  # no winner, but in one block
+    u[20:30, 100:140, 60:90] = rng.random((10, 40, 30), dtype=np.float32)
+    k[20:30, 100:140, 60:90] = rng.integers(0, 4, (10, 40, 30))
+    spec = _spec("max", DataTF(), TimeTF())
+    w = Winners(aligned_copy(u), aligned_copy(k), (0, 1, 2, 3), 4, UNIT, spec)
+    spares.clear()
+    dead = recycled_empty((*shape, 4), np.uint8)
+    dead[...] = 7  # a dead frame's contents
+    address = dead.ctypes.data
+    del dead
+    (given,) = [m for m in spares.maps if len(m) == nbytes]
+    bricks = BrickRecolourer()
+    prepared = bricks.prepare(w)
+    try:
+        assert prepared.output[0].ctypes.data == address
+        assert not [m for m in spares.maps if len(m) == nbytes]
+        want, _ = convert(recoloured(w, spec), "f1")
+        np.testing.assert_allclose(bricks.apply(prepared, spec).rgba, want, rtol=0, atol=1)
+    finally:
+        prepared.release()
+    assert any(m is given for m in spares.maps)  # back for the next frame
 
 
 def test_a_recoloured_frame_and_its_winners_come_back_whole(monkeypatch) -> None:

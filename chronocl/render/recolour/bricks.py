@@ -35,7 +35,7 @@ import threading
 
 import numpy as np
 
-from chronocl.core.memory import ALIGN, aligned_empty, is_aligned
+from chronocl.core.memory import ALIGN, aligned_empty, is_aligned, recycled_empty
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
@@ -128,8 +128,9 @@ class BrickWinners:
     def take_output(self, held: tuple | None, start) -> None:
         """Write into `start` where it is the RGBA8 the window shows (`shown_output`): the
         first edit rewrites its bricks the winners' spec may colour; else into `held`, the last
-        window's output (`take_held`); else into one zeroed here, so that no edit pays for
-        first touching its pages (512^3: 0.5 s)."""
+        window's output (`take_held`: it says which bricks hold colour, so nothing is zeroed);
+        else into one from the pool of reused host buffers, zeroed here, so that no edit pays
+        for first touching its pages (512^3: 0.5 s)."""
         shape = self.w.u.shape
         if shown_output(start, shape):
             self.output = (start, self.coloured(self.w.spec))
@@ -314,8 +315,10 @@ class BrickRecolourer:
 
 
 def aligned_zeros(shape) -> np.ndarray:
-    """Zeroed uint8 of `shape`, 64-byte aligned (PoCL writes it in place), its pages touched."""
-    out = aligned_empty(shape, np.uint8)
+    """Zeroed uint8 of `shape`, 64-byte aligned (PoCL writes it in place), its pages touched:
+    on the memory of a dead output of its size where there is one (`recycled_empty`; a
+    frame's RGBA8 or t_index), which goes back to the pool when the winners are released."""
+    out = recycled_empty(tuple(shape), np.uint8)
     out[...] = 0
     return out
 
