@@ -1,8 +1,34 @@
 """Host arrays aligned for the device: 64-byte aligned, so 16-lane vector loads need no fix-up.
 
-`recycled_empty` is for outputs made again and again at one size (a chronovolume per call of
-`chronocl.integrate`, per edit of a session): the memory of one that died is handed out again,
-already faulted in, instead of a fresh map whose every page faults on first write."""
+`recycled_empty` is the process's one pool of reusable host buffers, for what is made again and
+again at one size (a chronovolume per call of `chronocl.integrate`, per edit of a session): the
+memory of one that died is handed out again, already faulted in, instead of a fresh map whose
+every page faults on first write. What a frame gives back the next takes again; what nobody
+takes goes back to the system (`_Spares`). `--memory` (`chronocl.core.process_memory`) counts
+the process's resident memory, so every host buffer below, the pool's spares included.
+
+Where the process keeps host or device buffers beyond one call, and why:
+
+- pooled here: chronovolume outputs (RGBA, t_index, winners written by the kernels), a slide's
+  partials and a device array's read-back (`engine.device_arrays`), the recolouring's gathered
+  winners and its RGBA8 output (`render.recolour`), and the texture staging of the viewer's
+  uploads (`render.upload.convert`): taken per frame, given back when the frame lets go;
+- step slots (`data.slots.StepSlots`): one block per window manager, its free slots faulted in
+  ahead by the warming thread and handed back when `--memory` asks (`ProcessLimit.fit`): their
+  owner counts them (`held_bytes`); its rare `gc.collect` returns slots held in cycles;
+- handed over first: a recolouring's output goes to the next window's winners of its shape
+  (`BrickWinners.take_held`), whose coloured bricks say what to rewrite, so nothing is zeroed;
+  to the pool when released untaken;
+- on the device: a panel's GL textures, the current one and `TUNING.kept_textures` of other
+  sizes (`viewer.slots.ViewSlot`; host memory on llvmpipe, counted there), the OpenCL queues'
+  pinned staging and chunk buffers (`engine.transfer.Streams`, one set per device context,
+  grown to the largest chunk, 4-64 MiB by default; pinned pages are resident, so counted by
+  `--memory`, their device buffers fall within the share of device memory left beside
+  resident steps) and resident steps on a GPU (`engine.device_steps`, their own budget);
+- per thread, reader or engine, for their lifetime: the conversion's cache-sized scratch
+  (`render.upload`), a dask worker's brick buffer (`data.bricks.SeriesBricks.per_thread`), a
+  reader's two brick buffers (`SeriesBricks.buffered`), the TF tables
+  (`engine.tables.TableCache`) and the events' label buffers (`events.run`)."""
 
 from __future__ import annotations
 

@@ -9,9 +9,10 @@ under the limit, and the steps are what gives way:
 
 - before each frame and each step read, steps read ahead or kept from older windows are
   dropped and the pages of free slots handed back, until the resident steps plus what the
-  frames need fit the limit (`fit`). The memory of dead outputs kept for the next frames
-  (`chronocl.core.memory.spares`) counts as the frames': the next frame takes it again, so
-  dropping it would lower no peak and fault as much in afresh (about 1 s for 1 GB at 512^3);
+  frames need fit the limit (`fit`). The memory of dead outputs and staging kept for the next
+  frames (`chronocl.core.memory.spares`, the pool of reused host buffers) counts as the
+  frames': the next frame takes it again, so dropping it would lower no peak and fault as
+  much in afresh (about 1 s for 1 GB at 512^3);
   what nobody takes goes back after `TUNING.spare_seconds`;
 - what the frames need is what the process holds beside its steps now or after any of the last
   frames, whichever is more, and at least what the clients' views now expect theirs to hold
