@@ -31,6 +31,7 @@ import numpy as np
 from chronocl.core import process_memory
 from chronocl.core.errors import ChronoclError
 from chronocl.core.interrupt import checkpoint
+from chronocl.core.memory import recycled_empty
 from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine.buffers import DeviceLimitError
@@ -287,7 +288,7 @@ class InTexture(Chronovolume):
                 "read the view's chronovolume while it is shown"
             )
         t = time.perf_counter()
-        rgba = np.empty((*self._shape, 4), dtype=self._dtype)
+        rgba = recycled_empty((*self._shape, 4), self._dtype)  # the one pool of host buffers
         self._volume.texture.read_into(rgba)
         self.rgba = rgba
         self._owner.read_back(1e3 * (time.perf_counter() - t), rgba.nbytes)

@@ -28,7 +28,7 @@ import numpy as np
 
 from chronocl.core import host_threads
 from chronocl.core import values as _values
-from chronocl.core.memory import aligned_empty
+from chronocl.core.memory import recycled_empty
 from chronocl.core.selection import Selection
 from chronocl.core.tf import lut_lerp32
 from chronocl.data.chronovolume import Chronovolume
@@ -182,8 +182,8 @@ def winners(
     none) and the window's raw resident values (step -> (Z, Y, X)); gathered on the host
     threads, slab by slab."""
     table = index_table(steps)
-    u = aligned_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
-    k = aligned_empty(t_index.shape, table.dtype)
+    u = recycled_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
+    k = recycled_empty(t_index.shape, table.dtype)
     nz = t_index.shape[0]
     cuts = np.linspace(0, nz, min(nz, 4 * host_threads.workers()) + 1).astype(int)
     args = (t_index, arrays, steps, value_range, spec.mode, table, u, k)
