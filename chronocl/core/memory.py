@@ -11,7 +11,8 @@ Where the process keeps host or device buffers beyond one call, and why:
 
 - pooled here: chronovolume outputs (RGBA, t_index, winners written by the kernels), a slide's
   partials and a device array's read-back (`engine.device_arrays`), the recolouring's gathered
-  winners and its RGBA8 output (`render.recolour`), and the texture staging of the viewer's
+  winners and its RGBA8 output (`render.recolour`), a GPU recolour's RGBA read back when
+  something reads it (`viewer.recolouring.InTexture`), and the texture staging of the viewer's
   uploads (`render.upload.convert`): taken per frame, given back when the frame lets go;
 - step slots (`data.slots.StepSlots`): one block per window manager, its free slots faulted in
   ahead by the warming thread and handed back when `--memory` asks (`ProcessLimit.fit`): their
