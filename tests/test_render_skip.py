@@ -69,6 +69,28 @@ def test_grid_is_the_grown_brick_maximum(shape, brick, fill, seed):
     )
 
 
+@settings(max_examples=examples(60))
+@given(
+    shape=st.tuples(st.integers(1, 37), st.integers(1, 21), st.integers(1, 29)),
+    brick=st.sampled_from([1, 2, 3, 8, 16]),
+    points=st.integers(0, 6),
+    seed=st.integers(0, 2**16),
+)
+def test_occupied_bounds_from_the_grid_equal_the_volume_s(shape, brick, points, seed):
+    """The viewer's and renderer's occupied box, found from the brick grid and the planes it
+    points at, is the one a pass over the volume finds (`Occupancy.bounds`): a few opaque voxels
+    anywhere (on brick edges, in a short last brick), colour without opacity, RGBA8 and float."""
+    rng = np.random.default_rng(seed)
+    rgba = np.zeros((*shape, 4), dtype=np.uint8)
+    rgba[..., 0] = rng.integers(0, 256, shape)  # colour where nothing is opaque
+    for _ in range(points):
+        rgba[(*(int(rng.integers(0, n)) for n in shape), 3)] = rng.integers(1, 256)
+    for volume in (rgba, rgba.astype(np.float32) / 255):
+        want = convert(volume, "f4" if volume.dtype == np.float32 else "f1")[1].bounds()
+        got = brick_grid.occupied_bounds(brick_grid.from_rgba(volume, brick), volume, brick)
+        assert np.array_equal(got, want), (got, want)
+
+
 def test_grid_on_the_pool_equals_serial():
     rng = np.random.default_rng(3)
     # above TUNING.brick_grid_serial_voxels: slab tasks

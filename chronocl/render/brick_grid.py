@@ -77,6 +77,47 @@ def submit(rgba: np.ndarray) -> Future:
     return _starter.submit(from_rgba, rgba)
 
 
+def occupied_bounds(grid: np.ndarray, rgba: np.ndarray, brick: int = BRICK) -> np.ndarray:
+    """The first and last voxel of `rgba` (Z, Y, X, 4) with opacity > 0 along x, y and z, as
+    `chronocl.render.upload.Occupancy.bounds` gives them (none: [0, 0, 0, -1, -1, -1]), from
+    its `grid` and a few planes of it. A brick's value covers its voxels grown by one, so where
+    the bricks of layers below b are all 0 and layer b's are not, the first occupied plane lies
+    in [b*B, (b+1)*B]; where the layers above b are all 0, the last in [b*B - 1, (b+1)*B - 2]
+    (or up to the volume's last plane where b is the grid's last layer).
+    Only those planes are read (within the box found so far): at 512^3 a few ms, where a pass
+    over the volume took 40-50 ms before the texture's write."""
+    live = grid > 0
+    if not live.any():
+        return np.array([0, 0, 0, -1, -1, -1])
+    alpha = rgba[..., 3]
+    box = [slice(None)] * 3  # (z, y, x): narrowed to the bounds found, axis by axis
+    lo, hi = {}, {}
+    for axis in (0, 1, 2):  # z first: the planes read along y and x are then fewer
+        n = alpha.shape[axis]
+        layers = np.flatnonzero(live.any(axis=tuple(a for a in range(3) if a != axis)))
+        first, last = int(layers[0]), int(layers[-1])
+        a0, a1 = first * brick, min((first + 1) * brick + 1, n)
+        # (the last layer of the grid has none above it: its last plane may be the volume's)
+        b1 = min((last + 1) * brick - 1, n) if last < live.shape[axis] - 1 else n
+        b0 = max(last * brick - 1, 0)
+        lo[axis] = a0 + _first_filled(alpha, box, axis, a0, a1)
+        hi[axis] = b1 - 1 - _first_filled(alpha, box, axis, b0, b1, reverse=True)
+        box[axis] = slice(lo[axis], hi[axis] + 1)
+    return np.array([lo[2], lo[1], lo[0], hi[2], hi[1], hi[0]])
+
+
+def _first_filled(alpha, box: list, axis: int, p0: int, p1: int, reverse: bool = False) -> int:
+    """The index, from p0 (from p1 - 1 where `reverse`), of the first plane p0..p1 along `axis`
+    holding an opacity > 0 within `box`."""
+    part = list(box)
+    part[axis] = slice(p0, p1)
+    filled = np.moveaxis(alpha[tuple(part)] > 0, axis, 0).reshape(p1 - p0, -1).any(axis=1)
+    idx = np.flatnonzero(filled[::-1] if reverse else filled)
+    if idx.size == 0:  # cannot be, the grid says otherwise: a grid not of this volume
+        raise InvalidParameterError("the brick grid is not this volume's: rebuild it")
+    return int(idx[0])
+
+
 def _grid(values: np.ndarray, brick: int, finish) -> np.ndarray:
     if brick < 1:
         raise InvalidParameterError(f"brick size {brick}; use a positive number of voxels")

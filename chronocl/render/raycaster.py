@@ -65,9 +65,11 @@ class Raycaster:
         their golden images and pixel-exact tests are recorded with it."""
         nz, ny, nx, _ = cv.rgba.shape
         dtype = "f1" if cv.rgba.dtype == np.uint8 else dtype  # RGBA8 from the kernels as it is
-        data, occ = convert(cv.rgba, dtype)
+        data, occ = convert(cv.rgba, dtype, occupancy=False)
         vol = Volume.allocate(self.ctx, (nx, ny, nz), dtype, data, nearest)
-        vol.place(cv.spacing, occ.bounds(), brick_grid.from_rgba(data))
+        grid = brick_grid.from_rgba(data)
+        bounds = occ.bounds() if occ is not None else brick_grid.occupied_bounds(grid, data)
+        vol.place(cv.spacing, bounds, grid)
         return vol
 
     def draw(

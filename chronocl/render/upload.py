@@ -99,14 +99,20 @@ def staging_for(
 
 
 def convert(
-    rgba: np.ndarray, fmt: str, staging: np.ndarray | None = None, pooled: bool = False
-) -> tuple[np.ndarray, Occupancy]:
+    rgba: np.ndarray,
+    fmt: str,
+    staging: np.ndarray | None = None,
+    pooled: bool = False,
+    occupancy: bool = True,
+) -> tuple[np.ndarray, Occupancy | None]:
     """Premultiplied RGBA (Z, Y, X, 4) as texture data of format `fmt`, and its occupancy.
 
     The data is written into `staging` when it fits, else into a new buffer, from the pool
     where `pooled` (`staging_for`: let it go once written, the next call takes its memory
     again). A C-contiguous float32 input for "f4", or uint8 (RGBA8, a display chronovolume)
-    for "f1", is returned as it is (only the occupancy is computed).
+    for "f1", is returned as it is, with its occupancy, or None where not `occupancy` (a
+    pass over the volume of its own: `brick_grid.occupied_bounds` finds its bounds from the
+    brick grid instead). A conversion finds the occupancy in the same pass, whatever is asked.
     """
     if fmt not in FORMATS:
         raise InvalidParameterError(f"texture format {fmt!r}; use one of {', '.join(FORMATS)}")
@@ -120,6 +126,8 @@ def convert(
         (fmt == "f4" and rgba.dtype == np.float32) or (fmt == "f1" and rgba.dtype == np.uint8)
     )
     out = rgba if as_is else staging_for(rgba.shape, fmt, staging, pooled)
+    if as_is and not occupancy:
+        return out, None
     z = np.zeros(nz, dtype=bool)
     y = np.zeros(ny, dtype=bool)
     x = np.zeros(nx, dtype=bool)

@@ -107,7 +107,7 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
         raise SupersededError("newer input came before the refined frame was uploaded")
     # RGBA8 from the kernels (a display chronovolume) as it is, whatever the size
     fmt = "f1" if cv.rgba.dtype == np.uint8 else display_format(nz * ny * nx)
-    data, occ = convert(cv.rgba, fmt, pooled=True)
+    data, occ = convert(cv.rgba, fmt, pooled=True, occupancy=False)
     bricks = brick_grid.submit(data)  # the empty-space grid, beside the texture write
     # Written slab by slab while it integrated (`chronocl.viewer.slab_upload`): nothing to write
     if slot.written is cv and slot.volume is not None:
@@ -115,6 +115,8 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
     else:
         vol = slot.texture(rc.ctx, (nx, ny, nz), fmt)
         vol.write(data, given_up)  # given up: half written, uploaded again next time
-    vol.place(cv.spacing, occ.bounds(), bricks.result())
+    grid = bricks.result()
+    bounds = occ.bounds() if occ is not None else brick_grid.occupied_bounds(grid, data)
+    vol.place(cv.spacing, bounds, grid)
     slot.uploaded, slot.written = cv, None
     return vol
