@@ -771,12 +771,11 @@ def test_a_view_with_its_own_camera_shows_its_own_picture(widget, monkeypatch):
 # -- suspended while no view shows it --------------------------------------------------------
 
 
-def view(w, what: str) -> None:
-    """widget.js's message: a view of the widget shown on the page ("shown") or removed
-    ("gone": its output cleared, its cell deleted)."""
-    w._handle_msg(
-        {"content": {"data": {"method": "custom", "content": {"view": what}}}, "buffers": []}
-    )
+def view(w, what: str, view_id: str = "view-1", hidden: bool = False) -> None:
+    """widget.js's message: a view of the widget shown on the page ("shown"), alive (its
+    heartbeat) or removed ("gone": its output cleared, its cell deleted, its page hidden)."""
+    content = {"view": what, "id": view_id, "hidden": hidden}
+    w._handle_msg({"content": {"data": {"method": "custom", "content": content}}, "buffers": []})
 
 
 def suspended_soon(w, timeout: float = 30.0) -> bool:
@@ -941,5 +940,98 @@ def test_a_widget_in_use_is_not_suspended_under_its_waits(monkeypatch):
         for _ in range(3):
             assert w.screenshot().data[:8] == b"\x89PNG\r\n\x1a\n"
         assert suspended_soon(w)
+    finally:
+        w.close()
+
+
+# -- views proving they are alive (a page reloaded never says "gone") -------------------------
+
+
+class Clock:
+    """A clock the test moves by hand."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_a_view_silent_past_its_bound_is_gone_and_one_heard_again_is_shown():
+    from chronocl.notebook import views as nb_views
+
+    clock = Clock()
+    shown = nb_views.Views(clock)
+    assert shown.heard("a") and shown.heard("b", hidden=True) and len(shown) == 2
+    assert not shown.heard("a")  # a heartbeat of a view counted shown changes nothing
+    clock.now += nb_views.LOST_AFTER_S - 1
+    assert not shown.heard("a") and shown.expire() == []
+    clock.now += 2  # b silent past the visible bound, but its page is hidden: it waits longer
+    assert shown.expire() == [] and len(shown) == 2
+    clock.now += nb_views.LOST_AFTER_S  # a silent past it (its page reloaded): gone
+    assert shown.expire() == ["a"] and len(shown) == 1
+    clock.now += nb_views.LOST_HIDDEN_AFTER_S
+    assert shown.expire() == ["b"] and len(shown) == 0
+    assert shown.heard("a")  # heard again (a page back from the cache): shown anew
+    assert shown.gone("a") and not shown.gone("a") and not shown.gone("never")
+    assert len(shown) == 0
+
+
+def test_the_cell_clock_stands_still_while_a_cell_runs():
+    """A view's heartbeats wait in the kernel's queue while a cell runs: that silence is not
+    counted (the clock stands still from pre_execute to post_execute, cells run by cells once)."""
+    from chronocl.notebook import views as nb_views
+
+    clock = Clock()
+    cells = nb_views.CellTime(clock)
+    shown = nb_views.Views(cells)
+    shown.heard("a")
+    t0 = cells()
+    clock.now += 5
+    cells.start()
+    clock.now += 10 * nb_views.LOST_AFTER_S  # a long cell
+    cells.start()  # (a cell running a cell)
+    clock.now += 7
+    cells.end()
+    assert cells() == t0 + 5 and shown.expire() == []
+    cells.end()
+    cells.end()  # (an end without a start: nothing)
+    clock.now += 3
+    assert cells() == t0 + 8 and shown.expire() == []
+    clock.now += nb_views.LOST_AFTER_S
+    assert shown.expire() == ["a"]
+
+
+def test_a_widget_whose_views_stop_beating_is_suspended_and_one_heard_again_resumes(monkeypatch):
+    """A page reloaded or crashed sends no "gone": once its view's heartbeats stop for the
+    bound (the views' clock moved by hand) the widget is suspended at once, as if the view went;
+    while another view beats it is not; the view heard again resumes it as it was."""
+    import chronocl.notebook.widget as nb_widget
+    from chronocl.notebook import views as nb_views
+
+    monkeypatch.setattr(nb_widget, "SUSPEND_AFTER_S", 0.3)
+    w = chronocl.show(vortex()[:6], window=(1, 5))
+    try:
+        assert w._heartbeat_s == nb_views.HEARTBEAT_S  # the front end's heartbeat
+        clock = Clock()
+        w._views.clock = clock
+        view(w, "shown", "a")
+        view(w, "shown", "b")
+        w.mode = "max"
+        before = w.wait_frame()
+        thread = w._worker.thread
+        clock.now += nb_views.LOST_AFTER_S / 2
+        view(w, "alive", "b")
+        clock.now += nb_views.LOST_AFTER_S / 2 + 1  # a is silent past the bound, b beats
+        time.sleep(1.0)  # (the widget's poll, every POLL_S, counts a gone)
+        assert len(w._views) == 1 and not w.suspended and thread.is_alive()
+
+        clock.now += nb_views.LOST_AFTER_S + 1  # b silent too: no view left
+        assert suspended_soon(w, timeout=10)
+        assert len(w._views) == 0 and not thread.is_alive() and w.mode == "max"
+
+        view(w, "alive", "b")  # b was alive after all (its kernel busy): shown again
+        assert not w.suspended and len(w._views) == 1
+        assert w.wait_frame()["digest"] == before["digest"]
     finally:
         w.close()

@@ -5,7 +5,9 @@ it; what is done by hand in the widget (its mode menu, a window brushed on its t
 read back through the kernel; its keys are its own (not the notebook's) and its Save PNG
 downloads over the comm; a second widget on the page keeps its own state; its output cleared,
 the widget is suspended (its render thread ended, its steps let go) and `display(w)` shows it
-again with the same picture; closing the widget ends its render thread. The viewer's Events
+again with the same picture; so does a page reloaded, which never removes its views (their
+"gone" on pagehide, or, where that is lost, their heartbeats stopping, tell the kernel);
+closing the widget ends its render thread. The viewer's Events
 panel, through the widget's comm, lists a series' events, and a click on one moves the
 window, which `w.window` reads back. The server and the cells are run with
 tests/jupyter_lab.py (which bench/notebook_latency.py uses too)."""
@@ -13,6 +15,7 @@ tests/jupyter_lab.py (which bench/notebook_latency.py uses too)."""
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -23,6 +26,7 @@ pytest.importorskip("jupyterlab")
 pytest.importorskip("nbformat")
 
 from .jupyter_lab import (  # noqa: E402
+    NOTEBOOK_READY,
     cell_output,
     jupyter_lab,
     open_notebook,
@@ -80,6 +84,20 @@ EVENT_CELLS = [
     "print('WINDOW=' + json.dumps({'window': w.window}))",
     "w.close()",
 ]
+# The reload notebook: a widget whose views beat every second and are gone after 4 s silent
+# (chronocl/notebook/views.py; the defaults are 5 s and 20 s), read back, shown again.
+RELOAD_CELLS = [
+    "import json\nimport numpy as np\nimport chronocl\nfrom chronocl.data import synthetic\n"
+    "from chronocl.notebook import views\n"
+    "views.HEARTBEAT_S, views.LOST_AFTER_S = 1.0, 4.0\n"
+    "data = np.stack(list(synthetic.steps('vortex', 8, (32, 32, 32))))\n"
+    "w = chronocl.show(data, name='reloaded', height=420)\nw",
+    "print('VIEWS=' + json.dumps({'views': len(w._views), 'suspended': w.suspended, "
+    "'alive': w._live is not None and w._live.thread.is_alive(), 'mode': w.mode}))",
+    "w.mode = 'max'",
+    "w",  # shown again
+    "w.close()",
+]
 # The first widget's viewer (widget.js puts it on the element that holds the shadow root).
 VIEWER = "(document.querySelector('.chronocl-widget') || {}).viewer"
 SECOND = "(document.querySelectorAll('.chronocl-widget')[1] || {}).viewer"
@@ -133,6 +151,7 @@ def lab(tmp_path_factory):
     root = tmp_path_factory.mktemp("lab-root")
     write_notebook(root / "widget.ipynb", CELLS)
     write_notebook(root / "events.ipynb", EVENT_CELLS)
+    write_notebook(root / "reload.ipynb", RELOAD_CELLS)
     with jupyter_lab(root, tmp_path_factory.mktemp("lab-home")) as server:
         yield server
 
@@ -370,6 +389,86 @@ def test_events_found_in_the_widget_and_one_clicked_moves_its_window(browser, la
         run_cell(page, 2)
         assert cell_output(page, 2, "WINDOW") == {"window": [2, 12, 1]}
         run_cell(page, 3)
+        assert problems == []
+    finally:
+        context.close()
+
+
+# The page's WebSocket sends, where `window.dropGone` is set, all but the messages saying a
+# view went (JupyterLab's kernel messages, text or binary, hold the comm message's JSON).
+DROP_GONE = """(() => {
+  const send = WebSocket.prototype.send;
+  const text = (data) => (typeof data === 'string' ? data : new TextDecoder().decode(data));
+  WebSocket.prototype.send = function (data) {
+    if (window.dropGone && text(data).includes('"view":"gone"')) return;
+    return send.call(this, data);
+  };
+})();"""
+
+
+def views_read_back(page, until: dict, timeout_s: float = 60) -> dict:
+    """The reload notebook's cell 1 run until it prints `until` (or `timeout_s` passed): the
+    kernel's count of the widget's views and whether it is suspended. Each run is a cell of its
+    own: the views' silence while one runs is not counted (views.CellTime)."""
+    end = time.monotonic() + timeout_s
+    while True:
+        run_cell(page, 1)
+        got = cell_output(page, 1, "VIEWS")
+        if got == until or time.monotonic() > end:
+            return got
+        page.wait_for_timeout(500)
+
+
+def test_a_reloaded_page_suspends_its_widget_and_shown_again_it_resumes(browser, lab):
+    """A page reloaded never calls the view's cleanup: its view's best-effort "gone" on
+    pagehide, or its heartbeats stopping, tell the kernel, which suspends the widget (read back
+    through the kernel from the reloaded page); shown again there, it resumes with the picture
+    it had. A page whose "gone" is lost (a renderer crashed sends none) is found by its
+    silence alone."""
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = context.new_page()
+    problems: list[str] = []
+    page.on("pageerror", lambda e: problems.append(str(e)))
+    page.on("dialog", lambda d: d.accept())  # (JupyterLab asks before leaving unsaved cells)
+    again = "window.jupyterapp.shell.currentWidget.content.widgets[3].node"
+    shown_again = f"{again}.querySelector('.chronocl-widget')"
+    resumed = f"""() => {{ const h = {shown_again}, v = h && h.viewer, l = v && v.last;
+      return !!l && l.quality === 'full' && !l.refining && l.views === 1; }}"""
+    page.add_init_script(DROP_GONE)
+    try:
+        open_notebook(page, lab, "reload.ipynb", len(RELOAD_CELLS))
+        run_cell(page, 0)
+        page.wait_for_function(
+            f"() => {{ const v = {VIEWER}; return !!v && v.full >= 1; }}", timeout=60_000
+        )
+        run_cell(page, 2)  # (a picture of its own: not the first, which any widget shows)
+        page.wait_for_function(SHOWS_MODE, arg=[0, "max"], timeout=60_000)
+        shown = last(page)
+        alive = {"views": 1, "suspended": False, "alive": True, "mode": "max"}
+        assert views_read_back(page, alive, timeout_s=0) == alive
+
+        page.reload()
+        page.wait_for_function(NOTEBOOK_READY, arg=len(RELOAD_CELLS), timeout=60_000)
+        assert page.locator(".chronocl-widget").count() == 0  # (the cells' outputs unsaved)
+        gone = {"views": 0, "suspended": True, "alive": False, "mode": "max"}
+        assert views_read_back(page, gone) == gone
+
+        run_cell(page, 3)
+        page.wait_for_function(resumed, timeout=60_000)
+        assert page.evaluate(f"() => {shown_again}.viewer.last")["digest"] == shown["digest"]
+        assert page.evaluate(lit_share(shown_again)) > 0.02
+        assert views_read_back(page, alive, timeout_s=0) == alive
+
+        # Its "gone" lost (as a crashed renderer sends none; here dropped on the kernel's socket):
+        # the heartbeats stop, and 4 s later the view is counted gone and the widget suspended.
+        page.evaluate("() => { window.dropGone = true; }")
+        page.reload()
+        page.wait_for_function(NOTEBOOK_READY, arg=len(RELOAD_CELLS), timeout=60_000)
+        assert views_read_back(page, gone) == gone
+        run_cell(page, 3)
+        page.wait_for_function(resumed, timeout=60_000)
+        assert page.evaluate(f"() => {shown_again}.viewer.last")["digest"] == shown["digest"]
+        run_cell(page, 4)
         assert problems == []
     finally:
         context.close()

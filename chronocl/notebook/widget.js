@@ -52,9 +52,44 @@ async function render({ model, el }) {
   // Keys typed in the viewer are its own: the notebook does not see them.
   shell.addEventListener('keydown', (e) => e.stopPropagation());
   // The kernel counts the views shown: with none left for a while (the output cleared, the
-  // cell deleted) it lets the worker go, and a view shown again resumes it. Sent before the
-  // viewer starts, so that it comes before the viewer's own messages.
-  model.send({ view: 'shown' });
+  // cell deleted) it lets the worker go, and a view shown again resumes it. A page reloaded,
+  // closed or crashed never calls the cleanup below, so the view also proves it is alive: a
+  // heartbeat every `_heartbeat_s` while it exists, visible or not (a hidden page's beats say
+  // so: the kernel waits longer for its throttled timers), and a best-effort 'gone' on
+  // pagehide, after which it says nothing (chronocl/notebook/views.py). A page being unloaded
+  // turns hidden after pagehide; that is not said: the beats say hidden, on a timer, only
+  // where the page lives on hidden. "shown" is sent before the viewer starts, so that it
+  // comes before the viewer's own messages.
+  const id = `${Date.now().toString(36)}-${Math.random().toString(36).slice(2)}`;
+  const say = (what) => {
+    try {
+      model.send({ view: what, id, hidden: document.visibilityState === 'hidden' });
+    } catch {
+      // the model closed (its comm gone): the kernel freed the worker already
+    }
+  };
+  let beat = null;
+  const beating = (on) => {
+    clearInterval(beat);
+    beat = on ? setInterval(() => say('alive'), 1000 * model.get('_heartbeat_s')) : null;
+  };
+  const visible = () => {
+    if (beat !== null && document.visibilityState === 'visible') say('alive'); // (the short wait)
+  };
+  const pagehide = () => {
+    beating(false);
+    say('gone');
+  };
+  const pageshow = (e) => {
+    if (!e.persisted) return; // (back from the back-forward cache: shown again)
+    say('shown');
+    beating(true);
+  };
+  say('shown');
+  beating(true);
+  document.addEventListener('visibilitychange', visible);
+  window.addEventListener('pagehide', pagehide);
+  window.addEventListener('pageshow', pageshow);
   const { viewer, stop } = app.start(
     { root, shell, keys: shell, fragment: false, global: false },
     connection.modelTransport(model),
@@ -64,12 +99,12 @@ async function render({ model, el }) {
   // anywidget calls this when the view is removed (its output cleared, its cell deleted).
   return () => {
     model.off('change:height', height);
+    document.removeEventListener('visibilitychange', visible);
+    window.removeEventListener('pagehide', pagehide);
+    window.removeEventListener('pageshow', pageshow);
+    beating(false);
     stop();
-    try {
-      model.send({ view: 'gone' });
-    } catch {
-      // the model closed (its comm gone): the kernel freed the worker already
-    }
+    say('gone');
   };
 }
 

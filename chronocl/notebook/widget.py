@@ -32,6 +32,7 @@ from chronocl.core.errors import ChronoclError, InvalidParameterError, RendererU
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.probe import check_point
 from chronocl.notebook import state as synced
+from chronocl.notebook import views as shown_views
 from chronocl.notebook.bundle import esm
 from chronocl.notebook.kernel import KERNEL
 from chronocl.viewer.datasets import Dataset
@@ -128,6 +129,8 @@ class ChronoclWidget(anywidget.AnyWidget):
     data_tf = traitlets.Dict(help="the data transfer function: points and value range")
     time_tf = traitlets.Dict(help="the time transfer function")
     camera = traitlets.Dict(help="azimuth, elevation, zoom, fov, projection, up")
+    # How often each view says it is alive (chronocl/notebook/views.py), for widget.js.
+    _heartbeat_s = traitlets.Float(shown_views.HEARTBEAT_S).tag(sync=True)
     _closed = True  # until its worker runs (a widget that failed to start has nothing to free)
     _live: ClientWorker | None = None  # the worker; None while suspended (`_worker` resumes)
     # Set while a suspended worker is being ended (outside `_life`): cleared, with its share of
@@ -146,7 +149,7 @@ class ChronoclWidget(anywidget.AnyWidget):
     ) -> None:
         check_gl()
         self._syncing = True  # the attributes' first values are the worker's
-        super().__init__(height=height)
+        super().__init__(height=height, _heartbeat_s=shown_views.HEARTBEAT_S)
         self._datasets = [dataset]
         self._downloads = Downloads()
         self._cond = threading.Condition()
@@ -155,7 +158,8 @@ class ChronoclWidget(anywidget.AnyWidget):
         self._life = threading.RLock()
         self._engine, self._device, self._store = engine, device, store
         self._saved: tuple | None = None  # while suspended: the worker's state and focus
-        self._views_shown = 0  # the page's views showing the widget now ({"view": ...})
+        shown_views.CELL_TIME.watch()  # a view's silence while a cell runs is the kernel's
+        self._views = shown_views.Views()  # the page's views showing the widget now
         self._view_gen = 0  # counts the views shown and gone (a suspend timer's turn)
         self._used_at = time.monotonic()  # the worker's last use (`_worker`)
         self._busy = 0  # the kernel's waits on the worker in progress (no suspending then)
@@ -193,15 +197,16 @@ class ChronoclWidget(anywidget.AnyWidget):
         # The front end closed the model (its notebook closed, the widget closed from
         # JavaScript): the worker goes as with `close()`.
         self.comm.on_close(lambda _msg: self._front_end_closed())
-        self._steps = threading.Thread(target=self._report_steps, daemon=True)
-        self._steps.start()
+        self._poller = threading.Thread(target=self._poll, daemon=True)
+        self._poller.start()
 
     # -- the page's messages (the kernel's thread) ------------------------------------------
     def _on_msg(self, _widget, content, _buffers) -> None:
         if self._closed or not isinstance(content, dict):
             return
-        if content.get("view") in ("shown", "gone"):  # widget.js: a view rendered, removed
-            self._view_changed(content["view"] == "shown")
+        if content.get("view") in ("shown", "alive", "gone"):  # widget.js: a view's news
+            if isinstance(content.get("id"), str):
+                self._view_said(content["view"], content["id"], bool(content.get("hidden")))
             return
         if content.get("type") == "hello":  # a view was rendered: it starts as a socket does
             self.send({"text": json.dumps(info_message(self._datasets))})
@@ -296,10 +301,12 @@ class ChronoclWidget(anywidget.AnyWidget):
         head = reply | {"filename": filename, "media_type": media_type}
         self.send({"download": json.dumps(head)}, buffers=[path.read_bytes()])
 
-    def _report_steps(self) -> None:
-        """The timeline's resident steps (`viewer.residency`), as the socket reports them."""
+    def _poll(self) -> None:
+        """Every POLL_S: the views whose heartbeats stopped counted gone (`_expire_views`), and
+        the timeline's resident steps (`viewer.residency`) reported as the socket reports them."""
         last = None
         while not self._closed:
+            self._expire_views()
             worker = self._live  # (not `_worker`: a suspended widget stays suspended)
             if worker is None:
                 last = None  # a resumed worker's steps are reported afresh
@@ -605,9 +612,10 @@ class ChronoclWidget(anywidget.AnyWidget):
     @property
     def suspended(self) -> bool:
         """No view has shown the widget for SUSPEND_AFTER_S (its output cleared, its cell
-        deleted): its worker is let go (its render thread, GL textures, OpenCL buffers, and
-        its share of the kernel's memory and steps), its attributes and state kept. A view
-        shown again (`display(w)`) or any use from code resumes it as it was."""
+        deleted), or its views' heartbeats stopped (their page reloaded, closed or crashed:
+        chronocl/notebook/views.py): its worker is let go (its render thread, GL textures,
+        OpenCL buffers, and its share of the kernel's memory and steps), its attributes and
+        state kept. A view shown again (`display(w)`) or any use from code resumes it as it was."""
         return self._live is None and not self._closed and self._ending is None
 
     @property
@@ -654,15 +662,19 @@ class ChronoclWidget(anywidget.AnyWidget):
             raise
         self._shared, self._live, self._saved = shared, worker, None
 
-    def _view_changed(self, shown: bool) -> None:
-        """A view of the widget rendered on the page, or removed (its output cleared, its cell
-        deleted): with none left for SUSPEND_AFTER_S the widget is suspended; one shown
-        resumes it now (its page's requests follow), its state integrated meanwhile."""
+    def _view_said(self, what: str, view: str, hidden: bool) -> None:
+        """View `view` of the widget said it was rendered ("shown"), is alive ("alive", every
+        HEARTBEAT_S; `hidden`: its page is) or was removed ("gone": its output cleared, its
+        cell deleted, its page hidden for good). With none left for SUSPEND_AFTER_S the widget
+        is suspended; a view counted shown anew resumes it now (its page's requests follow),
+        its state integrated meanwhile."""
         with self._cond:
-            self._views_shown = max(0, self._views_shown + (1 if shown else -1))
+            changed = self._views.gone(view) if what == "gone" else self._views.heard(view, hidden)
+            if not changed:
+                return
             self._view_gen += 1
-            gen, none = self._view_gen, self._views_shown == 0
-        if shown:
+            gen, none = self._view_gen, not self._views
+        if what != "gone":
             with self._life:
                 was = self._live is None  # (suspended, or being suspended)
                 worker = self._worker
@@ -670,6 +682,18 @@ class ChronoclWidget(anywidget.AnyWidget):
                 worker.warm()
         elif none:
             self._suspend_after(gen, SUSPEND_AFTER_S)
+
+    def _expire_views(self) -> None:
+        """The views silent for longer than their bound (views.LOST_AFTER_S: a page reloaded,
+        closed or crashed, which never said "gone") counted gone; with none left the widget is
+        suspended at once (their silence was the grace)."""
+        with self._cond:
+            if not self._views.expire():
+                return
+            self._view_gen += 1
+            gen, none = self._view_gen, not self._views
+        if none:
+            self._suspend_after(gen, 0.0)
 
     def _suspend_after(self, gen: int, delay: float) -> None:
         timer = threading.Timer(delay, self._suspend, args=(gen,))
@@ -684,7 +708,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         and its share is let go (`_let_go`)."""
         with self._life:
             with self._cond:
-                if self._closed or self._live is None or self._views_shown or gen != self._view_gen:
+                if self._closed or self._live is None or self._views or gen != self._view_gen:
                     return
                 busy = self._busy
             left = self._used_at + SUSPEND_AFTER_S - time.monotonic()
