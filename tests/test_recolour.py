@@ -201,6 +201,25 @@ def test_first_hit_opacity_edits_that_keep_the_zeros_keep_the_hits() -> None:
     assert not same_hits(old, new, steps, n_steps)  # the crossing moves with the opacity
 
 
+def test_first_hit_edits_just_past_the_threshold_integrate() -> None:
+    """An edit whose segments both pass (or both fail) the threshold at their ends, but by less
+    than the rounding of lo * (1 - f) + hi * f and the time opacity's product may take away
+    (`CLEAR_BY`), integrates: opacity 1 everywhere edited to just above a threshold of 0.5, or
+    back, or from just below to further below; an edit that clears it by far recolours."""
+    steps, n_steps = (0, 1), 2
+
+    def flat(a: float) -> IntegrationSpec:
+        tf = DataTF(points=((0, 1, 1, 1, a), (1, 1, 1, 1, a)), value_range=UNIT)
+        return _spec("first_hit", tf, TimeTF(), threshold=0.5)
+
+    just_above = float(np.nextafter(np.float32(0.5), np.float32(1)))
+    just_below = float(np.nextafter(np.float32(0.5), np.float32(0)))
+    for a, b in [(1.0, just_above), (just_above, 1.0), (just_below, 0.2)]:
+        assert not same_hits(flat(a), flat(b), steps, n_steps), (a, b)
+    assert same_hits(flat(1.0), flat(0.6), steps, n_steps)
+    assert same_hits(flat(0.2), flat(0.4), steps, n_steps)
+
+
 def _on_gpu(rc, rec, prepared, spec, spacing, into=None):
     """The GPU's recolouring of `prepared` under `spec`, shown in `into` (None: its own)."""
     changed = rec.apply(prepared, spec, into)

@@ -130,42 +130,62 @@ def _passes(spec: IntegrationSpec, steps: tuple[int, ...], n_steps: int) -> np.n
 # threshold of 0 is passed wherever the other end is 0 (see `same_hits`): the opacity is then at
 # least this times 2^-24, far above float32's smallest normal (2^-126), so nothing underflows.
 ZERO_CROSSING_LEAST = 2.0**-70
+# How far a segment's opacity must clear the threshold, relatively, for every value in it to
+# pass (or fail) whatever the rounding: lo * (1 - f) + hi * f and the time opacity's product
+# round four times in float32 (2^-24 each); and, at a threshold of 0, how far above 0.
+CLEAR_BY, CLEAR_OF_ZERO = 2.0**-20, 2.0**-100
 
 
 def same_hits(
     old: IntegrationSpec, new: IntegrationSpec, steps: tuple[int, ...], n_steps: int
 ) -> bool:
     """Whether every value passes first_hit's threshold at every step under `new` exactly
-    where it does under `old`. The opacity is linear between LUT entries: where both ends of a
-    segment pass (or both fail) so does the segment; where they differ, the crossing is where
-    it was if the segment is unchanged, or, at a threshold of 0, if the end that fails is 0 in
-    both: the kernels' lo * (1 - f) + hi * f (`tf.lut_lerp32`) is then hi * f or lo * (1 - f),
-    above 0 exactly where f is above 0 (below 1) whatever the other end's value, as long as
-    f's least step is not smaller than 2^-24: not so for a rise from the first entry, where f
-    is u * (size - 1) itself. Sufficient, not necessary (data not looked at)."""
+    where it does under `old`. The opacity is linear between LUT entries, times the step's time
+    opacity. A segment (a step's two neighbouring LUT entries) unchanged by the edit gives the
+    same opacities. A changed one whose ends both pass (or both fail) does so throughout only
+    where both ends clear the threshold by more than the rounding (`CLEAR_BY`) under both TFs.
+    Where the ends differ the crossing is where it was if the segment is unchanged, or, at a
+    threshold of 0, if the end that fails is 0 in both: the kernels' lo * (1 - f) + hi * f
+    (`tf.lut_lerp32`) is then hi * f or lo * (1 - f), above 0 exactly where f is above 0 (below
+    1) whatever the other end's value, as long as f's least step is not smaller than 2^-24:
+    not so for a rise from the first entry, where f is u * (size - 1) itself. Sufficient, not
+    necessary (data not looked at)."""
     if old.data_tf.size != new.data_tf.size:
         return False
     p_old, p_new = _passes(old, steps, n_steps), _passes(new, steps, n_steps)
     if not np.array_equal(p_old, p_new):
         return False
-    crossing = p_old[:, 1:] != p_old[:, :-1]  # (W, size - 1) segments the threshold cuts
-    if not crossing.any():
-        return True
     lut_o, lut_n = old.data_tf.lut[:, 3], new.data_tf.lut[:, 3]
     _, at_o = old.time_tf.evaluate(old.time_tf.positions_of(steps, n_steps))
     _, at_n = new.time_tf.evaluate(new.time_tf.positions_of(steps, n_steps))
+    at_o, at_n = np.float32(at_o), np.float32(at_n)
+    crossing = p_old[:, 1:] != p_old[:, :-1]  # (W, size - 1) segments the threshold cuts
+    changed = ((lut_o[:-1] != lut_n[:-1]) | (lut_o[1:] != lut_n[1:]))[None, :] | (at_o != at_n)[
+        :, None
+    ]
+    a_o = lut_o.astype(np.float64)[None, :] * at_o.astype(np.float64)[:, None]  # (W, size)
+    a_n = lut_n.astype(np.float64)[None, :] * at_n.astype(np.float64)[:, None]
+    ends = (a_o[:, :-1], a_o[:, 1:], a_n[:, :-1], a_n[:, 1:])
+    low, high = np.minimum.reduce(ends), np.maximum.reduce(ends)
+    t = float(np.float32(old.threshold))
+    clear = (high == 0) | (high * (1 + CLEAR_BY) < t)  # fails throughout
+    if t < 1:  # (an opacity is clamped to 1: a threshold of 1 is never passed)
+        clear |= low > t * (1 + CLEAR_BY) + CLEAR_OF_ZERO  # passes throughout
+    if (changed & ~crossing & ~clear).any():
+        return False
+    if not crossing.any():
+        return True
     seg = np.flatnonzero(crossing.any(axis=0))
     lo_o, hi_o, lo_n, hi_n = lut_o[seg], lut_o[seg + 1], lut_n[seg], lut_n[seg + 1]
     ends_same = (lo_o == lo_n) & (hi_o == hi_n)
-    steps_same = np.float32(at_o) == np.float32(at_n)
     crossed = crossing.any(axis=1)
-    if not steps_same[crossed].all():
+    if not (at_o == at_n)[crossed].all():
         return False
     if old.threshold == 0.0 and new.threshold == 0.0:
         rising = (lo_o == 0) & (lo_n == 0) & (seg >= 1)
         falling = (hi_o == 0) & (hi_n == 0)
         end = np.where(rising, np.minimum(hi_o, hi_n), np.minimum(lo_o, lo_n)).astype(np.float64)
-        least_time = float(np.float32(at_o)[crossed].min())
+        least_time = float(at_o[crossed].min())
         ends_same |= (rising | falling) & (end * least_time >= ZERO_CROSSING_LEAST)
     return bool(ends_same.all())
 
