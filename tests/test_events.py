@@ -13,9 +13,11 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import shutil
 import sys
 import tempfile
 import threading
+import time
 import tomllib
 from importlib.metadata import version
 from pathlib import Path
@@ -897,3 +899,140 @@ def test_crowded_markers_keep_their_labels_apart_and_beside_their_rings(monkeypa
         assert near_x < 20 and box[1] - 60 < py < box[3] + 60, (px, py, box)  # beside its ring
         for other in drawn[i + 1 :]:
             assert not markers.boxes_overlap(box, other[2])
+
+
+# -- worker processes: errors, Ctrl-C, a caller that dies, the memory plan (issue 51) ---------
+class _TwoArgumentError(Exception):
+    """An error whose __init__ takes more than its message: it pickles, but does not unpickle."""
+
+    def __init__(self, path: str, step: int) -> None:
+        super().__init__(f"{path} has no step {step}")
+
+
+class _UnsendableError(Exception):
+    """An error holding a lock: it does not pickle."""
+
+    def __init__(self, path: str, step: int) -> None:
+        super().__init__(f"{path} has no step {step}")
+        self.lock = threading.Lock()
+
+
+class _FailingSeries:
+    """What a worker needs of a series, every read failing with `error` (the worker imports
+    this module to unpickle it)."""
+
+    volume_shape = (4, 5, 6)
+    dtype = np.dtype(np.float32)
+
+    def __init__(self, error: type[Exception]) -> None:
+        self.error = error
+
+    def read_brick(self, steps, out=None, per_call=1):
+        raise self.error("/a/store", steps[0])
+
+
+def _labellers(series, count: int = 1) -> events_processes.Labellers:
+    axes = (False, False, False)
+    return events_processes.Labellers(
+        series, Mask.of_threshold(0.3), 26, axes, (1.0,) * 3, (0.0,) * 3, count
+    )
+
+
+@pytest.mark.parametrize(
+    ("error", "needles"),
+    [
+        (_TwoArgumentError, ["did not unpickle", "_TwoArgumentError: /a/store has no step 2"]),
+        (_UnsendableError, ["does not pickle", "_UnsendableError", "read_brick"]),
+    ],
+)
+def test_a_worker_s_error_that_does_not_travel_fails_its_step_in_one_line(error, needles):
+    """An error that does not unpickle in the caller, or pickle in the worker, still completes
+    its step's Future (a find waiting on it would wait for ever) with a LabellingWorkerError
+    naming it, in one line; the worker goes on answering."""
+    with _labellers(_FailingSeries(error)) as workers:
+        for step in (2, 3):
+            with pytest.raises(events_processes.LabellingWorkerError) as info:
+                workers.submit(step, None).result(timeout=60)
+            text = str(info.value).replace(f"step {step}", "step 2")
+            assert all(n in text for n in needles) and "\n" not in text, text
+
+
+def test_a_worker_process_ignores_ctrl_c(tmp_path):
+    """A Ctrl-C reaches the workers too (they share the caller's process group): they go on,
+    and the caller ends them by closing."""
+    import signal
+
+    _stored_vortex(tmp_path / "v.zarr", 2)
+    with _labellers(open_series(tmp_path / "v.zarr")) as workers:
+        assert workers.submit(0, None).result(timeout=60).step == 0  # the worker is serving
+        workers._procs[0].send_signal(signal.SIGINT)
+        time.sleep(0.3)
+        assert workers.submit(1, 0).result(timeout=60).shared is not None
+
+
+CALLER = """
+import sys, time
+from chronocl.data.series import open_series
+from chronocl.events.features import Mask
+from chronocl.events.processes import Labellers
+workers = Labellers(open_series(sys.argv[1]), Mask.of_threshold(0.3), 26, (False,) * 3,
+                    (1.0,) * 3, (0.0,) * 3, 2)
+workers.submit(0, None).result()
+workers.submit(1, 5)  # waits for step 5, which never comes
+print(workers.folder, flush=True)
+time.sleep(600)
+"""
+
+
+def test_a_killed_caller_s_files_are_removed(tmp_path):
+    """A caller killed (kill -9, out of memory) cannot remove its folder in /dev/shm: its
+    workers do (one waiting for a step, one for its stdin), and a folder of a dead caller that
+    still lies there is removed as the next workers start."""
+    import signal
+    import subprocess
+
+    _stored_vortex(tmp_path / "v.zarr", 2)
+    caller = subprocess.Popen(
+        [sys.executable, "-c", CALLER, str(tmp_path / "v.zarr")], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        folder = Path(caller.stdout.readline().strip())
+        assert folder.is_dir() and str(caller.pid) in folder.name
+    finally:
+        caller.send_signal(signal.SIGKILL)
+        caller.wait()
+    deadline = time.monotonic() + 30
+    while folder.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not folder.exists()
+
+    stale = folder.parent / f"chronocl-events-{caller.pid}-stale"  # as if its workers died too
+    stale.mkdir()
+    (stale / "0.voxels").write_bytes(b"\0" * 8)
+    alive = folder.parent / f"chronocl-events-{os.getpid()}-alive"
+    alive.mkdir()
+    try:
+        with _labellers(open_series(tmp_path / "v.zarr")):
+            pass
+        assert not stale.exists() and alive.is_dir()  # a live caller's folder is its own
+    finally:
+        for path in (stale, alive):
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def test_steps_on_worker_processes_are_planned_for_what_a_worker_holds(tmp_path, monkeypatch):
+    """A worker holds more a step than a thread does (`PROCESS_BYTES_PER_VOXEL`): a budget
+    for two steps on threads but one on processes labels on threads; twice the workers' need
+    labels on two processes; processes=False keeps a find on threads whatever the budget."""
+    _stored_vortex(tmp_path / "v.zarr", 3)
+    job = events_run.prepare(open_series(tmp_path / "v.zarr"), threshold=0.3)
+    monkeypatch.setenv("CHRONOCL_THREADS", "2")
+    monkeypatch.setattr(events_run, "PROCESS_MIN_VOXELS", 0)
+    voxels = 20 * 24 * 28
+    spent = events_run.Timings()
+    events_run.find(job, timings=spent, memory=2 * voxels * (4 + 13))
+    assert spent.processes == 0
+    events_run.find(job, timings=spent, memory=2 * voxels * (4 + 57))
+    assert spent.processes == 2
+    events_run.find(job, timings=spent, memory=2 * voxels * (4 + 57), processes=False)
+    assert spent.processes == 0

@@ -498,3 +498,27 @@ def test_a_find_labels_the_steps_the_view_holds_and_reads_the_others(server, mon
         assert held["events"] == streamed["events"] and held["tracks"] == streamed["tracks"]
     finally:
         c.close()
+
+
+def test_the_panel_s_find_labels_on_the_viewer_s_threads(server, monkeypatch):
+    """The viewer's --memory is a promise about its own process, whose memory is all it sees:
+    a find of a stored window, even one that `find` would label on worker processes, stays on
+    its threads."""
+    made: list[int] = []
+
+    class Counted(events_run.Labellers):
+        def __init__(self, *args, **kwargs):
+            made.append(len(made))
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(events_run, "Labellers", Counted)
+    monkeypatch.setenv("CHRONOCL_THREADS", "2")
+    monkeypatch.setattr(events_run, "PROCESS_MIN_VOXELS", 0)  # any window would do
+    c = Client(server)
+    try:
+        c.wait("dataset", c.send({"type": "open", "dataset": 0}))  # nothing resident yet
+        _, reply = find(c)
+        assert [e["kind"] for e in reply["events"]] == ["merge"]
+        assert made == []
+    finally:
+        c.close()

@@ -16,7 +16,14 @@ voxels up in its own labels (`chronocl.events.tracking.overlaps`). A step waits 
 given out before it, so the workers never wait on each other in a circle. The caller removes a
 step's files once the next step is matched (`release`), and the folder when it closes; closing
 early (an error, an interrupted find) tells a worker waiting for a step that will not come to
-give up.
+give up. A caller that dies (killed, out of memory) cannot: its workers then remove the folder
+(their stdin ends, or they find themselves adopted while waiting), and the next `Labellers`
+removes any folder whose caller, named by the pid in its name, is gone.
+
+The workers ignore SIGINT: they share the caller's process group, and a Ctrl-C is the
+caller's to act on (it ends them by closing). Every answer is pickled to bytes first, so an
+error that does not pickle in the worker, or unpickle in the caller, becomes a
+LabellingWorkerError naming it, and the step's Future is always completed.
 
 The workers are plain ``python -c`` children speaking pickle over their stdin and stdout, not
 multiprocessing's: its spawn and forkserver start methods run the caller's main script again
@@ -36,6 +43,7 @@ import sys
 import tempfile
 import threading
 import time
+import traceback
 from collections.abc import Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -54,14 +62,19 @@ STOP = "stop"  # the file `close` leaves in the folder: workers waiting for a st
 POLL_S = 0.002  # how often a worker waiting for the step before its own looks for it
 EXIT_WAIT_S = 10.0  # how long `close` waits for a worker to exit before killing it
 # The child's bootstrap: the caller's import path first, so it imports the same chronocl.
+# SIGINT ignored first: the workers share the caller's process group, so a Ctrl-C meant for
+# the caller would print a KeyboardInterrupt traceback from each; the caller ends them (`close`).
 BOOTSTRAP = (
+    "import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); "
     "import pickle, sys; sys.path[:] = pickle.load(sys.stdin.buffer); "
     "from chronocl.events.processes import serve; serve()"
 )
+PREFIX = "chronocl-events-"  # a folder's name: PREFIX, the caller's pid, "-", a random part
 
 
 class LabellingWorkerError(ChronoclError, RuntimeError):
-    """A worker process labelling steps exited before it answered."""
+    """A worker process labelling steps exited before it answered, or its answer (an error
+    that does not pickle or unpickle) could not be passed back."""
 
 
 @dataclass(frozen=True)
@@ -100,8 +113,9 @@ class Labellers:
     ) -> None:
         # first, so that a series that does not pickle (TypeError...) leaves nothing behind
         setup = pickle.dumps((series, mask, connectivity, periodic, spacing_xyz, origin_xyz))
-        shared = SHARED_MEMORY if SHARED_MEMORY.is_dir() else None
-        self.folder = tempfile.mkdtemp(prefix="chronocl-events-", dir=shared)
+        shared = SHARED_MEMORY if SHARED_MEMORY.is_dir() else Path(tempfile.gettempdir())
+        remove_stale(shared)
+        self.folder = tempfile.mkdtemp(prefix=f"{PREFIX}{os.getpid()}-", dir=shared)
         self._tasks: SimpleQueue[tuple[int, int | None, Future] | None] = SimpleQueue()
         self._procs: list[subprocess.Popen] = []
         self._threads: list[threading.Thread] = []
@@ -114,8 +128,8 @@ class Labellers:
                 self._procs.append(proc)
                 assert proc.stdin is not None
                 pickle.dump(list(sys.path), proc.stdin)
+                pickle.dump(self.folder, proc.stdin)  # first: a worker cut off removes it
                 proc.stdin.write(setup)
-                pickle.dump(self.folder, proc.stdin)
                 proc.stdin.flush()
                 thread = threading.Thread(
                     target=self._feed, args=(proc,), name="chronocl-events-feed", daemon=True
@@ -138,30 +152,52 @@ class Labellers:
         return future
 
     def _feed(self, proc: subprocess.Popen) -> None:
-        """One worker's steps: each taken from the shared queue in turn, sent, answered."""
+        """One worker's steps: each taken from the shared queue in turn, sent, answered. Every
+        step taken is completed, whatever the answer: `find` waits on it."""
         assert proc.stdin is not None and proc.stdout is not None
         while (task := self._tasks.get()) is not None:
             step, previous, future = task
             if not future.set_running_or_notify_cancel():
                 continue  # given up before it started
             try:
-                pickle.dump((step, previous), proc.stdin)
-                proc.stdin.flush()
-                kind, answer = pickle.load(proc.stdout)
-            except (OSError, EOFError, pickle.UnpicklingError):
-                future.set_exception(
-                    LabellingWorkerError(
-                        f"the worker process labelling step {step} exited (code {proc.poll()}) "
-                        "before it answered, e.g. out of memory: give find a smaller memory= "
-                        "budget, or set CHRONOCL_THREADS=1 to label on threads"
+                try:
+                    pickle.dump((step, previous), proc.stdin)
+                    proc.stdin.flush()
+                    kind, said, answer_bytes = pickle.load(proc.stdout)  # `_answer`'s
+                except (OSError, EOFError, pickle.UnpicklingError):
+                    future.set_exception(
+                        LabellingWorkerError(
+                            f"the worker process labelling step {step} exited (code "
+                            f"{proc.poll()}) before it answered, e.g. out of memory: give find "
+                            "a smaller memory= budget, or set CHRONOCL_THREADS=1 to label on "
+                            "threads"
+                        )
                     )
-                )
-                return
-            if kind == "error":
-                future.set_exception(answer)
-            else:
-                self.peaks[answer.pid] = max(self.peaks.get(answer.pid, 0), answer.peak_rss)
-                future.set_result(answer)
+                    return
+                try:
+                    answer = pickle.loads(answer_bytes)
+                except BaseException as exc:  # e.g. an error class whose __init__ takes more
+                    future.set_exception(
+                        LabellingWorkerError(
+                            f"step {step}'s answer ({said or kind}) did not unpickle here "
+                            f"({type(exc).__name__}: {exc}): set CHRONOCL_THREADS=1 to label "
+                            "on threads and see it raised as itself"
+                        )
+                    )
+                    continue  # the stream is whole (the answer came as bytes): go on
+                if kind == "error":
+                    future.set_exception(answer)
+                else:
+                    self.peaks[answer.pid] = max(self.peaks.get(answer.pid, 0), answer.peak_rss)
+                    future.set_result(answer)
+            finally:
+                if not future.done():  # whatever went wrong, find must not wait for ever
+                    future.set_exception(
+                        LabellingWorkerError(
+                            f"step {step}'s answer was lost: set CHRONOCL_THREADS=1 to label "
+                            "on threads"
+                        )
+                    )
 
     @staticmethod
     def features(done: Labelled) -> tuple[Feature, ...]:
@@ -205,6 +241,25 @@ class Labellers:
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
+def remove_stale(shared: Path) -> None:
+    """Remove the folders in `shared` of callers that died (killed, out of memory) before
+    their workers could remove them: a folder's name holds its caller's pid."""
+    for folder in shared.glob(f"{PREFIX}*-*"):
+        owner = folder.name[len(PREFIX) :].split("-", 1)[0]
+        if owner.isdigit() and not _alive(int(owner)):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's
+        return True
+    return True
+
+
 def _files(folder: str, step: int) -> tuple[str, str]:
     """A step's published voxels (flat indices, int64) and their labels (uint32)."""
     return os.path.join(folder, f"{step}.voxels"), os.path.join(folder, f"{step}.owners")
@@ -212,23 +267,46 @@ def _files(folder: str, step: int) -> tuple[str, str]:
 
 # -- in the worker -----------------------------------------------------------------------------
 def serve() -> None:
-    """A worker's loop: the setup, then steps until its stdin closes; one answer per step,
-    ("ok", Labelled) or ("error", the exception)."""
+    """A worker's loop: the folder and the setup, then steps until its stdin closes; one answer
+    per step, ("ok", Labelled) or ("error", the exception), pickled to bytes first so that an
+    error that does not pickle becomes a LabellingWorkerError naming it. Its stdin closing (the
+    caller closed it, or died: killed, out of memory) or the caller gone removes the folder:
+    the caller may never do it."""
     stdin = sys.stdin.buffer
     answers: BinaryIO = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())  # a stray print cannot break the pipe
-    worker = _Worker(*pickle.load(stdin), folder=pickle.load(stdin))
-    while True:
-        try:
+    folder = pickle.load(stdin)
+    caller = os.getppid()
+    try:
+        worker = _Worker(*pickle.load(stdin), folder=folder, caller=caller)
+        while True:
             step, previous = pickle.load(stdin)
-        except EOFError:
-            return
+            pickle.dump(_answer(worker, step, previous), answers)
+            answers.flush()
+    except (EOFError, OSError):
+        shutil.rmtree(folder, ignore_errors=True)  # no more steps will come
+    finally:
+        if os.getppid() != caller:  # adopted: the caller died
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _answer(worker: _Worker, step: int, previous: int | None) -> tuple[str, str, bytes]:
+    """The step's answer: ("ok", "", the Labelled pickled) or ("error", the error's type and
+    message, the error pickled; where it does not pickle, a LabellingWorkerError naming it and
+    carrying its traceback)."""
+    try:
+        return ("ok", "", pickle.dumps(worker.label(step, previous)))
+    except Exception as exc:  # sent back; the caller raises it
+        said = f"{type(exc).__name__}: {exc}"
         try:
-            answer: tuple[str, Any] = ("ok", worker.label(step, previous))
-        except Exception as exc:  # sent back; the caller raises it
-            answer = ("error", exc)
-        pickle.dump(answer, answers)
-        answers.flush()
+            return ("error", said, pickle.dumps(exc))
+        except Exception as why:
+            text = "".join(traceback.format_exception(exc)).strip().replace("\n", " | ")
+            error = LabellingWorkerError(
+                f"step {step} failed with {said}, an error that does not pickle "
+                f"({type(why).__name__}: {why}); the worker's traceback: {text}"
+            )
+            return ("error", said, pickle.dumps(error))
 
 
 class _Worker:
@@ -241,10 +319,11 @@ class _Worker:
         spacing_xyz: Sequence[float],
         origin_xyz: Sequence[float],
         folder: str,
+        caller: int,
     ) -> None:
         from chronocl.core.memory import aligned_empty
 
-        self.series, self.mask, self.folder = series, mask, folder
+        self.series, self.mask, self.folder, self.caller = series, mask, folder, caller
         self.connectivity, self.periodic = connectivity, periodic
         self.spacing_xyz, self.origin_xyz = spacing_xyz, origin_xyz
         shape = series.volume_shape
@@ -302,7 +381,7 @@ class _Worker:
         voxels, owners = _files(self.folder, step)
         stop = os.path.join(self.folder, STOP)
         while not os.path.exists(owners):
-            if os.path.exists(stop):
+            if os.path.exists(stop) or os.getppid() != self.caller:  # closed, or the caller died
                 raise LabellingWorkerError(f"step {step} was given up before it was labelled")
             time.sleep(POLL_S)
         return np.fromfile(voxels, np.int64), np.fromfile(owners, np.uint32)

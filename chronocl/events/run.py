@@ -80,12 +80,23 @@ def memory_budget() -> int:
     return interactive_memory()
 
 
-def steps_in_flight(series: TimeSeries, memory: int) -> int:
-    """How many steps `find` reads and labels at once within `memory` bytes: each costs its
-    read buffer, its mask (a byte a voxel), its labels (4) and the indices of its shown voxels
-    (up to 8): at least one, at most AHEAD."""
+# Bytes a voxel of a step in flight may hold besides its read buffer (the series' itemsize).
+# On threads: its mask (1), its labels (4) and the indices of its shown voxels (8).
+THREAD_BYTES_PER_VOXEL = 13
+# On a worker process, every shown (the worst case): its mask (1), its labels (4), a second
+# copy of them while periodic faces renumber them (4), its published voxels' indices and
+# labels (8 + 4) and their copy in the shared-memory files (12), the step before's voxels and
+# labels read back (12), and that step's files, kept until the caller has matched it (12).
+PROCESS_BYTES_PER_VOXEL = 57
+
+
+def steps_in_flight(series: TimeSeries, memory: int, processes: bool = False) -> int:
+    """How many steps `find` reads and labels at once within `memory` bytes, at least one, at
+    most AHEAD: each costs its read buffer and THREAD_BYTES_PER_VOXEL, or on worker processes
+    (`processes`) PROCESS_BYTES_PER_VOXEL a voxel."""
     voxels = int(np.prod(series.volume_shape))
-    per_step = voxels * (np.dtype(series.dtype).itemsize + 13)
+    extra = PROCESS_BYTES_PER_VOXEL if processes else THREAD_BYTES_PER_VOXEL
+    per_step = voxels * (np.dtype(series.dtype).itemsize + extra)
     return max(1, min(AHEAD, memory // max(1, per_step)))
 
 
@@ -350,6 +361,7 @@ def find(
     timings: Timings | None = None,
     memory: int | None = None,
     resident: Mapping[int, np.ndarray] | None = None,
+    processes: bool = True,
 ) -> EventGraph:
     """Label, match and track the steps of a prepared job (the module's docstring).
     `max_features`: a step of more features than this is refused as it is labelled
@@ -363,13 +375,21 @@ def find(
     series, steps = job.series, job.selection.steps
     spacing = tuple(float(s) for s in series.spacing)
 
-    ahead = steps_in_flight(series, memory_budget() if memory is None else memory)
+    budget = memory_budget() if memory is None else memory
+    ahead = steps_in_flight(series, budget)
     count = max(1, min(workers(), ahead))
+    resident = resident or {}
+    use_processes = processes and not resident and on_processes(series, count, len(steps))
+    if use_processes:  # planned again: a step on a worker holds more
+        on_ahead = steps_in_flight(series, budget, processes=True)
+        on_count = max(1, min(workers(), on_ahead))
+        use_processes = on_processes(series, on_count, len(steps))
+        if use_processes:
+            ahead, count = on_ahead, on_count
     features, edges, found = [], [], []
     with contextlib.ExitStack() as stack:
         labeller = None
-        resident = resident or {}
-        if not resident and on_processes(series, count, len(steps)):
+        if use_processes:
             with contextlib.suppress(pickle.PicklingError, TypeError, AttributeError):
                 labeller = stack.enter_context(
                     Labellers(

@@ -7,8 +7,9 @@ answers the `events` message:
 - `find` runs on a thread of its own (one find at a time), never on the frame thread nor on the
   side thread (`side_work`: a long find would hold histograms and fits back): the steps of
   the view's window at full resolution (labelled where the view's window manager holds them,
-  read from the store where it does not), a step showing where the data TF's opacity exceeds
-  `opacity` (as `chronocl.events(..., tf=...)`) or the values reach `value`. After a second it
+  read from the store where it does not; on threads, never on worker processes), a step
+  showing where the data TF's opacity exceeds `opacity` (as `chronocl.events(..., tf=...)`)
+  or the values reach `value`. After a second it
   sends `progress` messages ({"what": "events", "done", "total"}); it is given up (at the next
   step, `chronocl.core.interrupt`, and once more before its result is kept) once the window or
   the data set changes, or a newer find comes, and then answers {"type": "events", "cancelled":
@@ -190,7 +191,11 @@ class EventTasks:
                     ds.series, selection, connectivity=msg.get("connectivity", 26), **mask
                 )
                 held = self._resident_steps(view, ds.series, job.selection.steps)
-                graph = find(job, max_features=MAX_FEATURES_PER_STEP, resident=held)
+                # on threads of this process: the viewer's --memory (`ProcessLimit`) is a
+                # promise about this process, whose /proc/self/statm no worker's memory shows
+                graph = find(
+                    job, max_features=MAX_FEATURES_PER_STEP, resident=held, processes=False
+                )
         except SupersededError:
             why.append("it was given up")
         finally:
