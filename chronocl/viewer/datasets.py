@@ -136,37 +136,42 @@ class Dataset:
     def step_sample(self, step: int) -> np.ndarray:
         """Normalised values u of one step's histogram sample, about
         `TUNING.hist_sample_voxels` of them (`raw_sample`; cached)."""
+
+        def read() -> np.ndarray:
+            s = self.series
+            if self._level is None:
+                self._level = sample_level(s)  # (reads the store's level metadata)
+            return normalize(raw_sample(s, step, self._level), s.vmin, s.vmax).ravel()
+
+        return self._cached(self._samples, step, TUNING.hist_cache_steps, read)
+
+    def _cached(
+        self, cache: OrderedDict, key: object, cap: int, compute: Callable[[], np.ndarray]
+    ) -> np.ndarray:
+        """`cache[key]`, else `compute()` stored there, keeping the `cap` most recently used;
+        computed outside the lock, so that a slow read holds up no other lookup."""
         with self._lock:
-            got = self._samples.get(step)
+            got = cache.get(key)
             if got is not None:
-                self._samples.move_to_end(step)
+                cache.move_to_end(key)
                 return got
-        s = self.series
-        if self._level is None:
-            self._level = sample_level(s)  # (reads the store's level metadata)
-        got = normalize(raw_sample(s, step, self._level), s.vmin, s.vmax).ravel()
+        got = compute()
         with self._lock:
-            self._samples[step] = got
-            while len(self._samples) > TUNING.hist_cache_steps:
-                self._samples.popitem(last=False)
+            cache[key] = got
+            while len(cache) > cap:
+                cache.popitem(last=False)
         return got
 
     def step_counts(self, step: int, lo: float, hi: float) -> np.ndarray:
         """`TUNING.hist_bins` counts of one step's sample over [lo, hi] (cached per step and
         range)."""
         key = (int(step), float(lo), float(hi))
-        with self._lock:
-            got = self._counts.get(key)
-            if got is not None:
-                self._counts.move_to_end(key)
-                return got
-        got = np.histogram(self.step_sample(step), bins=TUNING.hist_bins, range=(lo, hi))[0]
-        got = got.astype(np.int64)
-        with self._lock:
-            self._counts[key] = got
-            while len(self._counts) > TUNING.hist_cache_counts:
-                self._counts.popitem(last=False)
-        return got
+
+        def count() -> np.ndarray:
+            sample = self.step_sample(step)
+            return np.histogram(sample, bins=TUNING.hist_bins, range=(lo, hi))[0].astype(np.int64)
+
+        return self._cached(self._counts, key, TUNING.hist_cache_counts, count)
 
     def change_counts(
         self, before: int, step: int, lo: float, hi: float, value_range: tuple[float, float]
@@ -176,11 +181,6 @@ class Dataset:
         to `value_range` and scaled to it, δ = |w(step) - w(before)| (cached per pair and
         ranges)."""
         key = (int(before), int(step), float(lo), float(hi), *map(float, value_range))
-        with self._lock:
-            got = self._counts.get(key)
-            if got is not None:
-                self._counts.move_to_end(key)
-                return got
         s, (vlo, vhi) = self.series, value_range
         span = max(float(vhi) - float(vlo), 1e-30)
 
@@ -188,13 +188,11 @@ class Dataset:
             v = float(s.vmin) + self.step_sample(t).astype(np.float64) * (s.vmax - s.vmin)
             return np.clip((v - vlo) / span, 0.0, 1.0)
 
-        got = np.histogram(np.abs(w(step) - w(before)), bins=TUNING.hist_bins, range=(lo, hi))[0]
-        got = got.astype(np.int64)
-        with self._lock:
-            self._counts[key] = got
-            while len(self._counts) > TUNING.hist_cache_counts:
-                self._counts.popitem(last=False)
-        return got
+        def count() -> np.ndarray:
+            delta = np.abs(w(step) - w(before))
+            return np.histogram(delta, bins=TUNING.hist_bins, range=(lo, hi))[0].astype(np.int64)
+
+        return self._cached(self._counts, key, TUNING.hist_cache_counts, count)
 
     def histogram(
         self,
