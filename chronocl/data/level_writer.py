@@ -318,6 +318,15 @@ def _write_together(writes: list[tuple[zarr.Array, int, np.ndarray]]) -> None:
         list(pool.map(write, writes))
 
 
+NOTHING_TO_ADD = f"nothing to add: levels are made while the largest axis is > {COARSEST}"
+PRESENT = "levels already present (pass --force to rebuild them)"
+
+
+def levels_summary(store: str, shape: tuple[int, ...], n_levels: int, status: str) -> dict:
+    """What `chronocl pyramid` reports of the store `store` of (T, Z, Y, X) `shape`."""
+    return {"store": store, "levels": describe_levels(shape[1:], n_levels), "status": status}
+
+
 def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = False) -> dict:
     """Add coarse levels to the chronocl store at `path`; returns a summary.
 
@@ -329,22 +338,13 @@ def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = Fa
     p = Path(path)
     arr = _open_data(p)
     shape = tuple(int(n) for n in arr.shape)
-    summary = {"store": str(p)}
     target = p / LEVELS
     remove_stale(target)  # partials of builds that were killed
     if not level_shapes(shape[1:]):
-        return {
-            **summary,
-            "levels": describe_levels(shape[1:], 1),
-            "status": f"nothing to add: levels are made while the largest axis is > {COARSEST}",
-        }
+        return levels_summary(str(p), shape, 1, NOTHING_TO_ADD)
     if target.exists() and not force:
         read_levels(p, shape)  # damaged levels are reported, not kept silently
-        return {
-            **summary,
-            "levels": describe_levels(shape[1:], 1 + len(level_shapes(shape[1:]))),
-            "status": "levels already present (pass --force to rebuild them)",
-        }
+        return levels_summary(str(p), shape, 1 + len(level_shapes(shape[1:])), PRESENT)
     zc = int(arr.chunks[1])
     chunk_bytes = zc * shape[2] * shape[3] * arr.dtype.itemsize
     tmp = partial_path(target)
@@ -359,11 +359,7 @@ def add_levels(path: str | os.PathLike, progress: bool = False, force: bool = Fa
     except BaseException:
         remove_path(tmp)
         raise
-    return {
-        **summary,
-        "levels": describe_levels(shape[1:], 1 + len(writer.shapes)),
-        "status": "rebuilt" if force else "added",
-    }
+    return levels_summary(str(p), shape, 1 + len(writer.shapes), "rebuilt" if force else "added")
 
 
 def _open_data(p: Path) -> zarr.Array:

@@ -23,8 +23,8 @@ import zarr
 from chronocl.core import env
 from chronocl.core.errors import InvalidParameterError, StoreFormatError
 from chronocl.core.progress import track
-from chronocl.data.level_writer import LevelWriter
-from chronocl.data.pyramid import COARSEST, LEVELS, describe_levels, level_shapes
+from chronocl.data.level_writer import NOTHING_TO_ADD, PRESENT, LevelWriter, levels_summary
+from chronocl.data.pyramid import LEVELS, level_shapes
 from chronocl.data.remote_levels import remote_levels
 from chronocl.data.remote_store import filesystem, is_url, join, parse_storage_options
 from chronocl.data.remote_write import publish, split_url
@@ -92,21 +92,12 @@ def add_remote_levels(
     if series.stats is None or series.zarr_array is None:
         raise StoreFormatError(f"{url} is not a chronocl store; ingest it with 'chronocl ingest'")
     arr, shape = series.zarr_array, tuple(int(n) for n in series.shape)
-    summary = {"store": url}
     if not level_shapes(shape[1:]):
-        return {
-            **summary,
-            "levels": describe_levels(shape[1:], 1),
-            "status": f"nothing to add: levels are made while the largest axis is > {COARSEST}",
-        }
+        return levels_summary(url, shape, 1, NOTHING_TO_ADD)
     has = filesystem(options).exists(f"{bucket}/{key}/{LEVELS}/zarr.json")
     if has and not force:
         series.level(1).read([0])  # damaged levels metadata is reported, not kept silently
-        return {
-            **summary,
-            "levels": describe_levels(shape[1:], series.n_levels),
-            "status": "levels already present (pass --force to rebuild them)",
-        }
+        return levels_summary(url, shape, series.n_levels, PRESENT)
     chunk_bytes = int(arr.chunks[1]) * shape[2] * shape[3] * arr.dtype.itemsize
     where = env.get("CHRONOCL_TMPDIR") or None  # as `remote_write.remote_output`
     with tempfile.TemporaryDirectory(prefix="chronocl-upload-", dir=where) as staging:
@@ -117,8 +108,4 @@ def add_remote_levels(
             writer.add(t, series.read([t])[0])
         writer.finish()
         publish(local, f"{url.rstrip('/')}/{LEVELS}", options, overwrite=True)
-    return {
-        **summary,
-        "levels": describe_levels(shape[1:], 1 + len(writer.shapes)),
-        "status": "rebuilt" if has else "added",
-    }
+    return levels_summary(url, shape, 1 + len(writer.shapes), "rebuilt" if has else "added")
