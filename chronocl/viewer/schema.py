@@ -175,13 +175,8 @@ class Obj:
 
 
 def show(value: object) -> str:
-    text = json.dumps(value) if _jsonable(value) else repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _jsonable(value: object) -> bool:
     try:
-        json.dumps(value)
+        text = json.dumps(value)
     except (TypeError, ValueError):
-        return False
-    return True
+        text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."

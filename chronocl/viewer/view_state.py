@@ -119,12 +119,12 @@ class ViewState:
             )
         return TimeTF(color=color, alpha=alpha, positions=t["positions"])
 
-    def spec(self, view: int, *, view_dir: tuple[float, float, float] | None = None):
+    def spec(self, view: int):
         mode, order = self.views[view]
         e = self.enhance
         kwargs = {k: e[k] for k in ("k0", "k1", "k2") if e.get(k) is not None}
         if e["kind"] == "silhouette":
-            kwargs["view"] = view_dir or self.camera_of(view).view_direction()
+            kwargs["view"] = self.camera_of(view).view_direction()
         return IntegrationSpec(
             mode=mode,
             order=order,

@@ -85,7 +85,7 @@ class LevelSession:
         # (t_index, winners) the kernels wrote with the window's integration (`winners`)
         self._won: tuple[np.ndarray, Winners] | None = None
         self.streaming: Streaming | None = None  # `stream`
-        self._prefetch = prefetch = setup.prefetch
+        prefetch = setup.prefetch
         self.level = check_level(series, level)
         self.series = series.level(self.level, self.spec.integration.pool)
         # GPUs keep the window's steps in device memory: an edit uploads none, a slide one.
