@@ -91,6 +91,22 @@ def test_occupied_bounds_from_the_grid_equal_the_volume_s(shape, brick, points, 
         assert np.array_equal(got, want), (got, want)
 
 
+def test_float_volumes_find_their_box_in_a_pass_and_a_foreign_grid_is_refused(rc):
+    """The grid's maxima carry a NaN through, so a brick holding one and an opaque voxel reads
+    as empty: float volumes (which may hold NaN) keep the pass over the volume, which skips
+    the NaN alone, and only RGBA8 takes the grid's bounds. A grid of other bricks is refused."""
+    spacing = {"x": 1.0, "y": 1.0, "z": 1.0}
+    rgba = np.zeros((24, 4, 4, 4), dtype=np.float32)
+    rgba[8, 1, 1, 3], rgba[12, 1, 1, 3] = 0.5, np.nan  # one brick: the NaN and the opaque voxel
+    clean = np.nan_to_num(rgba)
+    got = rc.upload(chronocl.Chronovolume(rgba, None, {"spacing": spacing}), dtype="f4")
+    want = rc.upload(chronocl.Chronovolume(clean, None, {"spacing": spacing}), dtype="f4")
+    np.testing.assert_array_equal(got.occupied[0], want.occupied[0])
+    np.testing.assert_array_equal(got.occupied[1], want.occupied[1])
+    with pytest.raises(InvalidParameterError, match="brick grid of shape"):
+        brick_grid.occupied_bounds(brick_grid.from_rgba(clean, 4), clean)
+
+
 def test_grid_on_the_pool_equals_serial():
     rng = np.random.default_rng(3)
     # above TUNING.brick_grid_serial_voxels: slab tasks

@@ -85,7 +85,13 @@ def occupied_bounds(grid: np.ndarray, rgba: np.ndarray, brick: int = BRICK) -> n
     in [b*B, (b+1)*B]; where the layers above b are all 0, the last in [b*B - 1, (b+1)*B - 2]
     (or up to the volume's last plane where b is the grid's last layer).
     Only those planes are read (within the box found so far): at 512^3 a few ms, where a pass
-    over the volume took 40-50 ms before the texture's write."""
+    over the volume took 40-50 ms before the texture's write. For RGBA8 (or NaN-free float):
+    the grid's maxima carry a NaN through, and a brick holding one reads as empty."""
+    if grid.shape != grid_shape(rgba.shape[:3], brick):
+        raise InvalidParameterError(
+            f"a brick grid of shape {grid.shape} for a volume of {rgba.shape[:3]} in bricks of "
+            f"{brick}: build it with `grid_shape`'s bricks"
+        )
     live = grid > 0
     if not live.any():
         return np.array([0, 0, 0, -1, -1, -1])

@@ -65,7 +65,7 @@ class Raycaster:
         their golden images and pixel-exact tests are recorded with it."""
         nz, ny, nx, _ = cv.rgba.shape
         dtype = "f1" if cv.rgba.dtype == np.uint8 else dtype  # RGBA8 from the kernels as it is
-        data, occ = convert(cv.rgba, dtype, occupancy=False)
+        data, occ = convert(cv.rgba, dtype, occupancy=dtype != "f1")  # RGBA8: from the grid
         vol = Volume.allocate(self.ctx, (nx, ny, nz), dtype, data, nearest)
         grid = brick_grid.from_rgba(data)
         bounds = occ.bounds() if occ is not None else brick_grid.occupied_bounds(grid, data)

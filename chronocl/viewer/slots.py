@@ -107,7 +107,8 @@ def upload(rc, slot: ViewSlot, cv: Chronovolume, given_up=None) -> Volume:
         raise SupersededError("newer input came before the refined frame was uploaded")
     # RGBA8 from the kernels (a display chronovolume) as it is, whatever the size
     fmt = "f1" if cv.rgba.dtype == np.uint8 else display_format(nz * ny * nx)
-    data, occ = convert(cv.rgba, fmt, pooled=True, occupancy=False)
+    # RGBA8 (no NaN to hide a brick's opacity): its box from the brick grid, not a pass
+    data, occ = convert(cv.rgba, fmt, pooled=True, occupancy=cv.rgba.dtype != np.uint8)
     bricks = brick_grid.submit(data)  # the empty-space grid, beside the texture write
     # Written slab by slab while it integrated (`chronocl.viewer.slab_upload`): nothing to write
     if slot.written is cv and slot.volume is not None:
