@@ -979,7 +979,8 @@ def test_a_view_silent_past_its_bound_is_gone_and_one_heard_again_is_shown():
 
 def test_the_cell_clock_stands_still_while_a_cell_runs():
     """A view's heartbeats wait in the kernel's queue while a cell runs: that silence is not
-    counted (the clock stands still from pre_execute to post_execute, cells run by cells once)."""
+    counted (the clock stands still from pre_run_cell to post_run_cell, cells run by cells once,
+    and an empty cell's end, which IPython sends without a start, ends nothing)."""
     from chronocl.notebook import views as nb_views
 
     clock = Clock()
@@ -988,14 +989,17 @@ def test_the_cell_clock_stands_still_while_a_cell_runs():
     shown.heard("a")
     t0 = cells()
     clock.now += 5
-    cells.start()
+    outer, inner, empty = object(), object(), object()
+    cells.start(outer)
     clock.now += 10 * nb_views.LOST_AFTER_S  # a long cell
-    cells.start()  # (a cell running a cell)
+    cells.start(inner)  # (a cell running a cell)
     clock.now += 7
-    cells.end()
+    cells.end(inner)
+    cells.end(empty)  # an empty cell run inside it: IPython ends it without starting it
+    clock.now += 30
     assert cells() == t0 + 5 and shown.expire() == []
-    cells.end()
-    cells.end()  # (an end without a start: nothing)
+    cells.end(outer)
+    cells.end(outer)  # (an end without a start: nothing)
     clock.now += 3
     assert cells() == t0 + 8 and shown.expire() == []
     clock.now += nb_views.LOST_AFTER_S

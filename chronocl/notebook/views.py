@@ -35,29 +35,40 @@ LOST_HIDDEN_AFTER_S = 180.0
 
 class CellTime:
     """A clock (seconds, monotonic) that stands still while the kernel runs a cell: `watch`
-    hooks it to IPython's pre_execute and post_execute events. Outside IPython (marimo, a
+    hooks it to IPython's pre_run_cell and post_run_cell events. Outside IPython (marimo, a
     script) it is the plain clock."""
 
     def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self._clock = clock
         self._lock = threading.Lock()
         self._in_cells = 0.0  # seconds spent in cells that ended
-        self._started: float | None = None  # when the cell running now started
-        self._depth = 0  # (a cell may run cells: `get_ipython().run_cell`)
+        self._started: float | None = None  # when the outermost cell running now started
+        # The cells running now, outermost first (a cell may run cells:
+        # `get_ipython().run_cell`, `%run notebook.ipynb`), each by the token its start gave.
+        self._running: list[object] = []
         self._watched: set[int] = set()
 
-    def start(self) -> None:
+    def start(self, cell: object = None) -> None:
+        """A cell starts; `cell` names it for its `end` (IPython's ExecutionInfo)."""
         with self._lock:
-            self._depth += 1
-            if self._depth == 1:
+            self._running.append(cell if cell is not None else object())
+            if len(self._running) == 1:
                 self._started = self._clock()
 
-    def end(self) -> None:
+    def end(self, cell: object = None) -> None:
+        """The cell `cell` ended (None: the innermost). An end no start announced is ignored:
+        IPython ends an empty cell, or one refused before it ran, without starting it."""
         with self._lock:
-            if self._depth == 0:  # (IPython ends a cell refused before it started)
+            if cell is None:
+                if not self._running:
+                    return
+                self._running.pop()
+            elif any(c is cell for c in self._running):
+                while self._running.pop() is not cell:
+                    pass  # (a cell whose end never came ends with the one that ran it)
+            else:
                 return
-            self._depth -= 1
-            if self._depth == 0 and self._started is not None:
+            if not self._running and self._started is not None:
                 self._in_cells += self._clock() - self._started
                 self._started = None
 
@@ -80,8 +91,16 @@ class CellTime:
             if id(shell) in self._watched:
                 return
             self._watched.add(id(shell))
-        shell.events.register("pre_execute", self.start)
-        shell.events.register("post_execute", self.end)
+        # pre_run_cell gives the cell's ExecutionInfo and post_run_cell its result, whose
+        # `info` is the same object: an empty cell (which IPython ends without starting it,
+        # also inside a running cell) does not end the cell around it.
+        shell.events.register("pre_run_cell", self.start)
+        shell.events.register("post_run_cell", self._ran)
+
+    def _ran(self, result: object) -> None:
+        """post_run_cell: its result's `info` (None where the cell failed inside IPython itself:
+        the innermost cell ends)."""
+        self.end(getattr(result, "info", None))
 
 
 CELL_TIME = CellTime()

@@ -71,7 +71,8 @@ async function render({ model, el }) {
   let beat = null;
   const beating = (on) => {
     clearInterval(beat);
-    beat = on ? setInterval(() => say('alive'), 1000 * model.get('_heartbeat_s')) : null;
+    const every = Number(model.get('_heartbeat_s')) || 5; // (the kernel's HEARTBEAT_S)
+    beat = on ? setInterval(() => say('alive'), 1000 * every) : null;
   };
   const visible = () => {
     if (beat !== null && document.visibilityState === 'visible') say('alive'); // (the short wait)
@@ -85,24 +86,35 @@ async function render({ model, el }) {
     say('shown');
     beating(true);
   };
+  const quiet = () => {
+    document.removeEventListener('visibilitychange', visible);
+    window.removeEventListener('pagehide', pagehide);
+    window.removeEventListener('pageshow', pageshow);
+    beating(false);
+  };
   say('shown');
   beating(true);
   document.addEventListener('visibilitychange', visible);
   window.addEventListener('pagehide', pagehide);
   window.addEventListener('pageshow', pageshow);
-  const { viewer, stop } = app.start(
-    { root, shell, keys: shell, fragment: false, global: false },
-    connection.modelTransport(model),
-  );
+  let started;
+  try {
+    started = app.start(
+      { root, shell, keys: shell, fragment: false, global: false },
+      connection.modelTransport(model),
+    );
+  } catch (err) {
+    quiet(); // a view that failed to start shows nothing: it must not beat for ever
+    say('gone');
+    throw err;
+  }
+  const { viewer, stop } = started;
   host.viewer = viewer; // for scripted use (the tests), as window.viewer is the page's
   host.widgetManager = model.widget_manager; // (the tests close the model through it)
   // anywidget calls this when the view is removed (its output cleared, its cell deleted).
   return () => {
     model.off('change:height', height);
-    document.removeEventListener('visibilitychange', visible);
-    window.removeEventListener('pagehide', pagehide);
-    window.removeEventListener('pageshow', pageshow);
-    beating(false);
+    quiet();
     stop();
     say('gone');
   };
