@@ -957,6 +957,25 @@ def test_a_worker_s_error_that_does_not_travel_fails_its_step_in_one_line(error,
             assert all(n in text for n in needles) and "\n" not in text, text
 
 
+class _UnreachableSeries(_FailingSeries):
+    """A series whose store a worker cannot reach as it unpickles it (an OSError)."""
+
+    def __setstate__(self, state) -> None:
+        raise FileNotFoundError("/a/store is gone")
+
+
+def test_a_worker_whose_setup_fails_exits_as_failed(capfd):
+    """A worker that cannot make its setup (a store out of reach) exits with its traceback
+    and a failing code, not quietly with 0 (its error was taken for the caller's stdin
+    closing), and leaves the other workers' folder alone."""
+    with _labellers(_UnreachableSeries(OSError)) as workers:
+        with pytest.raises(events_processes.LabellingWorkerError) as info:
+            workers.submit(0, None).result(timeout=60)
+        assert "(code 1)" in str(info.value), info.value
+        assert Path(workers.folder).is_dir()
+    assert "/a/store is gone" in capfd.readouterr().err
+
+
 def test_a_worker_process_ignores_ctrl_c(tmp_path):
     """A Ctrl-C reaches the workers too (they share the caller's process group): they go on,
     and the caller ends them by closing."""
@@ -1006,17 +1025,22 @@ def test_a_killed_caller_s_files_are_removed(tmp_path):
         time.sleep(0.05)
     assert not folder.exists()
 
-    stale = folder.parent / f"chronocl-events-{caller.pid}-stale"  # as if its workers died too
+    here = f"chronocl-events-{events_processes._here()}"
+    stale = folder.parent / f"{here}-{caller.pid}-stale"  # as if its workers died too
     stale.mkdir()
     (stale / "0.voxels").write_bytes(b"\0" * 8)
-    alive = folder.parent / f"chronocl-events-{os.getpid()}-alive"
+    alive = folder.parent / f"{here}-{os.getpid()}-alive"
     alive.mkdir()
+    # a dead pid of another host or PID namespace (a container sharing /dev/shm) says nothing
+    elsewhere = folder.parent / f"chronocl-events-0000ffff-{caller.pid}-elsewhere"
+    elsewhere.mkdir()
     try:
         with _labellers(open_series(tmp_path / "v.zarr")):
             pass
         assert not stale.exists() and alive.is_dir()  # a live caller's folder is its own
+        assert elsewhere.is_dir()
     finally:
-        for path in (stale, alive):
+        for path in (stale, alive, elsewhere):
             shutil.rmtree(path, ignore_errors=True)
 
 

@@ -35,9 +35,11 @@ the child cannot use.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import pickle
 import shutil
+import socket
 import subprocess
 import sys
 import tempfile
@@ -69,7 +71,8 @@ BOOTSTRAP = (
     "import pickle, sys; sys.path[:] = pickle.load(sys.stdin.buffer); "
     "from chronocl.events.processes import serve; serve()"
 )
-PREFIX = "chronocl-events-"  # a folder's name: PREFIX, the caller's pid, "-", a random part
+# A folder's name: PREFIX, where its caller runs (`_HERE`), its pid, "-", a random part.
+PREFIX = "chronocl-events-"
 
 
 class LabellingWorkerError(ChronoclError, RuntimeError):
@@ -115,7 +118,7 @@ class Labellers:
         setup = pickle.dumps((series, mask, connectivity, periodic, spacing_xyz, origin_xyz))
         shared = SHARED_MEMORY if SHARED_MEMORY.is_dir() else Path(tempfile.gettempdir())
         remove_stale(shared)
-        self.folder = tempfile.mkdtemp(prefix=f"{PREFIX}{os.getpid()}-", dir=shared)
+        self.folder = tempfile.mkdtemp(prefix=f"{PREFIX}{_here()}-{os.getpid()}-", dir=shared)
         self._tasks: SimpleQueue[tuple[int, int | None, Future] | None] = SimpleQueue()
         self._procs: list[subprocess.Popen] = []
         self._threads: list[threading.Thread] = []
@@ -165,6 +168,8 @@ class Labellers:
                     proc.stdin.flush()
                     kind, said, answer_bytes = pickle.load(proc.stdout)  # `_answer`'s
                 except (OSError, EOFError, pickle.UnpicklingError):
+                    with contextlib.suppress(subprocess.TimeoutExpired):
+                        proc.wait(timeout=EXIT_WAIT_S)  # its exit code, once it has one
                     future.set_exception(
                         LabellingWorkerError(
                             f"the worker process labelling step {step} exited (code "
@@ -243,11 +248,24 @@ class Labellers:
 
 def remove_stale(shared: Path) -> None:
     """Remove the folders in `shared` of callers that died (killed, out of memory) before
-    their workers could remove them: a folder's name holds its caller's pid."""
-    for folder in shared.glob(f"{PREFIX}*-*"):
-        owner = folder.name[len(PREFIX) :].split("-", 1)[0]
+    their workers could remove them: a folder's name holds where its caller ran and its pid.
+    Only folders of this host and PID namespace are judged: a pid elsewhere (a container
+    sharing /dev/shm, a temporary folder on a network file system) says nothing here."""
+    mine = f"{PREFIX}{_here()}-"
+    for folder in shared.glob(f"{mine}*-*"):
+        owner = folder.name[len(mine) :].split("-", 1)[0]
         if owner.isdigit() and not _alive(int(owner)):
             shutil.rmtree(folder, ignore_errors=True)
+
+
+def _here() -> str:
+    """This host and PID namespace, as a short name (a pid means a process only within them)."""
+    try:
+        namespace = os.stat("/proc/self/ns/pid").st_ino
+    except OSError:
+        namespace = 0
+    seen = f"{socket.gethostname()}:{namespace}".encode()
+    return hashlib.blake2s(seen, digest_size=4).hexdigest()
 
 
 def _alive(pid: int) -> bool:
@@ -278,13 +296,20 @@ def serve() -> None:
     folder = pickle.load(stdin)
     caller = os.getppid()
     try:
+        # a setup that fails (a store out of reach...) exits with its traceback on stderr
         worker = _Worker(*pickle.load(stdin), folder=folder, caller=caller)
         while True:
-            step, previous = pickle.load(stdin)
-            pickle.dump(_answer(worker, step, previous), answers)
-            answers.flush()
-    except (EOFError, OSError):
-        shutil.rmtree(folder, ignore_errors=True)  # no more steps will come
+            try:
+                step, previous = pickle.load(stdin)
+            except EOFError:  # no more steps will come: closed, or the caller died
+                shutil.rmtree(folder, ignore_errors=True)
+                return
+            try:
+                pickle.dump(_answer(worker, step, previous), answers)
+                answers.flush()
+            except BrokenPipeError:  # nobody reads the answers: the caller died
+                shutil.rmtree(folder, ignore_errors=True)
+                return
     finally:
         if os.getppid() != caller:  # adopted: the caller died
             shutil.rmtree(folder, ignore_errors=True)
@@ -381,7 +406,11 @@ class _Worker:
         voxels, owners = _files(self.folder, step)
         stop = os.path.join(self.folder, STOP)
         while not os.path.exists(owners):
-            if os.path.exists(stop) or os.getppid() != self.caller:  # closed, or the caller died
+            if (
+                os.path.exists(stop)
+                or not os.path.isdir(self.folder)  # removed: nothing will be published there
+                or os.getppid() != self.caller  # the caller died
+            ):
                 raise LabellingWorkerError(f"step {step} was given up before it was labelled")
             time.sleep(POLL_S)
         return np.fromfile(voxels, np.int64), np.fromfile(owners, np.uint32)
