@@ -8,6 +8,7 @@ import platform
 import statistics
 import sys
 
+from chronocl.core.budget import peak_resident_bytes
 from chronocl.core.timing import race  # noqa: F401  (the benchmarks import it from here)
 
 
@@ -23,14 +24,7 @@ def reset_peak_rss() -> bool:
 
 def peak_rss() -> int | None:
     """This process's peak RSS (VmHWM) in bytes, None where /proc has none."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
+    return peak_resident_bytes()
 
 
 def emit(obj: dict) -> None:

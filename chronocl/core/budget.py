@@ -123,6 +123,19 @@ def resident_bytes() -> int | None:
         return None
 
 
+def peak_resident_bytes() -> int | None:
+    """This process's peak resident memory (the kernel's VmHWM, Linux), or None where /proc
+    does not say."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
 class GrowthGuard:
     """Keeps the process's growth since creation near `allowance` bytes.
 

@@ -55,6 +55,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
+from chronocl.core.budget import peak_resident_bytes
 from chronocl.core.errors import ChronoclError
 from chronocl.events.features import Feature, Mask, Periodic
 from chronocl.events.tracking import Edge, edges_of
@@ -390,7 +391,7 @@ class _Worker:
             clock() - t1 - waited,
             waited,
             os.getpid(),
-            _peak_rss(),
+            peak_resident_bytes() or 0,
         )
 
     def _publish(self, step: int, voxels: np.ndarray, owners: np.ndarray) -> None:
@@ -414,15 +415,3 @@ class _Worker:
                 raise LabellingWorkerError(f"step {step} was given up before it was labelled")
             time.sleep(POLL_S)
         return np.fromfile(voxels, np.int64), np.fromfile(owners, np.uint32)
-
-
-def _peak_rss() -> int:
-    """This process's peak resident set (VmHWM, bytes); 0 where /proc does not say."""
-    try:
-        with open("/proc/self/status") as status:
-            for line in status:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 0
