@@ -14,10 +14,15 @@ from concurrent.futures import Future, ThreadPoolExecutor
 _gl_executor: ThreadPoolExecutor | None = None
 _gl_raycaster = None
 _gl_guard = threading.Lock()
+_gl_ident: int | None = None  # the GL thread's, once it ran something
 
 
 def on_gl(fn: Callable, *args):
-    """fn(raycaster, *args) on the viewer's GL thread; returns its result (or raises)."""
+    """fn(raycaster, *args) on the viewer's GL thread; returns its result (or raises). Called
+    on that thread (a recoloured chronovolume read there reads its texture), it runs at once:
+    waiting for the thread's own queue would wait for ever."""
+    if threading.get_ident() == _gl_ident:
+        return _on_gl(fn, args)
     return gl_submit(fn, *args).result()
 
 
@@ -43,7 +48,8 @@ def release_on_gl(fn: Callable, *args) -> None:
 
 
 def _on_gl(fn: Callable, args: tuple):
-    global _gl_raycaster
+    global _gl_raycaster, _gl_ident
+    _gl_ident = threading.get_ident()
     if _gl_raycaster is None:
         from chronocl.render.gl import new_egl_context
         from chronocl.render.raycaster import Raycaster

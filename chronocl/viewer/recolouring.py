@@ -21,7 +21,6 @@ kept in the slot; any integration of the window makes them stale.
 from __future__ import annotations
 
 import functools
-import threading
 import time
 import weakref
 from dataclasses import dataclass
@@ -221,9 +220,6 @@ class TextureLostError(ChronoclError, RuntimeError):
     """A recoloured chronovolume's RGBA was asked for after its texture took another frame."""
 
 
-_gl_thread: list[int] = []  # the GL thread's id, once a compute pass ran there
-
-
 class InTexture(Chronovolume):
     """A view's chronovolume recoloured by the GPU's compute pass, whose RGBA is in the view's
     texture only: `rgba` reads it back (on the GL thread) the first time anything reads it.
@@ -273,10 +269,7 @@ class InTexture(Chronovolume):
         """Read the RGBA back from the texture, unless it was read already."""
         if self._rgba is not None:
             return
-        if _gl_thread and threading.get_ident() == _gl_thread[0]:
-            self._read(None)
-        else:
-            on_gl(self._read)
+        on_gl(self._read)  # (at once where this is the GL thread: a read inside a GL task)
 
     def _read(self, rc) -> None:
         """On the GL thread, where every write of the texture runs too."""
@@ -365,7 +358,6 @@ def _prepare_on_gpu(rc, w) -> tuple:
 def _apply_and_show(rc, prepared: Prepared, spec, into, spacing, cv: InTexture):
     """The compute pass writes `cv` into the texture (`into`, where it fits), which holds it
     from now on."""
-    _gl_thread[:] = [threading.get_ident()]
     changed = prepared.recolourer.apply(prepared.winners, spec, into)
     show(changed, spacing)
     cv._volume = changed.volume
