@@ -18,7 +18,8 @@ step's files once the next step is matched (`release`), and the folder when it c
 early (an error, an interrupted find) tells a worker waiting for a step that will not come to
 give up. A caller that dies (killed, out of memory) cannot: its workers then remove the folder
 (their stdin ends, or they find themselves adopted while waiting), and the next `Labellers`
-removes any folder whose caller, named by the pid in its name, is gone.
+removes any folder whose caller, named by the pid in its name, is gone (only folders of
+its own host and PID namespace: a pid says nothing elsewhere).
 
 The workers ignore SIGINT: they share the caller's process group, and a Ctrl-C is the
 caller's to act on (it ends them by closing). Every answer is pickled to bytes first, so an
@@ -72,7 +73,7 @@ BOOTSTRAP = (
     "import pickle, sys; sys.path[:] = pickle.load(sys.stdin.buffer); "
     "from chronocl.events.processes import serve; serve()"
 )
-# A folder's name: PREFIX, where its caller runs (`_HERE`), its pid, "-", a random part.
+# A folder's name: PREFIX, where its caller runs (`_here`), its pid, "-", a random part.
 PREFIX = "chronocl-events-"
 
 

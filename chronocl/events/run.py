@@ -379,8 +379,8 @@ def find(
     ahead = steps_in_flight(series, budget)
     count = max(1, min(workers(), ahead))
     resident = resident or {}
-    use_processes = processes and not resident and on_processes(series, count, len(steps))
-    if use_processes:  # planned again: a step on a worker holds more
+    use_processes = False
+    if processes and not resident:  # planned for processes: a step on a worker holds more
         on_ahead = steps_in_flight(series, budget, processes=True)
         on_count = max(1, min(workers(), on_ahead))
         use_processes = on_processes(series, on_count, len(steps))
