@@ -70,3 +70,16 @@ def test_a_small_or_inverting_window_slides_in_float32(series):
     with chronocl.Session(series, display=True, mode="additive", time_tf=absolute) as s:
         s.set_window(0, 4)
         assert s.slide(1).rgba.dtype == np.float32
+
+
+def test_the_numpy_engine_refuses_to_combine_into_the_display_format():
+    """Only an engine that writes the display format combines into it (`Engine.combine`'s
+    rgba8); the numpy engine says so rather than give float32 where RGBA8 was asked."""
+    from chronocl.core.errors import InvalidParameterError
+    from chronocl.engine.numpy import NumpyEngine
+    from chronocl.modes.base import Partial
+    from chronocl.modes.spec import IntegrationSpec
+
+    part = Partial(np.zeros((2, 2, 2, 4), np.float32), None)
+    with pytest.raises(InvalidParameterError, match="float32 only"):
+        NumpyEngine().combine(part, part, IntegrationSpec(mode="alpha"), rgba8=True)

@@ -62,8 +62,11 @@ class Engine(Protocol):
         """
         ...
 
-    def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
-        """The partial of `front` then `back` (new arrays; the inputs are kept)."""
+    def combine(
+        self, front: Partial, back: Partial, spec: IntegrationSpec, rgba8: bool = False
+    ) -> Partial:
+        """The partial of `front` then `back` (new arrays; the inputs are kept); with `rgba8`
+        (an engine that `writes_display`, a final value) its colour as display RGBA8."""
         ...
 
     def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:

@@ -6,6 +6,7 @@ import numpy as np
 
 from chronocl import reference
 from chronocl.core import values
+from chronocl.core.errors import InvalidParameterError
 from chronocl.engine.base import FIXED_ONE
 from chronocl.modes.base import Partial, Values
 from chronocl.modes.spec import IntegrationSpec
@@ -47,7 +48,11 @@ class NumpyEngine:
             rgba, t_index = out[0], (out[1] if t_index is not None else None)
         return Partial(rgba, t_index), False
 
-    def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
+    def combine(
+        self, front: Partial, back: Partial, spec: IntegrationSpec, rgba8: bool = False
+    ) -> Partial:
+        if rgba8:  # (it does not write the display format: no session asks it to)
+            raise InvalidParameterError("the numpy engine combines in float32 only")
         return reference.combine(front, back, spec)
 
     def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:

@@ -375,9 +375,12 @@ class OpenCLEngine:
         return Partial(rgba, t_index), final
 
     # -- sliding windows: each mode's combine / finish kernels (`chronocl.engine.elementwise`)
-    def combine(self, front: Partial, back: Partial, spec: IntegrationSpec) -> Partial:
-        """The partial of `front` then `back` (see the mode's `combine`); new arrays."""
-        return elementwise.combine(self.dc, self.host_ptr, front, back, spec)
+    def combine(
+        self, front: Partial, back: Partial, spec: IntegrationSpec, rgba8: bool = False
+    ) -> Partial:
+        """The partial of `front` then `back` (see the mode's `combine`); new arrays (with
+        `rgba8`, its colour in the display format: `elementwise.combine`)."""
+        return elementwise.combine(self.dc, self.host_ptr, front, back, spec, rgba8)
 
     def fixed_add(self, acc: np.ndarray, rgba: np.ndarray, sign: int) -> None:
         """acc (Z, Y, X, C) int64 += sign * fixed-point first C channels of a raw partial."""

@@ -27,7 +27,6 @@ from chronocl.core.selection import Selection
 from chronocl.data.bricks import ResidentBricks
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
-from chronocl.engine import elementwise
 from chronocl.engine.base import Engine
 from chronocl.engine.buffers import max_alloc
 from chronocl.engine.device_arrays import to_host, zeros
@@ -54,19 +53,14 @@ class Combine:
         self.engine, self.spec, self.leaves = engine, spec, leaves  # `leaves` counts the pieces
         self.rgba8 = rgba8
 
-    def __call__(self, earlier: Partial, later: Partial) -> Partial:
+    def __call__(self, earlier: Partial, later: Partial, rgba8: bool = False) -> Partial:
         self.leaves.tick()
         if self.spec.order == "backward":
-            return self.engine.combine(later, earlier, self.spec)
-        return self.engine.combine(earlier, later, self.spec)
+            return self.engine.combine(later, earlier, self.spec, rgba8)
+        return self.engine.combine(earlier, later, self.spec, rgba8)
 
     def last(self, earlier: Partial, later: Partial) -> Partial:
-        if not self.rgba8:
-            return self(earlier, later)
-        self.leaves.tick()
-        front, back = (later, earlier) if self.spec.order == "backward" else (earlier, later)
-        engine = self.engine  # an OpenCL engine (`writes_display`): its context and buffers
-        return elementwise.combine(engine.dc, engine.host_ptr, front, back, self.spec, True)
+        return self(earlier, later, self.rgba8)
 
 
 class Leaves:
