@@ -178,3 +178,33 @@ def test_a_colour_map_recolours_and_keeps_the_opacity_curve(name):
 def test_unknown_colour_map_is_one_line():
     with pytest.raises(InvalidTransferFunctionError, match="unknown colour map 'nope'; use one of"):
         DataTF().with_colormap("nope")
+
+
+def test_the_presets_table_is_matplotlibs():
+    """The presets' stops shipped as a table (`colormap_presets.json`) are matplotlib's own."""
+    from chronocl.core.colormaps import PRESETS, _presets, colormap_stops, matplotlib_stops
+
+    assert list(_presets()) == list(PRESETS)
+    for name in PRESETS:
+        assert colormap_stops(name) == [list(stop) for stop in matplotlib_stops(name)], name
+
+
+def test_the_viewers_info_needs_no_matplotlib():
+    """A viewer's or widget's first message (its menus, the presets' stops) imports no
+    matplotlib: its import would delay the first picture."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "import chronocl\n"
+        "from chronocl.viewer.datasets import Dataset\n"
+        "from chronocl.viewer.sockets import info_message\n"
+        "series = chronocl.TimeSeries.from_array(np.zeros((3, 4, 4, 4), np.float32))\n"
+        "info = info_message([Dataset('v', series)])\n"
+        "assert len(info['colormaps']['viridis']) == 33\n"
+        "print('matplotlib' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False", out.stderr

@@ -7,6 +7,11 @@ point takes the curve's opacity at its position, and the existing points keep th
 viewer gets the same stops in its `info` message, so a preset chosen in the page and
 `--colormap` on the command line give the same transfer function.
 
+The presets' stops are a table, `colormap_presets.json`, so that a viewer's or widget's first
+message does not wait for matplotlib's import (0.06-0.3 s on 2 cores); other names ask
+matplotlib. tests/test_tf.py checks the table against matplotlib; `write_presets()` writes it
+again.
+
 `has_hue` and `is_white` classify a data TF's colours: one with hue makes the time colours
 default to lightness (`chronocl.core.time_tf.TimeTF.for_data`), and any but plain white gets a
 data colour bar beside the time legend (`chronocl.render.colorbar`).
@@ -15,7 +20,9 @@ data colour bar beside the time legend (`chronocl.render.colorbar`).
 from __future__ import annotations
 
 import functools
+import json
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -28,10 +35,13 @@ _ALIASES = {"grey": "gray", "gray_r": "gray_r", "grey_r": "gray_r"}
 # Channels further apart than this make a colour a hue rather than a grey (a map entered as
 # stops, rounded to 6 decimals, keeps its greys exactly grey).
 HUE_TOLERANCE = 0.02
+_PRESET_TABLE = Path(__file__).with_name("colormap_presets.json")
 
 
 def colormap_stops(name: str) -> list[list[float]]:
     """[u, r, g, b] at STOPS evenly spaced u in [0, 1] of matplotlib's map `name`."""
+    if isinstance(name, str) and name in PRESETS:
+        return [list(stop) for stop in _presets()[name]]
     from matplotlib import colormaps  # matplotlib costs ~0.3 s to import: only when used
 
     if not isinstance(name, str) or _ALIASES.get(name, name) not in colormaps:
@@ -39,13 +49,26 @@ def colormap_stops(name: str) -> list[list[float]]:
             f"unknown colour map {name!r}; use one of {', '.join(PRESETS)} "
             "or another matplotlib colour map name"
         )
-    return [list(stop) for stop in _stops(_ALIASES.get(name, name))]
+    return [list(stop) for stop in matplotlib_stops(name)]
 
 
 @functools.cache
-def _stops(name: str) -> tuple[tuple[float, ...], ...]:
+def _presets() -> dict[str, list[list[float]]]:
+    return json.loads(_PRESET_TABLE.read_text())
+
+
+def write_presets() -> None:
+    """Write the presets' table from matplotlib (after a change to PRESETS or STOPS)."""
+    table = {name: [list(stop) for stop in matplotlib_stops(name)] for name in PRESETS}
+    _PRESET_TABLE.write_text(json.dumps(table, separators=(",", ":")) + "\n")
+
+
+@functools.cache
+def matplotlib_stops(name: str) -> tuple[tuple[float, ...], ...]:
+    """The stops of matplotlib's map `name` (a preset's, or any other it knows)."""
     from matplotlib import colormaps
 
+    name = _ALIASES.get(name, name)
     u = np.linspace(0.0, 1.0, STOPS)
     rgb = colormaps[name](u)[:, :3]
     return tuple(
