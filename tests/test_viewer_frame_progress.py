@@ -12,6 +12,7 @@ import pytest
 pytest.importorskip("starlette")
 pytest.importorskip("websockets")
 
+from chronocl.core.tuning import TUNING
 from chronocl.data import synthetic
 from chronocl.data.timeseries import TimeSeries
 
@@ -39,7 +40,8 @@ def notes_until_frame(client: Client, rid: int) -> list[dict]:
             return notes
 
 
-def test_a_frame_answering_input_reports_its_stages(server):
+def test_a_frame_answering_input_reports_its_stages(server, monkeypatch):
+    monkeypatch.setattr(TUNING, "frame_progress_after_s", 0.0)  # (the frames here are quick)
     c = Client(server)
     try:
         c.open(0, size=(96, 96))
@@ -60,6 +62,24 @@ def test_a_frame_answering_input_reports_its_stages(server):
         # a camera turn only draws
         rid = c.send({"type": "update", "camera": {"azimuth": 50.0}})
         assert [n["stage"] for n in notes_until_frame(c, rid)] == ["drawing"]
+    finally:
+        c.close()
+
+
+def test_a_quick_frame_sends_no_progress_and_a_slow_one_does(server, monkeypatch):
+    """Reports come only once a frame has worked `frame_progress_after_s` (the page shows none
+    sooner): none for a quick frame, and a slow frame's from then on."""
+    c = Client(server)
+    try:
+        c.open(0, size=(96, 96))
+        monkeypatch.setattr(TUNING, "frame_progress_after_s", 60.0)
+        rid = c.send({"type": "update", "window": {"t0": 4, "t1": 12}})
+        assert notes_until_frame(c, rid) == []
+        # The progress of one that worked past the delay (here: none), the last one drawing.
+        monkeypatch.setattr(TUNING, "frame_progress_after_s", 1e-9)
+        rid = c.send({"type": "update", "window": {"t0": 13, "t1": 21}})
+        notes = notes_until_frame(c, rid)
+        assert notes and notes[-1]["stage"] == "drawing", notes
     finally:
         c.close()
 

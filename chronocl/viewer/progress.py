@@ -8,14 +8,21 @@ recolouring's winners in pieces, calling `chronocl.core.interrupt.checkpoint` be
 "integrating 3/8 slabs" (a refine, in the status line, with an offer to cancel) or "reading
 steps 3/10" (a frame answering input, in the busy box). `reporting` runs a frame's work
 under it without making that work one that newer input gives up.
+
+A frame answering input says nothing for its first `TUNING.frame_progress_after_s`: the page
+shows its busy box only after 400 ms, and a notebook widget's messages each cost the kernel,
+the Jupyter server and JupyterLab's page CPU that the frame itself needs (a 256^3 slide made
+about ten reports beside its two frames).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
 from chronocl.core.interrupt import reported
+from chronocl.core.tuning import TUNING
 
 
 class RefineProgress:
@@ -36,10 +43,12 @@ class RefineProgress:
         self.rid = rid
         self.view: int | None = 0 if what == "refine" else None
         self._last: tuple | None = None
+        quiet_s = TUNING.frame_progress_after_s if what == "frame" else 0.0
+        self._quiet_until = time.monotonic() + quiet_s
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         key = (self.view, stage, done, total)
-        if key == self._last:
+        if key == self._last or time.monotonic() < self._quiet_until:
             return
         self._last = key
         msg = refine_progress(stage, done, total, self.view, self.views)
