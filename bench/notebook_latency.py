@@ -38,9 +38,12 @@ cell run to the widget's view on the page: the front end loaded, the viewer's mo
 scrub's `widget_scrub` / `viewer_scrub` (each: the first and the tenth slide's `first_frame_ms`,
 `sharp_ms` and `release_sharp_ms`, and p50 / p95 / max of the warm slides' `sharp_ms`,
 `first_frame_ms`, `release_sharp_ms` and `transit_ms`: a frame's round trip less the worker's
-time on it, the way to the worker and back), their ratios `ratio_scrub_first_sharp`,
-`ratio_scrub_tenth_sharp`, `ratio_scrub_sharp_p50` and `ratio_scrub_first_frame_p50` (widget
-over viewer; issue 50: a scrub's frames within 1.2), the panels' sizes, and `targets`. One line
+time on it, the way to the worker and back; `sharp_server_ms`, the worker's time on the sharp
+frame; `page_task_ms` and `page_updates`, the page's main-thread task time and layouts over a
+slide, from Chromium's counters: where the widget's time goes beside the viewer's), their
+ratios `ratio_scrub_first_sharp`, `ratio_scrub_tenth_sharp`, `ratio_scrub_sharp_p50` and
+`ratio_scrub_first_frame_p50` (widget over viewer; issue 50: a scrub's frames within 1.2), the
+panels' sizes, and `targets`. One line
 per slide before it (`"case": "scrub"`, `"impl": "widget"` or `"viewer"`).
 
     python bench/notebook_latency.py                 # 256^3 x 20, a 10-step window
@@ -129,6 +132,7 @@ RECORD_SLIDE = """() => {
         && !l.refining && l.level === 0) {
       rec.sharp = now;
       rec.sharpTransit = transit(l);
+      rec.sharpTimings = l.timings || null;
       rec.window = [v.S.state.window.t0, v.S.state.window.t1];
       seen.disconnect();
       timeline.removeEventListener('pointermove', moved);
@@ -209,6 +213,7 @@ class Scrub:
         self.page, self.viewer, self.root = page, viewer, root
         self.slides: list[dict] = []
         self.direction = 1
+        self.cdp = None  # the page's DevTools session (`page_metrics`)
 
     def window(self) -> list[int]:
         return self.page.evaluate(
@@ -243,6 +248,14 @@ class Scrub:
             if got != [self.steps - (t1 - t0), self.steps]:
                 raise RuntimeError(f"the window brushed to the last steps is {got}")
 
+    def page_metrics(self) -> dict:
+        """Chromium's performance counters of the page (its main thread's task time, the
+        layouts it ran), through the DevTools protocol."""
+        if self.cdp is None:
+            self.cdp = self.page.context.new_cdp_session(self.page)
+            self.cdp.send("Performance.enable")
+        return {m["name"]: m["value"] for m in self.cdp.send("Performance.getMetrics")["metrics"]}
+
     def slide(self) -> None:
         page = self.page
         t0, t1 = self.window()
@@ -250,8 +263,10 @@ class Scrub:
             self.direction = -self.direction
         mid = (t0 + t1) // 2  # pressed inside the window, away from its edges: a move
         page.evaluate(RECORD_SLIDE % (self.viewer, self.root))
+        before = self.page_metrics()
         self.drag(mid, mid + self.direction)
         page.wait_for_function("() => window.__slide.sharp !== null", timeout=120_000)
+        after = self.page_metrics()
         rec = page.evaluate("() => window.__slide")
         if rec["window"] != [t0 + self.direction, t1 + self.direction]:
             raise RuntimeError(f"slide from {[t0, t1]} by {self.direction} showed {rec['window']}")
@@ -264,6 +279,12 @@ class Scrub:
                 "frames": rec["frames"],
                 "first_transit_ms": rnd(rec.get("firstTransit")),
                 "sharp_transit_ms": rnd(rec.get("sharpTransit")),
+                # the worker's stages for the sharp frame (integrate, upload, render...)
+                "sharp_timings": rec.get("sharpTimings"),
+                # the page's main thread over the slide (Chromium's own counters): its tasks,
+                # and of them the rendering updates (frames of the page) it drew
+                "page_task_ms": rnd(1e3 * (after["TaskDuration"] - before["TaskDuration"])),
+                "page_updates": int(after["LayoutCount"] - before["LayoutCount"]),
             }
         )
 
@@ -304,6 +325,12 @@ def scrub_summary(slides: list[dict]) -> dict:
                 if s[k] is not None
             ]
         ),
+        # the worker's time on the sharp frame, and the page's main-thread time per slide
+        "sharp_server_ms": percentiles(
+            [s["sharp_timings"]["server_ms"] for s in warm if s["sharp_timings"]]
+        ),
+        "page_task_ms": percentiles([s["page_task_ms"] for s in warm]),
+        "page_updates": percentiles([s["page_updates"] for s in warm]),
     }
 
 
