@@ -406,6 +406,15 @@ def test_clip_plane_outline_and_turning_it_by_dragging(browser, server, tmp_path
         p.close()
 
 
+def entered(page, field) -> None:
+    """Enter pressed in `field`, and the update it makes sent: the page sends it on the next
+    animation frame, and until then a settled frame answering the update before (the resize's)
+    would pass for its answer."""
+    sent = page.evaluate("() => window.viewer.sent")
+    field.press("Enter")
+    page.wait_for_function("(s) => window.viewer.sent > s", arg=sent)
+
+
 def test_two_periods_side_by_side(browser, server, tmp_path):  # noqa: F811
     """Typing a window into a view's header gives that view its own period; emptying it links
     the view to the timeline's window again."""
@@ -423,14 +432,14 @@ def test_two_periods_side_by_side(browser, server, tmp_path):  # noqa: F811
         # after the two views' frame) leaves what is typed, and Enter sends it
         page.set_viewport_size({"width": 1380, "height": 900})
         page.wait_for_timeout(400)
-        own.press("Enter")
+        entered(page, own)
         p.settle(before)
         first, second = p.eval(labels)
         assert second.endswith("steps 0:4") and not first.endswith("steps 0:4")
         page.screenshot(path=os.path.join(shots_dir(tmp_path), "two-periods.png"))
         before = p.last()
         own.fill("")
-        own.press("Enter")
+        entered(page, own)
         p.settle(before)
         first, second = p.eval(labels)
         assert first.split("steps")[1] == second.split("steps")[1]  # linked again
