@@ -33,6 +33,7 @@ from .strategies import examples, specs
 pytestmark = pytest.mark.filterwarnings("ignore::chronocl.core.errors.ChronoclWarning")
 
 ENGINES = ["numpy", "opencl"]
+RGB = TimeTF.preset("rgb", positions="absolute")  # (relative positions never slide)
 
 
 def _series(rng: np.random.Generator, t: int, shape: tuple[int, int, int], levels: bool):
@@ -79,10 +80,39 @@ def test_slides_and_jumps_equal_scratch(engine: str, mode: str, data) -> None:
             cv = session.slide(k)
             moved = session.selection != before
             overlap = set(before.steps) & set(session.selection.steps)
-            if moved and overlap:
-                assert session.stats["path"] == "incremental"
+            if moved and overlap:  # (or integrated: too faint to finish from its sums)
+                why = session.stats["why_not_incremental"] or ""
+                assert session.stats["path"] == "incremental" or "too faint" in why, why
         _check(cv, series, session.selection, session.spec, engine)
     session.close()
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_window_too_faint_for_its_sums_is_integrated(engine: str) -> None:
+    """additive normalised by "max" shows each colour sum over the largest: a window whose
+    sums are all but zero (here a data TF of colour 1e-20, opaque) would finish from its
+    fixed-point sums as black, or coarse, where its integration is bright. Such a slide is
+    integrated instead, says why, and the next bright window slides again."""
+    from chronocl.core.tf import DataTF
+
+    rng = np.random.default_rng(5)
+    series = _series(rng, 12, (3, 4, 9), levels=False)
+    faint = DataTF(points=((0.0, 0.0, 0.0, 1e-20, 1.0), (1.0, 0.0, 0.0, 1e-20, 1.0)))
+    spec = make_spec("additive", data_tf=faint, normalize="max", time_tf=RGB)
+    with Session(series, engine=engine, spec=spec, memory="64MB") as session:
+        session.set_window(0, 5)
+        cv = session.slide(1)
+        assert session.stats["path"] == "reintegrate"
+        assert "too faint to slide" in session.stats["why_not_incremental"]
+        _check(cv, series, session.selection, session.spec, engine)
+        assert cv.rgba[..., 2].max() > 0.5  # bright, as integrated
+        cv = session.slide(1)  # (no state kept from the faint slide: integrated again)
+        _check(cv, series, session.selection, session.spec, engine)
+        session.set_spec(make_spec("additive", normalize="max", time_tf=RGB))
+        session.slide(1)
+        cv = session.slide(1)
+        assert session.stats["path"] == "incremental"
+        _check(cv, series, session.selection, session.spec, engine)
 
 
 @pytest.mark.parametrize("engine", ENGINES)

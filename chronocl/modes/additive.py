@@ -3,14 +3,16 @@
 C = Σ a_k c_k divided per channel by N (``time``: N = Σ a_t(p_k) rgb_t(p_k); ``max``: the
 volume's largest channel value) and clamped to A = max a_k. Slides by inversion: the colour
 sums are kept in fixed point, so a step that leaves subtracts exactly what it added; the
-opacity (a maximum) slides by aggregation.
+opacity (a maximum) slides by aggregation. Normalised by "max", a window whose largest sum is
+too faint for the fixed point's precision (`FaintSums`: an all but black or transparent window)
+is not finished from its sums: a session integrates it instead.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from chronocl.modes.base import FIXED_ONE, Mode, Partial
+from chronocl.modes.base import FIXED_ONE, FaintSums, Mode, Partial, faint_below
 
 
 def additive_norm(spec, positions: np.ndarray) -> np.ndarray:
@@ -72,7 +74,12 @@ class Additive(Mode):
             return additive_norm(spec, positions)
         return np.full(3, float(sums.max()) if sums.size else 0.0)
 
+    def _check_bright(self, sums_max: float, positions, spec) -> None:
+        if spec.normalize == "max" and sums_max < faint_below(len(positions)):
+            raise FaintSums(f"the largest colour sum {sums_max:.3g} is too faint to slide")
+
     def finish_sums(self, sums, alpha, positions, spec):
+        self._check_bright(float(sums.max()) if sums.size else 0.0, positions, spec)
         rgba = np.empty((*alpha.shape, 4), np.float64)
         rgba[..., :3] = sums
         rgba[..., 3] = alpha
@@ -83,6 +90,7 @@ class Additive(Mode):
 
     def finish_kernel(self, acc, positions, spec):
         sums_max = np.array([float(acc.max()) / FIXED_ONE if acc.size else 0.0])
+        self._check_bright(float(sums_max[0]), positions, spec)
         norm = self.norm(spec, positions, sums_max)
         return "finish_additive", {}, [], [np.array([*norm, 0.0], dtype=np.float32)]
 

@@ -29,6 +29,21 @@ if TYPE_CHECKING:
 
 FIXED_ONE = float(2**40)  # sums of inverting modes in fixed point: exact add and subtract
 
+
+class FaintSums(Exception):
+    """A window's fixed-point sums too faint to finish as precisely as integrating it: a mode
+    whose picture is relative to its largest sum (additive, normalised by "max") reads each
+    sum to 2^-41 a step, which is coarse beside a largest sum under `faint_below`. Not an
+    error of the user's: a session that slides integrates such a window from its steps."""
+
+
+def faint_below(steps: int) -> float:
+    """The largest sum below which `steps` steps' rounding in fixed point (half of 1/FIXED_ONE
+    each) is more than 2^-22 of it: finished from the sums, such a window could differ from
+    its integration beyond float32's own rounding."""
+    return steps * 2.0**-19
+
+
 # One step's colour and opacity: (step k, values (default: u of step k)) -> (colour (..., 3)
 # float64, opacity (...) float64), the data TF taken at the values, the time TF at step k.
 StepRGBA = Callable[..., tuple[np.ndarray, np.ndarray]]

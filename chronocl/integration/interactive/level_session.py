@@ -49,6 +49,7 @@ from chronocl.integration.interactive.moves import fixed
 from chronocl.integration.interactive.settings import Settings, manager_key, settings
 from chronocl.integration.interactive.slider import Slider, slide_plan, slides_by_sums
 from chronocl.integration.interactive.winners import Winners, of_window, recolours
+from chronocl.modes.base import FaintSums
 from chronocl.modes.spec import IntegrationSpec
 
 
@@ -258,18 +259,22 @@ class LevelSession:
         leaving = {s: a for s, a in self._arrays.items() if s not in arrays}
         self._hold(arrays)
         self.selection = selection
-        slider = self._slider
+        slider, cv = self._slider, None
         path = "reintegrate"
         if reason is None and slider is not None and slider.can_move_to(selection):
             # Neither holds until it completes: a slide failing half way (out of memory) is torn
             self._cv, self._slider, self._won = None, None, None
             t_slide, fill = time.perf_counter(), 0 if slider.placed else selection.width
-            cv = slider.move_to(selection, {**leaving, **arrays})
-            self._slider, path = slider, "incremental"
-            if self.costs is not None:  # the first slide of a state fills it
-                ms = 1e3 * (time.perf_counter() - t_slide)
-                self.costs.record_slide(self.level, ms, voxels, move.shift, fill, move.inverts)
-        else:
+            try:
+                cv = slider.move_to(selection, {**leaving, **arrays})
+            except FaintSums as faint:  # integrated below; the state starts again from it
+                reason = f"{faint}; integrated"
+            else:
+                self._slider, path = slider, "incremental"
+                if self.costs is not None:  # the first slide of a state fills it
+                    ms = 1e3 * (time.perf_counter() - t_slide)
+                    self.costs.record_slide(self.level, ms, voxels, move.shift, fill, move.inverts)
+        if cv is None:
             job = window_job(self.series, selection, self.spec)
             bricks = self._device.bricks(self._arrays, selection.width) or self._bricks
             # Neither the last chronovolume nor the sliding state holds for this window until
