@@ -84,6 +84,34 @@ def test_a_quick_frame_sends_no_progress_and_a_slow_one_does(server, monkeypatch
         c.close()
 
 
+def test_a_report_of_the_quiet_time_is_sent_when_it_ends(monkeypatch):
+    """A stage reported early that then runs long is named once the quiet time ends (the busy
+    box shows from 400 ms); a frame sent within the quiet time sends nothing, then or later."""
+    import time
+
+    from chronocl.viewer.progress import RefineProgress
+
+    monkeypatch.setattr(TUNING, "frame_progress_after_s", 0.2)
+    sent: list[dict] = []
+    slow = RefineProgress(sent.append, 1, "frame", 7)
+    slow("reading steps", 1, 2)
+    slow("integrating", 0, 1)  # the newest is the one held
+    assert sent == []
+    time.sleep(0.4)  # the work goes on: the held report went when the quiet time ended
+    assert [(m["stage"], m["id"], m["what"]) for m in sent] == [("integrating", 7, "frame")]
+    slow("drawing", 0, 1)  # after it, at once
+    slow.finish()
+    assert [m["stage"] for m in sent] == ["integrating", "drawing"]
+
+    quick: list[dict] = []
+    fast = RefineProgress(quick.append, 1, "frame", 8)
+    fast("integrating", 0, 1)
+    fast("drawing", 0, 1)
+    fast.finish()  # the frame went within the quiet time
+    time.sleep(0.4)
+    assert quick == []
+
+
 def test_reported_work_is_heard_and_neither_given_up_nor_split():
     """A frame answering input runs under `interrupt.reported`: its checkpoints reach the
     progress, but it is not `watched`, so a session integrates it whole and a gather goes in

@@ -53,10 +53,11 @@ class Tuning:
     # up). Not measured: chosen by hand as a short idle (9ddf9eb, 2026-11-29).
     prepare_after_s: float = 0.3
     # Seconds a frame answering input works before it reports its progress (chronocl/viewer/
-    # progress.py): the page's busy box shows from 400 ms (static/connection.js BUSY_AFTER_MS),
-    # so an earlier report is never seen. Measured on the 2-core machine, bench/
-    # notebook_latency.py at 256^3: a slide's frames made about ten reports, each costing the
-    # kernel, the Jupyter server and JupyterLab's page CPU beside the frame's own work.
+    # progress.py; the newest report held meanwhile is sent then). Not measured: chosen under
+    # the page's 400 ms before its busy box shows (static/connection.js BUSY_AFTER_MS). What it
+    # saves was measured on the 2-core machine, bench/notebook_latency.py at 256^3: a slide's
+    # frames had sent about ten reports beside its two frames, 3 messages after (d536647,
+    # 2026-12-01).
     frame_progress_after_s: float = 0.3
     # Seconds a frame waits, at most, for a client that left to let go of its frames. Measured
     # on the 2-core machine, bench/viewer_soak.py at 512^3: a reloaded page's first frame made

@@ -12,11 +12,14 @@ under it without making that work one that newer input gives up.
 A frame answering input says nothing for its first `TUNING.frame_progress_after_s`: the page
 shows its busy box only after 400 ms, and a notebook widget's messages each cost the kernel,
 the Jupyter server and JupyterLab's page CPU that the frame itself needs (a 256^3 slide made
-about ten reports beside its two frames).
+about ten reports beside its two frames). The newest report of that time is held, and sent
+when it ends if the frame is still being made (`finish` says it was sent): a stage that
+started early and runs for seconds is still named in the busy box.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
@@ -45,14 +48,47 @@ class RefineProgress:
         self._last: tuple | None = None
         quiet_s = TUNING.frame_progress_after_s if what == "frame" else 0.0
         self._quiet_until = time.monotonic() + quiet_s
+        # The quiet time's newest report and the timer that sends it when the time ends; the
+        # lock keeps reports in order between the work's thread and the timer's.
+        self._lock = threading.Lock()
+        self._held: tuple | None = None
+        self._timer: threading.Timer | None = None
+        self._finished = False
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         key = (self.view, stage, done, total)
-        if key == self._last or time.monotonic() < self._quiet_until:
-            return
+        with self._lock:
+            newest = self._held[0] if self._held else self._last
+            if self._finished or key == newest:
+                return
+            wait = self._quiet_until - time.monotonic()
+            if wait > 0:
+                self._held = (key, stage, done, total)
+                if self._timer is None:
+                    self._timer = threading.Timer(wait, self._send_held)
+                    self._timer.daemon = True
+                    self._timer.start()
+                return
+            self._held = None
+            self._send(key, stage, done, total)
+
+    def _send(self, key: tuple, stage: str, done: int, total: int) -> None:
         self._last = key
         msg = refine_progress(stage, done, total, self.view, self.views)
         self.reply({**msg, "what": self.what, "id": self.rid})
+
+    def _send_held(self) -> None:
+        with self._lock:
+            held, self._held = self._held, None
+            if held is not None and not self._finished:
+                self._send(*held)
+
+    def finish(self) -> None:
+        """The frame was sent (or failed): nothing held is sent after it."""
+        with self._lock:
+            self._finished, self._held = True, None
+            if self._timer is not None:
+                self._timer.cancel()
 
 
 def refine_progress(stage: str, done: int, total: int, view: int | None, views: int) -> dict:

@@ -373,10 +373,13 @@ class ClientWorker(Tasks):
             return  # nobody will see it
         # the page's busy box hears how far it got: reading steps n/N, integrating slab n/N...
         progress = RefineProgress(self._note, len(state.views), "frame", rid)
-        with reporting(progress):
-            cvs, integrate_ms, incremental = self.views.chronovolumes(state)
-        progress("drawing", 0, len(cvs))
-        self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
+        try:
+            with reporting(progress):
+                cvs, integrate_ms, incremental = self.views.chronovolumes(state)
+            progress("drawing", 0, len(cvs))
+            self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
+        finally:
+            progress.finish()
         self._memory_after()
         self._histogram_after(state)
         self._warm_after(state)
