@@ -106,7 +106,9 @@ def test_a_window_too_faint_for_its_sums_is_integrated(engine: str) -> None:
         assert "too faint to slide" in session.stats["why_not_incremental"]
         _check(cv, series, session.selection, session.spec, engine)
         assert cv.rgba[..., 2].max() > 0.5  # bright, as integrated
-        cv = session.slide(1)  # (no state kept from the faint slide: integrated again)
+        assert session.stats["held_partials"] > 0  # the state, moved, is kept
+        cv = session.slide(1)
+        assert "too faint to slide" in session.stats["why_not_incremental"]
         _check(cv, series, session.selection, session.spec, engine)
         session.set_spec(make_spec("additive", normalize="max", time_tf=RGB))
         session.slide(1)

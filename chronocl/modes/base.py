@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from chronocl.core.errors import ModeDefinitionError
+from chronocl.core.errors import ChronoclError, ModeDefinitionError
 
 if TYPE_CHECKING:
     from chronocl.core.tf import DataTF, TimeTF
@@ -30,17 +30,18 @@ if TYPE_CHECKING:
 FIXED_ONE = float(2**40)  # sums of inverting modes in fixed point: exact add and subtract
 
 
-class FaintSums(Exception):
+class FaintSums(ChronoclError):
     """A window's fixed-point sums too faint to finish as precisely as integrating it: a mode
     whose picture is relative to its largest sum (additive, normalised by "max") reads each
-    sum to 2^-41 a step, which is coarse beside a largest sum under `faint_below`. Not an
-    error of the user's: a session that slides integrates such a window from its steps."""
+    sum to within 2^-40 a step (truncated), which is coarse beside a largest sum under
+    `faint_below`. Not an error of the user's: a session that slides catches it and
+    integrates such a window from its steps."""
 
 
 def faint_below(steps: int) -> float:
-    """The largest sum below which `steps` steps' rounding in fixed point (half of 1/FIXED_ONE
-    each) is more than 2^-22 of it: finished from the sums, such a window could differ from
-    its integration beyond float32's own rounding."""
+    """The largest sum below which `steps` steps' truncation in fixed point (under 1/FIXED_ONE
+    each) may be more than 2^-21 of it: finished from the sums, such a window could differ from
+    its integration by more than a few float32 roundings."""
     return steps * 2.0**-19
 
 

@@ -259,7 +259,7 @@ class LevelSession:
         leaving = {s: a for s, a in self._arrays.items() if s not in arrays}
         self._hold(arrays)
         self.selection = selection
-        slider, cv = self._slider, None
+        slider, cv, faint = self._slider, None, None
         path = "reintegrate"
         if reason is None and slider is not None and slider.can_move_to(selection):
             # Neither holds until it completes: a slide failing half way (out of memory) is torn
@@ -267,8 +267,8 @@ class LevelSession:
             t_slide, fill = time.perf_counter(), 0 if slider.placed else selection.width
             try:
                 cv = slider.move_to(selection, {**leaving, **arrays})
-            except FaintSums as faint:  # integrated below; the state starts again from it
-                reason = f"{faint}; integrated"
+            except FaintSums as too_faint:  # integrated below; the state, moved, slides on
+                faint, reason = slider, f"{too_faint}; integrated"
             else:
                 self._slider, path = slider, "incremental"
                 if self.costs is not None:  # the first slide of a state fills it
@@ -298,7 +298,9 @@ class LevelSession:
                 self._won = (cv.t_index, w)
             # Jumps and spec changes integrate directly (one pass over the window); the
             # sliding state starts from this window and is filled lazily on the next slide.
-            if reason is None:
+            if faint is not None:
+                self._slider = faint
+            elif reason is None:
                 self._slider = Slider(
                     self.series,
                     self.engine,

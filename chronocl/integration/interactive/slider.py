@@ -275,11 +275,12 @@ class Slider:
                 self.agg.push_back(s) if forward else self.agg.push_front(s)
         leaves.forget()
         self.selection = selection
-        cv = self._chronovolume()
-        if leaves.device_bricks is not None:
-            leaves.device_bricks.slots.touch(selection.steps)
-        leaves.arrays, leaves.device_bricks = {}, None  # the leaving steps' slots free
-        return cv
+        try:  # (a window too faint to finish from its sums, `FaintSums`: the state holds)
+            return self._chronovolume()
+        finally:
+            if leaves.device_bricks is not None:
+                leaves.device_bricks.slots.touch(selection.steps)
+            leaves.arrays, leaves.device_bricks = {}, None  # the leaving steps' slots free
 
     def _chronovolume(self) -> Chronovolume:
         series, spec, selection = self.series, self.spec, self.selection
