@@ -281,8 +281,9 @@ class Scrub:
                 "sharp_transit_ms": rnd(rec.get("sharpTransit")),
                 # the worker's stages for the sharp frame (integrate, upload, render...)
                 "sharp_timings": rec.get("sharpTimings"),
-                # the page's main thread over the slide (Chromium's own counters): its tasks,
-                # and of them the rendering updates (frames of the page) it drew
+                # the page's main thread over the slide (Chromium's own counters): its tasks'
+                # time (Playwright's polling for the sharp frame included, on either page) and
+                # the layouts it ran
                 "page_task_ms": rnd(1e3 * (after["TaskDuration"] - before["TaskDuration"])),
                 "page_updates": int(after["LayoutCount"] - before["LayoutCount"]),
             }
