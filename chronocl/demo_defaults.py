@@ -41,15 +41,13 @@ def default_pictures(
     out_png: Path,
     *,
     engine: str = "opencl",
-    size: int = 320,
-    camera: Camera | None = None,
 ) -> list[ModePicture]:
     """Write `out_png` (one panel per mode, default TFs) and `out_png` with suffix .json; return
     what each picture shows."""
     selection = parse_selection(window, series.n_steps, series.times)
-    if camera is None:  # the default view: from the side of the first steps
-        fitted = prepare(series, window).value_range
-        camera = series_early_side(series, selection, fitted, Camera(30, 25, zoom=1.15))
+    # The default view: from the side of the first steps
+    fitted = prepare(series, window).value_range
+    camera = series_early_side(series, selection, fitted, Camera(30, 25, zoom=1.15))
     width = selection.width
     results, cvs, labels = [], [], []
     for mode in modes.names():
@@ -66,9 +64,7 @@ def default_pictures(
         results.append(ModePicture(mode, shown, tuple(str(w.message) for w in said)))
         cvs.append(cv)
         labels.append(f"{mode}: {len(shown.shown)} of {width} steps show")
-    image = render_views(
-        cvs, camera, (size, size), labels=labels, columns=4, axes=True, outline=True
-    )
+    image = render_views(cvs, camera, (320, 320), labels=labels, columns=4, axes=True, outline=True)
     image.save(out_png)
     report = {
         "window": window,

@@ -268,11 +268,9 @@ class ResidentBricks:
     kernel).
     """
 
-    def __init__(
-        self, arrays: Mapping[int, np.ndarray], keep: bool = False, in_place: bool = True
-    ) -> None:
+    def __init__(self, arrays: Mapping[int, np.ndarray], in_place: bool = True) -> None:
         self.arrays = arrays
-        self.keep = keep
+        self.keep = False
         self.in_place = in_place  # False: an engine that would stack a SlotBrick itself
         self._kept: tuple[tuple, np.ndarray] | None = None
 

@@ -231,10 +231,7 @@ def time_labels(ds, tdim: str) -> list | None:
 
 
 def dataarray_layout(
-    array,
-    time_dim: str | None = None,
-    dims_order: str | Sequence[str] | None = None,
-    resample: str | None = None,
+    array, resample: str | None = None
 ) -> tuple[object, tuple[float, float, float], list | None, list[str]]:
     """An xarray DataArray with a time dimension as (T, Z, Y, X): (its data, a view where the
     data allow, resampled lazily when `resample` is ``"uniform"`` and a coordinate is not
@@ -242,7 +239,7 @@ def dataarray_layout(
     notes)."""
     name = str(array.name) if array.name is not None else "data"
     ds = array.to_dataset(name=name)
-    tdim, zyx, squeeze = map_dims(ds, array, name, time_dim, dims_order)
+    tdim, zyx, squeeze = map_dims(ds, array, name, time_dim=None, dims_order=None)
     view = array.isel(dict.fromkeys(squeeze, 0)) if squeeze else array
     view = view.transpose(tdim, *zyx)
     grids = [axis_grid(ds, d, resample) for d in zyx]

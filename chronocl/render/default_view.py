@@ -54,9 +54,7 @@ def series_early_side(series, selection: Selection, value_range, camera: Camera)
     return early_side(camera, window_centres(series, selection, value_range))
 
 
-def default_camera(chronovolume, camera: Camera | None = None) -> Camera:
-    """The view `render` takes without a camera: `camera` (default `Camera()`) turned by the
-    centres the chronovolume keeps (`chronocl.integrate` records them), as the command line
-    turns it."""
-    base = camera or Camera()
-    return early_side(base, chronovolume.metadata.get("centres"))
+def default_camera(chronovolume) -> Camera:
+    """The view `render` takes without a camera: `Camera()` turned by the centres the
+    chronovolume keeps (`chronocl.integrate` records them), as the command line turns it."""
+    return early_side(Camera(), chronovolume.metadata.get("centres"))

@@ -21,12 +21,9 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.camera import Camera, world_extent
 
 
-def visible_box(cv: Chronovolume, threshold: float | None = None) -> np.ndarray | None:
-    """World box (x0, y0, z0, x1, y1, z1) of the voxels more opaque than `threshold` (None:
-    `TUNING.visible_alpha`; or a tenth of the largest opacity, if that is less); None when every
-    voxel is transparent."""
-    if threshold is None:
-        threshold = TUNING.visible_alpha
+def visible_box(cv: Chronovolume) -> np.ndarray | None:
+    """World box (x0, y0, z0, x1, y1, z1) of the voxels more opaque than `TUNING.visible_alpha`
+    (or a tenth of the largest opacity, if that is less); None when every voxel is transparent."""
     alpha = cv.rgba[..., 3]
     stride = max(1, math.ceil((alpha.size / TUNING.framing_sample_voxels) ** (1 / 3)))
     sample = alpha[::stride, ::stride, ::stride]
@@ -35,7 +32,7 @@ def visible_box(cv: Chronovolume, threshold: float | None = None) -> np.ndarray 
     top = float(sample.max()) if sample.size else 0.0
     if not top > 0:
         return None
-    seen = sample > min(threshold, top / 10)
+    seen = sample > min(TUNING.visible_alpha, top / 10)
     lo, hi = [], []
     for axis, n in ((2, alpha.shape[2]), (1, alpha.shape[1]), (0, alpha.shape[0])):
         others = tuple(a for a in range(3) if a != axis)

@@ -62,7 +62,6 @@ def slab_bytes(
     read_ahead: bool = True,
     write_behind: bool | None = None,
     steps_per_read: int | None = None,  # None: TUNING.steps_per_read
-    threads: int | None = None,
 ) -> int:
     """Memory held while a slab of `rows` output rows is read, integrated and written.
 
@@ -71,7 +70,7 @@ def slab_bytes(
     decoded; at most zarr's async.concurrency), the engine's own work arrays (float64 input goes to
     OpenCL as float32; the numpy reference works in float64), the slab's output and the previous one
     being written (write-behind; by default where there is read-ahead), and zarr's encoded copies
-    while writing, and TUNING.run_thread_bytes for each of `threads` (default: `run_threads()`), so
+    while writing, and TUNING.run_thread_bytes for each of the run's threads (`run_threads()`), so
     that the budget holds at any thread count.
     """
     steps_per_read = TUNING.steps_per_read if steps_per_read is None else steps_per_read
@@ -80,7 +79,7 @@ def slab_bytes(
     read_rows = min(nz, rows + 2 * job.halo)
     brick = read_rows * w * plane * item
     total = TUNING.run_base_bytes + brick * (2 if read_ahead else 1)
-    total += TUNING.run_thread_bytes * (run_threads() if threads is None else threads)
+    total += TUNING.run_thread_bytes * run_threads()
     zc = stored_z_chunk(job.series)
     if zc:
         # Stored chunks a read of these rows can touch: as many as they fill when a slab of
