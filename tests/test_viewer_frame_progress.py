@@ -97,7 +97,9 @@ def test_a_report_of_the_quiet_time_is_sent_when_it_ends(monkeypatch):
     slow("reading steps", 1, 2)
     slow("integrating", 0, 1)  # the newest is the one held
     assert sent == []
-    time.sleep(0.4)  # the work goes on: the held report went when the quiet time ended
+    deadline = time.monotonic() + 30  # the work goes on: the held report goes when it ends
+    while not sent and time.monotonic() < deadline:
+        time.sleep(0.01)
     assert [(m["stage"], m["id"], m["what"]) for m in sent] == [("integrating", 7, "frame")]
     slow("drawing", 0, 1)  # after it, at once
     slow.finish()
@@ -110,6 +112,50 @@ def test_a_report_of_the_quiet_time_is_sent_when_it_ends(monkeypatch):
     fast.finish()  # the frame went within the quiet time
     time.sleep(0.4)
     assert quick == []
+
+
+def test_no_report_goes_after_its_frame(tmp_path, monkeypatch):
+    """A frame whose delivery outlasts the quiet time (a slow page or comm): its held report
+    ("drawing") is not sent after it."""
+    import json
+    import threading
+    import time
+
+    from chronocl.viewer.datasets import open_datasets
+    from chronocl.viewer.saving import Downloads
+    from chronocl.viewer.worker import ClientWorker
+
+    path = tmp_path / "v.zarr"
+    TimeSeries.from_array(np.stack(list(synthetic.steps("vortex", 6, (16, 16, 16))))).save(path)
+    log: list[str] = []
+    framed = threading.Event()
+
+    def send(data, wait=True) -> bool:
+        if isinstance(data, bytes):
+            log.append("frame")
+            time.sleep(0.5)  # delivered slowly: the quiet time ends meanwhile
+            framed.set()
+        else:
+            msg = json.loads(data)
+            log.append(f"{msg['type']}:{msg.get('what')}:{msg.get('stage')}")
+        return True
+
+    worker = ClientWorker(open_datasets([path]), send, Downloads(), engine="numpy")
+    try:
+        worker.open(0, 1, frame=True)
+        assert framed.wait(60)
+        time.sleep(1.0)  # its refine, if any
+        monkeypatch.setattr(TUNING, "frame_progress_after_s", 0.25)
+        log.clear()
+        framed.clear()
+        worker.update({"type": "update", "id": 2, "camera": {"azimuth": 40.0}})
+        assert framed.wait(60)
+        time.sleep(0.5)
+        assert "frame" in log
+        after = log[log.index("frame") + 1 :]
+        assert not [m for m in after if m.startswith("progress:frame")], log
+    finally:
+        worker.close()
 
 
 def test_reported_work_is_heard_and_neither_given_up_nor_split():

@@ -377,9 +377,9 @@ class ClientWorker(Tasks):
             with reporting(progress):
                 cvs, integrate_ms, incremental = self.views.chronovolumes(state)
             progress("drawing", 0, len(cvs))
-            self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start)
+            self._send_frame(state, rid, cvs, integrate_ms, incremental, t_start, progress)
         finally:
-            progress.finish()
+            progress.finish()  # (a failed frame's)
         self._memory_after()
         self._histogram_after(state)
         self._warm_after(state)
@@ -458,12 +458,21 @@ class ClientWorker(Tasks):
         self._memory_after()
 
     def _send_frame(
-        self, state, rid, cvs, integrate_ms, incremental, t_start, final: bool = False
+        self,
+        state,
+        rid,
+        cvs,
+        integrate_ms,
+        incremental,
+        t_start,
+        progress: RefineProgress | None = None,
+        final: bool = False,
     ) -> None:
         """Draw, encode and send the frame. A frame answering input draws what the draw budget
         allows in `TUNING.draw_target_ms`; if that is less than the panels' size (within
         `TUNING.pixel_budget`), the frame is redrawn in full once input stops (`final`), as
-        coarse levels are."""
+        coarse levels are. Its `progress` is finished just before it is sent: no report of it
+        goes after it."""
         state = self._framed(state, cvs)
         preview = state.quality == "preview"
         scale = TUNING.preview_scale if preview else 1.0
@@ -560,6 +569,8 @@ class ClientWorker(Tasks):
             },
             "sent_at": time.time(),
         }
+        if progress is not None:
+            progress.finish()
         self.send(pack_frame(header, images))
 
     def _allocated(self) -> int:
