@@ -23,6 +23,7 @@ from chronocl.core.tf import TimeTF
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate, make_spec
 from chronocl.integration.interactive.costs import SlideCosts
+from chronocl.integration.interactive.moves import slid
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.sliding import SlidingAggregate
 
@@ -99,6 +100,20 @@ def test_a_window_too_faint_for_its_sums_is_integrated(engine: str) -> None:
     series = _series(rng, 12, (3, 4, 9), levels=False)
     faint = DataTF(points=((0.0, 0.0, 0.0, 1e-20, 1.0), (1.0, 0.0, 0.0, 1e-20, 1.0)))
     spec = make_spec("additive", data_tf=faint, normalize="max", time_tf=RGB)
+
+    def predicted(session: Session) -> float | None:
+        """The next one-step slide's ms as a viewer's session predicts it, slides measured
+        cheap (costs given for the question alone: the session's own choose nothing)."""
+        at = session.stats["level"]
+        level, cheap = session.at(at), SlideCosts()
+        cheap.slide = {(at, False): 1e-6, (at, True): 1e-6}  # measured cheap: it would slide
+        cheap.fill, cheap.direct = dict(cheap.slide), {at: 1e-3}
+        kept, level.costs = level.costs, cheap
+        try:
+            return level.slide_ms(slid(session.selection, 1, 12), session.spec)
+        finally:
+            level.costs = kept
+
     with Session(series, engine=engine, spec=spec, memory="64MB") as session:
         session.set_window(0, 5)
         cv = session.slide(1)
@@ -107,6 +122,7 @@ def test_a_window_too_faint_for_its_sums_is_integrated(engine: str) -> None:
         _check(cv, series, session.selection, session.spec, engine)
         assert cv.rgba[..., 2].max() > 0.5  # bright, as integrated
         assert session.stats["held_partials"] > 0  # the state, moved, is kept
+        assert predicted(session) is None  # not a slide alone: a slide and an integration
         cv = session.slide(1)
         assert "too faint to slide" in session.stats["why_not_incremental"]
         _check(cv, series, session.selection, session.spec, engine)
@@ -115,6 +131,7 @@ def test_a_window_too_faint_for_its_sums_is_integrated(engine: str) -> None:
         cv = session.slide(1)
         assert session.stats["path"] == "incremental"
         _check(cv, series, session.selection, session.spec, engine)
+        assert predicted(session) is not None
 
 
 @pytest.mark.parametrize("engine", ENGINES)

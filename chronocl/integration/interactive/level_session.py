@@ -333,6 +333,8 @@ class LevelSession:
         slider, costs = self._slider, self.costs
         if costs is None or slider is None or spec != self.spec or self.streaming is not None:
             return None
+        if slider.faint:  # (its next slide is likely faint too: a slide and an integration)
+            return None
         if self.selection is None or not slider.can_move_to(selection):
             return None
         voxels, move = int(np.prod(self.series.volume_shape)), self._move(selection)

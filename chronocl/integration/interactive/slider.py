@@ -196,6 +196,9 @@ class Slider:
             self.agg = SlidingAggregate(self.leaves.for_aggregate, self.combine)
             self.agg.reset(self._items(selection))
         self.acc = None  # inverting modes: fixed-point sums (Z, Y, X, C), host or device
+        # The last move's window was too faint to finish from its sums (`FaintSums`): the
+        # session integrated it, and predicts the next move as an integration too.
+        self.faint = False
 
     def _place(self) -> None:
         """Where the state lives, decided at the first slide (a window only edited holds no
@@ -276,7 +279,10 @@ class Slider:
         leaves.forget()
         self.selection = selection
         try:  # (a window too faint to finish from its sums, `FaintSums`: the state holds)
-            return self._chronovolume()
+            self.faint = True
+            cv = self._chronovolume()
+            self.faint = False
+            return cv
         finally:
             if leaves.device_bricks is not None:
                 leaves.device_bricks.slots.touch(selection.steps)
