@@ -262,10 +262,10 @@ class ResidentBricks:
     in one block of memory (`slot_brick`), else stacked.
 
     `in_place` False always stacks, for an engine that cannot read host memory in place (a
-    GPU's, the numpy reference). With `keep` the last stacked brick is kept and served again
-    for the same steps and rows: an interactive session re-integrating one window under a new
-    transfer function then stacks nothing (at 256^3 the stacking copy costs more than the
-    kernel).
+    GPU's, the numpy reference). With its `keep` attribute set (an interactive session sets it)
+    the last stacked brick is kept and served again for the same steps and rows: an interactive
+    session re-integrating one window under a new transfer function then stacks nothing (at
+    256^3 the stacking copy costs more than the kernel).
     """
 
     def __init__(self, arrays: Mapping[int, np.ndarray], in_place: bool = True) -> None:
