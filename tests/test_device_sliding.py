@@ -84,7 +84,9 @@ def test_slides_with_the_state_on_the_device_equal_the_reference(copying, conver
                 cv = session.slide(data.draw(st.sampled_from([-3, -2, -1, 1, 2, 3])))
                 after = session.selection
                 if after != before and set(before.steps) & set(after.steps):
-                    assert session.stats["path"] == "incremental"
+                    # (or integrated: too faint to finish from its sums, its state kept)
+                    why = session.stats["why_not_incremental"] or ""
+                    assert session.stats["path"] == "incremental" or "too faint" in why, why
                     assert session.at(0)._slider.dc is not None  # the state is on the device
             _check(session, cv, series)
 
