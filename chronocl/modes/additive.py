@@ -74,24 +74,28 @@ class Additive(Mode):
             return additive_norm(spec, positions)
         return np.full(3, float(sums.max()) if sums.size else 0.0)
 
-    def _check_bright(self, sums_max: float, positions, spec) -> None:
-        if spec.normalize == "max" and sums_max < faint_below(len(positions)):
-            raise FaintSums(f"the largest colour sum {sums_max:.3g} is too faint to slide")
+    def _finish_norm(self, spec, positions: np.ndarray, sums: np.ndarray) -> np.ndarray:
+        """`norm` for a window finished from its fixed-point sums; `FaintSums` where its largest
+        sum (normalised by "max") is too faint for their precision."""
+        norm = self.norm(spec, positions, sums)
+        if spec.normalize == "max" and norm[0] < faint_below(len(positions)):
+            raise FaintSums(f"the largest colour sum {norm[0]:.3g} is too faint to slide")
+        return norm
 
     def finish_sums(self, sums, alpha, positions, spec):
-        self._check_bright(float(sums.max()) if sums.size else 0.0, positions, spec)
+        norm = self._finish_norm(spec, positions, sums)
         rgba = np.empty((*alpha.shape, 4), np.float64)
         rgba[..., :3] = sums
         rgba[..., 3] = alpha
-        return finalize_sums(rgba, self.norm(spec, positions, sums))
+        return finalize_sums(rgba, norm)
 
     def combine_kernel(self, spec):
         return "additive", "combine_fmax", {}
 
     def finish_kernel(self, acc, positions, spec):
-        sums_max = np.array([float(acc.max()) / FIXED_ONE if acc.size else 0.0])
-        self._check_bright(float(sums_max[0]), positions, spec)
-        norm = self.norm(spec, positions, sums_max)
+        # the largest sum, read from the device, only where it is the divisor
+        largest = float(acc.max()) / FIXED_ONE if acc.size and spec.normalize == "max" else 0.0
+        norm = self._finish_norm(spec, positions, np.array([largest]))
         return "finish_additive", {}, [], [np.array([*norm, 0.0], dtype=np.float32)]
 
     def kernel_options(self, spec, positions, raw, given):

@@ -35,7 +35,7 @@ from chronocl.engine.device_steps import reserve
 from chronocl.integration.inmemory import DISPLAY_VOXELS, chronovolume_metadata, engine_name
 from chronocl.integration.interactive.costs import Move, SlideCosts
 from chronocl.integration.interactive.sliding import SlidingAggregate, block_size
-from chronocl.modes.base import Partial, Values
+from chronocl.modes.base import FaintSums, Partial, Values
 from chronocl.modes.spec import IntegrationSpec
 
 
@@ -278,15 +278,17 @@ class Slider:
                 self.agg.push_back(s) if forward else self.agg.push_front(s)
         leaves.forget()
         self.selection = selection
-        try:  # (a window too faint to finish from its sums, `FaintSums`: the state holds)
-            self.faint = True
+        try:
             cv = self._chronovolume()
-            self.faint = False
-            return cv
+        except FaintSums:  # too faint to finish from its sums: the state, moved, holds
+            self.faint = True
+            raise
         finally:
             if leaves.device_bricks is not None:
                 leaves.device_bricks.slots.touch(selection.steps)
             leaves.arrays, leaves.device_bricks = {}, None  # the leaving steps' slots free
+        self.faint = False
+        return cv
 
     def _chronovolume(self) -> Chronovolume:
         series, spec, selection = self.series, self.spec, self.selection
