@@ -13,8 +13,9 @@ A frame answering input says nothing for its first `TUNING.frame_progress_after_
 shows its busy box only after 400 ms, and a notebook widget's messages each cost the kernel,
 the Jupyter server and JupyterLab's page CPU that the frame itself needs (a 256^3 slide made
 about ten reports beside its two frames). The newest report of that time is held, and sent
-when it ends if the frame is still being made (`finish` says it was sent): a stage that
-started early and runs for seconds is still named in the busy box.
+when it ends if the frame is still being made (`finish`, just before the frame is sent, says
+it no longer is): a stage that started early and runs for seconds is still named in the busy
+box.
 """
 
 from __future__ import annotations
@@ -84,7 +85,7 @@ class RefineProgress:
                 self._send(*held)
 
     def finish(self) -> None:
-        """The frame was sent (or failed): nothing held is sent after it."""
+        """The frame is about to be sent (or failed): nothing held goes after it."""
         with self._lock:
             self._finished, self._held = True, None
             if self._timer is not None:
