@@ -12,6 +12,7 @@ import chronocl
 from chronocl import modes
 from chronocl.core.errors import ChronoclError, InvalidParameterError
 from chronocl.core.tf import TimeTF
+from chronocl.core.tuning import TUNING
 from chronocl.data import synthetic
 from chronocl.integration.interactive.session import LatencyModel, Session
 from chronocl.modes.spec import IntegrationSpec
@@ -149,6 +150,25 @@ def test_latency_model_picks_the_finest_level_within_target():
     assert model.predict(1, 10) == pytest.approx(8.0 + 40.0)
     assert model.pick(10)[0] == 1  # level 0: 64 + 320 ms > 100
     model.record_integrate(1, ms=100.0, steps=10)  # slower than predicted: back off
+    assert model.pick(10)[0] == 2
+
+
+def test_latency_model_draws_the_finest_level_a_little_over_target_rather_than_refine():
+    """Level 0 predicted within `sharp_overrun` times the target is drawn at once: a coarse
+    frame would be refined to it after, so its sharp frame would come later (a 256^3 slide in
+    the notebook: 294 ms coarse and refined against 174 ms at level 0 at once). Further over,
+    a coarser level within the target is drawn, as before; the overrun is level 0's alone."""
+    model = LatencyModel([8000, 1000, 125], target_ms=100)
+    model.record_integrate(0, ms=120.0, steps=10)  # level 0: 120 ms, level 1: 15 ms
+    level, why = model.pick(10)
+    assert level == 0 and f"within {TUNING.sharp_overrun:g}x the target" in why
+    model.record_integrate(0, ms=200.0, steps=10)  # blended: 160 ms > 1.5 x 100
+    assert model.predict(0, 10) == pytest.approx(160.0)
+    level, why = model.pick(10)
+    assert level == 1 and "within the target" in why
+    model = LatencyModel([8000, 1000, 125], target_ms=100)
+    model.record_integrate(0, ms=30.0, steps=10)  # level 1 over the target, within 1.5x
+    model.record_display(1, ms=120.0)  # level 2: 15 ms; level 0: 30 + 960 ms
     assert model.pick(10)[0] == 2
 
 

@@ -41,6 +41,15 @@ class Tuning:
     # display and read times (integration/interactive/session.py `LatencyModel`). Not measured:
     # chosen as an even blend, so a slow frame moves the choice back at once (5c608c6).
     level_smoothing: float = 0.5
+    # A frame predicted within this many times the target is drawn sharp at once, not coarse
+    # and refined after: drawn whole, not reduced and redrawn (viewer/frames.py), and at the
+    # finest level, not a coarser one (`LatencyModel.pick`). Measured on the 2-core machine: a
+    # sharp frame at 930x640 on llvmpipe draws in 130-170 ms, and one edit in two was drawn
+    # twice, 150 ms more to the sharp frame (29ee9ea, 2026-11-28); a 256^3 slide in the notebook
+    # widget, level 0 predicted at 160-250 ms, was drawn coarse, then integrated again at level
+    # 0: sharp frame p50 294 ms against 174 ms drawn at level 0 at once (bench/
+    # notebook_latency.py, 2026-12-01).
+    sharp_overrun: float = 1.5
 
     # --- Delays of the viewer's frames ---
 
@@ -74,11 +83,6 @@ class Tuning:
     # measured ms per pixel. Measured on the 2-core machine: a 512^2 draw of 128^3 on llvmpipe
     # takes about 80 ms (80-140 ms, docs/display.md; 8d9063a, 2026-11-23).
     draw_target_ms: float = 80.0
-    # A sharp frame predicted within this many times the frame's latency target is drawn whole,
-    # not reduced and redrawn. Measured on the 2-core machine: a sharp frame at 930x640 on
-    # llvmpipe draws in 130-170 ms, and one edit in two was drawn twice, 150 ms more to the sharp
-    # frame (29ee9ea, 2026-11-28).
-    sharp_overrun: float = 1.5
     # Pixels of a sharp frame at most, over all its panels (the browser scales up beyond).
     # Measured in the browser tests: a 1400x900 page's single panel is 1024x733 and is drawn
     # whole (768^2 before drew it at 907x649; 2afd36b, 2026-11-23).

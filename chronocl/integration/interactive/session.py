@@ -100,13 +100,24 @@ class LatencyModel:
         slides: Callable[[int], float | None] = lambda level: None,
     ) -> tuple[int, str]:
         """The level to draw next and why; `missing(level)`: the steps it would read;
-        `slides(level)`: the ms its slide is predicted at where it slides (else None)."""
+        `slides(level)`: the ms its slide is predicted at where it slides (else None).
+
+        The finest level is drawn where it is predicted within `TUNING.sharp_overrun` times
+        the target: a coarser frame would be refined to it after, so the sharp frame would
+        come later by the coarse frame's time and more."""
         coarsest = len(self.voxels) - 1
         for level in range(coarsest + 1):
             ms = self.predict(level, steps, missing(level), slides(level))
-            if ms is not None and ms <= self.target_ms:
+            if ms is None:
+                continue
+            if ms <= self.target_ms:
                 finer = "" if level == 0 else "; finer levels predicted over it"
                 return level, f"level {level} predicted at {ms:.0f} ms, within the target{finer}"
+            if level == 0 and ms <= TUNING.sharp_overrun * self.target_ms:
+                return 0, (
+                    f"level 0 predicted at {ms:.0f} ms, within {TUNING.sharp_overrun:g}x the "
+                    "target: drawn at once rather than coarse and refined"
+                )
         if self.predict(coarsest, steps) is None:
             return coarsest, "first frame: the coarsest level, measuring this machine"
         return coarsest, f"no level predicted within {self.target_ms:g} ms: the coarsest"
