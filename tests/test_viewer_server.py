@@ -148,7 +148,7 @@ def test_bad_messages_get_an_error_reply_and_the_server_keeps_serving(client):
     rid = client.send({"type": "update", "camera": {"azimuth": 80.0}})
     _, header, images = client.frame_for(rid)
     assert header["id"] == rid and images[0][:2] == b"\xff\xd8"  # JPEG
-    assert [e["step"] for e in header["legend"]] == list(range(1, 11))
+    assert [e["step"] for e in header["legends"][0]] == list(range(1, 11))
 
 
 def test_state_frames_and_incremental_slides(client):
@@ -179,7 +179,7 @@ def test_state_frames_and_incremental_slides(client):
     # Sliding keeps width and stride: the session slides; the legend follows the window.
     rid = client.send({"type": "update", "window": {"t0": 2, "t1": 12, "stride": 1}})
     _, header, slid = client.frame_for(rid)
-    assert [e["step"] for e in header["legend"]] == list(range(2, 12))
+    assert [e["step"] for e in header["legends"][0]] == list(range(2, 12))
     assert slid[0] != images[0] and header["timings"]["allocated"] == 0
 
     # Preview frames are smaller.

@@ -530,14 +530,12 @@ class ClientWorker(Tasks):
                 )
             ],
             "probe": self._probe_mark(state, cvs),
-            "clip_outline": clip_outline(cvs[0], state.panel_camera(0), state.size, state.clip),
             # each view's, under its own camera (the same where the cameras are linked)
             "clip_outlines": [
                 clip_outline(cv, state.panel_camera(i), state.size, state.clip)
                 for i, cv in enumerate(cvs)
             ],
             "axes": self._axes(state, cvs),
-            "legend": legend(cvs[0]),
             "legends": [legend(cv) for cv in cvs],  # a view with its own window has its own
             "colorbars": [colour_bar(cv) for cv in cvs],  # null where the data TF is white
             # a count view's bar, drawn instead of its time legend (null where colour is time)

@@ -383,13 +383,12 @@ export function onFrame(buf) {
   // The clip plane's cut through the box on each panel, under its camera.
   const cut = (c) => (c || []).map(([x, y]) => `${x},${y}`).join(' ');
   panels.forEach((p, i) => {
-    const outlines = header.clip_outlines;
-    p.outline.setAttribute('points', cut(outlines ? outlines[i] : header.clip_outline));
+    p.outline.setAttribute('points', cut(header.clip_outlines[i]));
     // With the box on, its labelled edges under the view's camera (box_axes.js).
     showAxes(p.axes, header.axes ? header.axes[i] : null);
   });
-  S.legend = header.legend || [];
-  S.legends = header.legends || null; // each view's, where views have their own windows
+  S.legends = header.legends; // each view's: a view with its own window has its own
+  S.legend = S.legends[0]; // the first view's, the timeline's
   S.colorbars = header.colorbars || null; // each view's data colour bar, null where TF is white
   S.countbars = header.countbars || null; // a count view's bar, in place of its time legend
   S.focus = header.focus || null;
