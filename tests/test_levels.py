@@ -170,6 +170,9 @@ def test_latency_model_draws_the_finest_level_a_little_over_target_rather_than_r
     model.record_integrate(0, ms=30.0, steps=10)  # level 1 over the target, within 1.5x
     model.record_display(1, ms=120.0)  # level 2: 15 ms; level 0: 30 + 960 ms
     assert model.pick(10)[0] == 2
+    model = LatencyModel([8000], target_ms=100)  # one level: nothing coarser to refine from
+    model.record_integrate(0, ms=120.0, steps=10)
+    assert model.pick(10) == (0, "no level predicted within 100 ms: the coarsest")
 
 
 def test_latency_model_counts_the_steps_a_level_must_read_first():

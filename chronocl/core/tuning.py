@@ -33,8 +33,9 @@ class Tuning:
     # --- The latency target ---
 
     # Milliseconds from input to its drawn frame that an interactive session aims at: a session
-    # of level "auto" draws the finest level predicted within it, and the viewer draws a sharp
-    # frame whole where its draw fits it (viewer/frames.py). Not measured: 150 ms reads as
+    # of level "auto" draws the finest level predicted within it (level 0 within
+    # `sharp_overrun` of it), and the viewer draws a sharp frame whole where its draw fits it
+    # (viewer/frames.py). Not measured: 150 ms reads as
     # immediate (docs/display.md; 5c608c6, 2026-11-23).
     target_ms: float = 150.0
     # Weight of the newest measurement in the level policy's running estimates of integrate,

@@ -113,7 +113,7 @@ class LatencyModel:
             if ms <= self.target_ms:
                 finer = "" if level == 0 else "; finer levels predicted over it"
                 return level, f"level {level} predicted at {ms:.0f} ms, within the target{finer}"
-            if level == 0 and ms <= TUNING.sharp_overrun * self.target_ms:
+            if level == 0 < coarsest and ms <= TUNING.sharp_overrun * self.target_ms:
                 return 0, (
                     f"level 0 predicted at {ms:.0f} ms, within {TUNING.sharp_overrun:g}x the "
                     "target: drawn at once rather than coarse and refined"
@@ -171,9 +171,9 @@ class Session:
     (`slider.slide_plan`); without (the default), every window that can slide does.
 
     `level` is the level of the series drawn (0: full resolution), or ``"auto"``: each window
-    at the finest level predicted to meet `target_ms` (default `TUNING.target_ms`; a coarse
-    frame first), which `refine`
-    brings to full resolution when the caller is idle; `manager` then serves no level (one
+    at the finest level predicted to meet `target_ms` (default `TUNING.target_ms`; level 0
+    where predicted within `TUNING.sharp_overrun` of it; else a coarse frame first), which
+    `refine` brings to full resolution when the caller is idle; `manager` then serves no level (one
     manager cannot serve every level: pass `managers`). A fixed level ignores `target_ms`.
     `stats` are those of the level drawn, with the level and why.
 
