@@ -300,8 +300,14 @@ def test_a_reconnect_clears_the_events_list_and_a_find_under_way(
         )
         monkeypatch.setattr(events_run, "label_step", label)
         second = ViewerServer([path], port=first.port, token=first.token)
+        frames = p.eval("() => window.viewer.frames")
         second.start()
-        page.wait_for_function("() => window.viewer.connects === 2", timeout=30_000)
+        # A frame on the new socket: its info (which clears the events) came before it.
+        page.wait_for_function(
+            "([n]) => window.viewer.connects === 2 && window.viewer.frames > n",
+            arg=[frames],
+            timeout=30_000,
+        )
         p.settle({"seq": 0})
         assert p.eval("() => window.viewer.events") is None
         assert page.locator("#events-list li").count() == 0
