@@ -3,11 +3,13 @@ panel size in device pixels, within a pixel budget that follows the latency targ
 encoding of the panels, the preview scale and qualities, the legend of the window's time
 colours that the page's timeline shows, the data colour bar of a coloured data TF, the count
 bar that stands for the time legend in a mode whose colour tells the fraction of steps (count),
-and the note a panel gets when almost nothing in it is visible."""
+the note a panel gets when almost nothing in it is visible, and the times its work took beside
+integrating (`FrameTimes`)."""
 
 from __future__ import annotations
 
 import io
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -26,6 +28,22 @@ JPEG_QUALITY = {"preview": 70, "full": 88}
 # A full-resolution frame whose full-size draw fits the frame's latency target
 # (`TUNING.target_ms`) is drawn at full size at once, not reduced and redrawn, and so is one
 # predicted within `TUNING.sharp_overrun` times that.
+
+
+@dataclass
+class FrameTimes:
+    """What a frame's work took beside integrating and drawing, in ms, for its header's
+    `timings`: summed by whatever does the work (`Recolouring`, `InTexture`, `Views`) and
+    zeroed once, as the worker starts a frame or a refine (`start`)."""
+
+    recolour_ms: float = 0.0  # a TF edit's recolouring, less the texture writes and reads
+    recolour_upload_ms: float = 0.0  # a recolour's texture writes (llvmpipe's brick-wise path)
+    readback_ms: float = 0.0  # recoloured RGBA read back from textures (a probe's came before)
+    slab_upload_ms: float = 0.0  # a refine's texture writes, overlapped with its integration
+
+    def start(self) -> None:
+        for f in fields(self):
+            setattr(self, f.name, 0.0)
 
 
 class DrawBudget:

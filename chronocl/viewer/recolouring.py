@@ -10,7 +10,7 @@ that nothing read is never read back (512 MB at 512^3), because the texture is i
 owner until it takes another frame (`settle`); on llvmpipe with an RGBA8 texture, the
 OpenCL device recolours brick by brick (`chronocl.render.recolour.bricks`, several times faster
 there than llvmpipe's compute shaders: bench/recolour.py), and only what changed goes up (the
-frame's `upload_ms` counts that write, `recolour_ms` the rest).
+frame's `upload_ms` counts that write, `recolour_ms` the rest: `FrameTimes`).
 
 The winners (value and step per voxel) are those the kernels wrote as they integrated the
 window (max, min, change: `LevelSession.winners`), else gathered from the level-0 session's
@@ -40,6 +40,7 @@ from chronocl.render.recolour import Changed, Recolourer, show
 from chronocl.render.recolour.bricks import BrickRecolourer, shown_output, takes_over
 from chronocl.render.recolour.gather import gather
 from chronocl.render.recolour.gl import available, recolourer, software_gl
+from chronocl.viewer.frames import FrameTimes
 from chronocl.viewer.gl_thread import on_gl
 from chronocl.viewer.slots import ViewSlot
 
@@ -64,12 +65,9 @@ class Prepared:
 class Recolouring:
     """Recolours the views of one client where a TF edit allows it."""
 
-    def __init__(self, device: str | None = None) -> None:
+    def __init__(self, times: FrameTimes, device: str | None = None) -> None:
         self.device = device  # the OpenCL device of recolouring on the host
-        self.ms = 0.0  # recolouring time of the last frame's views
-        self.upload_ms = 0.0  # of which writing textures (llvmpipe's brick-wise path)
-        self.readback_ms = 0.0  # reading `InTexture`s back since the worker zeroed it
-        self.read_bytes = 0  # read back in all (a count for tests and benchmarks)
+        self.times = times  # the frame's, summed here (recolour, upload, read-back)
         # each view's chronovolume whose RGBA is still only in its texture (weakly held: one
         # nothing holds any more is never read)
         self._unread: list[tuple[ViewSlot, weakref.ref]] = []
@@ -87,7 +85,8 @@ class Recolouring:
             slot.why_not_recoloured = found
             return None
         full, new = found
-        t, uploaded, read = time.perf_counter(), self.upload_ms, self.readback_ms
+        times = self.times
+        t, uploaded, read = time.perf_counter(), times.recolour_upload_ms, times.readback_ms
         prepared = slot.recolour
         new_range = full.value_range_of(new)  # max/min: another range keeps the winners
         if (
@@ -102,7 +101,7 @@ class Recolouring:
         spacing, held = shown.spacing, _held_by(prepared, shown, slot)
         if prepared.recolourer.gl_thread:  # the compute pass writes the texture, below
             fmt = slot.volume.texture.dtype
-            unread = InTexture(shown.shape, fmt, shown.t_index, meta, self)
+            unread = InTexture(shown.shape, fmt, shown.t_index, meta, times)
             cv, changed = unread, None
         else:  # RGBA8 on the host; what changed is written into the texture below
             changed = prepared.recolourer.apply(prepared.winners, new, slot.volume)
@@ -119,7 +118,9 @@ class Recolouring:
         else:
             self._show(slot, prepared, changed, held, spacing, cv)
         spent = 1e3 * (time.perf_counter() - t)  # less the texture writes and reads timed apart
-        self.ms += spent - (self.upload_ms - uploaded) - (self.readback_ms - read)
+        times.recolour_ms += (
+            spent - (times.recolour_upload_ms - uploaded) - (times.readback_ms - read)
+        )
         return cv
 
     def settle(self, slot: ViewSlot) -> None:
@@ -158,7 +159,7 @@ class Recolouring:
         texture may colour, is None: `_held_by`)."""
         t = time.perf_counter()
         on_gl(_write, changed, held, spacing)
-        self.upload_ms += 1e3 * (time.perf_counter() - t)
+        self.times.recolour_upload_ms += 1e3 * (time.perf_counter() - t)
         prepared.written, prepared.texture = weakref.ref(cv), slot.volume.texture
         prepared.held = changed.coloured
 
@@ -210,11 +211,6 @@ class Recolouring:
         slot.recolour = prepared
         return prepared
 
-    def read_back(self, ms: float, nbytes: int) -> None:
-        """Count an `InTexture`'s read-back (the frame header's `readback_ms`)."""
-        self.readback_ms += ms
-        self.read_bytes += nbytes
-
 
 class TextureLostError(ChronoclError, RuntimeError):
     """A recoloured chronovolume's RGBA was asked for after its texture took another frame."""
@@ -227,11 +223,11 @@ class InTexture(Chronovolume):
     takes another frame (`Recolouring.settle`, which reads it back first where something
     still holds it)."""
 
-    def __init__(self, shape, fmt: str, t_index, metadata: dict, owner: Recolouring) -> None:
+    def __init__(self, shape, fmt: str, t_index, metadata: dict, times: FrameTimes) -> None:
         self._volume = None  # the texture holding the RGBA (None: read, or not written yet)
         self._shape = tuple(shape)
         self._dtype = np.dtype(np.uint8 if fmt == "f1" else np.float32)
-        self._owner = owner
+        self._times = times  # where its read-back counts
         self._rgba: np.ndarray | None = None
         super().__init__(None, t_index, metadata)  # type: ignore[arg-type]
 
@@ -263,7 +259,7 @@ class InTexture(Chronovolume):
         """A copy or a pickle holds the RGBA itself (read back now): the texture is no owner
         of theirs (`settle` knows only this one)."""
         self.read()
-        return {**self.__dict__, "_volume": None, "_owner": None}
+        return {**self.__dict__, "_volume": None, "_times": None}
 
     def read(self) -> None:
         """Read the RGBA back from the texture, unless it was read already."""
@@ -284,7 +280,7 @@ class InTexture(Chronovolume):
         rgba = recycled_empty((*self._shape, 4), self._dtype)  # the one pool of host buffers
         self._volume.texture.read_into(rgba)
         self.rgba = rgba
-        self._owner.read_back(1e3 * (time.perf_counter() - t), rgba.nbytes)
+        self._times.readback_ms += 1e3 * (time.perf_counter() - t)
 
 
 def _held_by(prepared: Prepared, shown: Chronovolume, slot: ViewSlot) -> np.ndarray | None:

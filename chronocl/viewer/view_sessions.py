@@ -28,6 +28,7 @@ from chronocl.integration.interactive.costs import SlideCosts
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.settings import manager_key
 from chronocl.viewer.datasets import Dataset
+from chronocl.viewer.frames import FrameTimes
 from chronocl.viewer.gl_thread import gl_submit, release_on_gl
 from chronocl.viewer.recolouring import Recolouring
 from chronocl.viewer.slab_upload import SlabUpload, pays
@@ -84,7 +85,8 @@ class Views:
         self._own = shared is None
         self._shared = shared or SharedSteps()
         self._managers: dict[tuple[int, str], WindowManager] = {}
-        self.recolouring = Recolouring(device)  # TF edits that only recolour (recolouring.py)
+        self.times = FrameTimes()  # the frame's, zeroed by the worker as it starts one
+        self.recolouring = Recolouring(self.times, device)  # TF edits that only recolour
         # slide or integrate a window again: the rates the views' sessions measure, shared
         self.slide_costs = SlideCosts()
         self.host_steps_why: str | None = None  # the last frame's steps_on_host
@@ -92,7 +94,6 @@ class Views:
         # them, and why (its timings.why_not_incremental); a refine's views slid
         self.why_not_incremental: str | None = None
         self.refine_incremental = False
-        self.slab_upload_ms = 0.0  # a refine's texture writes, overlapped with its integration
         self._slabs: bool | None = None  # whether they pay (`slab_upload.pays`), once known
         self._over = False  # whether the last frame left the process over its memory limit
         self._streaming: Streaming | None = None  # the views' windows stream: why
@@ -114,7 +115,6 @@ class Views:
         while len(self.slots) < len(state.views):
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
-        self.recolouring.ms = self.recolouring.upload_ms = self.slab_upload_ms = 0.0
         for slot in self.slots[len(state.views) :]:  # views taken away hold nothing meanwhile
             slot.drop_session()
         with INTEGRATE_LOCK:  # views moving let go first, not after another view integrated
@@ -274,10 +274,8 @@ class Views:
 
     def refine_slot(self, slot: ViewSlot) -> float:
         """The slot's chronovolume at full resolution if it was coarse; the ms it took. A
-        refine recolours nothing: its frame must not repeat the last frame's recolour times."""
-        self.recolouring.ms = self.recolouring.upload_ms = 0.0
+        refine recolours nothing (its frame's `FrameTimes` started at zero)."""
         if slot is self.slots[0]:  # the refine's first view
-            self.slab_upload_ms = 0.0
             self.refine_incremental, self.why_not_incremental = False, None
         if self._slabs is None:
             self._slabs = pays(self.engine, self.device)
@@ -289,7 +287,7 @@ class Views:
         with INTEGRATE_LOCK, slabs_to(writes.put) if self._slabs else nullcontext():
             cv = slot.session.refine()  # type: ignore[union-attr]
         writes.done(cv)
-        self.slab_upload_ms += writes.ms
+        self.times.slab_upload_ms += writes.ms
         if cv is None:
             return 0.0
         slot.cv = cv

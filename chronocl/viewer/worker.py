@@ -365,7 +365,7 @@ class ClientWorker(Tasks):
 
     def _render(self, state: ViewState, rid: int | None) -> None:
         t_start = time.perf_counter()
-        self.views.recolouring.readback_ms = 0.0  # the frame's own (a probe's came before)
+        self.views.times.start()  # the frame's own (a probe's read-back came before)
         with _left:  # a client that left lets go of its frames before this one makes more
             while not self._closed and (wait := self._left_wait()) > 0:
                 _left.wait(wait)
@@ -417,7 +417,7 @@ class ClientWorker(Tasks):
         if any(slot.cv is None for slot in self.views.slots[: len(state.views)]):
             return  # a frame moving the window failed since: nothing shown to refine
         t_start, integrate_ms = time.perf_counter(), 0.0
-        self.views.recolouring.readback_ms = 0.0
+        self.views.times.start()
         progress = RefineProgress(self._note, len(state.views))
         try:
             with interruptible(self._given_up, progress):
@@ -486,10 +486,11 @@ class ClientWorker(Tasks):
         bg = parse_color(state.background)
         t0 = time.perf_counter()
         stop = self._given_up if final else None  # a refine's upload and draw are given up too
-        read_ms = self.views.recolouring.readback_ms
+        times = self.views.times
+        read_ms = times.readback_ms
         panels, t_up, t_draw, t_done = on_gl(self._draw, cvs, state, (w, h), bg, stop)
         # an older recoloured frame read back before its texture took this one: readback_ms's
-        upload_s = t_draw - t_up - (self.views.recolouring.readback_ms - read_ms) / 1e3
+        upload_s = t_draw - t_up - (times.readback_ms - read_ms) / 1e3
         images = [encode(p, JPEG_QUALITY[state.quality]) for p in panels]
         t_enc = time.perf_counter()
         self._frame += 1
@@ -548,15 +549,15 @@ class ClientWorker(Tasks):
             "reduced": reduced,  # drawn smaller than the panels for the latency target
             "timings": {
                 "integrate_ms": round(integrate_ms, 2),
-                "recolour_ms": round(self.views.recolouring.ms, 2),  # a TF edit's, not integrated
+                "recolour_ms": round(times.recolour_ms, 2),  # a TF edit's, not integrated
                 # a GPU recolour's RGBA read back for this frame (framing; an older one still
                 # held, its texture taking this one): 0 where nothing read it
-                "readback_ms": round(self.views.recolouring.readback_ms, 2),
+                "readback_ms": round(times.readback_ms, 2),
                 "incremental": incremental,
                 "why_not_incremental": self.views.why_not_incremental,  # integrated again: why
                 # + a recolour's texture write; a refine's slabs are written within integrate_ms
-                "upload_ms": round(1e3 * upload_s + self.views.recolouring.upload_ms, 2),
-                "upload_overlapped_ms": round(self.views.slab_upload_ms, 2),
+                "upload_ms": round(1e3 * upload_s + times.recolour_upload_ms, 2),
+                "upload_overlapped_ms": round(times.slab_upload_ms, 2),
                 "allocated": self._allocated(),  # textures: 0 once each panel and level has one
                 "render_ms": round(1e3 * (t_done - t_draw), 2),
                 "gl_wait_ms": round(1e3 * (t_up - t0), 2),
