@@ -43,12 +43,18 @@ from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.engine.device_steps import DeviceBricks, DeviceWindow
-from chronocl.integration.inmemory import WinnersOut, check_level, integrate_bricks, window_job
+from chronocl.integration.inmemory import (
+    WinnersOut,
+    check_level,
+    integrate_bricks,
+    value_range,
+    window_job,
+)
 from chronocl.integration.interactive.costs import Move
 from chronocl.integration.interactive.moves import fixed
 from chronocl.integration.interactive.settings import Settings, manager_key, settings
 from chronocl.integration.interactive.slider import Slider, slide_plan, slides_by_sums
-from chronocl.integration.interactive.winners import Winners, of_window, recolours
+from chronocl.integration.interactive.winners import Winners, of_window, why_not
 from chronocl.modes.base import FaintSums
 from chronocl.modes.spec import IntegrationSpec
 
@@ -155,7 +161,7 @@ class LevelSession:
 
     def value_range_of(self, spec: IntegrationSpec) -> tuple[float, float]:
         """The value range `spec` normalises the window's values by."""
-        return tuple(map(float, window_job(self.series, self.window(), spec).value_range))
+        return tuple(map(float, value_range(self.series, self.window(), spec)))
 
     def recolours(self, spec: IntegrationSpec) -> tuple[IntegrationSpec, str | None]:
         """`spec` fixed for the window, and None where it only recolours (else why not)."""
@@ -163,8 +169,10 @@ class LevelSession:
         _, new = fixed(self.base, self.asked, self.spec, spec, sel)
         if self._cv is None:
             return new, "nothing is integrated yet"
-        new_range = self.value_range_of(new)
-        return new, recolours(self._cv, self.spec, new, new_range, self.base.n_steps)
+        steps = tuple(self._cv.metadata["selection"]["steps"])
+        old_range = tuple(self._cv.metadata["value_range"])
+        why = why_not(self.spec, new, old_range, self.value_range_of(new), steps, self.base.n_steps)
+        return new, why
 
     def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
         """Show `cv`, this window recoloured under `spec` (asked as `asked`), as if integrated.

@@ -81,19 +81,6 @@ def why_not(
     return None
 
 
-def recolours(
-    cv: Chronovolume,
-    old: IntegrationSpec,
-    new: IntegrationSpec,
-    new_range: tuple[float, float],
-    n_steps: int,
-) -> str | None:
-    """`why_not` for `cv`, integrated under `old`, shown under `new` (normalised by
-    `new_range`) in a series of `n_steps`."""
-    steps = tuple(cv.metadata["selection"]["steps"])
-    return why_not(old, new, tuple(cv.metadata["value_range"]), new_range, steps, n_steps)
-
-
 def of_window(
     cv: Chronovolume | None,
     selection: Selection | None,
