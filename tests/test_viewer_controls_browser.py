@@ -232,11 +232,12 @@ def test_page_reconnects_after_a_server_restart(browser, tmp_path, full_size_fra
         opacity, note = p.eval(dimmed)
         assert float(opacity) < 0.5 and "stale" in note  # the last picture is not live
         page.screenshot(path=os.path.join(shots_dir(tmp_path), "disconnected.png"))
+        frames = p.eval("() => window.viewer.frames")
         second = ViewerServer(stores, port=first.port, token=first.token)
         second.start()
         page.wait_for_function(
             "([n]) => window.viewer.connects === 2 && window.viewer.frames > n",
-            arg=[p.eval("() => window.viewer.frames")],
+            arg=[frames],
             timeout=30_000,
         )
         after = p.settle({"seq": 0})

@@ -73,8 +73,10 @@ class Page:
 
     def settle(self, before: dict | None = None) -> dict:
         """Wait for the final frame (full quality, level and size) answering the newest
-        request; returns viewer.last."""
+        request; returns viewer.last. An update the page made is sent on its next animation
+        frame: one goes by first, so that an older frame cannot pass for its answer."""
         seq = 0 if before is None else before["seq"]
+        self.eval("() => new Promise((r) => requestAnimationFrame(() => r()))")
         self.page.wait_for_function(SETTLED_FRAME, arg=[seq], timeout=60_000)
         return self.last()
 
