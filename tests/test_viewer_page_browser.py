@@ -32,6 +32,11 @@ from .viewer_helpers import (  # noqa: E402
     serving,
 )
 
+# Resolves after the page's next animation frame (or 2 s: evaluate has no timeout of its own).
+NEXT_ANIMATION_FRAME = (
+    "() => new Promise((r) => { requestAnimationFrame(() => r()); setTimeout(r, 2000); })"
+)
+
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
 )
@@ -76,7 +81,7 @@ class Page:
         request; returns viewer.last. An update the page made is sent on its next animation
         frame: one goes by first, so that an older frame cannot pass for its answer."""
         seq = 0 if before is None else before["seq"]
-        self.eval("() => new Promise((r) => requestAnimationFrame(() => r()))")
+        self.eval(NEXT_ANIMATION_FRAME)
         self.page.wait_for_function(SETTLED_FRAME, arg=[seq], timeout=60_000)
         return self.last()
 

@@ -26,7 +26,7 @@ from chronocl.data.timeseries import TimeSeries
 from .test_prefetch_browser import BAR_PIXEL
 from .test_viewer_page_browser import Page, browser, shots_dir  # noqa: F401
 from .test_viewer_refine_browser import WINDOW
-from .viewer_helpers import CHROMIUM, SETTLED_FRAME, start_server
+from .viewer_helpers import CHROMIUM, start_server
 
 pytestmark = pytest.mark.skipif(
     not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} missing ('apt-get install chromium')"
@@ -56,7 +56,7 @@ def server(tmp_path_factory):
 
 def settled(p: Page) -> dict:
     """The full-resolution frame answering the newest request (both views at level 0)."""
-    p.page.wait_for_function(SETTLED_FRAME, arg=[0], timeout=60_000)
+    p.settle({"seq": 0})
     p.page.wait_for_function("() => window.viewer.last.level === 0", timeout=60_000)
     return p.last()
 
