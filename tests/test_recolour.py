@@ -335,6 +335,32 @@ def test_max_min_recolour_at_another_value_range(mode) -> None:
     assert "value range" in why_not(change, change, (-10.0, 30.0), (0.0, 12.0), steps, n)
 
 
+def test_a_session_says_whether_an_edit_only_recolours_what_it_showed() -> None:
+    """`Session.recolours`: the finest level's session and the edit fixed for its window where
+    the edit only recolours the chronovolume shown; else one line saying why not."""
+    series = _series(np.random.default_rng(3), 9, (13, 11, 12))
+    spec = _spec("max", DataTF(), TimeTF(), value_range=(-10.0, 30.0))
+    edit = _spec("max", DataTF(), TimeTF.preset("warm-cool"), value_range=(-10.0, 30.0))
+    with Session(series, engine="opencl", spec=spec, memory="256MB") as s:
+        shown = s.set_window(1, 7)
+        sel = s.selection
+        full, fixed = s.recolours(edit, sel, shown)
+        assert full is s.at(0) and fixed.time_tf == edit.time_tf
+        assert s.recolours(edit, Selection((2, 3, 4), 9), shown) == "another window"
+        other = Chronovolume(shown.rgba.copy(), shown.t_index, shown.metadata)
+        assert s.recolours(edit, sel, other) == "the full-resolution window holds another frame"
+        alpha = dataclasses.replace(edit, mode="alpha")
+        assert s.recolours(alpha, sel, shown) == "the mode changed"
+    coarse = _series(np.random.default_rng(3), 9, (5, 6, 70))  # 70: a coarse level (35)
+    with Session(coarse, engine="opencl", spec=spec, memory="256MB", level="auto") as s:
+        shown = s.set_window(1, 7)
+        assert s.shown_level > 0  # a first window: the coarsest level
+        assert s.recolours(edit, s.selection, shown) == "a coarse level is shown"
+        shown = s.refine()  # at full resolution: it recolours
+        full, fixed = s.recolours(edit, s.selection, shown)
+        assert full is s.at(0) and s.shown_level == 0
+
+
 def _recoloured_points(spec):
     return tuple((p[0], 1.0 - p[1], 0.5, p[3] * 0.5, p[4]) for p in spec.data_tf.points)
 

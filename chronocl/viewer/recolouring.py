@@ -292,28 +292,16 @@ def _held_by(prepared: Prepared, shown: Chronovolume, slot: ViewSlot) -> np.ndar
 
 def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> tuple | str:
     """(the level-0 session, `spec` fixed for its window) where the slot shows window `sel`
-    integrated at full resolution, in its texture, and `spec` only recolours it; else why not
-    (one line, for the frame's header)."""
+    integrated at full resolution, in its texture, and `spec` only recolours it
+    (`Session.recolours`); else why not (one line, for the frame's header)."""
     s, shown = slot.session, slot.cv
     if spec.mode not in RECOLOURED:
         return f"{spec.mode} mixes every step's colour"
     if s is None or shown is None or shown.t_index is None:
         return "no integrated window with a step per voxel is shown"
-    if s.selection != sel:
-        return "another window"
-    if s.shown_level != 0:
-        return "a coarse level is shown"
     if slot.volume is None or slot.uploaded is not shown:
         return "the texture holds another frame"
-    full = s.at(0, spec)
-    if full is None or full.selection != sel:
-        return "the window is not integrated at full resolution"
-    new, reason = full.recolours(spec)  # a reason when it has integrated nothing
-    if reason is not None:
-        return reason
-    if full.current() is not shown:
-        return "the full-resolution window holds another frame"
-    return full, new
+    return s.recolours(spec, sel, shown)
 
 
 def _prepared_bytes(shown: Chronovolume, on_gpu: bool, outputs_held: bool, kept: bool) -> int:

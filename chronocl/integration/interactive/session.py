@@ -285,6 +285,26 @@ class Session:
         self.why = "refined to full resolution"
         return self._at(self.policy.finest, *self._last)
 
+    def recolours(
+        self, spec: IntegrationSpec, selection: Selection, shown: Chronovolume
+    ) -> tuple[LevelSession, IntegrationSpec] | str:
+        """Where `spec` only recolours `shown`, the chronovolume this session last returned,
+        of `selection` at the finest level: that level's session and `spec` fixed for its
+        window (`LevelSession.recolours`); else why not, in one line."""
+        if self.selection != selection:
+            return "another window"
+        if self.shown != self.policy.finest:
+            return "a coarse level is shown"
+        full = self.at(self.policy.finest, spec)
+        if full is None or full.selection != selection:
+            return "the window is not integrated at full resolution"
+        new, reason = full.recolours(spec)  # a reason when it has integrated nothing
+        if reason is not None:
+            return reason
+        if full.current() is not shown:
+            return "the full-resolution window holds another frame"
+        return full, new
+
     def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
         """Show `cv`, the window at the finest level recoloured under `spec` (asked as
         `asked`), as if integrated; its level's session too (`LevelSession.adopt`)."""
