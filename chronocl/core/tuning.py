@@ -38,10 +38,12 @@ class Tuning:
     # (viewer/frames.py). Not measured: 150 ms reads as
     # immediate (docs/display.md; 5c608c6, 2026-11-23).
     target_ms: float = 150.0
-    # Weight of the newest measurement in the level policy's running estimates of integrate,
-    # display and read times (integration/interactive/session.py `LatencyModel`). Not measured:
-    # chosen as an even blend, so a slow frame moves the choice back at once (5c608c6).
-    level_smoothing: float = 0.5
+    # Weight of the newest measurement in the adaptive models' running averages (`running`):
+    # the level policy's integrate, display and read times (`LatencyModel`), the slide costs'
+    # rates of integrating and filling (`SlideCosts`), the cores a coarse frame keeps busy
+    # (`ReadAhead`) and the draw budget's ms per pixel (`DrawBudget`). Not measured: chosen as
+    # an even blend, so a slow frame moves the choice back at once (5c608c6, e9a488f).
+    smoothing: float = 0.5
     # A frame predicted within this many times the target is drawn sharp at once, not coarse
     # and refined after: drawn whole, not reduced and redrawn (viewer/frames.py), and at the
     # finest level, not a coarser one (`LatencyModel.pick`). Measured on the 2-core machine: a
@@ -205,9 +207,6 @@ class Tuning:
 
     # --- Slide or integrate (integration/interactive/costs.py) ---
 
-    # Weight of the newest measurement in the running rates of integrating and filling. Not
-    # measured: chosen as an even blend, quick to follow a change (e9a488f, 2026-11-30).
-    cost_smoothing: float = 0.5
     # Slides averaged for the steady slide's rate: longer than the splits' period (3/4 W
     # slides) at the widths scrubbed; tests/test_costs.py follows a machine getting slower.
     # Not measured as a time (e9a488f, 2026-11-30).
@@ -438,3 +437,10 @@ class Tuning:
 
 
 TUNING = Tuning()
+
+
+def running(old: float | None, new: float, weight: float | None = None) -> float:
+    """`new` taken into the running average `old` (None: `new` is the first measurement) with
+    weight `weight` (None: `TUNING.smoothing`): the one average every adaptive model keeps."""
+    w = TUNING.smoothing if weight is None else weight
+    return new if old is None else (1 - w) * old + w * new

@@ -23,7 +23,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 
-from chronocl.core.tuning import TUNING
+from chronocl.core.tuning import TUNING, running
 
 
 class ScrubModel:
@@ -52,10 +52,7 @@ class ScrubModel:
     def record_read(self, seconds: float) -> None:
         """A whole step was read in `seconds`."""
         with self._lock:
-            old = self.read_s
-            new = float(seconds)
-            weight = TUNING.scrub_read_weight
-            self.read_s = new if old is None else (1 - weight) * old + weight * new
+            self.read_s = running(self.read_s, float(seconds), TUNING.scrub_read_weight)
 
     def velocity(self) -> float:
         """Steps a second the window's start moved over the recent requests (0: unknown)."""

@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from chronocl.core.tuning import TUNING
+from chronocl.core.tuning import TUNING, running
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.render.colorbar import data_bar
 from chronocl.render.legends import FRACTION_ENDS, fraction_ramp
@@ -66,9 +66,7 @@ class DrawBudget:
     def record(self, ms: float, pixels: int) -> None:
         if pixels < 16 * 16 or not ms > 0:
             return
-        rate = ms / pixels
-        old = self.ms_per_pixel
-        self.ms_per_pixel = rate if old is None else 0.5 * old + 0.5 * rate
+        self.ms_per_pixel = running(self.ms_per_pixel, ms / pixels)
 
     def pixels(self, sharp: bool = False, full: int | None = None) -> int:
         """Pixels drawn in the target (`sharp`: a full-resolution frame's, `sharp_ms`; one

@@ -33,7 +33,7 @@ Rates are per level (a coarse level's voxels cost more each: fixed overheads), a
 kind of slide besides (`Move.inverts`: a mode sliding by its sums alone adds the entering and
 takes out the leaving steps, two pieces, where the others combine partials, about seven): one
 kind's slides say little of the other's. d and f are running
-averages (`TUNING.cost_smoothing`), s the mean of the last `TUNING.slide_memory` slides (so that
+averages (`tuning.running`), s the mean of the last `TUNING.slide_memory` slides (so that
 the splits of the stacks, a slide in tens dearer than the others, count at their share).
 
 **Read ahead or not.** While a coarse level shows a window (a scrub), its full-resolution steps
@@ -54,7 +54,7 @@ import os
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from chronocl.core.tuning import TUNING
+from chronocl.core.tuning import TUNING, running
 
 # Pieces (leaves + combines) of a one-step slide through a `SlidingAggregate`, the splits of its
 # stacks amortised: counted over 200 slides at W = 10 and 50 (5.5 and 6.7; tests/test_costs.py
@@ -94,7 +94,7 @@ class SlideCosts:
 
     def record_direct(self, level: int, ms: float, voxels: int, steps: int) -> None:
         """A window of `steps` steps over `voxels` voxels integrated from its steps in `ms`."""
-        _blend(self.direct, level, ms / max(1, voxels * steps))
+        self.direct[level] = running(self.direct.get(level), ms / max(1, voxels * steps))
 
     def record_slide(
         self,
@@ -113,7 +113,7 @@ class SlideCosts:
         if not d:
             return
         if fill:
-            _blend(self.fill, key, ms / max(1, voxels * fill) / d)
+            self.fill[key] = running(self.fill.get(key), ms / max(1, voxels * fill) / d)
             return
         n = self._slides[key] = min(TUNING.slide_memory, self._slides.get(key, 0) + 1)
         value, old = ms / max(1, voxels * steps) / d, self.slide.get(key)
@@ -164,12 +164,6 @@ class SlideCosts:
         )
 
 
-def _blend(table: dict, key: object, value: float) -> None:
-    old = table.get(key)
-    weight = TUNING.cost_smoothing
-    table[key] = value if old is None else (1 - weight) * old + weight * value
-
-
 @dataclass
 class ReadAhead:
     """Whether coarse frames read full resolution's steps ahead (`reads`), from the cores their
@@ -181,7 +175,7 @@ class ReadAhead:
     def record_frame(self, wall_s: float, cpu_s: float) -> None:
         """A coarse frame's integration took `wall_s`, and the process `cpu_s` of CPU time."""
         if wall_s > 0:
-            self.busy = _smoothed(self.busy, min(float(self.cores), cpu_s / wall_s))
+            self.busy = running(self.busy, min(float(self.cores), cpu_s / wall_s))
 
     def why_not(self, missing: int, read_ms: float | None, target_ms: float) -> str | None:
         """None where reading `missing` full-resolution steps ahead pays (each read in
@@ -204,8 +198,3 @@ def cores_here() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
-
-
-def _smoothed(old: float | None, new: float) -> float:
-    weight = TUNING.cost_smoothing
-    return new if old is None else (1 - weight) * old + weight * new

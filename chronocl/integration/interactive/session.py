@@ -23,7 +23,7 @@ from collections.abc import Callable
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.process_memory import Streaming
 from chronocl.core.selection import Selection, parse_selection
-from chronocl.core.tuning import TUNING
+from chronocl.core.tuning import TUNING, running
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.pyramid import level_shapes
 from chronocl.data.series import TimeSeries
@@ -57,21 +57,17 @@ class LatencyModel:
         self.reads: dict[int, float] = {}  # level -> ms per voxel of reading one step
 
     def record_integrate(self, level: int, ms: float, steps: int) -> None:
-        self._blend(self.rate, level, ms / max(1, self.voxels[level] * steps))
+        rate = ms / max(1, self.voxels[level] * steps)
+        self.rate[level] = running(self.rate.get(level), rate)
 
     def record_display(self, level: int, ms: float) -> None:
-        self._blend(self.display, level, ms)
+        self.display[level] = running(self.display.get(level), ms)
 
     def record_read(self, level: int, seconds: float | None) -> None:
         """A step's read time at `level` (the window manager's running average)."""
         if seconds:
-            self._blend(self.reads, level, 1e3 * seconds / self.voxels[level])
-
-    @staticmethod
-    def _blend(table: dict[int, float], level: int, value: float) -> None:
-        old = table.get(level)
-        w = TUNING.level_smoothing
-        table[level] = value if old is None else (1 - w) * old + w * value
+            read = 1e3 * seconds / self.voxels[level]
+            self.reads[level] = running(self.reads.get(level), read)
 
     def predict(
         self, level: int, steps: int, missing: int = 0, slide_ms: float | None = None
