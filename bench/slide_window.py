@@ -15,7 +15,7 @@ Per slide: the ms to the sharp frame and to the first frame, the levels its fram
 at, whether level 0 slid incrementally (the frames' `timings.incremental`) and, where it
 integrated the window again, why (`timings.why_not_incremental`: the rates measured on this
 machine predicted integrating cheaper, the memory budget, ...). At the end: the rates the
-viewer measured (`costs.SlideCosts`, read from the server's views) and the width from which a
+viewer measured (`costs.Costs`, read from the server's views) and the width from which a
 one-step slide pays on them. Summary: per width the p50/min/max of the sharp frame and the
 paths; `long_over_short`, the long width's p50 over the short one's (issue 47's target <= 2).
 

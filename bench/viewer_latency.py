@@ -169,7 +169,7 @@ def full_split(chains: list[list[dict]]) -> dict:
 def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, case: str) -> dict:
     """The same edits without the server: a resident level-0 `Session` over the same window and
     budget, set_spec per edit, then the viewer's upload, a draw at the server's size, JPEG."""
-    from chronocl.integration.interactive.costs import SlideCosts
+    from chronocl.integration.interactive.costs import Costs
     from chronocl.integration.interactive.session import Session
     from chronocl.render.gl import gl_context
     from chronocl.render.views import raycaster
@@ -185,7 +185,7 @@ def direct_baseline(path: Path, size: tuple[int, int], memory, repeats: int, cas
     edit = Edits(describe_state(state)["data_tf"])
     draw_size = render_size(state.size, 1, 1.0)
     rows = []
-    options = {"display": True, "slide_costs": SlideCosts()}  # as the viewer's sessions
+    options = {"display": True, "slide_costs": Costs()}  # as the viewer's sessions
     with gl_context(), Session(series, memory=memory, spec=state.spec(0), **options) as s:
         rc, slot = raycaster(), ViewSlot()
         s.show(state.selection(n))

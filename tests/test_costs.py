@@ -19,9 +19,8 @@ from chronocl.integration.interactive import costs
 from chronocl.integration.interactive.costs import (
     INVERT_PIECES,
     SLIDE_PIECES,
+    Costs,
     Move,
-    ReadAhead,
-    SlideCosts,
 )
 from chronocl.integration.interactive.moves import slid
 from chronocl.integration.interactive.session import LatencyModel
@@ -38,13 +37,13 @@ V = 1_000_000  # voxels
 
 
 def test_nothing_measured_slides_as_a_library_session_does():
-    assert SlideCosts().why_not(V, 50) is None
+    assert Costs().why_not(V, 50) is None
 
 
-def _measured(d: float, s: float, f: float, inverts: bool = False) -> SlideCosts:
+def _measured(d: float, s: float, f: float, inverts: bool = False) -> Costs:
     """Rates in ms per voxel-step integrated (d), per voxel of a steady slide (s) and per
     voxel-step of a fill (f), as the sessions feed them (`inverts`: of a mode sliding by sums)."""
-    c = SlideCosts()
+    c = Costs()
     c.record_direct(0, ms=d * V * 10, voxels=V, steps=10)
     c.record_slide(0, ms=f * V * 30, voxels=V, fill=30, inverts=inverts)
     c.record_slide(0, ms=s * V, voxels=V, inverts=inverts)
@@ -84,7 +83,7 @@ def test_unmeasured_slides_and_fills_are_guessed_from_the_integration():
     TUNING.fill_steps a step; where the steps travel for every integration, both at one voxel-step
     (the transfer, which a slide pays for its entering step alone); a mode sliding by sums
     alone at its fewer pieces. The first slide measures the fill, the next ones a slide."""
-    c = SlideCosts()
+    c = Costs()
     c.record_direct(0, ms=1.0, voxels=V, steps=1)
     width = int(TUNING.slide_steps + TUNING.fill_steps)
     assert c.why_not(V, width + 1) is None
@@ -108,7 +107,7 @@ def test_steady_slides_are_averaged_over_the_splits_period():
     c.record_slide(0, ms=400e-6 * V, voxels=V)  # a split
     assert c.slide[0, False] < 40  # in voxel-steps of integration
     assert c.why_not(V, 40, Move(filled=True)) is None  # one split does not drop the state
-    slower = SlideCosts()
+    slower = Costs()
     slower.record_direct(0, ms=1e-6 * V, voxels=V, steps=1)
     for k in range(3 * TUNING.slide_memory):  # slides getting dearer are followed
         slower.record_slide(0, ms=(1 if k < TUNING.slide_memory else 100) * V * 1e-6, voxels=V)
@@ -128,13 +127,13 @@ def test_a_slide_timed_while_the_machine_was_busy_is_weighed_by_the_integration_
     _, slide, measured = c.predict(V, 50)
     assert measured and slide == pytest.approx(35 * c.direct[0] * V)
     assert c.why_not(V, 50) is None and c.why_not(V, 30) is not None
-    fresh = SlideCosts()
+    fresh = Costs()
     fresh.record_slide(0, ms=1.0, voxels=V)
     assert not fresh.slide and fresh.predict(V, 50) is None
 
 
 def test_rates_are_per_level_and_follow_the_machine():
-    c = SlideCosts()
+    c = Costs()
     c.record_direct(2, ms=1.0, voxels=1000, steps=10)
     assert c.predict(V, 10) is None and c.why_not(V, 10) is None
     c.record_direct(0, ms=10.0, voxels=V, steps=10)
@@ -147,7 +146,7 @@ def test_each_kind_of_slide_is_measured_apart(monkeypatch):
     sliding through the aggregate (max: about seven pieces a slide) keep their own slide and
     fill rates: after mean's cheap slides, max's slide is still predicted from the guess (they
     shared one rate per level, so a switch to max took mean's rate for its own)."""
-    c = SlideCosts()
+    c = Costs()
     c.record_direct(0, ms=1e-6 * V * 10, voxels=V, steps=10)
     c.record_slide(0, ms=0.1e-6 * V * 10, voxels=V, fill=10, inverts=True)
     c.record_slide(0, ms=0.1e-6 * V, voxels=V, inverts=True)
@@ -160,7 +159,7 @@ def test_each_kind_of_slide_is_measured_apart(monkeypatch):
     series = chronocl.TimeSeries.from_array(data)
     monkeypatch.setattr(TUNING, "slide_steps", 0.01)  # guessed cheap: the first slides slide
     monkeypatch.setattr(TUNING, "fill_steps", 0.01)
-    fed = SlideCosts()
+    fed = Costs()
     absolute = TimeTF.preset("rgb", positions="absolute")
     for mode in ("mean", "max"):
         with chronocl.Session(series, mode=mode, time_tf=absolute, slide_costs=fed) as session:
@@ -228,13 +227,13 @@ def test_slide_pieces_and_the_states_bound_are_what_the_aggregate_does():
 
 def test_a_level_that_slides_is_predicted_at_its_slide_not_its_windows_integration():
     """A level policy predicts a level whose session slides to the window from the slide's ms
-    (`SlideCosts.slide_ms`: steady, or with its state's whole fill), not from integrating the
+    (`Costs.slide_ms`: steady, or with its state's whole fill), not from integrating the
     window: a 50-step window whose full resolution slides in 20 ms is drawn there at once, not
     first coarse (128^3 through the viewer: 158 ms for the sharp frame, two frames, where the
     slide took 13). A slide's time teaches the policy nothing of integrating."""
     model = LatencyModel([V, V // 8], target_ms=150)
-    model.record_integrate(0, ms=500.0, steps=50)
-    model.record_integrate(1, ms=60.0, steps=50)
+    model.costs.record_direct(0, 500.0, model.voxels[0], 50)
+    model.costs.record_direct(1, 60.0, model.voxels[1], 50)
     assert model.pick(50)[0] == 1
     level, why = model.pick(50, slides=lambda level: 20.0 if level == 0 else None)
     assert level == 0 and "predicted at 20 ms" in why
@@ -246,56 +245,65 @@ def test_a_level_that_slides_is_predicted_at_its_slide_not_its_windows_integrati
     series = chronocl.TimeSeries.from_array(data)
     assert series.n_levels > 1
     absolute = TimeTF.preset("rgb", positions="absolute")
-    rates = SlideCosts()
+    rates = Costs()
     with chronocl.Session(
         series, level="auto", mode="alpha", time_tf=absolute, slide_costs=rates
     ) as session:
         session.set_window(0, 20)
         session.refine()
-        policy = session.policy
-        before = dict(policy.rate)
+        before = dict(session.costs.direct)
         session.at(0).costs.slide = {(0, False): 1e-6}  # measured cheap: level 0 slides
         session.at(0).costs.fill = {(0, False): 1e-6}
         predicted = session._slide_ms(0, slid(session.window(), 1, 30), session.spec)
         assert predicted is not None and predicted < 1.0
         session.slide(1)
         assert session.stats["level"] == 0 and session.stats["path"] == "incremental"
-        assert policy.rate.get(0) == before.get(0)
+        assert session.costs.direct.get(0) == before.get(0)
 
 
 # -- read ahead or not ----------------------------------------------------------------------
 
 
+def _read(cores: int, read_ms: float | None = 200.0) -> Costs:
+    """Costs on `cores` cores where a full-resolution step of `V` voxels reads in `read_ms`."""
+    c = Costs(cores=cores)
+    if read_ms is not None:
+        c.record_read(0, read_ms / 1e3, V)
+    return c
+
+
 def test_read_ahead_where_the_frames_leave_a_core_idle():
-    two = ReadAhead(cores=2)
-    assert two.why_not(10, 200.0, 150.0) == "nothing measured yet"
+    two = _read(2)
+    assert two.why_not_read_ahead(10, V, 150.0) == "nothing measured yet"
     two.record_frame(wall_s=0.1, cpu_s=0.19)  # a CPU device: both cores busy
-    assert "1.9 of 2 cores" in two.why_not(10, 200.0, 150.0)
-    gpu = ReadAhead(cores=2)
+    assert "1.9 of 2 cores" in two.why_not_read_ahead(10, V, 150.0)
+    gpu = _read(2)
     gpu.record_frame(wall_s=0.1, cpu_s=0.03)  # a GPU integrates: the host mostly idle
-    assert gpu.why_not(10, 200.0, 150.0) is None
-    many = ReadAhead(cores=16)
+    assert gpu.why_not_read_ahead(10, V, 150.0) is None
+    many = _read(16)
     many.record_frame(wall_s=0.1, cpu_s=0.8)  # 8 of 16 busy
-    assert many.why_not(10, 200.0, 150.0) is None
+    assert many.why_not_read_ahead(10, V, 150.0) is None
 
 
 def test_no_read_ahead_where_reading_at_the_stop_is_cheap_or_nothing_is_missing():
-    r = ReadAhead(cores=16)
+    r = _read(16, 10.0)
     r.record_frame(wall_s=0.1, cpu_s=0.1)
-    assert "takes 100 ms" in r.why_not(10, 10.0, 150.0)
-    assert r.why_not(0, 200.0, 150.0) == "every step of the window is resident"
-    assert r.why_not(1, None, 150.0) == "nothing measured yet"
+    assert "takes 100 ms" in r.why_not_read_ahead(10, V, 150.0)
+    assert r.why_not_read_ahead(0, V, 150.0) == "every step of the window is resident"
+    unread = _read(16, None)
+    unread.record_frame(wall_s=0.1, cpu_s=0.1)
+    assert unread.why_not_read_ahead(1, V, 150.0) == "nothing measured yet"
 
 
 def test_read_ahead_counts_the_cores_this_process_may_use():
     assert 1 <= costs.cores_here() <= (__import__("os").cpu_count() or 1)
-    assert ReadAhead().cores == costs.cores_here()
+    assert Costs().cores == costs.cores_here()
 
 
 # -- a viewer's session ---------------------------------------------------------------------
 
 
-class _Fixed(SlideCosts):
+class _Fixed(Costs):
     """A viewer's slide costs at fixed rates (a machine where a long window slides: the
     rates measured on this one would decide otherwise at this small size): `direct` in ms per
     voxel-step, `slide` (and the fill) in voxel-steps of it; what the sessions time is still

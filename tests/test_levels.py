@@ -85,7 +85,7 @@ def test_a_coarse_frame_reads_its_full_resolution_steps_ahead(series):
     background (where the coarse frames leave a core idle: here a machine of many cores):
     the refine after a scrub finds them resident and reads nothing more."""
     with Session(series, mode="max", level="auto", target_ms=1e-3, memory="1GB") as s:
-        s.ahead.cores = 1000
+        s.costs.cores = 1000
         s.set_window(0, 4)
         for _ in range(3):
             s.slide(+1)
@@ -145,11 +145,11 @@ def test_every_level_takes_the_keywords_of_the_other(series):
 def test_latency_model_picks_the_finest_level_within_target():
     model = LatencyModel([8000, 1000, 125], target_ms=100)
     assert model.pick(10)[0] == 2
-    model.record_integrate(2, ms=1.0, steps=10)  # 1 ms per 1250 voxel-steps
-    model.record_display(2, ms=5.0)
+    model.costs.record_direct(2, 1.0, model.voxels[2], 10)  # 1 ms per 1250 voxel-steps
+    model.costs.record_display(2, 5.0, model.voxels[2])
     assert model.predict(1, 10) == pytest.approx(8.0 + 40.0)
     assert model.pick(10)[0] == 1  # level 0: 64 + 320 ms > 100
-    model.record_integrate(1, ms=100.0, steps=10)  # slower than predicted: back off
+    model.costs.record_direct(1, 100.0, model.voxels[1], 10)  # slower than predicted: back off
     assert model.pick(10)[0] == 2
 
 
@@ -159,19 +159,19 @@ def test_latency_model_draws_the_finest_level_a_little_over_target_rather_than_r
     the notebook: 294 ms coarse and refined against 174 ms at level 0 at once). Further over,
     a coarser level within the target is drawn, as before; the overrun is level 0's alone."""
     model = LatencyModel([8000, 1000, 125], target_ms=100)
-    model.record_integrate(0, ms=120.0, steps=10)  # level 0: 120 ms, level 1: 15 ms
+    model.costs.record_direct(0, 120.0, model.voxels[0], 10)  # level 0: 120 ms, level 1: 15 ms
     level, why = model.pick(10)
     assert level == 0 and f"within {TUNING.sharp_overrun:g}x the target" in why
-    model.record_integrate(0, ms=200.0, steps=10)  # blended: 160 ms > 1.5 x 100
+    model.costs.record_direct(0, 200.0, model.voxels[0], 10)  # blended: 160 ms > 1.5 x 100
     assert model.predict(0, 10) == pytest.approx(160.0)
     level, why = model.pick(10)
     assert level == 1 and "within the target" in why
     model = LatencyModel([8000, 1000, 125], target_ms=100)
-    model.record_integrate(0, ms=30.0, steps=10)  # level 1 over the target, within 1.5x
-    model.record_display(1, ms=120.0)  # level 2: 15 ms; level 0: 30 + 960 ms
+    model.costs.record_direct(0, 30.0, model.voxels[0], 10)  # level 1 over the target, within 1.5x
+    model.costs.record_display(1, 120.0, model.voxels[1])  # level 2: 15 ms; level 0: 30 + 960 ms
     assert model.pick(10)[0] == 2
     model = LatencyModel([8000], target_ms=100)  # one level: nothing coarser to refine from
-    model.record_integrate(0, ms=120.0, steps=10)
+    model.costs.record_direct(0, 120.0, model.voxels[0], 10)
     assert model.pick(10) == (0, "no level predicted within 100 ms: the coarsest")
 
 
@@ -179,9 +179,9 @@ def test_latency_model_counts_the_steps_a_level_must_read_first():
     """A level whose window is not resident pays for reading it: a scrub at a coarse level
     does not jump to a finer one whose steps it would first read."""
     model = LatencyModel([8000, 1000, 125], target_ms=100)
-    model.record_integrate(2, ms=1.0, steps=10)
-    model.record_display(2, ms=5.0)
-    model.record_read(2, seconds=0.0025)  # 2.5 ms a step of 125 voxels: 0.02 ms a voxel
+    model.costs.record_direct(2, 1.0, model.voxels[2], 10)
+    model.costs.record_display(2, 5.0, model.voxels[2])
+    model.costs.record_read(2, 0.0025, model.voxels[2])  # 2.5 ms a step of 125: 0.02 ms a voxel
     assert model.predict(1, 10, missing=0) == pytest.approx(48.0)
     assert model.predict(1, 10, missing=10) == pytest.approx(48.0 + 10 * 0.02 * 1000)
     assert model.pick(10, lambda level: 0)[0] == 1  # its steps resident: within the target

@@ -22,7 +22,7 @@ from chronocl.core.errors import InvalidSelectionError
 from chronocl.core.tf import TimeTF
 from chronocl.data.series import TimeSeries
 from chronocl.integration.inmemory import integrate, make_spec
-from chronocl.integration.interactive.costs import SlideCosts
+from chronocl.integration.interactive.costs import Costs
 from chronocl.integration.interactive.moves import slid
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.sliding import SlidingAggregate
@@ -105,14 +105,14 @@ def test_a_window_too_faint_for_its_sums_is_integrated(engine: str) -> None:
         """The next one-step slide's ms as a viewer's session predicts it, slides measured
         cheap (costs given for the question alone: the session's own choose nothing)."""
         at = session.stats["level"]
-        level, cheap = session.at(at), SlideCosts()
+        level, cheap = session.at(at), Costs()
         cheap.slide = {(at, False): 1e-6, (at, True): 1e-6}  # measured cheap: it would slide
         cheap.fill, cheap.direct = dict(cheap.slide), {at: 1e-3}
-        kept, level.costs = level.costs, cheap
+        kept, level.costs, level.weighs_slides = level.costs, cheap, True
         try:
             return level.slide_ms(slid(session.selection, 1, 12), session.spec)
         finally:
-            level.costs = kept
+            level.costs, level.weighs_slides = kept, False
 
     with Session(series, engine=engine, spec=spec, memory="64MB") as session:
         session.set_window(0, 5)
@@ -164,7 +164,7 @@ def test_relative_positions_and_importance_order_reintegrate(engine: str) -> Non
         _check(cv, series, session.selection, session.spec, engine)
 
 
-class _Rates(SlideCosts):
+class _Rates(Costs):
     """Slide costs at fixed rates (ms per voxel-step integrated, per voxel of a slide and per
     voxel-step of a fill): the session's own timings are not learnt, so the choice does not
     depend on the machine."""

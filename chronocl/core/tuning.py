@@ -39,10 +39,10 @@ class Tuning:
     # immediate (docs/display.md; 5c608c6, 2026-11-23).
     target_ms: float = 150.0
     # Weight of the newest measurement in the adaptive models' running averages (`running`):
-    # the level policy's integrate, display and read times (`LatencyModel`), the slide costs'
-    # rates of integrating and filling (`SlideCosts`), the cores a coarse frame keeps busy
-    # (`ReadAhead`) and the draw budget's ms per pixel (`DrawBudget`). Not measured: chosen as
-    # an even blend, so a slow frame moves the choice back at once (5c608c6, e9a488f).
+    # the measured rates of integrating, filling a sliding state, reading and displaying a
+    # level and the cores a coarse frame keeps busy (`Costs`), and the draw budget's ms per
+    # pixel (`DrawBudget`). Not measured: chosen as an even blend, so a slow frame moves the
+    # choice back at once (5c608c6, e9a488f).
     smoothing: float = 0.5
     # A frame predicted within this many times the target is drawn sharp at once, not coarse
     # and refined after: drawn whole, not reduced and redrawn (viewer/frames.py), and at the

@@ -3,7 +3,7 @@ over one data set. The panels' sessions share the data set's resident steps (one
 per level and pooling; in a server, shared by every client: `SharedSteps`) and integrate only
 what changed: a slide of the window goes through `Session.show`, which integrates the new
 window from resident steps (incrementally where the rates measured on this machine predict a
-slide cheaper than integrating the window again: `Views.slide_costs`, `costs.SlideCosts`);
+slide cheaper than integrating the window again: `Views.slide_costs`, `costs.Costs`);
 a camera change integrates nothing (silhouettes aside).
 
 OpenCL integration is serialised per process (`INTEGRATE_LOCK`: the engine is shared).
@@ -24,7 +24,7 @@ from chronocl.core.slab_sink import slabs_to
 from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.window import WindowManager
-from chronocl.integration.interactive.costs import SlideCosts
+from chronocl.integration.interactive.costs import Costs
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.settings import manager_key
 from chronocl.viewer.datasets import Dataset
@@ -88,7 +88,7 @@ class Views:
         self.times = FrameTimes()  # the frame's, zeroed by the worker as it starts one
         self.recolouring = Recolouring(self.times, device)  # TF edits that only recolour
         # slide or integrate a window again: the rates the views' sessions measure, shared
-        self.slide_costs = SlideCosts()
+        self.slide_costs = Costs()
         self.host_steps_why: str | None = None  # the last frame's steps_on_host
         # the last frame's views integrated their windows again where they could not slide
         # them, and why (its timings.why_not_incremental); a refine's views slid
@@ -299,7 +299,7 @@ class Views:
     @staticmethod
     def _why_integrated(slots: list[ViewSlot]) -> str | None:
         """Why the first of `slots` whose window was integrated again did not slide it (a
-        slide predicted dearer than integrating, on this machine's rates: `costs.SlideCosts`;
+        slide predicted dearer than integrating, on this machine's rates: `costs.Costs`;
         relative time positions; the memory budget), else None."""
         for s in slots:
             stats = s.session.stats if s.session is not None else {}

@@ -7,6 +7,8 @@ up to date, sliding incrementally where it can (docs/architecture.md, "How a sli
 - `level_session`: `LevelSession`, one level of a series; it owns a window manager (the
   resident steps) and a `Slider`; `SessionPool` builds one per level and pooling shown.
 - `moves`: the window or spec a move asks for, and the spec shown with its value range fixed.
+- `costs`: `Costs`, the rates measured on the machine at hand (integrating, sliding, reading,
+  displaying) that the level drawn, slide or integrate, and read ahead or not are chosen by.
 - `slider`: `Slider`, the incremental state of one window under one spec, built from the
   series, the engine and the spec; its `Leaves` and `Combine` feed the sliding aggregate.
 - `sliding`: `SlidingAggregate`, a window's aggregate under an associative operation that

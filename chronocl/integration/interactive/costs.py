@@ -1,7 +1,10 @@
-"""Two choices of an interactive session made from rates measured on the machine at hand:
-whether a window slides incrementally or is integrated again (`SlideCosts`), and whether a
-coarse frame reads full resolution's steps ahead (`ReadAhead`). Both are pure: fed numbers,
-they answer; the sessions feed them what they timed (`LevelSession._update`, `Session._at`).
+"""The rates an interactive session's choices are made from, measured on the machine at hand,
+in one place (`Costs`): which level a frame is drawn at (`session.LatencyModel` predicts each
+level's frame from the rates of integrating, reading and displaying it), whether a window
+slides incrementally or is integrated again, and whether a coarse frame reads full
+resolution's steps ahead. Pure: fed numbers, it answers; the sessions feed it what they timed
+(`LevelSession._update`: integrations and slides; `Session._at`: reads and a coarse frame's
+cores; `Session.record_display`: the viewer's upload and draw).
 
 **Slide or integrate.** A one-step slide costs about the same whatever the window's width (a
 few leaves, one step integrated alone into a partial volume, and combines of two partials; the
@@ -34,12 +37,13 @@ kind of slide besides (`Move.inverts`: a mode sliding by its sums alone adds the
 takes out the leaving steps, two pieces, where the others combine partials, about seven): one
 kind's slides say little of the other's. d and f are running
 averages (`tuning.running`), s the mean of the last `TUNING.slide_memory` slides (so that
-the splits of the stacks, a slide in tens dearer than the others, count at their share).
+the splits of the stacks, a slide in tens dearer than the others, count at their share). A
+level's rate of integrating is the one `LatencyModel` predicts its frames from, too.
 
 **Read ahead or not.** While a coarse level shows a window (a scrub), its full-resolution steps
 can be read in the background so that the refine at the stop finds them. The reads take host
 cores; they pay where the coarse frames leave a core idle for them, and where reading the
-window at the stop would cost more than the latency target. `ReadAhead` measures the cores a
+window at the stop would cost more than the latency target. `Costs` measures the cores a
 coarse frame's integration keeps busy (the process's CPU time over the wall time: all of them
 on a CPU device, a fraction of one where a GPU integrates) and a full-resolution step's read
 time, and reads ahead where `cores - busy >= 1` and `missing * read > target`. On the 2-core
@@ -51,7 +55,6 @@ they needed (the longest stall 195 -> 1 535 ms) and the stop was no faster at a 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
 from typing import NamedTuple
 
 from chronocl.core.tuning import TUNING, running
@@ -79,18 +82,40 @@ class Move(NamedTuple):
 ONE_STEP = Move()
 
 
-class SlideCosts:
-    """Measured rates of integrating a window, sliding it and filling its sliding state, per
-    level; `why_not` says whether a slide is predicted cheaper (None) or why not. Shared by the
-    sessions of a viewer's views: one machine, one engine."""
+class Costs:
+    """The rates an interactive session's choices are made from, measured on the machine at
+    hand, per level: integrating a window, sliding it and filling its sliding state, reading a
+    step, a frame's upload and draw (the viewer's), and the cores a coarse frame keeps busy.
+    `why_not` says whether a slide is predicted cheaper (None) or why not, `why_not_read_ahead`
+    whether coarse frames read ahead; a `LatencyModel` predicts each level's frame from them.
+    Shared by the levels of a `Session` and by the sessions of a viewer's views: one machine,
+    one engine."""
 
-    def __init__(self) -> None:
+    def __init__(self, cores: int | None = None) -> None:
         self.direct: dict[int, float] = {}  # level -> ms per voxel-step, integrated
         # (level, inverts) -> voxel-steps of integration of a steady one-step slide, of a
         # state's fill per step, and the slides averaged so far (up to TUNING.slide_memory)
         self.slide: dict[tuple[int, bool], float] = {}
         self.fill: dict[tuple[int, bool], float] = {}
         self._slides: dict[tuple[int, bool], int] = {}
+        self.reads: dict[int, float] = {}  # level -> ms per voxel of reading a step
+        self.display: dict[int, float] = {}  # level -> ms per voxel of a frame's upload + draw
+        self.cores = cores_here() if cores is None else cores
+        self.busy: float | None = None  # the cores a coarse frame's integration keeps busy
+
+    def record_read(self, level: int, seconds: float | None, voxels: int) -> None:
+        """A step of `voxels` voxels read at `level` in `seconds` (None: none read yet)."""
+        if seconds:
+            self.reads[level] = running(self.reads.get(level), 1e3 * seconds / voxels)
+
+    def record_display(self, level: int, ms: float, voxels: int) -> None:
+        """A frame of `level`, `voxels` voxels, uploaded and drawn in `ms`."""
+        self.display[level] = running(self.display.get(level), ms / voxels)
+
+    def record_frame(self, wall_s: float, cpu_s: float) -> None:
+        """A coarse frame's integration took `wall_s`, and the process `cpu_s` of CPU time."""
+        if wall_s > 0:
+            self.busy = running(self.busy, min(float(self.cores), cpu_s / wall_s))
 
     def record_direct(self, level: int, ms: float, voxels: int, steps: int) -> None:
         """A window of `steps` steps over `voxels` voxels integrated from its steps in `ms`."""
@@ -163,27 +188,15 @@ class SlideCosts:
             f"ms ({how}{fill}): cheaper to integrate"
         )
 
-
-@dataclass
-class ReadAhead:
-    """Whether coarse frames read full resolution's steps ahead (`reads`), from the cores their
-    integration keeps busy (`record_frame`) and a full-resolution step's read time."""
-
-    cores: int = field(default_factory=lambda: cores_here())
-    busy: float | None = None  # running average of the cores a coarse frame kept busy
-
-    def record_frame(self, wall_s: float, cpu_s: float) -> None:
-        """A coarse frame's integration took `wall_s`, and the process `cpu_s` of CPU time."""
-        if wall_s > 0:
-            self.busy = running(self.busy, min(float(self.cores), cpu_s / wall_s))
-
-    def why_not(self, missing: int, read_ms: float | None, target_ms: float) -> str | None:
-        """None where reading `missing` full-resolution steps ahead pays (each read in
-        `read_ms`, the latency target `target_ms`), else why not."""
+    def why_not_read_ahead(self, missing: int, voxels: int, target_ms: float) -> str | None:
+        """None where reading `missing` full-resolution steps of `voxels` voxels ahead pays
+        (the latency target `target_ms`), else why not."""
         if missing <= 0:
             return "every step of the window is resident"
-        if self.busy is None or read_ms is None:
+        finest = min(self.reads, default=None)  # the finest level whose reads were timed
+        if self.busy is None or finest is None:
             return "nothing measured yet"
+        read_ms = self.reads[finest] * voxels
         if missing * read_ms <= target_ms:
             return f"reading the {missing} steps at the stop takes {missing * read_ms:.0f} ms"
         idle = self.cores - self.busy

@@ -52,7 +52,7 @@ from chronocl.integration.inmemory import (
 )
 from chronocl.integration.interactive.costs import Move
 from chronocl.integration.interactive.moves import fixed
-from chronocl.integration.interactive.settings import Settings, manager_key, settings
+from chronocl.integration.interactive.settings import Settings, manager_key
 from chronocl.integration.interactive.slider import Slider, slide_plan, slides_by_sums
 from chronocl.integration.interactive.winners import Winners, of_window, why_not
 from chronocl.modes.base import FaintSums
@@ -61,26 +61,27 @@ from chronocl.modes.spec import IntegrationSpec
 
 class LevelSession:
     """One level of a `Session`: a series, a window and an integration spec at that level,
-    which `show` brings up to date and returns as a Chronovolume (its keywords `settings`
-    reads, as `Session` takes them; `manager`: another's resident steps, parallel views of
-    one window). It never writes into a chronovolume it returned."""
+    which `show` brings up to date and returns as a Chronovolume (built by a `SessionPool`
+    from its `Session`'s settings, `setup`: its spec and budget this level's; `manager`:
+    another's resident steps, parallel views of one window). It never writes into a
+    chronovolume it returned."""
 
     def __init__(
         self,
         series: TimeSeries,
+        setup: Settings,
         *,
         level: int = 0,
         manager: WindowManager | None = None,
-        **options: object,
     ) -> None:
-        setup = settings(**options)  # type: ignore[arg-type]
         self.base = series
         # The spec as asked; `self.spec` is it with its value range fixed (`fix_range`).
         self.asked = self.spec = setup.asked
         self.engine = setup.engine
         self.budget = setup.budget
         self.display = setup.display
-        self.costs = setup.slide_costs  # measured rates: slide or integrate (None: slide)
+        self.costs = setup.costs  # the rates measured, this level's recorded into them
+        self.weighs_slides = setup.weighs_slides  # slide only where they predict it cheaper
         self.selection: Selection | None = None
         self.stats: dict = {}
         self._arrays: dict[int, np.ndarray] = {}
@@ -249,7 +250,8 @@ class LevelSession:
             why = f"the window needs {human(window)} > budget {human(self.budget)}"
             return self._stream(selection, t, Streaming(why, self.budget))
         voxels, move = int(np.prod(self.series.volume_shape)), self._move(selection)
-        width, budget, costs = selection.width, self.budget, self.costs
+        width, budget = selection.width, self.budget
+        costs = self.costs if self.weighs_slides else None
         reason, keep, state = slide_plan(self.spec, voxels, width, window, budget, costs, move)
         self._bricks.keep = keep
         if self.owns_manager:
@@ -279,9 +281,8 @@ class LevelSession:
                 faint, reason = slider, f"{too_faint}; integrated"
             else:
                 self._slider, path = slider, "incremental"
-                if self.costs is not None:  # the first slide of a state fills it
-                    ms = 1e3 * (time.perf_counter() - t_slide)
-                    self.costs.record_slide(self.level, ms, voxels, move.shift, fill, move.inverts)
+                ms = 1e3 * (time.perf_counter() - t_slide)  # the first slide of a state fills it
+                self.costs.record_slide(self.level, ms, voxels, move.shift, fill, move.inverts)
         if cv is None:
             job = window_job(self.series, selection, self.spec)
             bricks = self._device.bricks(self._arrays, selection.width) or self._bricks
@@ -296,9 +297,8 @@ class LevelSession:
             cv = integrate_bricks(
                 job, self.engine, bricks, slab=slab, display=self.display, winners=won
             )
-            if self.costs is not None:
-                ms = 1e3 * (time.perf_counter() - t_direct)
-                self.costs.record_direct(self.level, ms, voxels, selection.width)
+            ms = 1e3 * (time.perf_counter() - t_direct)
+            self.costs.record_direct(self.level, ms, voxels, selection.width)
             if won is not None and won.u is not None:
                 w = Winners(
                     won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
@@ -336,10 +336,12 @@ class LevelSession:
 
     def slide_ms(self, selection: Selection, spec: IntegrationSpec) -> float | None:
         """The ms moving to `selection` under `spec` (fixed: `moves.fixed`) is predicted to take
-        where it slides incrementally (a viewer's costs, `costs.SlideCosts.slide_ms`), else None:
+        where it slides incrementally (a viewer's costs, `costs.Costs.slide_ms`), else None:
         a level policy predicts such a frame from it, not from integrating its window."""
         slider, costs = self._slider, self.costs
-        if costs is None or slider is None or spec != self.spec or self.streaming is not None:
+        if not self.weighs_slides or self.streaming is not None:
+            return None
+        if slider is None or spec != self.spec:
             return None
         if slider.faint:  # (its next slide is likely faint too: a slide and an integration)
             return None
@@ -395,6 +397,11 @@ class LevelSession:
             display=self.display,
             winners=won,
         )
+        # the level's rate of integrating, the store's reads with it: the level policy predicts
+        # the next streamed frame from it (nothing slides while a window streams)
+        voxels = int(np.prod(self.series.volume_shape))
+        ms = 1e3 * (time.perf_counter() - t)
+        self.costs.record_direct(self.level, ms, voxels, selection.width)
         if won is not None and won.u is not None:
             w = Winners(
                 won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
@@ -477,15 +484,9 @@ class SessionPool:
             shared = self.manager
             self.sessions[key] = LevelSession(
                 self.series,
-                memory=budget,
-                engine=o.engine,
-                spec=spec,
+                o._replace(asked=spec, budget=budget),
                 level=level,
                 manager=shared[1] if shared and shared[0] == key else None,
-                prefetch=o.prefetch,
-                managers=o.managers,
-                display=o.display,
-                slide_costs=o.slide_costs,
             )
         return self.sessions[key]
 

@@ -12,7 +12,8 @@ predicted time to a drawn frame (integrate, plus upload and render as the displa
 them) meets a latency target. It starts from the coarsest level, whose frame is always cheap,
 and learns from every frame's own timings; `refine` then brings the same window and spec to
 full resolution when the caller is idle. Both say which level a refine brings a frame to
-(`finest`) and take the same measurements (`record_*`), which a fixed level ignores.
+(`finest`). The times it predicts from are the session's measured rates (`costs.Costs`): its
+levels record their integrations and slides, the session its reads and the display's times.
 """
 
 from __future__ import annotations
@@ -23,13 +24,13 @@ from collections.abc import Callable
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.process_memory import Streaming
 from chronocl.core.selection import Selection, parse_selection
-from chronocl.core.tuning import TUNING, running
+from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.pyramid import level_shapes
 from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.integration.inmemory import check_level
-from chronocl.integration.interactive.costs import ReadAhead
+from chronocl.integration.interactive.costs import Costs
 from chronocl.integration.interactive.level_session import LevelSession, SessionPool
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.integration.interactive.settings import manager_key, settings
@@ -37,37 +38,24 @@ from chronocl.modes.spec import IntegrationSpec
 
 
 class LatencyModel:
-    """Predicted milliseconds from a request to its drawn frame, per level.
+    """Predicted milliseconds from a request to its drawn frame, per level, from the rates
+    measured (`costs.Costs`, the session's).
 
     Integration is modelled per voxel-step (the rate measured at the finest level seen,
     which is the most efficient, so coarse-level overheads never make a fine level look
-    cheap); display (upload + render) per level, scaled by voxels from the nearest level
-    measured. Unmeasured: only the coarsest level is predicted to fit.
+    cheap); display (upload + render) per voxel from the nearest level measured, reading a
+    step per voxel from the finest level measured. Unmeasured: only the coarsest level is
+    predicted to fit.
     """
 
     finest = 0  # a refine brings a coarse frame to full resolution
 
-    def __init__(self, voxels: list[int], target_ms: float) -> None:
+    def __init__(self, voxels: list[int], target_ms: float, costs: Costs | None = None) -> None:
         if not target_ms > 0:
             raise InvalidParameterError(f"target_ms is {target_ms}; give a positive number")
         self.voxels = voxels
         self.target_ms = float(target_ms)
-        self.rate: dict[int, float] = {}  # level -> ms per voxel-step of integration
-        self.display: dict[int, float] = {}  # level -> ms of upload + render
-        self.reads: dict[int, float] = {}  # level -> ms per voxel of reading one step
-
-    def record_integrate(self, level: int, ms: float, steps: int) -> None:
-        rate = ms / max(1, self.voxels[level] * steps)
-        self.rate[level] = running(self.rate.get(level), rate)
-
-    def record_display(self, level: int, ms: float) -> None:
-        self.display[level] = running(self.display.get(level), ms)
-
-    def record_read(self, level: int, seconds: float | None) -> None:
-        """A step's read time at `level` (the window manager's running average)."""
-        if seconds:
-            read = 1e3 * seconds / self.voxels[level]
-            self.reads[level] = running(self.reads.get(level), read)
+        self.costs = Costs() if costs is None else costs
 
     def predict(
         self, level: int, steps: int, missing: int = 0, slide_ms: float | None = None
@@ -76,16 +64,15 @@ class LatencyModel:
         steps to be read first (a level not shown lately has none of them resident: a scrub
         at 64^3 that tried 256^3 waited 0.7 s for ten of its steps), `slide_ms` the level's
         prediction of a slide where it slides incrementally (None: it integrates)."""
-        if not self.rate:
+        c = self.costs
+        if not c.direct:
             return None
-        finest = min(self.rate)
-        rate = max(self.rate[finest], self.rate.get(level, 0.0))
+        rate = max(c.direct[min(c.direct)], c.direct.get(level, 0.0))
         ms = rate * self.voxels[level] * steps if slide_ms is None else slide_ms
-        if self.display:
-            near = min(self.display, key=lambda m: abs(m - level))
-            ms += self.display[near] * self.voxels[level] / self.voxels[near]
-        if missing and self.reads:
-            read = max(self.reads[min(self.reads)], self.reads.get(level, 0.0))
+        if c.display:
+            ms += c.display[min(c.display, key=lambda m: abs(m - level))] * self.voxels[level]
+        if missing and c.reads:
+            read = max(c.reads[min(c.reads)], c.reads.get(level, 0.0))
             ms += missing * read * self.voxels[level]
         return ms
 
@@ -133,15 +120,6 @@ class FixedLevel:
     ) -> tuple[int, str]:
         return self.finest, f"level {self.finest} asked"
 
-    def record_integrate(self, level: int, ms: float, steps: int) -> None:
-        pass
-
-    def record_display(self, level: int, ms: float) -> None:
-        pass
-
-    def record_read(self, level: int, seconds: float | None) -> None:
-        pass
-
 
 class Session:
     """A series, a window and an integration spec; every move returns the current Chronovolume.
@@ -162,9 +140,10 @@ class Session:
     and other engines still return float32. The viewer alone holds those: its recolouring
     writes a TF edit into the RGBA8 the window shows
     (`chronocl.render.recolour.bricks.shown_output`) and hands it back (`adopt`). With
-    `slide_costs` (a viewer's `costs.SlideCosts`, fed the times of the integrations and
-    slides) a window slides only where a slide is predicted cheaper than integrating it again
-    (`slider.slide_plan`); without (the default), every window that can slide does.
+    `slide_costs` (a viewer's `costs.Costs`, shared by its views' sessions, which record the
+    times of their integrations and slides into it) a window slides only where a slide is
+    predicted cheaper than integrating it again (`slider.slide_plan`); without (the default),
+    the session measures into a `Costs` of its own, and every window that can slide does.
 
     `level` is the level of the series drawn (0: full resolution), or ``"auto"``: each window
     at the finest level predicted to meet `target_ms` (default `TUNING.target_ms`; level 0
@@ -194,13 +173,15 @@ class Session:
         self.asked = self.spec = setup.asked
         self.selection: Selection | None = None
         self.stats: dict = {}
+        self.costs = setup.costs  # the rates measured, shared by the levels (`costs.Costs`)
+        # The levels' voxels, their shapes by the rule: building the level series here would
+        # pool lazy levels.
+        shapes = [series.volume_shape, *level_shapes(series.volume_shape)]
+        self.voxels = [int(z) * int(y) * int(x) for z, y, x in shapes[: series.n_levels]]
         if level == "auto":
-            # The shapes by the rule: building the level series here would pool lazy levels.
-            shapes = [series.volume_shape, *level_shapes(series.volume_shape)]
-            voxels = [int(z) * int(y) * int(x) for z, y, x in shapes[: series.n_levels]]
             target = TUNING.target_ms if target_ms is None else target_ms
-            self.policy: FixedLevel | LatencyModel = LatencyModel(voxels, target)
-            self.shown = len(voxels) - 1
+            self.policy: FixedLevel | LatencyModel = LatencyModel(self.voxels, target, self.costs)
+            self.shown = len(self.voxels) - 1
             manager = None
         else:
             self.policy = FixedLevel(check_level(series, level))  # type: ignore[arg-type]
@@ -214,7 +195,6 @@ class Session:
         self._last: tuple[Selection, IntegrationSpec] | None = None
         self._cv: Chronovolume | None = None
         self._streaming: Streaming | None = None  # the finest level's (`stream`)
-        self.ahead = ReadAhead()  # whether coarse frames read the finest level's steps ahead
         self.why_not_read_ahead: str | None = None
         self._reading_ahead = False
 
@@ -315,7 +295,7 @@ class Session:
     def record_display(self, ms: float) -> None:
         """The display's upload + render time of the last chronovolume returned: a latency
         policy learns from it which level meets the target next time."""
-        self.policy.record_display(self.shown, ms)
+        self.costs.record_display(self.shown, ms, self.voxels[self.shown])
 
     def leaving(self, selection: Selection) -> None:
         """`selection` is shown next: each level lets go of what no longer helps
@@ -367,9 +347,7 @@ class Session:
         t, cpu = time.perf_counter(), time.process_time()
         cv = s.show(selection, spec)
         wall = time.perf_counter() - t
-        if not s.stats.get("incremental"):  # a slide's ms say nothing of integrating the window
-            self.policy.record_integrate(level, 1e3 * wall, selection.width)
-        self.policy.record_read(level, s.manager.scrub.read_s)
+        self.costs.record_read(level, s.manager.scrub.read_s, self.voxels[level])
         if level != finest:
             self._read_ahead(selection, spec, wall, time.process_time() - cpu)
         self.shown, self._last, self._cv = level, (selection, spec), cv
@@ -387,18 +365,17 @@ class Session:
         self, selection: Selection, spec: IntegrationSpec, wall_s: float, cpu_s: float
     ) -> None:
         """The refine to come finds the window's full-resolution steps read, where that pays
-        (`costs.ReadAhead`: the coarse frames leave a core idle, and reading the steps at the
-        stop would take longer than the target). On 2 PoCL cores the reads took the cores the
-        coarse frames needed (docs/window.md): their integration keeps both busy there."""
+        (`Costs.why_not_read_ahead`: the coarse frames leave a core idle, and reading the steps
+        at the stop would take longer than the target). On 2 PoCL cores the reads took the
+        cores the coarse frames needed (docs/window.md): their integration keeps both busy
+        there."""
         model = self.policy
         assert isinstance(model, LatencyModel)  # a fixed level is never shown coarse
         if not self._reading_ahead:  # the readers' CPU time would count as the frame's
-            self.ahead.record_frame(wall_s, cpu_s)
-        finest = min(model.reads, default=None)  # ms per voxel of a step's read
-        read = None if finest is None else model.reads[finest] * model.voxels[0]
+            self.costs.record_frame(wall_s, cpu_s)
         missing = self._missing(0, selection)
         why = "full resolution streams its window" if self._streaming is not None else None
-        why = why or self.ahead.why_not(missing, read, model.target_ms)
+        why = why or self.costs.why_not_read_ahead(missing, self.voxels[0], model.target_ms)
         self.why_not_read_ahead, self._reading_ahead = why, why is None
         if why is None:
             self.pool.read_ahead(selection, spec)

@@ -11,7 +11,7 @@ from chronocl.data.window import WindowManager
 from chronocl.engine import get_engine
 from chronocl.engine.base import Engine
 from chronocl.integration.inmemory import make_spec
-from chronocl.integration.interactive.costs import SlideCosts
+from chronocl.integration.interactive.costs import Costs
 from chronocl.modes.spec import IntegrationSpec
 
 Managers = dict[tuple[int, str], WindowManager]
@@ -26,7 +26,11 @@ class Settings(NamedTuple):
     prefetch: int | None
     managers: Managers | None
     display: bool = False  # frames in the display format where the engine writes it
-    slide_costs: SlideCosts | None = None  # slide only where measured cheaper (None: always)
+    # The rates measured, which every level records into (the caller's `slide_costs`, shared;
+    # else the session's own), and whether a window slides only where they predict it cheaper
+    # than integrating (given `slide_costs`: a viewer's sessions) or wherever it can.
+    costs: Costs | None = None
+    weighs_slides: bool = False
 
 
 def settings(
@@ -38,14 +42,15 @@ def settings(
     prefetch: int | None = None,
     managers: Managers | None = None,
     display: bool = False,
-    slide_costs: SlideCosts | None = None,
+    slide_costs: Costs | None = None,
     **spec_args: object,
 ) -> Settings:
     """The keywords a `Session` takes at any level (`Session`'s docstring says what each is)."""
     asked = spec if spec is not None else make_spec(**spec_args)  # type: ignore[arg-type]
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
     budget = interactive_memory() if memory is None else parse_memory(memory)
-    return Settings(asked, eng, budget, prefetch, managers, display, slide_costs)
+    costs = Costs() if slide_costs is None else slide_costs
+    return Settings(asked, eng, budget, prefetch, managers, display, costs, slide_costs is not None)
 
 
 def manager_key(level: int, pool: str) -> tuple[int, str]:

@@ -33,7 +33,7 @@ from chronocl.engine.device_arrays import to_host, zeros
 from chronocl.engine.device_leaves import alpha_of, leaf, leaf_value
 from chronocl.engine.device_steps import reserve
 from chronocl.integration.inmemory import DISPLAY_VOXELS, chronovolume_metadata, engine_name
-from chronocl.integration.interactive.costs import Move, SlideCosts
+from chronocl.integration.interactive.costs import Costs, Move
 from chronocl.integration.interactive.sliding import SlidingAggregate, block_size
 from chronocl.modes.base import FaintSums, Partial, Values
 from chronocl.modes.spec import IntegrationSpec
@@ -334,14 +334,14 @@ def slide_plan(
     width: int,
     window: int,
     budget: int,
-    costs: SlideCosts | None = None,
+    costs: Costs | None = None,
     move: Move | None = None,
 ) -> tuple[str | None, bool, int]:
     """How a session's budget splits for a window of `width` steps over `voxels` voxels, whose
     steps take `window` bytes: why it does not slide incrementally (None: it does); whether its
     stacked brick is kept for the next spec change (when it fits beside the steps and the
     sliding state); and the bytes of the state sliding holds (`state_bytes`). With `costs`
-    (a viewer's: the rates measured on this machine, `costs.SlideCosts`), a `move` (`costs.Move`:
+    (a viewer's: the rates measured on this machine, `costs.Costs`), a `move` (`costs.Move`:
     its level, the steps entering, ...) whose slide is predicted to cost more than integrating
     the window again is integrated instead; where the window is read in place, sliding pays only
     for long windows (docs/window.md). Without `costs`, every window that can slide does."""
