@@ -277,7 +277,7 @@ class Session:
         new, reason = full.recolours(spec)  # a reason when it has integrated nothing
         if reason is not None:
             return reason
-        if full.current() is not shown:
+        if self._cv is not shown:
             return "the full-resolution window holds another frame"
         return full, new
 
