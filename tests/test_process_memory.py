@@ -412,7 +412,7 @@ def test_a_window_that_does_not_fit_beside_the_views_frames_streams_and_equals_i
                     else:  # the window's last two held, the first two streamed
                         assert sorted(full._arrays) == [3, 4]
                         assert "2 of 4 steps resident" in why
-                assert full.has_winners() == (mode == "max")
+                assert (full.kept_winners() is not None) == (mode == "max")
                 assert (views.streamed() is not None) == (name != "resident")  # in the header
                 got[name] = views.slots[0].cv.rgba.copy()
             finally:
@@ -650,6 +650,6 @@ def test_a_session_streaming_part_of_its_window_keeps_those_steps_and_reads_only
         assert (again.t_index is None) == (whole[1] is None) == (mode == "alpha")
         if whole[1] is not None:
             np.testing.assert_array_equal(again.t_index, whole[1])
-        assert s.at(0).has_winners() == (mode == "max")
+        assert (s.at(0).kept_winners() is not None) == (mode == "max")
         for m in managers.values():
             m.close()

@@ -20,10 +20,10 @@ kept in the slot; any integration of the window makes them stale.
 
 from __future__ import annotations
 
-import functools
 import time
 import weakref
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -184,12 +184,12 @@ class Recolouring:
         start = shown.rgba if ours and shown_output(shown.rgba, shown.shape) else None
         if start is not None:
             held = None  # that output's memory goes back now: the gather below takes it
+        kept = full.kept_winners(spec)  # the kernels wrote them: nothing to gather
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the winners and outputs
             has_output = start is not None or takes_over(held, shown.shape)
-            kept = full.has_winners(spec)  # the kernels wrote them: nothing to gather
-            limit.fit(_prepared_bytes(shown, on_gpu, has_output, kept))
-        w = full.winners(functools.partial(gather, device=self.device), spec)
+            limit.fit(_prepared_bytes(shown, on_gpu, has_output, kept is not None))
+        w = kept if kept is not None else full.winners(partial(gather, device=self.device), spec)
         if w is None:
             slot.why_not_recoloured = "a step of the window is not in memory"
             return None

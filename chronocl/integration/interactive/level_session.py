@@ -136,25 +136,22 @@ class LevelSession:
         wrote with the window's integration (a display session in max, min or change), else
         gathered (`winners.of_window`); their u at the value range of `spec` (a fixed spec from
         `recolours`), else the shown's."""
-        vr = None if spec is None else self.value_range_of(spec)
-        kept = self._kept_winners(vr)
+        kept = self.kept_winners(spec)
         if kept is not None:
             return kept
+        vr = None if spec is None else self.value_range_of(spec)
         return of_window(
             self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather, vr
         )
 
-    def has_winners(self, spec: IntegrationSpec | None = None) -> bool:
-        """Whether `winners(spec=spec)` hands out the kernels' winners (nothing to gather)."""
-        vr = None if spec is None else self.value_range_of(spec)
-        return self._kept_winners(vr) is not None
-
-    def _kept_winners(self, vr: tuple[float, float] | None) -> Winners | None:
-        """The winners the kernels wrote with the chronovolume shown, their u at `vr` (None:
-        the range it is coloured at), under the spec shown; else None."""
+    def kept_winners(self, spec: IntegrationSpec | None = None) -> Winners | None:
+        """The winners the kernels wrote with the chronovolume shown (nothing to gather), their
+        u at the value range of `spec` (None: the range it is coloured at), under the spec
+        shown; else None."""
         cv, won = self._cv, self._won
         if cv is None or won is None or won[0] is not cv.t_index:
             return None
+        vr = None if spec is None else self.value_range_of(spec)
         want = tuple(map(float, vr if vr is not None else cv.metadata["value_range"]))
         if want != tuple(map(float, won[1].value_range)):
             return None
