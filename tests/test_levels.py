@@ -188,6 +188,21 @@ def test_latency_model_counts_the_steps_a_level_must_read_first():
     assert model.pick(10, lambda level: 10 if level < 2 else 1)[0] == 2  # read first: not
 
 
+def test_a_streamed_window_is_predicted_at_its_own_rate_and_leaves_the_slide_rates_alone():
+    """A level whose window streams (no room to stay resident) is predicted at the rate
+    measured streaming it, the store's reads with it; that rate is the level policy's alone:
+    the rate of integrating resident steps, which the slide choice weighs, stays as measured."""
+    model = LatencyModel([8000, 1000, 125], target_ms=100)
+    c = model.costs
+    c.record_direct(0, 10.0, 8000, 10)  # resident: 10 ms at level 0
+    c.record_streamed(0, 400.0, 8000, 10)  # streamed from the store: 400 ms
+    assert model.predict(0, 10) == pytest.approx(10.0)
+    assert model.predict(0, 10, missing=10, streams=True) == pytest.approx(400.0)
+    assert model.pick(10)[0] == 0
+    assert model.pick(10, streams=0)[0] == 1  # level 0 streaming: over the target
+    assert c.direct == {0: pytest.approx(10.0 / 80_000)}
+
+
 @pytest.mark.parametrize(
     ("level", "text"),
     [(3, "level 3 is out of range: vortex has levels 0..2"), ("fine", "must be an integer")],

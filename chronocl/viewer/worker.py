@@ -500,7 +500,8 @@ class ClientWorker(Tasks):
         share = min(1.0, self._draw_budget.pixels() / max(1, w * h * len(cvs)))
         self._draw_budget.record(1e3 * (t_done - t_draw), w * h * len(cvs))
         display_ms = 1e3 * (upload_s + share * (t_done - t_draw)) / max(1, len(cvs))
-        for session in sessions:
+        # once a level: the views' sessions share their measured rates (`Views.slide_costs`)
+        for session in {s.shown_level: s for s in sessions}.values():
             session.record_display(display_ms)
         level = max((session.shown_level for session in sessions), default=0)
         levels = max((session.stats.get("levels", 1) for session in sessions), default=1)

@@ -3,8 +3,9 @@ in one place (`Costs`): which level a frame is drawn at (`session.LatencyModel` 
 level's frame from the rates of integrating, reading and displaying it), whether a window
 slides incrementally or is integrated again, and whether a coarse frame reads full
 resolution's steps ahead. Pure: fed numbers, it answers; the sessions feed it what they timed
-(`LevelSession._update`: integrations and slides; `Session._at`: reads and a coarse frame's
-cores; `Session.record_display`: the viewer's upload and draw).
+(`LevelSession._update`: integrations from resident steps and slides; `LevelSession._stream`:
+windows streamed; `Session._at`: reads and a coarse frame's cores; `Session.record_display`:
+the viewer's upload and draw).
 
 **Slide or integrate.** A one-step slide costs about the same whatever the window's width (a
 few leaves, one step integrated alone into a partial volume, and combines of two partials; the
@@ -98,10 +99,17 @@ class Costs:
         self.slide: dict[tuple[int, bool], float] = {}
         self.fill: dict[tuple[int, bool], float] = {}
         self._slides: dict[tuple[int, bool], int] = {}
+        # level -> ms per voxel-step of a window streamed from the store, its reads with it
+        # (a level policy's alone: nothing slides while a window streams)
+        self.streamed: dict[int, float] = {}
         self.reads: dict[int, float] = {}  # level -> ms per voxel of reading a step
         self.display: dict[int, float] = {}  # level -> ms per voxel of a frame's upload + draw
         self.cores = cores_here() if cores is None else cores
         self.busy: float | None = None  # the cores a coarse frame's integration keeps busy
+
+    def record_streamed(self, level: int, ms: float, voxels: int, steps: int) -> None:
+        """A window of `steps` steps over `voxels` voxels streamed and integrated in `ms`."""
+        self.streamed[level] = running(self.streamed.get(level), ms / max(1, voxels * steps))
 
     def record_read(self, level: int, seconds: float | None, voxels: int) -> None:
         """A step of `voxels` voxels read at `level` in `seconds` (None: none read yet)."""

@@ -394,11 +394,9 @@ class LevelSession:
             display=self.display,
             winners=won,
         )
-        # the level's rate of integrating, the store's reads with it: the level policy predicts
-        # the next streamed frame from it (nothing slides while a window streams)
         voxels = int(np.prod(self.series.volume_shape))
         ms = 1e3 * (time.perf_counter() - t)
-        self.costs.record_direct(self.level, ms, voxels, selection.width)
+        self.costs.record_streamed(self.level, ms, voxels, selection.width)
         if won is not None and won.u is not None:
             w = Winners(
                 won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec

@@ -43,8 +43,9 @@ class LatencyModel:
 
     Integration is modelled per voxel-step (the rate measured at the finest level seen,
     which is the most efficient, so coarse-level overheads never make a fine level look
-    cheap); display (upload + render) per voxel from the nearest level measured, reading a
-    step per voxel from the finest level measured. Unmeasured: only the coarsest level is
+    cheap), a window streamed at the rate measured streaming it; display (upload + render) per
+    voxel from the nearest level measured; reading a step per voxel at the larger of the
+    finest level's rate measured and the level's own. Unmeasured: only the coarsest level is
     predicted to fit.
     """
 
@@ -58,17 +59,27 @@ class LatencyModel:
         self.costs = Costs() if costs is None else costs
 
     def predict(
-        self, level: int, steps: int, missing: int = 0, slide_ms: float | None = None
+        self,
+        level: int,
+        steps: int,
+        missing: int = 0,
+        slide_ms: float | None = None,
+        streams: bool = False,
     ) -> float | None:
         """Predicted ms for `level` (None: nothing measured yet), `missing` of the window's
         steps to be read first (a level not shown lately has none of them resident: a scrub
         at 64^3 that tried 256^3 waited 0.7 s for ten of its steps), `slide_ms` the level's
-        prediction of a slide where it slides incrementally (None: it integrates)."""
+        prediction of a slide where it slides incrementally (None: it integrates); `streams`:
+        the level streams its window, predicted at the rate measured streaming (its reads
+        with it) once there is one."""
         c = self.costs
-        if not c.direct:
+        if streams and level in c.streamed:
+            ms, missing = c.streamed[level] * self.voxels[level] * steps, 0
+        elif c.direct:
+            rate = max(c.direct[min(c.direct)], c.direct.get(level, 0.0))
+            ms = rate * self.voxels[level] * steps if slide_ms is None else slide_ms
+        else:
             return None
-        rate = max(c.direct[min(c.direct)], c.direct.get(level, 0.0))
-        ms = rate * self.voxels[level] * steps if slide_ms is None else slide_ms
         if c.display:
             ms += c.display[min(c.display, key=lambda m: abs(m - level))] * self.voxels[level]
         if missing and c.reads:
@@ -81,16 +92,18 @@ class LatencyModel:
         steps: int,
         missing: Callable[[int], int] = lambda level: 0,
         slides: Callable[[int], float | None] = lambda level: None,
+        streams: int | None = None,
     ) -> tuple[int, str]:
         """The level to draw next and why; `missing(level)`: the steps it would read;
-        `slides(level)`: the ms its slide is predicted at where it slides (else None).
+        `slides(level)`: the ms its slide is predicted at where it slides (else None);
+        `streams`: the level whose window streams (None: none).
 
         The finest level is drawn where it is predicted within `TUNING.sharp_overrun` times
         the target: a coarser frame would be refined to it after, so the sharp frame would
         come later by the coarse frame's time and more."""
         coarsest = len(self.voxels) - 1
         for level in range(coarsest + 1):
-            ms = self.predict(level, steps, missing(level), slides(level))
+            ms = self.predict(level, steps, missing(level), slides(level), level == streams)
             if ms is None:
                 continue
             if ms <= self.target_ms:
@@ -117,6 +130,7 @@ class FixedLevel:
         steps: int,
         missing: Callable[[int], int] = lambda level: 0,
         slides: Callable[[int], float | None] = lambda level: None,
+        streams: int | None = None,
     ) -> tuple[int, str]:
         return self.finest, f"level {self.finest} asked"
 
@@ -244,6 +258,7 @@ class Session:
             selection.width,
             lambda n: self._missing(n, selection),
             lambda n: self._slide_ms(n, selection, spec),
+            None if self._streaming is None else self.policy.finest,
         )
         return self._at(level, selection, spec)
 

@@ -25,11 +25,11 @@ class Settings(NamedTuple):
     budget: int  # bytes
     prefetch: int | None
     managers: Managers | None
-    display: bool = False  # frames in the display format where the engine writes it
     # The rates measured, which every level records into (the caller's `slide_costs`, shared;
     # else the session's own), and whether a window slides only where they predict it cheaper
     # than integrating (given `slide_costs`: a viewer's sessions) or wherever it can.
-    costs: Costs | None = None
+    costs: Costs
+    display: bool = False  # frames in the display format where the engine writes it
     weighs_slides: bool = False
 
 
@@ -50,7 +50,8 @@ def settings(
     eng = get_engine(engine, device) if isinstance(engine, str) else engine
     budget = interactive_memory() if memory is None else parse_memory(memory)
     costs = Costs() if slide_costs is None else slide_costs
-    return Settings(asked, eng, budget, prefetch, managers, display, costs, slide_costs is not None)
+    weighs = slide_costs is not None
+    return Settings(asked, eng, budget, prefetch, managers, costs, display, weighs)
 
 
 def manager_key(level: int, pool: str) -> tuple[int, str]:
