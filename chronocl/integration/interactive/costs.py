@@ -90,7 +90,8 @@ class Costs:
     `why_not` says whether a slide is predicted cheaper (None) or why not, `why_not_read_ahead`
     whether coarse frames read ahead; a `LatencyModel` predicts each level's frame from them.
     Shared by the levels of a `Session` and by the sessions of a viewer's views: one machine,
-    one engine."""
+    one engine (and one store for the reads: a viewer measures them anew for another data
+    set)."""
 
     def __init__(self, cores: int | None = None) -> None:
         self.direct: dict[int, float] = {}  # level -> ms per voxel-step, integrated
