@@ -199,7 +199,7 @@ def test_a_streamed_window_is_predicted_at_its_own_rate_and_leaves_the_slide_rat
     assert model.predict(0, 10) == pytest.approx(10.0)
     assert model.predict(0, 10, missing=10, streams=True) == pytest.approx(400.0)
     assert model.pick(10)[0] == 0
-    assert model.pick(10, streams=0)[0] == 1  # level 0 streaming: over the target
+    assert model.pick(10, streams=lambda level: level == 0)[0] == 1  # level 0 streams: over
     assert c.direct == {0: pytest.approx(10.0 / 80_000)}
 
 
@@ -283,6 +283,12 @@ def test_a_window_over_the_budget_is_streamed_by_slabs(series):
         full = s.refine()
         assert s.stats["path"] == "streamed" and "budget" in s.stats["why_not_incremental"]
         np.testing.assert_array_equal(full.rgba, chronocl.integrate(series, "0:5", "additive").rgba)
+        # the next window of level 0 is predicted at the rate it streamed at, its reads within
+        costs, sel = s.costs, s.selection
+        assert 0 in costs.streamed and 0 not in costs.direct
+        assert s._streams(0, sel, s.spec) and not s._streams(1, sel, s.spec)
+        want = costs.streamed[0] * s.voxels[0] * 5
+        assert s.policy.predict(0, 5, missing=5, streams=True) == pytest.approx(want)
 
 
 def test_modes_pooling_differently_share_level_0s_resident_steps(series):

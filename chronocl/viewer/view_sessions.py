@@ -112,7 +112,9 @@ class Views:
             self._close_managers()
             self._dataset = state.dataset
             self._managers = self._shared.of(state.dataset)
-            self.slide_costs.reads.clear()  # the store's, not the machine's: measured anew
+            # the store's, not the machine's: measured anew
+            self.slide_costs.reads.clear()
+            self.slide_costs.streamed.clear()
         while len(self.slots) < len(state.views):
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False

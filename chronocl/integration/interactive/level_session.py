@@ -243,7 +243,7 @@ class LevelSession:
         window = selection.width * self.manager.step_bytes
         if self.streaming is not None:  # a viewer's memory limit: the steps have no room
             return self._stream(selection, t, self.streaming)
-        if window > self.budget:
+        if window > self.budget:  # (`streams`)
             why = f"the window needs {human(window)} > budget {human(self.budget)}"
             return self._stream(selection, t, Streaming(why, self.budget))
         voxels, move = int(np.prod(self.series.volume_shape)), self._move(selection)
@@ -330,6 +330,12 @@ class LevelSession:
             entering = len(set(selection.steps) - set(old.steps))
             move = move._replace(shift=entering, filled=slider.placed)
         return move
+
+    def streams(self, selection: Selection) -> bool:
+        """Whether `selection` is streamed from the store by z-slabs, not kept resident: a
+        viewer's limit leaves it no room (`stream`), or it is over this level's budget."""
+        window = selection.width * self.manager.step_bytes
+        return self.streaming is not None or window > self.budget
 
     def slide_ms(self, selection: Selection, spec: IntegrationSpec) -> float | None:
         """The ms moving to `selection` under `spec` (fixed: `moves.fixed`) is predicted to take

@@ -92,18 +92,18 @@ class LatencyModel:
         steps: int,
         missing: Callable[[int], int] = lambda level: 0,
         slides: Callable[[int], float | None] = lambda level: None,
-        streams: int | None = None,
+        streams: Callable[[int], bool] = lambda level: False,
     ) -> tuple[int, str]:
         """The level to draw next and why; `missing(level)`: the steps it would read;
         `slides(level)`: the ms its slide is predicted at where it slides (else None);
-        `streams`: the level whose window streams (None: none).
+        `streams(level)`: whether its window streams.
 
         The finest level is drawn where it is predicted within `TUNING.sharp_overrun` times
         the target: a coarser frame would be refined to it after, so the sharp frame would
         come later by the coarse frame's time and more."""
         coarsest = len(self.voxels) - 1
         for level in range(coarsest + 1):
-            ms = self.predict(level, steps, missing(level), slides(level), level == streams)
+            ms = self.predict(level, steps, missing(level), slides(level), streams(level))
             if ms is None:
                 continue
             if ms <= self.target_ms:
@@ -130,7 +130,7 @@ class FixedLevel:
         steps: int,
         missing: Callable[[int], int] = lambda level: 0,
         slides: Callable[[int], float | None] = lambda level: None,
-        streams: int | None = None,
+        streams: Callable[[int], bool] = lambda level: False,
     ) -> tuple[int, str]:
         return self.finest, f"level {self.finest} asked"
 
@@ -258,7 +258,7 @@ class Session:
             selection.width,
             lambda n: self._missing(n, selection),
             lambda n: self._slide_ms(n, selection, spec),
-            None if self._streaming is None else self.policy.finest,
+            lambda n: self._streams(n, selection, spec),
         )
         return self._at(level, selection, spec)
 
@@ -353,6 +353,14 @@ class Session:
         slide costs: `LevelSession.slide_ms`); None where it integrates or has no session."""
         held = self.at(level, spec)
         return None if held is None else held.slide_ms(selection, spec)
+
+    def _streams(self, level: int, selection: Selection, spec: IntegrationSpec) -> bool:
+        """Whether `level` would stream `selection` (a viewer's limit leaves the finest level's
+        window no room, or the window is over the level's budget: `LevelSession.streams`)."""
+        if level == self.policy.finest and self._streaming is not None:
+            return True
+        held = self.at(level, spec)
+        return held is not None and held.streams(selection)
 
     def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
         s = self.pool.session(level, spec)
