@@ -117,6 +117,13 @@ class Costs:
         if seconds:
             self.reads[level] = running(self.reads.get(level), 1e3 * seconds / voxels)
 
+    def read_ms(self, level: int, voxels: int) -> float | None:
+        """The ms reading a step of `voxels` voxels at `level` takes: at the larger of the
+        finest level's rate measured and the level's own (None: no read measured yet)."""
+        if not self.reads:
+            return None
+        return max(self.reads[min(self.reads)], self.reads.get(level, 0.0)) * voxels
+
     def record_display(self, level: int, ms: float, voxels: int) -> None:
         """A frame of `level`, `voxels` voxels, uploaded and drawn in `ms`."""
         self.display[level] = running(self.display.get(level), ms / voxels)
@@ -202,10 +209,9 @@ class Costs:
         (the latency target `target_ms`), else why not."""
         if missing <= 0:
             return "every step of the window is resident"
-        finest = min(self.reads, default=None)  # the finest level whose reads were timed
-        if self.busy is None or finest is None:
+        read_ms = self.read_ms(0, voxels)
+        if self.busy is None or read_ms is None:
             return "nothing measured yet"
-        read_ms = self.reads[finest] * voxels
         if missing * read_ms <= target_ms:
             return f"reading the {missing} steps at the stop takes {missing * read_ms:.0f} ms"
         idle = self.cores - self.busy

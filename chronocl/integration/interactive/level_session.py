@@ -241,11 +241,9 @@ class LevelSession:
         if old is not None and selection == old and self._cv is not None:
             return self._cv
         window = selection.width * self.manager.step_bytes
-        if self.streaming is not None:  # a viewer's memory limit: the steps have no room
-            return self._stream(selection, t, self.streaming)
-        if window > self.budget:  # (`streams`)
+        if self.streams(selection):  # a viewer's memory limit leaves no room, or the budget
             why = f"the window needs {human(window)} > budget {human(self.budget)}"
-            return self._stream(selection, t, Streaming(why, self.budget))
+            return self._stream(selection, t, self.streaming or Streaming(why, self.budget))
         voxels, move = int(np.prod(self.series.volume_shape)), self._move(selection)
         width, budget = selection.width, self.budget
         costs = self.costs if self.weighs_slides else None

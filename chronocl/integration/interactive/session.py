@@ -82,9 +82,9 @@ class LatencyModel:
             return None
         if c.display:
             ms += c.display[min(c.display, key=lambda m: abs(m - level))] * self.voxels[level]
-        if missing and c.reads:
-            read = max(c.reads[min(c.reads)], c.reads.get(level, 0.0))
-            ms += missing * read * self.voxels[level]
+        read = c.read_ms(level, self.voxels[level])
+        if missing and read is not None:
+            ms += missing * read
         return ms
 
     def pick(
