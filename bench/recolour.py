@@ -46,12 +46,12 @@ from common import emit, env_record
 from chronocl.core.tf import DataTF, TimeTF
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
+from chronocl.engine.numpy import NumpyEngine
 from chronocl.integration.interactive.session import Session
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
 from chronocl.render.recolour import show
 from chronocl.render.recolour.bricks import BrickRecolourer
-from chronocl.render.recolour.gather import gather
 from chronocl.render.recolour.gl import GLRecolourer
 from chronocl.viewer.slots import ViewSlot, upload
 
@@ -130,12 +130,13 @@ def main() -> None:
         args.png.mkdir(parents=True, exist_ok=True)
         save(first, args.png / "max_before.png")
 
+    full = s.at(0)
+    opencl, full.engine = full.engine, NumpyEngine()
     a = time.perf_counter()
-    s.at(0).winners()  # numpy's gather (reads every step of the window)
+    full.winners()  # numpy's gather (reads every step of the window)
     b = time.perf_counter()
-    won = s.at(0).winners(
-        gather
-    )  # the OpenCL one (each voxel reads its winner), as the viewer does
+    full.engine = opencl
+    won = full.winners()  # the OpenCL engine's (each voxel reads its winner), as the viewer's
     c = time.perf_counter()
     paths = tuple(args.paths.split(","))
     if "integrate" not in paths or not set(paths) <= {"integrate", "bricks", "gl"}:

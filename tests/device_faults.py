@@ -31,7 +31,6 @@ from chronocl.integration.inmemory import integrate
 from chronocl.integration.interactive.winners import winners
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour.bricks import BrickRecolourer
-from chronocl.render.recolour.gather import gather
 from chronocl.viewer.recolouring import on_host
 
 ENQUEUES = ("enqueue_nd_range_kernel", "enqueue_copy", "enqueue_map_buffer")
@@ -136,7 +135,7 @@ def works(size: int) -> dict:
     bricks_edited.setup = make_kept
     work = {
         "gather": lambda: (lambda w: (w.u, w.k))(
-            gather(t_index, arrays, steps, 8, vr, spec("max"))
+            winners(t_index, arrays, steps, 8, vr, spec("max"), OpenCLEngine())
         ),
         "integrate_max": integrated("max"),
         "integrate_alpha": integrated("alpha"),

@@ -25,7 +25,6 @@ from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour.bricks import BrickRecolourer
-from chronocl.render.recolour.gather import gather
 from chronocl.viewer.recolouring import on_host
 
 CAP = "128KB"  # one step is 608 KB; a brick row of 6 steps 101 KB, of RGBA float32 66 KB
@@ -78,7 +77,7 @@ def _run_all(series: TimeSeries, mode: str) -> dict[str, np.ndarray]:
             keep(f"edit.display{display}", s.set_spec(_spec(mode, EDIT)))
             if mode in RECOLOURED and not display:
                 _, reason = s.at(0).recolours(_spec(mode, EDIT))
-                w = s.at(0).winners(gather)
+                w = s.at(0).winners()  # the OpenCL engine's gather
                 assert reason is None and w is not None, reason
                 out["winners.u"], out["winners.k"] = w.u.copy(), w.k.copy()
     curve = probe(series, region=((3, 40), (2, 30), (5, 33)))
@@ -221,6 +220,7 @@ def test_the_gather_wraps_only_what_its_rows_span_of_a_slot_block():
     gather wraps only the bytes they span, and equals numpy's."""
     from chronocl.core.memory import aligned_empty
     from chronocl.engine.device import get_context
+    from chronocl.engine.opencl import OpenCLEngine
     from chronocl.integration.interactive.winners import winners
 
     dc = get_context()
@@ -236,6 +236,6 @@ def test_the_gather_wraps_only_what_its_rows_span_of_a_slot_block():
     t_index = rng.choice(np.array([*steps, -1], np.int32), size=shape)
     spec = _spec("max")
     want = winners(t_index, arrays, steps, 8, (0.0, 255.0), spec)
-    got = gather(t_index, arrays, steps, 8, (0.0, 255.0), spec)
+    got = winners(t_index, arrays, steps, 8, (0.0, 255.0), spec, OpenCLEngine())
     np.testing.assert_array_equal(got.k, want.k)
     np.testing.assert_array_equal(got.u, want.u)

@@ -2,7 +2,7 @@
 engine uses, on a cold cache, and a CLI run prints nothing of the compiler's.
 
 The options are those of OpenCLEngine.accumulate / _elementwise and bench/integrate.py, and
-every one of the host recolouring's (chronocl/render/recolour/gather.py, bricks.py).
+every one of the host recolouring's (chronocl/engine/gather.py, chronocl/render/recolour/bricks.py).
 Options a file never mentions cannot change its preprocessed source, so they are held
 fixed; of the rest, a set of combinations holding every pair of values (all-pairs) is
 built, in the test process with pyopencl's CompilerWarning an error.
@@ -27,11 +27,11 @@ import chronocl
 from chronocl import modes
 from chronocl.engine import opencl, program
 from chronocl.engine.defines import CPU_PATHS, HALF_DEFINES
+from chronocl.engine.gather import CL_TYPES, gather_defines
 from chronocl.engine.opencl import DEVICE_TYPES, OpenCLEngine
 from chronocl.modes.base import KernelInput
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour.bricks import RECOLOUR_H, bricks_defines
-from chronocl.render.recolour.gather import CL_TYPES, gather_defines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 INTEGRATION_KEYS = set(

@@ -24,6 +24,7 @@ from chronocl.core.tf import DataTF, TimeAlpha, TimeTF
 from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
+from chronocl.engine.opencl import OpenCLEngine
 from chronocl.integration.inmemory import integrate
 from chronocl.integration.interactive.session import Session
 from chronocl.integration.interactive.winners import (
@@ -40,7 +41,6 @@ from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
 from chronocl.render.recolour import show
 from chronocl.render.recolour.bricks import BrickRecolourer, shown_output
-from chronocl.render.recolour.gather import gather
 from chronocl.render.recolour.gl import GLRecolourer, available
 from chronocl.render.upload import convert, display_format
 
@@ -324,7 +324,7 @@ def test_max_min_recolour_at_another_value_range(mode) -> None:
             edit = _spec(mode, DataTF(), TimeTF.preset("warm-cool"), value_range=vr)
             fixed, reason = s.at(0).recolours(edit)
             assert reason is None, reason
-            w = s.at(0).winners(spec=fixed)
+            w = s.at(0).winners(vr)
             assert w.value_range == vr and w.steps == s.selection.steps
             want = integrate(series, s.selection, spec=fixed, engine="opencl")
             _same_on_host(w, fixed, want.rgba)
@@ -336,16 +336,19 @@ def test_max_min_recolour_at_another_value_range(mode) -> None:
 
 
 def test_a_session_says_whether_an_edit_only_recolours_what_it_showed() -> None:
-    """`Session.recolours`: the finest level's session and the edit fixed for its window where
-    the edit only recolours the chronovolume shown; else one line saying why not."""
+    """`Session.recolours`: the finest level's session, the edit fixed for its window and the
+    value range it colours at where the edit only recolours the chronovolume shown; else one
+    line saying why not."""
     series = _series(np.random.default_rng(3), 9, (13, 11, 12))
     spec = _spec("max", DataTF(), TimeTF(), value_range=(-10.0, 30.0))
     edit = _spec("max", DataTF(), TimeTF.preset("warm-cool"), value_range=(-10.0, 30.0))
     with Session(series, engine="opencl", spec=spec, memory="256MB") as s:
         shown = s.set_window(1, 7)
         sel = s.selection
-        full, fixed = s.recolours(edit, sel, shown)
-        assert full is s.at(0) and fixed.time_tf == edit.time_tf
+        full, fixed, at = s.recolours(edit, sel, shown)
+        assert full is s.at(0) and fixed.time_tf == edit.time_tf and at == (-10.0, 30.0)
+        wider = dataclasses.replace(edit, data_tf=DataTF(value_range=(-20.0, 40.0)))
+        assert s.recolours(wider, sel, shown).value_range == (-20.0, 40.0)  # max: its own range
         assert s.recolours(edit, Selection((2, 3, 4), 9), shown) == "another window"
         other = Chronovolume(shown.rgba.copy(), shown.t_index, shown.metadata)
         assert s.recolours(edit, sel, other) == "the full-resolution window holds another frame"
@@ -357,7 +360,7 @@ def test_a_session_says_whether_an_edit_only_recolours_what_it_showed() -> None:
         assert s.shown_level > 0  # a first window: the coarsest level
         assert s.recolours(edit, s.selection, shown) == "a coarse level is shown"
         shown = s.refine()  # at full resolution: it recolours
-        full, fixed = s.recolours(edit, s.selection, shown)
+        full, fixed, _ = s.recolours(edit, s.selection, shown)
         assert full is s.at(0) and s.shown_level == 0
 
 
@@ -394,7 +397,7 @@ def test_opencl_gather_equals_the_numpy_one(mode, dtype, monkeypatch) -> None:
     it takes, windows over one and three chunks of steps, steps apart or in one block, values
     beyond the range clipped. Its arrays come with garbage in them (the memory of dead ones):
     the kernels write every voxel, those no step won included."""
-    from chronocl.render.recolour import gather as gather_module  # the module
+    from chronocl.engine import gather as gather_module  # the module
 
     def dirty(shape, dtype):
         out = aligned_empty(shape, dtype)
@@ -422,7 +425,7 @@ def test_opencl_gather_equals_the_numpy_one(mode, dtype, monkeypatch) -> None:
             {s: block[:, i] for i, s in enumerate(steps)},
         ):
             want = winners(t_index, arrays, steps, 30, vr, spec)
-            got = gather(t_index, arrays, steps, 30, vr, spec)
+            got = winners(t_index, arrays, steps, 30, vr, spec, OpenCLEngine())
             np.testing.assert_array_equal(got.k, want.k)
             np.testing.assert_array_equal(got.u, want.u)
 
@@ -462,7 +465,7 @@ def test_recolouring_writes_into_the_rgba8_shown(mode) -> None:
     with Session(series, engine="opencl", spec=spec, memory="256MB", display=True) as s:
         cv = s.set_window(2, 9)
         assert shown_output(cv.rgba, cv.shape)
-        w = s.at(0).winners(gather)
+        w = s.at(0).winners()
         bricks = BrickRecolourer()
         prepared = bricks.prepare(w, start=cv.rgba)
         try:
@@ -497,13 +500,13 @@ def test_brick_outputs_taken_over_by_the_next_window_recolour_it_right(mode) -> 
     with Session(series, engine="opencl", spec=spec, memory="256MB") as s:
         s.set_window(0, 6)
         bricks = BrickRecolourer()
-        first = bricks.prepare(s.at(0).winners(gather))
+        first = bricks.prepare(s.at(0).winners())
         for edit in edits:
             bricks.apply(first, s.at(0).recolours(edit)[0])
         held = first.take_held()
         first.release()
         s.set_window(5, 11)
-        w = s.at(0).winners(gather)
+        w = s.at(0).winners()
         taken = bricks.prepare(w, held=held)
         try:
             assert taken.output[0] is held[0]
@@ -574,14 +577,14 @@ def test_a_recoloured_frame_and_its_winners_come_back_whole(monkeypatch) -> None
     try:
         with Session(series, engine="opencl", mode="max", display=True, memory="256MB") as s:
             cv = s.set_window(0, 4)
-            w = s.at(0).winners(gather)
+            w = s.at(0).winners()
             assert cv.rgba.dtype == np.uint8 and misses  # the first frame: fresh memory
             misses.clear()
             s.leaving(parse_selection("4:8", 8))  # as the viewer does before a jump
             del cv, w
             gc.collect()
             s.set_window(4, 8)
-            assert s.at(0).winners(gather) is not None
+            assert s.at(0).winners() is not None
             assert misses == []
     finally:
         spares.clear()
@@ -594,12 +597,11 @@ def test_the_first_edits_kernels_are_warmed_once_per_data_type(monkeypatch) -> N
     from chronocl.render.recolour import bricks as recolour_bricks
 
     gathered, recoloured = [], []
-    real_gather, real_apply = recolour_bricks.gather, BrickRecolourer.apply
+    real_gather, real_apply = recolour_bricks.on_device, BrickRecolourer.apply
 
-    def spy_gather(*args, **kwargs):
-        w = real_gather(*args, **kwargs)
-        gathered.append(w.spec.mode)
-        return w
+    def spy_gather(*args):
+        gathered.append("change" if args[-1] else "max")
+        return real_gather(*args)
 
     def spy_apply(self, prepared, spec, into=None):
         changed = real_apply(self, prepared, spec, into)
@@ -609,10 +611,10 @@ def test_the_first_edits_kernels_are_warmed_once_per_data_type(monkeypatch) -> N
     def no_numpy(*args, **kwargs):
         raise AssertionError("warmed numpy's gather, not the OpenCL kernels")
 
-    from chronocl.integration.interactive import winners as winners_module
+    from chronocl.engine import gather as gather_module
 
-    monkeypatch.setattr(winners_module, "winners", no_numpy)
-    monkeypatch.setattr(recolour_bricks, "gather", spy_gather)
+    monkeypatch.setattr(gather_module, "on_host", no_numpy)
+    monkeypatch.setattr(recolour_bricks, "on_device", spy_gather)
     monkeypatch.setattr(BrickRecolourer, "apply", spy_apply)
     monkeypatch.setattr(recolour_bricks, "_warmed", set())
     recolour_bricks.warm_kernels(np.uint16, None)
@@ -633,7 +635,6 @@ def test_the_kernels_winners_equal_the_gathered_ones(data) -> None:
     slots and stacked, the per-vector and the rows kernels, every x86 path, float32 and RGBA8
     output, float and integer data (compared in their own lanes)."""
     from chronocl.data.bricks import ResidentBricks
-    from chronocl.engine.opencl import OpenCLEngine
     from chronocl.integration.inmemory import WinnersOut, integrate_bricks, window_job
 
     series, sel, arrays = data.draw(slotted_windows())  # float32, uint8 or uint16 in slots
@@ -693,7 +694,7 @@ def test_a_session_keeps_the_kernels_winners_until_its_window_changes(monkeypatc
     np.testing.assert_array_equal(w.u, want.u)
     np.testing.assert_array_equal(w.k, want.k)
     assert w.spec == s.spec
-    s.at(0).winners(spec=s.spec.with_value_range((0.2, 0.7)))  # u at another range: gathered
+    s.at(0).winners((0.2, 0.7))  # u at another range: gathered
     assert len(gathered) == 1
     cv = s.slide(1)  # slid (gathered) or integrated again (written): the new window's
     w = s.at(0).winners()

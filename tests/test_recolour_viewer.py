@@ -15,6 +15,7 @@ pytest.importorskip("websockets")
 from chronocl.core.errors import SupersededError
 from chronocl.core.interrupt import checkpoint
 from chronocl.core.tuning import TUNING
+from chronocl.engine.opencl import OpenCLEngine
 from chronocl.viewer import recolouring
 
 from .viewer_helpers import Client, connected_client, make_stores, serving  # noqa: F401
@@ -290,11 +291,10 @@ def _counting_gather(monkeypatch, hold_first: bool = False) -> list[str]:
     """Spy on the viewer's gathers of winners (the real one runs): each call's outcome. With
     `hold_first`, the first waits until new input has come (its checkpoints would give it up).
     The kernels write no winners meanwhile (max and change then gather, as first_hit does)."""
-    from chronocl.engine.opencl import OpenCLEngine
 
     monkeypatch.setattr(OpenCLEngine, "writes_winners", False)
     calls: list[str] = []
-    real = recolouring.gather
+    real = OpenCLEngine.gather
 
     def input_came() -> bool:
         try:
@@ -303,19 +303,19 @@ def _counting_gather(monkeypatch, hold_first: bool = False) -> list[str]:
             return True
         return False
 
-    def spy(*args, **kwargs):
+    def spy(self, *args, **kwargs):
         calls.append("started")
         if hold_first and len(calls) == 1:
             _until(input_came)
         try:
-            w = real(*args, **kwargs)
+            w = real(self, *args, **kwargs)
         except SupersededError:
             calls[-1] = "given up"
             raise
         calls[-1] = "done"
         return w
 
-    monkeypatch.setattr(recolouring, "gather", spy)
+    monkeypatch.setattr(OpenCLEngine, "gather", spy)
     return calls
 
 
@@ -379,7 +379,7 @@ def test_the_first_edit_after_a_switch_takes_the_winners_the_integration_wrote(
     window, so neither the idle preparation nor the first edit gathers, and the edit shows what
     integrating it shows."""
     calls: list[str] = []
-    monkeypatch.setattr(recolouring, "gather", lambda *a, **k: calls.append("gathered"))
+    monkeypatch.setattr(OpenCLEngine, "gather", lambda *a, **k: calls.append("gathered"))
     fitted, _ = _open_in(client, mode)
     edit = {**EDIT, "data_tf": {**EDIT["data_tf"], "value_range": fitted}}
     header, recoloured = _sharp(client, edit)
@@ -405,14 +405,14 @@ def test_steps_give_way_to_the_winners_before_they_are_gathered(client, monkeypa
         return real_fit(self, extra, **kwargs)
 
     calls = _counting_gather(monkeypatch)
-    real_gather = recolouring.gather
+    real_gather = OpenCLEngine.gather
 
-    def gather(*args, **kwargs):
+    def gather(self, *args, **kwargs):
         events.append(("gather", 0))
-        return real_gather(*args, **kwargs)
+        return real_gather(self, *args, **kwargs)
 
     monkeypatch.setattr(process_memory.ProcessLimit, "fit", fit)
-    monkeypatch.setattr(recolouring, "gather", gather)
+    monkeypatch.setattr(OpenCLEngine, "gather", gather)
     limit = process_memory.ProcessLimit((resident_bytes() or 0) + (1 << 30))
     with process_memory.limited(limit):
         _open_in(client, "max")

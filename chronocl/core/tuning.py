@@ -107,7 +107,7 @@ class Tuning:
     # 2-core machine: a whole 930x640 draw of 512^3 takes 150-190 ms, so about 40 ms a band
     # (ab0a9f4, 2026-11-27).
     draw_bands: int = 4
-    # Slabs of a winners' gather that may be given up (render/recolour/gather.py). Measured on
+    # Slabs of a winners' gather that may be given up (engine/gather.py). Measured on
     # the 2-core machine: at 512^3 and 10 steps the gather takes 1.2-1.4 s in all, so about
     # 0.2 s a slab (9ddf9eb, 1675ccd, 2026-11-29/30).
     gather_pieces: int = 8

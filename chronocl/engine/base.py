@@ -83,3 +83,17 @@ class Engine(Protocol):
         """The finished RGBA float32 of a window kept as fixed-point sums (and, for modes
         that aggregate their opacity, that opacity)."""
         ...
+
+    def gather(
+        self,
+        t_index: np.ndarray,
+        arrays: dict[int, np.ndarray],
+        steps: tuple[int, ...],
+        value_range: tuple[float, float],
+        change: bool,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Each voxel's winner of an integrated window (max, min, first_hit, change) from its
+        t_index and the window's raw resident values (step -> (Z, Y, X)): the value it won
+        with normalised to `value_range` (float32 u; `change`: the change) and its step's
+        place in `steps` (k; the dtype's largest: none), as `chronocl.engine.gather` says."""
+        ...

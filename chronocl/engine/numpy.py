@@ -8,6 +8,7 @@ from chronocl import reference
 from chronocl.core import values
 from chronocl.core.errors import InvalidParameterError
 from chronocl.engine.base import FIXED_ONE
+from chronocl.engine.gather import on_host
 from chronocl.modes.base import Partial, Values
 from chronocl.modes.spec import IntegrationSpec
 
@@ -68,3 +69,6 @@ class NumpyEngine:
         spec: IntegrationSpec,
     ) -> np.ndarray:
         return spec.integration.finish_sums(acc / FIXED_ONE, alpha, positions, spec)
+
+    def gather(self, t_index, arrays, steps, value_range, change: bool):
+        return on_host(t_index, arrays, steps, value_range, change)

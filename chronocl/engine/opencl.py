@@ -31,6 +31,7 @@ from chronocl.engine.defines import (
 from chronocl.engine.device import DeviceContext, get_context
 from chronocl.engine.device_formats import check_format_name, resolve_format
 from chronocl.engine.device_steps import DeviceBrick, run_resident
+from chronocl.engine.gather import on_device
 from chronocl.engine.in_place import aligned_part, slot_chunks
 from chronocl.engine.kernel_args import INTEGRATE, ROWS
 from chronocl.engine.program import kernel
@@ -395,6 +396,10 @@ class OpenCLEngine:
     ) -> np.ndarray:
         """The finished RGBA of a window kept as fixed-point sums (see Mode.finish_sums)."""
         return elementwise.finish_sums(self.dc, self.host_ptr, acc, alpha, positions, spec)
+
+    def gather(self, t_index, arrays, steps, value_range, change: bool):
+        """Each voxel's winner read from its winning step alone on the device (`on_device`)."""
+        return on_device(self.dc, t_index, arrays, steps, value_range, change)
 
     def _row_blocks(self, mode, vec: int, n_vec: int, ny: int, nz: int) -> int:
         """Rows a work-item of the mode's rows kernel takes (`Mode.rows_kernel`), 0 where the

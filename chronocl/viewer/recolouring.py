@@ -23,7 +23,6 @@ from __future__ import annotations
 import time
 import weakref
 from dataclasses import dataclass
-from functools import partial
 
 import numpy as np
 
@@ -34,11 +33,11 @@ from chronocl.core.memory import recycled_empty
 from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine.buffers import DeviceLimitError
+from chronocl.integration.interactive.session import Recolour
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour import Changed, Recolourer, show
 from chronocl.render.recolour.bricks import BrickRecolourer, shown_output, takes_over
-from chronocl.render.recolour.gather import gather
 from chronocl.render.recolour.gl import available, recolourer, software_gl
 from chronocl.viewer.frames import FrameTimes
 from chronocl.viewer.gl_thread import on_gl
@@ -84,17 +83,16 @@ class Recolouring:
         if isinstance(found, str):
             slot.why_not_recoloured = found
             return None
-        full, new = found
+        full, new, new_range = found  # max/min: another range keeps the winners
         times = self.times
         t, uploaded, read = time.perf_counter(), times.recolour_upload_ms, times.readback_ms
         prepared = slot.recolour
-        new_range = full.value_range_of(new)  # max/min: another range keeps the winners
         if (
             not isinstance(prepared, Prepared)
             or prepared.t_index() is not shown.t_index
             or prepared.value_range != new_range
         ):
-            prepared = self._prepare(slot, full, shown, new)
+            prepared = self._prepare(slot, full, shown, new_range)
             if prepared is None:  # why: `_prepare` said
                 return None
         meta = {**shown.metadata, "spec": new.to_dict(), "value_range": list(new_range)}
@@ -152,7 +150,7 @@ class Recolouring:
         if isinstance(prepared, Prepared) and prepared.t_index() is shown.t_index:
             return False
         found = _recolourable(slot, s.asked, s.selection)
-        return not isinstance(found, str) and self._prepare(slot, found[0], shown, None) is not None
+        return not isinstance(found, str) and self._prepare(slot, found.level, shown) is not None
 
     def _show(self, slot: ViewSlot, prepared: Prepared, changed: Changed, held, spacing, cv):
         """Write what changed into the slot's texture (all of it where `held`, the bricks the
@@ -163,11 +161,11 @@ class Recolouring:
         prepared.written, prepared.texture = weakref.ref(cv), slot.volume.texture
         prepared.held = changed.coloured
 
-    def _prepare(self, slot: ViewSlot, full, shown: Chronovolume, spec) -> Prepared | None:
+    def _prepare(self, slot: ViewSlot, full, shown: Chronovolume, at=None) -> Prepared | None:
         """The window's winners where the recolouring runs (`_release_and_pick`); their u at
-        `spec`'s value range (None: the one `shown` is coloured at)."""
+        the value range `at` (None: the one `shown` is coloured at)."""
         own = tuple(map(float, shown.metadata["value_range"]))
-        at = own if spec is None else full.value_range_of(spec)
+        at = own if at is None else tuple(map(float, at))
         old = slot.recolour
         held = None
         if isinstance(old, Prepared) and not old.recolourer.gl_thread:
@@ -184,12 +182,12 @@ class Recolouring:
         start = shown.rgba if ours and shown_output(shown.rgba, shown.shape) else None
         if start is not None:
             held = None  # that output's memory goes back now: the gather below takes it
-        kept = full.kept_winners(spec)  # the kernels wrote them: nothing to gather
+        kept = full.kept_winners(at)  # the kernels wrote them: nothing to gather
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the winners and outputs
             has_output = start is not None or takes_over(held, shown.shape)
             limit.fit(_prepared_bytes(shown, on_gpu, has_output, kept is not None))
-        w = kept if kept is not None else full.winners(partial(gather, device=self.device), spec)
+        w = kept if kept is not None else full.winners(at)
         if w is None:
             slot.why_not_recoloured = "a step of the window is not in memory"
             return None
@@ -290,10 +288,11 @@ def _held_by(prepared: Prepared, shown: Chronovolume, slot: ViewSlot) -> np.ndar
     return prepared.held if ours and prepared.texture is slot.volume.texture else None
 
 
-def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> tuple | str:
-    """(the level-0 session, `spec` fixed for its window) where the slot shows window `sel`
-    integrated at full resolution, in its texture, and `spec` only recolours it
-    (`Session.recolours`); else why not (one line, for the frame's header)."""
+def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> Recolour | str:
+    """The recolouring (`Session.recolours`: the level-0 session, `spec` fixed for its window
+    and its value range) where the slot shows window `sel` integrated at full resolution, in
+    its texture, and `spec` only recolours it; else why not (one line, for the frame's
+    header)."""
     s, shown = slot.session, slot.cv
     if spec.mode not in RECOLOURED:
         return f"{spec.mode} mixes every step's colour"

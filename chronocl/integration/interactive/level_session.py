@@ -131,27 +131,25 @@ class LevelSession:
             return self._update(self.window())
         return self._cv
 
-    def winners(self, gather=None, spec: IntegrationSpec | None = None) -> Winners | None:
+    def winners(self, value_range: tuple | None = None) -> Winners | None:
         """The window's winners, to recolour a TF edit without integrating: those the kernels
         wrote with the window's integration (a display session in max, min or change), else
-        gathered (`winners.of_window`); their u at the value range of `spec` (a fixed spec from
-        `recolours`), else the shown's."""
-        kept = self.kept_winners(spec)
+        gathered by the session's engine (`winners.of_window`); their u at `value_range` (an
+        edit's, `Session.recolours`), else the shown's."""
+        kept = self.kept_winners(value_range)
         if kept is not None:
             return kept
-        vr = None if spec is None else self.value_range_of(spec)
-        return of_window(
-            self._cv, self.selection, self._arrays, self.base.n_steps, self.spec, gather, vr
-        )
+        cv, arrays, n = self._cv, self._arrays, self.base.n_steps
+        return of_window(cv, self.selection, arrays, n, self.spec, self.engine, value_range)
 
-    def kept_winners(self, spec: IntegrationSpec | None = None) -> Winners | None:
+    def kept_winners(self, value_range: tuple | None = None) -> Winners | None:
         """The winners the kernels wrote with the chronovolume shown (nothing to gather), their
-        u at the value range of `spec` (None: the range it is coloured at), under the spec
-        shown; else None."""
+        u at `value_range` (None: the range it is coloured at), under the spec shown; else
+        None."""
         cv, won = self._cv, self._won
         if cv is None or won is None or won[0] is not cv.t_index:
             return None
-        vr = None if spec is None else self.value_range_of(spec)
+        vr = value_range
         want = tuple(map(float, vr if vr is not None else cv.metadata["value_range"]))
         if want != tuple(map(float, won[1].value_range)):
             return None

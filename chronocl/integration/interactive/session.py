@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import NamedTuple
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.process_memory import Streaming
@@ -35,6 +36,14 @@ from chronocl.integration.interactive.level_session import LevelSession, Session
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.integration.interactive.settings import manager_key, settings
 from chronocl.modes.spec import IntegrationSpec
+
+
+class Recolour(NamedTuple):
+    """An edit that only recolours the window shown (`Session.recolours`)."""
+
+    level: LevelSession  # the finest level's session, which holds the window's winners
+    spec: IntegrationSpec  # the edit's spec, fixed for the window
+    value_range: tuple[float, float]  # the range it colours at (max/min: may be another)
 
 
 class LatencyModel:
@@ -278,10 +287,11 @@ class Session:
 
     def recolours(
         self, spec: IntegrationSpec, selection: Selection, shown: Chronovolume
-    ) -> tuple[LevelSession, IntegrationSpec] | str:
+    ) -> Recolour | str:
         """Where `spec` only recolours `shown`, the chronovolume this session last returned,
-        of `selection` at the finest level: that level's session and `spec` fixed for its
-        window (`LevelSession.recolours`); else why not, in one line."""
+        of `selection` at the finest level: that level's session, `spec` fixed for its window
+        (`LevelSession.recolours`) and the value range it colours at; else why not, in one
+        line."""
         if self.selection != selection:
             return "another window"
         if self.shown != self.policy.finest:
@@ -294,7 +304,7 @@ class Session:
             return reason
         if self._cv is not shown:
             return "the full-resolution window holds another frame"
-        return full, new
+        return Recolour(full, new, full.value_range_of(new))
 
     def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
         """Show `cv`, the window at the finest level recoloured under `spec` (asked as

@@ -21,17 +21,15 @@ edit cannot change who won:
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
 
-from chronocl.core import host_threads
-from chronocl.core import values as _values
-from chronocl.core.memory import recycled_empty
 from chronocl.core.selection import Selection
 from chronocl.core.tf import lut_lerp32
 from chronocl.data.chronovolume import Chronovolume
+from chronocl.engine.base import Engine
+from chronocl.engine.gather import on_host
 from chronocl.modes.spec import IntegrationSpec
 
 RECOLOURED = ("max", "min", "first_hit", "change")
@@ -87,12 +85,11 @@ def of_window(
     arrays: dict[int, np.ndarray],
     n_steps: int,
     spec: IntegrationSpec,
-    gather=None,
+    engine: Engine | None = None,
     value_range: tuple[float, float] | None = None,
 ) -> Winners | None:
     """The winners of `cv` (the window `selection` integrated under `spec`) from the window's
-    resident raw values `arrays` (step -> (Z, Y, X)), gathered by `gather` (`winners`'s
-    arguments; default `winners`, e.g. chronocl.render.recolour.gather.gather), their u at
+    resident raw values `arrays` (step -> (Z, Y, X)), gathered by `engine` (`winners`), their u at
     `value_range` (default: the one `cv` was coloured at; max/min only may take another);
     None where the mode has none, nothing is integrated or a step of the window is not
     resident."""
@@ -101,7 +98,7 @@ def of_window(
     if any(s not in arrays for s in selection.steps):
         return None
     vr = tuple(value_range if value_range is not None else cv.metadata["value_range"])
-    return (gather or winners)(cv.t_index, arrays, selection.steps, n_steps, vr, spec)
+    return winners(cv.t_index, arrays, selection.steps, n_steps, vr, spec, engine)
 
 
 def _passes(spec: IntegrationSpec, steps: tuple[int, ...], n_steps: int) -> np.ndarray:
@@ -184,60 +181,14 @@ def winners(
     n_steps: int,
     value_range: tuple[float, float],
     spec: IntegrationSpec,
+    engine: Engine | None = None,
 ) -> Winners:
     """The winners of an integrated window: its t_index (the selected step of each voxel, -1:
-    none) and the window's raw resident values (step -> (Z, Y, X)); gathered on the host
-    threads, slab by slab."""
-    table = index_table(steps)
-    u = recycled_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
-    k = recycled_empty(t_index.shape, table.dtype)
-    nz = t_index.shape[0]
-    cuts = np.linspace(0, nz, min(nz, 4 * host_threads.workers()) + 1).astype(int)
-    args = (t_index, arrays, steps, value_range, spec.mode, table, u, k)
-    jobs = [
-        host_threads.pool().submit(_gather, *args, int(a), int(b))
-        for a, b in itertools.pairwise(cuts.tolist())
-        if b > a
-    ]
-    for job in jobs:
-        job.result()
+    none) and the window's raw resident values (step -> (Z, Y, X)), gathered by `engine`
+    (`Engine.gather`: OpenCL's on its device; default numpy's, on the host threads)."""
+    gather = on_host if engine is None else engine.gather
+    u, k = gather(t_index, arrays, steps, value_range, spec.mode == "change")
     return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
-
-
-def index_table(steps: tuple[int, ...]) -> np.ndarray:
-    """Each voxel's winner index from its t_index t (the selected step, -1: none): `table[t + 1]`,
-    the window's place of step t (uint8, uint16 from 255 steps), or `none` (the dtype's largest)
-    where t is -1 or no step of the window. Both gathers read it so (numpy's `winners`,
-    chronocl.render.recolour.gather on the OpenCL device)."""
-    dtype = np.uint8 if len(steps) < 255 else np.uint16
-    table = np.full(max(steps) + 2, np.iinfo(dtype).max, dtype=dtype)
-    table[np.asarray(steps) + 1] = np.arange(len(steps), dtype=dtype)
-    return table
-
-
-def _gather(t_index, arrays, steps, value_range, mode, table, u, k, z0: int, z1: int) -> None:
-    kk = k[z0:z1]
-    np.take(table, np.add(t_index[z0:z1], 1, dtype=np.intp), out=kk)  # take's own index type
-    raw = u[z0:z1]
-    raw[...] = 0
-    if mode == "change":
-        before = np.zeros_like(raw)
-    for i, s in enumerate(steps):
-        if i == 0 and mode == "change":
-            continue  # step 0 of the window starts no change
-        where = kk == i
-        if not where.any():
-            continue
-        np.copyto(raw, arrays[s][z0:z1], where=where, casting="unsafe")
-        if mode == "change":
-            np.copyto(before, arrays[steps[i - 1]][z0:z1], where=where, casting="unsafe")
-    if mode == "change":
-        lo, hi = _values.clip_bounds(*value_range)
-        _, scale = _values.normalization(*value_range)
-        d = np.abs(np.clip(raw, lo, hi) - np.clip(before, lo, hi))
-        raw[...] = np.minimum(d * scale, np.float32(1.0))
-    else:
-        raw[...] = _values.normalize(raw, *value_range)
 
 
 def step_table(spec: IntegrationSpec, steps: tuple[int, ...], n_steps: int) -> np.ndarray:

@@ -13,7 +13,8 @@ time TF of the winning step). One protocol, `Recolourer`, two implementations:
   where the winners are over the device's largest buffer.
 
 `show` then puts what changed into the display `Volume` (the bricks of host RGBA8 that may
-differ, and either's box and grid); `gather.gather` gathers winners on the OpenCL device.
+differ, and either's box and grid). Winners the kernels did not write are gathered by the
+session's engine (`chronocl.engine.gather`).
 """
 
 from __future__ import annotations

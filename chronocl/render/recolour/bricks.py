@@ -36,11 +36,11 @@ import threading
 import numpy as np
 
 from chronocl.core.memory import ALIGN, aligned_empty, is_aligned, recycled_empty
+from chronocl.engine.gather import aligned, index_type, on_device
 from chronocl.integration.interactive.winners import Winners, step_table
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render import brick_grid
 from chronocl.render.recolour import Changed, empty_bounds
-from chronocl.render.recolour.gather import aligned, gather, index_type
 from chronocl.render.volume import Volume
 
 B = brick_grid.BRICK
@@ -387,15 +387,18 @@ def warm_kernels(dtype, device: str | None) -> None:
 
 
 def _warm(dtype, device: str | None) -> None:
+    from chronocl.engine.device import get_context
     from chronocl.integration.inmemory import make_spec
 
     block = aligned_empty((2, B, B, B), dtype)
     block[...] = 0
     t_index = aligned_empty((B, B, B), np.int32)
     t_index[...] = 1
+    arrays, steps, vr = {0: block[0], 1: block[1]}, (0, 1), (0.0, 1.0)
     for mode in ("max", "change"):  # change's gather is a kernel of its own
         spec = make_spec(mode)
-        w = gather(t_index, {0: block[0], 1: block[1]}, (0, 1), 2, (0.0, 1.0), spec, device)
+        u, k = on_device(get_context(device), t_index, arrays, steps, vr, mode == "change")
+        w = Winners(u, k, steps, 2, vr, spec)
         recolourer = BrickRecolourer(device)
         prepared = recolourer.prepare(w)
         try:

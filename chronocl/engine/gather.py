@@ -1,24 +1,27 @@
-"""The winners of a window gathered on the OpenCL device (kernels/opencl/recolour_gather.cl).
+"""Each voxel's winner of an integrated window gathered from its steps: the index of the step
+that won (k) and the value it won with (u; change: the change δ), for recolouring a TF edit
+(`chronocl.integration.interactive.winners`). The engines' `gather`: numpy's on the host threads
+(`on_host`, reading every step) and OpenCL's (`on_device`, kernels/opencl/recolour_gather.cl:
+each voxel reads its winning step's value alone), equal bit for bit.
 
-Each voxel's step index comes from the chronovolume's t_index through the one index table
-(`winners.index_table`: `table[t_index + 1]`), and its value is read from that step alone
-(numpy's gather, `winners.winners`, reads every step, and stays the fallback for data types
-the kernels do not take). On a CPU device the steps and the winners are read and written where
-they lie (host pointers, nothing copied); on a GPU the steps are copied to it and the
+Both map a voxel's t_index t (the selected step, -1: none) through one index table,
+`table[t + 1]` (`index_table`). On a CPU device the steps and the winners are read and written
+where they lie (host pointers, nothing copied); on a GPU the steps are copied to it and the
 winners only back (`_written`). The kernels are built without common.h.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 
+from chronocl.core import host_threads
+from chronocl.core import values as _values
 from chronocl.core.interrupt import checkpoint, watched
 from chronocl.core.memory import ALIGN, aligned_empty, is_aligned, recycled_empty
 from chronocl.core.tuning import TUNING
-from chronocl.integration.interactive.winners import Winners, index_table
-from chronocl.modes.spec import IntegrationSpec
 
 CHUNK = 8  # steps per gather pass (the kernel's p1..p8)
 CL_TYPES = {  # numpy's name -> OpenCL's, for the raw values the gather reads
@@ -41,32 +44,86 @@ def gather_defines(k_dtype, dtype, change: bool) -> dict[str, object]:
     return {"K_T": index_type(k_dtype), "V_T": CL_TYPES[np.dtype(dtype).name], "CHANGE": change}
 
 
-def gather(
+def index_table(steps: tuple[int, ...]) -> np.ndarray:
+    """Each voxel's winner index from its t_index t (the selected step, -1: none): `table[t + 1]`,
+    the window's place of step t (uint8, uint16 from 255 steps), or `none` (the dtype's largest)
+    where t is -1 or no step of the window. Both gathers read it so."""
+    dtype = np.uint8 if len(steps) < 255 else np.uint16
+    table = np.full(max(steps) + 2, np.iinfo(dtype).max, dtype=dtype)
+    table[np.asarray(steps) + 1] = np.arange(len(steps), dtype=dtype)
+    return table
+
+
+def on_host(
     t_index: np.ndarray,
     arrays: dict[int, np.ndarray],
     steps: tuple[int, ...],
-    n_steps: int,
     value_range: tuple[float, float],
-    spec: IntegrationSpec,
-    device: str | None = None,
-) -> Winners:
-    """`chronocl.integration.interactive.winners.winners` on the OpenCL device: each voxel reads
-    its winning step's value alone (the numpy gather reads every step;
-    kernels/opencl/recolour_gather.cl), in place on a CPU device, in slabs of z rows whose
-    buffers each fit the device's largest (`chronocl.engine.buffers`). Falls back to the numpy
-    gather for data types the kernel does not take."""
+    change: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(u, k) of an integrated window from its t_index and the window's raw resident values
+    (step -> (Z, Y, X)), gathered on the host threads slab by slab, reading every step."""
+    table = index_table(steps)
+    u = recycled_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
+    k = recycled_empty(t_index.shape, table.dtype)
+    nz = t_index.shape[0]
+    cuts = np.linspace(0, nz, min(nz, 4 * host_threads.workers()) + 1).astype(int)
+    args = (t_index, arrays, steps, value_range, change, table, u, k)
+    jobs = [
+        host_threads.pool().submit(_host_slab, *args, int(a), int(b))
+        for a, b in itertools.pairwise(cuts.tolist())
+        if b > a
+    ]
+    for job in jobs:
+        job.result()
+    return u, k
+
+
+def _host_slab(t_index, arrays, steps, value_range, change, table, u, k, z0: int, z1: int):
+    kk = k[z0:z1]
+    np.take(table, np.add(t_index[z0:z1], 1, dtype=np.intp), out=kk)  # take's own index type
+    raw = u[z0:z1]
+    raw[...] = 0
+    if change:
+        before = np.zeros_like(raw)
+    for i, s in enumerate(steps):
+        if i == 0 and change:
+            continue  # step 0 of the window starts no change
+        where = kk == i
+        if not where.any():
+            continue
+        np.copyto(raw, arrays[s][z0:z1], where=where, casting="unsafe")
+        if change:
+            np.copyto(before, arrays[steps[i - 1]][z0:z1], where=where, casting="unsafe")
+    if change:
+        lo, hi = _values.clip_bounds(*value_range)
+        _, scale = _values.normalization(*value_range)
+        d = np.abs(np.clip(raw, lo, hi) - np.clip(before, lo, hi))
+        raw[...] = np.minimum(d * scale, np.float32(1.0))
+    else:
+        raw[...] = _values.normalize(raw, *value_range)
+
+
+def on_device(
+    dc,
+    t_index: np.ndarray,
+    arrays: dict[int, np.ndarray],
+    steps: tuple[int, ...],
+    value_range: tuple[float, float],
+    change: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`on_host` on the OpenCL device `dc` (a `DeviceContext`): each voxel reads its winning
+    step's value alone, in place on a CPU device, in slabs of z rows whose buffers each fit
+    the device's largest (`chronocl.engine.buffers`). Falls back to `on_host` for data types
+    the kernel does not take, and for steps it would have to copy."""
     import pyopencl as cl
 
-    from chronocl.core import values as _values
     from chronocl.engine.buffers import DeviceWork, max_alloc
-    from chronocl.engine.device import get_context
     from chronocl.engine.program import build
-    from chronocl.integration.interactive.winners import winners  # looked up when called
 
     dtype = np.dtype(arrays[steps[0]].dtype)
     if dtype.name not in CL_TYPES or any(arrays[s].dtype != dtype for s in steps):
-        return winners(t_index, arrays, steps, n_steps, value_range, spec)
-    dc = get_context(device)
+        return on_host(t_index, arrays, steps, value_range, change)
     limit = max_alloc(dc)
     nz, ny, nx = shape = t_index.shape
     plane = ny * nx  # voxels of one z row
@@ -87,7 +144,7 @@ def gather(
         rows -= rows % aligned_rows
     in_place = all(arrays[s].flags.c_contiguous and is_aligned(arrays[s]) for s in steps)
     if (block is None and not in_place) or rows < 1:  # a copy costs more than numpy's gather
-        return winners(t_index, arrays, steps, n_steps, value_range, spec)
+        return on_host(t_index, arrays, steps, value_range, change)
     table = index_table(steps)
     k_dtype, none = table.dtype, int(np.iinfo(table.dtype).max)
     # PoCL reads and writes aligned host memory in place; the kernels write every voxel, on
@@ -97,7 +154,6 @@ def gather(
     k = recycled_empty(shape, k_dtype)
     t_index = aligned(t_index.astype(np.int32, copy=False))
     cpu = dc.is_cpu
-    change = spec.mode == "change"
     program = build(dc, "recolour_gather.cl", gather_defines(k_dtype, dtype, change), common=False)
     lo, hi = _values.clip_bounds(*value_range)
     vmin, scale = _values.normalization(*value_range)
@@ -140,7 +196,7 @@ def gather(
                 work.read(u[z0:z1], u_buf, cpu)
         if group[-1][1] < nz:
             checkpoint("preparing the recolouring", group[-1][1], nz)
-    return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
+    return u, k
 
 
 def _written(work, out: np.ndarray, cpu: bool):
