@@ -201,6 +201,11 @@ def test_a_streamed_window_is_predicted_at_its_own_rate_and_leaves_the_slide_rat
     assert model.pick(10)[0] == 0
     assert model.pick(10, streams=lambda level: level == 0)[0] == 1  # level 0 streams: over
     assert c.direct == {0: pytest.approx(10.0 / 80_000)}
+    only = LatencyModel([8000, 1000, 125], target_ms=100)  # a streamed rate, nothing resident
+    only.costs.record_streamed(0, 400.0, 8000, 10)
+    why = "no level predicted within 100 ms: the coarsest"  # not measuring: level 0 was
+    assert only.pick(10, streams=lambda level: level == 0) == (2, why)
+    assert only.pick(10) == (2, "first frame: the coarsest level, measuring this machine")
 
 
 @pytest.mark.parametrize(

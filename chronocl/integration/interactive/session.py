@@ -111,10 +111,12 @@ class LatencyModel:
         the target: a coarser frame would be refined to it after, so the sharp frame would
         come later by the coarse frame's time and more."""
         coarsest = len(self.voxels) - 1
+        measured = False
         for level in range(coarsest + 1):
             ms = self.predict(level, steps, missing(level), slides(level), streams(level))
             if ms is None:
                 continue
+            measured = True
             if ms <= self.target_ms:
                 finer = "" if level == 0 else "; finer levels predicted over it"
                 return level, f"level {level} predicted at {ms:.0f} ms, within the target{finer}"
@@ -123,7 +125,7 @@ class LatencyModel:
                     f"level 0 predicted at {ms:.0f} ms, within {TUNING.sharp_overrun:g}x the "
                     "target: drawn at once rather than coarse and refined"
                 )
-        if self.predict(coarsest, steps) is None:
+        if not measured:
             return coarsest, "first frame: the coarsest level, measuring this machine"
         return coarsest, f"no level predicted within {self.target_ms:g} ms: the coarsest"
 
