@@ -14,6 +14,7 @@ from chronocl.core.errors import ChronoclError, InvalidParameterError
 from chronocl.core.tf import TimeTF
 from chronocl.core.tuning import TUNING
 from chronocl.data import synthetic
+from chronocl.integration.interactive.costs import Costs
 from chronocl.integration.interactive.session import LatencyModel, Session
 from chronocl.modes.spec import IntegrationSpec
 
@@ -206,6 +207,31 @@ def test_a_streamed_window_is_predicted_at_its_own_rate_and_leaves_the_slide_rat
     why = "no level predicted within 100 ms: the coarsest"  # not measuring: level 0 was
     assert only.pick(10, streams=lambda level: level == 0) == (2, why)
     assert only.pick(10) == (2, "first frame: the coarsest level, measuring this machine")
+
+
+def test_a_coarse_frame_reads_full_resolution_ahead_where_it_pays_and_says_why_not(series):
+    """A new window is drawn coarse first; where `Costs` says reading ahead pays (a core left
+    idle, the reads at the stop over the target), full resolution's steps are read in the
+    background meanwhile, and the refine finds them resident. Where full resolution streams
+    its window (over its budget) nothing is read ahead, and the frame says why."""
+    step = int(np.prod(SHAPE)) * 4
+    for memory, why in [(64 * step, None), (3 * step, "full resolution streams its window")]:
+        costs = Costs(cores=64)  # cores to spare
+        costs.reads[0] = 1.0  # ms a voxel: reading the window at the stop is far over the target
+        with Session(series, level="auto", slide_costs=costs, memory=memory) as s:
+            s.set_window(0, 4)
+            assert s.shown_level > 0 and s.stats["why_not_read_ahead"] == why
+            full = s.at(0)
+            assert full is not None
+            if why is None:
+                deadline = time.monotonic() + 30
+                while full.manager.resident() != [0, 1, 2, 3] and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                assert full.manager.resident() == [0, 1, 2, 3]
+            else:
+                assert full.manager.resident() == [] and full.streams(s.selection)
+            s.refine()
+            assert s.shown_level == 0
 
 
 @pytest.mark.parametrize(

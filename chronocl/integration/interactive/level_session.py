@@ -175,12 +175,17 @@ class LevelSession:
         The sliding state held the old colours: the next slide integrates the window again."""
         self.asked, self.spec, self._cv, self._slider = asked, spec, cv, None
 
-    def read_ahead(self, selection: Selection) -> None:
-        """Start reading `selection`'s steps in the background where they fit the budget (a
-        `Session` shows the window at a coarse level meanwhile)."""
+    def read_ahead(self, selection: Selection) -> str | None:
+        """Start reading `selection`'s steps in the background (a `Session` shows the window at
+        a coarse level meanwhile); else why not: the window streams (`streams`), or it is over
+        the room the sliding state and a kept brick leave its manager."""
         window = selection.width * self.manager.step_bytes
-        if window <= self.manager.budget and self.streaming is None:
-            self.manager.request(selection.steps, owner=self)
+        if self.streams(selection):
+            return "full resolution streams its window"
+        if window > self.manager.budget:
+            return f"the window needs {human(window)} > {human(self.manager.budget)} left to it"
+        self.manager.request(selection.steps, owner=self)
+        return None
 
     def leaving(self, selection: Selection) -> None:
         """`selection` is shown next: the chronovolume of another window is never shown again,
@@ -486,11 +491,6 @@ class SessionPool:
                 manager=shared[1] if shared and shared[0] == key else None,
             )
         return self.sessions[key]
-
-    def read_ahead(self, selection: Selection, spec: IntegrationSpec) -> None:
-        """Steps of `selection` at the finest level read in the background
-        (`LevelSession.read_ahead`)."""
-        self.session(self.finest, spec).read_ahead(selection)
 
     def close(self) -> None:
         for s in self.sessions.values():

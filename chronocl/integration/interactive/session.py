@@ -374,11 +374,16 @@ class Session:
         held = self.at(level, spec)
         return held is not None and held.streams(selection)
 
-    def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
+    def _level(self, level: int, spec: IntegrationSpec) -> LevelSession:
+        """`level`'s session for `spec`, the finest streaming as `stream` last said (one made
+        since is told now)."""
         s = self.pool.session(level, spec)
-        finest = self.policy.finest
-        if level == finest and s.streaming != self._streaming:  # made since `stream`
+        if level == self.policy.finest and s.streaming != self._streaming:
             s.stream(self._streaming)
+        return s
+
+    def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
+        s, finest = self._level(level, spec), self.policy.finest
         t, cpu = time.perf_counter(), time.process_time()
         cv = s.show(selection, spec)
         wall = time.perf_counter() - t
@@ -409,8 +414,7 @@ class Session:
         if not self._reading_ahead:  # the readers' CPU time would count as the frame's
             self.costs.record_frame(wall_s, cpu_s)
         missing = self._missing(0, selection)
-        why = "full resolution streams its window" if self._streaming is not None else None
-        why = why or self.costs.why_not_read_ahead(missing, self.voxels[0], model.target_ms)
-        self.why_not_read_ahead, self._reading_ahead = why, why is None
+        why = self.costs.why_not_read_ahead(missing, self.voxels[0], model.target_ms)
         if why is None:
-            self.pool.read_ahead(selection, spec)
+            why = self._level(model.finest, spec).read_ahead(selection)
+        self.why_not_read_ahead, self._reading_ahead = why, why is None
