@@ -667,16 +667,14 @@ def test_the_kernels_winners_equal_the_gathered_ones(data) -> None:
 def test_a_session_keeps_the_kernels_winners_until_its_window_changes(monkeypatch) -> None:
     """A viewer's session (display) in max hands out the winners its integration wrote: no
     gather; after a slide or a value range they are gathered again; the numpy engine gathers."""
-    from chronocl.integration.interactive import level_session as session_module
-
     gathered = []
-    real = session_module.of_window
+    real = OpenCLEngine.gather
 
-    def spy(*args, **kwargs):
+    def spy(self, *args, **kwargs):
         gathered.append(1)
-        return real(*args, **kwargs)
+        return real(self, *args, **kwargs)
 
-    monkeypatch.setattr(session_module, "of_window", spy)
+    monkeypatch.setattr(OpenCLEngine, "gather", spy)
     rng = np.random.default_rng(3)
     series = TimeSeries.from_array(rng.random((8, 5, 6, 21), dtype=np.float32))
     s = Session(series, memory="64MB", mode="max", display=True, time_tf="rgb")

@@ -44,6 +44,7 @@ from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.engine.device_steps import DeviceBricks, DeviceWindow
 from chronocl.integration.inmemory import (
+    Job,
     WinnersOut,
     check_level,
     integrate_bricks,
@@ -54,7 +55,7 @@ from chronocl.integration.interactive.costs import Move
 from chronocl.integration.interactive.moves import fixed
 from chronocl.integration.interactive.settings import Settings, manager_key
 from chronocl.integration.interactive.slider import Slider, slide_plan, slides_by_sums
-from chronocl.integration.interactive.winners import Winners, of_window, why_not
+from chronocl.integration.interactive.winners import RECOLOURED, Winners, why_not
 from chronocl.modes.base import FaintSums
 from chronocl.modes.spec import IntegrationSpec
 
@@ -134,13 +135,21 @@ class LevelSession:
     def winners(self, value_range: tuple | None = None) -> Winners | None:
         """The window's winners, to recolour a TF edit without integrating: those the kernels
         wrote with the window's integration (a display session in max, min or change), else
-        gathered by the session's engine (`winners.of_window`); their u at `value_range` (an
-        edit's, `Session.recolours`), else the shown's."""
+        gathered by the session's engine (`Engine.gather`) from the window's resident steps;
+        their u at `value_range` (an edit's, `Session.recolours`), else the shown's. None where
+        the mode has none, nothing is integrated or a step of the window is not resident."""
         kept = self.kept_winners(value_range)
         if kept is not None:
             return kept
-        cv, arrays, n = self._cv, self._arrays, self.base.n_steps
-        return of_window(cv, self.selection, arrays, n, self.spec, self.engine, value_range)
+        cv, spec, arrays = self._cv, self.spec, self._arrays
+        if cv is None or cv.t_index is None or spec.mode not in RECOLOURED:
+            return None
+        steps = self.window().steps
+        if any(s not in arrays for s in steps):
+            return None
+        vr = tuple(value_range if value_range is not None else cv.metadata["value_range"])
+        u, k = self.engine.gather(cv.t_index, arrays, steps, vr, spec.mode == "change")
+        return Winners(u, k, steps, self.base.n_steps, vr, spec)
 
     def kept_winners(self, value_range: tuple | None = None) -> Winners | None:
         """The winners the kernels wrote with the chronovolume shown (nothing to gather), their
@@ -297,11 +306,7 @@ class LevelSession:
             )
             ms = 1e3 * (time.perf_counter() - t_direct)
             self.costs.record_direct(self.level, ms, voxels, selection.width)
-            if won is not None and won.u is not None:
-                w = Winners(
-                    won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
-                )
-                self._won = (cv.t_index, w)
+            self._keep_won(cv, won, job)
             # Jumps and spec changes integrate directly (one pass over the window); the
             # sliding state starts from this window and is filled lazily on the next slide.
             if faint is not None:
@@ -404,11 +409,7 @@ class LevelSession:
         voxels = int(np.prod(self.series.volume_shape))
         ms = 1e3 * (time.perf_counter() - t)
         self.costs.record_streamed(self.level, ms, voxels, selection.width)
-        if won is not None and won.u is not None:
-            w = Winners(
-                won.u, won.k, selection.steps, self.base.n_steps, job.value_range, self.spec
-            )
-            self._won = (cv.t_index, w)
+        self._keep_won(cv, won, job)
         self._cv = cv
         some = f"{len(kept)} of {selection.width} steps resident, the rest " if kept else ""
         self._record(t, "streamed", f"{why}: {some}streamed by z-slabs")
@@ -426,6 +427,13 @@ class LevelSession:
         if not (watched() and free):
             return None
         return -(-self.series.volume_shape[0] // TUNING.refine_slabs)
+
+    def _keep_won(self, cv: Chronovolume, won: WinnersOut | None, job: Job) -> None:
+        """Keep the winners the kernels wrote integrating `cv` (`won`), with its t_index."""
+        if won is not None and won.u is not None:
+            sel, n = job.selection, self.base.n_steps
+            w = Winners(won.u, won.k, sel.steps, n, job.value_range, self.spec)
+            self._won = (cv.t_index, w)
 
     def _record(self, t: float, path: str, reason: str | None) -> None:
         self.stats = {

@@ -25,9 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from chronocl.core.selection import Selection
 from chronocl.core.tf import lut_lerp32
-from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine.base import Engine
 from chronocl.engine.gather import on_host
 from chronocl.modes.spec import IntegrationSpec
@@ -77,28 +75,6 @@ def why_not(
     if old.mode == "first_hit" and not same_hits(old, new, steps, n_steps):
         return "the edit changes which values pass the opacity threshold"
     return None
-
-
-def of_window(
-    cv: Chronovolume | None,
-    selection: Selection | None,
-    arrays: dict[int, np.ndarray],
-    n_steps: int,
-    spec: IntegrationSpec,
-    engine: Engine | None = None,
-    value_range: tuple[float, float] | None = None,
-) -> Winners | None:
-    """The winners of `cv` (the window `selection` integrated under `spec`) from the window's
-    resident raw values `arrays` (step -> (Z, Y, X)), gathered by `engine` (`winners`), their u at
-    `value_range` (default: the one `cv` was coloured at; max/min only may take another);
-    None where the mode has none, nothing is integrated or a step of the window is not
-    resident."""
-    if cv is None or selection is None or cv.t_index is None or spec.mode not in RECOLOURED:
-        return None
-    if any(s not in arrays for s in selection.steps):
-        return None
-    vr = tuple(value_range if value_range is not None else cv.metadata["value_range"])
-    return winners(cv.t_index, arrays, selection.steps, n_steps, vr, spec, engine)
 
 
 def _passes(spec: IntegrationSpec, steps: tuple[int, ...], n_steps: int) -> np.ndarray:
@@ -185,7 +161,8 @@ def winners(
 ) -> Winners:
     """The winners of an integrated window: its t_index (the selected step of each voxel, -1:
     none) and the window's raw resident values (step -> (Z, Y, X)), gathered by `engine`
-    (`Engine.gather`: OpenCL's on its device; default numpy's, on the host threads)."""
+    (`Engine.gather`: OpenCL's on its device; default numpy's, on the host threads, the
+    oracle the tests hold the others to; a session's are `LevelSession.winners`)."""
     gather = on_host if engine is None else engine.gather
     u, k = gather(t_index, arrays, steps, value_range, spec.mode == "change")
     return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
