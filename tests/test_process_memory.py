@@ -578,7 +578,9 @@ def test_a_streaming_view_reads_no_full_resolution_window_ahead(monkeypatch):
         views = Views([Dataset("d", series)], "opencl", None, "10GB")
         try:
             views.chronovolumes(state)
-            assert views.slots[0].session.shown_level > 0  # a coarse frame first
+            session = views.slots[0].session
+            assert session.shown_level > 0  # a coarse frame first
+            assert session.stats["why_not_read_ahead"] == "full resolution streams its window"
             full = views.manager(0, "")
             assert full is None or (full.resident() == [] and not full.state()["loading"])
             views.full_resolution(range(1))

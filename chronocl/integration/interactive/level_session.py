@@ -158,8 +158,8 @@ class LevelSession:
         cv, won = self._cv, self._won
         if cv is None or won is None or won[0] is not cv.t_index:
             return None
-        vr = value_range
-        want = tuple(map(float, vr if vr is not None else cv.metadata["value_range"]))
+        vr = value_range if value_range is not None else cv.metadata["value_range"]
+        want = tuple(map(float, vr))
         if want != tuple(map(float, won[1].value_range)):
             return None
         return dataclasses.replace(won[1], spec=self.spec)  # the spec shown, as gathered
@@ -473,9 +473,11 @@ class SessionPool:
         self.finest = finest
         self.manager = manager
         self.sessions: dict[tuple[int, str], LevelSession] = {}
+        self.streaming: Streaming | None = None  # the finest level's (`stream`)
 
     def session(self, level: int, spec: IntegrationSpec) -> LevelSession:
-        """The session of `level` for `spec`'s pooling (full resolution: one for all)."""
+        """The session of `level` for `spec`'s pooling (full resolution: one for all), the
+        finest streaming as `stream` last said."""
         key = manager_key(level, spec.integration.pool)
         # Another pooling's session of the level held its window after a mode switch: a jump
         # then read the new window beside it, over the limit. One that owns its manager goes
@@ -492,13 +494,23 @@ class SessionPool:
             # Coarse levels hold 1/8 of the voxels of the next finer one or less.
             budget = o.budget if level == self.finest else max(1, o.budget // 8)
             shared = self.manager
-            self.sessions[key] = LevelSession(
+            self.sessions[key] = s = LevelSession(
                 self.series,
                 o._replace(asked=spec, budget=budget),
                 level=level,
                 manager=shared[1] if shared and shared[0] == key else None,
             )
+            if level == self.finest and self.streaming is not None:  # made since `stream`
+                s.stream(self.streaming)
         return self.sessions[key]
+
+    def stream(self, why: Streaming | None) -> None:
+        """The finest level streams its window from now on (`LevelSession.stream`), or not
+        (None); coarser levels' windows are small and stay resident."""
+        self.streaming = why
+        for (level, _), s in self.sessions.items():
+            if level == self.finest:
+                s.stream(why)
 
     def close(self) -> None:
         for s in self.sessions.values():

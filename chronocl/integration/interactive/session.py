@@ -219,7 +219,6 @@ class Session:
         self.why = ""
         self._last: tuple[Selection, IntegrationSpec] | None = None
         self._cv: Chronovolume | None = None
-        self._streaming: Streaming | None = None  # the finest level's (`stream`)
         self.why_not_read_ahead: str | None = None
         self._reading_ahead = False
 
@@ -335,10 +334,7 @@ class Session:
     def stream(self, why: Streaming | None) -> None:
         """The finest level streams its window from now on (`LevelSession.stream`), or not
         (None); coarser levels' windows are small and stay resident."""
-        self._streaming = why
-        for (level, _), s in self.pool.sessions.items():
-            if level == self.policy.finest:
-                s.stream(why)
+        self.pool.stream(why)
 
     def close(self) -> None:
         self.pool.close()
@@ -356,8 +352,9 @@ class Session:
         if held is None:
             return selection.width
         resident = set(held.manager.resident())
-        if level == self.policy.finest and self._streaming is not None:
-            resident &= self._streaming.keep  # the steps not kept are read again
+        streaming = self.pool.streaming
+        if level == self.policy.finest and streaming is not None:
+            resident &= streaming.keep  # the steps not kept are read again
         return sum(1 for t in selection.steps if t not in resident)
 
     def _slide_ms(self, level: int, selection: Selection, spec: IntegrationSpec) -> float | None:
@@ -369,21 +366,13 @@ class Session:
     def _streams(self, level: int, selection: Selection, spec: IntegrationSpec) -> bool:
         """Whether `level` would stream `selection` (a viewer's limit leaves the finest level's
         window no room, or the window is over the level's budget: `LevelSession.streams`)."""
-        if level == self.policy.finest and self._streaming is not None:
+        if level == self.policy.finest and self.pool.streaming is not None:
             return True
         held = self.at(level, spec)
         return held is not None and held.streams(selection)
 
-    def _level(self, level: int, spec: IntegrationSpec) -> LevelSession:
-        """`level`'s session for `spec`, the finest streaming as `stream` last said (one made
-        since is told now)."""
-        s = self.pool.session(level, spec)
-        if level == self.policy.finest and s.streaming != self._streaming:
-            s.stream(self._streaming)
-        return s
-
     def _at(self, level: int, selection: Selection, spec: IntegrationSpec) -> Chronovolume:
-        s, finest = self._level(level, spec), self.policy.finest
+        s, finest = self.pool.session(level, spec), self.policy.finest
         t, cpu = time.perf_counter(), time.process_time()
         cv = s.show(selection, spec)
         wall = time.perf_counter() - t
@@ -414,7 +403,9 @@ class Session:
         if not self._reading_ahead:  # the readers' CPU time would count as the frame's
             self.costs.record_frame(wall_s, cpu_s)
         missing = self._missing(0, selection)
-        why = self.costs.why_not_read_ahead(missing, self.voxels[0], model.target_ms)
-        if why is None:
-            why = self._level(model.finest, spec).read_ahead(selection)
+        streams = self._streams(model.finest, selection, spec)
+        why = "full resolution streams its window" if streams else None
+        why = why or self.costs.why_not_read_ahead(missing, self.voxels[0], model.target_ms)
+        if why is None:  # its session may be new: it says why not itself
+            why = self.pool.session(model.finest, spec).read_ahead(selection)
         self.why_not_read_ahead, self._reading_ahead = why, why is None
