@@ -18,12 +18,15 @@ from hypothesis import strategies as st
 
 from chronocl import reference
 from chronocl.core.enhance import Enhance
+from chronocl.core.errors import SupersededError
+from chronocl.core.interrupt import interruptible
 from chronocl.core.memory import aligned_empty, recycled_empty, spares
 from chronocl.core.selection import Selection
 from chronocl.core.tf import DataTF, TimeAlpha, TimeTF
 from chronocl.core.tuning import TUNING
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
+from chronocl.engine.numpy import NumpyEngine
 from chronocl.engine.opencl import OpenCLEngine
 from chronocl.integration.inmemory import integrate
 from chronocl.integration.interactive.session import Session
@@ -404,7 +407,6 @@ def test_opencl_gather_equals_the_numpy_one(mode, dtype, monkeypatch) -> None:
         out.view(np.uint8)[...] = 0xFF  # NaN as float32
         return out
 
-    monkeypatch.setattr(gather_module, "recycled_empty", dirty)
     rng = np.random.default_rng(5)
     for width in (1, 3, 9, 17):
         shape = (7, 9, 11)
@@ -425,9 +427,38 @@ def test_opencl_gather_equals_the_numpy_one(mode, dtype, monkeypatch) -> None:
             {s: block[:, i] for i, s in enumerate(steps)},
         ):
             want = winners(t_index, arrays, steps, 30, vr, spec)
-            got = winners(t_index, arrays, steps, 30, vr, spec, OpenCLEngine())
+            with monkeypatch.context() as m:
+                m.setattr(gather_module, "recycled_empty", dirty)
+                got = winners(t_index, arrays, steps, 30, vr, spec, OpenCLEngine())
             np.testing.assert_array_equal(got.k, want.k)
             np.testing.assert_array_equal(got.u, want.u)
+
+
+@pytest.mark.parametrize("engine", [NumpyEngine, OpenCLEngine])
+def test_a_gather_that_may_be_given_up_goes_in_pieces(engine) -> None:
+    """Work that may be given up (the viewer's preparation at idle) gathers the winners in
+    pieces (`TUNING.gather_pieces`), a checkpoint between two: new input gives it up at the
+    next; unwatched, it gathers whole. Both engines' gathers, equal to numpy's either way."""
+    rng = np.random.default_rng(9)
+    shape, steps, vr = (40, 8, 8), (0, 1, 2, 3, 4), (0.0, 1.0)  # z rows of 64: slabs aligned
+    arrays = {s: aligned_copy(rng.random(shape, dtype=np.float32)) for s in steps}
+    t_index = rng.choice(np.array([*steps, -1], np.int32), size=shape)
+    spec = _spec("max", DataTF(), TimeTF(), value_range=vr)
+    want = winners(t_index, arrays, steps, 8, vr, spec)
+    told: list[tuple] = []
+    with interruptible(lambda: False, lambda *p: told.append(p)):
+        got = winners(t_index, arrays, steps, 8, vr, spec, engine())
+    np.testing.assert_array_equal(got.u, want.u)
+    np.testing.assert_array_equal(got.k, want.k)
+    assert 3 <= len(told) < TUNING.gather_pieces
+    assert all(stage == "preparing the recolouring" for stage, _, _ in told)
+    seen: list[tuple] = []
+    with (
+        pytest.raises(SupersededError),
+        interruptible(lambda: len(seen) >= 2, lambda *p: seen.append(p)),
+    ):
+        winners(t_index, arrays, steps, 8, vr, spec, engine())
+    assert len(seen) == 2  # given up at the third checkpoint
 
 
 def aligned_copy(a: np.ndarray) -> np.ndarray:
@@ -708,6 +739,15 @@ def test_a_session_keeps_the_kernels_winners_until_its_window_changes(monkeypatc
     np.testing.assert_array_equal(w.u, want.u)
     np.testing.assert_array_equal(w.k, want.k)
     s.close()
+    gathered.clear()
+    with Session(series, engine="numpy", memory="64MB", mode="max", time_tf="rgb") as s:
+        cv = s.set_window(1, 5)
+        w = s.at(0).winners()  # numpy's gather: no kernel writes winners
+        assert not gathered and w.steps == (1, 2, 3, 4)
+        arrays = {t: series.host[t] for t in range(1, 5)}
+        want = winners(cv.t_index, arrays, (1, 2, 3, 4), 8, w.value_range, s.spec)
+        np.testing.assert_array_equal(w.u, want.u)
+        np.testing.assert_array_equal(w.k, want.k)
 
 
 def test_the_bricks_rgba8_rounds_as_the_display_conversion() -> None:

@@ -4,7 +4,8 @@ An engine integrates one xytz brick (rows, W, Y, X) into that slab's part of a c
 combines the partials of adjacent runs of steps (for windows that slide by aggregation), and
 keeps the fixed-point sums of windows that slide by inversion (docs/semantics.md). The OpenCL
 engine's combine, fixed_add and finish_sums also take device arrays (a sliding state kept on a
-GPU: `chronocl.engine.elementwise`).
+GPU: `chronocl.engine.elementwise`). It also gathers each voxel's winner of an integrated
+window from its steps, for a TF edit that only recolours (`chronocl.engine.gather`).
 """
 
 from __future__ import annotations

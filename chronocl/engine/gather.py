@@ -62,20 +62,23 @@ def on_host(
     change: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(u, k) of an integrated window from its t_index and the window's raw resident values
-    (step -> (Z, Y, X)), gathered on the host threads slab by slab, reading every step."""
+    (step -> (Z, Y, X)), gathered on the host threads slab by slab, reading every step. Work
+    that may be given up (`watched`) runs in `TUNING.gather_pieces` groups of slabs, each
+    finished before the checkpoint after it, as `on_device`'s slabs are."""
     table = index_table(steps)
     u = recycled_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
     k = recycled_empty(t_index.shape, table.dtype)
     nz = t_index.shape[0]
     cuts = np.linspace(0, nz, min(nz, 4 * host_threads.workers()) + 1).astype(int)
+    slabs = [(int(a), int(b)) for a, b in itertools.pairwise(cuts.tolist()) if b > a]
+    per = -(-len(slabs) // TUNING.gather_pieces) if watched() else len(slabs)
     args = (t_index, arrays, steps, value_range, change, table, u, k)
-    jobs = [
-        host_threads.pool().submit(_host_slab, *args, int(a), int(b))
-        for a, b in itertools.pairwise(cuts.tolist())
-        if b > a
-    ]
-    for job in jobs:
-        job.result()
+    for i in range(0, len(slabs), per):
+        group = slabs[i : i + per]
+        for job in [host_threads.pool().submit(_host_slab, *args, a, b) for a, b in group]:
+            job.result()
+        if group[-1][1] < nz:
+            checkpoint("preparing the recolouring", group[-1][1], nz)
     return u, k
 
 

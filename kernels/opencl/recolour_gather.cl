@@ -1,10 +1,10 @@
-/* The winners of a window gathered on the OpenCL device (chronocl/render/recolour/gather.py,
- * gather): each voxel's step index from the chronovolume's t_index and its value read from
+/* The winners of a window gathered on the OpenCL device (chronocl/engine/gather.py,
+ * on_device): each voxel's step index from the chronovolume's t_index and its value read from
  * that step alone. Built alone (no common.h) with K_T (the step index type), V_T (the raw
  * values' type) and, in change mode, CHANGE. */
 
 // The winners' step index (into the window; none: none_k) from t_index (the selected step, -1:
-// none) through `table` (step + 1 -> index: winners.index_table, numpy's gather's too), then
+// none) through `table` (step + 1 -> index: gather.index_table, on_host's too), then
 // their value u (0 where none): the window's
 // steps go in chunks of up to 8 (p1..p8 the chunk's steps, p0 the step before the first, which
 // change reads; `winner_u`). Every voxel's k and u are written here: the host's arrays come
