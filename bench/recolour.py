@@ -46,8 +46,8 @@ from common import emit, env_record
 from chronocl.core.tf import DataTF, TimeTF
 from chronocl.data import synthetic
 from chronocl.data.series import TimeSeries
-from chronocl.engine.numpy import NumpyEngine
 from chronocl.integration.interactive.session import Session
+from chronocl.integration.interactive.winners import winners
 from chronocl.render.camera import Camera
 from chronocl.render.raycaster import Raycaster
 from chronocl.render.recolour import show
@@ -130,14 +130,18 @@ def main() -> None:
         args.png.mkdir(parents=True, exist_ok=True)
         save(first, args.png / "max_before.png")
 
-    full = s.at(0)
-    opencl, full.engine = full.engine, NumpyEngine()
+    # The kernels wrote this window's winners (`LevelSession.kept_winners`): both gathers are
+    # timed on it, from the steps where the window manager's slots hold them, as the viewer's.
+    full, shown, sel = s.at(0), s.current(), s.selection
+    arrays = full.manager.hold(sel.steps)
+    vr = tuple(shown.metadata["value_range"])
+    window = (shown.t_index, arrays, sel.steps, series.n_steps, vr, s.spec)
     a = time.perf_counter()
-    full.winners()  # numpy's gather (reads every step of the window)
+    winners(*window)  # numpy's gather (reads every step of the window)
     b = time.perf_counter()
-    full.engine = opencl
-    won = full.winners()  # the OpenCL engine's (each voxel reads its winner), as the viewer's
+    won = winners(*window, full.engine)  # the OpenCL engine's: each voxel reads its winner
     c = time.perf_counter()
+    del arrays, window
     paths = tuple(args.paths.split(","))
     if "integrate" not in paths or not set(paths) <= {"integrate", "bricks", "gl"}:
         raise SystemExit("--paths: integrate (the reference) and any of bricks, gl")
