@@ -64,8 +64,8 @@ class LevelSession:
     """One level of a `Session`: a series, a window and an integration spec at that level,
     which `show` brings up to date and returns as a Chronovolume (built by a `SessionPool`
     from its `Session`'s settings, `setup`: its spec and budget this level's; `manager`:
-    another's resident steps, parallel views of one window). It never writes into a
-    chronovolume it returned."""
+    another's resident steps, parallel views of one window; `streaming`: it streams from the
+    start, `stream`). It never writes into a chronovolume it returned."""
 
     def __init__(
         self,
@@ -74,6 +74,7 @@ class LevelSession:
         *,
         level: int = 0,
         manager: WindowManager | None = None,
+        streaming: Streaming | None = None,
     ) -> None:
         self.base = series
         # The spec as asked; `self.spec` is it with its value range fixed (`fix_range`).
@@ -93,7 +94,7 @@ class LevelSession:
         self._cv: Chronovolume | None = None
         # (t_index, winners) the kernels wrote with the window's integration (`winners`)
         self._won: tuple[np.ndarray, Winners] | None = None
-        self.streaming: Streaming | None = None  # `stream`
+        self.streaming = streaming  # `stream`
         prefetch = setup.prefetch
         self.level = check_level(series, level)
         self.series = series.level(self.level, self.spec.integration.pool)
@@ -477,7 +478,7 @@ class SessionPool:
 
     def session(self, level: int, spec: IntegrationSpec) -> LevelSession:
         """The session of `level` for `spec`'s pooling (full resolution: one for all), the
-        finest streaming as `stream` last said."""
+        finest streaming as `stream` last said (one made since from the start)."""
         key = manager_key(level, spec.integration.pool)
         # Another pooling's session of the level held its window after a mode switch: a jump
         # then read the new window beside it, over the limit. One that owns its manager goes
@@ -494,14 +495,13 @@ class SessionPool:
             # Coarse levels hold 1/8 of the voxels of the next finer one or less.
             budget = o.budget if level == self.finest else max(1, o.budget // 8)
             shared = self.manager
-            self.sessions[key] = s = LevelSession(
+            self.sessions[key] = LevelSession(
                 self.series,
                 o._replace(asked=spec, budget=budget),
                 level=level,
                 manager=shared[1] if shared and shared[0] == key else None,
+                streaming=self.streaming if level == self.finest else None,
             )
-            if level == self.finest and self.streaming is not None:  # made since `stream`
-                s.stream(self.streaming)
         return self.sessions[key]
 
     def stream(self, why: Streaming | None) -> None:
