@@ -68,8 +68,10 @@ def on_host(
     table = index_table(steps)
     u = recycled_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
     k = recycled_empty(t_index.shape, table.dtype)
-    nz = t_index.shape[0]
-    cuts = np.linspace(0, nz, min(nz, 4 * host_threads.workers()) + 1).astype(int)
+    nz, workers = t_index.shape[0], host_threads.workers()
+    # 4 slabs a thread, and where given up, enough that each piece keeps every thread busy
+    count = max(4, TUNING.gather_pieces if watched() else 0) * workers
+    cuts = np.linspace(0, nz, min(nz, count) + 1).astype(int)
     slabs = [(int(a), int(b)) for a, b in itertools.pairwise(cuts.tolist()) if b > a]
     per = -(-len(slabs) // TUNING.gather_pieces) if watched() else len(slabs)
     args = (t_index, arrays, steps, value_range, change, table, u, k)
