@@ -68,12 +68,12 @@ def on_host(
     table = index_table(steps)
     u = recycled_empty(t_index.shape, np.float32)  # aligned: OpenCL reads them in place
     k = recycled_empty(t_index.shape, table.dtype)
-    nz, workers = t_index.shape[0], host_threads.workers()
+    nz, pieces = t_index.shape[0], TUNING.gather_pieces if watched() else 1
     # 4 slabs a thread, and where given up, enough that each piece keeps every thread busy
-    count = max(4, TUNING.gather_pieces if watched() else 0) * workers
+    count = max(4, pieces) * host_threads.workers()
     cuts = np.linspace(0, nz, min(nz, count) + 1).astype(int)
     slabs = [(int(a), int(b)) for a, b in itertools.pairwise(cuts.tolist()) if b > a]
-    per = -(-len(slabs) // TUNING.gather_pieces) if watched() else len(slabs)
+    per = -(-len(slabs) // pieces)
     args = (t_index, arrays, steps, value_range, change, table, u, k)
     for i in range(0, len(slabs), per):
         group = slabs[i : i + per]

@@ -56,6 +56,7 @@ from chronocl.integration.interactive.moves import fixed
 from chronocl.integration.interactive.settings import Settings, manager_key
 from chronocl.integration.interactive.slider import Slider, slide_plan, slides_by_sums
 from chronocl.integration.interactive.winners import RECOLOURED, Winners, why_not
+from chronocl.integration.interactive.winners import winners as gathered
 from chronocl.modes.base import FaintSums
 from chronocl.modes.spec import IntegrationSpec
 
@@ -149,8 +150,7 @@ class LevelSession:
         if any(s not in arrays for s in steps):
             return None
         vr = tuple(value_range if value_range is not None else cv.metadata["value_range"])
-        u, k = self.engine.gather(cv.t_index, arrays, steps, vr, spec.mode == "change")
-        return Winners(u, k, steps, self.base.n_steps, vr, spec)
+        return gathered(cv.t_index, arrays, steps, self.base.n_steps, vr, spec, self.engine)
 
     def kept_winners(self, value_range: tuple | None = None) -> Winners | None:
         """The winners the kernels wrote with the chronovolume shown (nothing to gather), their

@@ -162,7 +162,7 @@ def winners(
     """The winners of an integrated window: its t_index (the selected step of each voxel, -1:
     none) and the window's raw resident values (step -> (Z, Y, X)), gathered by `engine`
     (`Engine.gather`: OpenCL's on its device; default numpy's, on the host threads, the
-    oracle the tests hold the others to; a session's are `LevelSession.winners`)."""
+    oracle the tests hold the others to). A session's: `LevelSession.winners`."""
     gather = on_host if engine is None else engine.gather
     u, k = gather(t_index, arrays, steps, value_range, spec.mode == "change")
     return Winners(u, k, tuple(steps), n_steps, tuple(value_range), spec)
