@@ -25,6 +25,8 @@ pytest.importorskip("anywidget")
 pytest.importorskip("jupyterlab")
 pytest.importorskip("nbformat")
 
+from chronocl.notebook.widget import OWN_IDS  # noqa: E402
+
 from .jupyter_lab import (  # noqa: E402
     NOTEBOOK_READY,
     cell_output,
@@ -182,6 +184,25 @@ def settle(page, before: dict | None) -> dict:
     return last(page)
 
 
+def edits_answered(page, viewer: str, seq: int) -> dict:
+    """Wait until the kernel has the page's edits: a settled frame after frame `seq` answers the
+    last update the page sent, or a later one of the page's (the kernel's own requests are
+    numbered from OWN_IDS). The page sends its pending update on the next animation frame, so
+    two frames on it has gone; a cell run sooner could overtake it. Returns that frame."""
+    sent = page.evaluate(
+        "() => new Promise((done) => requestAnimationFrame(() => "
+        f"requestAnimationFrame(() => done({viewer}.sent))))"
+    )
+    assert sent > 0  # (0: the page had no connection to send it on)
+    page.wait_for_function(
+        f"([seq, id, own]) => {{ const l = {viewer}.last; return !!l && l.seq > seq && "
+        "l.id >= id && l.id < own && l.quality === 'full' && !l.refining; }",
+        arg=[seq, sent, OWN_IDS],
+        timeout=60_000,
+    )
+    return page.evaluate(f"() => {viewer}.last")
+
+
 def test_show_in_jupyterlab_is_driven_from_code_and_by_hand(notebook, lab, tmp_path):
     page, problems = notebook
 
@@ -228,7 +249,7 @@ def test_show_in_jupyterlab_is_driven_from_code_and_by_hand(notebook, lab, tmp_p
         "s.time_tf.color === 'lightness'; }",
         timeout=30_000,
     )
-    settle(page, after)
+    edits_answered(page, VIEWER, after["seq"])
     run_cell(page, 2)
     state = cell_output(page, 2, "STATE")
     assert state["mode"] == "mean"

@@ -24,7 +24,7 @@ pytest.importorskip("anywidget")
 pytest.importorskip("marimo")
 
 from .jupyter_lab import free_port, wait_for_port
-from .test_notebook_browser import lit_share
+from .test_notebook_browser import edits_answered, lit_share
 from .viewer_helpers import CHROMIUM, launch_browser
 
 pytestmark = pytest.mark.skipif(
@@ -217,8 +217,7 @@ def test_show_in_marimo_draws_and_follows_code_and_hand(browser, marimo_app, tmp
             f"() => {{ const s = {VIEWER}.S.state.window; return s.t0 === 0 && s.t1 === 5; }}",
             timeout=30_000,
         )
-        page.wait_for_function(SETTLED, arg=[after["seq"]], timeout=60_000)
-        assert last(page)["digest"] != after["digest"]
+        assert edits_answered(page, VIEWER, after["seq"])["digest"] != after["digest"]
         page.get_by_role("button", name="read state").click()
         assert read_state(page, 1) == {"reads": 1, "mode": "max", "window": [0, 5, 1]}
         page.screenshot(path=str(tmp_path / "marimo.png"))
