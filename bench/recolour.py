@@ -86,6 +86,13 @@ def edit(i: int, fitted) -> tuple[DataTF, TimeTF]:
     return DataTF(points=points, value_range=fitted), TimeTF.preset(TIME_COLOURS[i % 4])
 
 
+def _recoloured(s: Session, spec):
+    """`spec` fixed for the window of `s`'s finest level, which it only recolours."""
+    recolour = s.at(0).recolours(spec)
+    assert not isinstance(recolour, str), recolour
+    return recolour.spec
+
+
 def save(pixels: np.ndarray, path: Path) -> None:
     from PIL import Image
 
@@ -179,8 +186,7 @@ def main() -> None:
                 b = time.perf_counter()
                 vol = upload(rc, slot, cv)
             elif path == "bricks":  # PoCL recolours the bricks that may be coloured
-                new, reason = s.at(0).recolours(spec)
-                assert reason is None, reason
+                new = _recoloured(s, spec)
                 changed = brick_recolourer.apply(bricks, new, own.volume)
                 b = time.perf_counter()
                 vol = own.volume
@@ -188,8 +194,7 @@ def main() -> None:
                 held = changed.coloured
                 rewritten[i] = changed.rewritten / changed.coloured.size
             else:  # the compute pass rewrites the texture: nothing uploaded
-                new, reason = s.at(0).recolours(spec)
-                assert reason is None, reason
+                new = _recoloured(s, spec)
                 changed = rec.apply(rv, new, slot.volume)
                 show(changed, series.spacing)
                 vol = changed.volume

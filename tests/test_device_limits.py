@@ -76,9 +76,10 @@ def _run_all(series: TimeSeries, mode: str) -> dict[str, np.ndarray]:
                 keep(f"slide{move:+d}.display{display}", s.slide(move))
             keep(f"edit.display{display}", s.set_spec(_spec(mode, EDIT)))
             if mode in RECOLOURED and not display:
-                _, reason = s.at(0).recolours(_spec(mode, EDIT))
+                recolour = s.at(0).recolours(_spec(mode, EDIT))
+                assert not isinstance(recolour, str), recolour
                 w = s.at(0).winners()  # the OpenCL engine's gather
-                assert reason is None and w is not None, reason
+                assert w is not None
                 out["winners.u"], out["winners.k"] = w.u.copy(), w.k.copy()
     curve = probe(series, region=((3, 40), (2, 30), (5, 33)))
     out["probe"] = np.stack([curve.values, curve.min, curve.max])

@@ -302,8 +302,7 @@ def test_session_recolours_after_slides_both_ways(gl, mode) -> None:
         for move in (+2, -3, +1):
             s.slide(move)
             assert s.stats["path"] == "incremental"
-            fixed, reason = s.at(0).recolours(edit)
-            assert reason is None, reason
+            fixed = _recoloured(s, edit)
             w = s.at(0).winners()
             assert w is not None and w.steps == s.selection.steps
             want = integrate(series, s.selection, spec=fixed, engine="opencl")
@@ -325,8 +324,7 @@ def test_max_min_recolour_at_another_value_range(mode) -> None:
         s.set_window(1, 7)
         for vr in [(0.0, 12.0), (-4.0, 5.0)]:  # each clips many voxels to u = 0 or 1
             edit = _spec(mode, DataTF(), TimeTF.preset("warm-cool"), value_range=vr)
-            fixed, reason = s.at(0).recolours(edit)
-            assert reason is None, reason
+            fixed = _recoloured(s, edit)
             w = s.at(0).winners(vr)
             assert w.value_range == vr and w.steps == s.selection.steps
             want = integrate(series, s.selection, spec=fixed, engine="opencl")
@@ -349,6 +347,7 @@ def test_a_session_says_whether_an_edit_only_recolours_what_it_showed() -> None:
         shown = s.set_window(1, 7)
         sel = s.selection
         full, fixed, at = s.recolours(edit, sel, shown)
+        assert s.at(0).recolours(edit) == (full, fixed, at)
         assert full is s.at(0) and fixed.time_tf == edit.time_tf and at == (-10.0, 30.0)
         wider = dataclasses.replace(edit, data_tf=DataTF(value_range=(-20.0, 40.0)))
         assert s.recolours(wider, sel, shown).value_range == (-20.0, 40.0)  # max: its own range
@@ -365,6 +364,13 @@ def test_a_session_says_whether_an_edit_only_recolours_what_it_showed() -> None:
         shown = s.refine()  # at full resolution: it recolours
         full, fixed, _ = s.recolours(edit, s.selection, shown)
         assert full is s.at(0) and s.shown_level == 0
+
+
+def _recoloured(s: Session, edit: IntegrationSpec) -> IntegrationSpec:
+    """`edit` fixed for the window of `s`'s finest level, which it only recolours."""
+    recolour = s.at(0).recolours(edit)
+    assert not isinstance(recolour, str), recolour
+    return recolour.spec
 
 
 def _recoloured_points(spec):
@@ -502,7 +508,7 @@ def test_recolouring_writes_into_the_rgba8_shown(mode) -> None:
         try:
             before = prepared.output[1].copy()  # the bricks the shown spec may colour
             for edit in [*edits, spec]:
-                fixed = s.at(0).recolours(edit)[0]
+                fixed = _recoloured(s, edit)
                 changed = bricks.apply(prepared, fixed)
                 assert changed.rgba is cv.rgba
                 np.testing.assert_array_equal(changed.rgba, _whole(w, fixed))
@@ -533,7 +539,7 @@ def test_brick_outputs_taken_over_by_the_next_window_recolour_it_right(mode) -> 
         bricks = BrickRecolourer()
         first = bricks.prepare(s.at(0).winners())
         for edit in edits:
-            bricks.apply(first, s.at(0).recolours(edit)[0])
+            bricks.apply(first, _recoloured(s, edit))
         held = first.take_held()
         first.release()
         s.set_window(5, 11)
@@ -542,7 +548,7 @@ def test_brick_outputs_taken_over_by_the_next_window_recolour_it_right(mode) -> 
         try:
             assert taken.output[0] is held[0]
             for edit in [*edits[::-1], spec]:
-                fixed = s.at(0).recolours(edit)[0]
+                fixed = _recoloured(s, edit)
                 np.testing.assert_array_equal(bricks.apply(taken, fixed).rgba, _whole(w, fixed))
         finally:
             taken.release()

@@ -33,7 +33,7 @@ from chronocl.core.memory import recycled_empty
 from chronocl.core.selection import Selection
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.engine.buffers import DeviceLimitError
-from chronocl.integration.interactive.session import Recolour
+from chronocl.integration.interactive.level_session import Recolour
 from chronocl.integration.interactive.winners import RECOLOURED
 from chronocl.modes.spec import IntegrationSpec
 from chronocl.render.recolour import Changed, Recolourer, show

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -169,16 +170,17 @@ class LevelSession:
         """The value range `spec` normalises the window's values by."""
         return tuple(map(float, value_range(self.series, self.window(), spec)))
 
-    def recolours(self, spec: IntegrationSpec) -> tuple[IntegrationSpec, str | None]:
-        """`spec` fixed for the window, and None where it only recolours (else why not)."""
-        sel = self.window()
-        _, new = fixed(self.base, self.asked, self.spec, spec, sel)
+    def recolours(self, spec: IntegrationSpec) -> Recolour | str:
+        """Where `spec` only recolours the last chronovolume: this session, `spec` fixed for
+        the window and the value range it colours at; else why not, in one line."""
         if self._cv is None:
-            return new, "nothing is integrated yet"
+            return "nothing is integrated yet"
+        _, new = fixed(self.base, self.asked, self.spec, spec, self.window())
         steps = tuple(self._cv.metadata["selection"]["steps"])
         old_range = tuple(self._cv.metadata["value_range"])
-        why = why_not(self.spec, new, old_range, self.value_range_of(new), steps, self.base.n_steps)
-        return new, why
+        at = self.value_range_of(new)
+        why = why_not(self.spec, new, old_range, at, steps, self.base.n_steps)
+        return Recolour(self, new, at) if why is None else why
 
     def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
         """Show `cv`, this window recoloured under `spec` (asked as `asked`), as if integrated.
@@ -453,6 +455,14 @@ class LevelSession:
             # kept by a recolouring's stats (`Session.adopt`): the window still streams
             "streamed": reason if path == "streamed" else None,
         }
+
+
+class Recolour(NamedTuple):
+    """An edit that only recolours the window shown (`LevelSession.recolours`)."""
+
+    level: LevelSession  # the session that holds the window's winners
+    spec: IntegrationSpec  # the edit's spec, fixed for the window
+    value_range: tuple[float, float]  # the range it colours at (max/min: may be another)
 
 
 class SessionPool:

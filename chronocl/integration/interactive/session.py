@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import NamedTuple
 
 from chronocl.core.errors import InvalidParameterError
 from chronocl.core.process_memory import Streaming
@@ -32,18 +31,10 @@ from chronocl.data.series import TimeSeries
 from chronocl.data.window import WindowManager
 from chronocl.integration.inmemory import check_level
 from chronocl.integration.interactive.costs import Costs
-from chronocl.integration.interactive.level_session import LevelSession, SessionPool
+from chronocl.integration.interactive.level_session import LevelSession, Recolour, SessionPool
 from chronocl.integration.interactive.moves import Window, changed, fixed, jump, slid
 from chronocl.integration.interactive.settings import manager_key, settings
 from chronocl.modes.spec import IntegrationSpec
-
-
-class Recolour(NamedTuple):
-    """An edit that only recolours the window shown (`Session.recolours`)."""
-
-    level: LevelSession  # the finest level's session, which holds the window's winners
-    spec: IntegrationSpec  # the edit's spec, fixed for the window
-    value_range: tuple[float, float]  # the range it colours at (max/min: may be another)
 
 
 class LatencyModel:
@@ -290,9 +281,8 @@ class Session:
         self, spec: IntegrationSpec, selection: Selection, shown: Chronovolume
     ) -> Recolour | str:
         """Where `spec` only recolours `shown`, the chronovolume this session last returned,
-        of `selection` at the finest level: that level's session, `spec` fixed for its window
-        (`LevelSession.recolours`) and the value range it colours at; else why not, in one
-        line."""
+        of `selection` at the finest level, that level's `LevelSession.recolours`; else why
+        not, in one line."""
         if self.selection != selection:
             return "another window"
         if self.shown != self.policy.finest:
@@ -300,12 +290,12 @@ class Session:
         full = self.at(self.policy.finest, spec)
         if full is None or full.selection != selection:
             return "the window is not integrated at full resolution"
-        new, reason = full.recolours(spec)  # a reason when it has integrated nothing
-        if reason is not None:
-            return reason
+        recolour = full.recolours(spec)
+        if isinstance(recolour, str):
+            return recolour
         if self._cv is not shown:
             return "the full-resolution window holds another frame"
-        return Recolour(full, new, full.value_range_of(new))
+        return recolour
 
     def adopt(self, asked: IntegrationSpec, spec: IntegrationSpec, cv: Chronovolume) -> None:
         """Show `cv`, the window at the finest level recoloured under `spec` (asked as
