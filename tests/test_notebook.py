@@ -179,6 +179,70 @@ def test_the_page_camera_comes_back(widget):
     assert (widget.camera["azimuth"], widget.camera["zoom"]) == (123.0, 2.0) and len(seen) == 1
 
 
+def test_an_observer_that_sets_an_attribute_sets_the_worker_too(widget):
+    """An observer reacting to a change (the page's edit, or a set from code) by setting an
+    attribute sends it to the worker as a cell would, once every attribute is set."""
+    seen: list = []
+
+    def to_max(change) -> None:
+        seen.append((widget.window, widget.mode))  # every attribute is the worker's by now
+        if change["new"][0] == 4:
+            widget.mode = "max"
+
+    widget.mode = "alpha"
+    widget.observe(to_max, names="window")
+    try:
+        from_page(widget, {"type": "update", "id": 15, "window": {"t0": 4, "t1": 8, "stride": 1}})
+        assert widget.mode == "max" and widget._worker.state.views[0][0] == "max"
+        widget.window = (1, 5)
+        widget.mode = "alpha"
+        widget.window = (4, 6)  # from code
+        assert widget.mode == "max" and widget._worker.state.views[0][0] == "max"
+        assert seen == [((4, 8, 1), "alpha"), ((1, 5, 1), "max"), ((4, 6, 1), "alpha")]
+    finally:
+        widget.unobserve(to_max, names="window")
+
+
+def test_the_page_edits_on_another_thread_never_lose_a_set_from_code():
+    """JupyterLab 4 sends comm messages over subshells (`commsOverSubshells`), so ipykernel 7
+    may hand the page's edits to the widget on another thread while a cell sets attributes:
+    every set from code still reaches the worker, each page edit comes back whole, and the
+    attributes end as the worker's state."""
+    w = chronocl.show(vortex(), name="vortex")
+    stop, errors = threading.Event(), []
+    # an observer that takes its time, as a user's may: the page's edit is being applied then
+    w.observe(lambda change: time.sleep(0.002), names="window")
+
+    def page() -> None:
+        i = 0
+        while not stop.is_set():
+            i += 1
+            t0 = i % 6
+            window = {"t0": t0, "t1": t0 + 4, "stride": 1}
+            try:
+                from_page(w, {"type": "update", "id": i, "window": window})
+            except Exception as exc:  # (a failure here would leave the test blind)
+                errors.append(exc)
+                return
+
+    edits = threading.Thread(target=page)
+    edits.start()
+    try:
+        for i in range(300):
+            mode = ("max", "min", "alpha")[i % 3]
+            w.mode = mode
+            assert w._worker.state.views[0][0] == mode, f"set {i} never reached the worker"
+        stop.set()
+        edits.join(30)
+        assert errors == []
+        worker = synced.from_state(w._described())
+        assert {k: getattr(w, k) for k in worker} == worker
+    finally:
+        stop.set()
+        edits.join(30)
+        w.close()
+
+
 def test_a_bad_page_message_changes_nothing(widget):
     window = widget.window
     from_page(widget, {"type": "update", "id": 14, "window": {"t0": 5, "t1": 2}})

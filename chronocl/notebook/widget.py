@@ -10,6 +10,9 @@ The synced attributes (`window`, `mode`, `views`, `data_tf`, `time_tf`, `camera`
 chronocl/notebook/state.py) are the worker's state: setting one sends the update to the
 worker (validated as the page's are; a bad value raises and changes nothing) and tells the
 page, which shows it; the page's own edits come back into them. `observe` sees both.
+JupyterLab 4 sends comm messages over subshells, so ipykernel 7 may hand the page's messages
+to the widget on another thread than the cells': an edit and a set from code are applied one
+at a time (`_sync`), each whole.
 """
 
 from __future__ import annotations
@@ -131,6 +134,8 @@ class ChronoclWidget(anywidget.AnyWidget):
     camera = traitlets.Dict(help="azimuth, elevation, zoom, fov, projection, up")
     # How often each view says it is alive (chronocl/notebook/views.py), for widget.js.
     _heartbeat_s = traitlets.Float(shown_views.HEARTBEAT_S).tag(sync=True)
+    _syncing_in: int | None = None  # (`__init__`)
+    _held: list | None = None  # the changes `_pull` made, for their observers once all are set
     _closed = True  # until its worker runs (a widget that failed to start has nothing to free)
     _live: ClientWorker | None = None  # the worker; None while suspended (`_worker` resumes)
     # Set while a suspended worker is being ended (outside `_life`): cleared, with its share of
@@ -148,7 +153,11 @@ class ChronoclWidget(anywidget.AnyWidget):
         store: tuple | None = None,
     ) -> None:
         check_gl()
-        self._syncing = True  # the attributes' first values are the worker's
+        # The page's edits (the comm's thread) and sets from code (a cell's), one at a time;
+        # `_syncing_in`: the thread setting the attributes to the worker's state (at first,
+        # this one: their first values are the worker's), whose sets are not sent back.
+        self._sync = threading.RLock()
+        self._syncing_in = threading.get_ident()
         super().__init__(height=height, _heartbeat_s=shown_views.HEARTBEAT_S)
         self._datasets = [dataset]
         self._downloads = Downloads()
@@ -200,7 +209,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         self._poller = threading.Thread(target=self._poll, daemon=True)
         self._poller.start()
 
-    # -- the page's messages (the kernel's thread) ------------------------------------------
+    # -- the page's messages (the kernel's shell or a subshell's thread) ---------------------
     def _on_msg(self, _widget, content, _buffers) -> None:
         if self._closed or not isinstance(content, dict):
             return
@@ -213,12 +222,13 @@ class ChronoclWidget(anywidget.AnyWidget):
             return
         if "text" not in content:
             return  # not the viewer's (anywidget's own messages)
-        self._drawing = True  # the page's requests are answered with frames from now on
-        reply = self._answer(content["text"])
-        if reply is not None:
-            self.send({"text": json.dumps(reply)})
-        if reply is None or reply.get("type") == "dataset":
-            self._pull(tell_page=False)  # the page's edit, into the attributes
+        with self._sync:
+            self._drawing = True  # the page's requests are answered with frames from now on
+            reply = self._answer(content["text"])
+            if reply is not None:
+                self.send({"text": json.dumps(reply)})
+            if reply is None or reply.get("type") == "dataset":
+                self._pull(tell_page=False)  # the page's edit, into the attributes
 
     def _answer(self, text: object) -> dict | None:
         """The page's message answered as the socket answers it; an `open` (a view shown, or
@@ -326,19 +336,30 @@ class ChronoclWidget(anywidget.AnyWidget):
         return describe_state(self._worker.state)
 
     def _pull(self, tell_page: bool) -> None:
-        """The attributes set from the worker's state (observers called for those that
-        changed); `tell_page`: the page is sent the state too."""
-        described = self._described()
-        self._syncing = True
-        try:
-            with self.hold_trait_notifications():
+        """The attributes set from the worker's state; `tell_page`: the page is sent the state
+        too. Then the observers of those that changed are called, all set by then: what they
+        set goes to the worker as any set from code does."""
+        held: list = []
+        with self._sync:
+            described = self._described()
+            self._syncing_in, self._held = threading.get_ident(), held
+            try:
                 for name, value in synced.from_state(described).items():
                     setattr(self, name, value)
-        finally:
-            self._syncing = False
-        if tell_page:
-            fields = {k: described[k] for k in ("window", "views", "camera", "data_tf", "time_tf")}
-            self.send({"text": json.dumps({"type": "state", "state": fields})})
+            finally:
+                self._syncing_in = self._held = None
+            if tell_page:
+                told = ("window", "views", "camera", "data_tf", "time_tf")
+                fields = {k: described[k] for k in told}
+                self.send({"text": json.dumps({"type": "state", "state": fields})})
+        for change in held:
+            super().notify_change(change)
+
+    def notify_change(self, change) -> None:
+        if self._held is not None and self._syncing_in == threading.get_ident():
+            self._held.append(change)
+        else:
+            super().notify_change(change)
 
     def _set(self, name: str, value: object) -> object:
         """Apply `name = value` to the worker (as the page's update would be) and tell the
@@ -360,9 +381,18 @@ class ChronoclWidget(anywidget.AnyWidget):
         self._pull(tell_page=True)
         return getattr(self, name)
 
+    def __setattr__(self, name: str, value: object) -> None:
+        # A set from code waits while a page's edit is applied on another thread: the set
+        # and the edit each whole, in one order for the worker and the attributes.
+        if name in synced.SYNCED and self._syncing_in != threading.get_ident():
+            with self._sync:
+                super().__setattr__(name, value)
+        else:
+            super().__setattr__(name, value)
+
     @traitlets.validate(*synced.SYNCED)
     def _validate(self, proposal):
-        if self._syncing:
+        if self._syncing_in == threading.get_ident():
             return proposal["value"]
         return self._set(proposal["trait"].name, proposal["value"])
 
