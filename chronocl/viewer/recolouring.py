@@ -289,10 +289,10 @@ def _held_by(prepared: Prepared, shown: Chronovolume, slot: ViewSlot) -> np.ndar
 
 
 def _recolourable(slot: ViewSlot, spec: IntegrationSpec, sel: Selection) -> Recolour | str:
-    """The recolouring (`Session.recolours`: the level-0 session, `spec` fixed for its window
-    and its value range) where the slot shows window `sel` integrated at full resolution, in
-    its texture, and `spec` only recolours it; else why not (one line, for the frame's
-    header)."""
+    """The recolouring (`Session.recolours`, the level-0 `LevelSession.recolours`: that
+    session, `spec` fixed for its window and its value range) where the slot shows window
+    `sel` integrated at full resolution, in its texture, and `spec` only recolours it; else
+    why not (one line, for the frame's header)."""
     s, shown = slot.session, slot.cv
     if spec.mode not in RECOLOURED:
         return f"{spec.mode} mixes every step's colour"
