@@ -203,6 +203,44 @@ def test_an_observer_that_sets_an_attribute_sets_the_worker_too(widget):
         widget.unobserve(to_max, names="window")
 
 
+def test_widgets_whose_observers_set_each_other_never_wait_for_each_other():
+    """Two widgets whose camera observers set the other's camera, one turned from code while the
+    other is turned on the page (on another thread): both finish, each observer called after
+    the lock is let go, and the cameras end as one."""
+    w1, w2 = chronocl.show(vortex()[:4], name="one"), chronocl.show(vortex()[:4], name="two")
+
+    def follow(other):
+        def observer(change) -> None:
+            time.sleep(0.002)  # (a user's takes its time)
+            other.camera = {"azimuth": change["new"]["azimuth"]}
+
+        return observer
+
+    w1.observe(follow(w2), names="camera")
+    w2.observe(follow(w1), names="camera")
+    try:
+
+        def code() -> None:
+            for i in range(20):
+                w1.camera = {"azimuth": float(i)}
+
+        def page() -> None:
+            for i in range(20):
+                from_page(w2, {"type": "update", "id": i + 1, "camera": {"azimuth": 100.0 + i}})
+
+        threads = [threading.Thread(target=f, daemon=True) for f in (code, page)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(60)
+        assert not any(t.is_alive() for t in threads), "the widgets waited for each other"
+        assert w1.camera["azimuth"] == w2.camera["azimuth"]
+        assert w1._worker.state.camera.azimuth == w1.camera["azimuth"]
+    finally:
+        w1.close()
+        w2.close()
+
+
 def test_the_page_edits_on_another_thread_never_lose_a_set_from_code():
     """JupyterLab 4 sends comm messages over subshells (`commsOverSubshells`), so ipykernel 7
     may hand the page's edits to the widget on another thread while a cell sets attributes:

@@ -12,7 +12,8 @@ worker (validated as the page's are; a bad value raises and changes nothing) and
 page, which shows it; the page's own edits come back into them. `observe` sees both.
 JupyterLab 4 sends comm messages over subshells, so ipykernel 7 may hand the page's messages
 to the widget on another thread than the cells': an edit and a set from code are applied one
-at a time (`_sync`), each whole.
+at a time (`_synced`), each whole, and the observers are called after, in order, the widget
+free for other threads meanwhile.
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ import json
 import threading
 import time
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import anywidget
@@ -135,7 +137,6 @@ class ChronoclWidget(anywidget.AnyWidget):
     # How often each view says it is alive (chronocl/notebook/views.py), for widget.js.
     _heartbeat_s = traitlets.Float(shown_views.HEARTBEAT_S).tag(sync=True)
     _syncing_in: int | None = None  # (`__init__`)
-    _held: list | None = None  # the changes `_pull` made, for their observers once all are set
     _closed = True  # until its worker runs (a widget that failed to start has nothing to free)
     _live: ClientWorker | None = None  # the worker; None while suspended (`_worker` resumes)
     # Set while a suspended worker is being ended (outside `_life`): cleared, with its share of
@@ -153,10 +154,12 @@ class ChronoclWidget(anywidget.AnyWidget):
         store: tuple | None = None,
     ) -> None:
         check_gl()
-        # The page's edits (the comm's thread) and sets from code (a cell's), one at a time;
-        # `_syncing_in`: the thread setting the attributes to the worker's state (at first,
-        # this one: their first values are the worker's), whose sets are not sent back.
+        # The page's edits (the comm's thread) and sets from code (a cell's), one at a time
+        # (`_synced`); `_syncing_in`: the thread setting the attributes to the worker's state
+        # (at first, this one: their first values are the worker's), whose sets are not sent
+        # back; `_due`: per thread, the changes whose observers are still to be called.
         self._sync = threading.RLock()
+        self._due = threading.local()
         self._syncing_in = threading.get_ident()
         super().__init__(height=height, _heartbeat_s=shown_views.HEARTBEAT_S)
         self._datasets = [dataset]
@@ -222,7 +225,7 @@ class ChronoclWidget(anywidget.AnyWidget):
             return
         if "text" not in content:
             return  # not the viewer's (anywidget's own messages)
-        with self._sync:
+        with self._synced():
             self._drawing = True  # the page's requests are answered with frames from now on
             reply = self._answer(content["text"])
             if reply is not None:
@@ -337,27 +340,55 @@ class ChronoclWidget(anywidget.AnyWidget):
 
     def _pull(self, tell_page: bool) -> None:
         """The attributes set from the worker's state; `tell_page`: the page is sent the state
-        too. Then the observers of those that changed are called, all set by then: what they
-        set goes to the worker as any set from code does."""
-        held: list = []
-        with self._sync:
+        too. The observers of those that changed are called once the edit or set that pulled
+        is done (`_synced`)."""
+        with self._synced():
             described = self._described()
-            self._syncing_in, self._held = threading.get_ident(), held
+            self._syncing_in = threading.get_ident()
             try:
                 for name, value in synced.from_state(described).items():
                     setattr(self, name, value)
             finally:
-                self._syncing_in = self._held = None
+                self._syncing_in = None
             if tell_page:
                 told = ("window", "views", "camera", "data_tf", "time_tf")
                 fields = {k: described[k] for k in told}
                 self.send({"text": json.dumps({"type": "state", "state": fields})})
-        for change in held:
-            super().notify_change(change)
+
+    @contextmanager
+    def _synced(self) -> Iterator[None]:
+        """`_sync` held: a page's edit or a set from code, whole. Once this thread's outermost
+        one is done and the lock let go, the observers of the attributes it changed are called,
+        in order; a set an observer makes is applied at once and its changes are called after
+        (two widgets whose observers set each other never wait for each other's lock)."""
+        due = self._due
+        outer = not getattr(due, "depth", 0) and not getattr(due, "calling", False)
+        if outer:
+            due.changes = []
+        try:
+            with self._sync:
+                due.depth = getattr(due, "depth", 0) + 1
+                try:
+                    yield
+                finally:
+                    due.depth -= 1
+        finally:
+            if outer:
+                due.calling = True
+                try:
+                    while due.changes:
+                        super().notify_change(due.changes.pop(0))
+                finally:
+                    due.calling, due.changes = False, None
 
     def notify_change(self, change) -> None:
-        if self._held is not None and self._syncing_in == threading.get_ident():
-            self._held.append(change)
+        due = (
+            getattr(self._due, "changes", None)
+            if self._syncing_in == threading.get_ident()
+            else None
+        )
+        if due is not None:
+            due.append(change)  # (`_pull`'s: called by `_synced`)
         else:
             super().notify_change(change)
 
@@ -385,10 +416,21 @@ class ChronoclWidget(anywidget.AnyWidget):
         # A set from code waits while a page's edit is applied on another thread: the set
         # and the edit each whole, in one order for the worker and the attributes.
         if name in synced.SYNCED and self._syncing_in != threading.get_ident():
-            with self._sync:
+            with self._synced():
                 super().__setattr__(name, value)
         else:
             super().__setattr__(name, value)
+
+    def set_trait(self, name: str, value: object) -> None:
+        if name in synced.SYNCED and self._syncing_in != threading.get_ident():
+            with self._synced():
+                super().set_trait(name, value)
+        else:
+            super().set_trait(name, value)
+
+    def set_state(self, sync_data) -> None:
+        with self._synced():  # (the front end's sync of `height`: its notifications held)
+            super().set_state(sync_data)
 
     @traitlets.validate(*synced.SYNCED)
     def _validate(self, proposal):
@@ -419,11 +461,12 @@ class ChronoclWidget(anywidget.AnyWidget):
         widget), one is made for the state now. FrameFailedError at once where the worker
         failed to make it (the error the page shows, in one line)."""
         self._check_open()
-        if not self._drawing:
-            self._drawing = True
-            rid = self._own_id()
-            self._worker.update({"type": "update", "id": rid})
-            self._newest_id = rid
+        with self._sync:  # (a page's first request may come meanwhile: it is the newest then)
+            if not self._drawing:
+                self._drawing = True
+                rid = self._own_id()
+                self._worker.update({"type": "update", "id": rid})
+                self._newest_id = rid
         end = time.monotonic() + timeout
         with self._cond:
             self._busy += 1  # not suspended while it waits
