@@ -203,6 +203,35 @@ def test_an_observer_that_sets_an_attribute_sets_the_worker_too(widget):
         widget.unobserve(to_max, names="window")
 
 
+def test_observers_are_called_with_the_widget_free(widget):
+    """Every observer runs once its change is done, with the widget's lock let go (another
+    thread may take it): after a page's edit, a set from code, and the front end's own sync of
+    `height` (ipywidgets' `set_state`)."""
+    free: list = []
+
+    def probe(change) -> None:
+        def take() -> None:
+            got = widget._sync.acquire(timeout=0)
+            free.append((change["name"], got))
+            if got:
+                widget._sync.release()
+
+        t = threading.Thread(target=take)
+        t.start()
+        t.join()
+
+    widget.observe(probe, names=["height", "window"])
+    try:
+        from_page(widget, {"type": "update", "id": 16, "window": {"t0": 2, "t1": 7, "stride": 1}})
+        widget.window = (3, 8)
+        state = {"method": "update", "state": {"height": 444}, "buffer_paths": []}
+        widget._handle_msg({"content": {"data": state}, "buffers": []})
+        assert widget.height == 444
+        assert free == [("window", True), ("window", True), ("height", True)]
+    finally:
+        widget.unobserve(probe, names=["height", "window"])
+
+
 def test_widgets_whose_observers_set_each_other_never_wait_for_each_other():
     """Two widgets whose camera observers set the other's camera, one turned from code while the
     other is turned on the page (on another thread): both finish, each observer called after

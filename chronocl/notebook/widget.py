@@ -12,8 +12,8 @@ worker (validated as the page's are; a bad value raises and changes nothing) and
 page, which shows it; the page's own edits come back into them. `observe` sees both.
 JupyterLab 4 sends comm messages over subshells, so ipykernel 7 may hand the page's messages
 to the widget on another thread than the cells': an edit and a set from code are applied one
-at a time (`_synced`), each whole, and the observers are called after, in order, the widget
-free for other threads meanwhile.
+at a time (`_synced`), each whole, and the observers are called after, the widget free for
+other threads meanwhile (each thread's in the order of its changes).
 """
 
 from __future__ import annotations
@@ -377,20 +377,20 @@ class ChronoclWidget(anywidget.AnyWidget):
                 due.calling = True
                 try:
                     while due.changes:
-                        super().notify_change(due.changes.pop(0))
+                        super()._notify_observers(due.changes.pop(0))
                 finally:
                     due.calling, due.changes = False, None
 
-    def notify_change(self, change) -> None:
-        due = (
-            getattr(self._due, "changes", None)
-            if self._syncing_in == threading.get_ident()
-            else None
-        )
-        if due is not None:
-            due.append(change)  # (`_pull`'s: called by `_synced`)
+    def _notify_observers(self, event) -> None:
+        # A change made under `_synced` on this thread (a pull, the front end's `set_state`)
+        # reaches its observers once the lock is let go; the page was told already
+        # (`Widget.notify_change`).
+        due = getattr(self, "_due", None)
+        changes = getattr(due, "changes", None) if getattr(due, "depth", 0) else None
+        if changes is not None and event["type"] == "change":
+            changes.append(event)
         else:
-            super().notify_change(change)
+            super()._notify_observers(event)
 
     def _set(self, name: str, value: object) -> object:
         """Apply `name = value` to the worker (as the page's update would be) and tell the
@@ -429,14 +429,15 @@ class ChronoclWidget(anywidget.AnyWidget):
             super().set_trait(name, value)
 
     def set_state(self, sync_data) -> None:
-        with self._synced():  # (the front end's sync of `height`: its notifications held)
+        with self._synced():  # (the front end's sync of `height`: traitlets' checks held)
             super().set_state(sync_data)
 
     @traitlets.validate(*synced.SYNCED)
     def _validate(self, proposal):
         if self._syncing_in == threading.get_ident():
             return proposal["value"]
-        return self._set(proposal["trait"].name, proposal["value"])
+        with self._synced():  # (already, but for a set held by `hold_trait_notifications`)
+            return self._set(proposal["trait"].name, proposal["value"])
 
     # -- pictures, chronovolumes, sessions ---------------------------------------------------
     def warm(self) -> None:
@@ -461,16 +462,18 @@ class ChronoclWidget(anywidget.AnyWidget):
         widget), one is made for the state now. FrameFailedError at once where the worker
         failed to make it (the error the page shows, in one line)."""
         self._check_open()
-        with self._sync:  # (a page's first request may come meanwhile: it is the newest then)
-            if not self._drawing:
-                self._drawing = True
-                rid = self._own_id()
-                self._worker.update({"type": "update", "id": rid})
-                self._newest_id = rid
-        end = time.monotonic() + timeout
         with self._cond:
             self._busy += 1  # not suspended while it waits
-            try:
+        try:
+            # (a page's first request may come meanwhile: the newest then; a suspend clears
+            # `_drawing` under `_life`)
+            with self._sync, self._life:
+                if not self._drawing:
+                    rid = self._own_id()
+                    self._worker.update({"type": "update", "id": rid})
+                    self._drawing, self._newest_id = True, rid
+            end = time.monotonic() + timeout
+            with self._cond:
                 while True:
                     last = self.last_frame
                     if (
@@ -487,7 +490,8 @@ class ChronoclWidget(anywidget.AnyWidget):
                     if left <= 0 or self._closed:
                         raise InvalidParameterError(f"no settled frame came in {timeout:.0f} s")
                     self._cond.wait(min(left, 0.5))
-            finally:
+        finally:
+            with self._cond:
                 self._busy -= 1
 
     @property
