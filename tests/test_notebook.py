@@ -203,6 +203,30 @@ def test_an_observer_that_sets_an_attribute_sets_the_worker_too(widget):
         widget.unobserve(to_max, names="window")
 
 
+def test_sets_held_together_each_reach_the_worker_and_a_bad_one_changes_nothing(widget):
+    """Sets in `hold_trait_notifications` are applied and checked at once (as `set_trait`'s):
+    both reach the worker, their observers are called after the block; a bad one raises and
+    leaves its attribute as it was."""
+    seen = changes(widget, "window")
+    with widget.hold_trait_notifications():
+        widget.mode = "min"
+        widget.window = (1, 6)
+        assert seen == []  # (held)
+    assert seen == [(1, 6, 1)]
+    state = widget._worker.state
+    assert (state.views[0][0], widget.mode, widget.window) == ("min", "min", (1, 6, 1))
+    assert state.window == (1, 6, 1)
+    with pytest.raises(ChronoclError):
+        with widget.hold_trait_notifications():
+            widget.mode = "no such mode"
+    assert widget.mode == "min" and widget._worker.state.views[0][0] == "min"
+    widget.set_trait("mode", "max")
+    widget.set_trait("window", (2, 5))
+    state = widget._worker.state
+    assert (widget.mode, widget.window) == ("max", (2, 5, 1))
+    assert (state.views[0][0], state.window) == ("max", (2, 5, 1))
+
+
 def test_observers_are_called_with_the_widget_free(widget):
     """Every observer runs once its change is done, with the widget's lock let go (another
     thread may take it): after a page's edit, a set from code, and the front end's own sync of

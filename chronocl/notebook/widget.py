@@ -56,6 +56,7 @@ REQUEST_TIMEOUT_S = 120.0
 # the page uses, so that the page takes a frame answering one as the answer to its own.
 OWN_IDS = 2**52
 FRAMED = ("update", "open", "load")  # the requests a frame answers
+LOCKED = (*synced.SYNCED, "height")  # the attributes the page sets too: set under `_synced`
 FAILURES_KEPT = 32  # the frame failures remembered, by request id (the newest kept)
 # How long a widget no view shows keeps its worker before it is suspended (`suspended`): a
 # notebook re-rendering an output (a cell moved, an output area rebuilt, a notebook's tab
@@ -226,7 +227,8 @@ class ChronoclWidget(anywidget.AnyWidget):
         if "text" not in content:
             return  # not the viewer's (anywidget's own messages)
         with self._synced():
-            self._drawing = True  # the page's requests are answered with frames from now on
+            with self._life:  # (where a suspend clears it)
+                self._drawing = True  # the page's requests are answered with frames from now on
             reply = self._answer(content["text"])
             if reply is not None:
                 self.send({"text": json.dumps(reply)})
@@ -415,29 +417,37 @@ class ChronoclWidget(anywidget.AnyWidget):
     def __setattr__(self, name: str, value: object) -> None:
         # A set from code waits while a page's edit is applied on another thread: the set
         # and the edit each whole, in one order for the worker and the attributes.
-        if name in synced.SYNCED and self._syncing_in != threading.get_ident():
+        if name in LOCKED and self._syncing_in != threading.get_ident():
             with self._synced():
                 super().__setattr__(name, value)
         else:
             super().__setattr__(name, value)
 
     def set_trait(self, name: str, value: object) -> None:
-        if name in synced.SYNCED and self._syncing_in != threading.get_ident():
+        if name in LOCKED and self._syncing_in != threading.get_ident():
             with self._synced():
                 super().set_trait(name, value)
         else:
             super().set_trait(name, value)
 
     def set_state(self, sync_data) -> None:
-        with self._synced():  # (the front end's sync of `height`: traitlets' checks held)
+        with self._synced():  # (the front end's sync of `height`)
             super().set_state(sync_data)
+
+    @contextmanager
+    def hold_trait_notifications(self) -> Iterator[None]:
+        # Sets in it are applied and checked at once, as plain sets are (traitlets' deferred
+        # check of each would find it overwritten by the pull of the one checked before);
+        # the observers wait until the block is done and the lock let go (`_synced`), and a
+        # page's edit waits for the block. (`trait_set`, ipywidgets' `set_state` use it.)
+        with self._synced():
+            yield
 
     @traitlets.validate(*synced.SYNCED)
     def _validate(self, proposal):
         if self._syncing_in == threading.get_ident():
             return proposal["value"]
-        with self._synced():  # (already, but for a set held by `hold_trait_notifications`)
-            return self._set(proposal["trait"].name, proposal["value"])
+        return self._set(proposal["trait"].name, proposal["value"])
 
     # -- pictures, chronovolumes, sessions ---------------------------------------------------
     def warm(self) -> None:
@@ -461,13 +471,13 @@ class ChronoclWidget(anywidget.AnyWidget):
         made (`frames`), waited for. Where no frame was wanted yet (no page has shown the
         widget), one is made for the state now. FrameFailedError at once where the worker
         failed to make it (the error the page shows, in one line)."""
-        self._check_open()
         with self._cond:
             self._busy += 1  # not suspended while it waits
         try:
             # (a page's first request may come meanwhile: the newest then; a suspend clears
-            # `_drawing` under `_life`)
+            # `_drawing` and a close sets `_closed` under `_life`)
             with self._sync, self._life:
+                self._check_open()
                 if not self._drawing:
                     rid = self._own_id()
                     self._worker.update({"type": "update", "id": rid})
@@ -486,8 +496,9 @@ class ChronoclWidget(anywidget.AnyWidget):
                     failed = self._failed.get(self._newest_id)
                     if failed is not None:
                         raise FrameFailedError(f"the frame failed: {failed}")
+                    self._check_open()
                     left = end - time.monotonic()
-                    if left <= 0 or self._closed:
+                    if left <= 0:
                         raise InvalidParameterError(f"no settled frame came in {timeout:.0f} s")
                     self._cond.wait(min(left, 0.5))
         finally:
@@ -512,8 +523,9 @@ class ChronoclWidget(anywidget.AnyWidget):
             end = time.monotonic() + REQUEST_TIMEOUT_S
             with self._cond:
                 while self._requests[rid] is None:
+                    self._check_open()
                     left = end - time.monotonic()
-                    if left <= 0 or self._closed:
+                    if left <= 0:
                         raise InvalidParameterError(f"{msg['type']} got no answer")
                     self._cond.wait(min(left, 0.5))
                 reply = self._requests[rid]
