@@ -26,7 +26,7 @@ import threading
 import time
 import zipfile
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 import anywidget
@@ -227,7 +227,10 @@ class ChronoclWidget(anywidget.AnyWidget):
         if "text" not in content:
             return  # not the viewer's (anywidget's own messages)
         with self._synced():
-            with self._life:  # (where a suspend clears it)
+            if self._closed:  # (by a cell meanwhile)
+                return
+            with self._life:  # (where a suspend clears it: the worker resumed and used now)
+                self._worker  # noqa: B018
                 self._drawing = True  # the page's requests are answered with frames from now on
             reply = self._answer(content["text"])
             if reply is not None:
@@ -664,13 +667,26 @@ class ChronoclWidget(anywidget.AnyWidget):
     def close(self) -> None:
         """Free the worker (its thread, GL textures, OpenCL buffers, and the steps no other
         widget shows) and the comm (its views on the page go)."""
-        self._free()
-        super().close()
+        with self._closing():
+            self._free()
+            super().close()
 
     def _front_end_closed(self) -> None:
         """The front end closed the comm: free the worker; the comm is closed already."""
-        self._free()
-        super().close()  # (forgets the comm; sends nothing more: it is closed)
+        with self._closing():
+            self._free()
+            super().close()  # (forgets the comm; sends nothing more: it is closed)
+
+    def _closing(self):
+        """`_sync` where there is one (not where `check_gl` refused): a close from the front
+        end (a subshell's thread) and one from code, or an edit, one at a time."""
+        sync = getattr(self, "_sync", None)
+        return nullcontext() if sync is None else sync
+
+    def _send(self, msg, buffers=None) -> None:
+        comm = self.comm  # (read once: a close on another thread sets it to None)
+        if comm is not None and getattr(comm, "kernel", True) is not None:
+            comm.send(data=msg, buffers=buffers)
 
     def _free(self) -> None:
         if self._closed:  # closed, or never started (no `_life` either: `check_gl` refused)
