@@ -25,8 +25,6 @@ pytest.importorskip("anywidget")
 pytest.importorskip("jupyterlab")
 pytest.importorskip("nbformat")
 
-from chronocl.notebook.widget import OWN_IDS  # noqa: E402
-
 from .jupyter_lab import (  # noqa: E402
     NOTEBOOK_READY,
     cell_output,
@@ -131,12 +129,18 @@ SETTLED = f"""([seq]) => {{
   const v = {VIEWER}, l = v && v.last;
   return !!l && l.seq > seq && l.quality === 'full' && !l.refining;
 }}"""
-# A settled frame after frame `seq` answering the page's newest request (not the kernel's: its
-# ids are above any the page uses).
-ANSWERED = f"""([seq]) => {{
-  const v = {VIEWER}, l = v && v.last;
+
+
+def answered(viewer: str) -> str:
+    """A settled frame after frame `seq` answering the page's newest request (not the kernel's:
+    its ids are above any the page uses), of the widget whose viewer is `viewer`."""
+    return f"""([seq]) => {{
+  const v = {viewer}, l = v && v.last;
   return !!l && l.seq > seq && l.id === v.sent && l.quality === 'full' && !l.refining;
 }}"""
+
+
+ANSWERED = answered(VIEWER)
 # A settled frame after frame `seq` whose first view's caption starts with `mode`.
 SHOWS_MODE = f"""([seq, mode]) => {{
   const v = {VIEWER}, l = v && v.last;
@@ -186,20 +190,15 @@ def settle(page, before: dict | None) -> dict:
 
 def edits_answered(page, viewer: str, seq: int) -> dict:
     """Wait until the kernel has the page's edits: a settled frame after frame `seq` answers the
-    last update the page sent, or a later one of the page's (the kernel's own requests are
-    numbered from OWN_IDS). The page sends its pending update on the next animation frame, so
-    two frames on it has gone; a cell run sooner could overtake it. Returns that frame."""
+    last update the page sent (`answered`). The page sends its pending update on the next
+    animation frame, so two frames on it has gone; a cell run sooner could overtake it.
+    Returns that frame."""
     sent = page.evaluate(
         "() => new Promise((done) => requestAnimationFrame(() => "
         f"requestAnimationFrame(() => done({viewer}.sent))))"
     )
     assert sent > 0  # (0: the page had no connection to send it on)
-    page.wait_for_function(
-        f"([seq, id, own]) => {{ const l = {viewer}.last; return !!l && l.seq > seq && "
-        "l.id >= id && l.id < own && l.quality === 'full' && !l.refining; }",
-        arg=[seq, sent, OWN_IDS],
-        timeout=60_000,
-    )
+    page.wait_for_function(answered(viewer), arg=[seq], timeout=60_000)
     return page.evaluate(f"() => {viewer}.last")
 
 

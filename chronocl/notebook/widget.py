@@ -138,6 +138,7 @@ class ChronoclWidget(anywidget.AnyWidget):
     # How often each view says it is alive (chronocl/notebook/views.py), for widget.js.
     _heartbeat_s = traitlets.Float(shown_views.HEARTBEAT_S).tag(sync=True)
     _syncing_in: int | None = None  # (`__init__`)
+    _sync = nullcontext()  # (`__init__`; kept by a widget `check_gl` refused: nothing to order)
     _closed = True  # until its worker runs (a widget that failed to start has nothing to free)
     _live: ClientWorker | None = None  # the worker; None while suspended (`_worker` resumes)
     # Set while a suspended worker is being ended (outside `_life`): cleared, with its share of
@@ -417,20 +418,19 @@ class ChronoclWidget(anywidget.AnyWidget):
         self._pull(tell_page=True)
         return getattr(self, name)
 
-    def __setattr__(self, name: str, value: object) -> None:
-        # A set from code waits while a page's edit is applied on another thread: the set
-        # and the edit each whole, in one order for the worker and the attributes.
+    def _set_from_code(self, name: str):
+        """Where a set of `name` waits while a page's edit is applied on another thread (the
+        set and the edit each whole, in one order for the worker and the attributes)."""
         if name in LOCKED and self._syncing_in != threading.get_ident():
-            with self._synced():
-                super().__setattr__(name, value)
-        else:
+            return self._synced()
+        return nullcontext()
+
+    def __setattr__(self, name: str, value: object) -> None:
+        with self._set_from_code(name):
             super().__setattr__(name, value)
 
     def set_trait(self, name: str, value: object) -> None:
-        if name in LOCKED and self._syncing_in != threading.get_ident():
-            with self._synced():
-                super().set_trait(name, value)
-        else:
+        with self._set_from_code(name):
             super().set_trait(name, value)
 
     def set_state(self, sync_data) -> None:
@@ -667,21 +667,15 @@ class ChronoclWidget(anywidget.AnyWidget):
     def close(self) -> None:
         """Free the worker (its thread, GL textures, OpenCL buffers, and the steps no other
         widget shows) and the comm (its views on the page go)."""
-        with self._closing():
+        with self._sync:  # (a close from the front end, on a subshell's thread, and an edit)
             self._free()
             super().close()
 
     def _front_end_closed(self) -> None:
         """The front end closed the comm: free the worker; the comm is closed already."""
-        with self._closing():
+        with self._sync:
             self._free()
             super().close()  # (forgets the comm; sends nothing more: it is closed)
-
-    def _closing(self):
-        """`_sync` where there is one (not where `check_gl` refused): a close from the front
-        end (a subshell's thread) and one from code, or an edit, one at a time."""
-        sync = getattr(self, "_sync", None)
-        return nullcontext() if sync is None else sync
 
     def _send(self, msg, buffers=None) -> None:
         comm = self.comm  # (read once: a close on another thread sets it to None)
