@@ -12,10 +12,12 @@ full quality as when a drag is let go, each sent when the last one's sharp frame
 from its send to its sharp frame (level 0, not reduced).
 
 Per slide: the ms to the sharp frame and to the first frame, the levels its frames were drawn
-at, whether level 0 slid incrementally (the frames' `timings.incremental`) and, where it
-integrated the window again, why (`timings.why_not_incremental`: the rates measured on this
-machine predicted integrating cheaper, the memory budget, ...). At the end: the rates the
-viewer measured (`costs.Costs`, read from the server's views) and the width from which a
+at, the ms level 0 waited for its steps to be read (`timings.read_ms`, within its integrate
+ms), why a coarse frame read nothing ahead for it (`timings.why_not_read_ahead`), whether
+level 0 slid incrementally (the frames' `timings.incremental`) and, where it integrated the
+window again, why (`timings.why_not_incremental`: the rates measured on this machine
+predicted integrating cheaper, the memory budget, ...). At the end: the rates the viewer
+measured (`costs.Costs`, read from the server's views) and the width from which a
 one-step slide pays on them. Summary: per width the p50/min/max of the sharp frame and the
 paths; `long_over_short`, the long width's p50 over the short one's (issue 47's target <= 2).
 
@@ -69,6 +71,16 @@ def slide_to(c: Client, t0: int, width: int) -> dict:
         "path": "incremental" if incremental else "integrated",
         "why_not_incremental": next((w for w in whys if w), None),
         "integrate_level0_ms": round(sum(h["timings"]["integrate_ms"] for h in level0), 1),
+        # of it, waiting for the window's steps (the entering one unless read ahead)
+        "read_level0_ms": round(sum(h["timings"]["read_ms"] for h in level0), 1),
+        "why_not_read_ahead": next(
+            (
+                h["timings"]["why_not_read_ahead"]
+                for h in chain
+                if h["timings"]["why_not_read_ahead"]
+            ),
+            None,
+        ),
         "sharp": sharp(chain[-1]),
     }
 
@@ -186,6 +198,7 @@ def main() -> None:
             "integrate_level0_ms_p50": round(
                 statistics.median(r["integrate_level0_ms"] for r in rows), 1
             ),
+            "read_level0_ms_p50": round(statistics.median(r["read_level0_ms"] for r in rows), 1),
             "incremental": f"{paths.count('incremental')}/{len(paths)}",
             "why_not_incremental": sorted(w for w in whys if w),
             "why_last": rows[-1]["why_not_incremental"],

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import re
 import time
 
 import numpy as np
@@ -258,10 +259,17 @@ def test_bad_target_and_a_series_without_levels():
         assert s.shown_level == 0 and s.refine() is None
 
 
+# `Costs.why_not_read_ahead`'s reasons for a window of 4 steps none of which is resident
+WHY_NOT_READ_AHEAD = (
+    r"nothing measured yet|reading the 4 steps at the stop takes \d+ ms"
+    r"|the coarse frames keep [\d.]+ of \d+ cores busy"
+)
+
+
 def test_viewer_sends_a_coarse_frame_then_full_resolution(tmp_path):
     """A store with levels: the first frame of a request is coarse and says so, the next one
-    (after a short idle) answers the same request at full resolution; a probe never uses
-    the coarse level."""
+    (after a short idle) answers the same request at full resolution, its wait for the steps
+    read within its integration; the coarse frame says why it read none of them ahead."""
     from .viewer_helpers import Client, start_server
 
     data = np.stack(list(synthetic.steps("vortex", 6, (40, 36, 96))))
@@ -279,6 +287,12 @@ def test_viewer_sends_a_coarse_frame_then_full_resolution(tmp_path):
         _, full, _ = client.frame_for(rid)
         assert full["id"] == rid and full["level"] == 0 and not full["refining"]
         assert full["level_shape"] == [40, 36, 96]
+        why, timings = first["timings"]["why_not_read_ahead"], full["timings"]
+        assert why is None or re.fullmatch(WHY_NOT_READ_AHEAD, why), why
+        assert 0 <= timings["read_ms"] <= timings["integrate_ms"], timings
+        if why is not None:  # its 4 steps were read at the stop, within its integration
+            assert timings["read_ms"] > 0, timings
+        assert timings["why_not_read_ahead"] is None  # a full-resolution frame reads none ahead
         client.close()
     finally:
         server.stop()

@@ -77,6 +77,7 @@ def test_page_loads_with_the_token_and_shows_a_frame(page):
     assert "upload" not in status and "encode" not in status
     tooltip = page.get_attribute("#status", "title")
     assert re.search(r"render [\d.]+ ms .* encode [\d.]+ ms", tooltip), tooltip
+    assert re.search(r"integrate [\d.]+ ms \(reading steps [\d.]+ ms of it\)", tooltip), tooltip
     # The mode menu is the server's registry, with each mode's summary as its tooltip.
     menu = page.eval_on_selector_all(
         ".view select.mode option", "os => os.map(o => [o.value, o.title])"

@@ -40,6 +40,7 @@ class FrameTimes:
     recolour_upload_ms: float = 0.0  # a recolour's texture writes (llvmpipe's brick-wise path)
     readback_ms: float = 0.0  # recoloured RGBA read back from textures (a probe's came before)
     slab_upload_ms: float = 0.0  # a refine's texture writes, overlapped with its integration
+    read_ms: float = 0.0  # of integrating, waiting for the windows' steps to be read
 
     def start(self) -> None:
         for f in fields(self):

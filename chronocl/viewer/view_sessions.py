@@ -165,6 +165,7 @@ class Views:
             cvs.append(cv)
             if ms > 0:  # integrated for this frame (not its last chronovolume shown again)
                 integrated.append(slot)
+                self.times.read_ms += float(slot.session.stats.get("read_ms", 0.0))
         # A GPU session whose window does not fit the device: its steps go up every time.
         whys = (s.session.stats.get("why_not_on_device") for s in self.slots[: len(cvs)])
         self.host_steps_why = next((why for why in whys if why), None)
@@ -297,6 +298,7 @@ class Views:
         stats = slot.session.stats  # type: ignore[union-attr]
         self.refine_incremental = self.refine_incremental or bool(stats.get("incremental"))
         self.why_not_incremental = self.why_not_incremental or self._why_integrated([slot])
+        self.times.read_ms += float(stats.get("read_ms", 0.0))
         return float(stats.get("integrate_ms", 0.0))
 
     @staticmethod

@@ -269,6 +269,7 @@ class LevelSession:
         direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
         if not (reason is None and self._slider and self._slider.can_move_to(selection)):
             self._let_go(selection)
+        t_read = time.perf_counter()
         arrays = dict(
             zip(
                 selection.steps,
@@ -276,6 +277,7 @@ class LevelSession:
                 strict=True,
             )
         )
+        read_ms = 1e3 * (time.perf_counter() - t_read)
         leaving = {s: a for s, a in self._arrays.items() if s not in arrays}
         self._hold(arrays)
         self.selection = selection
@@ -325,7 +327,7 @@ class LevelSession:
                     self.display,
                 )
         self._cv = cv
-        self._record(t, path, reason)
+        self._record(t, path, reason, read_ms)
         return cv
 
     def _move(self, selection: Selection) -> Move:
@@ -396,7 +398,9 @@ class LevelSession:
         self._slider, self.selection, self._cv, self._won = None, selection, None, None
         self._bricks.forget()
         kept = [s for s in selection.steps if s in keep]
+        t_read = time.perf_counter()
         arrays = self.manager.get(kept, owner=self) if kept else []
+        read_ms = 1e3 * (time.perf_counter() - t_read)
         self._hold(dict(zip(kept, arrays, strict=True)))
         del arrays
         bricks = PartlyResidentBricks(self.series, self._arrays) if kept else None
@@ -415,7 +419,7 @@ class LevelSession:
         self._keep_won(cv, won, job)
         self._cv = cv
         some = f"{len(kept)} of {selection.width} steps resident, the rest " if kept else ""
-        self._record(t, "streamed", f"{why}: {some}streamed by z-slabs")
+        self._record(t, "streamed", f"{why}: {some}streamed by z-slabs", read_ms)
         return self._cv
 
     def _slab_rows(self, bricks: object) -> int | None:
@@ -438,10 +442,13 @@ class LevelSession:
             w = Winners(won.u, won.k, sel.steps, n, job.value_range, self.spec)
             self._won = (cv.t_index, w)
 
-    def _record(self, t: float, path: str, reason: str | None) -> None:
+    def _record(self, t: float, path: str, reason: str | None, read_ms: float) -> None:
         self.stats = {
             "level": self.level,
             "integrate_ms": 1e3 * (time.perf_counter() - t),
+            # of it, waiting for the window's resident steps: their reads (a streamed window's
+            # other steps are read as it integrates); 0 where they were resident or read ahead
+            "read_ms": read_ms,
             "path": path,
             "incremental": path == "incremental",
             "why_not_incremental": reason,

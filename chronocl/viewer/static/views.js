@@ -491,7 +491,7 @@ function showTimings(h) {
   if (rt !== null) parts.push(`round trip ${rt.toFixed(0)} ms`);
   setStatus(parts.join(' · '));
   $('status').title = [
-    `integrate ${t.integrate_ms.toFixed(1)} ms`,
+    `integrate ${t.integrate_ms.toFixed(1)} ms (reading steps ${t.read_ms.toFixed(1)} ms of it)`,
     `recolour ${t.recolour_ms.toFixed(1)} ms`,
     `upload ${t.upload_ms.toFixed(1)} ms`,
     `render ${t.render_ms.toFixed(1)} ms`,
