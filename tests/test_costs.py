@@ -18,6 +18,7 @@ from chronocl.integration.inmemory import make_spec
 from chronocl.integration.interactive import costs
 from chronocl.integration.interactive.costs import (
     INVERT_PIECES,
+    ONE_STEP,
     SLIDE_PIECES,
     Costs,
     Move,
@@ -51,31 +52,67 @@ def _measured(d: float, s: float, f: float, inverts: bool = False) -> Costs:
 
 
 def test_measured_rates_set_the_width_from_which_a_slide_pays():
-    """A filled state slides while s < d W; a state to fill pays its fill's share too, f per
-    voxel (a state serves a scrub across its window), so it starts from (s + f) / d on,
-    whatever the voxels."""
-    c = _measured(d=1e-6, s=20e-6, f=30e-6)  # W* = 20 filled, 50 to fill
+    """A filled state slides while s < d W, whatever the voxels; a state still to be filled
+    costs its whole fill besides, less the rent its window's integrated slides have paid
+    (what each cost over a steady slide): it is filled once that rent reaches the fill."""
+    c = _measured(d=1e-6, s=20e-6, f=30e-6)  # at V voxels, in ms: d V = 1, a slide 20, fill 30 W
     for voxels in (V, 8 * V):
+        k = voxels / V
         assert c.why_not(voxels, 21, Move(filled=True)) is None
         why = c.why_not(voxels, 19, Move(filled=True))
         assert why and "cheaper to integrate" in why and "(measured)" in why
-        assert c.why_not(voxels, 51) is None
-        why = c.why_not(voxels, 49)
-        assert why and "(measured, its state's fill included)" in why
-    direct, slide, measured = c.predict(V, 60)
-    assert measured and direct == pytest.approx(60.0) and slide == pytest.approx(50.0)
+        why = c.why_not(voxels, 50)  # a jump's first slide: the whole fill, 1500 ms
+        assert why and "(measured, its state's fill included: " in why
+        assert f"{1500 * k:.0f} ms, 0 ms of it paid by integrating since the jump" in why
+        assert c.rent(voxels, 50) == pytest.approx(30 * k)  # integrated: 50 over a slide's 20
+        assert c.why_not(voxels, 50, Move(rent=1469 * k)) is not None
+        assert c.why_not(voxels, 50, Move(rent=1471 * k)) is None  # 20 + 29 < 50
+    direct, slide, measured = c.predict(V, 60, Move(rent=100))
+    assert measured and direct == pytest.approx(60.0) and slide == pytest.approx(20 + 1800 - 100)
+    # the frame that fills the state takes the whole fill, whatever the rent paid
+    assert c.slide_ms(V, 60, Move(rent=100)) == pytest.approx(20 + 1800)
     # a slide of several steps costs as many times a steady one
     assert c.why_not(V, 50, Move(shift=3, filled=True)) is not None
+    assert c.rent(V, 50, Move(shift=3)) == 0  # no dearer integrated than slid: pays no rent
+
+
+def _slides_before_fill(c: Costs, width: int, move: Move = ONE_STEP) -> int | None:
+    """One-step slides a viewer's session integrates after a jump before it fills a state
+    (None: none within 1000)."""
+    for n in range(1000):
+        if c.why_not(V, width, move) is None:
+            return n
+        move = move._replace(rent=move.rent + c.rent(V, width, move))
+    return None
+
+
+def test_a_state_is_filled_after_integrating_slides_that_cost_as_much_as_its_fill():
+    """Ski rental: after a jump, a window's one-step slides are integrated until what they cost
+    over steady slides reaches the state's fill, `f W / (W - s)` slides; so a user who slides
+    twice never waits for a fill that pays after fifty, and one who scrubs on pays at most
+    twice what knowing the moves to come would have cost."""
+    c = _measured(d=1e-6, s=20e-6, f=31e-6)  # in ms: a slide 20, the fill 31 W
+    assert _slides_before_fill(c, 50) == 51  # the fill 1550 ms, less 30 a slide, under 50 - 20
+    assert _slides_before_fill(c, 100) == 38  # 3100 ms, 80 a slide
+    assert _slides_before_fill(c, 20) is None  # a slide no cheaper than integrating: never
+    # where the steps travel for every integration, fill and slide guessed at one voxel-step:
+    # filled after one integrated slide
+    guessed = Costs()
+    guessed.record_direct(0, ms=1.0, voxels=V, steps=1)
+    assert _slides_before_fill(guessed, 10, Move(travels=True)) == 1
 
 
 def test_a_gpu_and_a_cpu_find_their_own_threshold():
     """The same decision code, two machines: one whose integration is cheap per voxel-step
-    beside its slides (a window read in place) integrates a 30-step window; one where every
-    integration pays for the whole window's transfer slides a 10-step one."""
-    cpu = _measured(d=7e-6, s=200e-6, f=140e-6)  # slides pay from 49 steps
-    gpu = _measured(d=15e-6, s=20e-6, f=15e-6)  # the steps sent up every time: from 3
-    assert cpu.why_not(V, 10) and cpu.why_not(V, 30) and cpu.why_not(V, 50) is None
-    assert gpu.why_not(V, 10) is None and gpu.why_not(V, 2)
+    beside its slides (a window read in place) integrates a 28-step window and fills a state
+    for a 50-step one only after 46 of its slides; one where every integration pays for the
+    whole window's transfer slides a 10-step one after one."""
+    cpu = _measured(d=7e-6, s=200e-6, f=140e-6)  # a filled state slides from 29 steps
+    gpu = _measured(d=15e-6, s=20e-6, f=15e-6)  # the steps sent up every time: from 2
+    assert cpu.why_not(V, 28, Move(filled=True)) and cpu.why_not(V, 30, Move(filled=True)) is None
+    assert gpu.why_not(V, 1, Move(filled=True)) and gpu.why_not(V, 2, Move(filled=True)) is None
+    assert _slides_before_fill(cpu, 10) is None and _slides_before_fill(cpu, 50) == 46
+    assert _slides_before_fill(gpu, 10) == 1
 
 
 def test_unmeasured_slides_and_fills_are_guessed_from_the_integration():
@@ -85,17 +122,22 @@ def test_unmeasured_slides_and_fills_are_guessed_from_the_integration():
     alone at its fewer pieces. The first slide measures the fill, the next ones a slide."""
     c = Costs()
     c.record_direct(0, ms=1.0, voxels=V, steps=1)
-    width = int(TUNING.slide_steps + TUNING.fill_steps)
-    assert c.why_not(V, width + 1) is None
-    assert "not measured yet" in c.why_not(V, width - 1)
-    assert c.why_not(V, int(TUNING.slide_steps) + 1, Move(filled=True)) is None
-    assert c.why_not(V, 3, Move(travels=True)) is None and c.why_not(V, 2, Move(travels=True))
-    inverting = TUNING.slide_steps * INVERT_PIECES / SLIDE_PIECES + TUNING.fill_steps
-    assert c.why_not(V, int(inverting) + 1, Move(inverts=True)) is None
-    # the fill measured dear: a state is not started where it was guessed to pay
-    c.record_slide(0, ms=100 * TUNING.fill_steps * 1e-6 * V * 20, voxels=V, fill=20)
-    assert c.why_not(V, width + 1) is not None
-    assert c.why_not(V, width + 1, Move(filled=True)) is None  # a filled one slides on
+    s, f = TUNING.slide_steps, TUNING.fill_steps
+    assert c.why_not(V, int(s) + 1, Move(filled=True)) is None
+    assert "not measured yet" in c.why_not(V, int(s) - 1, Move(filled=True))
+    width = int(s) + 12  # each integrated slide pays 12 ms of rent
+    assert _slides_before_fill(c, width) == int((s + f * width - width) // 12) + 1
+    assert "not measured yet" in c.why_not(V, width)
+    assert (
+        c.why_not(V, 3, Move(travels=True))
+        and c.why_not(V, 3, Move(travels=True, rent=2.5)) is None
+    )
+    inverting = s * INVERT_PIECES / SLIDE_PIECES
+    assert c.why_not(V, int(inverting) + 1, Move(inverts=True, filled=True)) is None
+    # the fill measured dear: a state is started after more integrated slides than guessed
+    c.record_slide(0, ms=100 * f * 1e-6 * V * 20, voxels=V, fill=20)
+    assert _slides_before_fill(c, width) is None
+    assert c.why_not(V, width, Move(filled=True)) is None  # a filled one slides on
 
 
 def test_steady_slides_are_averaged_over_the_splits_period():
@@ -125,8 +167,9 @@ def test_a_slide_timed_while_the_machine_was_busy_is_weighed_by_the_integration_
     c.record_direct(0, ms=1e-6 * V, voxels=V, steps=1)
     assert c.direct[0] < 1.5e-6
     _, slide, measured = c.predict(V, 50)
-    assert measured and slide == pytest.approx(35 * c.direct[0] * V)
-    assert c.why_not(V, 50) is None and c.why_not(V, 30) is not None
+    assert measured and slide == pytest.approx((20 + 15 * 50) * c.direct[0] * V)
+    assert c.why_not(V, 21, Move(filled=True)) is None
+    assert c.why_not(V, 19, Move(filled=True)) is not None
     fresh = Costs()
     fresh.record_slide(0, ms=1.0, voxels=V)
     assert not fresh.slide and fresh.predict(V, 50) is None
@@ -309,16 +352,16 @@ class _Fixed(Costs):
     voxel-step, `slide` (and the fill) in voxel-steps of it; what the sessions time is still
     fed to it, and kept."""
 
-    def __init__(self, direct: float, slide: float) -> None:
+    def __init__(self, direct: float, slide: float, fill: float | None = None) -> None:
         super().__init__()
-        self.rates = direct, slide
+        self.rates = direct, slide, slide if fill is None else fill
         self.fed: list[tuple[str, int]] = []
         self._reset()
 
     def _reset(self) -> None:
         self.direct = {lv: self.rates[0] for lv in range(4)}
         self.slide = {(lv, k): self.rates[1] for lv in range(4) for k in (False, True)}
-        self.fill = {(lv, k): self.rates[1] for lv in range(4) for k in (False, True)}
+        self.fill = {(lv, k): self.rates[2] for lv in range(4) for k in (False, True)}
 
     def record_direct(self, level, ms, voxels, steps) -> None:
         self.fed.append(("direct", level))
@@ -380,3 +423,35 @@ def test_a_viewers_long_window_slides_incrementally_and_equals_the_direct_integr
             assert ("direct", 0) in rates.fed
         finally:
             views.release()
+
+
+def test_a_session_integrates_its_slides_until_they_paid_for_the_fill_and_a_jump_starts_again():
+    """A viewer's session at rates where a 20-step window's fill (10 voxel-steps a step: 200)
+    pays after 13 integrated one-step slides (each 20 - 5 over a slide's 5): those integrate
+    and say how much of the fill they paid, the next one keeps a state, the one after fills it
+    and slides, and slides on; a jump integrates and pays nothing yet. Every chronovolume
+    equals integrating its window."""
+    data = np.random.default_rng(6).random((60, 6, 7, 9), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    rates = _Fixed(direct=1e-3, slide=5.0, fill=10.0)
+    paths, paid = [], []
+    with chronocl.Session(series, mode="alpha", time_tf=absolute, slide_costs=rates) as session:
+        session.set_window(0, 20)
+        for t0 in range(1, 17):
+            cv = session.set_window(t0, t0 + 20)
+            paths.append(session.stats["path"])
+            why = session.stats["why_not_incremental"] or ""
+            paid.append(why.split("ms of it paid")[0].rsplit(", ", 1)[-1].strip() if why else None)
+            ref = chronocl.integrate(series, f"{t0}:{t0 + 20}", spec=session.spec)
+            np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
+        assert paths == ["reintegrate"] * 14 + ["incremental"] * 2, paths
+        ms = 1e-3 * int(np.prod(series.volume_shape))  # a voxel-step of integration, in ms
+        assert paid[:13] == [f"{15 * ms * k:.0f}" for k in range(13)], paid
+        assert paid[13:] == [None] * 3  # kept a state; filled it; slid
+        session.set_window(38, 58)  # a jump: integrated, and the rent starts again
+        for t0, rent in ((39, 0), (40, 15 * ms), (0, 0)):  # the last a jump: it paid nothing
+            session.set_window(t0, t0 + 20)
+            why = session.stats["why_not_incremental"]
+            assert session.stats["path"] == "reintegrate"
+            assert f", {rent:.0f} ms of it paid by integrating since the jump" in why, why

@@ -17,15 +17,23 @@ a leaf and a combine per step. With, per level,
     s = voxel-steps of integration (d) of a steady one-step slide   (`record_slide`)
     f = voxel-steps of integration of a state's fill, per step      (`record_slide(fill=W)`)
 
-a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * d * V * k`, plus, where
-the state is still to be filled, the fill's `f * d * V * W` shared by the W slides a state is taken
-to serve (a scrub across its window): `f * d * V`. Integrating is predicted at `d * V * W`, and the
-cheaper is taken, so sliding pays from a width of about `s + f` on, which each machine and engine
-finds for itself; a state already filled keeps sliding while `s * k < W`. Until measured, s and f
-are guessed (`TUNING.slide_steps`, `fill_steps`, from this machine); where the window's steps
-travel to the device for every integration (a GPU whose memory holds not the window), d is mostly
-that transfer, which a slide pays only for its entering steps and a fill once per step: both are
-then guessed at 1. The first slide measures f, the next ones s.
+a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * d * V * k`, and
+integrating it at `d * V * W`; a state already filled keeps sliding while `s * k < W`. A state
+still to be filled costs its fill besides, `f * d * V * W` in one frame (at 256^3, W = 50 on 2
+cores: 6-11 s), which pays only over the slides that follow. So it is bought as skis are rented
+(`Move.rent`): each one-step move of a window integrated instead of slid adds what integrating
+cost over a steady slide, `d * V * (W - s)`, and the state is filled once that sum reaches
+the fill, at `f * W / (W - s)` integrated slides since the window was jumped to; a jump or
+a spec change starts the sum again. That is never more than twice what the best choice
+knowing the moves to come costs, whatever the user does next. Before 2026-12-01 the fill's
+share `f * d * V` was taken as paid on each slide (a scrub across the whole window assumed):
+every jump at W >= s + f was followed by a fill, a 6-11 s frame at 256^3, W = 50 here, even
+where the user slid two steps (bench/slide_window.py). Each machine and engine finds its own
+rates: until measured, s and f are guessed (`TUNING.slide_steps`, `fill_steps`, from this
+machine); where the window's steps travel to the device for every integration (a GPU whose
+memory holds not the window), d is mostly that transfer, which a slide pays only for its
+entering steps and a fill once per step: both are then guessed at 1, and the state is filled
+after one integrated slide. The first slide measures f, the next ones s.
 
 s and f are kept in units of d as it stood when they were measured (a slide's ms over the
 integration rate then), not in ms: on a machine shared with other work both slow down alike, and
@@ -71,13 +79,16 @@ INVERT_PIECES = 2.0
 class Move(NamedTuple):
     """A move of a session's window, as its slide is costed: at `level`, `shift` steps entering,
     the window's steps sent to the device for every integration (`travels`), the sliding state
-    filled already (`filled`: its fill is paid), a mode sliding by sums alone (`inverts`)."""
+    filled already (`filled`: its fill is paid), a mode sliding by sums alone (`inverts`), and
+    the ms its window's integrations since it was last jumped to cost over the slides of a
+    filled state (`rent`: the fill is paid once they reach it)."""
 
     level: int = 0
     shift: int = 1
     travels: bool = False
     filled: bool = False
     inverts: bool = False
+    rent: float = 0.0
 
 
 ONE_STEP = Move()
@@ -172,22 +183,32 @@ class Costs:
         key = (move.level, move.inverts)
         steady = self.slide.get(key, guess) * d * voxels * shift
         fill = 0.0
-        if not move.filled:  # its share over a scrub across the window: W slides
-            fill = self.fill.get(key, 1.0 if move.travels else TUNING.fill_steps) * d * voxels
+        if not move.filled:  # what of it the integrations since the jump have not paid yet
+            fill = max(0.0, self._fill_ms(voxels, width, move) - move.rent)
         measured = key in self.slide and (move.filled or key in self.fill)
         return d * voxels * width, steady + fill, measured
 
     def slide_ms(self, voxels: int, width: int, move: Move = ONE_STEP) -> float | None:
         """The ms `move` of a window of `width` over `voxels` voxels takes as a slide itself: a
-        steady slide, and where its state is still to be filled the whole fill, not its share
-        (None: nothing integrated at its level yet)."""
+        steady slide, and where its state is still to be filled the whole fill (None: nothing
+        integrated at its level yet)."""
         steady = self.predict(voxels, width, move._replace(filled=True))
         if steady is None:
             return None
-        if move.filled:
-            return steady[1]
-        share = self.predict(voxels, width, move)[1] - steady[1]  # type: ignore[index]
-        return steady[1] + share * width
+        return steady[1] + (0.0 if move.filled else self._fill_ms(voxels, width, move))
+
+    def rent(self, voxels: int, width: int, move: Move = ONE_STEP) -> float:
+        """The ms `move` of a window of `width` over `voxels` voxels, integrated, costs over the
+        steady slide of a filled state (0: nothing integrated at its level yet, or no more)."""
+        got = self.predict(voxels, width, move._replace(filled=True))
+        return 0.0 if got is None else max(0.0, got[0] - got[1])
+
+    def _fill_ms(self, voxels: int, width: int, move: Move) -> float:
+        """The ms filling the sliding state of a window of `width` over `voxels` voxels takes
+        (the level integrated: `predict`)."""
+        key = (move.level, move.inverts)
+        f = self.fill.get(key, 1.0 if move.travels else TUNING.fill_steps)
+        return f * self.direct[move.level] * voxels * width
 
     def why_not(self, voxels: int, width: int, move: Move = ONE_STEP) -> str | None:
         """None where sliding is predicted to pay (or nothing is measured yet), else why not."""
@@ -198,7 +219,11 @@ class Costs:
         if slide < direct:
             return None
         how = "measured" if measured else "not measured yet; guessed"
-        fill = "" if move.filled else ", its state's fill included"
+        fill = ""
+        if not move.filled:
+            whole = self._fill_ms(voxels, width, move)
+            paid = f"{move.rent:.0f} ms of it paid by integrating since the jump"
+            fill = f", its state's fill included: {whole:.0f} ms, {paid}"
         return (
             f"integrating the window is predicted at {direct:.0f} ms, sliding it at {slide:.0f} "
             f"ms ({how}{fill}): cheaper to integrate"

@@ -55,7 +55,12 @@ from chronocl.integration.inmemory import (
 from chronocl.integration.interactive.costs import Move
 from chronocl.integration.interactive.moves import fixed
 from chronocl.integration.interactive.settings import Settings, manager_key
-from chronocl.integration.interactive.slider import Slider, slide_plan, slides_by_sums
+from chronocl.integration.interactive.slider import (
+    Slider,
+    slide_plan,
+    slides_by_sums,
+    slides_to,
+)
 from chronocl.integration.interactive.winners import RECOLOURED, Winners, why_not
 from chronocl.integration.interactive.winners import winners as gathered
 from chronocl.modes.base import FaintSums
@@ -93,6 +98,9 @@ class LevelSession:
         in_place = self.engine.reads_in_place
         self._bricks = ResidentBricks(self._arrays, in_place=in_place)
         self._slider: Slider | None = None
+        # ms the one-step moves integrated since the window was jumped to cost over slides: a
+        # state is filled once they reach its fill (`costs.Move.rent`)
+        self._rent = 0.0
         self._cv: Chronovolume | None = None
         # (t_index, winners) the kernels wrote with the window's integration (`winners`)
         self._won: tuple[np.ndarray, Winners] | None = None
@@ -125,7 +133,7 @@ class LevelSession:
         self.asked, spec = fixed(self.base, self.asked, self.spec, spec, selection)
         if spec != self.spec:  # of this session's pooling (`SessionPool.session`)
             self.spec = spec
-            self._slider = None
+            self._slider, self._rent = None, 0.0
             self._cv = self._won = None
         return self._update(selection)
 
@@ -327,16 +335,34 @@ class LevelSession:
                     self.display,
                 )
         self._cv = cv
+        self._pay_rent(old, selection, path, move, voxels)
         self._record(t, path, reason, read_ms)
         return cv
+
+    def _pay_rent(
+        self, old: Selection | None, selection: Selection, path: str, move: Move, voxels: int
+    ) -> None:
+        """A slide from `old` integrated instead, where a filled state would have slid (a
+        viewer's costs), adds what that cost over the slide to the rent; a state filled has
+        paid it, and a jump starts it again."""
+        if path == "reintegrate" and old is not None and slides_to(old, selection):
+            if self.weighs_slides:
+                entering = len(set(selection.steps) - set(old.steps))
+                self._rent += self.costs.rent(
+                    voxels, selection.width, move._replace(shift=entering)
+                )
+        else:
+            self._rent = 0.0
 
     def _move(self, selection: Selection) -> Move:
         """The move to `selection` as a slide is costed: the steps entering where the state can
         slide (else a one-step slide's, which decides whether the window integrated now keeps a
-        state), the steps sent to the device for every integration, the state's fill paid."""
-        move = Move(self.level, inverts=slides_by_sums(self.spec))
-        move = move._replace(travels=self._device.why is not None)
+        state), the steps sent to the device for every integration, the state's fill paid, and
+        of a slide, the rent paid towards it (a jump has paid none)."""
         old, slider = self.selection, self._slider
+        rent = self._rent if old is not None and slides_to(old, selection) else 0.0
+        move = Move(self.level, inverts=slides_by_sums(self.spec), rent=rent)
+        move = move._replace(travels=self._device.why is not None)
         if old is not None and slider is not None and slider.can_move_to(selection):
             entering = len(set(selection.steps) - set(old.steps))
             move = move._replace(shift=entering, filled=slider.placed)

@@ -224,12 +224,7 @@ class Slider:
         return selection.steps[self.mode.leaf_span - 1 :]
 
     def can_move_to(self, selection: Selection) -> bool:
-        old, new = self.selection.steps, selection.steps
-        if len(new) != len(old):
-            return False
-        shift = new[0] - old[0]
-        # A slide keeps the steps' spacing and overlaps the old window.
-        return tuple(s + shift for s in old) == new and bool(set(old) & set(new))
+        return slides_to(self.selection, selection)
 
     def move_to(self, selection: Selection, arrays: dict[int, np.ndarray]) -> Chronovolume:
         """The chronovolume of `selection`, from the old window's state and `arrays` (the
@@ -314,6 +309,16 @@ class Slider:
             series, selection, spec, self.value_range, engine_name(self.engine)
         )
         return Chronovolume(rgba, t_index, meta)
+
+
+def slides_to(old: Selection, new: Selection) -> bool:
+    """Whether moving from window `old` to `new` is a slide: it keeps the steps' spacing and
+    overlaps the old window."""
+    a, b = old.steps, new.steps
+    if len(a) != len(b):
+        return False
+    shift = b[0] - a[0]
+    return tuple(s + shift for s in a) == b and bool(set(a) & set(b))
 
 
 def state_bytes(mode, width: int, voxels: int) -> int:
