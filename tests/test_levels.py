@@ -259,10 +259,11 @@ def test_bad_target_and_a_series_without_levels():
         assert s.shown_level == 0 and s.refine() is None
 
 
-# `Costs.why_not_read_ahead`'s reasons for a window of 4 steps none of which is resident
+# `Costs.why_not_read_ahead`'s reasons for a window of 4 steps
 WHY_NOT_READ_AHEAD = (
-    r"nothing measured yet|reading the 4 steps at the stop takes \d+ ms"
+    r"nothing measured yet|reading the \d steps at the stop takes \d+ ms"
     r"|the coarse frames keep [\d.]+ of \d+ cores busy"
+    r"|every step of the window is resident"  # the first frame's refine read them
 )
 
 
@@ -290,7 +291,7 @@ def test_viewer_sends_a_coarse_frame_then_full_resolution(tmp_path):
         why, timings = first["timings"]["why_not_read_ahead"], full["timings"]
         assert why is None or re.fullmatch(WHY_NOT_READ_AHEAD, why), why
         assert 0 <= timings["read_ms"] <= timings["integrate_ms"], timings
-        if why is not None:  # its 4 steps were read at the stop, within its integration
+        if why is not None and "resident" not in why:  # its 4 steps read at the stop
             assert timings["read_ms"] > 0, timings
         assert timings["why_not_read_ahead"] is None  # a full-resolution frame reads none ahead
         client.close()
