@@ -54,7 +54,8 @@ def _measured(d: float, s: float, f: float, inverts: bool = False) -> Costs:
 def test_measured_rates_set_the_width_from_which_a_slide_pays():
     """A filled state slides while s < d W, whatever the voxels; a state still to be filled
     costs its whole fill besides, less the rent its window's integrated slides have paid
-    (what each cost over a steady slide): it is filled once that rent reaches the fill."""
+    (what each cost over a steady slide, in steps integrated): it is kept once that rent
+    reaches the fill."""
     c = _measured(d=1e-6, s=20e-6, f=30e-6)  # at V voxels, in ms: d V = 1, a slide 20, fill 30 W
     for voxels in (V, 8 * V):
         k = voxels / V
@@ -64,9 +65,18 @@ def test_measured_rates_set_the_width_from_which_a_slide_pays():
         why = c.why_not(voxels, 50)  # a jump's first slide: the whole fill, 1500 ms
         assert why and "(measured, its state's fill included: " in why
         assert f"{1500 * k:.0f} ms, 0 ms of it paid by integrating since the jump" in why
-        assert c.rent(voxels, 50) == pytest.approx(30 * k)  # integrated: 50 over a slide's 20
-        assert c.why_not(voxels, 50, Move(rent=1469 * k)) is not None
-        assert c.why_not(voxels, 50, Move(rent=1471 * k)) is None  # 20 + 29 < 50
+        assert c.rent(voxels, 50) == pytest.approx(30)  # integrated: 50 steps over a slide's 20
+        assert c.why_not(voxels, 50, Move(rent=1469)) is not None
+        assert c.why_not(voxels, 50, Move(rent=1471)) is None  # 20 + 29 < 50
+        why = c.why_not(voxels, 50, Move(rent=1469))
+        assert f"{1500 * k:.0f} ms, {1469 * k:.0f} ms of it paid by integrating since" in why
+        over = c.why_not(voxels, 50, Move(rent=3000, shift=5))  # 5 steps: dearer than integrating
+        assert f"{1500 * k:.0f} ms, {1500 * k:.0f} ms of it paid" in over  # the fill, not more
+    # the rent is kept in steps integrated: on a machine grown busier (d from 1 to 2 ns) a
+    # step paid is worth as much of the fill as before
+    busier = _measured(d=1e-6, s=20e-6, f=30e-6)
+    busier.record_direct(0, ms=3e-6 * V * 10, voxels=V, steps=10)  # running: d = 2e-6
+    assert "3000 ms, 2938 ms of it paid" in busier.why_not(V, 50, Move(rent=1469))
     direct, slide, measured = c.predict(V, 60, Move(rent=100))
     assert measured and direct == pytest.approx(60.0) and slide == pytest.approx(20 + 1800 - 100)
     # the frame that fills the state takes the whole fill, whatever the rent paid
@@ -76,30 +86,31 @@ def test_measured_rates_set_the_width_from_which_a_slide_pays():
     assert c.rent(V, 50, Move(shift=3)) == 0  # no dearer integrated than slid: pays no rent
 
 
-def _slides_before_fill(c: Costs, width: int, move: Move = ONE_STEP) -> int | None:
-    """One-step slides a viewer's session integrates after a jump before it fills a state
-    (None: none within 1000)."""
-    for n in range(1000):
+def _slide_that_keeps_a_state(c: Costs, width: int, move: Move = ONE_STEP) -> int | None:
+    """Which one-step slide after a jump, integrated with its own rent paid, keeps a state, as
+    a viewer's session decides (`LevelSession._move`); the next one fills it (None: none of
+    the first 1000)."""
+    for n in range(1, 1000):
+        move = move._replace(rent=move.rent + c.rent(V, width, move))
         if c.why_not(V, width, move) is None:
             return n
-        move = move._replace(rent=move.rent + c.rent(V, width, move))
     return None
 
 
 def test_a_state_is_filled_after_integrating_slides_that_cost_as_much_as_its_fill():
     """Ski rental: after a jump, a window's one-step slides are integrated until what they cost
-    over steady slides reaches the state's fill, `f W / (W - s)` slides; so a user who slides
-    twice never waits for a fill that pays after fifty, and one who scrubs on pays at most
-    twice what knowing the moves to come would have cost."""
+    over steady slides reaches the state's fill, about `f W / (W - s)` slides; so a user who
+    slides twice never waits for a fill that pays after fifty, and one who scrubs on pays
+    about twice at most what knowing the moves to come would have cost."""
     c = _measured(d=1e-6, s=20e-6, f=31e-6)  # in ms: a slide 20, the fill 31 W
-    assert _slides_before_fill(c, 50) == 51  # the fill 1550 ms, less 30 a slide, under 50 - 20
-    assert _slides_before_fill(c, 100) == 38  # 3100 ms, 80 a slide
-    assert _slides_before_fill(c, 20) is None  # a slide no cheaper than integrating: never
+    assert _slide_that_keeps_a_state(c, 50) == 51  # the fill 1550, less 30 a slide, < 50 - 20
+    assert _slide_that_keeps_a_state(c, 100) == 38  # 3100 ms, 80 a slide
+    assert _slide_that_keeps_a_state(c, 20) is None  # a slide no cheaper than integrating: never
     # where the steps travel for every integration, fill and slide guessed at one voxel-step:
-    # filled after one integrated slide
+    # the first slide keeps a state, the second fills it
     guessed = Costs()
     guessed.record_direct(0, ms=1.0, voxels=V, steps=1)
-    assert _slides_before_fill(guessed, 10, Move(travels=True)) == 1
+    assert _slide_that_keeps_a_state(guessed, 10, Move(travels=True)) == 1
 
 
 def test_a_gpu_and_a_cpu_find_their_own_threshold():
@@ -111,8 +122,9 @@ def test_a_gpu_and_a_cpu_find_their_own_threshold():
     gpu = _measured(d=15e-6, s=20e-6, f=15e-6)  # the steps sent up every time: from 2
     assert cpu.why_not(V, 28, Move(filled=True)) and cpu.why_not(V, 30, Move(filled=True)) is None
     assert gpu.why_not(V, 1, Move(filled=True)) and gpu.why_not(V, 2, Move(filled=True)) is None
-    assert _slides_before_fill(cpu, 10) is None and _slides_before_fill(cpu, 50) == 46
-    assert _slides_before_fill(gpu, 10) == 1
+    assert _slide_that_keeps_a_state(cpu, 10) is None
+    assert _slide_that_keeps_a_state(cpu, 50) == 46
+    assert _slide_that_keeps_a_state(gpu, 10) == 1
 
 
 def test_unmeasured_slides_and_fills_are_guessed_from_the_integration():
@@ -125,8 +137,11 @@ def test_unmeasured_slides_and_fills_are_guessed_from_the_integration():
     s, f = TUNING.slide_steps, TUNING.fill_steps
     assert c.why_not(V, int(s) + 1, Move(filled=True)) is None
     assert "not measured yet" in c.why_not(V, int(s) - 1, Move(filled=True))
-    width = int(s) + 12  # each integrated slide pays 12 ms of rent
-    assert _slides_before_fill(c, width) == int((s + f * width - width) // 12) + 1
+    width = int(s) + 12
+    per = width - s  # the rent each integrated slide pays, in steps integrated
+    keeps = (s + f * width - width) / per  # the state is kept by the first slide past it
+    assert keeps != int(keeps)  # not a tie, which rounding would decide
+    assert _slide_that_keeps_a_state(c, width) == int(keeps) + 1
     assert "not measured yet" in c.why_not(V, width)
     assert (
         c.why_not(V, 3, Move(travels=True))
@@ -136,7 +151,7 @@ def test_unmeasured_slides_and_fills_are_guessed_from_the_integration():
     assert c.why_not(V, int(inverting) + 1, Move(inverts=True, filled=True)) is None
     # the fill measured dear: a state is started after more integrated slides than guessed
     c.record_slide(0, ms=100 * f * 1e-6 * V * 20, voxels=V, fill=20)
-    assert _slides_before_fill(c, width) is None
+    assert _slide_that_keeps_a_state(c, width) is None
     assert c.why_not(V, width, Move(filled=True)) is None  # a filled one slides on
 
 
@@ -427,10 +442,10 @@ def test_a_viewers_long_window_slides_incrementally_and_equals_the_direct_integr
 
 def test_a_session_integrates_its_slides_until_they_paid_for_the_fill_and_a_jump_starts_again():
     """A viewer's session at rates where a 20-step window's fill (10 voxel-steps a step: 200)
-    pays after 13 integrated one-step slides (each 20 - 5 over a slide's 5): those integrate
-    and say how much of the fill they paid, the next one keeps a state, the one after fills it
-    and slides, and slides on; a jump integrates and pays nothing yet. Every chronovolume
-    equals integrating its window."""
+    pays after 13 integrated one-step slides (each 20 - 5 over a slide's 5): the first 12
+    integrate and say how much of the fill they paid, their own share included; the 13th
+    integrates and keeps a state, the 14th fills it and slides, and the next ones slide; a
+    jump integrates and pays nothing. Every chronovolume equals integrating its window."""
     data = np.random.default_rng(6).random((60, 6, 7, 9), dtype=np.float32)
     series = chronocl.TimeSeries.from_array(data)
     absolute = TimeTF.preset("rgb", positions="absolute")
@@ -445,13 +460,43 @@ def test_a_session_integrates_its_slides_until_they_paid_for_the_fill_and_a_jump
             paid.append(why.split("ms of it paid")[0].rsplit(", ", 1)[-1].strip() if why else None)
             ref = chronocl.integrate(series, f"{t0}:{t0 + 20}", spec=session.spec)
             np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
-        assert paths == ["reintegrate"] * 14 + ["incremental"] * 2, paths
-        ms = 1e-3 * int(np.prod(series.volume_shape))  # a voxel-step of integration, in ms
-        assert paid[:13] == [f"{15 * ms * k:.0f}" for k in range(13)], paid
-        assert paid[13:] == [None] * 3  # kept a state; filled it; slid
+        assert paths == ["reintegrate"] * 13 + ["incremental"] * 3, paths
+        ms = 1e-3 * int(np.prod(series.volume_shape))  # a step of integration, in ms
+        assert paid[:12] == [f"{15 * ms * k:.0f}" for k in range(1, 13)], paid
+        assert paid[12:] == [None] * 4  # kept a state; filled it; slid twice
         session.set_window(38, 58)  # a jump: integrated, and the rent starts again
-        for t0, rent in ((39, 0), (40, 15 * ms), (0, 0)):  # the last a jump: it paid nothing
+        for t0, rent in ((39, 15 * ms), (40, 30 * ms), (0, 0)):  # the last a jump: pays none
             session.set_window(t0, t0 + 20)
             why = session.stats["why_not_incremental"]
             assert session.stats["path"] == "reintegrate"
             assert f", {rent:.0f} ms of it paid by integrating since the jump" in why, why
+
+
+def test_a_jump_given_up_pays_its_window_no_rent_of_the_one_before(monkeypatch):
+    """The rent is the jumped-to window's from the moment it is asked for: a jump whose
+    integration is given up for newer input (a refine's) leaves none of the old window's rent,
+    so the next slide pays its own share alone."""
+    from chronocl.core.errors import SupersededError
+    from chronocl.integration.interactive import level_session
+
+    data = np.random.default_rng(7).random((60, 6, 7, 9), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    rates = _Fixed(direct=1e-3, slide=5.0, fill=10.0)
+    ms = 1e-3 * int(np.prod(series.volume_shape))
+    with chronocl.Session(series, mode="alpha", time_tf=absolute, slide_costs=rates) as session:
+        for t0 in range(6):
+            session.set_window(t0, t0 + 20)
+        assert f", {75 * ms:.0f} ms of it paid" in session.stats["why_not_incremental"]
+        integrate = level_session.integrate_bricks
+
+        def given_up(*args, **kwargs):
+            monkeypatch.setattr(level_session, "integrate_bricks", integrate)
+            raise SupersededError("newer input came")
+
+        monkeypatch.setattr(level_session, "integrate_bricks", given_up)
+        with pytest.raises(SupersededError):
+            session.set_window(30, 50)
+        session.set_window(31, 51)
+        assert session.stats["path"] == "reintegrate"
+        assert f", {15 * ms:.0f} ms of it paid" in session.stats["why_not_incremental"]

@@ -21,19 +21,23 @@ a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * d *
 integrating it at `d * V * W`; a state already filled keeps sliding while `s * k < W`. A state
 still to be filled costs its fill besides, `f * d * V * W` in one frame (at 256^3, W = 50 on 2
 cores: 6-11 s), which pays only over the slides that follow. So it is bought as skis are rented
-(`Move.rent`): each one-step move of a window integrated instead of slid adds what integrating
-cost over a steady slide, `d * V * (W - s)`, and the state is filled once that sum reaches
-the fill, at `f * W / (W - s)` integrated slides since the window was jumped to; a jump or
-a spec change starts the sum again. That is never more than twice what the best choice
-knowing the moves to come costs, whatever the user does next. Before 2026-12-01 the fill's
-share `f * d * V` was taken as paid on each slide (a scrub across the whole window assumed):
-every jump at W >= s + f was followed by a fill, a 6-11 s frame at 256^3, W = 50 here, even
-where the user slid two steps (bench/slide_window.py). Each machine and engine finds its own
-rates: until measured, s and f are guessed (`TUNING.slide_steps`, `fill_steps`, from this
-machine); where the window's steps travel to the device for every integration (a GPU whose
-memory holds not the window), d is mostly that transfer, which a slide pays only for its
-entering steps and a fill once per step: both are then guessed at 1, and the state is filled
-after one integrated slide. The first slide measures f, the next ones s.
+(`Move.rent`): each slide of `k` steps of a window integrated instead adds what integrating
+cost over a steady slide, `d * V * (W - s * k)`, and the integration that brings the sum up to
+the fill keeps a state, which the next slide fills: after about `f * W / (W - s)` integrated
+one-step slides since the window was jumped to. A jump or an integration under another spec
+starts the sum again. Whatever the user does next, that costs never much more than twice what
+the best choice knowing the moves to come would. The sum is kept in steps integrated (units
+of `d * V`), as s and f are. Before 2026-12-01 the fill's share `f * d * V` was taken as paid
+on each slide (a scrub across the whole window assumed): every jump at W >= s + f was followed
+by a fill, a 6-11 s frame at 256^3, W = 50 here, even where the user slid two steps
+(bench/slide_window.py).
+
+Each machine and engine finds its own rates: until measured, s and f are guessed
+(`TUNING.slide_steps`, `fill_steps`, from this machine); where the window's steps travel to the
+device for every integration (a GPU whose memory holds not the window), d is mostly that
+transfer, which a slide pays only for its entering steps and a fill once per step: both are
+then guessed at 1, so the first slide after a jump integrates and keeps a state and the second
+fills it. The first slide measures f, the next ones s.
 
 s and f are kept in units of d as it stood when they were measured (a slide's ms over the
 integration rate then), not in ms: on a machine shared with other work both slow down alike, and
@@ -80,8 +84,9 @@ class Move(NamedTuple):
     """A move of a session's window, as its slide is costed: at `level`, `shift` steps entering,
     the window's steps sent to the device for every integration (`travels`), the sliding state
     filled already (`filled`: its fill is paid), a mode sliding by sums alone (`inverts`), and
-    the ms its window's integrations since it was last jumped to cost over the slides of a
-    filled state (`rent`: the fill is paid once they reach it)."""
+    what the slides of its window integrated since it was last jumped to cost over the slides
+    of a filled state (`rent`, in steps integrated, as s and f: the fill is paid once it
+    reaches the fill's)."""
 
     level: int = 0
     shift: int = 1
@@ -184,7 +189,7 @@ class Costs:
         steady = self.slide.get(key, guess) * d * voxels * shift
         fill = 0.0
         if not move.filled:  # what of it the integrations since the jump have not paid yet
-            fill = max(0.0, self._fill_ms(voxels, width, move) - move.rent)
+            fill = max(0.0, self._fill_ms(voxels, width, move) - move.rent * d * voxels)
         measured = key in self.slide and (move.filled or key in self.fill)
         return d * voxels * width, steady + fill, measured
 
@@ -198,10 +203,14 @@ class Costs:
         return steady[1] + (0.0 if move.filled else self._fill_ms(voxels, width, move))
 
     def rent(self, voxels: int, width: int, move: Move = ONE_STEP) -> float:
-        """The ms `move` of a window of `width` over `voxels` voxels, integrated, costs over the
-        steady slide of a filled state (0: nothing integrated at its level yet, or no more)."""
+        """What `move` of a window of `width` over `voxels` voxels, integrated, costs over the
+        steady slide of a filled state, in steps integrated (kept so, as s and f, a machine
+        growing busier weighs it at today's rate; 0: nothing integrated at its level yet, or
+        no more)."""
         got = self.predict(voxels, width, move._replace(filled=True))
-        return 0.0 if got is None else max(0.0, got[0] - got[1])
+        if got is None:
+            return 0.0
+        return max(0.0, got[0] - got[1]) / (self.direct[move.level] * voxels)
 
     def _fill_ms(self, voxels: int, width: int, move: Move) -> float:
         """The ms filling the sliding state of a window of `width` over `voxels` voxels takes
@@ -222,7 +231,8 @@ class Costs:
         fill = ""
         if not move.filled:
             whole = self._fill_ms(voxels, width, move)
-            paid = f"{move.rent:.0f} ms of it paid by integrating since the jump"
+            paid = min(whole, move.rent * self.direct[move.level] * voxels)
+            paid = f"{paid:.0f} ms of it paid by integrating since the jump"
             fill = f", its state's fill included: {whole:.0f} ms, {paid}"
         return (
             f"integrating the window is predicted at {direct:.0f} ms, sliding it at {slide:.0f} "

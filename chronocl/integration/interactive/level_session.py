@@ -98,8 +98,9 @@ class LevelSession:
         in_place = self.engine.reads_in_place
         self._bricks = ResidentBricks(self._arrays, in_place=in_place)
         self._slider: Slider | None = None
-        # ms the one-step moves integrated since the window was jumped to cost over slides: a
-        # state is filled once they reach its fill (`costs.Move.rent`)
+        # what the slides integrated since the window was jumped to cost over slides of a
+        # filled state, in steps integrated: a state is filled once it reaches the fill's
+        # (`costs.Move.rent`)
         self._rent = 0.0
         self._cv: Chronovolume | None = None
         # (t_index, winners) the kernels wrote with the window's integration (`winners`)
@@ -194,6 +195,7 @@ class LevelSession:
         """Show `cv`, this window recoloured under `spec` (asked as `asked`), as if integrated.
         The sliding state held the old colours: the next slide integrates the window again."""
         self.asked, self.spec, self._cv, self._slider = asked, spec, cv, None
+        self._rent = 0.0  # a state for another spec: its rent starts again
 
     def read_ahead(self, selection: Selection) -> str | None:
         """Start reading `selection`'s steps in the background (a `Session` shows the window at
@@ -237,7 +239,7 @@ class LevelSession:
         self._hold({s: a for s, a in held.items() if s in why.keep})
         del held
         self._bricks.forget()
-        self._slider = None
+        self._slider, self._rent = None, 0.0
         self.manager.drop(leaving)
 
     def set_aside(self) -> None:
@@ -249,7 +251,7 @@ class LevelSession:
         self._device.release()
         self._hold({})
         self._bricks.forget()
-        self._slider = None
+        self._slider, self._rent = None, 0.0
         self._cv = self._won = None
 
     def close(self) -> None:
@@ -263,6 +265,8 @@ class LevelSession:
         old = self.selection
         if old is not None and selection == old and self._cv is not None:
             return self._cv
+        if old is None or not slides_to(old, selection):
+            self._rent = 0.0  # a jump: even where it streams or its integration is given up
         window = selection.width * self.manager.step_bytes
         if self.streams(selection):  # a viewer's memory limit leaves no room, or the budget
             why = f"the window needs {human(window)} > budget {human(self.budget)}"
@@ -335,37 +339,31 @@ class LevelSession:
                     self.display,
                 )
         self._cv = cv
-        self._pay_rent(old, selection, path, move, voxels)
+        # a state filled has paid the rent; a slide integrated pays its share (in `_move`)
+        self._rent = 0.0 if path == "incremental" else move.rent
         self._record(t, path, reason, read_ms)
         return cv
-
-    def _pay_rent(
-        self, old: Selection | None, selection: Selection, path: str, move: Move, voxels: int
-    ) -> None:
-        """A slide from `old` integrated instead, where a filled state would have slid (a
-        viewer's costs), adds what that cost over the slide to the rent; a state filled has
-        paid it, and a jump starts it again."""
-        if path == "reintegrate" and old is not None and slides_to(old, selection):
-            if self.weighs_slides:
-                entering = len(set(selection.steps) - set(old.steps))
-                self._rent += self.costs.rent(
-                    voxels, selection.width, move._replace(shift=entering)
-                )
-        else:
-            self._rent = 0.0
 
     def _move(self, selection: Selection) -> Move:
         """The move to `selection` as a slide is costed: the steps entering where the state can
         slide (else a one-step slide's, which decides whether the window integrated now keeps a
         state), the steps sent to the device for every integration, the state's fill paid, and
-        of a slide, the rent paid towards it (a jump has paid none)."""
+        of a slide, the rent paid towards it (a jump has paid none); a slide integrated, with no
+        state to slide, pays its own share at once, so the integration that brings the rent up
+        to the fill keeps a state, and the next slide fills it."""
         old, slider = self.selection, self._slider
-        rent = self._rent if old is not None and slides_to(old, selection) else 0.0
-        move = Move(self.level, inverts=slides_by_sums(self.spec), rent=rent)
+        slides = old is not None and slides_to(old, selection)
+        move = Move(self.level, inverts=slides_by_sums(self.spec), rent=self._rent if slides else 0)
         move = move._replace(travels=self._device.why is not None)
-        if old is not None and slider is not None and slider.can_move_to(selection):
-            entering = len(set(selection.steps) - set(old.steps))
-            move = move._replace(shift=entering, filled=slider.placed)
+        if not slides:
+            return move
+        entering = len(set(selection.steps) - set(old.steps))
+        if slider is not None and slider.can_move_to(selection):
+            return move._replace(shift=entering, filled=slider.placed)
+        if self.weighs_slides and entering:
+            voxels = int(np.prod(self.series.volume_shape))
+            paid = self.costs.rent(voxels, selection.width, move._replace(shift=entering))
+            move = move._replace(rent=move.rent + paid)
         return move
 
     def streams(self, selection: Selection) -> bool:

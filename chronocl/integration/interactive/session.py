@@ -306,7 +306,7 @@ class Session:
         self.shown, self._last = finest, (self.window(), spec)
         self.why = "recoloured at full resolution"
         self.stats = {**self.stats, "level": finest, "why_level": self.why, "refining": False}
-        self.stats.update(integrate_ms=0.0, path="recoloured", incremental=False)
+        self.stats.update(integrate_ms=0.0, read_ms=0.0, path="recoloured", incremental=False)
 
     def record_display(self, ms: float) -> None:
         """The display's upload + render time of the last chronovolume returned: a latency
