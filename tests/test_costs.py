@@ -75,7 +75,7 @@ def test_measured_rates_set_the_width_from_which_a_slide_pays():
     # the rent is kept in steps integrated: on a machine grown busier (d from 1 to 2 ns) a
     # step paid is worth as much of the fill as before
     busier = _measured(d=1e-6, s=20e-6, f=30e-6)
-    busier.record_direct(0, ms=3e-6 * V * 10, voxels=V, steps=10)  # running: d = 2e-6
+    busier.direct[0] = 2e-6
     assert "3000 ms, 2938 ms of it paid" in busier.why_not(V, 50, Move(rent=1469))
     direct, slide, measured = c.predict(V, 60, Move(rent=100))
     assert measured and direct == pytest.approx(60.0) and slide == pytest.approx(20 + 1800 - 100)
@@ -499,4 +499,39 @@ def test_a_jump_given_up_pays_its_window_no_rent_of_the_one_before(monkeypatch):
             session.set_window(30, 50)
         session.set_window(31, 51)
         assert session.stats["path"] == "reintegrate"
+        assert f", {15 * ms:.0f} ms of it paid" in session.stats["why_not_incremental"]
+
+
+def test_a_fill_given_up_or_a_jump_seen_in_passing_starts_the_rent_again(monkeypatch):
+    """A fill given up for newer input bought nothing: the rent starts again, so a scrub does
+    not start a fill on every frame it gives up; a jump a level only hears of (`leaving`: the
+    frames between drawn at another level) starts it again too."""
+    from chronocl.core.errors import SupersededError
+    from chronocl.core.selection import parse_selection
+    from chronocl.integration.interactive.slider import Slider
+
+    data = np.random.default_rng(8).random((60, 6, 7, 9), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    rates = _Fixed(direct=1e-3, slide=5.0, fill=10.0)  # a state kept on the 13th slide
+    ms = 1e-3 * int(np.prod(series.volume_shape))
+    with chronocl.Session(series, mode="alpha", time_tf=absolute, slide_costs=rates) as session:
+        for t0 in range(14):
+            session.set_window(t0, t0 + 20)
+        assert session.stats["path"] == "reintegrate" and not session.stats["why_not_incremental"]
+        move_to = Slider.move_to
+
+        def given_up(self, *args, **kwargs):
+            monkeypatch.setattr(Slider, "move_to", move_to)
+            raise SupersededError("newer input came")
+
+        monkeypatch.setattr(Slider, "move_to", given_up)
+        with pytest.raises(SupersededError):
+            session.set_window(14, 34)  # the fill, given up
+        for t0, paid in ((15, 15 * ms), (16, 30 * ms)):
+            session.set_window(t0, t0 + 20)
+            assert session.stats["path"] == "reintegrate"
+            assert f", {paid:.0f} ms of it paid" in session.stats["why_not_incremental"]
+        session.leaving(parse_selection("40:60", series.n_steps))  # drawn elsewhere
+        session.set_window(17, 37)
         assert f", {15 * ms:.0f} ms of it paid" in session.stats["why_not_incremental"]

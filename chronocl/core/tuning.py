@@ -220,9 +220,9 @@ class Tuning:
     # Guess, until measured, of a sliding state's fill per window step, in voxel-steps. Measured
     # as slide_steps: 12 (128^3 alpha), 36 (128^3 max), 15-20 (256^3 alpha) per step (e9a488f);
     # 26-42 at 256^3 alpha through the viewer on 2026-12-01, slide_steps 21-26 (the fill's
-    # partials are held at once, in fresh pages). Since then a state is filled once the window's
-    # integrated slides cost as much more than slides (`costs.Move.rent`): a guess too low
-    # fills a scrub's state too early, not one after every jump.
+    # partials are held at once, in fresh pages). Since then a state is filled once what the
+    # window's integrated slides cost over slides reaches the fill (`costs.Move.rent`): a guess
+    # too low fills a scrub's state too early, not one after every jump.
     fill_steps: float = 20.0
     # Idle cores a reader thread needs before full resolution is read ahead (a reader decodes
     # one step at a time). Not measured: one reader, one core (e9a488f, 2026-11-30).

@@ -21,11 +21,12 @@ a slide of `k` steps of a window of `W` over `V` voxels is predicted at `s * d *
 integrating it at `d * V * W`; a state already filled keeps sliding while `s * k < W`. A state
 still to be filled costs its fill besides, `f * d * V * W` in one frame (at 256^3, W = 50 on 2
 cores: 6-11 s), which pays only over the slides that follow. So it is bought as skis are rented
-(`Move.rent`): each slide of `k` steps of a window integrated instead adds what integrating
-cost over a steady slide, `d * V * (W - s * k)`, and the integration that brings the sum up to
-the fill keeps a state, which the next slide fills: after about `f * W / (W - s)` integrated
-one-step slides since the window was jumped to. A jump or an integration under another spec
-starts the sum again. Whatever the user does next, that costs never much more than twice what
+(`Move.rent`): each slide of `k` steps of a window integrated where no state was kept adds what
+integrating cost over a steady slide, `d * V * (W - s * k)`, and the integration that brings
+the sum up to the fill keeps a state, which the next slide fills: after about
+`f * W / (W - s)` integrated one-step slides since the window was jumped to. A jump, an
+integration under another spec, a window that streams and a fill given up for newer input
+start the sum again. Whatever the user does next, that costs never much more than twice what
 the best choice knowing the moves to come would. The sum is kept in steps integrated (units
 of `d * V`), as s and f are. Before 2026-12-01 the fill's share `f * d * V` was taken as paid
 on each slide (a scrub across the whole window assumed): every jump at W >= s + f was followed
@@ -207,10 +208,13 @@ class Costs:
         steady slide of a filled state, in steps integrated (kept so, as s and f, a machine
         growing busier weighs it at today's rate; 0: nothing integrated at its level yet, or
         no more)."""
-        got = self.predict(voxels, width, move._replace(filled=True))
-        if got is None:
+        got, d = (
+            self.predict(voxels, width, move._replace(filled=True)),
+            self.direct.get(move.level),
+        )
+        if got is None or not d:
             return 0.0
-        return max(0.0, got[0] - got[1]) / (self.direct[move.level] * voxels)
+        return max(0.0, got[0] - got[1]) / (d * voxels)
 
     def _fill_ms(self, voxels: int, width: int, move: Move) -> float:
         """The ms filling the sliding state of a window of `width` over `voxels` voxels takes

@@ -35,6 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from chronocl.core.budget import human
+from chronocl.core.errors import SupersededError
 from chronocl.core.interrupt import watched
 from chronocl.core.process_memory import Streaming
 from chronocl.core.selection import Selection, parse_selection
@@ -217,6 +218,8 @@ class LevelSession:
         first read the new one, and both old frames: 4 GB over the steady 8.8 at 512^3)."""
         if self.selection is None or selection == self.selection:
             return
+        if not slides_to(self.selection, selection):
+            self._rent = 0.0  # a jump, seen where this level draws none of the frames between
         self._cv = self._won = None
         if not (self._slider is not None and self._slider.can_move_to(selection)):
             self._let_go(selection)  # integrated anew: the steps leaving help no more
@@ -303,6 +306,10 @@ class LevelSession:
                 cv = slider.move_to(selection, {**leaving, **arrays})
             except FaintSums as too_faint:  # integrated below; the state, moved, slides on
                 faint, reason = slider, f"{too_faint}; integrated"
+            except SupersededError:
+                if fill:  # a fill given up (newer input) bought nothing: no retry at every frame
+                    self._rent = 0.0
+                raise
             else:
                 self._slider, path = slider, "incremental"
                 ms = 1e3 * (time.perf_counter() - t_slide)  # the first slide of a state fills it
@@ -340,7 +347,7 @@ class LevelSession:
                 )
         self._cv = cv
         # a state filled has paid the rent; a slide integrated pays its share (in `_move`)
-        self._rent = 0.0 if path == "incremental" else move.rent
+        self._rent = 0.0 if path == "incremental" or faint is not None else move.rent
         self._record(t, path, reason, read_ms)
         return cv
 
