@@ -75,24 +75,31 @@ def wait_slice(p: Page, spec: str, after: int = 0) -> dict:
     return p.eval(SHOWN)
 
 
-def hover(
-    p: Page, shown: dict, u: float, v: float, after: int = 0, panel: int = 0, img="slice-pic"
-) -> dict:
+def hover(p: Page, u: float, v: float, after: int = 0, panel: int = 0, img="slice-pic") -> dict:
     """The pointer at (u, v) of the voxel grid in the reply's picture `panel` (0: the colours,
     1: the step map; the grid's `box` is in each of the layout's pictures) of the picture `img`;
-    returns the read-out that answers it. The picture's place is read when the pointer moves,
-    and again while the read-out is waited for: the side panel's sections above it change
-    height as their notes come (a histogram's, late under load), which moved the picture
-    under a pointer placed from an older place; the pointer follows it there."""
-    bx, by, bw, bh = shown["box"]
-    px, py = shown["pictures"][panel][:2]
+    returns the read-out that answers it. Where the pointer goes is read from the picture shown
+    when it moves, and again while the read-out is waited for: the side panel's sections above
+    it change height as their notes come (a histogram's, late under load), which moved the
+    picture, and a picture asked again may lay out otherwise; the pointer follows it there.
+    Where no read-out came in 5 s with the pointer still, it moves off and back: the page asks
+    again only when the pointer moves (CI: a read-out never came in 60 s, the pointer still)."""
     end, placed = time.monotonic() + 60, None
     while True:
-        x, y, w, _ = p.eval(SHOWN, img)["shown"]
-        if (x, y, w) != placed:  # (the same place: the read-out is waited for, not asked again)
-            scale = w / shown["natural"][0]
-            p.page.mouse.move(x + (px + bx + u * bw) * scale, y + (py + by + v * bh) * scale)
-            placed = (x, y, w)
+        now = p.eval(SHOWN, img)
+        if now is None or not now["complete"] or not now["natural"][0]:
+            assert time.monotonic() < end, "the slice picture never loaded"
+            time.sleep(0.05)  # a picture still loading: no grid to point at yet
+            continue
+        x, y, w, _ = now["shown"]
+        bx, by, bw, bh = now["box"]
+        px, py = now["pictures"][panel][:2]
+        scale = w / now["natural"][0]
+        at = (x + (px + bx + u * bw) * scale, y + (py + by + v * bh) * scale)
+        if at == placed:  # still: nothing new to ask, so a move off and back asks again
+            p.page.mouse.move(at[0] + 1, at[1])
+        p.page.mouse.move(*at)
+        placed = at
         try:
             p.page.wait_for_function(
                 "(after) => window.viewer.sliceReadout && window.viewer.sliceReadoutId > after",
@@ -162,7 +169,7 @@ def test_the_slice_panel_shows_the_plane_and_reads_the_winning_step(
         cv = chronocl.integrate(series, f"{t0}:{t1}:{stride}", mode="max")
         # The pointer at voxel centres (a voxel is ~3 CSS pixels of the panel's picture): column
         # 9, row 12 from the top (y = 31 - 12).
-        got = hover(p, shown, 9.5 / 32, 12.5 / 32, shown["id"])
+        got = hover(p, 9.5 / 32, 12.5 / 32, shown["id"])
         read = got["readout"]
         vx, vy, vz = (read["voxel"][a] for a in "xyz")
         assert (vx, vy, vz) == (9, 19, 20)
@@ -172,7 +179,7 @@ def test_the_slice_panel_shows_the_plane_and_reads_the_winning_step(
         assert got["text"] == read["text"] and f"step {step}" in got["text"]
         assert got["text"].startswith(f"x={vx} y={vy} z={vz} (")
         # The same voxel from the step map beside the colours.
-        beside = hover(p, shown, 9.5 / 32, 12.5 / 32, got["id"], panel=1)
+        beside = hover(p, 9.5 / 32, 12.5 / 32, got["id"], panel=1)
         assert len(shown["pictures"]) == 2 and beside["readout"] == read
         # A click there pins the probe: v(t) at that voxel over every step, marked on the view.
         page.mouse.down()
@@ -205,7 +212,7 @@ def test_the_slice_panel_shows_the_plane_and_reads_the_winning_step(
             abs(big["shown"][2] - big["size"][0]) <= 2 or abs(big["shown"][3] - big["size"][1]) <= 2
         )
         assert big["grid"] == shown["grid"]
-        got = hover(p, big, 25.5 / 32, 3.5 / 32, big["id"], img="slice-big-pic")
+        got = hover(p, 25.5 / 32, 3.5 / 32, big["id"], img="slice-big-pic")
         vx, vy = 25, 31 - 3
         assert got["readout"]["voxel"] == {"x": vx, "y": vy, "z": 20}
         assert got["readout"]["step"] == int(cv.t_index[20, vy, vx])
@@ -220,7 +227,7 @@ def test_the_slice_panel_shows_the_plane_and_reads_the_winning_step(
         choose(p, "#views .view select.mode", "alpha")
         again = wait_slice(p, "z=20", got["id"])
         assert again["t_index"] is False
-        got = hover(p, again, 0.5, 0.5, again["id"])
+        got = hover(p, 0.5, 0.5, again["id"])
         assert got["readout"]["step"] is None
         assert "no winning step" in got["text"] and "no t_index" in got["text"]
         # The panel folded: no outline left on the view.
