@@ -440,18 +440,41 @@ def test_a_viewers_long_window_slides_incrementally_and_equals_the_direct_integr
             views.release()
 
 
+def _renting(seed: int):
+    """A viewer's session over 60 random steps at rates where a 20-step window's fill (10
+    voxel-steps a step: 200) pays after 13 integrated one-step slides (each 20 - 5 over a
+    slide's 5), its series, and a step of integration in ms."""
+    data = np.random.default_rng(seed).random((60, 6, 7, 9), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    rates = _Fixed(direct=1e-3, slide=5.0, fill=10.0)
+    session = chronocl.Session(series, mode="alpha", time_tf=absolute, slide_costs=rates)
+    return session, series, 1e-3 * int(np.prod(series.volume_shape))
+
+
+def _give_up_once(monkeypatch, owner: object, name: str) -> None:
+    """`owner.name` raises SupersededError (newer input came) on its next call, then is itself
+    again."""
+    from chronocl.core.errors import SupersededError
+
+    real = getattr(owner, name)
+
+    def given_up(*args, **kwargs):
+        monkeypatch.setattr(owner, name, real)
+        raise SupersededError("newer input came")
+
+    monkeypatch.setattr(owner, name, given_up)
+
+
 def test_a_session_integrates_its_slides_until_they_paid_for_the_fill_and_a_jump_starts_again():
     """A viewer's session at rates where a 20-step window's fill (10 voxel-steps a step: 200)
     pays after 13 integrated one-step slides (each 20 - 5 over a slide's 5): the first 12
     integrate and say how much of the fill they paid, their own share included; the 13th
     integrates and keeps a state, the 14th fills it and slides, and the next ones slide; a
     jump integrates and pays nothing. Every chronovolume equals integrating its window."""
-    data = np.random.default_rng(6).random((60, 6, 7, 9), dtype=np.float32)
-    series = chronocl.TimeSeries.from_array(data)
-    absolute = TimeTF.preset("rgb", positions="absolute")
-    rates = _Fixed(direct=1e-3, slide=5.0, fill=10.0)
+    session, series, ms = _renting(6)
     paths, paid = [], []
-    with chronocl.Session(series, mode="alpha", time_tf=absolute, slide_costs=rates) as session:
+    with session:
         session.set_window(0, 20)
         for t0 in range(1, 17):
             cv = session.set_window(t0, t0 + 20)
@@ -461,7 +484,6 @@ def test_a_session_integrates_its_slides_until_they_paid_for_the_fill_and_a_jump
             ref = chronocl.integrate(series, f"{t0}:{t0 + 20}", spec=session.spec)
             np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
         assert paths == ["reintegrate"] * 13 + ["incremental"] * 3, paths
-        ms = 1e-3 * int(np.prod(series.volume_shape))  # a step of integration, in ms
         assert paid[:12] == [f"{15 * ms * k:.0f}" for k in range(1, 13)], paid
         assert paid[12:] == [None] * 4  # kept a state; filled it; slid twice
         session.set_window(38, 58)  # a jump: integrated, and the rent starts again
@@ -479,22 +501,12 @@ def test_a_jump_given_up_pays_its_window_no_rent_of_the_one_before(monkeypatch):
     from chronocl.core.errors import SupersededError
     from chronocl.integration.interactive import level_session
 
-    data = np.random.default_rng(7).random((60, 6, 7, 9), dtype=np.float32)
-    series = chronocl.TimeSeries.from_array(data)
-    absolute = TimeTF.preset("rgb", positions="absolute")
-    rates = _Fixed(direct=1e-3, slide=5.0, fill=10.0)
-    ms = 1e-3 * int(np.prod(series.volume_shape))
-    with chronocl.Session(series, mode="alpha", time_tf=absolute, slide_costs=rates) as session:
+    session, _, ms = _renting(7)
+    with session:
         for t0 in range(6):
             session.set_window(t0, t0 + 20)
         assert f", {75 * ms:.0f} ms of it paid" in session.stats["why_not_incremental"]
-        integrate = level_session.integrate_bricks
-
-        def given_up(*args, **kwargs):
-            monkeypatch.setattr(level_session, "integrate_bricks", integrate)
-            raise SupersededError("newer input came")
-
-        monkeypatch.setattr(level_session, "integrate_bricks", given_up)
+        _give_up_once(monkeypatch, level_session, "integrate_bricks")
         with pytest.raises(SupersededError):
             session.set_window(30, 50)
         session.set_window(31, 51)
@@ -510,22 +522,12 @@ def test_a_fill_given_up_or_a_jump_seen_in_passing_starts_the_rent_again(monkeyp
     from chronocl.core.selection import parse_selection
     from chronocl.integration.interactive.slider import Slider
 
-    data = np.random.default_rng(8).random((60, 6, 7, 9), dtype=np.float32)
-    series = chronocl.TimeSeries.from_array(data)
-    absolute = TimeTF.preset("rgb", positions="absolute")
-    rates = _Fixed(direct=1e-3, slide=5.0, fill=10.0)  # a state kept on the 13th slide
-    ms = 1e-3 * int(np.prod(series.volume_shape))
-    with chronocl.Session(series, mode="alpha", time_tf=absolute, slide_costs=rates) as session:
+    session, series, ms = _renting(8)  # a state kept on the 13th slide
+    with session:
         for t0 in range(14):
             session.set_window(t0, t0 + 20)
         assert session.stats["path"] == "reintegrate" and not session.stats["why_not_incremental"]
-        move_to = Slider.move_to
-
-        def given_up(self, *args, **kwargs):
-            monkeypatch.setattr(Slider, "move_to", move_to)
-            raise SupersededError("newer input came")
-
-        monkeypatch.setattr(Slider, "move_to", given_up)
+        _give_up_once(monkeypatch, Slider, "move_to")
         with pytest.raises(SupersededError):
             session.set_window(14, 34)  # the fill, given up
         for t0, paid in ((15, 15 * ms), (16, 30 * ms)):

@@ -251,8 +251,13 @@ class Views:
     def streamed(self) -> str | None:
         """Why a view's window streams from the store instead of staying resident (its
         session's one line: the memory limit leaves its steps too little room), else None."""
+        return self.said("streamed")
+
+    def said(self, key: str) -> str | None:
+        """The first reason the views' sessions give under `key` in their stats (why the
+        window streams, why a coarse frame read nothing ahead), else None."""
         for slot in self.slots:
-            why = slot.session.stats.get("streamed") if slot.session is not None else None
+            why = slot.session.stats.get(key) if slot.session is not None else None
             if why:
                 return why
         return None

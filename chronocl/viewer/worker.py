@@ -553,14 +553,7 @@ class ClientWorker(Tasks):
                 # of it, waiting for steps read from the store (0: resident or read ahead)
                 "read_ms": round(times.read_ms, 2),
                 # a coarse frame that read no full-resolution step ahead for its refine: why
-                "why_not_read_ahead": next(
-                    (
-                        s.stats["why_not_read_ahead"]
-                        for s in sessions
-                        if s.stats.get("why_not_read_ahead")
-                    ),
-                    None,
-                ),
+                "why_not_read_ahead": self.views.said("why_not_read_ahead"),
                 "recolour_ms": round(times.recolour_ms, 2),  # a TF edit's, not integrated
                 # a GPU recolour's RGBA read back for this frame (framing; an older one still
                 # held, its texture taking this one): 0 where nothing read it

@@ -208,10 +208,8 @@ class Costs:
         steady slide of a filled state, in steps integrated (kept so, as s and f, a machine
         growing busier weighs it at today's rate; 0: nothing integrated at its level yet, or
         no more)."""
-        got, d = (
-            self.predict(voxels, width, move._replace(filled=True)),
-            self.direct.get(move.level),
-        )
+        got = self.predict(voxels, width, move._replace(filled=True))
+        d = self.direct.get(move.level)
         if got is None or not d:
             return 0.0
         return max(0.0, got[0] - got[1]) / (d * voxels)

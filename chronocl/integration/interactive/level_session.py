@@ -355,12 +355,12 @@ class LevelSession:
         """The move to `selection` as a slide is costed: the steps entering where the state can
         slide (else a one-step slide's, which decides whether the window integrated now keeps a
         state), the steps sent to the device for every integration, the state's fill paid, and
-        of a slide, the rent paid towards it (a jump has paid none); a slide integrated, with no
-        state to slide, pays its own share at once, so the integration that brings the rent up
-        to the fill keeps a state, and the next slide fills it."""
+        the rent paid towards it (none after a jump: `_update` starts it again); a slide
+        integrated, with no state to slide, pays its own share at once, so the integration that
+        brings the rent up to the fill keeps a state, and the next slide fills it."""
         old, slider = self.selection, self._slider
         slides = old is not None and slides_to(old, selection)
-        move = Move(self.level, inverts=slides_by_sums(self.spec), rent=self._rent if slides else 0)
+        move = Move(self.level, inverts=slides_by_sums(self.spec), rent=self._rent)
         move = move._replace(travels=self._device.why is not None)
         if not slides:
             return move
