@@ -218,3 +218,44 @@ def test_the_context_has_compute_shaders_where_the_driver_has_them_and_draws_wit
         pytest.skip(f"this driver's GL is {version}: no 4.3 to ask for")
     assert compute == "True" and drew == "True"
     assert run(MESA_GL_VERSION_OVERRIDE="3.3") == ["330", "False", "True"]
+
+
+def test_the_raycaster_keeps_the_framebuffers_of_the_sizes_drawn_last():
+    """A viewer's page asks for a new size at every resize, and a frame drawn smaller while
+    input comes at nearly every frame: the raycaster (one a process) keeps the framebuffers of
+    the `TUNING.kept_framebuffers` sizes drawn last and releases the others with their
+    renderbuffers (kept all, a minute of dragging held 160 MB); a size drawn again after its
+    framebuffer went draws the same picture on a new one."""
+    from chronocl.core.tuning import TUNING
+
+    rc = Raycaster()
+    vol = rc.upload(random_chronovolume())
+    camera = Camera(30.0, 20.0)
+    try:
+        made: dict = {}  # each framebuffer made: its attachments (a released one has none)
+
+        def note() -> None:
+            for f in rc._fbos.values():
+                made.setdefault(f, [a for a in (*f.color_attachments, f.depth_attachment) if a])
+
+        first = rc.draw(vol, camera, (40, 30), jitter=False, outline=True)
+        note()
+        for w in range(41, 41 + 2 * TUNING.kept_framebuffers):
+            rc.draw(vol, camera, (w, 30), jitter=False)
+            note()
+        rc.samples(vol, camera, (40, 30))  # the sample counts' float framebuffer: one of them
+        note()
+        assert len(rc._fbos) == TUNING.kept_framebuffers
+        assert len(made) == 2 * TUNING.kept_framebuffers + 2
+        gone = [f for f in made if f not in rc._fbos.values()]
+        assert len(gone) == len(made) - TUNING.kept_framebuffers
+        for fbo in gone:
+            assert made[fbo]
+            for obj in (fbo, *made[fbo]):
+                assert type(obj.mglo).__name__ == "InvalidObject"
+        for fbo in rc._fbos.values():
+            assert type(fbo.mglo).__name__ != "InvalidObject"
+        again = rc.draw(vol, camera, (40, 30), jitter=False, outline=True)
+        np.testing.assert_array_equal(again, first)
+    finally:
+        vol.release()

@@ -136,6 +136,11 @@ class Tuning:
     # measured as a figure: two, so that coarse and full-resolution frames stop reallocating a
     # 512^3 texture each edit (dc27825, 2026-11-27).
     kept_textures: int = 2
+    # Framebuffers of other sizes the raycaster keeps (render/raycaster.py `Raycaster._fbo`): a
+    # page resized, or a frame drawn smaller while input comes (`DrawBudget`), asks for a new
+    # size each time. Kept all, a minute of dragging held 74 of them, 160 MB (2026-12-01); four
+    # cover a page's sharp and reduced frames with a second client's.
+    kept_framebuffers: int = 4
     # Bytes the viewer's process may grow since its last clean-up before `HeapKeeper` collects
     # garbage and trims malloc. Measured with bench/viewer_soak.py (20 clients) on the 2-core
     # machine: without it the server grew ~100 MB/s without bound (86cb5ae, 2026-11-23).

@@ -55,7 +55,7 @@ class Raycaster:
         self._lit: tuple | None = None  # the lit program and its vertex array, on first use
         self._counting: tuple | None = None  # the COUNT_SAMPLES build, on first use
         self.outline_prog = program(self.ctx, "outline")
-        self._fbos: dict[tuple[int, int], object] = {}
+        self._fbos: dict[tuple, object] = {}  # (size, f4): the framebuffers drawn last, last
 
     def upload(self, cv: Chronovolume, dtype: str = "f2", nearest: bool = False) -> Volume:
         """Upload premultiplied RGBA (Z, Y, X, 4) as a new 3D texture (f4: float32, f2: half
@@ -148,12 +148,9 @@ class Raycaster:
         w, h = check_size(size)
         if self._counting is None:
             prog = program(self.ctx, "raycast", ("COUNT_SAMPLES",))
-            self._counting = (prog, self.ctx.vertex_array(prog, []), {})
-        prog, vao, fbos = self._counting
-        fbo = fbos.get((w, h))
-        if fbo is None:
-            rb = self.ctx.renderbuffer((w, h), 4, dtype="f4")
-            fbo = fbos[w, h] = self.ctx.framebuffer(color_attachments=[rb])
+            self._counting = (prog, self.ctx.vertex_array(prog, []))
+        prog, vao = self._counting
+        fbo = self._fbo((w, h), counts=True)
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
         self._set_uniforms(prog, volume, camera, (w, h), (0.0, 0.0, 0.0), clip, jitter, step, skip)
@@ -203,10 +200,26 @@ class Raycaster:
             self._lit = (prog, self.ctx.vertex_array(prog, []))
         return self._lit
 
-    def _fbo(self, size: tuple[int, int]):
-        fbo = self._fbos.get(size)
+    def _fbo(self, size: tuple[int, int], counts: bool = False):
+        """The framebuffer of `size` (RGBA8 and depth; with `counts`, float32 RGBA alone), made
+        on first use; those of the `TUNING.kept_framebuffers` sizes drawn last are kept, the
+        others released with their renderbuffers (moderngl releases a framebuffer's
+        attachments only when asked: github.com/moderngl/moderngl/issues/226)."""
+        key = (size, counts)
+        fbo = self._fbos.pop(key, None)
         if fbo is None:
-            fbo = self._fbos[size] = self.ctx.simple_framebuffer(size, components=4)
+            ctx = self.ctx
+            if counts:
+                fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4, dtype="f4")])
+            else:
+                fbo = ctx.framebuffer(ctx.renderbuffer(size, 4), ctx.depth_renderbuffer(size))
+        self._fbos[key] = fbo
+        while len(self._fbos) > TUNING.kept_framebuffers:
+            old = self._fbos.pop(next(iter(self._fbos)))
+            for attachment in (*old.color_attachments, old.depth_attachment):
+                if attachment is not None:
+                    attachment.release()
+            old.release()
         return fbo
 
     def _draw_outline(self, view_proj: np.ndarray, half: np.ndarray, background) -> None:
