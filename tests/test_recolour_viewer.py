@@ -110,14 +110,16 @@ def test_edit_that_changes_the_hits_integrates(client) -> None:
 
 @pytest.fixture(scope="module")
 def rgba8_server(tmp_path_factory):
-    """A vortex above 32^3 (odd sides), whose texture is RGBA8: llvmpipe's brick-wise path."""
+    """A vortex above 32^3 (odd sides), whose texture is RGBA8: llvmpipe's brick-wise path;
+    and a second data set of its shape (another run of the simulation)."""
     from chronocl.data import synthetic
     from chronocl.data.series import TimeSeries
 
-    path = tmp_path_factory.mktemp("recolour8") / "vortex.zarr"
+    root = tmp_path_factory.mktemp("recolour8")
     data = np.stack(list(synthetic.steps("vortex", 12, (44, 36, 40))))
-    TimeSeries.from_array(data, source="vortex").save(path)
-    yield from serving([path], gl_current=True)
+    TimeSeries.from_array(data, source="vortex").save(root / "vortex.zarr")
+    TimeSeries.from_array(data[::-1][:10], source="vortex").save(root / "again.zarr")
+    yield from serving([root / "vortex.zarr", root / "again.zarr"], gl_current=True)
 
 
 def test_edits_recolour_brick_by_brick(rgba8_server, monkeypatch) -> None:
@@ -444,3 +446,39 @@ def test_a_window_streamed_under_the_memory_limit_still_recolours_its_tf_edits(t
     finally:
         client.close()
         server.stop()
+
+
+def test_winners_go_with_their_session(rgba8_server, monkeypatch) -> None:
+    """A panel's winners belong to its window's session: an edit of the spec and the window at
+    once, or another data set of the same shape opened, releases them with the session (kept,
+    they held 9-10 bytes a voxel, 1.2 GB at 512^3, until the next edit)."""
+    import gc
+
+    released: list = []
+    real = recolouring.Prepared.release
+    monkeypatch.setattr(recolouring.Prepared, "release", lambda p: (released.append(p), real(p)))
+
+    def recoloured(x: float) -> recolouring.Prepared:
+        """Recolour an edit (opaque from `x`); the winners it prepared."""
+        header, _ = _sharp(client, _opaque_from(x, fitted))
+        t = header["timings"]
+        assert t["recolour_ms"] > 0 and t["integrate_ms"] == 0, (header["views"], t)
+        made = [o for o in gc.get_objects() if type(o) is recolouring.Prepared]  # (no proxy)
+        gone = {id(p) for p in released}  # (held in `released`: no id is used again)
+        made = [p for p in made if id(p) not in gone and p.t_index() is not None]
+        assert len(made) == 1, made
+        return made[0]
+
+    client = Client(rgba8_server)
+    try:
+        fitted, _ = _open_in(client, "max")
+        kept = recoloured(0.3)
+        header, _ = _sharp(client, {"views": [{"mode": "min"}], "window": {"t0": 2, "t1": 9}})
+        assert header["timings"]["integrate_ms"] > 0
+        _until(lambda: any(p is kept for p in released))
+        _sharp(client, {"views": [{"mode": "max"}], "window": {"t0": 0, "t1": 12}})
+        kept = recoloured(0.5)
+        client.open(1, size=(96, 96))
+        _until(lambda: any(p is kept for p in released))
+    finally:
+        client.close()

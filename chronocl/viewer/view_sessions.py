@@ -108,7 +108,7 @@ class Views:
         series = self.datasets[state.dataset].series
         if self._dataset != state.dataset:
             for s in self.slots:
-                s.drop_session()
+                _drop(s)
             self._close_managers()
             self._dataset = state.dataset
             self._managers = self._shared.of(state.dataset)
@@ -119,15 +119,14 @@ class Views:
             self.slots.append(ViewSlot())
         integrate_ms, incremental = 0.0, False
         for slot in self.slots[len(state.views) :]:  # views taken away hold nothing meanwhile
-            slot.drop_session()
+            _drop(slot)
         with INTEGRATE_LOCK:  # views moving let go first, not after another view integrated
             for i, slot in enumerate(self.slots[: len(state.views)]):
                 if slot.session is not None:
                     sel = state.selection(series.n_steps, i)
                     if slot.session.selection != sel:
                         slot.forget_frame()
-                        if slot.recolour is not None:  # the old window's winners: stale
-                            gl_submit(lambda rc, s=slot: s.release_recolour())  # GL runs in turn
+                        _release_winners(slot)
                     slot.session.leaving(sel)
         limit = process_memory.current()
         if limit is not None:  # steps read ahead or kept give way to the frame
@@ -158,7 +157,7 @@ class Views:
                 except SupersededError:  # given up for a newer request: kept
                     raise
                 except Exception:  # its session may say it holds what it failed to make
-                    slot.drop_session()
+                    _drop(slot)
                     raise
             integrate_ms += ms
             incremental = incremental or inc
@@ -204,8 +203,7 @@ class Views:
         if s is not None and slot.cv is not None and s.asked == spec and s.selection == sel:
             return slot.cv, 0.0, False
         if s is None or (s.asked != spec and s.selection != sel):
-            if s is not None:
-                s.close()
+            _drop(slot)
             s = slot.session = Session(
                 series,
                 memory=self.memory,
@@ -222,9 +220,8 @@ class Views:
         else:  # recoloured where a TF edit allows, else slid where the windows overlap
             cv = self.recolouring.view(slot, spec, sel)
             if cv is None:
-                if s.asked != spec and slot.recolour is not None:
-                    # integrated anew: the old winners (and outputs) are stale; they go first
-                    gl_submit(lambda rc, slot=slot: slot.release_recolour())
+                if s.asked != spec:  # integrated anew: they go first
+                    _release_winners(slot)
                 cv = s.show(sel, spec)
         slot.cv = cv
         stats = s.stats or {}
@@ -339,3 +336,19 @@ class Views:
         if self._own:
             self._shared.close()
             self._shared = SharedSteps()
+
+
+def _release_winners(slot: ViewSlot) -> None:
+    """Let go of the slot's winners (viewer/recolouring.py `Prepared`): another window or
+    session comes, for which they are stale. Freed on the GL thread, where they may be
+    textures; GL work runs in turn, so before any winners prepared next."""
+    prepared, slot.recolour = slot.recolour, None
+    if prepared is not None:
+        gl_submit(lambda rc: prepared.release())
+
+
+def _drop(slot: ViewSlot) -> None:
+    """The slot's session closed, and its winners with it (kept, a data set opened after an
+    edit held the old one's, 1.2 GB at 512^3, until the next edit)."""
+    _release_winners(slot)
+    slot.drop_session()
