@@ -537,3 +537,46 @@ def test_a_fill_given_up_or_a_jump_seen_in_passing_starts_the_rent_again(monkeyp
         session.leaving(parse_selection("40:60", series.n_steps))  # drawn elsewhere
         session.set_window(17, 37)
         assert f", {15 * ms:.0f} ms of it paid" in session.stats["why_not_incremental"]
+
+
+def test_a_window_shown_again_through_its_state_measures_no_slide():
+    """A viewer announces a window (`leaving`) that newer input replaces before it is drawn, and
+    the window shown comes back: the state shows it again, a move of no step, which once was
+    kept as a one-step slide at its whole ms (sliding then predicted voxels times dearer: off
+    for good). It equals integrating the window, and the rates measured stay as they were."""
+    from chronocl.integration.interactive.moves import slid
+
+    data = np.random.default_rng(4).random((20, 4, 5, 6), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    with chronocl.Session(series, mode="alpha", time_tf=absolute) as session:
+        session.set_window(0, 8)
+        session.slide(1)  # fills the state
+        session.slide(1)
+        assert session.stats["path"] == "incremental"
+        costs = session.at(0).costs
+        measured = dict(costs.slide)
+        shown = session.selection
+        session.leaving(slid(shown, 1, series.n_steps))
+        cv = session.current()
+        assert session.selection == shown and session.stats["path"] == "incremental"
+        assert costs.slide == measured
+        ref = chronocl.integrate(series, shown, spec=session.spec)
+        np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
+
+
+def test_a_closed_session_says_so_and_reads_nothing():
+    """A session used after its `with` block raises at once, not quietly making a new window
+    manager whose readers nothing closes; closing again is fine."""
+    import threading
+
+    from chronocl.core.errors import InvalidParameterError
+
+    series = chronocl.TimeSeries.from_array(np.zeros((6, 2, 3, 4), np.float32))
+    with chronocl.Session(series, mode="max") as session:
+        session.set_window(0, 3)
+    readers = {t for t in threading.enumerate() if "window" in t.name}
+    with pytest.raises(InvalidParameterError, match="closed; make a new one"):
+        session.slide(1)
+    assert {t for t in threading.enumerate() if "window" in t.name} <= readers
+    session.close()

@@ -88,6 +88,46 @@ def test_slides_and_jumps_equal_scratch(engine: str, mode: str, data) -> None:
     session.close()
 
 
+@pytest.mark.parametrize("mode", modes.names())
+@pytest.mark.parametrize("engine", ENGINES)
+@settings(max_examples=examples(4))
+@given(data=st.data())
+def test_windows_listed_step_by_step_equal_scratch(engine: str, mode: str, data) -> None:
+    """Every registered mode: windows given as lists of unevenly spaced steps, each the last
+    one with steps left out at one end and others added at the other (a slide), or moved on
+    as a whole (steps leaving from the middle: integrated), equal integrating each from
+    scratch. [0, 1, 2, 9] -> [1, 2, 3, 10] once kept 9 between the entering steps."""
+    shape = data.draw(st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(1, 17)))
+    n_steps = data.draw(st.integers(4, 24))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    series = _series(rng, n_steps, shape, data.draw(st.booleans()))
+    spec = data.draw(specs(mode=mode, positions="absolute"))
+    some = st.lists(st.integers(0, n_steps - 1), min_size=2, max_size=n_steps, unique=True)
+    steps = sorted(data.draw(some))
+    with Session(series, engine=engine, spec=spec, memory="64MB") as session:
+        cv = session.set_window(steps)
+        _check(cv, series, session.selection, session.spec, engine)
+        for _ in range(data.draw(st.integers(1, 6))):
+            k = data.draw(st.integers(1, len(steps) - 1))
+            if data.draw(st.booleans()):  # all moved by one: no slide where unevenly spaced
+                moved = [s + 1 for s in steps] if steps[-1] + 1 < n_steps else steps
+            elif data.draw(st.booleans()):  # k leave at the start, k after the end enter
+                after = list(range(steps[-1] + 1, n_steps))
+                moved = steps[k:] + after[:k] if len(after) >= k else steps
+            else:  # k leave at the end, k before the start enter
+                moved = list(range(steps[0]))[-k:] + steps[:-k] if steps[0] >= k else steps
+            even = len(set(np.diff(steps))) == 1
+            ends = moved[: len(steps) - k] == steps[k:] or moved[k:] == steps[: len(steps) - k]
+            cv = session.set_window(moved)
+            path, why = session.stats["path"], session.stats["why_not_incremental"] or ""
+            if moved != steps and not even and moved == [s + 1 for s in steps]:
+                assert path == "reintegrate", (steps, moved)
+            elif moved != steps and ends:  # (or integrated: too faint to finish from its sums)
+                assert path == "incremental" or "too faint" in why, (steps, moved, why)
+            steps = moved
+            _check(cv, series, session.selection, session.spec, engine)
+
+
 @pytest.mark.parametrize("engine", ENGINES)
 def test_a_window_too_faint_for_its_sums_is_integrated(engine: str) -> None:
     """additive normalised by "max" shows each colour sum over the largest: a window whose

@@ -168,7 +168,7 @@ class Costs:
         mode sliding by its sums alone. Kept against the level's integration rate now (none
         yet: nothing to weigh it by, and a session integrates a window before it slides it)."""
         d, key = self.direct.get(level), (level, inverts)
-        if not d:
+        if not d or not (steps or fill):  # (a state showing its window again: no step slid)
             return
         if fill:
             self.fill[key] = running(self.fill.get(key), ms / max(1, voxels * fill) / d)

@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from chronocl.core.budget import human
-from chronocl.core.errors import SupersededError
+from chronocl.core.errors import InvalidParameterError, SupersededError
 from chronocl.core.interrupt import watched
 from chronocl.core.process_memory import Streaming
 from chronocl.core.selection import Selection, parse_selection
@@ -523,10 +523,13 @@ class SessionPool:
         self.manager = manager
         self.sessions: dict[tuple[int, str], LevelSession] = {}
         self.streaming: Streaming | None = None  # the finest level's (`stream`)
+        self.closed = False
 
     def session(self, level: int, spec: IntegrationSpec) -> LevelSession:
         """The session of `level` for `spec`'s pooling (full resolution: one for all), the
         finest streaming as `stream` last said (one made since from the start)."""
+        if self.closed:  # (it would make a window manager, and readers, that none closes)
+            raise InvalidParameterError("this session is closed; make a new one")
         key = manager_key(level, spec.integration.pool)
         # Another pooling's session of the level held its window after a mode switch: a jump
         # then read the new window beside it, over the limit. One that owns its manager goes
@@ -561,6 +564,7 @@ class SessionPool:
                 s.stream(why)
 
     def close(self) -> None:
+        self.closed = True
         for s in self.sessions.values():
             s.close()
         self.sessions = {}

@@ -312,13 +312,15 @@ class Slider:
 
 
 def slides_to(old: Selection, new: Selection) -> bool:
-    """Whether moving from window `old` to `new` is a slide: it keeps the steps' spacing and
-    overlaps the old window."""
+    """Whether moving from window `old` to `new` is a slide: as many steps, some in both, and
+    those at the old window's end and the new one's start (forward) or the reverse, so that
+    steps leave the state at one end and enter at the other. A list of unevenly spaced steps
+    moved on, [0, 1, 2, 9] -> [1, 2, 3, 10], is not one: 9 would lie between entering steps."""
     a, b = old.steps, new.steps
-    if len(a) != len(b):
+    both = len(set(a) & set(b))
+    if len(a) != len(b) or not both:
         return False
-    shift = b[0] - a[0]
-    return tuple(s + shift for s in a) == b and bool(set(a) & set(b))
+    return a[len(a) - both :] == b[:both] or a[:both] == b[len(b) - both :]
 
 
 def state_bytes(mode, width: int, voxels: int) -> int:
