@@ -580,3 +580,34 @@ def test_a_closed_session_says_so_and_reads_nothing():
         session.slide(1)
     assert {t for t in threading.enumerate() if "window" in t.name} <= readers
     session.close()
+
+
+@pytest.mark.parametrize("mode", ["alpha", "mean"])
+def test_a_slide_holds_its_window_and_state_within_the_memory_given(mode):
+    """Memory for the window and its sliding state exactly: a slide of k steps holds no more.
+    An aggregate's leaving steps are only dropped from it, so they give way to the entering
+    ones before these are read; a slide by sums reads both (it takes the leaving out), so it
+    slides where the budget holds k steps more, and integrates where not (it held W + k)."""
+    from chronocl import modes
+    from chronocl.integration.interactive.slider import state_bytes
+
+    width, shape = 10, (8, 16, 16)
+    data = np.random.default_rng(2).random((30, *shape), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    step, voxels = data[0].nbytes, int(np.prod(shape))
+    state = state_bytes(modes.get(mode), width, voxels)
+    for k, more in [(1, 0), (3, 0), (3, 3)]:
+        memory = (width + more) * step + state
+        with chronocl.Session(series, mode=mode, time_tf=absolute, memory=memory) as session:
+            session.set_window(0, width)
+            cv = session.slide(k)
+            path, why = session.stats["path"], session.stats["why_not_incremental"]
+            if mode == "mean" and k > more:
+                assert path == "reintegrate" and "window and sliding state need" in why, why
+            else:
+                assert path == "incremental", why
+            held = len(session.manager.resident()) * step + (state if path != "reintegrate" else 0)
+            assert held <= memory, (k, more, path)
+            ref = chronocl.integrate(series, session.selection, spec=session.spec)
+            np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)

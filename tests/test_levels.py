@@ -235,6 +235,31 @@ def test_a_coarse_frame_reads_full_resolution_ahead_where_it_pays_and_says_why_n
             assert s.shown_level == 0
 
 
+def test_a_window_read_ahead_takes_the_room_of_the_last_one_not_more(series):
+    """A library session is not told what it shows next (`leaving`): a jump drawn coarse, its
+    full-resolution steps read ahead, let go of the last window's first, so that level 0's
+    steps stay within its budget and in its slots (it held both windows: 8 steps for 5)."""
+    step = int(np.prod(SHAPE)) * 4
+    costs = Costs(cores=64)  # cores to spare
+    costs.reads[0] = 1.0  # ms a voxel: reading the window at the stop is far over the target
+    with Session(series, level="auto", slide_costs=costs, memory=5 * step) as s:
+        s.set_window(0, 3)
+        s.refine()
+        full = s.at(0)
+        assert s.shown_level == 0 and full.manager.resident() == [0, 1, 2]
+        s.set_window(5, 8)
+        assert s.shown_level > 0 and s.stats["why_not_read_ahead"] is None
+        deadline = time.monotonic() + 30
+        while full.manager.resident()[-3:] != [5, 6, 7] and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert full.manager.resident()[-3:] == [5, 6, 7]
+        assert full.manager.resident_bytes <= full.manager.budget
+        assert full.manager.slots.own_arrays == 0
+        cv = s.refine()
+        ref = chronocl.integrate(series, "5:8", spec=s.spec)
+        np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
+
+
 @pytest.mark.parametrize(
     ("level", "text"),
     [(3, "level 3 is out of range: vortex has levels 0..2"), ("fine", "must be an integer")],

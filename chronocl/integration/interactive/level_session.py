@@ -201,12 +201,18 @@ class LevelSession:
     def read_ahead(self, selection: Selection) -> str | None:
         """Start reading `selection`'s steps in the background (a `Session` shows the window at
         a coarse level meanwhile); else why not: the window streams (`streams`), or it is over
-        the room the sliding state and a kept brick leave its manager."""
-        window = selection.width * self.manager.step_bytes
+        the room the sliding state and a kept brick leave its manager beside the steps this
+        session still holds (those its state slides from; the others go first, as `leaving`
+        lets them go: a library's session is not told, and read a window beside the last)."""
         if self.streams(selection):
             return "full resolution streams its window"
-        if window > self.manager.budget:
-            return f"the window needs {human(window)} > {human(self.manager.budget)} left to it"
+        self.leaving(selection)
+        window = selection.width * self.manager.step_bytes
+        held = len(set(self._arrays) - set(selection.steps))
+        if window + held * self.manager.step_bytes > self.manager.budget:
+            beside = f" beside the {held} steps its state slides from" if held else ""
+            left = human(self.manager.budget)
+            return f"the window needs {human(window)}{beside} > {left} left to it"
         self.manager.request(selection.steps, owner=self)
         return None
 
@@ -284,6 +290,9 @@ class LevelSession:
         direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
         if not (reason is None and self._slider and self._slider.can_move_to(selection)):
             self._let_go(selection)
+        elif self.spec.integration.slides != "invert":  # steps leaving an aggregate are only
+            # dropped from it, never read: they give way to the entering ones
+            self._hold({s: a for s, a in self._arrays.items() if s in set(selection.steps)})
         t_read = time.perf_counter()
         arrays = dict(
             zip(

@@ -355,13 +355,15 @@ def slide_plan(
     mode = spec.integration
     state = state_bytes(mode, width, voxels)
     keep = 2 * window + state <= budget
+    # a slide by sums reads the steps leaving too (it takes them out), beside the window's
+    held = window + (window // width * move.shift if move and mode.slides == "invert" else 0)
     reason = None
     if spec.time_tf.positions != "absolute":
         reason = "relative time positions recolour every step on a slide"
     elif not isinstance(spec.order, str):
         reason = "importance orders are not sliding windows"
-    elif window + state > budget:
-        reason = f"window and sliding state need {human(window + state)} > budget {human(budget)}"
+    elif held + state > budget:
+        reason = f"window and sliding state need {human(held + state)} > budget {human(budget)}"
     elif costs is not None:
         move = (move or Move())._replace(inverts=slides_by_sums(spec))
         reason = costs.why_not(voxels, width, move)
