@@ -611,3 +611,75 @@ def test_a_slide_holds_its_window_and_state_within_the_memory_given(mode):
             assert held <= memory, (k, more, path)
             ref = chronocl.integrate(series, session.selection, spec=session.spec)
             np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
+
+
+def test_a_slide_by_sums_holds_no_stacked_brick_of_the_window_it_leaves(monkeypatch):
+    """An engine that stacks the window's steps (numpy here; a GPU) keeps the stacked brick for
+    a spec change where it fits beside the window and the state; a slide leaves it stale, and
+    lets go of it before reading: kept, a slide by sums held it beside the window and the
+    steps leaving (2W + k steps and the sums, over the 2W + k - 1 given)."""
+    from chronocl import modes
+    from chronocl.integration.interactive import slider
+    from chronocl.integration.interactive.slider import state_bytes
+
+    width, k, shape = 10, 3, (8, 16, 16)
+    data = np.random.default_rng(2).random((30, *shape), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    absolute = TimeTF.preset("rgb", positions="absolute")
+    step, state = data[0].nbytes, state_bytes(modes.get("mean"), width, int(np.prod(shape)))
+    memory = (2 * width + k - 1) * step + state  # keeps the brick; slides k steps
+    held: list[int] = []
+    real = slider.Slider.move_to
+
+    def move_to(self, selection, arrays):
+        kept = session.at(0)._bricks._kept
+        held.append(sum(a.nbytes for a in arrays.values()) + (kept[1].nbytes if kept else 0))
+        return real(self, selection, arrays)
+
+    monkeypatch.setattr(slider.Slider, "move_to", move_to)
+    with chronocl.Session(
+        series, engine="numpy", mode="mean", time_tf=absolute, memory=memory
+    ) as session:
+        session.set_window(0, width)
+        cv = session.slide(k)
+        assert session.stats["path"] == "incremental" and len(held) == 1
+        assert held[0] + state <= memory, (held[0] + state) / memory
+        ref = chronocl.integrate(series, session.selection, spec=session.spec, engine="numpy")
+        np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
+
+
+def test_views_sliding_one_window_read_no_step_beside_those_leaving():
+    """A viewer's panels share one manager: every view is told the next window (`leaving`)
+    before any shows it. An aggregate's steps leaving go then, so the first view's entering
+    steps do not come in beside the second's leaving ones (13 steps held for 10)."""
+    from chronocl.core.selection import Selection
+    from chronocl.data.window import WindowManager
+
+    width, k, shape = 10, 3, (8, 16, 16)
+    data = np.random.default_rng(2).random((30, *shape), dtype=np.float32)
+    series = chronocl.TimeSeries.from_array(data)
+    step = data[0].nbytes
+    manager = WindowManager(series, width * step, prefetch=0)  # room for the window exactly
+    opts = {"time_tf": TimeTF.preset("rgb", positions="absolute"), "memory": "64MB"}
+    views = [
+        chronocl.Session(series, mode=mode, managers={(0, ""): manager}, **opts)
+        for mode in ("alpha", "max")
+    ]
+    try:
+        for view in views:
+            view.set_window(0, width)
+        for view in views:
+            view.slide(1)  # the states filled: they slide from now on
+        after = Selection(tuple(range(1 + k, 1 + k + width)), series.n_steps)
+        for view in views:
+            view.leaving(after)
+        for view in views:
+            cv = view.show(after)
+            assert view.stats["path"] == "incremental"
+            assert len(manager.resident()) <= width
+            ref = chronocl.integrate(series, after, spec=view.spec)
+            np.testing.assert_allclose(cv.rgba, ref.rgba, rtol=0, atol=1e-5)
+    finally:
+        for view in views:
+            view.close()
+        manager.close()

@@ -450,8 +450,9 @@ def test_a_window_streamed_under_the_memory_limit_still_recolours_its_tf_edits(t
 
 def test_winners_go_with_their_session(rgba8_server, monkeypatch) -> None:
     """A panel's winners belong to its window's session: an edit of the spec and the window at
-    once, or another data set of the same shape opened, releases them with the session (kept,
-    they held 9-10 bytes a voxel, 1.2 GB at 512^3, until the next edit)."""
+    once (its window's change lets them go), or another data set of the same shape opened,
+    releases them (kept, the data set's held 9-10 bytes a voxel, 1.2 GB at 512^3, until the
+    next edit)."""
     import gc
 
     released: list = []

@@ -219,16 +219,15 @@ class LevelSession:
     def leaving(self, selection: Selection) -> None:
         """`selection` is shown next: the chronovolume of another window is never shown again,
         so it goes now, before any view integrates (the new one takes its memory); the steps
-        leaving go too unless the window slides incrementally (which reads them), before another
-        view reads `selection` (two views of one window jumping held the old window while the
-        first read the new one, and both old frames: 4 GB over the steady 8.8 at 512^3)."""
+        leaving go too (`_give_way`), before another view reads `selection` (two views of one
+        window jumping held the old window while the first read the new one, and both old
+        frames: 4 GB over the steady 8.8 at 512^3)."""
         if self.selection is None or selection == self.selection:
             return
         if not slides_to(self.selection, selection):
             self._rent = 0.0  # a jump, seen where this level draws none of the frames between
         self._cv = self._won = None
-        if not (self._slider is not None and self._slider.can_move_to(selection)):
-            self._let_go(selection)  # integrated anew: the steps leaving help no more
+        self._give_way(selection)
 
     def stream(self, why: Streaming | None) -> None:
         """From now on the window streams from the store (`why`: the reason, the bytes its
@@ -288,11 +287,7 @@ class LevelSession:
         if self.owns_manager:
             self.manager.budget = self.budget - (0 if reason else state) - keep * window
         direction = 0 if old is None else int(np.sign(selection.steps[0] - old.steps[0]))
-        if not (reason is None and self._slider and self._slider.can_move_to(selection)):
-            self._let_go(selection)
-        elif self.spec.integration.slides != "invert":  # steps leaving an aggregate are only
-            # dropped from it, never read: they give way to the entering ones
-            self._hold({s: a for s, a in self._arrays.items() if s in set(selection.steps)})
+        self._give_way(selection, slides=reason is None)
         t_read = time.perf_counter()
         arrays = dict(
             zip(
@@ -405,6 +400,20 @@ class LevelSession:
         window = selection.width * self.manager.step_bytes
         reason, _, _ = slide_plan(spec, voxels, selection.width, window, self.budget, costs, move)
         return None if reason else costs.slide_ms(voxels, selection.width, move)
+
+    def _give_way(self, selection: Selection, slides: bool = True) -> None:
+        """Let go of what moving to `selection` will not read, before its steps are read: where
+        it is integrated anew (it does not slide, or its state cannot) every step outside it
+        (`_let_go`); where its state slides, the stacked brick kept for a spec change (the old
+        window's, stale once it moves) and the steps leaving an aggregate, which only drops
+        them (a slide by sums reads them to take them out: `slider.slide_plan` charges them)."""
+        if not (slides and self._slider is not None and self._slider.can_move_to(selection)):
+            self._let_go(selection)
+            return
+        self._bricks.forget()
+        if self.spec.integration.slides != "invert":
+            wanted = set(selection.steps)
+            self._hold({s: a for s, a in self._arrays.items() if s in wanted})
 
     def _let_go(self, selection: Selection) -> None:
         """Drop the steps that leave a window integrated anew before the entering ones are
