@@ -444,3 +444,27 @@ def test_replacing_a_folder_without_an_exchange_moves_the_old_one_aside(tmp_path
         series.save(out, overwrite=True)
     assert chronocl.open(out).read([1])[0].max() == 2.0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.zarr"]
+
+
+@pytest.mark.parametrize("name", ["{s}", "{s}/cv.zarr", "{s}/cv.vti"])
+def test_a_chronovolume_is_never_saved_over_or_into_the_series_it_came_from(tmp_path, name):
+    """`Chronovolume.save` and `save_chronovolume` (the Python API's outputs, which the CLI's
+    check before them) refuse the store a chronovolume was integrated from, or a path inside
+    it, even with overwrite: the store once became the chronovolume, its series gone."""
+    from chronocl.core.errors import OutputIsInputError
+    from chronocl.data.formats.outputs import save_chronovolume
+
+    data = np.random.default_rng(1).random((4, 3, 4, 5), dtype=np.float32)
+    store = tmp_path / "s.zarr"
+    chronocl.TimeSeries.from_array(data).save(store)
+    before = digest(store)
+    cv = chronocl.integrate(chronocl.open(store), "0:3", mode="max")
+    target = name.format(s=store)
+    saves = [lambda p: save_chronovolume(cv, p, overwrite=True)]
+    if not target.endswith(".vti"):  # (`save` writes zarr whatever the name)
+        saves.append(lambda p: cv.save(p, overwrite=True))
+    for save in saves:
+        with pytest.raises(OutputIsInputError):
+            save(target)
+    assert digest(store) == before
+    cv.save(tmp_path / "cv.zarr")  # apart from it: saved

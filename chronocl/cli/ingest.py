@@ -170,7 +170,7 @@ def ingest(
     """
     from chronocl.core.errors import InvalidParameterError
     from chronocl.core.paths import GLOB_CHARS, check_input, check_target
-    from chronocl.core.times_input import read_times
+    from chronocl.core.times_input import read_times, times_file
     from chronocl.core.times_meta import check_time_unit
     from chronocl.core.times_meta import times_from_meta as read_meta_times
     from chronocl.data.ingest import ingest as run_ingest
@@ -187,7 +187,8 @@ def ingest(
         check_remote_output(out_path, overwrite, out_options)  # before any work
         options: dict = {"storage_options": out_options}
     else:
-        check_target(Path(out_path), overwrite, [*inputs, *named])
+        read = [meta, times_from_meta, times_file(times) if times is not None else None]
+        check_target(Path(out_path), overwrite, [*inputs, *named, *read])
         if out_options:
             raise InvalidParameterError(
                 f"--storage-option applies to an s3:// OUT, not to the local path {out_path!r}"

@@ -278,7 +278,7 @@ def render(
     outputs = [out_path, *([turntable] if turntable is not None else []), *saves]
     check_distinct(outputs)
     for path in outputs:
-        check_target(path, overwrite, [local_input(store), tf])
+        check_target(path, overwrite, [local_input(store), tf, events])
     graph = None if events is None else load_events(events)  # one line if it is not one
     series = open_series(store, storage_options=storage_options)
     if graph is not None:

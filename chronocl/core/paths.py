@@ -171,7 +171,7 @@ def check_output(path: str | os.PathLike, overwrite: bool) -> Path:
     """Return `path` as a Path; raise if it exists and `overwrite` is false."""
     check_writable(path)  # its folder must take new files: probed before any work
     target = Path(path)
-    if target.exists() and not overwrite:
+    if os.path.lexists(target) and not overwrite:  # (a link to nothing is there too)
         raise OutputExistsError(
             f"output {str(target)!r} already exists; "
             "pass --overwrite (overwrite=True) to replace it"

@@ -42,6 +42,16 @@ def read_times(value: str) -> list:
     return [_scalar(item.strip(), "--times") for item in text.split(",")]
 
 
+def times_file(value: str) -> Path | None:
+    """The file `value` (a --times) reads, where it names one (a JSON file, with or without a
+    key, or a file of times); None for times given inline."""
+    text = value.strip()
+    path, _ = _json_reference(text) if text else (None, None)
+    if path is None and text and _is_file(text):
+        path = Path(text)
+    return path
+
+
 def _json_reference(text: str) -> tuple[Path | None, str | None]:
     """(the JSON file, the key) when `text` names an existing .json file, else (None, None)."""
     if text.lower().endswith(".json") and _is_file(text):

@@ -19,6 +19,7 @@ import zarr
 
 from chronocl.core.atomic import atomic_directory
 from chronocl.core.errors import InvalidSelectionError, StoreFormatError
+from chronocl.core.paths import check_apart
 from chronocl.core.selection import Selection
 from chronocl.data.integrity import checked_read
 from chronocl.data.remote_store import is_url
@@ -121,6 +122,13 @@ class Chronovolume:
             return self.rgba.astype(np.float32) / np.float32(255)
         return np.asarray(self.rgba, dtype=np.float32)
 
+    def check_apart_from_source(self, path: str | os.PathLike) -> None:
+        """Raise OutputIsInputError where `path`, a local output, is, lies in or holds the
+        series store this chronovolume was integrated from (`metadata["store"]`)."""
+        source = self.metadata.get("store") or None
+        if source is not None and not is_url(str(source)):
+            check_apart(path, [source])
+
     def save(
         self, path: str | os.PathLike, overwrite: bool = False, storage_options: dict | None = None
     ) -> Path | str:
@@ -130,6 +138,7 @@ class Chronovolume:
             with remote_output(str(path), overwrite, storage_options) as local:
                 self.save(local)
             return str(path)
+        self.check_apart_from_source(path)
         z, y, x, _ = self.rgba.shape
         zc = max(1, min(z, (8 * 2**20) // max(1, y * x * 16)))
         keep = {"compressors": compressors("zstd"), "config": {"write_empty_chunks": True}}

@@ -22,8 +22,10 @@ def output_kind(path: str | os.PathLike) -> str:
 
 
 def save_chronovolume(cv: Chronovolume, path: str | os.PathLike, overwrite: bool = False) -> Path:
-    """Save `cv` in the format its suffix names, atomically."""
-    return _output(path).save(cv, path, overwrite=overwrite)
+    """Save `cv` in the format its suffix names, atomically (never over its source store)."""
+    output = _output(path)
+    cv.check_apart_from_source(path)
+    return output.save(cv, path, overwrite=overwrite)
 
 
 def _output(path: str | os.PathLike) -> Output:
