@@ -14,6 +14,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +27,7 @@ from chronocl.data import synthetic
 from chronocl.notebook import bundle
 from chronocl.notebook import state as synced
 from chronocl.notebook.widget import FrameFailedError
+from chronocl.viewer.protocol import ProtocolError
 from chronocl.viewer.snapshot import check_snapshot
 
 STEPS, SHAPE = 12, (24, 24, 24)
@@ -355,6 +357,27 @@ def test_screenshot_chronovolume_and_snapshot(widget):
     assert cv.spec.mode == "max" and cv.steps == tuple(range(8)) and cv.rgba.dtype == np.float32
     snapshot = check_snapshot(widget.snapshot())
     assert snapshot["dataset"]["name"] == "vortex" and snapshot["views"][0]["mode"] == "max"
+    # each chronovolume is loaded whole: nothing of it stays on disk
+    assert widget.chronovolume(view=np.int64(0)).steps == cv.steps
+    assert not [p for p in Path(widget._downloads.dir).iterdir() if p.is_dir()]
+
+
+@pytest.mark.parametrize(
+    ("call", "field"),
+    [
+        (lambda w: w.screenshot(columns=-1), "columns"),
+        (lambda w: w.screenshot(columns="a"), "columns"),
+        (lambda w: w.chronovolume(view=-1), "view"),
+        (lambda w: w.chronovolume(view=True), "view"),
+    ],
+)
+def test_the_kernel_s_requests_are_checked_as_the_page_s(widget, call, field):
+    """A bad argument to a request from code gets the protocol's one line naming it, as the
+    page's would: once a worker's internal error (a traceback on stderr), or another view's
+    chronovolume (view -1: the last one)."""
+    with pytest.raises(ProtocolError, match=field) as got:
+        call(widget)
+    assert "\n" not in str(got.value)
 
 
 def test_a_failed_frame_raises_at_once_naming_the_error(tmp_path):

@@ -22,12 +22,12 @@ import dataclasses
 import hashlib
 import io
 import json
+import tempfile
 import threading
 import time
 import zipfile
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, nullcontext
-from pathlib import Path
 
 import anywidget
 import numpy as np
@@ -515,9 +515,13 @@ class ChronoclWidget(anywidget.AnyWidget):
 
     def _request(self, msg: dict) -> dict:
         """A request of the kernel's own to the worker (as the page's save requests), its
-        reply waited for; ChronoclError with the worker's message where it failed."""
+        reply waited for; ChronoclError with the worker's message where it failed. Checked as
+        the page's are first (ProtocolError naming the field: `screenshot(columns=-1)` was a
+        worker's internal error, `chronovolume(view=-1)` another view's chronovolume)."""
         self._check_open()
         rid = self._own_id()
+        plain = json.dumps(msg | {"id": rid}, default=lambda o: getattr(o, "item", o.__str__)())
+        msg = parse_message(plain)  # (numpy numbers as the numbers they hold)
         with self._cond:
             self._requests[rid] = None
             self._busy += 1  # not suspended while it waits
@@ -564,10 +568,10 @@ class ChronoclWidget(anywidget.AnyWidget):
         """The chronovolume of `view` as shown, integrated again at full resolution and
         precision (as the page's Save chronovolume writes it), in memory."""
         data, _ = self._download({"type": "save", "what": "chronovolume", "view": view})
-        folder = Path(self._downloads.dir) / f"cv-{self._own_id()}"
-        with zipfile.ZipFile(io.BytesIO(data)) as zf:
-            zf.extractall(folder)
-        return Chronovolume.load(folder)
+        with tempfile.TemporaryDirectory(dir=self._downloads.dir) as folder:  # (loaded whole)
+            with zipfile.ZipFile(io.BytesIO(data)) as zf:
+                zf.extractall(folder)
+            return Chronovolume.load(folder)
 
     def snapshot(self) -> dict:
         """The state as a snapshot: the session file the page's Save session writes, which
