@@ -157,6 +157,20 @@ def nested_store(d: Path, s: Path) -> None:
 
 ING = ("--dims", "2", "2", "2", "--dtype", "uint8")
 
+
+def edited_events(edit: Callable[[dict], None]) -> Callable[[Path, Path], None]:
+    """events.json: the store's events at threshold 0.5, a record then edited by `edit`."""
+
+    def setup(d: Path, s: Path) -> None:
+        found = chronocl.events(str(s), threshold=0.5).to_dict()
+        edit(found)
+        (d / "events.json").write_text(json.dumps(found))
+
+    return setup
+
+
+TRACKS = ("render", "{s}", "-o", "{d}/o.png", "--mode", "max", "--colour", "track")
+
 CASES = [
     # ---------------------------------------------------------------- windows
     integrate("window-past-end", ("--window", "0:9"), "outside the series"),
@@ -463,6 +477,18 @@ CASES = [
         ("integrate", "{s}", "{d}/dl.zarr"),
         "already exists; pass --overwrite",
         lambda d, s: (d / "dl.zarr").symlink_to(d / "nowhere.zarr"),
+    ),
+    Case(
+        "render-tracks-of-events-without-tracks",
+        (*TRACKS, "--events", "{d}/events.json"),
+        "cannot colour by track",
+        edited_events(lambda e: [f.pop("track") for f in e["features"]]),
+    ),
+    Case(
+        "render-tracks-of-events-without-a-range",
+        (*TRACKS, "--events", "{d}/events.json"),
+        "cannot colour by track",
+        edited_events(lambda e: e["meta"].update(mask={"kind": "opacity", "opacity": 0.1})),
     ),
     Case(
         "generate-onto-working-folder",

@@ -307,8 +307,9 @@ def render(
         camera = series_early_side(picked[0], selection, jobs[0].value_range, camera)
     tracks = None
     if track_by is not None:  # the events cover the window: checked before any step is read
-        from chronocl.events.colour import TrackColour, check_steps
+        from chronocl.events.colour import TrackColour, check_records, check_steps
 
+        check_records(graph)
         check_steps(graph, selection.steps, series.volume_shape)
         tracks = TrackColour(graph, series, track_by)
     if device_format != "auto":  # over each level's value range, which it quantises

@@ -57,7 +57,13 @@ from chronocl.core.errors import InvalidDataError, InvalidParameterError
 from chronocl.core.tf import DataTF
 from chronocl.data.chronovolume import Chronovolume
 from chronocl.data.series import TimeSeries
-from chronocl.events.features import Mask, StepFeatures, label_step, parse_periodic
+from chronocl.events.features import (
+    Mask,
+    StepFeatures,
+    check_connectivity,
+    label_step,
+    parse_periodic,
+)
 from chronocl.events.graph import EventGraph
 from chronocl.events.palette import track_rgb
 
@@ -150,6 +156,7 @@ def check(
             f"in one of {', '.join(winner_modes())}"
         )
     graph = check_graph(graph)
+    check_records(graph)
     check_steps(graph, chronovolume.steps, chronovolume.shape)
     check_series(chronovolume, graph, series)
     return graph
@@ -209,6 +216,25 @@ def check_series(chronovolume: Chronovolume, graph: EventGraph, series: object) 
             f"series= has {n_steps} steps, the chronovolume shows step {beyond[-1]}: give the "
             "series it came from"
         )
+
+
+def check_records(graph: EventGraph) -> None:
+    """One line, before any step is read, where what colouring by track reads of the events is
+    missing or not a number (a file edited or cut short): what a step showed, the connectivity,
+    the periodic axes, and each feature's step, id, size and track."""
+    try:
+        mask_of(graph)
+        check_connectivity(int(graph.meta.get("connectivity", 26)))
+        parse_periodic(graph.meta.get("periodic") or False)
+        for f in graph.features:
+            int(f["step"]), int(f["id"]), int(f["size"]), int(f["track"])
+    except InvalidDataError:
+        raise
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InvalidDataError(
+            f"the events cannot colour by track: a record is missing or wrong "
+            f"({type(exc).__name__}: {exc}); write them again with chronocl events"
+        ) from None
 
 
 def mask_of(graph: EventGraph) -> Mask:
