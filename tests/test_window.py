@@ -347,3 +347,18 @@ def test_store_modified_underneath_is_detected(tmp_path) -> None:
         arr.resize((14, 6, 10, 10))  # two steps appended by a running simulation
         with pytest.raises(StoreChangedError, match="now has shape"):
             wm.get([1, 2])
+
+
+def test_store_replaced_by_other_values_of_its_shape_is_detected(tmp_path) -> None:
+    """A store replaced whole by one of the same shape (the simulation run again, ingested
+    with --overwrite): its statistics changed, so the series' (that map its values to
+    colours) and the steps held are stale; the next read says so, not a picture of new values
+    coloured by the old range. Its levels are still what they were until then."""
+    series = zarr_series(tmp_path, shape=(4, 5, 70))  # with a level 1
+    with WindowManager(series, "10MB") as wm:
+        wm.get([0, 1])
+        series.level(1).check_unchanged()  # a level's own statistics are not the store's
+        data = np.asarray(zarr.open_group(str(tmp_path / "s.zarr"), mode="r")["data"])
+        TimeSeries.from_array(data * 100).save(tmp_path / "s.zarr", overwrite=True)
+        with pytest.raises(StoreChangedError, match="replaced by other values of its shape"):
+            wm.get([1, 2])

@@ -84,6 +84,17 @@ def metadata_stamp(path: Path, arr: zarr.Array) -> int | None:
     return meta.stat().st_mtime_ns if meta is not None else None
 
 
+def stored_stats(path: Path) -> tuple | None:
+    """The statistics a chronocl store at `path` keeps now (vmin, vmax and the per-step lists,
+    as `metadata.SeriesStats` orders them); None where it keeps none (a bare array) or is gone."""
+    try:
+        attrs = dict(zarr.open(store=str(path), mode="r").attrs).get("chronocl", {})
+        keys = ("vmin", "vmax", "step_min", "step_max", "step_mean")
+        return tuple(tuple(attrs[k]) if isinstance(attrs[k], list) else attrs[k] for k in keys)
+    except Exception:
+        return None
+
+
 def stored_shape(path: Path, arr: zarr.Array) -> tuple[int, ...] | None:
     """The shape the array at `arr`'s place in the store at `path` has now; None if gone."""
     try:

@@ -35,7 +35,7 @@ from chronocl.data.pyramid import check_pool, describe_levels
 from chronocl.data.sizes import disk_usage, human_size
 from chronocl.data.steps import Steps
 from chronocl.data.store_open import open_array
-from chronocl.data.store_reads import metadata_stamp, read_runs, stored_shape
+from chronocl.data.store_reads import metadata_stamp, read_runs, stored_shape, stored_stats
 from chronocl.data.writer import VARIABLES, write_store
 
 
@@ -268,7 +268,9 @@ class TimeSeries:
         return checked_read(self.path, self._zarr, lambda: self._zarr.get_basic_selection(sel), sel)
 
     def check_unchanged(self) -> None:
-        """Raise StoreChangedError when the store on disk no longer has this series' shape.
+        """Raise StoreChangedError when the store on disk no longer has this series' shape, or
+        its statistics changed (replaced by another of that shape: `--overwrite`; its old
+        statistics would have coloured the new values).
 
         Cheap when nothing changed: only the array's metadata file is stat'ed.
         """
@@ -286,6 +288,13 @@ class TimeSeries:
             raise StoreChangedError(
                 f"store {str(self.path)!r} changed underneath: opened with shape {self.shape}, "
                 f"{now}; open it again to see the new steps"
+            )
+        stats = stored_stats(self.path)
+        kept = (self._root or self).stats  # (a level's own per step: level 0's are stored)
+        if stats is not None and stats != dataclasses.astuple(kept):
+            raise StoreChangedError(
+                f"store {str(self.path)!r} changed underneath: replaced by other values of its "
+                "shape; open it again to see them"
             )
         self._stamp = stamp
 
