@@ -140,6 +140,13 @@ DAMAGE = {
     ),
     "negative spacing": (_set("spacing", {"x": -1, "y": 1, "z": 1}), "voxel spacing"),
     "time labels of the wrong length": (_set("times", [0, 1]), "2 time labels"),
+    "byte order flipped in the metadata": (
+        lambda s: _json(
+            s / "data" / "zarr.json",
+            lambda d: [c["configuration"].update(endian="big") for c in d["codecs"][:1]],
+        ),
+        "its array data is marked big-endian, not as written",
+    ),
     "unsupported data type": (
         lambda s: _json(s / "data" / "zarr.json", lambda d: d.update(data_type="complex64")),
         "",
@@ -454,3 +461,15 @@ def test_a_url_chronocl_cannot_read_is_one_line_from_the_cli(tmp_path, url, need
     from .bad_input import assert_rejected
 
     assert_rejected(["info", url], needle, inputs=[], folder=tmp_path)
+
+
+def test_a_level_array_marked_in_another_byte_order_is_reported(tmp_path):
+    """A level array's metadata edited to another byte order (its checksums still match: they
+    cover the bytes, not their order) is reported, not read as other values."""
+    path = tmp_path / "s.zarr"
+    data = np.random.default_rng(0).random((3, 4, 5, 70), dtype=np.float32)
+    chronocl.TimeSeries.from_array(data).save(path)
+    meta = path / "levels" / "1" / "mean" / "zarr.json"
+    _json(meta, lambda d: [c["configuration"].update(endian="big") for c in d["codecs"][:1]])
+    with pytest.raises(StoreCorruptError, match="levels/1/mean is marked big-endian"):
+        chronocl.open(path).level(1).read([0], 0, 2)

@@ -33,6 +33,16 @@ def damaged(path: str | os.PathLike, what: str) -> StoreCorruptError:
     return StoreCorruptError(f"store {str(path)!r} is damaged: {what}; {FIX}")
 
 
+def check_byte_order(path: str | os.PathLike, arr, name: str) -> None:
+    """StoreCorruptError where array `name` of a chronocl store at `path` is marked other than
+    little-endian, the order chronocl writes: its metadata was edited, and its values would read
+    as others (its checksums cover the bytes, not their order)."""
+    for codec in getattr(arr.metadata, "codecs", ()):
+        order = getattr(getattr(codec, "endian", None), "value", "little")
+        if order != "little":
+            raise damaged(path, f"its array {name} is marked {order}-endian, not as written")
+
+
 class MissingChunks:
     """What a checked store (local or remote) does with the chunks it was asked for and did
     not find: notes them, for `checked_read` to raise StoreCorruptError after the read.

@@ -30,7 +30,7 @@ import zarr
 from zarr.codecs import BloscCodec
 
 from chronocl.core.errors import ChronoclError, InvalidDataError, InvalidParameterError
-from chronocl.data.integrity import CheckedStore, damaged
+from chronocl.data.integrity import CheckedStore, check_byte_order, damaged
 from chronocl.data.metadata import SeriesStats, stats_from_steps
 
 POOLS = ("mean", "max", "min")
@@ -271,6 +271,7 @@ def open_level_array(
         raise
     except Exception:
         raise damaged(path, f"its level array {name} cannot be opened") from None
+    check_byte_order(path, arr, name)
     if tuple(arr.shape) != tuple(shape) or arr.dtype != dtype or arr.chunks[0] != 1:
         raise damaged(
             path,

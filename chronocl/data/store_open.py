@@ -16,7 +16,7 @@ import dask.array as da
 import zarr
 
 from chronocl.core.errors import ChronoclError, StoreFormatError
-from chronocl.data.integrity import CheckedArray, CheckedStore, damaged
+from chronocl.data.integrity import CheckedArray, CheckedStore, check_byte_order, damaged
 from chronocl.data.metadata import (
     FORMAT,
     SeriesStats,
@@ -93,6 +93,7 @@ def open_array(p: Path | str, storage_options: dict | None = None) -> StoredArra
     if not (isinstance(attrs, dict) and attrs.get("format") == FORMAT):
         return StoredArray(path=where, array=arr, data=lazy, source=str(p))
     stats, spacing, times = checked_attrs(p, arr, attrs)
+    check_byte_order(p, arr, "data")
     if attrs.get("chunks") == "complete":
         store.complete = True
     else:  # written before stores kept empty chunks: a step may lack all-fill chunks
