@@ -169,6 +169,18 @@ def edited_events(edit: Callable[[dict], None]) -> Callable[[Path, Path], None]:
     return setup
 
 
+def state_and_tf(d: Path, s: Path) -> None:
+    """s.json: a viewer's saved state of the store; t.json: a TF file."""
+    from chronocl.data.series import open_series
+    from chronocl.viewer.snapshot import snapshot_of
+    from chronocl.viewer.view_state import default_state
+
+    series = open_series(s)
+    state = snapshot_of(default_state(0, series), "S", series, str(s))
+    (d / "s.json").write_text(json.dumps(state))
+    (d / "t.json").write_text(json.dumps({"points": [[0, 1, 1, 1, 0], [1, 1, 1, 1, 1]]}))
+
+
 TRACKS = ("render", "{s}", "-o", "{d}/o.png", "--mode", "max", "--colour", "track")
 
 CASES = [
@@ -489,6 +501,33 @@ CASES = [
         (*TRACKS, "--events", "{d}/events.json"),
         "cannot colour by track",
         edited_events(lambda e: e["meta"].update(mask={"kind": "opacity", "opacity": 0.1})),
+    ),
+    Case(
+        "render-state-onto-its-tf",
+        (
+            "render",
+            "--state",
+            "{d}/s.json",
+            "--tf",
+            "{d}/t.json",
+            "-o",
+            "{d}/t.json",
+            "--overwrite",
+        ),
+        "is the input",
+        state_and_tf,
+    ),
+    Case(
+        "render-tracks-of-events-with-a-mask-not-an-object",
+        (*TRACKS, "--events", "{d}/events.json"),
+        "does not say what a step showed",
+        edited_events(lambda e: e["meta"].update(mask="threshold")),
+    ),
+    Case(
+        "render-tracks-of-events-with-steps-not-a-list",
+        (*TRACKS, "--events", "{d}/events.json"),
+        "cannot colour by track",
+        edited_events(lambda e: e["meta"].update(steps=5)),
     ),
     Case(
         "generate-onto-working-folder",

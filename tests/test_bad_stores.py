@@ -473,3 +473,16 @@ def test_a_level_array_marked_in_another_byte_order_is_reported(tmp_path):
     _json(meta, lambda d: [c["configuration"].update(endian="big") for c in d["codecs"][:1]])
     with pytest.raises(StoreCorruptError, match="levels/1/mean is marked big-endian"):
         chronocl.open(path).level(1).read([0], 0, 2)
+
+
+def test_a_chronovolume_marked_in_another_byte_order_is_reported(tmp_path):
+    """A chronovolume's RGBA array marked big-endian in edited metadata is reported as
+    damaged where it is opened, not loaded as other values (1e37 off)."""
+    path = tmp_path / "cv.zarr"
+    series = chronocl.TimeSeries.from_array(np.random.default_rng(1).random((3, 4, 5, 6)))
+    chronocl.integrate(series, None, "max").save(path)
+    _json(
+        path / "rgba" / "zarr.json", lambda d: d["codecs"][0]["configuration"].update(endian="big")
+    )
+    with pytest.raises(StoreCorruptError, match="its array rgba is marked big-endian"):
+        chronocl.Chronovolume.load(path)

@@ -367,6 +367,7 @@ def test_screenshot_chronovolume_and_snapshot(widget):
     [
         (lambda w: w.screenshot(columns=-1), "columns"),
         (lambda w: w.screenshot(columns="a"), "columns"),
+        (lambda w: w.screenshot(columns=np.array([1, 2])), "columns"),
         (lambda w: w.chronovolume(view=-1), "view"),
         (lambda w: w.chronovolume(view=True), "view"),
     ],

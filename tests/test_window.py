@@ -357,6 +357,8 @@ def test_store_replaced_by_other_values_of_its_shape_is_detected(tmp_path) -> No
     series = zarr_series(tmp_path, shape=(4, 5, 70))  # with a level 1
     with WindowManager(series, "10MB") as wm:
         wm.get([0, 1])
+        level = tmp_path / "s.zarr" / "levels" / "1" / "mean" / "zarr.json"
+        os.utime(level, ns=(level.stat().st_atime_ns, level.stat().st_mtime_ns + 10**9))
         series.level(1).check_unchanged()  # a level's own statistics are not the store's
         data = np.asarray(zarr.open_group(str(tmp_path / "s.zarr"), mode="r")["data"])
         TimeSeries.from_array(data * 100).save(tmp_path / "s.zarr", overwrite=True)

@@ -63,7 +63,7 @@ def render_state(state_path: Path, options: dict) -> None:
     store = options.get("store") or dataset_path(snapshot, state_path.name)
     out = options.get("out_path") or state_path.with_suffix(".png")
     overwrite = bool(options.get("overwrite", False))
-    check_target(out, overwrite, [store, state_path])
+    check_target(out, overwrite, [store, state_path, options.get("tf")])
     fields = _snapshot_fields(snapshot, options)
     series = open_series(store)
     state = snapshot_state(snapshot | fields, series)

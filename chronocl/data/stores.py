@@ -8,7 +8,7 @@ from pathlib import Path
 import zarr
 
 from chronocl.core.errors import ChronoclError, InputNotFoundError, StoreFormatError
-from chronocl.data.integrity import CheckedStore
+from chronocl.data.integrity import CheckedStore, check_byte_order
 from chronocl.data.remote_store import is_url, missing_store, remote_store
 
 
@@ -44,6 +44,10 @@ def open_group(
         store.complete = (
             bool(checked) and isinstance(attrs, dict) and attrs.get("chunks") == "complete"
         )
+        if isinstance(attrs, dict):  # written by chronocl: little-endian
+            for name in checked:
+                if name in group:
+                    check_byte_order(p, group[name], name)
         return group
     except ChronoclError:  # a remote store's network failure or refusal
         raise

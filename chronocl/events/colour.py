@@ -226,6 +226,7 @@ def check_records(graph: EventGraph) -> None:
         mask_of(graph)
         check_connectivity(int(graph.meta.get("connectivity", 26)))
         parse_periodic(graph.meta.get("periodic") or False)
+        {int(s) for s in graph.meta.get("steps") or ()}  # (what `check_steps` reads)
         for f in graph.features:
             int(f["step"]), int(f["id"]), int(f["size"]), int(f["track"])
     except InvalidDataError:
@@ -240,6 +241,7 @@ def check_records(graph: EventGraph) -> None:
 def mask_of(graph: EventGraph) -> Mask:
     """What a step showed when the events were found (`meta["mask"]`)."""
     d = graph.meta.get("mask") or {}
+    d = d if isinstance(d, dict) else {}
     if d.get("kind") == "threshold":
         return Mask.of_threshold(d.get("threshold"))
     if d.get("kind") == "opacity":

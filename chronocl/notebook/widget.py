@@ -520,8 +520,8 @@ class ChronoclWidget(anywidget.AnyWidget):
         worker's internal error, `chronovolume(view=-1)` another view's chronovolume)."""
         self._check_open()
         rid = self._own_id()
-        plain = json.dumps(msg | {"id": rid}, default=lambda o: getattr(o, "item", o.__str__)())
-        msg = parse_message(plain)  # (numpy numbers as the numbers they hold)
+        plain = json.dumps(msg | {"id": rid}, default=_plain)
+        msg = parse_message(plain)
         with self._cond:
             self._requests[rid] = None
             self._busy += 1  # not suspended while it waits
@@ -834,3 +834,9 @@ class ChronoclWidget(anywidget.AnyWidget):
             self._shared = None
             ending, self._ending = self._ending, None
             ending.set()
+
+
+def _plain(value: object) -> object:
+    """A numpy number as the number it holds, anything else JSON cannot write as its text (the
+    protocol then names the field it does not take)."""
+    return value.item() if isinstance(value, np.generic) else str(value)
