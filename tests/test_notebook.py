@@ -27,7 +27,6 @@ from chronocl.data import synthetic
 from chronocl.notebook import bundle
 from chronocl.notebook import state as synced
 from chronocl.notebook.widget import FrameFailedError
-from chronocl.viewer.protocol import ProtocolError
 from chronocl.viewer.snapshot import check_snapshot
 
 STEPS, SHAPE = 12, (24, 24, 24)
@@ -367,6 +366,7 @@ def test_screenshot_chronovolume_and_snapshot(widget):
     [
         (lambda w: w.screenshot(columns=-1), "columns"),
         (lambda w: w.screenshot(columns="a"), "columns"),
+        (lambda w: w.screenshot(columns=object()), "not plain data"),
         (lambda w: w.screenshot(columns=np.array([1, 2])), "columns"),
         (lambda w: w.chronovolume(view=-1), "view"),
         (lambda w: w.chronovolume(view=True), "view"),
@@ -376,7 +376,7 @@ def test_the_kernel_s_requests_are_checked_as_the_page_s(widget, call, field):
     """A bad argument to a request from code gets the protocol's one line naming it, as the
     page's would: once a worker's internal error (a traceback on stderr), or another view's
     chronovolume (view -1: the last one)."""
-    with pytest.raises(ProtocolError, match=field) as got:
+    with pytest.raises(ChronoclError, match=field) as got:
         call(widget)
     assert "\n" not in str(got.value)
 

@@ -108,6 +108,15 @@ def _plain(value: object) -> object:
     raise TypeError(f"{type(value).__name__} is not a number, a list or a dict")
 
 
+def _json(message: dict, what: str) -> str:
+    """`message` as JSON text, numpy numbers as the numbers they hold; InvalidParameterError
+    naming `what` where it holds anything else."""
+    try:
+        return json.dumps(message, default=_plain)
+    except (TypeError, ValueError) as exc:
+        raise InvalidParameterError(f"{what} is not plain data: {exc}") from None
+
+
 def check_gl() -> None:
     """RendererUnavailableError, saying what to do, where this process cannot make the OpenGL
     context the viewer draws with (no EGL, no GL driver)."""
@@ -403,10 +412,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         page; returns the value the attribute then has."""
         self._check_open()
         fields = synced.to_fields(name, value, self._described())
-        try:  # numpy scalars and arrays as the numbers they hold
-            text = json.dumps({"type": "update", "id": self._own_id(), **fields}, default=_plain)
-        except (TypeError, ValueError) as exc:
-            raise InvalidParameterError(f"{name} = {value!r} is not plain data: {exc}") from None
+        text = _json({"type": "update", "id": self._own_id(), **fields}, f"{name} = {value!r}")
         msg = parse_message(text)  # ProtocolError naming the field, before anything changes
         if self._drawing:
             reply = answer(self._worker, text)
@@ -520,8 +526,7 @@ class ChronoclWidget(anywidget.AnyWidget):
         worker's internal error, `chronovolume(view=-1)` another view's chronovolume)."""
         self._check_open()
         rid = self._own_id()
-        plain = json.dumps(msg | {"id": rid}, default=_plain)
-        msg = parse_message(plain)
+        msg = parse_message(_json(msg | {"id": rid}, f"the {msg['type']} request"))
         with self._cond:
             self._requests[rid] = None
             self._busy += 1  # not suspended while it waits
@@ -834,9 +839,3 @@ class ChronoclWidget(anywidget.AnyWidget):
             self._shared = None
             ending, self._ending = self._ending, None
             ending.set()
-
-
-def _plain(value: object) -> object:
-    """A numpy number as the number it holds, anything else JSON cannot write as its text (the
-    protocol then names the field it does not take)."""
-    return value.item() if isinstance(value, np.generic) else str(value)
