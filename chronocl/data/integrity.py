@@ -38,8 +38,9 @@ def check_byte_order(path: str | os.PathLike, arr, name: str) -> None:
     little-endian, the order chronocl writes: its metadata was edited, and its values would read
     as others (its checksums cover the bytes, not their order)."""
     for codec in getattr(arr.metadata, "codecs", ()):
-        order = getattr(getattr(codec, "endian", None), "value", "little")
-        if order != "little":
+        order = getattr(codec, "endian", None)  # an Endian (zarr 3.1), a str (3.4), or None
+        order = getattr(order, "value", order)
+        if order not in (None, "little"):
             raise damaged(path, f"its array {name} is marked {order}-endian, not as written")
 
 
