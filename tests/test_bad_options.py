@@ -158,6 +158,30 @@ def nested_store(d: Path, s: Path) -> None:
 ING = ("--dims", "2", "2", "2", "--dtype", "uint8")
 
 
+def ingest_around(name: str, flag: str, file: str, text: str, key: str = "") -> Case:
+    """ingest -o runA --overwrite, `flag` naming runA/`file` (holding `text`; `key`: a JSON
+    key after it): the output would replace the folder holding a file it reads."""
+    return Case(
+        f"ingest-around-its-{name}",
+        (
+            "ingest",
+            "{d}/raw/v*.raw",
+            "-o",
+            "{d}/runA",
+            "--overwrite",
+            *ING,
+            flag,
+            f"{{d}}/runA/{file}{key}",
+        ),
+        "contains the input",
+        lambda d, s: (
+            raw_steps("raw")(d, s),
+            mkdir("runA")(d, s),
+            write(f"runA/{file}", text)(d, s),
+        ),
+    )
+
+
 def edited_events(edit: Callable[[dict], None]) -> Callable[[Path, Path], None]:
     """events.json: the store's events at threshold 0.5, a record then edited by `edit`."""
 
@@ -396,63 +420,9 @@ CASES = [
         "is the input",
         raw_steps("raw"),
     ),
-    Case(
-        "ingest-around-its-times-file",
-        (
-            "ingest",
-            "{d}/raw/v*.raw",
-            "-o",
-            "{d}/runA",
-            "--overwrite",
-            *ING,
-            "--times",
-            "{d}/runA/t.txt",
-        ),
-        "contains the input",
-        lambda d, s: (
-            raw_steps("raw")(d, s),
-            mkdir("runA")(d, s),
-            write("runA/t.txt", "0\n1")(d, s),
-        ),
-    ),
-    Case(
-        "ingest-around-its-times-json",
-        (
-            "ingest",
-            "{d}/raw/v*.raw",
-            "-o",
-            "{d}/runA",
-            "--overwrite",
-            *ING,
-            "--times",
-            "{d}/runA/m.json:t",
-        ),
-        "contains the input",
-        lambda d, s: (
-            raw_steps("raw")(d, s),
-            mkdir("runA")(d, s),
-            write("runA/m.json", "{}")(d, s),
-        ),
-    ),
-    Case(
-        "ingest-around-its-meta",
-        (
-            "ingest",
-            "{d}/raw/v*.raw",
-            "-o",
-            "{d}/runA",
-            "--overwrite",
-            *ING,
-            "--meta",
-            "{d}/runA/m.json",
-        ),
-        "contains the input",
-        lambda d, s: (
-            raw_steps("raw")(d, s),
-            mkdir("runA")(d, s),
-            write("runA/m.json", "{}")(d, s),
-        ),
-    ),
+    ingest_around("times-file", "--times", "t.txt", "0\n1"),
+    ingest_around("times-json", "--times", "m.json", "{}", key=":t"),
+    ingest_around("meta", "--meta", "m.json", "{}"),
     Case(
         "ingest-onto-its-times-from-meta",
         (
